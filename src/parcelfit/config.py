@@ -1,0 +1,127 @@
+"""Loading YAML configuration and checking it, with errors that name the file, key and fix.
+
+Every configuration file parcelfit reads (datasets, rigs, studies, tag maps) goes through these
+helpers, so every mistake is reported the same way.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from parcelfit.errors import ParcelfitError
+
+
+def load_yaml(path: str | Path) -> Any:
+    """Parse a YAML file; a missing file or a syntax error becomes a `ParcelfitError`."""
+    path = Path(path)
+    if not path.is_file():
+        raise ParcelfitError("file not found", file=path, fix="check the path")
+    try:
+        with path.open(encoding="utf-8") as fh:
+            return yaml.safe_load(fh)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else None
+        problem = getattr(exc, "problem", None) or str(exc)
+        raise ParcelfitError(
+            f"malformed YAML: {problem}",
+            file=path,
+            where=where,
+            fix="correct the YAML syntax there",
+        ) from exc
+
+
+def require_mapping(value: Any, *, file: str | Path | None, where: str) -> Mapping[str, Any]:
+    """Check that ``value`` is a mapping (a YAML dictionary)."""
+    if not isinstance(value, Mapping):
+        raise ParcelfitError(
+            f"expected a mapping of keys to values, got {type(value).__name__}",
+            file=file,
+            where=where,
+            fix="write it as `key: value` lines",
+        )
+    return value
+
+
+def check_keys(
+    mapping: Mapping[str, Any],
+    *,
+    allowed: Iterable[str],
+    required: Iterable[str] = (),
+    file: str | Path | None,
+    where: str,
+) -> None:
+    """Reject unknown keys (suggesting the closest known one) and report missing required keys."""
+    allowed = list(allowed)
+    for key in mapping:
+        if key not in allowed:
+            close = difflib.get_close_matches(str(key), allowed, n=1)
+            fix = f"did you mean {close[0]!r}?" if close else f"known keys: {', '.join(allowed)}"
+            raise ParcelfitError(f"unknown key {key!r}", file=file, where=where, fix=fix)
+    for key in required:
+        if key not in mapping:
+            raise ParcelfitError(
+                f"missing required key {key!r}", file=file, where=where, fix=f"add `{key}:`"
+            )
+
+
+def get_number(
+    mapping: Mapping[str, Any],
+    key: str,
+    *,
+    file: str | Path | None,
+    where: str,
+    default: float | None = None,
+    minimum: float | None = None,
+    maximum: float | None = None,
+    allow_none: bool = False,
+    unit: str = "",
+) -> float | None:
+    """Read a finite number (optionally bounded); ``None`` only if ``allow_none``."""
+    value = mapping.get(key, default)
+    label = f"{where}.{key}" if where else key
+    if value is None and allow_none:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise ParcelfitError(
+            f"expected a number{f' in {unit}' if unit else ''}, got {value!r}",
+            file=file,
+            where=label,
+            fix="write a plain number" + (" or null" if allow_none else ""),
+        )
+    if (minimum is not None and value < minimum) or (maximum is not None and value > maximum):
+        raise ParcelfitError(
+            f"{value} is outside [{minimum}, {maximum}]{f' {unit}' if unit else ''}",
+            file=file,
+            where=label,
+            fix="use a value inside that range",
+        )
+    return float(value)
+
+
+def get_str(
+    mapping: Mapping[str, Any],
+    key: str,
+    *,
+    file: str | Path | None,
+    where: str,
+    default: str | None = None,
+) -> str:
+    """Read a non-empty string."""
+    value = mapping.get(key, default)
+    if isinstance(value, int) and not isinstance(value, bool):
+        value = str(value)
+    if not isinstance(value, str) or not value.strip():
+        raise ParcelfitError(
+            f"expected a non-empty text, got {value!r}",
+            file=file,
+            where=f"{where}.{key}" if where else key,
+            fix="write a name",
+        )
+    return value.strip()

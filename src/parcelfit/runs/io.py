@@ -1,0 +1,138 @@
+"""Reading and writing trajectory files (CSV or Parquet, columns t, x, y, theta in SI units).
+
+Schema: one row per sample; ``t`` [s] strictly increasing, ``x``, ``y`` [m] parcel centre in the
+rig frame, ``theta`` [rad] heading (wrapped or unwrapped; it is unwrapped on load). Nothing else.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from parcelfit.errors import ParcelfitError
+from parcelfit.runs.trajectory import COLUMNS, MIN_SAMPLES, Trajectory, unwrap_angle
+
+SUFFIXES = (".csv", ".parquet")
+# Plausibility limits for spotting unit mistakes; a test rig is a few metres long, a run lasts
+# seconds and a parcel turns at most a few times.
+MAX_POSITION_SPAN_M = 100.0
+MAX_TIME_SPAN_S = 3600.0
+MAX_HEADING_RAD = 4 * np.pi
+
+
+def read_table(path: Path) -> pd.DataFrame:
+    """Read a CSV or Parquet file into a table, with a clear error if it cannot be read."""
+    path = Path(path)
+    if not path.is_file():
+        raise ParcelfitError("file not found", file=path, fix="check the path in dataset.yaml")
+    try:
+        if path.suffix.lower() == ".csv":
+            return pd.read_csv(path)
+        if path.suffix.lower() == ".parquet":
+            return pd.read_parquet(path)
+    except Exception as exc:
+        raise ParcelfitError(f"cannot read the file ({exc})", file=path) from exc
+    raise ParcelfitError(
+        f"unknown file type {path.suffix!r}", file=path, fix="use a .csv or .parquet file"
+    )
+
+
+def check_trajectory_table(frame: pd.DataFrame, file: str | Path) -> Trajectory:
+    """Check a table against the trajectory schema and return it as a `Trajectory`.
+
+    Errors name the file, the column or data row (1-based, header excluded) and the fix.
+    """
+    cols = [str(c) for c in frame.columns]
+    missing = [c for c in COLUMNS if c not in cols]
+    extra = [c for c in cols if c not in COLUMNS]
+    if missing:
+        raise ParcelfitError(
+            f"missing column(s) {missing}; found {cols}",
+            file=file,
+            fix="name the columns exactly t,x,y,theta (seconds, metres, radians)",
+        )
+    if extra:
+        raise ParcelfitError(
+            f"unexpected column(s) {extra}",
+            file=file,
+            fix="keep only the columns t,x,y,theta (seconds, metres, radians)",
+        )
+    if len(frame) < MIN_SAMPLES:
+        raise ParcelfitError(
+            f"{len(frame)} samples, at least {MIN_SAMPLES} needed",
+            file=file,
+            fix="record a longer run",
+        )
+    values = {}
+    for c in COLUMNS:
+        a = pd.to_numeric(frame[c], errors="coerce").to_numpy(dtype=float)
+        bad = np.flatnonzero(~np.isfinite(a))
+        if bad.size:
+            raise ParcelfitError(
+                f"column {c!r} has a missing, non-numeric or infinite value ({frame[c].iloc[bad[0]]!r})",
+                file=file,
+                where=f"data row {bad[0] + 1}",
+                fix="remove or interpolate that sample",
+            )
+        values[c] = a
+    t = values["t"]
+    bad = np.flatnonzero(np.diff(t) <= 0)
+    if bad.size:
+        raise ParcelfitError(
+            f"time does not increase (t={t[bad[0]]:.6g} then {t[bad[0] + 1]:.6g})",
+            file=file,
+            where=f"data row {bad[0] + 2}",
+            fix="sort by t and drop duplicated time stamps",
+        )
+    if t[-1] - t[0] > MAX_TIME_SPAN_S:
+        raise ParcelfitError(
+            f"the run spans {t[-1] - t[0]:.4g} s, more than {MAX_TIME_SPAN_S:.0f} s",
+            file=file,
+            where="column 't'",
+            fix="t must be in seconds; if it is in milliseconds, divide by 1000",
+        )
+    for c in ("x", "y"):
+        span = np.ptp(values[c])
+        if span > MAX_POSITION_SPAN_M:
+            raise ParcelfitError(
+                f"{c} spans {span:.4g} m, more than any test rig ({MAX_POSITION_SPAN_M:.0f} m)",
+                file=file,
+                where=f"column {c!r}",
+                fix="positions must be in metres; if they are in millimetres, divide by 1000",
+            )
+    theta = unwrap_angle(values["theta"])
+    if np.max(np.abs(theta)) > MAX_HEADING_RAD or np.ptp(theta) > MAX_HEADING_RAD:
+        raise ParcelfitError(
+            f"theta reaches {np.max(np.abs(theta)):.4g} rad (more than two turns)",
+            file=file,
+            where="column 'theta'",
+            fix="theta must be in radians; if it is in degrees, convert with numpy.radians",
+        )
+    return Trajectory(t=t, x=values["x"], y=values["y"], theta=theta)
+
+
+def read_trajectory(path: str | Path) -> Trajectory:
+    """Read and check a trajectory file (.csv or .parquet; t [s], x [m], y [m], theta [rad])."""
+    path = Path(path)
+    return check_trajectory_table(read_table(path), path)
+
+
+def write_trajectory(trajectory: Trajectory, path: str | Path) -> Path:
+    """Write a trajectory to .csv or .parquet (by suffix); returns the path written."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in SUFFIXES:
+        raise ParcelfitError(
+            f"unknown file type {path.suffix!r}", file=path, fix="use .csv or .parquet"
+        )
+    path.parent.mkdir(parents=True, exist_ok=True)
+    frame = trajectory.to_frame()
+    tmp = path.with_name(path.name + ".tmp")
+    if suffix == ".csv":
+        frame.to_csv(tmp, index=False, float_format="%.9g")
+    else:
+        frame.to_parquet(tmp, index=False)
+    tmp.replace(path)  # atomic: a crash never leaves half a file under the final name
+    return path

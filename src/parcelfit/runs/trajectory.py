@@ -1,0 +1,150 @@
+"""The planar trajectory of one parcel: time, centre position and heading (SI units).
+
+A `Trajectory` holds equal-length arrays ``t`` [s] (strictly increasing), ``x``, ``y`` [m] (the
+parcel centre in the rig frame: x along the conveying direction, y across it) and ``theta``
+[rad] (heading of the parcel's x axis, counter-clockwise from the rig's x axis, unwrapped, so
+consecutive samples never jump by more than pi).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from parcelfit.errors import ParcelfitError
+
+COLUMNS: tuple[str, ...] = ("t", "x", "y", "theta")
+MIN_SAMPLES = 3
+
+
+def unwrap_angle(theta: np.ndarray) -> np.ndarray:
+    """Return ``theta`` [rad] unwrapped: 2*pi steps removed so consecutive samples differ < pi."""
+    return np.unwrap(np.asarray(theta, dtype=float))
+
+
+@dataclass(frozen=True, eq=False)
+class Trajectory:
+    """Sampled planar motion of a parcel: t [s], x [m], y [m], theta [rad, unwrapped]."""
+
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    theta: np.ndarray
+
+    def __post_init__(self) -> None:
+        arrays = {}
+        for name in COLUMNS:
+            a = np.ascontiguousarray(np.asarray(getattr(self, name), dtype=float))
+            if a.ndim != 1:
+                raise ParcelfitError(
+                    f"column {name!r} must be one-dimensional, got shape {a.shape}"
+                )
+            a.setflags(write=False)
+            arrays[name] = a
+            object.__setattr__(self, name, a)
+        n = {len(a) for a in arrays.values()}
+        if len(n) != 1:
+            lengths = {k: len(v) for k, v in arrays.items()}
+            raise ParcelfitError(
+                f"columns differ in length: {lengths}", fix="give every column one value per sample"
+            )
+        if len(self.t) < MIN_SAMPLES:
+            raise ParcelfitError(
+                f"a trajectory needs at least {MIN_SAMPLES} samples, got {len(self.t)}",
+                fix="record a longer run or check the file",
+            )
+        for name, a in arrays.items():
+            bad = np.flatnonzero(~np.isfinite(a))
+            if bad.size:
+                raise ParcelfitError(
+                    f"column {name!r} has a non-finite value (NaN or inf) at sample {bad[0]}",
+                    fix="remove or interpolate the missing samples",
+                )
+        steps = np.diff(self.t)
+        bad = np.flatnonzero(steps <= 0)
+        if bad.size:
+            raise ParcelfitError(
+                f"time is not strictly increasing at sample {bad[0] + 1} "
+                f"(t={self.t[bad[0]]:.6g} s then {self.t[bad[0] + 1]:.6g} s)",
+                fix="sort the samples by time and drop duplicated time stamps",
+            )
+        jumps = np.flatnonzero(np.abs(np.diff(self.theta)) > np.pi)
+        if jumps.size:
+            raise ParcelfitError(
+                f"theta jumps by more than pi at sample {jumps[0] + 1}: it is not unwrapped",
+                fix="pass the heading through parcelfit.runs.unwrap_angle",
+            )
+
+    @classmethod
+    def from_arrays(
+        cls, t: np.ndarray, x: np.ndarray, y: np.ndarray, theta: np.ndarray
+    ) -> Trajectory:
+        """Build a trajectory, unwrapping ``theta`` [rad] first (t [s], x, y [m])."""
+        return cls(t=t, x=x, y=y, theta=unwrap_angle(theta))
+
+    @classmethod
+    def from_frame(cls, frame: pd.DataFrame) -> Trajectory:
+        """Build from a table with columns t [s], x [m], y [m], theta [rad]."""
+        return cls.from_arrays(*(frame[c].to_numpy(dtype=float) for c in COLUMNS))
+
+    def to_frame(self) -> pd.DataFrame:
+        """The trajectory as a table with columns t [s], x [m], y [m], theta [rad]."""
+        return pd.DataFrame({c: getattr(self, c) for c in COLUMNS})
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    @property
+    def xy(self) -> np.ndarray:
+        """Centre positions as an (n, 2) array [m]."""
+        return np.column_stack([self.x, self.y])
+
+    @property
+    def duration(self) -> float:
+        """Time between first and last sample [s]."""
+        return float(self.t[-1] - self.t[0])
+
+    def relative(self) -> Trajectory:
+        """Positions [m] and heading [rad] relative to the first sample (time unchanged).
+
+        Position offsets are subtracted in the rig frame (the axes are not rotated), the initial
+        heading is subtracted from theta.
+        """
+        return Trajectory(
+            t=self.t, x=self.x - self.x[0], y=self.y - self.y[0], theta=self.theta - self.theta[0]
+        )
+
+    def select(self, mask: np.ndarray) -> Trajectory:
+        """The samples where ``mask`` is true (a boolean array of the trajectory's length)."""
+        mask = np.asarray(mask, dtype=bool)
+        if mask.shape != self.t.shape:
+            raise ParcelfitError(f"mask has shape {mask.shape}, trajectory has {self.t.shape}")
+        if mask.sum() < MIN_SAMPLES:
+            raise ParcelfitError(
+                f"only {int(mask.sum())} samples remain after selection, {MIN_SAMPLES} needed",
+                fix="widen the regions of interest or their margin",
+            )
+        return Trajectory(t=self.t[mask], x=self.x[mask], y=self.y[mask], theta=self.theta[mask])
+
+    def resample(
+        self, rate: float, start: float | None = None, stop: float | None = None
+    ) -> Trajectory:
+        """Linearly interpolate onto a uniform grid of ``rate`` [Hz] between start and stop [s]."""
+        if not np.isfinite(rate) or rate <= 0:
+            raise ParcelfitError(f"resampling rate must be a positive number of Hz, got {rate}")
+        t0 = self.t[0] if start is None else max(start, self.t[0])
+        t1 = self.t[-1] if stop is None else min(stop, self.t[-1])
+        n = int(np.floor((t1 - t0) * rate + 1e-9)) + 1
+        t = t0 + np.arange(n) / rate
+        return Trajectory(
+            t=t,
+            x=np.interp(t, self.t, self.x),
+            y=np.interp(t, self.t, self.y),
+            theta=np.interp(t, self.t, self.theta),
+        )
+
+    def sample_rate(self) -> float:
+        """Median sampling rate [Hz]."""
+        return float(1.0 / np.median(np.diff(self.t)))

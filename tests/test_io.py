@@ -1,0 +1,82 @@
+import numpy as np
+import pandas as pd
+import pytest
+
+from parcelfit import ParcelfitError
+from parcelfit.runs import read_trajectory, write_trajectory
+
+from .conftest import line_trajectory
+
+
+def _write(tmp_path, frame, name="run.csv"):
+    path = tmp_path / name
+    frame.to_csv(path, index=False)
+    return path
+
+
+def _good(n=20):
+    return line_trajectory(n).to_frame()
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+def test_round_trip(tmp_path, suffix):
+    tr = line_trajectory(30, turn=0.4)
+    path = write_trajectory(tr, tmp_path / f"a{suffix}")
+    back = read_trajectory(path)
+    assert np.allclose(back.xy, tr.xy, rtol=1e-8, atol=0)
+    assert np.allclose(back.theta, tr.theta, rtol=1e-8)
+    assert not list(tmp_path.glob("*.tmp"))
+
+
+def test_wrapped_heading_is_unwrapped_on_load(tmp_path):
+    f = _good(6)
+    f["theta"] = [3.0, 3.1, -3.1, -3.0, -2.9, -2.8]
+    tr = read_trajectory(_write(tmp_path, f))
+    assert np.all(np.diff(tr.theta) > 0)
+
+
+@pytest.mark.parametrize(
+    ("mutate", "pattern"),
+    [
+        (lambda f: f.drop(columns="theta"), r"run\.csv: missing column\(s\) \['theta'\].*Fix: name the columns"),
+        (lambda f: f.assign(z=0.0), r"unexpected column\(s\) \['z'\].*Fix: keep only"),
+        (lambda f: f.head(2), "2 samples, at least 3 needed"),
+        (lambda f: f.assign(x=f["x"].where(f.index != 4, np.nan)), r"data row 5: column 'x' has a missing"),
+        (lambda f: f.assign(y=f["y"].where(f.index != 2, np.inf)), r"data row 3: column 'y'"),
+        (lambda f: f.assign(t=f["t"].astype(object).where(f.index != 1, "abc")), r"data row 2: column 't'"),
+        (lambda f: f.assign(t=f["t"].where(f.index != 6, f["t"][5])), r"data row 7: time does not increase"),
+        (lambda f: f.assign(x=f["x"] * 1000 + 300), r"column 'x': x spans .* if they are in millimetres"),
+        (lambda f: f.assign(t=f["t"] * 1e6), r"column 't'.*if it is in milliseconds"),
+        (lambda f: f.assign(theta=np.linspace(30, 45, len(f))), r"column 'theta'.*if it is in degrees"),
+    ],
+)
+def test_bad_files_name_file_place_and_fix(tmp_path, mutate, pattern):
+    path = _write(tmp_path, mutate(_good()))
+    with pytest.raises(ParcelfitError, match=pattern) as info:
+        read_trajectory(path)
+    assert "Fix:" in str(info.value)
+
+
+def test_missing_and_unreadable_files(tmp_path):
+    with pytest.raises(ParcelfitError, match="file not found"):
+        read_trajectory(tmp_path / "none.csv")
+    bad = tmp_path / "x.txt"
+    bad.write_text("t,x\n")
+    with pytest.raises(ParcelfitError, match="unknown file type"):
+        read_trajectory(bad)
+    broken = tmp_path / "b.parquet"
+    broken.write_bytes(b"not parquet")
+    with pytest.raises(ParcelfitError, match="cannot read the file"):
+        read_trajectory(broken)
+
+
+def test_write_rejects_unknown_suffix(tmp_path):
+    with pytest.raises(ParcelfitError, match="use .csv or .parquet"):
+        write_trajectory(line_trajectory(), tmp_path / "a.json")
+
+
+def test_parquet_schema_errors_too(tmp_path):
+    path = tmp_path / "a.parquet"
+    pd.DataFrame({"t": [0.0, 1.0, 2.0], "x": [0.0, 1, 2], "y": [0.0, 0, 0]}).to_parquet(path)
+    with pytest.raises(ParcelfitError, match="missing column"):
+        read_trajectory(path)

@@ -1,0 +1,68 @@
+import numpy as np
+import pytest
+
+from parcelfit import ParcelfitError
+from parcelfit.runs import Trajectory, unwrap_angle
+
+from .conftest import line_trajectory
+
+
+def test_arrays_are_read_only_floats():
+    tr = Trajectory(t=[0, 1, 2], x=[0, 1, 2], y=[0, 0, 0], theta=[0, 0, 0])
+    assert tr.t.dtype == float
+    with pytest.raises(ValueError):
+        tr.x[0] = 5.0
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"t": [0, 1], "x": [0, 1], "y": [0, 1], "theta": [0, 0]}, "at least 3 samples"),
+        ({"t": [0, 1, 2], "x": [0, 1], "y": [0, 1, 2], "theta": [0, 0, 0]}, "differ in length"),
+        ({"t": [0, 1, 1], "x": [0, 1, 2], "y": [0, 1, 2], "theta": [0, 0, 0]}, "not strictly increasing at sample 2"),
+        ({"t": [0, 1, 2], "x": [0, np.nan, 2], "y": [0, 1, 2], "theta": [0, 0, 0]}, "non-finite value"),
+        ({"t": [0, 1, 2], "x": [0, 1, 2], "y": [0, 1, 2], "theta": [0, 3.5, 0]}, "not unwrapped"),
+    ],
+)
+def test_bad_trajectories_are_rejected(kwargs, message):
+    with pytest.raises(ParcelfitError, match=message):
+        Trajectory(**kwargs)
+
+
+def test_unwrap_removes_two_pi_jumps():
+    wrapped = np.array([3.0, -3.1, -2.9, 3.1])
+    un = unwrap_angle(wrapped)
+    assert np.all(np.abs(np.diff(un)) < np.pi)
+    assert np.allclose(np.cos(un), np.cos(wrapped)) and np.allclose(np.sin(un), np.sin(wrapped))
+    tr = Trajectory.from_arrays([0, 1, 2, 3], [0, 0, 0, 0], [0, 0, 0, 0], wrapped)
+    assert tr.theta == pytest.approx([3.0, 2 * np.pi - 3.1, 2 * np.pi - 2.9, 3.1])
+
+
+def test_relative_subtracts_initial_pose():
+    tr = Trajectory(t=[0, 1, 2], x=[1.0, 2.0, 3.0], y=[0.5, 0.5, 0.7], theta=[0.3, 0.4, 0.6])
+    rel = tr.relative()
+    assert rel.x.tolist() == [0.0, 1.0, 2.0]
+    assert rel.y == pytest.approx([0.0, 0.0, 0.2])
+    assert rel.theta == pytest.approx([0.0, 0.1, 0.3])
+    assert rel.t.tolist() == [0, 1, 2]
+
+
+def test_resample_is_linear_on_a_uniform_grid():
+    tr = Trajectory(t=[0.0, 0.1, 0.3], x=[0.0, 1.0, 3.0], y=[0.0, 0.0, 2.0], theta=[0.0, 0.1, 0.1])
+    rs = tr.resample(20.0)
+    assert rs.t == pytest.approx([0.0, 0.05, 0.1, 0.15, 0.2, 0.25, 0.3])
+    assert rs.x == pytest.approx(10 * rs.t)
+    assert rs.y == pytest.approx([0, 0, 0, 0.5, 1.0, 1.5, 2.0])
+    assert rs.sample_rate() == pytest.approx(20.0)
+    with pytest.raises(ParcelfitError, match="positive"):
+        tr.resample(0)
+
+
+def test_select_and_frame_round_trip():
+    tr = line_trajectory(10)
+    sub = tr.select(tr.x > tr.x[4])
+    assert len(sub) == 5
+    with pytest.raises(ParcelfitError, match="only 2 samples remain"):
+        tr.select(tr.x > tr.x[7])
+    back = Trajectory.from_frame(tr.to_frame())
+    assert np.array_equal(back.xy, tr.xy)
