@@ -42,16 +42,43 @@ def test_loads_runs_grouped_by_test_case(make_dataset):
         (lambda d: d.update(nmae="x"), r"top level: unknown key 'nmae'.*did you mean 'name'"),
         (lambda d: d.pop("name"), r"missing required key 'name'"),
         (lambda d: d.update(test_cases=[]), r"test_cases must be a non-empty list"),
-        (lambda d: d["test_cases"][0].update(speed_setting=0), r"test_cases\[0\]\.speed_setting: .*integer >= 1"),
-        (lambda d: d["test_cases"][0].update(rigg="E3"), r"test_cases\[0\]: unknown key 'rigg'.*did you mean 'rig'"),
-        (lambda d: d["test_cases"][0]["runs"][1].update(id="r0"), r"runs\[1\]\.id: duplicate run id 'r0'"),
-        (lambda d: d["test_cases"][0]["runs"][0].update(transit_time=-1), r"transit_time must be positive"),
-        (lambda d: d["test_cases"][0]["runs"][0].update(transit_time="fast"), r"transit_time: expected a number"),
-        (lambda d: d["test_cases"][0]["runs"][0].update(file="runs/nope.csv"), r"runs\[0\]\.file: .*not found"),
-        (lambda d: d["test_cases"].append(dict(d["test_cases"][0])), r"test case E3/KPBW/1 appears twice"),
+        (
+            lambda d: d["test_cases"][0].update(speed_setting=0),
+            r"test_cases\[0\]\.speed_setting: .*integer >= 1",
+        ),
+        (
+            lambda d: d["test_cases"][0].update(rigg="E3"),
+            r"test_cases\[0\]: unknown key 'rigg'.*did you mean 'rig'",
+        ),
+        (
+            lambda d: d["test_cases"][0]["runs"][1].update(id="r0"),
+            r"runs\[1\]\.id: duplicate run id 'r0'",
+        ),
+        (
+            lambda d: d["test_cases"][0]["runs"][0].update(transit_time=-1),
+            r"transit_time must be positive",
+        ),
+        (
+            lambda d: d["test_cases"][0]["runs"][0].update(transit_time="fast"),
+            r"transit_time: expected a number",
+        ),
+        (
+            lambda d: d["test_cases"][0]["runs"][0].update(file="runs/nope.csv"),
+            r"runs\[0\]\.file: .*not found",
+        ),
+        (
+            lambda d: d["test_cases"].append(dict(d["test_cases"][0])),
+            r"test case E3/KPBW/1 appears twice",
+        ),
         (lambda d: d["test_cases"][0].update(margin=-0.1), r"margin: -0.1 is outside"),
-        (lambda d: d["test_cases"][0].update(regions=[{"x": [1, 0]}]), r"regions\[0\]: x must be \[min, max\]"),
-        (lambda d: d["test_cases"][0].update(regions=[{"polygon": [[0, 0], [1, 1]]}]), r"at least three"),
+        (
+            lambda d: d["test_cases"][0].update(regions=[{"x": [1, 0]}]),
+            r"regions\[0\]: x must be \[min, max\]",
+        ),
+        (
+            lambda d: d["test_cases"][0].update(regions=[{"polygon": [[0, 0], [1, 1]]}]),
+            r"at least three",
+        ),
         (lambda d: d["test_cases"][0].update(regions=[{"circle": 1}]), r"unknown region keys"),
     ],
 )
@@ -79,7 +106,7 @@ def test_bad_trajectory_inside_dataset_names_the_run_file(make_dataset):
 
 
 def test_missing_folder(tmp_path):
-    with pytest.raises(ParcelfitError, match="no dataset.yaml here"):
+    with pytest.raises(ParcelfitError, match=r"no dataset\.yaml here"):
         load_dataset(tmp_path)
 
 
@@ -88,7 +115,9 @@ def test_save_and_load_round_trip(tmp_path, fmt):
     case = TestCase("E1", "BW", 2)
     runs = tuple(Run(f"a{i}", case, line_trajectory(15, turn=0.1 * i), 1.5 + i) for i in range(2))
     regions = (Box(xmin=0.1, xmax=0.9), Polygon(np.array([[0, 0], [1, 0], [1, 1.0]])))
-    save_dataset(tmp_path, "rt", [CaseData(case, runs, regions, 0.01)], synthetic=True, file_format=fmt)
+    save_dataset(
+        tmp_path, "rt", [CaseData(case, runs, regions, 0.01)], synthetic=True, file_format=fmt
+    )
     ds = load_dataset(tmp_path / "dataset.yaml")
     cd = ds[case]
     assert ds.synthetic and ds.name == "rt"

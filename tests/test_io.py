@@ -38,16 +38,34 @@ def test_wrapped_heading_is_unwrapped_on_load(tmp_path):
 @pytest.mark.parametrize(
     ("mutate", "pattern"),
     [
-        (lambda f: f.drop(columns="theta"), r"run\.csv: missing column\(s\) \['theta'\].*Fix: name the columns"),
+        (
+            lambda f: f.drop(columns="theta"),
+            r"run\.csv: missing column\(s\) \['theta'\].*Fix: name the columns",
+        ),
         (lambda f: f.assign(z=0.0), r"unexpected column\(s\) \['z'\].*Fix: keep only"),
         (lambda f: f.head(2), "2 samples, at least 3 needed"),
-        (lambda f: f.assign(x=f["x"].where(f.index != 4, np.nan)), r"data row 5: column 'x' has a missing"),
+        (
+            lambda f: f.assign(x=f["x"].where(f.index != 4, np.nan)),
+            r"data row 5: column 'x' has a missing",
+        ),
         (lambda f: f.assign(y=f["y"].where(f.index != 2, np.inf)), r"data row 3: column 'y'"),
-        (lambda f: f.assign(t=f["t"].astype(object).where(f.index != 1, "abc")), r"data row 2: column 't'"),
-        (lambda f: f.assign(t=f["t"].where(f.index != 6, f["t"][5])), r"data row 7: time does not increase"),
-        (lambda f: f.assign(x=f["x"] * 1000 + 300), r"column 'x': x spans .* if they are in millimetres"),
+        (
+            lambda f: f.assign(t=f["t"].astype(object).where(f.index != 1, "abc")),
+            r"data row 2: column 't'",
+        ),
+        (
+            lambda f: f.assign(t=f["t"].where(f.index != 6, f["t"][5])),
+            r"data row 7: time does not increase",
+        ),
+        (
+            lambda f: f.assign(x=f["x"] * 1000 + 300),
+            r"column 'x': x spans .* if they are in millimetres",
+        ),
         (lambda f: f.assign(t=f["t"] * 1e6), r"column 't'.*if it is in milliseconds"),
-        (lambda f: f.assign(theta=np.linspace(30, 45, len(f))), r"column 'theta'.*if it is in degrees"),
+        (
+            lambda f: f.assign(theta=np.linspace(30, 45, len(f))),
+            r"column 'theta'.*if it is in degrees",
+        ),
     ],
 )
 def test_bad_files_name_file_place_and_fix(tmp_path, mutate, pattern):
@@ -71,7 +89,7 @@ def test_missing_and_unreadable_files(tmp_path):
 
 
 def test_write_rejects_unknown_suffix(tmp_path):
-    with pytest.raises(ParcelfitError, match="use .csv or .parquet"):
+    with pytest.raises(ParcelfitError, match=r"use \.csv or \.parquet"):
         write_trajectory(line_trajectory(), tmp_path / "a.json")
 
 

@@ -19,8 +19,14 @@ def test_arrays_are_read_only_floats():
     [
         ({"t": [0, 1], "x": [0, 1], "y": [0, 1], "theta": [0, 0]}, "at least 3 samples"),
         ({"t": [0, 1, 2], "x": [0, 1], "y": [0, 1, 2], "theta": [0, 0, 0]}, "differ in length"),
-        ({"t": [0, 1, 1], "x": [0, 1, 2], "y": [0, 1, 2], "theta": [0, 0, 0]}, "not strictly increasing at sample 2"),
-        ({"t": [0, 1, 2], "x": [0, np.nan, 2], "y": [0, 1, 2], "theta": [0, 0, 0]}, "non-finite value"),
+        (
+            {"t": [0, 1, 1], "x": [0, 1, 2], "y": [0, 1, 2], "theta": [0, 0, 0]},
+            "not strictly increasing at sample 2",
+        ),
+        (
+            {"t": [0, 1, 2], "x": [0, np.nan, 2], "y": [0, 1, 2], "theta": [0, 0, 0]},
+            "non-finite value",
+        ),
         ({"t": [0, 1, 2], "x": [0, 1, 2], "y": [0, 1, 2], "theta": [0, 3.5, 0]}, "not unwrapped"),
     ],
 )

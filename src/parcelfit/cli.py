@@ -36,7 +36,7 @@ def friendly_errors(func: F) -> F:
         try:
             return func(*args, **kwargs)
         except ParcelfitError as exc:
-            err_console.print(f"[bold red]error:[/] {exc}", highlight=False)
+            err_console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
             raise typer.Exit(code=2) from None
 
     return wrapper  # type: ignore[return-value]

@@ -101,7 +101,10 @@ def load_dataset(folder: str | Path) -> Dataset:
     synthetic = doc.get("synthetic", False)
     if not isinstance(synthetic, bool):
         raise ParcelfitError(
-            "synthetic must be true or false", file=file, where="synthetic", fix="write synthetic: true"
+            "synthetic must be true or false",
+            file=file,
+            where="synthetic",
+            fix="write synthetic: true",
         )
     cases_doc = doc["test_cases"]
     if not isinstance(cases_doc, list) or not cases_doc:

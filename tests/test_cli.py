@@ -1,0 +1,60 @@
+import json
+
+from typer.testing import CliRunner
+
+from parcelfit.cli import app
+
+from .conftest import line_trajectory
+
+runner = CliRunner()
+
+
+def _small(make_dataset):
+    runs = [
+        (f"r{i}", line_trajectory(30, y0=0.001 * i, turn=0.05 * i), 1.0 + 0.01 * i)
+        for i in range(4)
+    ]
+    return make_dataset(
+        {
+            ("E1", "KP", 1): runs,
+            ("E1", "BW", 1): [(f"b{i}", line_trajectory(30), 1.2 + 0.01 * i) for i in range(4)],
+        }
+    )
+
+
+def test_reference_json(make_dataset):
+    result = runner.invoke(app, ["reference", str(_small(make_dataset)), "--json"])
+    assert result.exit_code == 0, result.output
+    doc = json.loads(result.stdout)
+    assert [d["test_case"] for d in doc] == ["E1/BW/1", "E1/KP/1"]
+    assert doc[1]["reference_run"] in ("r1", "r2")
+    assert len(doc[1]["row_sums"]) == 4
+
+
+def test_reference_table(make_dataset):
+    result = runner.invoke(app, ["reference", str(_small(make_dataset))])
+    assert result.exit_code == 0
+    assert "E1/KP/1: reference run" in result.stdout
+
+
+def test_stats_writes_files(make_dataset, tmp_path):
+    out = tmp_path / "st"
+    result = runner.invoke(app, ["stats", str(_small(make_dataset)), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert (out / "transit_time_tests.csv").is_file() and (out / "transit_times.png").is_file()
+
+
+def test_bad_input_gives_message_not_traceback(tmp_path):
+    result = runner.invoke(app, ["reference", str(tmp_path)])
+    assert result.exit_code == 2
+    assert "error:" in result.output and "no dataset.yaml here" in result.output
+    assert "Traceback" not in result.output
+
+
+def test_demo_on_bundled_data(tmp_path):
+    result = runner.invoke(app, ["demo", "--out", str(tmp_path / "demo")])
+    assert result.exit_code == 0, result.output
+    assert "SYNTHETIC" in result.output
+    refs = json.loads((tmp_path / "demo" / "reference_runs.json").read_text())
+    assert len(refs) == 12
+    assert (tmp_path / "demo" / "stats" / "transit_times.png").is_file()
