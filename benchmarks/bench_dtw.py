@@ -32,7 +32,9 @@ def median_time(func, repeats: int) -> float:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--length", type=int, default=600)
     ap.add_argument("--repeats", type=int, default=20)
     args = ap.parse_args()
@@ -40,7 +42,9 @@ def main() -> None:
     n = args.length
     a = rng.normal(size=(n, 2)).cumsum(axis=0)
     b = rng.normal(size=(n, 2)).cumsum(axis=0)
-    assert abs(dtw_distance(a, b) - dtw_python.dtw(a, b, distance_only=True).distance) < 1e-9 * dtw_distance(a, b)
+    assert abs(
+        dtw_distance(a, b) - dtw_python.dtw(a, b, distance_only=True).distance
+    ) < 1e-9 * dtw_distance(a, b)
 
     t_ref = median_time(lambda: dtw_python.dtw(a, b, distance_only=True), args.repeats)
     t_ours = median_time(lambda: dtw_distance(a, b), args.repeats)
@@ -49,7 +53,9 @@ def main() -> None:
     print(f"  parcelfit                  {t_ours * 1e3:8.2f} ms")
     print(f"  speed-up                   {t_ref / t_ours:8.1f} x")
 
-    series = [rng.normal(size=(n + int(rng.integers(-50, 50)), 2)).cumsum(axis=0) for _ in range(10)]
+    series = [
+        rng.normal(size=(n + int(rng.integers(-50, 50)), 2)).cumsum(axis=0) for _ in range(10)
+    ]
     pairwise_dtw(series)  # compile the parallel kernel
     cores = numba.config.NUMBA_NUM_THREADS
     numba.set_num_threads(1)
@@ -57,13 +63,19 @@ def main() -> None:
     numba.set_num_threads(cores)
     t_all = median_time(lambda: pairwise_dtw(series), max(3, args.repeats // 4))
     t_loop = median_time(
-        lambda: [dtw_python.dtw(series[i], series[j], distance_only=True) for i in range(10) for j in range(i + 1, 10)],
+        lambda: [
+            dtw_python.dtw(series[i], series[j], distance_only=True)
+            for i in range(10)
+            for j in range(i + 1, 10)
+        ],
         max(3, args.repeats // 4),
     )
     print(f"10 x 10 distance matrix (45 pairs of ~{n} samples), {os.cpu_count()} cores:")
     print(f"  dtw-python loop            {t_loop * 1e3:8.1f} ms")
     print(f"  parcelfit, 1 thread        {t_one * 1e3:8.1f} ms")
-    print(f"  parcelfit, {cores} threads       {t_all * 1e3:8.1f} ms  (x{t_one / t_all:.2f} over 1 thread)")
+    print(
+        f"  parcelfit, {cores} threads       {t_all * 1e3:8.1f} ms  (x{t_one / t_all:.2f} over 1 thread)"
+    )
     print(f"  speed-up over dtw-python   {t_loop / t_all:8.1f} x")
 
 

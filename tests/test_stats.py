@@ -82,7 +82,10 @@ def test_ties_use_the_tie_corrected_normal_approximation(make_dataset):
     from scipy.stats import mannwhitneyu
 
     a, b = [1.0, 1.1, 1.1, 1.3, 1.4], [1.1, 1.5, 1.6, 1.7, 1.8]
-    cases = {("E1", n, 1): [(f"{n}{i}", line_trajectory(5), t) for i, t in enumerate(ts)] for n, ts in (("A", a), ("B", b))}
+    cases = {
+        ("E1", n, 1): [(f"{n}{i}", line_trajectory(5), t) for i, t in enumerate(ts)]
+        for n, ts in (("A", a), ("B", b))
+    }
     row = compare_transit_times(load_dataset(make_dataset(cases))).iloc[0]
     assert row.method == "asymptotic"
     assert row.p_value == pytest.approx(mannwhitneyu(a, b, method="asymptotic").pvalue, rel=1e-12)
