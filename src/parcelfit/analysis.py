@@ -42,8 +42,15 @@ def transit_statistics(
     times.to_csv(files[0], index=False)
     tests.to_csv(files[1], index=False)
     if not times.empty:
-        files += save_figure(transit_time_boxplots(times, tests), out / "transit_times")
+        files += save_figure(
+            transit_time_boxplots(times, tests, dataset_title(dataset)), out / "transit_times"
+        )
     return StatsResult(times, tests, files)
+
+
+def dataset_title(dataset: Dataset) -> str:
+    """Title for figures: the dataset's name, marked SYNTHETIC where it was not measured."""
+    return f"{dataset.name} (SYNTHETIC data)" if dataset.synthetic else dataset.name
 
 
 def reference_runs(dataset: Dataset) -> dict[TestCase, ReferenceSelection]:

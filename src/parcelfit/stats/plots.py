@@ -8,7 +8,9 @@ from matplotlib.figure import Figure
 from parcelfit.stats.transit import significance_stars
 
 
-def transit_time_boxplots(times: pd.DataFrame, comparisons: pd.DataFrame) -> Figure:
+def transit_time_boxplots(
+    times: pd.DataFrame, comparisons: pd.DataFrame, title: str = "Transit times"
+) -> Figure:
     """One panel per rig and speed setting: transit times [s] per consignment type, brackets
     over the pairs whose Benjamini-Hochberg adjusted p-value is significant."""
     panels = sorted(
@@ -48,5 +50,5 @@ def transit_time_boxplots(times: pd.DataFrame, comparisons: pd.DataFrame) -> Fig
         ax.set_ylim(top=level + 0.05 * span)
     for ax in axes[len(panels) :]:
         ax.set_visible(False)
-    fig.suptitle("Transit times (brackets: Mann-Whitney U, Benjamini-Hochberg adjusted)")
+    fig.suptitle(f"{title} (brackets: Mann-Whitney U, Benjamini-Hochberg adjusted)")
     return fig
