@@ -1,0 +1,27 @@
+"""Simulation: the `Simulator` protocol, the parameter catalogue and the backends.
+
+Backends: `parcelfit.sim.mujoco.MujocoSimulator` (rigs and consignments from data files) and
+`parcelfit.sim.external.ExternalSimulator` (any solver run as a command).
+"""
+
+from parcelfit.sim.params import (
+    CATALOGUE,
+    ParameterSpec,
+    defaults_si,
+    parameter,
+    parameters_for,
+    resolve,
+)
+from parcelfit.sim.protocol import SimResult, SimStatus, Simulator
+
+__all__ = [
+    "CATALOGUE",
+    "ParameterSpec",
+    "SimResult",
+    "SimStatus",
+    "Simulator",
+    "defaults_si",
+    "parameter",
+    "parameters_for",
+    "resolve",
+]

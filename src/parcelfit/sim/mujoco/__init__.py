@@ -1,0 +1,25 @@
+"""The MuJoCo backend: rigs and consignments from YAML, flexible packaging shells, observation
+like the camera's. See README.md in this folder for the model and its parameter mapping."""
+
+from parcelfit.sim.mujoco.consignment import (
+    Consignment,
+    bundled_consignment_names,
+    load_consignment,
+)
+from parcelfit.sim.mujoco.rig import Rig, bundled_rig_names, load_rig
+from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
+from parcelfit.sim.mujoco.simulator import Frames, MujocoSimulator, SimOptions
+
+__all__ = [
+    "Consignment",
+    "Frames",
+    "MujocoSimulator",
+    "Rig",
+    "SceneOptions",
+    "SimOptions",
+    "build_scene",
+    "bundled_consignment_names",
+    "bundled_rig_names",
+    "load_consignment",
+    "load_rig",
+]

@@ -1,0 +1,437 @@
+"""Test rigs as data: conveying surfaces, walls, start pose, light barriers, regions of interest.
+
+A rig file (YAML, SI units, angles in degrees counter-clockwise from the rig's x axis)::
+
+    name: E3
+    description: free text
+    speeds:                       # speed setting -> drive name -> surface speed [m/s]
+      1: {main: 1.56, strip: 1.64}
+    surfaces:                     # things a parcel rides on
+      - name: main
+        type: belt                # belt | strips | rollers
+        material: belt            # belt | roller | metal (selects the contact parameters)
+        centre: [1.75, 0.0]       # centre of the conveying area [m]
+        length: 4.5               # along the heading [m]
+        width: 0.8                # across the heading [m]
+        heading: 0                # direction of motion [deg]
+        top: 0.0                  # height of the conveying surface [m]
+        drive: main               # key into speeds
+        # strips:  count, strip_width, pitch           (type strips)
+        # rollers: rows, columns, radius, roller_width, swivel [deg]   (type rollers)
+    walls:                        # vertical plates (guide plates, side walls)
+      - {name: guide, material: metal, from: [0.35, -0.4], to: [1.5, -0.11], height: 0.1,
+         base: 0.0, thickness: 0.003}
+    start: {position: [x, y], heading: 30, surface: strips}   # parcel centre, x axis, surface below
+    light_barriers:               # exactly two beams, crossed in this order
+      - {name: LS1, from: [x, y], to: [x, y]}
+      - {name: LS2, from: [x, y], to: [x, y]}
+    regions: [{x: [-0.3, 1.6]}]   # regions of interest for comparisons (see parcelfit.runs.regions)
+    margin: 0.02                  # [m]
+    end: {x: [-1.0, 3.0], y: [-1.0, 1.0], duration: 3.0, after_last_barrier: 0.3}
+
+The run ends when the parcel centre leaves the ``end`` box, ``after_last_barrier`` seconds
+after it interrupts the second light barrier, or after ``duration`` seconds of simulated time.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from importlib.resources import files
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from parcelfit.config import check_keys, get_number, get_str, load_yaml, require_mapping
+from parcelfit.errors import ParcelfitError
+from parcelfit.runs import Region, parse_region
+
+MATERIALS = ("belt", "roller", "metal")
+SURFACE_TYPES = ("belt", "strips", "rollers")
+_SURFACE_KEYS = {
+    "belt": (),
+    "strips": ("count", "strip_width", "pitch"),
+    "rollers": ("rows", "columns", "radius", "roller_width", "swivel"),
+}
+_COMMON = ("name", "type", "material", "centre", "length", "width", "heading", "top", "drive")
+
+
+@dataclass(frozen=True)
+class Surface:
+    """A driven conveying surface (belt, strip set or roller matrix); SI units, degrees."""
+
+    name: str
+    type: str
+    material: str
+    centre: tuple[float, float]
+    length: float
+    width: float
+    heading: float
+    top: float
+    drive: str
+    extra: Mapping[str, float]
+
+    def unit(self) -> np.ndarray:
+        """Unit vector of the heading (direction of motion) in the plane."""
+        a = np.radians(self.heading)
+        return np.array([np.cos(a), np.sin(a)])
+
+
+@dataclass(frozen=True)
+class Wall:
+    """A vertical plate from ``start`` to ``end`` [m], ``height`` above ``base`` [m]."""
+
+    name: str
+    material: str
+    start: tuple[float, float]
+    end: tuple[float, float]
+    height: float
+    base: float
+    thickness: float
+
+
+@dataclass(frozen=True)
+class Barrier:
+    """A light barrier: a beam over the line segment ``start``-``end`` [m]."""
+
+    name: str
+    start: tuple[float, float]
+    end: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class StartPose:
+    """Where the start guide puts the parcel: centre [m], heading [deg], surface it lies on."""
+
+    position: tuple[float, float]
+    heading: float
+    surface: str
+
+
+@dataclass(frozen=True)
+class EndCondition:
+    """When a run ends: centre leaves the box [m], time [s] after the last barrier, duration [s]."""
+
+    x: tuple[float, float]
+    y: tuple[float, float]
+    duration: float
+    after_last_barrier: float
+
+
+@dataclass(frozen=True)
+class Rig:
+    """A test rig: surfaces, walls, start pose, light barriers, regions of interest, speeds."""
+
+    name: str
+    description: str
+    speeds: Mapping[int, Mapping[str, float]]
+    surfaces: tuple[Surface, ...]
+    walls: tuple[Wall, ...]
+    start: StartPose
+    barriers: tuple[Barrier, Barrier]
+    regions: tuple[Region, ...]
+    margin: float
+    end: EndCondition
+    source: str = ""
+
+    def surface(self, name: str) -> Surface:
+        """The surface called ``name``."""
+        for s in self.surfaces:
+            if s.name == name:
+                return s
+        raise ParcelfitError(f"rig {self.name} has no surface {name!r}")
+
+    def drive_speeds(self, setting: int) -> Mapping[str, float]:
+        """Surface speed [m/s] of every drive at a speed setting."""
+        if setting not in self.speeds:
+            raise ParcelfitError(
+                f"rig {self.name} has no speed setting {setting}",
+                fix=f"use one of {sorted(self.speeds)}",
+            )
+        return self.speeds[setting]
+
+
+def _point(value: Any, *, file: str, where: str) -> tuple[float, float]:
+    if (
+        not isinstance(value, list | tuple)
+        or len(value) != 2
+        or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
+    ):
+        raise ParcelfitError(
+            f"expected a point [x, y] in metres, got {value!r}",
+            file=file,
+            where=where,
+            fix="write e.g. [0.5, -0.4]",
+        )
+    return float(value[0]), float(value[1])
+
+
+def _pair(value: Any, *, file: str, where: str) -> tuple[float, float]:
+    p = _point(value, file=file, where=where)
+    if not p[0] < p[1]:
+        raise ParcelfitError(
+            f"expected [min, max] with min < max, got {value!r}", file=file, where=where
+        )
+    return p
+
+
+def parse_rig(doc: Any, file: str) -> Rig:
+    """Build and check a `Rig` from its parsed YAML document."""
+    doc = require_mapping(doc, file=file, where="top level")
+    check_keys(
+        doc,
+        allowed=(
+            "name",
+            "description",
+            "speeds",
+            "surfaces",
+            "walls",
+            "start",
+            "light_barriers",
+            "regions",
+            "margin",
+            "end",
+        ),
+        required=("name", "speeds", "surfaces", "start", "light_barriers", "end"),
+        file=file,
+        where="top level",
+    )
+    name = get_str(doc, "name", file=file, where="")
+    speeds_doc = require_mapping(doc["speeds"], file=file, where="speeds")
+    speeds: dict[int, dict[str, float]] = {}
+    for key, drives in speeds_doc.items():
+        if isinstance(key, bool) or not isinstance(key, int) or key < 1:
+            raise ParcelfitError(
+                f"speed setting {key!r} must be an integer >= 1",
+                file=file,
+                where="speeds",
+                fix="write e.g. `1: {main: 1.56}`",
+            )
+        drives = require_mapping(drives, file=file, where=f"speeds.{key}")
+        speeds[key] = {
+            str(d): get_number(
+                drives, d, file=file, where=f"speeds.{key}", minimum=0.0, maximum=20.0, unit="m/s"
+            )
+            for d in drives
+        }
+    if not speeds:
+        raise ParcelfitError(
+            "no speed settings", file=file, where="speeds", fix="add `1: {drive: speed}`"
+        )
+    surfaces = []
+    for i, s in enumerate(doc["surfaces"] or []):
+        where = f"surfaces[{i}]"
+        s = require_mapping(s, file=file, where=where)
+        stype = get_str(s, "type", file=file, where=where)
+        if stype not in SURFACE_TYPES:
+            raise ParcelfitError(
+                f"unknown surface type {stype!r}",
+                file=file,
+                where=f"{where}.type",
+                fix=f"use one of {', '.join(SURFACE_TYPES)}",
+            )
+        check_keys(
+            s,
+            allowed=_COMMON + _SURFACE_KEYS[stype],
+            required=_COMMON + _SURFACE_KEYS[stype],
+            file=file,
+            where=where,
+        )
+        material = get_str(s, "material", file=file, where=where)
+        if material not in MATERIALS:
+            raise ParcelfitError(
+                f"unknown material {material!r}",
+                file=file,
+                where=f"{where}.material",
+                fix=f"use one of {', '.join(MATERIALS)}",
+            )
+        drive = get_str(s, "drive", file=file, where=where)
+        missing = [k for k, d in speeds.items() if drive not in d]
+        if missing:
+            raise ParcelfitError(
+                f"drive {drive!r} has no speed in setting(s) {missing}",
+                file=file,
+                where=f"{where}.drive",
+                fix=f"add {drive} to every speed setting",
+            )
+        extra = {k: get_number(s, k, file=file, where=where) for k in _SURFACE_KEYS[stype]}
+        surfaces.append(
+            Surface(
+                name=get_str(s, "name", file=file, where=where),
+                type=stype,
+                material=material,
+                centre=_point(s["centre"], file=file, where=f"{where}.centre"),
+                length=get_number(
+                    s, "length", file=file, where=where, minimum=1e-3, maximum=100, unit="m"
+                ),
+                width=get_number(
+                    s, "width", file=file, where=where, minimum=1e-3, maximum=100, unit="m"
+                ),
+                heading=get_number(
+                    s, "heading", file=file, where=where, minimum=-360, maximum=360, unit="deg"
+                ),
+                top=get_number(s, "top", file=file, where=where, minimum=-10, maximum=10, unit="m"),
+                drive=drive,
+                extra=extra,
+            )
+        )
+    if not surfaces:
+        raise ParcelfitError("a rig needs at least one surface", file=file, where="surfaces")
+    names = [s.name for s in surfaces]
+    if len(set(names)) != len(names):
+        raise ParcelfitError("surface names must be unique", file=file, where="surfaces")
+    walls = []
+    for i, w in enumerate(doc.get("walls") or []):
+        where = f"walls[{i}]"
+        w = require_mapping(w, file=file, where=where)
+        check_keys(
+            w,
+            allowed=("name", "material", "from", "to", "height", "base", "thickness"),
+            required=("name", "from", "to", "height"),
+            file=file,
+            where=where,
+        )
+        material = get_str(w, "material", file=file, where=where, default="metal")
+        if material not in MATERIALS:
+            raise ParcelfitError(
+                f"unknown material {material!r}",
+                file=file,
+                where=f"{where}.material",
+                fix=f"use one of {', '.join(MATERIALS)}",
+            )
+        walls.append(
+            Wall(
+                name=get_str(w, "name", file=file, where=where),
+                material=material,
+                start=_point(w["from"], file=file, where=f"{where}.from"),
+                end=_point(w["to"], file=file, where=f"{where}.to"),
+                height=get_number(
+                    w, "height", file=file, where=where, minimum=1e-3, maximum=10, unit="m"
+                ),
+                base=get_number(
+                    w,
+                    "base",
+                    file=file,
+                    where=where,
+                    default=0.0,
+                    minimum=-10,
+                    maximum=10,
+                    unit="m",
+                ),
+                thickness=get_number(
+                    w,
+                    "thickness",
+                    file=file,
+                    where=where,
+                    default=0.003,
+                    minimum=1e-4,
+                    maximum=1,
+                    unit="m",
+                ),
+            )
+        )
+    st = require_mapping(doc["start"], file=file, where="start")
+    check_keys(
+        st,
+        allowed=("position", "heading", "surface"),
+        required=("position", "heading", "surface"),
+        file=file,
+        where="start",
+    )
+    start = StartPose(
+        _point(st["position"], file=file, where="start.position"),
+        get_number(st, "heading", file=file, where="start", minimum=-360, maximum=360, unit="deg"),
+        get_str(st, "surface", file=file, where="start"),
+    )
+    if start.surface not in names:
+        raise ParcelfitError(
+            f"start.surface names no surface: {start.surface!r}",
+            file=file,
+            where="start.surface",
+            fix=f"use one of {', '.join(names)}",
+        )
+    bars = doc["light_barriers"]
+    if not isinstance(bars, list) or len(bars) != 2:
+        raise ParcelfitError(
+            "exactly two light barriers are needed",
+            file=file,
+            where="light_barriers",
+            fix="list LS1 and LS2 in the order the parcel crosses them",
+        )
+    barriers = []
+    for i, b in enumerate(bars):
+        where = f"light_barriers[{i}]"
+        b = require_mapping(b, file=file, where=where)
+        check_keys(
+            b,
+            allowed=("name", "from", "to"),
+            required=("name", "from", "to"),
+            file=file,
+            where=where,
+        )
+        barriers.append(
+            Barrier(
+                get_str(b, "name", file=file, where=where),
+                _point(b["from"], file=file, where=f"{where}.from"),
+                _point(b["to"], file=file, where=f"{where}.to"),
+            )
+        )
+    regions = tuple(
+        parse_region(r, file=file, where=f"regions[{k}]")
+        for k, r in enumerate(doc.get("regions") or [])
+    )
+    end = require_mapping(doc["end"], file=file, where="end")
+    check_keys(
+        end,
+        allowed=("x", "y", "duration", "after_last_barrier"),
+        required=("x", "y", "duration"),
+        file=file,
+        where="end",
+    )
+    return Rig(
+        name=name,
+        description=str(doc.get("description", "") or ""),
+        speeds=speeds,
+        surfaces=tuple(surfaces),
+        walls=tuple(walls),
+        start=start,
+        barriers=(barriers[0], barriers[1]),
+        regions=regions,
+        margin=get_number(doc, "margin", file=file, where="", default=0.0, minimum=0.0, unit="m")
+        or 0.0,
+        end=EndCondition(
+            _pair(end["x"], file=file, where="end.x"),
+            _pair(end["y"], file=file, where="end.y"),
+            get_number(
+                end, "duration", file=file, where="end", minimum=0.01, maximum=600, unit="s"
+            ),
+            get_number(
+                end, "after_last_barrier", file=file, where="end", default=0.3, minimum=0, unit="s"
+            ),
+        ),
+        source=file,
+    )
+
+
+def bundled_rig_names() -> list[str]:
+    """Names of the rigs shipped with parcelfit."""
+    return sorted(
+        p.name[:-5]
+        for p in files("parcelfit.sim.mujoco").joinpath("rigs").iterdir()
+        if p.name.endswith(".yaml")
+    )
+
+
+def load_rig(name_or_path: str | Path) -> Rig:
+    """Load a bundled rig by name (``E3``) or a rig file by path."""
+    path = Path(name_or_path)
+    if path.suffix.lower() not in (".yaml", ".yml"):
+        candidate = files("parcelfit.sim.mujoco").joinpath("rigs").joinpath(f"{name_or_path}.yaml")
+        if not candidate.is_file():
+            raise ParcelfitError(
+                f"unknown rig {str(name_or_path)!r}",
+                fix=f"use one of {', '.join(bundled_rig_names())} or the path of a rig .yaml file",
+            )
+        path = Path(str(candidate))
+    return parse_rig(load_yaml(path), str(path))

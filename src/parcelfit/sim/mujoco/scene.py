@@ -1,0 +1,304 @@
+"""Building the MJCF scene of a rig and a consignment for given parameters (SI units).
+
+Scene conventions:
+
+* Conveying surfaces are static world geoms with a surface velocity (`surfacevel`): belts and
+  strips are boxes whose top face is the conveying surface, roller units are capsules lying
+  across their heading. Walls are thin static boxes. Materials select the parameters: ``belt``
+  and ``roller`` use the belt/packaging ones (BePa), ``metal`` the metal/packaging ones (MePa).
+* The packaging is a two-sheet flex shell (`parcelfit.sim.mujoco.shell`, elastic2d="both":
+  membrane and bending) with vertex radius ``vertex_radius``; a rigid content is a free box, a
+  soft content a 3-D flex grid. The content collides only with the packaging (contype bits), the
+  packaging with everything. Contact properties come from the partner with the higher priority:
+  surfaces (2) over the content (1) over the packaging (0), so each pair has exactly the
+  parameters of the catalogue.
+* Flex damping is Rayleigh stiffness-proportional: beta = 2 zeta / omega_ref, where omega_ref is
+  the first bending frequency of the body treated as a free plate strip of length L,
+  omega_ref = (4.730 / L)^2 sqrt(D / (rho h)), D = E h^3 / (12 (1 - nu^2)).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from parcelfit.errors import ParcelfitError
+from parcelfit.sim.mujoco.consignment import Consignment
+from parcelfit.sim.mujoco.contact import ContactParams, contact_params
+from parcelfit.sim.mujoco.rig import Rig, Surface
+from parcelfit.sim.mujoco.shell import ShellMesh, pillow_shell
+from parcelfit.sim.params import SOFT
+
+SLAB = 0.02  # half-thickness of belt and strip boxes [m]
+CONTACT_GAP = 0.0005  # clearance between content and shell, and under the parcel at the start [m]
+FREE_PLATE_BETA1 = 4.730  # first free-free beam mode, beta_1 L
+
+
+@dataclass(frozen=True)
+class SceneOptions:
+    """Numerical settings of a scene (not calibrated): step [s], mesh spacing [m], etc."""
+
+    timestep: float = 1.0 / 600.0
+    spacing: float = 0.03  # shell grid spacing, rigid contents [m]
+    soft_shell_spacing: float = 0.04  # shell grid spacing around a soft content [m]
+    soft_spacing: float = 0.06  # vertex spacing of a soft content [m]
+    vertex_radius: float = 0.001
+    solver: str = "Newton"
+    iterations: int = 50
+    tolerance: float = 1e-7
+    speed_factors: Mapping[str, float] = field(
+        default_factory=dict
+    )  # drive -> factor (synthetic jitter)
+    start_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)  # dx [m], dy [m], dheading [deg]
+
+    def __post_init__(self) -> None:
+        if not 1e-5 <= self.timestep <= 0.01:
+            raise ParcelfitError(f"timestep must lie in [1e-5, 0.01] s, got {self.timestep}")
+        if not 0.003 <= self.spacing <= 0.2:
+            raise ParcelfitError(
+                f"mesh spacing must lie in [3, 200] mm, got {self.spacing * 1e3:g} mm"
+            )
+
+
+@dataclass(frozen=True)
+class SurfaceGeom:
+    """A driven geom: name, material and world velocity of its surface [m/s]."""
+
+    name: str
+    material: str
+    velocity: tuple[float, float, float]
+    surface: str
+
+
+@dataclass(frozen=True)
+class Scene:
+    """MJCF text and what the runner needs to read the simulation back."""
+
+    xml: str
+    shell: ShellMesh
+    driven: tuple[SurfaceGeom, ...]
+    metal_geoms: tuple[str, ...]
+    start_velocity: tuple[float, float, float]
+    contacts: Mapping[str, ContactParams]
+    n_shell_vertices: int
+    content_flex: bool
+
+
+def _quat(yaw_deg: float, roll_deg: float = 0.0) -> str:
+    """Quaternion (w x y z) of R = Rz(yaw) Rx(roll)."""
+    y, r = math.radians(yaw_deg) / 2, math.radians(roll_deg) / 2
+    qz = np.array([math.cos(y), 0, 0, math.sin(y)])
+    qx = np.array([math.cos(r), math.sin(r), 0, 0])
+    w1, x1, y1, z1 = qz
+    w2, x2, y2, z2 = qx
+    q = [
+        w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+        w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+        w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+        w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+    ]
+    return " ".join(f"{v:.9g}" for v in q)
+
+
+def _f(v: float) -> str:
+    return f"{v:.9g}"
+
+
+def _surface_geoms(
+    s: Surface, speed: float, cp: ContactParams, mu: float
+) -> tuple[list[str], list[SurfaceGeom]]:
+    u, n = s.unit(), np.array([-s.unit()[1], s.unit()[0]])
+    common = (
+        f'friction="{_f(mu)} 0.005 0.0001" priority="2" solref="{cp.solref}" solimp="{cp.solimp}" '
+        f'contype="1" conaffinity="1" condim="3"'
+    )
+    xml, geoms = [], []
+    if s.type == "belt":
+        parts = [(s.name, np.array(s.centre), s.width)]
+    elif s.type == "strips":
+        k = int(s.extra["count"])
+        parts = [
+            (
+                f"{s.name}_{i}",
+                np.array(s.centre) + (i - (k - 1) / 2) * s.extra["pitch"] * n,
+                s.extra["strip_width"],
+            )
+            for i in range(k)
+        ]
+    else:
+        parts = []
+    for name, c, width in parts:
+        xml.append(
+            f'<geom name="{name}" type="box" size="{_f(s.length / 2)} {_f(width / 2)} {SLAB}" '
+            f'pos="{_f(c[0])} {_f(c[1])} {_f(s.top - SLAB)}" quat="{_quat(s.heading)}" '
+            f'surfacevel="{_f(speed)} 0 0 0 0 0" rgba="0.25 0.25 0.3 1" {common}/>'
+        )
+        geoms.append(SurfaceGeom(name, s.material, (speed * u[0], speed * u[1], 0.0), s.name))
+    if s.type == "rollers":
+        rows, cols = int(s.extra["rows"]), int(s.extra["columns"])
+        radius, half = s.extra["radius"], s.extra["roller_width"] / 2
+        heading = s.heading + s.extra["swivel"]
+        a = math.radians(heading)
+        for r in range(rows):
+            for c_ in range(cols):
+                c = (
+                    np.array(s.centre)
+                    + (c_ - (cols - 1) / 2) * (s.length / cols) * u
+                    + (r - (rows - 1) / 2) * (s.width / rows) * n
+                )
+                name = f"{s.name}_{r}_{c_}"
+                # capsule axis (local z) across the roller's heading: R = Rz(heading) Rx(90 deg)
+                xml.append(
+                    f'<geom name="{name}" type="capsule" size="{_f(radius)} {_f(half)}" '
+                    f'pos="{_f(c[0])} {_f(c[1])} {_f(s.top - radius)}" quat="{_quat(heading, 90)}" '
+                    f'surfacevel="{_f(speed)} 0 0 0 0 0" rgba="0.6 0.6 0.2 1" {common}/>'
+                )
+                geoms.append(
+                    SurfaceGeom(
+                        name, s.material, (speed * math.cos(a), speed * math.sin(a), 0.0), s.name
+                    )
+                )
+    return xml, geoms
+
+
+def bending_omega(
+    young: float, poisson: float, thickness: float, density: float, length: float
+) -> float:
+    """First free-free bending frequency [rad/s] of a plate strip (E [Pa], h [m], rho [kg/m^3], L [m])."""
+    d = young * thickness**3 / (12 * (1 - poisson**2))
+    return (FREE_PLATE_BETA1 / length) ** 2 * math.sqrt(d / (density * thickness))
+
+
+def build_scene(
+    rig: Rig,
+    consignment: Consignment,
+    params: Mapping[str, float],
+    setting: int,
+    options: SceneOptions | None = None,
+) -> Scene:
+    """The MJCF scene of ``rig`` at ``setting`` with ``consignment`` and SI ``params``."""
+    opt = options or SceneOptions()
+    p = params
+    speeds = rig.drive_speeds(setting)
+    L, W, _H = consignment.outer
+    cL, cW, cH = consignment.content
+    r = opt.vertex_radius
+    half_height = cH / 2 + r + CONTACT_GAP
+    soft = consignment.content_kind == SOFT
+    shell = pillow_shell(
+        (L, W), (cL, cW), half_height, opt.soft_shell_spacing if soft else opt.spacing
+    )
+    nv = len(shell.points)
+    m_pa = p["m_Pa"]
+    m_co = consignment.mass - m_pa
+    if m_co <= 0:
+        raise ParcelfitError(
+            f"packaging mass {m_pa * 1e3:g} g leaves no mass for the content "
+            f"(consignment {consignment.mass * 1e3:g} g)",
+            fix="lower m_Pa",
+        )
+    m_v = m_pa / nv
+    n_face = len(shell.bottom_face)
+    dt = opt.timestep
+
+    # --- contact parameters -------------------------------------------------------------------
+    belt_cp = contact_params(p["k_BePa"], n_face, 1 / m_v, p["zeta_BePa"], dt)
+    metal_cp = contact_params(p["k_MePa"], n_face, 1 / m_v, p["zeta_MePa"], dt)
+    if soft:
+        counts = [max(2, round(s / opt.soft_spacing) + 1) for s in (cL, cW)] + [2]
+        m_cv = m_co / (counts[0] * counts[1] * counts[2])
+        content_cp = contact_params(p["k_CoPa"], n_face, 1 / m_v + 1 / m_cv, p["zeta_CoPa"], dt)
+    else:
+        content_cp = contact_params(p["k_CoPa"], n_face, 1 / m_v + 1 / m_co, p["zeta_CoPa"], dt)
+
+    # --- rig ------------------------------------------------------------------------------------
+    body: list[str] = []
+    driven: list[SurfaceGeom] = []
+    for s in rig.surfaces:
+        factor = opt.speed_factors.get(s.drive, 1.0)
+        cp, mu = (metal_cp, p["mu_d_MePa"]) if s.material == "metal" else (belt_cp, p["mu_d_BePa"])
+        xml, geoms = _surface_geoms(s, speeds[s.drive] * factor, cp, mu)
+        body += xml
+        driven += geoms
+    metal = []
+    for w in rig.walls:
+        a, b = np.array(w.start), np.array(w.end)
+        c, length = (a + b) / 2, float(np.linalg.norm(b - a))
+        yaw = math.degrees(math.atan2(b[1] - a[1], b[0] - a[0]))
+        cp, mu = (metal_cp, p["mu_d_MePa"]) if w.material == "metal" else (belt_cp, p["mu_d_BePa"])
+        body.append(
+            f'<geom name="{w.name}" type="box" size="{_f(length / 2)} {_f(w.thickness / 2)} {_f(w.height / 2)}" '
+            f'pos="{_f(c[0])} {_f(c[1])} {_f(w.base + w.height / 2)}" quat="{_quat(yaw)}" '
+            f'friction="{_f(mu)} 0.005 0.0001" priority="2" solref="{cp.solref}" solimp="{cp.solimp}" '
+            f'contype="1" conaffinity="1" condim="3" rgba="0.7 0.7 0.75 1"/>'
+        )
+        if w.material == "metal":
+            metal.append(w.name)
+
+    # --- parcel ---------------------------------------------------------------------------------
+    start_surface = rig.surface(rig.start.surface)
+    dx, dy, dh = opt.start_offset
+    x0, y0 = rig.start.position[0] + dx, rig.start.position[1] + dy
+    heading = rig.start.heading + dh
+    zc = start_surface.top + half_height + r + CONTACT_GAP
+    q = _quat(heading)
+    v_start = speeds[start_surface.drive] * opt.speed_factors.get(start_surface.drive, 1.0)
+    u0 = start_surface.unit()
+    start_velocity = (v_start * u0[0], v_start * u0[1], 0.0)
+
+    rho_pa = m_pa / (2 * L * W * p["t_Pa"])
+    beta_pa = 2 * p["zeta_Pa"] / bending_omega(p["E_Pa"], p["nu_Pa"], p["t_Pa"], rho_pa, L)
+    points = " ".join(_f(v) for v in shell.points.ravel())
+    elements = " ".join(str(i) for i in shell.triangles.ravel())
+    body.append(
+        f'<flexcomp name="packaging" type="direct" dim="2" pos="{_f(x0)} {_f(y0)} {_f(zc)}" quat="{q}" '
+        f'radius="{_f(r)}" mass="{_f(m_pa)}" point="{points}" element="{elements}" rgba="0.85 0.75 0.55 0.8">'
+        f'<contact contype="3" conaffinity="3" condim="3" selfcollide="none" priority="0"/>'
+        f'<elasticity young="{_f(p["E_Pa"])}" poisson="{_f(p["nu_Pa"])}" thickness="{_f(p["t_Pa"])}" '
+        f'damping="{_f(beta_pa)}" elastic2d="both"/></flexcomp>'
+    )
+    content_friction = f'friction="{_f(p["mu_CoPa"])} 0.005 0.0001"'
+    if soft:
+        spacing = [s / (c - 1) for s, c in zip((cL, cW, cH), counts, strict=True)]
+        rho_co = m_co / (cL * cW * cH)
+        beta_co = 2 * p["zeta_Co"] / bending_omega(p["E_Co"], 0.3, cH, rho_co, cL)
+        body.append(
+            f'<flexcomp name="content" type="grid" dim="3" count="{counts[0]} {counts[1]} {counts[2]}" '
+            f'spacing="{" ".join(_f(s) for s in spacing)}" pos="{_f(x0)} {_f(y0)} {_f(zc)}" quat="{q}" '
+            f'radius="{_f(r / 2)}" mass="{_f(m_co)}" rgba="0.3 0.5 0.9 1">'
+            f'<contact contype="2" conaffinity="2" condim="3" selfcollide="none" priority="1" {content_friction} '
+            f'solref="{content_cp.solref}" solimp="{content_cp.solimp}"/>'
+            f'<elasticity young="{_f(p["E_Co"])}" poisson="0.3" damping="{_f(beta_co)}"/></flexcomp>'
+        )
+    else:
+        body.append(
+            f'<body name="content" pos="{_f(x0)} {_f(y0)} {_f(zc)}" quat="{q}"><freejoint name="content"/>'
+            f'<geom name="content" type="box" size="{_f(cL / 2)} {_f(cW / 2)} {_f(cH / 2)}" mass="{_f(m_co)}" '
+            f'contype="2" conaffinity="2" condim="3" priority="1" {content_friction} solref="{content_cp.solref}" '
+            f'solimp="{content_cp.solimp}" rgba="0.6 0.4 0.2 1"/></body>'
+        )
+
+    xml = f"""<mujoco model="{rig.name}-{consignment.name}">
+<compiler angle="degree"/>
+<option timestep="{_f(dt)}" integrator="discrete" solver="{opt.solver}" cone="elliptic"
+        iterations="{opt.iterations}" tolerance="{_f(opt.tolerance)}"/>
+<size memory="256M"/>
+<visual><global offwidth="1280" offheight="720"/></visual>
+<worldbody>
+<light pos="1 0 3" dir="0 0 -1" directional="true"/>
+{chr(10).join(body)}
+</worldbody>
+</mujoco>"""
+    return Scene(
+        xml=xml,
+        shell=shell,
+        driven=tuple(driven),
+        metal_geoms=tuple(metal),
+        start_velocity=start_velocity,
+        contacts={"belt": belt_cp, "metal": metal_cp, "content": content_cp},
+        n_shell_vertices=nv,
+        content_flex=soft,
+    )

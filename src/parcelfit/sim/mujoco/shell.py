@@ -1,0 +1,104 @@
+"""The packaging shell: a closed two-sheet "pillow" mesh of triangles around the content.
+
+Top and bottom sheets are rectangular grids over the packed outer footprint L x W that share
+their boundary ring (the seam). Heights follow
+
+    h(x, y) = H * min(f(x; L, c_L), f(y; W, c_W)),   f(s; L, c) = clip((L/2 - |s|) / ((L - c)/2), 0, 1)
+
+(top at +h, bottom at -h): flat over the content footprint c_L x c_W, tapering linearly to the
+seam at height 0. Grid lines lie exactly on the content's edges, so the shell never cuts into
+the content (a shell that does makes the parcel lag the belt). The spacing of the grid is the
+mesh resolution: each of the three bands (rim, content, rim) per axis is divided into the
+number of cells closest to band width / spacing (at least one).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from parcelfit.errors import ParcelfitError
+
+
+def _axis(outer: float, inner: float, spacing: float) -> np.ndarray:
+    rim = (outer - inner) / 2
+    n_rim = max(1, round(rim / spacing))
+    n_mid = max(1, round(inner / spacing))
+    left = np.linspace(-outer / 2, -inner / 2, n_rim + 1)[:-1]
+    mid = np.linspace(-inner / 2, inner / 2, n_mid + 1)
+    return np.concatenate([left, mid, -left[::-1]])
+
+
+@dataclass(frozen=True)
+class ShellMesh:
+    """Vertices (n, 3) [m] in the parcel frame, triangles (m, 3), and vertex index groups."""
+
+    points: np.ndarray
+    triangles: np.ndarray
+    top: np.ndarray  # top-sheet vertices over the content footprint (where a tag would sit)
+    bottom_face: np.ndarray  # bottom-sheet vertices over the content footprint (the flat face)
+    seam: np.ndarray  # boundary ring
+    half_height: float  # H [m]
+
+
+def pillow_shell(
+    outer: tuple[float, float], content: tuple[float, float], half_height: float, spacing: float
+) -> ShellMesh:
+    """Build the pillow shell for outer (L, W) and content (c_L, c_W) footprints [m]."""
+    (L, W), (cL, cW) = outer, content
+    if not (0 < cL < L and 0 < cW < W):
+        raise ParcelfitError(f"content {content} must be smaller than the outer footprint {outer}")
+    if spacing <= 0 or spacing > max(L, W):
+        raise ParcelfitError(f"mesh spacing must be in (0, {max(L, W)}] m, got {spacing}")
+    xs, ys = _axis(L, cL, spacing), _axis(W, cW, spacing)
+    nx, ny = len(xs), len(ys)
+
+    def height(x: float, y: float) -> float:
+        fx = np.clip((L / 2 - abs(x)) / ((L - cL) / 2), 0, 1)
+        fy = np.clip((W / 2 - abs(y)) / ((W - cW) / 2), 0, 1)
+        return half_height * min(fx, fy)
+
+    pts: list[list[float]] = []
+    top: dict[tuple[int, int], int] = {}
+    bot: dict[tuple[int, int], int] = {}
+    for i, x in enumerate(xs):
+        for j, y in enumerate(ys):
+            top[i, j] = len(pts)
+            pts.append([x, y, height(x, y)])
+    for i, x in enumerate(xs):
+        for j, y in enumerate(ys):
+            if i in (0, nx - 1) or j in (0, ny - 1):
+                bot[i, j] = top[i, j]
+            else:
+                bot[i, j] = len(pts)
+                pts.append([x, y, -height(x, y)])
+    tris: list[int] = []
+    for i in range(nx - 1):
+        for j in range(ny - 1):
+            for grid, flip in ((top, False), (bot, True)):
+                a, b, c, d = grid[i, j], grid[i + 1, j], grid[i + 1, j + 1], grid[i, j + 1]
+                # alternate the diagonal for symmetry; reverse the bottom's winding (outward = -z)
+                quad = [a, b, c, a, c, d] if (i + j) % 2 == 0 else [a, b, d, b, c, d]
+                if flip:
+                    quad = [quad[0], quad[2], quad[1], quad[3], quad[5], quad[4]]
+                tris += quad
+    points = np.asarray(pts)
+    eps = 1e-12
+    inside = [
+        (i, j)
+        for i in range(nx)
+        for j in range(ny)
+        if abs(xs[i]) <= cL / 2 + eps and abs(ys[j]) <= cW / 2 + eps
+    ]
+    seam = sorted(
+        {top[i, j] for i in range(nx) for j in range(ny) if i in (0, nx - 1) or j in (0, ny - 1)}
+    )
+    return ShellMesh(
+        points=points,
+        triangles=np.asarray(tris, dtype=int).reshape(-1, 3),
+        top=np.array([top[k] for k in inside]),
+        bottom_face=np.array([bot[k] for k in inside]),
+        seam=np.array(seam),
+        half_height=half_height,
+    )

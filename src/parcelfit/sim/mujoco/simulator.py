@@ -1,0 +1,351 @@
+"""The MuJoCo backend: simulate a test case and read it back like the camera would see it.
+
+Observation (every 1/sample_rate s, default 60 Hz like the camera): the shell's top-sheet
+vertices over the content footprint stand in for the AprilTag on the parcel. Their centroid is
+the parcel position (x, y) [m]; the heading theta [rad] is the 2-D least-squares rotation
+(Kabsch) of their rest coordinates (x_i, y_i) onto the current offsets q_i from the centroid:
+
+    theta = atan2( sum(x_i q_iy - y_i q_ix), sum(x_i q_ix + y_i q_iy) )
+
+(rest coordinates in the parcel frame, offsets in the rig frame, so theta is the heading in the
+rig frame), which is exact for rigid motion and averages out local wrinkles otherwise.
+
+Light barriers: a beam is interrupted when the packaging vertices' (x, y) lie on both sides of
+its line with some of them over the segment; the transit time is the time between the first
+interruption of LS1 and of LS2, checked every step.
+
+Static friction offset (mu_s_*): every step, the friction of metal (and belt/roller) geoms is
+mu_d + offset * exp(-(v_slip / v_stick)^2), where v_slip is the parcel's speed relative to that
+surface (walls: its speed; belts: relative to the belt under the parcel's centre) and v_stick =
+5 mm/s. This is a parcel-level approximation: one coefficient per surface, not per contact.
+
+Status: ``unstable`` on NaN, MuJoCo's bad-acceleration warning, a speed above 20 m/s, or the
+parcel falling 0.2 m below the lowest surface; ``timeout`` when the wall-clock limit passes;
+``ok`` otherwise (the run ends when the centre leaves the rig's end box, some time after LS2,
+or at the rig's duration).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+
+from parcelfit.errors import ParcelfitError
+from parcelfit.runs import Run, TestCase, Trajectory
+from parcelfit.sim.mujoco.consignment import Consignment, load_consignment
+from parcelfit.sim.mujoco.rig import Barrier, Rig, load_rig
+from parcelfit.sim.mujoco.scene import Scene, SceneOptions, build_scene
+from parcelfit.sim.params import parameters_for, resolve
+from parcelfit.sim.protocol import SimResult, SimStatus
+
+STICK_SPEED = 0.005  # m/s
+MAX_SPEED = 20.0  # m/s
+FALL_DEPTH = 0.2  # m
+
+
+@dataclass(frozen=True)
+class SimOptions:
+    """Run settings: scene numerics, sampling rate [Hz], wall-clock limit [s], frame recording."""
+
+    scene: SceneOptions = field(default_factory=SceneOptions)
+    sample_rate: float = 60.0
+    wall_limit: float = 600.0
+    record_vertices: bool = False  # keep the shell's vertex positions per sample (for animations)
+    duration: float | None = None  # override the rig's duration [s]
+
+
+@dataclass(frozen=True)
+class Frames:
+    """Per-sample vertex positions of the shell (n_samples, n_vertices, 3) [m], for animations."""
+
+    t: np.ndarray
+    vertices: np.ndarray
+    triangles: np.ndarray
+
+
+def _barrier_state(xy: np.ndarray, barrier: Barrier) -> bool:
+    a, b = np.asarray(barrier.start), np.asarray(barrier.end)
+    d = b - a
+    rel = xy - a
+    side = d[0] * rel[:, 1] - d[1] * rel[:, 0]
+    along = (rel @ d) / (d @ d)
+    over = (along >= 0) & (along <= 1)
+    if not over.any():
+        return False
+    s = side[over]
+    return bool(s.min() <= 0 <= s.max())
+
+
+class MujocoSimulator:
+    """Simulator backend on MuJoCo for bundled or user rigs and consignments (see module doc)."""
+
+    def __init__(
+        self,
+        options: SimOptions | None = None,
+        rigs: Mapping[str, Rig] | None = None,
+        consignments: Mapping[str, Consignment] | None = None,
+    ) -> None:
+        self.options = options or SimOptions()
+        self._rigs = dict(rigs or {})
+        self._consignments = dict(consignments or {})
+
+    def rig(self, name: str) -> Rig:
+        """The rig called ``name`` (given at construction, else bundled)."""
+        if name not in self._rigs:
+            self._rigs[name] = load_rig(name)
+        return self._rigs[name]
+
+    def consignment(self, name: str) -> Consignment:
+        """The consignment type called ``name`` (given at construction, else bundled)."""
+        if name not in self._consignments:
+            self._consignments[name] = load_consignment(name)
+        return self._consignments[name]
+
+    def scene(self, params: Mapping[str, float], case: TestCase) -> Scene:
+        """The MJCF scene for SI ``params`` (defaults filled in) and a test case."""
+        cons = self.consignment(case.consignment)
+        full = resolve(cons.content_kind, si_values=params)
+        return build_scene(self.rig(case.rig), cons, full, case.speed_setting, self.options.scene)
+
+    def run(
+        self, params: Mapping[str, float], case: TestCase, run_id: str | None = None
+    ) -> SimResult:
+        """Simulate ``case`` with SI ``params``; see the module docstring for what is measured."""
+        result, _ = self.run_with_frames(params, case, run_id)
+        return result
+
+    def run_with_frames(
+        self, params: Mapping[str, float], case: TestCase, run_id: str | None = None
+    ) -> tuple[SimResult, Frames | None]:
+        """As `run`, also returning the shell's vertex positions per sample if recorded."""
+        t_wall = time.perf_counter()
+        rig = self.rig(case.rig)
+        cons = self.consignment(case.consignment)
+        full = resolve(cons.content_kind, si_values=params)
+        scene = build_scene(rig, cons, full, case.speed_setting, self.options.scene)
+        with _CountedWarnings() as warnings:
+            try:
+                model = mujoco.MjModel.from_xml_string(scene.xml)
+            except ValueError as exc:
+                return SimResult(
+                    None,
+                    SimStatus.FAILED,
+                    time.perf_counter() - t_wall,
+                    {"message": f"MuJoCo rejected the scene: {exc}"},
+                ), None
+            result, frames = self._simulate(model, scene, rig, full, case, run_id, t_wall)
+        result.diagnostics["mujoco_warnings"] = warnings.count  # type: ignore[index]
+        if warnings.first:
+            result.diagnostics["first_mujoco_warning"] = warnings.first  # type: ignore[index]
+        return result, frames
+
+    def _simulate(
+        self,
+        model: mujoco.MjModel,
+        scene: Scene,
+        rig: Rig,
+        params: Mapping[str, float],
+        case: TestCase,
+        run_id: str | None,
+        t_wall: float,
+    ) -> tuple[SimResult, Frames | None]:
+        opt = self.options
+        data = mujoco.MjData(model)
+        dt = model.opt.timestep
+        flex = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, "packaging")
+        adr, num = model.flex_vertadr[flex], model.flex_vertnum[flex]
+        rest = scene.shell.points[scene.shell.top, :2] - scene.shell.points[
+            scene.shell.top, :2
+        ].mean(axis=0)
+        _set_velocity(model, data, np.asarray(scene.start_velocity))
+
+        friction = _FrictionSwitch(model, scene, rig, params)
+        duration = opt.duration if opt.duration is not None else rig.end.duration
+        n_steps = round(duration / dt)
+        every = max(1, round(1.0 / (opt.sample_rate * dt)))
+        lowest = min(s.top for s in rig.surfaces) - FALL_DEPTH
+        (x_lo, x_hi), (y_lo, y_hi) = rig.end.x, rig.end.y
+        crossed: list[float | None] = [None, None]
+        samples: list[tuple[float, float, float, float]] = []
+        frames: list[np.ndarray] = []
+        status, message = SimStatus.OK, "reached the end of the run"
+        prev_c: np.ndarray | None = None
+        stop_at = n_steps
+        step = 0
+        while True:
+            verts = data.flexvert_xpos[adr : adr + num]
+            top = verts[scene.shell.top]
+            c = top[:, :2].mean(axis=0)
+            if step % every == 0:
+                q = top[:, :2] - c
+                theta = math.atan2(
+                    float(np.sum(rest[:, 0] * q[:, 1] - rest[:, 1] * q[:, 0])),
+                    float(np.sum(rest[:, 0] * q[:, 0] + rest[:, 1] * q[:, 1])),
+                )
+                samples.append((data.time, float(c[0]), float(c[1]), theta))
+                if opt.record_vertices:
+                    frames.append(verts.copy())
+                if (
+                    not np.all(np.isfinite(verts))
+                    or data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number
+                ):
+                    status, message = (
+                        SimStatus.UNSTABLE,
+                        "numerical blow-up (NaN or bad acceleration)",
+                    )
+                    break
+                if float(top[:, 2].mean()) < lowest:
+                    status, message = SimStatus.UNSTABLE, "the parcel fell off the rig"
+                    break
+                if not (x_lo <= c[0] <= x_hi and y_lo <= c[1] <= y_hi):
+                    message = "the parcel left the rig's end box"
+                    break
+                if time.perf_counter() - t_wall > opt.wall_limit:
+                    status, message = (
+                        SimStatus.TIMEOUT,
+                        f"wall-clock limit of {opt.wall_limit:g} s reached",
+                    )
+                    break
+            if step >= stop_at:
+                break
+            for k, barrier in enumerate(rig.barriers):
+                if (
+                    crossed[k] is None
+                    and (k == 0 or crossed[0] is not None)
+                    and _barrier_state(verts[:, :2], barrier)
+                ):
+                    crossed[k] = data.time
+                    if k == 1:
+                        stop_at = min(n_steps, step + round(rig.end.after_last_barrier / dt))
+            if prev_c is not None:
+                speed_vec = (c - prev_c) / dt
+                if float(np.hypot(*speed_vec)) > MAX_SPEED:
+                    status, message = (
+                        SimStatus.UNSTABLE,
+                        "energy blow-up (parcel faster than 20 m/s)",
+                    )
+                    break
+                friction.update(model, c, speed_vec)
+            prev_c = c.copy()
+            mujoco.mj_step(model, data)
+            step += 1
+        wall = time.perf_counter() - t_wall
+        transit = (
+            crossed[1] - crossed[0] if crossed[0] is not None and crossed[1] is not None else None
+        )
+        diagnostics: dict[str, object] = {
+            "message": message,
+            "steps": step,
+            "simulated_time": float(data.time),
+            "steps_per_second": step / wall if wall > 0 else float("nan"),
+            "barrier_times": tuple(crossed),
+        }
+        run = None
+        if len(samples) >= 3 and status is not SimStatus.UNSTABLE:
+            arr = np.asarray(samples)
+            try:
+                traj = Trajectory.from_arrays(arr[:, 0], arr[:, 1], arr[:, 2], arr[:, 3])
+                run = Run(
+                    run_id or f"sim-{case.rig}-{case.consignment}-{case.speed_setting}",
+                    case,
+                    traj,
+                    transit,
+                )
+            except ParcelfitError as exc:
+                status, diagnostics["message"] = SimStatus.UNSTABLE, f"unusable trajectory: {exc}"
+        result = SimResult(run, status, wall, diagnostics)
+        rec = None
+        if opt.record_vertices and frames:
+            rec = Frames(
+                np.asarray([s[0] for s in samples[: len(frames)]]),
+                np.asarray(frames),
+                scene.shell.triangles,
+            )
+        return result, rec
+
+
+class _CountedWarnings:
+    """Count MuJoCo's warnings during a run instead of printing them (3-D flexes can warn about
+    an ill-conditioned stiffness solve every step); the count goes into the diagnostics."""
+
+    def __enter__(self) -> _CountedWarnings:
+        self.count = 0
+        self.first = ""
+        self._previous = mujoco.get_mju_user_warning()
+        mujoco.set_mju_user_warning(self._handle)
+        return self
+
+    def _handle(self, message: str) -> None:
+        self.count += 1
+        if not self.first:
+            self.first = str(message).strip()
+
+    def __exit__(self, *exc: object) -> None:
+        mujoco.set_mju_user_warning(self._previous)
+
+
+def _set_velocity(model: mujoco.MjModel, data: mujoco.MjData, v: np.ndarray) -> None:
+    """Give every degree of freedom the world velocity ``v`` [m/s] (free joints, slide joints)."""
+    mujoco.mj_forward(model, data)
+    for j in range(model.njnt):
+        a = model.jnt_dofadr[j]
+        if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE:
+            data.qvel[a : a + 3] = v
+        elif model.jnt_type[j] == mujoco.mjtJoint.mjJNT_SLIDE:
+            data.qvel[a] = float(np.dot(data.xaxis[j], v))
+    mujoco.mj_forward(model, data)
+
+
+class _FrictionSwitch:
+    """Raise a surface's friction by the static offset while the parcel sticks to it."""
+
+    def __init__(
+        self, model: mujoco.MjModel, scene: Scene, rig: Rig, params: Mapping[str, float]
+    ) -> None:
+        self.groups: list[tuple[np.ndarray, float, float, np.ndarray | None, object]] = []
+        metal_ids = np.array([model.geom(n).id for n in scene.metal_geoms], dtype=int)
+        if params["mu_s_MePa"] > 0 and metal_ids.size:
+            self.groups.append((metal_ids, params["mu_d_MePa"], params["mu_s_MePa"], None, None))
+        self.belts = []
+        if params["mu_s_BePa"] > 0:
+            for g in scene.driven:
+                if g.material != "metal":
+                    self.belts.append(
+                        (model.geom(g.name).id, np.asarray(g.velocity[:2]), rig.surface(g.surface))
+                    )
+            self.mu_belt = (params["mu_d_BePa"], params["mu_s_BePa"])
+
+    def update(self, model: mujoco.MjModel, centre: np.ndarray, velocity: np.ndarray) -> None:
+        for ids, mu_d, offset, _, _ in self.groups:
+            slip = float(np.hypot(*velocity))
+            model.geom_friction[ids, 0] = mu_d + offset * math.exp(-((slip / STICK_SPEED) ** 2))
+        if self.belts:
+            mu_d, offset = self.mu_belt
+            for gid, v_surface, surface in self.belts:
+                slip = float(np.hypot(*(velocity - v_surface)))
+                inside = _inside(surface, centre)
+                model.geom_friction[gid, 0] = mu_d + (
+                    offset * math.exp(-((slip / STICK_SPEED) ** 2)) if inside else 0
+                )
+
+
+def _inside(surface: object, point: np.ndarray) -> bool:
+    u = surface.unit()  # type: ignore[attr-defined]
+    rel = point - np.asarray(surface.centre)  # type: ignore[attr-defined]
+    return (
+        abs(rel @ u) <= surface.length / 2
+        and abs(rel @ np.array([-u[1], u[0]])) <= surface.width / 2
+    )  # type: ignore[attr-defined]
+
+
+def parameter_names(consignment: Consignment) -> list[str]:
+    """Names of the parameters that apply to a consignment."""
+    return [p.name for p in parameters_for(consignment.content_kind)]
+
+
+__all__ = ["Frames", "MujocoSimulator", "SimOptions", "parameter_names"]

@@ -1,0 +1,343 @@
+"""The catalogue of simulation parameters: physical meaning, unit, published range and default.
+
+Values are stored in user units (the published table's: N/mm, N/mm^2, mm, g) and converted to
+SI exactly once, by `ParameterSpec.to_si`, before they reach a simulator. ``low``/``high`` are the
+screening ranges (method.md section 5, where published; otherwise plausible ranges, marked
+``published=False``); ``physical`` bounds are what a value may take at all.
+
+Stage-one screening starts from 16 parameters for rigid-content consignments (KPBW, KP, BW) and
+18 for the polybag PB (the two content parameters E_Co and zeta_Co are added). How each maps
+to MuJoCo is stated in ``mapping`` and in ``parcelfit/sim/mujoco/README.md``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+
+from parcelfit.errors import ParcelfitError
+
+RIGID = "rigid"
+SOFT = "soft"
+
+
+@dataclass(frozen=True)
+class Range:
+    """Screening range and default in user units."""
+
+    low: float
+    high: float
+    default: float
+
+
+@dataclass(frozen=True)
+class ParameterSpec:
+    """One simulation parameter (values in ``unit``; ``si_factor`` converts to SI)."""
+
+    name: str
+    meaning: str
+    unit: str  # user-facing unit; "-" for dimensionless
+    si_unit: str
+    si_factor: float
+    ranges: Mapping[str, Range]  # by content kind: "rigid" or "soft"
+    physical: tuple[float, float]  # admissible values at all, user units
+    published: bool
+    mapping: str
+
+    def range_for(self, content_kind: str) -> Range:
+        """Screening range and default for a content kind ("rigid" or "soft")."""
+        if content_kind not in self.ranges:
+            raise ParcelfitError(f"parameter {self.name} does not apply to {content_kind} contents")
+        return self.ranges[content_kind]
+
+    def to_si(self, value: float) -> float:
+        """Convert a value from the user unit to SI."""
+        return value * self.si_factor
+
+    def from_si(self, value: float) -> float:
+        """Convert a value from SI to the user unit."""
+        return value / self.si_factor
+
+
+def _both(low: float, high: float, default: float) -> dict[str, Range]:
+    r = Range(low, high, default)
+    return {RIGID: r, SOFT: r}
+
+
+_STIFF = (
+    "per-contact solref (direct format) and constant solimp, derived so that the whole-face contact has "
+    "this normal stiffness (sim/mujoco/contact.py)"
+)
+_DAMP = "contact damping ratio: direct-format damping = 2 * zeta * sqrt(stiffness)"
+
+CATALOGUE: tuple[ParameterSpec, ...] = (
+    ParameterSpec(
+        "k_CoPa",
+        "contact stiffness content/packaging",
+        "N/mm",
+        "N/m",
+        1e3,
+        _both(100, 1000, 500),
+        (1, 1e5),
+        True,
+        _STIFF,
+    ),
+    ParameterSpec(
+        "k_MePa",
+        "contact stiffness metal/packaging",
+        "N/mm",
+        "N/m",
+        1e3,
+        _both(100, 1000, 611),
+        (1, 1e5),
+        True,
+        _STIFF,
+    ),
+    ParameterSpec(
+        "k_BePa",
+        "contact stiffness belt/packaging",
+        "N/mm",
+        "N/m",
+        1e3,
+        _both(100, 1000, 500),
+        (1, 1e5),
+        False,
+        _STIFF,
+    ),
+    ParameterSpec(
+        "mu_d_BePa",
+        "dynamic friction belt/packaging",
+        "-",
+        "-",
+        1.0,
+        _both(0.3, 0.6, 0.45),
+        (0, 2),
+        True,
+        "sliding friction of belt and roller geoms (priority wins)",
+    ),
+    ParameterSpec(
+        "mu_d_MePa",
+        "dynamic friction metal/packaging",
+        "-",
+        "-",
+        1.0,
+        _both(0.15, 0.35, 0.25),
+        (0, 2),
+        True,
+        "sliding friction of metal geoms (priority wins)",
+    ),
+    ParameterSpec(
+        "mu_s_MePa",
+        "static friction offset metal/packaging",
+        "-",
+        "-",
+        1.0,
+        _both(0.0, 0.3, 0.15),
+        (0, 1),
+        True,
+        "friction of a metal geom raised to mu_d + offset while the packaging's slip speed on it "
+        "is below the stick threshold (updated every step)",
+    ),
+    ParameterSpec(
+        "mu_s_BePa",
+        "static friction offset belt/packaging",
+        "-",
+        "-",
+        1.0,
+        _both(0.0, 0.3, 0.1),
+        (0, 1),
+        False,
+        "as mu_s_MePa, for belt and roller geoms",
+    ),
+    ParameterSpec(
+        "mu_CoPa",
+        "friction content/packaging",
+        "-",
+        "-",
+        1.0,
+        _both(0.2, 0.8, 0.4),
+        (0, 2),
+        False,
+        "sliding friction of the content geom or flex (priority)",
+    ),
+    ParameterSpec(
+        "E_Pa",
+        "Young's modulus packaging",
+        "N/mm^2",
+        "Pa",
+        1e6,
+        {RIGID: Range(200, 1600, 1000), SOFT: Range(50, 200, 100)},
+        (1, 1e5),
+        True,
+        "flex elasticity young of the packaging shell",
+    ),
+    ParameterSpec(
+        "nu_Pa",
+        "Poisson's ratio packaging",
+        "-",
+        "-",
+        1.0,
+        _both(0.2, 0.45, 0.3),
+        (0, 0.49),
+        False,
+        "flex elasticity poisson of the packaging shell",
+    ),
+    ParameterSpec(
+        "t_Pa",
+        "shell thickness packaging",
+        "mm",
+        "m",
+        1e-3,
+        {RIGID: Range(0.2, 1.0, 0.5), SOFT: Range(0.05, 0.2, 0.1)},
+        (0.01, 5),
+        False,
+        "flex elasticity thickness of the packaging shell",
+    ),
+    ParameterSpec(
+        "zeta_Pa",
+        "damping ratio packaging",
+        "-",
+        "-",
+        1.0,
+        _both(0.01, 0.1, 0.04),
+        (0, 2),
+        False,
+        "flex Rayleigh damping beta = 2 zeta / omega_ref (omega_ref: the shell's first membrane mode)",
+    ),
+    ParameterSpec(
+        "zeta_CoPa",
+        "contact damping ratio content/packaging",
+        "-",
+        "-",
+        1.0,
+        _both(0.3, 1.5, 1.0),
+        (0.01, 5),
+        False,
+        _DAMP,
+    ),
+    ParameterSpec(
+        "zeta_BePa",
+        "contact damping ratio belt/packaging",
+        "-",
+        "-",
+        1.0,
+        _both(0.3, 1.5, 1.0),
+        (0.01, 5),
+        False,
+        _DAMP,
+    ),
+    ParameterSpec(
+        "zeta_MePa",
+        "contact damping ratio metal/packaging",
+        "-",
+        "-",
+        1.0,
+        _both(0.3, 1.5, 1.0),
+        (0.01, 5),
+        False,
+        _DAMP,
+    ),
+    ParameterSpec(
+        "m_Pa",
+        "mass of the packaging (the content takes the rest)",
+        "g",
+        "kg",
+        1e-3,
+        {RIGID: Range(10, 40, 20), SOFT: Range(5, 20, 10)},
+        (1, 1000),
+        False,
+        "flexcomp mass of the shell; content mass = consignment mass - m_Pa",
+    ),
+    ParameterSpec(
+        "E_Co",
+        "Young's modulus content",
+        "N/mm^2",
+        "Pa",
+        1e6,
+        {SOFT: Range(0.05, 0.5, 0.08)},
+        (0.001, 100),
+        True,
+        "flex elasticity young of the soft content",
+    ),
+    ParameterSpec(
+        "zeta_Co",
+        "damping ratio content",
+        "-",
+        "-",
+        1.0,
+        {SOFT: Range(0.01, 0.1, 0.04)},
+        (0, 2),
+        True,
+        "flex Rayleigh damping beta = 2 zeta / omega_ref of the soft content",
+    ),
+)
+
+_BY_NAME = {p.name: p for p in CATALOGUE}
+
+
+def parameter(name: str) -> ParameterSpec:
+    """The catalogue entry called ``name``."""
+    if name not in _BY_NAME:
+        import difflib
+
+        close = difflib.get_close_matches(name, list(_BY_NAME), n=1)
+        raise ParcelfitError(
+            f"unknown parameter {name!r}",
+            fix=f"did you mean {close[0]!r}?" if close else f"known: {', '.join(_BY_NAME)}",
+        )
+    return _BY_NAME[name]
+
+
+def parameters_for(content_kind: str) -> list[ParameterSpec]:
+    """The screening candidates for a content kind: 16 for "rigid", 18 for "soft"."""
+    return [p for p in CATALOGUE if content_kind in p.ranges]
+
+
+def defaults_si(content_kind: str) -> dict[str, float]:
+    """Default value of every parameter for a content kind, in SI units."""
+    return {
+        p.name: p.to_si(p.range_for(content_kind).default) for p in parameters_for(content_kind)
+    }
+
+
+def resolve(
+    content_kind: str,
+    user_values: Mapping[str, float] | None = None,
+    si_values: Mapping[str, float] | None = None,
+) -> dict[str, float]:
+    """Defaults overridden by values in user units and/or SI; every value checked (SI result)."""
+    out = defaults_si(content_kind)
+    known = {p.name for p in parameters_for(content_kind)}
+    for values, in_si in ((user_values or {}, False), (si_values or {}, True)):
+        for name, value in values.items():
+            spec = parameter(name)
+            if name not in known:
+                raise ParcelfitError(
+                    f"parameter {name} does not apply to {content_kind} contents",
+                    fix=f"use one of: {', '.join(sorted(known))}",
+                )
+            user = spec.from_si(value) if in_si else float(value)
+            lo, hi = spec.physical
+            if not lo <= user <= hi:
+                raise ParcelfitError(
+                    f"{name} = {user:g} {spec.unit} is outside its physical range [{lo:g}, {hi:g}] {spec.unit}",
+                    fix=f"give {spec.meaning} in {spec.unit}",
+                )
+            out[name] = spec.to_si(user)
+    return out
+
+
+def parse_assignments(items: Iterable[str]) -> dict[str, float]:
+    """Parse ``NAME=VALUE`` strings (user units) into a dict."""
+    out: dict[str, float] = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        try:
+            out[name.strip()] = float(value)
+        except ValueError:
+            sep = ""
+        if not sep:
+            raise ParcelfitError(
+                f"cannot read {item!r}", fix="write NAME=VALUE, e.g. mu_d_BePa=0.4"
+            )
+    return out
