@@ -37,6 +37,17 @@ def load_yaml(path: str | Path) -> Any:
         ) from exc
 
 
+def suggest(name: str, known: Iterable[str]) -> str | None:
+    """The known name closest to ``name``: a case-insensitive match first, else the nearest by difflib."""
+    known = list(known)
+    for k in known:
+        if k.lower() == str(name).lower():
+            return k
+    lowered = {k.lower(): k for k in known}
+    close = difflib.get_close_matches(str(name).lower(), list(lowered), n=1)
+    return lowered[close[0]] if close else None
+
+
 def require_mapping(value: Any, *, file: str | Path | None, where: str) -> Mapping[str, Any]:
     """Check that ``value`` is a mapping (a YAML dictionary)."""
     if not isinstance(value, Mapping):
@@ -61,8 +72,8 @@ def check_keys(
     allowed = list(allowed)
     for key in mapping:
         if key not in allowed:
-            close = difflib.get_close_matches(str(key), allowed, n=1)
-            fix = f"did you mean {close[0]!r}?" if close else f"known keys: {', '.join(allowed)}"
+            close = suggest(str(key), allowed)
+            fix = f"did you mean {close!r}?" if close else f"known keys: {', '.join(allowed)}"
             raise ParcelfitError(f"unknown key {key!r}", file=file, where=where, fix=fix)
     for key in required:
         if key not in mapping:

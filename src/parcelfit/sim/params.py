@@ -15,6 +15,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
+from parcelfit.config import suggest
 from parcelfit.errors import ParcelfitError
 
 RIGID = "rigid"
@@ -278,12 +279,10 @@ _BY_NAME = {p.name: p for p in CATALOGUE}
 def parameter(name: str) -> ParameterSpec:
     """The catalogue entry called ``name``."""
     if name not in _BY_NAME:
-        import difflib
-
-        close = difflib.get_close_matches(name, list(_BY_NAME), n=1)
+        close = suggest(name, _BY_NAME)
         raise ParcelfitError(
             f"unknown parameter {name!r}",
-            fix=f"did you mean {close[0]!r}?" if close else f"known: {', '.join(_BY_NAME)}",
+            fix=f"did you mean {close!r}?" if close else f"known: {', '.join(_BY_NAME)}",
         )
     return _BY_NAME[name]
 

@@ -12,12 +12,21 @@ one contact is
 and to realise K_c we set s = K_c (1 - d) A_hat. The same derivation holds for many contacts
 (R is diagonal), so contacts in parallel add up.
 
+Flex contacts: MuJoCo collides a 2-D flex per triangle element, creating one contact per
+triangle corner that touches. Its Jacobian weights the corner vertex by w (the solver's
+regulariser gives A_hat * m_v = 0.4442 = w^2 with w = 2/3, for every mesh spacing and vertex mass
+tried). The contact force reaches the vertex scaled by w and the vertex's motion changes the
+penetration scaled by w, so the static stiffness seen by the vertex is K_c = s w^2 / ((1-d) A_hat)
+= s / ((1 - d) / m_v): the mapping uses the plain inverse masses, A_eff = 1/m_v + 1/m_other. The
+indentation test measures exactly this.
+
 Meaning of the parameters (k_CoPa, k_BePa, k_MePa): the normal stiffness of a whole-face
 contact, i.e. the parcel (or its content) lying flat with one face on the counter-surface. That
-face is carried by the n_face shell vertices of the flat bottom face, so K_c = K / n_face; the
-same per-vertex stiffness applies wherever the packaging touches that material (contact
-stiffness per unit area, the physically meaningful quantity), e.g. at an edge pressed against a
-guide plate. A virtual indentation test in the test suite checks the realised stiffness.
+face makes n_face contacts (`ShellMesh.face_contacts`: the corners of bottom-sheet triangles on
+the flat face), so K_c = K / n_face; the same per-contact stiffness applies wherever the
+packaging touches that material (stiffness per unit contact area, the physically meaningful
+quantity), e.g. at an edge pressed against a guide plate. The virtual indentation test
+(`parcelfit.sim.mujoco.indentation`) checks the realised stiffness.
 
 Choosing d: the contact's constraint-space dynamics have angular frequency sqrt(s) [1/s]. To keep
 it resolvable by the time step we pick 1 - d = (omega_dt / dt)^2 / (K_c A_hat), capped to

@@ -53,6 +53,7 @@ class SceneOptions:
         default_factory=dict
     )  # drive -> factor (synthetic jitter)
     start_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)  # dx [m], dy [m], dheading [deg]
+    start_speed_factor: float = 1.0  # the parcel's initial speed as a fraction of its surface's
 
     def __post_init__(self) -> None:
         if not 1e-5 <= self.timestep <= 0.01:
@@ -201,10 +202,10 @@ def build_scene(
             fix="lower m_Pa",
         )
     m_v = m_pa / nv
-    n_face = len(shell.bottom_face)
+    n_face = shell.face_contacts
     dt = opt.timestep
 
-    # --- contact parameters -------------------------------------------------------------------
+    # --- contact parameters (effective inverse mass of a flex contact: see contact.py) ------------
     belt_cp = contact_params(p["k_BePa"], n_face, 1 / m_v, p["zeta_BePa"], dt)
     metal_cp = contact_params(p["k_MePa"], n_face, 1 / m_v, p["zeta_MePa"], dt)
     if soft:
@@ -245,7 +246,11 @@ def build_scene(
     heading = rig.start.heading + dh
     zc = start_surface.top + half_height + r + CONTACT_GAP
     q = _quat(heading)
-    v_start = speeds[start_surface.drive] * opt.speed_factors.get(start_surface.drive, 1.0)
+    v_start = (
+        speeds[start_surface.drive]
+        * opt.speed_factors.get(start_surface.drive, 1.0)
+        * opt.start_speed_factor
+    )
     u0 = start_surface.unit()
     start_velocity = (v_start * u0[0], v_start * u0[1], 0.0)
 

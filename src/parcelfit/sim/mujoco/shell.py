@@ -40,6 +40,14 @@ class ShellMesh:
     bottom_face: np.ndarray  # bottom-sheet vertices over the content footprint (the flat face)
     seam: np.ndarray  # boundary ring
     half_height: float  # H [m]
+    bottom_triangles: np.ndarray  # indices into triangles of the bottom sheet
+
+    @property
+    def face_contacts(self) -> int:
+        """Contacts MuJoCo creates when the flat bottom face lies on a plane: one per corner of a
+        bottom-sheet triangle that lies on the face (flex collisions are per triangle element)."""
+        corners = self.triangles[self.bottom_triangles]
+        return int(np.isin(corners, self.bottom_face).sum())
 
 
 def pillow_shell(
@@ -74,9 +82,12 @@ def pillow_shell(
                 bot[i, j] = len(pts)
                 pts.append([x, y, -height(x, y)])
     tris: list[int] = []
+    bottom_tris: list[int] = []
     for i in range(nx - 1):
         for j in range(ny - 1):
             for grid, flip in ((top, False), (bot, True)):
+                if flip:
+                    bottom_tris += [len(tris) // 3, len(tris) // 3 + 1]
                 a, b, c, d = grid[i, j], grid[i + 1, j], grid[i + 1, j + 1], grid[i, j + 1]
                 # alternate the diagonal for symmetry; reverse the bottom's winding (outward = -z)
                 quad = [a, b, c, a, c, d] if (i + j) % 2 == 0 else [a, b, d, b, c, d]
@@ -101,4 +112,5 @@ def pillow_shell(
         bottom_face=np.array([bot[k] for k in inside]),
         seam=np.array(seam),
         half_height=half_height,
+        bottom_triangles=np.array(bottom_tris),
     )

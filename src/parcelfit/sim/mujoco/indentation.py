@@ -1,0 +1,122 @@
+"""Virtual indentation test: the realised whole-face contact stiffness of a parcel model [N/m].
+
+The parcel lies flat on a static plate of the chosen material. The (rigid) content is pressed
+down with a force F1 [N] and the parcel settles, then with F2 > F1 and it settles again (both
+loads keep the whole face in contact; under gravity alone a few corner contacts at the face's
+edge do not touch yet). Every contact between the plate and the packaging, and between the
+content and the packaging, reports its penetration; with per-contact stiffness K_c the added
+force satisfies F2 - F1 = K_c * sum_i d(delta_i), so the realised whole-face stiffness is
+
+    K_face = n_face * (F2 - F1) / sum_i d(delta_i)
+
+(n_face: the contacts of the flat face, `ShellMesh.face_contacts`, over which the catalogue's
+stiffness is spread). `parcelfit.sim.mujoco.contact` promises K_face = k_BePa / k_MePa / k_CoPa.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from parcelfit.errors import ParcelfitError
+from parcelfit.sim.mujoco.consignment import Consignment
+from parcelfit.sim.mujoco.rig import parse_rig
+from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
+from parcelfit.sim.params import RIGID, resolve
+
+
+@dataclass(frozen=True)
+class Indentation:
+    """Realised whole-face stiffnesses [N/m], the contacts that carried the load, and n_face."""
+
+    plate: float
+    content: float
+    plate_contacts: int
+    content_contacts: int
+    n_face: int
+
+
+def _plate_rig(material: str) -> object:
+    return parse_rig(
+        {
+            "name": "plate",
+            "speeds": {1: {"none": 0.0}},
+            "surfaces": [
+                {
+                    "name": "plate",
+                    "type": "belt",
+                    "material": material,
+                    "centre": [0, 0],
+                    "length": 1.0,
+                    "width": 1.0,
+                    "heading": 0,
+                    "top": 0.0,
+                    "drive": "none",
+                }
+            ],
+            "start": {"position": [0, 0], "heading": 0, "surface": "plate"},
+            "light_barriers": [
+                {"name": "a", "from": [0.4, -1], "to": [0.4, 1]},
+                {"name": "b", "from": [0.45, -1], "to": [0.45, 1]},
+            ],
+            "end": {"x": [-1, 1], "y": [-1, 1], "duration": 1.0},
+        },
+        "<indentation plate>",
+    )
+
+
+def _penetrations(
+    model: mujoco.MjModel, data: mujoco.MjData, plate: int, content: int
+) -> tuple[np.ndarray, ...]:
+    n = data.ncon
+    geoms = np.asarray(data.contact.geom[:n])
+    dist = np.asarray(data.contact.dist[:n])
+    on_plate = (geoms == plate).any(axis=1)
+    on_content = (geoms == content).any(axis=1)
+    return -dist[on_plate], -dist[on_content]
+
+
+def indentation_test(
+    consignment: Consignment,
+    params: Mapping[str, float] | None = None,
+    material: str = "belt",
+    loads: tuple[float, float] = (10.0, 20.0),
+    settle: float = 0.5,
+    options: SceneOptions | None = None,
+) -> Indentation:
+    """Measure the realised stiffness [N/m] of the plate/packaging and content/packaging faces."""
+    if consignment.content_kind != RIGID:
+        raise ParcelfitError(
+            "the indentation test presses a rigid content", fix="use a rigid-content consignment"
+        )
+    full = resolve(consignment.content_kind, si_values=params or {})
+    scene = build_scene(_plate_rig(material), consignment, full, 1, options)  # type: ignore[arg-type]
+    model = mujoco.MjModel.from_xml_string(scene.xml)
+    data = mujoco.MjData(model)
+    plate = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "plate")
+    content = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "content")
+    body = model.geom_bodyid[content]
+    steps = round(settle / model.opt.timestep)
+
+    def settle_and_measure(force: float) -> tuple[np.ndarray, np.ndarray]:
+        data.xfrc_applied[body, 2] = -force
+        for _ in range(steps):
+            mujoco.mj_step(model, data)
+        return _penetrations(model, data, plate, content)
+
+    p0, c0 = settle_and_measure(loads[0])
+    p1, c1 = settle_and_measure(loads[1])
+    # contacts that appear or vanish between the loads sit at (near) zero penetration and carry
+    # (near) no force, so sums over whatever touches at each load are compared
+    n_face = scene.shell.face_contacts
+    added = loads[1] - loads[0]
+    return Indentation(
+        plate=n_face * added / float(np.sum(p1) - np.sum(p0)),
+        content=n_face * added / float(np.sum(c1) - np.sum(c0)),
+        plate_contacts=len(p1),
+        content_contacts=len(c1),
+        n_face=n_face,
+    )

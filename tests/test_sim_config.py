@@ -1,0 +1,136 @@
+import copy
+
+import pytest
+
+from parcelfit import ParcelfitError
+from parcelfit.config import load_yaml
+from parcelfit.sim.mujoco import (
+    bundled_consignment_names,
+    bundled_rig_names,
+    load_consignment,
+    load_rig,
+)
+from parcelfit.sim.mujoco.consignment import parse_consignment
+from parcelfit.sim.mujoco.contact import contact_params, realised_stiffness
+from parcelfit.sim.mujoco.rig import parse_rig
+from parcelfit.sim.params import CATALOGUE, parameter, parameters_for, parse_assignments, resolve
+
+
+def test_bundled_rigs_and_consignments():
+    assert bundled_rig_names() == ["E1", "E2a", "E2b", "E3"]
+    assert bundled_consignment_names() == ["BW", "KP", "KPBW", "PB"]
+    e3 = load_rig("E3")
+    assert e3.drive_speeds(1) == {"main": 1.56, "strip": 1.64}
+    assert e3.drive_speeds(2)["main"] == 1.86
+    assert load_rig("E1").drive_speeds(3)["belt2"] == 1.57
+    assert load_rig("E2b").surface("splitter").extra["swivel"] == 30
+    assert e3.surface("strips").top - e3.surface("main").top == pytest.approx(0.02)
+    kpbw = load_consignment("KP/BW")
+    assert (kpbw.mass, kpbw.outer, kpbw.content_kind) == (0.14, (0.275, 0.20, 0.02), "rigid")
+    assert load_consignment("PB").content_kind == "soft"
+    with pytest.raises(ParcelfitError, match=r"unknown rig 'E9'.*E1, E2a, E2b, E3"):
+        load_rig("E9")
+
+
+def _e3_doc():
+    return copy.deepcopy(load_yaml(load_rig("E3").source))
+
+
+@pytest.mark.parametrize(
+    ("change", "pattern"),
+    [
+        (lambda d: d.update(lenght=1), r"top level: unknown key 'lenght'"),
+        (
+            lambda d: d["surfaces"][0].update(material="wood"),
+            r"surfaces\[0\]\.material: unknown material 'wood'",
+        ),
+        (lambda d: d["surfaces"][0].update(type="chute"), r"unknown surface type 'chute'"),
+        (lambda d: d["surfaces"][1].pop("pitch"), r"surfaces\[1\]: missing required key 'pitch'"),
+        (lambda d: d["surfaces"][0].update(drive="nope"), r"drive 'nope' has no speed in setting"),
+        (lambda d: d["start"].update(surface="floor"), r"start\.surface names no surface: 'floor'"),
+        (lambda d: d["light_barriers"].pop(), r"exactly two light barriers"),
+        (lambda d: d["surfaces"][0].update(width=-1), r"surfaces\[0\]\.width: -1 is outside"),
+        (
+            lambda d: d["walls"][0].update(**{"from": [0, 0, 0]}),
+            r"walls\[0\]\.from: expected a point",
+        ),
+        (
+            lambda d: d["speeds"].update({0: {"main": 1}}),
+            r"speed setting 0 must be an integer >= 1",
+        ),
+    ],
+)
+def test_bad_rig_files(change, pattern):
+    doc = _e3_doc()
+    change(doc)
+    with pytest.raises(ParcelfitError, match=pattern) as info:
+        parse_rig(doc, "my_rig.yaml")
+    assert str(info.value).startswith("my_rig.yaml")
+
+
+def test_bad_consignment_files():
+    good = {
+        "name": "X",
+        "mass": 0.1,
+        "outer": [0.3, 0.2, 0.02],
+        "content": {"kind": "rigid", "size": [0.2, 0.1, 0.02]},
+    }
+    parse_consignment(good, "c.yaml")
+    bad = copy.deepcopy(good)
+    bad["content"]["size"] = [0.3, 0.1, 0.02]
+    with pytest.raises(ParcelfitError, match=r"c\.yaml: content\.size: content .* does not fit"):
+        parse_consignment(bad, "c.yaml")
+    bad = copy.deepcopy(good)
+    bad["content"]["kind"] = "liquid"
+    with pytest.raises(ParcelfitError, match="unknown content kind 'liquid'"):
+        parse_consignment(bad, "c.yaml")
+    with pytest.raises(ParcelfitError, match=r"expected \[length, width, height\]"):
+        parse_consignment({**good, "outer": [300, 200]}, "c.yaml")
+
+
+def test_catalogue_counts_units_and_published_values():
+    assert len(parameters_for("rigid")) == 16
+    assert len(parameters_for("soft")) == 18
+    published = {p.name for p in CATALOGUE if p.published}
+    assert published == {
+        "k_CoPa",
+        "k_MePa",
+        "mu_d_BePa",
+        "mu_d_MePa",
+        "mu_s_MePa",
+        "E_Pa",
+        "E_Co",
+        "zeta_Co",
+    }
+    assert parameter("k_MePa").range_for("rigid").default == 611
+    assert parameter("E_Pa").range_for("soft").low == 50
+    assert parameter("E_Co").range_for("soft").default == 0.08
+    si = resolve("rigid", user_values={"k_CoPa": 250, "E_Pa": 506})
+    assert si["k_CoPa"] == 250e3 and si["E_Pa"] == 506e6
+    assert resolve("rigid", si_values={"t_Pa": 4e-4})["t_Pa"] == pytest.approx(4e-4)
+
+
+def test_bad_parameters():
+    with pytest.raises(
+        ParcelfitError, match=r"unknown parameter 'mu_d_bePa'.*did you mean 'mu_d_BePa'"
+    ):
+        resolve("rigid", user_values={"mu_d_bePa": 0.4})
+    with pytest.raises(ParcelfitError, match="E_Co does not apply to rigid"):
+        resolve("rigid", user_values={"E_Co": 0.1})
+    with pytest.raises(ParcelfitError, match=r"mu_d_BePa = 5 - is outside its physical range"):
+        resolve("rigid", user_values={"mu_d_BePa": 5})
+    assert parse_assignments(["mu_d_BePa=0.4", " E_Pa = 800"]) == {"mu_d_BePa": 0.4, "E_Pa": 800.0}
+    with pytest.raises(ParcelfitError, match="write NAME=VALUE"):
+        parse_assignments(["mu_d_BePa:0.4"])
+
+
+def test_contact_mapping_round_trip_and_impedance_choice():
+    cp = contact_params(5e5, 208, 1 / 1.6e-4, 1.0, 1 / 600)
+    assert realised_stiffness(cp, 208, 1 / 1.6e-4) == pytest.approx(5e5, rel=1e-12)
+    assert cp.omega_dt == pytest.approx(0.5)
+    assert cp.damping == pytest.approx(2 * cp.stiffness**0.5)
+    assert 0.9 <= cp.impedance <= 0.9999
+    soft = contact_params(1.0, 208, 1 / 1.6e-4, 0.5, 1 / 600)  # very soft: impedance capped at 0.9
+    assert soft.impedance == pytest.approx(0.9) and soft.omega_dt < 0.5
+    with pytest.raises(ParcelfitError):
+        contact_params(-1, 208, 1, 1, 0.001)

@@ -1,0 +1,148 @@
+"""Physics checks with analytic expectations (method.md sections 1, 2, 5)."""
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from parcelfit.runs import TestCase
+from parcelfit.sim import SimStatus
+from parcelfit.sim.mujoco import MujocoSimulator, SceneOptions, SimOptions, load_consignment
+from parcelfit.sim.mujoco.indentation import indentation_test
+from parcelfit.sim.params import resolve
+
+from .simhelpers import flat_belt
+
+G = 9.81
+KPBW = TestCase("flat", "KPBW", 1)
+
+
+def _speed(traj):
+    return np.hypot(np.gradient(traj.x, traj.t), np.gradient(traj.y, traj.t))
+
+
+@pytest.mark.parametrize("material", ["belt", "metal"])
+@pytest.mark.parametrize("k_n_per_mm", [100, 1000])
+def test_indentation_realises_the_requested_stiffness(material, k_n_per_mm):
+    k = k_n_per_mm * 1e3
+    key = "k_BePa" if material == "belt" else "k_MePa"
+    r = indentation_test(load_consignment("KPBW"), {key: k, "k_CoPa": k}, material=material)
+    assert r.plate == pytest.approx(k, rel=0.10)
+    assert r.content == pytest.approx(k, rel=0.10)
+    assert r.plate_contacts == r.n_face
+
+
+def test_parcel_dropped_on_a_belt_reaches_belt_speed_after_v_over_mu_g():
+    mu, v_belt = 0.4, 1.0
+    sim = MujocoSimulator(
+        SimOptions(scene=SceneOptions(start_speed_factor=0.0), sample_rate=600, duration=0.6),
+        rigs={"flat": flat_belt(v_belt, barriers=(2.0, 2.5))},
+    )
+    res = sim.run({"mu_d_BePa": mu, "mu_s_BePa": 0.0}, KPBW)
+    assert res.status is SimStatus.OK
+    speed = _speed(res.run.trajectory)
+    t = res.run.trajectory.t
+    t_reach = t[np.argmax(speed >= 0.98 * v_belt)]
+    expected = 0.98 * v_belt / (mu * G)
+    assert t_reach == pytest.approx(expected, rel=0.05)
+    assert speed[-1] == pytest.approx(v_belt, rel=0.01)
+
+
+def test_transit_time_between_light_barriers_on_a_plain_belt():
+    sim = MujocoSimulator(
+        SimOptions(duration=1.5), rigs={"flat": flat_belt(1.2, barriers=(0.4, 1.0))}
+    )
+    res = sim.run({}, KPBW)
+    assert res.run.transit_time == pytest.approx(0.6 / 1.2, abs=2 * sim.options.scene.timestep)
+
+
+def test_observation_starts_at_the_start_pose():
+    sim = MujocoSimulator(
+        SimOptions(duration=0.1), rigs={"flat": flat_belt(0.5, start_x=0.1, heading=30)}
+    )
+    traj = sim.run({}, KPBW).run.trajectory
+    assert traj.x[0] == pytest.approx(0.1, abs=1e-3) and traj.y[0] == pytest.approx(0.0, abs=1e-3)
+    assert math.degrees(traj.theta[0]) == pytest.approx(30, abs=0.1)
+    assert traj.sample_rate() == pytest.approx(60, rel=0.01)
+
+
+@pytest.fixture(scope="module")
+def e1_runs():
+    """E1 at speed setting 3 (belt 2 at 1.57 m/s), the KPBW parcel at half, single and double
+    mass; "scaled" also scales the contact stiffnesses and Young's modulus with the mass."""
+    base = MujocoSimulator().consignment("KPBW")
+    defaults = resolve("rigid")
+    out = {}
+    for scaled in (False, True):
+        for factor in (0.5, 1.0, 2.0):
+            cons = replace(base, name=f"KPBWx{factor}", mass=base.mass * factor)
+            params = {"m_Pa": defaults["m_Pa"] * factor}
+            if scaled:
+                params.update(
+                    {k: defaults[k] * factor for k in ("k_BePa", "k_CoPa", "k_MePa", "E_Pa")}
+                )
+            sim = MujocoSimulator(consignments={cons.name: cons})
+            out[scaled, factor] = sim.run(params, TestCase("E1", cons.name, 3))
+    return out
+
+
+def test_e1_parcel_converges_to_belt_2_speed(e1_runs):
+    res = e1_runs[False, 1.0]
+    assert res.status is SimStatus.OK
+    traj = res.run.trajectory
+    late = traj.x > 0.5  # well past the transfer at x = 0
+    assert _speed(traj)[late][-10:].mean() == pytest.approx(1.57, rel=0.02)
+    assert res.run.transit_time is not None
+
+
+def _max_deviation(a, b):
+    n = min(len(a), len(b))
+    return (
+        np.max(np.hypot(a.x[:n] - b.x[:n], a.y[:n] - b.y[:n])),
+        np.max(np.abs(a.theta[:n] - b.theta[:n])),
+    )
+
+
+def test_heavier_and_lighter_parcels_with_same_friction_behave_alike(e1_runs):
+    # Coulomb friction scales with the normal force: with stiffnesses scaled like the mass the
+    # motion is the same; with fixed stiffnesses only sag and penetration differ, a little
+    for factor in (0.5, 2.0):
+        dxy, dth = _max_deviation(
+            e1_runs[True, 1.0].run.trajectory, e1_runs[True, factor].run.trajectory
+        )
+        assert dxy < 1e-3 and dth < math.radians(0.1)
+        dxy, dth = _max_deviation(
+            e1_runs[False, 1.0].run.trajectory, e1_runs[False, factor].run.trajectory
+        )
+        assert dxy < 0.02 and dth < math.radians(3)
+
+
+def test_same_inputs_same_result_and_small_continuous_friction_effect():
+    sim = MujocoSimulator(SimOptions(duration=1.0))
+    case = TestCase("E1", "KPBW", 3)
+    a = sim.run({"mu_d_BePa": 0.45}, case).run.trajectory
+    b = sim.run({"mu_d_BePa": 0.45}, case).run.trajectory
+    assert np.array_equal(a.xy, b.xy) and np.array_equal(a.theta, b.theta)
+    c = sim.run({"mu_d_BePa": 0.45 * 1.01}, case).run.trajectory
+    d = sim.run({"mu_d_BePa": 0.45 * 1.02}, case).run.trajectory
+    n = min(len(a), len(c), len(d))
+    dev1 = np.max(np.hypot(a.x[:n] - c.x[:n], a.y[:n] - c.y[:n]))
+    dev2 = np.max(np.hypot(a.x[:n] - d.x[:n], a.y[:n] - d.y[:n]))
+    assert 0 < dev1 < 0.01
+    assert 0 < dev2 < 0.02
+
+
+def test_parcel_falling_off_the_rig_is_unstable_and_wall_limit_times_out():
+    short = flat_belt(1.0, length=0.6, barriers=(3.0, 3.5), start_x=-0.5, duration=1.5)
+    short = replace(short, end=replace(short.end, x=(-5.0, 5.0)))
+    res = MujocoSimulator(rigs={"flat": short}).run({}, KPBW)
+    assert res.status is SimStatus.UNSTABLE and "fell off" in res.diagnostics["message"]
+    res = MujocoSimulator(SimOptions(wall_limit=0.05), rigs={"flat": flat_belt()}).run({}, KPBW)
+    assert res.status is SimStatus.TIMEOUT
+
+
+def test_soft_polybag_runs_briefly():
+    res = MujocoSimulator(SimOptions(duration=0.15)).run({}, TestCase("E3", "PB", 1))
+    assert res.status is SimStatus.OK
+    assert res.run.trajectory.x[-1] > res.run.trajectory.x[0]
