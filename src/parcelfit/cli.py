@@ -177,6 +177,153 @@ def demo(
     console.print(f"[green]done[/]: results in {out}/ ({ref_file.name}, stats/)")
 
 
+@app.command()
+@friendly_errors
+def simulate(
+    rig: Annotated[
+        str, typer.Option(help="Bundled rig name (E1, E2a, E2b, E3) or a rig .yaml file.")
+    ] = "E3",
+    consignment: Annotated[
+        str, typer.Option(help="Bundled type (KPBW, PB, KP, BW) or a .yaml file.")
+    ] = "KPBW",
+    setting: Annotated[int, typer.Option(help="Speed setting of the rig.")] = 1,
+    set_: Annotated[
+        list[str] | None,
+        typer.Option("--set", help="NAME=VALUE in the catalogue's unit (see `parcelfit params`)."),
+    ] = None,
+    out: Annotated[Path, typer.Option(help="Trajectory file to write (.csv or .parquet).")] = Path(
+        "run.csv"
+    ),
+    video: Annotated[
+        Path | None,
+        typer.Option(help="Also write a top-view animation (.gif, or .mp4 with ffmpeg)."),
+    ] = None,
+    timestep: Annotated[float, typer.Option(help="Time step [s].")] = 1.0 / 600.0,
+    spacing: Annotated[
+        float, typer.Option(help="Shell mesh spacing for rigid contents [m].")
+    ] = 0.03,
+    wall_limit: Annotated[float, typer.Option(help="Wall-clock limit [s].")] = 600.0,
+) -> None:
+    """Simulate one test case with MuJoCo and write the run (t, x, y, theta; SI units)."""
+    from parcelfit.runs import TestCase, write_trajectory
+    from parcelfit.sim.mujoco import (
+        MujocoSimulator,
+        SceneOptions,
+        SimOptions,
+        load_consignment,
+        load_rig,
+    )
+    from parcelfit.sim.params import parse_assignments, resolve
+
+    rig_obj = load_rig(rig)
+    cons = load_consignment(consignment)
+    params = resolve(cons.content_kind, user_values=parse_assignments(set_ or []))
+    sim = MujocoSimulator(
+        SimOptions(
+            scene=SceneOptions(timestep=timestep, spacing=spacing),
+            wall_limit=wall_limit,
+            record_vertices=video is not None,
+        ),
+        rigs={rig_obj.name: rig_obj},
+        consignments={cons.name: cons},
+    )
+    case = TestCase(rig_obj.name, cons.name, setting)
+    rig_obj.drive_speeds(setting)  # a clear error for an unknown setting before simulating
+    with console.status(f"simulating {case.label}"):
+        result, frames = sim.run_with_frames(params, case)
+    d = result.diagnostics
+    colour = "green" if result.ok else "red"
+    console.print(
+        f"[{colour}]{result.status.value}[/]: {d.get('message')}; {d.get('simulated_time', 0):.3f} s "
+        f"simulated in {result.wall_time:.2f} s wall ({d.get('steps_per_second', 0):.0f} steps/s)"
+    )
+    if result.run is not None:
+        tt = result.run.transit_time
+        console.print(
+            f"transit time: {'not measured (a light barrier was not crossed)' if tt is None else f'{tt:.4f} s'}"
+        )
+        console.print(f"wrote {write_trajectory(result.run.trajectory, out)}")
+    if video is not None and frames is not None:
+        from parcelfit.sim.mujoco.render import animate_run
+
+        with console.status("rendering the animation"):
+            console.print(f"wrote {animate_run(rig_obj, frames, video, title=case.label)}")
+    if not result.ok:
+        raise typer.Exit(code=1)
+
+
+@app.command()
+@friendly_errors
+def rigs() -> None:
+    """List the bundled test rigs with their speed settings."""
+    from parcelfit.sim.mujoco import bundled_rig_names, load_rig
+
+    table = Table(title="Bundled rigs (parcelfit simulate --rig NAME)", title_justify="left")
+    for col in ("rig", "surfaces", "speed settings [m/s]", "light barriers"):
+        table.add_column(col)
+    for name in bundled_rig_names():
+        r = load_rig(name)
+        speeds = "; ".join(
+            f"{k}: " + ", ".join(f"{d} {v:g}" for d, v in r.speeds[k].items())
+            for k in sorted(r.speeds)
+        )
+        table.add_row(
+            name,
+            ", ".join(f"{s.name} ({s.type})" for s in r.surfaces),
+            speeds,
+            " -> ".join(b.name for b in r.barriers),
+        )
+    console.print(table)
+    from parcelfit.sim.mujoco import bundled_consignment_names, load_consignment
+
+    table = Table(title="Bundled consignment types (--consignment NAME)", title_justify="left")
+    for col in ("type", "mass [g]", "outer L x W x H [mm]", "content", "content L x W x H [mm]"):
+        table.add_column(col)
+    for name in bundled_consignment_names():
+        c = load_consignment(name)
+        table.add_row(
+            name,
+            f"{c.mass * 1e3:g}",
+            " x ".join(f"{v * 1e3:g}" for v in c.outer),
+            c.content_kind,
+            " x ".join(f"{v * 1e3:g}" for v in c.content),
+        )
+    console.print(table)
+
+
+@app.command()
+@friendly_errors
+def params(
+    consignment: Annotated[
+        str, typer.Option(help="Consignment type (or .yaml) whose parameters to list.")
+    ] = "KPBW",
+) -> None:
+    """List the simulation parameters with units, screening ranges and defaults."""
+    from parcelfit.sim.mujoco import load_consignment
+    from parcelfit.sim.params import parameters_for
+
+    cons = load_consignment(consignment)
+    specs = parameters_for(cons.content_kind)
+    table = Table(
+        title=f"{len(specs)} parameters for {cons.name} ({cons.content_kind} content); "
+        "* = published screening range",
+        title_justify="left",
+    )
+    for col in ("name", "meaning", "unit", "low", "high", "default"):
+        table.add_column(col, justify="right" if col in ("low", "high", "default") else "left")
+    for p in specs:
+        r = p.range_for(cons.content_kind)
+        table.add_row(
+            p.name + (" *" if p.published else ""),
+            p.meaning,
+            p.unit,
+            f"{r.low:g}",
+            f"{r.high:g}",
+            f"{r.default:g}",
+        )
+    console.print(table)
+
+
 def main() -> None:
     """Entry point of the ``parcelfit`` console script."""
     app()

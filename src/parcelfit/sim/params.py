@@ -318,9 +318,11 @@ def resolve(
             user = spec.from_si(value) if in_si else float(value)
             lo, hi = spec.physical
             if not lo <= user <= hi:
+                unit = "" if spec.unit == "-" else f" {spec.unit}"
                 raise ParcelfitError(
-                    f"{name} = {user:g} {spec.unit} is outside its physical range [{lo:g}, {hi:g}] {spec.unit}",
-                    fix=f"give {spec.meaning} in {spec.unit}",
+                    f"{name} = {user:g}{unit} is outside its physical range [{lo:g}, {hi:g}]{unit}",
+                    fix=f"give {spec.meaning}"
+                    + (f" in {spec.unit}" if unit else " (dimensionless)"),
                 )
             out[name] = spec.to_si(user)
     return out

@@ -1,0 +1,177 @@
+"""Any solver run as a command: parameters in through a file, trajectory out through a CSV.
+
+A solver description (YAML)::
+
+    name: my-recurdyn-model
+    command: [python, "${solver_dir}/run_model.py", "${params_file}", "${output_file}"]  # no shell
+    template: params.tmpl        # parameter file template, relative to this file
+    params_file: params.txt      # name of the rendered file in the run's work folder
+    output_file: trajectory.csv  # trajectory the solver writes (columns t,x,y,theta; SI units)
+    transit_file: transit.txt    # optional: a file holding the transit time [s]
+    timeout: 3600                # wall-clock limit [s]
+
+The template and every command argument may use ``${name}`` placeholders: each catalogue
+parameter in SI units (``${mu_d_BePa}``), ``${rig}``, ``${consignment}``, ``${speed_setting}``,
+``${params_file}``, ``${output_file}``, ``${workdir}``, ``${solver_dir}`` (the folder of the
+description file). A placeholder that is not known is an
+error before anything runs. Each run gets its own work folder; the command runs there, is never
+passed through a shell, and is killed at the timeout. Exit status 0 and a readable trajectory
+give ``ok``; anything else ``failed`` (with the solver's last output lines) or ``timeout``.
+"""
+
+from __future__ import annotations
+
+import string
+import subprocess
+import tempfile
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from parcelfit.config import check_keys, get_number, get_str, load_yaml, require_mapping
+from parcelfit.errors import ParcelfitError
+from parcelfit.runs import Run, TestCase, read_trajectory
+from parcelfit.sim.protocol import SimResult, SimStatus
+
+_KEYS = ("name", "command", "template", "params_file", "output_file", "transit_file", "timeout")
+
+
+@dataclass(frozen=True)
+class ExternalSolver:
+    """How to run an external solver (see the module docstring)."""
+
+    name: str
+    command: tuple[str, ...]
+    template: str
+    params_file: str = "params.txt"
+    output_file: str = "trajectory.csv"
+    transit_file: str | None = None
+    timeout: float = 3600.0
+    solver_dir: str = "."
+
+
+def load_external_solver(path: str | Path) -> ExternalSolver:
+    """Read and check a solver description file (YAML)."""
+    path = Path(path)
+    doc = require_mapping(load_yaml(path), file=path, where="top level")
+    check_keys(
+        doc, allowed=_KEYS, required=("name", "command", "template"), file=path, where="top level"
+    )
+    command = doc["command"]
+    if (
+        not isinstance(command, list)
+        or not command
+        or not all(isinstance(a, str | int | float) for a in command)
+    ):
+        raise ParcelfitError(
+            "command must be a non-empty list of arguments",
+            file=path,
+            where="command",
+            fix='write e.g. command: [python, model.py, "${params_file}"]',
+        )
+    template_path = path.parent / get_str(doc, "template", file=path, where="")
+    if not template_path.is_file():
+        raise ParcelfitError(
+            f"template {template_path.name!r} not found",
+            file=path,
+            where="template",
+            fix="give the template's path relative to this file",
+        )
+    transit = doc.get("transit_file")
+    return ExternalSolver(
+        name=get_str(doc, "name", file=path, where=""),
+        command=tuple(str(a) for a in command),
+        template=template_path.read_text(encoding="utf-8"),
+        params_file=get_str(doc, "params_file", file=path, where="", default="params.txt"),
+        output_file=get_str(doc, "output_file", file=path, where="", default="trajectory.csv"),
+        transit_file=None if transit is None else get_str(doc, "transit_file", file=path, where=""),
+        timeout=get_number(
+            doc, "timeout", file=path, where="", default=3600.0, minimum=0.01, unit="s"
+        )
+        or 3600.0,
+        solver_dir=str(path.parent.resolve()),
+    )
+
+
+def _substitute(text: str, values: Mapping[str, Any], what: str) -> str:
+    try:
+        return string.Template(text).substitute({k: str(v) for k, v in values.items()})
+    except KeyError as exc:
+        raise ParcelfitError(
+            f"{what} uses the unknown placeholder ${{{exc.args[0]}}}",
+            fix=f"use one of: {', '.join(sorted(values))}",
+        ) from None
+    except ValueError as exc:
+        raise ParcelfitError(
+            f"{what} has a malformed placeholder ({exc})", fix="write placeholders as ${name}"
+        ) from None
+
+
+class ExternalSimulator:
+    """`Simulator` that renders a parameter file, runs a command and reads its trajectory back."""
+
+    def __init__(self, solver: ExternalSolver, workroot: str | Path | None = None) -> None:
+        self.solver = solver
+        self.workroot = None if workroot is None else Path(workroot)
+
+    def run(
+        self, params: Mapping[str, float], case: TestCase, run_id: str | None = None
+    ) -> SimResult:
+        """Run the solver for SI ``params`` and ``case``; failures become a status, never an exception."""
+        t0 = time.perf_counter()
+        if self.workroot is not None:
+            self.workroot.mkdir(parents=True, exist_ok=True)
+        workdir = Path(tempfile.mkdtemp(prefix=f"{self.solver.name}-", dir=self.workroot))
+        values: dict[str, Any] = {
+            **params,
+            "rig": case.rig,
+            "consignment": case.consignment,
+            "speed_setting": case.speed_setting,
+            "workdir": workdir,
+            "solver_dir": self.solver.solver_dir,
+            "params_file": workdir / self.solver.params_file,
+            "output_file": workdir / self.solver.output_file,
+        }
+        (workdir / self.solver.params_file).write_text(
+            _substitute(self.solver.template, values, "the parameter template"), encoding="utf-8"
+        )
+        args = [_substitute(a, values, f"command argument {a!r}") for a in self.solver.command]
+        diagnostics: dict[str, object] = {"workdir": str(workdir), "command": args}
+        try:
+            proc = subprocess.run(
+                args,
+                cwd=workdir,
+                capture_output=True,
+                text=True,
+                timeout=self.solver.timeout,
+                check=False,
+            )
+        except subprocess.TimeoutExpired:
+            diagnostics["message"] = f"killed after the timeout of {self.solver.timeout:g} s"
+            return SimResult(None, SimStatus.TIMEOUT, time.perf_counter() - t0, diagnostics)
+        except OSError as exc:
+            diagnostics["message"] = f"could not start the solver: {exc}"
+            return SimResult(None, SimStatus.FAILED, time.perf_counter() - t0, diagnostics)
+        tail = "\n".join((proc.stdout + proc.stderr).strip().splitlines()[-10:])
+        diagnostics["output_tail"] = tail
+        if proc.returncode != 0:
+            diagnostics["message"] = f"the solver exited with status {proc.returncode}"
+            return SimResult(None, SimStatus.FAILED, time.perf_counter() - t0, diagnostics)
+        try:
+            traj = read_trajectory(workdir / self.solver.output_file)
+            transit = None
+            if self.solver.transit_file:
+                transit = float((workdir / self.solver.transit_file).read_text().strip())
+            run = Run(
+                run_id or f"ext-{case.rig}-{case.consignment}-{case.speed_setting}",
+                case,
+                traj,
+                transit,
+            )
+        except (ParcelfitError, OSError, ValueError) as exc:
+            diagnostics["message"] = f"unusable solver output: {exc}"
+            return SimResult(None, SimStatus.FAILED, time.perf_counter() - t0, diagnostics)
+        diagnostics["message"] = "ok"
+        return SimResult(run, SimStatus.OK, time.perf_counter() - t0, diagnostics)

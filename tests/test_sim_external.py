@@ -1,0 +1,81 @@
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+from parcelfit import ParcelfitError
+from parcelfit.runs import TestCase
+from parcelfit.sim import SimStatus, Simulator, defaults_si
+from parcelfit.sim.external import ExternalSimulator, load_external_solver
+
+SOLVER = Path(__file__).parent / "data" / "external" / "solver.yaml"
+CASE = TestCase("E1", "KPBW", 1)
+
+
+@pytest.fixture
+def sim(tmp_path):
+    return ExternalSimulator(load_external_solver(SOLVER), workroot=tmp_path)
+
+
+def test_runs_the_solver_and_reads_the_trajectory(sim):
+    assert isinstance(sim, Simulator)
+    params = {**defaults_si("rigid"), "mu_d_BePa": 0.5}
+    res = sim.run(params, CASE)
+    assert res.status is SimStatus.OK, res.diagnostics
+    traj = res.run.trajectory
+    # the fake solver accelerates at a = mu * g in steps of 1/60 s: x_2 = (1 + 2) a / 60^2
+    assert traj.x[2] == pytest.approx(3 * 0.5 * 9.81 / 60**2, rel=1e-6)
+    assert res.run.transit_time == pytest.approx(1.0)
+    rendered = (Path(res.diagnostics["workdir"]) / "params.txt").read_text()
+    assert "mu_d_BePa = 0.5" in rendered and "E1 / KPBW / setting 1" in rendered
+    assert res.run.case == CASE
+
+
+def test_failures_and_timeouts_become_statuses(sim):
+    res = sim.run({**defaults_si("rigid"), "mu_d_BePa": 0.11}, CASE)
+    assert res.status is SimStatus.FAILED
+    assert "exited with status 3" in res.diagnostics["message"]
+    assert "diverged at step 42" in res.diagnostics["output_tail"]
+    quick = ExternalSimulator(replace(sim.solver, timeout=0.5), workroot=sim.workroot)
+    res = quick.run({**defaults_si("rigid"), "mu_d_BePa": 0.12}, CASE)
+    assert res.status is SimStatus.TIMEOUT and res.wall_time < 5
+
+
+def test_missing_output_and_missing_program(sim):
+    broken = ExternalSimulator(
+        replace(sim.solver, output_file="nothing.csv"), workroot=sim.workroot
+    )
+    res = broken.run(defaults_si("rigid"), CASE)
+    assert res.status is SimStatus.FAILED and "unusable solver output" in res.diagnostics["message"]
+    absent = ExternalSimulator(
+        replace(sim.solver, command=("no-such-solver-binary",)), workroot=sim.workroot
+    )
+    assert absent.run(defaults_si("rigid"), CASE).status is SimStatus.FAILED
+
+
+def test_arguments_are_not_passed_through_a_shell(sim, tmp_path):
+    marker = tmp_path / "pwned"
+    evil = ExternalSimulator(
+        replace(
+            sim.solver,
+            command=("python3", "-c", "import sys; print(sys.argv)", f"; touch {marker}"),
+        ),
+        workroot=sim.workroot,
+    )
+    evil.run(defaults_si("rigid"), CASE)
+    assert not marker.exists()
+
+
+def test_unknown_placeholder_and_bad_description(sim, tmp_path):
+    bad = ExternalSimulator(
+        replace(sim.solver, template="mu = ${mu_dynamic}"), workroot=sim.workroot
+    )
+    with pytest.raises(ParcelfitError, match=r"unknown placeholder \$\{mu_dynamic\}"):
+        bad.run(defaults_si("rigid"), CASE)
+    desc = tmp_path / "s.yaml"
+    desc.write_text("name: x\ncommand: run.sh --fast\ntemplate: t.tmpl\n")
+    with pytest.raises(ParcelfitError, match="command must be a non-empty list"):
+        load_external_solver(desc)
+    desc.write_text("name: x\ncommand: [run]\ntemplate: missing.tmpl\n")
+    with pytest.raises(ParcelfitError, match=r"template 'missing\.tmpl' not found"):
+        load_external_solver(desc)
