@@ -42,9 +42,8 @@ def test_failures_and_timeouts_become_statuses(sim):
 
 
 def test_missing_output_and_missing_program(sim):
-    broken = ExternalSimulator(
-        replace(sim.solver, output_file="nothing.csv"), workroot=sim.workroot
-    )
+    writes_elsewhere = (*sim.solver.command[:3], "elsewhere.csv")
+    broken = ExternalSimulator(replace(sim.solver, command=writes_elsewhere), workroot=sim.workroot)
     res = broken.run(defaults_si("rigid"), CASE)
     assert res.status is SimStatus.FAILED and "unusable solver output" in res.diagnostics["message"]
     absent = ExternalSimulator(
