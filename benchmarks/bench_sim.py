@@ -1,0 +1,51 @@
+"""Simulation speed: 2 s of E3 (induction) with the flexible parcels, one core.
+
+    python benchmarks/bench_sim.py [--repeats 3]
+
+Simulates exactly 2 s (the end box is widened so the run does not stop at the rig's end) for
+KPBW (flexible packaging, rigid content) and PB (polybag, soft content) at speed setting 1 and
+the default resolution, and prints the median wall time, steps per second, and the ratio to the
+published cost of one such simulation (about 5 hours on a 16-core desktop with a commercial
+MFBD solver, method.md section 10). MuJoCo runs one simulation on one core.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+from dataclasses import replace
+
+from parcelfit.runs import TestCase
+from parcelfit.sim.mujoco import MujocoSimulator, SimOptions, load_rig
+
+PUBLISHED_SECONDS = 5 * 3600.0
+BUDGET = {"KPBW": 15.0, "PB": 30.0}  # s, the targets of the physics issue
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument("--repeats", type=int, default=3)
+    args = ap.parse_args()
+    rig = load_rig("E3")
+    rig = replace(rig, end=replace(rig.end, x=(-1.0, 3.9), duration=2.0, after_last_barrier=10.0))
+    sim = MujocoSimulator(SimOptions(), rigs={"E3": rig})
+    print("E3, speed setting 1, 2.0 s simulated, default resolution, one core")
+    print(f"{'case':<10}{'wall [s]':>10}{'steps/s':>10}{'x faster than 5 h':>20}{'target [s]':>12}")
+    for cons in ("KPBW", "PB"):
+        walls, rates = [], []
+        for _ in range(args.repeats):
+            res = sim.run({}, TestCase("E3", cons, 1))
+            assert res.ok and abs(res.diagnostics["simulated_time"] - 2.0) < 0.01, res.diagnostics
+            walls.append(res.wall_time)
+            rates.append(res.diagnostics["steps_per_second"])
+        wall = statistics.median(walls)
+        print(
+            f"{'E3/' + cons:<10}{wall:>10.2f}{statistics.median(rates):>10.0f}{PUBLISHED_SECONDS / wall:>20.0f}"
+            f"{BUDGET[cons]:>12.0f}"
+        )
+
+
+if __name__ == "__main__":
+    main()

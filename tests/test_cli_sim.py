@@ -1,0 +1,71 @@
+import pytest
+from typer.testing import CliRunner
+
+from parcelfit.cli import app
+from parcelfit.runs import read_trajectory
+
+runner = CliRunner()
+
+
+def test_simulate_writes_run_and_animation(tmp_path):
+    out, gif = tmp_path / "run.csv", tmp_path / "run.gif"
+    result = runner.invoke(
+        app,
+        [
+            "simulate",
+            "--rig",
+            "E1",
+            "--consignment",
+            "BW",
+            "--setting",
+            "2",
+            "--set",
+            "mu_d_BePa=0.4",
+            "--out",
+            str(out),
+            "--video",
+            str(gif),
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    assert "ok:" in result.output and "transit time:" in result.output
+    traj = read_trajectory(out)
+    assert traj.sample_rate() == pytest.approx(60.0, rel=0.01)
+    assert traj.x[-1] > traj.x[0] + 1.0
+    assert gif.read_bytes()[:6] in (b"GIF89a", b"GIF87a")
+
+
+def test_simulate_bad_input_is_one_message(tmp_path):
+    for args, text in (
+        (["--rig", "E7"], "unknown rig 'E7'"),
+        (["--consignment", "XX"], "unknown consignment type 'XX'"),
+        (["--setting", "4"], "rig E3 has no speed setting 4"),
+        (["--set", "mu_d_BePa=7"], "outside its physical range"),
+        (["--set", "E_Co=0.1"], "E_Co does not apply to rigid contents"),
+        (["--rig", str(tmp_path / "nope.yaml")], "file not found"),
+    ):
+        result = runner.invoke(app, ["simulate", *args, "--out", str(tmp_path / "r.csv")])
+        assert result.exit_code == 2, (args, result.output)
+        assert text in result.output and "Traceback" not in result.output
+
+
+def test_malformed_rig_yaml(tmp_path):
+    bad = tmp_path / "rig.yaml"
+    bad.write_text("name: X\nspeeds: {1: {a: 1}\n")
+    result = runner.invoke(app, ["simulate", "--rig", str(bad)])
+    assert result.exit_code == 2 and "malformed YAML" in result.output
+
+
+def test_rigs_and_params_listings():
+    result = runner.invoke(app, ["rigs"])
+    assert result.exit_code == 0
+    for name in ("E1", "E2a", "E2b", "E3", "KPBW", "PB"):
+        assert name in result.output
+    result = runner.invoke(app, ["params", "--consignment", "PB"])
+    assert (
+        result.exit_code == 0
+        and "18 parameters for PB" in result.output
+        and "E_Co" in result.output
+    )
+    result = runner.invoke(app, ["params"])
+    assert "16 parameters for KPBW" in result.output
