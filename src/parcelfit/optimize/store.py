@@ -1,0 +1,205 @@
+"""The evaluation store of a study: one SQLite database, written before the loop moves on.
+
+Schema (``study.sqlite`` in the study folder; WAL journal, one transaction per write):
+
+``meta(key TEXT PRIMARY KEY, value TEXT)``
+    study-level facts as JSON: the study file's fingerprint, the seed, the parameter space.
+
+``evaluations``
+    ``id`` INTEGER PRIMARY KEY, ``kind`` ('fit' | 'validation'), ``iteration`` (0 = initial
+    design), ``slot`` (position in its batch), ``speed_setting``, ``params`` (JSON, SI units),
+    ``status`` ('pending' | 'ok' | 'failed' | 'unstable' | 'timeout'), ``cost``, ``dtw_xy`` [m],
+    ``dtw_theta`` [rad], ``transit_time`` [s], ``seed``, ``wall_time`` [s], ``asked_at`` and
+    ``finished_at`` (Unix time [s]), ``run_file`` (trajectory file, relative to the study
+    folder), ``details`` (JSON: validation criteria, diagnostics).
+
+A batch is written as ``pending`` rows before any of it runs; each result replaces its row in one
+transaction the moment it arrives. A study killed at any point therefore finds on restart every
+finished evaluation (never simulated again) and exactly the pending ones to run.
+"""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+import time
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from parcelfit.errors import ParcelfitError
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS evaluations (
+    id INTEGER PRIMARY KEY,
+    kind TEXT NOT NULL CHECK (kind IN ('fit', 'validation')),
+    iteration INTEGER NOT NULL,
+    slot INTEGER NOT NULL,
+    speed_setting INTEGER NOT NULL,
+    params TEXT NOT NULL,
+    status TEXT NOT NULL,
+    cost REAL, dtw_xy REAL, dtw_theta REAL, transit_time REAL,
+    seed INTEGER, wall_time REAL, asked_at REAL NOT NULL, finished_at REAL,
+    run_file TEXT, details TEXT,
+    UNIQUE (kind, iteration, slot)
+);
+"""
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """One row of the store (see the module docstring for the units)."""
+
+    id: int
+    kind: str
+    iteration: int
+    slot: int
+    speed_setting: int
+    params: dict[str, float]
+    status: str
+    cost: float | None
+    dtw_xy: float | None
+    dtw_theta: float | None
+    transit_time: float | None
+    seed: int | None
+    wall_time: float | None
+    asked_at: float
+    finished_at: float | None
+    run_file: str | None
+    details: dict[str, Any]
+
+
+class Store:
+    """Durable record of a study's evaluations (SQLite, WAL, one transaction per write)."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            self._db = sqlite3.connect(self.path, timeout=30.0, isolation_level=None)
+            self._db.execute("PRAGMA journal_mode=WAL")
+            self._db.execute("PRAGMA synchronous=FULL")
+            self._db.executescript(_SCHEMA)
+        except sqlite3.DatabaseError as exc:
+            raise ParcelfitError(
+                f"cannot open the study database ({exc})",
+                file=self.path,
+                fix="move the damaged file away and start the study again",
+            ) from exc
+
+    def close(self) -> None:
+        """Close the database."""
+        self._db.close()
+
+    @contextmanager
+    def _transaction(self) -> Iterator[sqlite3.Connection]:
+        self._db.execute("BEGIN IMMEDIATE")
+        try:
+            yield self._db
+        except BaseException:
+            self._db.execute("ROLLBACK")
+            raise
+        self._db.execute("COMMIT")
+
+    # -- meta -------------------------------------------------------------------------------
+    def get_meta(self, key: str) -> Any:
+        """A study-level value (None if absent)."""
+        row = self._db.execute("SELECT value FROM meta WHERE key = ?", (key,)).fetchone()
+        return None if row is None else json.loads(row[0])
+
+    def set_meta(self, key: str, value: Any) -> None:
+        """Store a study-level value (JSON-serialisable)."""
+        with self._transaction() as db:
+            db.execute(
+                "INSERT OR REPLACE INTO meta (key, value) VALUES (?, ?)", (key, json.dumps(value))
+            )
+
+    # -- evaluations ------------------------------------------------------------------------
+    def add_pending(
+        self,
+        kind: str,
+        iteration: int,
+        batch: Sequence[Mapping[str, float]],
+        speed_setting: int,
+        seeds: Sequence[int],
+    ) -> list[int]:
+        """Record a batch as pending (one transaction); returns the row ids in batch order."""
+        now = time.time()
+        ids = []
+        with self._transaction() as db:
+            for slot, (params, seed) in enumerate(zip(batch, seeds, strict=True)):
+                cur = db.execute(
+                    "INSERT INTO evaluations (kind, iteration, slot, speed_setting, params, status, seed, asked_at) "
+                    "VALUES (?, ?, ?, ?, ?, 'pending', ?, ?)",
+                    (kind, iteration, slot, speed_setting, json.dumps(dict(params)), seed, now),
+                )
+                ids.append(int(cur.lastrowid))  # type: ignore[arg-type]
+        return ids
+
+    def finish(
+        self,
+        row_id: int,
+        *,
+        status: str,
+        cost: float | None = None,
+        dtw_xy: float | None = None,
+        dtw_theta: float | None = None,
+        transit_time: float | None = None,
+        wall_time: float | None = None,
+        run_file: str | None = None,
+        details: Mapping[str, Any] | None = None,
+    ) -> None:
+        """Record the result of a pending evaluation (one transaction)."""
+        if status == "pending":
+            raise ParcelfitError("a finished evaluation needs a final status")
+        with self._transaction() as db:
+            cur = db.execute(
+                "UPDATE evaluations SET status = ?, cost = ?, dtw_xy = ?, dtw_theta = ?, transit_time = ?, "
+                "wall_time = ?, finished_at = ?, run_file = ?, details = ? WHERE id = ?",
+                (
+                    status,
+                    cost,
+                    dtw_xy,
+                    dtw_theta,
+                    transit_time,
+                    wall_time,
+                    time.time(),
+                    run_file,
+                    json.dumps(dict(details or {}), default=str),
+                    row_id,
+                ),
+            )
+            if cur.rowcount != 1:
+                raise ParcelfitError(f"no evaluation with id {row_id} in {self.path}")
+
+    def evaluations(self, kind: str | None = None) -> list[Evaluation]:
+        """All evaluations (of one kind), in the order they were asked."""
+        sql = "SELECT * FROM evaluations" + (" WHERE kind = ?" if kind else "") + " ORDER BY id"
+        rows = self._db.execute(sql, (kind,) if kind else ()).fetchall()
+        out = []
+        for r in rows:
+            out.append(
+                Evaluation(
+                    id=r[0],
+                    kind=r[1],
+                    iteration=r[2],
+                    slot=r[3],
+                    speed_setting=r[4],
+                    params=json.loads(r[5]),
+                    status=r[6],
+                    cost=r[7],
+                    dtw_xy=r[8],
+                    dtw_theta=r[9],
+                    transit_time=r[10],
+                    seed=r[11],
+                    wall_time=r[12],
+                    asked_at=r[13],
+                    finished_at=r[14],
+                    run_file=r[15],
+                    details=json.loads(r[16]) if r[16] else {},
+                )
+            )
+        return out
