@@ -117,7 +117,9 @@ def test_bad_parameters():
         resolve("rigid", user_values={"mu_d_bePa": 0.4})
     with pytest.raises(ParcelfitError, match="E_Co does not apply to rigid"):
         resolve("rigid", user_values={"E_Co": 0.1})
-    with pytest.raises(ParcelfitError, match=r"mu_d_BePa = 5 is outside its physical range \[0, 2\]"):
+    with pytest.raises(
+        ParcelfitError, match=r"mu_d_BePa = 5 is outside its physical range \[0, 2\]"
+    ):
         resolve("rigid", user_values={"mu_d_BePa": 5})
     assert parse_assignments(["mu_d_BePa=0.4", " E_Pa = 800"]) == {"mu_d_BePa": 0.4, "E_Pa": 800.0}
     with pytest.raises(ParcelfitError, match="write NAME=VALUE"):
