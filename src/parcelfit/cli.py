@@ -324,6 +324,122 @@ def params(
     console.print(table)
 
 
+@app.command()
+@friendly_errors
+def calibrate(
+    study_file: Annotated[Path, typer.Argument(help="Study file (YAML).")],
+    out: Annotated[
+        Path | None,
+        typer.Option(help="Study folder (default: next to the study file, named after it)."),
+    ] = None,
+    executor: Annotated[
+        str | None, typer.Option(help="local or dask (default: the study file's).")
+    ] = None,
+    scheduler: Annotated[
+        str | None, typer.Option(help="Dask scheduler address, e.g. tcp://HOST:8786.")
+    ] = None,
+    workers: Annotated[
+        int | None, typer.Option(help="Local worker processes (default: one per core).")
+    ] = None,
+) -> None:
+    """Calibrate by batch Bayesian optimisation; rerunning the same command resumes the study."""
+    from rich.live import Live
+
+    from parcelfit.optimize.calibration import Calibration, Progress
+    from parcelfit.optimize.study import load_study
+
+    study = load_study(study_file)
+    folder = out or study_file.parent / study_file.stem
+    state: dict[str, Progress | None] = {"p": None}
+
+    def render() -> Table:
+        p = state["p"]
+        table = Table(
+            title=f"calibration {study.name} -> {folder}", title_justify="left", show_header=False
+        )
+        table.add_column(style="bold")
+        table.add_column()
+        if p is None:
+            table.add_row("status", "starting (reference runs, workers)")
+            return table
+        verdict = {None: "not yet", True: "[green]passed[/]", False: "[red]failed[/]"}[
+            p.last_validation
+        ]
+        table.add_row("iteration", str(p.iteration))
+        table.add_row("evaluations", f"{p.done} done, {p.running} running, budget {p.budget}")
+        table.add_row("best cost", "-" if p.best_cost is None else f"{p.best_cost:.4g}")
+        table.add_row("last validation", verdict)
+        table.add_row("last event", p.message)
+        return table
+
+    with Live(render(), console=console, refresh_per_second=4, transient=False) as live:
+
+        def update(p: Progress) -> None:
+            state["p"] = p
+            live.update(render())
+
+        result = Calibration(
+            study,
+            folder,
+            executor=executor,
+            scheduler=scheduler,
+            workers=workers,
+            on_progress=update,
+        ).run()
+    console.print(
+        f"[bold]{result.stop_reason}[/] after {result.evaluations} evaluations in "
+        f"{result.iterations} iterations; study folder {result.folder}"
+    )
+    if result.best_params is not None:
+        _print_params(result.best_params, result.best_cost)
+
+
+def _print_params(params: dict[str, float], cost: float | None) -> None:
+    from parcelfit.sim.params import CATALOGUE
+
+    table = Table(
+        title=f"best parameters (cost {cost:.4g})" if cost is not None else "best parameters",
+        title_justify="left",
+    )
+    table.add_column("parameter")
+    table.add_column("value", justify="right")
+    table.add_column("unit")
+    specs = {p.name: p for p in CATALOGUE}
+    for name, value in params.items():
+        spec = specs.get(name)
+        table.add_row(
+            name, f"{spec.from_si(value) if spec else value:.5g}", spec.unit if spec else "SI"
+        )
+    console.print(table)
+
+
+@app.command()
+@friendly_errors
+def status(
+    study_dir: Annotated[Path, typer.Argument(help="Study folder (holding study.sqlite).")],
+    as_json: Annotated[bool, typer.Option("--json", help="Print machine-readable JSON.")] = False,
+) -> None:
+    """Show the state of a running or finished calibration study."""
+    from parcelfit.optimize.calibration import study_status
+
+    info = study_status(study_dir)
+    if as_json:
+        sys.stdout.write(json.dumps(info, indent=1) + "\n")
+        return
+    name = (info["study"] or {}).get("name", "?")
+    console.print(
+        f"[bold]{name}[/]: {info['evaluations']} evaluations ({info['by_status']}), "
+        f"{info['iterations']} iterations, reference run {info['reference_run']}, "
+        f"stopped: {info['stop_reason'] or 'not yet'}"
+    )
+    for v in info["validations"]:
+        console.print(
+            f"  validation at iteration {v['iteration']}: {v['status']}, passed={v['passed']}"
+        )
+    if info["best"]:
+        _print_params(info["best"]["params"], info["best"]["cost"])
+
+
 def main() -> None:
     """Entry point of the ``parcelfit`` console script."""
     app()

@@ -1,0 +1,397 @@
+"""The calibration loop (method.md sections 7 and 8): reference runs, initial design, batch BO
+iterations, validation every N iterations, stop when the validation passes or the budget is
+spent. Every evaluation goes through the `Store` before the loop moves on; restarting the same
+study folder replays the store (finished evaluations are never simulated again, pending ones
+are run) and continues exactly where it stopped.
+
+Failed, unstable and timed-out simulations, and runs whose trajectory misses the regions of
+interest, are stored with their status and told to the optimiser as failures (it penalises them
+with the worst cost seen); they never stop the loop and count against the budget.
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from parcelfit.errors import ParcelfitError
+from parcelfit.metrics import ReferenceSelection, calibration_cost, select_reference, validate
+from parcelfit.optimize.bo import BatchBO
+from parcelfit.optimize.executors import DaskExecutor, LocalExecutor, Task
+from parcelfit.optimize.store import Evaluation, Store
+from parcelfit.optimize.study import Study
+from parcelfit.runs import TestCase, load_dataset, write_trajectory
+from parcelfit.sim.protocol import SimResult, Simulator
+
+STORE_FILE = "study.sqlite"
+
+
+@dataclass(frozen=True)
+class Progress:
+    """What the loop reports after every result."""
+
+    iteration: int
+    done: int
+    running: int
+    budget: int
+    best_cost: float | None
+    last_validation: bool | None
+    message: str
+
+
+@dataclass(frozen=True)
+class CalibrationResult:
+    """Outcome of a study: best parameters (SI), cost, counts, validation verdict, why it stopped."""
+
+    best_params: dict[str, float] | None
+    best_cost: float | None
+    evaluations: int
+    iterations: int
+    validated: bool | None
+    stop_reason: str
+    folder: Path
+
+
+def make_simulator(study: Study) -> Simulator:
+    """The simulator a study describes."""
+    sim = study.simulator
+    backend = sim["backend"]
+    if backend == "mujoco":
+        from parcelfit.sim.mujoco import (
+            MujocoSimulator,
+            SceneOptions,
+            SimOptions,
+            load_consignment,
+            load_rig,
+        )
+
+        rig = load_rig(sim["rig"])
+        cons = load_consignment(sim["consignment"])
+        scene = SceneOptions(**{k: float(sim[k]) for k in ("timestep", "spacing") if k in sim})
+        options = SimOptions(scene=scene, wall_limit=float(sim.get("wall_limit", 600.0)))
+        return MujocoSimulator(options, rigs={rig.name: rig}, consignments={cons.name: cons})
+    if backend == "external":
+        from parcelfit.sim.external import ExternalSimulator, load_external_solver
+
+        return ExternalSimulator(
+            load_external_solver(sim["external"]), workroot=study.folder / ".external-runs"
+        )
+    module, _, attr = str(sim["factory"]).partition(":")
+    try:
+        factory = getattr(importlib.import_module(module), attr)
+    except (ImportError, AttributeError) as exc:
+        raise ParcelfitError(
+            f"cannot import the simulator factory {sim['factory']!r} ({exc})",
+            fix="give it as package.module:callable, importable from here",
+        ) from exc
+    return factory()
+
+
+def _executor(
+    study: Study,
+    simulator: Simulator,
+    executor: str | None,
+    scheduler: str | None,
+    workers: int | None,
+) -> LocalExecutor | DaskExecutor:
+    kind = executor or study.executor.get("kind", "local")
+    if kind == "dask":
+        address = scheduler or study.executor.get("scheduler")
+        if not address:
+            raise ParcelfitError(
+                "the dask executor needs a scheduler address",
+                fix="pass --scheduler tcp://HOST:8786",
+            )
+        return DaskExecutor(simulator, address)
+    return LocalExecutor(simulator, workers or study.executor.get("workers"))
+
+
+class Calibration:
+    """One study folder: its store, references, optimiser and executor (see the module doc)."""
+
+    def __init__(
+        self,
+        study: Study,
+        folder: str | Path,
+        *,
+        executor: str | None = None,
+        scheduler: str | None = None,
+        workers: int | None = None,
+        on_progress: Callable[[Progress], None] | None = None,
+    ) -> None:
+        self.study = study
+        self.folder = Path(folder)
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.store = Store(self.folder / STORE_FILE)
+        known = self.store.get_meta("fingerprint")
+        if known is not None and known != study.fingerprint:
+            raise ParcelfitError(
+                "this folder holds a study made from a different study file",
+                file=self.folder,
+                fix="use a new output folder, or restore the study file it was made from",
+            )
+        if known is None:
+            self.store.set_meta("fingerprint", study.fingerprint)
+            self.store.set_meta(
+                "study",
+                {
+                    "name": study.name,
+                    "parameters": study.space.names,
+                    "bounds": [[d.low, d.high] for d in study.space.dims],
+                    "seed": study.seed,
+                    "fit_setting": study.fit_setting,
+                    "validation_setting": study.validation_setting,
+                },
+            )
+        dataset = load_dataset(study.dataset)
+        self.fit_case = TestCase(study.rig, study.consignment, study.fit_setting)
+        self.reference: ReferenceSelection = select_reference(dataset[self.fit_case])
+        self.val_case = (
+            None
+            if study.validation_setting is None
+            else TestCase(study.rig, study.consignment, study.validation_setting)
+        )
+        self.val_reference = (
+            None if self.val_case is None else select_reference(dataset[self.val_case])
+        )
+        self.store.set_meta("reference_run", self.reference.reference_id)
+        self.simulator = make_simulator(study)
+        self.bo = BatchBO(
+            study.space, batch_size=study.batch_size, seed=study.seed, settings=study.bo
+        )
+        self._executor_args = (executor, scheduler, workers)
+        self.on_progress = on_progress or (lambda p: None)
+        self.last_validation: bool | None = None
+
+    # -- helpers -----------------------------------------------------------------------------
+    def _full_params(self, fitted: Mapping[str, float]) -> dict[str, float]:
+        return {**self.study.fixed, **fitted}
+
+    def _report(self, iteration: int, running: int, message: str) -> None:
+        best = self.bo.best()
+        done = sum(1 for e in self.store.evaluations("fit") if e.status != "pending")
+        self.on_progress(
+            Progress(
+                iteration,
+                done,
+                running,
+                self.study.budget,
+                None if best is None else best[1],
+                self.last_validation,
+                message,
+            )
+        )
+
+    def _record_fit(self, row: Evaluation, result: SimResult) -> None:
+        status = result.status.value
+        cost = dtw_xy = dtw_theta = None
+        transit = None
+        run_file = None
+        details: dict[str, Any] = {k: v for k, v in result.diagnostics.items() if k != "traceback"}
+        if result.run is not None:
+            run_file = f"runs/fit-{row.iteration:03d}-{row.slot:02d}.csv"
+            write_trajectory(result.run.trajectory, self.folder / run_file)
+            transit = result.run.transit_time
+        if result.ok and result.run is not None:
+            try:
+                c = calibration_cost(
+                    result.run.trajectory, self.reference, self.study.w_xy, self.study.w_theta
+                )
+                cost, dtw_xy, dtw_theta = c.value, c.dtw_xy, c.dtw_theta
+            except ParcelfitError as exc:
+                status, details["message"] = "failed", f"cost not computable: {exc}"
+        self.store.finish(
+            row.id,
+            status=status,
+            cost=cost,
+            dtw_xy=dtw_xy,
+            dtw_theta=dtw_theta,
+            transit_time=transit,
+            wall_time=result.wall_time,
+            run_file=run_file,
+            details=details,
+        )
+        self.bo.tell(row.params, cost if status == "ok" else None)
+
+    def _run_rows(self, rows: list[Evaluation], executor: LocalExecutor | DaskExecutor) -> None:
+        tasks = [
+            Task(self._full_params(r.params), self.fit_case, f"fit-{r.iteration:03d}-{r.slot:02d}")
+            for r in rows
+        ]
+        remaining = len(rows)
+        for i, result in executor.run(tasks):
+            self._record_fit(rows[i], result)
+            remaining -= 1
+            self._report(rows[i].iteration, remaining, f"{result.status.value}: {tasks[i].run_id}")
+
+    def _validate(self, iteration: int, executor: LocalExecutor | DaskExecutor) -> bool | None:
+        best = self.bo.best()
+        if best is None or self.val_case is None or self.val_reference is None:
+            return None
+        params, _ = best
+        (row_id,) = self.store.add_pending(
+            "validation", iteration, [params], self.val_case.speed_setting, [0]
+        )
+        task = Task(self._full_params(params), self.val_case, f"validation-{iteration:03d}")
+        ((_, result),) = list(executor.run([task]))
+        details: dict[str, Any] = {"message": result.diagnostics.get("message")}
+        passed = False
+        run_file = None
+        if result.ok and result.run is not None:
+            run_file = f"runs/validation-{iteration:03d}.csv"
+            write_trajectory(result.run.trajectory, self.folder / run_file)
+            try:
+                verdict = validate(
+                    result.run.trajectory, result.run.transit_time, self.val_reference
+                )
+                passed = verdict.passed
+                details.update(
+                    {
+                        "passed": passed,
+                        "transit_time": {
+                            "simulated": verdict.transit_time.simulated,
+                            "low": verdict.transit_time.low,
+                            "high": verdict.transit_time.high,
+                            "passed": verdict.transit_time.passed,
+                        },
+                        "xy": {
+                            "simulated_mean": verdict.xy.simulated_mean,
+                            "largest_real_mean": verdict.xy.largest_real_mean,
+                            "passed": verdict.xy.passed,
+                        },
+                        "theta": {
+                            "simulated_mean": verdict.theta.simulated_mean,
+                            "largest_real_mean": verdict.theta.largest_real_mean,
+                            "passed": verdict.theta.passed,
+                        },
+                    }
+                )
+            except ParcelfitError as exc:
+                details["message"] = f"validation not computable: {exc}"
+        details["passed"] = passed
+        self.store.finish(
+            row_id,
+            status=result.status.value,
+            transit_time=None if result.run is None else result.run.transit_time,
+            wall_time=result.wall_time,
+            run_file=run_file,
+            details=details,
+        )
+        self.last_validation = passed
+        self._report(
+            iteration, 0, f"validation at iteration {iteration}: {'passed' if passed else 'failed'}"
+        )
+        return passed
+
+    # -- the loop ----------------------------------------------------------------------------
+    def run(self) -> CalibrationResult:
+        """Run (or resume) the study until validation passes or the budget is spent."""
+        study = self.study
+        rows = self.store.evaluations("fit")
+        for r in rows:  # replay: the optimiser learns every finished evaluation again
+            if r.status != "pending":
+                self.bo.tell(r.params, r.cost if r.status == "ok" else None)
+        validations = {v.iteration: v for v in self.store.evaluations("validation")}
+        for v in validations.values():
+            if v.status == "pending":
+                continue
+            self.last_validation = bool(v.details.get("passed"))
+            if self.last_validation:
+                return self._result("validation passed")
+        pending = [r for r in rows if r.status == "pending"]
+        iteration = max((r.iteration for r in rows), default=-1)
+        executor = _executor(study, self.simulator, *self._executor_args)
+        try:
+            while True:
+                if pending:
+                    self._report(
+                        iteration, len(pending), f"resuming {len(pending)} pending simulations"
+                    )
+                    self._run_rows(pending, executor)
+                    pending = []
+                elif sum(1 for r in self.store.evaluations("fit")) < study.budget:
+                    done = len(self.store.evaluations("fit"))
+                    iteration += 1
+                    n = min(
+                        study.initial if iteration == 0 else study.batch_size, study.budget - done
+                    )
+                    batch = self.bo.ask(n)
+                    seeds = [study.seed * 100003 + done + k for k in range(n)]
+                    self.store.add_pending("fit", iteration, batch, study.fit_setting, seeds)
+                    new_rows = [
+                        r for r in self.store.evaluations("fit") if r.iteration == iteration
+                    ]
+                    self._report(iteration, n, f"iteration {iteration}: {n} simulations")
+                    self._run_rows(new_rows, executor)
+                else:
+                    break
+                due = (
+                    iteration >= 1
+                    and iteration % study.validate_every == 0
+                    and iteration not in validations
+                )
+                if due:
+                    validations[iteration] = None  # type: ignore[assignment]
+                    if self._validate(iteration, executor):
+                        return self._result("validation passed")
+            if (
+                self.val_case is not None
+                and iteration not in validations
+                and self._validate(iteration, executor)
+            ):
+                return self._result("validation passed")
+            return self._result("budget spent")
+        finally:
+            executor.close()
+
+    def _result(self, reason: str) -> CalibrationResult:
+        best = self.bo.best()
+        fits = self.store.evaluations("fit")
+        self.store.set_meta("stop_reason", reason)
+        return CalibrationResult(
+            best_params=None if best is None else best[0],
+            best_cost=None if best is None else best[1],
+            evaluations=len(fits),
+            iterations=max((r.iteration for r in fits), default=-1) + 1,
+            validated=self.last_validation,
+            stop_reason=reason,
+            folder=self.folder,
+        )
+
+
+def study_status(folder: str | Path) -> dict[str, Any]:
+    """A summary of a study folder (running or finished): counts, best, validations."""
+    path = Path(folder) / STORE_FILE
+    if not path.is_file():
+        raise ParcelfitError(
+            f"no {STORE_FILE} here", file=folder, fix="point at a study's output folder"
+        )
+    store = Store(path)
+    fits = store.evaluations("fit")
+    ok = [e for e in fits if e.status == "ok" and e.cost is not None and math.isfinite(e.cost)]
+    best = min(ok, key=lambda e: e.cost) if ok else None  # type: ignore[arg-type, return-value]
+    vals = store.evaluations("validation")
+    out = {
+        "study": store.get_meta("study"),
+        "reference_run": store.get_meta("reference_run"),
+        "stop_reason": store.get_meta("stop_reason"),
+        "evaluations": len(fits),
+        "pending": sum(e.status == "pending" for e in fits),
+        "by_status": {
+            s: sum(e.status == s for e in fits) for s in sorted({e.status for e in fits})
+        },
+        "iterations": max((e.iteration for e in fits), default=-1) + 1,
+        "best": None
+        if best is None
+        else {"params": best.params, "cost": best.cost, "iteration": best.iteration},
+        "validations": [
+            {"iteration": v.iteration, "status": v.status, "passed": v.details.get("passed")}
+            for v in vals
+        ],
+    }
+    store.close()
+    return out

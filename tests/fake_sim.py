@@ -1,0 +1,89 @@
+"""A cheap analytic simulator for testing the calibration loop.
+
+A parcel moves along x at the speed setting's belt speed; its lateral drift is set by
+mu_d_BePa and its turn by mu_d_MePa, so both are identifiable from the trajectory. Environment:
+FAKE_SIM_DELAY [s] sleeps per simulation (for kill tests); FAKE_SIM_LOG appends each run id.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Mapping
+
+import numpy as np
+
+from parcelfit.runs import CaseData, Run, TestCase, Trajectory, save_dataset
+from parcelfit.sim.protocol import SimResult, SimStatus
+
+SPEEDS = {1: 1.0, 2: 1.4}
+TRUTH = {"mu_d_BePa": 0.5, "mu_d_MePa": 0.2}
+
+
+def trajectory(
+    p: Mapping[str, float], setting: int, t_end: float = 1.5
+) -> tuple[Trajectory, float]:
+    """Analytic run: x = v t, y = 0.4 (mu_B - 0.3) t^2, theta = 3 (mu_M - 0.15) (1 - exp(-2 t))."""
+    t = np.arange(0.0, t_end, 1 / 60)
+    v = SPEEDS[setting]
+    y = 0.4 * (p["mu_d_BePa"] - 0.3) * t**2
+    theta = 3.0 * (p["mu_d_MePa"] - 0.15) * (1 - np.exp(-2 * t))
+    transit = 1.0 / v * (1 + 0.2 * (p["mu_d_BePa"] - 0.45))
+    return Trajectory(t=t, x=v * t, y=y, theta=theta), transit
+
+
+class AnalyticSimulator:
+    """Implements the Simulator protocol with `trajectory`."""
+
+    def __init__(self, delay: float = 0.0, log: str | None = None) -> None:
+        self.delay = delay
+        self.log = log
+
+    def run(
+        self, params: Mapping[str, float], case: TestCase, run_id: str | None = None
+    ) -> SimResult:
+        t0 = time.perf_counter()
+        if self.delay:
+            time.sleep(self.delay)
+        if self.log:
+            with open(self.log, "a") as fh:
+                fh.write(f"{run_id}\n")
+        if params["mu_d_BePa"] > 0.59:  # a region where "the solver" fails
+            return SimResult(
+                None, SimStatus.UNSTABLE, time.perf_counter() - t0, {"message": "diverged"}
+            )
+        traj, transit = trajectory(params, case.speed_setting)
+        return SimResult(
+            Run(run_id or "sim", case, traj, transit), SimStatus.OK, time.perf_counter() - t0, {}
+        )
+
+
+def make() -> AnalyticSimulator:
+    """Factory named in study files (tests.fake_sim:make)."""
+    return AnalyticSimulator(
+        float(os.environ.get("FAKE_SIM_DELAY", "0")), os.environ.get("FAKE_SIM_LOG")
+    )
+
+
+def write_reference_dataset(folder, n_runs: int = 8, seed: int = 0):
+    """Runs of the truth with specimen-to-specimen variation and tracking noise."""
+    rng = np.random.default_rng(seed)
+    cases = []
+    for setting in (1, 2):
+        case = TestCase("R", "P", setting)
+        runs = []
+        for k in range(n_runs):
+            p = {
+                "mu_d_BePa": TRUTH["mu_d_BePa"] * (1 + rng.normal(0, 0.03)),
+                "mu_d_MePa": TRUTH["mu_d_MePa"] * (1 + rng.normal(0, 0.03)),
+            }
+            traj, transit = trajectory(p, setting)
+            noisy = Trajectory(
+                t=traj.t,
+                x=traj.x + rng.normal(0, 0.001, len(traj)),
+                y=traj.y + rng.normal(0, 0.001, len(traj)),
+                theta=traj.theta + rng.normal(0, 0.003, len(traj)),
+            )
+            runs.append(Run(f"R-P-{setting}-{k}", case, noisy, transit * (1 + rng.normal(0, 0.01))))
+        cases.append(CaseData(case, tuple(runs)))
+    return save_dataset(folder, "fake-reference", cases, synthetic=True)

@@ -1,0 +1,168 @@
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+from parcelfit import ParcelfitError
+from parcelfit.optimize.calibration import Calibration, study_status
+from parcelfit.optimize.study import load_study
+
+from .fake_sim import TRUTH, write_reference_dataset
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def write_study(tmp_path, **overrides):
+    write_reference_dataset(tmp_path / "data")
+    doc = {
+        "name": "fake",
+        "simulator": {"backend": "python", "factory": "tests.fake_sim:make"},
+        "parameters": {"mu_d_BePa": [0.3, 0.6], "mu_d_MePa": [0.15, 0.35]},
+        "reference": {"dataset": "data", "rig": "R", "consignment": "P", "speed_setting": 1},
+        "validation": {"speed_setting": 2, "every": 2},
+        "batch_size": 4,
+        "initial": 8,
+        "budget": 40,
+        "seed": 3,
+        "optimizer": {"n_samples": 1000, "n_restarts": 1},
+        "executor": {"kind": "local", "workers": 2},
+    }
+    doc.update(overrides)
+    path = tmp_path / "study.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+def test_calibration_recovers_the_truth_and_validates(tmp_path):
+    study = load_study(write_study(tmp_path))
+    seen = []
+    result = Calibration(study, tmp_path / "out", on_progress=seen.append).run()
+    assert result.stop_reason == "validation passed" and result.validated
+    for name, (low, high) in {"mu_d_BePa": (0.3, 0.6), "mu_d_MePa": (0.15, 0.35)}.items():
+        assert abs(result.best_params[name] - TRUTH[name]) < 0.1 * (high - low)
+    assert seen and seen[-1].last_validation is True
+    info = study_status(tmp_path / "out")
+    assert info["evaluations"] == result.evaluations and info["pending"] == 0
+    assert info["validations"][-1]["passed"] is True
+    assert (tmp_path / "out" / "runs" / "fit-000-00.csv").is_file()
+    # a finished study resumed does nothing more
+    again = Calibration(study, tmp_path / "out").run()
+    assert again.evaluations == result.evaluations and again.stop_reason == "validation passed"
+
+
+def test_failed_simulations_are_recorded_and_do_not_stop_the_loop(tmp_path):
+    study = load_study(
+        write_study(
+            tmp_path,
+            parameters={"mu_d_BePa": [0.45, 0.7], "mu_d_MePa": [0.15, 0.35]},
+            validation={},
+            budget=16,
+        )
+    )
+    result = Calibration(study, tmp_path / "out").run()
+    info = study_status(tmp_path / "out")
+    assert result.evaluations == 16 and result.stop_reason == "budget spent"
+    assert info["by_status"].get("unstable", 0) > 0 and info["by_status"]["ok"] > 0
+
+
+def test_a_changed_study_file_is_refused_for_the_same_folder(tmp_path):
+    path = write_study(tmp_path, budget=8, validation={})
+    Calibration(load_study(path), tmp_path / "out").run()
+    write_study(tmp_path, budget=12, validation={})
+    with pytest.raises(ParcelfitError, match="different study file"):
+        Calibration(load_study(path), tmp_path / "out")
+
+
+@pytest.mark.parametrize(
+    ("change", "pattern"),
+    [
+        ({"simulator": {"backend": "fortran"}}, r"simulator\.backend: unknown backend 'fortran'"),
+        ({"parameters": {"mu_d_BePa": [0.6, 0.3]}}, r"parameters\.mu_d_BePa: .*low < high"),
+        ({"parameters": {"mu_d_BePa": "wide"}}, r"parameters\.mu_d_BePa: expected \[low, high\]"),
+        (
+            {"validation": {"speed_setting": 1}},
+            r"validation\.speed_setting: validation must use a speed setting",
+        ),
+        ({"optimizer": {"lambda": 2}}, r"optimizer: unknown key 'lambda'"),
+        ({"budgett": 3}, r"top level: unknown key 'budgett'.*did you mean 'budget'"),
+    ],
+)
+def test_bad_study_files(tmp_path, change, pattern):
+    with pytest.raises(ParcelfitError, match=pattern):
+        load_study(write_study(tmp_path, **change))
+
+
+def _finished(db: Path) -> dict[int, tuple]:
+    if not db.exists():
+        return {}
+    con = sqlite3.connect(db, timeout=10)
+    try:
+        rows = con.execute(
+            "SELECT id, params, cost, finished_at FROM evaluations "
+            "WHERE kind = 'fit' AND status != 'pending'"
+        ).fetchall()
+    except sqlite3.OperationalError:
+        return {}
+    finally:
+        con.close()
+    return {r[0]: r[1:] for r in rows}
+
+
+def test_sigkill_at_any_moment_then_rerun_resumes_without_losing_or_repeating(tmp_path):
+    study = write_study(tmp_path, budget=24, validation={})
+    out = tmp_path / "out"
+    log = tmp_path / "simulated.log"
+    env = {
+        **os.environ,
+        "FAKE_SIM_DELAY": "0.15",
+        "FAKE_SIM_LOG": str(log),
+        "PYTHONPATH": str(ROOT),
+    }
+    cmd = [
+        sys.executable,
+        "-m",
+        "parcelfit",
+        "calibrate",
+        str(study),
+        "--out",
+        str(out),
+        "--workers",
+        "2",
+    ]
+    proc = subprocess.Popen(
+        cmd,
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        start_new_session=True,
+    )
+    deadline = time.time() + 120
+    while (
+        len(_finished(out / "study.sqlite")) < 10 and time.time() < deadline and proc.poll() is None
+    ):
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGKILL)  # the loop and its workers, mid-batch
+    proc.wait()
+    before = _finished(out / "study.sqlite")
+    assert 10 <= len(before) < 24
+    done = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    after = _finished(out / "study.sqlite")
+    assert len(after) == 24
+    assert all(after[k] == v for k, v in before.items())  # nothing finished was lost or redone
+    runs = log.read_text().split()
+    con = sqlite3.connect(out / "study.sqlite")
+    labels = {
+        row[0]: f"fit-{row[1]:03d}-{row[2]:02d}"
+        for row in con.execute("SELECT id, iteration, slot FROM evaluations")
+    }
+    con.close()
+    for row_id in before:  # every evaluation finished before the kill was simulated exactly once
+        assert runs.count(labels[row_id]) == 1
