@@ -2,7 +2,8 @@
 
 A parcel moves along x at the speed setting's belt speed; its lateral drift is set by
 mu_d_BePa and its turn by mu_d_MePa, so both are identifiable from the trajectory. Environment:
-FAKE_SIM_DELAY [s] sleeps per simulation (for kill tests); FAKE_SIM_LOG appends each run id.
+FAKE_SIM_DELAY [s] sleeps per simulation (for kill tests); FAKE_SIM_LOG appends each run id
+when its simulation starts.
 """
 
 from __future__ import annotations
@@ -43,11 +44,11 @@ class AnalyticSimulator:
         self, params: Mapping[str, float], case: TestCase, run_id: str | None = None
     ) -> SimResult:
         t0 = time.perf_counter()
-        if self.delay:
-            time.sleep(self.delay)
-        if self.log:
+        if self.log:  # logged when a simulation starts, so a restarted one appears twice
             with open(self.log, "a") as fh:
                 fh.write(f"{run_id}\n")
+        if self.delay:
+            time.sleep(self.delay)
         if params["mu_d_BePa"] > 0.59:  # a region where "the solver" fails
             return SimResult(
                 None, SimStatus.UNSTABLE, time.perf_counter() - t0, {"message": "diverged"}
