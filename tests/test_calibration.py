@@ -51,6 +51,12 @@ def test_calibration_recovers_the_truth_and_validates(tmp_path):
     assert info["evaluations"] == result.evaluations and info["pending"] == 0
     assert info["validations"][-1]["passed"] is True
     assert (tmp_path / "out" / "runs" / "fit-000-00.csv").is_file()
+    from parcelfit.optimize.plots import study_figures
+
+    names = sorted(p.name for p in study_figures(tmp_path / "out"))
+    assert names == sorted(
+        f"{n}.{ext}" for n in ("history", "traces", "partial_dependence") for ext in ("png", "svg")
+    )
     # a finished study resumed does nothing more
     again = Calibration(study, tmp_path / "out").run()
     assert again.evaluations == result.evaluations and again.stop_reason == "validation passed"

@@ -1,0 +1,186 @@
+"""Figures of a calibration study, read from its store.
+
+* ``history``: the cost of every fitting evaluation by iteration, the best cost so far, and the
+  validations (green: passed, red: failed), like the published Figure 12.
+* ``traces``: each fitted parameter by evaluation, coloured by cost, the best one marked.
+* ``partial_dependence``: the GP's predicted cost as one parameter varies, averaged over the
+  others (uniform Monte Carlo sample of 256 points per value), with a +-1 standard deviation
+  band; the GP is refitted from the store exactly as the optimiser saw it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from parcelfit.figures import save_figure
+from parcelfit.optimize.bo import BatchBO
+from parcelfit.optimize.calibration import STORE_FILE
+from parcelfit.optimize.space import Dimension, Space
+from parcelfit.optimize.store import Evaluation, Store
+from parcelfit.sim.params import CATALOGUE
+
+_SPECS = {p.name: p for p in CATALOGUE}
+
+
+def _display(name: str, value: float | np.ndarray) -> float | np.ndarray:
+    spec = _SPECS.get(name)
+    return spec.from_si(value) if spec else value  # type: ignore[operator, return-value]
+
+
+def _label(name: str) -> str:
+    spec = _SPECS.get(name)
+    return f"{name} [{spec.unit}]" if spec and spec.unit != "-" else name
+
+
+def history(fits: list[Evaluation], validations: list[Evaluation]) -> Figure:
+    """Cost by iteration with the best so far and the validation verdicts."""
+    fig = Figure(figsize=(7, 4), layout="constrained")
+    ax = fig.subplots()
+    ok = [e for e in fits if e.status == "ok" and e.cost is not None]
+    bad = [e for e in fits if e.status not in ("ok", "pending")]
+    ax.scatter(
+        [e.iteration for e in ok], [e.cost for e in ok], s=14, color="#7f8c8d", label="evaluation"
+    )
+    if bad:
+        top = max((e.cost for e in ok), default=1.0)
+        ax.scatter(
+            [e.iteration for e in bad],
+            [top] * len(bad),
+            marker="x",
+            color="#c0392b",
+            label="failed / unstable (plotted at the worst cost)",
+        )
+    iters = sorted({e.iteration for e in fits})
+    best, run = [], np.inf
+    for it in iters:
+        run = min([run, *[e.cost for e in ok if e.iteration == it]])
+        best.append(run)
+    ax.step(iters, best, where="post", color="#2c3e50", label="best so far")
+    for v in validations:
+        if v.status == "pending":
+            continue
+        passed = bool(v.details.get("passed"))
+        ax.axvline(v.iteration, color="#27ae60" if passed else "#e74c3c", ls="--", lw=1)
+        ax.text(
+            v.iteration,
+            ax.get_ylim()[1],
+            "valid" if passed else "invalid",
+            rotation=90,
+            va="top",
+            ha="right",
+            fontsize=8,
+            color="#27ae60" if passed else "#e74c3c",
+        )
+    ax.set_xlabel("iteration (0 = initial design)")
+    ax.set_ylabel("cost (eq. 3)")
+    if ok and min(e.cost for e in ok) > 0:  # type: ignore[type-var]
+        ax.set_yscale("log")
+    ax.xaxis.get_major_locator().set_params(integer=True)
+    ax.legend(fontsize=8)
+    return fig
+
+
+def traces(fits: list[Evaluation], names: list[str]) -> Figure:
+    """Each parameter by evaluation, coloured by cost; the best evaluation starred."""
+    fig = Figure(figsize=(7, 1.8 * len(names) + 0.6), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(len(names), 1, sharex=True))
+    ok = [(i, e) for i, e in enumerate(fits) if e.status == "ok" and e.cost is not None]
+    best = min(ok, key=lambda ie: ie[1].cost)[0] if ok else None  # type: ignore[arg-type, return-value]
+    costs = np.array([e.cost for _, e in ok]) if ok else np.array([])
+    for ax, name in zip(axes, names, strict=True):
+        xs = [i for i, _ in ok]
+        ys = [_display(name, e.params[name]) for _, e in ok]
+        sc = ax.scatter(xs, ys, c=costs, cmap="viridis_r", s=14)
+        failed = [(i, e) for i, e in enumerate(fits) if e.status not in ("ok", "pending")]
+        ax.scatter(
+            [i for i, _ in failed],
+            [_display(name, e.params[name]) for _, e in failed],
+            marker="x",
+            color="#c0392b",
+            s=14,
+        )
+        if best is not None:
+            ax.scatter(
+                [best],
+                [_display(name, fits[best].params[name])],
+                marker="*",
+                s=120,
+                color="#e67e22",
+            )
+        ax.set_ylabel(_label(name), fontsize=8)
+    axes[-1].set_xlabel("evaluation")
+    if ok:
+        fig.colorbar(sc, ax=list(axes), label="cost")
+    return fig
+
+
+def partial_dependence(
+    bo: BatchBO, n_grid: int = 40, n_mc: int = 256, seed: int = 0
+) -> Figure | None:
+    """GP partial dependence of the cost on each parameter (None before two successes)."""
+    fitted = bo._fit(np.random.default_rng([bo.seed, len(bo.observations)]), [])
+    if fitted is None:
+        return None
+    gp, mean, std = fitted
+    scale = std if std > 0 else 1.0
+    rng = np.random.default_rng(seed)
+    d = len(bo.space)
+    others = rng.random((n_mc, d))
+    fig = Figure(figsize=(3.2 * d, 3.0), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(1, d))
+    grid = np.linspace(0, 1, n_grid)
+    for j, (ax, dim) in enumerate(zip(axes, bo.space.dims, strict=True)):
+        mu_pd, sd_pd = [], []
+        for g in grid:
+            pts = others.copy()
+            pts[:, j] = g
+            mu, sd = gp.predict(pts, return_std=True)
+            mu_pd.append(mu.mean())
+            sd_pd.append(sd.mean())
+        mu_c = mean - np.asarray(mu_pd) * scale  # back to cost units (y = -(c - mean) / std)
+        sd_c = np.asarray(sd_pd) * scale
+        xs = np.array(
+            [bo.space.from_unit(np.r_[np.zeros(j), g, np.zeros(d - j - 1)])[dim.name] for g in grid]
+        )
+        xs = _display(dim.name, xs)
+        ax.plot(xs, mu_c, color="#2c3e50")
+        ax.fill_between(xs, mu_c - sd_c, mu_c + sd_c, color="#2c3e50", alpha=0.15)
+        ax.set_xlabel(_label(dim.name), fontsize=8)
+        if dim.log:
+            ax.set_xscale("log")
+    axes[0].set_ylabel("predicted cost")
+    fig.suptitle("GP partial dependence (mean over the other parameters, +-1 sd)", fontsize=9)
+    return fig
+
+
+def study_figures(folder: str | Path) -> list[Path]:
+    """Write history, traces and partial dependence (PNG and SVG) into ``folder/figures``."""
+    folder = Path(folder)
+    store = Store(folder / STORE_FILE)
+    meta = store.get_meta("study") or {}
+    fits, vals = store.evaluations("fit"), store.evaluations("validation")
+    store.close()
+    names = list(meta.get("parameters", []))
+    out = folder / "figures"
+    paths = save_figure(history(fits, vals), out / "history")
+    if not fits or not names:
+        return paths
+    paths += save_figure(traces(fits, names), out / "traces")
+    logs = meta.get("log") or [False] * len(names)
+    space = Space(
+        [
+            Dimension(n, lo, hi, lg)
+            for n, (lo, hi), lg in zip(names, meta["bounds"], logs, strict=True)
+        ]
+    )
+    bo = BatchBO(space, batch_size=int(meta.get("batch_size", 4)), seed=int(meta.get("seed", 0)))
+    for e in fits:
+        if e.status != "pending":
+            bo.tell(e.params, e.cost if e.status == "ok" else None)
+    pd_fig = partial_dependence(bo)
+    if pd_fig is not None:
+        paths += save_figure(pd_fig, out / "partial_dependence")
+    return paths
