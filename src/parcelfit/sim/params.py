@@ -203,7 +203,7 @@ CATALOGUE: tuple[ParameterSpec, ...] = (
         _both(0.01, 0.1, 0.04),
         (0, 2),
         False,
-        "flex Rayleigh damping beta = 2 zeta / omega_ref (omega_ref: the shell's first membrane mode)",
+        "flex Rayleigh damping beta = 2 zeta / omega_ref (omega_ref: the shell's first free bending mode)",
     ),
     ParameterSpec(
         "zeta_CoPa",

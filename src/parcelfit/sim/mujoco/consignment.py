@@ -15,12 +15,12 @@ larger). The packaging's mass is a simulation parameter (m_Pa); the content gets
 from __future__ import annotations
 
 from dataclasses import dataclass
-from importlib.resources import files
 from pathlib import Path
 from typing import Any
 
 from parcelfit.config import check_keys, get_number, get_str, load_yaml, require_mapping
 from parcelfit.errors import ParcelfitError
+from parcelfit.sim.mujoco.bundled import bundled_names, resolve_file
 from parcelfit.sim.params import RIGID, SOFT
 
 
@@ -99,23 +99,11 @@ def parse_consignment(doc: Any, file: str) -> Consignment:
 
 def bundled_consignment_names() -> list[str]:
     """Names of the consignment types shipped with parcelfit."""
-    return sorted(
-        p.name[:-5]
-        for p in files("parcelfit.sim.mujoco").joinpath("consignments").iterdir()
-        if p.name.endswith(".yaml")
-    )
+    return bundled_names("consignments")
 
 
 def load_consignment(name_or_path: str | Path) -> Consignment:
-    """Load a bundled consignment type by name (``KPBW``) or a consignment file by path."""
-    path = Path(name_or_path)
-    if path.suffix.lower() not in (".yaml", ".yml"):
-        key = str(name_or_path).replace("/", "").upper()
-        candidate = files("parcelfit.sim.mujoco").joinpath("consignments").joinpath(f"{key}.yaml")
-        if not candidate.is_file():
-            raise ParcelfitError(
-                f"unknown consignment type {str(name_or_path)!r}",
-                fix=f"use one of {', '.join(bundled_consignment_names())} or a .yaml path",
-            )
-        path = Path(str(candidate))
+    """Load a bundled consignment type by name (``KPBW``, ``KP/BW``) or a consignment file by path."""
+    key = str(name_or_path).replace("/", "").upper()
+    path = resolve_file("consignments", name_or_path, "consignment type", key)
     return parse_consignment(load_yaml(path), str(path))

@@ -37,7 +37,6 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from importlib.resources import files
 from pathlib import Path
 from typing import Any
 
@@ -46,6 +45,7 @@ import numpy as np
 from parcelfit.config import check_keys, get_number, get_str, load_yaml, require_mapping
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import Region, parse_region
+from parcelfit.sim.mujoco.bundled import bundled_names, resolve_file
 
 MATERIALS = ("belt", "roller", "metal")
 SURFACE_TYPES = ("belt", "strips", "rollers")
@@ -416,22 +416,10 @@ def parse_rig(doc: Any, file: str) -> Rig:
 
 def bundled_rig_names() -> list[str]:
     """Names of the rigs shipped with parcelfit."""
-    return sorted(
-        p.name[:-5]
-        for p in files("parcelfit.sim.mujoco").joinpath("rigs").iterdir()
-        if p.name.endswith(".yaml")
-    )
+    return bundled_names("rigs")
 
 
 def load_rig(name_or_path: str | Path) -> Rig:
     """Load a bundled rig by name (``E3``) or a rig file by path."""
-    path = Path(name_or_path)
-    if path.suffix.lower() not in (".yaml", ".yml"):
-        candidate = files("parcelfit.sim.mujoco").joinpath("rigs").joinpath(f"{name_or_path}.yaml")
-        if not candidate.is_file():
-            raise ParcelfitError(
-                f"unknown rig {str(name_or_path)!r}",
-                fix=f"use one of {', '.join(bundled_rig_names())} or the path of a rig .yaml file",
-            )
-        path = Path(str(candidate))
+    path = resolve_file("rigs", name_or_path, "rig")
     return parse_rig(load_yaml(path), str(path))
