@@ -56,6 +56,40 @@ class CalibrationResult:
     folder: Path
 
 
+def record_result(
+    store: Store,
+    folder: Path,
+    row: Evaluation,
+    result: SimResult,
+    reference: ReferenceSelection,
+    w_xy: float = 1.0,
+    w_theta: float = 1.0,
+) -> dict[str, Any]:
+    """Write a simulated run next to the store, compute its cost parts, and store the result."""
+    status = result.status.value
+    out: dict[str, Any] = {
+        "status": status,
+        "cost": None,
+        "dtw_xy": None,
+        "dtw_theta": None,
+        "transit_time": None,
+        "run_file": None,
+    }
+    details: dict[str, Any] = {k: v for k, v in result.diagnostics.items() if k != "traceback"}
+    if result.run is not None:
+        out["run_file"] = f"runs/{row.kind}-{row.iteration:03d}-{row.slot:02d}.csv"
+        write_trajectory(result.run.trajectory, folder / out["run_file"])
+        out["transit_time"] = result.run.transit_time
+    if result.ok and result.run is not None:
+        try:
+            c = calibration_cost(result.run.trajectory, reference, w_xy, w_theta)
+            out.update(cost=c.value, dtw_xy=c.dtw_xy, dtw_theta=c.dtw_theta)
+        except ParcelfitError as exc:
+            out["status"], details["message"] = "failed", f"cost not computable: {exc}"
+    store.finish(row.id, wall_time=result.wall_time, details=details, **out)
+    return out
+
+
 def make_simulator(study: Study) -> Simulator:
     """The simulator a study describes."""
     sim = study.simulator
@@ -187,35 +221,16 @@ class Calibration:
         )
 
     def _record_fit(self, row: Evaluation, result: SimResult) -> None:
-        status = result.status.value
-        cost = dtw_xy = dtw_theta = None
-        transit = None
-        run_file = None
-        details: dict[str, Any] = {k: v for k, v in result.diagnostics.items() if k != "traceback"}
-        if result.run is not None:
-            run_file = f"runs/fit-{row.iteration:03d}-{row.slot:02d}.csv"
-            write_trajectory(result.run.trajectory, self.folder / run_file)
-            transit = result.run.transit_time
-        if result.ok and result.run is not None:
-            try:
-                c = calibration_cost(
-                    result.run.trajectory, self.reference, self.study.w_xy, self.study.w_theta
-                )
-                cost, dtw_xy, dtw_theta = c.value, c.dtw_xy, c.dtw_theta
-            except ParcelfitError as exc:
-                status, details["message"] = "failed", f"cost not computable: {exc}"
-        self.store.finish(
-            row.id,
-            status=status,
-            cost=cost,
-            dtw_xy=dtw_xy,
-            dtw_theta=dtw_theta,
-            transit_time=transit,
-            wall_time=result.wall_time,
-            run_file=run_file,
-            details=details,
+        outcome = record_result(
+            self.store,
+            self.folder,
+            row,
+            result,
+            self.reference,
+            self.study.w_xy,
+            self.study.w_theta,
         )
-        self.bo.tell(row.params, cost if status == "ok" else None)
+        self.bo.tell(row.params, outcome["cost"] if outcome["status"] == "ok" else None)
 
     def _run_rows(self, rows: list[Evaluation], executor: LocalExecutor | DaskExecutor) -> None:
         tasks = [

@@ -6,8 +6,9 @@ Schema (``study.sqlite`` in the study folder; WAL journal, one transaction per w
     study-level facts as JSON: the study file's fingerprint, the seed, the parameter space.
 
 ``evaluations``
-    ``id`` INTEGER PRIMARY KEY, ``kind`` ('fit' | 'validation'), ``iteration`` (0 = initial
-    design), ``slot`` (position in its batch), ``speed_setting``, ``params`` (JSON, SI units),
+    ``id`` INTEGER PRIMARY KEY, ``kind`` ('fit' | 'validation' | 'screen'), ``iteration`` (0 =
+    initial design; for screening the stage), ``slot`` (position in its batch),
+    ``speed_setting``, ``params`` (JSON, SI units),
     ``status`` ('pending' | 'ok' | 'failed' | 'unstable' | 'timeout'), ``cost``, ``dtw_xy`` [m],
     ``dtw_theta`` [rad], ``transit_time`` [s], ``seed``, ``wall_time`` [s], ``asked_at`` and
     ``finished_at`` (Unix time [s]), ``run_file`` (trajectory file, relative to the study
@@ -35,7 +36,7 @@ _SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 CREATE TABLE IF NOT EXISTS evaluations (
     id INTEGER PRIMARY KEY,
-    kind TEXT NOT NULL CHECK (kind IN ('fit', 'validation')),
+    kind TEXT NOT NULL CHECK (kind IN ('fit', 'validation', 'screen')),
     iteration INTEGER NOT NULL,
     slot INTEGER NOT NULL,
     speed_setting INTEGER NOT NULL,
