@@ -415,6 +415,51 @@ def _print_params(params: dict[str, float], cost: float | None) -> None:
 
 @app.command()
 @friendly_errors
+def screen(
+    screen_file: Annotated[Path, typer.Argument(help="Screen file (YAML).")],
+    out: Annotated[
+        Path | None, typer.Option(help="Screen folder (default: next to the file, named after it).")
+    ] = None,
+    workers: Annotated[
+        int | None, typer.Option(help="Local worker processes (default: one per core).")
+    ] = None,
+) -> None:
+    """Screen parameters: fractional -> full factorial designs, effects, Pareto charts, a selection."""
+    from parcelfit.optimize.screening import load_screen, run_screen
+
+    spec = load_screen(screen_file)
+    folder = out or screen_file.parent / screen_file.stem
+    with console.status("screening") as status_line:
+        stages, selection = run_screen(
+            spec, folder, workers=workers, on_event=lambda m: status_line.update(m)
+        )
+    for k, stage in enumerate(stages, start=1):
+        table = Table(
+            title=f"stage {k}: {stage.kind} factorial over {len(stage.factors)} parameters "
+            f"({stage.analyses[0].method} errors)",
+            title_justify="left",
+        )
+        for col in ("response", "term", "effect", "|t|", "p", ""):
+            table.add_column(col, justify="right" if col in ("effect", "|t|", "p") else "left")
+        for a in stage.analyses:
+            for _, r in a.table.head(6).iterrows():
+                table.add_row(
+                    a.response,
+                    r["term"],
+                    f"{r['effect']:.3g}",
+                    f"{abs(r['t']):.3g}",
+                    f"{r['p_value']:.2g}",
+                    "*" if r["significant"] else "",
+                )
+        console.print(table)
+    console.print(
+        f"[bold]selected for calibration:[/] {', '.join(selection['selected']) or 'none'}"
+    )
+    console.print(f"results in {folder} (selection.yaml, stageN-effects.csv, Pareto charts)")
+
+
+@app.command()
+@friendly_errors
 def status(
     study_dir: Annotated[Path, typer.Argument(help="Study folder (holding study.sqlite).")],
     as_json: Annotated[bool, typer.Option("--json", help="Print machine-readable JSON.")] = False,

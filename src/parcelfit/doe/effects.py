@@ -144,10 +144,18 @@ def analyse_effects(
 def pareto_chart(analysis: EffectAnalysis, top: int = 10) -> Figure:
     """Horizontal bars of |standardised effect| for the largest ``top`` terms, with the critical line."""
     tab = analysis.table.head(top).iloc[::-1]
-    fig = Figure(figsize=(6.5, 0.35 * len(tab) + 1.4), layout="constrained")
+    fig = Figure(figsize=(6.5, max(3.0, 0.35 * len(tab) + 1.4)), layout="constrained")
     ax = fig.subplots()
     colours = ["#c0392b" if s else "#7f8c8d" for s in tab["significant"]]
-    ax.barh(tab["term"], np.abs(tab["t"]), color=colours)
+    size = np.abs(tab["t"].to_numpy(dtype=float))
+    finite = size[np.isfinite(size) & (size < 1e6)]
+    cap = max(float(finite.max()) if finite.size else 0.0, analysis.critical_t) * 1.5
+    off_scale = ~np.isfinite(size) | (size >= 1e6)  # a noise-free response: no error to divide by
+    size = np.where(off_scale, cap, size)
+    ax.barh(tab["term"], size, color=colours)
+    for y, flag in enumerate(off_scale):
+        if flag:
+            ax.text(cap, y, " off scale", va="center", fontsize=7)
     ax.axvline(analysis.critical_t, color="k", ls="--", lw=1)
     ax.text(analysis.critical_t, len(tab) - 0.4, f" {analysis.critical_t:.2f}", fontsize=8)
     ax.set_xlabel(f"standardised effect |t| ({analysis.method}; alpha = {analysis.alpha:g})")

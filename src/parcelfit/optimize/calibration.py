@@ -90,9 +90,8 @@ def record_result(
     return out
 
 
-def make_simulator(study: Study) -> Simulator:
-    """The simulator a study describes."""
-    sim = study.simulator
+def make_simulator(sim: Mapping[str, Any], folder: Path) -> Simulator:
+    """The simulator a study's or screen's ``simulator`` section describes (``folder``: the file's)."""
     backend = sim["backend"]
     if backend == "mujoco":
         from parcelfit.sim.mujoco import (
@@ -112,7 +111,7 @@ def make_simulator(study: Study) -> Simulator:
         from parcelfit.sim.external import ExternalSimulator, load_external_solver
 
         return ExternalSimulator(
-            load_external_solver(sim["external"]), workroot=study.folder / ".external-runs"
+            load_external_solver(sim["external"]), workroot=folder / ".external-runs"
         )
     module, _, attr = str(sim["factory"]).partition(":")
     try:
@@ -193,7 +192,7 @@ class Calibration:
             None if self.val_case is None else select_reference(dataset[self.val_case])
         )
         self.store.set_meta("reference_run", self.reference.reference_id)
-        self.simulator = make_simulator(study)
+        self.simulator = make_simulator(study.simulator, study.folder)
         self.bo = BatchBO(
             study.space, batch_size=study.batch_size, seed=study.seed, settings=study.bo
         )

@@ -118,30 +118,8 @@ def load_study(path: str | Path) -> Study:
         where="top level",
     )
     folder = path.parent.resolve()
-    sim = dict(require_mapping(doc["simulator"], file=path, where="simulator"))
-    check_keys(sim, allowed=_SIM, required=("backend",), file=path, where="simulator")
-    backend = get_str(sim, "backend", file=path, where="simulator")
-    if backend not in ("mujoco", "external", "python"):
-        raise ParcelfitError(
-            f"unknown backend {backend!r}",
-            file=path,
-            where="simulator.backend",
-            fix="use mujoco, external or python",
-        )
-    needed = {"mujoco": ("rig", "consignment"), "external": ("external",), "python": ("factory",)}[
-        backend
-    ]
-    for key in needed:
-        if key not in sim:
-            raise ParcelfitError(
-                f"the {backend} backend needs {key!r}",
-                file=path,
-                where="simulator",
-                fix=f"add `{key}:`",
-            )
-    for key in ("rig", "consignment", "external"):
-        if key in sim and str(sim[key]).lower().endswith((".yaml", ".yml")):
-            sim[key] = str((folder / str(sim[key])).resolve())
+    sim = parse_simulator(doc["simulator"], path, folder)
+    backend = sim["backend"]
 
     params = require_mapping(doc["parameters"], file=path, where="parameters")
     if not params:
@@ -200,20 +178,7 @@ def load_study(path: str | Path) -> Study:
             fix="remove them from one of the two",
         )
 
-    ref = require_mapping(doc["reference"], file=path, where="reference")
-    check_keys(
-        ref,
-        allowed=("dataset", "rig", "consignment", "speed_setting"),
-        required=("dataset", "speed_setting"),
-        file=path,
-        where="reference",
-    )
-    dataset = (folder / get_str(ref, "dataset", file=path, where="reference")).resolve()
-    rig = str(ref.get("rig") or _name(sim.get("rig"), path, "reference.rig"))
-    consignment = str(
-        ref.get("consignment") or _name(sim.get("consignment"), path, "reference.consignment")
-    )
-    fit_setting = int(get_number(ref, "speed_setting", file=path, where="reference", minimum=1))  # type: ignore[arg-type]
+    dataset, rig, consignment, fit_setting = parse_reference(doc["reference"], path, folder, sim)
     val = require_mapping(doc.get("validation") or {}, file=path, where="validation")
     check_keys(val, allowed=("speed_setting", "every"), file=path, where="validation")
     val_setting = val.get("speed_setting")
@@ -274,6 +239,56 @@ def load_study(path: str | Path) -> Study:
         executor=dict(execu),
         fingerprint=fingerprint,
     )
+
+
+def parse_simulator(section: Any, path: Path, folder: Path) -> dict[str, Any]:
+    """The ``simulator`` section of a study or screen file, with file paths made absolute."""
+    sim = dict(require_mapping(section, file=path, where="simulator"))
+    check_keys(sim, allowed=_SIM, required=("backend",), file=path, where="simulator")
+    backend = get_str(sim, "backend", file=path, where="simulator")
+    if backend not in ("mujoco", "external", "python"):
+        raise ParcelfitError(
+            f"unknown backend {backend!r}",
+            file=path,
+            where="simulator.backend",
+            fix="use mujoco, external or python",
+        )
+    needed = {"mujoco": ("rig", "consignment"), "external": ("external",), "python": ("factory",)}[
+        backend
+    ]
+    for key in needed:
+        if key not in sim:
+            raise ParcelfitError(
+                f"the {backend} backend needs {key!r}",
+                file=path,
+                where="simulator",
+                fix=f"add `{key}:`",
+            )
+    for key in ("rig", "consignment", "external"):
+        if key in sim and str(sim[key]).lower().endswith((".yaml", ".yml")):
+            sim[key] = str((folder / str(sim[key])).resolve())
+    return sim
+
+
+def parse_reference(
+    section: Any, path: Path, folder: Path, sim: Mapping[str, Any]
+) -> tuple[Path, str, str, int]:
+    """The ``reference`` section: dataset folder, rig, consignment and speed setting."""
+    ref = require_mapping(section, file=path, where="reference")
+    check_keys(
+        ref,
+        allowed=("dataset", "rig", "consignment", "speed_setting"),
+        required=("dataset", "speed_setting"),
+        file=path,
+        where="reference",
+    )
+    dataset = (folder / get_str(ref, "dataset", file=path, where="reference")).resolve()
+    rig = str(ref.get("rig") or _name(sim.get("rig"), path, "reference.rig"))
+    consignment = str(
+        ref.get("consignment") or _name(sim.get("consignment"), path, "reference.consignment")
+    )
+    setting = int(get_number(ref, "speed_setting", file=path, where="reference", minimum=1))  # type: ignore[arg-type]
+    return dataset, rig, consignment, setting
 
 
 def _name(value: Any, path: Path, where: str) -> str:

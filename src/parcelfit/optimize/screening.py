@@ -1,0 +1,310 @@
+"""Screening runs (method.md section 6): designs simulated through the executors and the store.
+
+A screen file (YAML)::
+
+    name: e3-kpbw-screen
+    simulator: {backend: mujoco, rig: E3, consignment: KPBW}     # as in a study file
+    reference: {dataset: data, speed_setting: 2}                   # as in a study file
+    parameters: all              # all catalogue candidates of the consignment, or a list of names,
+                                 # or {name: [low, high]} (catalogue units; default: screening range)
+    fixed: {}                    # optional, catalogue units
+    stages: [fractional, full]   # fractional (resolution IV) -> full factorial on the survivors
+    soft_content: [E_Co, zeta_Co]   # optional third stage: survivors + these (polybag PB)
+    resolution: 4
+    alpha: 0.05
+    max_full_factors: 6          # the full factorial keeps at most this many survivors (2^6 = 64 runs)
+    select: 4                    # parameters recommended for calibration
+    executor: {kind: local}
+
+Responses of every run: DTW_xy [m] and DTW_theta [rad] between the simulated run and the
+reference run of the test case (the same preparation as the calibration cost), and the transit
+time [s]. After each stage the effects on DTW_xy and DTW_theta are analysed
+(`parcelfit.doe.analyse_effects`); a parameter survives if any of its effects is significant.
+Outputs in the screen folder: ``stageN-effects.csv``, ``stageN-pareto-<response>.png/.svg``,
+``stageN-design.csv`` (parameters and responses per run) and ``selection.yaml`` (the ranked
+recommendation with reasons, and the parameters with their ranges ready for a study file).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import yaml
+
+from parcelfit.config import check_keys, get_number, load_yaml, require_mapping
+from parcelfit.doe import (
+    EffectAnalysis,
+    analyse_effects,
+    decode,
+    fractional_factorial,
+    full_factorial,
+    pareto_chart,
+    select_parameters,
+)
+from parcelfit.errors import ParcelfitError
+from parcelfit.figures import save_figure
+from parcelfit.metrics import select_reference
+from parcelfit.optimize.calibration import record_result
+from parcelfit.optimize.executors import LocalExecutor, Task
+from parcelfit.optimize.store import Store
+from parcelfit.optimize.study import _to_si, parse_reference, parse_simulator
+from parcelfit.runs import TestCase, load_dataset
+from parcelfit.sim.params import CATALOGUE, parameter
+
+_KEYS = (
+    "name",
+    "simulator",
+    "reference",
+    "parameters",
+    "fixed",
+    "stages",
+    "soft_content",
+    "resolution",
+    "alpha",
+    "max_full_factors",
+    "select",
+    "executor",
+)
+RESPONSES = ("dtw_xy", "dtw_theta")
+
+
+@dataclass(frozen=True)
+class Screen:
+    """A parsed screen file: parameter ranges in catalogue (user) units."""
+
+    name: str
+    folder: Path
+    simulator: dict[str, Any]
+    ranges: dict[str, tuple[float, float]]
+    fixed: dict[str, float]
+    dataset: Path
+    case: TestCase
+    stages: tuple[str, ...]
+    soft_content: tuple[str, ...]
+    resolution: int
+    alpha: float
+    max_full_factors: int
+    select: int
+    executor: dict[str, Any] = field(default_factory=dict)
+
+
+def load_screen(path: str | Path) -> Screen:
+    """Read and check a screen file."""
+    path = Path(path)
+    doc = require_mapping(load_yaml(path), file=path, where="top level")
+    check_keys(
+        doc,
+        allowed=_KEYS,
+        required=("name", "simulator", "reference"),
+        file=path,
+        where="top level",
+    )
+    folder = path.parent.resolve()
+    sim = parse_simulator(doc["simulator"], path, folder)
+    dataset, rig, cons, setting = parse_reference(doc["reference"], path, folder, sim)
+    kind = "rigid"
+    if sim["backend"] == "mujoco":
+        from parcelfit.sim.mujoco import load_consignment
+
+        kind = load_consignment(sim["consignment"]).content_kind
+    spec = doc.get("parameters", "all")
+    if spec == "all":
+        names = [
+            p.name for p in CATALOGUE if kind in p.ranges and p.name not in ("E_Co", "zeta_Co")
+        ]
+        spec = {n: None for n in names}
+    elif isinstance(spec, list):
+        spec = {str(n): None for n in spec}
+    spec = require_mapping(spec, file=path, where="parameters")
+    ranges = {}
+    for name, bounds in spec.items():
+        if bounds is None:
+            r = parameter(str(name)).range_for(kind)
+            ranges[str(name)] = (r.low, r.high)
+        elif isinstance(bounds, list) and len(bounds) == 2 and bounds[0] < bounds[1]:
+            ranges[str(name)] = (float(bounds[0]), float(bounds[1]))
+        else:
+            raise ParcelfitError(
+                f"expected [low, high] with low < high, got {bounds!r}",
+                file=path,
+                where=f"parameters.{name}",
+                fix="or leave it empty for the screening range",
+            )
+    if len(ranges) < 2:
+        raise ParcelfitError(
+            "a screen needs at least two parameters", file=path, where="parameters"
+        )
+    stages = tuple(doc.get("stages") or ("fractional", "full"))
+    if not stages or any(s not in ("fractional", "full") for s in stages):
+        raise ParcelfitError(
+            f"unknown stages {list(stages)}",
+            file=path,
+            where="stages",
+            fix="use fractional and/or full",
+        )
+    fixed_doc = require_mapping(doc.get("fixed") or {}, file=path, where="fixed")
+    return Screen(
+        name=str(doc["name"]),
+        folder=folder,
+        simulator=sim,
+        ranges=ranges,
+        fixed={k: float(v) for k, v in fixed_doc.items()},
+        dataset=dataset,
+        case=TestCase(rig, cons, setting),
+        stages=stages,
+        soft_content=tuple(doc.get("soft_content") or ()),
+        resolution=int(
+            get_number(doc, "resolution", file=path, where="", default=4, minimum=3, maximum=5)
+        ),  # type: ignore[arg-type]
+        alpha=get_number(doc, "alpha", file=path, where="", default=0.05, minimum=1e-6, maximum=0.5)
+        or 0.05,
+        max_full_factors=int(
+            get_number(
+                doc,
+                "max_full_factors",
+                file=path,
+                where="",
+                default=6,
+                minimum=2,  # type: ignore[arg-type]
+                maximum=10,
+            )
+        ),
+        select=int(get_number(doc, "select", file=path, where="", default=4, minimum=1)),  # type: ignore[arg-type]
+        executor=dict(
+            require_mapping(doc.get("executor") or {"kind": "local"}, file=path, where="executor")
+        ),
+    )
+
+
+@dataclass(frozen=True)
+class StageResult:
+    """One stage: the factors, the analyses per response, the survivors."""
+
+    kind: str
+    factors: list[str]
+    analyses: list[EffectAnalysis]
+    survivors: list[str]
+
+
+def run_screen(
+    screen: Screen,
+    out: str | Path,
+    *,
+    workers: int | None = None,
+    on_event: Callable[[str], None] | None = None,
+) -> tuple[list[StageResult], dict[str, Any]]:
+    """Run the screen's stages (resumable), write the outputs, return the stages and the selection."""
+    from parcelfit.optimize.calibration import make_simulator
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    say = on_event or (lambda m: None)
+    store = Store(out / "screen.sqlite")
+    reference = select_reference(load_dataset(screen.dataset)[screen.case])
+    simulator = make_simulator(screen.simulator, screen.folder)
+    backend = screen.simulator["backend"]
+    executor = LocalExecutor(simulator, workers or screen.executor.get("workers"))
+    results: list[StageResult] = []
+    factors = list(screen.ranges)
+    try:
+        plan = list(screen.stages) + (["full"] if screen.soft_content else [])
+        for stage, kind in enumerate(plan):
+            if stage == len(screen.stages) and screen.soft_content:
+                for extra in screen.soft_content:
+                    r = parameter(extra).range_for("soft")
+                    screen.ranges.setdefault(extra, (r.low, r.high))
+                factors = list(dict.fromkeys([*factors, *screen.soft_content]))
+            if kind == "full" and len(factors) > screen.max_full_factors:
+                say(
+                    f"stage {stage + 1}: {len(factors)} survivors, keeping the {screen.max_full_factors} strongest"
+                )
+                factors = factors[: screen.max_full_factors]
+            design = (
+                fractional_factorial(len(factors), screen.resolution)
+                if kind == "fractional"
+                else full_factorial(len(factors))
+            )
+            values = decode(design.matrix, [screen.ranges[f] for f in factors])
+            rows = [e for e in store.evaluations("screen") if e.iteration == stage]
+            if not rows:
+                batch = [
+                    {f: _to_si(f, v, backend) for f, v in zip(factors, run, strict=True)}
+                    for run in values
+                ]
+                store.add_pending(
+                    "screen", stage, batch, screen.case.speed_setting, [0] * len(batch)
+                )
+                rows = [e for e in store.evaluations("screen") if e.iteration == stage]
+            todo = [r for r in rows if r.status == "pending"]
+            say(
+                f"stage {stage + 1} ({kind}, {len(factors)} factors): {len(rows)} runs, {len(todo)} to simulate"
+            )
+            fixed_si = {k: _to_si(k, v, backend) for k, v in screen.fixed.items()}
+            tasks = [
+                Task({**fixed_si, **r.params}, screen.case, f"screen-{stage}-{r.slot}")
+                for r in todo
+            ]
+            for i, res in executor.run(tasks):
+                record_result(store, out, todo[i], res, reference)
+                say(f"{res.status.value}: {tasks[i].run_id}")
+            rows = sorted(
+                (e for e in store.evaluations("screen") if e.iteration == stage),
+                key=lambda e: e.slot,
+            )
+            frame = pd.DataFrame(
+                [
+                    {
+                        **{f: v for f, v in zip(factors, values[r.slot], strict=True)},
+                        "status": r.status,
+                        "dtw_xy": r.dtw_xy,
+                        "dtw_theta": r.dtw_theta,
+                        "transit_time": r.transit_time,
+                    }
+                    for r in rows
+                ]
+            )
+            frame.to_csv(out / f"stage{stage + 1}-design.csv", index=False)
+            ok = frame["status"].eq("ok").to_numpy()
+            analyses = []
+            for resp in RESPONSES:
+                y = frame[resp].to_numpy(dtype=float)
+                sub = design if ok.all() else _subset(design, ok)
+                a = analyse_effects(sub, factors, y[ok], name=resp, alpha=screen.alpha)
+                analyses.append(a)
+                save_figure(pareto_chart(a), out / f"stage{stage + 1}-pareto-{resp}")
+            table = pd.concat(
+                [a.table.assign(response=a.response, method=a.method) for a in analyses]
+            )
+            table.to_csv(out / f"stage{stage + 1}-effects.csv", index=False)
+            ranked = select_parameters(analyses, max_parameters=len(factors)).parameters
+            results.append(StageResult(kind, factors, analyses, ranked))
+            say(
+                f"stage {stage + 1}: {len(ranked)} of {len(factors)} parameters have a significant effect"
+            )
+            if ranked:
+                factors = ranked
+    finally:
+        executor.close()
+        store.close()
+    sel = select_parameters(results[-1].analyses, max_parameters=screen.select)
+    doc = {
+        "screen": screen.name,
+        "test_case": screen.case.label,
+        "method": results[-1].analyses[0].method,
+        "selected": sel.parameters,
+        "reasons": sel.reasons,
+        "parameters": {p: list(screen.ranges[p]) for p in sel.parameters},
+    }
+    (out / "selection.yaml").write_text(yaml.safe_dump(doc, sort_keys=False), encoding="utf-8")
+    return results, doc
+
+
+def _subset(design: Any, keep: np.ndarray) -> Any:
+    from dataclasses import replace
+
+    return replace(design, matrix=design.matrix[keep])

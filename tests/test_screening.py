@@ -1,0 +1,47 @@
+import pandas as pd
+import yaml
+
+from parcelfit.optimize.screening import load_screen, run_screen
+
+from .fake_sim import write_reference_dataset
+
+
+def test_screen_finds_the_parameters_that_matter(tmp_path):
+    write_reference_dataset(tmp_path / "data")
+    doc = {
+        "name": "fake-screen",
+        "simulator": {"backend": "python", "factory": "tests.fake_sim:make"},
+        "reference": {"dataset": "data", "rig": "R", "consignment": "P", "speed_setting": 1},
+        # two parameters the analytic simulator responds to, four it ignores
+        "parameters": {
+            "mu_d_BePa": [0.3, 0.58],
+            "mu_d_MePa": [0.15, 0.35],
+            "E_Pa": [200, 1600],
+            "nu_Pa": [0.2, 0.45],
+            "t_Pa": [0.2, 1.0],
+            "k_CoPa": [100, 1000],
+        },
+        "stages": ["fractional", "full"],
+        "select": 4,
+        "executor": {"kind": "local", "workers": 2},
+    }
+    path = tmp_path / "screen.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    events = []
+    stages, selection = run_screen(load_screen(path), tmp_path / "out", on_event=events.append)
+    assert [s.kind for s in stages] == ["fractional", "full"]
+    assert stages[0].factors == list(doc["parameters"]) and len(stages[0].analyses) == 2
+    assert set(stages[0].survivors) == {"mu_d_BePa", "mu_d_MePa"}
+    assert set(selection["selected"]) == {"mu_d_BePa", "mu_d_MePa"}
+    assert selection["parameters"]["mu_d_BePa"] == [0.3, 0.58]
+    design = pd.read_csv(tmp_path / "out" / "stage1-design.csv")
+    assert len(design) == 16 and (design["status"] == "ok").all()
+    assert (tmp_path / "out" / "stage2-pareto-dtw_xy.png").is_file()
+    assert (
+        yaml.safe_load((tmp_path / "out" / "selection.yaml").read_text())["selected"]
+        == selection["selected"]
+    )
+    # resumable: a rerun simulates nothing
+    events.clear()
+    run_screen(load_screen(path), tmp_path / "out", on_event=events.append)
+    assert not any(e.startswith("ok:") for e in events)
