@@ -386,12 +386,18 @@ def calibrate(
             workers=workers,
             on_progress=update,
         ).run()
+    console.print()
     console.print(
         f"[bold]{result.stop_reason}[/] after {result.evaluations} evaluations in "
         f"{result.iterations} iterations; study folder {result.folder}"
     )
     if result.best_params is not None:
         _print_params(result.best_params, result.best_cost)
+    from parcelfit.optimize.plots import study_figures
+
+    with console.status("figures"):
+        figures = study_figures(folder)
+    console.print(f"figures in {folder / 'figures'} ({len(figures) // 2} figures, PNG and SVG)")
 
 
 def _print_params(params: dict[str, float], cost: float | None) -> None:

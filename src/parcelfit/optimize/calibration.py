@@ -175,6 +175,8 @@ class Calibration:
                     "name": study.name,
                     "parameters": study.space.names,
                     "bounds": [[d.low, d.high] for d in study.space.dims],
+                    "log": [d.log for d in study.space.dims],
+                    "batch_size": study.batch_size,
                     "seed": study.seed,
                     "fit_setting": study.fit_setting,
                     "validation_setting": study.validation_setting,

@@ -270,6 +270,14 @@ def run_screen(
             )
             frame.to_csv(out / f"stage{stage + 1}-design.csv", index=False)
             ok = frame["status"].eq("ok").to_numpy()
+            if ok.sum() <= len(factors):
+                first = next((r.details.get("message") for r in rows if r.status != "ok"), "")
+                raise ParcelfitError(
+                    f"stage {stage + 1}: only {int(ok.sum())} of {len(rows)} runs succeeded, too few to estimate "
+                    f"{len(factors)} effects (first failure: {first})",
+                    file=out / "screen.sqlite",
+                    fix="fix the failing simulations (see stageN-design.csv), then rerun",
+                )
             analyses = []
             for resp in RESPONSES:
                 y = frame[resp].to_numpy(dtype=float)
