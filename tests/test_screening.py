@@ -31,8 +31,14 @@ def test_screen_finds_the_parameters_that_matter(tmp_path):
     stages, selection = run_screen(load_screen(path), tmp_path / "out", on_event=events.append)
     assert [s.kind for s in stages] == ["fractional", "full"]
     assert stages[0].factors == list(doc["parameters"]) and len(stages[0].analyses) == 2
-    assert set(stages[0].survivors) == {"mu_d_BePa", "mu_d_MePa"}
-    assert set(selection["selected"]) == {"mu_d_BePa", "mu_d_MePa"}
+    # the two significant parameters first, topped up to three by effect size for stage 2
+    assert (
+        set(stages[0].survivors[:2]) == {"mu_d_BePa", "mu_d_MePa"} and len(stages[0].survivors) == 3
+    )
+    assert stages[1].factors == stages[0].survivors
+    assert set(selection["selected"][:2]) == {"mu_d_BePa", "mu_d_MePa"}
+    third = selection["selected"][2]
+    assert "(not significant)" in selection["reasons"][third]
     assert selection["parameters"]["mu_d_BePa"] == [0.3, 0.58]
     design = pd.read_csv(tmp_path / "out" / "stage1-design.csv")
     assert len(design) == 16 and (design["status"] == "ok").all()

@@ -97,15 +97,18 @@ def analyse_effects(
     df_resid = round(model.df_resid)
     if method == "auto":
         method = "pooled" if df_resid >= 3 else "lenth"
-    coef = np.asarray(model.params[1:])
+    # effects below 1e-9 of the response's spread are floating-point dust of a noise-free
+    # response, not effects: they count as exactly zero
+    tiny = 1e-9 * float(np.max(np.abs(y - y.mean()))) if y.size else 0.0
+    coef = np.where(np.abs(np.asarray(model.params[1:])) <= tiny, 0.0, np.asarray(model.params[1:]))
     if method == "pooled":
         if df_resid < 1:
             raise ParcelfitError(
                 "the model leaves no residual degrees of freedom for pooled errors",
                 fix="use method='lenth' or fewer terms",
             )
-        t = coef / np.asarray(model.bse[1:])
-        p = np.asarray(model.pvalues[1:])
+        t = _standardise(coef, np.asarray(model.bse[1:]), tiny)
+        p = 2 * stats.t.sf(np.abs(t), df_resid)
         crit = float(stats.t.ppf(1 - alpha / 2, df_resid))
     elif method == "lenth":
         base = len(letters) - len(design.generators)
@@ -113,8 +116,9 @@ def analyse_effects(
         for r in range(1, base + 1):
             for combo in itertools.combinations(range(base), r):
                 contrasts.append(np.mean(np.prod(X[:, list(combo)], axis=1) * y))
-        pse, dof = lenth(np.asarray(contrasts))
-        t = coef / pse if pse > 0 else np.full_like(coef, np.inf)
+        c = np.asarray(contrasts)
+        pse, dof = lenth(np.where(np.abs(c) <= tiny, 0.0, c))
+        t = _standardise(coef, np.full_like(coef, pse), tiny)
         p = 2 * stats.t.sf(np.abs(t), dof)
         crit = float(stats.t.ppf(1 - alpha / 2, dof))
     else:
@@ -139,6 +143,16 @@ def analyse_effects(
         )
     table = pd.DataFrame(rows).sort_values("t", key=np.abs, ascending=False, ignore_index=True)
     return EffectAnalysis(name, table, method, crit, alpha)
+
+
+def _standardise(coef: np.ndarray, se: np.ndarray, tiny: float) -> np.ndarray:
+    """coef / se; where the error is (numerically) zero, a zero effect has t = 0 and any other
+    effect is infinitely larger than the error (a noise-free response)."""
+    out = np.zeros_like(coef, dtype=float)
+    exact = se <= tiny
+    np.divide(coef, se, out=out, where=~exact)
+    out[exact & (coef != 0)] = np.sign(coef[exact & (coef != 0)]) * np.inf
+    return out
 
 
 def pareto_chart(analysis: EffectAnalysis, top: int = 10) -> Figure:
@@ -171,20 +185,24 @@ class Selection:
     reasons: dict[str, str]
 
 
-def select_parameters(analyses: Sequence[EffectAnalysis], max_parameters: int = 4) -> Selection:
+def select_parameters(
+    analyses: Sequence[EffectAnalysis], max_parameters: int = 4, only_significant: bool = True
+) -> Selection:
     """Rank parameters by their largest |standardised effect| over all responses (main effects,
-    or a share in a significant interaction), keep those with a significant effect, at most N."""
+    or a share in an interaction); keep at most N, and only those with a significant effect
+    unless ``only_significant`` is False (then the reasons say which effects are significant)."""
     score: dict[str, float] = {}
     why: dict[str, list[str]] = {}
     for a in analyses:
         for _, row in a.table.iterrows():
-            if not row["significant"]:
+            if only_significant and not row["significant"]:
                 continue
             for factor in row["term"].split(":"):
                 score[factor] = max(score.get(factor, 0.0), abs(row["t"]))
                 why.setdefault(factor, []).append(
                     f"{'main effect' if ':' not in row['term'] else 'interaction ' + row['term']} on "
                     f"{a.response}: effect {row['effect']:.3g}, |t| {abs(row['t']):.2f}, p {row['p_value']:.2g}"
+                    + ("" if row["significant"] else " (not significant)")
                 )
     ranked = sorted(score, key=lambda f: -score[f])[:max_parameters]
     return Selection(ranked, {f: "; ".join(why[f]) for f in ranked})

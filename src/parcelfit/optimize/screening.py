@@ -13,6 +13,8 @@ A screen file (YAML)::
     resolution: 4
     alpha: 0.05
     max_full_factors: 6          # the full factorial keeps at most this many survivors (2^6 = 64 runs)
+    min_full_factors: 3          # ... and at least this many: fewer survivors are topped up with the
+                                 # next-largest effects (a 2- or 4-run design says nothing)
     select: 4                    # parameters recommended for calibration
     executor: {kind: local}
 
@@ -23,6 +25,11 @@ time [s]. After each stage the effects on DTW_xy and DTW_theta are analysed
 Outputs in the screen folder: ``stageN-effects.csv``, ``stageN-pareto-<response>.png/.svg``,
 ``stageN-design.csv`` (parameters and responses per run) and ``selection.yaml`` (the ranked
 recommendation with reasons, and the parameters with their ranges ready for a study file).
+
+The final selection ranks the last stage's parameters by their largest standardised effect, as
+the method asks ("by effect size, not blindly by significance"); the reasons say which effects
+were significant. A rerun resumes stage by stage and refuses a stage whose stored factors differ
+from the ones it would run now (use a new folder after changing the screen file).
 """
 
 from __future__ import annotations
@@ -67,6 +74,7 @@ _KEYS = (
     "resolution",
     "alpha",
     "max_full_factors",
+    "min_full_factors",
     "select",
     "executor",
 )
@@ -89,6 +97,7 @@ class Screen:
     resolution: int
     alpha: float
     max_full_factors: int
+    min_full_factors: int
     select: int
     executor: dict[str, Any] = field(default_factory=dict)
 
@@ -174,6 +183,11 @@ def load_screen(path: str | Path) -> Screen:
                 maximum=10,
             )
         ),
+        min_full_factors=int(
+            get_number(
+                doc, "min_full_factors", file=path, where="", default=3, minimum=1, maximum=10
+            )  # type: ignore[arg-type]
+        ),
         select=int(get_number(doc, "select", file=path, where="", default=4, minimum=1)),  # type: ignore[arg-type]
         executor=dict(
             require_mapping(doc.get("executor") or {"kind": "local"}, file=path, where="executor")
@@ -231,6 +245,12 @@ def run_screen(
             )
             values = decode(design.matrix, [screen.ranges[f] for f in factors])
             rows = [e for e in store.evaluations("screen") if e.iteration == stage]
+            if rows and sorted(rows[0].params) != sorted(factors):
+                raise ParcelfitError(
+                    f"stage {stage + 1} was run over {sorted(rows[0].params)}, now it would be over {sorted(factors)}",
+                    file=out / "screen.sqlite",
+                    fix="use a new output folder after changing the screen file",
+                )
             if not rows:
                 batch = [
                     {f: _to_si(f, v, backend) for f, v in zip(factors, run, strict=True)}
@@ -289,17 +309,28 @@ def run_screen(
                 [a.table.assign(response=a.response, method=a.method) for a in analyses]
             )
             table.to_csv(out / f"stage{stage + 1}-effects.csv", index=False)
-            ranked = select_parameters(analyses, max_parameters=len(factors)).parameters
-            results.append(StageResult(kind, factors, analyses, ranked))
+            significant = select_parameters(analyses, max_parameters=len(factors)).parameters
+            by_size = select_parameters(
+                analyses, max_parameters=len(factors), only_significant=False
+            ).parameters
+            top_up = [f for f in by_size if f not in significant]
+            survivors = significant + top_up[: max(0, screen.min_full_factors - len(significant))]
+            results.append(StageResult(kind, factors, analyses, survivors))
             say(
-                f"stage {stage + 1}: {len(ranked)} of {len(factors)} parameters have a significant effect"
+                f"stage {stage + 1}: {len(significant)} of {len(factors)} parameters have a significant effect"
+                + (
+                    f"; topped up to {len(survivors)} by effect size"
+                    if len(survivors) > len(significant)
+                    else ""
+                )
             )
-            if ranked:
-                factors = ranked
+            factors = survivors
     finally:
         executor.close()
         store.close()
-    sel = select_parameters(results[-1].analyses, max_parameters=screen.select)
+    sel = select_parameters(
+        results[-1].analyses, max_parameters=screen.select, only_significant=False
+    )
     doc = {
         "screen": screen.name,
         "test_case": screen.case.label,
