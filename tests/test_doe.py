@@ -110,6 +110,12 @@ def test_selection_and_pareto_chart(tmp_path):
     sel = select_parameters([a], max_parameters=1)
     assert sel.parameters == ["mu_B"] and "main effect on DTW_xy" in sel.reasons["mu_B"]
     assert select_parameters([a]).parameters == ["mu_B", "mu_M"]
+    inert = analyse_effects(
+        d, ["mu_B", "mu_M", "E", "k"], np.where(d.matrix[:, 0] > 0, 2.0, 1.0), name="step"
+    )
+    assert select_parameters([inert], only_significant=False).parameters == [
+        "mu_B"
+    ]  # the others do nothing
     paths = save_figure(pareto_chart(a), tmp_path / "pareto")
     assert all(p.stat().st_size > 1000 for p in paths)
 

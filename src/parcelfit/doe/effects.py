@@ -204,7 +204,8 @@ def select_parameters(
                     f"{a.response}: effect {row['effect']:.3g}, |t| {abs(row['t']):.2f}, p {row['p_value']:.2g}"
                     + ("" if row["significant"] else " (not significant)")
                 )
-    ranked = sorted(score, key=lambda f: -score[f])[:max_parameters]
+    # a parameter whose every effect is exactly zero does nothing here: never recommend it
+    ranked = [f for f in sorted(score, key=lambda f: -score[f]) if score[f] > 0][:max_parameters]
     return Selection(ranked, {f: "; ".join(why[f]) for f in ranked})
 
 
