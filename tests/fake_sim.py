@@ -24,11 +24,15 @@ TRUTH = {"mu_d_BePa": 0.5, "mu_d_MePa": 0.2}
 def trajectory(
     p: Mapping[str, float], setting: int, t_end: float = 1.5
 ) -> tuple[Trajectory, float]:
-    """Analytic run: x = v t, y = 0.4 (mu_B - 0.3) t^2, theta = 3 (mu_M - 0.15) (1 - exp(-2 t))."""
+    """Analytic run: x = v t, y = 0.4 (mu_B - 0.3) t^2, theta = 3 (mu_M - 0.15) (1 - exp(-2 t))
+    + 1e-4 (E_Pa / 1 GPa) t."""
     t = np.arange(0.0, t_end, 1 / 60)
     v = SPEEDS[setting]
     y = 0.4 * (p["mu_d_BePa"] - 0.3) * t**2
-    theta = 3.0 * (p["mu_d_MePa"] - 0.15) * (1 - np.exp(-2 * t))
+    # E_Pa has a tiny effect (an almost inert parameter); the other catalogue parameters none
+    theta = (
+        3.0 * (p["mu_d_MePa"] - 0.15) * (1 - np.exp(-2 * t)) + 1e-4 * p.get("E_Pa", 1e9) / 1e9 * t
+    )
     transit = 1.0 / v * (1 + 0.2 * (p["mu_d_BePa"] - 0.45))
     return Trajectory(t=t, x=v * t, y=y, theta=theta), transit
 

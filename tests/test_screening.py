@@ -31,7 +31,8 @@ def test_screen_finds_the_parameters_that_matter(tmp_path):
     stages, selection = run_screen(load_screen(path), tmp_path / "out", on_event=events.append)
     assert [s.kind for s in stages] == ["fractional", "full"]
     assert stages[0].factors == list(doc["parameters"]) and len(stages[0].analyses) == 2
-    # the two significant parameters first, topped up to three by effect size for stage 2
+    # the two significant parameters first, topped up to three by effect size (E_Pa's tiny effect)
+    # for stage 2; the parameters with exactly no effect are never taken
     assert (
         set(stages[0].survivors[:2]) == {"mu_d_BePa", "mu_d_MePa"} and len(stages[0].survivors) == 3
     )
