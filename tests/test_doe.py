@@ -132,3 +132,25 @@ def test_bad_input_and_helpers():
     for j in range(3):
         assert sorted(np.floor((lhs[:, j] + 1) / 2 * 8).astype(int)) == list(range(8))
     assert list(itertools.islice(full_factorial(3).matrix[:, 0], 4)) == [-1, 1, -1, 1]
+
+
+def test_centre_points_leave_effects_unchanged_and_join_the_fit():
+    from parcelfit.doe import with_centre_points
+
+    d = full_factorial(3)
+    y = 5 + 2 * d.matrix[:, 0] + np.random.default_rng(2).normal(0, 0.1, 8)
+    assert (
+        with_centre_points(d.matrix, 3).shape == (11, 3)
+        and not with_centre_points(d.matrix, 3)[8:].any()
+    )
+    plain = analyse_effects(d, ["a", "b", "c"], y, interactions=False)
+    with_c = analyse_effects(
+        d, ["a", "b", "c"], y, interactions=False, centre=np.array([5.0, 5.1, 4.9])
+    )
+    assert with_c.table.set_index("term").loc["a", "effect"] == pytest.approx(
+        plain.table.set_index("term").loc["a", "effect"]
+    )
+    assert (
+        with_c.table.set_index("term").loc["a", "p_value"]
+        != plain.table.set_index("term").loc["a", "p_value"]
+    )

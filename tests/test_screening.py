@@ -52,3 +52,23 @@ def test_screen_finds_the_parameters_that_matter(tmp_path):
     events.clear()
     run_screen(load_screen(path), tmp_path / "out", on_event=events.append)
     assert not any(e.startswith("ok:") for e in events)
+
+
+def test_polybag_third_stage_and_centre_points(tmp_path):
+    write_reference_dataset(tmp_path / "data")
+    doc = {
+        "name": "pb",
+        "simulator": {"backend": "python", "factory": "tests.fake_sim:make"},
+        "reference": {"dataset": "data", "rig": "R", "consignment": "P", "speed_setting": 1},
+        "parameters": {"mu_d_BePa": [0.3, 0.58], "mu_d_MePa": [0.15, 0.35], "E_Pa": [200, 1600]},
+        "stages": ["full"],
+        "soft_content": ["E_Co", "zeta_Co"],
+        "centre_points": 2,
+        "executor": {"kind": "local", "workers": 2},
+    }
+    path = tmp_path / "pb.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    stages, _ = run_screen(load_screen(path), tmp_path / "out")
+    assert [s.kind for s in stages] == ["full", "full"]
+    assert {"E_Co", "zeta_Co"} <= set(stages[1].factors)
+    assert len(pd.read_csv(tmp_path / "out" / "stage1-design.csv")) == 8 + 2

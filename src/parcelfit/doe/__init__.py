@@ -9,6 +9,7 @@ from parcelfit.doe.designs import (
     fractional_factorial,
     full_factorial,
     latin_hypercube,
+    with_centre_points,
 )
 from parcelfit.doe.effects import (
     EffectAnalysis,
@@ -31,4 +32,5 @@ __all__ = [
     "lenth",
     "pareto_chart",
     "select_parameters",
+    "with_centre_points",
 ]

@@ -132,6 +132,15 @@ def fractional_factorial(n_factors: int, resolution: int = 4) -> Design:
     )
 
 
+def with_centre_points(matrix: np.ndarray, n: int) -> np.ndarray:
+    """The coded design with ``n`` centre runs (all factors at 0) appended; they leave the effect
+    estimates unchanged and reveal curvature (centre mean against the factorial mean)."""
+    if n < 0:
+        raise ParcelfitError(f"the number of centre points must be >= 0, got {n}")
+    matrix = np.asarray(matrix)
+    return np.vstack([matrix, np.zeros((n, matrix.shape[1]), dtype=matrix.dtype)])
+
+
 def latin_hypercube(n_runs: int, n_factors: int, seed: int = 0) -> np.ndarray:
     """A scrambled Latin hypercube (SciPy) in coded units [-1, 1], shape (n_runs, n_factors)."""
     return 2 * qmc.LatinHypercube(d=n_factors, seed=np.random.default_rng(seed)).random(n_runs) - 1

@@ -68,15 +68,20 @@ def analyse_effects(
     interactions: bool | None = None,
     method: str = "auto",
     alpha: float = 0.05,
+    centre: np.ndarray | None = None,
 ) -> EffectAnalysis:
     """Main (and two-factor interaction) effects of ``response`` on a coded design.
 
     ``interactions``: fit the two-factor interactions too (default: only for full factorials,
     where they are not aliased with main effects). ``method``: "pooled", "lenth", or "auto"
     (pooled when the model leaves at least 3 residual degrees of freedom, else Lenth).
+    ``centre``: responses of centre runs (all factors at 0), added to the least-squares fit.
     """
     X = np.asarray(design.matrix, dtype=float)
     y = np.asarray(response, dtype=float)
+    if centre is not None:  # centre runs join the least-squares fit (intercept and residual)
+        X = np.vstack([X, np.zeros((len(centre), X.shape[1]))])
+        y = np.concatenate([y, np.asarray(centre, dtype=float)])
     if X.shape[0] != y.shape[0] or len(names) != X.shape[1]:
         raise ParcelfitError(
             f"design has {X.shape} runs x factors, response {y.shape}, names {len(names)}"
@@ -113,9 +118,10 @@ def analyse_effects(
     elif method == "lenth":
         base = len(letters) - len(design.generators)
         contrasts = []
+        Xf, yf = X[: len(design.matrix)], y[: len(design.matrix)]  # contrasts of the factorial runs
         for r in range(1, base + 1):
             for combo in itertools.combinations(range(base), r):
-                contrasts.append(np.mean(np.prod(X[:, list(combo)], axis=1) * y))
+                contrasts.append(np.mean(np.prod(Xf[:, list(combo)], axis=1) * yf))
         c = np.asarray(contrasts)
         pse, dof = lenth(np.where(np.abs(c) <= tiny, 0.0, c))
         t = _standardise(coef, np.full_like(coef, pse), tiny)

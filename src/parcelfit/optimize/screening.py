@@ -11,6 +11,7 @@ A screen file (YAML)::
     stages: [fractional, full]   # fractional (resolution IV) -> full factorial on the survivors
     soft_content: [E_Co, zeta_Co]   # optional third stage: survivors + these (polybag PB)
     resolution: 4
+    centre_points: 0             # optional runs with every factor at mid-range, added to each stage
     alpha: 0.05
     max_full_factors: 6          # the full factorial keeps at most this many survivors (2^6 = 64 runs)
     min_full_factors: 3          # ... and at least this many: fewer survivors are topped up with the
@@ -52,6 +53,7 @@ from parcelfit.doe import (
     full_factorial,
     pareto_chart,
     select_parameters,
+    with_centre_points,
 )
 from parcelfit.errors import ParcelfitError
 from parcelfit.figures import save_figure
@@ -72,6 +74,7 @@ _KEYS = (
     "stages",
     "soft_content",
     "resolution",
+    "centre_points",
     "alpha",
     "max_full_factors",
     "min_full_factors",
@@ -95,6 +98,7 @@ class Screen:
     stages: tuple[str, ...]
     soft_content: tuple[str, ...]
     resolution: int
+    centre_points: int
     alpha: float
     max_full_factors: int
     min_full_factors: int
@@ -170,6 +174,9 @@ def load_screen(path: str | Path) -> Screen:
         resolution=int(
             get_number(doc, "resolution", file=path, where="", default=4, minimum=3, maximum=5)
         ),  # type: ignore[arg-type]
+        centre_points=int(
+            get_number(doc, "centre_points", file=path, where="", default=0, minimum=0, maximum=50)  # type: ignore[arg-type]
+        ),
         alpha=get_number(doc, "alpha", file=path, where="", default=0.05, minimum=1e-6, maximum=0.5)
         or 0.05,
         max_full_factors=int(
@@ -243,7 +250,11 @@ def run_screen(
                 if kind == "fractional"
                 else full_factorial(len(factors))
             )
-            values = decode(design.matrix, [screen.ranges[f] for f in factors])
+            n_runs = len(design.matrix)
+            values = decode(
+                with_centre_points(design.matrix, screen.centre_points),
+                [screen.ranges[f] for f in factors],
+            )
             rows = [e for e in store.evaluations("screen") if e.iteration == stage]
             if rows and sorted(rows[0].params) != sorted(factors):
                 raise ParcelfitError(
@@ -299,10 +310,14 @@ def run_screen(
                     fix="fix the failing simulations (see stageN-design.csv), then rerun",
                 )
             analyses = []
+            run_ok, centre_ok = ok[:n_runs], ok[n_runs:]
             for resp in RESPONSES:
                 y = frame[resp].to_numpy(dtype=float)
-                sub = design if ok.all() else _subset(design, ok)
-                a = analyse_effects(sub, factors, y[ok], name=resp, alpha=screen.alpha)
+                sub = design if run_ok.all() else _subset(design, run_ok)
+                centre = y[n_runs:][centre_ok] if screen.centre_points else None
+                a = analyse_effects(
+                    sub, factors, y[:n_runs][run_ok], name=resp, alpha=screen.alpha, centre=centre
+                )
                 analyses.append(a)
                 save_figure(pareto_chart(a), out / f"stage{stage + 1}-pareto-{resp}")
             table = pd.concat(
