@@ -172,3 +172,16 @@ def test_sigkill_at_any_moment_then_rerun_resumes_without_losing_or_repeating(tm
     con.close()
     for row_id in before:  # every evaluation finished before the kill was simulated exactly once
         assert runs.count(labels[row_id]) == 1
+
+
+def test_validation_records_the_envelope_beside_the_published_verdict(tmp_path):
+    from parcelfit.optimize.store import Store
+
+    study = load_study(
+        write_study(tmp_path, budget=12, validation={"speed_setting": 2, "every": 1})
+    )
+    Calibration(study, tmp_path / "out").run()
+    v = Store(tmp_path / "out" / "study.sqlite").evaluations("validation")[-1]
+    env = v.details["envelope"]
+    assert set(env) == {"inside_y", "inside_theta", "worst_y_m", "worst_theta_rad", "passed"}
+    assert 0.0 <= env["inside_y"] <= 1.0

@@ -8,6 +8,9 @@ With the simulation added to the n real runs as run n+1:
 3. heading: the same with D_theta [rad^2].
 
 All three must hold. Each criterion returns the numbers behind its verdict.
+
+Beyond the published criteria, `Validation.envelope` holds the stricter pointwise band test of
+`parcelfit.metrics.envelope` (reported beside them; ``strict_passed`` requires it too).
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ import numpy as np
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.metrics.dtw import cross_dtw
+from parcelfit.metrics.envelope import EnvelopeCheck, envelope_check
 from parcelfit.metrics.reference import ReferenceSelection
 from parcelfit.runs import Trajectory
 
@@ -50,11 +54,17 @@ class Validation:
     transit_time: TransitTimeCheck
     xy: MeanDistanceCheck
     theta: MeanDistanceCheck
+    envelope: EnvelopeCheck | None = None
 
     @property
     def passed(self) -> bool:
-        """True when all three criteria hold."""
+        """True when the three published criteria hold."""
         return self.transit_time.passed and self.xy.passed and self.theta.passed
+
+    @property
+    def strict_passed(self) -> bool:
+        """True when the published criteria and the envelope test hold."""
+        return self.passed and self.envelope is not None and self.envelope.passed
 
 
 def mean_distance_check(quantity: str, real: np.ndarray, to_sim: np.ndarray) -> MeanDistanceCheck:
@@ -94,10 +104,15 @@ def validate(
     """Section 8 verdict for a simulated run against the real runs behind ``real``."""
     prepared = real.comparison.prepare(simulated)
     w = real.comparison.window
+    real_prepared = [
+        Trajectory(t=np.arange(len(xy)), x=xy[:, 0], y=xy[:, 1], theta=th)
+        for xy, th in zip(real.xy_series, real.theta_series, strict=True)
+    ]
     to_sim_xy = cross_dtw(real.xy_series, [prepared.xy], w)[:, 0] ** 2
     to_sim_theta = cross_dtw(real.theta_series, [prepared.theta], w)[:, 0] ** 2
     return Validation(
         transit_time=transit_time_check(simulated_transit_time, real.transit_times),
         xy=mean_distance_check("xy", real.d_xy, to_sim_xy),
         theta=mean_distance_check("theta", real.d_theta, to_sim_theta),
+        envelope=envelope_check(prepared, real_prepared) if len(real_prepared) >= 2 else None,
     )

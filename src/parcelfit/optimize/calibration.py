@@ -284,6 +284,16 @@ class Calibration:
                             "largest_real_mean": verdict.theta.largest_real_mean,
                             "passed": verdict.theta.passed,
                         },
+                        # the stricter band test, reported beside the published verdict
+                        "envelope": None
+                        if verdict.envelope is None
+                        else {
+                            "inside_y": verdict.envelope.inside_y,
+                            "inside_theta": verdict.envelope.inside_theta,
+                            "worst_y_m": verdict.envelope.worst_y,
+                            "worst_theta_rad": verdict.envelope.worst_theta,
+                            "passed": verdict.envelope.passed,
+                        },
                     }
                 )
             except ParcelfitError as exc:
