@@ -116,6 +116,38 @@ def get_number(
     return float(value)
 
 
+def get_choice(
+    mapping: Mapping[str, Any],
+    key: str,
+    choices: Iterable[str],
+    *,
+    what: str,
+    file: str | Path | None,
+    where: str,
+    default: str | None = None,
+) -> str:
+    """Read a text that must be one of ``choices`` (``what`` names it in the error)."""
+    choices = list(choices)
+    value = get_str(mapping, key, file=file, where=where, default=default)
+    if value not in choices:
+        raise ParcelfitError(
+            f"unknown {what} {value!r}",
+            file=file,
+            where=f"{where}.{key}" if where else key,
+            fix=f"use one of {', '.join(choices)}",
+        )
+    return value
+
+
+def load_config(
+    path: str | Path, *, allowed: Iterable[str], required: Iterable[str] = ()
+) -> Mapping[str, Any]:
+    """Read a YAML file whose top level is a mapping, and check its keys."""
+    doc = require_mapping(load_yaml(path), file=path, where="top level")
+    check_keys(doc, allowed=allowed, required=required, file=path, where="top level")
+    return doc
+
+
 def get_str(
     mapping: Mapping[str, Any],
     key: str,

@@ -44,7 +44,7 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from parcelfit.config import check_keys, get_number, load_yaml, require_mapping
+from parcelfit.config import get_number, load_config, require_mapping
 from parcelfit.doe import (
     EffectAnalysis,
     analyse_effects,
@@ -109,14 +109,7 @@ class Screen:
 def load_screen(path: str | Path) -> Screen:
     """Read and check a screen file."""
     path = Path(path)
-    doc = require_mapping(load_yaml(path), file=path, where="top level")
-    check_keys(
-        doc,
-        allowed=_KEYS,
-        required=("name", "simulator", "reference"),
-        file=path,
-        where="top level",
-    )
+    doc = load_config(path, allowed=_KEYS, required=("name", "simulator", "reference"))
     folder = path.parent.resolve()
     sim = parse_simulator(doc["simulator"], path, folder)
     dataset, rig, cons, setting = parse_reference(doc["reference"], path, folder, sim)

@@ -44,7 +44,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from parcelfit.config import check_keys, get_number, get_str, load_yaml, require_mapping
+from parcelfit.config import (
+    check_keys,
+    get_choice,
+    get_number,
+    get_str,
+    load_config,
+    require_mapping,
+)
 from parcelfit.errors import ParcelfitError
 from parcelfit.optimize.bo import BOSettings
 from parcelfit.optimize.space import Dimension, Space
@@ -109,14 +116,7 @@ def _to_si(name: str, value: float, backend: str) -> float:
 def load_study(path: str | Path) -> Study:
     """Read and check a study file; every error names the file, the key and the fix."""
     path = Path(path)
-    doc = require_mapping(load_yaml(path), file=path, where="top level")
-    check_keys(
-        doc,
-        allowed=_TOP,
-        required=("name", "simulator", "parameters", "reference"),
-        file=path,
-        where="top level",
-    )
+    doc = load_config(path, allowed=_TOP, required=("name", "simulator", "parameters", "reference"))
     folder = path.parent.resolve()
     sim = parse_simulator(doc["simulator"], path, folder)
     backend = sim["backend"]
@@ -245,14 +245,14 @@ def parse_simulator(section: Any, path: Path, folder: Path) -> dict[str, Any]:
     """The ``simulator`` section of a study or screen file, with file paths made absolute."""
     sim = dict(require_mapping(section, file=path, where="simulator"))
     check_keys(sim, allowed=_SIM, required=("backend",), file=path, where="simulator")
-    backend = get_str(sim, "backend", file=path, where="simulator")
-    if backend not in ("mujoco", "external", "python"):
-        raise ParcelfitError(
-            f"unknown backend {backend!r}",
-            file=path,
-            where="simulator.backend",
-            fix="use mujoco, external or python",
-        )
+    backend = get_choice(
+        sim,
+        "backend",
+        ("mujoco", "external", "python"),
+        what="backend",
+        file=path,
+        where="simulator",
+    )
     needed = {"mujoco": ("rig", "consignment"), "external": ("external",), "python": ("factory",)}[
         backend
     ]

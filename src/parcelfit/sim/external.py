@@ -30,7 +30,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from parcelfit.config import check_keys, get_number, get_str, load_yaml, require_mapping
+from parcelfit.config import (
+    get_number,
+    get_str,
+    load_config,
+)
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import Run, TestCase, read_trajectory
 from parcelfit.sim.protocol import SimResult, SimStatus
@@ -55,10 +59,7 @@ class ExternalSolver:
 def load_external_solver(path: str | Path) -> ExternalSolver:
     """Read and check a solver description file (YAML)."""
     path = Path(path)
-    doc = require_mapping(load_yaml(path), file=path, where="top level")
-    check_keys(
-        doc, allowed=_KEYS, required=("name", "command", "template"), file=path, where="top level"
-    )
+    doc = load_config(path, allowed=_KEYS, required=("name", "command", "template"))
     command = doc["command"]
     if (
         not isinstance(command, list)

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from parcelfit.config import check_keys, get_number, get_str, load_yaml, require_mapping
+from parcelfit.config import check_keys, get_choice, get_number, get_str, load_yaml, require_mapping
 from parcelfit.errors import ParcelfitError
 from parcelfit.sim.mujoco.bundled import bundled_names, resolve_file
 from parcelfit.sim.params import RIGID, SOFT
@@ -69,14 +69,9 @@ def parse_consignment(doc: Any, file: str) -> Consignment:
     check_keys(
         content, allowed=("kind", "size"), required=("kind", "size"), file=file, where="content"
     )
-    kind = get_str(content, "kind", file=file, where="content")
-    if kind not in (RIGID, SOFT):
-        raise ParcelfitError(
-            f"unknown content kind {kind!r}",
-            file=file,
-            where="content.kind",
-            fix="use rigid or soft",
-        )
+    kind = get_choice(
+        content, "kind", (RIGID, SOFT), what="content kind", file=file, where="content"
+    )
     outer = _size(doc["outer"], file=file, where="outer")
     inner = _size(content["size"], file=file, where="content.size")
     if not (inner[0] < outer[0] and inner[1] < outer[1] and inner[2] <= outer[2]):

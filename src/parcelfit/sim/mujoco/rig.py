@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from parcelfit.config import check_keys, get_number, get_str, load_yaml, require_mapping
+from parcelfit.config import check_keys, get_choice, get_number, get_str, load_yaml, require_mapping
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import Region, parse_region
 from parcelfit.sim.mujoco.bundled import bundled_names, resolve_file
@@ -223,14 +223,7 @@ def parse_rig(doc: Any, file: str) -> Rig:
     for i, s in enumerate(doc["surfaces"] or []):
         where = f"surfaces[{i}]"
         s = require_mapping(s, file=file, where=where)
-        stype = get_str(s, "type", file=file, where=where)
-        if stype not in SURFACE_TYPES:
-            raise ParcelfitError(
-                f"unknown surface type {stype!r}",
-                file=file,
-                where=f"{where}.type",
-                fix=f"use one of {', '.join(SURFACE_TYPES)}",
-            )
+        stype = get_choice(s, "type", SURFACE_TYPES, what="surface type", file=file, where=where)
         check_keys(
             s,
             allowed=_COMMON + _SURFACE_KEYS[stype],
@@ -238,14 +231,7 @@ def parse_rig(doc: Any, file: str) -> Rig:
             file=file,
             where=where,
         )
-        material = get_str(s, "material", file=file, where=where)
-        if material not in MATERIALS:
-            raise ParcelfitError(
-                f"unknown material {material!r}",
-                file=file,
-                where=f"{where}.material",
-                fix=f"use one of {', '.join(MATERIALS)}",
-            )
+        material = get_choice(s, "material", MATERIALS, what="material", file=file, where=where)
         drive = get_str(s, "drive", file=file, where=where)
         missing = [k for k, d in speeds.items() if drive not in d]
         if missing:
@@ -292,14 +278,9 @@ def parse_rig(doc: Any, file: str) -> Rig:
             file=file,
             where=where,
         )
-        material = get_str(w, "material", file=file, where=where, default="metal")
-        if material not in MATERIALS:
-            raise ParcelfitError(
-                f"unknown material {material!r}",
-                file=file,
-                where=f"{where}.material",
-                fix=f"use one of {', '.join(MATERIALS)}",
-            )
+        material = get_choice(
+            w, "material", MATERIALS, what="material", file=file, where=where, default="metal"
+        )
         walls.append(
             Wall(
                 name=get_str(w, "name", file=file, where=where),
