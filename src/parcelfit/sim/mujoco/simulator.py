@@ -38,7 +38,7 @@ import numpy as np
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import Run, TestCase, Trajectory
 from parcelfit.sim.mujoco.consignment import Consignment, load_consignment
-from parcelfit.sim.mujoco.rig import Barrier, Rig, load_rig
+from parcelfit.sim.mujoco.rig import Barrier, Rig, Surface, load_rig
 from parcelfit.sim.mujoco.scene import Scene, SceneOptions, build_scene
 from parcelfit.sim.params import parameters_for, resolve
 from parcelfit.sim.protocol import SimResult, SimStatus
@@ -307,40 +307,49 @@ class _FrictionSwitch:
     def __init__(
         self, model: mujoco.MjModel, scene: Scene, rig: Rig, params: Mapping[str, float]
     ) -> None:
-        self.groups: list[tuple[np.ndarray, float, float, np.ndarray | None, object]] = []
         metal_ids = np.array([model.geom(n).id for n in scene.metal_geoms], dtype=int)
-        if params["mu_s_MePa"] > 0 and metal_ids.size:
-            self.groups.append((metal_ids, params["mu_d_MePa"], params["mu_s_MePa"], None, None))
-        self.belts = []
+        self.metal = (
+            (metal_ids, params["mu_d_MePa"], params["mu_s_MePa"])
+            if params["mu_s_MePa"] > 0 and metal_ids.size
+            else None
+        )
+        self.belts: list[tuple[int, np.ndarray, Surface]] = []
         if params["mu_s_BePa"] > 0:
-            for g in scene.driven:
-                if g.material != "metal":
-                    self.belts.append(
-                        (model.geom(g.name).id, np.asarray(g.velocity[:2]), rig.surface(g.surface))
-                    )
-            self.mu_belt = (params["mu_d_BePa"], params["mu_s_BePa"])
+            self.belts = [
+                (model.geom(g.name).id, np.asarray(g.velocity[:2]), rig.surface(g.surface))
+                for g in scene.driven
+                if g.material != "metal"
+            ]
+        self.mu_belt = (params["mu_d_BePa"], params["mu_s_BePa"])
+
+    @staticmethod
+    def _stick(slip: float) -> float:
+        """1 while the parcel sticks (slip speed 0), falling to 0 above a few mm/s."""
+        return math.exp(-((slip / STICK_SPEED) ** 2))
 
     def update(self, model: mujoco.MjModel, centre: np.ndarray, velocity: np.ndarray) -> None:
-        for ids, mu_d, offset, _, _ in self.groups:
-            slip = float(np.hypot(*velocity))
-            model.geom_friction[ids, 0] = mu_d + offset * math.exp(-((slip / STICK_SPEED) ** 2))
-        if self.belts:
-            mu_d, offset = self.mu_belt
-            for gid, v_surface, surface in self.belts:
-                slip = float(np.hypot(*(velocity - v_surface)))
-                inside = _inside(surface, centre)
-                model.geom_friction[gid, 0] = mu_d + (
-                    offset * math.exp(-((slip / STICK_SPEED) ** 2)) if inside else 0
-                )
+        """Set the friction of the switched geoms for the parcel's centre [m] and velocity [m/s]."""
+        if self.metal is not None:  # walls are static: the slip is the parcel's speed
+            ids, mu_d, offset = self.metal
+            model.geom_friction[ids, 0] = mu_d + offset * self._stick(float(np.hypot(*velocity)))
+        mu_d, offset = self.mu_belt
+        for gid, v_surface, surface in self.belts:
+            stick = (
+                self._stick(float(np.hypot(*(velocity - v_surface))))
+                if _inside(surface, centre)
+                else 0.0
+            )
+            model.geom_friction[gid, 0] = mu_d + offset * stick
 
 
-def _inside(surface: object, point: np.ndarray) -> bool:
-    u = surface.unit()  # type: ignore[attr-defined]
-    rel = point - np.asarray(surface.centre)  # type: ignore[attr-defined]
+def _inside(surface: Surface, point: np.ndarray) -> bool:
+    """Is ``point`` [m] over the surface's rectangle?"""
+    u = surface.unit()
+    rel = point - np.asarray(surface.centre)
     return (
         abs(rel @ u) <= surface.length / 2
         and abs(rel @ np.array([-u[1], u[0]])) <= surface.width / 2
-    )  # type: ignore[attr-defined]
+    )
 
 
 def parameter_names(consignment: Consignment) -> list[str]:
