@@ -199,32 +199,34 @@ def main() -> None:
             f"ask(4) with 200 observations in 4-D, one core: {ask_overhead():.2f} s (target: < 2 s)"
         )
         return
-    jobs = [
-        (fn[0], m, s, args.budget)
-        for fn in FUNCTIONS
-        for m in args.methods.split(",")
-        for s in range(args.seeds)
-    ]
-    with multiprocessing.get_context("spawn").Pool(args.jobs) as pool:
-        results = pool.map(one, jobs, chunksize=1)
-    print(f"batch size 4, budget {args.budget}, {args.seeds} seeds; evaluations to regret <= 0.01")
+    methods = args.methods.split(",")
+    print(
+        f"batch size 4, budget {args.budget}, {args.seeds} seeds; evaluations to regret <= 0.01",
+        flush=True,
+    )
     print(
         f"{'function':<11}{'method':<15}{'median evals':>13}{'reached':>9}{'median final regret':>21}{'s/run':>7}"
     )
-    for fname, *_ in FUNCTIONS:
-        for m in args.methods.split(","):
-            rows = [r for r in results if r[0] == fname and r[1] == m]
-            if any(r[3] == "missing" for r in rows):
-                print(f"{fname:<11}{m:<15}  not installed: {rows[0][4]}")
-                continue
-            hits = [r[3] if r[3] is not None else math.inf for r in rows]
-            med = statistics.median(hits)
-            med_txt = f">{args.budget}" if math.isinf(med) else f"{med:g}"
-            reached = sum(h != math.inf for h in hits) / len(hits)
-            print(
-                f"{fname:<11}{m:<15}{med_txt:>13}{reached:>9.0%}{statistics.median(r[4] for r in rows):>21.4f}"
-                f"{statistics.median(r[5] for r in rows):>7.1f}"
-            )
+    with multiprocessing.get_context("spawn").Pool(args.jobs) as pool:
+        for fname, *_ in FUNCTIONS:  # one function at a time, printed as soon as it is done
+            jobs = [(fname, m, s, args.budget) for m in methods for s in range(args.seeds)]
+            results = pool.map(one, jobs, chunksize=1)
+            for m in methods:
+                rows = [r for r in results if r[1] == m]
+                if any(r[3] == "missing" for r in rows):
+                    print(f"{fname:<11}{m:<15}  not installed: {rows[0][4]}")
+                    continue
+                hits = [r[3] if r[3] is not None else math.inf for r in rows]
+                med = statistics.median(hits)
+                med_txt = f">{args.budget}" if math.isinf(med) else f"{med:g}"
+                reached = sum(h != math.inf for h in hits) / len(hits)
+                final = statistics.median(r[4] for r in rows)
+                secs = statistics.median(r[5] for r in rows)
+                print(
+                    f"{fname:<11}{m:<15}{med_txt:>13}{reached:>9.0%}{final:>21.4f}{secs:>7.1f}",
+                    flush=True,
+                )
+    print(f"ask(4) with 200 observations in 4-D, one core: {ask_overhead():.2f} s (target: < 2 s)")
 
 
 if __name__ == "__main__":
