@@ -208,7 +208,7 @@ class Calibration:
 
     def _report(self, iteration: int, running: int, message: str) -> None:
         best = self.bo.best()
-        done = sum(1 for e in self.store.evaluations("fit") if e.status != "pending")
+        done = len(self.bo.observations)  # every finished evaluation is told exactly once
         self.on_progress(
             Progress(
                 iteration,
@@ -321,8 +321,9 @@ class Calibration:
         for r in rows:  # replay: the optimiser learns every finished evaluation again
             if r.status != "pending":
                 self.bo.tell(r.params, r.cost if r.status == "ok" else None)
-        validations = {v.iteration: v for v in self.store.evaluations("validation")}
-        for v in validations.values():
+        stored = self.store.evaluations("validation")
+        validated = {v.iteration for v in stored}
+        for v in stored:
             if v.status == "pending":
                 continue
             self.last_validation = bool(v.details.get("passed"))
@@ -339,8 +340,7 @@ class Calibration:
                     )
                     self._run_rows(pending, executor)
                     pending = []
-                elif sum(1 for r in self.store.evaluations("fit")) < study.budget:
-                    done = len(self.store.evaluations("fit"))
+                elif (done := len(self.store.evaluations("fit"))) < study.budget:
                     iteration += 1
                     n = min(
                         study.initial if iteration == 0 else study.batch_size, study.budget - done
@@ -358,15 +358,15 @@ class Calibration:
                 due = (
                     iteration >= 1
                     and iteration % study.validate_every == 0
-                    and iteration not in validations
+                    and iteration not in validated
                 )
                 if due:
-                    validations[iteration] = None  # type: ignore[assignment]
+                    validated.add(iteration)
                     if self._validate(iteration, executor):
                         return self._result("validation passed")
             if (
                 self.val_case is not None
-                and iteration not in validations
+                and iteration not in validated
                 and self._validate(iteration, executor)
             ):
                 return self._result("validation passed")

@@ -40,7 +40,7 @@ from parcelfit.runs import Run, TestCase, Trajectory
 from parcelfit.sim.mujoco.consignment import Consignment, load_consignment
 from parcelfit.sim.mujoco.rig import Barrier, Rig, Surface, load_rig
 from parcelfit.sim.mujoco.scene import Scene, SceneOptions, build_scene
-from parcelfit.sim.params import parameters_for, resolve
+from parcelfit.sim.params import resolve
 from parcelfit.sim.protocol import SimResult, SimStatus
 
 STICK_SPEED = 0.005  # m/s
@@ -352,9 +352,4 @@ def _inside(surface: Surface, point: np.ndarray) -> bool:
     )
 
 
-def parameter_names(consignment: Consignment) -> list[str]:
-    """Names of the parameters that apply to a consignment."""
-    return [p.name for p in parameters_for(consignment.content_kind)]
-
-
-__all__ = ["Frames", "MujocoSimulator", "SimOptions", "parameter_names"]
+__all__ = ["Frames", "MujocoSimulator", "SimOptions"]
