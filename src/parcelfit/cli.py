@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import sys
 from collections.abc import Callable
 from functools import wraps
@@ -11,6 +12,7 @@ from typing import Annotated, Any, TypeVar
 
 import typer
 from rich.console import Console
+from rich.progress import Progress, TimeElapsedColumn
 from rich.table import Table
 
 from parcelfit import __version__
@@ -137,44 +139,156 @@ def demo(
     out: Annotated[
         Path, typer.Option("--out", help="Folder for everything the demo writes.")
     ] = Path("parcelfit-demo"),
+    quick: Annotated[
+        bool, typer.Option("--quick", help="A smoke run: small screen, short calibration.")
+    ] = False,
+    full: Annotated[
+        bool, typer.Option("--full", help="The full published protocol (slower).")
+    ] = False,
+    workers: Annotated[
+        int | None, typer.Option(help="Worker processes (default: one per core).")
+    ] = None,
+    animation: Annotated[
+        bool, typer.Option(help="Embed an animation of the simulated run in the report.")
+    ] = True,
 ) -> None:
-    """Run the analysis on the bundled SYNTHETIC example dataset: statistics and reference runs."""
+    """End to end on the bundled SYNTHETIC twin dataset: statistics, reference runs, screening,
+    calibration with validation, and the HTML report. Rerunning resumes."""
+    import time
+
     from parcelfit.analysis import reference_runs, transit_statistics, write_reference_runs
-    from parcelfit.data import example_dataset_path
+    from parcelfit.demo import PROFILES, demo_dataset, run_stricter_example, write_demo_files
+    from parcelfit.optimize.screening import load_screen, run_screen
+    from parcelfit.optimize.study import load_study
+    from parcelfit.report import build_report, verdict_text
     from parcelfit.runs import load_dataset
 
-    path = example_dataset_path()
-    with console.status("loading the bundled example dataset"):
+    if quick and full:
+        raise ParcelfitError("--quick and --full exclude each other", fix="choose one")
+    profile = PROFILES["quick" if quick else "full" if full else "default"]
+    t0 = time.perf_counter()
+    path = demo_dataset()
+    with console.status("loading the bundled twin dataset"):
         ds = load_dataset(path)
     console.print(
         f"[bold]dataset[/] {ds.name}: {len(ds.cases)} test cases, {len(ds.runs())} runs "
-        "[yellow](SYNTHETIC: simulated, not measured)[/]"
+        "[yellow](SYNTHETIC: simulated from hidden true parameters, not measured)[/]"
     )
-    with console.status("transit-time statistics"):
+    console.rule("1/6 transit-time statistics")
+    with console.status("Mann-Whitney U tests"):
         result = transit_statistics(ds, out / "stats")
-    _print_tests(result.tests)
-    with console.status("reference runs (DTW distance matrices)"):
+    sig = result.tests[result.tests["significant"]]
+    console.print(
+        f"{len(sig)} of {len(result.tests)} consignment pairs differ significantly; "
+        f"box plots in {out / 'stats'}"
+    )
+    console.rule("2/6 reference runs")
+    with console.status("DTW distance matrices"):
         selections = reference_runs(ds)
     table = Table(title="Reference run per test case", title_justify="left")
-    for col in (
-        "test case",
-        "reference run",
-        "runs",
-        "largest DTW_xy [m]",
-        "largest DTW_theta [rad]",
-    ):
+    for col in ("test case", "reference run", "runs"):
         table.add_column(col)
     for s in selections.values():
-        table.add_row(
-            s.case.label,
-            s.reference_id,
-            str(len(s.run_ids)),
-            f"{s.max_xy**0.5:.3f}",
-            f"{s.max_theta**0.5:.3f}",
-        )
+        table.add_row(s.case.label, s.reference_id, str(len(s.run_ids)))
     console.print(table)
-    ref_file = write_reference_runs(selections, out / "reference_runs.json")
-    console.print(f"[green]done[/]: results in {out}/ ({ref_file.name}, stats/)")
+    write_reference_runs(selections, out / "reference_runs.json")
+    screen_file, study_file = write_demo_files(out, profile, path)
+    console.rule(f"3/6 screening (profile {profile.name})")
+    with console.status("screening") as status_line:
+        stages, selection = run_screen(
+            load_screen(screen_file),
+            out / "screen",
+            workers=workers,
+            on_event=lambda m: status_line.update(f"screening: {m}"),
+        )
+    _print_screen(stages, selection)
+    console.rule("4/6 calibration of E3 KP/BW (setting 1, validation at setting 2)")
+    _calibrate_live(load_study(study_file), out / "calibration", workers=workers)
+    console.rule("5/6 the stricter validation criterion")
+    with console.status("simulating the polybag example"):
+        example = run_stricter_example(out, path)
+    console.print(example["description"])
+    console.rule("6/6 report")
+    with console.status("report") as status_line:
+        report = build_report(
+            out, animation=animation, progress=lambda m: status_line.update(f"report: {m}")
+        )
+    minutes = (time.perf_counter() - t0) / 60
+    console.print(f"[bold green]report:[/] {report.resolve()}")
+    console.print(f"[bold]verdict:[/] {verdict_text(out)} ({minutes:.1f} min)")
+
+
+@app.command()
+@friendly_errors
+def report(
+    folder: Annotated[
+        Path, typer.Argument(help="A study folder, or a folder holding calibration/ (the demo's).")
+    ],
+    out: Annotated[
+        Path | None, typer.Option(help="The HTML file (default: report.html beside the study).")
+    ] = None,
+    screen: Annotated[
+        Path | None, typer.Option(help="A screening folder (default: screen/ beside the study).")
+    ] = None,
+    frames: Annotated[
+        bool, typer.Option(help="Simulate the calibrated run again for key frames.")
+    ] = True,
+    animation: Annotated[
+        bool, typer.Option(help="Embed an animation of the simulated run.")
+    ] = False,
+) -> None:
+    """Write the self-contained HTML report of a calibration study."""
+    from parcelfit.report import build_report, verdict_text
+
+    with console.status("report") as status_line:
+        path = build_report(
+            folder,
+            out=out,
+            screen=screen,
+            key_frames=frames,
+            animation=animation,
+            progress=lambda m: status_line.update(f"report: {m}"),
+        )
+    console.print(f"[bold green]report:[/] {path.resolve()}")
+    console.print(f"[bold]verdict:[/] {verdict_text(folder)}")
+
+
+@app.command()
+@friendly_errors
+def synth(
+    spec: Annotated[Path, typer.Argument(help="Twin specification YAML (cases, truth, settings).")],
+    out: Annotated[Path, typer.Option("--out", help="Folder for the dataset.")] = Path("twin"),
+    workers: Annotated[
+        int, typer.Option("--workers", min=1, help="Processes simulating in parallel.")
+    ] = max(1, os.cpu_count() or 1),
+) -> None:
+    """Make a SYNTHETIC twin-experiment dataset from hidden true parameters (and truth.yaml)."""
+    from parcelfit.synth import load_twin_spec, make_twin_dataset
+
+    tw = load_twin_spec(spec)
+    total = len(tw.cases) * tw.settings.runs
+    console.print(
+        f"[bold]twin dataset[/] {tw.name}: {len(tw.cases)} test cases x {tw.settings.runs} runs "
+        f"on {workers} processes [yellow](SYNTHETIC)[/]"
+    )
+    with Progress(*Progress.get_default_columns(), TimeElapsedColumn(), console=console) as bar:
+        task = bar.add_task("simulating twin runs", total=total)
+
+        def step(message: str) -> None:
+            bar.advance(task)
+            bar.console.print(f"  {message}", highlight=False)
+
+        path = make_twin_dataset(
+            out,
+            tw.cases,
+            tw.truth,
+            settings=tw.settings,
+            seed=tw.seed,
+            name=tw.name,
+            workers=workers,
+            progress=step,
+        )
+    console.print(f"[green]done[/]: {path} and {path.parent / 'truth.yaml'}")
 
 
 @app.command()
@@ -343,14 +457,28 @@ def calibrate(
     ] = None,
 ) -> None:
     """Calibrate by batch Bayesian optimisation; rerunning the same command resumes the study."""
-    from rich.live import Live
-
-    from parcelfit.optimize.calibration import Calibration, Progress
     from parcelfit.optimize.study import load_study
 
     study = load_study(study_file)
     folder = out or study_file.parent / study_file.stem
-    state: dict[str, Progress | None] = {"p": None}
+    _calibrate_live(study, folder, executor=executor, scheduler=scheduler, workers=workers)
+
+
+def _calibrate_live(
+    study: Any,
+    folder: Path,
+    *,
+    executor: str | None = None,
+    scheduler: str | None = None,
+    workers: int | None = None,
+) -> Any:
+    """Run a calibration with a live status table, print the best parameters, write figures."""
+    from rich.live import Live
+
+    from parcelfit.optimize.calibration import Calibration
+    from parcelfit.optimize.calibration import Progress as CalibrationProgress
+
+    state: dict[str, CalibrationProgress | None] = {"p": None}
 
     def render() -> Table:
         p = state["p"]
@@ -374,7 +502,7 @@ def calibrate(
 
     with Live(render(), console=console, refresh_per_second=4, transient=False) as live:
 
-        def update(p: Progress) -> None:
+        def update(p: CalibrationProgress) -> None:
             state["p"] = p
             live.update(render())
 
@@ -398,6 +526,7 @@ def calibrate(
     with console.status("figures"):
         figures = study_figures(folder)
     console.print(f"figures in {folder / 'figures'} ({len(figures) // 2} figures, PNG and SVG)")
+    return result
 
 
 def _print_params(params: dict[str, float], cost: float | None) -> None:
@@ -439,6 +568,12 @@ def screen(
         stages, selection = run_screen(
             spec, folder, workers=workers, on_event=lambda m: status_line.update(m)
         )
+    _print_screen(stages, selection)
+    console.print(f"results in {folder} (selection.yaml, stageN-effects.csv, Pareto charts)")
+
+
+def _print_screen(stages: Any, selection: dict[str, Any]) -> None:
+    """The strongest effects of every screening stage, and the selection."""
     for k, stage in enumerate(stages, start=1):
         table = Table(
             title=f"stage {k}: {stage.kind} factorial over {len(stage.factors)} parameters "
@@ -461,7 +596,6 @@ def screen(
     console.print(
         f"[bold]selected for calibration:[/] {', '.join(selection['selected']) or 'none'}"
     )
-    console.print(f"results in {folder} (selection.yaml, stageN-effects.csv, Pareto charts)")
 
 
 @app.command()

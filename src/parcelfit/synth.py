@@ -17,13 +17,17 @@ dataset as ``truth.yaml``; the dataset is marked ``synthetic: true``.
 
 from __future__ import annotations
 
+import multiprocessing
 from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import yaml
 
+from parcelfit.config import check_keys, get_number, get_str, load_config, require_mapping
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import Box, CaseData, Run, TestCase, Trajectory, save_dataset
 from parcelfit.sim.mujoco import MujocoSimulator, SceneOptions, SimOptions
@@ -57,6 +61,43 @@ def _specimen(
     return out
 
 
+def _twin_run(job: dict[str, Any]) -> tuple[Run, float]:
+    """Simulate one twin run in a worker process; returns the noisy run and its wall time [s]."""
+    s: TwinSettings = job["settings"]
+    rng = np.random.default_rng(job["seed"])
+    rig, cons, case = job["rig"], job["consignment"], job["case"]
+    params = _specimen(job["truth"], rng, s)
+    drives = sorted({d for sp in rig.speeds.values() for d in sp})
+    scene = SceneOptions(
+        spacing=s.real_spacing,
+        soft_shell_spacing=max(s.real_spacing, 0.03),
+        speed_factors={d: 1 + rng.uniform(-s.speed_dev, s.speed_dev) for d in drives},
+        start_offset=(
+            rng.normal(0, s.placement_sd),
+            rng.normal(0, s.placement_sd),
+            rng.normal(0, s.angle_sd),
+        ),
+    )
+    twin = MujocoSimulator(
+        SimOptions(scene=scene), rigs={rig.name: rig}, consignments={cons.name: cons}
+    )
+    run_id = job["run_id"]
+    res = twin.run(params, case, run_id=run_id)
+    if not res.ok or res.run is None:
+        raise ParcelfitError(
+            f"twin run {run_id} ended {res.status.value}: {res.diagnostics.get('message')}"
+        )
+    tr = res.run.trajectory
+    n = len(tr)
+    noisy = Trajectory(
+        t=tr.t,
+        x=tr.x + rng.normal(0, s.tracking_sd, n),
+        y=tr.y + rng.normal(0, s.tracking_sd, n),
+        theta=tr.theta + rng.normal(0, s.heading_sd, n),
+    )
+    return Run(run_id, case, noisy, res.run.transit_time), res.wall_time
+
+
 def make_twin_dataset(
     folder: str | Path,
     cases: Sequence[TestCase],
@@ -65,63 +106,66 @@ def make_twin_dataset(
     settings: TwinSettings | None = None,
     seed: int = 0,
     name: str = "twin",
+    workers: int = 1,
     progress: Callable[[str], None] | None = None,
 ) -> Path:
     """Simulate ``settings.runs`` real-like runs per test case; returns the dataset.yaml path.
 
     ``truth_user`` maps a consignment type to its true parameters in the catalogue's units; the
-    others take their defaults.
+    others take their defaults. Every run draws from its own child of ``seed``, so the dataset is
+    the same whatever ``workers`` (processes) is.
     """
     s = settings or TwinSettings()
-    rng = np.random.default_rng(seed)
+    if s.runs < 1:
+        raise ParcelfitError("a twin dataset needs at least one run per test case", fix="runs >= 1")
     sim = MujocoSimulator()
-    out_cases = []
     truth_si: dict[str, dict[str, float]] = {}
-    for case in cases:
+    jobs: list[dict[str, Any]] = []
+    seeds = np.random.SeedSequence(seed).spawn(len(cases) * s.runs)
+    for i, case in enumerate(cases):
         cons = sim.consignment(case.consignment)
         if case.consignment not in truth_si:
             truth_si[case.consignment] = resolve(
                 cons.content_kind, user_values=truth_user.get(case.consignment, {})
             )
         rig = sim.rig(case.rig)
-        runs = []
         for k in range(s.runs):
-            params = _specimen(truth_si[case.consignment], rng, s)
-            drives = {d for sp in rig.speeds.values() for d in sp}
-            scene = SceneOptions(
-                spacing=s.real_spacing,
-                soft_shell_spacing=max(s.real_spacing, 0.03),
-                speed_factors={
-                    d: 1 + rng.uniform(-s.speed_dev, s.speed_dev) for d in sorted(drives)
-                },
-                start_offset=(
-                    rng.normal(0, s.placement_sd),
-                    rng.normal(0, s.placement_sd),
-                    rng.normal(0, s.angle_sd),
-                ),
+            jobs.append(
+                {
+                    "settings": s,
+                    "seed": seeds[i * s.runs + k],
+                    "rig": rig,
+                    "consignment": cons,
+                    "case": case,
+                    "truth": truth_si[case.consignment],
+                    "run_id": f"{case.rig}-{case.consignment}-{case.speed_setting}-{k + 1:02d}",
+                }
             )
-            twin = MujocoSimulator(
-                SimOptions(scene=scene), rigs={rig.name: rig}, consignments={cons.name: cons}
-            )
-            run_id = f"{case.rig}-{case.consignment}-{case.speed_setting}-{k + 1:02d}"
-            res = twin.run(params, case, run_id=run_id)
-            if not res.ok or res.run is None:
-                raise ParcelfitError(
-                    f"twin run {run_id} ended {res.status.value}: {res.diagnostics.get('message')}"
-                )
-            tr = res.run.trajectory
-            n = len(tr)
-            noisy = Trajectory(
-                t=tr.t,
-                x=tr.x + rng.normal(0, s.tracking_sd, n),
-                y=tr.y + rng.normal(0, s.tracking_sd, n),
-                theta=tr.theta + rng.normal(0, s.heading_sd, n),
-            )
-            runs.append(Run(run_id, case, noisy, res.run.transit_time))
-            if progress:
-                progress(f"{run_id}: {res.wall_time:.1f} s")
+    results: dict[str, Run] = {}
+
+    def done(run: Run, wall: float) -> None:
+        results[run.id] = run
+        if progress:
+            progress(f"{run.id}: {wall:.1f} s ({len(results)}/{len(jobs)})")
+
+    if workers <= 1:
+        for job in jobs:
+            done(*_twin_run(job))
+    else:
+        ctx = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+            futures = [pool.submit(_twin_run, job) for job in jobs]
+            for fut in as_completed(futures):
+                done(*fut.result())
+    out_cases = []
+    for case in cases:
+        rig = sim.rig(case.rig)
+        runs = tuple(
+            results[f"{case.rig}-{case.consignment}-{case.speed_setting}-{k + 1:02d}"]
+            for k in range(s.runs)
+        )
         regions = tuple(r for r in rig.regions if isinstance(r, Box)) or rig.regions
-        out_cases.append(CaseData(case, tuple(runs), regions, rig.margin))
+        out_cases.append(CaseData(case, runs, regions, rig.margin))
     path = save_dataset(
         folder,
         name,
@@ -149,4 +193,58 @@ def make_twin_dataset(
     return path
 
 
-__all__ = ["TwinSettings", "make_twin_dataset"]
+@dataclass(frozen=True)
+class TwinSpec:
+    """A twin dataset to make: its name, test cases, true parameters (catalogue units), seed."""
+
+    name: str
+    cases: tuple[TestCase, ...]
+    truth: dict[str, dict[str, float]]
+    settings: TwinSettings
+    seed: int
+
+
+def load_twin_spec(path: str | Path) -> TwinSpec:
+    """Read a twin specification YAML (keys: name, seed, cases, truth, settings) and check it."""
+    doc = load_config(
+        path, allowed=("name", "seed", "cases", "truth", "settings"), required=("cases",)
+    )
+    name = get_str(doc, "name", file=path, where="", default="twin")
+    seed = get_number(doc, "seed", file=path, where="", default=0)
+    raw_cases = doc["cases"]
+    if not isinstance(raw_cases, list) or not raw_cases:
+        raise ParcelfitError(
+            "expected a non-empty list of test cases",
+            file=path,
+            where="cases",
+            fix='write e.g. cases: ["E3/KPBW/1", "E3/KPBW/2"]',
+        )
+    cases = []
+    for i, text in enumerate(raw_cases):
+        try:
+            cases.append(TestCase.parse(str(text)))
+        except ParcelfitError as exc:
+            raise ParcelfitError(
+                exc.message, file=path, where=f"cases[{i}]", fix="write RIG/CONSIGNMENT/SETTING"
+            ) from exc
+    truth_doc = require_mapping(doc.get("truth", {}) or {}, file=path, where="truth")
+    known = {p.name for p in CATALOGUE}
+    truth: dict[str, dict[str, float]] = {}
+    for cons, values in truth_doc.items():
+        values = require_mapping(values, file=path, where=f"truth.{cons}")
+        check_keys(values, allowed=sorted(known), file=path, where=f"truth.{cons}")
+        truth[str(cons)] = {
+            k: float(get_number(values, k, file=path, where=f"truth.{cons}")) for k in values
+        }
+    raw_settings = require_mapping(doc.get("settings", {}) or {}, file=path, where="settings")
+    fields = TwinSettings.__dataclass_fields__
+    check_keys(raw_settings, allowed=list(fields), file=path, where="settings")
+    values = {
+        k: get_number(raw_settings, k, file=path, where="settings", minimum=0) for k in raw_settings
+    }
+    if "runs" in values:
+        values["runs"] = int(values["runs"])
+    return TwinSpec(name, tuple(cases), truth, TwinSettings(**values), int(seed))
+
+
+__all__ = ["TwinSettings", "TwinSpec", "load_twin_spec", "make_twin_dataset"]

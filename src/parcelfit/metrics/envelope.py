@@ -48,16 +48,48 @@ def _on_grid(traj: Trajectory, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return np.interp(grid, x[keep], traj.y[keep]), np.interp(grid, x[keep], traj.theta[keep])
 
 
-def envelope_check(
+@dataclass(frozen=True)
+class EnvelopeBand:
+    """The real runs' band along x and the simulated run on the same grid (m, rad)."""
+
+    grid: np.ndarray  # x [m]
+    real_y: np.ndarray  # (runs, points) [m]
+    real_theta: np.ndarray  # (runs, points) [rad]
+    sim_y: np.ndarray
+    sim_theta: np.ndarray
+    tol_xy: float
+    tol_theta: float
+
+    @property
+    def y_low(self) -> np.ndarray:
+        """Lower edge of the lateral band [m]."""
+        return self.real_y.min(axis=0) - self.tol_xy
+
+    @property
+    def y_high(self) -> np.ndarray:
+        """Upper edge of the lateral band [m]."""
+        return self.real_y.max(axis=0) + self.tol_xy
+
+    @property
+    def theta_low(self) -> np.ndarray:
+        """Lower edge of the heading band [rad]."""
+        return self.real_theta.min(axis=0) - self.tol_theta
+
+    @property
+    def theta_high(self) -> np.ndarray:
+        """Upper edge of the heading band [rad]."""
+        return self.real_theta.max(axis=0) + self.tol_theta
+
+
+def envelope_band(
     simulated: Trajectory,
     real: Sequence[Trajectory],
     *,
     tol_xy: float = DEFAULT_TOL_XY,
     tol_theta: float = DEFAULT_TOL_THETA,
-    min_inside: float = 0.95,
     points: int = 200,
-) -> EnvelopeCheck:
-    """Is the (prepared) simulated run inside the band of the (prepared) real runs along x?"""
+) -> EnvelopeBand:
+    """y and theta of the real runs and the simulated run on a common grid along x."""
     if len(real) < 2:
         raise ParcelfitError("the envelope test needs at least two real runs")
     runs = [*real, simulated]
@@ -69,14 +101,23 @@ def envelope_check(
         )
     grid = np.linspace(lo, hi, points)
     real_y, real_th = zip(*(_on_grid(t, grid) for t in real), strict=True)
-    ys, ths = np.array(real_y), np.array(real_th)
     sim_y, sim_th = _on_grid(simulated, grid)
-    below_y = ys.min(axis=0) - tol_xy - sim_y
-    above_y = sim_y - ys.max(axis=0) - tol_xy
-    below_t = ths.min(axis=0) - tol_theta - sim_th
-    above_t = sim_th - ths.max(axis=0) - tol_theta
-    out_y = np.maximum(below_y, above_y)
-    out_t = np.maximum(below_t, above_t)
+    return EnvelopeBand(grid, np.array(real_y), np.array(real_th), sim_y, sim_th, tol_xy, tol_theta)
+
+
+def envelope_check(
+    simulated: Trajectory,
+    real: Sequence[Trajectory],
+    *,
+    tol_xy: float = DEFAULT_TOL_XY,
+    tol_theta: float = DEFAULT_TOL_THETA,
+    min_inside: float = 0.95,
+    points: int = 200,
+) -> EnvelopeCheck:
+    """Is the (prepared) simulated run inside the band of the (prepared) real runs along x?"""
+    band = envelope_band(simulated, real, tol_xy=tol_xy, tol_theta=tol_theta, points=points)
+    out_y = np.maximum(band.y_low - band.sim_y, band.sim_y - band.y_high)
+    out_t = np.maximum(band.theta_low - band.sim_theta, band.sim_theta - band.theta_high)
     inside_y = float(np.mean(out_y <= 0))
     inside_t = float(np.mean(out_t <= 0))
     return EnvelopeCheck(

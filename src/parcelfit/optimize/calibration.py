@@ -182,6 +182,16 @@ class Calibration:
                     "validation_setting": study.validation_setting,
                 },
             )
+        # where the study came from, so a report can find its file and data again
+        self.store.set_meta(
+            "source",
+            {
+                "study_file": None if study.path is None else str(study.path),
+                "dataset": str(Path(study.dataset).resolve()),
+                "rig": study.rig,
+                "consignment": study.consignment,
+            },
+        )
         dataset = load_dataset(study.dataset)
         self.fit_case = TestCase(study.rig, study.consignment, study.fit_setting)
         self.reference: ReferenceSelection = select_reference(dataset[self.fit_case])

@@ -10,6 +10,7 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -117,10 +118,26 @@ def traces(fits: list[Evaluation], names: list[str]) -> Figure:
     return fig
 
 
-def partial_dependence(
+@dataclass(frozen=True)
+class DependenceCurve:
+    """The GP's partial dependence of the cost on one parameter (display units on x)."""
+
+    name: str
+    values: np.ndarray  # parameter values, catalogue units
+    cost: np.ndarray  # predicted cost averaged over the other parameters
+    sd: np.ndarray  # averaged predictive standard deviation
+    log: bool
+
+    @property
+    def amplitude(self) -> float:
+        """How much the predicted cost changes across the parameter's range."""
+        return float(np.max(self.cost) - np.min(self.cost))
+
+
+def dependence_curves(
     bo: BatchBO, n_grid: int = 40, n_mc: int = 256, seed: int = 0
-) -> Figure | None:
-    """GP partial dependence of the cost on each parameter (None before two successes)."""
+) -> list[DependenceCurve] | None:
+    """GP partial dependence curves of every parameter (None before two successes)."""
     fitted = bo._fit(np.random.default_rng([bo.seed, len(bo.observations)]), [])
     if fitted is None:
         return None
@@ -129,10 +146,9 @@ def partial_dependence(
     rng = np.random.default_rng(seed)
     d = len(bo.space)
     others = rng.random((n_mc, d))
-    fig = Figure(figsize=(3.2 * d, 3.0), layout="constrained")
-    axes = np.atleast_1d(fig.subplots(1, d))
     grid = np.linspace(0, 1, n_grid)
-    for j, (ax, dim) in enumerate(zip(axes, bo.space.dims, strict=True)):
+    curves = []
+    for j, dim in enumerate(bo.space.dims):
         mu_pd, sd_pd = [], []
         for g in grid:
             pts = others.copy()
@@ -145,15 +161,53 @@ def partial_dependence(
         xs = np.array(
             [bo.space.from_unit(np.r_[np.zeros(j), g, np.zeros(d - j - 1)])[dim.name] for g in grid]
         )
-        xs = _display(dim.name, xs)
-        ax.plot(xs, mu_c, color="#2c3e50")
-        ax.fill_between(xs, mu_c - sd_c, mu_c + sd_c, color="#2c3e50", alpha=0.15)
-        ax.set_xlabel(_label(dim.name), fontsize=8)
-        if dim.log:
+        curves.append(
+            DependenceCurve(dim.name, np.asarray(_display(dim.name, xs)), mu_c, sd_c, dim.log)
+        )
+    return curves
+
+
+def partial_dependence(
+    bo: BatchBO, n_grid: int = 40, n_mc: int = 256, seed: int = 0
+) -> Figure | None:
+    """GP partial dependence of the cost on each parameter (None before two successes)."""
+    curves = dependence_curves(bo, n_grid, n_mc, seed)
+    if curves is None:
+        return None
+    fig = Figure(figsize=(3.2 * len(curves), 3.0), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(1, len(curves)))
+    for ax, c in zip(axes, curves, strict=True):
+        ax.plot(c.values, c.cost, color="#2c3e50")
+        ax.fill_between(c.values, c.cost - c.sd, c.cost + c.sd, color="#2c3e50", alpha=0.15)
+        ax.set_xlabel(_label(c.name), fontsize=8)
+        if c.log:
             ax.set_xscale("log")
     axes[0].set_ylabel("predicted cost")
     fig.suptitle("GP partial dependence (mean over the other parameters, +-1 sd)", fontsize=9)
     return fig
+
+
+def study_optimizer(folder: str | Path) -> BatchBO | None:
+    """The optimiser of a study folder, told every finished evaluation (None without a study)."""
+    store = Store(Path(folder) / STORE_FILE)
+    meta = store.get_meta("study") or {}
+    fits = store.evaluations("fit")
+    store.close()
+    names = list(meta.get("parameters", []))
+    if not names:
+        return None
+    logs = meta.get("log") or [False] * len(names)
+    space = Space(
+        [
+            Dimension(n, lo, hi, lg)
+            for n, (lo, hi), lg in zip(names, meta["bounds"], logs, strict=True)
+        ]
+    )
+    bo = BatchBO(space, batch_size=int(meta.get("batch_size", 4)), seed=int(meta.get("seed", 0)))
+    for e in fits:
+        if e.status != "pending":
+            bo.tell(e.params, e.cost if e.status == "ok" else None)
+    return bo
 
 
 def study_figures(folder: str | Path) -> list[Path]:
@@ -169,18 +223,8 @@ def study_figures(folder: str | Path) -> list[Path]:
     if not fits or not names:
         return paths
     paths += save_figure(traces(fits, names), out / "traces")
-    logs = meta.get("log") or [False] * len(names)
-    space = Space(
-        [
-            Dimension(n, lo, hi, lg)
-            for n, (lo, hi), lg in zip(names, meta["bounds"], logs, strict=True)
-        ]
-    )
-    bo = BatchBO(space, batch_size=int(meta.get("batch_size", 4)), seed=int(meta.get("seed", 0)))
-    for e in fits:
-        if e.status != "pending":
-            bo.tell(e.params, e.cost if e.status == "ok" else None)
-    pd_fig = partial_dependence(bo)
+    bo = study_optimizer(folder)
+    pd_fig = None if bo is None else partial_dependence(bo)
     if pd_fig is not None:
         paths += save_figure(pd_fig, out / "partial_dependence")
     return paths

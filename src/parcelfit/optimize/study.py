@@ -98,6 +98,7 @@ class Study:
     bo: BOSettings
     executor: Mapping[str, Any] = field(default_factory=dict)
     fingerprint: str = ""
+    path: Path | None = None  # the study file
 
 
 def _to_si(name: str, value: float, backend: str) -> float:
@@ -238,6 +239,7 @@ def load_study(path: str | Path) -> Study:
         bo=bo,
         executor=dict(execu),
         fingerprint=fingerprint,
+        path=Path(path).resolve(),
     )
 
 
