@@ -58,7 +58,7 @@ def test_report_is_one_self_contained_file_with_every_section(demo_folder):
     # figures embedded, every one a real PNG; nothing fetched from elsewhere
     images = _images(text)
     assert len(images) >= 9
-    for kind, data in images:
+    for _kind, data in images:
         assert base64.b64decode(data)[:4] == b"\x89PNG"
     assert not re.search(r'(src|href)="(?!data:)', text)
     # the truth beside the calibrated values, and the recovery verdict (analytic truth: both)
