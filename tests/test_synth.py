@@ -30,3 +30,52 @@ def test_twin_dataset_scatters_like_real_runs_and_keeps_the_truth(tmp_path):
     assert np.array_equal(
         load_dataset(again)["E1/BW/1"].runs[2].trajectory.xy, runs[2].trajectory.xy
     )
+
+
+def test_synth_command_makes_the_dataset_from_a_spec(tmp_path):
+    from typer.testing import CliRunner
+
+    from parcelfit.cli import app
+
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(
+        "name: tiny\nseed: 2\ncases: [E1/BW/1]\ntruth: {BW: {mu_d_BePa: 0.5}}\n"
+        "settings: {runs: 2, real_spacing: 0.05}\n"
+    )
+    result = CliRunner().invoke(
+        app, ["synth", str(spec), "--out", str(tmp_path / "out"), "--workers", "2"]
+    )
+    assert result.exit_code == 0, result.output
+    ds = load_dataset(tmp_path / "out")
+    assert ds.name == "tiny" and ds.synthetic and len(ds["E1/BW/1"].runs) == 2
+    # the same runs whatever the number of processes
+    again = make_twin_dataset(
+        tmp_path / "serial",
+        [TestCase("E1", "BW", 1)],
+        {"BW": {"mu_d_BePa": 0.5}},
+        settings=TwinSettings(runs=2, real_spacing=0.05),
+        seed=2,
+        workers=1,
+    )
+    assert np.array_equal(
+        load_dataset(again)["E1/BW/1"].runs[1].trajectory.xy, ds["E1/BW/1"].runs[1].trajectory.xy
+    )
+
+
+def test_synth_spec_errors_name_the_key(tmp_path):
+    import pytest
+
+    from parcelfit import ParcelfitError
+    from parcelfit.synth import load_twin_spec
+
+    spec = tmp_path / "spec.yaml"
+    spec.write_text("cases: [E1/BW/1]\ntruth: {BW: {mu_d_BPa: 0.5}}\n")
+    with pytest.raises(ParcelfitError, match="mu_d_BPa") as err:
+        load_twin_spec(spec)
+    assert "mu_d_BePa" in str(err.value) and "spec.yaml" in str(err.value)
+    spec.write_text("cases: [E1-BW-1]\n")
+    with pytest.raises(ParcelfitError, match=r"cases\[0\]"):
+        load_twin_spec(spec)
+    spec.write_text("cases: [E1/BW/1]\nsettings: {runz: 3}\n")
+    with pytest.raises(ParcelfitError, match="runs"):
+        load_twin_spec(spec)
