@@ -291,6 +291,123 @@ def synth(
     console.print(f"[green]done[/]: {path} and {path.parent / 'truth.yaml'}")
 
 
+def _frame_bar() -> Progress:
+    return Progress(*Progress.get_default_columns(), TimeElapsedColumn(), console=console)
+
+
+@app.command()
+@friendly_errors
+def track(
+    video: Annotated[Path, typer.Argument(help="A top-down video of one run.")],
+    tags: Annotated[Path, typer.Option("--tags", help="The tag map (YAML).")],
+    out: Annotated[Path, typer.Option("--out", help="Folder for the run files.")] = Path("tracks"),
+    max_gap: Annotated[
+        int, typer.Option(min=0, help="Longest gap filled by interpolation [frames].")
+    ] = 5,
+    sensor_log: Annotated[
+        Path | None,
+        typer.Option(help="Light-barrier log CSV (timestamp, sensor) for the transit time."),
+    ] = None,
+    sensors: Annotated[
+        str, typer.Option(help="Start and end sensor ids in the log, START,END.")
+    ] = "1,2",
+) -> None:
+    """Track the AprilTags of a video: one run file (t, x, y, theta) per parcel tag and a quality
+    report (detection rate, gaps, reprojection error, transit time)."""
+    from parcelfit.tracking import load_tag_map, read_sensor_log, track_video, write_video_track
+    from parcelfit.tracking.track import TrackOptions
+
+    tag_map = load_tag_map(tags)
+    with _frame_bar() as bar:
+        task = bar.add_task(f"tracking {video.name}", total=None)
+        result = track_video(
+            video,
+            tag_map,
+            TrackOptions(max_gap=max_gap),
+            progress=lambda k, n: bar.update(task, completed=k, total=n or None),
+        )
+    if sensor_log is not None:
+        start, _, end = sensors.partition(",")
+        transit = read_sensor_log(sensor_log, start.strip(), end.strip())
+        for t in result.tags.values():
+            t.transit_time = transit
+    files = write_video_track(result, out)
+    q = result.quality
+    table = Table(
+        title=f"{video.name}: {result.frames} frames at {result.fps:g} fps", title_justify="left"
+    )
+    for col in (
+        "parcel tag",
+        "detected",
+        "gaps (filled / missing frames)",
+        "transit time [s]",
+        "file",
+    ):
+        table.add_column(col)
+    for tag_id, t in result.tags.items():
+        table.add_row(
+            str(tag_id),
+            f"{t.quality['detection_rate'] * 100:.1f} % of {t.quality['frames_in_view']} frames",
+            f"{len(t.quality['gaps'])} ({t.quality['interpolated_frames']} / {t.quality['missing_frames']})",
+            "-" if t.transit_time is None else f"{t.transit_time:.3f}",
+            "-" if t.trajectory is None else f"{video.stem}-tag{tag_id}.csv",
+        )
+    console.print(table)
+    rp = q["reference_reprojection_px"]
+    console.print(
+        f"reference tags: reprojection error mean {rp['mean']:.2f} px, max {rp['max']:.2f} px; "
+        f"{q['seconds_per_frame'] * 1e3:.0f} ms a frame"
+    )
+    if not q["parallax_corrected"]:
+        console.print(f"[yellow]parallax {q['parallax_note']}[/]")
+    console.print(f"[green]done[/]: {len(files)} files in {out}")
+
+
+@app.command("track-all")
+@friendly_errors
+def track_all_command(
+    folder: Annotated[
+        Path, typer.Argument(help="Folder of videos named RIG-CONS-SETTING-RUN.mp4.")
+    ],
+    tags: Annotated[Path, typer.Option("--tags", help="The tag map (YAML).")],
+    out: Annotated[Path, typer.Option("--out", help="Dataset folder.")] = Path("dataset"),
+    max_gap: Annotated[
+        int, typer.Option(min=0, help="Longest gap filled by interpolation [frames].")
+    ] = 5,
+) -> None:
+    """Track a folder of videos into one dataset (resumable: finished videos are skipped; a bad
+    video is reported and the others go on)."""
+    from parcelfit.tracking import load_tag_map, track_all
+    from parcelfit.tracking.track import TrackOptions
+
+    tag_map = load_tag_map(tags)
+    with _frame_bar() as bar:
+        task = bar.add_task("frames", total=None)
+
+        def on_video(video: Path, state: str) -> None:
+            bar.console.print(f"  {video.name}: {state}", highlight=False)
+            bar.update(task, description=video.name, completed=0)
+
+        summary = track_all(
+            folder,
+            tag_map,
+            out,
+            options=TrackOptions(max_gap=max_gap),
+            on_video=on_video,
+            on_frame=lambda k, n: bar.update(task, completed=k, total=n or None),
+        )
+    console.print(
+        f"{len(summary['done'])} tracked, {len(summary['skipped'])} already done, "
+        f"{len(summary['failed'])} failed"
+    )
+    for name, reason in summary["failed"].items():
+        console.print(f"[red]failed[/] {name}: {reason}", highlight=False)
+    if summary["dataset"]:
+        console.print(f"[green]dataset[/]: {summary['dataset']}")
+    if summary["failed"]:
+        raise typer.Exit(1)
+
+
 @app.command()
 @friendly_errors
 def simulate(

@@ -1,0 +1,132 @@
+"""Writing tracked runs, and tracking a folder of videos into one dataset (resumable).
+
+One video: ``<out>/<stem>-tag<ID>.csv`` per parcel tag (columns t [s], x [m], y [m], theta [rad],
+the parcel centre and the heading of its x axis) and ``<out>/<stem>.quality.json``.
+
+A folder: every video named ``RIG-CONSIGNMENT-SETTING-RUN.<ext>`` (e.g. ``E3-KPBW-1-07.mp4``)
+becomes run ``RIG-CONSIGNMENT-SETTING-RUN`` of test case RIG/CONSIGNMENT/SETTING. Per video the
+result goes to ``<out>/tracks/`` as above; a finished video is skipped when the command runs
+again; a video that fails (unreadable, no reference tags, wrong family, no parcel tag) is listed
+in ``<out>/track-all.json`` with the reason and the others go on. At the end ``<out>/dataset.yaml``
+and ``<out>/runs/`` are written from every finished video.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from parcelfit.errors import ParcelfitError
+from parcelfit.runs import CaseData, Run, TestCase, read_trajectory, save_dataset, write_trajectory
+from parcelfit.tracking.tagmap import TagMap
+from parcelfit.tracking.track import TrackOptions, VideoTrack, track_video
+
+VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv", ".m4v")
+_NAME = re.compile(r"^(?P<rig>[^-]+)-(?P<cons>[^-]+)-(?P<setting>\d+)-(?P<run>[^.]+)$")
+
+
+def write_video_track(result: VideoTrack, out: str | Path) -> list[Path]:
+    """Write one CSV per tracked parcel tag and the quality report; returns the files."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    stem = result.video.stem
+    files = []
+    tags: dict[str, Any] = {}
+    for tag_id, track in result.tags.items():
+        entry: dict[str, Any] = {**track.quality, "crossings_s": track.crossings}
+        entry["transit_time_s"] = track.transit_time
+        if track.trajectory is not None:
+            path = out / f"{stem}-tag{tag_id}.csv"
+            write_trajectory(track.trajectory, path)
+            files.append(path)
+            entry["file"] = path.name
+        tags[str(tag_id)] = entry
+    quality = {"video": result.video.name, **result.quality, "parcel_tags": tags}
+    qpath = out / f"{stem}.quality.json"
+    tmp = qpath.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(quality, indent=2), encoding="utf-8")
+    tmp.replace(qpath)  # written last: its presence means the video is done
+    return [*files, qpath]
+
+
+def case_of(video: Path) -> tuple[TestCase, str]:
+    """Test case and run id from a video's name ``RIG-CONSIGNMENT-SETTING-RUN``."""
+    m = _NAME.match(video.stem)
+    if not m:
+        raise ParcelfitError(
+            f"cannot read the test case from the name {video.name!r}",
+            file=video,
+            fix="name videos RIG-CONSIGNMENT-SETTING-RUN, e.g. E3-KPBW-1-07.mp4",
+        )
+    case = TestCase(m["rig"], m["cons"], int(m["setting"]))
+    return case, video.stem
+
+
+def track_all(
+    folder: str | Path,
+    tag_map: TagMap,
+    out: str | Path,
+    *,
+    options: TrackOptions | None = None,
+    name: str | None = None,
+    on_video: Callable[[Path, str], None] | None = None,
+    on_frame: Callable[[int, int], None] | None = None,
+) -> dict[str, Any]:
+    """Track every video of ``folder`` into a dataset in ``out``; returns the summary written to
+    ``track-all.json`` (done, skipped, failed with reasons)."""
+    folder, out = Path(folder), Path(out)
+    if not folder.is_dir():
+        raise ParcelfitError("not a folder", file=folder, fix="point at the folder of videos")
+    videos = sorted(p for p in folder.iterdir() if p.suffix.lower() in VIDEO_SUFFIXES)
+    if not videos:
+        raise ParcelfitError(
+            "no videos here", file=folder, fix=f"videos end in {', '.join(VIDEO_SUFFIXES)}"
+        )
+    tracks = out / "tracks"
+    summary: dict[str, Any] = {"done": [], "skipped": [], "failed": {}}
+    say = on_video or (lambda video, state: None)
+    for video in videos:
+        if (tracks / f"{video.stem}.quality.json").is_file():
+            summary["skipped"].append(video.name)
+            say(video, "already tracked")
+            continue
+        say(video, "tracking")
+        try:
+            case_of(video)
+            result = track_video(video, tag_map, options, on_frame)
+            if not any(t.trajectory is not None for t in result.tags.values()):
+                raise ParcelfitError(
+                    f"no parcel tag ({', '.join(map(str, sorted(tag_map.parcel_tags)))}) was found",
+                    file=video,
+                    fix="check the tag map's parcel_tags and the tag family",
+                )
+            write_video_track(result, tracks)
+            summary["done"].append(video.name)
+            say(video, "done")
+        except ParcelfitError as exc:
+            summary["failed"][video.name] = str(exc)
+            say(video, f"failed: {exc}")
+    cases: dict[TestCase, list[Run]] = {}
+    for qfile in sorted(tracks.glob("*.quality.json")) if tracks.is_dir() else []:
+        doc = json.loads(qfile.read_text(encoding="utf-8"))
+        stem = qfile.name[: -len(".quality.json")]
+        case, run_id = case_of(Path(stem))
+        entries = [e for e in doc["parcel_tags"].values() if e.get("file")]
+        if not entries:
+            continue
+        best = max(entries, key=lambda e: e["detected_frames"])  # the parcel's tag
+        traj = read_trajectory(tracks / best["file"])
+        cases.setdefault(case, []).append(Run(run_id, case, traj, best.get("transit_time_s")))
+    if cases:
+        save_dataset(
+            out,
+            name or folder.name,
+            [CaseData(c, tuple(cases[c])) for c in sorted(cases)],
+            description=f"tracked from the videos in {folder.name}/ with parcelfit track-all",
+        )
+    summary["dataset"] = str(out / "dataset.yaml") if cases else None
+    (out / "track-all.json").write_text(json.dumps(summary, indent=2), encoding="utf-8")
+    return summary

@@ -1,0 +1,295 @@
+"""A video to trajectories: decode, detect, fit the frame's geometry, pose every parcel tag.
+
+Per frame k (time t_k = k / fps [s]): tags are detected (`TagDetector`); when reference tags are
+seen the image->rig geometry is fitted again (`fit_plane_mapper`; so a camera that shakes is
+followed), else the last one is reused and the frame counted; every parcel tag seen gives the
+tag's centre and heading at its height, and the parcel centre is
+
+    (x, y) = tag centre - R(theta) * offset,     theta = tag heading.
+
+Frames where a parcel tag is missing between its first and last detection are gaps: gaps of at
+most ``max_gap`` frames are filled by linear interpolation (theta unwrapped first) and listed as
+interpolated; longer gaps stay missing (their samples are left out) and are listed too. The
+heading is unwrapped over the run. Decoding runs in a background thread (OpenCV releases the GIL
+while decoding), so decoding and detection overlap on two cores.
+"""
+
+from __future__ import annotations
+
+import math
+import queue
+import threading
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from parcelfit.errors import ParcelfitError
+from parcelfit.runs import Trajectory
+from parcelfit.tracking.barriers import barrier_times
+from parcelfit.tracking.detect import TagDetector
+from parcelfit.tracking.geometry import PlaneMapper, fit_plane_mapper, tag_pose
+from parcelfit.tracking.tagmap import TagMap
+
+
+@dataclass(frozen=True)
+class TrackOptions:
+    """Tracking settings: longest gap filled [frames], detector settings."""
+
+    max_gap: int = 5
+    downscale: int = 0  # 0: chosen from the first frame
+    min_side: float = 28.0  # px a tag keeps after shrinking
+    refine: bool = True
+    rescan: int = 10  # whole-frame search every this many frames, for tags entering the view
+
+
+@dataclass
+class TagTrack:
+    """One parcel tag's result: trajectory (parcel centre, SI), transit time, quality numbers."""
+
+    tag_id: int
+    trajectory: Trajectory | None
+    transit_time: float | None
+    crossings: dict[str, float | None]
+    quality: dict[str, Any]
+
+
+@dataclass
+class VideoTrack:
+    """Everything tracked in one video."""
+
+    video: Path
+    fps: float
+    frames: int
+    size: tuple[int, int]
+    tags: dict[int, TagTrack]
+    quality: dict[str, Any] = field(default_factory=dict)
+
+
+def open_video(path: str | Path) -> cv2.VideoCapture:
+    """Open a video, or raise a clear error (missing file, unreadable)."""
+    path = Path(path)
+    if not path.is_file():
+        raise ParcelfitError("video not found", file=path, fix="check the path")
+    cap = cv2.VideoCapture(str(path))
+    if not cap.isOpened():
+        raise ParcelfitError(
+            "cannot decode this video", file=path, fix="convert it to H.264/HEVC MP4 with ffmpeg"
+        )
+    ok, _ = cap.read()
+    if not ok:
+        cap.release()
+        raise ParcelfitError("the video has no readable frame", file=path, fix="check the file")
+    cap.set(cv2.CAP_PROP_POS_FRAMES, 0)
+    return cap
+
+
+def frames_of(cap: cv2.VideoCapture, prefetch: int = 4) -> Iterator[np.ndarray]:
+    """Grey frames of an open video, decoded in a background thread."""
+    q: queue.Queue[np.ndarray | None] = queue.Queue(maxsize=prefetch)
+    stop = threading.Event()
+
+    def reader() -> None:
+        try:
+            while not stop.is_set():
+                ok, frame = cap.read()
+                if not ok:
+                    break
+                grey = frame if frame.ndim == 2 else cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
+                q.put(grey)
+        finally:
+            q.put(None)
+
+    thread = threading.Thread(target=reader, daemon=True)
+    thread.start()
+    try:
+        while (item := q.get()) is not None:
+            yield item
+    finally:
+        stop.set()
+        while thread.is_alive():
+            try:
+                q.get_nowait()
+            except queue.Empty:
+                time.sleep(0.001)
+        thread.join()
+
+
+def _runs_of(mask: np.ndarray) -> list[tuple[int, int]]:
+    """[start, end) index ranges where ``mask`` is True."""
+    padded = np.concatenate([[False], mask, [False]])
+    edges = np.flatnonzero(np.diff(padded.astype(int)))
+    return list(zip(edges[::2], edges[1::2], strict=True))
+
+
+def fill_gaps(
+    t: np.ndarray, x: np.ndarray, y: np.ndarray, theta: np.ndarray, max_gap: int
+) -> tuple[Trajectory | None, list[dict[str, Any]]]:
+    """Trim to the first..last detection, unwrap theta, fill gaps <= ``max_gap`` frames linearly;
+    returns the trajectory (None under two samples) and the list of gaps."""
+    seen = np.isfinite(x)
+    if seen.sum() < 2:
+        return None, []
+    first, last = np.flatnonzero(seen)[[0, -1]]
+    t, x, y, theta = (a[first : last + 1].copy() for a in (t, x, y, theta))
+    seen = seen[first : last + 1]
+    theta[seen] = np.unwrap(theta[seen])
+    gaps = []
+    keep = seen.copy()
+    for a, b in _runs_of(~seen):
+        filled = b - a <= max_gap
+        gaps.append(
+            {
+                "from_s": float(t[a]),
+                "to_s": float(t[b - 1]),
+                "frames": int(b - a),
+                "interpolated": bool(filled),
+            }
+        )
+        if filled:
+            for arr in (x, y, theta):
+                arr[a:b] = np.interp(t[a:b], t[seen], arr[seen])
+            keep[a:b] = True
+    traj = Trajectory(t=t[keep], x=x[keep], y=y[keep], theta=theta[keep])
+    return traj, gaps
+
+
+def track_video(
+    video: str | Path,
+    tag_map: TagMap,
+    options: TrackOptions | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> VideoTrack:
+    """Track every parcel tag of ``tag_map`` through ``video`` (see the module docstring)."""
+    opts = options or TrackOptions()
+    video = Path(video)
+    cap = open_video(video)
+    fps = float(cap.get(cv2.CAP_PROP_FPS)) or 0.0
+    if not fps > 0:
+        cap.release()
+        raise ParcelfitError("the video does not state its frame rate", file=video)
+    total = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+    size = (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
+    cam = tag_map.camera
+    if cam is not None and cam.width and (cam.width, cam.height) != size:
+        cap.release()
+        raise ParcelfitError(
+            f"the camera model is for {cam.width}x{cam.height} px, the video is {size[0]}x{size[1]}",
+            file=tag_map.source,
+            where="camera",
+            fix="calibrate the camera at the video's resolution (parcelfit camera-calibrate)",
+        )
+    detector = TagDetector(
+        tag_map.family,
+        downscale=opts.downscale,
+        min_side=opts.min_side,
+        refine=opts.refine,
+        rescan=opts.rescan,
+    )
+    expected = set(tag_map.reference_tags)
+    parcel_ids = sorted(tag_map.parcel_tags)
+    rows: dict[int, list[tuple[float, float, float]]] = {i: [] for i in parcel_ids}
+    mapper: PlaneMapper | None = None
+    reproj_mean, reproj_max, reused, geometry_missing = [], 0.0, 0, 0
+    seen_any_reference = False
+    other_ids: set[int] = set()
+    started = time.perf_counter()
+    k = 0
+    try:
+        for k, grey in enumerate(frames_of(cap)):
+            found = detector.detect(grey, expected)
+            fitted = fit_plane_mapper(tag_map, found, mapper)
+            if fitted is not None:
+                mapper = fitted
+                seen_any_reference = True
+                reproj_mean.append(fitted.reprojection_mean)
+                reproj_max = max(reproj_max, fitted.reprojection_max)
+            elif mapper is not None:
+                reused += 1
+            other_ids |= set(found) - expected - set(parcel_ids)
+            for tag_id in parcel_ids:
+                if mapper is None or tag_id not in found:
+                    rows[tag_id].append((math.nan, math.nan, math.nan))
+                    if mapper is None:
+                        geometry_missing += 1
+                    continue
+                tag = tag_map.parcel_tags[tag_id]
+                tx, ty, th = tag_pose(mapper, found[tag_id], tag.height)
+                dx, dy = tag.offset
+                c, s = math.cos(th), math.sin(th)
+                rows[tag_id].append((tx - (c * dx - s * dy), ty - (s * dx + c * dy), th))
+            if progress:
+                progress(k + 1, total)
+    finally:
+        cap.release()
+    frames = k + 1
+    elapsed = time.perf_counter() - started
+    if not seen_any_reference:
+        raise ParcelfitError(
+            f"no reference tag ({', '.join(map(str, sorted(expected)))}) was found in any frame"
+            + (f"; other tags seen: {sorted(other_ids)}" if other_ids else ""),
+            file=video,
+            fix=f"check the tag map's reference_tags and family ({tag_map.family})",
+        )
+    t = np.arange(frames) / fps
+    tags = {}
+    for tag_id in parcel_ids:
+        arr = np.array(rows[tag_id], dtype=float).reshape(-1, 3)
+        traj, gaps = fill_gaps(t, arr[:, 0], arr[:, 1], arr[:, 2], opts.max_gap)
+        detected = np.isfinite(arr[:, 0])
+        span = (
+            int(np.flatnonzero(detected)[-1] - np.flatnonzero(detected)[0] + 1)
+            if detected.any()
+            else 0
+        )
+        crossings: dict[str, float | None] = {}
+        transit = None
+        if traj is not None and tag_map.barriers:
+            crossings = barrier_times(traj, tag_map.barriers, tag_map.parcel_tags[tag_id].outline)
+            a, b = crossings[tag_map.barriers[0].id], crossings[tag_map.barriers[-1].id]
+            if len(tag_map.barriers) >= 2 and a is not None and b is not None:
+                transit = b - a
+        tags[tag_id] = TagTrack(
+            tag_id,
+            traj,
+            transit,
+            crossings,
+            {
+                "detected_frames": int(detected.sum()),
+                "frames_in_view": span,
+                "detection_rate": float(detected.sum() / span) if span else 0.0,
+                "gaps": gaps,
+                "interpolated_frames": int(sum(g["frames"] for g in gaps if g["interpolated"])),
+                "missing_frames": int(sum(g["frames"] for g in gaps if not g["interpolated"])),
+            },
+        )
+    quality = {
+        "frames": frames,
+        "fps": fps,
+        "size_px": list(size),
+        "seconds_per_frame": elapsed / max(frames, 1),
+        "reference_reprojection_px": {
+            "mean": float(np.mean(reproj_mean)) if reproj_mean else None,
+            "max": float(reproj_max) if reproj_mean else None,
+        },
+        "frames_without_reference_tags": reused + geometry_missing,
+        "parallax_corrected": tag_map.camera is not None,
+        "parallax_note": "tag heights corrected with the camera model"
+        if tag_map.camera is not None
+        else "NOT corrected: the tag map has no camera model, so a tag above the belt is "
+        "mapped as if it lay on the belt plane (run parcelfit camera-calibrate)",
+        "lens_distortion_corrected": tag_map.camera is not None,
+        "detector": {
+            "library": f"OpenCV {cv2.__version__} aruco, family {tag_map.family}",
+            "downscale": detector.downscale,
+            "subpixel_refinement": opts.refine,
+            "full_frame_searches": detector.full_frame_searches,
+        },
+        "max_gap_filled_frames": opts.max_gap,
+        "other_tags_seen": sorted(other_ids),
+    }
+    return VideoTrack(video, fps, frames, size, tags, quality)

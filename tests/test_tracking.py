@@ -1,0 +1,252 @@
+import json
+import math
+import shutil
+
+import numpy as np
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from parcelfit import ParcelfitError
+from parcelfit.cli import app
+from parcelfit.runs import Trajectory, load_dataset, read_trajectory
+from parcelfit.tracking import (
+    crossing_time,
+    load_tag_map,
+    read_sensor_log,
+    track_all,
+    track_video,
+)
+from parcelfit.tracking.synthetic import conveyor_scene, render_video, s_curve
+from parcelfit.tracking.track import TrackOptions, fill_gaps
+
+runner = CliRunner()
+FPS = 60.0
+BARRIERS = [
+    {"id": "in", "from": [-0.3, -0.45], "to": [-0.3, 0.45]},
+    {"id": "out", "from": [0.1, -0.45], "to": [0.1, 0.45]},
+]
+
+
+def tag_map_doc(scene, *, camera=True, family="tag36h11"):
+    cam = scene.camera
+    doc = {
+        "family": family,
+        "reference_tags": {
+            t.id: {"x": t.x, "y": t.y, "size": t.size, "angle": math.degrees(t.angle)}
+            for t in scene.reference_tags
+        },
+        "parcel_tags": {
+            scene.parcel_tag_id: {
+                "size": scene.parcel_tag_size,
+                "height": scene.parcel_height,
+                "offset": list(scene.tag_offset),
+                "outline": list(scene.parcel_outline),
+            }
+        },
+        "light_barriers": BARRIERS,
+    }
+    if camera:
+        doc["camera"] = {
+            "fx": cam.fx,
+            "fy": cam.fy,
+            "cx": cam.cx,
+            "cy": cam.cy,
+            "distortion": list(cam.distortion),
+            "width": cam.width,
+            "height": cam.height,
+        }
+    return doc
+
+
+def write_tag_map(path, scene, **kw):
+    path.write_text(yaml.safe_dump(tag_map_doc(scene, **kw)))
+    return path
+
+
+@pytest.fixture(scope="module")
+def videos(tmp_path_factory):
+    """Rendered test videos: tilted camera with lens distortion, tag 2.5 cm above the belt,
+    motion blur (2.2 mm travel per exposure), noise, H.264; one with camera shake and covered
+    frames."""
+    root = tmp_path_factory.mktemp("videos")
+    scene = conveyor_scene(exposure=1 / 250, tag_offset=(0.04, -0.02))
+    truth = render_video(root / "plain.mp4", scene, s_curve, seed=1)
+    hard_scene = conveyor_scene(
+        exposure=1 / 250,
+        shake=0.002,
+        hidden=((0.30, 0.33), (0.70, 0.86)),  # 2-3 frames, then 10 frames covered
+        duration=1.2,
+    )
+    hard_truth = render_video(root / "hard.mp4", hard_scene, s_curve, seed=2)
+    return {
+        "root": root,
+        "scene": scene,
+        "truth": truth,
+        "hard_scene": hard_scene,
+        "hard_truth": truth_of(hard_truth),
+        "plain_truth": truth_of(truth),
+    }
+
+
+def truth_of(doc):
+    return {k: np.asarray(v) for k, v in doc.items()}
+
+
+def errors(traj, truth):
+    k = np.round(traj.t * FPS).astype(int)
+    pos = np.hypot(traj.x - truth["x"][k], traj.y - truth["y"][k])
+    head = np.abs(np.degrees(traj.theta - truth["theta"][k]))
+    return pos, head
+
+
+def true_crossings(scene):
+    t = np.arange(0, scene.duration, 1e-4)
+    x, y, th = s_curve(t)
+    fine = Trajectory(t=t, x=x, y=y, theta=th)
+    tm = load_tag_map_from_doc(tag_map_doc(scene))
+    return {b.id: crossing_time(fine, b, scene.parcel_outline) for b in tm.barriers}
+
+
+def load_tag_map_from_doc(doc, tmp=[]):  # noqa: B006 - a cache of temp folders
+    import tempfile
+    from pathlib import Path
+
+    d = Path(tempfile.mkdtemp())
+    tmp.append(d)
+    (d / "tags.yaml").write_text(yaml.safe_dump(doc))
+    return load_tag_map(d / "tags.yaml")
+
+
+def test_positions_headings_and_transit_time_are_accurate(videos, tmp_path):
+    scene = videos["scene"]
+    tm = load_tag_map(write_tag_map(tmp_path / "tags.yaml", scene))
+    result = track_video(videos["root"] / "plain.mp4", tm)
+    track = result.tags[scene.parcel_tag_id]
+    assert track.quality["detection_rate"] == 1.0 and len(track.trajectory) == 120
+    pos, head = errors(track.trajectory, videos["plain_truth"])
+    assert pos.mean() <= 0.001 and pos.max() <= 0.003  # mean <= 1 mm, max <= 3 mm
+    assert head.max() <= 1.0  # degrees
+    crossings = true_crossings(scene)
+    true_transit = crossings["out"] - crossings["in"]
+    assert abs(track.transit_time - true_transit) <= 1 / FPS
+    for key in ("in", "out"):
+        assert abs(track.crossings[key] - crossings[key]) <= 1 / FPS
+    assert result.quality["parallax_corrected"]
+    assert result.quality["reference_reprojection_px"]["max"] < 1.0
+
+
+def test_without_a_camera_model_parallax_stays_and_the_report_says_so(videos, tmp_path):
+    scene = videos["scene"]
+    tm = load_tag_map(write_tag_map(tmp_path / "tags.yaml", scene, camera=False))
+    result = track_video(videos["root"] / "plain.mp4", tm)
+    assert not result.quality["parallax_corrected"]
+    assert "NOT corrected" in result.quality["parallax_note"]
+    pos, _ = errors(result.tags[scene.parcel_tag_id].trajectory, videos["plain_truth"])
+    # a tag 2.5 cm up seen from 2 m is mapped outwards: millimetres off, not sub-millimetre
+    assert pos.mean() > 0.002
+
+
+def test_camera_shake_and_covered_frames(videos, tmp_path):
+    scene = videos["hard_scene"]
+    tm = load_tag_map(write_tag_map(tmp_path / "tags.yaml", scene))
+    result = track_video(videos["root"] / "hard.mp4", tm, TrackOptions(max_gap=5))
+    track = result.tags[scene.parcel_tag_id]
+    gaps = track.quality["gaps"]
+    assert [g["interpolated"] for g in gaps] == [True, False]
+    assert gaps[0]["frames"] <= 3 and gaps[1]["frames"] >= 9
+    # the long gap's samples are left out, the short one's filled
+    assert len(track.trajectory) == 72 - gaps[1]["frames"]
+    pos, head = errors(track.trajectory, videos["hard_truth"])
+    assert pos.max() <= 0.003 and head.max() <= 1.0  # the geometry follows the shaking camera
+    assert result.quality["frames_without_reference_tags"] == 0
+
+
+def test_fill_gaps_trims_unwraps_and_fills_only_short_gaps():
+    t = np.arange(12) / 10
+    x = np.array([np.nan, 0, 1, np.nan, 3, 4, np.nan, np.nan, np.nan, 8, 9, np.nan])
+    theta = np.array([0, 3.1, -3.1, np.nan, -3.0, -2.9, np.nan, np.nan, np.nan, -2.5, -2.4, 0])
+    traj, gaps = fill_gaps(t, x, x.copy(), theta, max_gap=2)
+    assert traj.t[0] == pytest.approx(0.1) and traj.t[-1] == pytest.approx(1.0)
+    assert [(g["frames"], g["interpolated"]) for g in gaps] == [(1, True), (3, False)]
+    assert traj.x == pytest.approx([0, 1, 2, 3, 4, 8, 9])
+    assert np.all(np.abs(np.diff(traj.theta[:5])) < 0.2)  # unwrapped across +-pi
+
+
+def test_track_command_writes_runs_and_quality(videos, tmp_path):
+    tags = write_tag_map(tmp_path / "tags.yaml", videos["scene"])
+    out = tmp_path / "out"
+    result = runner.invoke(
+        app, ["track", str(videos["root"] / "plain.mp4"), "--tags", str(tags), "--out", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    traj = read_trajectory(out / "plain-tag7.csv")
+    assert len(traj) == 120
+    quality = json.loads((out / "plain.quality.json").read_text())
+    assert quality["parcel_tags"]["7"]["detection_rate"] == 1.0
+    assert quality["parcel_tags"]["7"]["transit_time_s"] > 0
+
+
+def test_track_all_builds_a_dataset_resumes_and_reports_bad_videos(videos, tmp_path):
+    folder = tmp_path / "videos"
+    folder.mkdir()
+    shutil.copy(videos["root"] / "plain.mp4", folder / "E3-KPBW-1-01.mp4")
+    shutil.copy(videos["root"] / "hard.mp4", folder / "E3-KPBW-1-02.mp4")
+    (folder / "E3-KPBW-1-03.mp4").write_bytes(b"not a video" * 100)
+    other = conveyor_scene(family="tag25h9", duration=0.2)
+    render_video(folder / "E3-KPBW-1-04.mp4", other, s_curve)
+    shutil.copy(videos["root"] / "plain.mp4", folder / "badname.mp4")
+    tags = write_tag_map(tmp_path / "tags.yaml", videos["scene"])
+    out = tmp_path / "dataset"
+    result = runner.invoke(app, ["track-all", str(folder), "--tags", str(tags), "--out", str(out)])
+    assert result.exit_code == 1  # some videos failed, the others are in the dataset
+    summary = json.loads((out / "track-all.json").read_text())
+    assert sorted(summary["done"]) == ["E3-KPBW-1-01.mp4", "E3-KPBW-1-02.mp4"]
+    assert "cannot decode" in summary["failed"]["E3-KPBW-1-03.mp4"]
+    assert "no reference tag" in summary["failed"]["E3-KPBW-1-04.mp4"]
+    assert "RIG-CONSIGNMENT-SETTING-RUN" in summary["failed"]["badname.mp4"]
+    ds = load_dataset(out)
+    runs = ds["E3/KPBW/1"].runs
+    assert [r.id for r in runs] == ["E3-KPBW-1-01", "E3-KPBW-1-02"]
+    assert runs[0].transit_time is not None
+    # rerun: finished videos are skipped, the dataset is the same
+    summary = track_all(folder, load_tag_map(tags), out)
+    assert sorted(summary["skipped"]) == ["E3-KPBW-1-01.mp4", "E3-KPBW-1-02.mp4"]
+    assert not summary["done"]
+    assert len(load_dataset(out)["E3/KPBW/1"].runs) == 2
+
+
+def test_tag_map_errors_name_the_key(tmp_path, videos):
+    path = tmp_path / "tags.yaml"
+    doc = tag_map_doc(videos["scene"])
+    doc["family"] = "tag36h12"
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(ParcelfitError, match="family") as err:
+        load_tag_map(path)
+    assert "tag36h11" in str(err.value) and "tags.yaml" in str(err.value)
+    doc = tag_map_doc(videos["scene"])
+    doc["parcel_tags"][0] = doc["parcel_tags"].pop(7)
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(ParcelfitError, match="both a reference and a parcel tag"):
+        load_tag_map(path)
+    doc = tag_map_doc(videos["scene"])
+    doc["camera"]["distortion"] = [0.1, 0.2]
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(ParcelfitError, match=r"camera\.distortion"):
+        load_tag_map(path)
+    doc = tag_map_doc(videos["scene"])
+    doc["parcel_tags"][7]["hieght"] = 0.02
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(ParcelfitError, match="did you mean 'height'"):
+        load_tag_map(path)
+
+
+def test_sensor_log_transit_time(tmp_path):
+    log = tmp_path / "log.csv"
+    log.write_text("timestamp,sensor\n10.0,2\n12.50,1\n13.75,2\n14.0,2\n")
+    assert read_sensor_log(log, "1", "2") == pytest.approx(1.25)
+    with pytest.raises(ParcelfitError, match="no event of sensor '3'"):
+        read_sensor_log(log, "3", "2")
+    log.write_text("time,id\n1,2\n")
+    with pytest.raises(ParcelfitError, match="timestamp,sensor"):
+        read_sensor_log(log, "1", "2")
