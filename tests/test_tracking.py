@@ -250,3 +250,39 @@ def test_sensor_log_transit_time(tmp_path):
     log.write_text("time,id\n1,2\n")
     with pytest.raises(ParcelfitError, match="timestamp,sensor"):
         read_sensor_log(log, "1", "2")
+
+
+def test_camera_calibration_recovers_the_camera_and_tracking_stays_accurate(videos, tmp_path):
+    from parcelfit.tracking.synthetic import render_checkerboard_video
+
+    scene = videos["scene"]
+    truth_cam = scene.camera
+    board_video = render_checkerboard_video(tmp_path / "board.mp4", truth_cam, frames=20, seed=3)
+    doc = tag_map_doc(scene, camera=False)
+    tags = tmp_path / "tags.yaml"
+    tags.write_text(yaml.safe_dump(doc))
+    result = runner.invoke(
+        app,
+        [
+            "camera-calibrate",
+            str(board_video),
+            "--tags",
+            str(tags),
+            "--board",
+            "9x6",
+            "--square",
+            "40",
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    tm = load_tag_map(tags)
+    cam = tm.camera
+    assert abs(cam.fx / truth_cam.fx - 1) < 0.01 and abs(cam.fy / truth_cam.fy - 1) < 0.01
+    # the fitted model (principal point and k1..k3 trade off) must track as accurately
+    track = track_video(videos["root"] / "plain.mp4", tm).tags[scene.parcel_tag_id]
+    pos, head = errors(track.trajectory, videos["plain_truth"])
+    assert pos.mean() <= 0.001 and pos.max() <= 0.003 and head.max() <= 1.0
+    bad = runner.invoke(
+        app, ["camera-calibrate", str(board_video), "--tags", str(tags), "--board", "7x7"]
+    )
+    assert bad.exit_code == 2 and "found in only" in bad.output

@@ -408,6 +408,49 @@ def track_all_command(
         raise typer.Exit(1)
 
 
+@app.command("camera-calibrate")
+@friendly_errors
+def camera_calibrate(
+    video: Annotated[Path, typer.Argument(help="A video of a checkerboard moved around the view.")],
+    tags: Annotated[
+        Path, typer.Option("--tags", help="Tag map to write the camera into (created if missing).")
+    ],
+    board: Annotated[
+        str, typer.Option(help="Inner corners of the board, COLUMNSxROWS (e.g. 9x6).")
+    ] = "9x6",
+    square: Annotated[float, typer.Option(help="Side of one square [mm].")] = 40.0,
+    max_frames: Annotated[int, typer.Option(min=5, help="Views used at most.")] = 40,
+) -> None:
+    """Fit the camera's intrinsics and lens distortion (OpenCV) and write them into the tag map."""
+    from parcelfit.tracking.camera import calibrate_camera
+    from parcelfit.tracking.tagmap import save_camera
+
+    cols, sep, rows = board.lower().partition("x")
+    if not sep or not cols.isdigit() or not rows.isdigit():
+        raise ParcelfitError(f"cannot read --board {board!r}", fix="write COLUMNSxROWS, e.g. 9x6")
+    if square <= 0:
+        raise ParcelfitError(f"--square must be positive, got {square}", fix="give it in mm")
+    with _frame_bar() as bar:
+        task = bar.add_task("finding the board", total=None)
+        result = calibrate_camera(
+            video,
+            (int(cols), int(rows)),
+            square / 1000.0,  # mm at the edge, metres inside
+            max_frames=max_frames,
+            progress=lambda k, n: bar.update(task, completed=k, total=n or None),
+        )
+    cam = result.camera
+    console.print(
+        f"fx {cam.fx:.1f} px, fy {cam.fy:.1f} px, centre ({cam.cx:.1f}, {cam.cy:.1f}) px, "
+        f"distortion {', '.join(f'{v:.4g}' for v in cam.distortion)}; "
+        f"RMS reprojection error {result.rms:.3f} px over {result.views} views"
+    )
+    if result.rms > 1.0:
+        console.print("[yellow]RMS above 1 px: use more, sharper views covering the whole image[/]")
+    save_camera(tags, cam)
+    console.print(f"[green]written[/] into {tags} (camera:)")
+
+
 @app.command()
 @friendly_errors
 def simulate(

@@ -110,10 +110,11 @@ class Renderer:
 
     def _warp(self, frame: np.ndarray, image: np.ndarray, src: np.ndarray, dst: np.ndarray) -> None:
         h = cv2.getPerspectiveTransform(src, dst)
-        n = image.shape[0]
+        rows, cols = image.shape[:2]
         outline = cv2.perspectiveTransform(
             np.array(
-                [[[-0.5, -0.5], [n - 0.5, -0.5], [n - 0.5, n - 0.5], [-0.5, n - 0.5]]], np.float32
+                [[[-0.5, -0.5], [cols - 0.5, -0.5], [cols - 0.5, rows - 0.5], [-0.5, rows - 0.5]]],
+                np.float32,
             ),
             h,
         )[0]
@@ -277,3 +278,67 @@ def s_curve(t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     y = 0.12 * np.sin(1.4 * t) - 0.05
     theta = math.radians(10) + math.radians(35) * np.sin(0.9 * t)
     return x, y, theta
+
+
+def render_checkerboard_video(
+    target: str | Path,
+    camera: Camera,
+    board: tuple[int, int] = (9, 6),
+    square: float = 0.04,
+    frames: int = 24,
+    seed: int = 0,
+    fps: float = 10.0,
+) -> Path:
+    """An H.264 video of a checkerboard (``board`` inner corners, ``square`` [m]) held at varied
+    poses 1.5-2.3 m in front of ``camera`` (with its distortion), for camera calibration tests."""
+    import av
+
+    rng = np.random.default_rng(seed)
+    cols, rows = board
+    px = 40
+    img = np.full(((rows + 3) * px, (cols + 3) * px), 255, np.uint8)
+    for r in range(rows + 1):
+        for c in range(cols + 1):
+            if (r + c) % 2 == 0:
+                img[(r + 1) * px : (r + 2) * px, (c + 1) * px : (c + 2) * px] = 0
+    # board image pixel (u, v) <-> board plane point ((u + 0.5) / px - 1) * square, same for v
+    w_m, h_m = (cols + 3) * square, (rows + 3) * square
+    src = np.array(
+        [
+            [-0.5, -0.5],
+            [img.shape[1] - 0.5, -0.5],
+            [img.shape[1] - 0.5, img.shape[0] - 0.5],
+            [-0.5, img.shape[0] - 0.5],
+        ],
+        np.float32,
+    )
+    plane = np.array([[0, 0], [w_m, 0], [w_m, h_m], [0, h_m]]) - np.array([w_m, h_m]) / 2
+    scene = SyntheticScene(camera, (0, 0, 1), 0.0, (), 0, 0.01, 0.0, (0.01, 0.01), noise_sd=1.5)
+    renderer = Renderer(scene)
+    target = Path(target)
+    with av.open(str(target), mode="w") as container:
+        stream = container.add_stream("libx264", rate=round(fps))
+        stream.width, stream.height = camera.width, camera.height
+        stream.pix_fmt = "yuv420p"
+        stream.options = {"crf": "16", "preset": "veryfast"}
+        for _ in range(frames):
+            rvec = np.array(
+                [rng.uniform(-0.5, 0.5), rng.uniform(-0.5, 0.5), rng.uniform(-0.3, 0.3)]
+            )
+            z = rng.uniform(1.5, 2.3)
+            tvec = np.array([rng.uniform(-0.25, 0.25) * z, rng.uniform(-0.12, 0.12) * z, z])
+            obj = np.column_stack([plane, np.zeros(4)])
+            dst, _ = cv2.projectPoints(obj, rvec, tvec, camera.matrix, np.zeros(5))
+            frame = np.full((camera.height, camera.width), 120, np.float32)
+            renderer._warp(frame, img, src, dst.reshape(4, 2).astype(np.float32))
+            if renderer._distort_maps is not None:
+                frame = cv2.remap(frame, *renderer._distort_maps, cv2.INTER_LINEAR, borderValue=120)
+            frame = np.clip(np.round(frame + rng.normal(0, 1.5, frame.shape)), 0, 255).astype(
+                np.uint8
+            )
+            vf = av.VideoFrame.from_ndarray(cv2.cvtColor(frame, cv2.COLOR_GRAY2RGB), format="rgb24")
+            for packet in stream.encode(vf):
+                container.mux(packet)
+        for packet in stream.encode():
+            container.mux(packet)
+    return target
