@@ -16,7 +16,6 @@ accuracy on this video (mean / max position error, max heading error).
 from __future__ import annotations
 
 import argparse
-import math
 import tempfile
 import time
 from pathlib import Path
@@ -26,7 +25,7 @@ import numpy as np
 import yaml
 
 from parcelfit.tracking import load_tag_map, track_video
-from parcelfit.tracking.synthetic import conveyor_scene, render_video, s_curve
+from parcelfit.tracking.synthetic import conveyor_scene, render_video, s_curve, scene_tag_map
 
 
 def decode_only(path: Path) -> tuple[int, float]:
@@ -62,25 +61,7 @@ def main() -> None:
         np.savez(truth_file, **truth)
         print(f"rendered {video.name} in {time.perf_counter() - t0:.0f} s")
     truth = dict(np.load(truth_file))
-    cam = scene.camera
-    doc = {
-        "reference_tags": {
-            t.id: {"x": t.x, "y": t.y, "size": t.size, "angle": math.degrees(t.angle)}
-            for t in scene.reference_tags
-        },
-        "parcel_tags": {
-            scene.parcel_tag_id: {"size": scene.parcel_tag_size, "height": scene.parcel_height}
-        },
-        "camera": {
-            "fx": cam.fx,
-            "fy": cam.fy,
-            "cx": cam.cx,
-            "cy": cam.cy,
-            "distortion": list(cam.distortion),
-            "width": cam.width,
-            "height": cam.height,
-        },
-    }
+    doc = scene_tag_map(scene)
     tags = folder / "tags.yaml"
     tags.write_text(yaml.safe_dump(doc))
     tag_map = load_tag_map(tags)

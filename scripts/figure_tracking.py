@@ -9,7 +9,6 @@ tilted camera with lens distortion, tag 25 mm above the belt, motion blur, noise
 
 from __future__ import annotations
 
-import math
 import tempfile
 from pathlib import Path
 
@@ -20,7 +19,7 @@ from matplotlib.figure import Figure
 
 from parcelfit.tracking import load_tag_map, track_video
 from parcelfit.tracking.detect import TagDetector
-from parcelfit.tracking.synthetic import conveyor_scene, render_video, s_curve
+from parcelfit.tracking.synthetic import conveyor_scene, render_video, s_curve, scene_tag_map
 
 OUT = Path(__file__).resolve().parents[1] / "docs" / "figures" / "tracking-frame.png"
 
@@ -29,23 +28,7 @@ def main() -> None:
     tmp = Path(tempfile.mkdtemp())
     scene = conveyor_scene(exposure=1 / 250)
     truth = render_video(tmp / "run.mp4", scene, s_curve, seed=1)
-    cam = scene.camera
-    doc = {
-        "reference_tags": {
-            t.id: {"x": t.x, "y": t.y, "size": t.size, "angle": math.degrees(t.angle)}
-            for t in scene.reference_tags
-        },
-        "parcel_tags": {7: {"size": 0.06, "height": scene.parcel_height, "outline": [0.275, 0.2]}},
-        "camera": {
-            "fx": cam.fx,
-            "fy": cam.fy,
-            "cx": cam.cx,
-            "cy": cam.cy,
-            "distortion": list(cam.distortion),
-            "width": cam.width,
-            "height": cam.height,
-        },
-    }
+    doc = scene_tag_map(scene)
     (tmp / "tags.yaml").write_text(yaml.safe_dump(doc))
     result = track_video(tmp / "run.mp4", load_tag_map(tmp / "tags.yaml"))
     traj = result.tags[7].trajectory

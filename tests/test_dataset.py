@@ -73,7 +73,7 @@ def test_loads_runs_grouped_by_test_case(make_dataset):
         (lambda d: d["test_cases"][0].update(margin=-0.1), r"margin: -0.1 is outside"),
         (
             lambda d: d["test_cases"][0].update(regions=[{"x": [1, 0]}]),
-            r"regions\[0\]: x must be \[min, max\]",
+            r"regions\[0\]: expected x as \[min, max\]",
         ),
         (
             lambda d: d["test_cases"][0].update(regions=[{"polygon": [[0, 0], [1, 1]]}]),

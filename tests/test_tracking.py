@@ -1,5 +1,4 @@
 import json
-import math
 import shutil
 
 import numpy as np
@@ -17,7 +16,7 @@ from parcelfit.tracking import (
     track_all,
     track_video,
 )
-from parcelfit.tracking.synthetic import conveyor_scene, render_video, s_curve
+from parcelfit.tracking.synthetic import conveyor_scene, render_video, s_curve, scene_tag_map
 from parcelfit.tracking.track import TrackOptions, fill_gaps
 
 runner = CliRunner()
@@ -28,35 +27,8 @@ BARRIERS = [
 ]
 
 
-def tag_map_doc(scene, *, camera=True, family="tag36h11"):
-    cam = scene.camera
-    doc = {
-        "family": family,
-        "reference_tags": {
-            t.id: {"x": t.x, "y": t.y, "size": t.size, "angle": math.degrees(t.angle)}
-            for t in scene.reference_tags
-        },
-        "parcel_tags": {
-            scene.parcel_tag_id: {
-                "size": scene.parcel_tag_size,
-                "height": scene.parcel_height,
-                "offset": list(scene.tag_offset),
-                "outline": list(scene.parcel_outline),
-            }
-        },
-        "light_barriers": BARRIERS,
-    }
-    if camera:
-        doc["camera"] = {
-            "fx": cam.fx,
-            "fy": cam.fy,
-            "cx": cam.cx,
-            "cy": cam.cy,
-            "distortion": list(cam.distortion),
-            "width": cam.width,
-            "height": cam.height,
-        }
-    return doc
+def tag_map_doc(scene, *, camera=True):
+    return scene_tag_map(scene, camera=camera, barriers=BARRIERS)
 
 
 def write_tag_map(path, scene, **kw):
@@ -105,7 +77,7 @@ def true_crossings(scene):
     x, y, th = s_curve(t)
     fine = Trajectory(t=t, x=x, y=y, theta=th)
     tm = load_tag_map_from_doc(tag_map_doc(scene))
-    return {b.id: crossing_time(fine, b, scene.parcel_outline) for b in tm.barriers}
+    return {b.name: crossing_time(fine, b, scene.parcel_outline) for b in tm.barriers}
 
 
 def load_tag_map_from_doc(doc, tmp=[]):  # noqa: B006 - a cache of temp folders

@@ -168,3 +168,27 @@ def get_str(
             fix="write a name",
         )
     return value.strip()
+
+
+def get_pair(
+    value: Any,
+    *,
+    file: str | Path | None,
+    where: str,
+    what: str = "two numbers [a, b]",
+    fix: str = "write [a, b]",
+    increasing: bool = False,
+) -> tuple[float, float]:
+    """Read a list of two finite numbers (``increasing``: the first below the second); the
+    message names ``what`` was expected."""
+    ok = (
+        isinstance(value, list | tuple)
+        and len(value) == 2
+        and all(
+            isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+            for v in value
+        )
+    )
+    if not ok or (increasing and not value[0] < value[1]):
+        raise ParcelfitError(f"expected {what}, got {value!r}", file=file, where=where, fix=fix)
+    return float(value[0]), float(value[1])

@@ -5,12 +5,13 @@ Knows nothing of how runs were made (tracked video or simulation).
 
 from parcelfit.runs.dataset import CaseData, Dataset, load_dataset, save_dataset
 from parcelfit.runs.io import check_trajectory_table, read_trajectory, write_trajectory
-from parcelfit.runs.regions import Box, Polygon, Region, crop, parse_region, region_mask
+from parcelfit.runs.regions import Barrier, Box, Polygon, Region, crop, parse_region, region_mask
 from parcelfit.runs.run import Run, TestCase
 from parcelfit.runs.trajectory import COLUMNS, Trajectory, unwrap_angle
 
 __all__ = [
     "COLUMNS",
+    "Barrier",
     "Box",
     "CaseData",
     "Dataset",

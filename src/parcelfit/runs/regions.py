@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 from matplotlib.path import Path as MplPath
 
+from parcelfit.config import get_pair
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs.trajectory import Trajectory
 
@@ -74,20 +75,14 @@ def _distance_to_edges(xy: np.ndarray, vertices: np.ndarray) -> np.ndarray:
 
 
 def _pair(value: Any, key: str, where: str, file: str | None) -> tuple[float, float]:
-    if (
-        not isinstance(value, Sequence)
-        or isinstance(value, str)
-        or len(value) != 2
-        or not all(isinstance(v, int | float) for v in value)
-        or not value[0] < value[1]
-    ):
-        raise ParcelfitError(
-            f"{key} must be [min, max] in metres with min < max, got {value!r}",
-            file=file,
-            where=where,
-            fix=f"write e.g. {key}: [0.5, 1.2]",
-        )
-    return float(value[0]), float(value[1])
+    return get_pair(
+        value,
+        file=file,
+        where=where,
+        what=f"{key} as [min, max] in metres with min < max",
+        fix=f"write e.g. {key}: [0.5, 1.2]",
+        increasing=True,
+    )
 
 
 def parse_region(
@@ -155,3 +150,13 @@ def crop(trajectory: Trajectory, regions: Sequence[Region], margin: float = 0.0)
     if not regions:
         return trajectory
     return trajectory.select(region_mask(trajectory, regions, margin))
+
+
+@dataclass(frozen=True)
+class Barrier:
+    """A light barrier (real or virtual): a beam over the segment ``start``-``end`` in the rig
+    frame [m]."""
+
+    name: str
+    start: tuple[float, float]
+    end: tuple[float, float]

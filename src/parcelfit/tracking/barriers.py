@@ -22,8 +22,7 @@ import numpy as np
 import pandas as pd
 
 from parcelfit.errors import ParcelfitError
-from parcelfit.runs import Trajectory
-from parcelfit.tracking.tagmap import Barrier
+from parcelfit.runs import Barrier, Trajectory
 
 
 def outline_corners(
@@ -50,7 +49,7 @@ def crossing_time(
     d = b - a
     length = float(np.hypot(*d))
     if length == 0:
-        raise ParcelfitError(f"light barrier {barrier.id!r} has zero length")
+        raise ParcelfitError(f"light barrier {barrier.name!r} has zero length")
     u = d / length
     n = np.array([u[1], -u[0]])
     corners = outline_corners(traj.x, traj.y, traj.theta, outline)
@@ -76,7 +75,7 @@ def barrier_times(
     traj: Trajectory, barriers: Sequence[Barrier], outline: tuple[float, float] | None
 ) -> dict[str, float | None]:
     """Crossing time [s] of every barrier by id."""
-    return {b.id: crossing_time(traj, b, outline) for b in barriers}
+    return {b.name: crossing_time(traj, b, outline) for b in barriers}
 
 
 def read_sensor_log(path: str | Path, start: str, end: str) -> float:

@@ -342,3 +342,39 @@ def render_checkerboard_video(
         for packet in stream.encode():
             container.mux(packet)
     return target
+
+
+def scene_tag_map(
+    scene: SyntheticScene, *, camera: bool = True, barriers: list[dict] | None = None
+) -> dict:
+    """The tag map document (as YAML would hold it) that describes ``scene``: its reference
+    tags, its parcel tag, the true camera (unless ``camera`` is False) and ``barriers``."""
+    doc: dict = {
+        "family": scene.family,
+        "reference_tags": {
+            t.id: {"x": t.x, "y": t.y, "size": t.size, "angle": math.degrees(t.angle)}
+            for t in scene.reference_tags
+        },
+        "parcel_tags": {
+            scene.parcel_tag_id: {
+                "size": scene.parcel_tag_size,
+                "height": scene.parcel_height,
+                "offset": list(scene.tag_offset),
+                "outline": list(scene.parcel_outline),
+            }
+        },
+    }
+    if camera:
+        cam = scene.camera
+        doc["camera"] = {
+            "fx": cam.fx,
+            "fy": cam.fy,
+            "cx": cam.cx,
+            "cy": cam.cy,
+            "distortion": list(cam.distortion),
+            "width": cam.width,
+            "height": cam.height,
+        }
+    if barriers:
+        doc["light_barriers"] = barriers
+    return doc

@@ -32,8 +32,16 @@ from typing import Any
 import numpy as np
 import yaml
 
-from parcelfit.config import check_keys, get_number, get_str, load_config, require_mapping
+from parcelfit.config import (
+    check_keys,
+    get_number,
+    get_pair,
+    get_str,
+    load_config,
+    require_mapping,
+)
 from parcelfit.errors import ParcelfitError
+from parcelfit.runs import Barrier
 
 FAMILIES = ("tag36h11", "tag25h9", "tag16h5", "tag36h10")
 
@@ -88,15 +96,6 @@ class Camera:
 
 
 @dataclass(frozen=True)
-class Barrier:
-    """A virtual light barrier: a segment in the rig frame [m]."""
-
-    id: str
-    start: tuple[float, float]
-    end: tuple[float, float]
-
-
-@dataclass(frozen=True)
 class TagMap:
     """A parsed, checked tag map (SI units, radians)."""
 
@@ -119,18 +118,7 @@ def tag_corners(x: float, y: float, size: float, angle: float) -> np.ndarray:
 
 
 def _pair(value: Any, *, file: Path, where: str) -> tuple[float, float]:
-    if (
-        not isinstance(value, list | tuple)
-        or len(value) != 2
-        or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
-    ):
-        raise ParcelfitError(
-            f"expected two numbers [a, b], got {value!r}",
-            file=file,
-            where=where,
-            fix="write [a, b]",
-        )
-    return float(value[0]), float(value[1])
+    return get_pair(value, file=file, where=where)
 
 
 def _tag_id(key: Any, *, file: Path, where: str) -> int:
@@ -304,7 +292,6 @@ def save_camera(path: str | Path, camera: Camera) -> None:
 
 __all__ = [
     "FAMILIES",
-    "Barrier",
     "Camera",
     "ParcelTag",
     "ReferenceTag",

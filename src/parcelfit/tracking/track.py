@@ -250,7 +250,7 @@ def track_video(
         transit = None
         if traj is not None and tag_map.barriers:
             crossings = barrier_times(traj, tag_map.barriers, tag_map.parcel_tags[tag_id].outline)
-            a, b = crossings[tag_map.barriers[0].id], crossings[tag_map.barriers[-1].id]
+            a, b = crossings[tag_map.barriers[0].name], crossings[tag_map.barriers[-1].name]
             if len(tag_map.barriers) >= 2 and a is not None and b is not None:
                 transit = b - a
         tags[tag_id] = TagTrack(

@@ -42,9 +42,17 @@ from typing import Any
 
 import numpy as np
 
-from parcelfit.config import check_keys, get_choice, get_number, get_str, load_yaml, require_mapping
+from parcelfit.config import (
+    check_keys,
+    get_choice,
+    get_number,
+    get_pair,
+    get_str,
+    load_yaml,
+    require_mapping,
+)
 from parcelfit.errors import ParcelfitError
-from parcelfit.runs import Region, parse_region
+from parcelfit.runs import Barrier, Region, parse_region
 from parcelfit.sim.mujoco.bundled import bundled_names, resolve_file
 
 MATERIALS = ("belt", "roller", "metal")
@@ -89,15 +97,6 @@ class Wall:
     height: float
     base: float
     thickness: float
-
-
-@dataclass(frozen=True)
-class Barrier:
-    """A light barrier: a beam over the line segment ``start``-``end`` [m]."""
-
-    name: str
-    start: tuple[float, float]
-    end: tuple[float, float]
 
 
 @dataclass(frozen=True)
@@ -153,27 +152,20 @@ class Rig:
 
 
 def _point(value: Any, *, file: str, where: str) -> tuple[float, float]:
-    if (
-        not isinstance(value, list | tuple)
-        or len(value) != 2
-        or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
-    ):
-        raise ParcelfitError(
-            f"expected a point [x, y] in metres, got {value!r}",
-            file=file,
-            where=where,
-            fix="write e.g. [0.5, -0.4]",
-        )
-    return float(value[0]), float(value[1])
+    return get_pair(
+        value, file=file, where=where, what="a point [x, y] in metres", fix="write e.g. [0.5, -0.4]"
+    )
 
 
 def _pair(value: Any, *, file: str, where: str) -> tuple[float, float]:
-    p = _point(value, file=file, where=where)
-    if not p[0] < p[1]:
-        raise ParcelfitError(
-            f"expected [min, max] with min < max, got {value!r}", file=file, where=where
-        )
-    return p
+    return get_pair(
+        value,
+        file=file,
+        where=where,
+        what="[min, max] with min < max",
+        fix="write e.g. [0.5, 1.2]",
+        increasing=True,
+    )
 
 
 def parse_rig(doc: Any, file: str) -> Rig:
