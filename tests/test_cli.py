@@ -51,10 +51,20 @@ def test_bad_input_gives_message_not_traceback(tmp_path):
     assert "Traceback" not in result.output
 
 
-def test_demo_on_bundled_data(tmp_path):
-    result = runner.invoke(app, ["demo", "--out", str(tmp_path / "demo")])
+def test_demo_quick_end_to_end_on_bundled_data(tmp_path):
+    out = tmp_path / "demo"
+    result = runner.invoke(app, ["demo", "--quick", "--no-animation", "--out", str(out)])
     assert result.exit_code == 0, result.output
     assert "SYNTHETIC" in result.output
-    refs = json.loads((tmp_path / "demo" / "reference_runs.json").read_text())
-    assert len(refs) == 12
-    assert (tmp_path / "demo" / "stats" / "transit_times.png").is_file()
+    refs = json.loads((out / "reference_runs.json").read_text())
+    assert len(refs) == 16  # E3 KPBW and PB at two settings, E1 four types at three
+    assert (out / "stats" / "transit_times.png").is_file()
+    assert (out / "screen" / "selection.yaml").is_file()
+    assert (out / "calibration" / "study.sqlite").is_file()
+    report = out / "report.html"
+    text = report.read_text()
+    assert "SYNTHETIC DATA" in text and 'id="stricter"' in text and 'id="frames"' in text
+    assert "report:" in result.output and report.name in result.output
+    assert "verdict: validation" in result.output
+    example = json.loads((out / "stricter-criterion.json").read_text())
+    assert example["published_passed"] and not example["stricter_passed"]

@@ -5,7 +5,7 @@ from __future__ import annotations
 from importlib.resources import files
 from pathlib import Path
 
-EXAMPLE_DATASET = "e1-synthetic"
+EXAMPLE_DATASET = "twin"
 
 
 def example_dataset_path(name: str = EXAMPLE_DATASET) -> Path:

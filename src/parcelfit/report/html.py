@@ -13,8 +13,9 @@ figures like the published Figures 16-19); the simulated run's key frames.
 
 Identifiability rule (stated in the report): a parameter "shapes the cost" when the GP's partial
 dependence on it changes the predicted cost by at least 10 % of the largest such change among
-the calibrated parameters; otherwise the cost is flat along it, and this test case cannot
-identify it.
+the calibrated parameters AND by more than the GP's mean predictive standard deviation along it;
+otherwise the cost is flat along it (within what the surrogate can tell), and this test case
+cannot identify it.
 """
 
 from __future__ import annotations
@@ -274,6 +275,7 @@ class ParameterRow:
     truth: float | None
     amplitude: float | None
     share: float | None
+    uncertainty: float | None = None  # mean predictive sd of the GP along the curve
 
     @property
     def error_share(self) -> float | None:
@@ -284,8 +286,13 @@ class ParameterRow:
 
     @property
     def identifiable(self) -> bool | None:
-        """Does the surrogate's cost change noticeably along this parameter?"""
-        return None if self.share is None else self.share >= IDENTIFIABLE_SHARE
+        """Does the surrogate's cost change noticeably along this parameter: by at least
+        ``IDENTIFIABLE_SHARE`` of the strongest parameter's change and by more than the
+        surrogate's own uncertainty?"""
+        if self.share is None or self.amplitude is None:
+            return None
+        above_noise = self.uncertainty is None or self.amplitude >= self.uncertainty
+        return self.share >= IDENTIFIABLE_SHARE and above_noise
 
 
 def parameter_rows(
@@ -293,6 +300,7 @@ def parameter_rows(
 ) -> list[ParameterRow]:
     """The calibrated parameters' table rows (catalogue units)."""
     amps = {c.name: c.amplitude for c in curves} if curves else {}
+    sds = {c.name: float(c.sd.mean()) for c in curves} if curves else {}
     top = max(amps.values(), default=0.0)
     rows = []
     for name, (lo, hi) in zip(meta["parameters"], meta["bounds"], strict=True):
@@ -307,6 +315,7 @@ def parameter_rows(
                 truth.get(name),
                 amp,
                 None if amp is None or top <= 0 else amp / top,
+                sds.get(name),
             )
         )
     return rows
@@ -350,7 +359,7 @@ def _calibration_section(
     header = ["parameter", "unit", "range", "calibrated"]
     if truth:
         header += ["truth (hidden)", "error / range width", "recovered (&le; 10 %)"]
-    header += ["cost change along it (GP)", "identifiable here"]
+    header += ["cost change along it (GP) vs uncertainty", "identifiable here"]
     body = []
     for r in rows:
         cells = [
@@ -367,7 +376,9 @@ def _calibration_section(
                 "-" if err is None else _mark(err <= RECOVERY_TOLERANCE),
             ]
         cells += [
-            "-" if r.amplitude is None else f"{r.amplitude:.3g} ({(r.share or 0) * 100:.0f} %)",
+            "-"
+            if r.amplitude is None
+            else f"{r.amplitude:.3g} ({(r.share or 0) * 100:.0f} %) vs &plusmn;{r.uncertainty:.3g}",
             "-"
             if r.identifiable is None
             else ("yes" if r.identifiable else '<span class="bad">no: flat</span>'),
@@ -384,11 +395,13 @@ def _calibration_section(
     if flat:
         b.add(
             "<p>The GP surrogate's predicted cost barely changes along "
-            f"<b>{_esc(', '.join(r.name for r in flat))}</b> (less than "
-            f"{IDENTIFIABLE_SHARE * 100:.0f} % of the change along the strongest parameter): this "
-            "test case does not constrain them, so any value in that flat valley fits the "
-            "reference run about equally well. A different test case (another rig or speed), "
-            "or measuring them directly, is needed to pin them down.</p>"
+            f"<b>{_esc(', '.join(r.name for r in flat))}</b>: across the whole range it moves by "
+            f"less than {IDENTIFIABLE_SHARE * 100:.0f} % of the change along the strongest "
+            "parameter, or by less than the surrogate's own uncertainty (the &plusmn; column, "
+            "the partial-dependence band below). This test case does not constrain them: any "
+            "value in that flat valley fits the reference run about as well as the real runs "
+            "fit each other. Another test case (rig or speed) or a direct measurement is needed "
+            "to pin them down.</p>"
         )
     if missed and synthetic:
         unexplained = [r for r in missed if r.identifiable is not False]
