@@ -12,8 +12,8 @@ from parcelfit.optimize.calibration import Calibration
 from parcelfit.optimize.screening import load_screen, run_screen
 from parcelfit.optimize.study import load_study
 from parcelfit.report import build_report
+from parcelfit.report.browser import chromium, inspect_page, screenshot
 
-from .browser import chromium, inspect_page, screenshot
 from .fake_sim import TRUTH
 from .test_calibration import write_study
 

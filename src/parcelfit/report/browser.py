@@ -1,5 +1,6 @@
-"""Render a local HTML file in headless Chromium: a screenshot, and a check that every image
-decoded (a harness page loads the file in an iframe and writes what it found into its DOM)."""
+"""Render a local HTML file in headless Chromium (Debian's ``chromium``): a screenshot, and a
+check that the page loads and every image decodes (a harness page loads the file in an iframe
+and writes what it found into its own DOM, which ``--dump-dom`` prints)."""
 
 from __future__ import annotations
 
