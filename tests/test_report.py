@@ -116,3 +116,21 @@ def test_the_browser_check_sees_a_broken_image(tmp_path):
     )
     found = inspect_page(page)
     assert found["images"] == 1 and found["broken"] == 1 and found["headings"] == ["a"]
+
+
+def test_identifiability_from_the_surrogate_span():
+    import numpy as np
+
+    from parcelfit.optimize.plots import DependenceCurve
+    from parcelfit.report.html import ParameterRow
+
+    xs = np.linspace(0.3, 0.6, 31)
+    sharp = DependenceCurve("mu_d_BePa", xs, (xs - 0.4) ** 2 * 100, np.full(31, 0.05), False)
+    lo, hi = sharp.indistinct()
+    assert lo == pytest.approx(0.38) and hi == pytest.approx(0.42)  # (x-0.4)^2*100 <= 0.05
+    flat = DependenceCurve("E_Pa", xs, np.full(31, 0.5), np.full(31, 0.05), False)
+    assert flat.indistinct() == (pytest.approx(0.3), pytest.approx(0.6))
+    row = ParameterRow("mu_d_BePa", "-", 0.3, 0.6, 0.41, 0.4, sharp.amplitude, (lo, hi))
+    assert row.identifiable and row.error_share == pytest.approx(1 / 30)
+    row = ParameterRow("E_Pa", "-", 0.3, 0.6, 0.41, 0.4, flat.amplitude, flat.indistinct())
+    assert row.identifiable is False

@@ -31,6 +31,10 @@ Determinism: every random draw of ask() uses numpy's generator seeded with (seed
 observations, number of pending points), so the same history gives the same batch, which is
 what makes a resumed study replay exactly.
 
+Recommendation: the parameters reported and validated are, among the evaluated points, the
+one with the lowest GP mean cost (``recommend: posterior_mean``), not the single lowest observed
+cost (``best_observed``, the published choice), which on a rough objective is partly luck.
+
 Deliberate differences from the Mango library the published work used: the GP noise is not
 effectively zero, every input has its own length scale, the batch is never filled with hidden
 random points, the Latin hypercube is built in, and resuming is a replay of tell().
@@ -67,6 +71,7 @@ class BOSettings:
     alpha: float = 0.35**2  # noise variance on the standardised cost
     n_restarts: int = 3  # optimiser restarts of the GP's hyperparameters
     transform: str = "none"  # "none" (published) or "log": c -> log(c - min c + 0.01 * spread) before standardising
+    recommend: str = "posterior_mean"  # or "best_observed" (published); see BatchBO.recommend
 
     def __post_init__(self) -> None:
         if (
@@ -75,6 +80,7 @@ class BOSettings:
             or not 0 < self.top_fraction <= 1
             or self.alpha <= 0
             or self.transform not in ("none", "log")
+            or self.recommend not in ("posterior_mean", "best_observed")
         ):
             raise ParcelfitError(f"invalid BO settings: {self}")
 
@@ -143,6 +149,27 @@ class BatchBO:
             return None
         b = min(ok, key=lambda o: o.cost)  # type: ignore[arg-type, return-value]
         return dict(b.params), float(b.cost)  # type: ignore[arg-type]
+
+    def recommend(self) -> tuple[dict[str, float], float] | None:
+        """The parameters to report and validate, with their observed cost.
+
+        "best_observed" (the published choice) takes the lowest observed cost. The cost of a
+        parcel simulation is rough: a small parameter change moves it by run-to-run amounts, so
+        the single lowest value is partly luck. "posterior_mean" (default) takes, among the
+        evaluated points, the one whose GP mean cost is lowest: the surrogate averages over
+        neighbouring evaluations, a standard recommendation for noisy objectives.
+        """
+        best = self.best()
+        if best is None or self.settings.recommend == "best_observed":
+            return best
+        fitted = self._fit(np.random.default_rng([self.seed, len(self.observations)]), [])
+        if fitted is None:
+            return best
+        gp = fitted[0]
+        ok = [o for o in self.observations if o.cost is not None]
+        y = gp.predict(np.array([o.u for o in ok]))
+        pick = ok[int(np.argmax(y))]  # y is the standardised negative cost
+        return dict(pick.params), float(pick.cost)  # type: ignore[arg-type]
 
     def surrogate(self) -> GaussianProcessRegressor | None:
         """The GP fitted to the observations (None before two successes); predicts standardised -cost."""

@@ -255,7 +255,7 @@ class Calibration:
             self._report(rows[i].iteration, remaining, f"{result.status.value}: {tasks[i].run_id}")
 
     def _validate(self, iteration: int, executor: LocalExecutor | DaskExecutor) -> bool | None:
-        best = self.bo.best()
+        best = self.bo.recommend()
         if best is None or self.val_case is None or self.val_reference is None:
             return None
         params, _ = best
@@ -385,9 +385,11 @@ class Calibration:
             executor.close()
 
     def _result(self, reason: str) -> CalibrationResult:
-        best = self.bo.best()
+        best = self.bo.recommend()
         fits = self.store.evaluations("fit")
         self.store.set_meta("stop_reason", reason)
+        if best is not None:
+            self.store.set_meta("recommended", {"params": best[0], "cost": best[1]})
         return CalibrationResult(
             best_params=None if best is None else best[0],
             best_cost=None if best is None else best[1],

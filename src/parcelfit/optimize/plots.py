@@ -133,6 +133,12 @@ class DependenceCurve:
         """How much the predicted cost changes across the parameter's range."""
         return float(np.max(self.cost) - np.min(self.cost))
 
+    def indistinct(self) -> tuple[float, float]:
+        """The span of values whose predicted cost is within one (mean) predictive standard
+        deviation of the lowest: the values the surrogate cannot tell apart from the best."""
+        near = self.values[self.cost <= self.cost.min() + float(self.sd.mean())]
+        return float(near.min()), float(near.max())
+
 
 def dependence_curves(
     bo: BatchBO, n_grid: int = 40, n_mc: int = 256, seed: int = 0

@@ -11,11 +11,12 @@ screening; calibration (history, parameters with their ranges and, for synthetic
 identifiability from the surrogate); validation (published criteria and the stricter band test,
 figures like the published Figures 16-19); the simulated run's key frames.
 
-Identifiability rule (stated in the report): a parameter "shapes the cost" when the GP's partial
-dependence on it changes the predicted cost by at least 10 % of the largest such change among
-the calibrated parameters AND by more than the GP's mean predictive standard deviation along it;
-otherwise the cost is flat along it (within what the surrogate can tell), and this test case
-cannot identify it.
+Identifiability rule (stated in the report): along each calibrated parameter, the GP's partial
+dependence (mean cost averaged over the other parameters) is compared with its mean predictive
+standard deviation sd; the values whose mean cost is within sd of the lowest are those the
+evaluations cannot tell apart. A parameter is identifiable on this test case when that span is
+at most 20 % of its range (so the calibrated value is pinned to about +-10 %, the recovery
+tolerance); otherwise the report says it is not, and why.
 """
 
 from __future__ import annotations
@@ -42,7 +43,7 @@ from parcelfit.metrics.envelope import EnvelopeBand, envelope_band
 from parcelfit.runs import Dataset, TestCase, Trajectory, load_dataset, read_trajectory
 from parcelfit.sim.params import CATALOGUE
 
-IDENTIFIABLE_SHARE = 0.10  # partial-dependence change relative to the strongest parameter
+IDENTIFIABLE_SPAN = 0.20  # widest share of the range the surrogate may leave undecided
 RECOVERY_TOLERANCE = 0.10  # of the range's width
 
 _SPECS = {p.name: p for p in CATALOGUE}
@@ -273,9 +274,8 @@ class ParameterRow:
     high: float
     best: float
     truth: float | None
-    amplitude: float | None
-    share: float | None
-    uncertainty: float | None = None  # mean predictive sd of the GP along the curve
+    amplitude: float | None  # change of the GP's mean cost across the range
+    span: tuple[float, float] | None = None  # values the surrogate cannot tell apart
 
     @property
     def error_share(self) -> float | None:
@@ -286,25 +286,21 @@ class ParameterRow:
 
     @property
     def identifiable(self) -> bool | None:
-        """Does the surrogate's cost change noticeably along this parameter: by at least
-        ``IDENTIFIABLE_SHARE`` of the strongest parameter's change and by more than the
-        surrogate's own uncertainty?"""
-        if self.share is None or self.amplitude is None:
+        """Does the surrogate pin this parameter down: are the values it cannot tell apart
+        from the best within ``IDENTIFIABLE_SPAN`` of the range?"""
+        if self.span is None:
             return None
-        above_noise = self.uncertainty is None or self.amplitude >= self.uncertainty
-        return self.share >= IDENTIFIABLE_SHARE and above_noise
+        return (self.span[1] - self.span[0]) <= IDENTIFIABLE_SPAN * (self.high - self.low)
 
 
 def parameter_rows(
     meta: dict[str, Any], best: dict[str, float], truth: dict[str, float], curves: list | None
 ) -> list[ParameterRow]:
     """The calibrated parameters' table rows (catalogue units)."""
-    amps = {c.name: c.amplitude for c in curves} if curves else {}
-    sds = {c.name: float(c.sd.mean()) for c in curves} if curves else {}
-    top = max(amps.values(), default=0.0)
+    by_name = {c.name: c for c in curves} if curves else {}
     rows = []
     for name, (lo, hi) in zip(meta["parameters"], meta["bounds"], strict=True):
-        amp = amps.get(name)
+        curve = by_name.get(name)
         rows.append(
             ParameterRow(
                 name,
@@ -313,9 +309,8 @@ def parameter_rows(
                 _display(name, hi),
                 _display(name, best[name]),
                 truth.get(name),
-                amp,
-                None if amp is None or top <= 0 else amp / top,
-                sds.get(name),
+                None if curve is None else curve.amplitude,
+                None if curve is None else curve.indistinct(),
             )
         )
     return rows
@@ -349,6 +344,12 @@ def _calibration_section(
     )
     b.add(figure_html(history(fits, vals), "cost history"))
     best = status.get("best")
+    store = Store(folder / STORE_FILE)
+    recommended = store.get_meta("recommended")
+    store.close()
+    if best is not None and recommended is not None:  # what the study validated and reports
+        at = next((e.iteration for e in fits if e.params == recommended["params"]), None)
+        best = {**recommended, "iteration": at, "lowest_cost": best["cost"]}
     if best is None:
         b.add("<p class='bad'>No simulation succeeded; no parameters to report.</p>")
         return None, []
@@ -359,7 +360,11 @@ def _calibration_section(
     header = ["parameter", "unit", "range", "calibrated"]
     if truth:
         header += ["truth (hidden)", "error / range width", "recovered (&le; 10 %)"]
-    header += ["cost change along it (GP) vs uncertainty", "identifiable here"]
+    header += [
+        "cost change across the range (GP)",
+        "fit about equally well (GP)",
+        "identifiable here",
+    ]
     body = []
     for r in rows:
         cells = [
@@ -376,16 +381,23 @@ def _calibration_section(
                 "-" if err is None else _mark(err <= RECOVERY_TOLERANCE),
             ]
         cells += [
-            "-"
-            if r.amplitude is None
-            else f"{r.amplitude:.3g} ({(r.share or 0) * 100:.0f} %) vs &plusmn;{r.uncertainty:.3g}",
+            "-" if r.amplitude is None else f"{r.amplitude:.3g}",
+            "-" if r.span is None else f"{r.span[0]:.4g} - {r.span[1]:.4g}",
             "-"
             if r.identifiable is None
-            else ("yes" if r.identifiable else '<span class="bad">no: flat</span>'),
+            else ("yes" if r.identifiable else '<span class="bad">no</span>'),
         ]
         body.append(cells)
     b.add(
-        f"<p>Best cost {best['cost']:.4g} at iteration {best['iteration']}. "
+        f"<p>Calibrated parameters: the evaluation at iteration {best['iteration']} with cost "
+        f"{best['cost']:.4g}"
+        + (
+            f" (recommended by the GP's mean cost; the lowest single cost was "
+            f"{best['lowest_cost']:.4g})"
+            if "lowest_cost" in best
+            else ""
+        )
+        + ". "
         + ("<b>The truth column is shown because the data are SYNTHETIC.</b>" if truth else "")
         + "</p>"
     )
@@ -394,20 +406,21 @@ def _calibration_section(
     missed = [r for r in rows if r.error_share is not None and r.error_share > RECOVERY_TOLERANCE]
     if flat:
         b.add(
-            "<p>The GP surrogate's predicted cost barely changes along "
-            f"<b>{_esc(', '.join(r.name for r in flat))}</b>: across the whole range it moves by "
-            f"less than {IDENTIFIABLE_SHARE * 100:.0f} % of the change along the strongest "
-            "parameter, or by less than the surrogate's own uncertainty (the &plusmn; column, "
-            "the partial-dependence band below). This test case does not constrain them: any "
-            "value in that flat valley fits the reference run about as well as the real runs "
-            "fit each other. Another test case (rig or speed) or a direct measurement is needed "
-            "to pin them down.</p>"
+            "<p>Not identifiable here: "
+            f"<b>{_esc(', '.join(r.name for r in flat))}</b>. Along each, the GP surrogate's "
+            "mean cost (averaged over the other parameters, the partial dependence below) stays "
+            "within one predictive standard deviation of its lowest value over more than "
+            f"{IDENTIFIABLE_SPAN * 100:.0f} % of the range (the 'fit about equally well' "
+            "column): the evaluations cannot tell those values apart, so the calibrated value "
+            "within that span is as good as chance. This test case does not constrain them; "
+            "another test case (rig or speed setting), more runs, or a direct measurement is "
+            "needed to pin them down.</p>"
         )
     if missed and synthetic:
         unexplained = [r for r in missed if r.identifiable is not False]
         if unexplained:
             b.add(
-                f"<p class='bad'>Not recovered although the surrogate is not flat along it: "
+                f"<p class='bad'>Not recovered although the surrogate pins it down: "
                 f"{_esc(', '.join(r.name for r in unexplained))}. The model-form difference "
                 "between the twin runs and the calibrated model, or too small a budget, can "
                 "cause this.</p>"
@@ -679,7 +692,8 @@ def _summary(
             f"<br>Parameters recovered within {RECOVERY_TOLERANCE * 100:.0f} % of their range: "
             f"{len(recovered)} of {len(rows)}"
             + (
-                f"; not identifiable on this test case (flat surrogate): "
+                f"; not identifiable on this test case (the surrogate cannot tell apart "
+                f"values across more than {IDENTIFIABLE_SPAN * 100:.0f} % of the range): "
                 f"{_esc(', '.join(r.name for r in flat))}"
                 if flat
                 else ""
