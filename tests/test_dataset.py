@@ -131,5 +131,5 @@ def test_bundled_example_is_labelled_synthetic():
     ds = load_dataset(example_dataset_path())
     assert ds.synthetic
     assert "SYNTHETIC" in ds.description
-    assert len(ds.cases) == 12
+    assert len(ds.cases) == 16  # E3 KPBW, PB at settings 1-2; E1 four types at 1-3
     assert all(len(cd.runs) == 10 for cd in ds.cases.values())
