@@ -79,3 +79,44 @@ def test_synth_spec_errors_name_the_key(tmp_path):
     spec.write_text("cases: [E1/BW/1]\nsettings: {runz: 3}\n")
     with pytest.raises(ParcelfitError, match="runs"):
         load_twin_spec(spec)
+
+
+def test_an_interrupted_twin_dataset_resumes_from_its_cache(tmp_path, monkeypatch):
+    import pytest
+
+    import parcelfit.synth as synth
+
+    settings = TwinSettings(runs=3, real_spacing=0.05)
+    real = synth._twin_run
+    calls = []
+
+    def dies_on_the_third(job):
+        calls.append(job["run_id"])
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return real(job)
+
+    monkeypatch.setattr(synth, "_twin_run", dies_on_the_third)
+    with pytest.raises(KeyboardInterrupt):
+        make_twin_dataset(tmp_path / "d", [TestCase("E1", "BW", 1)], {}, settings=settings, seed=5)
+    assert len(list((tmp_path / "d" / ".twin-runs").glob("*.csv"))) == 2
+    calls.clear()
+    monkeypatch.setattr(synth, "_twin_run", real)
+    seen = []
+    path = make_twin_dataset(
+        tmp_path / "d",
+        [TestCase("E1", "BW", 1)],
+        {},
+        settings=settings,
+        seed=5,
+        progress=seen.append,
+    )
+    assert sum("from the cache" in m for m in seen) == 2 and len(seen) == 3
+    assert not (tmp_path / "d" / ".twin-runs").exists()
+    fresh = make_twin_dataset(
+        tmp_path / "e", [TestCase("E1", "BW", 1)], {}, settings=settings, seed=5
+    )
+    a, b = load_dataset(path)["E1/BW/1"].runs, load_dataset(fresh)["E1/BW/1"].runs
+    assert all(
+        np.allclose(x.trajectory.xy, y.trajectory.xy, atol=1e-9) for x, y in zip(a, b, strict=True)
+    )

@@ -13,11 +13,18 @@ experiments do (method.md sections 2 and 3):
 
 The truth (parameters in the catalogue's units, and every setting above) is written beside the
 dataset as ``truth.yaml``; the dataset is marked ``synthetic: true``.
+
+Every finished run is stored at once in ``<folder>/.twin-runs/`` (keyed by its job), so an
+interrupted generation resumes where it stopped; the folder is removed when the dataset is
+complete.
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
 import multiprocessing
+import shutil
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass
@@ -29,7 +36,16 @@ import yaml
 
 from parcelfit.config import check_keys, get_number, get_str, load_config, require_mapping
 from parcelfit.errors import ParcelfitError
-from parcelfit.runs import Box, CaseData, Run, TestCase, Trajectory, save_dataset
+from parcelfit.runs import (
+    Box,
+    CaseData,
+    Run,
+    TestCase,
+    Trajectory,
+    read_trajectory,
+    save_dataset,
+    write_trajectory,
+)
 from parcelfit.sim.mujoco import MujocoSimulator, SceneOptions, SimOptions
 from parcelfit.sim.params import CATALOGUE, resolve
 
@@ -142,21 +158,58 @@ def make_twin_dataset(
                 }
             )
     results: dict[str, Run] = {}
+    # every finished run is kept in a cache folder at once, so a crash or Ctrl-C loses nothing:
+    # rerunning the same command reuses the runs whose job (spec, seed, run) is unchanged
+    cache = Path(folder) / ".twin-runs"
+    cache.mkdir(parents=True, exist_ok=True)
 
-    def done(run: Run, wall: float) -> None:
+    def key(job: dict[str, Any]) -> str:
+        text = repr(
+            (
+                asdict(s),
+                job["case"].label,
+                sorted(job["truth"].items()),
+                job["seed"].entropy,
+                job["seed"].spawn_key,
+                job["rig"],
+                job["consignment"],
+            )
+        )
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+    def done(run: Run, wall: float, job: dict[str, Any], cached: bool = False) -> None:
         results[run.id] = run
+        if not cached:
+            base = cache / f"{run.id}-{key(job)}"
+            write_trajectory(run.trajectory, base.with_suffix(".csv"))
+            base.with_suffix(".json").write_text(json.dumps({"transit_time": run.transit_time}))
         if progress:
-            progress(f"{run.id}: {wall:.1f} s ({len(results)}/{len(jobs)})")
+            how = "from the cache" if cached else f"{wall:.1f} s"
+            progress(f"{run.id}: {how} ({len(results)}/{len(jobs)})")
 
+    todo = []
+    for job in jobs:
+        base = cache / f"{job['run_id']}-{key(job)}"
+        if base.with_suffix(".json").is_file() and base.with_suffix(".csv").is_file():
+            meta = json.loads(base.with_suffix(".json").read_text())
+            run = Run(
+                job["run_id"],
+                job["case"],
+                read_trajectory(base.with_suffix(".csv")),
+                meta["transit_time"],
+            )
+            done(run, 0.0, job, cached=True)
+        else:
+            todo.append(job)
     if workers <= 1:
-        for job in jobs:
-            done(*_twin_run(job))
+        for job in todo:
+            done(*_twin_run(job), job)
     else:
         ctx = multiprocessing.get_context("spawn")
         with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-            futures = [pool.submit(_twin_run, job) for job in jobs]
+            futures = {pool.submit(_twin_run, job): job for job in todo}
             for fut in as_completed(futures):
-                done(*fut.result())
+                done(*fut.result(), futures[fut])
     out_cases = []
     for case in cases:
         rig = sim.rig(case.rig)
@@ -190,6 +243,7 @@ def make_twin_dataset(
     (Path(folder) / "truth.yaml").write_text(
         yaml.safe_dump(truth_doc, sort_keys=False), encoding="utf-8"
     )
+    shutil.rmtree(cache, ignore_errors=True)  # the dataset is complete
     return path
 
 
