@@ -690,7 +690,7 @@ def _calibrate_live(
 
 
 def _print_params(params: dict[str, float], cost: float | None) -> None:
-    from parcelfit.sim.params import CATALOGUE
+    from parcelfit.sim.params import catalogue_unit, to_catalogue_units
 
     table = Table(
         title=f"best parameters (cost {cost:.4g})" if cost is not None else "best parameters",
@@ -699,12 +699,8 @@ def _print_params(params: dict[str, float], cost: float | None) -> None:
     table.add_column("parameter")
     table.add_column("value", justify="right")
     table.add_column("unit")
-    specs = {p.name: p for p in CATALOGUE}
     for name, value in params.items():
-        spec = specs.get(name)
-        table.add_row(
-            name, f"{spec.from_si(value) if spec else value:.5g}", spec.unit if spec else "SI"
-        )
+        table.add_row(name, f"{to_catalogue_units(name, value):.5g}", catalogue_unit(name))
     console.print(table)
 
 

@@ -180,7 +180,7 @@ def make_twin_dataset(
     def done(run: Run, wall: float, job: dict[str, Any], cached: bool = False) -> None:
         results[run.id] = run
         if not cached:
-            base = cache / f"{run.id}-{key(job)}"
+            base = cache / f"{run.id}-{job['key']}"
             write_trajectory(run.trajectory, base.with_suffix(".csv"))
             base.with_suffix(".json").write_text(json.dumps({"transit_time": run.transit_time}))
         if progress:
@@ -189,7 +189,8 @@ def make_twin_dataset(
 
     todo = []
     for job in jobs:
-        base = cache / f"{job['run_id']}-{key(job)}"
+        job["key"] = key(job)
+        base = cache / f"{job['run_id']}-{job['key']}"
         if base.with_suffix(".json").is_file() and base.with_suffix(".csv").is_file():
             meta = json.loads(base.with_suffix(".json").read_text())
             run = Run(

@@ -21,19 +21,12 @@ from parcelfit.optimize.bo import BatchBO
 from parcelfit.optimize.calibration import STORE_FILE
 from parcelfit.optimize.space import Dimension, Space
 from parcelfit.optimize.store import Evaluation, Store
-from parcelfit.sim.params import CATALOGUE
-
-_SPECS = {p.name: p for p in CATALOGUE}
-
-
-def _display(name: str, value: float | np.ndarray) -> float | np.ndarray:
-    spec = _SPECS.get(name)
-    return spec.from_si(value) if spec else value  # type: ignore[operator, return-value]
+from parcelfit.sim.params import catalogue_unit, to_catalogue_units
 
 
 def _label(name: str) -> str:
-    spec = _SPECS.get(name)
-    return f"{name} [{spec.unit}]" if spec and spec.unit != "-" else name
+    unit = catalogue_unit(name)
+    return f"{name} [{unit}]" if unit not in ("-", "SI") else name
 
 
 def history(fits: list[Evaluation], validations: list[Evaluation]) -> Figure:
@@ -93,12 +86,12 @@ def traces(fits: list[Evaluation], names: list[str]) -> Figure:
     costs = np.array([e.cost for _, e in ok]) if ok else np.array([])
     for ax, name in zip(axes, names, strict=True):
         xs = [i for i, _ in ok]
-        ys = [_display(name, e.params[name]) for _, e in ok]
+        ys = [to_catalogue_units(name, e.params[name]) for _, e in ok]
         sc = ax.scatter(xs, ys, c=costs, cmap="viridis_r", s=14)
         failed = [(i, e) for i, e in enumerate(fits) if e.status not in ("ok", "pending")]
         ax.scatter(
             [i for i, _ in failed],
-            [_display(name, e.params[name]) for _, e in failed],
+            [to_catalogue_units(name, e.params[name]) for _, e in failed],
             marker="x",
             color="#c0392b",
             s=14,
@@ -106,7 +99,7 @@ def traces(fits: list[Evaluation], names: list[str]) -> Figure:
         if best is not None:
             ax.scatter(
                 [best],
-                [_display(name, fits[best].params[name])],
+                [to_catalogue_units(name, fits[best].params[name])],
                 marker="*",
                 s=120,
                 color="#e67e22",
@@ -168,7 +161,9 @@ def dependence_curves(
             [bo.space.from_unit(np.r_[np.zeros(j), g, np.zeros(d - j - 1)])[dim.name] for g in grid]
         )
         curves.append(
-            DependenceCurve(dim.name, np.asarray(_display(dim.name, xs)), mu_c, sd_c, dim.log)
+            DependenceCurve(
+                dim.name, np.asarray(to_catalogue_units(dim.name, xs)), mu_c, sd_c, dim.log
+            )
         )
     return curves
 
@@ -178,8 +173,11 @@ def partial_dependence(
 ) -> Figure | None:
     """GP partial dependence of the cost on each parameter (None before two successes)."""
     curves = dependence_curves(bo, n_grid, n_mc, seed)
-    if curves is None:
-        return None
+    return None if curves is None else dependence_figure(curves)
+
+
+def dependence_figure(curves: list[DependenceCurve]) -> Figure:
+    """Partial dependence curves, one panel per parameter, with their +-1 sd band."""
     fig = Figure(figsize=(3.2 * len(curves), 3.0), layout="constrained")
     axes = np.atleast_1d(fig.subplots(1, len(curves)))
     for ax, c in zip(axes, curves, strict=True):

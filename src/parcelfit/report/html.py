@@ -41,12 +41,11 @@ from parcelfit.errors import ParcelfitError
 from parcelfit.metrics import ReferenceSelection, Validation, select_reference, validate
 from parcelfit.metrics.envelope import EnvelopeBand, envelope_band
 from parcelfit.runs import Dataset, TestCase, Trajectory, load_dataset, read_trajectory
-from parcelfit.sim.params import CATALOGUE
+from parcelfit.sim.params import catalogue_unit, to_catalogue_units
 
 IDENTIFIABLE_SPAN = 0.20  # widest share of the range the surrogate may leave undecided
 RECOVERY_TOLERANCE = 0.10  # of the range's width
 
-_SPECS = {p.name: p for p in CATALOGUE}
 
 _CSS = """
 body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;max-width:1100px;margin:2em auto;
@@ -76,15 +75,10 @@ def figure_html(fig: Figure, alt: str, dpi: int = 100) -> str:
     return png_html(buf.getvalue(), alt)
 
 
-def png_html(data: bytes, alt: str) -> str:
-    """PNG bytes as an embedded ``<img>``."""
+def png_html(data: bytes, alt: str, mime: str = "image/png") -> str:
+    """Image bytes (PNG unless ``mime`` says otherwise) as an embedded ``<img>``."""
     b64 = base64.b64encode(data).decode("ascii")
-    return f'<img src="data:image/png;base64,{b64}" alt="{_esc(alt)}">'
-
-
-def _gif_html(data: bytes, alt: str) -> str:
-    b64 = base64.b64encode(data).decode("ascii")
-    return f'<img src="data:image/gif;base64,{b64}" alt="{_esc(alt)}">'
+    return f'<img src="data:{mime};base64,{b64}" alt="{_esc(alt)}">'
 
 
 def _table(header: list[str], rows: list[list[str]]) -> str:
@@ -97,16 +91,6 @@ def _mark(passed: bool | None) -> str:
     if passed is None:
         return "-"
     return '<span class="ok">pass</span>' if passed else '<span class="bad">fail</span>'
-
-
-def _display(name: str, si: float) -> float:
-    spec = _SPECS.get(name)
-    return float(spec.from_si(si)) if spec else si
-
-
-def _unit(name: str) -> str:
-    spec = _SPECS.get(name)
-    return spec.unit if spec else "SI"
 
 
 @dataclass(frozen=True)
@@ -304,10 +288,10 @@ def parameter_rows(
         rows.append(
             ParameterRow(
                 name,
-                _unit(name),
-                _display(name, lo),
-                _display(name, hi),
-                _display(name, best[name]),
+                catalogue_unit(name),
+                float(to_catalogue_units(name, lo)),
+                float(to_catalogue_units(name, hi)),
+                float(to_catalogue_units(name, best[name])),
                 truth.get(name),
                 None if curve is None else curve.amplitude,
                 None if curve is None else curve.indistinct(),
@@ -327,6 +311,7 @@ def _calibration_section(
     status = study_status(folder)
     store = Store(folder / STORE_FILE)
     fits, vals = store.evaluations("fit"), store.evaluations("validation")
+    recommended = store.get_meta("recommended")
     store.close()
     sim_time = sum(e.wall_time or 0.0 for e in fits + vals)
     done = [e for e in fits if e.finished_at is not None]
@@ -344,9 +329,6 @@ def _calibration_section(
     )
     b.add(figure_html(history(fits, vals), "cost history"))
     best = status.get("best")
-    store = Store(folder / STORE_FILE)
-    recommended = store.get_meta("recommended")
-    store.close()
     if best is not None and recommended is not None:  # what the study validated and reports
         at = next((e.iteration for e in fits if e.params == recommended["params"]), None)
         best = {**recommended, "iteration": at, "lowest_cost": best["cost"]}
@@ -426,11 +408,9 @@ def _calibration_section(
                 "cause this.</p>"
             )
     if curves:
-        from parcelfit.optimize.plots import partial_dependence
+        from parcelfit.optimize.plots import dependence_figure
 
-        pd_fig = partial_dependence(bo) if bo is not None else None
-        if pd_fig is not None:
-            b.add(figure_html(pd_fig, "partial dependence"))
+        b.add(figure_html(dependence_figure(curves), "partial dependence"))
     b.add(figure_html(traces(fits, names), "parameter traces"))
     return best["params"], rows
 
@@ -541,7 +521,7 @@ def _key_frames(
 
         with tempfile.TemporaryDirectory() as tmp:
             gif = animate_run(rig, frames, Path(tmp) / "run.gif", f"{case.label} (calibrated)")
-            b.add(_gif_html(gif.read_bytes(), "animation of the simulated run"))
+            b.add(png_html(gif.read_bytes(), "animation of the simulated run", "image/gif"))
 
 
 def _stricter_example_section(b: _Builder, root: Path, ds: Dataset | None) -> None:

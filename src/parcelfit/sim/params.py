@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 from parcelfit.config import suggest
 from parcelfit.errors import ParcelfitError
@@ -285,6 +286,19 @@ def parameter(name: str) -> ParameterSpec:
             fix=f"did you mean {close!r}?" if close else f"known: {', '.join(_BY_NAME)}",
         )
     return _BY_NAME[name]
+
+
+def to_catalogue_units(name: str, si_value: Any) -> Any:
+    """A value (or array) of parameter ``name`` from SI to its catalogue unit; a name outside
+    the catalogue (an external solver's own parameter) is passed through unchanged."""
+    spec = _BY_NAME.get(name)
+    return spec.from_si(si_value) if spec else si_value
+
+
+def catalogue_unit(name: str) -> str:
+    """The catalogue unit of parameter ``name`` ("SI" for a name outside the catalogue)."""
+    spec = _BY_NAME.get(name)
+    return spec.unit if spec else "SI"
 
 
 def parameters_for(content_kind: str) -> list[ParameterSpec]:

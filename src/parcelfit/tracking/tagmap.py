@@ -34,9 +34,9 @@ import yaml
 
 from parcelfit.config import (
     check_keys,
+    get_choice,
     get_number,
     get_pair,
-    get_str,
     load_config,
     require_mapping,
 )
@@ -144,14 +144,9 @@ def load_tag_map(path: str | Path) -> TagMap:
         allowed=("family", "reference_tags", "parcel_tags", "camera", "light_barriers"),
         required=("reference_tags", "parcel_tags"),
     )
-    family = get_str(doc, "family", file=path, where="", default="tag36h11")
-    if family not in FAMILIES:
-        raise ParcelfitError(
-            f"unknown tag family {family!r}",
-            file=path,
-            where="family",
-            fix=f"use one of {', '.join(FAMILIES)}",
-        )
+    family = get_choice(
+        doc, "family", FAMILIES, what="tag family", file=path, where="", default="tag36h11"
+    )
     refs: dict[int, ReferenceTag] = {}
     for key, value in require_mapping(
         doc["reference_tags"], file=path, where="reference_tags"
