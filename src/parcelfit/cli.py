@@ -477,8 +477,30 @@ def simulate(
         float, typer.Option(help="Shell mesh spacing for rigid contents [m].")
     ] = 0.03,
     wall_limit: Annotated[float, typer.Option(help="Wall-clock limit [s].")] = 600.0,
+    seed: Annotated[
+        int | None,
+        typer.Option(
+            help="Placement seed: draw the start pose from the rig's hand-placement scatter "
+            "(default: the nominal pose; with --repeat, 0).",
+            min=0,
+        ),
+    ] = None,
+    repeat: Annotated[
+        int,
+        typer.Option(
+            help="Simulate an ensemble of this many placements (seeds SEED, SEED+1, ...) and "
+            "summarise transit times and rotations.",
+            min=1,
+        ),
+    ] = 1,
+    workers: Annotated[
+        int, typer.Option(help="Processes for an ensemble (0: all cores).", min=0)
+    ] = 0,
 ) -> None:
-    """Simulate one test case with MuJoCo and write the run (t, x, y, theta; SI units)."""
+    """Simulate one test case with MuJoCo and write the run (t, x, y, theta; SI units).
+
+    With --repeat N, simulate N seeded placements and write each run (OUT with -s<seed> before
+    its suffix), a summary table (OUT with -ensemble.csv) and print the ensemble statistics."""
     from parcelfit.runs import TestCase, write_trajectory
     from parcelfit.sim.mujoco import (
         MujocoSimulator,
@@ -503,6 +525,14 @@ def simulate(
     )
     case = TestCase(rig_obj.name, cons.name, setting)
     rig_obj.drive_speeds(setting)  # a clear error for an unknown setting before simulating
+    if repeat > 1:
+        if video is not None:
+            raise ParcelfitError("--video works with one run only", fix="leave out --repeat")
+        _simulate_ensemble(
+            sim, params, case, seed or 0, repeat, workers or os.cpu_count() or 1, out
+        )
+        return
+    sim = sim.with_placement(seed)
     with console.status(f"simulating {case.label}"):
         result, frames = sim.run_with_frames(params, case)
     d = result.diagnostics
@@ -523,6 +553,80 @@ def simulate(
         with console.status("rendering the animation"):
             console.print(f"wrote {animate_run(rig_obj, frames, video, title=case.label)}")
     if not result.ok:
+        raise typer.Exit(code=1)
+
+
+def _simulate_ensemble(
+    sim: Any, params: dict[str, float], case: Any, first: int, n: int, workers: int, out: Path
+) -> None:
+    """Simulate ``n`` placements from seed ``first``, write runs and a summary (see simulate)."""
+    import math
+    from concurrent.futures import ProcessPoolExecutor
+
+    import pandas as pd
+    from rich.markup import escape
+
+    from parcelfit.runs import write_trajectory
+    from parcelfit.sim.ensemble import simulate_ensemble, summarise
+
+    seeds = list(range(first, first + n))
+    rows: list[dict[str, Any]] = []
+
+    def done(m: Any) -> None:
+        if m.run is not None:
+            write_trajectory(m.run.trajectory, out.with_name(f"{out.stem}-s{m.seed}{out.suffix}"))
+        rows.append(
+            {
+                "seed": m.seed,
+                "status": m.status.value,
+                "transit_time_s": m.transit_time,
+                "rotation_deg": None if m.rotation is None else math.degrees(m.rotation),
+                "outcome": m.outcome,
+                "wall_time_s": m.wall_time,
+            }
+        )
+        progress.advance(task)
+
+    with Progress(
+        *Progress.get_default_columns(), TimeElapsedColumn(), console=console
+    ) as progress:
+        task = progress.add_task(f"{case.label}: {n} placements", total=n)
+        if workers > 1:
+            with ProcessPoolExecutor(min(workers, n)) as ex:
+                members = simulate_ensemble(sim.with_placement, params, case, seeds, ex, done)
+        else:
+            members = simulate_ensemble(sim.with_placement, params, case, seeds, None, done)
+    table_path = out.with_name(f"{out.stem}-ensemble.csv")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    pd.DataFrame(rows).to_csv(table_path, index=False)
+    table = Table(title=f"{case.label}: {n} placements (seeds {first}-{first + n - 1})")
+    for col in ("seed", "status", "transit time [s]", "rotation [deg]", "outcome"):
+        table.add_column(escape(col), justify="right" if col != "status" else "left")
+    for r in rows:
+        table.add_row(
+            str(r["seed"]),
+            r["status"],
+            "-" if r["transit_time_s"] is None else f"{r['transit_time_s']:.3f}",
+            "-" if r["rotation_deg"] is None else f"{r['rotation_deg']:.1f}",
+            r["outcome"],
+        )
+    console.print(table)
+    st = summarise(members)
+    console.print(
+        f"rotation [deg]: median {math.degrees(st.rotation_median):.1f} "
+        f"(quartiles {math.degrees(st.rotation_q25):.1f}-{math.degrees(st.rotation_q75):.1f}, "
+        f"max {math.degrees(st.rotation_max):.1f}); > 90 deg in {st.share_over_90:.0%}, "
+        f"> 180 deg in {st.share_over_180:.0%}; {st.spins} spins, {st.slides} slides",
+        markup=False,
+    )
+    console.print(
+        f"transit time [s]: median {st.transit_median:.3f}, mean {st.transit_mean:.3f} "
+        f"+- {st.transit_sem:.3f} (standard error); rank correlation with rotation "
+        f"{st.rank_correlation:.2f}",
+        markup=False,
+    )
+    console.print(f"wrote {n} runs and {table_path}", markup=False)
+    if st.n_ok < st.n:
         raise typer.Exit(code=1)
 
 

@@ -20,14 +20,22 @@ A rig file (YAML, SI units, angles in degrees counter-clockwise from the rig's x
         # rollers: rows, columns, radius, roller_width, swivel [deg]   (type rollers)
     walls:                        # vertical plates (guide plates, side walls)
       - {name: guide, material: metal, from: [0.35, -0.4], to: [1.5, -0.11], height: 0.1,
-         base: 0.0, thickness: 0.003}
-    start: {position: [x, y], heading: 30, surface: strips}   # parcel centre, x axis, surface below
+         base: 0.0, thickness: 0.003, lead_in: 0.01}   # lead_in: radius of a rounded
+                                  # (rolled) upstream end [m], optional
+    start: {position: [x, y], heading: 30, surface: strips,   # parcel centre, x axis, surface below
+            scatter: {along: 0.01, across: 0.01, heading: 2}} # optional: hand placement, see below
     light_barriers:               # exactly two beams, crossed in this order
       - {name: LS1, from: [x, y], to: [x, y]}
       - {name: LS2, from: [x, y], to: [x, y]}
     regions: [{x: [-0.3, 1.6]}]   # regions of interest for comparisons (see parcelfit.runs.regions)
     margin: 0.02                  # [m]
     end: {x: [-1.0, 3.0], y: [-1.0, 1.0], duration: 3.0, after_last_barrier: 0.3}
+
+``start.scatter`` describes how a hand-placed parcel varies from run to run: standard deviations
+of a normal distribution along and across the start surface's heading [m] and of the heading
+[deg], each draw cut off at 2.5 standard deviations. A simulation with a placement seed draws its
+start pose from it (`Rig.placement`), so an ensemble of seeds gives a distribution of outcomes
+like the repeated real runs of a test case; without a seed the parcel starts at the nominal pose.
 
 The run ends when the parcel centre leaves the ``end`` box, ``after_last_barrier`` seconds
 after it interrupts the second light barrier, or after ``duration`` seconds of simulated time.
@@ -63,6 +71,8 @@ _SURFACE_KEYS = {
     "rollers": ("rows", "columns", "radius", "roller_width", "swivel"),
 }
 _COMMON = ("name", "type", "material", "centre", "length", "width", "heading", "top", "drive")
+PLACEMENT_STREAM = 0x51ACE  # keeps placement draws apart from other seeded streams
+SCATTER_CUT = 2.5  # placement draws are cut off at this many standard deviations
 
 
 @dataclass(frozen=True)
@@ -97,15 +107,18 @@ class Wall:
     height: float
     base: float
     thickness: float
+    lead_in: float = 0.0  # radius of the rounded upstream end at ``start`` [m]; 0: a plain edge
 
 
 @dataclass(frozen=True)
 class StartPose:
-    """Where the start guide puts the parcel: centre [m], heading [deg], surface it lies on."""
+    """Where the parcel is put: centre [m], heading [deg], the surface it lies on, and the scatter
+    of a hand placement (standard deviations along and across the surface [m], heading [deg])."""
 
     position: tuple[float, float]
     heading: float
     surface: str
+    scatter: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -140,6 +153,21 @@ class Rig:
             if s.name == name:
                 return s
         raise ParcelfitError(f"rig {self.name} has no surface {name!r}")
+
+    def placement(self, seed: int) -> tuple[float, float, float]:
+        """The start-pose offset (dx [m], dy [m], dheading [deg]) of placement ``seed``: a draw
+        from ``start.scatter`` (normal, cut at 2.5 sd), along/across rotated into the rig frame."""
+        rng = np.random.default_rng([PLACEMENT_STREAM, seed])
+        along, across, heading = (
+            float(np.clip(rng.standard_normal(), -SCATTER_CUT, SCATTER_CUT)) * sd
+            for sd in self.start.scatter
+        )
+        u = self.surface(self.start.surface).unit()
+        return (
+            along * u[0] - across * u[1],
+            along * u[1] + across * u[0],
+            heading,
+        )
 
     def drive_speeds(self, setting: int) -> Mapping[str, float]:
         """Surface speed [m/s] of every drive at a speed setting."""
@@ -265,7 +293,7 @@ def parse_rig(doc: Any, file: str) -> Rig:
         w = require_mapping(w, file=file, where=where)
         check_keys(
             w,
-            allowed=("name", "material", "from", "to", "height", "base", "thickness"),
+            allowed=("name", "material", "from", "to", "height", "base", "thickness", "lead_in"),
             required=("name", "from", "to", "height"),
             file=file,
             where=where,
@@ -302,20 +330,67 @@ def parse_rig(doc: Any, file: str) -> Rig:
                     maximum=1,
                     unit="m",
                 ),
+                lead_in=get_number(
+                    w,
+                    "lead_in",
+                    file=file,
+                    where=where,
+                    default=0.0,
+                    minimum=0.0,
+                    maximum=0.2,
+                    unit="m",
+                ),
             )
         )
     st = require_mapping(doc["start"], file=file, where="start")
     check_keys(
         st,
-        allowed=("position", "heading", "surface"),
+        allowed=("position", "heading", "surface", "scatter"),
         required=("position", "heading", "surface"),
         file=file,
         where="start",
     )
+    scatter = (0.0, 0.0, 0.0)
+    if st.get("scatter") is not None:
+        sc = require_mapping(st["scatter"], file=file, where="start.scatter")
+        check_keys(sc, allowed=("along", "across", "heading"), file=file, where="start.scatter")
+        scatter = (
+            get_number(
+                sc,
+                "along",
+                file=file,
+                where="start.scatter",
+                default=0.0,
+                minimum=0.0,
+                maximum=0.5,
+                unit="m",
+            ),
+            get_number(
+                sc,
+                "across",
+                file=file,
+                where="start.scatter",
+                default=0.0,
+                minimum=0.0,
+                maximum=0.5,
+                unit="m",
+            ),
+            get_number(
+                sc,
+                "heading",
+                file=file,
+                where="start.scatter",
+                default=0.0,
+                minimum=0.0,
+                maximum=90,
+                unit="deg",
+            ),
+        )
     start = StartPose(
         _point(st["position"], file=file, where="start.position"),
         get_number(st, "heading", file=file, where="start", minimum=-360, maximum=360, unit="deg"),
         get_str(st, "surface", file=file, where="start"),
+        scatter,  # type: ignore[arg-type]
     )
     if start.surface not in names:
         raise ParcelfitError(

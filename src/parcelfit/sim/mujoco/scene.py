@@ -238,6 +238,16 @@ def build_scene(
         )
         if w.material == "metal":
             metal.append(w.name)
+        if w.lead_in > 0:  # a rolled lead-in: a vertical cylinder at the upstream end
+            name = f"{w.name}_lead_in"
+            body.append(
+                f'<geom name="{name}" type="cylinder" size="{_f(w.lead_in)} {_f(w.height / 2)}" '
+                f'pos="{_f(a[0])} {_f(a[1])} {_f(w.base + w.height / 2)}" '
+                f'friction="{_f(mu)} 0.005 0.0001" priority="2" solref="{cp.solref}" solimp="{cp.solimp}" '
+                f'contype="1" conaffinity="1" condim="3" rgba="0.7 0.7 0.75 1"/>'
+            )
+            if w.material == "metal":
+                metal.append(name)
 
     # --- parcel ---------------------------------------------------------------------------------
     start_surface = rig.surface(rig.start.surface)

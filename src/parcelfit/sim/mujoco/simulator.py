@@ -14,10 +14,18 @@ Light barriers: a beam is interrupted when the packaging vertices' (x, y) lie on
 its line with some of them over the segment; the transit time is the time between the first
 interruption of LS1 and of LS2, checked every step.
 
-Static friction offset (mu_s_*): every step, the friction of metal (and belt/roller) geoms is
-mu_d + offset * exp(-(v_slip / v_stick)^2), where v_slip is the parcel's speed relative to that
-surface (walls: its speed; belts: relative to the belt under the parcel's centre) and v_stick =
-5 mm/s. This is a parcel-level approximation: one coefficient per surface, not per contact.
+Static friction offset (mu_s_*): every step, the friction of each metal geom is set to
+mu_d + offset * S, where S is the stick factor of its contacts in the step before,
+
+    S = sum_k f_k exp(-(v_k / v_stick)^2) / sum_k f_k,
+
+f_k the normal force and v_k the tangential slip speed of contact k with that geom (the
+contact's tangential constraint velocities), v_stick = 5 mm/s: a corner of the packaging that
+catches on a guide plate sticks there and raises that plate's friction, while a packaging that
+slides along it keeps mu_d. For belts and rollers S uses the parcel's speed relative to the belt
+under its centre (a parcel rides on a belt as a whole). MuJoCo has one Coulomb coefficient per
+contact and its discrete integrator recomputes the contacts inside the step, so the switch acts
+per geom with a one-step lag rather than per contact.
 
 Status: ``unstable`` on NaN, MuJoCo's bad-acceleration warning, a speed above 20 m/s, or the
 parcel falling 0.2 m below the lowest surface; ``timeout`` when the wall-clock limit passes;
@@ -30,7 +38,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import mujoco
 import numpy as np
@@ -57,6 +65,7 @@ class SimOptions:
     wall_limit: float = 600.0
     record_vertices: bool = False  # keep the shell's vertex positions per sample (for animations)
     duration: float | None = None  # override the rig's duration [s]
+    placement_seed: int | None = None  # draw the start pose from the rig's scatter (None: nominal)
 
 
 @dataclass(frozen=True)
@@ -106,11 +115,27 @@ class MujocoSimulator:
             self._consignments[name] = load_consignment(name)
         return self._consignments[name]
 
+    def with_placement(self, seed: int | None) -> MujocoSimulator:
+        """The same simulator with placement ``seed`` (None: the nominal start pose)."""
+        return MujocoSimulator(
+            replace(self.options, placement_seed=seed), self._rigs, self._consignments
+        )
+
+    def scene_options(self, rig: Rig) -> SceneOptions:
+        """The scene settings of a run on ``rig``: the placement draw added to the start offset."""
+        opt = self.options.scene
+        if self.options.placement_seed is None:
+            return opt
+        dx, dy, dh = rig.placement(self.options.placement_seed)
+        x0, y0, h0 = opt.start_offset
+        return replace(opt, start_offset=(x0 + dx, y0 + dy, h0 + dh))
+
     def scene(self, params: Mapping[str, float], case: TestCase) -> Scene:
         """The MJCF scene for SI ``params`` (defaults filled in) and a test case."""
         cons = self.consignment(case.consignment)
+        rig = self.rig(case.rig)
         full = resolve(cons.content_kind, si_values=params)
-        return build_scene(self.rig(case.rig), cons, full, case.speed_setting, self.options.scene)
+        return build_scene(rig, cons, full, case.speed_setting, self.scene_options(rig))
 
     def run(
         self, params: Mapping[str, float], case: TestCase, run_id: str | None = None
@@ -127,7 +152,7 @@ class MujocoSimulator:
         rig = self.rig(case.rig)
         cons = self.consignment(case.consignment)
         full = resolve(cons.content_kind, si_values=params)
-        scene = build_scene(rig, cons, full, case.speed_setting, self.options.scene)
+        scene = build_scene(rig, cons, full, case.speed_setting, self.scene_options(rig))
         with _CountedWarnings() as warnings:
             try:
                 model = mujoco.MjModel.from_xml_string(scene.xml)
@@ -178,16 +203,20 @@ class MujocoSimulator:
         stop_at = n_steps
         step = 0
         while True:
+            # mj_step computes positions (flexvert_xpos) before it integrates, so after a step
+            # they belong to the time one step back: label them with that time
+            pos_step = max(step - 1, 0)
+            t_pos = pos_step * dt
             verts = data.flexvert_xpos[adr : adr + num]
             top = verts[scene.shell.top]
             c = top[:, :2].mean(axis=0)
-            if step % every == 0:
+            if pos_step % every == 0 and step != 1:
                 q = top[:, :2] - c
                 theta = math.atan2(
                     float(np.sum(rest[:, 0] * q[:, 1] - rest[:, 1] * q[:, 0])),
                     float(np.sum(rest[:, 0] * q[:, 0] + rest[:, 1] * q[:, 1])),
                 )
-                samples.append((data.time, float(c[0]), float(c[1]), theta))
+                samples.append((t_pos, float(c[0]), float(c[1]), theta))
                 if opt.record_vertices:
                     frames.append(verts.copy())
                 if (
@@ -219,7 +248,7 @@ class MujocoSimulator:
                     and (k == 0 or crossed[0] is not None)
                     and _barrier_state(verts[:, :2], barrier)
                 ):
-                    crossed[k] = data.time
+                    crossed[k] = t_pos
                     if k == 1:
                         stop_at = min(n_steps, step + round(rig.end.after_last_barrier / dt))
             if prev_c is not None:
@@ -230,7 +259,7 @@ class MujocoSimulator:
                         "energy blow-up (parcel faster than 20 m/s)",
                     )
                     break
-                friction.update(model, c, speed_vec)
+                friction.update(model, data, c, speed_vec)
             prev_c = c.copy()
             mujoco.mj_step(model, data)
             step += 1
@@ -302,7 +331,7 @@ def _set_velocity(model: mujoco.MjModel, data: mujoco.MjData, v: np.ndarray) -> 
 
 
 class _FrictionSwitch:
-    """Raise a surface's friction by the static offset while the parcel sticks to it."""
+    """Raise a surface's friction by the static offset while the packaging sticks to it."""
 
     def __init__(
         self, model: mujoco.MjModel, scene: Scene, rig: Rig, params: Mapping[str, float]
@@ -323,19 +352,41 @@ class _FrictionSwitch:
         self.mu_belt = (params["mu_d_BePa"], params["mu_s_BePa"])
 
     @staticmethod
-    def _stick(slip: float) -> float:
-        """1 while the parcel sticks (slip speed 0), falling to 0 above a few mm/s."""
-        return math.exp(-((slip / STICK_SPEED) ** 2))
+    def _stick(slip: np.ndarray | float) -> np.ndarray | float:
+        """1 while the contact sticks (slip speed 0), falling to 0 above a few mm/s."""
+        return np.exp(-((np.asarray(slip) / STICK_SPEED) ** 2))
 
-    def update(self, model: mujoco.MjModel, centre: np.ndarray, velocity: np.ndarray) -> None:
-        """Set the friction of the switched geoms for the parcel's centre [m] and velocity [m/s]."""
-        if self.metal is not None:  # walls are static: the slip is the parcel's speed
+    def update(
+        self,
+        model: mujoco.MjModel,
+        data: mujoco.MjData,
+        centre: np.ndarray,
+        velocity: np.ndarray,
+    ) -> None:
+        """Set the friction of the switched geoms from the last step's contacts (walls) and the
+        parcel's centre [m] and velocity [m/s] (belts)."""
+        if self.metal is not None:
             ids, mu_d, offset = self.metal
-            model.geom_friction[ids, 0] = mu_d + offset * self._stick(float(np.hypot(*velocity)))
+            n = data.ncon
+            geoms = data.contact.geom[:n]
+            for gid in ids:
+                on = np.flatnonzero((geoms[:, 0] == gid) | (geoms[:, 1] == gid))
+                stick = 0.0
+                if on.size:
+                    adr = data.contact.efc_address[on]
+                    valid = adr >= 0
+                    adr = adr[valid]
+                    if adr.size:
+                        force = np.maximum(data.efc_force[adr], 0.0)
+                        slip = np.hypot(data.efc_vel[adr + 1], data.efc_vel[adr + 2])
+                        total = float(force.sum())
+                        if total > 0:
+                            stick = float(np.sum(force * self._stick(slip)) / total)
+                model.geom_friction[gid, 0] = mu_d + offset * stick
         mu_d, offset = self.mu_belt
         for gid, v_surface, surface in self.belts:
             stick = (
-                self._stick(float(np.hypot(*(velocity - v_surface))))
+                float(self._stick(float(np.hypot(*(velocity - v_surface)))))
                 if _inside(surface, centre)
                 else 0.0
             )

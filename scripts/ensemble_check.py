@@ -1,0 +1,208 @@
+"""Judge the MuJoCo models by what the published experiments observed (method.md section 11),
+across ensembles of seeded hand placements rather than single runs.
+
+    python scripts/ensemble_check.py                        # E3 setting 1, 20 placements per type
+    python scripts/ensemble_check.py --rigs E3 E1 --placements 10 --types BW KPBW KP PB
+    python scripts/ensemble_check.py --all-settings         # every speed setting of each rig
+
+For each rig and speed setting it simulates every consignment type at its default parameters
+for the placement seeds 0..N-1 (the rig's ``start.scatter``), then prints and writes
+(``--out``, default docs/) ``ensemble-check.md`` with the per-type statistics and the published
+observations as checks:
+
+* E3: median absolute rotation ordered BW > KP/BW > KP; BW above 90 degrees in at least a
+  quarter of the placements and above 180 degrees in some; KP's median below 30 degrees; slides
+  and spins both occur; Spearman's rank correlation of rotation and transit time;
+* every rig and setting: PB's median transit time slowest or second slowest, by more than the
+  ensemble's standard error; on E1, BW fastest.
+
+and a figure per rig and setting (``ensemble-<rig>-<setting>.png``): the top view of every
+placement's path and the heading over the travelled distance, like the published Figures 17
+and 19. Runs go over all cores (``--workers``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+from parcelfit.runs import TestCase
+from parcelfit.sim.ensemble import EnsembleSummary, Member, simulate_ensemble, summarise
+from parcelfit.sim.mujoco import MujocoSimulator, load_rig
+
+TYPES = ("BW", "KPBW", "KP", "PB")
+COLOURS = {"BW": "tab:orange", "KPBW": "tab:blue", "KP": "tab:green", "PB": "tab:red"}
+
+
+def _deg(x: float) -> float:
+    return math.degrees(x)
+
+
+def _figure(rig_name: str, setting: int, members: dict[str, list[Member]], path: Path) -> None:
+    rig = load_rig(rig_name)
+    types = list(members)
+    fig, axes = plt.subplots(2, len(types), figsize=(4.2 * len(types), 7), squeeze=False)
+    for k, cons in enumerate(types):
+        top, head = axes[0][k], axes[1][k]
+        for s in rig.surfaces:
+            u = s.unit()
+            n = np.array([-u[1], u[0]])
+            c = np.array(s.centre)
+            corners = [
+                c + a * s.length / 2 * u + b * s.width / 2 * n
+                for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1), (-1, -1))
+            ]
+            top.plot(*np.array(corners).T, color="0.5", lw=0.6)
+        for w in rig.walls:
+            top.plot([w.start[0], w.end[0]], [w.start[1], w.end[1]], color="k", lw=2.5)
+        for b in rig.barriers:
+            top.plot([b.start[0], b.end[0]], [b.start[1], b.end[1]], "g--", lw=0.7)
+        for m in members[cons]:
+            if m.run is None:
+                continue
+            tr = m.run.trajectory
+            top.plot(tr.x, tr.y, color=COLOURS.get(cons, "k"), lw=0.7, alpha=0.7)
+            head.plot(
+                tr.x, np.degrees(np.unwrap(tr.theta)), color=COLOURS.get(cons, "k"), lw=0.7
+            )
+        top.set_aspect("equal")
+        top.set_title(f"{rig_name} setting {setting}: {cons}")
+        top.set_xlabel("x [m]")
+        top.set_ylabel("y [m]")
+        head.set_xlabel("x [m]")
+        head.set_ylabel("heading [deg]")
+        head.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def _row(cons: str, st: EnsembleSummary) -> str:
+    return (
+        f"| {cons} | {st.n_ok}/{st.n} | {_deg(st.rotation_median):.0f} | "
+        f"{_deg(st.rotation_q25):.0f}-{_deg(st.rotation_q75):.0f} | {_deg(st.rotation_max):.0f} | "
+        f"{st.share_over_90:.0%} | {st.share_over_180:.0%} | {st.spins}/{st.slides} | "
+        f"{st.transit_median:.3f} | {st.transit_sem * 1e3:.1f} | {st.rank_correlation:.2f} |"
+    )
+
+
+def _checks(rig: str, stats: dict[str, EnsembleSummary]) -> list[tuple[str, bool | None]]:
+    out: list[tuple[str, bool | None]] = []
+    have = set(stats)
+    if rig == "E3" and {"BW", "KPBW", "KP"} <= have:
+        bw, kpbw, kp = stats["BW"], stats["KPBW"], stats["KP"]
+        out.append(
+            (
+                "median rotation BW > KP/BW > KP",
+                bw.rotation_median > kpbw.rotation_median > kp.rotation_median,
+            )
+        )
+        out.append(("BW > 90 degrees in at least 25 % of placements", bw.share_over_90 >= 0.25))
+        out.append(("BW > 180 degrees in some placements", bw.share_over_180 > 0))
+        out.append(("KP median rotation < 30 degrees", _deg(kp.rotation_median) < 30))
+        spins = sum(s.spins for s in stats.values())
+        slides = sum(s.slides for s in stats.values())
+        out.append(("slides and spins both occur", spins > 0 and slides > 0))
+    if "PB" in have and len(have) >= 3:
+        order = sorted(have, key=lambda c: -stats[c].transit_median)
+        pb = stats["PB"]
+        rank = order.index("PB")
+        margin = (
+            pb.transit_median - stats[order[rank + 1]].transit_median
+            if rank + 1 < len(order)
+            else float("nan")
+        )
+        out.append(
+            (
+                "PB slowest or second slowest by more than its standard error "
+                f"(order {' > '.join(order)})",
+                rank <= 1 and margin > pb.transit_sem,
+            )
+        )
+    if rig == "E1" and "BW" in have and len(have) >= 2:
+        fastest = min(have, key=lambda c: stats[c].transit_median)
+        out.append((f"BW fastest on E1 (fastest: {fastest})", fastest == "BW"))
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rigs", nargs="+", default=["E3"])
+    ap.add_argument("--types", nargs="+", default=list(TYPES))
+    ap.add_argument("--placements", type=int, default=20)
+    ap.add_argument("--all-settings", action="store_true", help="every speed setting, not only 1")
+    ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    ap.add_argument("--out", type=Path, default=Path("docs"))
+    args = ap.parse_args(argv)
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "figures").mkdir(exist_ok=True)
+    sim = MujocoSimulator()
+    seeds = list(range(args.placements))
+    lines = [
+        "# Ensemble check: the models against the published observations",
+        "",
+        f"Written by `python scripts/ensemble_check.py --rigs {' '.join(args.rigs)} "
+        f"--placements {args.placements}{' --all-settings' if args.all_settings else ''}`: "
+        "every consignment type at its default parameters, placement seeds "
+        f"0-{args.placements - 1} (the rig's hand-placement scatter). Rotation is the net "
+        "change of heading from the first to the last sample; a spin is a rotation above "
+        "90 degrees. SE: standard error of the mean transit time; rho: Spearman's rank "
+        "correlation of rotation and transit time.",
+        "",
+    ]
+    t0 = time.perf_counter()
+    failures = 0
+    with ProcessPoolExecutor(args.workers) as ex:
+        for rig_name in args.rigs:
+            rig = load_rig(rig_name)
+            settings = sorted(rig.speeds) if args.all_settings else [min(rig.speeds)]
+            for setting in settings:
+                members: dict[str, list[Member]] = {}
+                for cons in args.types:
+                    case = TestCase(rig_name, cons, setting)
+                    members[cons] = simulate_ensemble(
+                        sim.with_placement, {}, case, seeds, executor=ex
+                    )
+                    print(f"{case.label}: done ({time.perf_counter() - t0:.0f} s)", flush=True)
+                stats = {c: summarise(m) for c, m in members.items()}
+                fig = args.out / "figures" / f"ensemble-{rig_name}-{setting}.png"
+                _figure(rig_name, setting, members, fig)
+                lines += [
+                    f"## {rig_name}, speed setting {setting}",
+                    "",
+                    f"![paths and headings](figures/{fig.name})",
+                    "",
+                    "| type | ok | median rotation [deg] | quartiles | max | > 90 deg | > 180 deg "
+                    "| spins/slides | median transit [s] | SE [ms] | rho |",
+                    "|---|---|---|---|---|---|---|---|---|---|---|",
+                    *(_row(c, st) for c, st in stats.items()),
+                    "",
+                ]
+                for text, ok in _checks(rig_name, stats):
+                    mark = "met" if ok else "NOT met"
+                    failures += not ok
+                    lines.append(f"- {text}: **{mark}**")
+                lines.append("")
+    lines.append(
+        f"Wall time {time.perf_counter() - t0:.0f} s on {args.workers} processes "
+        f"({failures} check(s) not met)."
+    )
+    text = "\n".join(lines) + "\n"
+    (args.out / "ensemble-check.md").write_text(text)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,165 @@
+"""Ensembles of seeded placements: the distribution of outcomes a model gives for one test case.
+
+Real test cases are repeated ten times with ten specimens placed by hand, so a model is judged
+by the distribution of its outcomes over placements, not by one run. An ensemble simulates one
+parameter set for a list of placement seeds (each reproducible on its own: the rig's
+``start.scatter`` draws the start pose from the seed, see `parcelfit.sim.mujoco.rig`) and
+summarises, per run:
+
+* the transit time T [s] between the two light barriers;
+* the rotation, the net change of the unwrapped heading from the first to the last sample,
+  |theta(t_end) - theta(t_0)| [rad];
+* the outcome: ``spin`` when the rotation exceeds 90 degrees (the parcel turned round a corner
+  or flipped), ``slide`` otherwise (it kept its orientation up to an alignment with a plate or
+  the belt).
+
+Summary statistics: median and quartiles of rotation and transit time, the shares of runs
+rotating more than 90 and 180 degrees, the standard error of the mean transit time
+s / sqrt(n), and Spearman's rank correlation between rotation and transit time.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import Executor
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+from parcelfit.runs import Run, TestCase, Trajectory
+from parcelfit.sim.protocol import SimStatus
+
+SPIN_ANGLE = math.pi / 2  # rotation [rad] above which a run counts as a spin
+
+
+def rotation(trajectory: Trajectory) -> float:
+    """Net rotation [rad] of a run: |theta(t_end) - theta(t_0)| of the unwrapped heading."""
+    theta = np.unwrap(np.asarray(trajectory.theta, dtype=float))
+    return float(abs(theta[-1] - theta[0]))
+
+
+@dataclass(frozen=True)
+class Member:
+    """One placement of an ensemble: its seed, status, transit time [s], rotation [rad], run."""
+
+    seed: int
+    status: SimStatus
+    transit_time: float | None
+    rotation: float | None
+    run: Run | None
+    wall_time: float
+
+    @property
+    def outcome(self) -> str:
+        """``spin`` (rotation above 90 degrees), ``slide``, or ``failed``."""
+        if self.rotation is None:
+            return "failed"
+        return "spin" if self.rotation > SPIN_ANGLE else "slide"
+
+
+@dataclass(frozen=True)
+class EnsembleSummary:
+    """Statistics of an ensemble (angles in rad, times in s); NaN where nothing was measured."""
+
+    n: int
+    n_ok: int
+    rotation_median: float
+    rotation_q25: float
+    rotation_q75: float
+    rotation_max: float
+    share_over_90: float
+    share_over_180: float
+    spins: int
+    slides: int
+    transit_median: float
+    transit_mean: float
+    transit_sem: float
+    rank_correlation: float  # Spearman's rho between rotation and transit time
+
+
+def summarise(members: Sequence[Member]) -> EnsembleSummary:
+    """Summary statistics of ``members`` (see the module docstring)."""
+    rot = np.array([m.rotation for m in members if m.rotation is not None], dtype=float)
+    pairs = [
+        (m.rotation, m.transit_time)
+        for m in members
+        if m.rotation is not None and m.transit_time is not None
+    ]
+    tt = np.array([t for _, t in pairs], dtype=float)
+    nan = float("nan")
+    rho = nan
+    if len(pairs) >= 3 and np.ptp(tt) > 0 and np.ptp([r for r, _ in pairs]) > 0:
+        rho = float(stats.spearmanr([r for r, _ in pairs], tt).statistic)
+    return EnsembleSummary(
+        n=len(members),
+        n_ok=int(rot.size),
+        rotation_median=float(np.median(rot)) if rot.size else nan,
+        rotation_q25=float(np.percentile(rot, 25)) if rot.size else nan,
+        rotation_q75=float(np.percentile(rot, 75)) if rot.size else nan,
+        rotation_max=float(rot.max()) if rot.size else nan,
+        share_over_90=float(np.mean(rot > math.pi / 2)) if rot.size else nan,
+        share_over_180=float(np.mean(rot > math.pi)) if rot.size else nan,
+        spins=sum(m.outcome == "spin" for m in members),
+        slides=sum(m.outcome == "slide" for m in members),
+        transit_median=float(np.median(tt)) if tt.size else nan,
+        transit_mean=float(np.mean(tt)) if tt.size else nan,
+        transit_sem=float(np.std(tt, ddof=1) / math.sqrt(tt.size)) if tt.size > 1 else nan,
+        rank_correlation=rho,
+    )
+
+
+def _member(
+    factory: Callable[[int], object], params: Mapping[str, float], case: TestCase, seed: int
+) -> Member:
+    sim = factory(seed)
+    result = sim.run(params, case)  # type: ignore[attr-defined]
+    run = result.run if result.ok else None
+    return Member(
+        seed=seed,
+        status=result.status,
+        transit_time=run.transit_time if run is not None else None,
+        rotation=rotation(run.trajectory) if run is not None else None,
+        run=run,
+        wall_time=result.wall_time,
+    )
+
+
+def simulate_ensemble(
+    factory: Callable[[int], object],
+    params: Mapping[str, float],
+    case: TestCase,
+    seeds: Sequence[int],
+    executor: Executor | None = None,
+    progress: Callable[[Member], None] | None = None,
+) -> list[Member]:
+    """Simulate ``case`` with SI ``params`` once per placement seed, in seed order.
+
+    ``factory(seed)`` returns a simulator whose placement is drawn from ``seed`` (for MuJoCo:
+    ``MujocoSimulator(...).with_placement``; it must be picklable to run in ``executor``).
+    Without an executor the runs go one after the other in this process.
+    """
+    members: list[Member] = []
+    if executor is None:
+        for seed in seeds:
+            members.append(_member(factory, params, case, seed))
+            if progress is not None:
+                progress(members[-1])
+        return members
+    futures = [executor.submit(_member, factory, params, case, s) for s in seeds]
+    for f in futures:
+        members.append(f.result())
+        if progress is not None:
+            progress(members[-1])
+    return members
+
+
+__all__ = [
+    "SPIN_ANGLE",
+    "EnsembleSummary",
+    "Member",
+    "rotation",
+    "simulate_ensemble",
+    "summarise",
+]
