@@ -4,6 +4,7 @@ across ensembles of seeded hand placements rather than single runs.
     python scripts/ensemble_check.py                        # E3 setting 1, 20 placements per type
     python scripts/ensemble_check.py --rigs E3 E1 --placements 10 --types BW KPBW KP PB
     python scripts/ensemble_check.py --all-settings         # every speed setting of each rig
+    python scripts/ensemble_check.py --rigs examples/e3-variants/E3-lead-in-in-path.yaml
 
 For each rig and speed setting it simulates every consignment type at its default parameters
 for the placement seeds 0..N-1 (the rig's ``start.scatter``), then prints and writes
@@ -40,6 +41,7 @@ import numpy as np
 from parcelfit.runs import TestCase
 from parcelfit.sim.ensemble import EnsembleSummary, Member, simulate_ensemble, summarise
 from parcelfit.sim.mujoco import MujocoSimulator, load_rig
+from parcelfit.sim.mujoco.rig import Rig
 
 TYPES = ("BW", "KPBW", "KP", "PB")
 COLOURS = {"BW": "tab:orange", "KPBW": "tab:blue", "KP": "tab:green", "PB": "tab:red"}
@@ -49,8 +51,8 @@ def _deg(x: float) -> float:
     return math.degrees(x)
 
 
-def _figure(rig_name: str, setting: int, members: dict[str, list[Member]], path: Path) -> None:
-    rig = load_rig(rig_name)
+def _figure(rig: Rig, setting: int, members: dict[str, list[Member]], path: Path) -> None:
+    rig_name = rig.name
     types = list(members)
     fig, axes = plt.subplots(2, len(types), figsize=(4.2 * len(types), 7), squeeze=False)
     for k, cons in enumerate(types):
@@ -73,9 +75,7 @@ def _figure(rig_name: str, setting: int, members: dict[str, list[Member]], path:
                 continue
             tr = m.run.trajectory
             top.plot(tr.x, tr.y, color=COLOURS.get(cons, "k"), lw=0.7, alpha=0.7)
-            head.plot(
-                tr.x, np.degrees(np.unwrap(tr.theta)), color=COLOURS.get(cons, "k"), lw=0.7
-            )
+            head.plot(tr.x, np.degrees(np.unwrap(tr.theta)), color=COLOURS.get(cons, "k"), lw=0.7)
         top.set_aspect("equal")
         top.set_title(f"{rig_name} setting {setting}: {cons}")
         top.set_xlabel("x [m]")
@@ -100,7 +100,7 @@ def _row(cons: str, st: EnsembleSummary) -> str:
 def _checks(rig: str, stats: dict[str, EnsembleSummary]) -> list[tuple[str, bool | None]]:
     out: list[tuple[str, bool | None]] = []
     have = set(stats)
-    if rig == "E3" and {"BW", "KPBW", "KP"} <= have:
+    if rig.startswith("E3") and {"BW", "KPBW", "KP"} <= have:
         bw, kpbw, kp = stats["BW"], stats["KPBW"], stats["KP"]
         out.append(
             (
@@ -130,7 +130,7 @@ def _checks(rig: str, stats: dict[str, EnsembleSummary]) -> list[tuple[str, bool
                 rank <= 1 and margin > pb.transit_sem,
             )
         )
-    if rig == "E1" and "BW" in have and len(have) >= 2:
+    if rig.startswith("E1") and "BW" in have and len(have) >= 2:
         fastest = min(have, key=lambda c: stats[c].transit_median)
         out.append((f"BW fastest on E1 (fastest: {fastest})", fastest == "BW"))
     return out
@@ -147,12 +147,14 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "figures").mkdir(exist_ok=True)
-    sim = MujocoSimulator()
+    rigs = [load_rig(r) for r in args.rigs]  # bundled names or rig files
+    sim = MujocoSimulator(rigs={r.name: r for r in rigs})
     seeds = list(range(args.placements))
     lines = [
         "# Ensemble check: the models against the published observations",
         "",
         f"Written by `python scripts/ensemble_check.py --rigs {' '.join(args.rigs)} "
+        f"--types {' '.join(args.types)} "
         f"--placements {args.placements}{' --all-settings' if args.all_settings else ''}`: "
         "every consignment type at its default parameters, placement seeds "
         f"0-{args.placements - 1} (the rig's hand-placement scatter). Rotation is the net "
@@ -164,8 +166,8 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     failures = 0
     with ProcessPoolExecutor(args.workers) as ex:
-        for rig_name in args.rigs:
-            rig = load_rig(rig_name)
+        for rig in rigs:
+            rig_name = rig.name
             settings = sorted(rig.speeds) if args.all_settings else [min(rig.speeds)]
             for setting in settings:
                 members: dict[str, list[Member]] = {}
@@ -177,7 +179,7 @@ def main(argv: list[str] | None = None) -> int:
                     print(f"{case.label}: done ({time.perf_counter() - t0:.0f} s)", flush=True)
                 stats = {c: summarise(m) for c, m in members.items()}
                 fig = args.out / "figures" / f"ensemble-{rig_name}-{setting}.png"
-                _figure(rig_name, setting, members, fig)
+                _figure(rig, setting, members, fig)
                 lines += [
                     f"## {rig_name}, speed setting {setting}",
                     "",

@@ -198,3 +198,14 @@ def test_simulate_repeat_writes_an_ensemble_reproducible_per_seed(tmp_path):
     again = read_trajectory(single)
     np.testing.assert_array_equal(again.x, b.x)
     np.testing.assert_array_equal(again.theta, b.theta)
+
+
+def test_every_under_converged_step_is_counted():
+    """MuJoCo prints its singular/under-converged effective-inertia warning once per run but
+    flags every step; the diagnostics count the steps (none for the rigid-content shell)."""
+    sim = MujocoSimulator(SimOptions(duration=0.1))
+    rigid = sim.run({}, TestCase("E3", "KPBW", 1)).diagnostics
+    assert rigid["under_converged_steps"] == 0
+    soft = sim.run({}, TestCase("E3", "PB", 1)).diagnostics
+    assert 0 <= soft["under_converged_steps"] <= soft["steps"] + 2
+    assert soft["under_converged_steps"] >= soft["mujoco_warnings"] - 1

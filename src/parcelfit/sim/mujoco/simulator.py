@@ -273,6 +273,9 @@ class MujocoSimulator:
             "simulated_time": float(data.time),
             "steps_per_second": step / wall if wall > 0 else float("nan"),
             "barrier_times": tuple(crossed),
+            # MuJoCo flags a step whose effective-inertia (M + K for flexes) solve is singular or
+            # under-converged with mjWARN_INERTIA; it prints the first only, but counts them all
+            "under_converged_steps": int(data.warning[mujoco.mjtWarning.mjWARN_INERTIA].number),
         }
         run = None
         if len(samples) >= 3 and status is not SimStatus.UNSTABLE:
