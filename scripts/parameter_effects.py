@@ -118,8 +118,10 @@ def main(argv: list[str] | None = None) -> int:
         "**Noise floor**: "
         + ", ".join(f"{m} {v:.4g}" for m, v in zip(MEASURES, noise, strict=True)),
         "",
-        "| parameter | range | " + " | ".join(f"effect {m}" for m in MEASURES)
-        + " | " + " | ".join(f"floor {m}" for m in MEASURES)
+        "| parameter | range | "
+        + " | ".join(f"effect {m}" for m in MEASURES)
+        + " | "
+        + " | ".join(f"floor {m}" for m in MEASURES)
         + " | ratio xy | ratio theta | ratio transit |",
         "|---" * 11 + "|",
     ]
