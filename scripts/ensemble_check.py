@@ -54,7 +54,9 @@ def _deg(x: float) -> float:
 def _figure(rig: Rig, setting: int, members: dict[str, list[Member]], path: Path) -> None:
     rig_name = rig.name
     types = list(members)
-    fig, axes = plt.subplots(2, len(types), figsize=(4.2 * len(types), 7), squeeze=False)
+    fig, axes = plt.subplots(
+        2, len(types), figsize=(4.2 * len(types), 6.5), squeeze=False, height_ratios=(1, 1.2)
+    )
     for k, cons in enumerate(types):
         top, head = axes[0][k], axes[1][k]
         for s in rig.surfaces:
@@ -76,6 +78,8 @@ def _figure(rig: Rig, setting: int, members: dict[str, list[Member]], path: Path
             tr = m.run.trajectory
             top.plot(tr.x, tr.y, color=COLOURS.get(cons, "k"), lw=0.7, alpha=0.7)
             head.plot(tr.x, np.degrees(np.unwrap(tr.theta)), color=COLOURS.get(cons, "k"), lw=0.7)
+        top.set_xlim(*rig.end.x)
+        top.set_ylim(*rig.end.y)
         top.set_aspect("equal")
         top.set_title(f"{rig_name} setting {setting}: {cons}")
         top.set_xlabel("x [m]")
