@@ -22,6 +22,7 @@ from parcelfit.errors import ParcelfitError
 from parcelfit.metrics import ReferenceSelection, calibration_cost, select_reference, validate
 from parcelfit.optimize.bo import BatchBO
 from parcelfit.optimize.executors import DaskExecutor, LocalExecutor, Task
+from parcelfit.optimize.folderlock import check_writable, lock_folder
 from parcelfit.optimize.store import Evaluation, Store
 from parcelfit.optimize.study import Study
 from parcelfit.runs import TestCase, load_dataset, write_trajectory
@@ -158,7 +159,16 @@ class Calibration:
     ) -> None:
         self.study = study
         self.folder = Path(folder)
-        self.folder.mkdir(parents=True, exist_ok=True)
+        check_writable(self.folder, (STORE_FILE,))
+        try:
+            self.folder.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise ParcelfitError(
+                f"cannot create the study folder ({exc.strerror or exc})",
+                file=self.folder,
+                fix="choose a writable output folder",
+            ) from None
+        self._lock = lock_folder(self.folder, "a calibration")  # released by close()
         self.store = Store(self.folder / STORE_FILE)
         known = self.store.get_meta("fingerprint")
         if known is not None and known != study.fingerprint:
@@ -211,6 +221,11 @@ class Calibration:
         self._executor_args = (executor, scheduler, workers)
         self.on_progress = on_progress or (lambda p: None)
         self.last_validation: bool | None = None
+
+    def close(self) -> None:
+        """Close the store and release the folder's lock (`run` does this when it ends)."""
+        self.store.close()
+        self._lock.release()
 
     # -- helpers -----------------------------------------------------------------------------
     def _full_params(self, fitted: Mapping[str, float]) -> dict[str, float]:
@@ -325,7 +340,14 @@ class Calibration:
 
     # -- the loop ----------------------------------------------------------------------------
     def run(self) -> CalibrationResult:
-        """Run (or resume) the study until validation passes or the budget is spent."""
+        """Run (or resume) the study until validation passes or the budget is spent; then close
+        the store and release the folder."""
+        try:
+            return self._run()
+        finally:
+            self.close()
+
+    def _run(self) -> CalibrationResult:
         study = self.study
         rows = self.store.evaluations("fit")
         for r in rows:  # replay: the optimiser learns every finished evaluation again
@@ -408,7 +430,7 @@ def study_status(folder: str | Path) -> dict[str, Any]:
         raise ParcelfitError(
             f"no {STORE_FILE} here", file=folder, fix="point at a study's output folder"
         )
-    store = Store(path)
+    store = Store(path, readonly=True)
     fits = store.evaluations("fit")
     ok = [e for e in fits if e.status == "ok" and e.cost is not None and math.isfinite(e.cost)]
     best = min(ok, key=lambda e: e.cost) if ok else None  # type: ignore[arg-type, return-value]
