@@ -161,3 +161,71 @@ def test_a_second_calibration_on_the_same_folder_is_refused(tmp_path):
     first.run()  # releases the folder when it ends
     again = Calibration(study, tmp_path / "out").run()
     assert again.evaluations == 8
+
+
+def _dataset_with_outside_file(make_dataset, tmp_path):
+    from .conftest import line_trajectory
+
+    root = make_dataset(
+        {("R", "P", 1): [("a", line_trajectory(), 1.0), ("b", line_trajectory(), 1.0)]}
+    )
+    line_trajectory().to_frame().to_csv(tmp_path / "outside.csv", index=False)
+    return root
+
+
+def _set_file(root, index, name):
+    path = root / "dataset.yaml"
+    doc = yaml.safe_load(path.read_text())
+    doc["test_cases"][0]["runs"][index]["file"] = name
+    path.write_text(yaml.safe_dump(doc))
+
+
+@pytest.mark.parametrize("kind", ["dotdot", "absolute", "symlink"])
+def test_run_files_outside_the_dataset_are_refused(make_dataset, tmp_path, kind):
+    from parcelfit.runs import load_dataset
+
+    root = _dataset_with_outside_file(make_dataset, tmp_path)
+    if kind == "symlink":
+        (root / "runs" / "link.csv").symlink_to(tmp_path / "outside.csv")
+        name = "runs/link.csv"
+    else:
+        name = "../outside.csv" if kind == "dotdot" else str(tmp_path / "outside.csv")
+    _set_file(root, 1, name)
+    with pytest.raises(
+        ParcelfitError, match=r"runs\[1\]\.file: run file .* lies outside the dataset"
+    ):
+        load_dataset(root)
+
+
+def test_a_symlink_inside_the_dataset_is_fine_but_two_runs_cannot_share_a_file(
+    make_dataset, tmp_path
+):
+    from parcelfit.runs import load_dataset
+
+    root = _dataset_with_outside_file(make_dataset, tmp_path)
+    (root / "runs" / "b.csv").rename(root / "b-real.csv")
+    (root / "runs" / "b.csv").symlink_to(root / "b-real.csv")
+    assert len(load_dataset(root).runs()) == 2
+    _set_file(root, 1, "runs/./a.csv")
+    with pytest.raises(
+        ParcelfitError, match=r"runs\[1\]\.file: .* is also the file of .*runs\[0\]"
+    ):
+        load_dataset(root)
+
+
+def test_a_line_break_in_a_name_cannot_add_lines_to_a_solver_parameter_file(tmp_path):
+    from pathlib import Path
+
+    from parcelfit.optimize.executors import Task, simulate_task
+    from parcelfit.runs import TestCase
+    from parcelfit.sim import SimStatus, defaults_si
+    from parcelfit.sim.external import ExternalSimulator, load_external_solver
+
+    solver = Path(__file__).parent / "data" / "external" / "solver.yaml"
+    sim = ExternalSimulator(load_external_solver(solver), workroot=tmp_path)
+    case = TestCase("E1\nmu_d_BePa = 9", "KPBW", 1)
+    with pytest.raises(ParcelfitError, match=r"\$\{rig\}.*line break"):
+        sim.run(defaults_si("rigid"), case)
+    result = simulate_task(sim, Task(defaults_si("rigid"), case, "r"))  # as the loop runs it
+    assert result.status is SimStatus.FAILED and "line break" in result.diagnostics["message"]
+    assert not list(tmp_path.glob("*/params.txt"))  # nothing was written, nothing ran

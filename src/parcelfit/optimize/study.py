@@ -30,6 +30,10 @@
     optimizer: {ucb_lambda: 2.0, n_samples: 4000, transform: none}   # optional BOSettings
     executor: {kind: local, workers: 2}   # optional: local (processes) | dask (scheduler: tcp://...)
 
+**A study file can run code.** ``backend: python`` imports the module named in ``factory`` and
+calls it, and ``backend: external`` runs the solver description's command: run only study (and
+screen) files you trust, as you would a script.
+
 Parameter values in the file are in the catalogue's user units (N/mm, N/mm^2, mm, g; see
 ``parcelfit params``) for the catalogue's parameters and converted to SI on load; parameters a
 ``python`` or ``external`` backend defines itself are taken as given.

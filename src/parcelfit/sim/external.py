@@ -13,8 +13,9 @@ A solver description (YAML)::
 The template and every command argument may use ``${name}`` placeholders: each catalogue
 parameter in SI units (``${mu_d_BePa}``), ``${rig}``, ``${consignment}``, ``${speed_setting}``,
 ``${params_file}``, ``${output_file}``, ``${workdir}``, ``${solver_dir}`` (the folder of the
-description file). A placeholder that is not known is an
-error before anything runs. Each run gets its own work folder; the command runs there, is never
+description file). A placeholder that is not known, or a value holding a line break or another
+control character (which could add lines to the parameter file), is an error before anything
+runs. Each run gets its own work folder; the command runs there, is never
 passed through a shell, and is killed at the timeout. Exit status 0 and a readable trajectory
 give ``ok``; anything else ``failed`` (with the solver's last output lines) or ``timeout``.
 """
@@ -25,6 +26,7 @@ import string
 import subprocess
 import tempfile
 import time
+import unicodedata
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -97,6 +99,14 @@ def load_external_solver(path: str | Path) -> ExternalSolver:
 
 
 def _substitute(text: str, values: Mapping[str, Any], what: str) -> str:
+    for key, value in values.items():
+        # a line break (or any control character) in a name would add lines to the file
+        if any(unicodedata.category(c) == "Cc" for c in str(value)):
+            raise ParcelfitError(
+                f"the value of ${{{key}}} ({str(value)!r}) holds a line break or another control "
+                f"character, which would change {what}",
+                fix="use names without line breaks or control characters",
+            )
     try:
         return string.Template(text).substitute({k: str(v) for k, v in values.items()})
     except KeyError as exc:
