@@ -4,6 +4,7 @@ read-only study stores."""
 import html
 import os
 import sqlite3
+import time
 
 import pytest
 import yaml
@@ -229,3 +230,77 @@ def test_a_line_break_in_a_name_cannot_add_lines_to_a_solver_parameter_file(tmp_
     result = simulate_task(sim, Task(defaults_si("rigid"), case, "r"))  # as the loop runs it
     assert result.status is SimStatus.FAILED and "line break" in result.diagnostics["message"]
     assert not list(tmp_path.glob("*/params.txt"))  # nothing was written, nothing ran
+
+
+def test_a_validation_killed_midway_is_run_again_on_resume(tmp_path):
+    study = load_study(write_study(tmp_path))
+    first = Calibration(study, tmp_path / "out").run()
+    assert first.stop_reason == "validation passed"
+    db = tmp_path / "out" / "study.sqlite"
+    con = sqlite3.connect(db, isolation_level=None)
+    (last,) = con.execute("SELECT max(id) FROM evaluations WHERE kind = 'validation'").fetchone()
+    # the state a kill during that validation leaves: its row pending, no run file, no stop
+    con.execute(
+        "UPDATE evaluations SET status = 'pending', details = NULL, finished_at = NULL, "
+        "run_file = NULL WHERE id = ?",
+        (last,),
+    )
+    con.execute("DELETE FROM meta WHERE key = 'stop_reason'")
+    con.close()
+    again = Calibration(study, tmp_path / "out").run()
+    assert again.stop_reason == "validation passed"
+    assert again.evaluations == first.evaluations  # no extra fitting runs
+    info = study_status(tmp_path / "out")
+    assert [v["status"] for v in info["validations"]][-1] == "ok"
+    assert info["validations"][-1]["passed"] is True
+
+
+def test_a_dying_local_worker_costs_time_not_results(tmp_path):
+    import random
+    import signal
+    import threading
+
+    from parcelfit.optimize.executors import LocalExecutor, Task
+    from parcelfit.runs import TestCase
+
+    from .fake_sim import AnalyticSimulator, trajectory
+
+    executor = LocalExecutor(AnalyticSimulator(delay=0.4), workers=2)
+    tasks = [
+        Task({"mu_d_BePa": 0.4 + 0.01 * i, "mu_d_MePa": 0.2}, TestCase("R", "P", 1), f"t{i}")
+        for i in range(6)
+    ]
+    victims = []
+
+    def kill_a_worker() -> None:  # SIGKILL one busy worker at a random moment of the batch
+        time.sleep(random.Random(7).uniform(0.6, 1.0))
+        pid = next(iter(executor._pool._processes))
+        victims.append(pid)
+        os.kill(pid, signal.SIGKILL)
+
+    killer = threading.Thread(target=kill_a_worker)
+    try:
+        killer.start()
+        results = dict(executor.run(tasks))
+        killer.join()
+    finally:
+        executor.close()
+    assert victims and sorted(results) == list(range(6))
+    assert all(r.ok for r in results.values())
+    for i, r in results.items():  # the right result for every task
+        assert r.run.transit_time == pytest.approx(trajectory(tasks[i].params, 1)[1])
+    assert executor.restarts == 1
+    assert any(r.diagnostics.get("worker_restarts") == 1 for r in results.values())
+
+
+def test_a_worker_killed_during_a_calibration_leaves_no_failed_evaluation(tmp_path, monkeypatch):
+    monkeypatch.setenv("FAKE_SIM_CRASH_ONCE", str(tmp_path / "crashed"))
+    study = load_study(write_study(tmp_path, budget=8, validation={}))
+    result = Calibration(study, tmp_path / "out").run()
+    assert (tmp_path / "crashed").exists()  # one simulation killed its worker
+    info = study_status(tmp_path / "out")
+    assert result.evaluations == 8 and info["by_status"] == {"ok": 8}
+    store = Store(tmp_path / "out" / "study.sqlite", readonly=True)
+    restarted = [e for e in store.evaluations("fit") if e.details.get("worker_restarts")]
+    store.close()
+    assert len(restarted) >= 1

@@ -277,6 +277,17 @@ class Calibration:
         (row_id,) = self.store.add_pending(
             "validation", iteration, [params], self.val_case.speed_setting, [0]
         )
+        return self._run_validation(row_id, iteration, params, executor)
+
+    def _run_validation(
+        self,
+        row_id: int,
+        iteration: int,
+        params: Mapping[str, float],
+        executor: LocalExecutor | DaskExecutor,
+    ) -> bool:
+        """Simulate a stored (pending) validation row and record its verdict."""
+        assert self.val_case is not None and self.val_reference is not None
         task = Task(self._full_params(params), self.val_case, f"validation-{iteration:03d}")
         ((_, result),) = list(executor.run([task]))
         details: dict[str, Any] = {"message": result.diagnostics.get("message")}
@@ -365,6 +376,14 @@ class Calibration:
         iteration = max((r.iteration for r in rows), default=-1)
         executor = _executor(study, self.simulator, *self._executor_args)
         try:
+            # a validation interrupted by a kill is run again before anything else
+            for v in stored:
+                if v.status == "pending" and self.val_case is not None:
+                    self._report(
+                        v.iteration, 1, f"resuming the validation at iteration {v.iteration}"
+                    )
+                    if self._run_validation(v.id, v.iteration, v.params, executor):
+                        return self._result("validation passed")
             while True:
                 if pending:
                     self._report(

@@ -5,7 +5,11 @@ loop can store each result the moment it exists. A task that raises becomes a ``
 result; the loop never stops on one simulation.
 
 Local: ``concurrent.futures.ProcessPoolExecutor`` with the ``spawn`` start method (MuJoCo and
-numba are not fork-safe), one simulation per core. Dask: ``distributed.Client`` on a scheduler
+numba are not fork-safe), one simulation per core. A worker that dies (a segfault, an
+out-of-memory kill) breaks the pool: the pool is recreated and the simulations it was running
+are started again, up to ``max_restarts`` times each (``worker_restarts`` in their
+diagnostics); only then is a simulation ``failed``. Workers die with the process that started
+them (`parcelfit.sim.lifetime.die_with_parent`). Dask: ``distributed.Client`` on a scheduler
 address; each task is retried up to twice if its worker dies, so a lost worker costs time, not
 results. A batch waits for its slowest member, as in the published method; workers beyond the
 batch size only help the initial design (16 simulations at once) and validation runs.
@@ -20,11 +24,13 @@ import time
 import traceback
 from collections.abc import Iterator, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass, replace
 from typing import Any
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import TestCase
+from parcelfit.sim.lifetime import die_with_parent
 from parcelfit.sim.protocol import SimResult, SimStatus, Simulator
 
 
@@ -57,27 +63,68 @@ def simulate_task(simulator: Simulator, task: Task) -> SimResult:
 class LocalExecutor:
     """Simulations in a pool of local processes (default: one per core)."""
 
-    def __init__(self, simulator: Simulator, workers: int | None = None) -> None:
+    def __init__(
+        self, simulator: Simulator, workers: int | None = None, max_restarts: int = 3
+    ) -> None:
         self.simulator = simulator
         self.workers = workers or os.cpu_count() or 1
-        self._pool = ProcessPoolExecutor(
-            max_workers=self.workers, mp_context=multiprocessing.get_context("spawn")
+        self.max_restarts = max_restarts
+        self.restarts = 0  # pools recreated after a worker died
+        self._pool = self._new_pool()
+
+    def _new_pool(self) -> ProcessPoolExecutor:
+        return ProcessPoolExecutor(
+            max_workers=self.workers,
+            mp_context=multiprocessing.get_context("spawn"),
+            initializer=die_with_parent,
+            initargs=(os.getpid(),),
         )
 
     def run(self, tasks: Sequence[Task]) -> Iterator[tuple[int, SimResult]]:
-        """Submit all tasks; yield (index, result) as they finish."""
-        futures = {
-            self._pool.submit(simulate_task, self.simulator, t): i for i, t in enumerate(tasks)
-        }
-        for fut in as_completed(futures):
-            i = futures[fut]
+        """Submit all tasks; yield (index, result) as they finish. Tasks whose worker died are
+        run again in a new pool."""
+        deaths = [0] * len(tasks)
+        todo = list(range(len(tasks)))
+        while todo:
+            futures = {}
             try:
-                yield i, fut.result()
-            except Exception as exc:
-                yield (
-                    i,
-                    SimResult(None, SimStatus.FAILED, 0.0, {"message": f"worker failed: {exc!r}"}),
-                )
+                for i in todo:
+                    futures[self._pool.submit(simulate_task, self.simulator, tasks[i])] = i
+            except BrokenProcessPool:
+                pass  # a worker died already; what was not submitted is retried below
+            again = [i for i in todo if i not in futures.values()]
+            for fut in as_completed(futures):
+                i = futures[fut]
+                try:
+                    result = fut.result()
+                except BrokenProcessPool:
+                    deaths[i] += 1
+                    if deaths[i] <= self.max_restarts:
+                        again.append(i)
+                        continue
+                    result = SimResult(
+                        None,
+                        SimStatus.FAILED,
+                        0.0,
+                        {
+                            "message": f"its worker process died {deaths[i]} times (a crash or "
+                            "an out-of-memory kill during the simulation)"
+                        },
+                    )
+                except Exception as exc:
+                    result = SimResult(
+                        None, SimStatus.FAILED, 0.0, {"message": f"worker failed: {exc!r}"}
+                    )
+                if deaths[i]:
+                    result = replace(
+                        result, diagnostics={**result.diagnostics, "worker_restarts": deaths[i]}
+                    )
+                yield i, result
+            if again:
+                self._pool.shutdown(wait=False, cancel_futures=True)
+                self._pool = self._new_pool()
+                self.restarts += 1
+            todo = sorted(again)
 
     def close(self) -> None:
         """Shut the pool down."""

@@ -16,7 +16,8 @@ parameter in SI units (``${mu_d_BePa}``), ``${rig}``, ``${consignment}``, ``${sp
 description file). A placeholder that is not known, or a value holding a line break or another
 control character (which could add lines to the parameter file), is an error before anything
 runs. Each run gets its own work folder; the command runs there, is never
-passed through a shell, and is killed at the timeout. Exit status 0 and a readable trajectory
+passed through a shell, runs in its own process group, and the whole group (the solver's own
+children too) is killed at the timeout. Exit status 0 and a readable trajectory
 give ``ok``; anything else ``failed`` (with the solver's last output lines) or ``timeout``.
 """
 
@@ -39,6 +40,7 @@ from parcelfit.config import (
 )
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import Run, TestCase, read_trajectory
+from parcelfit.sim.lifetime import run_command
 from parcelfit.sim.protocol import SimResult, SimStatus
 
 _KEYS = ("name", "command", "template", "params_file", "output_file", "transit_file", "timeout")
@@ -151,14 +153,7 @@ class ExternalSimulator:
         args = [_substitute(a, values, f"command argument {a!r}") for a in self.solver.command]
         diagnostics: dict[str, object] = {"workdir": str(workdir), "command": args}
         try:
-            proc = subprocess.run(
-                args,
-                cwd=workdir,
-                capture_output=True,
-                text=True,
-                timeout=self.solver.timeout,
-                check=False,
-            )
+            proc = run_command(args, workdir, self.solver.timeout)
         except subprocess.TimeoutExpired:
             diagnostics["message"] = f"killed after the timeout of {self.solver.timeout:g} s"
             return SimResult(None, SimStatus.TIMEOUT, time.perf_counter() - t0, diagnostics)
