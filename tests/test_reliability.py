@@ -1,10 +1,12 @@
 """Reliability and security: hostile names in reports, brackets in messages, damaged or
 read-only study stores."""
 
+import contextlib
 import html
 import os
 import sqlite3
 import time
+from pathlib import Path
 
 import pytest
 import yaml
@@ -304,3 +306,85 @@ def test_a_worker_killed_during_a_calibration_leaves_no_failed_evaluation(tmp_pa
     restarted = [e for e in store.evaluations("fit") if e.details.get("worker_restarts")]
     store.close()
     assert len(restarted) >= 1
+
+
+def _gone(pids, timeout):
+    """Wait until none of ``pids`` runs any more (a zombie counts as gone); the ones left."""
+    import psutil
+
+    deadline = time.time() + timeout
+    alive = set(pids)
+    while alive and time.time() < deadline:
+        for pid in list(alive):
+            try:
+                if psutil.Process(pid).status() == psutil.STATUS_ZOMBIE:
+                    alive.discard(pid)
+            except psutil.NoSuchProcess:
+                alive.discard(pid)
+        time.sleep(0.1)
+    return alive
+
+
+def test_pool_workers_die_when_the_main_process_is_killed(tmp_path):
+    import signal
+    import subprocess
+    import sys
+
+    import psutil
+
+    from .test_calibration import ROOT
+
+    study = write_study(tmp_path, budget=8, validation={})
+    log = tmp_path / "log"
+    env = {**os.environ, "FAKE_SIM_DELAY": "30", "FAKE_SIM_LOG": str(log)}
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH")) if p)
+    cmd = [sys.executable, "-m", "parcelfit", "calibrate", str(study), "--workers", "2"]
+    proc = subprocess.Popen(
+        [*cmd, "--out", str(tmp_path / "out")],
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
+    try:
+        deadline = time.time() + 60
+        while time.time() < deadline and len(log.read_text().split() if log.exists() else []) < 2:
+            time.sleep(0.1)
+        workers = [c.pid for c in psutil.Process(proc.pid).children(recursive=True)]
+        assert len(workers) >= 2  # both workers are simulating
+        os.kill(proc.pid, signal.SIGKILL)  # the main process only, not its process group
+        proc.wait()
+        assert not _gone(workers, timeout=10)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+
+
+def test_a_timed_out_solver_is_killed_with_its_children(tmp_path):
+    from parcelfit.runs import TestCase
+    from parcelfit.sim import SimStatus, defaults_si
+    from parcelfit.sim.external import ExternalSimulator, load_external_solver
+
+    (tmp_path / "spawner.py").write_text(
+        "import pathlib, subprocess, sys, time\n"
+        "child = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(60)'])\n"
+        "pathlib.Path(sys.argv[1], 'child.pid').write_text(str(child.pid))\n"
+        "time.sleep(60)\n"
+    )
+    (tmp_path / "p.tmpl").write_text("mu = ${mu_d_BePa}\n")
+    (tmp_path / "solver.yaml").write_text(
+        yaml.safe_dump(
+            {
+                "name": "spawner",
+                "command": ["python3", "${solver_dir}/spawner.py", "${workdir}"],
+                "template": "p.tmpl",
+                "timeout": 2,
+            }
+        )
+    )
+    sim = ExternalSimulator(load_external_solver(tmp_path / "solver.yaml"), tmp_path / "w")
+    result = sim.run(defaults_si("rigid"), TestCase("E1", "KPBW", 1))
+    assert result.status is SimStatus.TIMEOUT
+    child = int((Path(result.diagnostics["workdir"]) / "child.pid").read_text())
+    assert not _gone([child], timeout=5)
