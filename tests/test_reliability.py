@@ -4,6 +4,7 @@ read-only study stores."""
 import contextlib
 import html
 import os
+import re
 import sqlite3
 import time
 from pathlib import Path
@@ -388,3 +389,126 @@ def test_a_timed_out_solver_is_killed_with_its_children(tmp_path):
     assert result.status is SimStatus.TIMEOUT
     child = int((Path(result.diagnostics["workdir"]) / "child.pid").read_text())
     assert not _gone([child], timeout=5)
+
+
+def test_an_unreachable_scheduler_or_one_without_workers_is_a_clear_error():
+    distributed = pytest.importorskip("distributed")
+    from parcelfit.optimize.executors import DaskExecutor
+
+    from .fake_sim import AnalyticSimulator
+
+    with pytest.raises(ParcelfitError, match="cannot reach the Dask scheduler"):
+        DaskExecutor(AnalyticSimulator(), "tcp://127.0.0.1:9", connect_timeout=1)
+    with (
+        distributed.LocalCluster(n_workers=0, dashboard_address=None, processes=False) as cluster,
+        pytest.raises(ParcelfitError, match="no Dask worker is attached"),
+    ):
+        DaskExecutor(AnalyticSimulator(), cluster.scheduler_address, worker_wait=1)
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_losing_the_dask_scheduler_stops_cleanly_and_the_study_resumes(tmp_path):
+    pytest.importorskip("distributed")
+    import random
+    import signal
+    import subprocess
+    import sys
+
+    from .test_calibration import ROOT, _finished
+
+    study = write_study(
+        tmp_path,
+        parameters={"mu_d_BePa": [0.3, 0.58], "mu_d_MePa": [0.15, 0.35]},
+        budget=16,
+        validation={},
+    )
+    out = tmp_path / "out"
+    env = {**os.environ, "FAKE_SIM_DELAY": "0.3"}
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH")) if p)
+    address = f"tcp://127.0.0.1:{_free_port()}"
+    dask = [sys.executable, "-m", "distributed.cli"]
+    spawned = []
+
+    def start(args):
+        p = subprocess.Popen(
+            args,
+            env=env,
+            cwd=ROOT,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            start_new_session=True,
+        )
+        spawned.append(p)
+        return p
+
+    calibrate = [sys.executable, "-m", "parcelfit", "calibrate", str(study), "--out", str(out)]
+    try:
+        scheduler = start(
+            [
+                *dask[:2],
+                "distributed.cli.dask_scheduler",
+                "--host",
+                "127.0.0.1",
+                "--port",
+                address.rsplit(":", 1)[1],
+                "--no-dashboard",
+            ]
+        )
+        start(
+            [
+                *dask[:2],
+                "distributed.cli.dask_worker",
+                address,
+                "--nworkers",
+                "2",
+                "--nthreads",
+                "1",
+                "--no-dashboard",
+            ]
+        )
+        proc = subprocess.Popen(
+            [*calibrate, "--executor", "dask", "--scheduler", address],
+            cwd=ROOT,
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+            start_new_session=True,
+        )
+        spawned.append(proc)
+        deadline = time.time() + 120
+        while len(_finished(out / "study.sqlite")) < 3 and time.time() < deadline:
+            assert proc.poll() is None, proc.stderr.read()
+            time.sleep(0.05)
+        time.sleep(random.Random(11).uniform(0.0, 0.4))
+        os.killpg(scheduler.pid, signal.SIGKILL)  # the scheduler is lost mid-batch
+        _, err = proc.communicate(timeout=120)
+        assert proc.returncode == 2, err
+        assert "error: lost the Dask scheduler" in err
+        # distributed may log its own reconnection attempts; parcelfit itself does not crash
+        assert not re.search(r'File "[^"]*parcelfit[/\\]', err), err
+    finally:
+        for p in spawned:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(p.pid, signal.SIGKILL)
+    info = study_status(out)
+    assert set(info["by_status"]) <= {"ok", "pending"}  # nothing stored as failed
+    before = _finished(out / "study.sqlite")
+    done = subprocess.run(
+        [*calibrate, "--executor", "local", "--workers", "2"],
+        cwd=ROOT,
+        env={**env, "FAKE_SIM_DELAY": "0"},
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    after = _finished(out / "study.sqlite")
+    assert len(after) == 16 and all(after[k] == v for k, v in before.items())
