@@ -512,3 +512,158 @@ def test_losing_the_dask_scheduler_stops_cleanly_and_the_study_resumes(tmp_path)
     assert done.returncode == 0, done.stderr[-2000:]
     after = _finished(out / "study.sqlite")
     assert len(after) == 16 and all(after[k] == v for k, v in before.items())
+
+
+# -- bad input: one clear line and exit status 2 ------------------------------------------------
+
+
+def _dataset(tmp_path, edit=None, scale_t=1.0):
+    from .fake_sim import write_reference_dataset
+
+    write_reference_dataset(tmp_path / "data", n_runs=3)
+    if scale_t != 1.0:  # times written in milliseconds
+        for f in (tmp_path / "data" / "runs").glob("*.csv"):
+            text = f.read_text().splitlines()
+            rows = [text[0]] + [
+                ",".join([repr(float(r.split(",")[0]) * scale_t), *r.split(",")[1:]])
+                for r in text[1:]
+            ]
+            f.write_text("\n".join(rows) + "\n")
+    if edit is not None:
+        path = tmp_path / "data" / "dataset.yaml"
+        doc = yaml.safe_load(path.read_text())
+        edit(doc)
+        path.write_text(yaml.safe_dump(doc))
+    return ["reference", str(tmp_path / "data")]
+
+
+def _study(tmp_path, **change):
+    return ["calibrate", str(write_study(tmp_path, **change)), "--out", str(tmp_path / "o")]
+
+
+def _study_sim(tmp_path, **sim):
+    simulator = {"backend": "python", "factory": "tests.fake_sim:make", **sim}
+    return _study(tmp_path, simulator=simulator)
+
+
+def _screen(tmp_path, **change):
+    from .fake_sim import write_reference_dataset
+
+    write_reference_dataset(tmp_path / "data", n_runs=3)
+    doc = {
+        "name": "s",
+        "simulator": {"backend": "python", "factory": "tests.fake_sim:make"},
+        "reference": {"dataset": "data", "rig": "R", "consignment": "P", "speed_setting": 1},
+        "parameters": {"mu_d_BePa": [0.3, 0.58], "mu_d_MePa": [0.15, 0.35]},
+        "stages": ["full"],
+        **change,
+    }
+    (tmp_path / "screen.yaml").write_text(yaml.safe_dump(doc))
+    return ["screen", str(tmp_path / "screen.yaml"), "--out", str(tmp_path / "o")]
+
+
+def _not_utf8(tmp_path):
+    (tmp_path / "ds").mkdir()
+    (tmp_path / "ds" / "dataset.yaml").write_bytes("name: caf\u00e9\n".encode("latin-1"))
+    return ["reference", str(tmp_path / "ds")]
+
+
+def _out_is_a_file(tmp_path):
+    args = _study(tmp_path, budget=8)
+    (tmp_path / "o").write_text("not a folder")
+    return args
+
+
+def _report_out_is_a_folder(tmp_path):
+    Store(tmp_path / "study" / "study.sqlite").close()
+    (tmp_path / "folder").mkdir()
+    return ["report", str(tmp_path / "study"), "--out", str(tmp_path / "folder")]
+
+
+def _log_false(tmp_path):
+    bounds = {"mu_d_BePa": {"low": 0.3, "high": 0.6, "log": "false"}, "mu_d_MePa": [0.15, 0.35]}
+    return _study(tmp_path, parameters=bounds)
+
+
+BAD_INPUTS = {
+    "times in milliseconds": (
+        lambda p: _dataset(p, scale_t=1000.0),
+        r"R-P-1-0\.csv: column 't': samples are 16\.67 s apart .* divide by 1000",
+    ),
+    "transit_time 1e300": (
+        lambda p: _dataset(p, lambda d: d["test_cases"][0]["runs"][0].update(transit_time=1e300)),
+        r"runs\[0\]\.transit_time: transit_time must be positive and at most 600 s",
+    ),
+    "dataset.yaml not UTF-8": (
+        _not_utf8,
+        r"dataset\.yaml: not UTF-8 text .*save the file as UTF-8",
+    ),
+    "seed -1": (lambda p: _study(p, seed=-1), r"seed: -1 is out of range"),
+    "seed 1e30": (lambda p: _study(p, seed=1e30), r"seed: .* is out of range"),
+    "workers -1": (
+        lambda p: _study(p, executor={"kind": "local", "workers": -1}),
+        r"executor\.workers: -1 is out of range",
+    ),
+    "workers two": (
+        lambda p: _study(p, executor={"kind": "local", "workers": "two"}),
+        r"executor\.workers: expected a whole number, got 'two'",
+    ),
+    "timestep fast": (
+        lambda p: _study_sim(p, timestep="fast"),
+        r"simulator\.timestep: expected a number in s, got 'fast'",
+    ),
+    "screen string bounds": (
+        lambda p: _screen(p, parameters={"mu_d_BePa": ["a", "b"], "mu_d_MePa": [0.15, 0.35]}),
+        r"parameters\.mu_d_BePa: expected \[low, high\] with low < high, got \['a', 'b'\]",
+    ),
+    "screen fixed big": (
+        lambda p: _screen(p, fixed={"E_Pa": "big"}),
+        r"fixed\.E_Pa: expected a number, got 'big'",
+    ),
+    "screen stages 5": (lambda p: _screen(p, stages=5), r"stages: unknown stages \[5\]"),
+    "output folder is a file": (_out_is_a_file, r"/o: the output folder is a file"),
+    "report --out a folder": (_report_out_is_a_folder, r"/folder: the report's path is a folder"),
+    "log 'false'": (_log_false, r"parameters\.mu_d_BePa\.log: expected true or false"),
+    "budget 2.9": (lambda p: _study(p, budget=2.9), r"budget: expected a whole number, got 2\.9"),
+    "batch size 2.7": (
+        lambda p: _study(p, batch_size=2.7),
+        r"batch_size: expected a whole number, got 2\.7",
+    ),
+    "speed setting 1.9": (
+        lambda p: _study(
+            p, reference={"dataset": "data", "rig": "R", "consignment": "P", "speed_setting": 1.9}
+        ),
+        r"reference\.speed_setting: expected a whole number, got 1\.9",
+    ),
+    "weights 0/0": (
+        lambda p: _study(p, weights={"xy": 0, "theta": 0}),
+        r"weights: both weights are zero",
+    ),
+    "screen executor slurm": (
+        lambda p: _screen(p, executor={"kind": "slurm"}),
+        r"executor\.kind: unknown executor 'slurm'.*use one of local",
+    ),
+    "screen without a name": (
+        lambda p: _screen(p, name=["x"]),
+        r"name: expected a non-empty text",
+    ),
+    "screen unknown soft_content": (
+        lambda p: _screen(p, soft_content=["E_Cox"]),
+        r"soft_content\[0\]: unknown parameter 'E_Cox'.*did you mean 'E_Co'",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_INPUTS))
+def test_bad_input_stops_with_one_clear_line_and_status_2(tmp_path, case):
+    make, pattern = BAD_INPUTS[case]
+    args = make(tmp_path)
+    t0 = time.perf_counter()
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2, (result.output, result.exception)
+    assert time.perf_counter() - t0 < 30  # stops at once, never after simulating
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: "), result.output
+    assert re.search(pattern, lines[0]), lines[0]
+    assert not (tmp_path / "o").is_dir() or not any((tmp_path / "o").rglob("*.csv"))
+    assert not list(tmp_path.rglob("*.tmp"))  # nothing half-written left behind

@@ -150,7 +150,7 @@ def demo(
         bool, typer.Option("--full", help="The full published protocol (slower).")
     ] = False,
     workers: Annotated[
-        int | None, typer.Option(help="Worker processes (default: one per core).")
+        int | None, typer.Option(min=1, help="Worker processes (default: one per core).")
     ] = None,
     animation: Annotated[
         bool, typer.Option(help="Embed an animation of the simulated run in the report.")
@@ -618,7 +618,7 @@ def calibrate(
         str | None, typer.Option(help="Dask scheduler address, e.g. tcp://HOST:8786.")
     ] = None,
     workers: Annotated[
-        int | None, typer.Option(help="Local worker processes (default: one per core).")
+        int | None, typer.Option(min=1, help="Local worker processes (default: one per core).")
     ] = None,
 ) -> None:
     """Calibrate by batch Bayesian optimisation; rerunning the same command resumes the study."""
@@ -640,9 +640,11 @@ def _calibrate_live(
     """Run a calibration with a live status table, print the best parameters, write figures."""
     from rich.live import Live
 
-    from parcelfit.optimize.calibration import Calibration
+    from parcelfit.optimize.calibration import STORE_FILE, Calibration
     from parcelfit.optimize.calibration import Progress as CalibrationProgress
+    from parcelfit.optimize.folderlock import check_writable
 
+    check_writable(folder, (STORE_FILE,))  # before the live display starts
     state: dict[str, CalibrationProgress | None] = {"p": None}
 
     def render() -> Table:
@@ -721,7 +723,7 @@ def screen(
         Path | None, typer.Option(help="Screen folder (default: next to the file, named after it).")
     ] = None,
     workers: Annotated[
-        int | None, typer.Option(help="Local worker processes (default: one per core).")
+        int | None, typer.Option(min=1, help="Local worker processes (default: one per core).")
     ] = None,
 ) -> None:
     """Screen parameters: fractional -> full factorial designs, effects, Pareto charts, a selection."""

@@ -38,6 +38,7 @@ from parcelfit.runs.regions import Box, Polygon, Region, parse_region
 from parcelfit.runs.run import Run, TestCase
 
 DATASET_FILE = "dataset.yaml"
+MAX_TRANSIT_TIME_S = 600.0  # a parcel crosses a test rig in seconds; more is a unit mistake
 _TOP_KEYS = ("name", "description", "synthetic", "test_cases")
 _CASE_KEYS = ("rig", "consignment", "speed_setting", "regions", "margin", "runs")
 _RUN_KEYS = ("id", "file", "transit_time")
@@ -196,12 +197,12 @@ def load_dataset(folder: str | Path) -> Dataset:
                 allow_none=True,
                 unit="s",
             )
-            if transit is not None and transit <= 0:
+            if transit is not None and not 0 < transit <= MAX_TRANSIT_TIME_S:
                 raise ParcelfitError(
-                    f"transit_time must be positive, got {transit}",
+                    f"transit_time must be positive and at most {MAX_TRANSIT_TIME_S:g} s, got {transit:g}",
                     file=file,
                     where=f"{rwhere}.transit_time",
-                    fix="give seconds, or null",
+                    fix="give seconds (divide milliseconds by 1000), or null",
                 )
             traj_path = _run_file(root, get_str(run_doc, "file", file=file, where=rwhere))
             if traj_path is None:
