@@ -667,3 +667,18 @@ def test_bad_input_stops_with_one_clear_line_and_status_2(tmp_path, case):
     assert re.search(pattern, lines[0]), lines[0]
     assert not (tmp_path / "o").is_dir() or not any((tmp_path / "o").rglob("*.csv"))
     assert not list(tmp_path.rglob("*.tmp"))  # nothing half-written left behind
+
+
+def test_evaluations_once_stored_failed_by_a_lost_worker_run_again(tmp_path):
+    study = load_study(write_study(tmp_path, budget=8, validation={}))
+    Calibration(study, tmp_path / "out").run()
+    con = sqlite3.connect(tmp_path / "out" / "study.sqlite", isolation_level=None)
+    lost = '{"message": "worker failed: BrokenProcessPool(\'A child process terminated\')"}'
+    con.execute(
+        "UPDATE evaluations SET status = 'failed', cost = NULL, details = ? WHERE id IN (2, 5)",
+        (lost,),
+    )
+    con.close()
+    assert study_status(tmp_path / "out")["by_status"] == {"failed": 2, "ok": 6}
+    Calibration(study, tmp_path / "out").run()
+    assert study_status(tmp_path / "out")["by_status"] == {"ok": 8}

@@ -29,6 +29,11 @@ from parcelfit.runs import TestCase, load_dataset, write_trajectory
 from parcelfit.sim.protocol import SimResult, Simulator
 
 STORE_FILE = "study.sqlite"
+LOST_WORKER_MESSAGES = (
+    "worker failed: BrokenProcessPool",
+    "dask task failed: FutureCancelledError",
+    "dask task failed: CancelledError",
+)
 
 
 @dataclass(frozen=True)
@@ -360,6 +365,16 @@ class Calibration:
 
     def _run(self) -> CalibrationResult:
         study = self.study
+        # evaluations an earlier version stored as failed because their worker or the Dask
+        # scheduler was lost (not because the simulation failed) are run again
+        lost = [
+            r.id
+            for r in self.store.evaluations()
+            if r.status == "failed"
+            and str(r.details.get("message", "")).startswith(LOST_WORKER_MESSAGES)
+        ]
+        if lost:
+            self.store.reopen(lost)
         rows = self.store.evaluations("fit")
         for r in rows:  # replay: the optimiser learns every finished evaluation again
             if r.status != "pending":

@@ -251,6 +251,17 @@ class Store:
             if cur.rowcount != 1:
                 raise ParcelfitError(f"no evaluation with id {row_id} in {self.path}")
 
+    def reopen(self, row_ids: Sequence[int]) -> None:
+        """Make finished evaluations pending again (one transaction), so they run on resume."""
+        with self._transaction() as db:
+            for row_id in row_ids:
+                db.execute(
+                    "UPDATE evaluations SET status = 'pending', cost = NULL, dtw_xy = NULL, "
+                    "dtw_theta = NULL, transit_time = NULL, wall_time = NULL, finished_at = NULL, "
+                    "run_file = NULL, details = NULL WHERE id = ?",
+                    (row_id,),
+                )
+
     def evaluations(self, kind: str | None = None) -> list[Evaluation]:
         """All evaluations (of one kind), in the order they were asked."""
         sql = "SELECT * FROM evaluations" + (" WHERE kind = ?" if kind else "") + " ORDER BY id"
