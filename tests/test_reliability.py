@@ -108,27 +108,44 @@ def test_a_bracketed_word_in_a_message_does_not_vanish(tmp_path):
     assert "expected [low, high] or {low, high, log}" in result.output
 
 
-def test_an_empty_store_is_damaged_not_a_new_study(tmp_path):
-    study = load_study(write_study(tmp_path, budget=8, validation={}))
-    Calibration(study, tmp_path / "out").run()
-    runs = sorted((tmp_path / "out" / "runs").iterdir())
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory):
+    """A small finished study (8 fitting runs, validations at iterations 1 and 2)."""
+    root = tmp_path_factory.mktemp("finished")
+    study = write_study(
+        root, initial=4, batch_size=2, budget=8, validation={"speed_setting": 2, "every": 1}
+    )
+    Calibration(load_study(study), root / "out").run()
+    return root
+
+
+def _copy(finished, tmp_path):
+    """A private copy of the finished study: (study, its folder)."""
+    import shutil
+
+    shutil.copytree(finished, tmp_path / "s")
+    return load_study(tmp_path / "s" / "study.yaml"), tmp_path / "s" / "out"
+
+
+def test_an_empty_store_is_damaged_not_a_new_study(finished, tmp_path):
+    study, out = _copy(finished, tmp_path)
+    runs = sorted((out / "runs").iterdir())
     stamps = [p.stat().st_mtime_ns for p in runs]
-    (tmp_path / "out" / "study.sqlite").write_bytes(b"")  # truncated to 0 bytes
+    (out / "study.sqlite").write_bytes(b"")  # truncated to 0 bytes
     with pytest.raises(ParcelfitError, match=r"empty \(0 bytes\)"):
-        Calibration(study, tmp_path / "out")
-    result = runner.invoke(app, ["status", str(tmp_path / "out")])
+        Calibration(study, out)
+    result = runner.invoke(app, ["status", str(out)])
     assert result.exit_code == 2 and "empty (0 bytes)" in result.output
-    assert (tmp_path / "out" / "study.sqlite").stat().st_size == 0  # nothing written into it
+    assert (out / "study.sqlite").stat().st_size == 0  # nothing written into it
     assert [p.stat().st_mtime_ns for p in runs] == stamps  # runs/ untouched
 
 
-def test_status_and_report_open_the_store_read_only(tmp_path):
-    study = load_study(write_study(tmp_path, budget=8, validation={}))
-    Calibration(study, tmp_path / "out").run()
-    db = tmp_path / "out" / "study.sqlite"
+def test_status_and_report_open_the_store_read_only(finished, tmp_path):
+    _, out = _copy(finished, tmp_path)
+    db = out / "study.sqlite"
     before = db.read_bytes()
-    info = study_status(tmp_path / "out")
-    build_report(tmp_path / "out", out=tmp_path / "r.html", key_frames=False)
+    info = study_status(out)
+    build_report(out, out=tmp_path / "r.html", key_frames=False)
     assert info["evaluations"] == 8 and db.read_bytes() == before
     ro = Store(db, readonly=True)
     with pytest.raises(ParcelfitError, match="read-only"):
@@ -157,13 +174,13 @@ def test_a_foreign_sqlite_file_is_not_read_as_a_study(tmp_path):
     )
 
 
-def test_a_second_calibration_on_the_same_folder_is_refused(tmp_path):
-    study = load_study(write_study(tmp_path, budget=8, validation={}))
-    first = Calibration(study, tmp_path / "out")
+def test_a_second_calibration_on_the_same_folder_is_refused(finished, tmp_path):
+    study, out = _copy(finished, tmp_path)
+    first = Calibration(study, out)
     with pytest.raises(ParcelfitError, match="another parcelfit process is running a calibration"):
-        Calibration(study, tmp_path / "out")
+        Calibration(study, out)
     first.run()  # releases the folder when it ends
-    again = Calibration(study, tmp_path / "out").run()
+    again = Calibration(study, out).run()
     assert again.evaluations == 8
 
 
@@ -235,12 +252,10 @@ def test_a_line_break_in_a_name_cannot_add_lines_to_a_solver_parameter_file(tmp_
     assert not list(tmp_path.glob("*/params.txt"))  # nothing was written, nothing ran
 
 
-def test_a_validation_killed_midway_is_run_again_on_resume(tmp_path):
-    study = load_study(write_study(tmp_path))
-    first = Calibration(study, tmp_path / "out").run()
-    assert first.stop_reason == "validation passed"
-    db = tmp_path / "out" / "study.sqlite"
-    con = sqlite3.connect(db, isolation_level=None)
+def test_a_validation_killed_midway_is_run_again_on_resume(finished, tmp_path):
+    study, out = _copy(finished, tmp_path)
+    first = study_status(out)
+    con = sqlite3.connect(out / "study.sqlite", isolation_level=None)
     (last,) = con.execute("SELECT max(id) FROM evaluations WHERE kind = 'validation'").fetchone()
     # the state a kill during that validation leaves: its row pending, no run file, no stop
     con.execute(
@@ -250,12 +265,11 @@ def test_a_validation_killed_midway_is_run_again_on_resume(tmp_path):
     )
     con.execute("DELETE FROM meta WHERE key = 'stop_reason'")
     con.close()
-    again = Calibration(study, tmp_path / "out").run()
-    assert again.stop_reason == "validation passed"
-    assert again.evaluations == first.evaluations  # no extra fitting runs
-    info = study_status(tmp_path / "out")
-    assert [v["status"] for v in info["validations"]][-1] == "ok"
-    assert info["validations"][-1]["passed"] is True
+    again = Calibration(study, out).run()
+    info = study_status(out)
+    assert again.evaluations == first["evaluations"] == 8  # no extra fitting runs
+    assert info["validations"] == first["validations"]  # simulated again, same verdict
+    assert info["validations"][-1]["status"] == "ok" and info["stop_reason"] is not None
 
 
 def test_a_dying_local_worker_costs_time_not_results(tmp_path):
@@ -669,16 +683,33 @@ def test_bad_input_stops_with_one_clear_line_and_status_2(tmp_path, case):
     assert not list(tmp_path.rglob("*.tmp"))  # nothing half-written left behind
 
 
-def test_evaluations_once_stored_failed_by_a_lost_worker_run_again(tmp_path):
-    study = load_study(write_study(tmp_path, budget=8, validation={}))
-    Calibration(study, tmp_path / "out").run()
-    con = sqlite3.connect(tmp_path / "out" / "study.sqlite", isolation_level=None)
+def test_evaluations_once_stored_failed_by_a_lost_worker_run_again(finished, tmp_path):
+    study, out = _copy(finished, tmp_path)
+    con = sqlite3.connect(out / "study.sqlite", isolation_level=None)
     lost = '{"message": "worker failed: BrokenProcessPool(\'A child process terminated\')"}'
     con.execute(
-        "UPDATE evaluations SET status = 'failed', cost = NULL, details = ? WHERE id IN (2, 5)",
+        "UPDATE evaluations SET status = 'failed', cost = NULL, details = ? "
+        "WHERE kind = 'fit' AND slot IN (1, 2) AND iteration = 0",
         (lost,),
     )
     con.close()
-    assert study_status(tmp_path / "out")["by_status"] == {"failed": 2, "ok": 6}
-    Calibration(study, tmp_path / "out").run()
-    assert study_status(tmp_path / "out")["by_status"] == {"ok": 8}
+    assert study_status(out)["by_status"] == {"failed": 2, "ok": 6}
+    Calibration(study, out).run()
+    assert study_status(out)["by_status"] == {"ok": 8}
+
+
+def test_calibrate_on_a_read_only_folder_says_so_and_keeps_the_results(
+    finished, tmp_path, monkeypatch
+):
+    _, out = _copy(finished, tmp_path)
+    before = (out / "study.sqlite").read_bytes()
+    writable = os.access
+    monkeypatch.setattr(
+        os, "access", lambda p, mode: False if mode == os.W_OK else writable(p, mode)
+    )
+    result = runner.invoke(
+        app, ["calibrate", str(tmp_path / "s" / "study.yaml"), "--out", str(out)]
+    )
+    assert result.exit_code == 2
+    assert "read-only" in result.output and "results already in it are intact" in result.output
+    assert "move" not in result.output and (out / "study.sqlite").read_bytes() == before

@@ -389,6 +389,8 @@ class Calibration:
                 return self._result("validation passed")
         pending = [r for r in rows if r.status == "pending"]
         iteration = max((r.iteration for r in rows), default=-1)
+        if (self._executor_args[0] or study.executor.get("kind")) == "dask":
+            self._report(iteration, 0, "connecting to the Dask scheduler, waiting for a worker")
         executor = _executor(study, self.simulator, *self._executor_args)
         try:
             # a validation interrupted by a kill is run again before anything else
