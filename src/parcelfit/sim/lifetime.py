@@ -28,11 +28,18 @@ PR_SET_PDEATHSIG = 1  # from <linux/prctl.h>
 _groups: set[int] = set()  # process groups of the solvers this process is running
 
 
+def _kill_group(pgid: int) -> None:
+    with contextlib.suppress(ProcessLookupError, PermissionError):
+        if hasattr(os, "killpg"):
+            os.killpg(pgid, signal.SIGKILL)
+        else:  # Windows has no process groups to signal; the solver itself is killed
+            os.kill(pgid, signal.SIGTERM)
+
+
 def kill_groups() -> None:
     """SIGKILL every solver process group this process started and that is still running."""
     for pgid in list(_groups):
-        with contextlib.suppress(ProcessLookupError, PermissionError):
-            os.killpg(pgid, signal.SIGKILL)
+        _kill_group(pgid)
         _groups.discard(pgid)
 
 
@@ -80,13 +87,11 @@ def run_command(
         try:
             out, err = proc.communicate(timeout=timeout)
         except subprocess.TimeoutExpired:
-            with contextlib.suppress(ProcessLookupError, PermissionError):
-                os.killpg(proc.pid, signal.SIGKILL)
+            _kill_group(proc.pid)
+            proc.kill()
             proc.communicate()
             raise
-        # children the solver left behind die with it
-        with contextlib.suppress(ProcessLookupError, PermissionError):
-            os.killpg(proc.pid, signal.SIGKILL)
+        _kill_group(proc.pid)  # children the solver left behind die with it
     finally:
         _groups.discard(proc.pid)
         if proc.poll() is None:
