@@ -3,12 +3,14 @@
 A parcel moves along x at the speed setting's belt speed; its lateral drift is set by
 mu_d_BePa and its turn by mu_d_MePa, so both are identifiable from the trajectory. Environment:
 FAKE_SIM_DELAY [s] sleeps per simulation (for kill tests); FAKE_SIM_LOG appends each run id
-when its simulation starts.
+when its simulation starts; FAKE_SIM_CRASH_ONCE names a file: the first simulation to find it
+missing creates it and kills its own process with SIGKILL (a worker dying mid-simulation).
 """
 
 from __future__ import annotations
 
 import os
+import signal
 import time
 from collections.abc import Mapping
 
@@ -40,9 +42,12 @@ def trajectory(
 class AnalyticSimulator:
     """Implements the Simulator protocol with `trajectory`."""
 
-    def __init__(self, delay: float = 0.0, log: str | None = None) -> None:
+    def __init__(
+        self, delay: float = 0.0, log: str | None = None, crash_once: str | None = None
+    ) -> None:
         self.delay = delay
         self.log = log
+        self.crash_once = crash_once
 
     def run(
         self, params: Mapping[str, float], case: TestCase, run_id: str | None = None
@@ -53,6 +58,13 @@ class AnalyticSimulator:
                 fh.write(f"{run_id}\n")
         if self.delay:
             time.sleep(self.delay)
+        if self.crash_once:
+            try:
+                open(self.crash_once, "x").close()
+            except FileExistsError:
+                pass
+            else:
+                os.kill(os.getpid(), signal.SIGKILL)
         if params["mu_d_BePa"] > 0.59:  # a region where "the solver" fails
             return SimResult(
                 None, SimStatus.UNSTABLE, time.perf_counter() - t0, {"message": "diverged"}
@@ -66,7 +78,9 @@ class AnalyticSimulator:
 def make() -> AnalyticSimulator:
     """Factory named in study files (tests.fake_sim:make)."""
     return AnalyticSimulator(
-        float(os.environ.get("FAKE_SIM_DELAY", "0")), os.environ.get("FAKE_SIM_LOG")
+        float(os.environ.get("FAKE_SIM_DELAY", "0")),
+        os.environ.get("FAKE_SIM_LOG"),
+        os.environ.get("FAKE_SIM_CRASH_ONCE"),
     )
 
 

@@ -12,8 +12,10 @@ from typing import Annotated, Any, TypeVar
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.progress import Progress, TimeElapsedColumn
 from rich.table import Table
+from rich.text import Text
 
 from parcelfit import __version__
 from parcelfit.errors import ParcelfitError
@@ -38,7 +40,9 @@ def friendly_errors(func: F) -> F:
         try:
             return func(*args, **kwargs)
         except ParcelfitError as exc:
-            err_console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+            # user text (paths, keys, run ids) is printed as it is, never read as Rich markup
+            message = Text.assemble(("error:", "bold red"), " ", str(exc))
+            err_console.print(message, highlight=False, soft_wrap=True)
             raise typer.Exit(code=2) from None
 
     return wrapper  # type: ignore[return-value]
@@ -70,7 +74,7 @@ def reference(
         return
     for sel in selections.values():
         table = Table(
-            title=f"{sel.case.label}: reference run [bold]{sel.reference_id}[/]",
+            title=f"{escape(sel.case.label)}: reference run [bold]{escape(sel.reference_id)}[/]",
             title_justify="left",
         )
         table.add_column("run")
@@ -106,7 +110,7 @@ def stats(
     result = transit_statistics(load_dataset(dataset), out, alpha=alpha, family=family)
     _print_tests(result.tests)
     for f in result.files:
-        console.print(f"wrote {f}")
+        console.print(Text(f"wrote {f}"))
 
 
 def _print_tests(tests: Any) -> None:
@@ -146,7 +150,7 @@ def demo(
         bool, typer.Option("--full", help="The full published protocol (slower).")
     ] = False,
     workers: Annotated[
-        int | None, typer.Option(help="Worker processes (default: one per core).")
+        int | None, typer.Option(min=1, help="Worker processes (default: one per core).")
     ] = None,
     animation: Annotated[
         bool, typer.Option(help="Embed an animation of the simulated run in the report.")
@@ -214,7 +218,7 @@ def demo(
             out, animation=animation, progress=lambda m: status_line.update(f"report: {m}")
         )
     minutes = (time.perf_counter() - t0) / 60
-    console.print(f"[bold green]report:[/] {report.resolve()}")
+    console.print(f"[bold green]report:[/] {escape(str(report.resolve()))}")
     console.print(f"[bold]verdict:[/] {verdict_text(out)} ({minutes:.1f} min)")
 
 
@@ -249,7 +253,7 @@ def report(
             animation=animation,
             progress=lambda m: status_line.update(f"report: {m}"),
         )
-    console.print(f"[bold green]report:[/] {path.resolve()}")
+    console.print(f"[bold green]report:[/] {escape(str(path.resolve()))}")
     console.print(f"[bold]verdict:[/] {verdict_text(folder)}")
 
 
@@ -276,7 +280,7 @@ def synth(
 
         def step(message: str) -> None:
             bar.advance(task)
-            bar.console.print(f"  {message}", highlight=False)
+            bar.console.print(Text(f"  {message}"), highlight=False)
 
         path = make_twin_dataset(
             out,
@@ -288,7 +292,8 @@ def synth(
             workers=workers,
             progress=step,
         )
-    console.print(f"[green]done[/]: {path} and {path.parent / 'truth.yaml'}")
+    truth_file = path.parent / "truth.yaml"
+    console.print(f"[green]done[/]: {escape(str(path))} and {escape(str(truth_file))}")
 
 
 def _frame_bar() -> Progress:
@@ -546,12 +551,12 @@ def simulate(
         console.print(
             f"transit time: {'not measured (a light barrier was not crossed)' if tt is None else f'{tt:.4f} s'}"
         )
-        console.print(f"wrote {write_trajectory(result.run.trajectory, out)}")
+        console.print(Text(f"wrote {write_trajectory(result.run.trajectory, out)}"))
     if video is not None and frames is not None:
         from parcelfit.sim.mujoco.render import animate_run
 
         with console.status("rendering the animation"):
-            console.print(f"wrote {animate_run(rig_obj, frames, video, title=case.label)}")
+            console.print(Text(f"wrote {animate_run(rig_obj, frames, video, title=case.label)}"))
     if not result.ok:
         raise typer.Exit(code=1)
 
@@ -717,7 +722,7 @@ def calibrate(
         str | None, typer.Option(help="Dask scheduler address, e.g. tcp://HOST:8786.")
     ] = None,
     workers: Annotated[
-        int | None, typer.Option(help="Local worker processes (default: one per core).")
+        int | None, typer.Option(min=1, help="Local worker processes (default: one per core).")
     ] = None,
 ) -> None:
     """Calibrate by batch Bayesian optimisation; rerunning the same command resumes the study."""
@@ -739,15 +744,19 @@ def _calibrate_live(
     """Run a calibration with a live status table, print the best parameters, write figures."""
     from rich.live import Live
 
-    from parcelfit.optimize.calibration import Calibration
+    from parcelfit.optimize.calibration import STORE_FILE, Calibration
     from parcelfit.optimize.calibration import Progress as CalibrationProgress
+    from parcelfit.optimize.folderlock import check_writable
 
+    check_writable(folder, (STORE_FILE,))  # before the live display starts
     state: dict[str, CalibrationProgress | None] = {"p": None}
 
     def render() -> Table:
         p = state["p"]
         table = Table(
-            title=f"calibration {study.name} -> {folder}", title_justify="left", show_header=False
+            title=Text(f"calibration {study.name} -> {folder}"),
+            title_justify="left",
+            show_header=False,
         )
         table.add_column(style="bold")
         table.add_column()
@@ -761,7 +770,7 @@ def _calibrate_live(
         table.add_row("evaluations", f"{p.done} done, {p.running} running, budget {p.budget}")
         table.add_row("best cost", "-" if p.best_cost is None else f"{p.best_cost:.4g}")
         table.add_row("last validation", verdict)
-        table.add_row("last event", p.message)
+        table.add_row("last event", Text(p.message))
         return table
 
     with Live(render(), console=console, refresh_per_second=4, transient=False) as live:
@@ -781,7 +790,7 @@ def _calibrate_live(
     console.print()
     console.print(
         f"[bold]{result.stop_reason}[/] after {result.evaluations} evaluations in "
-        f"{result.iterations} iterations; study folder {result.folder}"
+        f"{result.iterations} iterations; study folder {escape(str(result.folder))}"
     )
     if result.best_params is not None:
         _print_params(result.best_params, result.best_cost)
@@ -789,7 +798,9 @@ def _calibrate_live(
 
     with console.status("figures"):
         figures = study_figures(folder)
-    console.print(f"figures in {folder / 'figures'} ({len(figures) // 2} figures, PNG and SVG)")
+    console.print(
+        Text(f"figures in {folder / 'figures'} ({len(figures) // 2} figures, PNG and SVG)")
+    )
     return result
 
 
@@ -816,7 +827,7 @@ def screen(
         Path | None, typer.Option(help="Screen folder (default: next to the file, named after it).")
     ] = None,
     workers: Annotated[
-        int | None, typer.Option(help="Local worker processes (default: one per core).")
+        int | None, typer.Option(min=1, help="Local worker processes (default: one per core).")
     ] = None,
 ) -> None:
     """Screen parameters: fractional -> full factorial designs, effects, Pareto charts, a selection."""
@@ -829,7 +840,7 @@ def screen(
             spec, folder, workers=workers, on_event=lambda m: status_line.update(m)
         )
     _print_screen(stages, selection)
-    console.print(f"results in {folder} (selection.yaml, stageN-effects.csv, Pareto charts)")
+    console.print(Text(f"results in {folder} (selection.yaml, stageN-effects.csv, Pareto charts)"))
 
 
 def _print_screen(stages: Any, selection: dict[str, Any]) -> None:
@@ -873,9 +884,9 @@ def status(
         return
     name = (info["study"] or {}).get("name", "?")
     console.print(
-        f"[bold]{name}[/]: {info['evaluations']} evaluations ({info['by_status']}), "
-        f"{info['iterations']} iterations, reference run {info['reference_run']}, "
-        f"stopped: {info['stop_reason'] or 'not yet'}"
+        f"[bold]{escape(str(name))}[/]: {info['evaluations']} evaluations ({info['by_status']}), "
+        f"{info['iterations']} iterations, reference run {escape(str(info['reference_run']))}, "
+        f"stopped: {escape(str(info['stop_reason'] or 'not yet'))}"
     )
     for v in info["validations"]:
         console.print(

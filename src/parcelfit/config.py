@@ -25,6 +25,18 @@ def load_yaml(path: str | Path) -> Any:
     try:
         with path.open(encoding="utf-8") as fh:
             return yaml.safe_load(fh)
+    except UnicodeDecodeError as exc:
+        raise ParcelfitError(
+            f"not UTF-8 text (byte {exc.start}: {exc.object[exc.start : exc.start + 1]!r})",
+            file=path,
+            fix="save the file as UTF-8",
+        ) from None
+    except OSError as exc:
+        raise ParcelfitError(
+            f"cannot read the file ({exc.strerror or exc})",
+            file=path,
+            fix="check that it is a readable file",
+        ) from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else None
@@ -114,6 +126,51 @@ def get_number(
             fix="use a value inside that range",
         )
     return float(value)
+
+
+def get_int(
+    mapping: Mapping[str, Any],
+    key: str,
+    *,
+    file: str | Path | None,
+    where: str,
+    default: int | None = None,
+    minimum: int | None = None,
+    maximum: int | None = None,
+) -> int:
+    """Read a whole number (optionally bounded); 2.9 or "two" is an error, never truncated."""
+    value = mapping.get(key, default)
+    label = f"{where}.{key}" if where else key
+    if isinstance(value, float) and value.is_integer():
+        value = int(value)
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ParcelfitError(
+            f"expected a whole number, got {value!r}",
+            file=file,
+            where=label,
+            fix="write a whole number such as 4",
+        )
+    if (minimum is not None and value < minimum) or (maximum is not None and value > maximum):
+        bounds = f"at least {minimum}" if maximum is None else f"in [{minimum}, {maximum}]"
+        raise ParcelfitError(
+            f"{value} is out of range", file=file, where=label, fix=f"use a whole number {bounds}"
+        )
+    return value
+
+
+def get_bool(
+    mapping: Mapping[str, Any], key: str, *, file: str | Path | None, where: str, default: bool
+) -> bool:
+    """Read true or false; a text such as "false" is an error, never read as true."""
+    value = mapping.get(key, default)
+    if not isinstance(value, bool):
+        raise ParcelfitError(
+            f"expected true or false, got {value!r}",
+            file=file,
+            where=f"{where}.{key}" if where else key,
+            fix="write true or false without quotes",
+        )
+    return value
 
 
 def get_choice(

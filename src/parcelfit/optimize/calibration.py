@@ -22,12 +22,18 @@ from parcelfit.errors import ParcelfitError
 from parcelfit.metrics import ReferenceSelection, calibration_cost, select_reference, validate
 from parcelfit.optimize.bo import BatchBO
 from parcelfit.optimize.executors import DaskExecutor, LocalExecutor, Task
+from parcelfit.optimize.folderlock import check_writable, lock_folder
 from parcelfit.optimize.store import Evaluation, Store
 from parcelfit.optimize.study import Study
 from parcelfit.runs import TestCase, load_dataset, write_trajectory
 from parcelfit.sim.protocol import SimResult, Simulator
 
 STORE_FILE = "study.sqlite"
+LOST_WORKER_MESSAGES = (
+    "worker failed: BrokenProcessPool",
+    "dask task failed: FutureCancelledError",
+    "dask task failed: CancelledError",
+)
 
 
 @dataclass(frozen=True)
@@ -158,7 +164,16 @@ class Calibration:
     ) -> None:
         self.study = study
         self.folder = Path(folder)
-        self.folder.mkdir(parents=True, exist_ok=True)
+        check_writable(self.folder, (STORE_FILE,))
+        try:
+            self.folder.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise ParcelfitError(
+                f"cannot create the study folder ({exc.strerror or exc})",
+                file=self.folder,
+                fix="choose a writable output folder",
+            ) from None
+        self._lock = lock_folder(self.folder, "a calibration")  # released by close()
         self.store = Store(self.folder / STORE_FILE)
         known = self.store.get_meta("fingerprint")
         if known is not None and known != study.fingerprint:
@@ -212,6 +227,11 @@ class Calibration:
         self.on_progress = on_progress or (lambda p: None)
         self.last_validation: bool | None = None
 
+    def close(self) -> None:
+        """Close the store and release the folder's lock (`run` does this when it ends)."""
+        self.store.close()
+        self._lock.release()
+
     # -- helpers -----------------------------------------------------------------------------
     def _full_params(self, fitted: Mapping[str, float]) -> dict[str, float]:
         return {**self.study.fixed, **fitted}
@@ -262,6 +282,17 @@ class Calibration:
         (row_id,) = self.store.add_pending(
             "validation", iteration, [params], self.val_case.speed_setting, [0]
         )
+        return self._run_validation(row_id, iteration, params, executor)
+
+    def _run_validation(
+        self,
+        row_id: int,
+        iteration: int,
+        params: Mapping[str, float],
+        executor: LocalExecutor | DaskExecutor,
+    ) -> bool:
+        """Simulate a stored (pending) validation row and record its verdict."""
+        assert self.val_case is not None and self.val_reference is not None
         task = Task(self._full_params(params), self.val_case, f"validation-{iteration:03d}")
         ((_, result),) = list(executor.run([task]))
         details: dict[str, Any] = {"message": result.diagnostics.get("message")}
@@ -325,8 +356,25 @@ class Calibration:
 
     # -- the loop ----------------------------------------------------------------------------
     def run(self) -> CalibrationResult:
-        """Run (or resume) the study until validation passes or the budget is spent."""
+        """Run (or resume) the study until validation passes or the budget is spent; then close
+        the store and release the folder."""
+        try:
+            return self._run()
+        finally:
+            self.close()
+
+    def _run(self) -> CalibrationResult:
         study = self.study
+        # evaluations an earlier version stored as failed because their worker or the Dask
+        # scheduler was lost (not because the simulation failed) are run again
+        lost = [
+            r.id
+            for r in self.store.evaluations()
+            if r.status == "failed"
+            and str(r.details.get("message", "")).startswith(LOST_WORKER_MESSAGES)
+        ]
+        if lost:
+            self.store.reopen(lost)
         rows = self.store.evaluations("fit")
         for r in rows:  # replay: the optimiser learns every finished evaluation again
             if r.status != "pending":
@@ -341,8 +389,18 @@ class Calibration:
                 return self._result("validation passed")
         pending = [r for r in rows if r.status == "pending"]
         iteration = max((r.iteration for r in rows), default=-1)
+        if (self._executor_args[0] or study.executor.get("kind")) == "dask":
+            self._report(iteration, 0, "connecting to the Dask scheduler, waiting for a worker")
         executor = _executor(study, self.simulator, *self._executor_args)
         try:
+            # a validation interrupted by a kill is run again before anything else
+            for v in stored:
+                if v.status == "pending" and self.val_case is not None:
+                    self._report(
+                        v.iteration, 1, f"resuming the validation at iteration {v.iteration}"
+                    )
+                    if self._run_validation(v.id, v.iteration, v.params, executor):
+                        return self._result("validation passed")
             while True:
                 if pending:
                     self._report(
@@ -408,7 +466,7 @@ def study_status(folder: str | Path) -> dict[str, Any]:
         raise ParcelfitError(
             f"no {STORE_FILE} here", file=folder, fix="point at a study's output folder"
         )
-    store = Store(path)
+    store = Store(path, readonly=True)
     fits = store.evaluations("fit")
     ok = [e for e in fits if e.status == "ok" and e.cost is not None and math.isfinite(e.cost)]
     best = min(ok, key=lambda e: e.cost) if ok else None  # type: ignore[arg-type, return-value]

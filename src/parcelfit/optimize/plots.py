@@ -193,7 +193,7 @@ def dependence_figure(curves: list[DependenceCurve]) -> Figure:
 
 def study_optimizer(folder: str | Path) -> BatchBO | None:
     """The optimiser of a study folder, told every finished evaluation (None without a study)."""
-    store = Store(Path(folder) / STORE_FILE)
+    store = Store(Path(folder) / STORE_FILE, readonly=True)
     meta = store.get_meta("study") or {}
     fits = store.evaluations("fit")
     store.close()
@@ -217,7 +217,7 @@ def study_optimizer(folder: str | Path) -> BatchBO | None:
 def study_figures(folder: str | Path) -> list[Path]:
     """Write history, traces and partial dependence (PNG and SVG) into ``folder/figures``."""
     folder = Path(folder)
-    store = Store(folder / STORE_FILE)
+    store = Store(folder / STORE_FILE, readonly=True)
     meta = store.get_meta("study") or {}
     fits, vals = store.evaluations("fit"), store.evaluations("validation")
     store.close()

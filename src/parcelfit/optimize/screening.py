@@ -44,7 +44,15 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from parcelfit.config import get_number, load_config, require_mapping
+from parcelfit.config import (
+    check_keys,
+    get_int,
+    get_number,
+    get_pair,
+    get_str,
+    load_config,
+    require_mapping,
+)
 from parcelfit.doe import (
     EffectAnalysis,
     analyse_effects,
@@ -60,8 +68,9 @@ from parcelfit.figures import save_figure
 from parcelfit.metrics import select_reference
 from parcelfit.optimize.calibration import record_result
 from parcelfit.optimize.executors import LocalExecutor, Task
+from parcelfit.optimize.folderlock import check_writable, lock_folder
 from parcelfit.optimize.store import Store
-from parcelfit.optimize.study import _to_si, parse_reference, parse_simulator
+from parcelfit.optimize.study import _to_si, check_executor, parse_reference, parse_simulator
 from parcelfit.runs import TestCase, load_dataset
 from parcelfit.sim.params import CATALOGUE, parameter
 
@@ -126,27 +135,35 @@ def load_screen(path: str | Path) -> Screen:
         spec = {n: None for n in names}
     elif isinstance(spec, list):
         spec = {str(n): None for n in spec}
+    elif isinstance(spec, str):
+        raise ParcelfitError(
+            f"expected all, a list of names or {{name: [low, high]}}, got {spec!r}",
+            file=path,
+            where="parameters",
+            fix="write parameters: all",
+        )
     spec = require_mapping(spec, file=path, where="parameters")
     ranges = {}
     for name, bounds in spec.items():
         if bounds is None:
-            r = parameter(str(name)).range_for(kind)
+            r = _known(str(name), path, f"parameters.{name}").range_for(kind)
             ranges[str(name)] = (r.low, r.high)
-        elif isinstance(bounds, list) and len(bounds) == 2 and bounds[0] < bounds[1]:
-            ranges[str(name)] = (float(bounds[0]), float(bounds[1]))
         else:
-            raise ParcelfitError(
-                f"expected [low, high] with low < high, got {bounds!r}",
+            ranges[str(name)] = get_pair(
+                bounds,
                 file=path,
                 where=f"parameters.{name}",
-                fix="or leave it empty for the screening range",
+                what="[low, high] with low < high",
+                fix="write two numbers, or leave it empty for the screening range",
+                increasing=True,
             )
     if len(ranges) < 2:
         raise ParcelfitError(
             "a screen needs at least two parameters", file=path, where="parameters"
         )
-    stages = tuple(doc.get("stages") or ("fractional", "full"))
-    if not stages or any(s not in ("fractional", "full") for s in stages):
+    stages_doc = doc.get("stages") or ["fractional", "full"]
+    stages = tuple(stages_doc) if isinstance(stages_doc, list) else (stages_doc,)
+    if any(s not in ("fractional", "full") for s in stages):
         raise ParcelfitError(
             f"unknown stages {list(stages)}",
             file=path,
@@ -154,44 +171,53 @@ def load_screen(path: str | Path) -> Screen:
             fix="use fractional and/or full",
         )
     fixed_doc = require_mapping(doc.get("fixed") or {}, file=path, where="fixed")
+    fixed = {str(k): get_number(fixed_doc, k, file=path, where="fixed") for k in fixed_doc}
+    soft_doc = doc.get("soft_content") or []
+    if not isinstance(soft_doc, list):
+        raise ParcelfitError(
+            f"expected a list of parameter names, got {soft_doc!r}",
+            file=path,
+            where="soft_content",
+            fix="write e.g. soft_content: [E_Co, zeta_Co]",
+        )
+    for k, extra in enumerate(soft_doc):  # checked now, not after stage 1 has simulated
+        try:
+            _known(str(extra), path, f"soft_content[{k}]").range_for("soft")
+        except ParcelfitError as exc:
+            raise ParcelfitError(
+                exc.message,
+                file=path,
+                where=f"soft_content[{k}]",
+                fix=exc.fix
+                or "name a soft-content parameter (see parcelfit params --consignment PB)",
+            ) from None
+    execu = require_mapping(doc.get("executor") or {"kind": "local"}, file=path, where="executor")
+    check_keys(execu, allowed=("kind", "workers"), file=path, where="executor")
+    check_executor(execu, ("local",), path)  # screens run in local processes
     return Screen(
-        name=str(doc["name"]),
+        name=get_str(doc, "name", file=path, where=""),
         folder=folder,
         simulator=sim,
         ranges=ranges,
-        fixed={k: float(v) for k, v in fixed_doc.items()},
+        fixed=fixed,  # type: ignore[arg-type]
         dataset=dataset,
         case=TestCase(rig, cons, setting),
         stages=stages,
-        soft_content=tuple(doc.get("soft_content") or ()),
-        resolution=int(
-            get_number(doc, "resolution", file=path, where="", default=4, minimum=3, maximum=5)
-        ),  # type: ignore[arg-type]
-        centre_points=int(
-            get_number(doc, "centre_points", file=path, where="", default=0, minimum=0, maximum=50)  # type: ignore[arg-type]
+        soft_content=tuple(str(n) for n in soft_doc),
+        resolution=get_int(doc, "resolution", file=path, where="", default=4, minimum=3, maximum=5),
+        centre_points=get_int(
+            doc, "centre_points", file=path, where="", default=0, minimum=0, maximum=50
         ),
         alpha=get_number(doc, "alpha", file=path, where="", default=0.05, minimum=1e-6, maximum=0.5)
         or 0.05,
-        max_full_factors=int(
-            get_number(
-                doc,
-                "max_full_factors",
-                file=path,
-                where="",
-                default=6,
-                minimum=2,  # type: ignore[arg-type]
-                maximum=10,
-            )
+        max_full_factors=get_int(
+            doc, "max_full_factors", file=path, where="", default=6, minimum=2, maximum=10
         ),
-        min_full_factors=int(
-            get_number(
-                doc, "min_full_factors", file=path, where="", default=3, minimum=1, maximum=10
-            )  # type: ignore[arg-type]
+        min_full_factors=get_int(
+            doc, "min_full_factors", file=path, where="", default=3, minimum=1, maximum=10
         ),
-        select=int(get_number(doc, "select", file=path, where="", default=4, minimum=1)),  # type: ignore[arg-type]
-        executor=dict(
-            require_mapping(doc.get("executor") or {"kind": "local"}, file=path, where="executor")
-        ),
+        select=get_int(doc, "select", file=path, where="", default=4, minimum=1),
+        executor=dict(execu),
     )
 
 
@@ -216,9 +242,15 @@ def run_screen(
     from parcelfit.optimize.calibration import make_simulator
 
     out = Path(out)
+    check_writable(out, ("screen.sqlite",))
     out.mkdir(parents=True, exist_ok=True)
     say = on_event or (lambda m: None)
-    store = Store(out / "screen.sqlite")
+    lock = lock_folder(out, "a screen")
+    try:
+        store = Store(out / "screen.sqlite")
+    except BaseException:
+        lock.release()
+        raise
     reference = select_reference(load_dataset(screen.dataset)[screen.case])
     simulator = make_simulator(screen.simulator, screen.folder)
     backend = screen.simulator["backend"]
@@ -336,6 +368,7 @@ def run_screen(
     finally:
         executor.close()
         store.close()
+        lock.release()
     sel = select_parameters(
         results[-1].analyses, max_parameters=screen.select, only_significant=False
     )
@@ -349,6 +382,14 @@ def run_screen(
     }
     (out / "selection.yaml").write_text(yaml.safe_dump(doc, sort_keys=False), encoding="utf-8")
     return results, doc
+
+
+def _known(name: str, path: Path, where: str) -> Any:
+    """The catalogue parameter ``name``; an unknown one is an error naming the file and key."""
+    try:
+        return parameter(name)
+    except ParcelfitError as exc:
+        raise ParcelfitError(exc.message, file=path, where=where, fix=exc.fix) from None
 
 
 def _subset(design: Any, keep: np.ndarray) -> Any:

@@ -17,13 +17,20 @@ Schema (``study.sqlite`` in the study folder; WAL journal, one transaction per w
 A batch is written as ``pending`` rows before any of it runs; each result replaces its row in one
 transaction the moment it arrives. A study killed at any point therefore finds on restart every
 finished evaluation (never simulated again) and exactly the pending ones to run.
+
+A new store is created under a temporary name and renamed once its schema is written, so an
+existing ``study.sqlite`` always has one: an empty (0-byte) or unreadable file is damaged and
+refused, never silently restarted. ``readonly=True`` (``status``, ``report``) opens the file with
+SQLite's ``mode=ro`` and never writes to it.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import sqlite3
 import time
+import urllib.parse
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -76,20 +83,80 @@ class Evaluation:
 class Store:
     """Durable record of a study's evaluations (SQLite, WAL, one transaction per write)."""
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(self, path: str | Path, *, readonly: bool = False) -> None:
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        try:
-            self._db = sqlite3.connect(self.path, timeout=30.0, isolation_level=None)
-            self._db.execute("PRAGMA journal_mode=WAL")
-            self._db.execute("PRAGMA synchronous=FULL")
-            self._db.executescript(_SCHEMA)
-        except sqlite3.DatabaseError as exc:
+        self.readonly = readonly
+        if self.path.is_file() and self.path.stat().st_size == 0:
             raise ParcelfitError(
-                f"cannot open the study database ({exc})",
+                "the study database is empty (0 bytes): it was truncated or damaged, and the "
+                "results it held are not in it",
                 file=self.path,
-                fix="move the damaged file away and start the study again",
-            ) from exc
+                fix="restore it from a backup, or run the study in a new output folder "
+                "(this one is left untouched)",
+            )
+        try:
+            if readonly:
+                self._db = self._open_readonly()
+            else:
+                if not self.path.exists():
+                    self._create()
+                self._db = sqlite3.connect(self.path, timeout=30.0, isolation_level=None)
+                self._db.execute("PRAGMA journal_mode=WAL")
+                self._db.execute("PRAGMA synchronous=FULL")
+                self._db.executescript(_SCHEMA)
+        except sqlite3.DatabaseError as exc:
+            raise self._error(exc) from exc
+
+    def _create(self) -> None:
+        """Write the schema under a temporary name, then rename: a store never exists half made."""
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = self.path.with_name(f"{self.path.name}.{os.getpid()}.new")
+        for stale in (tmp, Path(f"{tmp}-wal"), Path(f"{tmp}-shm")):
+            stale.unlink(missing_ok=True)
+        db = sqlite3.connect(tmp, isolation_level=None)
+        try:
+            db.execute("PRAGMA journal_mode=WAL")
+            db.executescript(_SCHEMA)
+        finally:
+            db.close()
+        os.replace(tmp, self.path)
+
+    def _open_readonly(self) -> sqlite3.Connection:
+        if not self.path.is_file():
+            raise ParcelfitError("no study database here", file=self.path)
+        uri = "file:" + urllib.parse.quote(str(self.path.resolve()))
+        try:
+            db = sqlite3.connect(f"{uri}?mode=ro", uri=True, timeout=30.0, isolation_level=None)
+            db.execute("SELECT count(*) FROM sqlite_master").fetchone()
+        except sqlite3.OperationalError:
+            # a WAL database in a read-only folder without its -shm file: SQLite can read it
+            # only as immutable (nobody can write there either)
+            db = sqlite3.connect(f"{uri}?mode=ro&immutable=1", uri=True, isolation_level=None)
+        tables = {r[0] for r in db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+        if not {"meta", "evaluations"} <= tables:
+            db.close()
+            raise ParcelfitError(
+                "this is not a parcelfit study database (its tables are missing)",
+                file=self.path,
+                fix="point at a study folder written by parcelfit",
+            )
+        return db
+
+    def _error(self, exc: sqlite3.Error) -> ParcelfitError:
+        """A database error as a message that says what to do without endangering results."""
+        if "readonly" in str(exc) or "read-only" in str(exc):
+            return ParcelfitError(
+                "the study folder or its database is read-only, so the study cannot go on "
+                "(its results are intact)",
+                file=self.path,
+                fix="make the folder and study.sqlite writable, or copy the folder somewhere "
+                "writable and run there",
+            )
+        return ParcelfitError(
+            f"cannot open the study database ({exc})",
+            file=self.path,
+            fix="restore it from a backup, or run the study in a new output folder",
+        )
 
     def close(self) -> None:
         """Close the database."""
@@ -97,9 +164,17 @@ class Store:
 
     @contextmanager
     def _transaction(self) -> Iterator[sqlite3.Connection]:
-        self._db.execute("BEGIN IMMEDIATE")
+        if self.readonly:
+            raise ParcelfitError("this store was opened read-only", file=self.path)
+        try:
+            self._db.execute("BEGIN IMMEDIATE")
+        except sqlite3.OperationalError as exc:
+            raise (self._error(exc) if "readonly" in str(exc) else exc) from exc
         try:
             yield self._db
+        except sqlite3.OperationalError as exc:
+            self._db.execute("ROLLBACK")
+            raise (self._error(exc) if "readonly" in str(exc) else exc) from exc
         except BaseException:
             self._db.execute("ROLLBACK")
             raise
@@ -175,6 +250,17 @@ class Store:
             )
             if cur.rowcount != 1:
                 raise ParcelfitError(f"no evaluation with id {row_id} in {self.path}")
+
+    def reopen(self, row_ids: Sequence[int]) -> None:
+        """Make finished evaluations pending again (one transaction), so they run on resume."""
+        with self._transaction() as db:
+            for row_id in row_ids:
+                db.execute(
+                    "UPDATE evaluations SET status = 'pending', cost = NULL, dtw_xy = NULL, "
+                    "dtw_theta = NULL, transit_time = NULL, wall_time = NULL, finished_at = NULL, "
+                    "run_file = NULL, details = NULL WHERE id = ?",
+                    (row_id,),
+                )
 
     def evaluations(self, kind: str | None = None) -> list[Evaluation]:
         """All evaluations (of one kind), in the order they were asked."""

@@ -30,6 +30,10 @@
     optimizer: {ucb_lambda: 2.0, n_samples: 4000, transform: none}   # optional BOSettings
     executor: {kind: local, workers: 2}   # optional: local (processes) | dask (scheduler: tcp://...)
 
+**A study file can run code.** ``backend: python`` imports the module named in ``factory`` and
+calls it, and ``backend: external`` runs the solver description's command: run only study (and
+screen) files you trust, as you would a script.
+
 Parameter values in the file are in the catalogue's user units (N/mm, N/mm^2, mm, g; see
 ``parcelfit params``) for the catalogue's parameters and converted to SI on load; parameters a
 ``python`` or ``external`` backend defines itself are taken as given.
@@ -46,7 +50,9 @@ from typing import Any
 
 from parcelfit.config import (
     check_keys,
+    get_bool,
     get_choice,
+    get_int,
     get_number,
     get_str,
     load_config,
@@ -72,6 +78,7 @@ _TOP = (
     "executor",
 )
 _SIM = ("backend", "rig", "consignment", "timestep", "spacing", "wall_limit", "external", "factory")
+_SIM_UNITS = {"timestep": "s", "spacing": "m", "wall_limit": "s"}
 
 
 @dataclass(frozen=True)
@@ -140,7 +147,7 @@ def load_study(path: str | Path) -> Study:
             )
             low = get_number(spec, "low", file=path, where=where)
             high = get_number(spec, "high", file=path, where=where)
-            log = bool(spec.get("log", False))
+            log = get_bool(spec, "log", file=path, where=where, default=False)
         elif isinstance(spec, list) and len(spec) == 2:
             low = get_number({"low": spec[0]}, "low", file=path, where=where)
             high = get_number({"high": spec[1]}, "high", file=path, where=where)
@@ -184,9 +191,7 @@ def load_study(path: str | Path) -> Study:
     check_keys(val, allowed=("speed_setting", "every"), file=path, where="validation")
     val_setting = val.get("speed_setting")
     if val_setting is not None:
-        val_setting = int(
-            get_number(val, "speed_setting", file=path, where="validation", minimum=1)
-        )  # type: ignore[arg-type]
+        val_setting = get_int(val, "speed_setting", file=path, where="validation", minimum=1)
         if val_setting == fit_setting:
             raise ParcelfitError(
                 "validation must use a speed setting not used for fitting",
@@ -194,25 +199,28 @@ def load_study(path: str | Path) -> Study:
                 where="validation.speed_setting",
                 fix=f"use a setting other than {fit_setting}",
             )
-    every = int(get_number(val, "every", file=path, where="validation", default=5, minimum=1))  # type: ignore[arg-type]
+    every = get_int(val, "every", file=path, where="validation", default=5, minimum=1)
     weights = require_mapping(doc.get("weights") or {}, file=path, where="weights")
     check_keys(weights, allowed=("xy", "theta"), file=path, where="weights")
     opt_doc = require_mapping(doc.get("optimizer") or {}, file=path, where="optimizer")
     known = set(BOSettings.__dataclass_fields__) - {"n_initial"}
     check_keys(opt_doc, allowed=sorted(known), file=path, where="optimizer")
-    initial = int(get_number(doc, "initial", file=path, where="", default=16, minimum=1))  # type: ignore[arg-type]
+    initial = get_int(doc, "initial", file=path, where="", default=16, minimum=1)
     try:
         bo = BOSettings(n_initial=initial, **opt_doc)  # type: ignore[arg-type]
     except (ParcelfitError, TypeError) as exc:
         raise ParcelfitError(str(exc), file=path, where="optimizer") from None
     execu = require_mapping(doc.get("executor") or {"kind": "local"}, file=path, where="executor")
     check_keys(execu, allowed=("kind", "workers", "scheduler"), file=path, where="executor")
-    if execu.get("kind", "local") not in ("local", "dask"):
+    check_executor(execu, ("local", "dask"), path)
+    w_xy = get_number(weights, "xy", file=path, where="weights", default=1.0, minimum=0) or 0.0
+    w_theta = get_number(weights, "theta", file=path, where="weights", default=1.0, minimum=0)
+    if w_xy + (w_theta or 0.0) <= 0:
         raise ParcelfitError(
-            f"unknown executor {execu.get('kind')!r}",
+            "both weights are zero, so every simulation would cost nothing",
             file=path,
-            where="executor.kind",
-            fix="use local or dask",
+            where="weights",
+            fix="give xy or theta a positive weight",
         )
     fingerprint = hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[
         :16
@@ -229,13 +237,12 @@ def load_study(path: str | Path) -> Study:
         fit_setting=fit_setting,
         validation_setting=val_setting,
         validate_every=every,
-        w_xy=get_number(weights, "xy", file=path, where="weights", default=1.0, minimum=0) or 0.0,
-        w_theta=get_number(weights, "theta", file=path, where="weights", default=1.0, minimum=0)
-        or 0.0,
-        batch_size=int(get_number(doc, "batch_size", file=path, where="", default=4, minimum=1)),  # type: ignore[arg-type]
+        w_xy=w_xy,
+        w_theta=w_theta or 0.0,
+        batch_size=get_int(doc, "batch_size", file=path, where="", default=4, minimum=1),
         initial=initial,
-        budget=int(get_number(doc, "budget", file=path, where="", default=80, minimum=1)),  # type: ignore[arg-type]
-        seed=int(get_number(doc, "seed", file=path, where="", default=0)),  # type: ignore[arg-type]
+        budget=get_int(doc, "budget", file=path, where="", default=80, minimum=1),
+        seed=get_int(doc, "seed", file=path, where="", default=0, minimum=0, maximum=2**32 - 1),
         bo=bo,
         executor=dict(execu),
         fingerprint=fingerprint,
@@ -266,6 +273,12 @@ def parse_simulator(section: Any, path: Path, folder: Path) -> dict[str, Any]:
                 where="simulator",
                 fix=f"add `{key}:`",
             )
+    for key in ("timestep", "spacing", "wall_limit"):
+        if key in sim:
+            get_number(sim, key, file=path, where="simulator", minimum=1e-9, unit=_SIM_UNITS[key])
+    for key in ("rig", "consignment", "external", "factory"):
+        if key in sim:
+            get_str(sim, key, file=path, where="simulator")
     for key in ("rig", "consignment", "external"):
         if key in sim and str(sim[key]).lower().endswith((".yaml", ".yml")):
             sim[key] = str((folder / str(sim[key])).resolve())
@@ -289,8 +302,20 @@ def parse_reference(
     consignment = str(
         ref.get("consignment") or _name(sim.get("consignment"), path, "reference.consignment")
     )
-    setting = int(get_number(ref, "speed_setting", file=path, where="reference", minimum=1))  # type: ignore[arg-type]
+    setting = get_int(ref, "speed_setting", file=path, where="reference", minimum=1)
     return dataset, rig, consignment, setting
+
+
+def check_executor(section: Mapping[str, Any], kinds: tuple[str, ...], path: Path) -> None:
+    """Check an ``executor`` section: its kind is one of ``kinds``, ``workers`` a whole number
+    >= 1, ``scheduler`` a text."""
+    get_choice(
+        section, "kind", kinds, what="executor", file=path, where="executor", default="local"
+    )
+    if section.get("workers") is not None:
+        get_int(section, "workers", file=path, where="executor", minimum=1)
+    if "scheduler" in section:
+        get_str(section, "scheduler", file=path, where="executor")
 
 
 def _name(value: Any, path: Path, where: str) -> str:

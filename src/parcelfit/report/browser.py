@@ -4,6 +4,7 @@ and writes what it found into its own DOM, which ``--dump-dom`` prints)."""
 
 from __future__ import annotations
 
+import html
 import json
 import os
 import re
@@ -77,7 +78,7 @@ def inspect_page(page: Path) -> dict:
     found = re.search(r"RESULT(.*?)END", proc.stdout, re.S)
     if not found:
         raise AssertionError(f"the page did not report back; stderr: {proc.stderr[-2000:]}")
-    return json.loads(found.group(1).replace("&quot;", '"'))
+    return json.loads(html.unescape(found.group(1)))  # --dump-dom prints the text as HTML
 
 
 def screenshot(page: Path, png: Path, width: int = 1200, height: int = 3000) -> Path:

@@ -22,7 +22,6 @@ tolerance); otherwise the report says it is not, and why.
 from __future__ import annotations
 
 import base64
-import html
 import io
 import json
 import math
@@ -32,8 +31,10 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+import jinja2
 import numpy as np
 import yaml
+from markupsafe import Markup, escape
 from matplotlib.figure import Figure
 
 from parcelfit import __version__
@@ -45,6 +46,18 @@ from parcelfit.sim.params import catalogue_unit, to_catalogue_units
 
 IDENTIFIABLE_SPAN = 0.20  # widest share of the range the surrogate may leave undecided
 RECOVERY_TOLERANCE = 0.10  # of the range's width
+
+# The report promises to be script-free and to fetch nothing: the page forbids every script,
+# frame, font and connection, and allows only embedded (data:) images and its own inline styles.
+CONTENT_SECURITY_POLICY = (
+    "default-src 'none'; img-src data:; style-src 'unsafe-inline'; base-uri 'none'; "
+    "form-action 'none'"
+)
+_TEMPLATES = jinja2.Environment(
+    loader=jinja2.PackageLoader("parcelfit.report", "templates"),
+    autoescape=True,
+    undefined=jinja2.StrictUndefined,
+)
 
 
 _CSS = """
@@ -64,8 +77,9 @@ code{background:#f4f4f4;padding:0 .2em}
 """
 
 
-def _esc(value: object) -> str:
-    return html.escape(str(value))
+def _esc(value: object) -> Markup:
+    """User text (names, ids, messages) made safe to place inside HTML."""
+    return escape(str(value))
 
 
 def figure_html(fig: Figure, alt: str, dpi: int = 100) -> str:
@@ -132,16 +146,20 @@ def locate(folder: str | Path, screen: str | Path | None = None) -> StudyFolders
 
 
 class _Builder:
+    """The sections' HTML fragments, in page order. Fragments are markup written by this module;
+    every piece of user text inside them passes through `_esc` (the page template escapes the
+    rest, and the page's Content-Security-Policy forbids scripts should anything slip through)."""
+
     def __init__(self, progress: Callable[[str], None] | None) -> None:
-        self.parts: list[str] = []
+        self.parts: list[Markup] = []
         self.progress = progress or (lambda message: None)
 
     def add(self, text: str) -> None:
-        self.parts.append(text)
+        self.parts.append(Markup(text))
 
     def section(self, title: str, anchor: str) -> None:
         self.progress(title)
-        self.parts.append(f'<h2 id="{anchor}">{_esc(title)}</h2>')
+        self.parts.append(Markup('<h2 id="{}">{}</h2>').format(anchor, title))
 
 
 def _load_truth(dataset_dir: Path, consignment: str) -> dict[str, float]:
@@ -309,7 +327,7 @@ def _calibration_section(
 
     b.section("Calibration", "calibration")
     status = study_status(folder)
-    store = Store(folder / STORE_FILE)
+    store = Store(folder / STORE_FILE, readonly=True)
     fits, vals = store.evaluations("fit"), store.evaluations("validation")
     recommended = store.get_meta("recommended")
     store.close()
@@ -554,7 +572,8 @@ def build_report(
     from parcelfit.optimize.store import Store
 
     places = locate(folder, screen)
-    store = Store(places.study / STORE_FILE)
+    target = _report_target(Path(out) if out is not None else places.root / "report.html")
+    store = Store(places.study / STORE_FILE, readonly=True)
     meta = store.get_meta("study") or {}
     source = store.get_meta("source") or {}
     stop_reason = store.get_meta("stop_reason")
@@ -574,20 +593,6 @@ def build_report(
     rig, cons = source.get("rig"), source.get("consignment")
     truth = _load_truth(dataset_dir, cons) if (dataset_dir and cons and ds and ds.synthetic) else {}
     title = f"parcelfit report: {meta.get('name', places.study.name)}"
-    b.add(f"<h1>{_esc(title)}</h1>")
-    b.add(
-        f"<p class='note'>parcelfit {_esc(__version__)}, "
-        f"{time.strftime('%Y-%m-%d %H:%M')}; study folder <code>{_esc(places.study.name)}</code>"
-        + (f", test case {_esc(rig)}/{_esc(cons)}" if rig else "")
-        + "</p>"
-    )
-    if ds is not None and ds.synthetic:
-        b.add(
-            "<p class='synthetic'><b>SYNTHETIC DATA.</b> The 'real' runs in this report were "
-            "simulated (twin experiments from hidden true parameters), not measured. "
-            f"{_esc(ds.description)}</p>"
-        )
-    summary_at = len(b.parts)
     if ds is not None:
         _statistics_section(b, ds)
         shown = []
@@ -621,7 +626,7 @@ def build_report(
     elif val_case in sels:
         b.add(
             f"<p>Calibrated parameters at iteration {val_row.iteration}, simulated at the other "
-            f"speed setting ({val_case.label}) and compared with its real runs (method section "
+            f"speed setting ({_esc(val_case.label)}) and compared with its real runs (method section "
             "8). The published criteria are the first three rows; the last is parcelfit's "
             "stricter band test.</p>"
         )
@@ -638,19 +643,53 @@ def build_report(
             _key_frames(b, study_file, best, case, animation)
         else:
             b.add("<p class='note'>The study file has moved; no key frames.</p>")
-    b.parts.insert(summary_at, _summary(verdict, rows, stop_reason, bool(truth)))
-    doc = (
-        "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
-        f"<title>{_esc(title)}</title><style>{_CSS}</style></head><body>"
-        + "\n".join(b.parts)
-        + "</body></html>"
+    doc = _TEMPLATES.get_template("report.html.j2").render(
+        csp=CONTENT_SECURITY_POLICY,
+        css=Markup(_CSS),
+        title=title,
+        version=__version__,
+        generated=time.strftime("%Y-%m-%d %H:%M"),
+        folder=places.study.name,
+        rig=rig,
+        consignment=cons,
+        synthetic=bool(ds is not None and ds.synthetic),
+        description="" if ds is None else ds.description,
+        summary=Markup(_summary(verdict, rows, stop_reason, bool(truth))),
+        sections=b.parts,
     )
-    target = Path(out) if out is not None else places.root / "report.html"
-    target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = target.with_suffix(".html.tmp")
-    tmp.write_text(doc, encoding="utf-8")
-    tmp.replace(target)
+    _write_page(target, doc)
     return target
+
+
+def _report_target(path: Path) -> Path:
+    """Check, before anything is computed, that the report can be written to ``path``."""
+    if path.is_dir():
+        raise ParcelfitError(
+            "the report's path is a folder",
+            file=path,
+            fix=f"name the HTML file, e.g. --out {path / 'report.html'}",
+        )
+    if path.parent.exists() and not path.parent.is_dir():
+        raise ParcelfitError(
+            "the report's folder is a file", file=path.parent, fix="choose another --out"
+        )
+    return path
+
+
+def _write_page(target: Path, doc: str) -> None:
+    """Write the page atomically (a temporary file renamed); nothing is left behind on failure."""
+    tmp = target.with_name(target.name + ".tmp")
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        tmp.write_text(doc, encoding="utf-8")
+        tmp.replace(target)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise ParcelfitError(
+            f"cannot write the report ({exc.strerror or exc})",
+            file=target,
+            fix="choose a writable --out",
+        ) from None
 
 
 def _summary(

@@ -14,10 +14,12 @@
         margin: 0.02                # optional, safety margin around the regions [m]
         runs:                       # required, at least one
           - id: E3-KPBW-1-01        # required, unique in the dataset
-            file: runs/E3-KPBW-1-01.csv   # required, relative to the folder (.csv or .parquet)
+            file: runs/E3-KPBW-1-01.csv   # required, inside the folder (.csv or .parquet)
             transit_time: 1.234     # optional [s]; null where no light barrier was crossed
 
-Trajectory files follow the schema of `parcelfit.runs.io`.
+Trajectory files follow the schema of `parcelfit.runs.io`. A run file must lie inside the
+dataset folder (no absolute paths, no ``..`` leading out, no symbolic link pointing out), and
+every run has its own file.
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ from parcelfit.runs.regions import Box, Polygon, Region, parse_region
 from parcelfit.runs.run import Run, TestCase
 
 DATASET_FILE = "dataset.yaml"
+MAX_TRANSIT_TIME_S = 600.0  # a parcel crosses a test rig in seconds; more is a unit mistake
 _TOP_KEYS = ("name", "description", "synthetic", "test_cases")
 _CASE_KEYS = ("rig", "consignment", "speed_setting", "regions", "margin", "runs")
 _RUN_KEYS = ("id", "file", "transit_time")
@@ -116,6 +119,8 @@ def load_dataset(folder: str | Path) -> Dataset:
         )
     cases: dict[TestCase, CaseData] = {}
     seen_ids: dict[str, str] = {}
+    seen_files: dict[Path, str] = {}
+    root = folder.resolve()
     for i, entry in enumerate(cases_doc):
         where = f"test_cases[{i}]"
         entry = require_mapping(entry, file=file, where=where)
@@ -192,14 +197,29 @@ def load_dataset(folder: str | Path) -> Dataset:
                 allow_none=True,
                 unit="s",
             )
-            if transit is not None and transit <= 0:
+            if transit is not None and not 0 < transit <= MAX_TRANSIT_TIME_S:
                 raise ParcelfitError(
-                    f"transit_time must be positive, got {transit}",
+                    f"transit_time must be positive and at most {MAX_TRANSIT_TIME_S:g} s, got {transit:g}",
                     file=file,
                     where=f"{rwhere}.transit_time",
-                    fix="give seconds, or null",
+                    fix="give seconds (divide milliseconds by 1000), or null",
                 )
-            traj_path = folder / get_str(run_doc, "file", file=file, where=rwhere)
+            traj_path = _run_file(root, get_str(run_doc, "file", file=file, where=rwhere))
+            if traj_path is None:
+                raise ParcelfitError(
+                    f"run file {run_doc['file']!r} lies outside the dataset folder",
+                    file=file,
+                    where=f"{rwhere}.file",
+                    fix="copy the file into the dataset folder and give its path relative to it",
+                )
+            if traj_path in seen_files:
+                raise ParcelfitError(
+                    f"run file {run_doc['file']!r} is also the file of {seen_files[traj_path]}",
+                    file=file,
+                    where=f"{rwhere}.file",
+                    fix="give every run its own trajectory file",
+                )
+            seen_files[traj_path] = rwhere
             if not traj_path.is_file():
                 raise ParcelfitError(
                     f"trajectory file {traj_path.name!r} not found",
@@ -223,6 +243,15 @@ def load_dataset(folder: str | Path) -> Dataset:
         synthetic=synthetic,
         root=folder,
     )
+
+
+def _run_file(root: Path, name: str) -> Path | None:
+    """The resolved path of a run file named in ``dataset.yaml``, None if it is absolute or
+    resolves (through ``..`` or a symbolic link) to a place outside ``root``."""
+    if Path(name).is_absolute():
+        return None
+    path = (root / name).resolve()
+    return path if path.is_relative_to(root) else None
 
 
 def _region_doc(region: Region) -> dict[str, Any]:

@@ -19,6 +19,10 @@ SUFFIXES = (".csv", ".parquet")
 # seconds and a parcel turns at most a few times.
 MAX_POSITION_SPAN_M = 100.0
 MAX_TIME_SPAN_S = 3600.0
+# a camera or a simulation samples a run at 2 Hz to 100 kHz; milliseconds read as seconds give
+# samples about 17 "s" apart
+MIN_SAMPLE_INTERVAL_S = 1e-5
+MAX_SAMPLE_INTERVAL_S = 0.5
 MAX_HEADING_RAD = 4 * np.pi
 
 
@@ -89,6 +93,15 @@ def check_trajectory_table(frame: pd.DataFrame, file: str | Path) -> Trajectory:
     if t[-1] - t[0] > MAX_TIME_SPAN_S:
         raise ParcelfitError(
             f"the run spans {t[-1] - t[0]:.4g} s, more than {MAX_TIME_SPAN_S:.0f} s",
+            file=file,
+            where="column 't'",
+            fix="t must be in seconds; if it is in milliseconds, divide by 1000",
+        )
+    step = float(np.median(np.diff(t)))
+    if not MIN_SAMPLE_INTERVAL_S <= step <= MAX_SAMPLE_INTERVAL_S:
+        raise ParcelfitError(
+            f"samples are {step:.4g} s apart ({1 / step:.4g} Hz), outside the plausible "
+            f"[{MIN_SAMPLE_INTERVAL_S:g}, {MAX_SAMPLE_INTERVAL_S:g}] s of a tracked run",
             file=file,
             where="column 't'",
             fix="t must be in seconds; if it is in milliseconds, divide by 1000",

@@ -13,9 +13,11 @@ A solver description (YAML)::
 The template and every command argument may use ``${name}`` placeholders: each catalogue
 parameter in SI units (``${mu_d_BePa}``), ``${rig}``, ``${consignment}``, ``${speed_setting}``,
 ``${params_file}``, ``${output_file}``, ``${workdir}``, ``${solver_dir}`` (the folder of the
-description file). A placeholder that is not known is an
-error before anything runs. Each run gets its own work folder; the command runs there, is never
-passed through a shell, and is killed at the timeout. Exit status 0 and a readable trajectory
+description file). A placeholder that is not known, or a value holding a line break or another
+control character (which could add lines to the parameter file), is an error before anything
+runs. Each run gets its own work folder; the command runs there, is never
+passed through a shell, runs in its own process group, and the whole group (the solver's own
+children too) is killed at the timeout. Exit status 0 and a readable trajectory
 give ``ok``; anything else ``failed`` (with the solver's last output lines) or ``timeout``.
 """
 
@@ -25,6 +27,7 @@ import string
 import subprocess
 import tempfile
 import time
+import unicodedata
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,6 +40,7 @@ from parcelfit.config import (
 )
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import Run, TestCase, read_trajectory
+from parcelfit.sim.lifetime import run_command
 from parcelfit.sim.protocol import SimResult, SimStatus
 
 _KEYS = ("name", "command", "template", "params_file", "output_file", "transit_file", "timeout")
@@ -97,6 +101,14 @@ def load_external_solver(path: str | Path) -> ExternalSolver:
 
 
 def _substitute(text: str, values: Mapping[str, Any], what: str) -> str:
+    for key, value in values.items():
+        # a line break (or any control character) in a name would add lines to the file
+        if any(unicodedata.category(c) == "Cc" for c in str(value)):
+            raise ParcelfitError(
+                f"the value of ${{{key}}} ({str(value)!r}) holds a line break or another control "
+                f"character, which would change {what}",
+                fix="use names without line breaks or control characters",
+            )
     try:
         return string.Template(text).substitute({k: str(v) for k, v in values.items()})
     except KeyError as exc:
@@ -141,14 +153,7 @@ class ExternalSimulator:
         args = [_substitute(a, values, f"command argument {a!r}") for a in self.solver.command]
         diagnostics: dict[str, object] = {"workdir": str(workdir), "command": args}
         try:
-            proc = subprocess.run(
-                args,
-                cwd=workdir,
-                capture_output=True,
-                text=True,
-                timeout=self.solver.timeout,
-                check=False,
-            )
+            proc = run_command(args, workdir, self.solver.timeout)
         except subprocess.TimeoutExpired:
             diagnostics["message"] = f"killed after the timeout of {self.solver.timeout:g} s"
             return SimResult(None, SimStatus.TIMEOUT, time.perf_counter() - t0, diagnostics)

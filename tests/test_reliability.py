@@ -1,0 +1,715 @@
+"""Reliability and security: hostile names in reports, brackets in messages, damaged or
+read-only study stores."""
+
+import contextlib
+import html
+import os
+import re
+import sqlite3
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from parcelfit import ParcelfitError
+from parcelfit.cli import app
+from parcelfit.optimize.calibration import Calibration, study_status
+from parcelfit.optimize.store import Store
+from parcelfit.optimize.study import load_study
+from parcelfit.report import build_report
+from parcelfit.report.browser import chromium, inspect_page
+from parcelfit.report.html import CONTENT_SECURITY_POLICY
+
+from .test_calibration import write_study
+
+runner = CliRunner()
+NEED_BROWSER = os.environ.get("CI") == "true"
+
+SCRIPT = "<script>document.title='X'</script>"
+HOSTILE = {
+    "rig": f"R{SCRIPT}",
+    "consignment": "P<img src=x onerror=\"document.title='Y'\">",
+    "run": f"run{SCRIPT}",
+    "name": f"study{SCRIPT}&amp;",
+}
+
+
+def _hostile_study(tmp_path):
+    """A small finished study whose rig, consignment, run ids and name are hostile HTML."""
+    study_file = write_study(
+        tmp_path,
+        name=HOSTILE["name"],
+        reference={
+            "dataset": "data",
+            "rig": HOSTILE["rig"],
+            "consignment": HOSTILE["consignment"],
+            "speed_setting": 1,
+        },
+        validation={"speed_setting": 2, "every": 1},
+        initial=4,
+        batch_size=2,
+        budget=6,
+    )
+    ds_file = tmp_path / "data" / "dataset.yaml"
+    doc = yaml.safe_load(ds_file.read_text())
+    for case in doc["test_cases"]:
+        case["rig"], case["consignment"] = HOSTILE["rig"], HOSTILE["consignment"]
+        for run in case["runs"]:
+            run["id"] = HOSTILE["run"] + run["id"]
+    ds_file.write_text(yaml.safe_dump(doc))
+    Calibration(load_study(study_file), tmp_path / "out").run()
+    return tmp_path / "out"
+
+
+def test_hostile_names_are_text_in_the_report(tmp_path):
+    page = build_report(_hostile_study(tmp_path), out=tmp_path / "r.html", key_frames=False)
+    text = page.read_text()
+    assert "<script" not in text.lower() and "<img src=x" not in text
+    assert "&lt;script&gt;document.title=" in text  # shown as text, escaped
+    policy = f'<meta http-equiv="Content-Security-Policy" content="{CONTENT_SECURITY_POLICY}">'
+    assert policy in html.unescape(text) and "default-src 'none'" in CONTENT_SECURITY_POLICY
+    if chromium() is None and not NEED_BROWSER:
+        pytest.skip("Chromium is not installed (CI installs it)")
+    found = inspect_page(page)
+    # no script ran: the title is the study's name as plain text, not 'X' or 'Y'
+    assert found["title"] == f"parcelfit report: {HOSTILE['name']}"
+
+
+def test_the_page_policy_blocks_a_script_that_slipped_through(tmp_path):
+    """Defence in depth: even unescaped markup cannot run a script under the report's policy."""
+    if chromium() is None and not NEED_BROWSER:
+        pytest.skip("Chromium is not installed (CI installs it)")
+    page = tmp_path / "p.html"
+    body = f"<title>safe</title>{SCRIPT}<img src=x onerror=\"document.title='Y'\">"
+    page.write_text(
+        f'<html><head><meta http-equiv="Content-Security-Policy" '
+        f'content="{CONTENT_SECURITY_POLICY}">{body}</head></html>'
+    )
+    assert inspect_page(page)["title"] == "safe"
+    page.write_text(f"<html><head>{body}</head></html>")  # the same page without the policy
+    assert inspect_page(page)["title"] in ("X", "Y")
+
+
+@pytest.mark.parametrize("name", ["a[/i]", "[/b]", "run[/bold]", "[red]x[/red]"])
+def test_square_brackets_in_user_text_are_printed_as_they_are(tmp_path, name):
+    folder = tmp_path / name
+    result = runner.invoke(app, ["reference", str(folder)])
+    assert result.exit_code == 2
+    assert "MarkupError" not in result.output
+    assert f"{folder}: no dataset.yaml here" in result.output
+
+
+def test_a_bracketed_word_in_a_message_does_not_vanish(tmp_path):
+    study = write_study(tmp_path, parameters={"mu_d_BePa": "wide"})
+    result = runner.invoke(app, ["calibrate", str(study)])
+    assert result.exit_code == 2
+    assert "expected [low, high] or {low, high, log}" in result.output
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory):
+    """A small finished study (8 fitting runs, validations at iterations 1 and 2)."""
+    root = tmp_path_factory.mktemp("finished")
+    study = write_study(
+        root, initial=4, batch_size=2, budget=8, validation={"speed_setting": 2, "every": 1}
+    )
+    Calibration(load_study(study), root / "out").run()
+    return root
+
+
+def _copy(finished, tmp_path):
+    """A private copy of the finished study: (study, its folder)."""
+    import shutil
+
+    shutil.copytree(finished, tmp_path / "s")
+    return load_study(tmp_path / "s" / "study.yaml"), tmp_path / "s" / "out"
+
+
+def test_an_empty_store_is_damaged_not_a_new_study(finished, tmp_path):
+    study, out = _copy(finished, tmp_path)
+    runs = sorted((out / "runs").iterdir())
+    stamps = [p.stat().st_mtime_ns for p in runs]
+    (out / "study.sqlite").write_bytes(b"")  # truncated to 0 bytes
+    with pytest.raises(ParcelfitError, match=r"empty \(0 bytes\)"):
+        Calibration(study, out)
+    result = runner.invoke(app, ["status", str(out)])
+    assert result.exit_code == 2 and "empty (0 bytes)" in result.output
+    assert (out / "study.sqlite").stat().st_size == 0  # nothing written into it
+    assert [p.stat().st_mtime_ns for p in runs] == stamps  # runs/ untouched
+
+
+def test_status_and_report_open_the_store_read_only(finished, tmp_path):
+    _, out = _copy(finished, tmp_path)
+    db = out / "study.sqlite"
+    before = db.read_bytes()
+    info = study_status(out)
+    build_report(out, out=tmp_path / "r.html", key_frames=False)
+    assert info["evaluations"] == 8 and db.read_bytes() == before
+    ro = Store(db, readonly=True)
+    with pytest.raises(ParcelfitError, match="read-only"):
+        ro.set_meta("x", 1)
+    ro.close()
+    # a database SQLite itself refuses to write (a read-only folder or file) gives advice that
+    # keeps the results: never "move the damaged file away"
+    store = Store(db)
+    store._db.close()
+    store._db = sqlite3.connect(f"file:{db}?mode=ro", uri=True, isolation_level=None)
+    with pytest.raises(ParcelfitError, match=r"read-only.*results are intact") as err:
+        store.set_meta("x", 1)
+    assert "move" not in str(err.value) and "new output folder" not in str(err.value)
+    store.close()
+
+
+def test_a_foreign_sqlite_file_is_not_read_as_a_study(tmp_path):
+    db = tmp_path / "study.sqlite"
+    sqlite3.connect(db).execute("CREATE TABLE t (x)").connection.close()
+    result = runner.invoke(app, ["status", str(tmp_path)])
+    assert result.exit_code == 2 and "not a parcelfit study database" in result.output
+    assert (
+        not sqlite3.connect(db)
+        .execute("SELECT name FROM sqlite_master WHERE name = 'evaluations'")
+        .fetchall()
+    )
+
+
+def test_a_second_calibration_on_the_same_folder_is_refused(finished, tmp_path):
+    study, out = _copy(finished, tmp_path)
+    first = Calibration(study, out)
+    with pytest.raises(ParcelfitError, match="another parcelfit process is running a calibration"):
+        Calibration(study, out)
+    first.run()  # releases the folder when it ends
+    again = Calibration(study, out).run()
+    assert again.evaluations == 8
+
+
+def _dataset_with_outside_file(make_dataset, tmp_path):
+    from .conftest import line_trajectory
+
+    root = make_dataset(
+        {("R", "P", 1): [("a", line_trajectory(), 1.0), ("b", line_trajectory(), 1.0)]}
+    )
+    line_trajectory().to_frame().to_csv(tmp_path / "outside.csv", index=False)
+    return root
+
+
+def _set_file(root, index, name):
+    path = root / "dataset.yaml"
+    doc = yaml.safe_load(path.read_text())
+    doc["test_cases"][0]["runs"][index]["file"] = name
+    path.write_text(yaml.safe_dump(doc))
+
+
+@pytest.mark.parametrize("kind", ["dotdot", "absolute", "symlink"])
+def test_run_files_outside_the_dataset_are_refused(make_dataset, tmp_path, kind):
+    from parcelfit.runs import load_dataset
+
+    root = _dataset_with_outside_file(make_dataset, tmp_path)
+    if kind == "symlink":
+        (root / "runs" / "link.csv").symlink_to(tmp_path / "outside.csv")
+        name = "runs/link.csv"
+    else:
+        name = "../outside.csv" if kind == "dotdot" else str(tmp_path / "outside.csv")
+    _set_file(root, 1, name)
+    with pytest.raises(
+        ParcelfitError, match=r"runs\[1\]\.file: run file .* lies outside the dataset"
+    ):
+        load_dataset(root)
+
+
+def test_a_symlink_inside_the_dataset_is_fine_but_two_runs_cannot_share_a_file(
+    make_dataset, tmp_path
+):
+    from parcelfit.runs import load_dataset
+
+    root = _dataset_with_outside_file(make_dataset, tmp_path)
+    (root / "runs" / "b.csv").rename(root / "b-real.csv")
+    (root / "runs" / "b.csv").symlink_to(root / "b-real.csv")
+    assert len(load_dataset(root).runs()) == 2
+    _set_file(root, 1, "runs/./a.csv")
+    with pytest.raises(
+        ParcelfitError, match=r"runs\[1\]\.file: .* is also the file of .*runs\[0\]"
+    ):
+        load_dataset(root)
+
+
+def test_a_line_break_in_a_name_cannot_add_lines_to_a_solver_parameter_file(tmp_path):
+    from pathlib import Path
+
+    from parcelfit.optimize.executors import Task, simulate_task
+    from parcelfit.runs import TestCase
+    from parcelfit.sim import SimStatus, defaults_si
+    from parcelfit.sim.external import ExternalSimulator, load_external_solver
+
+    solver = Path(__file__).parent / "data" / "external" / "solver.yaml"
+    sim = ExternalSimulator(load_external_solver(solver), workroot=tmp_path)
+    case = TestCase("E1\nmu_d_BePa = 9", "KPBW", 1)
+    with pytest.raises(ParcelfitError, match=r"\$\{rig\}.*line break"):
+        sim.run(defaults_si("rigid"), case)
+    result = simulate_task(sim, Task(defaults_si("rigid"), case, "r"))  # as the loop runs it
+    assert result.status is SimStatus.FAILED and "line break" in result.diagnostics["message"]
+    assert not list(tmp_path.glob("*/params.txt"))  # nothing was written, nothing ran
+
+
+def test_a_validation_killed_midway_is_run_again_on_resume(finished, tmp_path):
+    study, out = _copy(finished, tmp_path)
+    first = study_status(out)
+    con = sqlite3.connect(out / "study.sqlite", isolation_level=None)
+    (last,) = con.execute("SELECT max(id) FROM evaluations WHERE kind = 'validation'").fetchone()
+    # the state a kill during that validation leaves: its row pending, no run file, no stop
+    con.execute(
+        "UPDATE evaluations SET status = 'pending', details = NULL, finished_at = NULL, "
+        "run_file = NULL WHERE id = ?",
+        (last,),
+    )
+    con.execute("DELETE FROM meta WHERE key = 'stop_reason'")
+    con.close()
+    again = Calibration(study, out).run()
+    info = study_status(out)
+    assert again.evaluations == first["evaluations"] == 8  # no extra fitting runs
+    assert info["validations"] == first["validations"]  # simulated again, same verdict
+    assert info["validations"][-1]["status"] == "ok" and info["stop_reason"] is not None
+
+
+def test_a_dying_local_worker_costs_time_not_results(tmp_path):
+    import random
+    import signal
+    import threading
+
+    from parcelfit.optimize.executors import LocalExecutor, Task
+    from parcelfit.runs import TestCase
+
+    from .fake_sim import AnalyticSimulator, trajectory
+
+    executor = LocalExecutor(AnalyticSimulator(delay=0.4), workers=2)
+    tasks = [
+        Task({"mu_d_BePa": 0.4 + 0.01 * i, "mu_d_MePa": 0.2}, TestCase("R", "P", 1), f"t{i}")
+        for i in range(6)
+    ]
+    victims = []
+
+    def kill_a_worker() -> None:  # SIGKILL one busy worker at a random moment of the batch
+        time.sleep(random.Random(7).uniform(0.6, 1.0))
+        pid = next(iter(executor._pool._processes))
+        victims.append(pid)
+        os.kill(pid, signal.SIGKILL)
+
+    killer = threading.Thread(target=kill_a_worker)
+    try:
+        killer.start()
+        results = dict(executor.run(tasks))
+        killer.join()
+    finally:
+        executor.close()
+    assert victims and sorted(results) == list(range(6))
+    assert all(r.ok for r in results.values())
+    for i, r in results.items():  # the right result for every task
+        assert r.run.transit_time == pytest.approx(trajectory(tasks[i].params, 1)[1])
+    assert executor.restarts == 1
+    assert any(r.diagnostics.get("worker_restarts") == 1 for r in results.values())
+
+
+def test_a_worker_killed_during_a_calibration_leaves_no_failed_evaluation(tmp_path, monkeypatch):
+    monkeypatch.setenv("FAKE_SIM_CRASH_ONCE", str(tmp_path / "crashed"))
+    study = load_study(write_study(tmp_path, budget=8, validation={}))
+    result = Calibration(study, tmp_path / "out").run()
+    assert (tmp_path / "crashed").exists()  # one simulation killed its worker
+    info = study_status(tmp_path / "out")
+    assert result.evaluations == 8 and info["by_status"] == {"ok": 8}
+    store = Store(tmp_path / "out" / "study.sqlite", readonly=True)
+    restarted = [e for e in store.evaluations("fit") if e.details.get("worker_restarts")]
+    store.close()
+    assert len(restarted) >= 1
+
+
+def _gone(pids, timeout):
+    """Wait until none of ``pids`` runs any more (a zombie counts as gone); the ones left."""
+    import psutil
+
+    deadline = time.time() + timeout
+    alive = set(pids)
+    while alive and time.time() < deadline:
+        for pid in list(alive):
+            try:
+                if psutil.Process(pid).status() == psutil.STATUS_ZOMBIE:
+                    alive.discard(pid)
+            except psutil.NoSuchProcess:
+                alive.discard(pid)
+        time.sleep(0.1)
+    return alive
+
+
+def test_pool_workers_die_when_the_main_process_is_killed(tmp_path):
+    import signal
+    import subprocess
+    import sys
+
+    import psutil
+
+    from .test_calibration import ROOT
+
+    study = write_study(tmp_path, budget=8, validation={})
+    log = tmp_path / "log"
+    env = {**os.environ, "FAKE_SIM_DELAY": "30", "FAKE_SIM_LOG": str(log)}
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH")) if p)
+    cmd = [sys.executable, "-m", "parcelfit", "calibrate", str(study), "--workers", "2"]
+    proc = subprocess.Popen(
+        [*cmd, "--out", str(tmp_path / "out")],
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
+    try:
+        deadline = time.time() + 60
+        while time.time() < deadline and len(log.read_text().split() if log.exists() else []) < 2:
+            time.sleep(0.1)
+        workers = [c.pid for c in psutil.Process(proc.pid).children(recursive=True)]
+        assert len(workers) >= 2  # both workers are simulating
+        os.kill(proc.pid, signal.SIGKILL)  # the main process only, not its process group
+        proc.wait()
+        assert not _gone(workers, timeout=10)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+
+
+def test_a_timed_out_solver_is_killed_with_its_children(tmp_path):
+    from parcelfit.runs import TestCase
+    from parcelfit.sim import SimStatus, defaults_si
+    from parcelfit.sim.external import ExternalSimulator, load_external_solver
+
+    (tmp_path / "spawner.py").write_text(
+        "import pathlib, subprocess, sys, time\n"
+        "child = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(60)'])\n"
+        "pathlib.Path(sys.argv[1], 'child.pid').write_text(str(child.pid))\n"
+        "time.sleep(60)\n"
+    )
+    (tmp_path / "p.tmpl").write_text("mu = ${mu_d_BePa}\n")
+    (tmp_path / "solver.yaml").write_text(
+        yaml.safe_dump(
+            {
+                "name": "spawner",
+                "command": ["python3", "${solver_dir}/spawner.py", "${workdir}"],
+                "template": "p.tmpl",
+                "timeout": 2,
+            }
+        )
+    )
+    sim = ExternalSimulator(load_external_solver(tmp_path / "solver.yaml"), tmp_path / "w")
+    result = sim.run(defaults_si("rigid"), TestCase("E1", "KPBW", 1))
+    assert result.status is SimStatus.TIMEOUT
+    child = int((Path(result.diagnostics["workdir"]) / "child.pid").read_text())
+    assert not _gone([child], timeout=5)
+
+
+def test_an_unreachable_scheduler_or_one_without_workers_is_a_clear_error():
+    distributed = pytest.importorskip("distributed")
+    from parcelfit.optimize.executors import DaskExecutor
+
+    from .fake_sim import AnalyticSimulator
+
+    with pytest.raises(ParcelfitError, match="cannot reach the Dask scheduler"):
+        DaskExecutor(AnalyticSimulator(), "tcp://127.0.0.1:9", connect_timeout=1)
+    with (
+        distributed.LocalCluster(n_workers=0, dashboard_address=None, processes=False) as cluster,
+        pytest.raises(ParcelfitError, match="no Dask worker is attached"),
+    ):
+        DaskExecutor(AnalyticSimulator(), cluster.scheduler_address, worker_wait=1)
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_losing_the_dask_scheduler_stops_cleanly_and_the_study_resumes(tmp_path):
+    pytest.importorskip("distributed")
+    import random
+    import signal
+    import subprocess
+    import sys
+
+    from .test_calibration import ROOT, _finished
+
+    study = write_study(
+        tmp_path,
+        parameters={"mu_d_BePa": [0.3, 0.58], "mu_d_MePa": [0.15, 0.35]},
+        budget=16,
+        validation={},
+    )
+    out = tmp_path / "out"
+    env = {**os.environ, "FAKE_SIM_DELAY": "0.3"}
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH")) if p)
+    address = f"tcp://127.0.0.1:{_free_port()}"
+    dask = [sys.executable, "-m", "distributed.cli"]
+    spawned = []
+
+    def start(args):
+        p = subprocess.Popen(
+            args,
+            env=env,
+            cwd=ROOT,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            start_new_session=True,
+        )
+        spawned.append(p)
+        return p
+
+    calibrate = [sys.executable, "-m", "parcelfit", "calibrate", str(study), "--out", str(out)]
+    try:
+        scheduler = start(
+            [
+                *dask[:2],
+                "distributed.cli.dask_scheduler",
+                "--host",
+                "127.0.0.1",
+                "--port",
+                address.rsplit(":", 1)[1],
+                "--no-dashboard",
+            ]
+        )
+        start(
+            [
+                *dask[:2],
+                "distributed.cli.dask_worker",
+                address,
+                "--nworkers",
+                "2",
+                "--nthreads",
+                "1",
+                "--no-dashboard",
+            ]
+        )
+        proc = subprocess.Popen(
+            [*calibrate, "--executor", "dask", "--scheduler", address],
+            cwd=ROOT,
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+            start_new_session=True,
+        )
+        spawned.append(proc)
+        deadline = time.time() + 120
+        while len(_finished(out / "study.sqlite")) < 3 and time.time() < deadline:
+            assert proc.poll() is None, proc.stderr.read()
+            time.sleep(0.05)
+        time.sleep(random.Random(11).uniform(0.0, 0.4))
+        os.killpg(scheduler.pid, signal.SIGKILL)  # the scheduler is lost mid-batch
+        _, err = proc.communicate(timeout=120)
+        assert proc.returncode == 2, err
+        assert "error: lost the Dask scheduler" in err
+        # distributed may log its own reconnection attempts; parcelfit itself does not crash
+        assert not re.search(r'File "[^"]*parcelfit[/\\]', err), err
+    finally:
+        for p in spawned:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(p.pid, signal.SIGKILL)
+    info = study_status(out)
+    assert set(info["by_status"]) <= {"ok", "pending"}  # nothing stored as failed
+    before = _finished(out / "study.sqlite")
+    done = subprocess.run(
+        [*calibrate, "--executor", "local", "--workers", "2"],
+        cwd=ROOT,
+        env={**env, "FAKE_SIM_DELAY": "0"},
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    after = _finished(out / "study.sqlite")
+    assert len(after) == 16 and all(after[k] == v for k, v in before.items())
+
+
+# -- bad input: one clear line and exit status 2 ------------------------------------------------
+
+
+def _dataset(tmp_path, edit=None, scale_t=1.0):
+    from .fake_sim import write_reference_dataset
+
+    write_reference_dataset(tmp_path / "data", n_runs=3)
+    if scale_t != 1.0:  # times written in milliseconds
+        for f in (tmp_path / "data" / "runs").glob("*.csv"):
+            text = f.read_text().splitlines()
+            rows = [text[0]] + [
+                ",".join([repr(float(r.split(",")[0]) * scale_t), *r.split(",")[1:]])
+                for r in text[1:]
+            ]
+            f.write_text("\n".join(rows) + "\n")
+    if edit is not None:
+        path = tmp_path / "data" / "dataset.yaml"
+        doc = yaml.safe_load(path.read_text())
+        edit(doc)
+        path.write_text(yaml.safe_dump(doc))
+    return ["reference", str(tmp_path / "data")]
+
+
+def _study(tmp_path, **change):
+    return ["calibrate", str(write_study(tmp_path, **change)), "--out", str(tmp_path / "o")]
+
+
+def _study_sim(tmp_path, **sim):
+    simulator = {"backend": "python", "factory": "tests.fake_sim:make", **sim}
+    return _study(tmp_path, simulator=simulator)
+
+
+def _screen(tmp_path, **change):
+    from .fake_sim import write_reference_dataset
+
+    write_reference_dataset(tmp_path / "data", n_runs=3)
+    doc = {
+        "name": "s",
+        "simulator": {"backend": "python", "factory": "tests.fake_sim:make"},
+        "reference": {"dataset": "data", "rig": "R", "consignment": "P", "speed_setting": 1},
+        "parameters": {"mu_d_BePa": [0.3, 0.58], "mu_d_MePa": [0.15, 0.35]},
+        "stages": ["full"],
+        **change,
+    }
+    (tmp_path / "screen.yaml").write_text(yaml.safe_dump(doc))
+    return ["screen", str(tmp_path / "screen.yaml"), "--out", str(tmp_path / "o")]
+
+
+def _not_utf8(tmp_path):
+    (tmp_path / "ds").mkdir()
+    (tmp_path / "ds" / "dataset.yaml").write_bytes("name: caf\u00e9\n".encode("latin-1"))
+    return ["reference", str(tmp_path / "ds")]
+
+
+def _out_is_a_file(tmp_path):
+    args = _study(tmp_path, budget=8)
+    (tmp_path / "o").write_text("not a folder")
+    return args
+
+
+def _report_out_is_a_folder(tmp_path):
+    Store(tmp_path / "study" / "study.sqlite").close()
+    (tmp_path / "folder").mkdir()
+    return ["report", str(tmp_path / "study"), "--out", str(tmp_path / "folder")]
+
+
+def _log_false(tmp_path):
+    bounds = {"mu_d_BePa": {"low": 0.3, "high": 0.6, "log": "false"}, "mu_d_MePa": [0.15, 0.35]}
+    return _study(tmp_path, parameters=bounds)
+
+
+BAD_INPUTS = {
+    "times in milliseconds": (
+        lambda p: _dataset(p, scale_t=1000.0),
+        r"R-P-1-0\.csv: column 't': samples are 16\.67 s apart .* divide by 1000",
+    ),
+    "transit_time 1e300": (
+        lambda p: _dataset(p, lambda d: d["test_cases"][0]["runs"][0].update(transit_time=1e300)),
+        r"runs\[0\]\.transit_time: transit_time must be positive and at most 600 s",
+    ),
+    "dataset.yaml not UTF-8": (
+        _not_utf8,
+        r"dataset\.yaml: not UTF-8 text .*save the file as UTF-8",
+    ),
+    "seed -1": (lambda p: _study(p, seed=-1), r"seed: -1 is out of range"),
+    "seed 1e30": (lambda p: _study(p, seed=1e30), r"seed: .* is out of range"),
+    "workers -1": (
+        lambda p: _study(p, executor={"kind": "local", "workers": -1}),
+        r"executor\.workers: -1 is out of range",
+    ),
+    "workers two": (
+        lambda p: _study(p, executor={"kind": "local", "workers": "two"}),
+        r"executor\.workers: expected a whole number, got 'two'",
+    ),
+    "timestep fast": (
+        lambda p: _study_sim(p, timestep="fast"),
+        r"simulator\.timestep: expected a number in s, got 'fast'",
+    ),
+    "screen string bounds": (
+        lambda p: _screen(p, parameters={"mu_d_BePa": ["a", "b"], "mu_d_MePa": [0.15, 0.35]}),
+        r"parameters\.mu_d_BePa: expected \[low, high\] with low < high, got \['a', 'b'\]",
+    ),
+    "screen fixed big": (
+        lambda p: _screen(p, fixed={"E_Pa": "big"}),
+        r"fixed\.E_Pa: expected a number, got 'big'",
+    ),
+    "screen stages 5": (lambda p: _screen(p, stages=5), r"stages: unknown stages \[5\]"),
+    "output folder is a file": (_out_is_a_file, r"/o: the output folder is a file"),
+    "report --out a folder": (_report_out_is_a_folder, r"/folder: the report's path is a folder"),
+    "log 'false'": (_log_false, r"parameters\.mu_d_BePa\.log: expected true or false"),
+    "budget 2.9": (lambda p: _study(p, budget=2.9), r"budget: expected a whole number, got 2\.9"),
+    "batch size 2.7": (
+        lambda p: _study(p, batch_size=2.7),
+        r"batch_size: expected a whole number, got 2\.7",
+    ),
+    "speed setting 1.9": (
+        lambda p: _study(
+            p, reference={"dataset": "data", "rig": "R", "consignment": "P", "speed_setting": 1.9}
+        ),
+        r"reference\.speed_setting: expected a whole number, got 1\.9",
+    ),
+    "weights 0/0": (
+        lambda p: _study(p, weights={"xy": 0, "theta": 0}),
+        r"weights: both weights are zero",
+    ),
+    "screen executor slurm": (
+        lambda p: _screen(p, executor={"kind": "slurm"}),
+        r"executor\.kind: unknown executor 'slurm'.*use one of local",
+    ),
+    "screen without a name": (
+        lambda p: _screen(p, name=["x"]),
+        r"name: expected a non-empty text",
+    ),
+    "screen unknown soft_content": (
+        lambda p: _screen(p, soft_content=["E_Cox"]),
+        r"soft_content\[0\]: unknown parameter 'E_Cox'.*did you mean 'E_Co'",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_INPUTS))
+def test_bad_input_stops_with_one_clear_line_and_status_2(tmp_path, case):
+    make, pattern = BAD_INPUTS[case]
+    args = make(tmp_path)
+    t0 = time.perf_counter()
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2, (result.output, result.exception)
+    assert time.perf_counter() - t0 < 30  # stops at once, never after simulating
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: "), result.output
+    assert re.search(pattern, lines[0]), lines[0]
+    assert not (tmp_path / "o").is_dir() or not any((tmp_path / "o").rglob("*.csv"))
+    assert not list(tmp_path.rglob("*.tmp"))  # nothing half-written left behind
+
+
+def test_evaluations_once_stored_failed_by_a_lost_worker_run_again(finished, tmp_path):
+    study, out = _copy(finished, tmp_path)
+    con = sqlite3.connect(out / "study.sqlite", isolation_level=None)
+    lost = '{"message": "worker failed: BrokenProcessPool(\'A child process terminated\')"}'
+    con.execute(
+        "UPDATE evaluations SET status = 'failed', cost = NULL, details = ? "
+        "WHERE kind = 'fit' AND slot IN (1, 2) AND iteration = 0",
+        (lost,),
+    )
+    con.close()
+    assert study_status(out)["by_status"] == {"failed": 2, "ok": 6}
+    Calibration(study, out).run()
+    assert study_status(out)["by_status"] == {"ok": 8}
+
+
+def test_calibrate_on_a_read_only_folder_says_so_and_keeps_the_results(
+    finished, tmp_path, monkeypatch
+):
+    _, out = _copy(finished, tmp_path)
+    before = (out / "study.sqlite").read_bytes()
+    writable = os.access
+    monkeypatch.setattr(
+        os, "access", lambda p, mode: False if mode == os.W_OK else writable(p, mode)
+    )
+    result = runner.invoke(
+        app, ["calibrate", str(tmp_path / "s" / "study.yaml"), "--out", str(out)]
+    )
+    assert result.exit_code == 2
+    assert "read-only" in result.output and "results already in it are intact" in result.output
+    assert "move" not in result.output and (out / "study.sqlite").read_bytes() == before
