@@ -46,13 +46,17 @@ import math
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
+from scipy.optimize import minimize
+from scipy.special import ndtr
 from scipy.stats import qmc
 from sklearn.cluster import KMeans
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.gaussian_process import GaussianProcessRegressor
-from sklearn.gaussian_process.kernels import ConstantKernel, Matern
+from sklearn.gaussian_process.kernels import ConstantKernel, Matern, WhiteKernel
+from sklearn.preprocessing import PowerTransformer
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.optimize.space import Space
@@ -60,17 +64,25 @@ from parcelfit.optimize.space import Space
 
 @dataclass(frozen=True)
 class BOSettings:
-    """Settings of the batch BO; defaults follow the published method where it gives them."""
+    """Settings of the batch BO. The defaults are the measured default (see the module docstring);
+    `BOSettings.published()` gives the configuration of method.md section 7."""
 
     n_initial: int = 16  # Latin hypercube size
     ucb_lambda: float = 2.0  # exploration weight of UCB
     n_samples: int = 4000  # Monte Carlo candidates per ask
-    top_fraction: float = 0.25  # share of candidates kept for clustering
+    top_fraction: float = 0.25  # share of candidates kept for clustering (batch: kmeans)
     local_fraction: float = 0.25  # share of candidates drawn near the best observations
     nu: float = 2.5  # Matern smoothness
-    alpha: float = 0.35**2  # noise variance on the standardised cost
-    n_restarts: int = 3  # optimiser restarts of the GP's hyperparameters
-    transform: str = "none"  # "none" (published) or "log": c -> log(c - min c + 0.01 * spread) before standardising
+    alpha: float = 0.35**2  # noise variance on the standardised cost (noise: fixed)
+    noise: str = (
+        "fit"  # "fit": noise variance by marginal likelihood in [1e-6, 0.35^2]; "fixed": alpha
+    )
+    n_restarts: int = 1  # optimiser restarts of the GP's hyperparameters
+    transform: str = "power"  # "none", "log" or "power" (Box-Cox with lambda fitted to the data)
+    acquisition: str = "logei"  # "ucb" or "logei" (log expected improvement)
+    polish: int = 2  # L-BFGS-B polishing starts from the best candidates (0: sampled only)
+    batch: str = "believer"  # "believer" (kriging believer, sequential) or "kmeans" (published)
+    ard: bool = True  # one length scale per input (False: one shared length scale)
     recommend: str = "posterior_mean"  # or "best_observed" (published); see BatchBO.recommend
 
     def __post_init__(self) -> None:
@@ -78,11 +90,34 @@ class BOSettings:
             self.n_initial < 1
             or self.n_samples < 10
             or not 0 < self.top_fraction <= 1
+            or not 0 <= self.local_fraction <= 1
             or self.alpha <= 0
-            or self.transform not in ("none", "log")
+            or self.polish < 0
+            or self.noise not in ("fit", "fixed")
+            or self.transform not in ("none", "log", "power")
+            or self.acquisition not in ("ucb", "logei")
+            or self.batch not in ("believer", "kmeans")
             or self.recommend not in ("posterior_mean", "best_observed")
         ):
             raise ParcelfitError(f"invalid BO settings: {self}")
+
+    @classmethod
+    def published(cls, **overrides: Any) -> BOSettings:
+        """The configuration of method.md section 7 (Latin hypercube 16, Matern 5/2, noise
+        0.35^2, UCB by uniform Monte Carlo sampling, k-means on the top 25 %, best observed)."""
+        base: dict[str, Any] = {
+            "noise": "fixed",
+            "alpha": 0.35**2,
+            "transform": "none",
+            "acquisition": "ucb",
+            "polish": 0,
+            "batch": "kmeans",
+            "local_fraction": 0.0,
+            "ard": False,
+            "recommend": "best_observed",
+            "n_restarts": 3,
+        }
+        return cls(**{**base, **overrides})
 
 
 @dataclass
@@ -142,6 +177,11 @@ class BatchBO:
         ok = cost is not None and math.isfinite(cost)
         self.observations.append(Observation(u, dict(params), float(cost) if ok else None))
 
+    @property
+    def n_told(self) -> int:
+        """How many evaluations were told."""
+        return len(self.observations)
+
     def best(self) -> tuple[dict[str, float], float] | None:
         """The evaluated parameters with the lowest cost, and that cost (None before any success)."""
         ok = [o for o in self.observations if o.cost is not None]
@@ -186,39 +226,61 @@ class BatchBO:
         c = np.array([o.cost if o.cost is not None else worst for o in self.observations])
         return X, c
 
+    def _transformed(self, c: np.ndarray) -> np.ndarray:
+        """The cost after the output transform, before standardising."""
+        s = self.settings
+        if s.transform == "none" or np.ptp(c) <= 0:
+            return c
+        shifted = c - c.min() + 0.01 * float(np.ptp(c))
+        if s.transform == "log":
+            return np.log(shifted)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            out = PowerTransformer(method="box-cox", standardize=False).fit_transform(
+                shifted[:, None]
+            )[:, 0]
+        return out if np.all(np.isfinite(out)) and np.ptp(out) > 0 else np.log(shifted)
+
     def _fit(self, rng: np.random.Generator, fantasies: Sequence[np.ndarray]) -> tuple | None:
         data = self._training_data()
         if data is None:
             return None
         X, c = data
-        if self.settings.transform == "log":
-            c = np.log(c - c.min() + 0.01 * max(float(np.ptp(c)), 1e-12))
-        mean, std = c.mean(), c.std()
-        y = -(c - mean) / (std if std > 0 else 1.0)
+        z = self._transformed(c)
+        mean, std = z.mean(), z.std()
+        y = -(z - mean) / (std if std > 0 else 1.0)
+        s = self.settings
         d = X.shape[1]
-        kernel = ConstantKernel(1.0, (1e-2, 1e2)) * Matern(
-            length_scale=np.full(d, 0.3), length_scale_bounds=(1e-2, 1e2), nu=self.settings.nu
+        kernel: Any = ConstantKernel(1.0, (1e-2, 1e2)) * Matern(
+            length_scale=np.full(d, 0.3) if s.ard else 0.3,
+            length_scale_bounds=(1e-2, 1e2),
+            nu=s.nu,
         )
+        if s.noise == "fit":
+            kernel = kernel + WhiteKernel(0.01, (NOISE_LOW, NOISE_HIGH))
         gp = GaussianProcessRegressor(
             kernel=kernel,
-            alpha=self.settings.alpha,
+            alpha=s.alpha if s.noise == "fixed" else 1e-10,
             normalize_y=False,
-            n_restarts_optimizer=self.settings.n_restarts,
+            n_restarts_optimizer=s.n_restarts,
             random_state=int(rng.integers(2**31 - 1)),
         )
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)
             gp.fit(X, y)
+            if s.noise == "fit":
+                # predict the latent cost: the fitted noise becomes alpha, the kernel stays fixed
+                gp = _conditioned(gp.kernel_.k1, gp.kernel_.k2.noise_level, X, y)
             if fantasies:
                 # kriging believer: pending points count as observed at the predicted mean, with
                 # the fitted kernel kept fixed, so they lower the uncertainty around themselves
                 F = np.asarray(fantasies)
                 believed = gp.predict(F)
-                gp = GaussianProcessRegressor(
-                    kernel=gp.kernel_, alpha=self.settings.alpha, optimizer=None
+                gp = _conditioned(
+                    gp.kernel_, gp.alpha, np.vstack([X, F]), np.concatenate([y, believed])
                 )
-                gp.fit(np.vstack([X, F]), np.concatenate([y, believed]))
-        return gp, mean, std
+                return gp, mean, std, float(max(y.max(), believed.max()))
+        return gp, mean, std, float(y.max())
 
     def _candidates(self, rng: np.random.Generator, d: int) -> np.ndarray:
         n_local = int(self.settings.local_fraction * self.settings.n_samples)
@@ -231,6 +293,43 @@ class BatchBO:
         local = np.clip(centres + scales * rng.standard_normal((n_local, d)), 0.0, 1.0)
         return np.vstack([uniform, local])
 
+    def _acquisition(
+        self, gp: GaussianProcessRegressor, y_best: float, U: np.ndarray
+    ) -> np.ndarray:
+        """UCB or log EI of the standardised negative cost at the rows of U (higher is better)."""
+        mu, sigma = gp.predict(U, return_std=True)
+        if self.settings.acquisition == "ucb":
+            return mu + self.settings.ucb_lambda * sigma
+        sigma = np.maximum(sigma, 1e-12)
+        return np.log(sigma) + _log_h((mu - y_best) / sigma)
+
+    def _polish(self, gp: GaussianProcessRegressor, y_best: float, u0: np.ndarray) -> np.ndarray:
+        """L-BFGS-B from u0 on the acquisition (finite-difference gradient); u0 if not better."""
+
+        def negative(u: np.ndarray) -> float:
+            return -float(self._acquisition(gp, y_best, u[None])[0])
+
+        res = minimize(
+            negative,
+            u0,
+            method="L-BFGS-B",
+            bounds=[(0.0, 1.0)] * len(u0),
+            options={"maxiter": 15, "eps": 1e-6},
+        )
+        return np.clip(res.x, 0.0, 1.0) if res.fun < negative(u0) else u0
+
+    def _best_point(
+        self, gp: GaussianProcessRegressor, y_best: float, cand: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The acquisition's maximiser: best candidates, polished; and the candidates' values."""
+        a = self._acquisition(gp, y_best, cand)
+        starts = np.argsort(-a)[: max(1, self.settings.polish)]
+        if self.settings.polish == 0:
+            return cand[starts[0]], a
+        polished = [self._polish(gp, y_best, cand[i]) for i in starts]
+        values = self._acquisition(gp, y_best, np.array(polished))
+        return polished[int(np.argmax(values))], a
+
     def _suggest(self, n: int, extra_pending: Sequence[np.ndarray]) -> list[np.ndarray]:
         rng = np.random.default_rng(
             [self.seed, len(self.observations), len(self.pending) + len(extra_pending)]
@@ -239,19 +338,58 @@ class BatchBO:
         d = len(self.space)
         if fitted is None:  # fewer than two successes: keep exploring with random points
             return list(rng.random((n, d)))
-        gp = fitted[0]
+        gp, _, _, y_best = fitted
         cand = self._candidates(rng, d)
-        mu, sigma = gp.predict(cand, return_std=True)
-        ucb = mu + self.settings.ucb_lambda * sigma
+        if self.settings.batch == "believer" or n == 1:
+            batch: list[np.ndarray] = []
+            X, y = gp.X_train_, gp.y_train_
+            for k in range(n):
+                u, _ = self._best_point(gp, y_best, cand)
+                batch.append(u)
+                if k < n - 1:  # believe the pick at its predicted mean, then pick the next
+                    believed = float(gp.predict(u[None])[0])
+                    X, y = np.vstack([X, u]), np.append(y, believed)
+                    gp = _conditioned(gp.kernel_, gp.alpha, X, y)
+                    y_best = max(y_best, believed)  # the incumbent includes what is believed
+            return batch
+        acq = self._acquisition(gp, y_best, cand)
         keep = max(n, math.ceil(self.settings.top_fraction * len(cand)))
-        top = np.argsort(-ucb)[:keep]
-        if n == 1:
-            return [cand[top[0]]]
+        top = np.argsort(-acq)[:keep]
         km = KMeans(n_clusters=n, n_init=4, random_state=int(rng.integers(2**31 - 1))).fit(
             cand[top]
         )
         batch = []
         for k in range(n):
             members = top[km.labels_ == k]
-            batch.append(cand[members[np.argmax(ucb[members])]])
+            batch.append(cand[members[np.argmax(acq[members])]])
         return batch
+
+
+NOISE_LOW, NOISE_HIGH = 1e-6, 0.35**2  # bounds of the fitted noise variance (standardised cost)
+
+
+def _conditioned(kernel: Any, alpha: Any, X: np.ndarray, y: np.ndarray) -> GaussianProcessRegressor:
+    """A GP with a fixed kernel and noise conditioned on (X, y): no hyperparameter fit."""
+    gp = GaussianProcessRegressor(kernel=kernel, alpha=alpha, optimizer=None)
+    if np.ndim(alpha) > 0:  # sklearn stores an array alpha per training point; keep a scalar
+        gp.alpha = float(np.ravel(alpha)[0])
+    return gp.fit(X, y)
+
+
+def _log_h(z: np.ndarray) -> np.ndarray:
+    """log(z Phi(z) + phi(z)), the log of expected improvement over sigma, stable for z << 0.
+
+    Written here because SciPy has log Phi (log_ndtr) but not this function; for z < -6 the
+    asymptotic form h(z) = phi(z) / z^2 (1 - 3 / z^2 + ...) is used (relative error < 1 %).
+    """
+    z = np.asarray(z, dtype=float)
+    out = np.empty_like(z)
+    far = z < -6.0
+    zn = z[~far]
+    out[~far] = np.log(np.maximum(zn * ndtr(zn) + np.exp(-0.5 * zn**2) / SQRT_2PI, 1e-300))
+    zf = z[far]
+    out[far] = -0.5 * zf**2 - math.log(SQRT_2PI) - 2.0 * np.log(-zf) + np.log1p(-3.0 / zf**2)
+    return out
+
+
+SQRT_2PI = math.sqrt(2.0 * math.pi)

@@ -27,7 +27,7 @@
     initial: 16                        # optional, Latin hypercube size
     budget: 80                         # optional, most fitting evaluations
     seed: 0                            # optional
-    optimizer: {ucb_lambda: 2.0, n_samples: 4000, transform: none}   # optional BOSettings
+    optimizer: {sampler: gp, ucb_lambda: 2.0}   # optional: gp | published | tpe, BOSettings
     executor: {kind: local, workers: 2}   # optional: local (processes) | dask (scheduler: tcp://...)
 
 Parameter values in the file are in the catalogue's user units (N/mm, N/mm^2, mm, g; see
@@ -54,6 +54,7 @@ from parcelfit.config import (
 )
 from parcelfit.errors import ParcelfitError
 from parcelfit.optimize.bo import BOSettings
+from parcelfit.optimize.sampler import SAMPLERS
 from parcelfit.optimize.space import Dimension, Space
 
 _TOP = (
@@ -96,6 +97,7 @@ class Study:
     budget: int
     seed: int
     bo: BOSettings
+    sampler: str = "gp"  # gp | published | tpe (see optimize.sampler)
     executor: Mapping[str, Any] = field(default_factory=dict)
     fingerprint: str = ""
     path: Path | None = None  # the study file
@@ -197,14 +199,23 @@ def load_study(path: str | Path) -> Study:
     every = int(get_number(val, "every", file=path, where="validation", default=5, minimum=1))  # type: ignore[arg-type]
     weights = require_mapping(doc.get("weights") or {}, file=path, where="weights")
     check_keys(weights, allowed=("xy", "theta"), file=path, where="weights")
-    opt_doc = require_mapping(doc.get("optimizer") or {}, file=path, where="optimizer")
+    opt_doc = dict(require_mapping(doc.get("optimizer") or {}, file=path, where="optimizer"))
+    sampler = get_choice(
+        opt_doc, "sampler", SAMPLERS, what="optimizer", file=path, where="optimizer", default="gp"
+    )
+    opt_doc.pop("sampler", None)
     known = set(BOSettings.__dataclass_fields__) - {"n_initial"}
+    if sampler == "tpe":
+        known = set()  # TPE takes none of the GP's settings
     check_keys(opt_doc, allowed=sorted(known), file=path, where="optimizer")
     initial = int(get_number(doc, "initial", file=path, where="", default=16, minimum=1))  # type: ignore[arg-type]
     try:
-        bo = BOSettings(n_initial=initial, **opt_doc)  # type: ignore[arg-type]
+        make = BOSettings.published if sampler == "published" else BOSettings
+        bo = make(n_initial=initial, **opt_doc)  # type: ignore[arg-type]
     except (ParcelfitError, TypeError) as exc:
-        raise ParcelfitError(str(exc), file=path, where="optimizer") from None
+        raise ParcelfitError(
+            str(exc), file=path, where="optimizer", fix="see BOSettings for the allowed values"
+        ) from None
     execu = require_mapping(doc.get("executor") or {"kind": "local"}, file=path, where="executor")
     check_keys(execu, allowed=("kind", "workers", "scheduler"), file=path, where="executor")
     if execu.get("kind", "local") not in ("local", "dask"):
@@ -237,6 +248,7 @@ def load_study(path: str | Path) -> Study:
         budget=int(get_number(doc, "budget", file=path, where="", default=80, minimum=1)),  # type: ignore[arg-type]
         seed=int(get_number(doc, "seed", file=path, where="", default=0)),  # type: ignore[arg-type]
         bo=bo,
+        sampler=sampler,
         executor=dict(execu),
         fingerprint=fingerprint,
         path=Path(path).resolve(),
