@@ -196,3 +196,15 @@ def test_bad_optimizer_sections_name_file_key_and_fix(tmp_path):
         load_study(write_study(tmp_path, optimizer={"sampler": "tpe", "n_samples": 10}))
     with pytest.raises(ParcelfitError, match=r"invalid BO settings"):
         load_study(write_study(tmp_path, optimizer={"transform": "sqrt"}))
+
+
+def test_fast_prediction_matches_scikit_learn():
+    from parcelfit.optimize.bo import _predict
+
+    for settings in (BOSettings(n_samples=500, n_restarts=0, polish=1), BOSettings.published()):
+        bo, _ = _run(3, 5, settings)
+        gp = bo._fit(np.random.default_rng(0), [np.array([0.5, 0.5, 0.5])])[0]
+        U = np.random.default_rng(1).random((50, 3))
+        mu, sd = _predict(gp, U)
+        ref_mu, ref_sd = gp.predict(U, return_std=True)
+        assert mu == pytest.approx(ref_mu, abs=1e-9) and sd == pytest.approx(ref_sd, abs=1e-7)
