@@ -35,8 +35,6 @@ import numpy as np
 
 from parcelfit.optimize import BatchBO, BOSettings, Space
 
-Function = tuple[str, dict[str, tuple[float, float]], Callable[[dict[str, float]], float], float]
-
 
 def branin(p: dict[str, float]) -> float:
     x1, x2 = p["x1"], p["x2"]
@@ -68,31 +66,56 @@ def hartmann6(p: dict[str, float]) -> float:
     return float(-np.sum(_ALPHA * np.exp(-np.sum(_A * (x - _P) ** 2, axis=1))))
 
 
-FUNCTIONS: list[Function] = [
-    ("Branin", {"x1": (-5.0, 10.0), "x2": (0.0, 15.0)}, branin, 0.397887),
-    ("Hartmann6", {f"x{i}": (0.0, 1.0) for i in range(6)}, hartmann6, -3.32237),
+def _noisy_hartmann6(p: dict[str, float]) -> float:
+    """Hartmann 6 plus Gaussian observation noise (sd 0.05), seeded by the point itself."""
+    key = np.frombuffer(np.array([p[f"x{i}"] for i in range(6)]).tobytes(), dtype=np.uint32)
+    return hartmann6(p) + 0.05 * float(np.random.default_rng(key.tolist()).standard_normal())
+
+
+_ROUGH_CENTRE = np.array([0.31, 0.62, 0.47, 0.74])
+_ROUGH_WEIGHTS = np.array([1.0, 0.6, 0.35, 0.15])
+_ROUGH_DIRS = np.random.default_rng(2024).standard_normal((8, 4))
+_ROUGH_FREQ = np.random.default_rng(2025).uniform(40.0, 120.0, 8)
+
+
+def rough4(p: dict[str, float]) -> float:
+    """A 4-D cost built like the parcel cost: a smooth bowl (range about 1 over the cube) plus a
+    deterministic, parameter-dependent roughness of at most 0.04 (a few % of the range) whose
+    wavelength is about 1 % of a parameter's range, zero at the optimum (global minimum 0)."""
+    x = np.array([p[f"x{i}"] for i in range(4)]) - _ROUGH_CENTRE
+    bowl = float(np.sum(_ROUGH_WEIGHTS * x**2)) / 0.6
+    rough = 0.04 * float(np.mean(np.sin(np.pi * _ROUGH_FREQ * (_ROUGH_DIRS @ x)) ** 2))
+    return bowl + rough
+
+
+Objective = Callable[[dict[str, float]], float]
+_B = {"x1": (-5.0, 10.0), "x2": (0.0, 15.0)}
+_U6 = {f"x{i}": (0.0, 1.0) for i in range(6)}
+# name, bounds, observed function, true function (for the regret), global minimum, budget
+FUNCTIONS: list[tuple[str, dict[str, tuple[float, float]], Objective, Objective, float, int]] = [
+    ("Branin@48", _B, branin, branin, 0.397887, 48),
+    ("Branin@100", _B, branin, branin, 0.397887, 100),
+    ("Hartmann6", _U6, hartmann6, hartmann6, -3.32237, 100),
+    ("Hartmann6+n", _U6, _noisy_hartmann6, hartmann6, -3.32237, 100),
+    ("Rough4", {f"x{i}": (0.0, 1.0) for i in range(4)}, rough4, rough4, 0.0, 100),
 ]
 
 
-def run_parcelfit(bounds, f, seed, budget, transform="none"):
+def run_parcelfit(bounds, f, seed, budget, settings=None):
     bo = BatchBO(
-        Space.from_bounds(bounds), batch_size=4, seed=seed, settings=BOSettings(transform=transform)
+        Space.from_bounds(bounds), batch_size=4, seed=seed, settings=settings or BOSettings()
     )
-    values = []
-    while len(values) < budget:
-        for p in bo.ask(min(4 if values else 16, budget - len(values))):
-            v = f(p)
-            bo.tell(p, v)
-            values.append(v)
-    return values
+    n = 0
+    while n < budget:
+        for p in bo.ask(min(4 if n else 16, budget - n)):
+            bo.tell(p, f(p))
+            n += 1
 
 
 def run_random(bounds, f, seed, budget):
     rng = np.random.default_rng(seed)
-    return [
+    for _ in range(budget):
         f({k: lo + (hi - lo) * rng.random() for k, (lo, hi) in bounds.items()})
-        for _ in range(budget)
-    ]
 
 
 def run_optuna(bounds, f, seed, budget):
@@ -100,42 +123,82 @@ def run_optuna(bounds, f, seed, budget):
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     study = optuna.create_study(sampler=optuna.samplers.TPESampler(seed=seed))
-    values = []
-    while len(values) < budget:
-        trials = [study.ask() for _ in range(min(4, budget - len(values)))]
+    n = 0
+    while n < budget:
+        trials = [study.ask() for _ in range(min(4, budget - n))]
         for tr in trials:
-            v = f({k: tr.suggest_float(k, lo, hi) for k, (lo, hi) in bounds.items()})
-            study.tell(tr, v)
-            values.append(v)
-    return values
+            study.tell(tr, f({k: tr.suggest_float(k, lo, hi) for k, (lo, hi) in bounds.items()}))
+            n += 1
 
 
-def run_mango(bounds, f, seed, budget):
+def run_mango(bounds, f, seed, budget, published=False):
+    """Mango with its defaults, or (published=True) configured as method.md section 7: a
+    Latin hypercube of 16, GP Matern 5/2 with noise 0.35^2, k-means batches, no exploration."""
     from mango import Tuner
-    from scipy.stats import uniform
+    from scipy.stats import qmc, uniform
+    from sklearn.gaussian_process import GaussianProcessRegressor
+    from sklearn.gaussian_process.kernels import Matern
 
     random.seed(seed)
     np.random.seed(seed)
-    values = []
 
     def objective(batch):
-        out = [f(p) for p in batch]
-        values.extend(out)
-        return out
+        return [f(p) for p in batch]
 
     space = {k: uniform(lo, hi - lo) for k, (lo, hi) in bounds.items()}
-    conf = {"batch_size": 4, "initial_random": 16, "num_iteration": (budget - 16) // 4}
+    conf = {
+        "batch_size": 4,
+        "initial_random": 16,
+        "num_iteration": (budget - 16) // 4,
+        "log_progress": False,
+        # Mango's own domain is 50,000-500,000 random points per batch, which makes a 20-seed
+        # run take hours; both variants use 4000 Monte Carlo points, as parcelfit does
+        "domain_size": 4000,
+    }
+    if published:
+        lhs = qmc.LatinHypercube(d=len(bounds), scramble=True, seed=seed).random(16)
+        names = list(bounds)
+        conf |= {
+            "initial_custom": [
+                {
+                    k: bounds[k][0] + u[i] * (bounds[k][1] - bounds[k][0])
+                    for i, k in enumerate(names)
+                }
+                for u in lhs
+            ],
+            "surrogate": GaussianProcessRegressor(
+                kernel=Matern(nu=2.5),
+                alpha=0.35**2,
+                normalize_y=True,
+                n_restarts_optimizer=3,
+                random_state=seed,
+            ),
+            "parallel_strategy": "clustering",
+            "exploration": 0.0,
+            "alpha": 2.0,
+        }
     Tuner(space, objective, conf).minimize()
-    return values[:budget]
 
 
 METHODS = {
     "parcelfit": run_parcelfit,
-    "parcelfit-log": lambda b, f, s, n: run_parcelfit(b, f, s, n, "log"),
-    "mango": run_mango,
-    "optuna": run_optuna,
+    "published": lambda b, f, s, n: run_parcelfit(b, f, s, n, BOSettings.published()),
+    "mango-default": run_mango,
+    "mango-published": lambda b, f, s, n: run_mango(b, f, s, n, published=True),
+    "optuna-tpe": run_optuna,
     "random": run_random,
 }
+# one change at a time against the published configuration (--methods to select)
+ABLATIONS = {
+    "pub+noisefit": BOSettings.published(noise="fit"),
+    "pub+power": BOSettings.published(transform="power"),
+    "pub+logei": BOSettings.published(acquisition="logei"),
+    "pub+polish": BOSettings.published(polish=3),
+    "pub+believer": BOSettings.published(batch="believer"),
+    "pub+ard+local": BOSettings.published(ard=True, local_fraction=0.25),
+}
+for _name, _settings in ABLATIONS.items():
+    METHODS[_name] = lambda b, f, s, n, _st=_settings: run_parcelfit(b, f, s, n, _st)
 
 
 def evals_to_regret(values, optimum, tol=0.01):
@@ -145,13 +208,20 @@ def evals_to_regret(values, optimum, tol=0.01):
 
 
 def one(job):
-    fname, method, seed, budget = job
-    _, bounds, f, opt = next(fn for fn in FUNCTIONS if fn[0] == fname)
+    fname, method, seed = job
+    _, bounds, f, truth, opt, budget = next(fn for fn in FUNCTIONS if fn[0] == fname)
+    true_values: list[float] = []
+
+    def objective(p):
+        true_values.append(truth(p))
+        return f(p)
+
     t0 = time.perf_counter()
     try:
-        values = METHODS[method](bounds, f, seed, budget)
+        METHODS[method](bounds, objective, seed, budget)
     except ImportError as exc:
         return fname, method, seed, "missing", str(exc), 0.0
+    values = true_values[:budget]
     return (
         fname,
         method,
@@ -189,7 +259,7 @@ def main() -> None:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     ap.add_argument("--seeds", type=int, default=20)
-    ap.add_argument("--budget", type=int, default=100)
+    ap.add_argument("--functions", default=",".join(fn[0] for fn in FUNCTIONS))
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--methods", default=",".join(METHODS))
     ap.add_argument("--overhead-only", action="store_true")
@@ -200,30 +270,32 @@ def main() -> None:
         )
         return
     methods = args.methods.split(",")
+    functions = args.functions.split(",")
     print(
-        f"batch size 4, budget {args.budget}, {args.seeds} seeds; evaluations to regret <= 0.01",
+        f"batch size 4, {args.seeds} seeds; evaluations to regret <= 0.01 (budget after the @)",
         flush=True,
     )
     print(
-        f"{'function':<11}{'method':<15}{'median evals':>13}{'reached':>9}{'median final regret':>21}{'s/run':>7}"
+        f"{'function':<12}{'method':<16}{'median evals':>13}{'reached':>9}{'median final regret':>21}{'s/run':>7}"
     )
     with multiprocessing.get_context("spawn").Pool(args.jobs) as pool:
-        for fname, *_ in FUNCTIONS:  # one function at a time, printed as soon as it is done
-            jobs = [(fname, m, s, args.budget) for m in methods for s in range(args.seeds)]
+        for fname in functions:  # one function at a time, printed as soon as it is done
+            budget = next(fn[5] for fn in FUNCTIONS if fn[0] == fname)
+            jobs = [(fname, m, s) for m in methods for s in range(args.seeds)]
             results = pool.map(one, jobs, chunksize=1)
             for m in methods:
                 rows = [r for r in results if r[1] == m]
                 if any(r[3] == "missing" for r in rows):
-                    print(f"{fname:<11}{m:<15}  not installed: {rows[0][4]}")
+                    print(f"{fname:<12}{m:<16}  not installed: {rows[0][4]}")
                     continue
                 hits = [r[3] if r[3] is not None else math.inf for r in rows]
                 med = statistics.median(hits)
-                med_txt = f">{args.budget}" if math.isinf(med) else f"{med:g}"
+                med_txt = f">{budget}" if math.isinf(med) else f"{med:g}"
                 reached = sum(h != math.inf for h in hits) / len(hits)
                 final = statistics.median(r[4] for r in rows)
                 secs = statistics.median(r[5] for r in rows)
                 print(
-                    f"{fname:<11}{m:<15}{med_txt:>13}{reached:>9.0%}{final:>21.4f}{secs:>7.1f}",
+                    f"{fname:<12}{m:<16}{med_txt:>13}{reached:>9.0%}{final:>21.4f}{secs:>7.1f}",
                     flush=True,
                 )
     print(f"ask(4) with 200 observations in 4-D, one core: {ask_overhead():.2f} s (target: < 2 s)")

@@ -99,3 +99,112 @@ def test_replaying_tells_gives_the_same_next_batch():
     for o in bo.observations:  # as a resumed study replays its store
         fresh.tell(o.params, o.cost)
     assert fresh.ask() == bo.ask()
+
+
+def test_published_preset_is_method_section_7():
+    s = BOSettings.published()
+    assert (s.n_initial, s.nu, s.alpha, s.ucb_lambda, s.top_fraction) == (
+        16,
+        2.5,
+        0.35**2,
+        2.0,
+        0.25,
+    )
+    assert (s.noise, s.transform, s.acquisition, s.polish, s.batch) == (
+        "fixed",
+        "none",
+        "ucb",
+        0,
+        "kmeans",
+    )
+    assert (s.local_fraction, s.ard, s.recommend) == (0.0, False, "best_observed")
+    bo, _ = _run(4, 6, BOSettings.published(n_samples=1000, n_restarts=0))
+    assert len(bo.observations) == 24 and bo.best()[1] < min(o.cost for o in bo.observations[:16])
+    with pytest.raises(ParcelfitError, match="invalid BO settings"):
+        BOSettings(batch="penalty")
+
+
+def test_log_expected_improvement_is_accurate_far_into_the_tail():
+    from scipy.stats import norm
+
+    from parcelfit.optimize.bo import _log_h
+
+    z = np.array([-30.0, -8.0, -6.5, -5.9, -1.0, 0.0, 2.0])
+    direct = np.log(z * norm.cdf(z) + norm.pdf(z))
+    finite = np.isfinite(direct) & (z > -20)
+    assert _log_h(z)[finite] == pytest.approx(direct[finite], rel=1e-3)
+    assert np.isfinite(_log_h(z)).all() and np.all(np.diff(_log_h(z)) > 0)
+
+
+def test_fitted_noise_stays_within_its_bounds_and_small_on_a_smooth_function():
+    from parcelfit.optimize.bo import NOISE_HIGH, NOISE_LOW
+
+    bo, _ = _run(1, 5, BOSettings(n_samples=500, n_restarts=0, polish=1))
+    gp = bo.surrogate()
+    assert NOISE_LOW <= gp.alpha <= NOISE_HIGH
+    assert gp.alpha < 0.01  # a smooth quadratic: far below the published 0.35^2
+
+
+def test_tpe_sampler_asks_batches_and_replays_its_history():
+    from parcelfit.optimize.sampler import Sampler, make_sampler
+
+    space = Space([Dimension("a", 0, 1), Dimension("b", 1e-3, 1.0, log=True)])
+
+    def run():
+        tpe = make_sampler("tpe", space, batch_size=4, seed=2)
+        for _ in range(5):
+            batch = tpe.ask()
+            for p in batch:
+                tpe.tell(p, None if p["a"] > 0.9 else (p["a"] - 0.3) ** 2 + np.log10(p["b"]) ** 2)
+        return tpe, batch
+
+    tpe, last = run()
+    assert isinstance(tpe, Sampler) and tpe.n_told == 20
+    assert run()[1] == last
+    assert len({tuple(p.values()) for p in last}) == 4
+    fresh = make_sampler("tpe", space, batch_size=4, seed=2)
+    for p, c in tpe._told:  # as a resumed study replays its store
+        fresh.tell(p, c)
+    assert fresh.ask() == tpe.ask()
+    assert tpe.best()[1] == min(c for _, c in tpe._told if c is not None)
+
+
+@pytest.mark.parametrize("sampler", ["published", "tpe"])
+def test_a_study_file_chooses_its_optimizer(tmp_path, sampler):
+    from parcelfit.optimize.calibration import Calibration
+    from parcelfit.optimize.study import load_study
+
+    from .test_calibration import write_study
+
+    opts = {"sampler": sampler} | ({} if sampler == "tpe" else {"n_samples": 500})
+    study = load_study(write_study(tmp_path, optimizer=opts, budget=12, initial=8))
+    assert study.sampler == sampler
+    first = Calibration(study, tmp_path / "out").run()
+    assert first.evaluations == 12 and first.best_cost is not None
+    again = Calibration(study, tmp_path / "out").run()  # resumed from the store: nothing new
+    assert (again.evaluations, again.best_params) == (12, first.best_params)
+
+
+def test_bad_optimizer_sections_name_file_key_and_fix(tmp_path):
+    from parcelfit.optimize.study import load_study
+
+    from .test_calibration import write_study
+
+    with pytest.raises(ParcelfitError, match=r"optimizer.*'mango'"):
+        load_study(write_study(tmp_path, optimizer={"sampler": "mango"}))
+    with pytest.raises(ParcelfitError, match=r"optimizer: unknown key 'n_samples'"):
+        load_study(write_study(tmp_path, optimizer={"sampler": "tpe", "n_samples": 10}))
+    with pytest.raises(ParcelfitError, match=r"invalid BO settings"):
+        load_study(write_study(tmp_path, optimizer={"transform": "sqrt"}))
+
+
+def test_fast_prediction_matches_scikit_learn():
+    from parcelfit.optimize.bo import _predict
+
+    for settings in (BOSettings(n_samples=500, n_restarts=0, polish=1), BOSettings.published()):
+        bo, _ = _run(3, 5, settings)
+        gp = bo._fit(np.random.default_rng(0), [np.array([0.5, 0.5, 0.5])])[0]
+        U = np.random.default_rng(1).random((50, 3))
+        mu, sd = _predict(gp, U)
+        ref_mu, ref_sd = gp.predict(U, return_std=True)
+        assert mu == pytest.approx(ref_mu, abs=1e-9) and sd == pytest.approx(ref_sd, abs=1e-7)

@@ -1,43 +1,26 @@
-"""Batch Bayesian optimisation with ask/tell (method.md section 7), minimising a cost.
+"""Batch Bayesian optimisation with ask/tell, minimising a cost (formulas: README.md here).
 
-Initial design: a Latin hypercube of ``n_initial`` points (SciPy ``qmc.LatinHypercube``,
-scrambled, seeded) in the unit cube.
+Two configurations of one `BatchBO` (`BOSettings`):
 
-Surrogate: a Gaussian process (scikit-learn) on the unit-cube inputs and the standardised
-negative cost y = -(c - mean c) / std c, with kernel
+* the default, measured in ``benchmarks/bench_bo.py``: Latin hypercube of 16; GP (scikit-learn)
+  with Matern 5/2, one length scale per input and the noise variance fitted by marginal
+  likelihood within [1e-6, 0.35^2] of the standardised cost; the cost Box-Cox transformed
+  (lambda fitted to the data, SciPy/scikit-learn ``PowerTransformer``) before standardising; the
+  acquisition log expected improvement, maximised over Monte Carlo candidates and polished by
+  L-BFGS-B from the best of them; the batch chosen by kriging believer (pick one point, believe
+  it at its predicted mean, refit with the kernel fixed, pick the next); the recommendation is
+  the evaluated point with the lowest GP mean cost;
+* ``BOSettings.published()``, method.md section 7: Matern 5/2 with one length scale, noise
+  0.35^2, untransformed cost, UCB (lambda 2) on uniform Monte Carlo samples, k-means (k = batch
+  size) on the best 25 % with the best-UCB sample of each cluster as the batch, recommendation
+  the lowest observed cost.
 
-    k(u, u') = sigma_f^2 * Matern_nu(u, u'; l_1..l_d)        (nu = 5/2, one length scale per input)
-
-and observation noise variance ``alpha`` = 0.35^2 on the standardised scale (the published
-value). The kernel's hyperparameters are fitted by maximum marginal likelihood (L-BFGS-B with
-``n_restarts`` seeded restarts); length scales are bounded to [0.01, 100] in unit-cube units.
-
-Acquisition: UCB(u) = mu(u) + lambda * sigma(u) on y (i.e. on the negative cost), evaluated at
-``n_samples`` Monte Carlo candidates: (1 - ``local_fraction``) of them uniform in the unit cube,
-the rest Gaussian perturbations (standard deviations 0.1 and 0.02, clipped to the cube) of the
-five best observations, so the optimum can be resolved more finely than a uniform sample of that
-size allows. The best ``top_fraction`` (25 %) are clustered by k-means
-(scikit-learn) into k = batch size clusters and the best-UCB point of each cluster forms the
-batch, so one batch spreads over distinct promising regions.
-
-Pending points (asked, not yet told) enter the GP as "kriging believer" fantasies with their
-predicted mean, so asking again before telling does not repeat them.
-
-Failed evaluations are told with ``cost=None`` (or a non-finite cost): they are kept, with the
-worst finite cost observed so far, so the surrogate learns to avoid the region (a documented
-penalty; the raw failure is kept by the caller's store).
-
-Determinism: every random draw of ask() uses numpy's generator seeded with (seed, number of
-observations, number of pending points), so the same history gives the same batch, which is
-what makes a resumed study replay exactly.
-
-Recommendation: the parameters reported and validated are, among the evaluated points, the
-one with the lowest GP mean cost (``recommend: posterior_mean``), not the single lowest observed
-cost (``best_observed``, the published choice), which on a rough objective is partly luck.
-
-Deliberate differences from the Mango library the published work used: the GP noise is not
-effectively zero, every input has its own length scale, the batch is never filled with hidden
-random points, the Latin hypercube is built in, and resuming is a replay of tell().
+Common to both: the GP models the standardised negative (transformed) cost; pending points
+(asked, not yet told) enter as kriging-believer fantasies so asking again does not repeat them;
+failed evaluations are told with ``cost=None`` and kept with the worst finite cost seen so far
+(the store keeps the raw failure); every random draw of ask() uses numpy's generator seeded with
+(seed, number of observations, number of pending points), so the same history gives the same
+batch, which is what makes a resumed study replay exactly.
 """
 
 from __future__ import annotations
@@ -46,13 +29,18 @@ import math
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
+from scipy.linalg import solve_triangular
+from scipy.optimize import minimize
+from scipy.special import ndtr
 from scipy.stats import qmc
 from sklearn.cluster import KMeans
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.gaussian_process import GaussianProcessRegressor
-from sklearn.gaussian_process.kernels import ConstantKernel, Matern
+from sklearn.gaussian_process.kernels import ConstantKernel, Matern, Product, WhiteKernel
+from sklearn.preprocessing import PowerTransformer
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.optimize.space import Space
@@ -60,17 +48,25 @@ from parcelfit.optimize.space import Space
 
 @dataclass(frozen=True)
 class BOSettings:
-    """Settings of the batch BO; defaults follow the published method where it gives them."""
+    """Settings of the batch BO. The defaults are the measured default (see the module docstring);
+    `BOSettings.published()` gives the configuration of method.md section 7."""
 
     n_initial: int = 16  # Latin hypercube size
     ucb_lambda: float = 2.0  # exploration weight of UCB
     n_samples: int = 4000  # Monte Carlo candidates per ask
-    top_fraction: float = 0.25  # share of candidates kept for clustering
+    top_fraction: float = 0.25  # share of candidates kept for clustering (batch: kmeans)
     local_fraction: float = 0.25  # share of candidates drawn near the best observations
     nu: float = 2.5  # Matern smoothness
-    alpha: float = 0.35**2  # noise variance on the standardised cost
-    n_restarts: int = 3  # optimiser restarts of the GP's hyperparameters
-    transform: str = "none"  # "none" (published) or "log": c -> log(c - min c + 0.01 * spread) before standardising
+    alpha: float = 0.35**2  # noise variance on the standardised cost (noise: fixed)
+    noise: str = (
+        "fit"  # "fit": noise variance by marginal likelihood in [1e-6, 0.35^2]; "fixed": alpha
+    )
+    n_restarts: int = 1  # optimiser restarts of the GP's hyperparameters
+    transform: str = "power"  # "none", "log" or "power" (Box-Cox with lambda fitted to the data)
+    acquisition: str = "logei"  # "ucb" or "logei" (log expected improvement)
+    polish: int = 2  # L-BFGS-B polishing starts from the best candidates (0: sampled only)
+    batch: str = "believer"  # "believer" (kriging believer, sequential) or "kmeans" (published)
+    ard: bool = True  # one length scale per input (False: one shared length scale)
     recommend: str = "posterior_mean"  # or "best_observed" (published); see BatchBO.recommend
 
     def __post_init__(self) -> None:
@@ -78,11 +74,34 @@ class BOSettings:
             self.n_initial < 1
             or self.n_samples < 10
             or not 0 < self.top_fraction <= 1
+            or not 0 <= self.local_fraction <= 1
             or self.alpha <= 0
-            or self.transform not in ("none", "log")
+            or self.polish < 0
+            or self.noise not in ("fit", "fixed")
+            or self.transform not in ("none", "log", "power")
+            or self.acquisition not in ("ucb", "logei")
+            or self.batch not in ("believer", "kmeans")
             or self.recommend not in ("posterior_mean", "best_observed")
         ):
             raise ParcelfitError(f"invalid BO settings: {self}")
+
+    @classmethod
+    def published(cls, **overrides: Any) -> BOSettings:
+        """The configuration of method.md section 7 (Latin hypercube 16, Matern 5/2, noise
+        0.35^2, UCB by uniform Monte Carlo sampling, k-means on the top 25 %, best observed)."""
+        base: dict[str, Any] = {
+            "noise": "fixed",
+            "alpha": 0.35**2,
+            "transform": "none",
+            "acquisition": "ucb",
+            "polish": 0,
+            "batch": "kmeans",
+            "local_fraction": 0.0,
+            "ard": False,
+            "recommend": "best_observed",
+            "n_restarts": 3,
+        }
+        return cls(**{**base, **overrides})
 
 
 @dataclass
@@ -142,6 +161,11 @@ class BatchBO:
         ok = cost is not None and math.isfinite(cost)
         self.observations.append(Observation(u, dict(params), float(cost) if ok else None))
 
+    @property
+    def n_told(self) -> int:
+        """How many evaluations were told."""
+        return len(self.observations)
+
     def best(self) -> tuple[dict[str, float], float] | None:
         """The evaluated parameters with the lowest cost, and that cost (None before any success)."""
         ok = [o for o in self.observations if o.cost is not None]
@@ -186,39 +210,61 @@ class BatchBO:
         c = np.array([o.cost if o.cost is not None else worst for o in self.observations])
         return X, c
 
+    def _transformed(self, c: np.ndarray) -> np.ndarray:
+        """The cost after the output transform, before standardising."""
+        s = self.settings
+        if s.transform == "none" or np.ptp(c) <= 0:
+            return c
+        shifted = c - c.min() + 0.01 * float(np.ptp(c))
+        if s.transform == "log":
+            return np.log(shifted)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            out = PowerTransformer(method="box-cox", standardize=False).fit_transform(
+                shifted[:, None]
+            )[:, 0]
+        return out if np.all(np.isfinite(out)) and np.ptp(out) > 0 else np.log(shifted)
+
     def _fit(self, rng: np.random.Generator, fantasies: Sequence[np.ndarray]) -> tuple | None:
         data = self._training_data()
         if data is None:
             return None
         X, c = data
-        if self.settings.transform == "log":
-            c = np.log(c - c.min() + 0.01 * max(float(np.ptp(c)), 1e-12))
-        mean, std = c.mean(), c.std()
-        y = -(c - mean) / (std if std > 0 else 1.0)
+        z = self._transformed(c)
+        mean, std = z.mean(), z.std()
+        y = -(z - mean) / (std if std > 0 else 1.0)
+        s = self.settings
         d = X.shape[1]
-        kernel = ConstantKernel(1.0, (1e-2, 1e2)) * Matern(
-            length_scale=np.full(d, 0.3), length_scale_bounds=(1e-2, 1e2), nu=self.settings.nu
+        kernel: Any = ConstantKernel(1.0, (1e-2, 1e2)) * Matern(
+            length_scale=np.full(d, 0.3) if s.ard else 0.3,
+            length_scale_bounds=(1e-2, 1e2),
+            nu=s.nu,
         )
+        if s.noise == "fit":
+            kernel = kernel + WhiteKernel(0.01, (NOISE_LOW, NOISE_HIGH))
         gp = GaussianProcessRegressor(
             kernel=kernel,
-            alpha=self.settings.alpha,
+            alpha=s.alpha if s.noise == "fixed" else 1e-10,
             normalize_y=False,
-            n_restarts_optimizer=self.settings.n_restarts,
+            n_restarts_optimizer=s.n_restarts,
             random_state=int(rng.integers(2**31 - 1)),
         )
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)
             gp.fit(X, y)
+            if s.noise == "fit":
+                # predict the latent cost: the fitted noise becomes alpha, the kernel stays fixed
+                gp = _conditioned(gp.kernel_.k1, gp.kernel_.k2.noise_level, X, y)
             if fantasies:
                 # kriging believer: pending points count as observed at the predicted mean, with
                 # the fitted kernel kept fixed, so they lower the uncertainty around themselves
                 F = np.asarray(fantasies)
                 believed = gp.predict(F)
-                gp = GaussianProcessRegressor(
-                    kernel=gp.kernel_, alpha=self.settings.alpha, optimizer=None
+                gp = _conditioned(
+                    gp.kernel_, gp.alpha, np.vstack([X, F]), np.concatenate([y, believed])
                 )
-                gp.fit(np.vstack([X, F]), np.concatenate([y, believed]))
-        return gp, mean, std
+                return gp, mean, std, float(max(y.max(), believed.max()))
+        return gp, mean, std, float(y.max())
 
     def _candidates(self, rng: np.random.Generator, d: int) -> np.ndarray:
         n_local = int(self.settings.local_fraction * self.settings.n_samples)
@@ -231,6 +277,43 @@ class BatchBO:
         local = np.clip(centres + scales * rng.standard_normal((n_local, d)), 0.0, 1.0)
         return np.vstack([uniform, local])
 
+    def _acquisition(
+        self, gp: GaussianProcessRegressor, y_best: float, U: np.ndarray
+    ) -> np.ndarray:
+        """UCB or log EI of the standardised negative cost at the rows of U (higher is better)."""
+        mu, sigma = _predict(gp, U)
+        if self.settings.acquisition == "ucb":
+            return mu + self.settings.ucb_lambda * sigma
+        sigma = np.maximum(sigma, 1e-12)
+        return np.log(sigma) + _log_h((mu - y_best) / sigma)
+
+    def _polish(self, gp: GaussianProcessRegressor, y_best: float, u0: np.ndarray) -> np.ndarray:
+        """L-BFGS-B from u0 on the acquisition (finite-difference gradient); u0 if not better."""
+
+        def negative(u: np.ndarray) -> float:
+            return -float(self._acquisition(gp, y_best, u[None])[0])
+
+        res = minimize(
+            negative,
+            u0,
+            method="L-BFGS-B",
+            bounds=[(0.0, 1.0)] * len(u0),
+            options={"maxiter": 15, "eps": 1e-6},
+        )
+        return np.clip(res.x, 0.0, 1.0) if res.fun < negative(u0) else u0
+
+    def _best_point(
+        self, gp: GaussianProcessRegressor, y_best: float, cand: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The acquisition's maximiser: best candidates, polished; and the candidates' values."""
+        a = self._acquisition(gp, y_best, cand)
+        starts = np.argsort(-a)[: max(1, self.settings.polish)]
+        if self.settings.polish == 0:
+            return cand[starts[0]], a
+        polished = [self._polish(gp, y_best, cand[i]) for i in starts]
+        values = self._acquisition(gp, y_best, np.array(polished))
+        return polished[int(np.argmax(values))], a
+
     def _suggest(self, n: int, extra_pending: Sequence[np.ndarray]) -> list[np.ndarray]:
         rng = np.random.default_rng(
             [self.seed, len(self.observations), len(self.pending) + len(extra_pending)]
@@ -239,19 +322,88 @@ class BatchBO:
         d = len(self.space)
         if fitted is None:  # fewer than two successes: keep exploring with random points
             return list(rng.random((n, d)))
-        gp = fitted[0]
+        gp, _, _, y_best = fitted
         cand = self._candidates(rng, d)
-        mu, sigma = gp.predict(cand, return_std=True)
-        ucb = mu + self.settings.ucb_lambda * sigma
+        if self.settings.batch == "believer" or n == 1:
+            batch: list[np.ndarray] = []
+            X, y = gp.X_train_, gp.y_train_
+            for k in range(n):
+                u, _ = self._best_point(gp, y_best, cand)
+                batch.append(u)
+                if k < n - 1:  # believe the pick at its predicted mean, then pick the next
+                    believed = float(gp.predict(u[None])[0])
+                    X, y = np.vstack([X, u]), np.append(y, believed)
+                    gp = _conditioned(gp.kernel_, gp.alpha, X, y)
+                    y_best = max(y_best, believed)  # the incumbent includes what is believed
+            return batch
+        acq = self._acquisition(gp, y_best, cand)
         keep = max(n, math.ceil(self.settings.top_fraction * len(cand)))
-        top = np.argsort(-ucb)[:keep]
-        if n == 1:
-            return [cand[top[0]]]
+        top = np.argsort(-acq)[:keep]
         km = KMeans(n_clusters=n, n_init=4, random_state=int(rng.integers(2**31 - 1))).fit(
             cand[top]
         )
         batch = []
         for k in range(n):
             members = top[km.labels_ == k]
-            batch.append(cand[members[np.argmax(ucb[members])]])
+            batch.append(cand[members[np.argmax(acq[members])]])
         return batch
+
+
+NOISE_LOW, NOISE_HIGH = 1e-6, 0.35**2  # bounds of the fitted noise variance (standardised cost)
+
+
+def _conditioned(kernel: Any, alpha: Any, X: np.ndarray, y: np.ndarray) -> GaussianProcessRegressor:
+    """A GP with a fixed kernel and noise conditioned on (X, y): no hyperparameter fit."""
+    gp = GaussianProcessRegressor(kernel=kernel, alpha=alpha, optimizer=None)
+    if np.ndim(alpha) > 0:  # sklearn stores an array alpha per training point; keep a scalar
+        gp.alpha = float(np.ravel(alpha)[0])
+    return gp.fit(X, y)
+
+
+def _predict(gp: GaussianProcessRegressor, U: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Posterior mean and sd at the rows of U, as ``gp.predict(U, return_std=True)``.
+
+    Written out for the kernel sigma_f^2 Matern_5/2 that `BatchBO` fits: scikit-learn's predict
+    spends most of its time on input checks, which dominate the many one-point calls of the
+    L-BFGS-B polish. Other kernels fall back to scikit-learn.
+    """
+    k = gp.kernel_
+    if not (
+        isinstance(k, Product)
+        and isinstance(k.k1, ConstantKernel)
+        and isinstance(k.k2, Matern)
+        and k.k2.nu == 2.5
+    ):
+        return gp.predict(U, return_std=True)
+    r = np.sqrt(
+        np.maximum(
+            (((U[:, None, :] - gp.X_train_[None, :, :]) / k.k2.length_scale) ** 2).sum(-1), 0.0
+        )
+    )
+    K = k.k1.constant_value * (1.0 + SQRT_5 * r + 5.0 / 3.0 * r**2) * np.exp(-SQRT_5 * r)
+    mu = K @ gp.alpha_
+    V = solve_triangular(gp.L_, K.T, lower=True, check_finite=False)
+    var = k.k1.constant_value - np.einsum("ij,ij->j", V, V)
+    return mu, np.sqrt(np.maximum(var, 0.0))
+
+
+SQRT_5 = math.sqrt(5.0)
+
+
+def _log_h(z: np.ndarray) -> np.ndarray:
+    """log(z Phi(z) + phi(z)), the log of expected improvement over sigma, stable for z << 0.
+
+    Written here because SciPy has log Phi (log_ndtr) but not this function; for z < -6 the
+    asymptotic form h(z) = phi(z) / z^2 (1 - 3 / z^2 + ...) is used (relative error < 1 %).
+    """
+    z = np.asarray(z, dtype=float)
+    out = np.empty_like(z)
+    far = z < -6.0
+    zn = z[~far]
+    out[~far] = np.log(np.maximum(zn * ndtr(zn) + np.exp(-0.5 * zn**2) / SQRT_2PI, 1e-300))
+    zf = z[far]
+    out[far] = -0.5 * zf**2 - math.log(SQRT_2PI) - 2.0 * np.log(-zf) + np.log1p(-3.0 / zf**2)
+    return out
+
+
+SQRT_2PI = math.sqrt(2.0 * math.pi)

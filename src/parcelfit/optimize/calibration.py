@@ -20,9 +20,9 @@ from typing import Any
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.metrics import ReferenceSelection, calibration_cost, select_reference, validate
-from parcelfit.optimize.bo import BatchBO
 from parcelfit.optimize.executors import DaskExecutor, LocalExecutor, Task
 from parcelfit.optimize.folderlock import check_writable, lock_folder
+from parcelfit.optimize.sampler import make_sampler
 from parcelfit.optimize.store import Evaluation, Store
 from parcelfit.optimize.study import Study
 from parcelfit.runs import TestCase, load_dataset, write_trajectory
@@ -220,8 +220,13 @@ class Calibration:
         )
         self.store.set_meta("reference_run", self.reference.reference_id)
         self.simulator = make_simulator(study.simulator, study.folder)
-        self.bo = BatchBO(
-            study.space, batch_size=study.batch_size, seed=study.seed, settings=study.bo
+        self.bo = make_sampler(
+            study.sampler,
+            study.space,
+            batch_size=study.batch_size,
+            seed=study.seed,
+            settings=study.bo,
+            n_initial=study.initial,
         )
         self._executor_args = (executor, scheduler, workers)
         self.on_progress = on_progress or (lambda p: None)
@@ -238,7 +243,7 @@ class Calibration:
 
     def _report(self, iteration: int, running: int, message: str) -> None:
         best = self.bo.best()
-        done = len(self.bo.observations)  # every finished evaluation is told exactly once
+        done = self.bo.n_told  # every finished evaluation is told exactly once
         self.on_progress(
             Progress(
                 iteration,

@@ -27,7 +27,7 @@
     initial: 16                        # optional, Latin hypercube size
     budget: 80                         # optional, most fitting evaluations
     seed: 0                            # optional
-    optimizer: {ucb_lambda: 2.0, n_samples: 4000, transform: none}   # optional BOSettings
+    optimizer: {sampler: gp, ucb_lambda: 2.0}   # optional: gp | published | tpe, BOSettings
     executor: {kind: local, workers: 2}   # optional: local (processes) | dask (scheduler: tcp://...)
 
 **A study file can run code.** ``backend: python`` imports the module named in ``factory`` and
@@ -60,6 +60,7 @@ from parcelfit.config import (
 )
 from parcelfit.errors import ParcelfitError
 from parcelfit.optimize.bo import BOSettings
+from parcelfit.optimize.sampler import SAMPLERS
 from parcelfit.optimize.space import Dimension, Space
 
 _TOP = (
@@ -103,6 +104,7 @@ class Study:
     budget: int
     seed: int
     bo: BOSettings
+    sampler: str = "gp"  # gp | published | tpe (see optimize.sampler)
     executor: Mapping[str, Any] = field(default_factory=dict)
     fingerprint: str = ""
     path: Path | None = None  # the study file
@@ -202,14 +204,23 @@ def load_study(path: str | Path) -> Study:
     every = get_int(val, "every", file=path, where="validation", default=5, minimum=1)
     weights = require_mapping(doc.get("weights") or {}, file=path, where="weights")
     check_keys(weights, allowed=("xy", "theta"), file=path, where="weights")
-    opt_doc = require_mapping(doc.get("optimizer") or {}, file=path, where="optimizer")
+    opt_doc = dict(require_mapping(doc.get("optimizer") or {}, file=path, where="optimizer"))
+    sampler = get_choice(
+        opt_doc, "sampler", SAMPLERS, what="optimizer", file=path, where="optimizer", default="gp"
+    )
+    opt_doc.pop("sampler", None)
     known = set(BOSettings.__dataclass_fields__) - {"n_initial"}
+    if sampler == "tpe":
+        known = set()  # TPE takes none of the GP's settings
     check_keys(opt_doc, allowed=sorted(known), file=path, where="optimizer")
     initial = get_int(doc, "initial", file=path, where="", default=16, minimum=1)
     try:
-        bo = BOSettings(n_initial=initial, **opt_doc)  # type: ignore[arg-type]
+        make = BOSettings.published if sampler == "published" else BOSettings
+        bo = make(n_initial=initial, **opt_doc)  # type: ignore[arg-type]
     except (ParcelfitError, TypeError) as exc:
-        raise ParcelfitError(str(exc), file=path, where="optimizer") from None
+        raise ParcelfitError(
+            str(exc), file=path, where="optimizer", fix="see BOSettings for the allowed values"
+        ) from None
     execu = require_mapping(doc.get("executor") or {"kind": "local"}, file=path, where="executor")
     check_keys(execu, allowed=("kind", "workers", "scheduler"), file=path, where="executor")
     check_executor(execu, ("local", "dask"), path)
@@ -244,6 +255,7 @@ def load_study(path: str | Path) -> Study:
         budget=get_int(doc, "budget", file=path, where="", default=80, minimum=1),
         seed=get_int(doc, "seed", file=path, where="", default=0, minimum=0, maximum=2**32 - 1),
         bo=bo,
+        sampler=sampler,
         executor=dict(execu),
         fingerprint=fingerprint,
         path=Path(path).resolve(),
