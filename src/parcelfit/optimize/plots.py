@@ -120,6 +120,7 @@ class DependenceCurve:
     cost: np.ndarray  # predicted cost averaged over the other parameters
     sd: np.ndarray  # averaged predictive standard deviation
     log: bool
+    transformed: bool = False  # cost after the optimiser's output transform (log or Box-Cox)
 
     @property
     def amplitude(self) -> float:
@@ -140,8 +141,9 @@ def dependence_curves(
     fitted = bo._fit(np.random.default_rng([bo.seed, len(bo.observations)]), [])
     if fitted is None:
         return None
-    gp, mean, std = fitted
+    gp, mean, std = fitted[:3]
     scale = std if std > 0 else 1.0
+    transformed = bo.settings.transform != "none"
     rng = np.random.default_rng(seed)
     d = len(bo.space)
     others = rng.random((n_mc, d))
@@ -162,7 +164,12 @@ def dependence_curves(
         )
         curves.append(
             DependenceCurve(
-                dim.name, np.asarray(to_catalogue_units(dim.name, xs)), mu_c, sd_c, dim.log
+                dim.name,
+                np.asarray(to_catalogue_units(dim.name, xs)),
+                mu_c,
+                sd_c,
+                dim.log,
+                transformed,
             )
         )
     return curves
@@ -186,7 +193,9 @@ def dependence_figure(curves: list[DependenceCurve]) -> Figure:
         ax.set_xlabel(_label(c.name), fontsize=8)
         if c.log:
             ax.set_xscale("log")
-    axes[0].set_ylabel("predicted cost")
+    axes[0].set_ylabel(
+        "predicted cost (after the output transform)" if curves[0].transformed else "predicted cost"
+    )
     fig.suptitle("GP partial dependence (mean over the other parameters, +-1 sd)", fontsize=9)
     return fig
 
