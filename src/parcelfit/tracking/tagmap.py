@@ -236,7 +236,17 @@ def load_tag_map(path: str | Path) -> TagMap:
             )
         camera = Camera(
             *(
-                float(get_number(m, k, file=path, where="camera", minimum=0, unit="px"))
+                # a focal length is at least a pixel (fx: 0 would divide by zero when mapping)
+                float(
+                    get_number(  # type: ignore[arg-type]
+                        m,
+                        k,
+                        file=path,
+                        where="camera",
+                        minimum=1 if k in ("fx", "fy") else 0,
+                        unit="px",
+                    )
+                )
                 for k in ("fx", "fy", "cx", "cy")
             ),  # type: ignore[arg-type]
             distortion=tuple(float(v) for v in dist),

@@ -31,7 +31,7 @@ import numpy as np
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import Trajectory
 from parcelfit.tracking.barriers import barrier_times
-from parcelfit.tracking.detect import TagDetector
+from parcelfit.tracking.detect import TagDetector, _side
 from parcelfit.tracking.geometry import PlaneMapper, fit_plane_mapper, tag_pose
 from parcelfit.tracking.tagmap import TagMap
 
@@ -45,6 +45,8 @@ class TrackOptions:
     min_side: float = 28.0  # px a tag keeps after shrinking
     refine: bool = True
     rescan: int = 10  # whole-frame search every this many frames, for tags entering the view
+    edge_refine: bool = True  # parcel tag corners from fitted edge lines (blur-robust)
+    max_reprojection_px: float = 5.0  # reference tags' mean reprojection error above: refused
 
 
 @dataclass
@@ -183,6 +185,11 @@ def track_video(
             where="camera",
             fix="calibrate the camera at the video's resolution (parcelfit camera-calibrate)",
         )
+    if not opts.max_reprojection_px > 0:
+        raise ParcelfitError(
+            f"max_reprojection_px must be > 0, got {opts.max_reprojection_px}",
+            fix="use a few pixels (default 5)",
+        )
     detector = TagDetector(
         tag_map.family,
         downscale=opts.downscale,
@@ -190,6 +197,7 @@ def track_video(
         refine=opts.refine,
         rescan=opts.rescan,
     )
+    detector.edge_ids = set(tag_map.parcel_tags) if opts.edge_refine else set()
     expected = set(tag_map.reference_tags)
     parcel_ids = sorted(tag_map.parcel_tags)
     rows: dict[int, list[tuple[float, float, float]]] = {i: [] for i in parcel_ids}
@@ -197,11 +205,12 @@ def track_video(
     reproj_mean, reproj_max, reused, geometry_missing = [], 0.0, 0, 0
     seen_any_reference = False
     other_ids: set[int] = set()
+    centres: dict[int, dict[int, tuple[float, float, float]]] = {i: {} for i in parcel_ids}
     started = time.perf_counter()
     k = 0
     try:
         for k, grey in enumerate(frames_of(cap)):
-            found = detector.detect(grey, expected)
+            found = detector.detect(grey, expected, wanted=set(parcel_ids))
             fitted = fit_plane_mapper(tag_map, found, mapper)
             if fitted is not None:
                 mapper = fitted
@@ -218,6 +227,7 @@ def track_video(
                         geometry_missing += 1
                     continue
                 tag = tag_map.parcel_tags[tag_id]
+                centres[tag_id][k] = (*found[tag_id].mean(axis=0), _side(found[tag_id]))
                 tx, ty, th = tag_pose(mapper, found[tag_id], tag.height)
                 dx, dy = tag.offset
                 c, s = math.cos(th), math.sin(th)
@@ -235,17 +245,23 @@ def track_video(
             file=video,
             fix=f"check the tag map's reference_tags and family ({tag_map.family})",
         )
+    reproj = float(np.mean(reproj_mean))
+    if reproj > opts.max_reprojection_px:
+        raise ParcelfitError(
+            f"the reference tags do not fit the tag map: mean reprojection error {reproj:.1f} px "
+            f"(max {reproj_max:.1f} px) is above {opts.max_reprojection_px:g} px",
+            file=tag_map.source,
+            where="reference_tags",
+            fix="measure the reference tags' positions, sizes and angles again (a tag placed "
+            "wrongly shifts every trajectory)",
+        )
     t = np.arange(frames) / fps
     tags = {}
     for tag_id in parcel_ids:
         arr = np.array(rows[tag_id], dtype=float).reshape(-1, 3)
         traj, gaps = fill_gaps(t, arr[:, 0], arr[:, 1], arr[:, 2], opts.max_gap)
         detected = np.isfinite(arr[:, 0])
-        span = (
-            int(np.flatnonzero(detected)[-1] - np.flatnonzero(detected)[0] + 1)
-            if detected.any()
-            else 0
-        )
+        span = _frames_in_view(detected, centres[tag_id], size)
         crossings: dict[str, float | None] = {}
         transit = None
         if traj is not None and tag_map.barriers:
@@ -261,7 +277,8 @@ def track_video(
             {
                 "detected_frames": int(detected.sum()),
                 "frames_in_view": span,
-                "detection_rate": float(detected.sum() / span) if span else 0.0,
+                "missed_at_clip_ends": int(span - _detected_span(detected)),
+                "detection_rate": float(detected.sum() / span) if span else 0.0,  # coverage
                 "gaps": gaps,
                 "interpolated_frames": int(sum(g["frames"] for g in gaps if g["interpolated"])),
                 "missing_frames": int(sum(g["frames"] for g in gaps if not g["interpolated"])),
@@ -292,4 +309,36 @@ def track_video(
         "max_gap_filled_frames": opts.max_gap,
         "other_tags_seen": sorted(other_ids),
     }
+    if not any(t.trajectory is not None for t in tags.values()):
+        raise ParcelfitError(
+            f"no parcel tag ({', '.join(map(str, parcel_ids))}) was found"
+            + (f"; other tags seen: {sorted(other_ids)}" if other_ids else ""),
+            file=video,
+            fix="check the tag map's parcel_tags and the tag family",
+        )
     return VideoTrack(video, fps, frames, size, tags, quality)
+
+
+def _detected_span(detected: np.ndarray) -> int:
+    idx = np.flatnonzero(detected)
+    return int(idx[-1] - idx[0] + 1) if len(idx) else 0
+
+
+def _frames_in_view(
+    detected: np.ndarray, centres: dict[int, tuple[float, float, float]], size: tuple[int, int]
+) -> int:
+    """Frames the tag was in view: its first..last detection, widened to the clip's start (end)
+    when at its first (last) detection the tag was well inside the image (more than two tag
+    sides from every border), so it cannot have just entered (left) the view."""
+    idx = np.flatnonzero(detected)
+    if not len(idx):
+        return 0
+    first, last = int(idx[0]), int(idx[-1])
+
+    def inside(k: int) -> bool:
+        x, y, side = centres[k]
+        return min(x, y, size[0] - 1 - x, size[1] - 1 - y) > 2 * side
+
+    start = 0 if inside(first) else first
+    end = len(detected) - 1 if inside(last) else last
+    return end - start + 1
