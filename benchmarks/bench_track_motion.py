@@ -68,6 +68,7 @@ def run_cell(
         np.savez(truth_file, **render_video(video, scene, path, seed=seed))
     truth = dict(np.load(truth_file))
     doc = scene_tag_map(scene, barriers=BARRIERS)
+    doc["timing"] = {"exposure_ms": exposure_ms, "readout_ms": readout_ms}
     tags = folder / f"{name}.yaml"
     tags.write_text(yaml.safe_dump(doc))
     tm = load_tag_map(tags)

@@ -56,7 +56,7 @@ class SyntheticScene:
     hidden: tuple[tuple[float, float], ...] = ()  # time spans [s] the parcel tag is covered
     shake: float = 0.0  # sd [m] of the camera's position, drawn afresh every frame
     readout: float = 0.0  # rolling shutter: time from the first to the last row's exposure [s]
-    readout_bands: int = 16  # rows rendered in this many bands, each at its own time
+    readout_bands: int = 128  # rows rendered in this many bands, each at its own time
 
     def pose(self) -> tuple[np.ndarray, np.ndarray]:
         """rvec, tvec (OpenCV) of the camera: looking straight down, then tilted."""
@@ -187,6 +187,22 @@ class Renderer:
             sc.parcel_height,
         )
 
+    def _parcel_rows(self, path: Path2D, t: float, span: float) -> tuple[float, float]:
+        """Image rows [px] the parcel's box top covers within ``t`` +- ``span`` [s] (+ margin)."""
+        sc = self.scene
+        xs, ys, _ = path(np.linspace(t - span, t + span, 9))
+        r = math.hypot(*sc.parcel_outline) / 2 + 0.01
+        pts = np.array(
+            [
+                (x + dx, y + dy)
+                for x, y in zip(xs, ys, strict=True)
+                for dx in (-r, r)
+                for dy in (-r, r)
+            ]
+        )
+        rows = self.project(pts, sc.parcel_height)[:, 1]
+        return float(rows.min()) - 20, float(rows.max()) + 20
+
     def _exposed(self, path: Path2D, t: float, show_tag: bool) -> np.ndarray:
         """The undistorted, noise-free image averaged over the exposure centred on ``t`` [s]."""
         sc = self.scene
@@ -215,8 +231,12 @@ class Renderer:
             h = self.size[1]
             bands = max(1, sc.readout_bands)
             edges = np.linspace(0, h, bands + 1).round().astype(int)
-            img = np.empty_like(self._base)
+            img = self._base.copy()
+            # only the bands the parcel can reach during the readout are rendered
+            lo, hi = self._parcel_rows(path, t, sc.readout + sc.exposure)
             for a, b in itertools.pairwise(edges):
+                if b <= lo or a > hi:
+                    continue
                 mid_row = (a + b - 1) / 2
                 tb = t + (mid_row / h - 0.5) * sc.readout
                 img[a:b] = self._exposed(path, tb, show_tag)[a:b]
