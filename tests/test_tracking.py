@@ -354,3 +354,21 @@ def test_motion_blur_and_spin_4ms(tmp_path):
     assert track.quality["frames_in_view"] == len(truth["t"])  # in view from the clip's start
     pos, head = errors(track.trajectory, truth)
     assert pos.mean() <= 0.001 and pos.max() <= 0.003 and head.max() <= 1.0
+
+
+def test_smoother_rejects_a_bad_frame_and_keeps_a_spin():
+    from parcelfit.tracking.smooth import rts_smooth
+
+    t = np.arange(60) / 60
+    theta = np.radians(720) * t  # 720 deg/s
+    rng = np.random.default_rng(0)
+    z = theta + rng.normal(0, np.radians(0.3), 60)
+    z[30] += np.radians(4)  # one bad frame
+    z[40:43] = np.nan
+    r = np.full(60, np.radians(0.5) ** 2)
+    smoothed, sd, used = rts_smooth(z, 1 / 60, r, 1e3)
+    assert used[29] and used[31] and not used[40:43].any()
+    assert np.degrees(np.abs(smoothed - theta)).max() < 1.0  # the 4-degree frame: no spike
+    z[30] += np.radians(20)  # a wild frame is rejected outright
+    assert not rts_smooth(z, 1 / 60, r, 1e3)[2][30]
+    assert np.all(sd > 0)
