@@ -258,3 +258,117 @@ def test_camera_calibration_recovers_the_camera_and_tracking_stays_accurate(vide
         app, ["camera-calibrate", str(board_video), "--tags", str(tags), "--board", "7x7"]
     )
     assert bad.exit_code == 2 and "found in only" in bad.output
+
+
+def test_bad_tag_maps_and_videos_stop_with_exit_2(videos, tmp_path):
+    video = str(videos["root"] / "plain.mp4")
+    # a reference tag placed 35 cm from where it is: refused, not a trajectory 35 cm off
+    doc = tag_map_doc(videos["scene"])
+    doc["reference_tags"][0]["x"] += 0.35
+    bad = tmp_path / "moved.yaml"
+    bad.write_text(yaml.safe_dump(doc))
+    result = runner.invoke(app, ["track", video, "--tags", str(bad), "--out", str(tmp_path / "a")])
+    assert result.exit_code == 2 and "reprojection error" in result.output
+    assert not (tmp_path / "a").exists()  # nothing written
+    # a focal length of 0 px
+    doc = tag_map_doc(videos["scene"])
+    doc["camera"]["fx"] = 0
+    bad.write_text(yaml.safe_dump(doc))
+    result = runner.invoke(app, ["track", video, "--tags", str(bad), "--out", str(tmp_path / "b")])
+    assert result.exit_code == 2 and "camera.fx" in result.output
+    # a parcel tag that never appears
+    doc = tag_map_doc(videos["scene"])
+    doc["parcel_tags"][9] = doc["parcel_tags"].pop(7)
+    bad.write_text(yaml.safe_dump(doc))
+    result = runner.invoke(app, ["track", video, "--tags", str(bad), "--out", str(tmp_path / "c")])
+    assert result.exit_code == 2 and "no parcel tag (9) was found" in result.output
+
+
+def test_timing_block_is_read_in_seconds_and_checked(videos, tmp_path):
+    doc = tag_map_doc(videos["scene"])
+    doc["timing"] = {"exposure_ms": 4, "readout_ms": 15}
+    path = tmp_path / "tags.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    tm = load_tag_map(path)
+    assert tm.exposure == pytest.approx(0.004) and tm.readout == pytest.approx(0.015)
+    doc["timing"] = {"readout_ms": -1}
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(ParcelfitError, match=r"timing\.readout_ms"):
+        load_tag_map(path)
+
+
+def test_rolling_shutter_renders_each_band_of_rows_at_its_own_time():
+    from parcelfit.tracking.synthetic import Renderer, straight_spin
+
+    path = straight_spin(1.6, 720)
+    rs = conveyor_scene(
+        320,
+        180,
+        readout=0.015,
+        readout_bands=4,
+        exposure=0.0,
+        blur_samples=1,
+        noise_sd=0.0,
+        distortion=(0, 0, 0, 0, 0),
+        tilt_deg=0.0,
+    )
+    gs = conveyor_scene(
+        320,
+        180,
+        exposure=0.0,
+        blur_samples=1,
+        noise_sd=0.0,
+        distortion=(0, 0, 0, 0, 0),
+        tilt_deg=0.0,
+    )
+    rng = np.random.default_rng(0)
+    frame = Renderer(rs).frame(path, 0.3, rng).astype(float)
+    band = 45  # rows per band: the second band is exposed at 0.3 + (67 / 180 - 0.5) * 0.015 s
+    at_band = Renderer(gs).frame(path, 0.3 + (67 / 180 - 0.5) * 0.015, rng).astype(float)
+    at_frame = Renderer(gs).frame(path, 0.3, rng).astype(float)
+    rows = slice(band, 2 * band)
+    assert np.abs(frame[rows] - at_band[rows]).max() <= 1.0
+    assert np.abs(frame[rows] - at_frame[rows]).max() > 50  # the parcel moved 3 mm meanwhile
+
+
+def test_motion_blur_and_spin_4ms(tmp_path):
+    from parcelfit.tracking.synthetic import straight_spin
+
+    path = straight_spin(1.6, 360)
+    scene = conveyor_scene(
+        1328,
+        748,
+        exposure=0.004,
+        blur_samples=8,
+        duration=0.75,
+        parcel_height=0.02,
+        tag_offset=(0.05, 0.0),
+    )
+    truth = truth_of(render_video(tmp_path / "spin.mp4", scene, path, seed=0))
+    doc = scene_tag_map(scene, barriers=BARRIERS)
+    doc["timing"] = {"exposure_ms": 4, "readout_ms": 0}
+    (tmp_path / "tags.yaml").write_text(yaml.safe_dump(doc))
+    result = track_video(tmp_path / "spin.mp4", load_tag_map(tmp_path / "tags.yaml"))
+    track = result.tags[scene.parcel_tag_id]
+    assert len(track.trajectory) >= 0.95 * len(truth["t"])
+    assert track.quality["frames_in_view"] == len(truth["t"])  # in view from the clip's start
+    pos, head = errors(track.trajectory, truth)
+    assert pos.mean() <= 0.001 and pos.max() <= 0.003 and head.max() <= 1.0
+
+
+def test_smoother_rejects_a_bad_frame_and_keeps_a_spin():
+    from parcelfit.tracking.smooth import rts_smooth
+
+    t = np.arange(60) / 60
+    theta = np.radians(720) * t  # 720 deg/s
+    rng = np.random.default_rng(0)
+    z = theta + rng.normal(0, np.radians(0.3), 60)
+    z[30] += np.radians(4)  # one bad frame
+    z[40:43] = np.nan
+    r = np.full(60, np.radians(0.5) ** 2)
+    smoothed, sd, used = rts_smooth(z, 1 / 60, r, 1e3)
+    assert used[29] and used[31] and not used[40:43].any()
+    assert np.degrees(np.abs(smoothed - theta)).max() < 1.0  # the 4-degree frame: no spike
+    z[30] += np.radians(20)  # a wild frame is rejected outright
+    assert not rts_smooth(z, 1 / 60, r, 1e3)[2][30]
+    assert np.all(sd > 0)

@@ -3,8 +3,10 @@
 A top-down conveyor scene (grey belt), reference tags on the belt plane and one parcel (a light
 box top at height h with its tag) moving along a known path, seen by a perspective pinhole camera
 (optionally tilted, with lens distortion), with motion blur (``blur_samples`` sub-frame renders
-averaged over the exposure, centred on the frame's time), Gaussian sensor noise and H.264
-compression (libx264 through PyAV; OpenCV's own writer has no H.264).
+averaged over the ``exposure``, centred on the frame's time), an optional rolling shutter (image
+row r is exposed around t + (r / height - 0.5) * ``readout``, rendered in ``readout_bands``
+bands of rows), Gaussian sensor noise and H.264 compression (libx264 through PyAV; OpenCV's own
+writer has no H.264). `straight_spin` is a fast spinning parcel path (1.6 m/s, up to 720 deg/s).
 
 Each tag is drawn by warping OpenCV's bitmap of it (``cv2.aruco.generateImageMarker``: the black
 square, data and black border) with a white quiet zone one bit wide, from its bitmap corners to
@@ -14,6 +16,7 @@ distortion is then applied to the whole frame by ``cv2.remap``).
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -52,6 +55,8 @@ class SyntheticScene:
     parcel_grey: int = 200
     hidden: tuple[tuple[float, float], ...] = ()  # time spans [s] the parcel tag is covered
     shake: float = 0.0  # sd [m] of the camera's position, drawn afresh every frame
+    readout: float = 0.0  # rolling shutter: time from the first to the last row's exposure [s]
+    readout_bands: int = 128  # rows rendered in this many bands, each at its own time
 
     def pose(self) -> tuple[np.ndarray, np.ndarray]:
         """rvec, tvec (OpenCV) of the camera: looking straight down, then tilted."""
@@ -182,6 +187,35 @@ class Renderer:
             sc.parcel_height,
         )
 
+    def _parcel_rows(self, path: Path2D, t: float, span: float) -> tuple[float, float]:
+        """Image rows [px] the parcel's box top covers within ``t`` +- ``span`` [s] (+ margin)."""
+        sc = self.scene
+        xs, ys, _ = path(np.linspace(t - span, t + span, 9))
+        r = math.hypot(*sc.parcel_outline) / 2 + 0.01
+        pts = np.array(
+            [
+                (x + dx, y + dy)
+                for x, y in zip(xs, ys, strict=True)
+                for dx in (-r, r)
+                for dy in (-r, r)
+            ]
+        )
+        rows = self.project(pts, sc.parcel_height)[:, 1]
+        return float(rows.min()) - 20, float(rows.max()) + 20
+
+    def _exposed(self, path: Path2D, t: float, show_tag: bool) -> np.ndarray:
+        """The undistorted, noise-free image averaged over the exposure centred on ``t`` [s]."""
+        sc = self.scene
+        k = max(1, sc.blur_samples)
+        times = t + (np.arange(k) + 0.5) / k * sc.exposure - sc.exposure / 2
+        xs, ys, ths = path(times)
+        acc = np.zeros_like(self._base)
+        for x, y, th in zip(xs, ys, ths, strict=True):
+            f = self._base.copy()
+            self._parcel(f, float(x), float(y), float(th), show_tag)
+            acc += f
+        return acc / k
+
     def frame(self, path: Path2D, t: float, rng: np.random.Generator) -> np.ndarray:
         """The frame at time ``t`` [s]: exposure-averaged, distorted, noisy (uint8)."""
         sc = self.scene
@@ -193,15 +227,21 @@ class Renderer:
                 self._draw_tag(base, tag.id, tag.corners(), 0.0)
             self._base = base
         show_tag = not any(a <= t <= b for a, b in sc.hidden)
-        k = max(1, sc.blur_samples)
-        times = t + (np.arange(k) + 0.5) / k * sc.exposure - sc.exposure / 2
-        xs, ys, ths = path(times)
-        acc = np.zeros_like(self._base)
-        for x, y, th in zip(xs, ys, ths, strict=True):
-            f = self._base.copy()
-            self._parcel(f, float(x), float(y), float(th), show_tag)
-            acc += f
-        img = acc / k
+        if sc.readout > 0:
+            h = self.size[1]
+            bands = max(1, sc.readout_bands)
+            edges = np.linspace(0, h, bands + 1).round().astype(int)
+            img = self._base.copy()
+            # only the bands the parcel can reach during the readout are rendered
+            lo, hi = self._parcel_rows(path, t, sc.readout + sc.exposure)
+            for a, b in itertools.pairwise(edges):
+                if b <= lo or a > hi:
+                    continue
+                mid_row = (a + b - 1) / 2
+                tb = t + (mid_row / h - 0.5) * sc.readout
+                img[a:b] = self._exposed(path, tb, show_tag)[a:b]
+        else:
+            img = self._exposed(path, t, show_tag)
         if self._distort_maps is not None:
             img = cv2.remap(img, *self._distort_maps, cv2.INTER_LINEAR, borderValue=sc.belt_grey)
         img = img + rng.normal(0, sc.noise_sd, img.shape)
@@ -278,6 +318,20 @@ def s_curve(t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     y = 0.12 * np.sin(1.4 * t) - 0.05
     theta = math.radians(10) + math.radians(35) * np.sin(0.9 * t)
     return x, y, theta
+
+
+def straight_spin(speed: float = 1.6, spin_deg_s: float = 720.0, start: float = -0.62) -> Path2D:
+    """A parcel path: ``speed`` [m/s] along x from ``start`` [m], 30 mm across, spinning at
+    ``spin_deg_s`` [deg/s] (a fast conveyor transfer)."""
+
+    def path(t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        t = np.asarray(t, dtype=float)
+        x = start + speed * t
+        y = -0.03 + 0.04 * t
+        theta = math.radians(15) + math.radians(spin_deg_s) * t
+        return x, y, theta
+
+    return path
 
 
 def render_checkerboard_video(

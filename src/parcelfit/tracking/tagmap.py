@@ -8,6 +8,8 @@ parcel_tags:
   5: {size: 0.06, height: 0.025, offset: [0.0, 0.0], outline: [0.275, 0.20]}
 camera:                          # optional: OpenCV pinhole model [px]
   {fx: 1000, fy: 1000, cx: 640, cy: 360, distortion: [0, 0, 0, 0, 0], width: 1280, height: 720}
+timing: {exposure_ms: 4, readout_ms: 15}   # optional: the camera's exposure and rolling-shutter
+                                 # readout (first to last row) [ms]; 0 = global shutter
 light_barriers:                  # optional: virtual barriers, segments in the rig frame [m]
   - {id: start, from: [0.2, -0.5], to: [0.2, 0.5]}
   - {id: end, from: [1.0, -0.5], to: [1.0, 0.5]}
@@ -105,6 +107,8 @@ class TagMap:
     camera: Camera | None = None
     barriers: tuple[Barrier, ...] = ()
     source: Path | None = field(default=None, compare=False)
+    exposure: float = 0.0  # s
+    readout: float = 0.0  # s, rolling shutter: first to last image row
 
 
 def tag_corners(x: float, y: float, size: float, angle: float) -> np.ndarray:
@@ -141,7 +145,7 @@ def load_tag_map(path: str | Path) -> TagMap:
     path = Path(path)
     doc = load_config(
         path,
-        allowed=("family", "reference_tags", "parcel_tags", "camera", "light_barriers"),
+        allowed=("family", "reference_tags", "parcel_tags", "camera", "light_barriers", "timing"),
         required=("reference_tags", "parcel_tags"),
     )
     family = get_choice(
@@ -236,7 +240,17 @@ def load_tag_map(path: str | Path) -> TagMap:
             )
         camera = Camera(
             *(
-                float(get_number(m, k, file=path, where="camera", minimum=0, unit="px"))
+                # a focal length is at least a pixel (fx: 0 would divide by zero when mapping)
+                float(
+                    get_number(  # type: ignore[arg-type]
+                        m,
+                        k,
+                        file=path,
+                        where="camera",
+                        minimum=1 if k in ("fx", "fy") else 0,
+                        unit="px",
+                    )
+                )
                 for k in ("fx", "fy", "cx", "cy")
             ),  # type: ignore[arg-type]
             distortion=tuple(float(v) for v in dist),
@@ -265,7 +279,14 @@ def load_tag_map(path: str | Path) -> TagMap:
                 _pair(m["to"], file=path, where=f"{where}.to"),
             )
         )
-    return TagMap(family, refs, parcels, camera, tuple(barriers), path)
+    timing = require_mapping(doc.get("timing") or {}, file=path, where="timing")
+    check_keys(timing, allowed=("exposure_ms", "readout_ms"), file=path, where="timing")
+    exposure, readout = (
+        float(get_number(timing, k, file=path, where="timing", default=0, minimum=0, maximum=100))  # type: ignore[arg-type]
+        * 1e-3
+        for k in ("exposure_ms", "readout_ms")
+    )
+    return TagMap(family, refs, parcels, camera, tuple(barriers), path, exposure, readout)
 
 
 def save_camera(path: str | Path, camera: Camera) -> None:
