@@ -140,7 +140,7 @@ def dependence_curves(
     fitted = bo._fit(np.random.default_rng([bo.seed, len(bo.observations)]), [])
     if fitted is None:
         return None
-    gp, mean, std = fitted
+    gp, mean, std = fitted[:3]  # partial dependence on the transformed, standardised scale
     scale = std if std > 0 else 1.0
     rng = np.random.default_rng(seed)
     d = len(bo.space)
