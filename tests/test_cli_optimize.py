@@ -5,7 +5,7 @@ from typer.testing import CliRunner
 
 from parcelfit.cli import app
 
-from .test_calibration import write_study
+from .helpers import write_study
 
 runner = CliRunner()
 

@@ -22,7 +22,7 @@ from parcelfit.report import build_report
 from parcelfit.report.browser import chromium, inspect_page
 from parcelfit.report.html import CONTENT_SECURITY_POLICY
 
-from .test_calibration import write_study
+from .helpers import write_study
 
 runner = CliRunner()
 NEED_BROWSER = os.environ.get("CI") == "true"
@@ -347,7 +347,7 @@ def test_pool_workers_die_when_the_main_process_is_killed(tmp_path):
 
     import psutil
 
-    from .test_calibration import ROOT
+    from .helpers import ROOT
 
     study = write_study(tmp_path, budget=8, validation={})
     log = tmp_path / "log"
@@ -435,7 +435,7 @@ def test_losing_the_dask_scheduler_stops_cleanly_and_the_study_resumes(tmp_path)
     import subprocess
     import sys
 
-    from .test_calibration import ROOT, _finished
+    from .helpers import ROOT, finished_fits
 
     study = write_study(
         tmp_path,
@@ -498,7 +498,7 @@ def test_losing_the_dask_scheduler_stops_cleanly_and_the_study_resumes(tmp_path)
         )
         spawned.append(proc)
         deadline = time.time() + 120
-        while len(_finished(out / "study.sqlite")) < 3 and time.time() < deadline:
+        while len(finished_fits(out / "study.sqlite")) < 3 and time.time() < deadline:
             assert proc.poll() is None, proc.stderr.read()
             time.sleep(0.05)
         time.sleep(random.Random(11).uniform(0.0, 0.4))
@@ -514,7 +514,7 @@ def test_losing_the_dask_scheduler_stops_cleanly_and_the_study_resumes(tmp_path)
                 os.killpg(p.pid, signal.SIGKILL)
     info = study_status(out)
     assert set(info["by_status"]) <= {"ok", "pending"}  # nothing stored as failed
-    before = _finished(out / "study.sqlite")
+    before = finished_fits(out / "study.sqlite")
     done = subprocess.run(
         [*calibrate, "--executor", "local", "--workers", "2"],
         cwd=ROOT,
@@ -524,7 +524,7 @@ def test_losing_the_dask_scheduler_stops_cleanly_and_the_study_resumes(tmp_path)
         timeout=300,
     )
     assert done.returncode == 0, done.stderr[-2000:]
-    after = _finished(out / "study.sqlite")
+    after = finished_fits(out / "study.sqlite")
     assert len(after) == 16 and all(after[k] == v for k, v in before.items())
 
 

@@ -15,7 +15,7 @@ from parcelfit.report import build_report
 from parcelfit.report.browser import chromium, inspect_page, screenshot
 
 from .fake_sim import TRUTH
-from .test_calibration import write_study
+from .helpers import write_study
 
 runner = CliRunner()
 NEED_BROWSER = os.environ.get("CI") == "true"  # in CI the browser must be there
