@@ -15,6 +15,7 @@ from .fake_sim import TRUTH
 from .helpers import ROOT, finished_fits, write_study
 
 
+@pytest.mark.slow
 def test_calibration_recovers_the_truth_and_validates(tmp_path):
     study = load_study(write_study(tmp_path))
     seen = []
@@ -38,6 +39,7 @@ def test_calibration_recovers_the_truth_and_validates(tmp_path):
     assert again.evaluations == result.evaluations and again.stop_reason == "validation passed"
 
 
+@pytest.mark.slow
 def test_failed_simulations_are_recorded_and_do_not_stop_the_loop(tmp_path):
     study = load_study(
         write_study(
@@ -53,6 +55,7 @@ def test_failed_simulations_are_recorded_and_do_not_stop_the_loop(tmp_path):
     assert info["by_status"].get("unstable", 0) > 0 and info["by_status"]["ok"] > 0
 
 
+@pytest.mark.slow
 def test_a_changed_study_file_is_refused_for_the_same_folder(tmp_path):
     path = write_study(tmp_path, budget=8, validation={})
     Calibration(load_study(path), tmp_path / "out").run()
@@ -80,6 +83,7 @@ def test_bad_study_files(tmp_path, change, pattern):
         load_study(write_study(tmp_path, **change))
 
 
+@pytest.mark.slow
 def test_sigkill_at_any_moment_then_rerun_resumes_without_losing_or_repeating(tmp_path):
     study = write_study(tmp_path, budget=24, validation={})
     out = tmp_path / "out"
@@ -136,6 +140,7 @@ def test_sigkill_at_any_moment_then_rerun_resumes_without_losing_or_repeating(tm
         assert runs.count(labels[row_id]) == 1
 
 
+@pytest.mark.slow
 def test_validation_records_the_envelope_beside_the_published_verdict(tmp_path):
     from parcelfit.optimize.store import Store
 

@@ -7,6 +7,8 @@ from parcelfit.runs import read_trajectory
 runner = CliRunner()
 
 
+@pytest.mark.slow
+@pytest.mark.mujoco
 def test_simulate_writes_run_and_animation(tmp_path):
     out, gif = tmp_path / "run.csv", tmp_path / "run.gif"
     result = runner.invoke(

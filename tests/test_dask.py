@@ -16,6 +16,8 @@ from parcelfit.runs import TestCase  # noqa: E402
 from .fake_sim import AnalyticSimulator  # noqa: E402
 from .helpers import write_study  # noqa: E402
 
+pytestmark = [pytest.mark.slow]
+
 
 @pytest.fixture(scope="module")
 def cluster():

@@ -63,6 +63,8 @@ def _hostile_study(tmp_path):
     return tmp_path / "out"
 
 
+@pytest.mark.slow
+@pytest.mark.browser
 def test_hostile_names_are_text_in_the_report(tmp_path):
     page = build_report(_hostile_study(tmp_path), out=tmp_path / "r.html", key_frames=False)
     text = page.read_text()
@@ -77,6 +79,8 @@ def test_hostile_names_are_text_in_the_report(tmp_path):
     assert found["title"] == f"parcelfit report: {HOSTILE['name']}"
 
 
+@pytest.mark.slow
+@pytest.mark.browser
 def test_the_page_policy_blocks_a_script_that_slipped_through(tmp_path):
     """Defence in depth: even unescaped markup cannot run a script under the report's policy."""
     if chromium() is None and not NEED_BROWSER:
@@ -127,6 +131,7 @@ def _copy(finished, tmp_path):
     return load_study(tmp_path / "s" / "study.yaml"), tmp_path / "s" / "out"
 
 
+@pytest.mark.slow
 def test_an_empty_store_is_damaged_not_a_new_study(finished, tmp_path):
     study, out = _copy(finished, tmp_path)
     runs = sorted((out / "runs").iterdir())
@@ -140,6 +145,7 @@ def test_an_empty_store_is_damaged_not_a_new_study(finished, tmp_path):
     assert [p.stat().st_mtime_ns for p in runs] == stamps  # runs/ untouched
 
 
+@pytest.mark.slow
 def test_status_and_report_open_the_store_read_only(finished, tmp_path):
     _, out = _copy(finished, tmp_path)
     db = out / "study.sqlite"
@@ -174,6 +180,7 @@ def test_a_foreign_sqlite_file_is_not_read_as_a_study(tmp_path):
     )
 
 
+@pytest.mark.slow
 def test_a_second_calibration_on_the_same_folder_is_refused(finished, tmp_path):
     study, out = _copy(finished, tmp_path)
     first = Calibration(study, out)
@@ -252,6 +259,7 @@ def test_a_line_break_in_a_name_cannot_add_lines_to_a_solver_parameter_file(tmp_
     assert not list(tmp_path.glob("*/params.txt"))  # nothing was written, nothing ran
 
 
+@pytest.mark.slow
 def test_a_validation_killed_midway_is_run_again_on_resume(finished, tmp_path):
     study, out = _copy(finished, tmp_path)
     first = study_status(out)
@@ -272,6 +280,7 @@ def test_a_validation_killed_midway_is_run_again_on_resume(finished, tmp_path):
     assert info["validations"][-1]["status"] == "ok" and info["stop_reason"] is not None
 
 
+@pytest.mark.slow
 def test_a_dying_local_worker_costs_time_not_results(tmp_path):
     import random
     import signal
@@ -310,6 +319,7 @@ def test_a_dying_local_worker_costs_time_not_results(tmp_path):
     assert any(r.diagnostics.get("worker_restarts") == 1 for r in results.values())
 
 
+@pytest.mark.slow
 def test_a_worker_killed_during_a_calibration_leaves_no_failed_evaluation(tmp_path, monkeypatch):
     monkeypatch.setenv("FAKE_SIM_CRASH_ONCE", str(tmp_path / "crashed"))
     study = load_study(write_study(tmp_path, budget=8, validation={}))
@@ -340,6 +350,7 @@ def _gone(pids, timeout):
     return alive
 
 
+@pytest.mark.slow
 def test_pool_workers_die_when_the_main_process_is_killed(tmp_path):
     import signal
     import subprocess
@@ -376,6 +387,7 @@ def test_pool_workers_die_when_the_main_process_is_killed(tmp_path):
             os.killpg(proc.pid, signal.SIGKILL)
 
 
+@pytest.mark.slow
 def test_a_timed_out_solver_is_killed_with_its_children(tmp_path):
     from parcelfit.runs import TestCase
     from parcelfit.sim import SimStatus, defaults_si
@@ -428,6 +440,7 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+@pytest.mark.slow
 def test_losing_the_dask_scheduler_stops_cleanly_and_the_study_resumes(tmp_path):
     pytest.importorskip("distributed")
     import random
@@ -683,6 +696,7 @@ def test_bad_input_stops_with_one_clear_line_and_status_2(tmp_path, case):
     assert not list(tmp_path.rglob("*.tmp"))  # nothing half-written left behind
 
 
+@pytest.mark.slow
 def test_evaluations_once_stored_failed_by_a_lost_worker_run_again(finished, tmp_path):
     study, out = _copy(finished, tmp_path)
     con = sqlite3.connect(out / "study.sqlite", isolation_level=None)
@@ -698,6 +712,7 @@ def test_evaluations_once_stored_failed_by_a_lost_worker_run_again(finished, tmp
     assert study_status(out)["by_status"] == {"ok": 8}
 
 
+@pytest.mark.slow
 def test_calibrate_on_a_read_only_folder_says_so_and_keeps_the_results(
     finished, tmp_path, monkeypatch
 ):
