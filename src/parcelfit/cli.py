@@ -26,6 +26,8 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    # help texts are plain text: units such as [s] or [mm] must not be read as Rich markup
+    rich_markup_mode=None,
 )
 console = Console()
 err_console = Console(stderr=True)
@@ -477,7 +479,9 @@ def simulate(
         Path | None,
         typer.Option(help="Also write a top-view animation (.gif, or .mp4 with ffmpeg)."),
     ] = None,
-    timestep: Annotated[float, typer.Option(help="Time step [s].")] = 1.0 / 600.0,
+    timestep: Annotated[
+        float, typer.Option(help="Time step [s].", show_default="1/600 s")
+    ] = 1.0 / 600.0,
     spacing: Annotated[
         float, typer.Option(help="Shell mesh spacing for rigid contents [m].")
     ] = 0.03,
