@@ -63,6 +63,9 @@ def test_rigs_and_params_listings():
     assert result.exit_code == 0
     for name in ("E1", "E2a", "E2b", "E3", "KPBW", "PB"):
         assert name in result.output
+    text = " ".join(result.output.split())
+    for unit in ("[m/s]", "[g]", "[mm]"):  # units are shown, not eaten as markup
+        assert unit in text
     result = runner.invoke(app, ["params", "--consignment", "PB"])
     assert (
         result.exit_code == 0
