@@ -50,6 +50,7 @@ def _run(seed, n_batches, settings=None):
     return bo, asked
 
 
+@pytest.mark.slow
 def test_same_seed_same_batches_and_batches_are_diverse():
     _, a = _run(5, 6)
     _, b = _run(5, 6)
@@ -61,6 +62,7 @@ def test_same_seed_same_batches_and_batches_are_diverse():
     assert dists.min() > 1e-3
 
 
+@pytest.mark.slow
 def test_converges_on_a_smooth_function_and_beats_its_initial_design():
     bo, _ = _run(1, 12)
     initial_best = min(o.cost for o in bo.observations[:16])

@@ -4,41 +4,18 @@ import sqlite3
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pytest
-import yaml
 
 from parcelfit import ParcelfitError
 from parcelfit.optimize.calibration import Calibration, study_status
 from parcelfit.optimize.study import load_study
 
-from .fake_sim import TRUTH, write_reference_dataset
-
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def write_study(tmp_path, **overrides):
-    write_reference_dataset(tmp_path / "data")
-    doc = {
-        "name": "fake",
-        "simulator": {"backend": "python", "factory": "tests.fake_sim:make"},
-        "parameters": {"mu_d_BePa": [0.3, 0.6], "mu_d_MePa": [0.15, 0.35]},
-        "reference": {"dataset": "data", "rig": "R", "consignment": "P", "speed_setting": 1},
-        "validation": {"speed_setting": 2, "every": 2},
-        "batch_size": 4,
-        "initial": 8,
-        "budget": 40,
-        "seed": 3,
-        "optimizer": {"n_samples": 1000, "n_restarts": 1},
-        "executor": {"kind": "local", "workers": 2},
-    }
-    doc.update(overrides)
-    path = tmp_path / "study.yaml"
-    path.write_text(yaml.safe_dump(doc))
-    return path
+from .fake_sim import TRUTH
+from .helpers import ROOT, finished_fits, write_study
 
 
+@pytest.mark.slow
 def test_calibration_recovers_the_truth_and_validates(tmp_path):
     study = load_study(write_study(tmp_path))
     seen = []
@@ -62,6 +39,7 @@ def test_calibration_recovers_the_truth_and_validates(tmp_path):
     assert again.evaluations == result.evaluations and again.stop_reason == "validation passed"
 
 
+@pytest.mark.slow
 def test_failed_simulations_are_recorded_and_do_not_stop_the_loop(tmp_path):
     study = load_study(
         write_study(
@@ -77,6 +55,7 @@ def test_failed_simulations_are_recorded_and_do_not_stop_the_loop(tmp_path):
     assert info["by_status"].get("unstable", 0) > 0 and info["by_status"]["ok"] > 0
 
 
+@pytest.mark.slow
 def test_a_changed_study_file_is_refused_for_the_same_folder(tmp_path):
     path = write_study(tmp_path, budget=8, validation={})
     Calibration(load_study(path), tmp_path / "out").run()
@@ -104,22 +83,7 @@ def test_bad_study_files(tmp_path, change, pattern):
         load_study(write_study(tmp_path, **change))
 
 
-def _finished(db: Path) -> dict[int, tuple]:
-    if not db.exists():
-        return {}
-    con = sqlite3.connect(db, timeout=10)
-    try:
-        rows = con.execute(
-            "SELECT id, params, cost, finished_at FROM evaluations "
-            "WHERE kind = 'fit' AND status != 'pending'"
-        ).fetchall()
-    except sqlite3.OperationalError:
-        return {}
-    finally:
-        con.close()
-    return {r[0]: r[1:] for r in rows}
-
-
+@pytest.mark.slow
 def test_sigkill_at_any_moment_then_rerun_resumes_without_losing_or_repeating(tmp_path):
     study = write_study(tmp_path, budget=24, validation={})
     out = tmp_path / "out"
@@ -151,16 +115,18 @@ def test_sigkill_at_any_moment_then_rerun_resumes_without_losing_or_repeating(tm
     )
     deadline = time.time() + 120
     while (
-        len(_finished(out / "study.sqlite")) < 10 and time.time() < deadline and proc.poll() is None
+        len(finished_fits(out / "study.sqlite")) < 10
+        and time.time() < deadline
+        and proc.poll() is None
     ):
         time.sleep(0.05)
     os.killpg(proc.pid, signal.SIGKILL)  # the loop and its workers, mid-batch
     proc.wait()
-    before = _finished(out / "study.sqlite")
+    before = finished_fits(out / "study.sqlite")
     assert 10 <= len(before) < 24
     done = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]
-    after = _finished(out / "study.sqlite")
+    after = finished_fits(out / "study.sqlite")
     assert len(after) == 24
     assert all(after[k] == v for k, v in before.items())  # nothing finished was lost or redone
     runs = log.read_text().split()
@@ -174,6 +140,7 @@ def test_sigkill_at_any_moment_then_rerun_resumes_without_losing_or_repeating(tm
         assert runs.count(labels[row_id]) == 1
 
 
+@pytest.mark.slow
 def test_validation_records_the_envelope_beside_the_published_verdict(tmp_path):
     from parcelfit.optimize.store import Store
 

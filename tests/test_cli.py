@@ -1,5 +1,6 @@
 import json
 
+import pytest
 from typer.testing import CliRunner
 
 from parcelfit.cli import app
@@ -51,6 +52,8 @@ def test_bad_input_gives_message_not_traceback(tmp_path):
     assert "Traceback" not in result.output
 
 
+@pytest.mark.slow
+@pytest.mark.mujoco
 def test_demo_quick_end_to_end_on_bundled_data(tmp_path):
     out = tmp_path / "demo"
     result = runner.invoke(app, ["demo", "--quick", "--no-animation", "--out", str(out)])
@@ -68,3 +71,13 @@ def test_demo_quick_end_to_end_on_bundled_data(tmp_path):
     assert "verdict: validation" in result.output
     example = json.loads((out / "stricter-criterion.json").read_text())
     assert example["published_passed"] and not example["stricter_passed"]
+
+
+def test_help_keeps_units_in_square_brackets_and_shows_the_timestep_readably():
+    result = runner.invoke(app, ["simulate", "--help"], terminal_width=200)
+    assert result.exit_code == 0, result.output
+    text = " ".join(result.output.split())
+    assert "Time step [s]." in text and "Wall-clock limit [s]." in text
+    assert "1/600 s" in text and "0.0016666" not in text
+    result = runner.invoke(app, ["camera-calibrate", "--help"], terminal_width=200)
+    assert "Side of one square [mm]." in " ".join(result.output.split())

@@ -1,15 +1,17 @@
 import json
 
+import pytest
 import yaml
 from typer.testing import CliRunner
 
 from parcelfit.cli import app
 
-from .test_calibration import write_study
+from .helpers import write_study
 
 runner = CliRunner()
 
 
+@pytest.mark.slow
 def test_calibrate_then_status_json(tmp_path):
     study = write_study(tmp_path, budget=12, validation={"speed_setting": 2, "every": 1})
     out = tmp_path / "out"
@@ -22,6 +24,7 @@ def test_calibrate_then_status_json(tmp_path):
     assert (out / "figures" / "history.png").is_file()
 
 
+@pytest.mark.slow
 def test_screen_cli(tmp_path):
     from .fake_sim import write_reference_dataset
 

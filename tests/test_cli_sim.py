@@ -7,6 +7,8 @@ from parcelfit.runs import read_trajectory
 runner = CliRunner()
 
 
+@pytest.mark.slow
+@pytest.mark.mujoco
 def test_simulate_writes_run_and_animation(tmp_path):
     out, gif = tmp_path / "run.csv", tmp_path / "run.gif"
     result = runner.invoke(
@@ -61,6 +63,9 @@ def test_rigs_and_params_listings():
     assert result.exit_code == 0
     for name in ("E1", "E2a", "E2b", "E3", "KPBW", "PB"):
         assert name in result.output
+    text = " ".join(result.output.split())
+    for unit in ("[m/s]", "[g]", "[mm]"):  # units are shown, not eaten as markup
+        assert unit in text
     result = runner.invoke(app, ["params", "--consignment", "PB"])
     assert (
         result.exit_code == 0

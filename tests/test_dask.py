@@ -14,7 +14,9 @@ from parcelfit.optimize.study import load_study  # noqa: E402
 from parcelfit.runs import TestCase  # noqa: E402
 
 from .fake_sim import AnalyticSimulator  # noqa: E402
-from .test_calibration import write_study  # noqa: E402
+from .helpers import write_study  # noqa: E402
+
+pytestmark = [pytest.mark.slow]
 
 
 @pytest.fixture(scope="module")

@@ -1,16 +1,10 @@
-import dtw as dtw_python
 import numpy as np
 import pytest
 
 from parcelfit import ParcelfitError
 from parcelfit.metrics import cross_dtw, dtw_distance, pairwise_dtw
 
-
-def reference_dtw(a, b, window=None):
-    kwargs = {"distance_only": True}
-    if window is not None:
-        kwargs.update(window_type="sakoechiba", window_args={"window_size": window})
-    return dtw_python.dtw(np.asarray(a, float), np.asarray(b, float), **kwargs).distance
+from .helpers import reference_dtw
 
 
 def test_hand_computed_small_case():

@@ -5,7 +5,7 @@ from parcelfit.metrics import Comparison, calibration_cost, select_reference, va
 from parcelfit.metrics.validation import mean_distance_check, transit_time_check
 from parcelfit.runs import Box, CaseData, Run, TestCase, Trajectory
 
-from .test_dtw import reference_dtw
+from .helpers import reference_dtw
 
 CASE = TestCase("E3", "KPBW", 1)
 

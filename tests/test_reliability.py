@@ -22,7 +22,7 @@ from parcelfit.report import build_report
 from parcelfit.report.browser import chromium, inspect_page
 from parcelfit.report.html import CONTENT_SECURITY_POLICY
 
-from .test_calibration import write_study
+from .helpers import write_study
 
 runner = CliRunner()
 NEED_BROWSER = os.environ.get("CI") == "true"
@@ -63,6 +63,8 @@ def _hostile_study(tmp_path):
     return tmp_path / "out"
 
 
+@pytest.mark.slow
+@pytest.mark.browser
 def test_hostile_names_are_text_in_the_report(tmp_path):
     page = build_report(_hostile_study(tmp_path), out=tmp_path / "r.html", key_frames=False)
     text = page.read_text()
@@ -77,6 +79,8 @@ def test_hostile_names_are_text_in_the_report(tmp_path):
     assert found["title"] == f"parcelfit report: {HOSTILE['name']}"
 
 
+@pytest.mark.slow
+@pytest.mark.browser
 def test_the_page_policy_blocks_a_script_that_slipped_through(tmp_path):
     """Defence in depth: even unescaped markup cannot run a script under the report's policy."""
     if chromium() is None and not NEED_BROWSER:
@@ -127,6 +131,7 @@ def _copy(finished, tmp_path):
     return load_study(tmp_path / "s" / "study.yaml"), tmp_path / "s" / "out"
 
 
+@pytest.mark.slow
 def test_an_empty_store_is_damaged_not_a_new_study(finished, tmp_path):
     study, out = _copy(finished, tmp_path)
     runs = sorted((out / "runs").iterdir())
@@ -140,6 +145,7 @@ def test_an_empty_store_is_damaged_not_a_new_study(finished, tmp_path):
     assert [p.stat().st_mtime_ns for p in runs] == stamps  # runs/ untouched
 
 
+@pytest.mark.slow
 def test_status_and_report_open_the_store_read_only(finished, tmp_path):
     _, out = _copy(finished, tmp_path)
     db = out / "study.sqlite"
@@ -174,6 +180,7 @@ def test_a_foreign_sqlite_file_is_not_read_as_a_study(tmp_path):
     )
 
 
+@pytest.mark.slow
 def test_a_second_calibration_on_the_same_folder_is_refused(finished, tmp_path):
     study, out = _copy(finished, tmp_path)
     first = Calibration(study, out)
@@ -252,6 +259,7 @@ def test_a_line_break_in_a_name_cannot_add_lines_to_a_solver_parameter_file(tmp_
     assert not list(tmp_path.glob("*/params.txt"))  # nothing was written, nothing ran
 
 
+@pytest.mark.slow
 def test_a_validation_killed_midway_is_run_again_on_resume(finished, tmp_path):
     study, out = _copy(finished, tmp_path)
     first = study_status(out)
@@ -272,6 +280,7 @@ def test_a_validation_killed_midway_is_run_again_on_resume(finished, tmp_path):
     assert info["validations"][-1]["status"] == "ok" and info["stop_reason"] is not None
 
 
+@pytest.mark.slow
 def test_a_dying_local_worker_costs_time_not_results(tmp_path):
     import random
     import signal
@@ -310,6 +319,7 @@ def test_a_dying_local_worker_costs_time_not_results(tmp_path):
     assert any(r.diagnostics.get("worker_restarts") == 1 for r in results.values())
 
 
+@pytest.mark.slow
 def test_a_worker_killed_during_a_calibration_leaves_no_failed_evaluation(tmp_path, monkeypatch):
     monkeypatch.setenv("FAKE_SIM_CRASH_ONCE", str(tmp_path / "crashed"))
     study = load_study(write_study(tmp_path, budget=8, validation={}))
@@ -340,6 +350,7 @@ def _gone(pids, timeout):
     return alive
 
 
+@pytest.mark.slow
 def test_pool_workers_die_when_the_main_process_is_killed(tmp_path):
     import signal
     import subprocess
@@ -347,7 +358,7 @@ def test_pool_workers_die_when_the_main_process_is_killed(tmp_path):
 
     import psutil
 
-    from .test_calibration import ROOT
+    from .helpers import ROOT
 
     study = write_study(tmp_path, budget=8, validation={})
     log = tmp_path / "log"
@@ -376,6 +387,7 @@ def test_pool_workers_die_when_the_main_process_is_killed(tmp_path):
             os.killpg(proc.pid, signal.SIGKILL)
 
 
+@pytest.mark.slow
 def test_a_timed_out_solver_is_killed_with_its_children(tmp_path):
     from parcelfit.runs import TestCase
     from parcelfit.sim import SimStatus, defaults_si
@@ -428,6 +440,7 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+@pytest.mark.slow
 def test_losing_the_dask_scheduler_stops_cleanly_and_the_study_resumes(tmp_path):
     pytest.importorskip("distributed")
     import random
@@ -435,7 +448,7 @@ def test_losing_the_dask_scheduler_stops_cleanly_and_the_study_resumes(tmp_path)
     import subprocess
     import sys
 
-    from .test_calibration import ROOT, _finished
+    from .helpers import ROOT, finished_fits
 
     study = write_study(
         tmp_path,
@@ -498,7 +511,7 @@ def test_losing_the_dask_scheduler_stops_cleanly_and_the_study_resumes(tmp_path)
         )
         spawned.append(proc)
         deadline = time.time() + 120
-        while len(_finished(out / "study.sqlite")) < 3 and time.time() < deadline:
+        while len(finished_fits(out / "study.sqlite")) < 3 and time.time() < deadline:
             assert proc.poll() is None, proc.stderr.read()
             time.sleep(0.05)
         time.sleep(random.Random(11).uniform(0.0, 0.4))
@@ -514,7 +527,7 @@ def test_losing_the_dask_scheduler_stops_cleanly_and_the_study_resumes(tmp_path)
                 os.killpg(p.pid, signal.SIGKILL)
     info = study_status(out)
     assert set(info["by_status"]) <= {"ok", "pending"}  # nothing stored as failed
-    before = _finished(out / "study.sqlite")
+    before = finished_fits(out / "study.sqlite")
     done = subprocess.run(
         [*calibrate, "--executor", "local", "--workers", "2"],
         cwd=ROOT,
@@ -524,7 +537,7 @@ def test_losing_the_dask_scheduler_stops_cleanly_and_the_study_resumes(tmp_path)
         timeout=300,
     )
     assert done.returncode == 0, done.stderr[-2000:]
-    after = _finished(out / "study.sqlite")
+    after = finished_fits(out / "study.sqlite")
     assert len(after) == 16 and all(after[k] == v for k, v in before.items())
 
 
@@ -683,6 +696,7 @@ def test_bad_input_stops_with_one_clear_line_and_status_2(tmp_path, case):
     assert not list(tmp_path.rglob("*.tmp"))  # nothing half-written left behind
 
 
+@pytest.mark.slow
 def test_evaluations_once_stored_failed_by_a_lost_worker_run_again(finished, tmp_path):
     study, out = _copy(finished, tmp_path)
     con = sqlite3.connect(out / "study.sqlite", isolation_level=None)
@@ -698,6 +712,7 @@ def test_evaluations_once_stored_failed_by_a_lost_worker_run_again(finished, tmp
     assert study_status(out)["by_status"] == {"ok": 8}
 
 
+@pytest.mark.slow
 def test_calibrate_on_a_read_only_folder_says_so_and_keeps_the_results(
     finished, tmp_path, monkeypatch
 ):

@@ -15,7 +15,7 @@ from parcelfit.report import build_report
 from parcelfit.report.browser import chromium, inspect_page, screenshot
 
 from .fake_sim import TRUTH
-from .test_calibration import write_study
+from .helpers import write_study
 
 runner = CliRunner()
 NEED_BROWSER = os.environ.get("CI") == "true"  # in CI the browser must be there
@@ -47,6 +47,7 @@ def _images(text):
     return re.findall(r'src="data:image/(png|gif);base64,([^"]+)"', text)
 
 
+@pytest.mark.slow
 def test_report_is_one_self_contained_file_with_every_section(demo_folder):
     seen = []
     path = build_report(demo_folder, progress=seen.append)
@@ -76,6 +77,7 @@ def test_report_names_a_missing_study(tmp_path):
     assert result.exit_code == 2 and "no calibration study here" in result.output
 
 
+@pytest.mark.slow
 def test_report_command_prints_the_path_and_verdict(demo_folder, tmp_path):
     out = tmp_path / "r.html"
     result = runner.invoke(app, ["report", str(demo_folder / "calibration"), "--out", str(out)])
@@ -87,6 +89,8 @@ def test_report_command_prints_the_path_and_verdict(demo_folder, tmp_path):
 @pytest.mark.skipif(
     chromium() is None and not NEED_BROWSER, reason="Chromium is not installed (CI installs it)"
 )
+@pytest.mark.slow
+@pytest.mark.browser
 def test_report_renders_in_headless_chromium(demo_folder, tmp_path):
     page = build_report(demo_folder, out=tmp_path / "report.html")
     found = inspect_page(page)
@@ -108,6 +112,7 @@ def test_report_renders_in_headless_chromium(demo_folder, tmp_path):
 @pytest.mark.skipif(
     chromium() is None and not NEED_BROWSER, reason="Chromium is not installed (CI installs it)"
 )
+@pytest.mark.browser
 def test_the_browser_check_sees_a_broken_image(tmp_path):
     page = tmp_path / "broken.html"
     page.write_text(

@@ -1,4 +1,5 @@
 import pandas as pd
+import pytest
 import yaml
 
 from parcelfit.optimize.screening import load_screen, run_screen
@@ -6,6 +7,7 @@ from parcelfit.optimize.screening import load_screen, run_screen
 from .fake_sim import write_reference_dataset
 
 
+@pytest.mark.slow
 def test_screen_finds_the_parameters_that_matter(tmp_path):
     write_reference_dataset(tmp_path / "data")
     doc = {
@@ -54,6 +56,7 @@ def test_screen_finds_the_parameters_that_matter(tmp_path):
     assert not any(e.startswith("ok:") for e in events)
 
 
+@pytest.mark.slow
 def test_polybag_third_stage_and_centre_points(tmp_path):
     write_reference_dataset(tmp_path / "data")
     doc = {

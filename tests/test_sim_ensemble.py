@@ -22,6 +22,8 @@ from parcelfit.sim.mujoco.simulator import STICK_SPEED, _FrictionSwitch
 
 from .simhelpers import flat_belt
 
+pytestmark = [pytest.mark.slow, pytest.mark.mujoco]
+
 KPBW = TestCase("flat", "KPBW", 1)
 
 

@@ -14,6 +14,8 @@ from parcelfit.sim.params import resolve
 
 from .simhelpers import flat_belt
 
+pytestmark = [pytest.mark.slow, pytest.mark.mujoco]
+
 G = 9.81
 KPBW = TestCase("flat", "KPBW", 1)
 

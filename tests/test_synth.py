@@ -1,10 +1,13 @@
 import numpy as np
+import pytest
 import yaml
 
 from parcelfit.runs import TestCase, load_dataset
 from parcelfit.synth import TwinSettings, make_twin_dataset
 
 
+@pytest.mark.slow
+@pytest.mark.mujoco
 def test_twin_dataset_scatters_like_real_runs_and_keeps_the_truth(tmp_path):
     settings = TwinSettings(runs=3, real_spacing=0.05)
     path = make_twin_dataset(
@@ -32,6 +35,8 @@ def test_twin_dataset_scatters_like_real_runs_and_keeps_the_truth(tmp_path):
     )
 
 
+@pytest.mark.slow
+@pytest.mark.mujoco
 def test_synth_command_makes_the_dataset_from_a_spec(tmp_path):
     from typer.testing import CliRunner
 
@@ -81,6 +86,8 @@ def test_synth_spec_errors_name_the_key(tmp_path):
         load_twin_spec(spec)
 
 
+@pytest.mark.slow
+@pytest.mark.mujoco
 def test_an_interrupted_twin_dataset_resumes_from_its_cache(tmp_path, monkeypatch):
     import pytest
 

@@ -90,6 +90,7 @@ def load_tag_map_from_doc(doc, tmp=[]):  # noqa: B006 - a cache of temp folders
     return load_tag_map(d / "tags.yaml")
 
 
+@pytest.mark.slow
 def test_positions_headings_and_transit_time_are_accurate(videos, tmp_path):
     scene = videos["scene"]
     tm = load_tag_map(write_tag_map(tmp_path / "tags.yaml", scene))
@@ -108,6 +109,7 @@ def test_positions_headings_and_transit_time_are_accurate(videos, tmp_path):
     assert result.quality["reference_reprojection_px"]["max"] < 1.0
 
 
+@pytest.mark.slow  # renders the videos fixture
 def test_without_a_camera_model_parallax_stays_and_the_report_says_so(videos, tmp_path):
     scene = videos["scene"]
     tm = load_tag_map(write_tag_map(tmp_path / "tags.yaml", scene, camera=False))
@@ -119,6 +121,7 @@ def test_without_a_camera_model_parallax_stays_and_the_report_says_so(videos, tm
     assert pos.mean() > 0.002
 
 
+@pytest.mark.slow
 def test_camera_shake_and_covered_frames(videos, tmp_path):
     scene = videos["hard_scene"]
     tm = load_tag_map(write_tag_map(tmp_path / "tags.yaml", scene))
@@ -145,6 +148,7 @@ def test_fill_gaps_trims_unwraps_and_fills_only_short_gaps():
     assert np.all(np.abs(np.diff(traj.theta[:5])) < 0.2)  # unwrapped across +-pi
 
 
+@pytest.mark.slow  # renders the videos fixture
 def test_track_command_writes_runs_and_quality(videos, tmp_path):
     tags = write_tag_map(tmp_path / "tags.yaml", videos["scene"])
     out = tmp_path / "out"
@@ -159,6 +163,7 @@ def test_track_command_writes_runs_and_quality(videos, tmp_path):
     assert quality["parcel_tags"]["7"]["transit_time_s"] > 0
 
 
+@pytest.mark.slow
 def test_track_all_builds_a_dataset_resumes_and_reports_bad_videos(videos, tmp_path):
     folder = tmp_path / "videos"
     folder.mkdir()
@@ -188,6 +193,7 @@ def test_track_all_builds_a_dataset_resumes_and_reports_bad_videos(videos, tmp_p
     assert len(load_dataset(out)["E3/KPBW/1"].runs) == 2
 
 
+@pytest.mark.slow  # renders the videos fixture
 def test_tag_map_errors_name_the_key(tmp_path, videos):
     path = tmp_path / "tags.yaml"
     doc = tag_map_doc(videos["scene"])
@@ -224,6 +230,7 @@ def test_sensor_log_transit_time(tmp_path):
         read_sensor_log(log, "1", "2")
 
 
+@pytest.mark.slow
 def test_camera_calibration_recovers_the_camera_and_tracking_stays_accurate(videos, tmp_path):
     from parcelfit.tracking.synthetic import render_checkerboard_video
 

@@ -26,10 +26,13 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    # help texts are plain text: units such as [s] or [mm] must not be read as Rich markup
+    rich_markup_mode=None,
 )
 console = Console()
 err_console = Console(stderr=True)
 F = TypeVar("F", bound=Callable[..., Any])
+TIMESTEP_S = 1.0 / 600.0  # the default simulation time step [s]
 
 
 def friendly_errors(func: F) -> F:
@@ -79,7 +82,7 @@ def reference(
         )
         table.add_column("run")
         table.add_column("row sum of D_combined", justify="right")
-        table.add_column("transit time [s]", justify="right")
+        table.add_column(escape("transit time [s]"), justify="right")
         for i, run_id in enumerate(sel.run_ids):
             mark = " *" if i == sel.index else ""
             tt = sel.transit_times[i]
@@ -121,7 +124,7 @@ def _print_tests(tests: Any) -> None:
         title_justify="left",
     )
     for col in ("rig", "setting", "A", "B", "median A [s]", "median B [s]", "p", "p adj.", ""):
-        table.add_column(col, justify="right" if col not in ("rig", "A", "B") else "left")
+        table.add_column(escape(col), justify="right" if col not in ("rig", "A", "B") else "left")
     for _, r in tests.iterrows():
         table.add_row(
             r["rig"],
@@ -477,7 +480,9 @@ def simulate(
         Path | None,
         typer.Option(help="Also write a top-view animation (.gif, or .mp4 with ffmpeg)."),
     ] = None,
-    timestep: Annotated[float, typer.Option(help="Time step [s].")] = 1.0 / 600.0,
+    timestep: Annotated[
+        float, typer.Option(help="Time step [s].", show_default="1/600 s")
+    ] = TIMESTEP_S,
     spacing: Annotated[
         float, typer.Option(help="Shell mesh spacing for rigid contents [m].")
     ] = 0.03,
@@ -643,7 +648,7 @@ def rigs() -> None:
 
     table = Table(title="Bundled rigs (parcelfit simulate --rig NAME)", title_justify="left")
     for col in ("rig", "surfaces", "speed settings [m/s]", "light barriers"):
-        table.add_column(col)
+        table.add_column(escape(col))  # units in [] are text, not Rich markup
     for name in bundled_rig_names():
         r = load_rig(name)
         speeds = "; ".join(
@@ -661,7 +666,7 @@ def rigs() -> None:
 
     table = Table(title="Bundled consignment types (--consignment NAME)", title_justify="left")
     for col in ("type", "mass [g]", "outer L x W x H [mm]", "content", "content L x W x H [mm]"):
-        table.add_column(col)
+        table.add_column(escape(col))
     for name in bundled_consignment_names():
         c = load_consignment(name)
         table.add_row(
