@@ -61,11 +61,11 @@ PROFILES = {
 }
 
 # Found on the bundled twin data by scripts/find_stricter_example.py (catalogue units): the belt
-# friction 0.60 instead of the hidden 0.50 passes all three published criteria on E3/PB/2 but
-# leaves the real runs' band by ~16 mm over a fifth of the path.
+# friction 0.55 instead of the hidden 0.50 passes all three published criteria on E3/PB/2 but
+# leaves the real runs' band by up to 14 mm over a sixth of the path.
 STRICTER_EXAMPLE = {
     "case": "E3/PB/2",
-    "params": {"mu_d_BePa": 0.60, "mu_d_MePa": 0.25, "E_Pa": 120.0, "k_MePa": 300.0},
+    "params": {"mu_d_BePa": 0.55, "mu_d_MePa": 0.25, "E_Pa": 120.0, "k_MePa": 300.0},
 }
 
 
