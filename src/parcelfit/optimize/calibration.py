@@ -386,18 +386,27 @@ class Calibration:
                 self.bo.tell(r.params, r.cost if r.status == "ok" else None)
         stored = self.store.evaluations("validation")
         validated = {v.iteration for v in stored}
+        already_passed = False
         for v in stored:
             if v.status == "pending":
                 continue
             self.last_validation = bool(v.details.get("passed"))
-            if self.last_validation:
-                return self._result("validation passed")
+            already_passed = already_passed or self.last_validation
         pending = [r for r in rows if r.status == "pending"]
+        if already_passed and not pending:
+            return self._result("validation passed")
         iteration = max((r.iteration for r in rows), default=-1)
         if (self._executor_args[0] or study.executor.get("kind")) == "dask":
             self._report(iteration, 0, "connecting to the Dask scheduler, waiting for a worker")
         executor = _executor(study, self.simulator, *self._executor_args)
         try:
+            if already_passed:
+                # a finished study whose record lost fitting runs (a lost worker): complete the
+                # record, no new iterations
+                self._report(iteration, len(pending), f"resuming {len(pending)} lost simulations")
+                self._run_rows(pending, executor)
+                self.last_validation = True
+                return self._result("validation passed")
             # a validation interrupted by a kill is run again before anything else
             for v in stored:
                 if v.status == "pending" and self.val_case is not None:
