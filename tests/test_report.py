@@ -70,6 +70,15 @@ def test_report_is_one_self_contained_file_with_every_section(demo_folder):
     assert seen[0].startswith("Transit times")
 
 
+@pytest.mark.slow
+def test_the_report_of_a_study_folder_goes_inside_it(demo_folder):
+    study = demo_folder / "calibration"
+    path = build_report(study, key_frames=False)
+    assert path == study / "report.html" and path.is_file()
+    result = runner.invoke(app, ["report", "--help"], terminal_width=200)
+    assert "default: report.html inside FOLDER" in " ".join(result.output.split())
+
+
 def test_report_names_a_missing_study(tmp_path):
     with pytest.raises(ParcelfitError, match="no calibration study here"):
         build_report(tmp_path)

@@ -232,7 +232,7 @@ def report(
         Path, typer.Argument(help="A study folder, or a folder holding calibration/ (the demo's).")
     ],
     out: Annotated[
-        Path | None, typer.Option(help="The HTML file (default: report.html beside the study).")
+        Path | None, typer.Option(help="The HTML file (default: report.html inside FOLDER).")
     ] = None,
     screen: Annotated[
         Path | None, typer.Option(help="A screening folder (default: screen/ beside the study).")

@@ -566,13 +566,13 @@ def build_report(
     animation: bool = False,
     progress: Callable[[str], None] | None = None,
 ) -> Path:
-    """Write the HTML report of a study folder; returns the report's path (default
-    ``report.html`` in the folder holding the study)."""
+    """Write the HTML report of a study folder (or of a folder holding ``calibration/``, like
+    the demo's); returns the report's path (default: ``report.html`` inside ``folder``)."""
     from parcelfit.optimize.calibration import STORE_FILE
     from parcelfit.optimize.store import Store
 
     places = locate(folder, screen)
-    target = _report_target(Path(out) if out is not None else places.root / "report.html")
+    target = _report_target(Path(out) if out is not None else Path(folder) / "report.html")
     store = Store(places.study / STORE_FILE, readonly=True)
     meta = store.get_meta("study") or {}
     source = store.get_meta("source") or {}
