@@ -67,6 +67,20 @@ def test_report_is_one_self_contained_file_with_every_section(demo_folder):
     # the published criteria and the stricter one, each with a verdict
     assert text.count("<td>1. transit time") == 1 and "stricter (parcelfit)" in text
     assert "MuJoCo backend only" in text  # key frames need a MuJoCo study
+    # one iteration numbering: 0 is the initial design (8 runs), then batches of 4
+    n, last = map(
+        int,
+        re.search(
+            r"(\d+) simulations: the initial design \(iteration 0\) and iterations 1-(\d+) "
+            r"\(batches of 4\)",
+            text,
+        ).groups(),
+    )
+    assert (
+        n == 8 + 4 * last
+        and f"The calibrated parameters, validated after iteration {last}," in text
+    )
+    assert re.search(r"Calibrated parameters: the evaluation made in iteration \d+ with cost", text)
     assert seen[0].startswith("Transit times")
 
 
