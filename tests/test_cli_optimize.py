@@ -33,6 +33,11 @@ def test_calibrate_then_status_json(tmp_path):
         in said
     )
     assert info["validations"][-1]["after_iteration"] == last
+    # not a terminal: one progress line per finished evaluation
+    lines = re.findall(
+        r"^\w+: fit-\d{3}-\d{2} \((\d+)/12 evaluations, best cost ", result.stdout, re.M
+    )
+    assert [int(k) for k in lines] == list(range(1, info["evaluations"] + 1))
     # calibrate and status show the same point, under the same name
     rec = info["recommended"]
     title = f"recommended parameters (cost {rec['cost']:.4g}, evaluated in iteration {rec['iteration']})"
@@ -62,6 +67,12 @@ def test_screen_cli(tmp_path):
     )
     assert result.exit_code == 0, result.output
     assert "selected for calibration: mu_d_BePa" in result.output
+    # not a terminal: one progress line per finished run
+    runs = len((tmp_path / "o" / "stage1-design.csv").read_text().splitlines()) - 1
+    lines = re.findall(
+        r"^screening: \w+: screen-0-\d+ \((\d+) of (\d+) done\)$", result.stdout, re.M
+    )
+    assert lines == [(str(k), str(runs)) for k in range(1, runs + 1)]
     doc["fixed"] = {}
     path.write_text(yaml.safe_dump(doc, sort_keys=False))
     result = runner.invoke(
@@ -129,3 +140,29 @@ def test_status_of_a_demo_folder_points_to_its_calibration_subfolder(tmp_path):
     text = " ".join(result.output.split())
     assert "no study.sqlite here; the study is in the calibration/ subfolder" in text
     assert f"Fix: point at {study}" in text
+
+
+@pytest.mark.parametrize("terminal", [True, False])
+def test_progress_updates_the_spinner_on_a_terminal_and_prints_lines_elsewhere(
+    monkeypatch, terminal
+):
+    import io
+
+    from rich.console import Console
+
+    from parcelfit import cli
+
+    out = io.StringIO()
+    monkeypatch.setattr(cli, "console", Console(file=out, force_terminal=terminal, width=100))
+    shown = []
+
+    class Spinner:
+        def update(self, text):
+            shown.append(text)
+
+    say = cli._progress(Spinner(), "screening: ")
+    say("ok: screen-0-1 (1 of 2 done)")
+    say("ok: screen-0-0 (2 of 2 done)")
+    printed = ["screening: ok: screen-0-1 (1 of 2 done)", "screening: ok: screen-0-0 (2 of 2 done)"]
+    assert shown == (printed if terminal else [])
+    assert out.getvalue().splitlines() == ([] if terminal else printed)

@@ -35,6 +35,20 @@ F = TypeVar("F", bound=Callable[..., Any])
 TIMESTEP_S = 1.0 / 600.0  # the default simulation time step [s]
 
 
+def _progress(status: Any, prefix: str) -> Callable[[str], None]:
+    """A progress callback for a long job: on a terminal it updates the spinner's line; when
+    the output goes to a log or CI (where the spinner shows nothing) it prints one line per
+    event, i.e. per finished evaluation."""
+
+    def say(message: str) -> None:
+        if console.is_terminal:
+            status.update(f"{prefix}{message}")
+        else:
+            console.print(Text(f"{prefix}{message}"), highlight=False)
+
+    return say
+
+
 def friendly_errors(func: F) -> F:
     """Show a `ParcelfitError` as one red message and exit with status 2, without a traceback."""
 
@@ -221,7 +235,7 @@ def demo(
             load_screen(screen_file),
             out / "screen",
             workers=workers,
-            on_event=lambda m: status_line.update(f"screening: {m}"),
+            on_event=_progress(status_line, "screening: "),
         )
     _print_screen(stages, selection)
     console.rule("4/6 calibration of E3 KP/BW (setting 1, validation at setting 2)")
@@ -232,9 +246,7 @@ def demo(
     console.print(example["description"])
     console.rule("6/6 report")
     with console.status("report") as status_line:
-        report = build_report(
-            out, animation=animation, progress=lambda m: status_line.update(f"report: {m}")
-        )
+        report = build_report(out, animation=animation, progress=_progress(status_line, "report: "))
     minutes = (time.perf_counter() - t0) / 60
     console.print(f"[bold green]report:[/] {escape(str(report.resolve()))}")
     console.print(f"[bold]verdict:[/] {verdict_text(out)} ({minutes:.1f} min)")
@@ -269,7 +281,7 @@ def report(
             screen=screen,
             key_frames=frames,
             animation=animation,
-            progress=lambda m: status_line.update(f"report: {m}"),
+            progress=_progress(status_line, "report: "),
         )
     console.print(f"[bold green]report:[/] {escape(str(path.resolve()))}")
     console.print(f"[bold]verdict:[/] {verdict_text(folder)}")
@@ -798,6 +810,12 @@ def _calibrate_live(
         def update(p: CalibrationProgress) -> None:
             state["p"] = p
             live.update(render())
+            if not console.is_terminal:  # a log or CI: the table shows only at the end
+                best = "-" if p.best_cost is None else f"{p.best_cost:.4g}"
+                console.print(
+                    Text(f"{p.message} ({p.done}/{p.budget} evaluations, best cost {best})"),
+                    highlight=False,
+                )
 
         result = Calibration(
             study,
@@ -889,7 +907,7 @@ def screen(
     folder = out or screen_file.parent / screen_file.stem
     with console.status("screening") as status_line:
         stages, selection = run_screen(
-            spec, folder, workers=workers, on_event=lambda m: status_line.update(m)
+            spec, folder, workers=workers, on_event=_progress(status_line, "screening: ")
         )
     _print_screen(stages, selection)
     console.print(Text(f"results in {folder} (selection.yaml, stageN-effects.csv, Pareto charts)"))
