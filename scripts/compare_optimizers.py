@@ -21,7 +21,7 @@ from parcelfit.optimize.study import load_study
 
 
 def run_one(study_file: Path, sampler: str, seed: int, out: Path, workers: int) -> tuple:
-    """Calibrate with ``sampler`` and ``seed``; (evaluations, validated, iterations, best cost)."""
+    """Calibrate with ``sampler`` and ``seed``; (evaluations, validated, last iteration, best cost)."""
     doc = yaml.safe_load(study_file.read_text())
     doc["optimizer"] = {**(doc.get("optimizer") or {}), "sampler": sampler}
     doc["seed"] = seed
@@ -34,7 +34,7 @@ def run_one(study_file: Path, sampler: str, seed: int, out: Path, workers: int) 
         ).run()
     finally:
         variant.unlink()
-    return result.evaluations, result.validated, result.iterations, result.best_cost
+    return result.evaluations, result.validated, result.last_iteration, result.best_cost
 
 
 def main() -> None:

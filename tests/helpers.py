@@ -59,3 +59,49 @@ def reference_dtw(a, b, window=None) -> float:
     if window is not None:
         kwargs.update(window_type="sakoechiba", window_args={"window_size": window})
     return dtw_python.dtw(np.asarray(a, float), np.asarray(b, float), **kwargs).distance
+
+
+def write_study_store(folder: Path, dataset: Path | None) -> Path:
+    """A finished study's store written by hand, no simulation: the initial design (iteration 0:
+    one ok, one failed), iteration 1 (two ok), a passed validation after iteration 1, and a
+    recommended point that is not the one with the lowest cost. Values are SI."""
+    from parcelfit.optimize.store import Store
+
+    folder.mkdir(parents=True, exist_ok=True)
+    store = Store(folder / "study.sqlite")
+    store.set_meta(
+        "study",
+        {
+            "name": "hand",
+            "parameters": ["mu_d_BePa", "E_Pa"],
+            "bounds": [[0.3, 0.6], [2e8, 1.6e9]],
+            "log": [False, False],
+            "batch_size": 2,
+            "seed": 1,
+            "fit_setting": 1,
+            "validation_setting": 2,
+        },
+    )
+    store.set_meta(
+        "source",
+        {
+            "study_file": None,
+            "dataset": None if dataset is None else str(dataset),
+            "rig": "R",
+            "consignment": "P",
+        },
+    )
+    store.set_meta("reference_run", "R-P-1-0")
+    points = [{"mu_d_BePa": 0.3 + 0.05 * k, "E_Pa": 6e8 + 1e8 * k} for k in range(4)]
+    ids = store.add_pending("fit", 0, points[:2], 1, [0, 1])
+    ids += store.add_pending("fit", 1, points[2:], 1, [2, 3])
+    for row, status, cost in zip(
+        ids, ["ok", "failed", "ok", "ok"], [0.5, None, 0.2, 0.3], strict=True
+    ):
+        store.finish(row, status=status, cost=cost)
+    (val,) = store.add_pending("validation", 1, [points[3]], 2, [0])
+    store.finish(val, status="ok", details={"passed": True})
+    store.set_meta("recommended", {"params": points[3], "cost": 0.3})
+    store.set_meta("stop_reason", "validation passed")
+    store.close()
+    return folder

@@ -10,7 +10,7 @@ from .conftest import line_trajectory
 runner = CliRunner()
 
 
-def _small(make_dataset):
+def _small(make_dataset, extra=None):
     runs = [
         (f"r{i}", line_trajectory(30, y0=0.001 * i, turn=0.05 * i), 1.0 + 0.01 * i)
         for i in range(4)
@@ -19,7 +19,8 @@ def _small(make_dataset):
         {
             ("E1", "KP", 1): runs,
             ("E1", "BW", 1): [(f"b{i}", line_trajectory(30), 1.2 + 0.01 * i) for i in range(4)],
-        }
+        },
+        extra,
     )
 
 
@@ -36,6 +37,23 @@ def test_reference_table(make_dataset):
     result = runner.invoke(app, ["reference", str(_small(make_dataset))])
     assert result.exit_code == 0
     assert "E1/KP/1: reference run" in result.stdout
+
+
+@pytest.mark.parametrize("synthetic", [True, False])
+def test_reference_and_stats_say_synthetic_for_synthetic_data(make_dataset, tmp_path, synthetic):
+    data = str(_small(make_dataset, {"synthetic": synthetic}))
+    note = "(SYNTHETIC: simulated from hidden true parameters, not measured)"
+    table = runner.invoke(app, ["reference", data])
+    stats = runner.invoke(app, ["stats", data, "--out", str(tmp_path / "st")])
+    as_json = runner.invoke(app, ["reference", data, "--json"])
+    assert table.exit_code == stats.exit_code == as_json.exit_code == 0
+    for result in (table, stats):
+        text = " ".join(result.stdout.split())
+        assert text.startswith("dataset test: 2 test cases, 8 runs")
+        assert (note in text) is synthetic
+    doc = json.loads(as_json.stdout)
+    assert [(d["dataset"], d["synthetic"]) for d in doc] == [("test", synthetic)] * 2
+    assert ("SYNTHETIC" in as_json.stderr) is synthetic
 
 
 def test_stats_writes_files(make_dataset, tmp_path):

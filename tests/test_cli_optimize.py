@@ -1,4 +1,5 @@
 import json
+import re
 
 import pytest
 import yaml
@@ -6,7 +7,7 @@ from typer.testing import CliRunner
 
 from parcelfit.cli import app
 
-from .helpers import write_study
+from .helpers import write_study, write_study_store
 
 runner = CliRunner()
 
@@ -17,11 +18,31 @@ def test_calibrate_then_status_json(tmp_path):
     out = tmp_path / "out"
     result = runner.invoke(app, ["calibrate", str(study), "--out", str(out), "--workers", "2"])
     assert result.exit_code == 0, result.output
-    assert "best parameters" in result.output and "figures in" in result.output
+    assert "figures in" in result.output
     status = runner.invoke(app, ["status", str(out), "--json"])
     info = json.loads(status.stdout)
     assert info["evaluations"] <= 12 and info["pending"] == 0 and info["validations"]
     assert (out / "figures" / "history.png").is_file()
+    # one numbering: iteration 0 is the initial design (8 here), then batches of 4
+    last = info["last_iteration"]
+    assert info["evaluations"] == 8 + 4 * last and last >= 1
+    span = "iteration 1" if last == 1 else f"iterations 1-{last}"
+    said = " ".join(result.output.split())
+    assert (
+        f"after {info['evaluations']} evaluations: the initial design (iteration 0) and {span};"
+        in said
+    )
+    assert info["validations"][-1]["after_iteration"] == last
+    # not a terminal: one progress line per finished evaluation
+    lines = re.findall(
+        r"^\w+: fit-\d{3}-\d{2} \((\d+)/12 evaluations, best cost ", result.stdout, re.M
+    )
+    assert [int(k) for k in lines] == list(range(1, info["evaluations"] + 1))
+    # calibrate and status show the same point, under the same name
+    rec = info["recommended"]
+    title = f"recommended parameters (cost {rec['cost']:.4g}, evaluated in iteration {rec['iteration']})"
+    assert title in said
+    assert title in " ".join(runner.invoke(app, ["status", str(out)]).stdout.split())
 
 
 @pytest.mark.slow
@@ -46,6 +67,12 @@ def test_screen_cli(tmp_path):
     )
     assert result.exit_code == 0, result.output
     assert "selected for calibration: mu_d_BePa" in result.output
+    # not a terminal: one progress line per finished run
+    runs = len((tmp_path / "o" / "stage1-design.csv").read_text().splitlines()) - 1
+    lines = re.findall(
+        r"^screening: \w+: screen-0-\d+ \((\d+) of (\d+) done\)$", result.stdout, re.M
+    )
+    assert lines == [(str(k), str(runs)) for k in range(1, runs + 1)]
     doc["fixed"] = {}
     path.write_text(yaml.safe_dump(doc, sort_keys=False))
     result = runner.invoke(
@@ -69,3 +96,73 @@ def test_bad_study_and_missing_status_folder(tmp_path):
     )
     result = runner.invoke(app, ["status", str(tmp_path)])
     assert result.exit_code == 2 and "no study.sqlite here" in result.output
+
+
+def test_status_in_plain_words_with_the_recommended_point_and_synthetic_data(tmp_path):
+    from .fake_sim import write_reference_dataset
+
+    write_reference_dataset(tmp_path / "data")  # a synthetic dataset
+    study = write_study_store(tmp_path / "demo" / "calibration", tmp_path / "data")
+    result = runner.invoke(app, ["status", str(study)], terminal_width=200)
+    assert result.exit_code == 0, result.output
+    text = " ".join(result.stdout.split())
+    assert "(SYNTHETIC: simulated from hidden true parameters, not measured)" in text
+    assert (
+        "hand: 4 evaluations (1 failed, 3 ok), the initial design (iteration 0) and iteration 1, "
+        "reference run R-P-1-0, stopped: validation passed" in text
+    )
+    assert "validation after iteration 1: passed" in text
+    assert "recommended parameters (cost 0.3, evaluated in iteration 1)" in text
+    assert "the lowest single cost was 0.2 (iteration 1)" in text
+    assert re.search(r"E_Pa\W+900\W+N/mm\^2", text)  # the table in catalogue units
+    assert "{'" not in result.stdout and "passed=" not in result.stdout  # no Python reprs
+
+
+def test_status_json_is_si_with_its_units(tmp_path):
+    study = write_study_store(tmp_path / "study", None)
+    result = runner.invoke(app, ["status", str(study), "--json"])
+    assert result.exit_code == 0, result.output
+    info = json.loads(result.stdout)
+    assert info["units"] == {"mu_d_BePa": "-", "E_Pa": "Pa", "cost": "-"}
+    rec = info["recommended"]
+    assert rec["params"] == pytest.approx({"mu_d_BePa": 0.45, "E_Pa": 9e8})
+    assert (rec["cost"], rec["iteration"]) == (0.3, 1)
+    assert info["lowest_cost"]["cost"] == 0.2 and info["lowest_cost"]["iteration"] == 1
+    assert info["last_iteration"] == 1 and info["synthetic"] is None
+    assert info["validations"] == [{"after_iteration": 1, "status": "ok", "passed": True}]
+    assert "SYNTHETIC" not in runner.invoke(app, ["status", str(study)]).stdout
+
+
+def test_status_of_a_demo_folder_points_to_its_calibration_subfolder(tmp_path):
+    study = write_study_store(tmp_path / "demo" / "calibration", None)
+    result = runner.invoke(app, ["status", str(tmp_path / "demo")])
+    assert result.exit_code == 2
+    text = " ".join(result.output.split())
+    assert "no study.sqlite here; the study is in the calibration/ subfolder" in text
+    assert f"Fix: point at {study}" in text
+
+
+@pytest.mark.parametrize("terminal", [True, False])
+def test_progress_updates_the_spinner_on_a_terminal_and_prints_lines_elsewhere(
+    monkeypatch, terminal
+):
+    import io
+
+    from rich.console import Console
+
+    from parcelfit import cli
+
+    out = io.StringIO()
+    monkeypatch.setattr(cli, "console", Console(file=out, force_terminal=terminal, width=100))
+    shown = []
+
+    class Spinner:
+        def update(self, text):
+            shown.append(text)
+
+    say = cli._progress(Spinner(), "screening: ")
+    say("ok: screen-0-1 (1 of 2 done)")
+    say("ok: screen-0-0 (2 of 2 done)")
+    printed = ["screening: ok: screen-0-1 (1 of 2 done)", "screening: ok: screen-0-0 (2 of 2 done)"]
+    assert shown == (printed if terminal else [])
+    assert out.getvalue().splitlines() == ([] if terminal else printed)

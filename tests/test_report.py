@@ -67,7 +67,30 @@ def test_report_is_one_self_contained_file_with_every_section(demo_folder):
     # the published criteria and the stricter one, each with a verdict
     assert text.count("<td>1. transit time") == 1 and "stricter (parcelfit)" in text
     assert "MuJoCo backend only" in text  # key frames need a MuJoCo study
+    # one iteration numbering: 0 is the initial design (8 runs), then batches of 4
+    n, last = map(
+        int,
+        re.search(
+            r"(\d+) simulations: the initial design \(iteration 0\) and iterations 1-(\d+) "
+            r"\(batches of 4\)",
+            text,
+        ).groups(),
+    )
+    assert (
+        n == 8 + 4 * last
+        and f"The calibrated parameters, validated after iteration {last}," in text
+    )
+    assert re.search(r"Calibrated parameters: the evaluation made in iteration \d+ with cost", text)
     assert seen[0].startswith("Transit times")
+
+
+@pytest.mark.slow
+def test_the_report_of_a_study_folder_goes_inside_it(demo_folder):
+    study = demo_folder / "calibration"
+    path = build_report(study, key_frames=False)
+    assert path == study / "report.html" and path.is_file()
+    result = runner.invoke(app, ["report", "--help"], terminal_width=200)
+    assert "default: report.html inside FOLDER" in " ".join(result.output.split())
 
 
 def test_report_names_a_missing_study(tmp_path):

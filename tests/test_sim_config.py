@@ -136,3 +136,21 @@ def test_contact_mapping_round_trip_and_impedance_choice():
     assert soft.impedance == pytest.approx(0.9) and soft.omega_dt < 0.5
     with pytest.raises(ParcelfitError):
         contact_params(-1, 208, 1, 1, 0.001)
+
+
+@pytest.mark.mujoco
+def test_mujoco_warnings_go_to_logging_not_into_a_log_file(tmp_path, monkeypatch, caplog):
+    import mujoco
+    import numpy as np
+
+    import parcelfit.sim.mujoco  # noqa: F401  (installs the warning handler)
+
+    monkeypatch.chdir(tmp_path)
+    xml = "<mujoco><worldbody><body><freejoint/><geom size='.1'/></body></worldbody></mujoco>"
+    model = mujoco.MjModel.from_xml_string(xml)
+    data = mujoco.MjData(model)
+    data.qvel[:] = np.nan
+    with caplog.at_level("WARNING", logger="parcelfit.sim.mujoco"):
+        mujoco.mj_step(model, data)
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
+    assert "MuJoCo: Nan, Inf or huge value in QVEL at DOF 0" in caplog.text

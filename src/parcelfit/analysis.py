@@ -48,6 +48,9 @@ def transit_statistics(
     return StatsResult(times, tests, files)
 
 
+SYNTHETIC_NOTE = "SYNTHETIC: simulated from hidden true parameters, not measured"
+
+
 def dataset_title(dataset: Dataset) -> str:
     """Title for figures: the dataset's name, marked SYNTHETIC where it was not measured."""
     return f"{dataset.name} (SYNTHETIC data)" if dataset.synthetic else dataset.name
@@ -58,10 +61,21 @@ def reference_runs(dataset: Dataset) -> dict[TestCase, ReferenceSelection]:
     return {case: select_reference(dataset.cases[case]) for case in sorted(dataset.cases)}
 
 
-def write_reference_runs(selections: dict[TestCase, ReferenceSelection], path: Path) -> Path:
-    """Write the selections as JSON (a list, one object per test case)."""
+def reference_runs_doc(
+    selections: dict[TestCase, ReferenceSelection], dataset: Dataset
+) -> list[dict[str, object]]:
+    """The selections as JSON-ready objects, one per test case, each naming its dataset and
+    whether the data are synthetic."""
+    return [
+        {"dataset": dataset.name, "synthetic": dataset.synthetic, **s.to_dict()}
+        for s in selections.values()
+    ]
+
+
+def write_reference_runs(
+    selections: dict[TestCase, ReferenceSelection], dataset: Dataset, path: Path
+) -> Path:
+    """Write the selections as JSON (a list, one object per test case, see `reference_runs_doc`)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(
-        json.dumps([s.to_dict() for s in selections.values()], indent=1), encoding="utf-8"
-    )
+    path.write_text(json.dumps(reference_runs_doc(selections, dataset), indent=1), encoding="utf-8")
     return path

@@ -35,6 +35,20 @@ F = TypeVar("F", bound=Callable[..., Any])
 TIMESTEP_S = 1.0 / 600.0  # the default simulation time step [s]
 
 
+def _progress(status: Any, prefix: str) -> Callable[[str], None]:
+    """A progress callback for a long job: on a terminal it updates the spinner's line; when
+    the output goes to a log or CI (where the spinner shows nothing) it prints one line per
+    event, i.e. per finished evaluation."""
+
+    def say(message: str) -> None:
+        if console.is_terminal:
+            status.update(f"{prefix}{message}")
+        else:
+            console.print(Text(f"{prefix}{message}"), highlight=False)
+
+    return say
+
+
 def friendly_errors(func: F) -> F:
     """Show a `ParcelfitError` as one red message and exit with status 2, without a traceback."""
 
@@ -68,13 +82,17 @@ def reference(
     as_json: Annotated[bool, typer.Option("--json", help="Print machine-readable JSON.")] = False,
 ) -> None:
     """Choose each test case's reference run (DTW distance matrices, method section 4)."""
-    from parcelfit.analysis import reference_runs
+    from parcelfit.analysis import SYNTHETIC_NOTE, reference_runs, reference_runs_doc
     from parcelfit.runs import load_dataset
 
-    selections = reference_runs(load_dataset(dataset))
+    ds = load_dataset(dataset)
+    selections = reference_runs(ds)
     if as_json:
-        sys.stdout.write(json.dumps([s.to_dict() for s in selections.values()], indent=1) + "\n")
+        if ds.synthetic:  # stdout stays JSON; every object also carries "synthetic": true
+            err_console.print(Text(f"note: dataset {ds.name} is {SYNTHETIC_NOTE}"))
+        sys.stdout.write(json.dumps(reference_runs_doc(selections, ds), indent=1) + "\n")
         return
+    _print_dataset(ds)
     for sel in selections.values():
         table = Table(
             title=f"{escape(sel.case.label)}: reference run [bold]{escape(sel.reference_id)}[/]",
@@ -110,10 +128,24 @@ def stats(
     from parcelfit.analysis import transit_statistics
     from parcelfit.runs import load_dataset
 
-    result = transit_statistics(load_dataset(dataset), out, alpha=alpha, family=family)
+    ds = load_dataset(dataset)
+    _print_dataset(ds)
+    result = transit_statistics(ds, out, alpha=alpha, family=family)
     _print_tests(result.tests)
     for f in result.files:
         console.print(Text(f"wrote {f}"))
+
+
+def _print_dataset(ds: Any) -> None:
+    """One line naming the dataset, its size and, for synthetic data, that it is SYNTHETIC."""
+    from parcelfit.analysis import SYNTHETIC_NOTE
+
+    line = Text.assemble(
+        ("dataset", "bold"), f" {ds.name}: {len(ds.cases)} test cases, {len(ds.runs())} runs"
+    )
+    if ds.synthetic:
+        line.append(f" ({SYNTHETIC_NOTE})", style="yellow")
+    console.print(line)
 
 
 def _print_tests(tests: Any) -> None:
@@ -177,10 +209,7 @@ def demo(
     path = demo_dataset()
     with console.status("loading the bundled twin dataset"):
         ds = load_dataset(path)
-    console.print(
-        f"[bold]dataset[/] {ds.name}: {len(ds.cases)} test cases, {len(ds.runs())} runs "
-        "[yellow](SYNTHETIC: simulated from hidden true parameters, not measured)[/]"
-    )
+    _print_dataset(ds)
     console.rule("1/6 transit-time statistics")
     with console.status("Mann-Whitney U tests"):
         result = transit_statistics(ds, out / "stats")
@@ -198,7 +227,7 @@ def demo(
     for s in selections.values():
         table.add_row(s.case.label, s.reference_id, str(len(s.run_ids)))
     console.print(table)
-    write_reference_runs(selections, out / "reference_runs.json")
+    write_reference_runs(selections, ds, out / "reference_runs.json")
     screen_file, study_file = write_demo_files(out, profile, path)
     console.rule(f"3/6 screening (profile {profile.name})")
     with console.status("screening") as status_line:
@@ -206,7 +235,7 @@ def demo(
             load_screen(screen_file),
             out / "screen",
             workers=workers,
-            on_event=lambda m: status_line.update(f"screening: {m}"),
+            on_event=_progress(status_line, "screening: "),
         )
     _print_screen(stages, selection)
     console.rule("4/6 calibration of E3 KP/BW (setting 1, validation at setting 2)")
@@ -217,9 +246,7 @@ def demo(
     console.print(example["description"])
     console.rule("6/6 report")
     with console.status("report") as status_line:
-        report = build_report(
-            out, animation=animation, progress=lambda m: status_line.update(f"report: {m}")
-        )
+        report = build_report(out, animation=animation, progress=_progress(status_line, "report: "))
     minutes = (time.perf_counter() - t0) / 60
     console.print(f"[bold green]report:[/] {escape(str(report.resolve()))}")
     console.print(f"[bold]verdict:[/] {verdict_text(out)} ({minutes:.1f} min)")
@@ -232,7 +259,7 @@ def report(
         Path, typer.Argument(help="A study folder, or a folder holding calibration/ (the demo's).")
     ],
     out: Annotated[
-        Path | None, typer.Option(help="The HTML file (default: report.html beside the study).")
+        Path | None, typer.Option(help="The HTML file (default: report.html inside FOLDER).")
     ] = None,
     screen: Annotated[
         Path | None, typer.Option(help="A screening folder (default: screen/ beside the study).")
@@ -254,7 +281,7 @@ def report(
             screen=screen,
             key_frames=frames,
             animation=animation,
-            progress=lambda m: status_line.update(f"report: {m}"),
+            progress=_progress(status_line, "report: "),
         )
     console.print(f"[bold green]report:[/] {escape(str(path.resolve()))}")
     console.print(f"[bold]verdict:[/] {verdict_text(folder)}")
@@ -749,7 +776,7 @@ def _calibrate_live(
     """Run a calibration with a live status table, print the best parameters, write figures."""
     from rich.live import Live
 
-    from parcelfit.optimize.calibration import STORE_FILE, Calibration
+    from parcelfit.optimize.calibration import STORE_FILE, Calibration, study_status
     from parcelfit.optimize.calibration import Progress as CalibrationProgress
     from parcelfit.optimize.folderlock import check_writable
 
@@ -771,7 +798,7 @@ def _calibrate_live(
         verdict = {None: "not yet", True: "[green]passed[/]", False: "[red]failed[/]"}[
             p.last_validation
         ]
-        table.add_row("iteration", str(p.iteration))
+        table.add_row("iteration", f"{p.iteration} (0 = initial design)")
         table.add_row("evaluations", f"{p.done} done, {p.running} running, budget {p.budget}")
         table.add_row("best cost", "-" if p.best_cost is None else f"{p.best_cost:.4g}")
         table.add_row("last validation", verdict)
@@ -783,6 +810,12 @@ def _calibrate_live(
         def update(p: CalibrationProgress) -> None:
             state["p"] = p
             live.update(render())
+            if not console.is_terminal:  # a log or CI: the table shows only at the end
+                best = "-" if p.best_cost is None else f"{p.best_cost:.4g}"
+                console.print(
+                    Text(f"{p.message} ({p.done}/{p.budget} evaluations, best cost {best})"),
+                    highlight=False,
+                )
 
         result = Calibration(
             study,
@@ -794,11 +827,13 @@ def _calibrate_live(
         ).run()
     console.print()
     console.print(
-        f"[bold]{result.stop_reason}[/] after {result.evaluations} evaluations in "
-        f"{result.iterations} iterations; study folder {escape(str(result.folder))}"
+        Text.assemble(
+            (result.stop_reason, "bold"),
+            f" after {result.evaluations} evaluations: {_iterations_text(result.last_iteration)}; "
+            f"study folder {result.folder}",
+        )
     )
-    if result.best_params is not None:
-        _print_params(result.best_params, result.best_cost)
+    _print_recommendation(study_status(folder))
     from parcelfit.optimize.plots import study_figures
 
     with console.status("figures"):
@@ -809,13 +844,43 @@ def _calibrate_live(
     return result
 
 
-def _print_params(params: dict[str, float], cost: float | None) -> None:
+def _iterations_text(last: int | None) -> str:
+    """The iterations done, in the one numbering (0 = initial design, k >= 1 optimiser batches)."""
+    if last is None:
+        return "no iteration yet"
+    if last == 0:
+        return "the initial design (iteration 0)"
+    return "the initial design (iteration 0) and " + (
+        "iteration 1" if last == 1 else f"iterations 1-{last}"
+    )
+
+
+def _print_recommendation(info: dict[str, Any]) -> None:
+    """The study's recommended parameters (what it validates and reports), or while it runs the
+    lowest-cost ones so far; the same for `calibrate` and `status`."""
+    rec, low = info["recommended"], info["lowest_cost"]
+    if rec is not None:
+        at = "" if rec["iteration"] is None else f", evaluated in iteration {rec['iteration']}"
+        _print_params(rec["params"], f"recommended parameters (cost {rec['cost']:.4g}{at})")
+        if low is not None and low["params"] != rec["params"]:
+            console.print(
+                f"the lowest single cost was {low['cost']:.4g} (iteration {low['iteration']}); "
+                "the recommendation is the evaluated point with the lowest GP mean cost "
+                "(optimizer: {recommend: posterior_mean}, the default)",
+                markup=False,
+            )
+    elif low is not None:
+        _print_params(
+            low["params"],
+            f"lowest-cost parameters so far (cost {low['cost']:.4g}, iteration "
+            f"{low['iteration']}); the study recommends its parameters when it stops",
+        )
+
+
+def _print_params(params: dict[str, float], title: str) -> None:
     from parcelfit.sim.params import catalogue_unit, to_catalogue_units
 
-    table = Table(
-        title=f"best parameters (cost {cost:.4g})" if cost is not None else "best parameters",
-        title_justify="left",
-    )
+    table = Table(title=Text(title), title_justify="left")
     table.add_column("parameter")
     table.add_column("value", justify="right")
     table.add_column("unit")
@@ -842,7 +907,7 @@ def screen(
     folder = out or screen_file.parent / screen_file.stem
     with console.status("screening") as status_line:
         stages, selection = run_screen(
-            spec, folder, workers=workers, on_event=lambda m: status_line.update(m)
+            spec, folder, workers=workers, on_event=_progress(status_line, "screening: ")
         )
     _print_screen(stages, selection)
     console.print(Text(f"results in {folder} (selection.yaml, stageN-effects.csv, Pareto charts)"))
@@ -888,17 +953,34 @@ def status(
         sys.stdout.write(json.dumps(info, indent=1) + "\n")
         return
     name = (info["study"] or {}).get("name", "?")
+    if info["synthetic"]:
+        from parcelfit.analysis import SYNTHETIC_NOTE
+
+        console.print(Text(f"dataset {info['dataset']} ({SYNTHETIC_NOTE})", style="yellow"))
+    counts = ", ".join(f"{n} {s}" for s, n in info["by_status"].items())
     console.print(
-        f"[bold]{escape(str(name))}[/]: {info['evaluations']} evaluations ({info['by_status']}), "
-        f"{info['iterations']} iterations, reference run {escape(str(info['reference_run']))}, "
-        f"stopped: {escape(str(info['stop_reason'] or 'not yet'))}"
+        Text.assemble(
+            (str(name), "bold"),
+            f": {info['evaluations']} evaluations" + (f" ({counts})" if counts else ""),
+            f", {_iterations_text(info['last_iteration'])}",
+            f", reference run {info['reference_run']}",
+            f", stopped: {info['stop_reason'] or 'not yet'}",
+        )
     )
     for v in info["validations"]:
         console.print(
-            f"  validation at iteration {v['iteration']}: {v['status']}, passed={v['passed']}"
+            f"  validation after iteration {v['after_iteration']}: {_verdict_word(v)}",
+            markup=False,
         )
-    if info["best"]:
-        _print_params(info["best"]["params"], info["best"]["cost"])
+    _print_recommendation(info)
+
+
+def _verdict_word(v: dict[str, Any]) -> str:
+    if v["status"] == "pending":
+        return "pending (running, or interrupted: resumes with calibrate)"
+    if v["status"] != "ok":
+        return f"failed (the simulation ended {v['status']})"
+    return "passed" if v["passed"] else "failed"
 
 
 def main() -> None:

@@ -7,6 +7,10 @@ are run) and continues exactly where it stopped.
 Failed, unstable and timed-out simulations, and runs whose trajectory misses the regions of
 interest, are stored with their status and told to the optimiser as failures (it penalises them
 with the worst cost seen); they never stop the loop and count against the budget.
+
+Iterations are numbered one way in the store, the progress, `study_status` and the report:
+0 is the initial design, k >= 1 the k-th batch the optimiser chose; the validation "after
+iteration k" simulates the recommended parameters once iteration k has finished.
 """
 
 from __future__ import annotations
@@ -25,7 +29,7 @@ from parcelfit.optimize.folderlock import check_writable, lock_folder
 from parcelfit.optimize.sampler import make_sampler
 from parcelfit.optimize.store import Evaluation, Store
 from parcelfit.optimize.study import Study
-from parcelfit.runs import TestCase, load_dataset, write_trajectory
+from parcelfit.runs import TestCase, is_synthetic, load_dataset, write_trajectory
 from parcelfit.sim.protocol import SimResult, Simulator
 
 STORE_FILE = "study.sqlite"
@@ -51,12 +55,14 @@ class Progress:
 
 @dataclass(frozen=True)
 class CalibrationResult:
-    """Outcome of a study: best parameters (SI), cost, counts, validation verdict, why it stopped."""
+    """Outcome of a study: the recommended parameters (SI) and their cost, the number of fitting
+    evaluations, the last iteration (0 = the initial design, k >= 1 the k-th optimiser batch;
+    None before any), the validation verdict, why it stopped."""
 
     best_params: dict[str, float] | None
     best_cost: float | None
     evaluations: int
-    iterations: int
+    last_iteration: int | None
     validated: bool | None
     stop_reason: str
     folder: Path
@@ -355,7 +361,9 @@ class Calibration:
         )
         self.last_validation = passed
         self._report(
-            iteration, 0, f"validation at iteration {iteration}: {'passed' if passed else 'failed'}"
+            iteration,
+            0,
+            f"validation after iteration {iteration}: {'passed' if passed else 'failed'}",
         )
         return passed
 
@@ -411,7 +419,7 @@ class Calibration:
             for v in stored:
                 if v.status == "pending" and self.val_case is not None:
                     self._report(
-                        v.iteration, 1, f"resuming the validation at iteration {v.iteration}"
+                        v.iteration, 1, f"resuming the validation after iteration {v.iteration}"
                     )
                     if self._run_validation(v.id, v.iteration, v.params, executor):
                         return self._result("validation passed")
@@ -433,7 +441,12 @@ class Calibration:
                     new_rows = [
                         r for r in self.store.evaluations("fit") if r.iteration == iteration
                     ]
-                    self._report(iteration, n, f"iteration {iteration}: {n} simulations")
+                    what = (
+                        "initial design (iteration 0)"
+                        if iteration == 0
+                        else f"iteration {iteration}"
+                    )
+                    self._report(iteration, n, f"{what}: {n} simulations")
                     self._run_rows(new_rows, executor)
                 else:
                     break
@@ -466,7 +479,7 @@ class Calibration:
             best_params=None if best is None else best[0],
             best_cost=None if best is None else best[1],
             evaluations=len(fits),
-            iterations=max((r.iteration for r in fits), default=-1) + 1,
+            last_iteration=max((r.iteration for r in fits), default=None),
             validated=self.last_validation,
             stop_reason=reason,
             folder=self.folder,
@@ -474,34 +487,66 @@ class Calibration:
 
 
 def study_status(folder: str | Path) -> dict[str, Any]:
-    """A summary of a study folder (running or finished): counts, best, validations."""
-    path = Path(folder) / STORE_FILE
+    """A summary of a study folder (running or finished), JSON-ready.
+
+    Keys: ``study`` (its description), ``dataset`` and ``synthetic`` (True for SYNTHETIC data,
+    None when the dataset is not found), ``reference_run``, ``stop_reason`` (None while
+    running), ``evaluations``, ``pending``, ``by_status`` (evaluations per status),
+    ``last_iteration`` (iterations are numbered one way everywhere: 0 is the initial design,
+    k >= 1 the k-th batch the optimiser chose; None before the first), ``recommended`` (the
+    parameters the study validates and reports, with their cost and the iteration they were
+    evaluated in; set when the study stops), ``lowest_cost`` (the evaluation with the lowest
+    single cost), ``validations`` (each with the iteration it followed, its status and
+    verdict), and ``units``: parameter values are SI, in the unit given per parameter.
+    """
+    from parcelfit.sim.params import si_unit
+
+    folder = Path(folder)
+    path = folder / STORE_FILE
     if not path.is_file():
+        inner = folder / "calibration" / STORE_FILE
         raise ParcelfitError(
-            f"no {STORE_FILE} here", file=folder, fix="point at a study's output folder"
+            f"no {STORE_FILE} here"
+            + ("; the study is in the calibration/ subfolder" if inner.is_file() else ""),
+            file=folder,
+            fix=f"point at {inner.parent}"
+            if inner.is_file()
+            else "point at a study's output folder",
         )
     store = Store(path, readonly=True)
-    fits = store.evaluations("fit")
+    try:
+        fits = store.evaluations("fit")
+        vals = store.evaluations("validation")
+        meta = {k: store.get_meta(k) for k in ("study", "source", "reference_run")}
+        stop_reason, recommended = store.get_meta("stop_reason"), store.get_meta("recommended")
+    finally:
+        store.close()
+    source = meta["source"] or {}
     ok = [e for e in fits if e.status == "ok" and e.cost is not None and math.isfinite(e.cost)]
-    best = min(ok, key=lambda e: e.cost) if ok else None  # type: ignore[arg-type, return-value]
-    vals = store.evaluations("validation")
-    out = {
-        "study": store.get_meta("study"),
-        "reference_run": store.get_meta("reference_run"),
-        "stop_reason": store.get_meta("stop_reason"),
+    lowest = min(ok, key=lambda e: e.cost) if ok else None  # type: ignore[arg-type, return-value]
+    if recommended is not None:
+        at = next((e.iteration for e in fits if e.params == recommended["params"]), None)
+        recommended = {**recommended, "iteration": at}
+    names = list((meta["study"] or {}).get("parameters") or (lowest.params if lowest else []))
+    return {
+        "study": meta["study"],
+        "dataset": source.get("dataset"),
+        "synthetic": is_synthetic(source["dataset"]) if source.get("dataset") else None,
+        "reference_run": meta["reference_run"],
+        "stop_reason": stop_reason,
         "evaluations": len(fits),
         "pending": sum(e.status == "pending" for e in fits),
         "by_status": {
             s: sum(e.status == s for e in fits) for s in sorted({e.status for e in fits})
         },
-        "iterations": max((e.iteration for e in fits), default=-1) + 1,
-        "best": None
-        if best is None
-        else {"params": best.params, "cost": best.cost, "iteration": best.iteration},
+        "last_iteration": max((e.iteration for e in fits), default=None),
+        "recommended": recommended,
+        "lowest_cost": None
+        if lowest is None
+        else {"params": lowest.params, "cost": lowest.cost, "iteration": lowest.iteration},
         "validations": [
-            {"iteration": v.iteration, "status": v.status, "passed": v.details.get("passed")}
+            {"after_iteration": v.iteration, "status": v.status, "passed": v.details.get("passed")}
             for v in vals
         ],
+        "units": {**{n: si_unit(n) for n in names}, "cost": "-"},
     }
-    store.close()
-    return out

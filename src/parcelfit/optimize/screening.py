@@ -305,9 +305,9 @@ def run_screen(
                 Task({**fixed_si, **r.params}, screen.case, f"screen-{stage}-{r.slot}")
                 for r in todo
             ]
-            for i, res in executor.run(tasks):
+            for k, (i, res) in enumerate(executor.run(tasks), start=1):
                 record_result(store, out, todo[i], res, reference)
-                say(f"{res.status.value}: {tasks[i].run_id}")
+                say(f"{res.status.value}: {tasks[i].run_id} ({k} of {len(tasks)} done)")
             rows = sorted(
                 (e for e in store.evaluations("screen") if e.iteration == stage),
                 key=lambda e: e.slot,

@@ -318,6 +318,11 @@ def parameter_rows(
     return rows
 
 
+def _iteration_span(last: int) -> str:
+    """Iterations 1 to ``last`` (0 is the initial design, numbered as everywhere else)."""
+    return "iteration 1" if last == 1 else f"iterations 1-{last}"
+
+
 def _calibration_section(
     b: _Builder, folder: Path, meta: dict[str, Any], truth: dict[str, float], synthetic: bool
 ) -> tuple[dict[str, float] | None, list[ParameterRow]]:
@@ -329,7 +334,6 @@ def _calibration_section(
     status = study_status(folder)
     store = Store(folder / STORE_FILE, readonly=True)
     fits, vals = store.evaluations("fit"), store.evaluations("validation")
-    recommended = store.get_meta("recommended")
     store.close()
     sim_time = sum(e.wall_time or 0.0 for e in fits + vals)
     done = [e for e in fits if e.finished_at is not None]
@@ -338,18 +342,19 @@ def _calibration_section(
         if done
         else 0.0
     )
+    last = status["last_iteration"]
     b.add(
-        f"<p>{status['evaluations']} simulations in {status['iterations']} iterations"
-        + (f" (batches of {meta['batch_size']})" if meta.get("batch_size") else "")
+        f"<p>{status['evaluations']} simulations: the initial design (iteration 0)"
+        + (f" and {_iteration_span(last)}" if last else "")
+        + (f" (batches of {meta['batch_size']})" if last and meta.get("batch_size") else "")
         + f", {len(vals)} validation runs; "
         f"{span / 60:.1f} min from the first to the last result, {sim_time / 60:.1f} min of "
         f"simulation in all. Stopped: {_esc(status.get('stop_reason') or 'not finished')}.</p>"
     )
     b.add(figure_html(history(fits, vals), "cost history"))
-    best = status.get("best")
-    if best is not None and recommended is not None:  # what the study validated and reports
-        at = next((e.iteration for e in fits if e.params == recommended["params"]), None)
-        best = {**recommended, "iteration": at, "lowest_cost": best["cost"]}
+    best = status["lowest_cost"]
+    if best is not None and status["recommended"] is not None:  # what the study validated
+        best = {**status["recommended"], "lowest_cost": best["cost"]}
     if best is None:
         b.add("<p class='bad'>No simulation succeeded; no parameters to report.</p>")
         return None, []
@@ -389,7 +394,7 @@ def _calibration_section(
         ]
         body.append(cells)
     b.add(
-        f"<p>Calibrated parameters: the evaluation at iteration {best['iteration']} with cost "
+        f"<p>Calibrated parameters: the evaluation made in iteration {best['iteration']} with cost "
         f"{best['cost']:.4g}"
         + (
             f" (recommended by the GP's mean cost; the lowest single cost was "
@@ -566,13 +571,13 @@ def build_report(
     animation: bool = False,
     progress: Callable[[str], None] | None = None,
 ) -> Path:
-    """Write the HTML report of a study folder; returns the report's path (default
-    ``report.html`` in the folder holding the study)."""
+    """Write the HTML report of a study folder (or of a folder holding ``calibration/``, like
+    the demo's); returns the report's path (default: ``report.html`` inside ``folder``)."""
     from parcelfit.optimize.calibration import STORE_FILE
     from parcelfit.optimize.store import Store
 
     places = locate(folder, screen)
-    target = _report_target(Path(out) if out is not None else places.root / "report.html")
+    target = _report_target(Path(out) if out is not None else Path(folder) / "report.html")
     store = Store(places.study / STORE_FILE, readonly=True)
     meta = store.get_meta("study") or {}
     source = store.get_meta("source") or {}
@@ -620,12 +625,13 @@ def build_report(
         b.add("<p>No validation run yet.</p>")
     elif val_row.run_file is None:
         b.add(
-            f"<p class='bad'>The validation run at iteration {val_row.iteration} ended "
+            f"<p class='bad'>The validation run after iteration {val_row.iteration} ended "
             f"{_esc(val_row.status)}: {_esc(val_row.details.get('message'))}</p>"
         )
     elif val_case in sels:
         b.add(
-            f"<p>Calibrated parameters at iteration {val_row.iteration}, simulated at the other "
+            f"<p>The calibrated parameters, validated after iteration {val_row.iteration}, "
+            "simulated at the other "
             f"speed setting ({_esc(val_case.label)}) and compared with its real runs (method section "
             "8). The published criteria are the first three rows; the last is parcelfit's "
             "stricter band test.</p>"

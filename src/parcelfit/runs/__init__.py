@@ -3,7 +3,7 @@
 Knows nothing of how runs were made (tracked video or simulation).
 """
 
-from parcelfit.runs.dataset import CaseData, Dataset, load_dataset, save_dataset
+from parcelfit.runs.dataset import CaseData, Dataset, is_synthetic, load_dataset, save_dataset
 from parcelfit.runs.io import check_trajectory_table, read_trajectory, write_trajectory
 from parcelfit.runs.regions import Barrier, Box, Polygon, Region, crop, parse_region, region_mask
 from parcelfit.runs.run import Run, TestCase
@@ -22,6 +22,7 @@ __all__ = [
     "Trajectory",
     "check_trajectory_table",
     "crop",
+    "is_synthetic",
     "load_dataset",
     "parse_region",
     "read_trajectory",

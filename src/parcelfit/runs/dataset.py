@@ -85,6 +85,17 @@ class Dataset:
         return [r for c in sorted(self.cases) for r in self.cases[c].runs]
 
 
+def is_synthetic(folder: str | Path) -> bool | None:
+    """Whether a dataset folder's ``dataset.yaml`` marks its data synthetic, without loading the
+    runs (None when there is no readable ``dataset.yaml``)."""
+    file = Path(folder) / DATASET_FILE
+    try:
+        doc = load_yaml(file)
+    except (OSError, ParcelfitError):
+        return None
+    return isinstance(doc, dict) and doc.get("synthetic") is True
+
+
 def load_dataset(folder: str | Path) -> Dataset:
     """Load and check a dataset folder (or the path of its ``dataset.yaml``)."""
     folder = Path(folder)

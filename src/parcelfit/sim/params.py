@@ -301,6 +301,12 @@ def catalogue_unit(name: str) -> str:
     return spec.unit if spec else "SI"
 
 
+def si_unit(name: str) -> str:
+    """The SI unit of parameter ``name`` ("SI" for a name outside the catalogue)."""
+    spec = _BY_NAME.get(name)
+    return spec.si_unit if spec else "SI"
+
+
 def parameters_for(content_kind: str) -> list[ParameterSpec]:
     """The screening candidates for a content kind: 16 for "rigid", 18 for "soft"."""
     return [p for p in CATALOGUE if content_kind in p.ranges]

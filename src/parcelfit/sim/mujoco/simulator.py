@@ -46,6 +46,7 @@ import numpy as np
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import Run, TestCase, Trajectory
 from parcelfit.sim.mujoco.consignment import Consignment, load_consignment
+from parcelfit.sim.mujoco.mjlog import CountedWarnings
 from parcelfit.sim.mujoco.rig import Barrier, Rig, Surface, load_rig
 from parcelfit.sim.mujoco.scene import Scene, SceneOptions, build_scene
 from parcelfit.sim.params import resolve
@@ -153,7 +154,7 @@ class MujocoSimulator:
         cons = self.consignment(case.consignment)
         full = resolve(cons.content_kind, si_values=params)
         scene = build_scene(rig, cons, full, case.speed_setting, self.scene_options(rig))
-        with _CountedWarnings() as warnings:
+        with CountedWarnings() as warnings:
             try:
                 model = mujoco.MjModel.from_xml_string(scene.xml)
             except ValueError as exc:
@@ -299,26 +300,6 @@ class MujocoSimulator:
                 scene.shell.triangles,
             )
         return result, rec
-
-
-class _CountedWarnings:
-    """Count MuJoCo's warnings during a run instead of printing them (3-D flexes can warn about
-    an ill-conditioned stiffness solve every step); the count goes into the diagnostics."""
-
-    def __enter__(self) -> _CountedWarnings:
-        self.count = 0
-        self.first = ""
-        self._previous = mujoco.get_mju_user_warning()
-        mujoco.set_mju_user_warning(self._handle)
-        return self
-
-    def _handle(self, message: str) -> None:
-        self.count += 1
-        if not self.first:
-            self.first = str(message).strip()
-
-    def __exit__(self, *exc: object) -> None:
-        mujoco.set_mju_user_warning(self._previous)
 
 
 def _set_velocity(model: mujoco.MjModel, data: mujoco.MjData, v: np.ndarray) -> None:
