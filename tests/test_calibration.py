@@ -152,3 +152,23 @@ def test_validation_records_the_envelope_beside_the_published_verdict(tmp_path):
     env = v.details["envelope"]
     assert set(env) == {"inside_y", "inside_theta", "worst_y_m", "worst_theta_rad", "passed"}
     assert 0.0 <= env["inside_y"] <= 1.0
+
+
+def test_figures_refit_the_surrogate_with_the_study_s_own_optimizer_settings(tmp_path):
+    from parcelfit.optimize.bo import BOSettings
+    from parcelfit.optimize.plots import study_optimizer
+
+    study = write_study(
+        tmp_path,
+        optimizer={"sampler": "published", "n_samples": 1000, "n_restarts": 1},
+        initial=4,
+        batch_size=2,
+        budget=4,
+    )
+    calibration = Calibration(load_study(study), tmp_path / "out")
+    used = calibration.bo.settings
+    calibration.run()
+    rebuilt = study_optimizer(tmp_path / "out")
+    assert rebuilt is not None and rebuilt.settings == used
+    assert used.batch == "kmeans" and used.noise == "fixed" and used != BOSettings()
+    assert rebuilt.n_told == 4

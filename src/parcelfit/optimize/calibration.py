@@ -15,6 +15,7 @@ iteration k" simulates the recommended parameters once iteration k has finished.
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import math
 from collections.abc import Callable, Mapping
@@ -234,6 +235,13 @@ class Calibration:
             settings=study.bo,
             n_initial=study.initial,
         )
+        record = self.store.get_meta("study") or {}
+        if "sampler" not in record:
+            # the optimiser as it runs, so figures refit its surrogate with the same settings
+            settings = getattr(self.bo, "settings", None)
+            record["sampler"] = study.sampler
+            record["bo_settings"] = None if settings is None else dataclasses.asdict(settings)
+            self.store.set_meta("study", record)
         self._executor_args = (executor, scheduler, workers)
         self.on_progress = on_progress or (lambda p: None)
         self.last_validation: bool | None = None

@@ -17,7 +17,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from parcelfit.figures import save_figure
-from parcelfit.optimize.bo import BatchBO
+from parcelfit.optimize.bo import BatchBO, BOSettings
 from parcelfit.optimize.calibration import STORE_FILE
 from parcelfit.optimize.space import Dimension, Space
 from parcelfit.optimize.store import Evaluation, Store
@@ -216,7 +216,16 @@ def study_optimizer(folder: str | Path) -> BatchBO | None:
             for n, (lo, hi), lg in zip(names, meta["bounds"], logs, strict=True)
         ]
     )
-    bo = BatchBO(space, batch_size=int(meta.get("batch_size", 4)), seed=int(meta.get("seed", 0)))
+    # the study's own GP settings (a study with a non-GP sampler, or one stored before the
+    # settings were recorded, gets the default GP as its surrogate)
+    stored = meta.get("bo_settings")
+    settings = BOSettings(**stored) if stored else BOSettings()
+    bo = BatchBO(
+        space,
+        batch_size=int(meta.get("batch_size", 4)),
+        seed=int(meta.get("seed", 0)),
+        settings=settings,
+    )
     for e in fits:
         if e.status != "pending":
             bo.tell(e.params, e.cost if e.status == "ok" else None)
