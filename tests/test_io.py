@@ -98,3 +98,41 @@ def test_parquet_schema_errors_too(tmp_path):
     pd.DataFrame({"t": [0.0, 1.0, 2.0], "x": [0.0, 1, 2], "y": [0.0, 0, 0]}).to_parquet(path)
     with pytest.raises(ParcelfitError, match="missing column"):
         read_trajectory(path)
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+def test_source_column_round_trips_and_is_written_only_when_present(tmp_path, suffix):
+    tr = line_trajectory(6)
+    src = ["detected", "filled", "filled", "detected", "detected", "detected"]
+    flagged = type(tr)(t=tr.t, x=tr.x, y=tr.y, theta=tr.theta, source=src)
+    back = read_trajectory(write_trajectory(flagged, tmp_path / f"f{suffix}"))
+    assert back.source.tolist() == src
+    assert back.filled.tolist() == [False, True, True, False, False, False]
+    # a run without flags (simulated, or an old file) is written and read as before
+    plain = write_trajectory(tr, tmp_path / f"p{suffix}")
+    assert list(
+        pd.read_csv(plain).columns if suffix == ".csv" else pd.read_parquet(plain).columns
+    ) == [
+        "t",
+        "x",
+        "y",
+        "theta",
+    ]
+    old = read_trajectory(plain)
+    assert old.source is None and not old.filled.any()
+
+
+def test_old_csv_without_source_reads_and_a_bad_source_is_named(tmp_path):
+    old = tmp_path / "old.csv"
+    old.write_text("t,x,y,theta\n0,0,0,0\n0.1,0.01,0,0\n0.2,0.02,0,0.01\n")
+    tr = read_trajectory(old)
+    assert len(tr) == 3 and tr.source is None and not tr.filled.any()
+    f = _good(5).assign(source=["detected", "filled", "interpolated", "detected", "detected"])
+    with pytest.raises(
+        ParcelfitError,
+        match=r"data row 3: column 'source' has 'interpolated'.*Fix: write detected or filled",
+    ):
+        read_trajectory(_write(tmp_path, f))
+    f = _good(5).assign(source=["detected", None, "filled", "detected", "detected"])
+    with pytest.raises(ParcelfitError, match=r"data row 2: column 'source'"):
+        read_trajectory(_write(tmp_path, f))

@@ -72,3 +72,32 @@ def test_select_and_frame_round_trip():
         tr.select(tr.x > tr.x[7])
     back = Trajectory.from_frame(tr.to_frame())
     assert np.array_equal(back.xy, tr.xy)
+
+
+def test_source_flags_filled_samples_and_follows_select_and_relative():
+    src = ["detected", "detected", "filled", "filled", "detected"]
+    tr = Trajectory(
+        t=[0, 1, 2, 3, 4], x=[0.0, 1, 2, 3, 4], y=[0.0] * 5, theta=[0.0] * 5, source=src
+    )
+    assert tr.filled.tolist() == [False, False, True, True, False]
+    assert tr.relative().source.tolist() == src
+    assert tr.select(np.array([0, 1, 1, 1, 1], bool)).filled.tolist() == [False, True, True, False]
+    assert tr.resample(2.0).source is None  # resampled samples are neither
+    back = Trajectory.from_frame(tr.to_frame())
+    assert back.source.tolist() == src
+    with pytest.raises(ParcelfitError, match="source of sample 1 is 'guessed'"):
+        Trajectory(
+            t=[0, 1, 2],
+            x=[0, 1, 2],
+            y=[0, 0, 0],
+            theta=[0, 0, 0],
+            source=["detected", "guessed", "filled"],
+        )
+    with pytest.raises(ParcelfitError, match="one source per sample"):
+        Trajectory(t=[0, 1, 2], x=[0, 1, 2], y=[0, 0, 0], theta=[0, 0, 0], source=["detected"])
+
+
+def test_without_source_every_sample_counts_as_measured():
+    tr = line_trajectory(5)
+    assert tr.source is None and tr.filled.tolist() == [False] * 5
+    assert list(tr.to_frame().columns) == ["t", "x", "y", "theta"]

@@ -1,7 +1,9 @@
 """Reading and writing trajectory files (CSV or Parquet, columns t, x, y, theta in SI units).
 
 Schema: one row per sample; ``t`` [s] strictly increasing, ``x``, ``y`` [m] parcel centre in the
-rig frame, ``theta`` [rad] heading (wrapped or unwrapped; it is unwrapped on load). Nothing else.
+rig frame, ``theta`` [rad] heading (wrapped or unwrapped; it is unwrapped on load). Optional:
+``source``, ``detected`` or ``filled`` per sample (tracked runs; a file without it was measured
+in every sample). Nothing else.
 """
 
 from __future__ import annotations
@@ -12,7 +14,14 @@ import numpy as np
 import pandas as pd
 
 from parcelfit.errors import ParcelfitError
-from parcelfit.runs.trajectory import COLUMNS, MIN_SAMPLES, Trajectory, unwrap_angle
+from parcelfit.runs.trajectory import (
+    COLUMNS,
+    MIN_SAMPLES,
+    OPTIONAL_COLUMNS,
+    SOURCES,
+    Trajectory,
+    unwrap_angle,
+)
 
 SUFFIXES = (".csv", ".parquet")
 # Plausibility limits for spotting unit mistakes; a test rig is a few metres long, a run lasts
@@ -50,7 +59,7 @@ def check_trajectory_table(frame: pd.DataFrame, file: str | Path) -> Trajectory:
     """
     cols = [str(c) for c in frame.columns]
     missing = [c for c in COLUMNS if c not in cols]
-    extra = [c for c in cols if c not in COLUMNS]
+    extra = [c for c in cols if c not in COLUMNS + OPTIONAL_COLUMNS]
     if missing:
         raise ParcelfitError(
             f"missing column(s) {missing}; found {cols}",
@@ -61,7 +70,8 @@ def check_trajectory_table(frame: pd.DataFrame, file: str | Path) -> Trajectory:
         raise ParcelfitError(
             f"unexpected column(s) {extra}",
             file=file,
-            fix="keep only the columns t,x,y,theta (seconds, metres, radians)",
+            fix="keep only the columns t,x,y,theta (seconds, metres, radians) and optionally "
+            + ",".join(OPTIONAL_COLUMNS),
         )
     if len(frame) < MIN_SAMPLES:
         raise ParcelfitError(
@@ -123,17 +133,32 @@ def check_trajectory_table(frame: pd.DataFrame, file: str | Path) -> Trajectory:
             where="column 'theta'",
             fix="theta must be in radians; if it is in degrees, convert with numpy.radians",
         )
-    return Trajectory(t=t, x=values["x"], y=values["y"], theta=theta)
+    source = None
+    if "source" in cols:
+        raw = frame["source"]
+        text = np.array([v.strip() if isinstance(v, str) else "" for v in raw.tolist()])
+        bad = np.flatnonzero(~np.isin(text, SOURCES))
+        if bad.size:
+            raise ParcelfitError(
+                f"column 'source' has {raw.iloc[bad[0]]!r}",
+                file=file,
+                where=f"data row {bad[0] + 1}",
+                fix=f"write {' or '.join(SOURCES)} in every row, or drop the column",
+            )
+        source = text
+    return Trajectory(t=t, x=values["x"], y=values["y"], theta=theta, source=source)
 
 
 def read_trajectory(path: str | Path) -> Trajectory:
-    """Read and check a trajectory file (.csv or .parquet; t [s], x [m], y [m], theta [rad])."""
+    """Read and check a trajectory file (.csv or .parquet; t [s], x [m], y [m], theta [rad],
+    optionally source)."""
     path = Path(path)
     return check_trajectory_table(read_table(path), path)
 
 
 def write_trajectory(trajectory: Trajectory, path: str | Path) -> Path:
-    """Write a trajectory to .csv or .parquet (by suffix); returns the path written."""
+    """Write a trajectory to .csv or .parquet (by suffix); returns the path written. The source
+    column is written only when the trajectory has one (tracked runs, not simulated ones)."""
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in SUFFIXES:

@@ -4,6 +4,10 @@ A `Trajectory` holds equal-length arrays ``t`` [s] (strictly increasing), ``x``,
 parcel centre in the rig frame: x along the conveying direction, y across it) and ``theta``
 [rad] (heading of the parcel's x axis, counter-clockwise from the rig's x axis, unwrapped, so
 consecutive samples never jump by more than pi).
+
+Optionally, per sample, ``source``: ``"detected"`` (measured in that frame) or ``"filled"``
+(interpolated across a gap in the measurements). Tracked runs carry it; simulated runs and files
+without the column have ``source`` None, which means every sample was measured.
 """
 
 from __future__ import annotations
@@ -16,6 +20,9 @@ import pandas as pd
 from parcelfit.errors import ParcelfitError
 
 COLUMNS: tuple[str, ...] = ("t", "x", "y", "theta")
+# optional per-sample columns: where each sample came from (see SOURCES)
+OPTIONAL_COLUMNS: tuple[str, ...] = ("source",)
+SOURCES: tuple[str, ...] = ("detected", "filled")
 MIN_SAMPLES = 3
 
 
@@ -26,12 +33,14 @@ def unwrap_angle(theta: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class Trajectory:
-    """Sampled planar motion of a parcel: t [s], x [m], y [m], theta [rad, unwrapped]."""
+    """Sampled planar motion of a parcel: t [s], x [m], y [m], theta [rad, unwrapped]; optionally
+    ``source`` per sample ("detected" or "filled"; None: all measured)."""
 
     t: np.ndarray
     x: np.ndarray
     y: np.ndarray
     theta: np.ndarray
+    source: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         arrays = {}
@@ -76,22 +85,56 @@ class Trajectory:
                 f"theta jumps by more than pi at sample {jumps[0] + 1}: it is not unwrapped",
                 fix="pass the heading through parcelfit.runs.unwrap_angle",
             )
+        if self.source is not None:
+            src = np.asarray(self.source, dtype=str)
+            if src.shape != self.t.shape:
+                raise ParcelfitError(
+                    f"source has shape {src.shape}, the trajectory {self.t.shape}",
+                    fix="give one source per sample",
+                )
+            bad = np.flatnonzero(~np.isin(src, SOURCES))
+            if bad.size:
+                raise ParcelfitError(
+                    f"source of sample {bad[0]} is {str(src[bad[0]])!r}",
+                    fix=f"use one of {', '.join(SOURCES)}",
+                )
+            src.setflags(write=False)
+            object.__setattr__(self, "source", src)
 
     @classmethod
     def from_arrays(
-        cls, t: np.ndarray, x: np.ndarray, y: np.ndarray, theta: np.ndarray
+        cls,
+        t: np.ndarray,
+        x: np.ndarray,
+        y: np.ndarray,
+        theta: np.ndarray,
+        source: np.ndarray | None = None,
     ) -> Trajectory:
         """Build a trajectory, unwrapping ``theta`` [rad] first (t [s], x, y [m])."""
-        return cls(t=t, x=x, y=y, theta=unwrap_angle(theta))
+        return cls(t=t, x=x, y=y, theta=unwrap_angle(theta), source=source)
 
     @classmethod
     def from_frame(cls, frame: pd.DataFrame) -> Trajectory:
-        """Build from a table with columns t [s], x [m], y [m], theta [rad]."""
-        return cls.from_arrays(*(frame[c].to_numpy(dtype=float) for c in COLUMNS))
+        """Build from a table with columns t [s], x [m], y [m], theta [rad] (and, optionally,
+        source)."""
+        source = frame["source"].tolist() if "source" in frame else None
+        return cls.from_arrays(*(frame[c].to_numpy(dtype=float) for c in COLUMNS), source=source)
 
     def to_frame(self) -> pd.DataFrame:
-        """The trajectory as a table with columns t [s], x [m], y [m], theta [rad]."""
-        return pd.DataFrame({c: getattr(self, c) for c in COLUMNS})
+        """The trajectory as a table with columns t [s], x [m], y [m], theta [rad], and source
+        when the trajectory has it."""
+        frame = pd.DataFrame({c: getattr(self, c) for c in COLUMNS})
+        if self.source is not None:
+            frame["source"] = self.source
+        return frame
+
+    @property
+    def filled(self) -> np.ndarray:
+        """True where a sample was filled across a gap rather than measured (all False when the
+        trajectory has no source)."""
+        if self.source is None:
+            return np.zeros(len(self.t), dtype=bool)
+        return self.source == "filled"
 
     def __len__(self) -> int:
         return len(self.t)
@@ -113,7 +156,11 @@ class Trajectory:
         heading is subtracted from theta.
         """
         return Trajectory(
-            t=self.t, x=self.x - self.x[0], y=self.y - self.y[0], theta=self.theta - self.theta[0]
+            t=self.t,
+            x=self.x - self.x[0],
+            y=self.y - self.y[0],
+            theta=self.theta - self.theta[0],
+            source=self.source,
         )
 
     def select(self, mask: np.ndarray) -> Trajectory:
@@ -126,12 +173,19 @@ class Trajectory:
                 f"only {int(mask.sum())} samples remain after selection, {MIN_SAMPLES} needed",
                 fix="widen the regions of interest or their margin",
             )
-        return Trajectory(t=self.t[mask], x=self.x[mask], y=self.y[mask], theta=self.theta[mask])
+        return Trajectory(
+            t=self.t[mask],
+            x=self.x[mask],
+            y=self.y[mask],
+            theta=self.theta[mask],
+            source=None if self.source is None else self.source[mask],
+        )
 
     def resample(
         self, rate: float, start: float | None = None, stop: float | None = None
     ) -> Trajectory:
-        """Linearly interpolate onto a uniform grid of ``rate`` [Hz] between start and stop [s]."""
+        """Linearly interpolate onto a uniform grid of ``rate`` [Hz] between start and stop [s]
+        (the new samples have no source: they are neither detected nor filled frames)."""
         if not np.isfinite(rate) or rate <= 0:
             raise ParcelfitError(f"resampling rate must be a positive number of Hz, got {rate}")
         t0 = self.t[0] if start is None else max(start, self.t[0])
