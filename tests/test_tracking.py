@@ -2,6 +2,7 @@ import json
 import shutil
 
 import numpy as np
+import pandas as pd
 import pytest
 import yaml
 from typer.testing import CliRunner
@@ -146,6 +147,38 @@ def test_fill_gaps_trims_unwraps_and_fills_only_short_gaps():
     assert [(g["frames"], g["interpolated"]) for g in gaps] == [(1, True), (3, False)]
     assert traj.x == pytest.approx([0, 1, 2, 3, 4, 8, 9])
     assert np.all(np.abs(np.diff(traj.theta[:5])) < 0.2)  # unwrapped across +-pi
+
+
+def test_fill_gaps_flags_exactly_the_filled_samples():
+    t = np.arange(12) / 10
+    x = np.array([np.nan, 0, 1, np.nan, 3, 4, np.nan, np.nan, np.nan, 8, 9, np.nan])
+    traj, _ = fill_gaps(t, x, x.copy(), x.copy(), max_gap=2)
+    # samples t = 0.1 .. 1.0 with the long gap (0.6-0.8 s) left out; 0.3 s was filled
+    assert traj.source.tolist() == ["detected"] * 2 + ["filled"] + ["detected"] * 4
+
+
+@pytest.mark.slow  # renders a 45-frame video
+def test_filled_frames_are_flagged_in_the_run_file(tmp_path):
+    # the parcel tag is covered in frames 12-14 (filled, <= max_gap) and 30-38 (left out)
+    scene = conveyor_scene(duration=0.75, hidden=((0.19, 0.245), (0.49, 0.64)))
+    render_video(tmp_path / "gap.mp4", scene, s_curve, seed=3)
+    tags = write_tag_map(tmp_path / "tags.yaml", scene)
+    out = tmp_path / "out"
+    result = runner.invoke(
+        app,
+        ["track", str(tmp_path / "gap.mp4"), "--tags", str(tags), "--out", str(out)],
+    )
+    assert result.exit_code == 0, result.output
+    table = pd.read_csv(out / "gap-tag7.csv")
+    frames = np.round(table["t"].to_numpy() * FPS).astype(int)
+    assert frames.tolist() == [k for k in range(45) if not 30 <= k <= 38]
+    filled = frames[table["source"].to_numpy() == "filled"]
+    assert filled.tolist() == [12, 13, 14]
+    assert set(table["source"]) == {"detected", "filled"}
+    traj = read_trajectory(out / "gap-tag7.csv")
+    assert np.flatnonzero(traj.filled).tolist() == [12, 13, 14]
+    quality = json.loads((out / "gap.quality.json").read_text())["parcel_tags"]["7"]
+    assert quality["interpolated_frames"] == 3 and quality["missing_frames"] == 9
 
 
 @pytest.mark.slow  # renders the videos fixture

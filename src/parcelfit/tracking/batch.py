@@ -1,7 +1,8 @@
 """Writing tracked runs, and tracking a folder of videos into one dataset (resumable).
 
 One video: ``<out>/<stem>-tag<ID>.csv`` per parcel tag (columns t [s], x [m], y [m], theta [rad],
-the parcel centre and the heading of its x axis) and ``<out>/<stem>.quality.json``.
+the parcel centre and the heading of its x axis, and source: detected or filled) and
+``<out>/<stem>.quality.json``.
 
 A folder: every video named ``RIG-CONSIGNMENT-SETTING-RUN.<ext>`` (e.g. ``E3-KPBW-1-07.mp4``)
 becomes run ``RIG-CONSIGNMENT-SETTING-RUN`` of test case RIG/CONSIGNMENT/SETTING. Per video the

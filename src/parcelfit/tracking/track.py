@@ -8,8 +8,9 @@ tag's centre and heading at its height, and the parcel centre is
     (x, y) = tag centre - R(theta) * offset,     theta = tag heading.
 
 Frames where a parcel tag is missing between its first and last detection are gaps: gaps of at
-most ``max_gap`` frames are filled by linear interpolation (theta unwrapped first) and listed as
-interpolated; longer gaps stay missing (their samples are left out) and are listed too. The
+most ``max_gap`` frames are filled by linear interpolation (theta unwrapped first), listed as
+interpolated and flagged ``filled`` in the trajectory's ``source`` (the others ``detected``);
+longer gaps stay missing (their samples are left out) and are listed too. The
 heading is unwrapped over the run. Decoding runs in a background thread (OpenCV releases the GIL
 while decoding), so decoding and detection overlap on two cores.
 """
@@ -134,7 +135,8 @@ def fill_gaps(
     t: np.ndarray, x: np.ndarray, y: np.ndarray, theta: np.ndarray, max_gap: int
 ) -> tuple[Trajectory | None, list[dict[str, Any]]]:
     """Trim to the first..last detection, unwrap theta, fill gaps <= ``max_gap`` frames linearly;
-    returns the trajectory (None under two samples) and the list of gaps."""
+    returns the trajectory (None under two samples; its ``source`` says which samples were
+    detected and which filled) and the list of gaps."""
     seen = np.isfinite(x)
     if seen.sum() < 2:
         return None, []
@@ -158,7 +160,8 @@ def fill_gaps(
             for arr in (x, y, theta):
                 arr[a:b] = np.interp(t[a:b], t[seen], arr[seen])
             keep[a:b] = True
-    traj = Trajectory(t=t[keep], x=x[keep], y=y[keep], theta=theta[keep])
+    source = np.where(seen, "detected", "filled")
+    traj = Trajectory(t=t[keep], x=x[keep], y=y[keep], theta=theta[keep], source=source[keep])
     return traj, gaps
 
 
