@@ -136,3 +136,39 @@ def test_old_csv_without_source_reads_and_a_bad_source_is_named(tmp_path):
     f = _good(5).assign(source=["detected", None, "filled", "detected", "detected"])
     with pytest.raises(ParcelfitError, match=r"data row 2: column 'source'"):
         read_trajectory(_write(tmp_path, f))
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+def test_standard_deviation_columns_round_trip_with_empty_cells(tmp_path, suffix):
+    tr = line_trajectory(5)
+    pos_sd = np.array([1.5e-4, 1.2e-4, np.nan, 1.3e-4, 2.1e-4])
+    head_sd = np.array([2e-3, 1e-3, np.nan, 1e-3, 3e-3])
+    src = ["detected", "detected", "filled", "detected", "detected"]
+    full = type(tr)(
+        t=tr.t, x=tr.x, y=tr.y, theta=tr.theta, source=src, position_sd=pos_sd, heading_sd=head_sd
+    )
+    path = write_trajectory(full, tmp_path / f"sd{suffix}")
+    if suffix == ".csv":
+        assert path.read_text().splitlines()[0] == "t,x,y,theta,source,position_sd,heading_sd"
+        assert path.read_text().splitlines()[3].endswith(",filled,,")  # empty where none
+    back = read_trajectory(path)
+    assert back.position_sd == pytest.approx(pos_sd, rel=1e-8, nan_ok=True)
+    assert back.heading_sd == pytest.approx(head_sd, rel=1e-8, nan_ok=True)
+    assert back.source.tolist() == src
+
+
+@pytest.mark.parametrize(
+    ("column", "values", "pattern"),
+    [
+        (
+            "position_sd",
+            [1e-4, "abc", 1e-4, 1e-4, 1e-4],
+            r"data row 2: column 'position_sd' has 'abc'",
+        ),
+        ("heading_sd", [1e-3, 1e-3, 1e-3, -1e-3, 1e-3], r"data row 4: column 'heading_sd'"),
+    ],
+)
+def test_bad_standard_deviations_are_named(tmp_path, column, values, pattern):
+    f = _good(5).assign(**{column: values})
+    with pytest.raises(ParcelfitError, match=pattern + r".*Fix: a standard deviation"):
+        read_trajectory(_write(tmp_path, f))

@@ -101,3 +101,21 @@ def test_without_source_every_sample_counts_as_measured():
     tr = line_trajectory(5)
     assert tr.source is None and tr.filled.tolist() == [False] * 5
     assert list(tr.to_frame().columns) == ["t", "x", "y", "theta"]
+
+
+def test_standard_deviations_follow_select_and_relative_and_are_checked():
+    kw = {"t": [0, 1, 2, 3], "x": [0.0, 1, 2, 3], "y": [0.0] * 4, "theta": [0.0] * 4}
+    tr = Trajectory(
+        **kw, position_sd=[2e-4, 1e-4, np.nan, 3e-4], heading_sd=[0.01, 0.02, np.nan, 0.03]
+    )
+    sub = tr.relative().select(np.array([0, 1, 1, 1], bool))
+    assert sub.position_sd == pytest.approx([1e-4, np.nan, 3e-4], nan_ok=True)
+    assert sub.heading_sd == pytest.approx([0.02, np.nan, 0.03], nan_ok=True)
+    assert tr.resample(2.0).position_sd is None
+    back = Trajectory.from_frame(tr.to_frame())
+    assert back.heading_sd == pytest.approx(tr.heading_sd, nan_ok=True)
+    assert line_trajectory(5).position_sd is None
+    with pytest.raises(ParcelfitError, match=r"heading_sd of sample 1 is -0\.1"):
+        Trajectory(**kw, heading_sd=[0.0, -0.1, 0.0, 0.0])
+    with pytest.raises(ParcelfitError, match="position_sd of sample 3 is inf"):
+        Trajectory(**kw, position_sd=[0.0, 0.0, 0.0, np.inf])

@@ -3,7 +3,8 @@
 Schema: one row per sample; ``t`` [s] strictly increasing, ``x``, ``y`` [m] parcel centre in the
 rig frame, ``theta`` [rad] heading (wrapped or unwrapped; it is unwrapped on load). Optional:
 ``source``, ``detected`` or ``filled`` per sample (tracked runs; a file without it was measured
-in every sample). Nothing else.
+in every sample), and ``position_sd`` [m], ``heading_sd`` [rad] per sample (empty where there is
+none). Nothing else.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from parcelfit.runs.trajectory import (
     MIN_SAMPLES,
     OPTIONAL_COLUMNS,
     SOURCES,
+    UNCERTAINTY_COLUMNS,
     Trajectory,
     unwrap_angle,
 )
@@ -146,19 +148,34 @@ def check_trajectory_table(frame: pd.DataFrame, file: str | Path) -> Trajectory:
                 fix=f"write {' or '.join(SOURCES)} in every row, or drop the column",
             )
         source = text
-    return Trajectory(t=t, x=values["x"], y=values["y"], theta=theta, source=source)
+    sds = {}
+    for c in UNCERTAINTY_COLUMNS:
+        if c not in cols:
+            continue
+        a = pd.to_numeric(frame[c], errors="coerce").to_numpy(dtype=float)
+        bad = np.flatnonzero((np.isnan(a) & frame[c].notna().to_numpy()) | np.isinf(a) | (a < 0))
+        if bad.size:
+            raise ParcelfitError(
+                f"column {c!r} has {frame[c].iloc[bad[0]]!r}",
+                file=file,
+                where=f"data row {bad[0] + 1}",
+                fix="a standard deviation is a number >= 0 (SI units), or empty where there is none",
+            )
+        sds[c] = a
+    return Trajectory(t=t, x=values["x"], y=values["y"], theta=theta, source=source, **sds)
 
 
 def read_trajectory(path: str | Path) -> Trajectory:
     """Read and check a trajectory file (.csv or .parquet; t [s], x [m], y [m], theta [rad],
-    optionally source)."""
+    optionally source, position_sd [m], heading_sd [rad])."""
     path = Path(path)
     return check_trajectory_table(read_table(path), path)
 
 
 def write_trajectory(trajectory: Trajectory, path: str | Path) -> Path:
-    """Write a trajectory to .csv or .parquet (by suffix); returns the path written. The source
-    column is written only when the trajectory has one (tracked runs, not simulated ones)."""
+    """Write a trajectory to .csv or .parquet (by suffix); returns the path written. The optional
+    columns (source, position_sd, heading_sd) are written only when the trajectory has them
+    (tracked runs, not simulated ones)."""
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in SUFFIXES:

@@ -7,7 +7,9 @@ consecutive samples never jump by more than pi).
 
 Optionally, per sample, ``source``: ``"detected"`` (measured in that frame) or ``"filled"``
 (interpolated across a gap in the measurements). Tracked runs carry it; simulated runs and files
-without the column have ``source`` None, which means every sample was measured.
+without the column have ``source`` None, which means every sample was measured. Tracked runs may
+also carry ``position_sd`` [m] and ``heading_sd`` [rad], a standard deviation per sample (NaN
+where there is none, e.g. in filled frames); None when not known.
 """
 
 from __future__ import annotations
@@ -20,8 +22,9 @@ import pandas as pd
 from parcelfit.errors import ParcelfitError
 
 COLUMNS: tuple[str, ...] = ("t", "x", "y", "theta")
-# optional per-sample columns: where each sample came from (see SOURCES)
-OPTIONAL_COLUMNS: tuple[str, ...] = ("source",)
+# optional per-sample columns: where each sample came from (see SOURCES) and its uncertainty
+OPTIONAL_COLUMNS: tuple[str, ...] = ("source", "position_sd", "heading_sd")
+UNCERTAINTY_COLUMNS: tuple[str, ...] = ("position_sd", "heading_sd")
 SOURCES: tuple[str, ...] = ("detected", "filled")
 MIN_SAMPLES = 3
 
@@ -34,13 +37,16 @@ def unwrap_angle(theta: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True, eq=False)
 class Trajectory:
     """Sampled planar motion of a parcel: t [s], x [m], y [m], theta [rad, unwrapped]; optionally
-    ``source`` per sample ("detected" or "filled"; None: all measured)."""
+    ``source`` per sample ("detected" or "filled"; None: all measured) and standard deviations
+    ``position_sd`` [m], ``heading_sd`` [rad] (NaN where none; None: not known)."""
 
     t: np.ndarray
     x: np.ndarray
     y: np.ndarray
     theta: np.ndarray
     source: np.ndarray | None = None
+    position_sd: np.ndarray | None = None
+    heading_sd: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         arrays = {}
@@ -100,6 +106,23 @@ class Trajectory:
                 )
             src.setflags(write=False)
             object.__setattr__(self, "source", src)
+        for name in UNCERTAINTY_COLUMNS:
+            if getattr(self, name) is None:
+                continue
+            sd = np.array(getattr(self, name), dtype=float)
+            if sd.shape != self.t.shape:
+                raise ParcelfitError(
+                    f"{name} has shape {sd.shape}, the trajectory {self.t.shape}",
+                    fix="give one value per sample (NaN where there is none)",
+                )
+            bad = np.flatnonzero(np.isinf(sd) | (sd < 0))
+            if bad.size:
+                raise ParcelfitError(
+                    f"{name} of sample {bad[0]} is {sd[bad[0]]}",
+                    fix="a standard deviation is finite and >= 0 (NaN where there is none)",
+                )
+            sd.setflags(write=False)
+            object.__setattr__(self, name, sd)
 
     @classmethod
     def from_arrays(
@@ -109,24 +132,46 @@ class Trajectory:
         y: np.ndarray,
         theta: np.ndarray,
         source: np.ndarray | None = None,
+        position_sd: np.ndarray | None = None,
+        heading_sd: np.ndarray | None = None,
     ) -> Trajectory:
         """Build a trajectory, unwrapping ``theta`` [rad] first (t [s], x, y [m])."""
-        return cls(t=t, x=x, y=y, theta=unwrap_angle(theta), source=source)
+        return cls(
+            t=t,
+            x=x,
+            y=y,
+            theta=unwrap_angle(theta),
+            source=source,
+            position_sd=position_sd,
+            heading_sd=heading_sd,
+        )
 
     @classmethod
     def from_frame(cls, frame: pd.DataFrame) -> Trajectory:
         """Build from a table with columns t [s], x [m], y [m], theta [rad] (and, optionally,
-        source)."""
+        source, position_sd [m], heading_sd [rad])."""
         source = frame["source"].tolist() if "source" in frame else None
-        return cls.from_arrays(*(frame[c].to_numpy(dtype=float) for c in COLUMNS), source=source)
+        sds = {c: frame[c].to_numpy(dtype=float) for c in UNCERTAINTY_COLUMNS if c in frame}
+        return cls.from_arrays(
+            *(frame[c].to_numpy(dtype=float) for c in COLUMNS), source=source, **sds
+        )
 
     def to_frame(self) -> pd.DataFrame:
-        """The trajectory as a table with columns t [s], x [m], y [m], theta [rad], and source
-        when the trajectory has it."""
+        """The trajectory as a table with columns t [s], x [m], y [m], theta [rad], and those of
+        source, position_sd [m], heading_sd [rad] the trajectory has."""
         frame = pd.DataFrame({c: getattr(self, c) for c in COLUMNS})
-        if self.source is not None:
-            frame["source"] = self.source
+        for c in OPTIONAL_COLUMNS:
+            if getattr(self, c) is not None:
+                frame[c] = getattr(self, c)
         return frame
+
+    def _optional(self, mask: np.ndarray | None = None) -> dict[str, np.ndarray | None]:
+        """The optional per-sample columns, restricted to ``mask`` when given."""
+        out = {}
+        for c in OPTIONAL_COLUMNS:
+            a = getattr(self, c)
+            out[c] = a if a is None or mask is None else a[mask]
+        return out
 
     @property
     def filled(self) -> np.ndarray:
@@ -160,7 +205,7 @@ class Trajectory:
             x=self.x - self.x[0],
             y=self.y - self.y[0],
             theta=self.theta - self.theta[0],
-            source=self.source,
+            **self._optional(),
         )
 
     def select(self, mask: np.ndarray) -> Trajectory:
@@ -178,14 +223,14 @@ class Trajectory:
             x=self.x[mask],
             y=self.y[mask],
             theta=self.theta[mask],
-            source=None if self.source is None else self.source[mask],
+            **self._optional(mask),
         )
 
     def resample(
         self, rate: float, start: float | None = None, stop: float | None = None
     ) -> Trajectory:
         """Linearly interpolate onto a uniform grid of ``rate`` [Hz] between start and stop [s]
-        (the new samples have no source: they are neither detected nor filled frames)."""
+        (the new samples have no source and no standard deviations: they are not frames)."""
         if not np.isfinite(rate) or rate <= 0:
             raise ParcelfitError(f"resampling rate must be a positive number of Hz, got {rate}")
         t0 = self.t[0] if start is None else max(start, self.t[0])
