@@ -179,6 +179,17 @@ def test_filled_frames_are_flagged_in_the_run_file(tmp_path):
     assert np.flatnonzero(traj.filled).tolist() == [12, 13, 14]
     quality = json.loads((out / "gap.quality.json").read_text())["parcel_tags"]["7"]
     assert quality["interpolated_frames"] == 3 and quality["missing_frames"] == 9
+    # the smoother's standard deviations: empty in exactly the filled frames, and under the
+    # assumed per-frame 0.3 mm / 0.5 degrees everywhere else, largest at the ends and the gaps
+    pos_sd, head_sd = traj.position_sd, traj.heading_sd
+    assert np.flatnonzero(np.isnan(pos_sd)).tolist() == [12, 13, 14]
+    assert np.flatnonzero(np.isnan(head_sd)).tolist() == [12, 13, 14]
+    detected = ~traj.filled
+    assert np.all((pos_sd[detected] > 0) & (pos_sd[detected] < 3e-4))
+    assert np.all((head_sd[detected] > 0) & (head_sd[detected] < np.radians(0.5)))
+    middle = np.nanmedian(pos_sd)
+    for k in (0, 11, 15, 29, 30, len(traj) - 1):  # ends, next to the short and the long gap
+        assert pos_sd[k] > 1.2 * middle
 
 
 @pytest.mark.slow  # renders the videos fixture
@@ -412,3 +423,35 @@ def test_smoother_rejects_a_bad_frame_and_keeps_a_spin():
     z[30] += np.radians(20)  # a wild frame is rejected outright
     assert not rts_smooth(z, 1 / 60, r, 1e3)[2][30]
     assert np.all(sd > 0)
+
+
+def test_smoother_standard_deviation_is_the_gaussian_posterior():
+    """The RTS smoother's sd (written to the run files) equals the posterior sd of the same
+    Gaussian model solved at once: prior, constant-acceleration steps, measurements."""
+    from parcelfit.tracking.smooth import rts_smooth
+
+    n, dt, q, r = 24, 1 / 60, 10.0, 9e-8
+    z = 0.5 * np.arange(n) * dt + np.random.default_rng(1).normal(0, 3e-4, n)
+    z[9:12] = np.nan
+    _, sd, _ = rts_smooth(z, dt, np.full(n, r), q)
+    f = np.array([[1, dt, dt * dt / 2], [0, 1, dt], [0, 0, 1]])
+    qm = q * np.array(
+        [
+            [dt**5 / 20, dt**4 / 8, dt**3 / 6],
+            [dt**4 / 8, dt**3 / 3, dt**2 / 2],
+            [dt**3 / 6, dt**2 / 2, dt],
+        ]
+    )
+    info = np.zeros((3 * n, 3 * n))  # the posterior information matrix of all states
+    info[:3, :3] = np.linalg.inv(np.diag([r, 1e2, 1e4]))  # the smoother's prior
+    qi = np.linalg.inv(qm)
+    for k in range(1, n):
+        a, b = slice(3 * k - 3, 3 * k), slice(3 * k, 3 * k + 3)
+        info[a, a] += f.T @ qi @ f
+        info[b, b] += qi
+        info[a, b] -= f.T @ qi
+        info[b, a] -= qi @ f
+    for k in np.flatnonzero(np.isfinite(z)):
+        info[3 * k, 3 * k] += 1 / r
+    posterior_sd = np.sqrt(np.diag(np.linalg.inv(info))[0::3])
+    assert sd == pytest.approx(posterior_sd, rel=1e-6)

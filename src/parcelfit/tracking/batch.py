@@ -1,7 +1,8 @@
 """Writing tracked runs, and tracking a folder of videos into one dataset (resumable).
 
 One video: ``<out>/<stem>-tag<ID>.csv`` per parcel tag (columns t [s], x [m], y [m], theta [rad],
-the parcel centre and the heading of its x axis, and source: detected or filled) and
+the parcel centre and the heading of its x axis; source: detected or filled; position_sd [m],
+heading_sd [rad]: the smoother's standard deviations) and
 ``<out>/<stem>.quality.json``.
 
 A folder: every video named ``RIG-CONSIGNMENT-SETTING-RUN.<ext>`` (e.g. ``E3-KPBW-1-07.mp4``)

@@ -10,7 +10,9 @@ tag's centre and heading at its height, and the parcel centre is
 Frames where a parcel tag is missing between its first and last detection are gaps: gaps of at
 most ``max_gap`` frames are filled by linear interpolation (theta unwrapped first), listed as
 interpolated and flagged ``filled`` in the trajectory's ``source`` (the others ``detected``);
-longer gaps stay missing (their samples are left out) and are listed too. The
+longer gaps stay missing (their samples are left out) and are listed too. With the smoother on,
+the detected frames carry its posterior standard deviations (``position_sd``, ``heading_sd``;
+see `smooth_track` for what they assume). The
 heading is unwrapped over the run. Decoding runs in a background thread (OpenCV releases the GIL
 while decoding), so decoding and detection overlap on two cores.
 """
@@ -132,17 +134,26 @@ def _runs_of(mask: np.ndarray) -> list[tuple[int, int]]:
 
 
 def fill_gaps(
-    t: np.ndarray, x: np.ndarray, y: np.ndarray, theta: np.ndarray, max_gap: int
+    t: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    theta: np.ndarray,
+    max_gap: int,
+    sd: np.ndarray | None = None,
 ) -> tuple[Trajectory | None, list[dict[str, Any]]]:
     """Trim to the first..last detection, unwrap theta, fill gaps <= ``max_gap`` frames linearly;
     returns the trajectory (None under two samples; its ``source`` says which samples were
-    detected and which filled) and the list of gaps."""
+    detected and which filled) and the list of gaps. ``sd`` (n, 2), the position [m] and heading
+    [rad] standard deviations per frame, becomes the trajectory's position_sd and heading_sd,
+    NaN in the filled frames (no standard deviation describes a linear interpolation)."""
     seen = np.isfinite(x)
     if seen.sum() < 2:
         return None, []
     first, last = np.flatnonzero(seen)[[0, -1]]
     t, x, y, theta = (a[first : last + 1].copy() for a in (t, x, y, theta))
     seen = seen[first : last + 1]
+    if sd is not None:
+        sd = np.where(seen[:, None], sd[first : last + 1], np.nan)
     theta[seen] = np.unwrap(theta[seen])
     gaps = []
     keep = seen.copy()
@@ -161,7 +172,15 @@ def fill_gaps(
                 arr[a:b] = np.interp(t[a:b], t[seen], arr[seen])
             keep[a:b] = True
     source = np.where(seen, "detected", "filled")
-    traj = Trajectory(t=t[keep], x=x[keep], y=y[keep], theta=theta[keep], source=source[keep])
+    traj = Trajectory(
+        t=t[keep],
+        x=x[keep],
+        y=y[keep],
+        theta=theta[keep],
+        source=source[keep],
+        position_sd=None if sd is None else sd[keep, 0],
+        heading_sd=None if sd is None else sd[keep, 1],
+    )
     return traj, gaps
 
 
@@ -271,10 +290,10 @@ def track_video(
             arr = rolling_shutter_poses(
                 corners[tag_id], t, tag_map.readout, size[1], tag_map.parcel_tags[tag_id].offset
             )
-        gated = 0
+        gated, sd = 0, None
         if opts.smooth:
-            arr, gated = smooth_track(arr, 1 / fps)
-        traj, gaps = fill_gaps(t, arr[:, 0], arr[:, 1], arr[:, 2], opts.max_gap)
+            arr, gated, sd = smooth_track(arr, 1 / fps)
+        traj, gaps = fill_gaps(t, arr[:, 0], arr[:, 1], arr[:, 2], opts.max_gap, sd)
         detected = np.isfinite(arr[:, 0])
         span = _frames_in_view(detected, centres[tag_id], size)
         crossings: dict[str, float | None] = {}
@@ -343,25 +362,35 @@ _MEASUREMENT_SD = (3e-4, 3e-4, math.radians(0.5))
 _JERK_DENSITY = (10.0, 10.0, 1e3)
 
 
-def smooth_track(arr: np.ndarray, dt: float) -> tuple[np.ndarray, int]:
+def smooth_track(arr: np.ndarray, dt: float) -> tuple[np.ndarray, int, np.ndarray | None]:
     """Poses (n, 3) [m, m, rad] (NaN where unseen) replaced by their RTS-smoothed values at the
     seen frames (`parcelfit.tracking.smooth`); frames the smoother rejects as outliers become
-    NaN. Returns the poses and how many frames were rejected."""
+    NaN. Returns the poses, how many frames were rejected, and the smoother's posterior standard
+    deviations (n, 2): position [m] (root mean square of the x and y sds) and heading [rad],
+    NaN where the pose is NaN (None under 3 seen frames: nothing was smoothed).
+
+    The sds are those of the smoothed estimate under the model: every frame measured with the
+    same sd (`_MEASUREMENT_SD`), x, y and theta independent, constant acceleration with white jerk
+    (`_JERK_DENSITY`). They grow at the track's ends and next to gaps and rejected frames; they
+    do not know that a frame was blurred or badly fitted."""
     seen = np.isfinite(arr[:, 0])
     if seen.sum() < 3:
-        return arr, 0
+        return arr, 0, None
     out = arr.copy()
     out[seen, 2] = np.unwrap(arr[seen, 2])
     keep = seen.copy()
+    sds = np.zeros((len(arr), 3))
     for j in range(3):
         z = out[:, j]
         r = np.full(len(z), _MEASUREMENT_SD[j] ** 2)
-        smoothed, _, used = rts_smooth(z, dt, r, _JERK_DENSITY[j])
+        smoothed, sds[:, j], used = rts_smooth(z, dt, r, _JERK_DENSITY[j])
         out[seen, j] = smoothed[seen]
         keep &= used | ~seen
     rejected = int((seen & ~keep).sum())
     out[~keep] = np.nan
-    return out, rejected
+    sd = np.column_stack([np.sqrt((sds[:, 0] ** 2 + sds[:, 1] ** 2) / 2), sds[:, 2]])
+    sd[~keep] = np.nan
+    return out, rejected, sd
 
 
 def _parcel_pose(w: np.ndarray, offset: tuple[float, float]) -> tuple[float, float, float]:
