@@ -14,7 +14,7 @@ placement against the finest configuration (the reference, listed last), the med
 difference of each run's rotation [deg] and transit time [ms] and the share of placements whose
 outcome (spin/slide) differs. Wall time per run is measured on one core per worker.
 
-Writes ``ensemble-convergence.md`` into ``--out`` (default docs/) and prints the table.
+Writes ``ensemble-convergence-<rig>.md`` into ``--out`` (default docs/) after every type.
 """
 
 from __future__ import annotations
@@ -74,6 +74,63 @@ def _outcomes(members: list[Member]) -> dict[int, Member]:
     return {m.seed: m for m in members}
 
 
+def _write(args, rig, configs, results, walls, types_done) -> None:
+    """Write (and print) the table for the types finished so far."""
+    ref = len(configs) - 1
+    lines = [
+        "# Ensemble convergence: mesh spacing and time step",
+        "",
+        f"Measured with `python scripts/ensemble_convergence.py --rig {args.rig} --setting "
+        f"{args.setting} --types {' '.join(args.types)} --placements {args.placements} "
+        f"--configs {' '.join(args.configs)}` ({args.workers} workers on a 2-core machine; wall "
+        "times are per run and include the other worker's load).",
+        "",
+        f"Rig {rig.name}, speed setting {args.setting}, default parameters, placement seeds "
+        f"0..{args.placements - 1}. The reference is the last configuration "
+        f"({configs[ref].label}). Paired columns compare each placement with the same placement "
+        "at the reference: median |delta rotation|, median |delta T| and the share of "
+        "placements whose outcome (spin > 90 degrees / slide) differs.",
+        "",
+        "| type | mesh, step | median rotation [deg] | spins | median T [ms] | "
+        "paired |d rot| [deg] | paired |d T| [ms] | outcome differs | s/run |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for cons in types_done:
+        reference = _outcomes(results[cons, ref])
+        for k, cfg in enumerate(configs):
+            members = results[cons, k]
+            s = summarise(members)
+            d_rot, d_t, differs, both = [], [], 0, 0
+            for m in members:
+                r = reference.get(m.seed)
+                if r is None or m.rotation is None or r.rotation is None:
+                    continue
+                both += 1
+                d_rot.append(abs(math.degrees(m.rotation - r.rotation)))
+                if m.transit_time is not None and r.transit_time is not None:
+                    d_t.append(abs(m.transit_time - r.transit_time) * 1e3)
+                differs += m.outcome != r.outcome
+            paired = (
+                ("-", "-", "-")
+                if k == ref
+                else (
+                    f"{np.median(d_rot):.1f}" if d_rot else "n/a",
+                    f"{np.median(d_t):.1f}" if d_t else "n/a",
+                    f"{differs}/{both}",
+                )
+            )
+            lines.append(
+                f"| {cons} | {cfg.label} | {math.degrees(s.rotation_median):.1f} "
+                f"({math.degrees(s.rotation_q25):.0f}-{math.degrees(s.rotation_q75):.0f}) | "
+                f"{s.spins}/{s.n} | {s.transit_median * 1e3:.1f} | {paired[0]} | {paired[1]} | "
+                f"{paired[2]} | {walls[cons, k]:.1f} |"
+            )
+    args.out.mkdir(parents=True, exist_ok=True)
+    target = args.out / f"ensemble-convergence-{Path(args.rig).stem}.md"
+    target.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    print(f"written: {target} ({len(types_done)} of {len(args.types)} types)", flush=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--rig", default="E3", help="bundled rig name or a rig YAML file")
@@ -112,61 +169,8 @@ def main(argv: list[str] | None = None) -> int:
                     f"  {walls[cons, k]:5.1f} s/run  ({time.perf_counter() - started:5.0f} s)",
                     flush=True,
                 )
+            _write(args, rig, configs, results, walls, args.types[: args.types.index(cons) + 1])
 
-    ref = len(configs) - 1
-    lines = [
-        "# Ensemble convergence: mesh spacing and time step",
-        "",
-        f"Measured with `python scripts/ensemble_convergence.py --rig {args.rig} --setting "
-        f"{args.setting} --types {' '.join(args.types)} --placements {args.placements} "
-        f"--configs {' '.join(args.configs)}` ({args.workers} workers on a 2-core machine; wall "
-        "times are per run and include the other worker's load).",
-        "",
-        f"Rig {rig.name}, speed setting {args.setting}, default parameters, placement seeds "
-        f"0..{args.placements - 1}. The reference is the last configuration "
-        f"({configs[ref].label}). Paired columns compare each placement with the same placement "
-        "at the reference: median |delta rotation|, median |delta T| and the share of "
-        "placements whose outcome (spin > 90 degrees / slide) differs.",
-        "",
-        "| type | mesh, step | median rotation [deg] | spins | median T [ms] | "
-        "paired |d rot| [deg] | paired |d T| [ms] | outcome differs | s/run |",
-        "|---|---|---|---|---|---|---|---|---|",
-    ]
-    for cons in args.types:
-        reference = _outcomes(results[cons, ref])
-        for k, cfg in enumerate(configs):
-            members = results[cons, k]
-            s = summarise(members)
-            d_rot, d_t, differs, both = [], [], 0, 0
-            for m in members:
-                r = reference.get(m.seed)
-                if r is None or m.rotation is None or r.rotation is None:
-                    continue
-                both += 1
-                d_rot.append(abs(math.degrees(m.rotation - r.rotation)))
-                if m.transit_time is not None and r.transit_time is not None:
-                    d_t.append(abs(m.transit_time - r.transit_time) * 1e3)
-                differs += m.outcome != r.outcome
-            paired = (
-                ("-", "-", "-")
-                if k == ref
-                else (
-                    f"{np.median(d_rot):.1f}" if d_rot else "n/a",
-                    f"{np.median(d_t):.1f}" if d_t else "n/a",
-                    f"{differs}/{both}",
-                )
-            )
-            lines.append(
-                f"| {cons} | {cfg.label} | {math.degrees(s.rotation_median):.1f} "
-                f"({math.degrees(s.rotation_q25):.0f}-{math.degrees(s.rotation_q75):.0f}) | "
-                f"{s.spins}/{s.n} | {s.transit_median * 1e3:.1f} | {paired[0]} | {paired[1]} | "
-                f"{paired[2]} | {walls[cons, k]:.1f} |"
-            )
-    args.out.mkdir(parents=True, exist_ok=True)
-    target = args.out / "ensemble-convergence.md"
-    target.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    print("\n".join(lines[8:]))
-    print(f"written: {target}")
     return 0
 
 

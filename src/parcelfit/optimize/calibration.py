@@ -16,7 +16,6 @@ iteration k" simulates the recommended parameters once iteration k has finished.
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -31,6 +30,7 @@ from parcelfit.optimize.sampler import make_sampler
 from parcelfit.optimize.store import Evaluation, Store
 from parcelfit.optimize.study import Study
 from parcelfit.runs import TestCase, is_synthetic, load_dataset, write_trajectory
+from parcelfit.sim.factory import make_simulator
 from parcelfit.sim.protocol import SimResult, Simulator
 
 STORE_FILE = "study.sqlite"
@@ -101,40 +101,6 @@ def record_result(
             out["status"], details["message"] = "failed", f"cost not computable: {exc}"
     store.finish(row.id, wall_time=result.wall_time, details=details, **out)
     return out
-
-
-def make_simulator(sim: Mapping[str, Any], folder: Path) -> Simulator:
-    """The simulator a study's or screen's ``simulator`` section describes (``folder``: the file's)."""
-    backend = sim["backend"]
-    if backend == "mujoco":
-        from parcelfit.sim.mujoco import (
-            MujocoSimulator,
-            SceneOptions,
-            SimOptions,
-            load_consignment,
-            load_rig,
-        )
-
-        rig = load_rig(sim["rig"])
-        cons = load_consignment(sim["consignment"])
-        scene = SceneOptions(**{k: float(sim[k]) for k in ("timestep", "spacing") if k in sim})
-        options = SimOptions(scene=scene, wall_limit=float(sim.get("wall_limit", 600.0)))
-        return MujocoSimulator(options, rigs={rig.name: rig}, consignments={cons.name: cons})
-    if backend == "external":
-        from parcelfit.sim.external import ExternalSimulator, load_external_solver
-
-        return ExternalSimulator(
-            load_external_solver(sim["external"]), workroot=folder / ".external-runs"
-        )
-    module, _, attr = str(sim["factory"]).partition(":")
-    try:
-        factory = getattr(importlib.import_module(module), attr)
-    except (ImportError, AttributeError) as exc:
-        raise ParcelfitError(
-            f"cannot import the simulator factory {sim['factory']!r} ({exc})",
-            fix="give it as package.module:callable, importable from here",
-        ) from exc
-    return factory()
 
 
 def _executor(

@@ -239,7 +239,7 @@ def run_screen(
     on_event: Callable[[str], None] | None = None,
 ) -> tuple[list[StageResult], dict[str, Any]]:
     """Run the screen's stages (resumable), write the outputs, return the stages and the selection."""
-    from parcelfit.optimize.calibration import make_simulator
+    from parcelfit.sim.factory import make_simulator
 
     out = Path(out)
     check_writable(out, ("screen.sqlite",))

@@ -512,9 +512,9 @@ def _validation_figures(
 def _key_frames(
     b: _Builder, study_file: Path, params: dict[str, float], case: TestCase, animation: bool
 ) -> None:
-    from parcelfit.optimize.calibration import make_simulator
     from parcelfit.optimize.study import load_study
     from parcelfit.report.figures import key_frame_indices
+    from parcelfit.sim.factory import make_simulator
     from parcelfit.sim.mujoco import MujocoSimulator
     from parcelfit.sim.mujoco.render import animate_run, snapshot
 
