@@ -1,4 +1,5 @@
 import copy
+import dataclasses
 
 import pytest
 
@@ -136,6 +137,21 @@ def test_contact_mapping_round_trip_and_impedance_choice():
     assert soft.impedance == pytest.approx(0.9) and soft.omega_dt < 0.5
     with pytest.raises(ParcelfitError):
         contact_params(-1, 208, 1, 1, 0.001)
+
+
+def test_contact_dynamics_do_not_follow_the_time_step():
+    """A finer step resolves the same contact (same solref/solimp, same static stiffness); a
+    step too coarse for the contact's frequency softens it to omega * dt = 0.5."""
+    at = {dt: contact_params(5e5, 208, 1 / 1.6e-4, 1.0, dt) for dt in (1 / 600, 1 / 1200, 1 / 2400)}
+    assert at[1 / 1200] == dataclasses.replace(at[1 / 600], omega_dt=at[1 / 1200].omega_dt)
+    assert at[1 / 2400].stiffness == at[1 / 600].stiffness == pytest.approx(300.0**2)
+    assert at[1 / 2400].omega_dt == pytest.approx(0.125)
+    coarse = contact_params(5e5, 208, 1 / 1.6e-4, 1.0, 1 / 300)
+    assert coarse.omega_dt == pytest.approx(0.5) and coarse.stiffness == pytest.approx(150.0**2)
+    for cp in (*at.values(), coarse):
+        assert realised_stiffness(cp, 208, 1 / 1.6e-4) == pytest.approx(5e5, rel=1e-12)
+    faster = contact_params(5e5, 208, 1 / 1.6e-4, 1.0, 1 / 2400, frequency=1200.0)
+    assert faster.omega_dt == pytest.approx(0.5)
 
 
 @pytest.mark.mujoco

@@ -46,6 +46,9 @@ class SceneOptions:
     soft_shell_spacing: float = 0.04  # shell grid spacing around a soft content [m]
     soft_spacing: float = 0.06  # vertex spacing of a soft content [m]
     vertex_radius: float = 0.001
+    # the contacts' own angular frequency [rad/s] (see contact.py): fixed, so that a finer time
+    # step resolves the same impact instead of a faster one
+    contact_frequency: float = 300.0
     solver: str = "Newton"
     # MuJoCo's iteration cap, shared by the constraint solver (Newton converges in a few) and the
     # conjugate-gradient solve of the 3-D flex's effective inertia M + h^2 K, which needs several
@@ -62,6 +65,10 @@ class SceneOptions:
     def __post_init__(self) -> None:
         if not 1e-5 <= self.timestep <= 0.01:
             raise ParcelfitError(f"timestep must lie in [1e-5, 0.01] s, got {self.timestep}")
+        if not self.contact_frequency > 0:
+            raise ParcelfitError(
+                f"contact_frequency must be positive [rad/s], got {self.contact_frequency}"
+            )
         if not 0.003 <= self.spacing <= 0.2:
             raise ParcelfitError(
                 f"mesh spacing must lie in [3, 200] mm, got {self.spacing * 1e3:g} mm"
@@ -208,16 +215,21 @@ def build_scene(
     m_v = m_pa / nv
     n_face = shell.face_contacts
     dt = opt.timestep
+    f_c = opt.contact_frequency
 
     # --- contact parameters (effective inverse mass of a flex contact: see contact.py) ------------
-    belt_cp = contact_params(p["k_BePa"], n_face, 1 / m_v, p["zeta_BePa"], dt)
-    metal_cp = contact_params(p["k_MePa"], n_face, 1 / m_v, p["zeta_MePa"], dt)
+    belt_cp = contact_params(p["k_BePa"], n_face, 1 / m_v, p["zeta_BePa"], dt, frequency=f_c)
+    metal_cp = contact_params(p["k_MePa"], n_face, 1 / m_v, p["zeta_MePa"], dt, frequency=f_c)
     if soft:
         counts = [max(2, round(s / opt.soft_spacing) + 1) for s in (cL, cW)] + [2]
         m_cv = m_co / (counts[0] * counts[1] * counts[2])
-        content_cp = contact_params(p["k_CoPa"], n_face, 1 / m_v + 1 / m_cv, p["zeta_CoPa"], dt)
+        content_cp = contact_params(
+            p["k_CoPa"], n_face, 1 / m_v + 1 / m_cv, p["zeta_CoPa"], dt, frequency=f_c
+        )
     else:
-        content_cp = contact_params(p["k_CoPa"], n_face, 1 / m_v + 1 / m_co, p["zeta_CoPa"], dt)
+        content_cp = contact_params(
+            p["k_CoPa"], n_face, 1 / m_v + 1 / m_co, p["zeta_CoPa"], dt, frequency=f_c
+        )
 
     # --- rig ------------------------------------------------------------------------------------
     body: list[str] = []
