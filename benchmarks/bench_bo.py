@@ -1,24 +1,30 @@
 """Sample efficiency of the batch BO against its peers on analytic functions, in one run.
 
-    python -m venv --system-site-packages .bench && .bench/bin/pip install -e . arm-mango optuna
-    .bench/bin/python benchmarks/bench_bo.py [--seeds 20] [--budget 100] [--jobs 2]
+    python -m pip install -e ".[bench]"          # Optuna and Mango, for this benchmark only
+    python benchmarks/bench_bo.py [--seeds 20] [--jobs 2] [--functions Branin@48,Rough4]
+        [--methods parcelfit,published,mango-default,mango-published,optuna-tpe,random]
+    python benchmarks/bench_bo.py --overhead-only
 
-Branin (2-D) and Hartmann 6 (6-D), batch size 4, ``--budget`` evaluations, ``--seeds`` seeds.
-For each method: the median number of evaluations until the simple regret (best value found
-minus the global minimum) is at most 0.01, counting seeds that never get there as "more than the
-budget", and the share of seeds that get there. Methods:
+Problems (batch size 4, the budget after the @): Branin@48 and Branin@100 (2-D), Hartmann6
+(6-D, 100), Hartmann6+n (the same with Gaussian observation noise of sd 0.05; the regret is of
+the noise-free value) and Rough4 (4-D, 100: a smooth bowl plus deterministic, parameter-dependent
+roughness like the parcel cost). For each method: the median number of evaluations until the
+simple regret (best true value found minus the global minimum) is at most 0.01, counting seeds
+that never get there as "more than the budget", the share of seeds that get there, the median
+final regret and the median seconds per run. Methods:
 
-* ``parcelfit``: `BatchBO` with its defaults (Latin hypercube of 16, GP Matern 5/2 with one
-  length scale per input, alpha = 0.35^2 on the standardised cost, MC UCB, k-means batches);
-* ``parcelfit-log``: the same with the cost log-warped before standardising (``transform: log``);
-* ``mango``: the Mango library as in the published work (batch 4, 16 random initial points);
-* ``optuna``: Optuna's default sampler (TPE), batches of 4 by ask/tell;
-* ``random``: uniform random search.
+* ``parcelfit``: `BatchBO` with its defaults (see docs/optimizer.md: fitted noise, Box-Cox
+  output, log EI with L-BFGS-B polish, kriging-believer batches, one length scale per input);
+* ``published``: `BOSettings.published()`, method.md section 7 (fixed noise 0.35^2, MC UCB,
+  k-means batches);
+* ``mango-default`` / ``mango-published``: the Mango library with its own defaults, and
+  configured as published (Latin hypercube of 16, noise 0.35^2, clustering batches);
+* ``optuna-tpe``: Optuna's TPE, batches of 4 by ask/tell;
+* ``random``: uniform random search;
+* ``pub+noisefit``, ``pub+power``, ``pub+logei``, ``pub+polish``, ``pub+believer``,
+  ``pub+ard+local``: one change of the default at a time on top of ``published``.
 
-Then the overhead of one ``ask(4)`` with 200 observations in 4-D on one core (median of 5).
-
-Mango and Optuna are not dependencies of parcelfit: install them in the benchmark's own
-environment as above.
+``--overhead-only`` times one ``ask(4)`` with 200 observations in 4-D on one core (median of 5).
 """
 
 from __future__ import annotations
