@@ -354,37 +354,22 @@ def parse_rig(doc: Any, file: str) -> Rig:
     if st.get("scatter") is not None:
         sc = require_mapping(st["scatter"], file=file, where="start.scatter")
         check_keys(sc, allowed=("along", "across", "heading"), file=file, where="start.scatter")
-        scatter = (
+        scatter = tuple(
             get_number(
                 sc,
-                "along",
+                key,
                 file=file,
                 where="start.scatter",
                 default=0.0,
                 minimum=0.0,
-                maximum=0.5,
-                unit="m",
-            ),
-            get_number(
-                sc,
-                "across",
-                file=file,
-                where="start.scatter",
-                default=0.0,
-                minimum=0.0,
-                maximum=0.5,
-                unit="m",
-            ),
-            get_number(
-                sc,
-                "heading",
-                file=file,
-                where="start.scatter",
-                default=0.0,
-                minimum=0.0,
-                maximum=90,
-                unit="deg",
-            ),
+                maximum=maximum,
+                unit=unit,
+            )
+            for key, maximum, unit in (
+                ("along", 0.5, "m"),
+                ("across", 0.5, "m"),
+                ("heading", 90, "deg"),
+            )
         )
     start = StartPose(
         _point(st["position"], file=file, where="start.position"),
