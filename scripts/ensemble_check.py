@@ -194,6 +194,18 @@ def main(argv: list[str] | None = None) -> int:
                     "|---|---|---|---|---|---|---|---|---|---|---|",
                     *(_row(c, st) for c, st in stats.items()),
                     "",
+                    "Net rotation of each placement seed 0, 1, ... [deg] (each reproducible with "
+                    f"`parcelfit simulate --rig {rig_name} --consignment TYPE --setting {setting} --seed N`):",
+                    "",
+                    *(
+                        f"- {c}: "
+                        + ", ".join(
+                            "failed" if m.rotation is None else f"{_deg(m.rotation):.0f}"
+                            for m in ms
+                        )
+                        for c, ms in members.items()
+                    ),
+                    "",
                 ]
                 for text, ok in _checks(rig_name, stats):
                     mark = "met" if ok else "NOT met"
