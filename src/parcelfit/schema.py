@@ -18,6 +18,7 @@ Units are the file's: a model holds what the file says, the loader converts to S
 
 from __future__ import annotations
 
+import difflib
 import math
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
@@ -28,12 +29,22 @@ from pydantic import BaseModel, BeforeValidator, ConfigDict, GetCoreSchemaHandle
 from pydantic import ValidationError as _ValidationError
 from pydantic_core import core_schema
 
-from parcelfit.config import suggest
 from parcelfit.errors import ParcelfitError
 
 M = TypeVar("M", bound="FileModel")
 
 _MAPPING_FIX = "write it as `key: value` lines"
+
+
+def suggest(name: str, known: Iterable[str]) -> str | None:
+    """The known name closest to ``name``: a case-insensitive match first, else the nearest by difflib."""
+    known = list(known)
+    for k in known:
+        if k.lower() == str(name).lower():
+            return k
+    lowered = {k.lower(): k for k in known}
+    close = difflib.get_close_matches(str(name).lower(), list(lowered), n=1)
+    return lowered[close[0]] if close else None
 
 
 def check_keys(data: Mapping[Any, Any], allowed: Iterable[str], *, fix: str | None = None) -> None:
@@ -322,5 +333,6 @@ __all__ = [
     "or_default",
     "parse",
     "require_mapping",
+    "suggest",
     "to_parcelfit_error",
 ]
