@@ -14,6 +14,9 @@ keys before anything else: an unknown key is reported with the closest known one
 required key with the line to add.
 
 Units are the file's: a model holds what the file says, the loader converts to SI once.
+
+The getters of `parcelfit.config` (for the files not yet described by models) check their
+values with the same types, so each message is written once.
 """
 
 from __future__ import annotations
