@@ -1,20 +1,26 @@
-"""Loading YAML configuration and checking it, with errors that name the file, key and fix.
+"""Loading YAML configuration, and the checked getters of the files not yet described by typed
+models, with errors that name the file, key and fix.
 
-Every configuration file parcelfit reads (datasets, rigs, studies, tag maps) goes through these
-helpers, so every mistake is reported the same way.
+The study, screen, twin spec and tag map files are typed models (`parcelfit.schema`); the
+dataset, rig, consignment and external solver files still read their keys with the getters
+below, which check each value with the same types (`schema.Number`, ...) so that every mistake
+is reported the same way.
 """
 
 from __future__ import annotations
 
-import difflib
-import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import yaml
 
 from parcelfit.errors import ParcelfitError
+from parcelfit.schema import Choice, Number, Pair, Text, suggest
+from parcelfit.schema import check_keys as _check_keys
+from parcelfit.schema import require_mapping as _require_mapping
+
+T = TypeVar("T")
 
 
 def load_yaml(path: str | Path) -> Any:
@@ -49,27 +55,21 @@ def load_yaml(path: str | Path) -> Any:
         ) from exc
 
 
-def suggest(name: str, known: Iterable[str]) -> str | None:
-    """The known name closest to ``name``: a case-insensitive match first, else the nearest by difflib."""
-    known = list(known)
-    for k in known:
-        if k.lower() == str(name).lower():
-            return k
-    lowered = {k.lower(): k for k in known}
-    close = difflib.get_close_matches(str(name).lower(), list(lowered), n=1)
-    return lowered[close[0]] if close else None
+def _at(check: Callable[[Any], T], value: Any, *, file: str | Path | None, where: str) -> T:
+    """``check(value)``, its `ParcelfitError` placed at ``where`` in ``file``."""
+    try:
+        return check(value)
+    except ParcelfitError as exc:
+        raise ParcelfitError(exc.message, file=file, where=where, fix=exc.fix) from None
+
+
+def _label(where: str, key: str) -> str:
+    return f"{where}.{key}" if where else key
 
 
 def require_mapping(value: Any, *, file: str | Path | None, where: str) -> Mapping[str, Any]:
     """Check that ``value`` is a mapping (a YAML dictionary)."""
-    if not isinstance(value, Mapping):
-        raise ParcelfitError(
-            f"expected a mapping of keys to values, got {type(value).__name__}",
-            file=file,
-            where=where,
-            fix="write it as `key: value` lines",
-        )
-    return value
+    return _at(_require_mapping, value, file=file, where=where)
 
 
 def check_keys(
@@ -81,12 +81,7 @@ def check_keys(
     where: str,
 ) -> None:
     """Reject unknown keys (suggesting the closest known one) and report missing required keys."""
-    allowed = list(allowed)
-    for key in mapping:
-        if key not in allowed:
-            close = suggest(str(key), allowed)
-            fix = f"did you mean {close!r}?" if close else f"known keys: {', '.join(allowed)}"
-            raise ParcelfitError(f"unknown key {key!r}", file=file, where=where, fix=fix)
+    _at(lambda m: _check_keys(m, allowed), mapping, file=file, where=where)
     for key in required:
         if key not in mapping:
             raise ParcelfitError(
@@ -107,70 +102,8 @@ def get_number(
     unit: str = "",
 ) -> float | None:
     """Read a finite number (optionally bounded); ``None`` only if ``allow_none``."""
-    value = mapping.get(key, default)
-    label = f"{where}.{key}" if where else key
-    if value is None and allow_none:
-        return None
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise ParcelfitError(
-            f"expected a number{f' in {unit}' if unit else ''}, got {value!r}",
-            file=file,
-            where=label,
-            fix="write a plain number" + (" or null" if allow_none else ""),
-        )
-    if (minimum is not None and value < minimum) or (maximum is not None and value > maximum):
-        raise ParcelfitError(
-            f"{value} is outside [{minimum}, {maximum}]{f' {unit}' if unit else ''}",
-            file=file,
-            where=label,
-            fix="use a value inside that range",
-        )
-    return float(value)
-
-
-def get_int(
-    mapping: Mapping[str, Any],
-    key: str,
-    *,
-    file: str | Path | None,
-    where: str,
-    default: int | None = None,
-    minimum: int | None = None,
-    maximum: int | None = None,
-) -> int:
-    """Read a whole number (optionally bounded); 2.9 or "two" is an error, never truncated."""
-    value = mapping.get(key, default)
-    label = f"{where}.{key}" if where else key
-    if isinstance(value, float) and value.is_integer():
-        value = int(value)
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise ParcelfitError(
-            f"expected a whole number, got {value!r}",
-            file=file,
-            where=label,
-            fix="write a whole number such as 4",
-        )
-    if (minimum is not None and value < minimum) or (maximum is not None and value > maximum):
-        bounds = f"at least {minimum}" if maximum is None else f"in [{minimum}, {maximum}]"
-        raise ParcelfitError(
-            f"{value} is out of range", file=file, where=label, fix=f"use a whole number {bounds}"
-        )
-    return value
-
-
-def get_bool(
-    mapping: Mapping[str, Any], key: str, *, file: str | Path | None, where: str, default: bool
-) -> bool:
-    """Read true or false; a text such as "false" is an error, never read as true."""
-    value = mapping.get(key, default)
-    if not isinstance(value, bool):
-        raise ParcelfitError(
-            f"expected true or false, got {value!r}",
-            file=file,
-            where=f"{where}.{key}" if where else key,
-            fix="write true or false without quotes",
-        )
-    return value
+    check = Number(unit=unit, ge=minimum, le=maximum, nullable=allow_none).check
+    return _at(check, mapping.get(key, default), file=file, where=_label(where, key))
 
 
 def get_choice(
@@ -184,16 +117,8 @@ def get_choice(
     default: str | None = None,
 ) -> str:
     """Read a text that must be one of ``choices`` (``what`` names it in the error)."""
-    choices = list(choices)
-    value = get_str(mapping, key, file=file, where=where, default=default)
-    if value not in choices:
-        raise ParcelfitError(
-            f"unknown {what} {value!r}",
-            file=file,
-            where=f"{where}.{key}" if where else key,
-            fix=f"use one of {', '.join(choices)}",
-        )
-    return value
+    check = Choice(tuple(choices), what=what).check
+    return _at(check, mapping.get(key, default), file=file, where=_label(where, key))
 
 
 def load_config(
@@ -214,17 +139,8 @@ def get_str(
     default: str | None = None,
 ) -> str:
     """Read a non-empty string."""
-    value = mapping.get(key, default)
-    if isinstance(value, int) and not isinstance(value, bool):
-        value = str(value)
-    if not isinstance(value, str) or not value.strip():
-        raise ParcelfitError(
-            f"expected a non-empty text, got {value!r}",
-            file=file,
-            where=f"{where}.{key}" if where else key,
-            fix="write a name",
-        )
-    return value.strip()
+    text = _at(Text().check, mapping.get(key, default), file=file, where=_label(where, key))
+    return str(text)
 
 
 def get_pair(
@@ -238,14 +154,19 @@ def get_pair(
 ) -> tuple[float, float]:
     """Read a list of two finite numbers (``increasing``: the first below the second); the
     message names ``what`` was expected."""
-    ok = (
-        isinstance(value, list | tuple)
-        and len(value) == 2
-        and all(
-            isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
-            for v in value
-        )
-    )
-    if not ok or (increasing and not value[0] < value[1]):
-        raise ParcelfitError(f"expected {what}, got {value!r}", file=file, where=where, fix=fix)
-    return float(value[0]), float(value[1])
+    pair = _at(Pair(what=what, fix=fix, increasing=increasing).check, value, file=file, where=where)
+    assert pair is not None  # not nullable
+    return pair
+
+
+__all__ = [
+    "check_keys",
+    "get_choice",
+    "get_number",
+    "get_pair",
+    "get_str",
+    "load_config",
+    "load_yaml",
+    "require_mapping",
+    "suggest",
+]

@@ -29,12 +29,13 @@ from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
 import yaml
+from pydantic import BeforeValidator, Field, PlainValidator
 
-from parcelfit.config import check_keys, get_number, get_str, load_config, require_mapping
+from parcelfit.config import load_yaml
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import (
     Box,
@@ -46,6 +47,7 @@ from parcelfit.runs import (
     save_dataset,
     write_trajectory,
 )
+from parcelfit.schema import FileModel, Number, Text, Whole, keys_in, or_default, parse
 from parcelfit.sim.mujoco import MujocoSimulator, SceneOptions, SimOptions
 from parcelfit.sim.params import CATALOGUE, resolve
 
@@ -259,47 +261,59 @@ class TwinSpec:
     seed: int
 
 
-def load_twin_spec(path: str | Path) -> TwinSpec:
-    """Read a twin specification YAML (keys: name, seed, cases, truth, settings) and check it."""
-    doc = load_config(
-        path, allowed=("name", "seed", "cases", "truth", "settings"), required=("cases",)
-    )
-    name = get_str(doc, "name", file=path, where="", default="twin")
-    seed = get_number(doc, "seed", file=path, where="", default=0)
-    raw_cases = doc["cases"]
-    if not isinstance(raw_cases, list) or not raw_cases:
+def _test_case(value: Any) -> TestCase:
+    try:
+        return TestCase.parse(str(value))
+    except ParcelfitError as exc:
+        raise ParcelfitError(exc.message, fix="write RIG/CONSIGNMENT/SETTING") from exc
+
+
+def _cases(value: Any) -> Any:
+    if not isinstance(value, list) or not value:
         raise ParcelfitError(
             "expected a non-empty list of test cases",
-            file=path,
-            where="cases",
             fix='write e.g. cases: ["E3/KPBW/1", "E3/KPBW/2"]',
         )
-    cases = []
-    for i, text in enumerate(raw_cases):
-        try:
-            cases.append(TestCase.parse(str(text)))
-        except ParcelfitError as exc:
-            raise ParcelfitError(
-                exc.message, file=path, where=f"cases[{i}]", fix="write RIG/CONSIGNMENT/SETTING"
-            ) from exc
-    truth_doc = require_mapping(doc.get("truth", {}) or {}, file=path, where="truth")
-    known = {p.name for p in CATALOGUE}
-    truth: dict[str, dict[str, float]] = {}
-    for cons, values in truth_doc.items():
-        values = require_mapping(values, file=path, where=f"truth.{cons}")
-        check_keys(values, allowed=sorted(known), file=path, where=f"truth.{cons}")
-        truth[str(cons)] = {
-            k: float(get_number(values, k, file=path, where=f"truth.{cons}")) for k in values
-        }
-    raw_settings = require_mapping(doc.get("settings", {}) or {}, file=path, where="settings")
-    fields = TwinSettings.__dataclass_fields__
-    check_keys(raw_settings, allowed=list(fields), file=path, where="settings")
-    values = {
-        k: get_number(raw_settings, k, file=path, where="settings", minimum=0) for k in raw_settings
-    }
-    if "runs" in values:
-        values["runs"] = int(values["runs"])
-    return TwinSpec(name, tuple(cases), truth, TwinSettings(**values), int(seed))
+    return value
+
+
+class TwinSettingsSection(FileModel):
+    """``settings``: `TwinSettings` as written (each >= 0; ``runs`` a whole number >= 1)."""
+
+    runs: Annotated[int, Whole(ge=1)] = TwinSettings.runs
+    friction_cv: Annotated[float, Number(ge=0)] = TwinSettings.friction_cv
+    stiffness_cv: Annotated[float, Number(ge=0)] = TwinSettings.stiffness_cv
+    placement_sd: Annotated[float, Number(unit="m", ge=0)] = TwinSettings.placement_sd
+    angle_sd: Annotated[float, Number(unit="deg", ge=0)] = TwinSettings.angle_sd
+    speed_dev: Annotated[float, Number(ge=0)] = TwinSettings.speed_dev
+    tracking_sd: Annotated[float, Number(unit="m", ge=0)] = TwinSettings.tracking_sd
+    heading_sd: Annotated[float, Number(unit="rad", ge=0)] = TwinSettings.heading_sd
+    real_spacing: Annotated[float, Number(unit="m", ge=0)] = TwinSettings.real_spacing
+
+
+_Truth = Annotated[
+    dict[str, Annotated[float, Number()]], keys_in(lambda: (p.name for p in CATALOGUE))
+]
+
+
+class TwinSpecFile(FileModel):
+    """A twin specification file as written (true parameters in catalogue units)."""
+
+    name: Annotated[str, Text()] = "twin"
+    seed: Annotated[int, Whole(ge=0)] = 0
+    cases: Annotated[list[Annotated[TestCase, PlainValidator(_test_case)]], BeforeValidator(_cases)]
+    truth: Annotated[dict[Any, _Truth], or_default(dict)] = Field(default_factory=dict)
+    settings: Annotated[TwinSettingsSection, or_default(dict)] = Field(
+        default_factory=TwinSettingsSection
+    )
+
+
+def load_twin_spec(path: str | Path) -> TwinSpec:
+    """Read a twin specification YAML (keys: name, seed, cases, truth, settings) and check it;
+    the truth stays in catalogue units (`make_twin_dataset` converts it)."""
+    f = parse(TwinSpecFile, load_yaml(path), file=path)
+    truth = {str(cons): dict(values) for cons, values in f.truth.items()}
+    return TwinSpec(f.name, tuple(f.cases), truth, TwinSettings(**f.settings.model_dump()), f.seed)
 
 
 __all__ = ["TwinSettings", "TwinSpec", "load_twin_spec", "make_twin_dataset"]

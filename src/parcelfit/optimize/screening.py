@@ -24,7 +24,7 @@ reference run of the test case (the same preparation as the calibration cost), a
 time [s]. After each stage the effects on DTW_xy and DTW_theta are analysed
 (`parcelfit.doe.analyse_effects`); a parameter survives if any of its effects is significant.
 Outputs in the screen folder: ``stageN-effects.csv``, ``stageN-pareto-<response>.png/.svg``,
-``stageN-design.csv`` (parameters and responses per run) and ``selection.yaml`` (the ranked
+``stageN-design.csv`` (parameters in catalogue units and responses per run) and ``selection.yaml`` (the ranked
 recommendation with reasons, and the parameters with their ranges ready for a study file).
 
 The final selection ranks the last stage's parameters by their largest standardised effect, as
@@ -35,24 +35,18 @@ from the ones it would run now (use a new folder after changing the screen file)
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from types import MappingProxyType
+from typing import Annotated, Any
 
 import numpy as np
 import pandas as pd
 import yaml
+from pydantic import AfterValidator, BeforeValidator, Field
 
-from parcelfit.config import (
-    check_keys,
-    get_int,
-    get_number,
-    get_pair,
-    get_str,
-    load_config,
-    require_mapping,
-)
+from parcelfit.config import load_yaml
 from parcelfit.doe import (
     EffectAnalysis,
     analyse_effects,
@@ -70,38 +64,117 @@ from parcelfit.optimize.calibration import record_result
 from parcelfit.optimize.executors import LocalExecutor, Task
 from parcelfit.optimize.folderlock import check_writable, lock_folder
 from parcelfit.optimize.store import Store
-from parcelfit.optimize.study import _to_si, check_executor, parse_reference, parse_simulator
-from parcelfit.runs import TestCase, load_dataset
-from parcelfit.sim.params import CATALOGUE, parameter
-
-_KEYS = (
-    "name",
-    "simulator",
-    "reference",
-    "parameters",
-    "fixed",
-    "stages",
-    "soft_content",
-    "resolution",
-    "centre_points",
-    "alpha",
-    "max_full_factors",
-    "min_full_factors",
-    "select",
-    "executor",
+from parcelfit.optimize.study import (
+    ReferenceSection,
+    ScreenExecutorSection,
+    SimulatorSection,
+    _to_si,
+    reference_case,
+    simulator_settings,
 )
+from parcelfit.runs import TestCase, load_dataset
+from parcelfit.schema import FileModel, Number, Pair, Text, Whole, or_default, parse
+from parcelfit.sim.params import CATALOGUE, parameter, to_catalogue_units
+
 RESPONSES = ("dtw_xy", "dtw_theta")
+_STAGES = ("fractional", "full")
+
+_Range = Annotated[
+    tuple[float, float] | None,
+    Pair(
+        what="[low, high] with low < high",
+        fix="write two numbers, or leave it empty for the screening range",
+        increasing=True,
+        nullable=True,
+    ),
+]
+
+
+def _parameters(value: Any) -> Any:
+    """``all`` -> None (every candidate), a list of names -> {name: None}, else as written."""
+    if value == "all":
+        return None
+    if isinstance(value, list):
+        return {str(n): None for n in value}
+    if value is None or isinstance(value, str):
+        raise ParcelfitError(
+            f"expected all, a list of names or {{name: [low, high]}}, got {value!r}",
+            fix="write parameters: all",
+        )
+    return value
+
+
+def _stages(value: Any) -> tuple[Any, ...]:
+    stages = tuple(value) if isinstance(value, list) else (value,)
+    if any(s not in _STAGES for s in stages):
+        raise ParcelfitError(f"unknown stages {list(stages)}", fix="use fractional and/or full")
+    return stages
+
+
+def _soft_list(value: Any) -> Any:
+    if not isinstance(value, list):
+        raise ParcelfitError(
+            f"expected a list of parameter names, got {value!r}",
+            fix="write e.g. soft_content: [E_Co, zeta_Co]",
+        )
+    return [str(n) for n in value]
+
+
+def _soft_parameter(name: str) -> str:
+    """A catalogue parameter that applies to soft contents (checked now, not after stage 1)."""
+    try:
+        parameter(name).range_for("soft")
+    except ParcelfitError as exc:
+        raise ParcelfitError(
+            exc.message,
+            fix=exc.fix or "name a soft-content parameter (see parcelfit params --consignment PB)",
+        ) from None
+    return name
+
+
+class ScreenFile(FileModel):
+    """A screen file as written (see the module docstring; ranges in catalogue units)."""
+
+    name: Annotated[str, Text()]
+    simulator: SimulatorSection
+    reference: ReferenceSection
+    parameters: Annotated[dict[Any, _Range] | None, BeforeValidator(_parameters)] = None
+    fixed: Annotated[dict[Any, Annotated[float, Number()]], or_default(dict)] = Field(
+        default_factory=dict
+    )
+    stages: Annotated[
+        tuple[str, ...], BeforeValidator(_stages), or_default(lambda: list(_STAGES))
+    ] = _STAGES  # before-validators run last-written first: the default, then the check
+    soft_content: Annotated[
+        tuple[Annotated[str, AfterValidator(_soft_parameter)], ...],
+        BeforeValidator(_soft_list),
+        or_default(list),
+    ] = ()
+    resolution: Annotated[int, Whole(ge=3, le=5)] = 4
+    centre_points: Annotated[int, Whole(ge=0, le=50)] = 0
+    alpha: Annotated[float, Number(ge=1e-6, le=0.5)] = 0.05
+    max_full_factors: Annotated[int, Whole(ge=2, le=10)] = 6
+    min_full_factors: Annotated[int, Whole(ge=1, le=10)] = 3
+    select: Annotated[int, Whole(ge=1)] = 4
+    executor: Annotated[ScreenExecutorSection, or_default(dict)] = Field(
+        default_factory=ScreenExecutorSection
+    )
 
 
 @dataclass(frozen=True)
 class Screen:
-    """A parsed screen file: parameter ranges in catalogue (user) units."""
+    """A parsed screen file (SI units for the catalogue's parameters).
+
+    ``parameters`` are the first stage's factors; ``ranges`` holds their ranges and those of the
+    ``soft_content`` parameters of the last stage.
+    """
 
     name: str
     folder: Path
-    simulator: dict[str, Any]
-    ranges: dict[str, tuple[float, float]]
-    fixed: dict[str, float]
+    simulator: Mapping[str, Any]
+    parameters: tuple[str, ...]
+    ranges: Mapping[str, tuple[float, float]]
+    fixed: Mapping[str, float]
     dataset: Path
     case: TestCase
     stages: tuple[str, ...]
@@ -112,113 +185,88 @@ class Screen:
     max_full_factors: int
     min_full_factors: int
     select: int
-    executor: dict[str, Any] = field(default_factory=dict)
+    executor: Mapping[str, Any] = field(default_factory=dict)
 
 
 def load_screen(path: str | Path) -> Screen:
-    """Read and check a screen file."""
+    """Read and check a screen file; ranges and fixed values are converted from catalogue units
+    to SI here (a parameter left empty takes the catalogue's screening range)."""
     path = Path(path)
-    doc = load_config(path, allowed=_KEYS, required=("name", "simulator", "reference"))
+    f = parse(ScreenFile, load_yaml(path), file=path)
     folder = path.parent.resolve()
-    sim = parse_simulator(doc["simulator"], path, folder)
-    dataset, rig, cons, setting = parse_reference(doc["reference"], path, folder, sim)
+    sim = simulator_settings(f.simulator, folder)
+    backend = f.simulator.backend
+    dataset, rig, cons = reference_case(f.reference, f.simulator, path, folder)
     kind = "rigid"
-    if sim["backend"] == "mujoco":
+    if backend == "mujoco":
         from parcelfit.sim.mujoco import load_consignment
 
         kind = load_consignment(sim["consignment"]).content_kind
-    spec = doc.get("parameters", "all")
-    if spec == "all":
-        names = [
-            p.name for p in CATALOGUE if kind in p.ranges and p.name not in ("E_Co", "zeta_Co")
-        ]
-        spec = {n: None for n in names}
-    elif isinstance(spec, list):
-        spec = {str(n): None for n in spec}
-    elif isinstance(spec, str):
-        raise ParcelfitError(
-            f"expected all, a list of names or {{name: [low, high]}}, got {spec!r}",
-            file=path,
-            where="parameters",
-            fix="write parameters: all",
-        )
-    spec = require_mapping(spec, file=path, where="parameters")
-    ranges = {}
+    spec = f.parameters
+    if spec is None:
+        spec = {
+            p.name: None
+            for p in CATALOGUE
+            if kind in p.ranges and p.name not in ("E_Co", "zeta_Co")
+        }
+    user: dict[str, tuple[float, float]] = {}
     for name, bounds in spec.items():
         if bounds is None:
-            r = _known(str(name), path, f"parameters.{name}").range_for(kind)
-            ranges[str(name)] = (r.low, r.high)
+            r = _screening_range(str(name), kind, path, f"parameters.{name}")
+            user[str(name)] = (r.low, r.high)
         else:
-            ranges[str(name)] = get_pair(
-                bounds,
-                file=path,
-                where=f"parameters.{name}",
-                what="[low, high] with low < high",
-                fix="write two numbers, or leave it empty for the screening range",
-                increasing=True,
-            )
-    if len(ranges) < 2:
+            user[str(name)] = bounds
+    if len(user) < 2:
         raise ParcelfitError(
-            "a screen needs at least two parameters", file=path, where="parameters"
-        )
-    stages_doc = doc.get("stages") or ["fractional", "full"]
-    stages = tuple(stages_doc) if isinstance(stages_doc, list) else (stages_doc,)
-    if any(s not in ("fractional", "full") for s in stages):
-        raise ParcelfitError(
-            f"unknown stages {list(stages)}",
+            "a screen needs at least two parameters",
             file=path,
-            where="stages",
-            fix="use fractional and/or full",
+            where="parameters",
+            fix="list two or more (or write parameters: all)",
         )
-    fixed_doc = require_mapping(doc.get("fixed") or {}, file=path, where="fixed")
-    fixed = {str(k): get_number(fixed_doc, k, file=path, where="fixed") for k in fixed_doc}
-    soft_doc = doc.get("soft_content") or []
-    if not isinstance(soft_doc, list):
-        raise ParcelfitError(
-            f"expected a list of parameter names, got {soft_doc!r}",
-            file=path,
-            where="soft_content",
-            fix="write e.g. soft_content: [E_Co, zeta_Co]",
-        )
-    for k, extra in enumerate(soft_doc):  # checked now, not after stage 1 has simulated
+    for extra in f.soft_content:  # the last stage's extra factors, unless already listed
+        r = parameter(extra).range_for("soft")
+        user.setdefault(extra, (r.low, r.high))
+    ranges = {}
+    for name, (low, high) in user.items():
         try:
-            _known(str(extra), path, f"soft_content[{k}]").range_for("soft")
+            ranges[name] = (_to_si(name, low, backend), _to_si(name, high, backend))
         except ParcelfitError as exc:
             raise ParcelfitError(
-                exc.message,
-                file=path,
-                where=f"soft_content[{k}]",
-                fix=exc.fix
-                or "name a soft-content parameter (see parcelfit params --consignment PB)",
+                exc.message, file=path, where=f"parameters.{name}", fix=exc.fix
             ) from None
-    execu = require_mapping(doc.get("executor") or {"kind": "local"}, file=path, where="executor")
-    check_keys(execu, allowed=("kind", "workers"), file=path, where="executor")
-    check_executor(execu, ("local",), path)  # screens run in local processes
+    fixed = {}
+    for name, value in f.fixed.items():
+        try:
+            fixed[str(name)] = _to_si(str(name), value, backend)
+        except ParcelfitError as exc:
+            raise ParcelfitError(
+                exc.message, file=path, where=f"fixed.{name}", fix=exc.fix
+            ) from None
     return Screen(
-        name=get_str(doc, "name", file=path, where=""),
+        name=f.name,
         folder=folder,
-        simulator=sim,
-        ranges=ranges,
-        fixed=fixed,  # type: ignore[arg-type]
+        simulator=MappingProxyType(sim),
+        parameters=tuple(str(n) for n in spec),
+        ranges=MappingProxyType(ranges),
+        fixed=MappingProxyType(fixed),
         dataset=dataset,
-        case=TestCase(rig, cons, setting),
-        stages=stages,
-        soft_content=tuple(str(n) for n in soft_doc),
-        resolution=get_int(doc, "resolution", file=path, where="", default=4, minimum=3, maximum=5),
-        centre_points=get_int(
-            doc, "centre_points", file=path, where="", default=0, minimum=0, maximum=50
-        ),
-        alpha=get_number(doc, "alpha", file=path, where="", default=0.05, minimum=1e-6, maximum=0.5)
-        or 0.05,
-        max_full_factors=get_int(
-            doc, "max_full_factors", file=path, where="", default=6, minimum=2, maximum=10
-        ),
-        min_full_factors=get_int(
-            doc, "min_full_factors", file=path, where="", default=3, minimum=1, maximum=10
-        ),
-        select=get_int(doc, "select", file=path, where="", default=4, minimum=1),
-        executor=dict(execu),
+        case=TestCase(rig, cons, f.reference.speed_setting),
+        stages=f.stages,
+        soft_content=f.soft_content,
+        resolution=f.resolution,
+        centre_points=f.centre_points,
+        alpha=f.alpha,
+        max_full_factors=f.max_full_factors,
+        min_full_factors=f.min_full_factors,
+        select=f.select,
+        executor=MappingProxyType(f.executor.model_dump()),
     )
+
+
+def _user(name: str, si_value: float) -> float:
+    """A value from SI back to its catalogue unit for the outputs (12 significant digits, so
+    that 0.35 mm does not come back as 0.35000000000000003)."""
+    return float(f"{float(to_catalogue_units(name, si_value)):.12g}")
 
 
 @dataclass(frozen=True)
@@ -253,17 +301,13 @@ def run_screen(
         raise
     reference = select_reference(load_dataset(screen.dataset)[screen.case])
     simulator = make_simulator(screen.simulator, screen.folder)
-    backend = screen.simulator["backend"]
     executor = LocalExecutor(simulator, workers or screen.executor.get("workers"))
     results: list[StageResult] = []
-    factors = list(screen.ranges)
+    factors = list(screen.parameters)
     try:
         plan = list(screen.stages) + (["full"] if screen.soft_content else [])
         for stage, kind in enumerate(plan):
             if stage == len(screen.stages) and screen.soft_content:
-                for extra in screen.soft_content:
-                    r = parameter(extra).range_for("soft")
-                    screen.ranges.setdefault(extra, (r.low, r.high))
                 factors = list(dict.fromkeys([*factors, *screen.soft_content]))
             if kind == "full" and len(factors) > screen.max_full_factors:
                 say(
@@ -288,10 +332,7 @@ def run_screen(
                     fix="use a new output folder after changing the screen file",
                 )
             if not rows:
-                batch = [
-                    {f: _to_si(f, v, backend) for f, v in zip(factors, run, strict=True)}
-                    for run in values
-                ]
+                batch = [{f: float(v) for f, v in zip(factors, run, strict=True)} for run in values]
                 store.add_pending(
                     "screen", stage, batch, screen.case.speed_setting, [0] * len(batch)
                 )
@@ -300,9 +341,8 @@ def run_screen(
             say(
                 f"stage {stage + 1} ({kind}, {len(factors)} factors): {len(rows)} runs, {len(todo)} to simulate"
             )
-            fixed_si = {k: _to_si(k, v, backend) for k, v in screen.fixed.items()}
             tasks = [
-                Task({**fixed_si, **r.params}, screen.case, f"screen-{stage}-{r.slot}")
+                Task({**screen.fixed, **r.params}, screen.case, f"screen-{stage}-{r.slot}")
                 for r in todo
             ]
             for k, (i, res) in enumerate(executor.run(tasks), start=1):
@@ -315,7 +355,7 @@ def run_screen(
             frame = pd.DataFrame(
                 [
                     {
-                        **{f: v for f, v in zip(factors, values[r.slot], strict=True)},
+                        **{f: _user(f, v) for f, v in zip(factors, values[r.slot], strict=True)},
                         "status": r.status,
                         "dtw_xy": r.dtw_xy,
                         "dtw_theta": r.dtw_theta,
@@ -378,18 +418,21 @@ def run_screen(
         "method": results[-1].analyses[0].method,
         "selected": sel.parameters,
         "reasons": sel.reasons,
-        "parameters": {p: list(screen.ranges[p]) for p in sel.parameters},
+        "parameters": {p: [_user(p, v) for v in screen.ranges[p]] for p in sel.parameters},
     }
     (out / "selection.yaml").write_text(yaml.safe_dump(doc, sort_keys=False), encoding="utf-8")
     return results, doc
 
 
-def _known(name: str, path: Path, where: str) -> Any:
-    """The catalogue parameter ``name``; an unknown one is an error naming the file and key."""
+def _screening_range(name: str, kind: str, path: Path, where: str) -> Any:
+    """The catalogue's screening range of ``name`` for ``kind`` contents (catalogue units); an
+    unknown parameter, or one that does not apply, is an error naming the file and key."""
     try:
-        return parameter(name)
+        return parameter(name).range_for(kind)
     except ParcelfitError as exc:
-        raise ParcelfitError(exc.message, file=path, where=where, fix=exc.fix) from None
+        raise ParcelfitError(
+            exc.message, file=path, where=where, fix=exc.fix or f"remove it from a {kind} screen"
+        ) from None
 
 
 def _subset(design: Any, keep: np.ndarray) -> Any:

@@ -46,40 +46,187 @@ import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
-from parcelfit.config import (
-    check_keys,
-    get_bool,
-    get_choice,
-    get_int,
-    get_number,
-    get_str,
-    load_config,
-    require_mapping,
-)
+from pydantic import ConfigDict, Field, field_validator, model_validator
+
+from parcelfit.config import load_yaml
 from parcelfit.errors import ParcelfitError
 from parcelfit.optimize.bo import BOSettings
 from parcelfit.optimize.sampler import SAMPLERS
 from parcelfit.optimize.space import Dimension, Space
-
-_TOP = (
-    "name",
-    "simulator",
-    "parameters",
-    "fixed",
-    "reference",
-    "validation",
-    "weights",
-    "batch_size",
-    "initial",
-    "budget",
-    "seed",
-    "optimizer",
-    "executor",
+from parcelfit.schema import (
+    Choice,
+    FileModel,
+    Flag,
+    Number,
+    Text,
+    Whole,
+    check_keys,
+    or_default,
+    parse,
 )
-_SIM = ("backend", "rig", "consignment", "timestep", "spacing", "wall_limit", "external", "factory")
-_SIM_UNITS = {"timestep": "s", "spacing": "m", "wall_limit": "s"}
+
+# -- the file's sections (file units; shared with screen files) ---------------------------------
+
+
+class SimulatorSection(FileModel):
+    """``simulator``: the backend and what it needs (``timestep`` [s], ``spacing`` [m],
+    ``wall_limit`` [s])."""
+
+    backend: Annotated[str, Choice(("mujoco", "external", "python"), what="backend")]
+    rig: Annotated[str | None, Text()] = None
+    consignment: Annotated[str | None, Text()] = None
+    timestep: Annotated[float | None, Number(unit="s", ge=1e-9)] = None
+    spacing: Annotated[float | None, Number(unit="m", ge=1e-9)] = None
+    wall_limit: Annotated[float | None, Number(unit="s", ge=1e-9)] = None
+    external: Annotated[str | None, Text()] = None
+    factory: Annotated[str | None, Text()] = None
+
+    @model_validator(mode="after")
+    def _backend_needs(self) -> SimulatorSection:
+        needed = {
+            "mujoco": ("rig", "consignment"),
+            "external": ("external",),
+            "python": ("factory",),
+        }[self.backend]
+        for key in needed:
+            if getattr(self, key) is None:
+                raise ParcelfitError(
+                    f"the {self.backend} backend needs {key!r}", fix=f"add `{key}:`"
+                )
+        return self
+
+
+class ReferenceSection(FileModel):
+    """``reference``: the dataset folder (relative to the file), test case and speed setting."""
+
+    dataset: Annotated[str, Text()]
+    rig: Annotated[str | None, Text(nullable=True)] = None
+    consignment: Annotated[str | None, Text(nullable=True)] = None
+    speed_setting: Annotated[int, Whole(ge=1)]
+
+
+class ScreenExecutorSection(FileModel):
+    """``executor`` of a screen file: local processes only."""
+
+    kind: Annotated[str, Choice(("local",), what="executor")] = "local"
+    workers: Annotated[int | None, Whole(ge=1, nullable=True)] = None
+
+
+class ExecutorSection(ScreenExecutorSection):
+    """``executor`` of a study file: local processes, or a Dask ``scheduler`` (tcp://...)."""
+
+    kind: Annotated[str, Choice(("local", "dask"), what="executor")] = "local"
+    scheduler: Annotated[str | None, Text()] = None
+
+
+class Bounds(FileModel):
+    """One fitted parameter: ``[low, high]`` or ``{low, high, log}`` (catalogue units)."""
+
+    low: Annotated[float, Number()]
+    high: Annotated[float, Number()]
+    log: Annotated[bool, Flag()] = False
+
+    @classmethod
+    def prepare(cls, data: Any) -> Any:
+        if isinstance(data, list) and len(data) == 2:
+            return {"low": data[0], "high": data[1]}
+        if not isinstance(data, Mapping):
+            raise ParcelfitError(
+                f"expected [low, high] or {{low, high, log}}, got {data!r}",
+                fix="write e.g. mu_d_BePa: [0.3, 0.6]",
+            )
+        return data
+
+
+class ValidationSection(FileModel):
+    """``validation``: the validation speed setting (none: no validation) and how often."""
+
+    speed_setting: Annotated[int | None, Whole(ge=1, nullable=True)] = None
+    every: Annotated[int, Whole(ge=1)] = 5
+
+
+class WeightsSection(FileModel):
+    """``weights`` of equation (3): position and heading terms, >= 0, not both zero."""
+
+    xy: Annotated[float, Number(ge=0)] = 1.0
+    theta: Annotated[float, Number(ge=0)] = 1.0
+
+    @model_validator(mode="after")
+    def _not_both_zero(self) -> WeightsSection:
+        if self.xy + self.theta <= 0:
+            raise ParcelfitError(
+                "both weights are zero, so every simulation would cost nothing",
+                fix="give xy or theta a positive weight",
+            )
+        return self
+
+
+_GP_KEYS = sorted(set(BOSettings.__dataclass_fields__) - {"n_initial"})
+
+
+class OptimizerSection(FileModel):
+    """``optimizer``: the sampler and, for gp and published, `BOSettings` fields (checked when
+    the settings are made)."""
+
+    model_config = ConfigDict(extra="allow")  # merged with FileModel's
+    sampler: Annotated[str, Choice(tuple(SAMPLERS), what="optimizer")] = "gp"
+
+    @classmethod
+    def allowed_keys(cls, data: Mapping[Any, Any]) -> list[str]:
+        if data.get("sampler") == "tpe":
+            check_keys(data, ["sampler"], fix="the tpe sampler takes no settings but `sampler`")
+        return ["sampler", *_GP_KEYS]
+
+    @property
+    def settings(self) -> dict[str, Any]:
+        """The BOSettings overrides, as written."""
+        return dict(self.model_extra or {})
+
+
+class StudyFile(FileModel):
+    """A study file as written (see the module docstring)."""
+
+    name: Annotated[str, Text()]
+    simulator: SimulatorSection
+    parameters: dict[Any, Bounds]
+    fixed: Annotated[dict[Any, Annotated[float, Number()]], or_default(dict)] = Field(
+        default_factory=dict
+    )
+    reference: ReferenceSection
+    validation: Annotated[ValidationSection, or_default(dict)] = Field(
+        default_factory=ValidationSection
+    )
+    weights: Annotated[WeightsSection, or_default(dict)] = Field(default_factory=WeightsSection)
+    optimizer: Annotated[OptimizerSection, or_default(dict)] = Field(
+        default_factory=OptimizerSection
+    )
+    initial: Annotated[int, Whole(ge=1)] = 16
+    executor: Annotated[ExecutorSection, or_default(dict)] = Field(default_factory=ExecutorSection)
+    batch_size: Annotated[int, Whole(ge=1)] = 4
+    budget: Annotated[int, Whole(ge=1)] = 80
+    seed: Annotated[int, Whole(ge=0, le=2**32 - 1)] = 0
+
+    @field_validator("parameters")
+    @classmethod
+    def _some(cls, value: dict[Any, Bounds]) -> dict[Any, Bounds]:
+        if not value:
+            raise ParcelfitError("no parameters to fit", fix="list at least one")
+        return value
+
+    @model_validator(mode="after")
+    def _validation_setting(self) -> StudyFile:
+        if self.validation.speed_setting == self.reference.speed_setting:
+            raise ParcelfitError(
+                "validation must use a speed setting not used for fitting",
+                where="validation.speed_setting",
+                fix=f"use a setting other than {self.reference.speed_setting}",
+            )
+        return self
+
+
+# -- the parsed study (SI) --------------------------------------------------------------------
 
 
 @dataclass(frozen=True)
@@ -111,6 +258,8 @@ class Study:
 
 
 def _to_si(name: str, value: float, backend: str) -> float:
+    """A parameter value from its catalogue unit to SI; a name outside the catalogue is taken
+    as given, except for the mujoco backend (which knows only the catalogue)."""
     from parcelfit.sim.params import CATALOGUE
 
     spec = next((p for p in CATALOGUE if p.name == name), None)
@@ -124,61 +273,35 @@ def _to_si(name: str, value: float, backend: str) -> float:
 
 
 def load_study(path: str | Path) -> Study:
-    """Read and check a study file; every error names the file, the key and the fix."""
+    """Read and check a study file; every error names the file, the key and the fix. Parameter
+    values are converted from catalogue units to SI here."""
     path = Path(path)
-    doc = load_config(path, allowed=_TOP, required=("name", "simulator", "parameters", "reference"))
+    doc = load_yaml(path)
+    f = parse(StudyFile, doc, file=path)
     folder = path.parent.resolve()
-    sim = parse_simulator(doc["simulator"], path, folder)
-    backend = sim["backend"]
-
-    params = require_mapping(doc["parameters"], file=path, where="parameters")
-    if not params:
-        raise ParcelfitError(
-            "no parameters to fit", file=path, where="parameters", fix="list at least one"
-        )
+    sim = simulator_settings(f.simulator, folder)
+    backend = f.simulator.backend
     dims = []
-    for name, spec in params.items():
-        where = f"parameters.{name}"
-        if isinstance(spec, Mapping):
-            check_keys(
-                spec,
-                allowed=("low", "high", "log"),
-                required=("low", "high"),
-                file=path,
-                where=where,
-            )
-            low = get_number(spec, "low", file=path, where=where)
-            high = get_number(spec, "high", file=path, where=where)
-            log = get_bool(spec, "log", file=path, where=where, default=False)
-        elif isinstance(spec, list) and len(spec) == 2:
-            low = get_number({"low": spec[0]}, "low", file=path, where=where)
-            high = get_number({"high": spec[1]}, "high", file=path, where=where)
-            log = False
-        else:
-            raise ParcelfitError(
-                f"expected [low, high] or {{low, high, log}}, got {spec!r}",
-                file=path,
-                where=where,
-                fix="write e.g. mu_d_BePa: [0.3, 0.6]",
-            )
+    for name, bounds in f.parameters.items():
         try:
-            dims.append(
-                Dimension(
-                    str(name),
-                    _to_si(str(name), low, backend),
-                    _to_si(str(name), high, backend),
-                    log,
-                )
-            )  # type: ignore[arg-type]
+            low = _to_si(str(name), bounds.low, backend)
+            high = _to_si(str(name), bounds.high, backend)
+            dims.append(Dimension(str(name), low, high, bounds.log))
         except ParcelfitError as exc:
             raise ParcelfitError(
-                exc.message, file=path, where=where, fix=exc.fix or "give low < high"
+                exc.message,
+                file=path,
+                where=f"parameters.{name}",
+                fix=exc.fix or "give low < high",
             ) from None
-    fixed_doc = require_mapping(doc.get("fixed") or {}, file=path, where="fixed")
-    fixed = {
-        str(k): _to_si(str(k), get_number(fixed_doc, k, file=path, where="fixed"), backend)  # type: ignore[arg-type]
-        for k in fixed_doc
-    }
+    fixed = {}
+    for name, value in f.fixed.items():
+        try:
+            fixed[str(name)] = _to_si(str(name), value, backend)
+        except ParcelfitError as exc:
+            raise ParcelfitError(
+                exc.message, file=path, where=f"fixed.{name}", fix=exc.fix
+            ) from None
     overlap = set(fixed) & {d.name for d in dims}
     if overlap:
         raise ParcelfitError(
@@ -187,57 +310,19 @@ def load_study(path: str | Path) -> Study:
             where="fixed",
             fix="remove them from one of the two",
         )
-
-    dataset, rig, consignment, fit_setting = parse_reference(doc["reference"], path, folder, sim)
-    val = require_mapping(doc.get("validation") or {}, file=path, where="validation")
-    check_keys(val, allowed=("speed_setting", "every"), file=path, where="validation")
-    val_setting = val.get("speed_setting")
-    if val_setting is not None:
-        val_setting = get_int(val, "speed_setting", file=path, where="validation", minimum=1)
-        if val_setting == fit_setting:
-            raise ParcelfitError(
-                "validation must use a speed setting not used for fitting",
-                file=path,
-                where="validation.speed_setting",
-                fix=f"use a setting other than {fit_setting}",
-            )
-    every = get_int(val, "every", file=path, where="validation", default=5, minimum=1)
-    weights = require_mapping(doc.get("weights") or {}, file=path, where="weights")
-    check_keys(weights, allowed=("xy", "theta"), file=path, where="weights")
-    opt_doc = dict(require_mapping(doc.get("optimizer") or {}, file=path, where="optimizer"))
-    sampler = get_choice(
-        opt_doc, "sampler", SAMPLERS, what="optimizer", file=path, where="optimizer", default="gp"
-    )
-    opt_doc.pop("sampler", None)
-    known = set(BOSettings.__dataclass_fields__) - {"n_initial"}
-    if sampler == "tpe":
-        known = set()  # TPE takes none of the GP's settings
-    check_keys(opt_doc, allowed=sorted(known), file=path, where="optimizer")
-    initial = get_int(doc, "initial", file=path, where="", default=16, minimum=1)
+    dataset, rig, consignment = reference_case(f.reference, f.simulator, path, folder)
     try:
-        make = BOSettings.published if sampler == "published" else BOSettings
-        bo = make(n_initial=initial, **opt_doc)  # type: ignore[arg-type]
+        make = BOSettings.published if f.optimizer.sampler == "published" else BOSettings
+        bo = make(n_initial=f.initial, **f.optimizer.settings)
     except (ParcelfitError, TypeError) as exc:
         raise ParcelfitError(
             str(exc), file=path, where="optimizer", fix="see BOSettings for the allowed values"
         ) from None
-    execu = require_mapping(doc.get("executor") or {"kind": "local"}, file=path, where="executor")
-    check_keys(execu, allowed=("kind", "workers", "scheduler"), file=path, where="executor")
-    check_executor(execu, ("local", "dask"), path)
-    w_xy = get_number(weights, "xy", file=path, where="weights", default=1.0, minimum=0) or 0.0
-    w_theta = get_number(weights, "theta", file=path, where="weights", default=1.0, minimum=0)
-    if w_xy + (w_theta or 0.0) <= 0:
-        raise ParcelfitError(
-            "both weights are zero, so every simulation would cost nothing",
-            file=path,
-            where="weights",
-            fix="give xy or theta a positive weight",
-        )
     fingerprint = hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[
         :16
     ]
     return Study(
-        name=get_str(doc, "name", file=path, where=""),
+        name=f.name,
         folder=folder,
         simulator=sim,
         space=Space(dims),
@@ -245,92 +330,45 @@ def load_study(path: str | Path) -> Study:
         dataset=dataset,
         rig=rig,
         consignment=consignment,
-        fit_setting=fit_setting,
-        validation_setting=val_setting,
-        validate_every=every,
-        w_xy=w_xy,
-        w_theta=w_theta or 0.0,
-        batch_size=get_int(doc, "batch_size", file=path, where="", default=4, minimum=1),
-        initial=initial,
-        budget=get_int(doc, "budget", file=path, where="", default=80, minimum=1),
-        seed=get_int(doc, "seed", file=path, where="", default=0, minimum=0, maximum=2**32 - 1),
+        fit_setting=f.reference.speed_setting,
+        validation_setting=f.validation.speed_setting,
+        validate_every=f.validation.every,
+        w_xy=f.weights.xy,
+        w_theta=f.weights.theta,
+        batch_size=f.batch_size,
+        initial=f.initial,
+        budget=f.budget,
+        seed=f.seed,
         bo=bo,
-        sampler=sampler,
-        executor=dict(execu),
+        sampler=f.optimizer.sampler,
+        executor=f.executor.model_dump(),
         fingerprint=fingerprint,
-        path=Path(path).resolve(),
+        path=path.resolve(),
     )
 
 
-def parse_simulator(section: Any, path: Path, folder: Path) -> dict[str, Any]:
-    """The ``simulator`` section of a study or screen file, with file paths made absolute."""
-    sim = dict(require_mapping(section, file=path, where="simulator"))
-    check_keys(sim, allowed=_SIM, required=("backend",), file=path, where="simulator")
-    backend = get_choice(
-        sim,
-        "backend",
-        ("mujoco", "external", "python"),
-        what="backend",
-        file=path,
-        where="simulator",
-    )
-    needed = {"mujoco": ("rig", "consignment"), "external": ("external",), "python": ("factory",)}[
-        backend
-    ]
-    for key in needed:
-        if key not in sim:
-            raise ParcelfitError(
-                f"the {backend} backend needs {key!r}",
-                file=path,
-                where="simulator",
-                fix=f"add `{key}:`",
-            )
-    for key in ("timestep", "spacing", "wall_limit"):
-        if key in sim:
-            get_number(sim, key, file=path, where="simulator", minimum=1e-9, unit=_SIM_UNITS[key])
-    for key in ("rig", "consignment", "external", "factory"):
-        if key in sim:
-            get_str(sim, key, file=path, where="simulator")
+def simulator_settings(section: SimulatorSection, folder: Path) -> dict[str, Any]:
+    """The ``simulator`` section as `make_simulator` takes it: the keys given, with the paths of
+    ``.yaml`` rig, consignment and solver files made absolute (relative to ``folder``)."""
+    sim = section.model_dump(exclude_none=True)
     for key in ("rig", "consignment", "external"):
-        if key in sim and str(sim[key]).lower().endswith((".yaml", ".yml")):
-            sim[key] = str((folder / str(sim[key])).resolve())
+        if key in sim and sim[key].lower().endswith((".yaml", ".yml")):
+            sim[key] = str((folder / sim[key]).resolve())
     return sim
 
 
-def parse_reference(
-    section: Any, path: Path, folder: Path, sim: Mapping[str, Any]
-) -> tuple[Path, str, str, int]:
-    """The ``reference`` section: dataset folder, rig, consignment and speed setting."""
-    ref = require_mapping(section, file=path, where="reference")
-    check_keys(
-        ref,
-        allowed=("dataset", "rig", "consignment", "speed_setting"),
-        required=("dataset", "speed_setting"),
-        file=path,
-        where="reference",
-    )
-    dataset = (folder / get_str(ref, "dataset", file=path, where="reference")).resolve()
-    rig = str(ref.get("rig") or _name(sim.get("rig"), path, "reference.rig"))
-    consignment = str(
-        ref.get("consignment") or _name(sim.get("consignment"), path, "reference.consignment")
-    )
-    setting = get_int(ref, "speed_setting", file=path, where="reference", minimum=1)
-    return dataset, rig, consignment, setting
+def reference_case(
+    ref: ReferenceSection, sim: SimulatorSection, path: Path, folder: Path
+) -> tuple[Path, str, str]:
+    """The reference dataset folder (absolute), rig and consignment names; the names default to
+    the simulator's (a ``.yaml`` file gives its stem)."""
+    dataset = (folder / ref.dataset).resolve()
+    rig = ref.rig or _name(sim.rig, path, "reference.rig")
+    consignment = ref.consignment or _name(sim.consignment, path, "reference.consignment")
+    return dataset, rig, consignment
 
 
-def check_executor(section: Mapping[str, Any], kinds: tuple[str, ...], path: Path) -> None:
-    """Check an ``executor`` section: its kind is one of ``kinds``, ``workers`` a whole number
-    >= 1, ``scheduler`` a text."""
-    get_choice(
-        section, "kind", kinds, what="executor", file=path, where="executor", default="local"
-    )
-    if section.get("workers") is not None:
-        get_int(section, "workers", file=path, where="executor", minimum=1)
-    if "scheduler" in section:
-        get_str(section, "scheduler", file=path, where="executor")
-
-
-def _name(value: Any, path: Path, where: str) -> str:
+def _name(value: str | None, path: Path, where: str) -> str:
     if value is None:
         raise ParcelfitError(
             "cannot tell which test case to compare with",
@@ -338,4 +376,4 @@ def _name(value: Any, path: Path, where: str) -> str:
             where=where,
             fix="give reference.rig and reference.consignment",
         )
-    return Path(str(value)).stem if str(value).lower().endswith((".yaml", ".yml")) else str(value)
+    return Path(value).stem if value.lower().endswith((".yaml", ".yml")) else value

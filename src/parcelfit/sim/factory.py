@@ -3,7 +3,7 @@
 The section's ``backend`` chooses: ``mujoco`` (a bundled or user rig and consignment, optional
 ``timestep`` [s], ``spacing`` [m] and ``wall_limit`` [s]), ``external`` (a solver description
 file run as a command) or ``python`` (``factory: package.module:callable``, imported and called:
-such a file runs code). The loaders in `parcelfit.optimize.study` have checked the section.
+such a file runs code). The section has been checked by `SimulatorSection` (`parcelfit.optimize.study`).
 """
 
 from __future__ import annotations

@@ -29,21 +29,16 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
 import yaml
+from pydantic import BeforeValidator, Field, PlainValidator, field_validator, model_validator
 
-from parcelfit.config import (
-    check_keys,
-    get_choice,
-    get_number,
-    get_pair,
-    load_config,
-    require_mapping,
-)
+from parcelfit.config import load_yaml
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import Barrier
+from parcelfit.schema import Choice, FileModel, Number, Pair, Text, Whole, or_default, parse
 
 FAMILIES = ("tag36h11", "tag25h9", "tag16h5", "tag36h10")
 
@@ -121,172 +116,153 @@ def tag_corners(x: float, y: float, size: float, angle: float) -> np.ndarray:
     return local @ rot.T + np.array([x, y])
 
 
-def _pair(value: Any, *, file: Path, where: str) -> tuple[float, float]:
-    return get_pair(value, file=file, where=where)
-
-
-def _tag_id(key: Any, *, file: Path, where: str) -> int:
+def _tag_id(key: Any) -> int:
     try:
         tag_id = int(key)
     except (TypeError, ValueError):
         tag_id = -1
     if tag_id < 0 or str(tag_id) != str(key).strip():
         raise ParcelfitError(
-            f"tag ids are whole numbers >= 0, got {key!r}",
-            file=file,
-            where=where,
-            fix="use the tag's id number as the key",
+            f"tag ids are whole numbers >= 0, got {key!r}", fix="use the tag's id number as the key"
         )
     return tag_id
 
 
+def _distortion(value: Any) -> tuple[float, ...]:
+    if (
+        not isinstance(value, list)
+        or len(value) not in (4, 5, 8)
+        or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
+    ):
+        raise ParcelfitError(
+            f"expected 4, 5 or 8 distortion coefficients, got {value!r}",
+            fix="write [k1, k2, p1, p2, k3] (OpenCV's order)",
+        )
+    return tuple(float(v) for v in value)
+
+
+def _barrier_list(value: Any) -> Any:
+    if not isinstance(value, list):
+        raise ParcelfitError("expected a list of barriers", fix="write - {id, from, to}")
+    return value
+
+
+_TagId = Annotated[int, PlainValidator(_tag_id)]
+_Metres = Annotated[float, Number(unit="m")]
+_TagSize = Annotated[float, Number(unit="m", ge=1e-3, le=2)]
+
+
+class ReferenceTagEntry(FileModel):
+    """One of ``reference_tags``: centre [m], side [m], angle [deg CCW]."""
+
+    x: _Metres
+    y: _Metres
+    size: _TagSize
+    angle: Annotated[float, Number(unit="deg")] = 0.0
+
+
+class ParcelTagEntry(FileModel):
+    """One of ``parcel_tags``: side, height, offset and outline [m]."""
+
+    size: _TagSize
+    height: Annotated[float, Number(unit="m", ge=0, le=2)] = 0.0
+    offset: Annotated[tuple[float, float], Pair()] = (0.0, 0.0)
+    outline: Annotated[tuple[float, float] | None, Pair(nullable=True)] = None
+
+
+class CameraSection(FileModel):
+    """``camera``: focal lengths (>= 1) and principal point [px], distortion, image size [px]."""
+
+    # a focal length is at least a pixel (fx: 0 would divide by zero when mapping)
+    fx: Annotated[float, Number(unit="px", ge=1)]
+    fy: Annotated[float, Number(unit="px", ge=1)]
+    cx: Annotated[float, Number(unit="px", ge=0)]
+    cy: Annotated[float, Number(unit="px", ge=0)]
+    distortion: Annotated[tuple[float, ...], PlainValidator(_distortion)] = (0.0,) * 5
+    width: Annotated[int, Whole(ge=0)] = 0
+    height: Annotated[int, Whole(ge=0)] = 0
+
+
+class BarrierEntry(FileModel):
+    """One of ``light_barriers``: its id and the segment's ends [m]."""
+
+    id: Annotated[str, Text()]
+    start: Annotated[tuple[float, float], Pair(), Field(alias="from")]
+    end: Annotated[tuple[float, float], Pair(), Field(alias="to")]
+
+
+class TimingSection(FileModel):
+    """``timing``: exposure and rolling-shutter readout [ms], 0 to 100."""
+
+    exposure_ms: Annotated[float, Number(ge=0, le=100)] = 0.0
+    readout_ms: Annotated[float, Number(ge=0, le=100)] = 0.0
+
+
+class TagMapFile(FileModel):
+    """A tag map file as written (see the module docstring)."""
+
+    family: Annotated[str, Choice(FAMILIES, what="tag family")] = "tag36h11"
+    reference_tags: dict[_TagId, ReferenceTagEntry]
+    parcel_tags: dict[_TagId, ParcelTagEntry]
+    camera: CameraSection | None = None
+    light_barriers: Annotated[
+        list[BarrierEntry], BeforeValidator(_barrier_list), or_default(list)
+    ] = Field(default_factory=list)
+    timing: Annotated[TimingSection, or_default(dict)] = Field(default_factory=TimingSection)
+
+    @field_validator("reference_tags")
+    @classmethod
+    def _some_reference(cls, value: dict[int, ReferenceTagEntry]) -> dict[int, ReferenceTagEntry]:
+        if not value:
+            raise ParcelfitError("no reference tags", fix="list at least one (four recommended)")
+        return value
+
+    @field_validator("parcel_tags")
+    @classmethod
+    def _some_parcel(cls, value: dict[int, ParcelTagEntry]) -> dict[int, ParcelTagEntry]:
+        if not value:
+            raise ParcelfitError("no parcel tags", fix="list the parcel's tag")
+        return value
+
+    @model_validator(mode="after")
+    def _one_role(self) -> TagMapFile:
+        for tag_id in self.parcel_tags:
+            if tag_id in self.reference_tags:
+                raise ParcelfitError(
+                    f"tag {tag_id} is both a reference and a parcel tag",
+                    where=f"parcel_tags.{tag_id}",
+                    fix="give every tag one role",
+                )
+        return self
+
+
 def load_tag_map(path: str | Path) -> TagMap:
-    """Read and check a tag map file (see the module docstring)."""
+    """Read and check a tag map file (see the module docstring); angles become radians and
+    times seconds here."""
     path = Path(path)
-    doc = load_config(
-        path,
-        allowed=("family", "reference_tags", "parcel_tags", "camera", "light_barriers", "timing"),
-        required=("reference_tags", "parcel_tags"),
-    )
-    family = get_choice(
-        doc, "family", FAMILIES, what="tag family", file=path, where="", default="tag36h11"
-    )
-    refs: dict[int, ReferenceTag] = {}
-    for key, value in require_mapping(
-        doc["reference_tags"], file=path, where="reference_tags"
-    ).items():
-        where = f"reference_tags.{key}"
-        tag_id = _tag_id(key, file=path, where=where)
-        m = require_mapping(value, file=path, where=where)
-        check_keys(
-            m,
-            allowed=("x", "y", "size", "angle"),
-            required=("x", "y", "size"),
-            file=path,
-            where=where,
-        )
-        refs[tag_id] = ReferenceTag(
-            tag_id,
-            float(get_number(m, "x", file=path, where=where, unit="m")),  # type: ignore[arg-type]
-            float(get_number(m, "y", file=path, where=where, unit="m")),  # type: ignore[arg-type]
-            float(get_number(m, "size", file=path, where=where, minimum=1e-3, maximum=2, unit="m")),  # type: ignore[arg-type]
-            math.radians(
-                float(get_number(m, "angle", file=path, where=where, default=0, unit="deg"))
-            ),  # type: ignore[arg-type]
-        )
-    if len(refs) < 1:
-        raise ParcelfitError(
-            "no reference tags",
-            file=path,
-            where="reference_tags",
-            fix="list at least one (four recommended)",
-        )
-    parcels: dict[int, ParcelTag] = {}
-    for key, value in require_mapping(doc["parcel_tags"], file=path, where="parcel_tags").items():
-        where = f"parcel_tags.{key}"
-        tag_id = _tag_id(key, file=path, where=where)
-        if tag_id in refs:
-            raise ParcelfitError(
-                f"tag {tag_id} is both a reference and a parcel tag",
-                file=path,
-                where=where,
-                fix="give every tag one role",
-            )
-        m = require_mapping(value, file=path, where=where)
-        check_keys(
-            m,
-            allowed=("size", "height", "offset", "outline"),
-            required=("size",),
-            file=path,
-            where=where,
-        )
-        outline = m.get("outline")
-        parcels[tag_id] = ParcelTag(
-            tag_id,
-            float(get_number(m, "size", file=path, where=where, minimum=1e-3, maximum=2, unit="m")),  # type: ignore[arg-type]
-            float(
-                get_number(
-                    m, "height", file=path, where=where, default=0, minimum=0, maximum=2, unit="m"
-                )
-            ),  # type: ignore[arg-type]
-            _pair(m.get("offset", [0, 0]), file=path, where=f"{where}.offset"),
-            None if outline is None else _pair(outline, file=path, where=f"{where}.outline"),
-        )
-    if not parcels:
-        raise ParcelfitError(
-            "no parcel tags", file=path, where="parcel_tags", fix="list the parcel's tag"
-        )
+    f = parse(TagMapFile, load_yaml(path), file=path)
+    refs = {
+        i: ReferenceTag(i, t.x, t.y, t.size, math.radians(t.angle))
+        for i, t in f.reference_tags.items()
+    }
+    parcels = {
+        i: ParcelTag(i, t.size, t.height, t.offset, t.outline) for i, t in f.parcel_tags.items()
+    }
     camera = None
-    if doc.get("camera") is not None:
-        m = require_mapping(doc["camera"], file=path, where="camera")
-        check_keys(
-            m,
-            allowed=("fx", "fy", "cx", "cy", "distortion", "width", "height"),
-            required=("fx", "fy", "cx", "cy"),
-            file=path,
-            where="camera",
-        )
-        dist = m.get("distortion", [0, 0, 0, 0, 0])
-        if (
-            not isinstance(dist, list)
-            or len(dist) not in (4, 5, 8)
-            or not all(isinstance(v, int | float) for v in dist)
-        ):
-            raise ParcelfitError(
-                f"expected 4, 5 or 8 distortion coefficients, got {dist!r}",
-                file=path,
-                where="camera.distortion",
-                fix="write [k1, k2, p1, p2, k3] (OpenCV's order)",
-            )
-        camera = Camera(
-            *(
-                # a focal length is at least a pixel (fx: 0 would divide by zero when mapping)
-                float(
-                    get_number(  # type: ignore[arg-type]
-                        m,
-                        k,
-                        file=path,
-                        where="camera",
-                        minimum=1 if k in ("fx", "fy") else 0,
-                        unit="px",
-                    )
-                )
-                for k in ("fx", "fy", "cx", "cy")
-            ),  # type: ignore[arg-type]
-            distortion=tuple(float(v) for v in dist),
-            width=int(get_number(m, "width", file=path, where="camera", default=0, minimum=0)),  # type: ignore[arg-type]
-            height=int(get_number(m, "height", file=path, where="camera", default=0, minimum=0)),  # type: ignore[arg-type]
-        )
-    barriers = []
-    raw = doc.get("light_barriers") or []
-    if not isinstance(raw, list):
-        raise ParcelfitError(
-            "expected a list of barriers",
-            file=path,
-            where="light_barriers",
-            fix="write - {id, from, to}",
-        )
-    for i, b in enumerate(raw):
-        where = f"light_barriers[{i}]"
-        m = require_mapping(b, file=path, where=where)
-        check_keys(
-            m, allowed=("id", "from", "to"), required=("id", "from", "to"), file=path, where=where
-        )
-        barriers.append(
-            Barrier(
-                str(m["id"]),
-                _pair(m["from"], file=path, where=f"{where}.from"),
-                _pair(m["to"], file=path, where=f"{where}.to"),
-            )
-        )
-    timing = require_mapping(doc.get("timing") or {}, file=path, where="timing")
-    check_keys(timing, allowed=("exposure_ms", "readout_ms"), file=path, where="timing")
-    exposure, readout = (
-        float(get_number(timing, k, file=path, where="timing", default=0, minimum=0, maximum=100))  # type: ignore[arg-type]
-        * 1e-3
-        for k in ("exposure_ms", "readout_ms")
+    if f.camera is not None:
+        c = f.camera
+        camera = Camera(c.fx, c.fy, c.cx, c.cy, c.distortion, c.width, c.height)
+    barriers = tuple(Barrier(b.id, b.start, b.end) for b in f.light_barriers)
+    return TagMap(
+        f.family,
+        refs,
+        parcels,
+        camera,
+        barriers,
+        path,
+        f.timing.exposure_ms * 1e-3,
+        f.timing.readout_ms * 1e-3,
     )
-    return TagMap(family, refs, parcels, camera, tuple(barriers), path, exposure, readout)
 
 
 def save_camera(path: str | Path, camera: Camera) -> None:

@@ -1,0 +1,261 @@
+"""The typed file models (study, screen, twin spec, tag map): every refusal names the file, the
+key and the fix; values are converted to SI once, on load."""
+
+from types import MappingProxyType
+
+import pytest
+import yaml
+
+from parcelfit import ParcelfitError
+from parcelfit.optimize.screening import load_screen
+from parcelfit.optimize.study import load_study
+from parcelfit.synth import load_twin_spec
+from parcelfit.tracking import load_tag_map
+
+SIM = {"backend": "python", "factory": "tests.fake_sim:make"}
+REF = {"dataset": "data", "rig": "R", "consignment": "P", "speed_setting": 1}
+STUDY = {"name": "s", "simulator": SIM, "parameters": {"mu_d_BePa": [0.3, 0.6]}, "reference": REF}
+SCREEN = {
+    "name": "s",
+    "simulator": SIM,
+    "reference": REF,
+    "parameters": {"mu_d_BePa": [0.3, 0.58], "E_Pa": [200, 1600]},
+}
+TWIN = {"cases": ["E1/BW/1"], "truth": {"BW": {"mu_d_BePa": 0.5}}, "settings": {"runs": 2}}
+TAGS = {
+    "reference_tags": {0: {"x": 0.0, "y": 0.0, "size": 0.08}},
+    "parcel_tags": {5: {"size": 0.06}},
+    "camera": {"fx": 1000, "fy": 1000, "cx": 640, "cy": 360},
+    "light_barriers": [{"id": "start", "from": [0.2, -0.5], "to": [0.2, 0.5]}],
+}
+LOADERS = {
+    "study": (load_study, STUDY),
+    "screen": (load_screen, SCREEN),
+    "twin": (load_twin_spec, TWIN),
+    "tags": (load_tag_map, TAGS),
+}
+
+
+def _write(tmp_path, doc):
+    path = tmp_path / "file.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return path
+
+
+def _refused(tmp_path, kind, edit):
+    load, base = LOADERS[kind]
+    doc = yaml.safe_load(yaml.safe_dump(base))  # a deep copy
+    edit(doc)
+    path = _write(tmp_path, doc)
+    with pytest.raises(ParcelfitError) as err:
+        load(path)
+    assert err.value.file == str(path)
+    return err.value.where, err.value.message, err.value.fix
+
+
+@pytest.mark.parametrize("kind", list(LOADERS))
+def test_the_base_documents_load(tmp_path, kind):
+    load, base = LOADERS[kind]
+    assert load(_write(tmp_path, base)) is not None
+
+
+CASES = {
+    # kind, edit -> (where, message, fix)
+    "study wrong type": (
+        "study",
+        lambda d: d.update(budget="many"),
+        ("budget", "expected a whole number, got 'many'", "write a whole number such as 4"),
+    ),
+    "study unknown key": (
+        "study",
+        lambda d: d["reference"].update(speed_settin=2),
+        ("reference", "unknown key 'speed_settin'", "did you mean 'speed_setting'?"),
+    ),
+    "study missing key": (
+        "study",
+        lambda d: d.pop("reference"),
+        ("top level", "missing required key 'reference'", "add `reference:`"),
+    ),
+    "study out of range": (
+        "study",
+        lambda d: d.update(weights={"xy": -1}),
+        ("weights.xy", "-1 is outside [0, None]", "use a value inside that range"),
+    ),
+    "study bounds not a pair": (
+        "study",
+        lambda d: d["parameters"].update(mu_d_BePa=[1, 2, 3]),
+        (
+            "parameters.mu_d_BePa",
+            "expected [low, high] or {low, high, log}, got [1, 2, 3]",
+            "write e.g. mu_d_BePa: [0.3, 0.6]",
+        ),
+    ),
+    "study section not a mapping": (
+        "study",
+        lambda d: d.update(simulator=["python"]),
+        (
+            "simulator",
+            "expected a mapping of keys to values, got list",
+            "write it as `key: value` lines",
+        ),
+    ),
+    "study backend needs its key": (
+        "study",
+        lambda d: d["simulator"].pop("factory"),
+        ("simulator", "the python backend needs 'factory'", "add `factory:`"),
+    ),
+    "study tpe takes no settings": (
+        "study",
+        lambda d: d.update(optimizer={"sampler": "tpe", "ucb_lambda": 2}),
+        (
+            "optimizer",
+            "unknown key 'ucb_lambda'",
+            "the tpe sampler takes no settings but `sampler`",
+        ),
+    ),
+    "screen executor dask": (
+        "screen",
+        lambda d: d.update(executor={"kind": "dask"}),
+        ("executor.kind", "unknown executor 'dask'", "use one of local"),
+    ),
+    "screen wrong type": (
+        "screen",
+        lambda d: d.update(alpha="small"),
+        ("alpha", "expected a number, got 'small'", "write a plain number"),
+    ),
+    "screen unknown key": (
+        "screen",
+        lambda d: d.update(centre_point=2),
+        ("top level", "unknown key 'centre_point'", "did you mean 'centre_points'?"),
+    ),
+    "screen missing key": (
+        "screen",
+        lambda d: d["reference"].pop("dataset"),
+        ("reference", "missing required key 'dataset'", "add `dataset:`"),
+    ),
+    "screen out of range": (
+        "screen",
+        lambda d: d.update(resolution=6),
+        ("resolution", "6 is out of range", "use a whole number in [3, 5]"),
+    ),
+    "screen one parameter": (
+        "screen",
+        lambda d: d.update(parameters=["mu_d_BePa"]),
+        (
+            "parameters",
+            "a screen needs at least two parameters",
+            "list two or more (or write parameters: all)",
+        ),
+    ),
+    "screen scheduler is not a screen key": (
+        "screen",
+        lambda d: d.update(executor={"kind": "local", "scheduler": "tcp://x:1"}),
+        ("executor", "unknown key 'scheduler'", "known keys: kind, workers"),
+    ),
+    "twin wrong type": (
+        "twin",
+        lambda d: d["truth"]["BW"].update(mu_d_BePa="half"),
+        ("truth.BW.mu_d_BePa", "expected a number, got 'half'", "write a plain number"),
+    ),
+    "twin unknown key": (
+        "twin",
+        lambda d: d["settings"].update(runz=3),
+        ("settings", "unknown key 'runz'", "did you mean 'runs'?"),
+    ),
+    "twin missing key": (
+        "twin",
+        lambda d: d.pop("cases"),
+        ("top level", "missing required key 'cases'", "add `cases:`"),
+    ),
+    "twin out of range": (
+        "twin",
+        lambda d: d["settings"].update(friction_cv=-0.1),
+        ("settings.friction_cv", "-0.1 is outside [0, None]", "use a value inside that range"),
+    ),
+    "twin runs not whole": (
+        "twin",
+        lambda d: d["settings"].update(runs=2.5),
+        ("settings.runs", "expected a whole number, got 2.5", "write a whole number such as 4"),
+    ),
+    "twin bad case": (
+        "twin",
+        lambda d: d["cases"].append("E1-BW-1"),
+        ("cases[1]", None, "write RIG/CONSIGNMENT/SETTING"),
+    ),
+    "tags wrong type": (
+        "tags",
+        lambda d: d["parcel_tags"][5].update(offset="centre"),
+        ("parcel_tags.5.offset", "expected two numbers [a, b], got 'centre'", "write [a, b]"),
+    ),
+    "tags unknown key": (
+        "tags",
+        lambda d: d["reference_tags"][0].update(angel=90),
+        ("reference_tags.0", "unknown key 'angel'", "did you mean 'angle'?"),
+    ),
+    "tags missing key": (
+        "tags",
+        lambda d: d["light_barriers"][0].pop("to"),
+        ("light_barriers[0]", "missing required key 'to'", "add `to:`"),
+    ),
+    "tags out of range": (
+        "tags",
+        lambda d: d["reference_tags"][0].update(size=3),
+        ("reference_tags.0.size", "3 is outside [0.001, 2] m", "use a value inside that range"),
+    ),
+    "tags bad id": (
+        "tags",
+        lambda d: d["parcel_tags"].update({"five": {"size": 0.06}}),
+        (
+            "parcel_tags.five",
+            "tag ids are whole numbers >= 0, got 'five'",
+            "use the tag's id number as the key",
+        ),
+    ),
+    "tags two roles": (
+        "tags",
+        lambda d: d["parcel_tags"].update({0: {"size": 0.06}}),
+        ("parcel_tags.0", "tag 0 is both a reference and a parcel tag", "give every tag one role"),
+    ),
+}
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_a_refusal_names_the_file_the_key_and_the_fix(tmp_path, case):
+    kind, edit, (where, message, fix) = CASES[case]
+    got = _refused(tmp_path, kind, edit)
+    assert got[0] == where and got[2] == fix
+    if message is not None:
+        assert got[1] == message
+
+
+def test_study_values_are_si_and_sections_take_their_defaults(tmp_path):
+    doc = {**STUDY, "parameters": {"E_Pa": {"low": 200, "high": 1600, "log": True}}}
+    doc.update(fixed={"t_Pa": 0.5}, validation=None, executor=None)
+    study = load_study(_write(tmp_path, doc))
+    dim = study.space.dims[0]
+    assert (dim.name, dim.low, dim.high, dim.log) == ("E_Pa", 2e8, 1.6e9, True)
+    assert study.fixed == {"t_Pa": 0.0005}
+    assert (study.validation_setting, study.validate_every) == (None, 5)
+    assert study.executor == {"kind": "local", "workers": None, "scheduler": None}
+    assert dict(study.simulator) == SIM
+
+
+def test_a_screen_is_si_immutable_and_holds_its_soft_content_ranges(tmp_path):
+    doc = {**SCREEN, "fixed": {"t_Pa": 0.5}, "soft_content": ["E_Co"]}
+    screen = load_screen(_write(tmp_path, doc))
+    assert screen.parameters == ("mu_d_BePa", "E_Pa")
+    assert screen.ranges["E_Pa"] == (2e8, 1.6e9) and screen.fixed == {"t_Pa": 0.0005}
+    assert list(screen.ranges) == ["mu_d_BePa", "E_Pa", "E_Co"]
+    assert isinstance(screen.ranges, MappingProxyType)
+    with pytest.raises(TypeError):
+        screen.ranges["x"] = (0.0, 1.0)
+
+
+def test_tag_map_values_are_si(tmp_path):
+    doc = {**TAGS, "timing": {"exposure_ms": 4, "readout_ms": 15}}
+    doc["reference_tags"] = {0: {"x": 0.1, "y": 0.2, "size": 0.08, "angle": 90}}
+    tm = load_tag_map(_write(tmp_path, doc))
+    assert tm.reference_tags[0].angle == pytest.approx(1.5707963267948966)
+    assert (tm.exposure, tm.readout) == (0.004, 0.015)
+    assert tm.camera is not None and tm.camera.distortion == (0.0,) * 5
+    assert tm.barriers[0].start == (0.2, -0.5) and tm.barriers[0].end == (0.2, 0.5)
