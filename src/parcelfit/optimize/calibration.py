@@ -24,14 +24,14 @@ from typing import Any
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.metrics import ReferenceSelection, calibration_cost, select_reference, validate
-from parcelfit.optimize.executors import DaskExecutor, LocalExecutor, Task
+from parcelfit.optimize.executors import Executor, Task, make_executor
 from parcelfit.optimize.folderlock import check_writable, lock_folder
 from parcelfit.optimize.sampler import make_sampler
 from parcelfit.optimize.store import Evaluation, Store
 from parcelfit.optimize.study import Study
 from parcelfit.runs import TestCase, is_synthetic, load_dataset, write_trajectory
 from parcelfit.sim.factory import make_simulator
-from parcelfit.sim.protocol import SimResult, Simulator
+from parcelfit.sim.protocol import SimResult
 
 STORE_FILE = "study.sqlite"
 LOST_WORKER_MESSAGES = (
@@ -105,21 +105,16 @@ def record_result(
 
 def _executor(
     study: Study,
-    simulator: Simulator,
     executor: str | None,
     scheduler: str | None,
     workers: int | None,
-) -> LocalExecutor | DaskExecutor:
-    kind = executor or study.executor.get("kind", "local")
-    if kind == "dask":
-        address = scheduler or study.executor.get("scheduler")
-        if not address:
-            raise ParcelfitError(
-                "the dask executor needs a scheduler address",
-                fix="pass --scheduler tcp://HOST:8786",
-            )
-        return DaskExecutor(simulator, address)
-    return LocalExecutor(simulator, workers or study.executor.get("workers"))
+) -> Executor:
+    """The executor the command line (first) or the study file asks for; local by default."""
+    return make_executor(
+        executor or study.executor.get("kind", "local"),
+        workers=workers or study.executor.get("workers"),
+        scheduler=scheduler or study.executor.get("scheduler"),
+    )
 
 
 class Calibration:
@@ -248,18 +243,18 @@ class Calibration:
         )
         self.bo.tell(row.params, outcome["cost"] if outcome["status"] == "ok" else None)
 
-    def _run_rows(self, rows: list[Evaluation], executor: LocalExecutor | DaskExecutor) -> None:
+    def _run_rows(self, rows: list[Evaluation], executor: Executor) -> None:
         tasks = [
             Task(self._full_params(r.params), self.fit_case, f"fit-{r.iteration:03d}-{r.slot:02d}")
             for r in rows
         ]
         remaining = len(rows)
-        for i, result in executor.run(tasks):
+        for i, result in executor.simulate(self.simulator, tasks):
             self._record_fit(rows[i], result)
             remaining -= 1
             self._report(rows[i].iteration, remaining, f"{result.status.value}: {tasks[i].run_id}")
 
-    def _validate(self, iteration: int, executor: LocalExecutor | DaskExecutor) -> bool | None:
+    def _validate(self, iteration: int, executor: Executor) -> bool | None:
         best = self.bo.recommend()
         if best is None or self.val_case is None or self.val_reference is None:
             return None
@@ -274,12 +269,12 @@ class Calibration:
         row_id: int,
         iteration: int,
         params: Mapping[str, float],
-        executor: LocalExecutor | DaskExecutor,
+        executor: Executor,
     ) -> bool:
         """Simulate a stored (pending) validation row and record its verdict."""
         assert self.val_case is not None and self.val_reference is not None
         task = Task(self._full_params(params), self.val_case, f"validation-{iteration:03d}")
-        ((_, result),) = list(executor.run([task]))
+        ((_, result),) = list(executor.simulate(self.simulator, [task]))
         details: dict[str, Any] = {"message": result.diagnostics.get("message")}
         passed = False
         run_file = None
@@ -380,7 +375,7 @@ class Calibration:
         iteration = max((r.iteration for r in rows), default=-1)
         if (self._executor_args[0] or study.executor.get("kind")) == "dask":
             self._report(iteration, 0, "connecting to the Dask scheduler, waiting for a worker")
-        executor = _executor(study, self.simulator, *self._executor_args)
+        executor = _executor(study, *self._executor_args)
         try:
             if already_passed:
                 # a finished study whose record lost fitting runs (a lost worker): complete the

@@ -17,7 +17,7 @@ A screen file (YAML)::
     min_full_factors: 3          # ... and at least this many: fewer survivors are topped up with the
                                  # next-largest effects (a 2- or 4-run design says nothing)
     select: 4                    # parameters recommended for calibration
-    executor: {kind: local}
+    executor: {kind: local}      # or serial (in this process), or just executor: serial
 
 Responses of every run: DTW_xy [m] and DTW_theta [rad] between the simulated run and the
 reference run of the test case (the same preparation as the calibration cost), and the transit
@@ -45,7 +45,6 @@ import pandas as pd
 import yaml
 
 from parcelfit.config import (
-    check_keys,
     get_int,
     get_number,
     get_pair,
@@ -67,10 +66,10 @@ from parcelfit.errors import ParcelfitError
 from parcelfit.figures import save_figure
 from parcelfit.metrics import select_reference
 from parcelfit.optimize.calibration import record_result
-from parcelfit.optimize.executors import LocalExecutor, Task
+from parcelfit.optimize.executors import Task, make_executor
 from parcelfit.optimize.folderlock import check_writable, lock_folder
 from parcelfit.optimize.store import Store
-from parcelfit.optimize.study import _to_si, check_executor, parse_reference, parse_simulator
+from parcelfit.optimize.study import _to_si, parse_executor, parse_reference, parse_simulator
 from parcelfit.runs import TestCase, load_dataset
 from parcelfit.sim.params import CATALOGUE, parameter
 
@@ -191,9 +190,7 @@ def load_screen(path: str | Path) -> Screen:
                 fix=exc.fix
                 or "name a soft-content parameter (see parcelfit params --consignment PB)",
             ) from None
-    execu = require_mapping(doc.get("executor") or {"kind": "local"}, file=path, where="executor")
-    check_keys(execu, allowed=("kind", "workers"), file=path, where="executor")
-    check_executor(execu, ("local",), path)  # screens run in local processes
+    execu = parse_executor(doc.get("executor"), ("serial", "local"), path)  # on this machine
     return Screen(
         name=get_str(doc, "name", file=path, where=""),
         folder=folder,
@@ -217,7 +214,7 @@ def load_screen(path: str | Path) -> Screen:
             doc, "min_full_factors", file=path, where="", default=3, minimum=1, maximum=10
         ),
         select=get_int(doc, "select", file=path, where="", default=4, minimum=1),
-        executor=dict(execu),
+        executor=execu,
     )
 
 
@@ -235,10 +232,13 @@ def run_screen(
     screen: Screen,
     out: str | Path,
     *,
+    executor: str | None = None,
     workers: int | None = None,
     on_event: Callable[[str], None] | None = None,
 ) -> tuple[list[StageResult], dict[str, Any]]:
-    """Run the screen's stages (resumable), write the outputs, return the stages and the selection."""
+    """Run the screen's stages (resumable), write the outputs, return the stages and the selection.
+
+    ``executor`` (serial or local) and ``workers`` override the screen file's ``executor``."""
     from parcelfit.sim.factory import make_simulator
 
     out = Path(out)
@@ -254,7 +254,10 @@ def run_screen(
     reference = select_reference(load_dataset(screen.dataset)[screen.case])
     simulator = make_simulator(screen.simulator, screen.folder)
     backend = screen.simulator["backend"]
-    executor = LocalExecutor(simulator, workers or screen.executor.get("workers"))
+    runner = make_executor(
+        executor or screen.executor.get("kind", "local"),
+        workers=workers or screen.executor.get("workers"),
+    )
     results: list[StageResult] = []
     factors = list(screen.ranges)
     try:
@@ -305,7 +308,7 @@ def run_screen(
                 Task({**fixed_si, **r.params}, screen.case, f"screen-{stage}-{r.slot}")
                 for r in todo
             ]
-            for k, (i, res) in enumerate(executor.run(tasks), start=1):
+            for k, (i, res) in enumerate(runner.simulate(simulator, tasks), start=1):
                 record_result(store, out, todo[i], res, reference)
                 say(f"{res.status.value}: {tasks[i].run_id} ({k} of {len(tasks)} done)")
             rows = sorted(
@@ -366,7 +369,7 @@ def run_screen(
             )
             factors = survivors
     finally:
-        executor.close()
+        runner.close()
         store.close()
         lock.release()
     sel = select_parameters(

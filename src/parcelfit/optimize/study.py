@@ -28,7 +28,8 @@
     budget: 80                         # optional, most fitting evaluations
     seed: 0                            # optional
     optimizer: {sampler: gp, ucb_lambda: 2.0}   # optional: gp | published | tpe, BOSettings
-    executor: {kind: local, workers: 2}   # optional: local (processes) | dask (scheduler: tcp://...)
+    executor: {kind: local, workers: 2}   # optional: local (processes) | serial (this process,
+                                       # for debugging; also executor: serial) | dask (scheduler: tcp://...)
 
 **A study file can run code.** ``backend: python`` imports the module named in ``factory`` and
 calls it, and ``backend: external`` runs the solver description's command: run only study (and
@@ -221,9 +222,7 @@ def load_study(path: str | Path) -> Study:
         raise ParcelfitError(
             str(exc), file=path, where="optimizer", fix="see BOSettings for the allowed values"
         ) from None
-    execu = require_mapping(doc.get("executor") or {"kind": "local"}, file=path, where="executor")
-    check_keys(execu, allowed=("kind", "workers", "scheduler"), file=path, where="executor")
-    check_executor(execu, ("local", "dask"), path)
+    execu = parse_executor(doc.get("executor"), ("serial", "local", "dask"), path)
     w_xy = get_number(weights, "xy", file=path, where="weights", default=1.0, minimum=0) or 0.0
     w_theta = get_number(weights, "theta", file=path, where="weights", default=1.0, minimum=0)
     if w_xy + (w_theta or 0.0) <= 0:
@@ -316,6 +315,18 @@ def parse_reference(
     )
     setting = get_int(ref, "speed_setting", file=path, where="reference", minimum=1)
     return dataset, rig, consignment, setting
+
+
+def parse_executor(value: Any, kinds: tuple[str, ...], path: Path) -> dict[str, Any]:
+    """An ``executor`` entry, checked: ``{kind: KIND, workers: N, scheduler: ADDRESS}`` or just
+    ``KIND``, where KIND is one of ``kinds`` (default local); ``scheduler`` only for dask."""
+    if isinstance(value, str):
+        value = {"kind": value}
+    execu = require_mapping(value or {"kind": "local"}, file=path, where="executor")
+    allowed = ("kind", "workers", "scheduler") if "dask" in kinds else ("kind", "workers")
+    check_keys(execu, allowed=allowed, file=path, where="executor")
+    check_executor(execu, kinds, path)
+    return dict(execu)
 
 
 def check_executor(section: Mapping[str, Any], kinds: tuple[str, ...], path: Path) -> None:
