@@ -6,23 +6,40 @@ import json
 import os
 import sys
 from collections.abc import Callable
-from functools import wraps
 from pathlib import Path
-from typing import Annotated, Any, TypeVar
+from typing import Annotated, Any
 
+import click
 import typer
 from rich.console import Console
 from rich.markup import escape
 from rich.progress import Progress, TimeElapsedColumn
 from rich.table import Table
 from rich.text import Text
+from typer.core import TyperGroup
 
 from parcelfit import __version__
 from parcelfit.errors import ParcelfitError
 
+
+class _Commands(TyperGroup):
+    """The command group. Errors are handled here, once for every command: a `ParcelfitError`
+    is shown as one red message and exits with status 2, without a traceback."""
+
+    def invoke(self, ctx: click.Context) -> Any:
+        try:
+            return super().invoke(ctx)
+        except ParcelfitError as exc:
+            # user text (paths, keys, run ids) is printed as it is, never read as Rich markup
+            message = Text.assemble(("error:", "bold red"), " ", str(exc))
+            err_console.print(message, highlight=False, soft_wrap=True)
+            raise typer.Exit(code=2) from None
+
+
 app = typer.Typer(
     name="parcelfit",
     help="Calibrate physics simulations of parcels with flexible packaging against tracked experiments.",
+    cls=_Commands,
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
@@ -31,7 +48,6 @@ app = typer.Typer(
 )
 console = Console()
 err_console = Console(stderr=True)
-F = TypeVar("F", bound=Callable[..., Any])
 TIMESTEP_S = 1.0 / 600.0  # the default simulation time step [s]
 
 
@@ -49,34 +65,16 @@ def _progress(status: Any, prefix: str) -> Callable[[str], None]:
     return say
 
 
-def friendly_errors(func: F) -> F:
-    """Show a `ParcelfitError` as one red message and exit with status 2, without a traceback."""
-
-    @wraps(func)
-    def wrapper(*args: Any, **kwargs: Any) -> Any:
-        try:
-            return func(*args, **kwargs)
-        except ParcelfitError as exc:
-            # user text (paths, keys, run ids) is printed as it is, never read as Rich markup
-            message = Text.assemble(("error:", "bold red"), " ", str(exc))
-            err_console.print(message, highlight=False, soft_wrap=True)
-            raise typer.Exit(code=2) from None
-
-    return wrapper  # type: ignore[return-value]
-
-
 DatasetArg = Annotated[Path, typer.Argument(help="Dataset folder (holding dataset.yaml).")]
 
 
 @app.command()
-@friendly_errors
 def version() -> None:
     """Print parcelfit's version."""
     console.print(f"parcelfit {__version__}")
 
 
 @app.command()
-@friendly_errors
 def reference(
     dataset: DatasetArg,
     as_json: Annotated[bool, typer.Option("--json", help="Print machine-readable JSON.")] = False,
@@ -111,7 +109,6 @@ def reference(
 
 
 @app.command()
-@friendly_errors
 def stats(
     dataset: DatasetArg,
     out: Annotated[Path, typer.Option("--out", help="Folder for tables and box plots.")] = Path(
@@ -173,7 +170,6 @@ def _print_tests(tests: Any) -> None:
 
 
 @app.command()
-@friendly_errors
 def demo(
     out: Annotated[
         Path, typer.Option("--out", help="Folder for everything the demo writes.")
@@ -253,7 +249,6 @@ def demo(
 
 
 @app.command()
-@friendly_errors
 def report(
     folder: Annotated[
         Path, typer.Argument(help="A study folder, or a folder holding calibration/ (the demo's).")
@@ -288,7 +283,6 @@ def report(
 
 
 @app.command()
-@friendly_errors
 def synth(
     spec: Annotated[Path, typer.Argument(help="Twin specification YAML (cases, truth, settings).")],
     out: Annotated[Path, typer.Option("--out", help="Folder for the dataset.")] = Path("twin"),
@@ -331,7 +325,6 @@ def _frame_bar() -> Progress:
 
 
 @app.command()
-@friendly_errors
 def track(
     video: Annotated[Path, typer.Argument(help="A top-down video of one run.")],
     tags: Annotated[Path, typer.Option("--tags", help="The tag map (YAML).")],
@@ -399,7 +392,6 @@ def track(
 
 
 @app.command("track-all")
-@friendly_errors
 def track_all_command(
     folder: Annotated[
         Path, typer.Argument(help="Folder of videos named RIG-CONS-SETTING-RUN.mp4.")
@@ -444,7 +436,6 @@ def track_all_command(
 
 
 @app.command("camera-calibrate")
-@friendly_errors
 def camera_calibrate(
     video: Annotated[Path, typer.Argument(help="A video of a checkerboard moved around the view.")],
     tags: Annotated[
@@ -487,7 +478,6 @@ def camera_calibrate(
 
 
 @app.command()
-@friendly_errors
 def simulate(
     rig: Annotated[
         str, typer.Option(help="Bundled rig name (E1, E2a, E2b, E3) or a rig .yaml file.")
@@ -668,7 +658,6 @@ def _simulate_ensemble(
 
 
 @app.command()
-@friendly_errors
 def rigs() -> None:
     """List the bundled test rigs with their speed settings."""
     from parcelfit.sim.mujoco import bundled_rig_names, load_rig
@@ -707,7 +696,6 @@ def rigs() -> None:
 
 
 @app.command()
-@friendly_errors
 def params(
     consignment: Annotated[
         str, typer.Option(help="Consignment type (or .yaml) whose parameters to list.")
@@ -740,7 +728,6 @@ def params(
 
 
 @app.command()
-@friendly_errors
 def calibrate(
     study_file: Annotated[Path, typer.Argument(help="Study file (YAML).")],
     out: Annotated[
@@ -890,7 +877,6 @@ def _print_params(params: dict[str, float], title: str) -> None:
 
 
 @app.command()
-@friendly_errors
 def screen(
     screen_file: Annotated[Path, typer.Argument(help="Screen file (YAML).")],
     out: Annotated[
@@ -940,7 +926,6 @@ def _print_screen(stages: Any, selection: dict[str, Any]) -> None:
 
 
 @app.command()
-@friendly_errors
 def status(
     study_dir: Annotated[Path, typer.Argument(help="Study folder (holding study.sqlite).")],
     as_json: Annotated[bool, typer.Option("--json", help="Print machine-readable JSON.")] = False,
