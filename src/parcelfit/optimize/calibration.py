@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -29,6 +29,7 @@ from parcelfit.optimize.folderlock import check_writable, lock_folder
 from parcelfit.optimize.sampler import make_sampler
 from parcelfit.optimize.store import Evaluation, Store
 from parcelfit.optimize.study import Study
+from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.runs import TestCase, is_synthetic, load_dataset, write_trajectory
 from parcelfit.sim.factory import make_simulator
 from parcelfit.sim.protocol import SimResult
@@ -42,23 +43,11 @@ LOST_WORKER_MESSAGES = (
 
 
 @dataclass(frozen=True)
-class Progress:
-    """What the loop reports after every result."""
-
-    iteration: int
-    done: int
-    running: int
-    budget: int
-    best_cost: float | None
-    last_validation: bool | None
-    message: str
-
-
-@dataclass(frozen=True)
 class CalibrationResult:
     """Outcome of a study: the recommended parameters (SI) and their cost, the number of fitting
     evaluations, the last iteration (0 = the initial design, k >= 1 the k-th optimiser batch;
-    None before any), the validation verdict, why it stopped."""
+    None before any), the validation verdict, why it stopped, the study figures written (PNG
+    and SVG in ``folder/figures``)."""
 
     best_params: dict[str, float] | None
     best_cost: float | None
@@ -67,6 +56,7 @@ class CalibrationResult:
     validated: bool | None
     stop_reason: str
     folder: Path
+    figures: tuple[Path, ...] = ()
 
 
 def record_result(
@@ -118,7 +108,12 @@ def _executor(
 
 
 class Calibration:
-    """One study folder: its store, references, optimiser and executor (see the module doc)."""
+    """One study folder: its store, references, optimiser and executor (see the module doc).
+
+    ``executor`` (serial, local or dask), ``scheduler`` and ``workers`` override the study
+    file's ``executor``; ``progress`` receives a `ProgressEvent` after every result; with
+    ``figures`` the study figures (`parcelfit.optimize.plots.study_figures`) are written when
+    the study stops."""
 
     def __init__(
         self,
@@ -128,9 +123,11 @@ class Calibration:
         executor: str | None = None,
         scheduler: str | None = None,
         workers: int | None = None,
-        on_progress: Callable[[Progress], None] | None = None,
+        progress: ProgressCallback | None = None,
+        figures: bool = True,
     ) -> None:
         self.study = study
+        self.figures = figures
         self.folder = Path(folder)
         check_writable(self.folder, (STORE_FILE,))
         try:
@@ -204,7 +201,7 @@ class Calibration:
             record["bo_settings"] = None if settings is None else dataclasses.asdict(settings)
             self.store.set_meta("study", record)
         self._executor_args = (executor, scheduler, workers)
-        self.on_progress = on_progress or (lambda p: None)
+        self.progress = progress or ignore_progress
         self.last_validation: bool | None = None
 
     def close(self) -> None:
@@ -219,15 +216,16 @@ class Calibration:
     def _report(self, iteration: int, running: int, message: str) -> None:
         best = self.bo.best()
         done = self.bo.n_told  # every finished evaluation is told exactly once
-        self.on_progress(
-            Progress(
-                iteration,
-                done,
-                running,
-                self.study.budget,
-                None if best is None else best[1],
-                self.last_validation,
+        self.progress(
+            ProgressEvent(
+                "calibration",
                 message,
+                done=done,
+                total=self.study.budget,
+                iteration=iteration,
+                running=running,
+                best_cost=None if best is None else best[1],
+                last_validation=self.last_validation,
             )
         )
 
@@ -339,11 +337,18 @@ class Calibration:
     # -- the loop ----------------------------------------------------------------------------
     def run(self) -> CalibrationResult:
         """Run (or resume) the study until validation passes or the budget is spent; then close
-        the store and release the folder."""
+        the store, release the folder and write the study figures."""
         try:
-            return self._run()
+            result = self._run()
         finally:
             self.close()
+        if self.figures:
+            from parcelfit.optimize.plots import study_figures
+
+            last = result.last_iteration
+            self._report(-1 if last is None else last, 0, "writing the study figures")
+            result = dataclasses.replace(result, figures=tuple(study_figures(self.folder)))
+        return result
 
     def _run(self) -> CalibrationResult:
         study = self.study

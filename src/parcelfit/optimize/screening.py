@@ -35,7 +35,6 @@ from the ones it would run now (use a new folder after changing the screen file)
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -70,6 +69,7 @@ from parcelfit.optimize.executors import Task, make_executor
 from parcelfit.optimize.folderlock import check_writable, lock_folder
 from parcelfit.optimize.store import Store
 from parcelfit.optimize.study import _to_si, parse_executor, parse_reference, parse_simulator
+from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.runs import TestCase, load_dataset
 from parcelfit.sim.params import CATALOGUE, parameter
 
@@ -234,17 +234,23 @@ def run_screen(
     *,
     executor: str | None = None,
     workers: int | None = None,
-    on_event: Callable[[str], None] | None = None,
+    progress: ProgressCallback | None = None,
 ) -> tuple[list[StageResult], dict[str, Any]]:
     """Run the screen's stages (resumable), write the outputs, return the stages and the selection.
 
-    ``executor`` (serial or local) and ``workers`` override the screen file's ``executor``."""
+    ``executor`` (serial or local) and ``workers`` override the screen file's ``executor``;
+    ``progress`` receives a `ProgressEvent` per stage and per finished simulation (``done`` of
+    ``total`` counting the stage's simulations)."""
     from parcelfit.sim.factory import make_simulator
 
     out = Path(out)
     check_writable(out, ("screen.sqlite",))
     out.mkdir(parents=True, exist_ok=True)
-    say = on_event or (lambda m: None)
+    report = progress or ignore_progress
+
+    def say(message: str, done: int | None = None, total: int | None = None) -> None:
+        report(ProgressEvent("screening", message, done, total))
+
     lock = lock_folder(out, "a screen")
     try:
         store = Store(out / "screen.sqlite")
@@ -310,7 +316,11 @@ def run_screen(
             ]
             for k, (i, res) in enumerate(runner.simulate(simulator, tasks), start=1):
                 record_result(store, out, todo[i], res, reference)
-                say(f"{res.status.value}: {tasks[i].run_id} ({k} of {len(tasks)} done)")
+                say(
+                    f"{res.status.value}: {tasks[i].run_id} ({k} of {len(tasks)} done)",
+                    k,
+                    len(tasks),
+                )
             rows = sorted(
                 (e for e in store.evaluations("screen") if e.iteration == stage),
                 key=lambda e: e.slot,
