@@ -680,7 +680,7 @@ BAD_INPUTS = {
     ),
     "screen executor slurm": (
         lambda p: _screen(p, executor={"kind": "slurm"}),
-        r"executor\.kind: unknown executor 'slurm'.*use one of local",
+        r"executor\.kind: unknown executor 'slurm'.*use one of serial, local",
     ),
     "screen without a name": (
         lambda p: _screen(p, name=["x"]),
