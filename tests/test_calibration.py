@@ -19,7 +19,7 @@ from .helpers import ROOT, finished_fits, write_study
 def test_calibration_recovers_the_truth_and_validates(tmp_path):
     study = load_study(write_study(tmp_path))
     seen = []
-    result = Calibration(study, tmp_path / "out", on_progress=seen.append).run()
+    result = Calibration(study, tmp_path / "out", progress=seen.append).run()
     assert result.stop_reason == "validation passed" and result.validated
     for name, (low, high) in {"mu_d_BePa": (0.3, 0.6), "mu_d_MePa": (0.15, 0.35)}.items():
         assert abs(result.best_params[name] - TRUTH[name]) < 0.1 * (high - low)

@@ -1,6 +1,7 @@
 import json
 
 import pytest
+import yaml
 from typer.testing import CliRunner
 
 from parcelfit.cli import app
@@ -99,3 +100,21 @@ def test_help_keeps_units_in_square_brackets_and_shows_the_timestep_readably():
     assert "1/600 s" in text and "0.0016666" not in text
     result = runner.invoke(app, ["camera-calibrate", "--help"], terminal_width=200)
     assert "Side of one square [mm]." in " ".join(result.output.split())
+
+
+def test_demo_stages_are_library_calls(tmp_path):
+    from parcelfit import ParcelfitError
+    from parcelfit.demo import STAGES, Demo
+
+    with pytest.raises(ParcelfitError, match="unknown demo profile 'fast'"):
+        Demo(tmp_path, "fast")
+    d = Demo(tmp_path / "demo", "quick", executor="serial")
+    assert d.dataset.synthetic and len(STAGES) == 6
+    refs = d.reference_runs()
+    assert (
+        len(refs) == 16
+        and len(json.loads((tmp_path / "demo" / "reference_runs.json").read_text())) == 16
+    )
+    screen_file, study_file = d.files
+    assert yaml.safe_load(study_file.read_text())["budget"] == 16
+    assert yaml.safe_load(screen_file.read_text())["stages"] == ["fractional"]

@@ -151,6 +151,7 @@ def test_progress_updates_the_spinner_on_a_terminal_and_prints_lines_elsewhere(
     from rich.console import Console
 
     from parcelfit import cli
+    from parcelfit.progress import ProgressEvent
 
     out = io.StringIO()
     monkeypatch.setattr(cli, "console", Console(file=out, force_terminal=terminal, width=100))
@@ -161,8 +162,18 @@ def test_progress_updates_the_spinner_on_a_terminal_and_prints_lines_elsewhere(
             shown.append(text)
 
     say = cli._progress(Spinner(), "screening: ")
-    say("ok: screen-0-1 (1 of 2 done)")
-    say("ok: screen-0-0 (2 of 2 done)")
+    say(ProgressEvent("screening", "ok: screen-0-1 (1 of 2 done)", 1, 2))
+    say(ProgressEvent("screening", "ok: screen-0-0 (2 of 2 done)", 2, 2))
     printed = ["screening: ok: screen-0-1 (1 of 2 done)", "screening: ok: screen-0-0 (2 of 2 done)"]
     assert shown == (printed if terminal else [])
     assert out.getvalue().splitlines() == ([] if terminal else printed)
+
+
+def test_an_executor_a_command_cannot_use_is_one_clear_error(tmp_path):
+    study = write_study(tmp_path)
+    result = runner.invoke(app, ["calibrate", str(study), "--executor", "cloud"])
+    assert result.exit_code == 2 and "unknown executor 'cloud'" in result.output
+    assert "serial or local or dask" in " ".join(result.output.split())
+    result = runner.invoke(app, ["screen", str(study), "--executor", "dask"])
+    assert result.exit_code == 2 and "unknown executor 'dask'" in result.output
+    assert "Traceback" not in result.output

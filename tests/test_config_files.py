@@ -116,7 +116,7 @@ CASES = {
     "screen executor dask": (
         "screen",
         lambda d: d.update(executor={"kind": "dask"}),
-        ("executor.kind", "unknown executor 'dask'", "use one of local"),
+        ("executor.kind", "unknown executor 'dask'", "use one of serial, local"),
     ),
     "screen wrong type": (
         "screen",
@@ -241,8 +241,9 @@ def test_study_values_are_si_and_sections_take_their_defaults(tmp_path):
 
 
 def test_a_screen_is_si_immutable_and_holds_its_soft_content_ranges(tmp_path):
-    doc = {**SCREEN, "fixed": {"t_Pa": 0.5}, "soft_content": ["E_Co"]}
+    doc = {**SCREEN, "fixed": {"t_Pa": 0.5}, "soft_content": ["E_Co"], "executor": "serial"}
     screen = load_screen(_write(tmp_path, doc))
+    assert screen.executor == {"kind": "serial", "workers": None}  # the string shorthand
     assert screen.parameters == ("mu_d_BePa", "E_Pa")
     assert screen.ranges["E_Pa"] == (2e8, 1.6e9) and screen.fixed == {"t_Pa": 0.0005}
     assert list(screen.ranges) == ["mu_d_BePa", "E_Pa", "E_Co"]

@@ -9,7 +9,7 @@ import pytest
 distributed = pytest.importorskip("distributed")
 
 from parcelfit.optimize.calibration import Calibration  # noqa: E402
-from parcelfit.optimize.executors import DaskExecutor, Task  # noqa: E402
+from parcelfit.optimize.executors import Task, dask_executor  # noqa: E402
 from parcelfit.optimize.study import load_study  # noqa: E402
 from parcelfit.runs import TestCase  # noqa: E402
 
@@ -30,14 +30,15 @@ def cluster():
 def test_killed_worker_costs_time_not_results(cluster, tmp_path):
     log = tmp_path / "log"
     with distributed.Client(cluster) as client:
-        executor = DaskExecutor(AnalyticSimulator(delay=1.0, log=str(log)), client)
+        executor = dask_executor(client)
+        sim = AnalyticSimulator(delay=1.0, log=str(log))
         tasks = [
             Task({"mu_d_BePa": 0.4 + 0.01 * i, "mu_d_MePa": 0.2}, TestCase("R", "P", 1), f"t{i}")
             for i in range(6)
         ]
         results = {}
         killed = False
-        for i, res in executor.run(tasks):
+        for i, res in executor.simulate(sim, tasks):
             results[i] = res
             if not killed:  # kill one worker while the others' tasks are still running
                 victim = next(iter(cluster.workers.values()))

@@ -300,12 +300,12 @@ def test_a_dying_local_worker_costs_time_not_results(tmp_path):
     import signal
     import threading
 
-    from parcelfit.optimize.executors import LocalExecutor, Task
+    from parcelfit.optimize.executors import Task, local_executor
     from parcelfit.runs import TestCase
 
     from .fake_sim import AnalyticSimulator, trajectory
 
-    executor = LocalExecutor(AnalyticSimulator(delay=0.4), workers=2)
+    executor = local_executor(workers=2)
     tasks = [
         Task({"mu_d_BePa": 0.4 + 0.01 * i, "mu_d_MePa": 0.2}, TestCase("R", "P", 1), f"t{i}")
         for i in range(6)
@@ -321,7 +321,7 @@ def test_a_dying_local_worker_costs_time_not_results(tmp_path):
     killer = threading.Thread(target=kill_a_worker)
     try:
         killer.start()
-        results = dict(executor.run(tasks))
+        results = dict(executor.simulate(AnalyticSimulator(delay=0.4), tasks))
         killer.join()
     finally:
         executor.close()
@@ -433,17 +433,15 @@ def test_a_timed_out_solver_is_killed_with_its_children(tmp_path):
 
 def test_an_unreachable_scheduler_or_one_without_workers_is_a_clear_error():
     distributed = pytest.importorskip("distributed")
-    from parcelfit.optimize.executors import DaskExecutor
-
-    from .fake_sim import AnalyticSimulator
+    from parcelfit.optimize.executors import dask_executor
 
     with pytest.raises(ParcelfitError, match="cannot reach the Dask scheduler"):
-        DaskExecutor(AnalyticSimulator(), "tcp://127.0.0.1:9", connect_timeout=1)
+        dask_executor("tcp://127.0.0.1:9", connect_timeout=1)
     with (
         distributed.LocalCluster(n_workers=0, dashboard_address=None, processes=False) as cluster,
         pytest.raises(ParcelfitError, match="no Dask worker is attached"),
     ):
-        DaskExecutor(AnalyticSimulator(), cluster.scheduler_address, worker_wait=1)
+        dask_executor(cluster.scheduler_address, worker_wait=1)
 
 
 def _free_port() -> int:
@@ -682,7 +680,7 @@ BAD_INPUTS = {
     ),
     "screen executor slurm": (
         lambda p: _screen(p, executor={"kind": "slurm"}),
-        r"executor\.kind: unknown executor 'slurm'.*use one of local",
+        r"executor\.kind: unknown executor 'slurm'.*use one of serial, local",
     ),
     "screen without a name": (
         lambda p: _screen(p, name=["x"]),

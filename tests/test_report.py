@@ -81,7 +81,7 @@ def test_report_is_one_self_contained_file_with_every_section(demo_folder):
         and f"The calibrated parameters, validated after iteration {last}," in text
     )
     assert re.search(r"Calibrated parameters: the evaluation made in iteration \d+ with cost", text)
-    assert seen[0].startswith("Transit times")
+    assert seen[0].job == "report" and seen[0].message.startswith("Transit times")
 
 
 @pytest.mark.slow

@@ -30,7 +30,7 @@ def test_screen_finds_the_parameters_that_matter(tmp_path):
     path = tmp_path / "screen.yaml"
     path.write_text(yaml.safe_dump(doc, sort_keys=False))
     events = []
-    stages, selection = run_screen(load_screen(path), tmp_path / "out", on_event=events.append)
+    stages, selection = run_screen(load_screen(path), tmp_path / "out", progress=events.append)
     assert [s.kind for s in stages] == ["fractional", "full"]
     assert stages[0].factors == list(doc["parameters"]) and len(stages[0].analyses) == 2
     # the two significant parameters first, topped up to three by effect size (E_Pa's tiny effect)
@@ -50,10 +50,13 @@ def test_screen_finds_the_parameters_that_matter(tmp_path):
         yaml.safe_load((tmp_path / "out" / "selection.yaml").read_text())["selected"]
         == selection["selected"]
     )
+    counted = [(e.done, e.total) for e in events if e.done is not None]
+    assert counted[:16] == [(k, 16) for k in range(1, 17)]  # stage 1's simulations, one by one
+    assert {e.job for e in events} == {"screening"}
     # resumable: a rerun simulates nothing
     events.clear()
-    run_screen(load_screen(path), tmp_path / "out", on_event=events.append)
-    assert not any(e.startswith("ok:") for e in events)
+    run_screen(load_screen(path), tmp_path / "out", progress=events.append)
+    assert not any(e.message.startswith("ok:") for e in events)
 
 
 @pytest.mark.slow

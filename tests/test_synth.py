@@ -98,7 +98,7 @@ def test_an_interrupted_twin_dataset_resumes_from_its_cache(tmp_path, monkeypatc
     calls = []
 
     def dies_on_the_third(job):
-        calls.append(job["run_id"])
+        calls.append(job.run_id)
         if len(calls) == 3:
             raise KeyboardInterrupt
         return real(job)
@@ -118,7 +118,8 @@ def test_an_interrupted_twin_dataset_resumes_from_its_cache(tmp_path, monkeypatc
         seed=5,
         progress=seen.append,
     )
-    assert sum("from the cache" in m for m in seen) == 2 and len(seen) == 3
+    assert sum("from the cache" in e.message for e in seen) == 2 and len(seen) == 3
+    assert [(e.job, e.done, e.total) for e in seen] == [("synth", k, 3) for k in (1, 2, 3)]
     assert not (tmp_path / "d" / ".twin-runs").exists()
     fresh = make_twin_dataset(
         tmp_path / "e", [TestCase("E1", "BW", 1)], {}, settings=settings, seed=5

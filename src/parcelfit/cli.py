@@ -6,23 +6,41 @@ import json
 import os
 import sys
 from collections.abc import Callable
-from functools import wraps
 from pathlib import Path
-from typing import Annotated, Any, TypeVar
+from typing import Annotated, Any
 
+import click
 import typer
 from rich.console import Console
 from rich.markup import escape
 from rich.progress import Progress, TimeElapsedColumn
 from rich.table import Table
 from rich.text import Text
+from typer.core import TyperGroup
 
 from parcelfit import __version__
 from parcelfit.errors import ParcelfitError
+from parcelfit.progress import ProgressCallback, ProgressEvent
+
+
+class _Commands(TyperGroup):
+    """The command group. Errors are handled here, once for every command: a `ParcelfitError`
+    is shown as one red message and exits with status 2, without a traceback."""
+
+    def invoke(self, ctx: click.Context) -> Any:
+        try:
+            return super().invoke(ctx)
+        except ParcelfitError as exc:
+            # user text (paths, keys, run ids) is printed as it is, never read as Rich markup
+            message = Text.assemble(("error:", "bold red"), " ", str(exc))
+            err_console.print(message, highlight=False, soft_wrap=True)
+            raise typer.Exit(code=2) from None
+
 
 app = typer.Typer(
     name="parcelfit",
     help="Calibrate physics simulations of parcels with flexible packaging against tracked experiments.",
+    cls=_Commands,
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
@@ -31,52 +49,33 @@ app = typer.Typer(
 )
 console = Console()
 err_console = Console(stderr=True)
-F = TypeVar("F", bound=Callable[..., Any])
 TIMESTEP_S = 1.0 / 600.0  # the default simulation time step [s]
 
 
-def _progress(status: Any, prefix: str) -> Callable[[str], None]:
+def _progress(status: Any, prefix: str) -> ProgressCallback:
     """A progress callback for a long job: on a terminal it updates the spinner's line; when
     the output goes to a log or CI (where the spinner shows nothing) it prints one line per
     event, i.e. per finished evaluation."""
 
-    def say(message: str) -> None:
+    def say(event: ProgressEvent) -> None:
         if console.is_terminal:
-            status.update(f"{prefix}{message}")
+            status.update(f"{prefix}{event.message}")
         else:
-            console.print(Text(f"{prefix}{message}"), highlight=False)
+            console.print(Text(f"{prefix}{event.message}"), highlight=False)
 
     return say
-
-
-def friendly_errors(func: F) -> F:
-    """Show a `ParcelfitError` as one red message and exit with status 2, without a traceback."""
-
-    @wraps(func)
-    def wrapper(*args: Any, **kwargs: Any) -> Any:
-        try:
-            return func(*args, **kwargs)
-        except ParcelfitError as exc:
-            # user text (paths, keys, run ids) is printed as it is, never read as Rich markup
-            message = Text.assemble(("error:", "bold red"), " ", str(exc))
-            err_console.print(message, highlight=False, soft_wrap=True)
-            raise typer.Exit(code=2) from None
-
-    return wrapper  # type: ignore[return-value]
 
 
 DatasetArg = Annotated[Path, typer.Argument(help="Dataset folder (holding dataset.yaml).")]
 
 
 @app.command()
-@friendly_errors
 def version() -> None:
     """Print parcelfit's version."""
     console.print(f"parcelfit {__version__}")
 
 
 @app.command()
-@friendly_errors
 def reference(
     dataset: DatasetArg,
     as_json: Annotated[bool, typer.Option("--json", help="Print machine-readable JSON.")] = False,
@@ -111,7 +110,6 @@ def reference(
 
 
 @app.command()
-@friendly_errors
 def stats(
     dataset: DatasetArg,
     out: Annotated[Path, typer.Option("--out", help="Folder for tables and box plots.")] = Path(
@@ -172,8 +170,16 @@ def _print_tests(tests: Any) -> None:
     console.print(table)
 
 
+ExecutorOption = Annotated[
+    str | None,
+    typer.Option(
+        help="Where simulations run: serial (in this process, one at a time; for debugging) "
+        "or local (processes). Default: the file's executor, else local."
+    ),
+]
+
+
 @app.command()
-@friendly_errors
 def demo(
     out: Annotated[
         Path, typer.Option("--out", help="Folder for everything the demo writes.")
@@ -184,6 +190,7 @@ def demo(
     full: Annotated[
         bool, typer.Option("--full", help="The full published protocol (slower).")
     ] = False,
+    executor: ExecutorOption = None,
     workers: Annotated[
         int | None, typer.Option(min=1, help="Worker processes (default: one per core).")
     ] = None,
@@ -195,65 +202,71 @@ def demo(
     calibration with validation, and the HTML report. Rerunning resumes."""
     import time
 
-    from parcelfit.analysis import reference_runs, transit_statistics, write_reference_runs
-    from parcelfit.demo import PROFILES, demo_dataset, run_stricter_example, write_demo_files
-    from parcelfit.optimize.screening import load_screen, run_screen
+    from parcelfit.demo import STAGES, Demo
     from parcelfit.optimize.study import load_study
-    from parcelfit.report import build_report, verdict_text
-    from parcelfit.runs import load_dataset
 
     if quick and full:
         raise ParcelfitError("--quick and --full exclude each other", fix="choose one")
-    profile = PROFILES["quick" if quick else "full" if full else "default"]
+    _check_executor(executor, ("serial", "local"))
     t0 = time.perf_counter()
-    path = demo_dataset()
+    d = Demo(
+        out,
+        "quick" if quick else "full" if full else "default",
+        executor=executor,
+        workers=workers,
+        animation=animation,
+    )
+
+    def rule(k: int, extra: str = "") -> None:
+        console.rule(f"{k}/{len(STAGES)} {STAGES[k - 1]}{extra}")
+
     with console.status("loading the bundled twin dataset"):
-        ds = load_dataset(path)
+        ds = d.dataset
     _print_dataset(ds)
-    console.rule("1/6 transit-time statistics")
+    rule(1)
     with console.status("Mann-Whitney U tests"):
-        result = transit_statistics(ds, out / "stats")
+        result = d.statistics()
     sig = result.tests[result.tests["significant"]]
     console.print(
         f"{len(sig)} of {len(result.tests)} consignment pairs differ significantly; "
         f"box plots in {out / 'stats'}"
     )
-    console.rule("2/6 reference runs")
+    rule(2)
     with console.status("DTW distance matrices"):
-        selections = reference_runs(ds)
+        selections = d.reference_runs()
     table = Table(title="Reference run per test case", title_justify="left")
     for col in ("test case", "reference run", "runs"):
         table.add_column(col)
     for s in selections.values():
         table.add_row(s.case.label, s.reference_id, str(len(s.run_ids)))
     console.print(table)
-    write_reference_runs(selections, ds, out / "reference_runs.json")
-    screen_file, study_file = write_demo_files(out, profile, path)
-    console.rule(f"3/6 screening (profile {profile.name})")
+    rule(3, f" (profile {d.profile.name})")
     with console.status("screening") as status_line:
-        stages, selection = run_screen(
-            load_screen(screen_file),
-            out / "screen",
-            workers=workers,
-            on_event=_progress(status_line, "screening: "),
-        )
+        stages, selection = d.screen(_progress(status_line, "screening: "))
     _print_screen(stages, selection)
-    console.rule("4/6 calibration of E3 KP/BW (setting 1, validation at setting 2)")
-    _calibrate_live(load_study(study_file), out / "calibration", workers=workers)
-    console.rule("5/6 the stricter validation criterion")
+    rule(4)
+    _calibrate_live(d.calibration, load_study(d.files[1]).name, out / "calibration")
+    rule(5)
     with console.status("simulating the polybag example"):
-        example = run_stricter_example(out, path)
+        example = d.stricter_example()
     console.print(example["description"])
-    console.rule("6/6 report")
+    rule(6)
     with console.status("report") as status_line:
-        report = build_report(out, animation=animation, progress=_progress(status_line, "report: "))
+        report = d.report(_progress(status_line, "report: "))
     minutes = (time.perf_counter() - t0) / 60
     console.print(f"[bold green]report:[/] {escape(str(report.resolve()))}")
-    console.print(f"[bold]verdict:[/] {verdict_text(out)} ({minutes:.1f} min)")
+    console.print(f"[bold]verdict:[/] {d.verdict()} ({minutes:.1f} min)")
+
+
+def _check_executor(kind: str | None, kinds: tuple[str, ...]) -> None:
+    """A clear error for an --executor that this command cannot use."""
+    if kind is not None and kind not in kinds:
+        raise ParcelfitError(
+            f"unknown executor {kind!r} for this command", fix=f"use {' or '.join(kinds)}"
+        )
 
 
 @app.command()
-@friendly_errors
 def report(
     folder: Annotated[
         Path, typer.Argument(help="A study folder, or a folder holding calibration/ (the demo's).")
@@ -288,10 +301,16 @@ def report(
 
 
 @app.command()
-@friendly_errors
 def synth(
     spec: Annotated[Path, typer.Argument(help="Twin specification YAML (cases, truth, settings).")],
     out: Annotated[Path, typer.Option("--out", help="Folder for the dataset.")] = Path("twin"),
+    executor: Annotated[
+        str | None,
+        typer.Option(
+            help="serial (in this process, for debugging) or local (processes; the default "
+            "for more than one worker)."
+        ),
+    ] = None,
     workers: Annotated[
         int, typer.Option("--workers", min=1, help="Processes simulating in parallel.")
     ] = max(1, os.cpu_count() or 1),
@@ -299,18 +318,21 @@ def synth(
     """Make a SYNTHETIC twin-experiment dataset from hidden true parameters (and truth.yaml)."""
     from parcelfit.synth import load_twin_spec, make_twin_dataset
 
+    _check_executor(executor, ("serial", "local"))
     tw = load_twin_spec(spec)
     total = len(tw.cases) * tw.settings.runs
+    serial = executor == "serial" or (executor is None and workers <= 1)
+    where = "in this process" if serial else f"on {workers} processes"
     console.print(
         f"[bold]twin dataset[/] {tw.name}: {len(tw.cases)} test cases x {tw.settings.runs} runs "
-        f"on {workers} processes [yellow](SYNTHETIC)[/]"
+        f"{where} [yellow](SYNTHETIC)[/]"
     )
     with Progress(*Progress.get_default_columns(), TimeElapsedColumn(), console=console) as bar:
         task = bar.add_task("simulating twin runs", total=total)
 
-        def step(message: str) -> None:
-            bar.advance(task)
-            bar.console.print(Text(f"  {message}"), highlight=False)
+        def step(event: ProgressEvent) -> None:
+            bar.update(task, completed=event.done)
+            bar.console.print(Text(f"  {event.message}"), highlight=False)
 
         path = make_twin_dataset(
             out,
@@ -320,6 +342,7 @@ def synth(
             seed=tw.seed,
             name=tw.name,
             workers=workers,
+            executor=executor,
             progress=step,
         )
     truth_file = path.parent / "truth.yaml"
@@ -331,7 +354,6 @@ def _frame_bar() -> Progress:
 
 
 @app.command()
-@friendly_errors
 def track(
     video: Annotated[Path, typer.Argument(help="A top-down video of one run.")],
     tags: Annotated[Path, typer.Option("--tags", help="The tag map (YAML).")],
@@ -399,7 +421,6 @@ def track(
 
 
 @app.command("track-all")
-@friendly_errors
 def track_all_command(
     folder: Annotated[
         Path, typer.Argument(help="Folder of videos named RIG-CONS-SETTING-RUN.mp4.")
@@ -444,7 +465,6 @@ def track_all_command(
 
 
 @app.command("camera-calibrate")
-@friendly_errors
 def camera_calibrate(
     video: Annotated[Path, typer.Argument(help="A video of a checkerboard moved around the view.")],
     tags: Annotated[
@@ -487,7 +507,6 @@ def camera_calibrate(
 
 
 @app.command()
-@friendly_errors
 def simulate(
     rig: Annotated[
         str, typer.Option(help="Bundled rig name (E1, E2a, E2b, E3) or a rig .yaml file.")
@@ -668,7 +687,6 @@ def _simulate_ensemble(
 
 
 @app.command()
-@friendly_errors
 def rigs() -> None:
     """List the bundled test rigs with their speed settings."""
     from parcelfit.sim.mujoco import bundled_rig_names, load_rig
@@ -707,7 +725,6 @@ def rigs() -> None:
 
 
 @app.command()
-@friendly_errors
 def params(
     consignment: Annotated[
         str, typer.Option(help="Consignment type (or .yaml) whose parameters to list.")
@@ -740,7 +757,6 @@ def params(
 
 
 @app.command()
-@friendly_errors
 def calibrate(
     study_file: Annotated[Path, typer.Argument(help="Study file (YAML).")],
     out: Annotated[
@@ -748,7 +764,11 @@ def calibrate(
         typer.Option(help="Study folder (default: next to the study file, named after it)."),
     ] = None,
     executor: Annotated[
-        str | None, typer.Option(help="local or dask (default: the study file's).")
+        str | None,
+        typer.Option(
+            help="serial (in this process, for debugging), local (processes) or dask "
+            "(default: the study file's, else local)."
+        ),
     ] = None,
     scheduler: Annotated[
         str | None, typer.Option(help="Dask scheduler address, e.g. tcp://HOST:8786.")
@@ -758,35 +778,42 @@ def calibrate(
     ] = None,
 ) -> None:
     """Calibrate by batch Bayesian optimisation; rerunning the same command resumes the study."""
+    from parcelfit.optimize.calibration import Calibration
     from parcelfit.optimize.study import load_study
 
+    _check_executor(executor, ("serial", "local", "dask"))
     study = load_study(study_file)
     folder = out or study_file.parent / study_file.stem
-    _calibrate_live(study, folder, executor=executor, scheduler=scheduler, workers=workers)
+
+    def run(progress: ProgressCallback) -> Any:
+        calibration = Calibration(
+            study,
+            folder,
+            executor=executor,
+            scheduler=scheduler,
+            workers=workers,
+            progress=progress,
+        )
+        return calibration.run()
+
+    _calibrate_live(run, study.name, folder)
 
 
-def _calibrate_live(
-    study: Any,
-    folder: Path,
-    *,
-    executor: str | None = None,
-    scheduler: str | None = None,
-    workers: int | None = None,
-) -> Any:
-    """Run a calibration with a live status table, print the best parameters, write figures."""
+def _calibrate_live(run: Callable[[ProgressCallback], Any], name: str, folder: Path) -> Any:
+    """Run a calibration (``run(progress)``) with a live status table; then print how it
+    stopped, the recommended parameters and where its figures are."""
     from rich.live import Live
 
-    from parcelfit.optimize.calibration import STORE_FILE, Calibration, study_status
-    from parcelfit.optimize.calibration import Progress as CalibrationProgress
+    from parcelfit.optimize.calibration import STORE_FILE, study_status
     from parcelfit.optimize.folderlock import check_writable
 
     check_writable(folder, (STORE_FILE,))  # before the live display starts
-    state: dict[str, CalibrationProgress | None] = {"p": None}
+    state: dict[str, ProgressEvent | None] = {"p": None}
 
     def render() -> Table:
         p = state["p"]
         table = Table(
-            title=Text(f"calibration {study.name} -> {folder}"),
+            title=Text(f"calibration {name} -> {folder}"),
             title_justify="left",
             show_header=False,
         )
@@ -799,7 +826,7 @@ def _calibrate_live(
             p.last_validation
         ]
         table.add_row("iteration", f"{p.iteration} (0 = initial design)")
-        table.add_row("evaluations", f"{p.done} done, {p.running} running, budget {p.budget}")
+        table.add_row("evaluations", f"{p.done} done, {p.running} running, budget {p.total}")
         table.add_row("best cost", "-" if p.best_cost is None else f"{p.best_cost:.4g}")
         table.add_row("last validation", verdict)
         table.add_row("last event", Text(p.message))
@@ -807,24 +834,17 @@ def _calibrate_live(
 
     with Live(render(), console=console, refresh_per_second=4, transient=False) as live:
 
-        def update(p: CalibrationProgress) -> None:
+        def update(p: ProgressEvent) -> None:
             state["p"] = p
             live.update(render())
             if not console.is_terminal:  # a log or CI: the table shows only at the end
                 best = "-" if p.best_cost is None else f"{p.best_cost:.4g}"
                 console.print(
-                    Text(f"{p.message} ({p.done}/{p.budget} evaluations, best cost {best})"),
+                    Text(f"{p.message} ({p.done}/{p.total} evaluations, best cost {best})"),
                     highlight=False,
                 )
 
-        result = Calibration(
-            study,
-            folder,
-            executor=executor,
-            scheduler=scheduler,
-            workers=workers,
-            on_progress=update,
-        ).run()
+        result = run(update)
     console.print()
     console.print(
         Text.assemble(
@@ -834,12 +854,8 @@ def _calibrate_live(
         )
     )
     _print_recommendation(study_status(folder))
-    from parcelfit.optimize.plots import study_figures
-
-    with console.status("figures"):
-        figures = study_figures(folder)
     console.print(
-        Text(f"figures in {folder / 'figures'} ({len(figures) // 2} figures, PNG and SVG)")
+        Text(f"figures in {folder / 'figures'} ({len(result.figures) // 2} figures, PNG and SVG)")
     )
     return result
 
@@ -890,12 +906,12 @@ def _print_params(params: dict[str, float], title: str) -> None:
 
 
 @app.command()
-@friendly_errors
 def screen(
     screen_file: Annotated[Path, typer.Argument(help="Screen file (YAML).")],
     out: Annotated[
         Path | None, typer.Option(help="Screen folder (default: next to the file, named after it).")
     ] = None,
+    executor: ExecutorOption = None,
     workers: Annotated[
         int | None, typer.Option(min=1, help="Local worker processes (default: one per core).")
     ] = None,
@@ -903,11 +919,16 @@ def screen(
     """Screen parameters: fractional -> full factorial designs, effects, Pareto charts, a selection."""
     from parcelfit.optimize.screening import load_screen, run_screen
 
+    _check_executor(executor, ("serial", "local"))
     spec = load_screen(screen_file)
     folder = out or screen_file.parent / screen_file.stem
     with console.status("screening") as status_line:
         stages, selection = run_screen(
-            spec, folder, workers=workers, on_event=_progress(status_line, "screening: ")
+            spec,
+            folder,
+            executor=executor,
+            workers=workers,
+            progress=_progress(status_line, "screening: "),
         )
     _print_screen(stages, selection)
     console.print(Text(f"results in {folder} (selection.yaml, stageN-effects.csv, Pareto charts)"))
@@ -940,7 +961,6 @@ def _print_screen(stages: Any, selection: dict[str, Any]) -> None:
 
 
 @app.command()
-@friendly_errors
 def status(
     study_dir: Annotated[Path, typer.Argument(help="Study folder (holding study.sqlite).")],
     as_json: Annotated[bool, typer.Option("--json", help="Print machine-readable JSON.")] = False,

@@ -11,21 +11,26 @@ Stages (each resumable: rerunning with the same ``--out`` continues where it sto
    published criteria but leaves the real runs' band (see `STRICTER_EXAMPLE`);
 6. the HTML report.
 
-The study and screen files are written into the output folder, so every stage can also be
-rerun by hand with `parcelfit screen` / `parcelfit calibrate` / `parcelfit report`.
+`Demo` holds the stages; `Demo.run` runs all six for a library user (with `ProgressEvent`
+callbacks), and ``parcelfit demo`` calls the same stages one by one to show each result. The
+study and screen files are written into the output folder, so every stage can also be rerun by
+hand with `parcelfit screen` / `parcelfit calibrate` / `parcelfit report`.
 """
 
 from __future__ import annotations
 
 import json
+import time
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
 import yaml
 
 from parcelfit.errors import ParcelfitError
-from parcelfit.runs import TestCase, load_dataset, write_trajectory
+from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
+from parcelfit.runs import Dataset, TestCase, load_dataset, write_trajectory
 from parcelfit.sim.params import CATALOGUE
 
 RIG, CONSIGNMENT = "E3", "KPBW"
@@ -163,11 +168,168 @@ def run_stricter_example(out: Path, dataset: Path) -> dict[str, Any]:
     return doc
 
 
+STAGES = (
+    "transit-time statistics",
+    "reference runs",
+    "screening",
+    "calibration of E3 KP/BW (setting 1, validation at setting 2)",
+    "the stricter validation criterion",
+    "report",
+)
+
+
+@dataclass(frozen=True)
+class DemoResult:
+    """Everything the demo made: the statistics, the reference runs, the screening's stages and
+    selection, the calibration, the stricter-criterion example, the report and its verdict, and
+    the wall time [min]."""
+
+    stats: Any
+    references: dict[TestCase, Any]
+    screen_stages: list[Any]
+    selection: dict[str, Any]
+    calibration: Any
+    example: dict[str, Any]
+    report: Path
+    verdict: str
+    minutes: float
+
+
+class Demo:
+    """The demo's six stages on the bundled SYNTHETIC twin dataset, writing into ``out``.
+
+    ``profile`` is quick, default or full (see `PROFILES`); ``executor`` (serial or local) and
+    ``workers`` choose where screening and calibration simulate (default: the files' local
+    processes, one per core); ``animation`` embeds an animation of the calibrated run in the
+    report. Each stage method can be called alone (in order: later stages read earlier files)
+    and resumes what an earlier run of the same folder left.
+    """
+
+    def __init__(
+        self,
+        out: str | Path = "parcelfit-demo",
+        profile: str = "default",
+        *,
+        executor: str | None = None,
+        workers: int | None = None,
+        animation: bool = True,
+    ) -> None:
+        if profile not in PROFILES:
+            raise ParcelfitError(f"unknown demo profile {profile!r}", fix=", ".join(PROFILES))
+        self.out = Path(out)
+        self.profile = PROFILES[profile]
+        self.executor = executor
+        self.workers = workers
+        self.animation = animation
+        self.path = demo_dataset()
+
+    @cached_property
+    def dataset(self) -> Dataset:
+        """The bundled twin dataset (loaded once)."""
+        return load_dataset(self.path)
+
+    @cached_property
+    def files(self) -> tuple[Path, Path]:
+        """The demo's ``screen.yaml`` and ``study.yaml`` (written on first use)."""
+        return write_demo_files(self.out, self.profile, self.path)
+
+    def statistics(self) -> Any:
+        """Stage 1: transit-time tests and box plots in ``out/stats``; the `StatsResult`."""
+        from parcelfit.analysis import transit_statistics
+
+        return transit_statistics(self.dataset, self.out / "stats")
+
+    def reference_runs(self) -> dict[TestCase, Any]:
+        """Stage 2: every test case's reference run, written to ``out/reference_runs.json``."""
+        from parcelfit.analysis import reference_runs, write_reference_runs
+
+        selections = reference_runs(self.dataset)
+        write_reference_runs(selections, self.dataset, self.out / "reference_runs.json")
+        return selections
+
+    def screen(self, progress: ProgressCallback | None = None) -> tuple[list[Any], dict[str, Any]]:
+        """Stage 3: the screening in ``out/screen``; its stages and selection."""
+        from parcelfit.optimize.screening import load_screen, run_screen
+
+        return run_screen(
+            load_screen(self.files[0]),
+            self.out / "screen",
+            executor=self.executor,
+            workers=self.workers,
+            progress=progress,
+        )
+
+    def calibration(self, progress: ProgressCallback | None = None) -> Any:
+        """Stage 4: the calibration in ``out/calibration`` (with its figures); its result."""
+        from parcelfit.optimize.calibration import Calibration
+        from parcelfit.optimize.study import load_study
+
+        return Calibration(
+            load_study(self.files[1]),
+            self.out / "calibration",
+            executor=self.executor,
+            workers=self.workers,
+            progress=progress,
+        ).run()
+
+    def stricter_example(self) -> dict[str, Any]:
+        """Stage 5: the polybag run that passes the published criteria and fails the band."""
+        return run_stricter_example(self.out, self.path)
+
+    def report(self, progress: ProgressCallback | None = None) -> Path:
+        """Stage 6: ``out/report.html``; its path."""
+        from parcelfit.report import build_report
+
+        return build_report(self.out, animation=self.animation, progress=progress)
+
+    def verdict(self) -> str:
+        """The report's one-line verdict."""
+        from parcelfit.report import verdict_text
+
+        return verdict_text(self.out)
+
+    def run(self, progress: ProgressCallback | None = None) -> DemoResult:
+        """Run (or resume) all six stages; ``progress`` gets a ``demo`` event as each stage
+        starts (``done`` of 6 finished) and the stages' own events."""
+        say = progress or ignore_progress
+        t0 = time.perf_counter()
+
+        def stage(k: int) -> None:
+            say(ProgressEvent("demo", f"{k}/{len(STAGES)} {STAGES[k - 1]}", k - 1, len(STAGES)))
+
+        stage(1)
+        stats = self.statistics()
+        stage(2)
+        references = self.reference_runs()
+        stage(3)
+        screen_stages, selection = self.screen(progress)
+        stage(4)
+        calibration = self.calibration(progress)
+        stage(5)
+        example = self.stricter_example()
+        stage(6)
+        report = self.report(progress)
+        return DemoResult(
+            stats,
+            references,
+            screen_stages,
+            selection,
+            calibration,
+            example,
+            report,
+            self.verdict(),
+            (time.perf_counter() - t0) / 60,
+        )
+
+
 __all__ = [
     "CALIBRATED",
     "PROFILES",
+    "STAGES",
     "STRICTER_EXAMPLE",
+    "Demo",
     "DemoProfile",
+    "DemoResult",
     "demo_dataset",
     "run_stricter_example",
     "write_demo_files",

@@ -14,19 +14,18 @@ experiments do (method.md sections 2 and 3):
 The truth (parameters in the catalogue's units, and every setting above) is written beside the
 dataset as ``truth.yaml``; the dataset is marked ``synthetic: true``.
 
-Every finished run is stored at once in ``<folder>/.twin-runs/`` (keyed by its job), so an
-interrupted generation resumes where it stopped; the folder is removed when the dataset is
-complete.
+The runs are `TwinJob` objects simulated through the same executors as calibration and
+screening (`parcelfit.optimize.executors`: serial in this process, or local processes). Every
+finished run is stored at once in ``<folder>/.twin-runs/`` (keyed by its job), so an interrupted
+generation resumes where it stopped; the folder is removed when the dataset is complete.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-import multiprocessing
 import shutil
-from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Annotated, Any
@@ -37,6 +36,8 @@ from pydantic import BeforeValidator, Field, PlainValidator
 
 from parcelfit.config import load_yaml
 from parcelfit.errors import ParcelfitError
+from parcelfit.optimize.executors import make_executor
+from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.runs import (
     Box,
     CaseData,
@@ -48,7 +49,7 @@ from parcelfit.runs import (
     write_trajectory,
 )
 from parcelfit.schema import FileModel, Number, Text, Whole, keys_in, or_default, parse
-from parcelfit.sim.mujoco import MujocoSimulator, SceneOptions, SimOptions
+from parcelfit.sim.mujoco import Consignment, MujocoSimulator, Rig, SceneOptions, SimOptions
 from parcelfit.sim.params import CATALOGUE, resolve
 
 
@@ -79,12 +80,42 @@ def _specimen(
     return out
 
 
-def _twin_run(job: dict[str, Any]) -> tuple[Run, float]:
-    """Simulate one twin run in a worker process; returns the noisy run and its wall time [s]."""
-    s: TwinSettings = job["settings"]
-    rng = np.random.default_rng(job["seed"])
-    rig, cons, case = job["rig"], job["consignment"], job["case"]
-    params = _specimen(job["truth"], rng, s)
+@dataclass(frozen=True)
+class TwinJob:
+    """One twin run to simulate: its id and test case, the rig and consignment, the true
+    parameters (SI), how real-like it is, and its own random stream."""
+
+    run_id: str
+    case: TestCase
+    rig: Rig
+    consignment: Consignment
+    truth: Mapping[str, float]
+    settings: TwinSettings
+    seed: np.random.SeedSequence
+
+    @property
+    def key(self) -> str:
+        """A short hash of everything the run depends on: its name in the cache."""
+        text = repr(
+            (
+                asdict(self.settings),
+                self.case.label,
+                sorted(self.truth.items()),
+                self.seed.entropy,
+                self.seed.spawn_key,
+                self.rig,
+                self.consignment,
+            )
+        )
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _twin_run(job: TwinJob) -> tuple[Run, float]:
+    """Simulate one twin run; returns the noisy run and its wall time [s]."""
+    s = job.settings
+    rng = np.random.default_rng(job.seed)
+    rig, cons = job.rig, job.consignment
+    params = _specimen(job.truth, rng, s)
     drives = sorted({d for sp in rig.speeds.values() for d in sp})
     scene = SceneOptions(
         spacing=s.real_spacing,
@@ -99,11 +130,10 @@ def _twin_run(job: dict[str, Any]) -> tuple[Run, float]:
     twin = MujocoSimulator(
         SimOptions(scene=scene), rigs={rig.name: rig}, consignments={cons.name: cons}
     )
-    run_id = job["run_id"]
-    res = twin.run(params, case, run_id=run_id)
+    res = twin.run(params, job.case, run_id=job.run_id)
     if not res.ok or res.run is None:
         raise ParcelfitError(
-            f"twin run {run_id} ended {res.status.value}: {res.diagnostics.get('message')}"
+            f"twin run {job.run_id} ended {res.status.value}: {res.diagnostics.get('message')}"
         )
     tr = res.run.trajectory
     n = len(tr)
@@ -113,7 +143,38 @@ def _twin_run(job: dict[str, Any]) -> tuple[Run, float]:
         y=tr.y + rng.normal(0, s.tracking_sd, n),
         theta=tr.theta + rng.normal(0, s.heading_sd, n),
     )
-    return Run(run_id, case, noisy, res.run.transit_time), res.wall_time
+    return Run(job.run_id, job.case, noisy, res.run.transit_time), res.wall_time
+
+
+class _RunCache:
+    """Finished twin runs in ``folder`` (a CSV and a JSON per run, named by run id and job
+    key), written the moment each run exists, so a crash or Ctrl-C loses nothing."""
+
+    def __init__(self, folder: Path) -> None:
+        self.folder = folder
+        folder.mkdir(parents=True, exist_ok=True)
+
+    def _base(self, job: TwinJob) -> Path:
+        return self.folder / f"{job.run_id}-{job.key}"
+
+    def get(self, job: TwinJob) -> Run | None:
+        """The cached run of ``job``, or None."""
+        base = self._base(job)
+        csv, meta = base.with_suffix(".csv"), base.with_suffix(".json")
+        if not (meta.is_file() and csv.is_file()):
+            return None
+        transit = json.loads(meta.read_text())["transit_time"]
+        return Run(job.run_id, job.case, read_trajectory(csv), transit)
+
+    def put(self, job: TwinJob, run: Run) -> None:
+        """Store a finished run (the trajectory first, then the JSON that marks it complete)."""
+        base = self._base(job)
+        write_trajectory(run.trajectory, base.with_suffix(".csv"))
+        base.with_suffix(".json").write_text(json.dumps({"transit_time": run.transit_time}))
+
+    def remove(self) -> None:
+        """Delete the cache (the dataset is complete)."""
+        shutil.rmtree(self.folder, ignore_errors=True)
 
 
 def make_twin_dataset(
@@ -125,20 +186,25 @@ def make_twin_dataset(
     seed: int = 0,
     name: str = "twin",
     workers: int = 1,
-    progress: Callable[[str], None] | None = None,
+    executor: str | None = None,
+    progress: ProgressCallback | None = None,
 ) -> Path:
     """Simulate ``settings.runs`` real-like runs per test case; returns the dataset.yaml path.
 
     ``truth_user`` maps a consignment type to its true parameters in the catalogue's units; the
-    others take their defaults. Every run draws from its own child of ``seed``, so the dataset is
-    the same whatever ``workers`` (processes) is.
+    others take their defaults. ``executor`` is serial (in this process) or local (``workers``
+    processes); by default serial for one worker, local for more. Every run draws from its own
+    child of ``seed``, so the dataset is the same whatever the executor. Finished runs are kept
+    in ``<folder>/.twin-runs/`` until the dataset is complete: rerunning resumes.
     """
     s = settings or TwinSettings()
     if s.runs < 1:
         raise ParcelfitError("a twin dataset needs at least one run per test case", fix="runs >= 1")
+    if executor not in (None, "serial", "local"):
+        raise ParcelfitError(f"unknown executor {executor!r} for synth", fix="serial or local")
     sim = MujocoSimulator()
     truth_si: dict[str, dict[str, float]] = {}
-    jobs: list[dict[str, Any]] = []
+    jobs: list[TwinJob] = []
     seeds = np.random.SeedSequence(seed).spawn(len(cases) * s.runs)
     for i, case in enumerate(cases):
         cons = sim.consignment(case.consignment)
@@ -148,71 +214,41 @@ def make_twin_dataset(
             )
         rig = sim.rig(case.rig)
         for k in range(s.runs):
+            run_id = f"{case.rig}-{case.consignment}-{case.speed_setting}-{k + 1:02d}"
             jobs.append(
-                {
-                    "settings": s,
-                    "seed": seeds[i * s.runs + k],
-                    "rig": rig,
-                    "consignment": cons,
-                    "case": case,
-                    "truth": truth_si[case.consignment],
-                    "run_id": f"{case.rig}-{case.consignment}-{case.speed_setting}-{k + 1:02d}",
-                }
+                TwinJob(
+                    run_id, case, rig, cons, truth_si[case.consignment], s, seeds[i * s.runs + k]
+                )
             )
+    say = progress or ignore_progress
     results: dict[str, Run] = {}
-    # every finished run is kept in a cache folder at once, so a crash or Ctrl-C loses nothing:
-    # rerunning the same command reuses the runs whose job (spec, seed, run) is unchanged
-    cache = Path(folder) / ".twin-runs"
-    cache.mkdir(parents=True, exist_ok=True)
+    cache = _RunCache(Path(folder) / ".twin-runs")
 
-    def key(job: dict[str, Any]) -> str:
-        text = repr(
-            (
-                asdict(s),
-                job["case"].label,
-                sorted(job["truth"].items()),
-                job["seed"].entropy,
-                job["seed"].spawn_key,
-                job["rig"],
-                job["consignment"],
+    def done(run: Run, how: str) -> None:
+        results[run.id] = run
+        say(
+            ProgressEvent(
+                "synth", f"{run.id}: {how} ({len(results)}/{len(jobs)})", len(results), len(jobs)
             )
         )
-        return hashlib.sha256(text.encode()).hexdigest()[:16]
-
-    def done(run: Run, wall: float, job: dict[str, Any], cached: bool = False) -> None:
-        results[run.id] = run
-        if not cached:
-            base = cache / f"{run.id}-{job['key']}"
-            write_trajectory(run.trajectory, base.with_suffix(".csv"))
-            base.with_suffix(".json").write_text(json.dumps({"transit_time": run.transit_time}))
-        if progress:
-            how = "from the cache" if cached else f"{wall:.1f} s"
-            progress(f"{run.id}: {how} ({len(results)}/{len(jobs)})")
 
     todo = []
     for job in jobs:
-        job["key"] = key(job)
-        base = cache / f"{job['run_id']}-{job['key']}"
-        if base.with_suffix(".json").is_file() and base.with_suffix(".csv").is_file():
-            meta = json.loads(base.with_suffix(".json").read_text())
-            run = Run(
-                job["run_id"],
-                job["case"],
-                read_trajectory(base.with_suffix(".csv")),
-                meta["transit_time"],
-            )
-            done(run, 0.0, job, cached=True)
-        else:
+        cached = cache.get(job)
+        if cached is None:
             todo.append(job)
-    if workers <= 1:
-        for job in todo:
-            done(*_twin_run(job), job)
-    else:
-        ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-            futures = {pool.submit(_twin_run, job): job for job in todo}
-            for fut in as_completed(futures):
-                done(*fut.result(), futures[fut])
+        else:
+            done(cached, "from the cache")
+    kind = executor or ("local" if workers > 1 else "serial")
+    with make_executor(kind, workers=workers) as pool:
+        for i, out in pool.map(_twin_run, todo):
+            if isinstance(out.exception, ParcelfitError):
+                raise out.exception  # the twin run itself failed (unstable, timed out)
+            if out.value is None:
+                raise ParcelfitError(f"twin run {todo[i].run_id} could not run: {out.error}")
+            run, wall = out.value
+            cache.put(todo[i], run)
+            done(run, f"{wall:.1f} s")
     out_cases = []
     for case in cases:
         rig = sim.rig(case.rig)
@@ -246,7 +282,7 @@ def make_twin_dataset(
     (Path(folder) / "truth.yaml").write_text(
         yaml.safe_dump(truth_doc, sort_keys=False), encoding="utf-8"
     )
-    shutil.rmtree(cache, ignore_errors=True)  # the dataset is complete
+    cache.remove()  # the dataset is complete
     return path
 
 
@@ -316,4 +352,4 @@ def load_twin_spec(path: str | Path) -> TwinSpec:
     return TwinSpec(f.name, tuple(f.cases), truth, TwinSettings(**f.settings.model_dump()), f.seed)
 
 
-__all__ = ["TwinSettings", "TwinSpec", "load_twin_spec", "make_twin_dataset"]
+__all__ = ["TwinJob", "TwinSettings", "TwinSpec", "load_twin_spec", "make_twin_dataset"]

@@ -17,21 +17,22 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.metrics import ReferenceSelection, calibration_cost, select_reference, validate
-from parcelfit.optimize.executors import DaskExecutor, LocalExecutor, Task
+from parcelfit.optimize.executors import Executor, Task, make_executor
 from parcelfit.optimize.folderlock import check_writable, lock_folder
 from parcelfit.optimize.sampler import make_sampler
 from parcelfit.optimize.store import Evaluation, Store
 from parcelfit.optimize.study import Study
+from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.runs import TestCase, is_synthetic, load_dataset, write_trajectory
 from parcelfit.sim.factory import make_simulator
-from parcelfit.sim.protocol import SimResult, Simulator
+from parcelfit.sim.protocol import SimResult
 
 STORE_FILE = "study.sqlite"
 LOST_WORKER_MESSAGES = (
@@ -42,23 +43,11 @@ LOST_WORKER_MESSAGES = (
 
 
 @dataclass(frozen=True)
-class Progress:
-    """What the loop reports after every result."""
-
-    iteration: int
-    done: int
-    running: int
-    budget: int
-    best_cost: float | None
-    last_validation: bool | None
-    message: str
-
-
-@dataclass(frozen=True)
 class CalibrationResult:
     """Outcome of a study: the recommended parameters (SI) and their cost, the number of fitting
     evaluations, the last iteration (0 = the initial design, k >= 1 the k-th optimiser batch;
-    None before any), the validation verdict, why it stopped."""
+    None before any), the validation verdict, why it stopped, the study figures written (PNG
+    and SVG in ``folder/figures``)."""
 
     best_params: dict[str, float] | None
     best_cost: float | None
@@ -67,6 +56,7 @@ class CalibrationResult:
     validated: bool | None
     stop_reason: str
     folder: Path
+    figures: tuple[Path, ...] = ()
 
 
 def record_result(
@@ -105,25 +95,25 @@ def record_result(
 
 def _executor(
     study: Study,
-    simulator: Simulator,
     executor: str | None,
     scheduler: str | None,
     workers: int | None,
-) -> LocalExecutor | DaskExecutor:
-    kind = executor or study.executor.get("kind", "local")
-    if kind == "dask":
-        address = scheduler or study.executor.get("scheduler")
-        if not address:
-            raise ParcelfitError(
-                "the dask executor needs a scheduler address",
-                fix="pass --scheduler tcp://HOST:8786",
-            )
-        return DaskExecutor(simulator, address)
-    return LocalExecutor(simulator, workers or study.executor.get("workers"))
+) -> Executor:
+    """The executor the command line (first) or the study file asks for; local by default."""
+    return make_executor(
+        executor or study.executor.get("kind", "local"),
+        workers=workers or study.executor.get("workers"),
+        scheduler=scheduler or study.executor.get("scheduler"),
+    )
 
 
 class Calibration:
-    """One study folder: its store, references, optimiser and executor (see the module doc)."""
+    """One study folder: its store, references, optimiser and executor (see the module doc).
+
+    ``executor`` (serial, local or dask), ``scheduler`` and ``workers`` override the study
+    file's ``executor``; ``progress`` receives a `ProgressEvent` after every result; with
+    ``figures`` the study figures (`parcelfit.optimize.plots.study_figures`) are written when
+    the study stops."""
 
     def __init__(
         self,
@@ -133,9 +123,11 @@ class Calibration:
         executor: str | None = None,
         scheduler: str | None = None,
         workers: int | None = None,
-        on_progress: Callable[[Progress], None] | None = None,
+        progress: ProgressCallback | None = None,
+        figures: bool = True,
     ) -> None:
         self.study = study
+        self.figures = figures
         self.folder = Path(folder)
         check_writable(self.folder, (STORE_FILE,))
         try:
@@ -209,7 +201,7 @@ class Calibration:
             record["bo_settings"] = None if settings is None else dataclasses.asdict(settings)
             self.store.set_meta("study", record)
         self._executor_args = (executor, scheduler, workers)
-        self.on_progress = on_progress or (lambda p: None)
+        self.progress = progress or ignore_progress
         self.last_validation: bool | None = None
 
     def close(self) -> None:
@@ -224,15 +216,16 @@ class Calibration:
     def _report(self, iteration: int, running: int, message: str) -> None:
         best = self.bo.best()
         done = self.bo.n_told  # every finished evaluation is told exactly once
-        self.on_progress(
-            Progress(
-                iteration,
-                done,
-                running,
-                self.study.budget,
-                None if best is None else best[1],
-                self.last_validation,
+        self.progress(
+            ProgressEvent(
+                "calibration",
                 message,
+                done=done,
+                total=self.study.budget,
+                iteration=iteration,
+                running=running,
+                best_cost=None if best is None else best[1],
+                last_validation=self.last_validation,
             )
         )
 
@@ -248,18 +241,18 @@ class Calibration:
         )
         self.bo.tell(row.params, outcome["cost"] if outcome["status"] == "ok" else None)
 
-    def _run_rows(self, rows: list[Evaluation], executor: LocalExecutor | DaskExecutor) -> None:
+    def _run_rows(self, rows: list[Evaluation], executor: Executor) -> None:
         tasks = [
             Task(self._full_params(r.params), self.fit_case, f"fit-{r.iteration:03d}-{r.slot:02d}")
             for r in rows
         ]
         remaining = len(rows)
-        for i, result in executor.run(tasks):
+        for i, result in executor.simulate(self.simulator, tasks):
             self._record_fit(rows[i], result)
             remaining -= 1
             self._report(rows[i].iteration, remaining, f"{result.status.value}: {tasks[i].run_id}")
 
-    def _validate(self, iteration: int, executor: LocalExecutor | DaskExecutor) -> bool | None:
+    def _validate(self, iteration: int, executor: Executor) -> bool | None:
         best = self.bo.recommend()
         if best is None or self.val_case is None or self.val_reference is None:
             return None
@@ -274,12 +267,12 @@ class Calibration:
         row_id: int,
         iteration: int,
         params: Mapping[str, float],
-        executor: LocalExecutor | DaskExecutor,
+        executor: Executor,
     ) -> bool:
         """Simulate a stored (pending) validation row and record its verdict."""
         assert self.val_case is not None and self.val_reference is not None
         task = Task(self._full_params(params), self.val_case, f"validation-{iteration:03d}")
-        ((_, result),) = list(executor.run([task]))
+        ((_, result),) = list(executor.simulate(self.simulator, [task]))
         details: dict[str, Any] = {"message": result.diagnostics.get("message")}
         passed = False
         run_file = None
@@ -344,11 +337,18 @@ class Calibration:
     # -- the loop ----------------------------------------------------------------------------
     def run(self) -> CalibrationResult:
         """Run (or resume) the study until validation passes or the budget is spent; then close
-        the store and release the folder."""
+        the store, release the folder and write the study figures."""
         try:
-            return self._run()
+            result = self._run()
         finally:
             self.close()
+        if self.figures:
+            from parcelfit.optimize.plots import study_figures
+
+            last = result.last_iteration
+            self._report(-1 if last is None else last, 0, "writing the study figures")
+            result = dataclasses.replace(result, figures=tuple(study_figures(self.folder)))
+        return result
 
     def _run(self) -> CalibrationResult:
         study = self.study
@@ -380,7 +380,7 @@ class Calibration:
         iteration = max((r.iteration for r in rows), default=-1)
         if (self._executor_args[0] or study.executor.get("kind")) == "dask":
             self._report(iteration, 0, "connecting to the Dask scheduler, waiting for a worker")
-        executor = _executor(study, self.simulator, *self._executor_args)
+        executor = _executor(study, *self._executor_args)
         try:
             if already_passed:
                 # a finished study whose record lost fitting runs (a lost worker): complete the

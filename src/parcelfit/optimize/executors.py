@@ -1,38 +1,52 @@
-"""Where simulations run: a local process pool (default) or a Dask cluster.
+"""Where simulations run: one `Executor` over any ``concurrent.futures.Executor``.
 
-Both take a batch of tasks and yield ``(index, SimResult)`` in the order results arrive, so the
-loop can store each result the moment it exists. A task that raises becomes a ``failed``
-result; the loop never stops on one simulation.
+The same loop drives three pools, chosen by name with `make_executor` (``executor: {kind: ...}``
+in study and screen files, ``--executor`` on the command line):
 
-Local: ``concurrent.futures.ProcessPoolExecutor`` with the ``spawn`` start method (MuJoCo and
-numba are not fork-safe), one simulation per core. A worker that dies (a segfault, an
-out-of-memory kill) breaks the pool: the pool is recreated and the simulations it was running
-are started again, up to ``max_restarts`` times each (``worker_restarts`` in their
-diagnostics); only then is a simulation ``failed``. Workers die with the process that started
-them (`parcelfit.sim.lifetime.die_with_parent`). Dask: ``distributed.Client`` on a scheduler
-address; each task is retried up to twice if its worker dies, so a lost worker costs time, not
-results. A batch waits for its slowest member, as in the published method; workers beyond the
-batch size only help the initial design (16 simulations at once) and validation runs.
+* ``serial``: in this process, one task after the other (`SerialPool`); nothing is pickled,
+  so a simulator or a twin run can be stepped through in a debugger;
+* ``local`` (default): a ``ProcessPoolExecutor`` with the ``spawn`` start method (MuJoCo and
+  numba are not fork-safe), one simulation per core; workers die with the process that started
+  them (`parcelfit.sim.lifetime.die_with_parent`);
+* ``dask``: ``client.get_executor()`` of a ``distributed.Client`` on a scheduler address.
+
+`Executor.map` submits a batch and yields ``(index, Outcome)`` in the order results arrive, so
+a caller can store each result the moment it exists; `Executor.simulate` does the same for
+simulation `Task` objects and turns anything that went wrong into a ``failed`` `SimResult`
+(the loop never stops on one simulation).
+
+A worker that dies (a segfault, an out-of-memory kill) breaks a process pool: the pool is
+recreated and the tasks it was running are started again, up to ``max_restarts`` times each
+(``worker_restarts`` in their diagnostics); only then is a task failed. Dask retries a task
+itself (twice) when its worker dies. A Dask scheduler lost during a batch stops the run with a
+`ParcelfitError`: the evaluations in flight are not recorded (they stay ``pending`` in the store
+and run on resume). A batch waits for its slowest member, as in the published method.
 """
 
 from __future__ import annotations
 
+import concurrent.futures as cf
 import contextlib
 import inspect
 import multiprocessing
 import os
+import threading
 import time
 import traceback
-from collections.abc import Iterator, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
-from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass, replace
-from typing import Any
+from collections import deque
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from functools import partial
+from typing import Any, Generic, TypeVar
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import TestCase
 from parcelfit.sim.lifetime import die_with_parent
 from parcelfit.sim.protocol import SimResult, SimStatus, Simulator
+
+T = TypeVar("T")
+R = TypeVar("R")
+EXECUTOR_KINDS = ("serial", "local", "dask")
 
 
 @dataclass(frozen=True)
@@ -42,6 +56,18 @@ class Task:
     params: Mapping[str, float]
     case: TestCase
     run_id: str
+
+
+@dataclass(frozen=True)
+class Outcome(Generic[R]):
+    """What became of one task: its ``value``, or ``error`` (why there is none) and the
+    ``exception`` the task raised if it did, and how often its worker died before it finished
+    (``restarts``)."""
+
+    value: R | None
+    error: str | None = None
+    restarts: int = 0
+    exception: BaseException | None = field(default=None, compare=False, repr=False)
 
 
 def simulate_task(simulator: Simulator, task: Task) -> SimResult:
@@ -61,179 +87,306 @@ def simulate_task(simulator: Simulator, task: Task) -> SimResult:
         )
 
 
-class LocalExecutor:
-    """Simulations in a pool of local processes (default: one per core)."""
+class SerialPool(cf.Executor):
+    """A ``concurrent.futures.Executor`` that runs each call in this process when it is
+    submitted. ``KeyboardInterrupt`` and other non-``Exception`` errors propagate at once."""
+
+    def __init__(self) -> None:
+        self._shutdown = False
+        self._lock = threading.Lock()
+
+    def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> cf.Future[Any]:
+        """Run ``fn(*args, **kwargs)`` now; return a finished future holding its outcome."""
+        with self._lock:
+            if self._shutdown:
+                raise RuntimeError("cannot schedule new futures after shutdown")
+        future: cf.Future[Any] = cf.Future()
+        future.set_running_or_notify_cancel()
+        try:
+            result = fn(*args, **kwargs)
+        except Exception as exc:
+            future.set_exception(exc)
+        else:
+            future.set_result(result)
+        return future
+
+    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        """Refuse further calls (nothing runs in the background)."""
+        with self._lock:
+            self._shutdown = True
+
+
+class Executor:
+    """Tasks on a ``concurrent.futures.Executor`` (see the module docstring).
+
+    ``pool`` is the executor to use, or a function making one; with a function, a pool broken
+    by a dying worker is replaced by a new one and its tasks run again (up to ``max_restarts``
+    times each). ``window`` is how many tasks are submitted ahead of the results (None: all of
+    a batch at once; 1 for `SerialPool`, so each result is yielded before the next task runs).
+    ``lost`` tells, from an error, whether the pool itself is gone (it returns the error to stop
+    with, or None); ``explain`` words the error of a task that raised; ``on_close`` releases
+    what the pool depends on (a Dask client).
+    ``restarts`` counts the pools recreated after a worker died.
+    """
 
     def __init__(
-        self, simulator: Simulator, workers: int | None = None, max_restarts: int = 3
+        self,
+        pool: cf.Executor | Callable[[], cf.Executor],
+        *,
+        max_restarts: int = 3,
+        window: int | None = None,
+        lost: Callable[[BaseException], ParcelfitError | None] | None = None,
+        on_close: Callable[[], None] | None = None,
+        explain: Callable[[BaseException], str] | None = None,
     ) -> None:
-        self.simulator = simulator
-        self.workers = workers or os.cpu_count() or 1
+        self._make = None if isinstance(pool, cf.Executor) else pool
+        self._pool: cf.Executor = pool if isinstance(pool, cf.Executor) else pool()
         self.max_restarts = max_restarts
-        self.restarts = 0  # pools recreated after a worker died
-        self._pool = self._new_pool()
+        self.window = window
+        self._lost = lost or (lambda exc: None)
+        self._on_close = on_close
+        self._explain = explain or (lambda exc: f"worker failed: {exc!r}")
+        self.restarts = 0
 
-    def _new_pool(self) -> ProcessPoolExecutor:
-        return ProcessPoolExecutor(
-            max_workers=self.workers,
+    def map(self, fn: Callable[[T], R], items: Sequence[T]) -> Iterator[tuple[int, Outcome[R]]]:
+        """Run ``fn(item)`` for every item; yield ``(index, Outcome)`` as results arrive. An
+        exception in ``fn`` becomes an outcome with ``error``; a lost pool raises."""
+        deaths = [0] * len(items)
+        todo = list(range(len(items)))
+        while todo:
+            futures: dict[cf.Future[R], int] = {}
+            queue = deque(todo)
+            again: list[int] = []
+            broken = self._submit(fn, items, queue, futures, self.window or len(todo))
+            while futures:
+                finished, _ = cf.wait(futures, return_when=cf.FIRST_COMPLETED)
+                for fut in sorted(finished, key=futures.__getitem__):
+                    i = futures.pop(fut)
+                    outcome = self._outcome(fut, deaths, i)
+                    if outcome is None:  # its worker died: run it again in a new pool
+                        again.append(i)
+                        continue
+                    yield i, outcome
+                if not broken and self.window is not None:
+                    broken = self._submit(fn, items, queue, futures, self.window - len(futures))
+            again.extend(queue)  # not submitted because the pool broke
+            if again:
+                self._renew()
+            todo = sorted(again)
+
+    def _submit(
+        self,
+        fn: Callable[[T], R],
+        items: Sequence[T],
+        queue: deque[int],
+        futures: dict[cf.Future[R], int],
+        n: int,
+    ) -> bool:
+        """Submit up to ``n`` more tasks from ``queue``; True if the pool broke meanwhile."""
+        for _ in range(max(n, 0)):
+            if not queue:
+                return False
+            try:
+                futures[self._pool.submit(fn, items[queue[0]])] = queue[0]
+            except cf.BrokenExecutor:
+                if self._make is None:
+                    raise
+                return True  # a worker died already: what is left in the queue is retried
+            except Exception as exc:
+                raise self._lost(exc) or exc from None
+            queue.popleft()
+        return False
+
+    def _outcome(self, fut: cf.Future[R], deaths: list[int], i: int) -> Outcome[R] | None:
+        try:
+            value = fut.result()
+        except cf.BrokenExecutor:
+            deaths[i] += 1
+            if self._make is not None and deaths[i] <= self.max_restarts:
+                return None
+            return Outcome(
+                None,
+                f"its worker process died {deaths[i]} times (a crash or an out-of-memory kill "
+                "during the simulation)",
+                deaths[i],
+            )
+        except Exception as exc:
+            lost = self._lost(exc)
+            if lost is not None:
+                raise lost from None
+            return Outcome(None, self._explain(exc), deaths[i], exc)
+        return Outcome(value, None, deaths[i])
+
+    def _renew(self) -> None:
+        if self._make is None:
+            raise ParcelfitError("the worker pool broke and cannot be recreated")
+        _shutdown(self._pool)
+        self._pool = self._make()
+        self.restarts += 1
+
+    def simulate(
+        self, simulator: Simulator, tasks: Sequence[Task]
+    ) -> Iterator[tuple[int, SimResult]]:
+        """Simulate every task; yield ``(index, SimResult)`` as results arrive. A task that
+        could not run is a ``failed`` result; ``worker_restarts`` in the diagnostics says how
+        often its worker died first."""
+        for i, out in self.map(partial(simulate_task, simulator), tasks):
+            result = out.value
+            if result is None:
+                result = SimResult(None, SimStatus.FAILED, 0.0, {"message": out.error})
+            if out.restarts:
+                result = replace(
+                    result, diagnostics={**result.diagnostics, "worker_restarts": out.restarts}
+                )
+            yield i, result
+
+    def close(self) -> None:
+        """Shut the pool down (cancelling what has not started) and release its resources."""
+        with contextlib.suppress(Exception):  # a lost Dask scheduler cannot cancel anything
+            _shutdown(self._pool)
+        if self._on_close is not None:
+            self._on_close()
+
+    def __enter__(self) -> Executor:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _shutdown(pool: cf.Executor) -> None:
+    """Shut ``pool`` down without waiting, cancelling what has not started."""
+    try:
+        pool.shutdown(wait=False, cancel_futures=True)
+    except TypeError:  # Dask's executor cancels on shutdown(wait=False) and has no such option
+        pool.shutdown(wait=False)
+
+
+def serial_executor() -> Executor:
+    """Tasks in this process, one after the other (for debugging and small jobs)."""
+    return Executor(SerialPool(), window=1)
+
+
+def local_executor(workers: int | None = None, max_restarts: int = 3) -> Executor:
+    """Tasks in a pool of ``workers`` local processes (default: one per core); a pool broken by
+    a dying worker is recreated."""
+    n = workers or os.cpu_count() or 1
+
+    def pool() -> cf.Executor:
+        return cf.ProcessPoolExecutor(
+            max_workers=n,
             mp_context=multiprocessing.get_context("spawn"),
             initializer=die_with_parent,
             initargs=(os.getpid(),),
         )
 
-    def run(self, tasks: Sequence[Task]) -> Iterator[tuple[int, SimResult]]:
-        """Submit all tasks; yield (index, result) as they finish. Tasks whose worker died are
-        run again in a new pool."""
-        deaths = [0] * len(tasks)
-        todo = list(range(len(tasks)))
-        while todo:
-            futures = {}
-            try:
-                for i in todo:
-                    futures[self._pool.submit(simulate_task, self.simulator, tasks[i])] = i
-            except BrokenProcessPool:
-                pass  # a worker died already; what was not submitted is retried below
-            again = [i for i in todo if i not in futures.values()]
-            for fut in as_completed(futures):
-                i = futures[fut]
-                try:
-                    result = fut.result()
-                except BrokenProcessPool:
-                    deaths[i] += 1
-                    if deaths[i] <= self.max_restarts:
-                        again.append(i)
-                        continue
-                    result = SimResult(
-                        None,
-                        SimStatus.FAILED,
-                        0.0,
-                        {
-                            "message": f"its worker process died {deaths[i]} times (a crash or "
-                            "an out-of-memory kill during the simulation)"
-                        },
-                    )
-                except Exception as exc:
-                    result = SimResult(
-                        None, SimStatus.FAILED, 0.0, {"message": f"worker failed: {exc!r}"}
-                    )
-                if deaths[i]:
-                    result = replace(
-                        result, diagnostics={**result.diagnostics, "worker_restarts": deaths[i]}
-                    )
-                yield i, result
-            if again:
-                self._pool.shutdown(wait=False, cancel_futures=True)
-                self._pool = self._new_pool()
-                self.restarts += 1
-            todo = sorted(again)
-
-    def close(self) -> None:
-        """Shut the pool down."""
-        self._pool.shutdown(wait=False, cancel_futures=True)
+    return Executor(pool, max_restarts=max_restarts)
 
 
-class DaskExecutor:
-    """Simulations on a Dask cluster; tasks are retried if their worker dies.
+def dask_executor(
+    scheduler: str | Any,
+    retries: int = 2,
+    *,
+    connect_timeout: float = 10.0,
+    worker_wait: float = 60.0,
+) -> Executor:
+    """Tasks on a Dask cluster: ``scheduler`` is an address (tcp://HOST:8786) or a connected
+    ``distributed.Client``. Each task is retried up to ``retries`` times if its worker dies.
 
-    A scheduler that cannot be reached, or has no worker attached after ``worker_wait`` [s],
-    is an error before anything runs. A scheduler lost during a batch stops the run with a
-    `ParcelfitError`: the evaluations in flight are not recorded (they stay ``pending`` in the
-    store and run on resume), never stored as ``failed``.
+    A scheduler that cannot be reached within ``connect_timeout`` [s], or has no worker attached
+    after ``worker_wait`` [s], is an error before anything runs.
     """
-
-    def __init__(
-        self,
-        simulator: Simulator,
-        scheduler: str | Any,
-        retries: int = 2,
-        *,
-        connect_timeout: float = 10.0,
-        worker_wait: float = 60.0,
-    ) -> None:
+    try:
+        from distributed import Client
+    except ImportError as exc:
+        raise ParcelfitError(
+            "the dask executor needs the 'dask' extra", fix='pip install "parcelfit[dask]"'
+        ) from exc
+    own = not hasattr(scheduler, "submit")
+    address = str(scheduler) if own else str(scheduler.scheduler.address)
+    if own:
         try:
-            from distributed import Client
-        except ImportError as exc:
+            client = Client(scheduler, timeout=connect_timeout)
+        except (OSError, TimeoutError, ValueError, TypeError) as exc:
             raise ParcelfitError(
-                "the dask executor needs the 'dask' extra", fix='pip install "parcelfit[dask]"'
-            ) from exc
-        self.simulator = simulator
-        self.retries = retries
-        self._own = not hasattr(scheduler, "submit")
-        self.address = str(scheduler) if self._own else str(scheduler.scheduler.address)
-        if self._own:
-            try:
-                self.client = Client(scheduler, timeout=connect_timeout)
-            except (OSError, TimeoutError, ValueError, TypeError) as exc:
-                raise ParcelfitError(
-                    f"cannot reach the Dask scheduler at {scheduler!r} ({exc})",
-                    fix="check the address (tcp://HOST:8786) and that the scheduler runs",
-                ) from None
-        else:
-            self.client = scheduler
-        try:
-            self.client.wait_for_workers(1, timeout=worker_wait)
-        except (TimeoutError, OSError):
-            self.close()
-            raise ParcelfitError(
-                f"no Dask worker is attached to the scheduler at {self.address} "
-                f"(waited {worker_wait:g} s)",
-                fix=f"start workers, e.g. `dask worker {self.address}`, then rerun",
+                f"cannot reach the Dask scheduler at {scheduler!r} ({exc})",
+                fix="check the address (tcp://HOST:8786) and that the scheduler runs",
             ) from None
+    else:
+        client = scheduler
 
-    def _lost(self, exc: BaseException) -> ParcelfitError:
+    def close() -> None:
+        if own:
+            with contextlib.suppress(Exception):
+                client.close(timeout=5)
+
+    try:
+        client.wait_for_workers(1, timeout=worker_wait)
+    except (TimeoutError, OSError):
+        close()
+        raise ParcelfitError(
+            f"no Dask worker is attached to the scheduler at {address} (waited {worker_wait:g} s)",
+            fix=f"start workers, e.g. `dask worker {address}`, then rerun",
+        ) from None
+
+    def connected() -> bool:
+        comm = getattr(client, "scheduler_comm", None)
+        return client.status == "running" and not (
+            comm is not None and getattr(comm.comm, "closed", lambda: False)()
+        )
+
+    def lost(exc: BaseException) -> ParcelfitError | None:
+        if connected():
+            return None
         return ParcelfitError(
-            f"lost the Dask scheduler at {self.address} ({type(exc).__name__}); the simulations "
+            f"lost the Dask scheduler at {address} ({type(exc).__name__}); the simulations "
             "in flight were not recorded and stay pending",
             fix="restart the scheduler and workers (or use --executor local), then rerun the "
             "same command: the study resumes",
         )
 
-    def _connected(self) -> bool:
-        comm = getattr(self.client, "scheduler_comm", None)
-        return self.client.status == "running" and not (
-            comm is not None and getattr(comm.comm, "closed", lambda: False)()
-        )
+    def explain(exc: BaseException) -> str:
+        if type(exc).__name__ == "KilledWorker":  # the task killed every worker it ran on
+            return f"its worker died {retries + 1} times: {exc}"
+        return f"dask task failed: {exc!r}"
 
-    def run(self, tasks: Sequence[Task]) -> Iterator[tuple[int, SimResult]]:
-        """Submit all tasks; yield (index, result) as they finish."""
-        from distributed import KilledWorker
-        from distributed import as_completed as dask_completed
+    pool = client.get_executor(pure=False, retries=retries)
+    return Executor(pool, lost=lost, on_close=close, explain=explain)
 
-        try:
-            futures = {
-                self.client.submit(
-                    simulate_task, self.simulator, t, pure=False, retries=self.retries
-                ): i
-                for i, t in enumerate(tasks)
-            }
-        except Exception as exc:
-            raise self._lost(exc) from None
-        try:
-            for fut in dask_completed(list(futures)):
-                i = futures[fut]
-                try:
-                    result = fut.result()
-                except KilledWorker as exc:  # the simulation killed every worker it ran on
-                    result = SimResult(
-                        None,
-                        SimStatus.FAILED,
-                        0.0,
-                        {"message": f"its worker died {self.retries + 1} times: {exc}"},
-                    )
-                except Exception as exc:
-                    if not self._connected():
-                        raise self._lost(exc) from None
-                    result = SimResult(
-                        None, SimStatus.FAILED, 0.0, {"message": f"dask task failed: {exc!r}"}
-                    )
-                yield i, result
-        except ParcelfitError:
-            raise
-        except Exception as exc:  # the client itself failed (closed, connection lost)
-            raise self._lost(exc) from None
 
-    def close(self) -> None:
-        """Close the client if this executor opened it."""
-        if self._own:
-            with contextlib.suppress(Exception):
-                self.client.close(timeout=5)
+def make_executor(
+    kind: str = "local",
+    *,
+    workers: int | None = None,
+    scheduler: str | Any | None = None,
+) -> Executor:
+    """The executor named ``kind`` (serial, local or dask); ``workers`` processes for local, a
+    ``scheduler`` address (or client) for dask."""
+    if kind == "serial":
+        return serial_executor()
+    if kind == "local":
+        return local_executor(workers)
+    if kind == "dask":
+        if not scheduler:
+            raise ParcelfitError(
+                "the dask executor needs a scheduler address",
+                fix="pass --scheduler tcp://HOST:8786",
+            )
+        return dask_executor(scheduler)
+    raise ParcelfitError(
+        f"unknown executor {kind!r}", fix=f"choose one of {', '.join(EXECUTOR_KINDS)}"
+    )
+
+
+__all__ = [
+    "EXECUTOR_KINDS",
+    "Executor",
+    "Outcome",
+    "SerialPool",
+    "Task",
+    "dask_executor",
+    "local_executor",
+    "make_executor",
+    "serial_executor",
+    "simulate_task",
+]

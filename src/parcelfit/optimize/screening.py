@@ -17,7 +17,7 @@ A screen file (YAML)::
     min_full_factors: 3          # ... and at least this many: fewer survivors are topped up with the
                                  # next-largest effects (a 2- or 4-run design says nothing)
     select: 4                    # parameters recommended for calibration
-    executor: {kind: local}
+    executor: {kind: local}      # or serial (in this process), or just executor: serial
 
 Responses of every run: DTW_xy [m] and DTW_theta [rad] between the simulated run and the
 reference run of the test case (the same preparation as the calibration cost), and the transit
@@ -35,7 +35,7 @@ from the ones it would run now (use a new folder after changing the screen file)
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
@@ -61,7 +61,7 @@ from parcelfit.errors import ParcelfitError
 from parcelfit.figures import save_figure
 from parcelfit.metrics import select_reference
 from parcelfit.optimize.calibration import record_result
-from parcelfit.optimize.executors import LocalExecutor, Task
+from parcelfit.optimize.executors import Task, make_executor
 from parcelfit.optimize.folderlock import check_writable, lock_folder
 from parcelfit.optimize.store import Store
 from parcelfit.optimize.study import (
@@ -72,6 +72,7 @@ from parcelfit.optimize.study import (
     reference_case,
     simulator_settings,
 )
+from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.runs import TestCase, load_dataset
 from parcelfit.schema import FileModel, Number, Pair, Text, Whole, or_default, parse
 from parcelfit.sim.params import CATALOGUE, parameter, to_catalogue_units
@@ -283,16 +284,25 @@ def run_screen(
     screen: Screen,
     out: str | Path,
     *,
+    executor: str | None = None,
     workers: int | None = None,
-    on_event: Callable[[str], None] | None = None,
+    progress: ProgressCallback | None = None,
 ) -> tuple[list[StageResult], dict[str, Any]]:
-    """Run the screen's stages (resumable), write the outputs, return the stages and the selection."""
+    """Run the screen's stages (resumable), write the outputs, return the stages and the selection.
+
+    ``executor`` (serial or local) and ``workers`` override the screen file's ``executor``;
+    ``progress`` receives a `ProgressEvent` per stage and per finished simulation (``done`` of
+    ``total`` counting the stage's simulations)."""
     from parcelfit.sim.factory import make_simulator
 
     out = Path(out)
     check_writable(out, ("screen.sqlite",))
     out.mkdir(parents=True, exist_ok=True)
-    say = on_event or (lambda m: None)
+    report = progress or ignore_progress
+
+    def say(message: str, done: int | None = None, total: int | None = None) -> None:
+        report(ProgressEvent("screening", message, done, total))
+
     lock = lock_folder(out, "a screen")
     try:
         store = Store(out / "screen.sqlite")
@@ -301,7 +311,10 @@ def run_screen(
         raise
     reference = select_reference(load_dataset(screen.dataset)[screen.case])
     simulator = make_simulator(screen.simulator, screen.folder)
-    executor = LocalExecutor(simulator, workers or screen.executor.get("workers"))
+    runner = make_executor(
+        executor or screen.executor.get("kind", "local"),
+        workers=workers or screen.executor.get("workers"),
+    )
     results: list[StageResult] = []
     factors = list(screen.parameters)
     try:
@@ -345,9 +358,13 @@ def run_screen(
                 Task({**screen.fixed, **r.params}, screen.case, f"screen-{stage}-{r.slot}")
                 for r in todo
             ]
-            for k, (i, res) in enumerate(executor.run(tasks), start=1):
+            for k, (i, res) in enumerate(runner.simulate(simulator, tasks), start=1):
                 record_result(store, out, todo[i], res, reference)
-                say(f"{res.status.value}: {tasks[i].run_id} ({k} of {len(tasks)} done)")
+                say(
+                    f"{res.status.value}: {tasks[i].run_id} ({k} of {len(tasks)} done)",
+                    k,
+                    len(tasks),
+                )
             rows = sorted(
                 (e for e in store.evaluations("screen") if e.iteration == stage),
                 key=lambda e: e.slot,
@@ -406,7 +423,7 @@ def run_screen(
             )
             factors = survivors
     finally:
-        executor.close()
+        runner.close()
         store.close()
         lock.release()
     sel = select_parameters(

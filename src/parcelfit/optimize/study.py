@@ -28,7 +28,8 @@
     budget: 80                         # optional, most fitting evaluations
     seed: 0                            # optional
     optimizer: {sampler: gp, ucb_lambda: 2.0}   # optional: gp | published | tpe, BOSettings
-    executor: {kind: local, workers: 2}   # optional: local (processes) | dask (scheduler: tcp://...)
+    executor: {kind: local, workers: 2}   # optional: local (processes) | serial (this process,
+                                       # for debugging; also executor: serial) | dask (scheduler: tcp://...)
 
 **A study file can run code.** ``backend: python`` imports the module named in ``factory`` and
 calls it, and ``backend: external`` runs the solver description's command: run only study (and
@@ -108,16 +109,22 @@ class ReferenceSection(FileModel):
 
 
 class ScreenExecutorSection(FileModel):
-    """``executor`` of a screen file: local processes only."""
+    """``executor`` of a screen file: on this machine, local processes or serial (in this
+    process); ``executor: KIND`` is short for ``executor: {kind: KIND}``."""
 
-    kind: Annotated[str, Choice(("local",), what="executor")] = "local"
+    kind: Annotated[str, Choice(("serial", "local"), what="executor")] = "local"
     workers: Annotated[int | None, Whole(ge=1, nullable=True)] = None
+
+    @classmethod
+    def prepare(cls, data: Any) -> Any:
+        return {"kind": data} if isinstance(data, str) else data
 
 
 class ExecutorSection(ScreenExecutorSection):
-    """``executor`` of a study file: local processes, or a Dask ``scheduler`` (tcp://...)."""
+    """``executor`` of a study file: local processes, serial (in this process, for debugging),
+    or a Dask ``scheduler`` (tcp://...)."""
 
-    kind: Annotated[str, Choice(("local", "dask"), what="executor")] = "local"
+    kind: Annotated[str, Choice(("serial", "local", "dask"), what="executor")] = "local"
     scheduler: Annotated[str | None, Text()] = None
 
 

@@ -26,7 +26,6 @@ import io
 import json
 import math
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -41,6 +40,7 @@ from parcelfit import __version__
 from parcelfit.errors import ParcelfitError
 from parcelfit.metrics import ReferenceSelection, Validation, select_reference, validate
 from parcelfit.metrics.envelope import EnvelopeBand, envelope_band
+from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.runs import Dataset, TestCase, Trajectory, load_dataset, read_trajectory
 from parcelfit.sim.params import catalogue_unit, to_catalogue_units
 
@@ -150,15 +150,15 @@ class _Builder:
     every piece of user text inside them passes through `_esc` (the page template escapes the
     rest, and the page's Content-Security-Policy forbids scripts should anything slip through)."""
 
-    def __init__(self, progress: Callable[[str], None] | None) -> None:
+    def __init__(self, progress: ProgressCallback | None) -> None:
         self.parts: list[Markup] = []
-        self.progress = progress or (lambda message: None)
+        self.progress = progress or ignore_progress
 
     def add(self, text: str) -> None:
         self.parts.append(Markup(text))
 
     def section(self, title: str, anchor: str) -> None:
-        self.progress(title)
+        self.progress(ProgressEvent("report", title))
         self.parts.append(Markup('<h2 id="{}">{}</h2>').format(anchor, title))
 
 
@@ -569,10 +569,11 @@ def build_report(
     screen: str | Path | None = None,
     key_frames: bool = True,
     animation: bool = False,
-    progress: Callable[[str], None] | None = None,
+    progress: ProgressCallback | None = None,
 ) -> Path:
     """Write the HTML report of a study folder (or of a folder holding ``calibration/``, like
-    the demo's); returns the report's path (default: ``report.html`` inside ``folder``)."""
+    the demo's); returns the report's path (default: ``report.html`` inside ``folder``).
+    ``progress`` receives a `ProgressEvent` as each section starts."""
     from parcelfit.optimize.calibration import STORE_FILE
     from parcelfit.optimize.store import Store
 
