@@ -69,6 +69,7 @@ from parcelfit.optimize.study import (
     ScreenExecutorSection,
     SimulatorSection,
     _to_si,
+    fixed_to_si,
     reference_case,
     simulator_settings,
 )
@@ -235,14 +236,7 @@ def load_screen(path: str | Path) -> Screen:
             raise ParcelfitError(
                 exc.message, file=path, where=f"parameters.{name}", fix=exc.fix
             ) from None
-    fixed = {}
-    for name, value in f.fixed.items():
-        try:
-            fixed[str(name)] = _to_si(str(name), value, backend)
-        except ParcelfitError as exc:
-            raise ParcelfitError(
-                exc.message, file=path, where=f"fixed.{name}", fix=exc.fix
-            ) from None
+    fixed = fixed_to_si(f.fixed, backend, path)
     return Screen(
         name=f.name,
         folder=folder,

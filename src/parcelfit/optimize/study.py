@@ -279,6 +279,19 @@ def _to_si(name: str, value: float, backend: str) -> float:
     return spec.to_si(float(value))
 
 
+def fixed_to_si(fixed: Mapping[Any, float], backend: str, path: Path) -> dict[str, float]:
+    """A file's ``fixed`` values (catalogue units for MuJoCo) in SI, each error naming its key."""
+    out = {}
+    for name, value in fixed.items():
+        try:
+            out[str(name)] = _to_si(str(name), value, backend)
+        except ParcelfitError as exc:
+            raise ParcelfitError(
+                exc.message, file=path, where=f"fixed.{name}", fix=exc.fix
+            ) from None
+    return out
+
+
 def load_study(path: str | Path) -> Study:
     """Read and check a study file; every error names the file, the key and the fix. Parameter
     values are converted from catalogue units to SI here."""
@@ -301,14 +314,7 @@ def load_study(path: str | Path) -> Study:
                 where=f"parameters.{name}",
                 fix=exc.fix or "give low < high",
             ) from None
-    fixed = {}
-    for name, value in f.fixed.items():
-        try:
-            fixed[str(name)] = _to_si(str(name), value, backend)
-        except ParcelfitError as exc:
-            raise ParcelfitError(
-                exc.message, file=path, where=f"fixed.{name}", fix=exc.fix
-            ) from None
+    fixed = fixed_to_si(f.fixed, backend, path)
     overlap = set(fixed) & {d.name for d in dims}
     if overlap:
         raise ParcelfitError(
