@@ -1,5 +1,5 @@
-"""The typed file models (study, screen, twin spec, tag map): every refusal names the file, the
-key and the fix; values are converted to SI once, on load."""
+"""The typed file models (study, screen, twin spec, tag map, rig, consignment): every refusal
+names the file, the key and the fix; values are converted to SI once, on load."""
 
 from types import MappingProxyType
 
@@ -9,6 +9,10 @@ import yaml
 from parcelfit import ParcelfitError
 from parcelfit.optimize.screening import load_screen
 from parcelfit.optimize.study import load_study
+from parcelfit.runs import Barrier, Box
+from parcelfit.sim.mujoco import load_consignment, load_rig
+from parcelfit.sim.mujoco.consignment import Consignment
+from parcelfit.sim.mujoco.rig import EndCondition, Rig, StartPose, Surface, Wall
 from parcelfit.synth import load_twin_spec
 from parcelfit.tracking import load_tag_map
 
@@ -28,11 +32,58 @@ TAGS = {
     "camera": {"fx": 1000, "fy": 1000, "cx": 640, "cy": 360},
     "light_barriers": [{"id": "start", "from": [0.2, -0.5], "to": [0.2, 0.5]}],
 }
+RIG = {
+    "name": "R",
+    "speeds": {1: {"main": 1.5, "strip": 1.6}},
+    "surfaces": [
+        {
+            "name": "main",
+            "type": "belt",
+            "material": "belt",
+            "centre": [1, 0],
+            "length": 3,
+            "width": 0.8,
+            "heading": 0,
+            "top": 0,
+            "drive": "main",
+        },
+        {
+            "name": "strips",
+            "type": "strips",
+            "material": "belt",
+            "centre": [-0.5, -0.6],
+            "length": 1,
+            "width": 0.4,
+            "heading": 30,
+            "top": 0.02,
+            "drive": "strip",
+            "count": 7,
+            "strip_width": 0.03,
+            "pitch": 0.06,
+        },
+    ],
+    "walls": [{"name": "guide", "from": [0.1, -0.5], "to": [1.3, -0.2], "height": 0.1}],
+    "start": {"position": [-0.3, -0.6], "heading": 30, "surface": "strips", "scatter": {}},
+    "light_barriers": [
+        {"name": "LS1", "from": [0, -0.7], "to": [-0.2, -0.2]},
+        {"name": "LS2", "from": [1.8, -0.4], "to": [1.8, 0.4]},
+    ],
+    "regions": [{"x": [-0.2, 1.6]}],
+    "end": {"x": [-1, 2], "y": [-1, 0.5], "duration": 2},
+}
+CONSIGNMENT = {
+    "name": "C",
+    "mass": 0.14,
+    "outer": [0.275, 0.2, 0.02],
+    "content": {"kind": "rigid", "size": [0.165, 0.125, 0.02]},
+}
 LOADERS = {
     "study": (load_study, STUDY),
     "screen": (load_screen, SCREEN),
     "twin": (load_twin_spec, TWIN),
     "tags": (load_tag_map, TAGS),
+    "rig": (load_rig, RIG),
+    "consignment": (load_consignment, CONSIGNMENT),
 }
 
 
@@ -216,6 +267,135 @@ CASES = {
         lambda d: d["parcel_tags"].update({0: {"size": 0.06}}),
         ("parcel_tags.0", "tag 0 is both a reference and a parcel tag", "give every tag one role"),
     ),
+    "rig wrong type": (
+        "rig",
+        lambda d: d["surfaces"][0].update(length="long"),
+        ("surfaces[0].length", "expected a number in m, got 'long'", "write a plain number"),
+    ),
+    "rig unknown key": (
+        "rig",
+        lambda d: d["walls"][0].update(heigth=0.1),
+        ("walls[0]", "unknown key 'heigth'", "did you mean 'height'?"),
+    ),
+    "rig missing key": (
+        "rig",
+        lambda d: d["surfaces"][1].pop("pitch"),
+        ("surfaces[1]", "missing required key 'pitch'", "add `pitch:`"),
+    ),
+    "rig out of range": (
+        "rig",
+        lambda d: d["start"].update(scatter={"heading": 100}),
+        ("start.scatter.heading", "100 is outside [0.0, 90] deg", "use a value inside that range"),
+    ),
+    "rig missing section": (
+        "rig",
+        lambda d: d.pop("end"),
+        ("top level", "missing required key 'end'", "add `end:`"),
+    ),
+    "rig key of another surface type": (
+        "rig",
+        lambda d: d["surfaces"][0].update(count=3),
+        ("surfaces[0]", "unknown key 'count'", "known keys: " + ", ".join(RIG["surfaces"][0])),
+    ),
+    "rig unknown surface type": (
+        "rig",
+        lambda d: d["surfaces"][0].update(type="chute"),
+        ("surfaces[0].type", "unknown surface type 'chute'", "use one of belt, strips, rollers"),
+    ),
+    "rig speed setting 0": (
+        "rig",
+        lambda d: d["speeds"].update({0: {"main": 1}}),
+        ("speeds", "speed setting 0 must be an integer >= 1", "write e.g. `1: {main: 1.56}`"),
+    ),
+    "rig drive without a speed": (
+        "rig",
+        lambda d: d["surfaces"][0].update(drive="fast"),
+        (
+            "surfaces[0].drive",
+            "drive 'fast' has no speed in setting(s) [1]",
+            "add fast to every speed setting",
+        ),
+    ),
+    "rig point of three": (
+        "rig",
+        lambda d: d["light_barriers"][1].update(to=[1.8, 0.4, 0]),
+        (
+            "light_barriers[1].to",
+            "expected a point [x, y] in metres, got [1.8, 0.4, 0]",
+            "write e.g. [0.5, -0.4]",
+        ),
+    ),
+    "rig one light barrier": (
+        "rig",
+        lambda d: d["light_barriers"].pop(),
+        (
+            "light_barriers",
+            "exactly two light barriers are needed",
+            "list LS1 and LS2 in the order the parcel crosses them",
+        ),
+    ),
+    "rig start on no surface": (
+        "rig",
+        lambda d: d["start"].update(surface="floor"),
+        ("start.surface", "start.surface names no surface: 'floor'", "use one of main, strips"),
+    ),
+    "rig bad region": (
+        "rig",
+        lambda d: d["regions"].append({"x": [2, 1]}),
+        (
+            "regions[1]",
+            "expected x as [min, max] in metres with min < max, got [2, 1]",
+            "write e.g. x: [0.5, 1.2]",
+        ),
+    ),
+    "rig end not increasing": (
+        "rig",
+        lambda d: d["end"].update(y=[1, -1]),
+        ("end.y", "expected [min, max] with min < max, got [1, -1]", "write e.g. [0.5, 1.2]"),
+    ),
+    "consignment wrong type": (
+        "consignment",
+        lambda d: d.update(mass="heavy"),
+        ("mass", "expected a number in kg, got 'heavy'", "write a plain number"),
+    ),
+    "consignment unknown key": (
+        "consignment",
+        lambda d: d["content"].update(knid="soft"),
+        ("content", "unknown key 'knid'", "did you mean 'kind'?"),
+    ),
+    "consignment missing key": (
+        "consignment",
+        lambda d: d.pop("outer"),
+        ("top level", "missing required key 'outer'", "add `outer:`"),
+    ),
+    "consignment out of range": (
+        "consignment",
+        lambda d: d.update(mass=1000),
+        ("mass", "1000 is outside [0.001, 100] kg", "use a value inside that range"),
+    ),
+    "consignment size out of range": (
+        "consignment",
+        lambda d: d["content"].update(size=[6, 0.1, 0.01]),
+        (
+            "content.size",
+            "expected [length, width, height] in metres (1 mm to 5 m), got [6, 0.1, 0.01]",
+            "write e.g. [0.275, 0.20, 0.02]",
+        ),
+    ),
+    "consignment unknown content kind": (
+        "consignment",
+        lambda d: d["content"].update(kind="liquid"),
+        ("content.kind", "unknown content kind 'liquid'", "use one of rigid, soft"),
+    ),
+    "consignment content too big": (
+        "consignment",
+        lambda d: d["content"].update(size=[0.3, 0.1, 0.02]),
+        (
+            "content.size",
+            "content (0.3, 0.1, 0.02) does not fit inside the outer dimensions (0.275, 0.2, 0.02)",
+            "make the content shorter and narrower than the packed parcel",
+        ),
+    ),
 }
 
 
@@ -260,3 +440,48 @@ def test_tag_map_values_are_si(tmp_path):
     assert (tm.exposure, tm.readout) == (0.004, 0.015)
     assert tm.camera is not None and tm.camera.distortion == (0.0,) * 5
     assert tm.barriers[0].start == (0.2, -0.5) and tm.barriers[0].end == (0.2, 0.5)
+
+
+def test_a_rig_file_is_si_and_takes_its_defaults(tmp_path):
+    path = _write(tmp_path, RIG)
+    rig = load_rig(path)
+    main, strips = (
+        Surface("main", "belt", "belt", (1.0, 0.0), 3.0, 0.8, 0.0, 0.0, "main", {}),
+        Surface(
+            "strips",
+            "strips",
+            "belt",
+            (-0.5, -0.6),
+            1.0,
+            0.4,
+            30.0,
+            0.02,
+            "strip",
+            {"count": 7.0, "strip_width": 0.03, "pitch": 0.06},
+        ),
+    )
+    assert rig == Rig(
+        name="R",
+        description="",
+        speeds={1: {"main": 1.5, "strip": 1.6}},
+        surfaces=(main, strips),
+        walls=(Wall("guide", "metal", (0.1, -0.5), (1.3, -0.2), 0.1, 0.0, 0.003, 0.0),),
+        start=StartPose((-0.3, -0.6), 30.0, "strips", (0.0, 0.0, 0.0)),
+        barriers=(
+            Barrier("LS1", (0.0, -0.7), (-0.2, -0.2)),
+            Barrier("LS2", (1.8, -0.4), (1.8, 0.4)),
+        ),
+        regions=(Box(xmin=-0.2, xmax=1.6),),
+        margin=0.0,
+        end=EndCondition((-1.0, 2.0), (-1.0, 0.5), 2.0, 0.3),
+        source=str(path),
+    )
+    counts = rig.surface("strips").extra.values()
+    assert all(type(v) is float for v in counts)  # as before: numbers, counts included, are floats
+
+
+def test_a_consignment_file_holds_its_values(tmp_path):
+    path = _write(tmp_path, {**CONSIGNMENT, "description": "  a box  "})
+    assert load_consignment(path) == Consignment(
+        "C", "a box", 0.14, (0.275, 0.2, 0.02), "rigid", (0.165, 0.125, 0.02), str(path)
+    )

@@ -1,8 +1,9 @@
 """Loading YAML configuration, and the checked getters of the files not yet described by typed
 models, with errors that name the file, key and fix.
 
-The study, screen, twin spec and tag map files are typed models (`parcelfit.schema`); the
-dataset, rig, consignment and external solver files still read their keys with the getters
+The study, screen, twin spec, tag map, rig and consignment files are typed models
+(`parcelfit.schema`); the dataset and external solver files, and the regions of interest
+(`runs.regions.parse_region`, in dataset and rig files), still read their keys with the getters
 below, which check each value with the same types (`schema.Number`, ...) so that every mistake
 is reported the same way.
 """
@@ -16,7 +17,7 @@ from typing import Any, TypeVar
 import yaml
 
 from parcelfit.errors import ParcelfitError
-from parcelfit.schema import Choice, Number, Pair, Text, suggest
+from parcelfit.schema import Number, Pair, Text, suggest
 from parcelfit.schema import check_keys as _check_keys
 from parcelfit.schema import require_mapping as _require_mapping
 
@@ -106,21 +107,6 @@ def get_number(
     return _at(check, mapping.get(key, default), file=file, where=_label(where, key))
 
 
-def get_choice(
-    mapping: Mapping[str, Any],
-    key: str,
-    choices: Iterable[str],
-    *,
-    what: str,
-    file: str | Path | None,
-    where: str,
-    default: str | None = None,
-) -> str:
-    """Read a text that must be one of ``choices`` (``what`` names it in the error)."""
-    check = Choice(tuple(choices), what=what).check
-    return _at(check, mapping.get(key, default), file=file, where=_label(where, key))
-
-
 def load_config(
     path: str | Path, *, allowed: Iterable[str], required: Iterable[str] = ()
 ) -> Mapping[str, Any]:
@@ -161,7 +147,6 @@ def get_pair(
 
 __all__ = [
     "check_keys",
-    "get_choice",
     "get_number",
     "get_pair",
     "get_str",

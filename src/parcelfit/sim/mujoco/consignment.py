@@ -16,10 +16,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
-from parcelfit.config import check_keys, get_choice, get_number, get_str, load_yaml, require_mapping
+from pydantic import PlainValidator, model_validator
+
+from parcelfit.config import load_yaml
 from parcelfit.errors import ParcelfitError
+from parcelfit.schema import Choice, FileModel, Number, Text, parse
 from parcelfit.sim.mujoco.bundled import bundled_names, resolve_file
 from parcelfit.sim.params import RIGID, SOFT
 
@@ -37,7 +40,7 @@ class Consignment:
     source: str = ""
 
 
-def _size(value: Any, *, file: str, where: str) -> tuple[float, float, float]:
+def _size(value: Any) -> tuple[float, float, float]:
     if (
         not isinstance(value, list | tuple)
         or len(value) != 3
@@ -48,46 +51,57 @@ def _size(value: Any, *, file: str, where: str) -> tuple[float, float, float]:
     ):
         raise ParcelfitError(
             f"expected [length, width, height] in metres (1 mm to 5 m), got {value!r}",
-            file=file,
-            where=where,
             fix="write e.g. [0.275, 0.20, 0.02]",
         )
     return float(value[0]), float(value[1]), float(value[2])
 
 
+def _description(value: Any) -> str:
+    return str(value or "").strip()
+
+
+_Size = Annotated[tuple[float, float, float], PlainValidator(_size)]
+
+
+class ContentSection(FileModel):
+    """``content``: its kind (rigid or soft) and size L, W, H [m]."""
+
+    kind: Annotated[str, Choice((RIGID, SOFT), what="content kind")]
+    size: _Size
+
+
+class ConsignmentFile(FileModel):
+    """A consignment file as written (see the module docstring): mass [kg], sizes [m]."""
+
+    name: Annotated[str, Text()]
+    description: Annotated[str, PlainValidator(_description)] = ""
+    mass: Annotated[float, Number(unit="kg", ge=0.001, le=100)]
+    outer: _Size
+    content: ContentSection
+
+    @model_validator(mode="after")
+    def _content_fits(self) -> ConsignmentFile:
+        inner, outer = self.content.size, self.outer
+        if not (inner[0] < outer[0] and inner[1] < outer[1] and inner[2] <= outer[2]):
+            raise ParcelfitError(
+                f"content {inner} does not fit inside the outer dimensions {outer}",
+                where="content.size",
+                fix="make the content shorter and narrower than the packed parcel",
+            )
+        return self
+
+
 def parse_consignment(doc: Any, file: str) -> Consignment:
-    """Build and check a `Consignment` from its parsed YAML document."""
-    doc = require_mapping(doc, file=file, where="top level")
-    check_keys(
-        doc,
-        allowed=("name", "description", "mass", "outer", "content"),
-        required=("name", "mass", "outer", "content"),
-        file=file,
-        where="top level",
-    )
-    content = require_mapping(doc["content"], file=file, where="content")
-    check_keys(
-        content, allowed=("kind", "size"), required=("kind", "size"), file=file, where="content"
-    )
-    kind = get_choice(
-        content, "kind", (RIGID, SOFT), what="content kind", file=file, where="content"
-    )
-    outer = _size(doc["outer"], file=file, where="outer")
-    inner = _size(content["size"], file=file, where="content.size")
-    if not (inner[0] < outer[0] and inner[1] < outer[1] and inner[2] <= outer[2]):
-        raise ParcelfitError(
-            f"content {inner} does not fit inside the outer dimensions {outer}",
-            file=file,
-            where="content.size",
-            fix="make the content shorter and narrower than the packed parcel",
-        )
+    """Build and check a `Consignment` from its parsed YAML document; every error names
+    ``file``, the key and the fix."""
+    f = parse(ConsignmentFile, doc, file=file)
     return Consignment(
-        name=get_str(doc, "name", file=file, where=""),
-        description=str(doc.get("description", "") or "").strip(),
-        mass=get_number(doc, "mass", file=file, where="", minimum=0.001, maximum=100, unit="kg"),
-        outer=outer,
-        content_kind=kind,
-        content=inner,
+        name=f.name,
+        description=f.description,
+        mass=f.mass,
+        outer=f.outer,
+        content_kind=f.content.kind,
+        content=f.content.size,
         source=file,
     )
 

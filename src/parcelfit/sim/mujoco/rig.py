@@ -46,21 +46,24 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
+from pydantic import BeforeValidator, Field, PlainValidator, field_validator, model_validator
 
-from parcelfit.config import (
-    check_keys,
-    get_choice,
-    get_number,
-    get_pair,
-    get_str,
-    load_yaml,
-    require_mapping,
-)
+from parcelfit.config import load_yaml
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import Barrier, Region, parse_region
+from parcelfit.schema import (
+    Choice,
+    FileModel,
+    Number,
+    Pair,
+    Text,
+    or_default,
+    parse,
+    require_mapping,
+)
 from parcelfit.sim.mujoco.bundled import bundled_names, resolve_file
 
 MATERIALS = ("belt", "roller", "metal")
@@ -179,270 +182,259 @@ class Rig:
         return self.speeds[setting]
 
 
-def _point(value: Any, *, file: str, where: str) -> tuple[float, float]:
-    return get_pair(
-        value, file=file, where=where, what="a point [x, y] in metres", fix="write e.g. [0.5, -0.4]"
-    )
+# -- the file as written (its units: m, m/s, s, deg) ----------------------------------
+
+_Point = Annotated[
+    tuple[float, float], Pair(what="a point [x, y] in metres", fix="write e.g. [0.5, -0.4]")
+]
+_Interval = Annotated[
+    tuple[float, float],
+    Pair(what="[min, max] with min < max", fix="write e.g. [0.5, 1.2]", increasing=True),
+]
+_Heading = Annotated[float, Number(unit="deg", ge=-360, le=360)]
+_Size = Annotated[float, Number(unit="m", ge=1e-3, le=100)]
+_Height = Annotated[float, Number(unit="m", ge=-10, le=10)]
+_Extra = Annotated[float | None, Number()]
+_SURFACE_TYPE = Choice(SURFACE_TYPES, what="surface type")
+_MATERIAL = Choice(MATERIALS, what="material")
 
 
-def _pair(value: Any, *, file: str, where: str) -> tuple[float, float]:
-    return get_pair(
-        value,
-        file=file,
-        where=where,
-        what="[min, max] with min < max",
-        fix="write e.g. [0.5, 1.2]",
-        increasing=True,
-    )
+def _description(value: Any) -> str:
+    return str(value or "")
 
 
-def parse_rig(doc: Any, file: str) -> Rig:
-    """Build and check a `Rig` from its parsed YAML document."""
-    doc = require_mapping(doc, file=file, where="top level")
-    check_keys(
-        doc,
-        allowed=(
-            "name",
-            "description",
-            "speeds",
-            "surfaces",
-            "walls",
-            "start",
-            "light_barriers",
-            "regions",
-            "margin",
-            "end",
-        ),
-        required=("name", "speeds", "surfaces", "start", "light_barriers", "end"),
-        file=file,
-        where="top level",
-    )
-    name = get_str(doc, "name", file=file, where="")
-    speeds_doc = require_mapping(doc["speeds"], file=file, where="speeds")
-    speeds: dict[int, dict[str, float]] = {}
-    for key, drives in speeds_doc.items():
+def _drive_name(value: Any) -> str:
+    return str(value)
+
+
+def _speed_settings(value: Any) -> Any:
+    """``speeds`` must map whole numbers >= 1 to drives (checked before the drives' speeds)."""
+    for key in require_mapping(value):
         if isinstance(key, bool) or not isinstance(key, int) or key < 1:
             raise ParcelfitError(
                 f"speed setting {key!r} must be an integer >= 1",
-                file=file,
-                where="speeds",
                 fix="write e.g. `1: {main: 1.56}`",
             )
-        drives = require_mapping(drives, file=file, where=f"speeds.{key}")
-        speeds[key] = {
-            str(d): get_number(
-                drives, d, file=file, where=f"speeds.{key}", minimum=0.0, maximum=20.0, unit="m/s"
-            )
-            for d in drives
-        }
-    if not speeds:
-        raise ParcelfitError(
-            "no speed settings", file=file, where="speeds", fix="add `1: {drive: speed}`"
-        )
-    surfaces = []
-    for i, s in enumerate(doc["surfaces"] or []):
-        where = f"surfaces[{i}]"
-        s = require_mapping(s, file=file, where=where)
-        stype = get_choice(s, "type", SURFACE_TYPES, what="surface type", file=file, where=where)
-        check_keys(
-            s,
-            allowed=_COMMON + _SURFACE_KEYS[stype],
-            required=_COMMON + _SURFACE_KEYS[stype],
-            file=file,
-            where=where,
-        )
-        material = get_choice(s, "material", MATERIALS, what="material", file=file, where=where)
-        drive = get_str(s, "drive", file=file, where=where)
-        missing = [k for k, d in speeds.items() if drive not in d]
-        if missing:
-            raise ParcelfitError(
-                f"drive {drive!r} has no speed in setting(s) {missing}",
-                file=file,
-                where=f"{where}.drive",
-                fix=f"add {drive} to every speed setting",
-            )
-        extra = {k: get_number(s, k, file=file, where=where) for k in _SURFACE_KEYS[stype]}
-        surfaces.append(
-            Surface(
-                name=get_str(s, "name", file=file, where=where),
-                type=stype,
-                material=material,
-                centre=_point(s["centre"], file=file, where=f"{where}.centre"),
-                length=get_number(
-                    s, "length", file=file, where=where, minimum=1e-3, maximum=100, unit="m"
-                ),
-                width=get_number(
-                    s, "width", file=file, where=where, minimum=1e-3, maximum=100, unit="m"
-                ),
-                heading=get_number(
-                    s, "heading", file=file, where=where, minimum=-360, maximum=360, unit="deg"
-                ),
-                top=get_number(s, "top", file=file, where=where, minimum=-10, maximum=10, unit="m"),
-                drive=drive,
-                extra=extra,
-            )
-        )
-    if not surfaces:
-        raise ParcelfitError("a rig needs at least one surface", file=file, where="surfaces")
-    names = [s.name for s in surfaces]
-    if len(set(names)) != len(names):
-        raise ParcelfitError("surface names must be unique", file=file, where="surfaces")
-    walls = []
-    for i, w in enumerate(doc.get("walls") or []):
-        where = f"walls[{i}]"
-        w = require_mapping(w, file=file, where=where)
-        check_keys(
-            w,
-            allowed=("name", "material", "from", "to", "height", "base", "thickness", "lead_in"),
-            required=("name", "from", "to", "height"),
-            file=file,
-            where=where,
-        )
-        material = get_choice(
-            w, "material", MATERIALS, what="material", file=file, where=where, default="metal"
-        )
-        walls.append(
-            Wall(
-                name=get_str(w, "name", file=file, where=where),
-                material=material,
-                start=_point(w["from"], file=file, where=f"{where}.from"),
-                end=_point(w["to"], file=file, where=f"{where}.to"),
-                height=get_number(
-                    w, "height", file=file, where=where, minimum=1e-3, maximum=10, unit="m"
-                ),
-                base=get_number(
-                    w,
-                    "base",
-                    file=file,
-                    where=where,
-                    default=0.0,
-                    minimum=-10,
-                    maximum=10,
-                    unit="m",
-                ),
-                thickness=get_number(
-                    w,
-                    "thickness",
-                    file=file,
-                    where=where,
-                    default=0.003,
-                    minimum=1e-4,
-                    maximum=1,
-                    unit="m",
-                ),
-                lead_in=get_number(
-                    w,
-                    "lead_in",
-                    file=file,
-                    where=where,
-                    default=0.0,
-                    minimum=0.0,
-                    maximum=0.2,
-                    unit="m",
-                ),
-            )
-        )
-    st = require_mapping(doc["start"], file=file, where="start")
-    check_keys(
-        st,
-        allowed=("position", "heading", "surface", "scatter"),
-        required=("position", "heading", "surface"),
-        file=file,
-        where="start",
-    )
-    scatter = (0.0, 0.0, 0.0)
-    if st.get("scatter") is not None:
-        sc = require_mapping(st["scatter"], file=file, where="start.scatter")
-        check_keys(sc, allowed=("along", "across", "heading"), file=file, where="start.scatter")
-        scatter = tuple(
-            get_number(
-                sc,
-                key,
-                file=file,
-                where="start.scatter",
-                default=0.0,
-                minimum=0.0,
-                maximum=maximum,
-                unit=unit,
-            )
-            for key, maximum, unit in (
-                ("along", 0.5, "m"),
-                ("across", 0.5, "m"),
-                ("heading", 90, "deg"),
-            )
-        )
-    start = StartPose(
-        _point(st["position"], file=file, where="start.position"),
-        get_number(st, "heading", file=file, where="start", minimum=-360, maximum=360, unit="deg"),
-        get_str(st, "surface", file=file, where="start"),
-        scatter,  # type: ignore[arg-type]
-    )
-    if start.surface not in names:
-        raise ParcelfitError(
-            f"start.surface names no surface: {start.surface!r}",
-            file=file,
-            where="start.surface",
-            fix=f"use one of {', '.join(names)}",
-        )
-    bars = doc["light_barriers"]
-    if not isinstance(bars, list) or len(bars) != 2:
+    if not value:
+        raise ParcelfitError("no speed settings", fix="add `1: {drive: speed}`")
+    return value
+
+
+def _two_barriers(value: Any) -> Any:
+    if not isinstance(value, list) or len(value) != 2:
         raise ParcelfitError(
             "exactly two light barriers are needed",
-            file=file,
-            where="light_barriers",
             fix="list LS1 and LS2 in the order the parcel crosses them",
         )
-    barriers = []
-    for i, b in enumerate(bars):
-        where = f"light_barriers[{i}]"
-        b = require_mapping(b, file=file, where=where)
-        check_keys(
-            b,
-            allowed=("name", "from", "to"),
-            required=("name", "from", "to"),
-            file=file,
-            where=where,
-        )
-        barriers.append(
-            Barrier(
-                get_str(b, "name", file=file, where=where),
-                _point(b["from"], file=file, where=f"{where}.from"),
-                _point(b["to"], file=file, where=f"{where}.to"),
+    return value
+
+
+def _region(value: Any) -> Region:
+    return parse_region(value, where="")
+
+
+class SurfaceEntry(FileModel):
+    """One of ``surfaces``: the common keys and those of its type (``count``, ``strip_width``,
+    ``pitch`` for strips; ``rows``, ``columns``, ``radius``, ``roller_width``, ``swivel`` for
+    rollers). Lengths in m, ``heading`` and ``swivel`` in degrees."""
+
+    name: Annotated[str, Text()]
+    type: Annotated[str, _SURFACE_TYPE]
+    material: Annotated[str, _MATERIAL]
+    centre: _Point
+    length: _Size
+    width: _Size
+    heading: _Heading
+    top: _Height
+    drive: Annotated[str, Text()]
+    count: _Extra = None
+    strip_width: _Extra = None
+    pitch: _Extra = None
+    rows: _Extra = None
+    columns: _Extra = None
+    radius: _Extra = None
+    roller_width: _Extra = None
+    swivel: _Extra = None
+
+    @classmethod
+    def allowed_keys(cls, data: Mapping[Any, Any]) -> list[str]:
+        """The common keys and those of the surface's type (checked first)."""
+        if "type" not in data:
+            raise ParcelfitError("missing required key 'type'", fix="add `type:`")
+        try:
+            stype = _SURFACE_TYPE.check(data["type"])
+        except ParcelfitError as exc:
+            raise ParcelfitError(exc.message, where="type", fix=exc.fix) from None
+        return [*_COMMON, *_SURFACE_KEYS[stype]]
+
+    @model_validator(mode="after")
+    def _type_keys(self) -> SurfaceEntry:
+        for key in _SURFACE_KEYS[self.type]:
+            if getattr(self, key) is None:
+                raise ParcelfitError(f"missing required key {key!r}", fix=f"add `{key}:`")
+        return self
+
+    @property
+    def extra(self) -> dict[str, float]:
+        """The keys of the surface's type, in their documented order."""
+        return {key: getattr(self, key) for key in _SURFACE_KEYS[self.type]}
+
+
+class WallEntry(FileModel):
+    """One of ``walls``: a plate ``from`` - ``to`` [m], ``height`` above ``base`` [m]."""
+
+    name: Annotated[str, Text()]
+    material: Annotated[str, _MATERIAL] = "metal"
+    start: Annotated[_Point, Field(alias="from")]
+    end: Annotated[_Point, Field(alias="to")]
+    height: Annotated[float, Number(unit="m", ge=1e-3, le=10)]
+    base: _Height = 0.0
+    thickness: Annotated[float, Number(unit="m", ge=1e-4, le=1)] = 0.003
+    lead_in: Annotated[float, Number(unit="m", ge=0.0, le=0.2)] = 0.0
+
+
+class ScatterSection(FileModel):
+    """``start.scatter``: standard deviations along and across [m] and of the heading [deg]."""
+
+    along: Annotated[float, Number(unit="m", ge=0.0, le=0.5)] = 0.0
+    across: Annotated[float, Number(unit="m", ge=0.0, le=0.5)] = 0.0
+    heading: Annotated[float, Number(unit="deg", ge=0.0, le=90)] = 0.0
+
+
+class StartSection(FileModel):
+    """``start``: the parcel's centre [m], heading [deg], the surface below, the scatter."""
+
+    position: _Point
+    heading: _Heading
+    surface: Annotated[str, Text()]
+    scatter: ScatterSection | None = None
+
+
+class BarrierEntry(FileModel):
+    """One of ``light_barriers``: its name and the beam's ends [m]."""
+
+    name: Annotated[str, Text()]
+    start: Annotated[_Point, Field(alias="from")]
+    end: Annotated[_Point, Field(alias="to")]
+
+
+class EndSection(FileModel):
+    """``end``: the box [m] the centre must stay in, the duration [s] and the time [s] after
+    the last barrier."""
+
+    x: _Interval
+    y: _Interval
+    duration: Annotated[float, Number(unit="s", ge=0.01, le=600)]
+    after_last_barrier: Annotated[float, Number(unit="s", ge=0)] = 0.3
+
+
+class RigFile(FileModel):
+    """A rig file as written (see the module docstring)."""
+
+    name: Annotated[str, Text()]
+    description: Annotated[str, PlainValidator(_description)] = ""
+    speeds: Annotated[
+        dict[
+            int,
+            dict[
+                Annotated[str, PlainValidator(_drive_name)],
+                Annotated[float, Number(unit="m/s", ge=0.0, le=20.0)],
+            ],
+        ],
+        BeforeValidator(_speed_settings),
+    ]
+    surfaces: Annotated[tuple[SurfaceEntry, ...], or_default(tuple)]
+    walls: Annotated[tuple[WallEntry, ...], or_default(tuple)] = ()
+    start: StartSection
+    light_barriers: Annotated[tuple[BarrierEntry, BarrierEntry], BeforeValidator(_two_barriers)]
+    regions: Annotated[
+        tuple[Annotated[Region, PlainValidator(_region)], ...], or_default(tuple)
+    ] = ()
+    margin: Annotated[float, Number(unit="m", ge=0.0)] = 0.0
+    end: EndSection
+
+    @field_validator("surfaces")
+    @classmethod
+    def _named_surfaces(cls, value: tuple[SurfaceEntry, ...]) -> tuple[SurfaceEntry, ...]:
+        if not value:
+            raise ParcelfitError("a rig needs at least one surface", fix="add a surface")
+        names = [s.name for s in value]
+        if len(set(names)) != len(names):
+            raise ParcelfitError(
+                "surface names must be unique", fix="give every surface its own name"
             )
-        )
-    regions = tuple(
-        parse_region(r, file=file, where=f"regions[{k}]")
-        for k, r in enumerate(doc.get("regions") or [])
-    )
-    end = require_mapping(doc["end"], file=file, where="end")
-    check_keys(
-        end,
-        allowed=("x", "y", "duration", "after_last_barrier"),
-        required=("x", "y", "duration"),
-        file=file,
-        where="end",
-    )
+        return value
+
+    @model_validator(mode="after")
+    def _references(self) -> RigFile:
+        for i, s in enumerate(self.surfaces):
+            missing = [k for k, d in self.speeds.items() if s.drive not in d]
+            if missing:
+                raise ParcelfitError(
+                    f"drive {s.drive!r} has no speed in setting(s) {missing}",
+                    where=f"surfaces[{i}].drive",
+                    fix=f"add {s.drive} to every speed setting",
+                )
+        names = [s.name for s in self.surfaces]
+        if self.start.surface not in names:
+            raise ParcelfitError(
+                f"start.surface names no surface: {self.start.surface!r}",
+                where="start.surface",
+                fix=f"use one of {', '.join(names)}",
+            )
+        return self
+
+
+def parse_rig(doc: Any, file: str) -> Rig:
+    """Build and check a `Rig` from its parsed YAML document; every error names ``file``, the
+    key and the fix."""
+    f = parse(RigFile, doc, file=file)
+    scatter = f.start.scatter
+    a, b = f.light_barriers
     return Rig(
-        name=name,
-        description=str(doc.get("description", "") or ""),
-        speeds=speeds,
-        surfaces=tuple(surfaces),
-        walls=tuple(walls),
-        start=start,
-        barriers=(barriers[0], barriers[1]),
-        regions=regions,
-        margin=get_number(doc, "margin", file=file, where="", default=0.0, minimum=0.0, unit="m")
-        or 0.0,
-        end=EndCondition(
-            _pair(end["x"], file=file, where="end.x"),
-            _pair(end["y"], file=file, where="end.y"),
-            get_number(
-                end, "duration", file=file, where="end", minimum=0.01, maximum=600, unit="s"
-            ),
-            get_number(
-                end, "after_last_barrier", file=file, where="end", default=0.3, minimum=0, unit="s"
-            ),
+        name=f.name,
+        description=f.description,
+        speeds={setting: dict(drives) for setting, drives in f.speeds.items()},
+        surfaces=tuple(
+            Surface(
+                name=s.name,
+                type=s.type,
+                material=s.material,
+                centre=s.centre,
+                length=s.length,
+                width=s.width,
+                heading=s.heading,
+                top=s.top,
+                drive=s.drive,
+                extra=s.extra,
+            )
+            for s in f.surfaces
         ),
+        walls=tuple(
+            Wall(
+                name=w.name,
+                material=w.material,
+                start=w.start,
+                end=w.end,
+                height=w.height,
+                base=w.base,
+                thickness=w.thickness,
+                lead_in=w.lead_in,
+            )
+            for w in f.walls
+        ),
+        start=StartPose(
+            position=f.start.position,
+            heading=f.start.heading,
+            surface=f.start.surface,
+            scatter=(0.0, 0.0, 0.0)
+            if scatter is None
+            else (scatter.along, scatter.across, scatter.heading),
+        ),
+        barriers=(Barrier(a.name, a.start, a.end), Barrier(b.name, b.start, b.end)),
+        regions=f.regions,
+        margin=f.margin,
+        end=EndCondition(f.end.x, f.end.y, f.end.duration, f.end.after_last_barrier),
         source=file,
     )
 
