@@ -65,13 +65,14 @@ def write_study_store(folder: Path, dataset: Path | None) -> Path:
     """A finished study's store written by hand, no simulation: the initial design (iteration 0:
     one ok, one failed), iteration 1 (two ok), a passed validation after iteration 1, and a
     recommended point that is not the one with the lowest cost. Values are SI."""
-    from parcelfit.optimize.store import Store
+    from parcelfit.optimize.store import RecommendedRecord, Store
 
     folder.mkdir(parents=True, exist_ok=True)
     store = Store(folder / "study.sqlite")
-    store.set_meta(
-        "study",
-        {
+    # the study and source records as an earlier version wrote them (no optimiser settings)
+    old_meta(
+        store,
+        study={
             "name": "hand",
             "parameters": ["mu_d_BePa", "E_Pa"],
             "bounds": [[0.3, 0.6], [2e8, 1.6e9]],
@@ -81,10 +82,7 @@ def write_study_store(folder: Path, dataset: Path | None) -> Path:
             "fit_setting": 1,
             "validation_setting": 2,
         },
-    )
-    store.set_meta(
-        "source",
-        {
+        source={
             "study_file": None,
             "dataset": None if dataset is None else str(dataset),
             "rig": "R",
@@ -101,7 +99,18 @@ def write_study_store(folder: Path, dataset: Path | None) -> Path:
         store.finish(row, status=status, cost=cost)
     (val,) = store.add_pending("validation", 1, [points[3]], 2, [0])
     store.finish(val, status="ok", details={"passed": True})
-    store.set_meta("recommended", {"params": points[3], "cost": 0.3})
+    store.write_recommended(RecommendedRecord(points[3], 0.3))
     store.set_meta("stop_reason", "validation passed")
     store.close()
     return folder
+
+
+def old_meta(store, **records) -> None:
+    """Write meta records as raw JSON, the way a store of an earlier version holds them."""
+    import json
+
+    with store._transaction() as db:
+        for key, value in records.items():
+            db.execute(
+                "INSERT OR REPLACE INTO meta (key, value) VALUES (?, ?)", (key, json.dumps(value))
+            )

@@ -972,7 +972,8 @@ def status(
     if as_json:
         sys.stdout.write(json.dumps(info, indent=1) + "\n")
         return
-    name = (info["study"] or {}).get("name", "?")
+    record = info["study"] or {}
+    name = record.get("name", "?")
     if info["synthetic"]:
         from parcelfit.analysis import SYNTHETIC_NOTE
 
@@ -992,6 +993,9 @@ def status(
             f"  validation after iteration {v['after_iteration']}: {_verdict_word(v)}",
             markup=False,
         )
+    note = (record.get("optimizer") or {}).get("note")
+    if note:
+        console.print(Text(f"note: {note}", style="yellow"))
     _print_recommendation(info)
 
 

@@ -26,15 +26,22 @@ from parcelfit.errors import ParcelfitError
 from parcelfit.metrics import ReferenceSelection, calibration_cost, select_reference, validate
 from parcelfit.optimize.executors import Executor, Task, make_executor
 from parcelfit.optimize.folderlock import check_writable, lock_folder
-from parcelfit.optimize.sampler import make_sampler
-from parcelfit.optimize.store import Evaluation, Store
+from parcelfit.optimize.sampler import Sampler, make_sampler
+from parcelfit.optimize.store import (
+    STORE_FILE,
+    Evaluation,
+    OptimizerRecord,
+    RecommendedRecord,
+    SourceRecord,
+    Store,
+    StudyRecord,
+)
 from parcelfit.optimize.study import Study
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.runs import TestCase, is_synthetic, load_dataset, write_trajectory
 from parcelfit.sim.factory import make_simulator
 from parcelfit.sim.protocol import SimResult
 
-STORE_FILE = "study.sqlite"
 LOST_WORKER_MESSAGES = (
     "worker failed: BrokenProcessPool",
     "dask task failed: FutureCancelledError",
@@ -57,6 +64,24 @@ class CalibrationResult:
     stop_reason: str
     folder: Path
     figures: tuple[Path, ...] = ()
+
+
+def study_record(study: Study, sampler: Sampler) -> StudyRecord:
+    """The store's record of ``study`` with the optimiser ``sampler`` as it runs (bounds SI)."""
+    settings = getattr(sampler, "settings", None)
+    return StudyRecord(
+        name=study.name,
+        parameters=tuple(study.space.names),
+        bounds=tuple((d.low, d.high) for d in study.space.dims),
+        log=tuple(d.log for d in study.space.dims),
+        batch_size=study.batch_size,
+        seed=study.seed,
+        fit_setting=study.fit_setting,
+        validation_setting=study.validation_setting,
+        optimizer=OptimizerRecord(
+            study.sampler, None if settings is None else dataclasses.asdict(settings)
+        ),
+    )
 
 
 def record_result(
@@ -149,28 +174,14 @@ class Calibration:
             )
         if known is None:
             self.store.set_meta("fingerprint", study.fingerprint)
-            self.store.set_meta(
-                "study",
-                {
-                    "name": study.name,
-                    "parameters": study.space.names,
-                    "bounds": [[d.low, d.high] for d in study.space.dims],
-                    "log": [d.log for d in study.space.dims],
-                    "batch_size": study.batch_size,
-                    "seed": study.seed,
-                    "fit_setting": study.fit_setting,
-                    "validation_setting": study.validation_setting,
-                },
-            )
         # where the study came from, so a report can find its file and data again
-        self.store.set_meta(
-            "source",
-            {
-                "study_file": None if study.path is None else str(study.path),
-                "dataset": str(Path(study.dataset).resolve()),
-                "rig": study.rig,
-                "consignment": study.consignment,
-            },
+        self.store.write_source(
+            SourceRecord(
+                study_file=None if study.path is None else str(study.path),
+                dataset=str(Path(study.dataset).resolve()),
+                rig=study.rig,
+                consignment=study.consignment,
+            )
         )
         dataset = load_dataset(study.dataset)
         self.fit_case = TestCase(study.rig, study.consignment, study.fit_setting)
@@ -193,13 +204,11 @@ class Calibration:
             settings=study.bo,
             n_initial=study.initial,
         )
-        record = self.store.get_meta("study") or {}
-        if "sampler" not in record:
-            # the optimiser as it runs, so figures refit its surrogate with the same settings
-            settings = getattr(self.bo, "settings", None)
-            record["sampler"] = study.sampler
-            record["bo_settings"] = None if settings is None else dataclasses.asdict(settings)
-            self.store.set_meta("study", record)
+        recorded = self.store.read_study()
+        if recorded is None or not recorded.optimizer.recorded:
+            # the study and its optimiser as it runs (so figures refit its surrogate with the
+            # same settings); a store of an earlier version gets the settings in use from now on
+            self.store.write_study(study_record(study, self.bo))
         self._executor_args = (executor, scheduler, workers)
         self.progress = progress or ignore_progress
         self.last_validation: bool | None = None
@@ -448,7 +457,7 @@ class Calibration:
         fits = self.store.evaluations("fit")
         self.store.set_meta("stop_reason", reason)
         if best is not None:
-            self.store.set_meta("recommended", {"params": best[0], "cost": best[1]})
+            self.store.write_recommended(RecommendedRecord(best[0], best[1]))
         return CalibrationResult(
             best_params=None if best is None else best[0],
             best_cost=None if best is None else best[1],
@@ -460,10 +469,26 @@ class Calibration:
         )
 
 
+def record_summary(record: StudyRecord) -> dict[str, Any]:
+    """A study record as JSON (bounds SI), its optimiser as ``optimizer``: ``sampler``,
+    ``settings`` (BOSettings fields, None without a GP), ``recorded`` (False for a store of an
+    earlier version: the defaults stand in) and ``note`` (None, or what stands in)."""
+    doc = record.to_json()
+    del doc["sampler"], doc["bo_settings"]
+    opt = record.optimizer
+    doc["optimizer"] = {
+        "sampler": opt.sampler,
+        "settings": opt.settings,
+        "recorded": opt.recorded,
+        "note": opt.note,
+    }
+    return doc
+
+
 def study_status(folder: str | Path) -> dict[str, Any]:
     """A summary of a study folder (running or finished), JSON-ready.
 
-    Keys: ``study`` (its description), ``dataset`` and ``synthetic`` (True for SYNTHETIC data,
+    Keys: ``study`` (its description, `record_summary`), ``dataset`` and ``synthetic`` (True for SYNTHETIC data,
     None when the dataset is not found), ``reference_run``, ``stop_reason`` (None while
     running), ``evaluations``, ``pending``, ``by_status`` (evaluations per status),
     ``last_iteration`` (iterations are numbered one way everywhere: 0 is the initial design,
@@ -491,22 +516,19 @@ def study_status(folder: str | Path) -> dict[str, Any]:
     try:
         fits = store.evaluations("fit")
         vals = store.evaluations("validation")
-        meta = {k: store.get_meta(k) for k in ("study", "source", "reference_run")}
-        stop_reason, recommended = store.get_meta("stop_reason"), store.get_meta("recommended")
+        record, source = store.read_study(), store.read_source() or SourceRecord()
+        reference_run, stop_reason = store.get_meta("reference_run"), store.get_meta("stop_reason")
+        recommended = store.read_recommended()
     finally:
         store.close()
-    source = meta["source"] or {}
     ok = [e for e in fits if e.status == "ok" and e.cost is not None and math.isfinite(e.cost)]
     lowest = min(ok, key=lambda e: e.cost) if ok else None  # type: ignore[arg-type, return-value]
-    if recommended is not None:
-        at = next((e.iteration for e in fits if e.params == recommended["params"]), None)
-        recommended = {**recommended, "iteration": at}
-    names = list((meta["study"] or {}).get("parameters") or (lowest.params if lowest else []))
+    names = list(record.parameters if record else (lowest.params if lowest else []))
     return {
-        "study": meta["study"],
-        "dataset": source.get("dataset"),
-        "synthetic": is_synthetic(source["dataset"]) if source.get("dataset") else None,
-        "reference_run": meta["reference_run"],
+        "study": None if record is None else record_summary(record),
+        "dataset": source.dataset,
+        "synthetic": is_synthetic(source.dataset) if source.dataset else None,
+        "reference_run": reference_run,
         "stop_reason": stop_reason,
         "evaluations": len(fits),
         "pending": sum(e.status == "pending" for e in fits),
@@ -514,7 +536,12 @@ def study_status(folder: str | Path) -> dict[str, Any]:
             s: sum(e.status == s for e in fits) for s in sorted({e.status for e in fits})
         },
         "last_iteration": max((e.iteration for e in fits), default=None),
-        "recommended": recommended,
+        "recommended": None
+        if recommended is None
+        else {
+            **recommended.to_json(),
+            "iteration": next((e.iteration for e in fits if e.params == recommended.params), None),
+        },
         "lowest_cost": None
         if lowest is None
         else {"params": lowest.params, "cost": lowest.cost, "iteration": lowest.iteration},

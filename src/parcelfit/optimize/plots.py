@@ -12,15 +12,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 from matplotlib.figure import Figure
 
 from parcelfit.figures import save_figure
 from parcelfit.optimize.bo import BatchBO, BOSettings
-from parcelfit.optimize.calibration import STORE_FILE
 from parcelfit.optimize.space import Dimension, Space
-from parcelfit.optimize.store import Evaluation, Store
+from parcelfit.optimize.store import STORE_FILE, Evaluation, Store, StudyRecord
 from parcelfit.sim.params import catalogue_unit, to_catalogue_units
 
 
@@ -201,30 +201,35 @@ def dependence_figure(curves: list[DependenceCurve]) -> Figure:
 
 
 def study_optimizer(folder: str | Path) -> BatchBO | None:
-    """The optimiser of a study folder, told every finished evaluation (None without a study)."""
+    """The optimiser of a study folder, told every finished evaluation, with the study's own GP
+    settings (None without a study record). A study whose sampler has no GP (tpe), or whose
+    store predates the recorded settings, gets the default GP (`OptimizerRecord.note` says so)."""
     store = Store(Path(folder) / STORE_FILE, readonly=True)
-    meta = store.get_meta("study") or {}
-    fits = store.evaluations("fit")
-    store.close()
-    names = list(meta.get("parameters", []))
-    if not names:
+    try:
+        record = store.read_study()
+        fits = store.evaluations("fit")
+    finally:
+        store.close()
+    if record is None or not record.parameters:
         return None
-    logs = meta.get("log") or [False] * len(names)
+    return surrogate_optimizer(record, fits)
+
+
+def surrogate_optimizer(record: StudyRecord, fits: list[Evaluation]) -> BatchBO:
+    """A GP optimiser over the record's space with its recorded settings (defaults where none
+    are recorded), told every finished evaluation in ``fits`` in order."""
     space = Space(
         [
             Dimension(n, lo, hi, lg)
-            for n, (lo, hi), lg in zip(names, meta["bounds"], logs, strict=True)
+            for n, (lo, hi), lg in zip(record.parameters, record.bounds, record.log, strict=True)
         ]
     )
-    # the study's own GP settings (a study with a non-GP sampler, or one stored before the
-    # settings were recorded, gets the default GP as its surrogate)
-    stored = meta.get("bo_settings")
-    settings = BOSettings(**stored) if stored else BOSettings()
+    stored = record.optimizer.settings
     bo = BatchBO(
         space,
-        batch_size=int(meta.get("batch_size", 4)),
-        seed=int(meta.get("seed", 0)),
-        settings=settings,
+        batch_size=record.batch_size,
+        seed=record.seed,
+        settings=BOSettings(**stored) if stored else BOSettings(),
     )
     for e in fits:
         if e.status != "pending":
@@ -232,21 +237,28 @@ def study_optimizer(folder: str | Path) -> BatchBO | None:
     return bo
 
 
-def study_figures(folder: str | Path) -> list[Path]:
-    """Write history, traces and partial dependence (PNG and SVG) into ``folder/figures``."""
+def study_figures(
+    folder: str | Path, curves: list[DependenceCurve] | Literal["refit"] | None = "refit"
+) -> list[Path]:
+    """Write history, traces and partial dependence (PNG and SVG) into ``folder/figures``;
+    ``curves`` are the partial dependence curves when already computed (None: there are none),
+    else they are computed from the study's surrogate."""
     folder = Path(folder)
     store = Store(folder / STORE_FILE, readonly=True)
-    meta = store.get_meta("study") or {}
-    fits, vals = store.evaluations("fit"), store.evaluations("validation")
-    store.close()
-    names = list(meta.get("parameters", []))
+    try:
+        record = store.read_study()
+        fits, vals = store.evaluations("fit"), store.evaluations("validation")
+    finally:
+        store.close()
+    names = [] if record is None else list(record.parameters)
     out = folder / "figures"
     paths = save_figure(history(fits, vals), out / "history")
     if not fits or not names:
         return paths
     paths += save_figure(traces(fits, names), out / "traces")
-    bo = study_optimizer(folder)
-    pd_fig = None if bo is None else partial_dependence(bo)
-    if pd_fig is not None:
-        paths += save_figure(pd_fig, out / "partial_dependence")
+    if curves == "refit":
+        bo = study_optimizer(folder)
+        curves = None if bo is None else dependence_curves(bo)
+    if curves:
+        paths += save_figure(dependence_figure(curves), out / "partial_dependence")
     return paths

@@ -28,7 +28,6 @@ import math
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
 
 import jinja2
 import numpy as np
@@ -40,6 +39,7 @@ from parcelfit import __version__
 from parcelfit.errors import ParcelfitError
 from parcelfit.metrics import ReferenceSelection, Validation, select_reference, validate
 from parcelfit.metrics.envelope import EnvelopeBand, envelope_band
+from parcelfit.optimize.store import StudyRecord
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.runs import Dataset, TestCase, Trajectory, load_dataset, read_trajectory
 from parcelfit.sim.params import catalogue_unit, to_catalogue_units
@@ -296,12 +296,12 @@ class ParameterRow:
 
 
 def parameter_rows(
-    meta: dict[str, Any], best: dict[str, float], truth: dict[str, float], curves: list | None
+    record: StudyRecord, best: dict[str, float], truth: dict[str, float], curves: list | None
 ) -> list[ParameterRow]:
     """The calibrated parameters' table rows (catalogue units)."""
     by_name = {c.name: c for c in curves} if curves else {}
     rows = []
-    for name, (lo, hi) in zip(meta["parameters"], meta["bounds"], strict=True):
+    for name, (lo, hi) in zip(record.parameters, record.bounds, strict=True):
         curve = by_name.get(name)
         rows.append(
             ParameterRow(
@@ -324,7 +324,7 @@ def _iteration_span(last: int) -> str:
 
 
 def _calibration_section(
-    b: _Builder, folder: Path, meta: dict[str, Any], truth: dict[str, float], synthetic: bool
+    b: _Builder, folder: Path, meta: StudyRecord, truth: dict[str, float], synthetic: bool
 ) -> tuple[dict[str, float] | None, list[ParameterRow]]:
     from parcelfit.optimize.calibration import STORE_FILE, study_status
     from parcelfit.optimize.plots import dependence_curves, history, study_optimizer, traces
@@ -346,7 +346,7 @@ def _calibration_section(
     b.add(
         f"<p>{status['evaluations']} simulations: the initial design (iteration 0)"
         + (f" and {_iteration_span(last)}" if last else "")
-        + (f" (batches of {meta['batch_size']})" if last and meta.get("batch_size") else "")
+        + (f" (batches of {meta.batch_size})" if last else "")
         + f", {len(vals)} validation runs; "
         f"{span / 60:.1f} min from the first to the last result, {sim_time / 60:.1f} min of "
         f"simulation in all. Stopped: {_esc(status.get('stop_reason') or 'not finished')}.</p>"
@@ -358,7 +358,7 @@ def _calibration_section(
     if best is None:
         b.add("<p class='bad'>No simulation succeeded; no parameters to report.</p>")
         return None, []
-    names = list(meta["parameters"])
+    names = list(meta.parameters)
     bo = study_optimizer(folder)
     curves = None if bo is None else dependence_curves(bo)
     rows = parameter_rows(meta, best["params"], truth, curves)
@@ -574,18 +574,17 @@ def build_report(
     """Write the HTML report of a study folder (or of a folder holding ``calibration/``, like
     the demo's); returns the report's path (default: ``report.html`` inside ``folder``).
     ``progress`` receives a `ProgressEvent` as each section starts."""
-    from parcelfit.optimize.calibration import STORE_FILE
-    from parcelfit.optimize.store import Store
+    from parcelfit.optimize.store import STORE_FILE, SourceRecord, Store
 
     places = locate(folder, screen)
     target = _report_target(Path(out) if out is not None else Path(folder) / "report.html")
     store = Store(places.study / STORE_FILE, readonly=True)
-    meta = store.get_meta("study") or {}
-    source = store.get_meta("source") or {}
+    meta = store.read_study()
+    source = store.read_source() or SourceRecord()
     stop_reason = store.get_meta("stop_reason")
     vals = [v for v in store.evaluations("validation") if v.status != "pending"]
     store.close()
-    if not meta:
+    if meta is None:
         raise ParcelfitError(
             "the study store has no study description",
             file=places.study / STORE_FILE,
@@ -593,19 +592,19 @@ def build_report(
         )
     b = _Builder(progress)
     ds: Dataset | None = None
-    dataset_dir = Path(source["dataset"]) if source.get("dataset") else None
+    dataset_dir = Path(source.dataset) if source.dataset else None
     if dataset_dir is not None and (dataset_dir / "dataset.yaml").is_file():
         ds = load_dataset(dataset_dir)
-    rig, cons = source.get("rig"), source.get("consignment")
+    rig, cons = source.rig, source.consignment
     truth = _load_truth(dataset_dir, cons) if (dataset_dir and cons and ds and ds.synthetic) else {}
-    title = f"parcelfit report: {meta.get('name', places.study.name)}"
+    title = f"parcelfit report: {meta.name}"
     if ds is not None:
         _statistics_section(b, ds)
         shown = []
         if rig and cons:
-            shown = [TestCase(rig, cons, int(meta["fit_setting"]))]
-            if meta.get("validation_setting") is not None:
-                shown.append(TestCase(rig, cons, int(meta["validation_setting"])))
+            shown = [TestCase(rig, cons, meta.fit_setting)]
+            if meta.validation_setting is not None:
+                shown.append(TestCase(rig, cons, meta.validation_setting))
         sels = _reference_section(b, ds, shown)
     else:
         sels = {}
@@ -618,8 +617,8 @@ def build_report(
         vals[-1] if vals else None
     )
     val_case = (
-        TestCase(rig, cons, int(meta["validation_setting"]))
-        if rig and cons and meta.get("validation_setting") is not None
+        TestCase(rig, cons, meta.validation_setting)
+        if rig and cons and meta.validation_setting is not None
         else None
     )
     if val_row is None or val_case is None:
@@ -642,10 +641,10 @@ def build_report(
             b, sels[val_case], traj, val_row.transit_time, "calibrated simulation"
         )
     _stricter_example_section(b, places.root, ds)
-    if key_frames and best is not None and rig and cons and source.get("study_file"):
+    if key_frames and best is not None and rig and cons and source.study_file:
         b.section("The simulated run", "frames")
-        case = val_case or TestCase(rig, cons, int(meta["fit_setting"]))
-        study_file = Path(source["study_file"])
+        case = val_case or TestCase(rig, cons, meta.fit_setting)
+        study_file = Path(source.study_file)
         if study_file.is_file():
             _key_frames(b, study_file, best, case, animation)
         else:
