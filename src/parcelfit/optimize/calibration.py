@@ -11,6 +11,12 @@ with the worst cost seen); they never stop the loop and count against the budget
 Iterations are numbered one way in the store, the progress, `study_status` and the report:
 0 is the initial design, k >= 1 the k-th batch the optimiser chose; the validation "after
 iteration k" simulates the recommended parameters once iteration k has finished.
+
+What the study concluded is written for the report, which computes nothing of its own:
+``results.json`` (`parcelfit.optimize.results`: the reference runs used, every validation with
+its verdict and curves, the GP surrogate's partial dependence refitted with the optimiser
+settings the store records, the key frames) after every validation and when the study stops,
+with the study figures in ``figures/``.
 """
 
 from __future__ import annotations
@@ -18,14 +24,25 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from parcelfit.errors import ParcelfitError
-from parcelfit.metrics import ReferenceSelection, calibration_cost, select_reference, validate
+from parcelfit.metrics import ReferenceSelection, calibration_cost, select_reference
 from parcelfit.optimize.executors import Executor, Task, make_executor
 from parcelfit.optimize.folderlock import check_writable, lock_folder
+from parcelfit.optimize.results import (
+    KeyFramesRecord,
+    ReferenceRecord,
+    StudyResults,
+    SurrogateRecord,
+    ValidationRecord,
+    new_results,
+    read_results,
+    validation_record,
+    write_results,
+)
 from parcelfit.optimize.sampler import Sampler, make_sampler
 from parcelfit.optimize.store import (
     STORE_FILE,
@@ -38,7 +55,13 @@ from parcelfit.optimize.store import (
 )
 from parcelfit.optimize.study import Study
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
-from parcelfit.runs import TestCase, is_synthetic, load_dataset, write_trajectory
+from parcelfit.runs import (
+    TestCase,
+    is_synthetic,
+    load_dataset,
+    read_trajectory,
+    write_trajectory,
+)
 from parcelfit.sim.factory import make_simulator
 from parcelfit.sim.protocol import SimResult
 
@@ -54,7 +77,7 @@ class CalibrationResult:
     """Outcome of a study: the recommended parameters (SI) and their cost, the number of fitting
     evaluations, the last iteration (0 = the initial design, k >= 1 the k-th optimiser batch;
     None before any), the validation verdict, why it stopped, the study figures written (PNG
-    and SVG in ``folder/figures``)."""
+    and SVG in ``folder/figures``, with the key frames of MuJoCo studies)."""
 
     best_params: dict[str, float] | None
     best_cost: float | None
@@ -136,9 +159,12 @@ class Calibration:
     """One study folder: its store, references, optimiser and executor (see the module doc).
 
     ``executor`` (serial, local or dask), ``scheduler`` and ``workers`` override the study
-    file's ``executor``; ``progress`` receives a `ProgressEvent` after every result; with
-    ``figures`` the study figures (`parcelfit.optimize.plots.study_figures`) are written when
-    the study stops."""
+    file's ``executor``; ``progress`` receives a `ProgressEvent` after every result. When the
+    study stops it writes its results (``results.json``, `parcelfit.optimize.results`: the
+    references, validations and surrogate the report renders) and, with ``figures``, the study
+    figures (`parcelfit.optimize.plots.study_figures`) and, with ``key_frames`` too, the
+    recommended run's key frames (MuJoCo studies: one more simulation; ``animation`` adds
+    ``figures/run.gif``)."""
 
     def __init__(
         self,
@@ -150,9 +176,13 @@ class Calibration:
         workers: int | None = None,
         progress: ProgressCallback | None = None,
         figures: bool = True,
+        key_frames: bool = True,
+        animation: bool = False,
     ) -> None:
         self.study = study
         self.figures = figures
+        self.key_frames = key_frames
+        self.animation = animation
         self.folder = Path(folder)
         check_writable(self.folder, (STORE_FILE,))
         try:
@@ -212,6 +242,7 @@ class Calibration:
         self._executor_args = (executor, scheduler, workers)
         self.progress = progress or ignore_progress
         self.last_validation: bool | None = None
+        self._validations: dict[int, ValidationRecord] = {}  # by store row id
 
     def close(self) -> None:
         """Close the store and release the folder's lock (`run` does this when it ends)."""
@@ -282,59 +313,31 @@ class Calibration:
         assert self.val_case is not None and self.val_reference is not None
         task = Task(self._full_params(params), self.val_case, f"validation-{iteration:03d}")
         ((_, result),) = list(executor.simulate(self.simulator, [task]))
-        details: dict[str, Any] = {"message": result.diagnostics.get("message")}
-        passed = False
         run_file = None
         if result.ok and result.run is not None:
             run_file = f"runs/validation-{iteration:03d}.csv"
             write_trajectory(result.run.trajectory, self.folder / run_file)
-            try:
-                verdict = validate(
-                    result.run.trajectory, result.run.transit_time, self.val_reference
-                )
-                passed = verdict.passed
-                details.update(
-                    {
-                        "passed": passed,
-                        "transit_time": {
-                            "simulated": verdict.transit_time.simulated,
-                            "low": verdict.transit_time.low,
-                            "high": verdict.transit_time.high,
-                            "passed": verdict.transit_time.passed,
-                        },
-                        "xy": {
-                            "simulated_mean": verdict.xy.simulated_mean,
-                            "largest_real_mean": verdict.xy.largest_real_mean,
-                            "passed": verdict.xy.passed,
-                        },
-                        "theta": {
-                            "simulated_mean": verdict.theta.simulated_mean,
-                            "largest_real_mean": verdict.theta.largest_real_mean,
-                            "passed": verdict.theta.passed,
-                        },
-                        # the stricter band test, reported beside the published verdict
-                        "envelope": None
-                        if verdict.envelope is None
-                        else {
-                            "inside_y": verdict.envelope.inside_y,
-                            "inside_theta": verdict.envelope.inside_theta,
-                            "worst_y_m": verdict.envelope.worst_y,
-                            "worst_theta_rad": verdict.envelope.worst_theta,
-                            "passed": verdict.envelope.passed,
-                        },
-                    }
-                )
-            except ParcelfitError as exc:
-                details["message"] = f"validation not computable: {exc}"
-        details["passed"] = passed
+        record = validation_record(
+            self.val_reference,
+            result.run.trajectory if run_file is not None and result.run is not None else None,
+            None if result.run is None else result.run.transit_time,
+            status=result.status.value,
+            message=result.diagnostics.get("message"),
+            params=params,
+            after_iteration=iteration,
+            run_file=run_file,
+        )
         self.store.finish(
             row_id,
             status=result.status.value,
-            transit_time=None if result.run is None else result.run.transit_time,
+            transit_time=record.transit_time,
             wall_time=result.wall_time,
             run_file=run_file,
-            details=details,
+            details=record.details(),
         )
+        self._validations[row_id] = record
+        passed = record.passed
+        self.write_results()
         self.last_validation = passed
         self._report(
             iteration,
@@ -345,19 +348,154 @@ class Calibration:
 
     # -- the loop ----------------------------------------------------------------------------
     def run(self) -> CalibrationResult:
-        """Run (or resume) the study until validation passes or the budget is spent; then close
-        the store, release the folder and write the study figures."""
+        """Run (or resume) the study until validation passes or the budget is spent; then write
+        the results (`parcelfit.optimize.results`), the study figures and the key frames, close
+        the store and release the folder."""
         try:
             result = self._run()
+            result = self._finish(result)
         finally:
             self.close()
+        return result
+
+    # -- what the study concluded, for the report --------------------------------------------
+    def _validation_records(self) -> list[ValidationRecord]:
+        """Every finished validation's record: those run now as they were made, earlier ones
+        (a resumed study) judged again from their stored run files (no simulation)."""
+        out = []
+        for row in self.store.evaluations("validation"):
+            if row.status == "pending" or self.val_reference is None:
+                continue
+            if row.id not in self._validations:
+                traj = None
+                if row.run_file is not None and (self.folder / row.run_file).is_file():
+                    traj = read_trajectory(self.folder / row.run_file)
+                self._validations[row.id] = validation_record(
+                    self.val_reference,
+                    traj,
+                    row.transit_time,
+                    status=row.status,
+                    message=row.details.get("message"),
+                    params=row.params,
+                    after_iteration=row.iteration,
+                    run_file=row.run_file,
+                )
+            out.append(self._validations[row.id])
+        return out
+
+    def surrogate(self) -> SurrogateRecord | None:
+        """The GP surrogate of the finished fitting evaluations, refitted with the optimiser
+        settings the store records, and its partial dependence curves (None without a study
+        record)."""
+        from parcelfit.optimize.plots import dependence_curves, surrogate_optimizer
+
+        record = self.store.read_study()
+        if record is None or not record.parameters:
+            return None
+        bo = surrogate_optimizer(record, self.store.evaluations("fit"))
+        curves = dependence_curves(bo)
+        return SurrogateRecord(
+            record.optimizer, bo.n_told, None if curves is None else tuple(curves)
+        )
+
+    def write_results(
+        self,
+        stop_reason: str | None = None,
+        *,
+        surrogate: SurrogateRecord | None = None,
+        key_frames: KeyFramesRecord | None = None,
+        figures: tuple[Path, ...] = (),
+    ) -> Path:
+        """Write ``results.json``: the references, every validation, the surrogate (refitted
+        here unless given), the key frames and figures; returns its path."""
+        references = {"fit": ReferenceRecord.from_selection(self.reference)}
+        if self.val_reference is not None:
+            references["validation"] = ReferenceRecord.from_selection(self.val_reference)
+        return write_results(
+            self.folder,
+            new_results(
+                references,
+                self._validation_records(),
+                stop_reason=stop_reason,
+                surrogate=surrogate or self.surrogate(),
+                key_frames=key_frames,
+                figures=[p.relative_to(self.folder).as_posix() for p in figures],
+            ),
+        )
+
+    def _finish(self, result: CalibrationResult) -> CalibrationResult:
+        """The results, study figures and key frames of a stopped study."""
+        last = -1 if result.last_iteration is None else result.last_iteration
+        surrogate = self.surrogate()
+        figures: list[Path] = []
+        key_frames = None
         if self.figures:
             from parcelfit.optimize.plots import study_figures
 
-            last = result.last_iteration
-            self._report(-1 if last is None else last, 0, "writing the study figures")
-            result = dataclasses.replace(result, figures=tuple(study_figures(self.folder)))
-        return result
+            self._report(last, 0, "writing the study figures")
+            curves = None if surrogate is None or surrogate.curves is None else surrogate.curves
+            figures += study_figures(self.folder, None if curves is None else list(curves))
+            if self.key_frames and result.best_params is not None:
+                key_frames, drawn = self._key_frames(result.best_params, last)
+                figures += drawn
+        self.write_results(
+            result.stop_reason, surrogate=surrogate, key_frames=key_frames, figures=tuple(figures)
+        )
+        return dataclasses.replace(result, figures=tuple(figures))
+
+    def _key_frames(
+        self, params: Mapping[str, float], iteration: int
+    ) -> tuple[KeyFramesRecord, list[Path]]:
+        """Draw the recommended run's key frames (MuJoCo only: one more simulation, at the
+        validation case if there is one) into ``figures/``; reused while the same."""
+        from parcelfit.figures import save_figure
+        from parcelfit.sim.mujoco import MujocoSimulator
+
+        case = self.val_case or self.fit_case
+        record = KeyFramesRecord(case.label, dict(params))
+        if not isinstance(self.simulator, MujocoSimulator):
+            return replace(record, note="Key frames are drawn for the MuJoCo backend only."), []
+        stem = self.folder / "figures" / "key-frames"
+        gif = self.folder / "figures" / "run.gif"
+        earlier = self._earlier_results()
+        kept = None if earlier is None else earlier.key_frames
+        if (
+            kept is not None
+            and kept.image is not None
+            and (kept.case, kept.params) == (record.case, record.params)
+            and stem.with_suffix(".png").is_file()
+            and (not self.animation or (kept.animation is not None and gif.is_file()))
+        ):
+            return kept, [stem.with_suffix(".png"), stem.with_suffix(".svg")]
+        self._report(iteration, 1, "drawing the key frames of the calibrated run")
+        from parcelfit.sim.mujoco.render import render_key_frames
+
+        try:
+            drawn = render_key_frames(
+                self.simulator,
+                self._full_params(params),
+                case,
+                animation=gif if self.animation else None,
+            )
+        except Exception as exc:  # a figure must not cost the study its results
+            return replace(record, note=f"The key-frame run failed: {exc}"), []
+        if drawn.figure is None:
+            return replace(record, note=f"The key-frame run ended {drawn.status}."), []
+        paths = save_figure(drawn.figure, stem)
+        return replace(
+            record,
+            image=paths[0].relative_to(self.folder).as_posix(),
+            animation=None
+            if drawn.animation is None
+            else drawn.animation.relative_to(self.folder).as_posix(),
+        ), paths
+
+    def _earlier_results(self) -> StudyResults | None:
+        """The results an earlier run of this folder wrote (None if none or unreadable)."""
+        try:
+            return read_results(self.folder)
+        except ParcelfitError:
+            return None
 
     def _run(self) -> CalibrationResult:
         study = self.study

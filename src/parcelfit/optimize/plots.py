@@ -5,12 +5,13 @@
 * ``traces``: each fitted parameter by evaluation, coloured by cost, the best one marked.
 * ``partial_dependence``: the GP's predicted cost as one parameter varies, averaged over the
   others (uniform Monte Carlo sample of 256 points per value), with a +-1 standard deviation
-  band; the GP is refitted from the store exactly as the optimiser saw it.
+  band; the GP is refitted from the store exactly as the optimiser saw it, with the optimiser
+  settings the store records (`surrogate_optimizer`). The curves are `DependenceCurve`s
+  (`parcelfit.optimize.results`), which the calibration also stores for the report.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
@@ -19,6 +20,7 @@ from matplotlib.figure import Figure
 
 from parcelfit.figures import save_figure
 from parcelfit.optimize.bo import BatchBO, BOSettings
+from parcelfit.optimize.results import DependenceCurve
 from parcelfit.optimize.space import Dimension, Space
 from parcelfit.optimize.store import STORE_FILE, Evaluation, Store, StudyRecord
 from parcelfit.sim.params import catalogue_unit, to_catalogue_units
@@ -109,29 +111,6 @@ def traces(fits: list[Evaluation], names: list[str]) -> Figure:
     if ok:
         fig.colorbar(sc, ax=list(axes), label="cost")
     return fig
-
-
-@dataclass(frozen=True)
-class DependenceCurve:
-    """The GP's partial dependence of the cost on one parameter (display units on x)."""
-
-    name: str
-    values: np.ndarray  # parameter values, catalogue units
-    cost: np.ndarray  # predicted cost averaged over the other parameters
-    sd: np.ndarray  # averaged predictive standard deviation
-    log: bool
-    transformed: bool = False  # cost after the optimiser's output transform (log or Box-Cox)
-
-    @property
-    def amplitude(self) -> float:
-        """How much the predicted cost changes across the parameter's range."""
-        return float(np.max(self.cost) - np.min(self.cost))
-
-    def indistinct(self) -> tuple[float, float]:
-        """The span of values whose predicted cost is within one (mean) predictive standard
-        deviation of the lowest: the values the surrogate cannot tell apart from the best."""
-        near = self.values[self.cost <= self.cost.min() + float(self.sd.mean())]
-        return float(near.min()), float(near.max())
 
 
 def dependence_curves(

@@ -9,7 +9,6 @@
 * ``validation_overlays``: lateral position y over x and heading theta over x of the real runs
   (grey) and the simulated run (colour) on the prepared trajectories the criteria use, with the
   stricter criterion's band shaded (like the published Figures 16-19);
-* ``key_frames``: the parcel's outline on the rig at a few instants.
 """
 
 from __future__ import annotations
@@ -143,11 +142,3 @@ def validation_overlays(
     ax_t.set_title("heading over travel", fontsize=9)
     ax_y.legend(fontsize=7)
     return fig
-
-
-def key_frame_indices(n_samples: int, count: int = 6) -> list[int]:
-    """``count`` sample indices spread evenly over a run of ``n_samples`` samples."""
-    if n_samples <= 0:
-        return []
-    spread = np.linspace(0, n_samples - 1, min(count, n_samples)).round().astype(int)
-    return sorted({int(i) for i in spread})

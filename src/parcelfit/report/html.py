@@ -513,10 +513,9 @@ def _key_frames(
     b: _Builder, study_file: Path, params: dict[str, float], case: TestCase, animation: bool
 ) -> None:
     from parcelfit.optimize.study import load_study
-    from parcelfit.report.figures import key_frame_indices
     from parcelfit.sim.factory import make_simulator
     from parcelfit.sim.mujoco import MujocoSimulator
-    from parcelfit.sim.mujoco.render import animate_run, snapshot
+    from parcelfit.sim.mujoco.render import animate_run, key_frame_indices, snapshot
 
     study = load_study(study_file)
     sim = make_simulator(study.simulator, study.folder)
