@@ -114,3 +114,58 @@ def old_meta(store, **records) -> None:
             db.execute(
                 "INSERT OR REPLACE INTO meta (key, value) VALUES (?, ?)", (key, json.dumps(value))
             )
+
+
+def write_study_results(folder: Path, dataset: Path, optimizer=None) -> None:
+    """``results.json`` for the store of `write_study_store`, made here without a calibration:
+    the reference runs of the fake dataset's R/P/1 and R/P/2, a validation after iteration 1 of
+    the analytic run at the truth, a surrogate (sharp along mu_d_BePa, flat along E_Pa) said to
+    be fitted with ``optimizer`` (default: the published configuration), no key frames."""
+    from dataclasses import asdict
+
+    from parcelfit.metrics import select_reference
+    from parcelfit.optimize.bo import BOSettings
+    from parcelfit.optimize.results import (
+        DependenceCurve,
+        KeyFramesRecord,
+        ReferenceRecord,
+        SurrogateRecord,
+        new_results,
+        validation_record,
+        write_results,
+    )
+    from parcelfit.optimize.store import OptimizerRecord
+    from parcelfit.runs import TestCase, load_dataset
+
+    from .fake_sim import TRUTH, trajectory
+
+    ds = load_dataset(dataset)
+    fit, val = (select_reference(ds[TestCase("R", "P", k)]) for k in (1, 2))
+    traj, transit = trajectory(TRUTH, 2)
+    params = {"mu_d_BePa": 0.45, "E_Pa": 9e8}
+    record = validation_record(
+        val, traj, transit, params=params, after_iteration=1, run_file="runs/validation-001.csv"
+    )
+    xs = np.linspace(0.3, 0.6, 31)
+    curves = (
+        DependenceCurve("mu_d_BePa", xs, (xs - 0.45) ** 2 * 100, np.full(31, 0.05), False),
+        DependenceCurve(
+            "E_Pa", np.linspace(200, 1600, 31), np.full(31, 0.5), np.full(31, 0.05), False
+        ),
+    )
+    optimizer = optimizer or OptimizerRecord("published", asdict(BOSettings.published()))
+    write_results(
+        folder,
+        new_results(
+            {
+                "fit": ReferenceRecord.from_selection(fit),
+                "validation": ReferenceRecord.from_selection(val),
+            },
+            [record],
+            stop_reason="validation passed",
+            surrogate=SurrogateRecord(optimizer, 3, curves),
+            key_frames=KeyFramesRecord(
+                "R/P/2", params, note="Key frames are drawn for the MuJoCo backend only."
+            ),
+        ),
+    )
