@@ -238,8 +238,8 @@ class Demo:
     ``profile`` is quick, default or full (see `PROFILES`); ``executor`` (serial or local) and
     ``workers`` choose where screening and calibration simulate (default: the files' local
     processes, one per core); with ``animation`` the calibration writes an animation of the
-    calibrated run and the report embeds it. Each stage method can be called alone (in order: later stages read earlier files)
-    and resumes what an earlier run of the same folder left.
+    calibrated run and the report embeds it. Each stage method can be called alone (in order:
+    later stages read earlier files) and resumes what an earlier run of the same folder left.
     """
 
     def __init__(

@@ -182,8 +182,13 @@ class _Page:
     progress: ProgressCallback
     sections: list[Section] = field(default_factory=list)
 
-    def add(self, kind: str, title: str, anchor: str, data: Any) -> None:
+    def start(self, title: str) -> str:
+        """Announce a section as its making starts; returns its title."""
         self.progress(ProgressEvent("report", title))
+        return title
+
+    def add(self, kind: str, title: str, anchor: str, data: Any) -> None:
+        """Append a made section."""
         self.sections.append(Section(kind, title, anchor, data))
 
 
@@ -203,8 +208,7 @@ def _statistics_section(page: _Page, ds: Dataset) -> None:
     from parcelfit.stats.plots import transit_time_boxplots
     from parcelfit.stats.transit import compare_transit_times, transit_time_table
 
-    title = "Transit times of the consignment types"
-    page.progress(ProgressEvent("report", title))
+    title = page.start("Transit times of the consignment types")
     times = transit_time_table(ds)
     data: dict[str, Any] = {"runs": len(times)}
     if not times.empty:
@@ -216,7 +220,7 @@ def _statistics_section(page: _Page, ds: Dataset) -> None:
             significant=int(tests["significant"].sum()),
             tests=len(tests),
         )
-    page.sections.append(Section("stats", title, "stats", data))
+    page.add("stats", title, "stats", data)
 
 
 # -- reference runs ----------------------------------------------------------------------------
@@ -262,8 +266,7 @@ def _reference_section(
 ) -> None:
     from parcelfit.report.figures import distance_heatmaps
 
-    title = "Reference runs"
-    page.progress(ProgressEvent("report", title))
+    title = page.start("Reference runs")
     stored = [] if results is None else list(results.references.values())
     everything = _dataset_references(root, ds)
     rows = everything or [
@@ -280,13 +283,14 @@ def _reference_section(
             figure_html(distance_heatmaps(r), f"distance matrices {r.case}") for r in stored
         ],
     }
-    page.sections.append(Section("reference", title, "reference", data))
+    page.add("reference", title, "reference", data)
 
 
 # -- screening ---------------------------------------------------------------------------------
 
 
 def _screen_section(page: _Page, screen: Path | None) -> None:
+    title = page.start("Screening")
     data: dict[str, Any] = {
         "found": screen is not None,
         "selected": None,
@@ -303,7 +307,7 @@ def _screen_section(page: _Page, screen: Path | None) -> None:
             png_html(png.read_bytes(), png.stem)
             for png in sorted(screen.glob("stage*-pareto-*.png"))
         ]
-    page.add("screening", "Screening", "screening", data)
+    page.add("screening", title, "screening", data)
 
 
 # -- calibration -------------------------------------------------------------------------------
@@ -409,8 +413,7 @@ def _calibration_section(
     from parcelfit.optimize.calibration import study_status
     from parcelfit.optimize.plots import dependence_figure, history, traces
 
-    title = "Calibration"
-    page.progress(ProgressEvent("report", title))
+    title = page.start("Calibration")
     status = study_status(folder)
     store = Store(folder / STORE_FILE, readonly=True)
     try:
@@ -439,7 +442,7 @@ def _calibration_section(
     if best is not None and status["recommended"] is not None:  # what the study validated
         best = {**status["recommended"], "lowest_cost": best["cost"]}
     if best is None:
-        page.sections.append(Section("calibration", title, "calibration", data))
+        page.add("calibration", title, "calibration", data)
         return None, []
     curves = None
     if results is not None and results.surrogate is not None:
@@ -464,7 +467,7 @@ def _calibration_section(
         else figure_html(dependence_figure(list(curves)), "partial dependence"),
         traces=figure_html(traces(fits, list(record.parameters)), "parameter traces"),
     )
-    page.sections.append(Section("calibration", title, "calibration", data))
+    page.add("calibration", title, "calibration", data)
     return best["params"], rows
 
 
@@ -503,8 +506,7 @@ def _validation_view(
 def _validation_section(
     page: _Page, results: StudyResults | None, record: StudyRecord
 ) -> ValidationRecord | None:
-    title = "Validation"
-    page.progress(ProgressEvent("report", title))
+    title = page.start("Validation")
     data: dict[str, Any] = {"missing": None, "shown": None, "view": None}
     shown = None if results is None else results.shown_validation()
     if results is None:
@@ -514,7 +516,7 @@ def _validation_section(
         reference = results.references.get("validation")
         if shown.verdict is not None and reference is not None:
             data["view"] = _validation_view(reference, shown, "calibrated simulation")
-    page.sections.append(Section("validation", title, "validation", data))
+    page.add("validation", title, "validation", data)
     return shown
 
 
@@ -522,8 +524,7 @@ def _stricter_example_section(page: _Page, root: Path) -> None:
     path = root / "stricter-criterion.json"
     if not path.is_file():
         return
-    title = "Why a stricter criterion"
-    page.progress(ProgressEvent("report", title))
+    title = page.start("Why a stricter criterion")
     doc = json.loads(path.read_text(encoding="utf-8"))
     data: dict[str, Any] = {
         "description": str(doc.get("description", "")),
@@ -541,7 +542,7 @@ def _stricter_example_section(page: _Page, root: Path) -> None:
             "curves: rerun `parcelfit demo` with the same --out to add them (nothing is "
             "simulated again)."
         )
-    page.sections.append(Section("stricter", title, "stricter", data))
+    page.add("stricter", title, "stricter", data)
 
 
 # -- key frames --------------------------------------------------------------------------------
@@ -550,6 +551,7 @@ def _stricter_example_section(page: _Page, root: Path) -> None:
 def _frames_section(
     page: _Page, folder: Path, results: StudyResults | None, animation: bool
 ) -> None:
+    title = page.start("The simulated run")
     data: dict[str, Any] = {"note": None, "image": None, "animation": None, "no_animation": None}
     kf = None if results is None else results.key_frames
     if results is None:
@@ -577,7 +579,7 @@ def _frames_section(
                     "No animation is stored: `parcelfit calibrate --animation` (or the demo) "
                     "writes one."
                 )
-    page.add("frames", "The simulated run", "frames", data)
+    page.add("frames", title, "frames", data)
 
 
 # -- the page ----------------------------------------------------------------------------------
