@@ -231,3 +231,42 @@ def test_study_results_round_trip_through_results_json(tmp_path):
     (tmp_path / "results.json").write_text("{")
     with pytest.raises(ParcelfitError, match="results file is unreadable"):
         read_results(tmp_path)
+
+
+def test_rerunning_a_finished_study_writes_its_missing_results_without_simulating(
+    tmp_path, monkeypatch
+):
+    from parcelfit.optimize.results import read_results
+
+    study = load_study(
+        write_study(
+            tmp_path,
+            initial=4,
+            batch_size=2,
+            budget=6,
+            validation={"speed_setting": 2, "every": 1},
+            executor={"kind": "serial"},
+        )
+    )
+    out = tmp_path / "out"
+    Calibration(study, out).run()
+    first = read_results(out)
+    assert first.stop_reason is not None and first.validations and first.surrogate.curves
+    # a folder as an earlier parcelfit left it: no results.json
+    (out / "results.json").unlink()
+    log = tmp_path / "sims.log"
+    monkeypatch.setenv("FAKE_SIM_LOG", str(log))
+    Calibration(study, out).run()
+    assert not log.exists()  # nothing simulated again
+    again = read_results(out)
+    assert again.surrogate.to_json() == first.surrogate.to_json()
+    # judged again from the run files: the same verdicts, with their curves (the numbers may
+    # differ a little: a run file's 9 significant digits can cost the resampled run a sample)
+    assert len(again.validations) == len(first.validations)
+    for a, b in zip(again.validations, first.validations, strict=True):
+        assert (a.after_iteration, a.params, a.passed) == (b.after_iteration, b.params, b.passed)
+        assert a.verdict is not None and a.sim_xy is not None and a.band is not None
+    # with its results file in place, a resumed study keeps the records as they were
+    Calibration(study, out).run()
+    kept = read_results(out)
+    assert [v.to_json() for v in kept.validations] == [v.to_json() for v in again.validations]

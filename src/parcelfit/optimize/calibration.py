@@ -361,11 +361,24 @@ class Calibration:
     # -- what the study concluded, for the report --------------------------------------------
     def _validation_records(self) -> list[ValidationRecord]:
         """Every finished validation's record: those run now as they were made, earlier ones
-        (a resumed study) judged again from their stored run files (no simulation)."""
+        (a resumed study) as the results file has them, else judged again from their stored run
+        files (no simulation; the files keep 9 significant digits)."""
         out = []
-        for row in self.store.evaluations("validation"):
-            if row.status == "pending" or self.val_reference is None:
+        rows = [r for r in self.store.evaluations("validation") if r.status != "pending"]
+        earlier = None
+        if any(r.id not in self._validations for r in rows):
+            kept = self._earlier_results()
+            earlier = {} if kept is None else {v.after_iteration: v for v in kept.validations}
+        for row in rows:
+            if self.val_reference is None:
                 continue
+            known = None if earlier is None else earlier.get(row.iteration)
+            if (
+                row.id not in self._validations
+                and known is not None
+                and (known.run_file, known.params) == (row.run_file, row.params)
+            ):
+                self._validations[row.id] = known
             if row.id not in self._validations:
                 traj = None
                 if row.run_file is not None and (self.folder / row.run_file).is_file():
