@@ -626,13 +626,7 @@ def record_summary(record: StudyRecord) -> dict[str, Any]:
     earlier version: the defaults stand in) and ``note`` (None, or what stands in)."""
     doc = record.to_json()
     del doc["sampler"], doc["bo_settings"]
-    opt = record.optimizer
-    doc["optimizer"] = {
-        "sampler": opt.sampler,
-        "settings": opt.settings,
-        "recorded": opt.recorded,
-        "note": opt.note,
-    }
+    doc["optimizer"] = {**record.optimizer.to_json(), "note": record.optimizer.note}
     return doc
 
 

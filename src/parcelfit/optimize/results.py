@@ -407,11 +407,7 @@ class SurrogateRecord:
     def to_json(self) -> dict[str, Any]:
         """The stored form."""
         return {
-            "optimizer": {
-                "sampler": self.optimizer.sampler,
-                "settings": self.optimizer.settings,
-                "recorded": self.optimizer.recorded,
-            },
+            "optimizer": self.optimizer.to_json(),
             "evaluations": self.evaluations,
             "curves": None if self.curves is None else [c.to_json() for c in self.curves],
         }
@@ -419,9 +415,9 @@ class SurrogateRecord:
     @classmethod
     def from_json(cls, doc: Mapping[str, Any]) -> SurrogateRecord:
         """Read the stored form."""
-        opt, curves = doc["optimizer"], doc.get("curves")
+        curves = doc.get("curves")
         return cls(
-            OptimizerRecord(str(opt["sampler"]), opt.get("settings"), bool(opt["recorded"])),
+            OptimizerRecord.from_json(doc["optimizer"]),
             int(doc["evaluations"]),
             None if curves is None else tuple(DependenceCurve.from_json(c) for c in curves),
         )

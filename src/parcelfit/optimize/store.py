@@ -109,6 +109,15 @@ class OptimizerRecord:
     settings: dict[str, Any] | None = None
     recorded: bool = True
 
+    def to_json(self) -> dict[str, Any]:
+        """As JSON (the study record stores the fields under its own keys, see `StudyRecord`)."""
+        return {"sampler": self.sampler, "settings": self.settings, "recorded": self.recorded}
+
+    @classmethod
+    def from_json(cls, doc: Mapping[str, Any]) -> OptimizerRecord:
+        """Read `to_json`'s form."""
+        return cls(str(doc["sampler"]), doc.get("settings"), bool(doc["recorded"]))
+
     @property
     def note(self) -> str | None:
         """A sentence for readers when the settings are not the study's own (else None)."""
