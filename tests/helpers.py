@@ -65,13 +65,14 @@ def write_study_store(folder: Path, dataset: Path | None) -> Path:
     """A finished study's store written by hand, no simulation: the initial design (iteration 0:
     one ok, one failed), iteration 1 (two ok), a passed validation after iteration 1, and a
     recommended point that is not the one with the lowest cost. Values are SI."""
-    from parcelfit.optimize.store import Store
+    from parcelfit.optimize.store import RecommendedRecord, Store
 
     folder.mkdir(parents=True, exist_ok=True)
     store = Store(folder / "study.sqlite")
-    store.set_meta(
-        "study",
-        {
+    # the study and source records as an earlier version wrote them (no optimiser settings)
+    old_meta(
+        store,
+        study={
             "name": "hand",
             "parameters": ["mu_d_BePa", "E_Pa"],
             "bounds": [[0.3, 0.6], [2e8, 1.6e9]],
@@ -81,10 +82,7 @@ def write_study_store(folder: Path, dataset: Path | None) -> Path:
             "fit_setting": 1,
             "validation_setting": 2,
         },
-    )
-    store.set_meta(
-        "source",
-        {
+        source={
             "study_file": None,
             "dataset": None if dataset is None else str(dataset),
             "rig": "R",
@@ -101,7 +99,73 @@ def write_study_store(folder: Path, dataset: Path | None) -> Path:
         store.finish(row, status=status, cost=cost)
     (val,) = store.add_pending("validation", 1, [points[3]], 2, [0])
     store.finish(val, status="ok", details={"passed": True})
-    store.set_meta("recommended", {"params": points[3], "cost": 0.3})
+    store.write_recommended(RecommendedRecord(points[3], 0.3))
     store.set_meta("stop_reason", "validation passed")
     store.close()
     return folder
+
+
+def old_meta(store, **records) -> None:
+    """Write meta records as raw JSON, the way a store of an earlier version holds them."""
+    import json
+
+    with store._transaction() as db:
+        for key, value in records.items():
+            db.execute(
+                "INSERT OR REPLACE INTO meta (key, value) VALUES (?, ?)", (key, json.dumps(value))
+            )
+
+
+def write_study_results(folder: Path, dataset: Path, optimizer=None) -> None:
+    """``results.json`` for the store of `write_study_store`, made here without a calibration:
+    the reference runs of the fake dataset's R/P/1 and R/P/2, a validation after iteration 1 of
+    the analytic run at the truth, a surrogate (sharp along mu_d_BePa, flat along E_Pa) said to
+    be fitted with ``optimizer`` (default: the published configuration), no key frames."""
+    from dataclasses import asdict
+
+    from parcelfit.metrics import select_reference
+    from parcelfit.optimize.bo import BOSettings
+    from parcelfit.optimize.results import (
+        DependenceCurve,
+        KeyFramesRecord,
+        ReferenceRecord,
+        SurrogateRecord,
+        new_results,
+        validation_record,
+        write_results,
+    )
+    from parcelfit.optimize.store import OptimizerRecord
+    from parcelfit.runs import TestCase, load_dataset
+
+    from .fake_sim import TRUTH, trajectory
+
+    ds = load_dataset(dataset)
+    fit, val = (select_reference(ds[TestCase("R", "P", k)]) for k in (1, 2))
+    traj, transit = trajectory(TRUTH, 2)
+    params = {"mu_d_BePa": 0.45, "E_Pa": 9e8}
+    record = validation_record(
+        val, traj, transit, params=params, after_iteration=1, run_file="runs/validation-001.csv"
+    )
+    xs = np.linspace(0.3, 0.6, 31)
+    curves = (
+        DependenceCurve("mu_d_BePa", xs, (xs - 0.45) ** 2 * 100, np.full(31, 0.05), False),
+        DependenceCurve(
+            "E_Pa", np.linspace(200, 1600, 31), np.full(31, 0.5), np.full(31, 0.05), False
+        ),
+    )
+    optimizer = optimizer or OptimizerRecord("published", asdict(BOSettings.published()))
+    write_results(
+        folder,
+        new_results(
+            {
+                "fit": ReferenceRecord.from_selection(fit),
+                "validation": ReferenceRecord.from_selection(val),
+            },
+            [record],
+            stop_reason="validation passed",
+            surrogate=SurrogateRecord(optimizer, 3, curves),
+            key_frames=KeyFramesRecord(
+                "R/P/2", params, note="Key frames are drawn for the MuJoCo backend only."
+            ),
+        ),
+    )

@@ -157,6 +157,7 @@ def test_validation_records_the_envelope_beside_the_published_verdict(tmp_path):
 def test_figures_refit_the_surrogate_with_the_study_s_own_optimizer_settings(tmp_path):
     from parcelfit.optimize.bo import BOSettings
     from parcelfit.optimize.plots import study_optimizer
+    from parcelfit.optimize.results import read_results
 
     study = write_study(
         tmp_path,
@@ -172,3 +173,100 @@ def test_figures_refit_the_surrogate_with_the_study_s_own_optimizer_settings(tmp
     assert rebuilt is not None and rebuilt.settings == used
     assert used.batch == "kmeans" and used.noise == "fixed" and used != BOSettings()
     assert rebuilt.n_told == 4
+    # the surrogate the calibration stores for the report was fitted with the same settings
+    surrogate = read_results(tmp_path / "out").surrogate
+    assert surrogate.optimizer.sampler == "published" and surrogate.optimizer.recorded
+    assert BOSettings(**surrogate.optimizer.settings) == used and surrogate.evaluations == 4
+
+
+def test_study_results_round_trip_through_results_json(tmp_path):
+    import numpy as np
+
+    from parcelfit.metrics import select_reference
+    from parcelfit.optimize.results import (
+        DependenceCurve,
+        KeyFramesRecord,
+        ReferenceRecord,
+        SurrogateRecord,
+        new_results,
+        read_results,
+        validation_record,
+        write_results,
+    )
+    from parcelfit.optimize.store import OptimizerRecord
+    from parcelfit.runs import TestCase, load_dataset
+
+    from .fake_sim import trajectory, write_reference_dataset
+
+    write_reference_dataset(tmp_path / "data")
+    sel = select_reference(load_dataset(tmp_path / "data")[TestCase("R", "P", 2)])
+    traj, transit = trajectory({"mu_d_BePa": 0.5, "mu_d_MePa": 0.2}, 2)
+    val = validation_record(sel, traj, transit, params={"mu_d_BePa": 0.5}, after_iteration=3)
+    failed = validation_record(sel, None, None, status="unstable", message="blew up")
+    assert val.verdict is not None and val.band is not None and failed.verdict is None
+    curve = DependenceCurve("E_Pa", np.linspace(200, 1600, 5), np.arange(5.0), np.ones(5), True)
+    opt = OptimizerRecord("published", {"batch": "kmeans"})
+    written = new_results(
+        {"validation": ReferenceRecord.from_selection(sel)},
+        [failed, val],
+        stop_reason="validation passed",
+        surrogate=SurrogateRecord(opt, 12, (curve,)),
+        key_frames=KeyFramesRecord("R/P/2", {"mu_d_BePa": 0.5}, note="MuJoCo only"),
+        figures=["figures/history.png"],
+    )
+    assert read_results(tmp_path) is None  # none written yet
+    write_results(tmp_path, written)
+    back = read_results(tmp_path)
+    assert back.to_json() == written.to_json()  # every field survives, arrays included
+    ref = back.references["validation"]
+    assert ref.reference_id == sel.reference_id and np.array_equal(ref.d_xy, sel.d_xy)
+    assert all(np.array_equal(a, b) for a, b in zip(ref.xy_series, sel.xy_series, strict=True))
+    shown = back.shown_validation()
+    assert shown.after_iteration == 3 and shown.verdict == val.verdict
+    assert np.array_equal(shown.sim_xy, val.sim_xy) and np.array_equal(
+        shown.band.grid, val.band.grid
+    )
+    assert back.surrogate.optimizer == opt and back.surrogate.curves[0].indistinct() == (200, 550)
+    assert back.key_frames.note == "MuJoCo only" and back.stop_reason == "validation passed"
+    (tmp_path / "results.json").write_text("{")
+    with pytest.raises(ParcelfitError, match="results file is unreadable"):
+        read_results(tmp_path)
+
+
+def test_rerunning_a_finished_study_writes_its_missing_results_without_simulating(
+    tmp_path, monkeypatch
+):
+    from parcelfit.optimize.results import read_results
+
+    study = load_study(
+        write_study(
+            tmp_path,
+            initial=4,
+            batch_size=2,
+            budget=6,
+            validation={"speed_setting": 2, "every": 1},
+            executor={"kind": "serial"},
+        )
+    )
+    out = tmp_path / "out"
+    Calibration(study, out).run()
+    first = read_results(out)
+    assert first.stop_reason is not None and first.validations and first.surrogate.curves
+    # a folder as an earlier parcelfit left it: no results.json
+    (out / "results.json").unlink()
+    log = tmp_path / "sims.log"
+    monkeypatch.setenv("FAKE_SIM_LOG", str(log))
+    Calibration(study, out).run()
+    assert not log.exists()  # nothing simulated again
+    again = read_results(out)
+    assert again.surrogate.to_json() == first.surrogate.to_json()
+    # judged again from the run files: the same verdicts, with their curves (the numbers may
+    # differ a little: a run file's 9 significant digits can cost the resampled run a sample)
+    assert len(again.validations) == len(first.validations)
+    for a, b in zip(again.validations, first.validations, strict=True):
+        assert (a.after_iteration, a.params, a.passed) == (b.after_iteration, b.params, b.passed)
+        assert a.verdict is not None and a.sim_xy is not None and a.band is not None
+    # with its results file in place, a resumed study keeps the records as they were
+    Calibration(study, out).run()
+    kept = read_results(out)
+    assert [v.to_json() for v in kept.validations] == [v.to_json() for v in again.validations]

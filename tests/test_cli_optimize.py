@@ -114,6 +114,8 @@ def test_status_in_plain_words_with_the_recommended_point_and_synthetic_data(tmp
     assert "validation after iteration 1: passed" in text
     assert "recommended parameters (cost 0.3, evaluated in iteration 1)" in text
     assert "the lowest single cost was 0.2 (iteration 1)" in text
+    # a store of an earlier version: no optimiser settings, and status says what stands in
+    assert "did not record the optimiser settings: the default GP settings are used" in text
     assert re.search(r"E_Pa\W+900\W+N/mm\^2", text)  # the table in catalogue units
     assert "{'" not in result.stdout and "passed=" not in result.stdout  # no Python reprs
 

@@ -14,8 +14,8 @@ from parcelfit.optimize.study import load_study
 from parcelfit.report import build_report
 from parcelfit.report.browser import chromium, inspect_page, screenshot
 
-from .fake_sim import TRUTH
-from .helpers import write_study
+from .fake_sim import TRUTH, write_reference_dataset
+from .helpers import write_study, write_study_results, write_study_store
 
 runner = CliRunner()
 NEED_BROWSER = os.environ.get("CI") == "true"  # in CI the browser must be there
@@ -43,12 +43,37 @@ def demo_folder(tmp_path_factory):
     return root
 
 
+def _no_analysis(monkeypatch):
+    """Make everything the report used to recompute raise: building a simulator, simulating,
+    selecting reference runs, validating, refitting the GP surrogate."""
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the report must render stored results, not recompute them")
+
+    from parcelfit.sim.mujoco.simulator import MujocoSimulator
+
+    for target in (
+        "parcelfit.sim.factory.make_simulator",
+        "parcelfit.metrics.select_reference",
+        "parcelfit.metrics.reference.select_reference",
+        "parcelfit.metrics.validate",
+        "parcelfit.metrics.validation.validate",
+        "parcelfit.optimize.results.validate",
+        "parcelfit.optimize.plots.dependence_curves",
+        "parcelfit.optimize.plots.surrogate_optimizer",
+        "parcelfit.optimize.bo.BatchBO._fit",
+    ):
+        monkeypatch.setattr(target, refuse)
+    monkeypatch.setattr(MujocoSimulator, "run_with_frames", refuse)
+
+
 def _images(text):
     return re.findall(r'src="data:image/(png|gif);base64,([^"]+)"', text)
 
 
 @pytest.mark.slow
-def test_report_is_one_self_contained_file_with_every_section(demo_folder):
+def test_report_is_one_self_contained_file_with_every_section(demo_folder, monkeypatch):
+    _no_analysis(monkeypatch)  # the calibration's stored results are rendered, nothing more
     seen = []
     path = build_report(demo_folder, progress=seen.append)
     assert path == demo_folder / "report.html"
@@ -162,3 +187,79 @@ def test_identifiability_from_the_surrogate_span():
     assert row.identifiable and row.error_share == pytest.approx(1 / 30)
     row = ParameterRow("E_Pa", "-", 0.3, 0.6, 0.41, 0.4, flat.amplitude, flat.indistinct())
     assert row.identifiable is False
+
+
+def test_the_report_renders_the_stored_verdict_without_simulating_or_refitting(
+    tmp_path, monkeypatch
+):
+    import json
+
+    write_reference_dataset(tmp_path / "data")
+    study = write_study_store(tmp_path / "study", tmp_path / "data")
+    write_study_results(study, tmp_path / "data")
+    # a stored number no analysis would give, so the page can only show it by reading it
+    path = study / "results.json"
+    doc = json.loads(path.read_text())
+    doc["validations"][0]["verdict"]["xy"]["simulated_mean"] = 4.56e-07
+    path.write_text(json.dumps(doc))
+    _no_analysis(monkeypatch)
+    text = build_report(study, out=tmp_path / "r.html").read_text()
+    assert "Validation PASSED" in text and "<td>4.56e-07 m&sup2;</td>" in text
+    assert "The calibrated parameters, validated after iteration 1," in text
+    assert text.count("<td>1. transit time") == 1 and "stricter (parcelfit)" in text
+    assert len(_images(text)) >= 8  # statistics, 2 distance maps, history, curves, traces, 3
+    # identifiability read off the stored curves: flat along E_Pa, pinned along mu_d_BePa
+    assert "Not identifiable here: <b>E_Pa</b>" in text
+    assert re.search(r"<td>mu_d_BePa</td>.*?<td>yes</td></tr>", text)
+    # the surrogate's optimiser settings are the stored ones (the published configuration)
+    assert "optimizer published" in text and "batch=kmeans" in text and "noise=fixed" in text
+    assert "MuJoCo backend only" in text and 'id="frames"' in text
+
+
+def test_a_study_without_stored_results_says_so_instead_of_recomputing(tmp_path, monkeypatch):
+    write_reference_dataset(tmp_path / "data")
+    study = write_study_store(tmp_path / "study", tmp_path / "data")  # as an earlier version
+    _no_analysis(monkeypatch)
+    text = " ".join(build_report(study, out=tmp_path / "r.html").read_text().split())
+    assert "no stored results (results.json)" in text and "nothing is recomputed here" in text
+    assert "`parcelfit calibrate` again on the same study file and folder" in text
+    assert text.count("Not stored in this study folder") == 4  # references, GP, validation, frames
+    assert "No validation verdict" in text and 'id="calibration"' in text
+    assert "<td>mu_d_BePa</td><td>-</td><td>0.3 - 0.6</td><td>0.45</td>" in text
+    # a damaged results file is named in the page; the rest still renders
+    (study / "results.json").write_text("{")
+    text = build_report(study, out=tmp_path / "r.html").read_text()
+    assert "results file is unreadable" in text and 'id="calibration"' in text
+
+
+def test_the_report_s_surrogate_has_the_study_s_optimizer_settings(tmp_path, monkeypatch):
+    from parcelfit.optimize import plots
+    from parcelfit.optimize.bo import BOSettings
+
+    study_file = write_study(
+        tmp_path,
+        optimizer={"sampler": "published", "n_samples": 1000, "n_restarts": 1},
+        initial=4,
+        batch_size=2,
+        budget=6,
+        validation={"speed_setting": 2, "every": 1},
+        executor={"kind": "serial"},
+    )
+    calibration = Calibration(load_study(study_file), tmp_path / "out", figures=False)
+    used = calibration.bo.settings
+    assert used != BOSettings() and used.batch == "kmeans" and not used.ard
+    refits = []
+    real = plots.surrogate_optimizer
+
+    def watched(record, fits):
+        refits.append(real(record, fits))
+        return refits[-1]
+
+    monkeypatch.setattr(plots, "surrogate_optimizer", watched)
+    calibration.run()
+    # every GP the calibration refitted for the report had the study's settings, not defaults
+    assert refits and all(bo.settings == used for bo in refits)
+    _no_analysis(monkeypatch)
+    text = build_report(tmp_path / "out", out=tmp_path / "r.html").read_text()
+    assert "optimizer published" in text and "batch=kmeans" in text and "ard=False" in text
+    assert "partial dependence" in text  # drawn from the stored curves

@@ -58,3 +58,62 @@ def test_damaged_database_is_reported(tmp_path):
     bad.write_bytes(b"this is not a database" * 100)
     with pytest.raises(ParcelfitError, match="cannot open the study database"):
         Store(bad)
+
+
+def test_the_meta_records_round_trip_by_type(tmp_path):
+    from parcelfit.optimize.store import (
+        OptimizerRecord,
+        RecommendedRecord,
+        SourceRecord,
+        StudyRecord,
+    )
+
+    study = StudyRecord(
+        name="s",
+        parameters=("mu_d_BePa", "E_Pa"),
+        bounds=((0.3, 0.6), (2e8, 1.6e9)),
+        log=(False, True),
+        batch_size=3,
+        seed=5,
+        fit_setting=1,
+        validation_setting=2,
+        optimizer=OptimizerRecord("published", {"batch": "kmeans", "noise": "fixed"}),
+    )
+    source = SourceRecord("/s/study.yaml", "/s/data", "E3", "KPBW")
+    best = RecommendedRecord({"mu_d_BePa": 0.45, "E_Pa": 9e8}, 0.25)
+    store = Store(tmp_path / "study.sqlite")
+    assert store.read_study() is None and store.read_recommended() is None
+    store.write_study(study)
+    store.write_source(source)
+    store.write_recommended(best)
+    store.close()
+    again = Store(tmp_path / "study.sqlite", readonly=True)
+    assert again.read_study() == study and again.read_study().optimizer.note is None
+    assert again.read_source() == source and again.read_recommended() == best
+    # one writer and one reader: the records are not read or written as raw values
+    with pytest.raises(ParcelfitError, match=r"read_study\(\)"):
+        again.get_meta("study")
+    again.close()
+    with pytest.raises(ParcelfitError, match=r"write_recommended\(\)"):
+        Store(tmp_path / "study.sqlite").set_meta("recommended", {})
+
+
+def test_an_old_study_record_reads_with_default_optimizer_settings_and_says_so(tmp_path):
+    from .helpers import old_meta
+
+    store = Store(tmp_path / "study.sqlite")
+    old_meta(
+        store,
+        study={"name": "old", "parameters": ["mu_d_BePa"], "bounds": [[0.3, 0.6]], "seed": 2},
+        source={"dataset": "/d"},
+    )
+    record = store.read_study()
+    assert record.parameters == ("mu_d_BePa",) and record.log == (False,) and record.seed == 2
+    assert record.batch_size == 4 and record.validation_setting is None
+    opt = record.optimizer
+    assert not opt.recorded and opt.settings is None and "earlier parcelfit" in opt.note
+    assert store.read_source().dataset == "/d" and store.read_source().rig is None
+    old_meta(store, study="not a record")
+    with pytest.raises(ParcelfitError, match="'study' record is damaged"):
+        store.read_study()
+    store.close()

@@ -195,7 +195,8 @@ def demo(
         int | None, typer.Option(min=1, help="Worker processes (default: one per core).")
     ] = None,
     animation: Annotated[
-        bool, typer.Option(help="Embed an animation of the simulated run in the report.")
+        bool,
+        typer.Option(help="Write an animation of the calibrated run and embed it in the report."),
     ] = True,
 ) -> None:
     """End to end on the bundled SYNTHETIC twin dataset: statistics, reference runs, screening,
@@ -278,10 +279,13 @@ def report(
         Path | None, typer.Option(help="A screening folder (default: screen/ beside the study).")
     ] = None,
     frames: Annotated[
-        bool, typer.Option(help="Simulate the calibrated run again for key frames.")
+        bool, typer.Option(help="Show the calibrated run's key frames (drawn by the calibration).")
     ] = True,
     animation: Annotated[
-        bool, typer.Option(help="Embed an animation of the simulated run.")
+        bool,
+        typer.Option(
+            help="Embed the animation of the calibrated run (written by `calibrate --animation`)."
+        ),
     ] = False,
 ) -> None:
     """Write the self-contained HTML report of a calibration study."""
@@ -776,8 +780,16 @@ def calibrate(
     workers: Annotated[
         int | None, typer.Option(min=1, help="Local worker processes (default: one per core).")
     ] = None,
+    animation: Annotated[
+        bool,
+        typer.Option(
+            help="Also write an animation of the calibrated run (MuJoCo studies; "
+            "`report --animation` embeds it)."
+        ),
+    ] = False,
 ) -> None:
-    """Calibrate by batch Bayesian optimisation; rerunning the same command resumes the study."""
+    """Calibrate by batch Bayesian optimisation; rerunning the same command resumes the study
+    (a finished study only has its results, figures and key frames written again)."""
     from parcelfit.optimize.calibration import Calibration
     from parcelfit.optimize.study import load_study
 
@@ -793,6 +805,7 @@ def calibrate(
             scheduler=scheduler,
             workers=workers,
             progress=progress,
+            animation=animation,
         )
         return calibration.run()
 
@@ -972,7 +985,8 @@ def status(
     if as_json:
         sys.stdout.write(json.dumps(info, indent=1) + "\n")
         return
-    name = (info["study"] or {}).get("name", "?")
+    record = info["study"] or {}
+    name = record.get("name", "?")
     if info["synthetic"]:
         from parcelfit.analysis import SYNTHETIC_NOTE
 
@@ -992,6 +1006,9 @@ def status(
             f"  validation after iteration {v['after_iteration']}: {_verdict_word(v)}",
             markup=False,
         )
+    note = (record.get("optimizer") or {}).get("note")
+    if note:
+        console.print(Text(f"note: {note}", style="yellow"))
     _print_recommendation(info)
 
 

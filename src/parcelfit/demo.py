@@ -24,14 +24,19 @@ import time
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import yaml
 
 from parcelfit.errors import ParcelfitError
+from parcelfit.optimize.results import write_json
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
-from parcelfit.runs import Dataset, TestCase, load_dataset, write_trajectory
+from parcelfit.runs import Dataset, TestCase, load_dataset, read_trajectory, write_trajectory
 from parcelfit.sim.params import CATALOGUE
+
+if TYPE_CHECKING:
+    from parcelfit.metrics import ReferenceSelection
+    from parcelfit.runs import Trajectory
 
 RIG, CONSIGNMENT = "E3", "KPBW"
 CALIBRATED = {  # catalogue units, published ranges
@@ -122,15 +127,25 @@ def write_demo_files(out: Path, profile: DemoProfile, dataset: Path) -> tuple[Pa
 
 
 def run_stricter_example(out: Path, dataset: Path) -> dict[str, Any]:
-    """Simulate the stricter-criterion example and write ``stricter-criterion.json`` (+ run)."""
-    from parcelfit.metrics import select_reference, validate
+    """Simulate the stricter-criterion example and write ``stricter-criterion.json`` (+ run):
+    the description, the verdicts, and the ``reference`` and ``validation`` records the report
+    plots (`parcelfit.optimize.results`). A file of an earlier demo without those records gets
+    them from its stored run (no simulation)."""
+    from parcelfit.metrics import select_reference
     from parcelfit.sim.mujoco import MujocoSimulator
     from parcelfit.sim.params import resolve
 
     case = TestCase.parse(STRICTER_EXAMPLE["case"])
     target = out / "stricter-criterion.json"
     if target.is_file():
-        return json.loads(target.read_text(encoding="utf-8"))
+        doc: dict[str, Any] = json.loads(target.read_text(encoding="utf-8"))
+        if {"reference", "validation"} <= set(doc):
+            return doc
+        traj = read_trajectory(out / doc["run_file"])
+        reference = select_reference(load_dataset(dataset)[case])
+        doc.update(_example_records(reference, traj, doc.get("transit_time")))
+        write_json(target, doc)
+        return doc
     sim = MujocoSimulator()
     params_user = STRICTER_EXAMPLE["params"]
     params = resolve(sim.consignment(case.consignment).content_kind, user_values=params_user)
@@ -140,11 +155,11 @@ def run_stricter_example(out: Path, dataset: Path) -> dict[str, Any]:
     run_file = "stricter-criterion/run.csv"
     (out / "stricter-criterion").mkdir(parents=True, exist_ok=True)
     write_trajectory(result.run.trajectory, out / run_file)
-    verdict = validate(
-        result.run.trajectory,
-        result.run.transit_time,
-        select_reference(load_dataset(dataset)[case]),
-    )
+    reference = select_reference(load_dataset(dataset)[case])
+    records = _example_records(reference, result.run.trajectory, result.run.transit_time)
+    verdict = records["validation"]["verdict"]
+    published = bool(verdict and verdict["passed"])
+    stricter = None if not verdict or verdict["envelope"] is None else verdict["envelope"]["passed"]
     units = {p.name: p.unit for p in CATALOGUE}
     described = ", ".join(
         f"{k} = {v:g} {units[k]}".replace(" -", "") for k, v in params_user.items()
@@ -155,17 +170,39 @@ def run_stricter_example(out: Path, dataset: Path) -> dict[str, Any]:
         "params": params_user,
         "run_file": run_file,
         "transit_time": result.run.transit_time,
-        "published_passed": verdict.passed,
-        "stricter_passed": None if verdict.envelope is None else verdict.envelope.passed,
+        "published_passed": published,
+        "stricter_passed": stricter,
         "description": (
             f"A polybag (PB) simulated on rig E3 at speed setting {case.speed_setting} with "
             f"{described} (not the twin data's hidden truth). "
-            f"The published criteria {'pass' if verdict.passed else 'fail'} it; the band test "
-            f"{'passes' if verdict.envelope and verdict.envelope.passed else 'fails'} it."
+            f"The published criteria {'pass' if published else 'fail'} it; the band test "
+            f"{'passes' if stricter else 'fails'} it."
         ),
+        **records,
     }
-    target.write_text(json.dumps(doc, indent=2), encoding="utf-8")
+    write_json(target, doc)
     return doc
+
+
+def _example_records(
+    reference: ReferenceSelection, trajectory: Trajectory, transit_time: float | None
+) -> dict[str, dict[str, Any]]:
+    """The example's reference and validation records (stored form) for the report."""
+    from parcelfit.optimize.results import ReferenceRecord, validation_record
+    from parcelfit.sim.params import parameter
+
+    params = {k: parameter(k).to_si(v) for k, v in STRICTER_EXAMPLE["params"].items()}
+    record = validation_record(
+        reference,
+        trajectory,
+        transit_time,
+        params=params,
+        run_file="stricter-criterion/run.csv",
+    )
+    return {
+        "reference": ReferenceRecord.from_selection(reference).to_json(),
+        "validation": record.to_json(),
+    }
 
 
 STAGES = (
@@ -200,9 +237,9 @@ class Demo:
 
     ``profile`` is quick, default or full (see `PROFILES`); ``executor`` (serial or local) and
     ``workers`` choose where screening and calibration simulate (default: the files' local
-    processes, one per core); ``animation`` embeds an animation of the calibrated run in the
-    report. Each stage method can be called alone (in order: later stages read earlier files)
-    and resumes what an earlier run of the same folder left.
+    processes, one per core); with ``animation`` the calibration writes an animation of the
+    calibrated run and the report embeds it. Each stage method can be called alone (in order:
+    later stages read earlier files) and resumes what an earlier run of the same folder left.
     """
 
     def __init__(
@@ -260,7 +297,8 @@ class Demo:
         )
 
     def calibration(self, progress: ProgressCallback | None = None) -> Any:
-        """Stage 4: the calibration in ``out/calibration`` (with its figures); its result."""
+        """Stage 4: the calibration in ``out/calibration`` (with its results, figures, key
+        frames and, with ``animation``, the animation the report embeds); its result."""
         from parcelfit.optimize.calibration import Calibration
         from parcelfit.optimize.study import load_study
 
@@ -270,6 +308,7 @@ class Demo:
             executor=self.executor,
             workers=self.workers,
             progress=progress,
+            animation=self.animation,
         ).run()
 
     def stricter_example(self) -> dict[str, Any]:

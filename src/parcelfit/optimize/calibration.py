@@ -11,6 +11,12 @@ with the worst cost seen); they never stop the loop and count against the budget
 Iterations are numbered one way in the store, the progress, `study_status` and the report:
 0 is the initial design, k >= 1 the k-th batch the optimiser chose; the validation "after
 iteration k" simulates the recommended parameters once iteration k has finished.
+
+What the study concluded is written for the report, which computes nothing of its own:
+``results.json`` (`parcelfit.optimize.results`: the reference runs used, every validation with
+its verdict and curves, the GP surrogate's partial dependence refitted with the optimiser
+settings the store records, the key frames) after every validation and when the study stops,
+with the study figures in ``figures/``.
 """
 
 from __future__ import annotations
@@ -18,23 +24,47 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from parcelfit.errors import ParcelfitError
-from parcelfit.metrics import ReferenceSelection, calibration_cost, select_reference, validate
+from parcelfit.metrics import ReferenceSelection, calibration_cost, select_reference
 from parcelfit.optimize.executors import Executor, Task, make_executor
 from parcelfit.optimize.folderlock import check_writable, lock_folder
-from parcelfit.optimize.sampler import make_sampler
-from parcelfit.optimize.store import Evaluation, Store
+from parcelfit.optimize.results import (
+    KeyFramesRecord,
+    ReferenceRecord,
+    StudyResults,
+    SurrogateRecord,
+    ValidationRecord,
+    new_results,
+    read_results,
+    validation_record,
+    write_results,
+)
+from parcelfit.optimize.sampler import Sampler, make_sampler
+from parcelfit.optimize.store import (
+    STORE_FILE,
+    Evaluation,
+    OptimizerRecord,
+    RecommendedRecord,
+    SourceRecord,
+    Store,
+    StudyRecord,
+)
 from parcelfit.optimize.study import Study
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
-from parcelfit.runs import TestCase, is_synthetic, load_dataset, write_trajectory
+from parcelfit.runs import (
+    TestCase,
+    is_synthetic,
+    load_dataset,
+    read_trajectory,
+    write_trajectory,
+)
 from parcelfit.sim.factory import make_simulator
 from parcelfit.sim.protocol import SimResult
 
-STORE_FILE = "study.sqlite"
 LOST_WORKER_MESSAGES = (
     "worker failed: BrokenProcessPool",
     "dask task failed: FutureCancelledError",
@@ -47,7 +77,7 @@ class CalibrationResult:
     """Outcome of a study: the recommended parameters (SI) and their cost, the number of fitting
     evaluations, the last iteration (0 = the initial design, k >= 1 the k-th optimiser batch;
     None before any), the validation verdict, why it stopped, the study figures written (PNG
-    and SVG in ``folder/figures``)."""
+    and SVG in ``folder/figures``, with the key frames of MuJoCo studies)."""
 
     best_params: dict[str, float] | None
     best_cost: float | None
@@ -57,6 +87,24 @@ class CalibrationResult:
     stop_reason: str
     folder: Path
     figures: tuple[Path, ...] = ()
+
+
+def study_record(study: Study, sampler: Sampler) -> StudyRecord:
+    """The store's record of ``study`` with the optimiser ``sampler`` as it runs (bounds SI)."""
+    settings = getattr(sampler, "settings", None)
+    return StudyRecord(
+        name=study.name,
+        parameters=tuple(study.space.names),
+        bounds=tuple((d.low, d.high) for d in study.space.dims),
+        log=tuple(d.log for d in study.space.dims),
+        batch_size=study.batch_size,
+        seed=study.seed,
+        fit_setting=study.fit_setting,
+        validation_setting=study.validation_setting,
+        optimizer=OptimizerRecord(
+            study.sampler, None if settings is None else dataclasses.asdict(settings)
+        ),
+    )
 
 
 def record_result(
@@ -111,9 +159,12 @@ class Calibration:
     """One study folder: its store, references, optimiser and executor (see the module doc).
 
     ``executor`` (serial, local or dask), ``scheduler`` and ``workers`` override the study
-    file's ``executor``; ``progress`` receives a `ProgressEvent` after every result; with
-    ``figures`` the study figures (`parcelfit.optimize.plots.study_figures`) are written when
-    the study stops."""
+    file's ``executor``; ``progress`` receives a `ProgressEvent` after every result. When the
+    study stops it writes its results (``results.json``, `parcelfit.optimize.results`: the
+    references, validations and surrogate the report renders) and, with ``figures``, the study
+    figures (`parcelfit.optimize.plots.study_figures`) and, with ``key_frames`` too, the
+    recommended run's key frames (MuJoCo studies: one more simulation; ``animation`` adds
+    ``figures/run.gif``)."""
 
     def __init__(
         self,
@@ -125,9 +176,13 @@ class Calibration:
         workers: int | None = None,
         progress: ProgressCallback | None = None,
         figures: bool = True,
+        key_frames: bool = True,
+        animation: bool = False,
     ) -> None:
         self.study = study
         self.figures = figures
+        self.key_frames = key_frames
+        self.animation = animation
         self.folder = Path(folder)
         check_writable(self.folder, (STORE_FILE,))
         try:
@@ -149,28 +204,14 @@ class Calibration:
             )
         if known is None:
             self.store.set_meta("fingerprint", study.fingerprint)
-            self.store.set_meta(
-                "study",
-                {
-                    "name": study.name,
-                    "parameters": study.space.names,
-                    "bounds": [[d.low, d.high] for d in study.space.dims],
-                    "log": [d.log for d in study.space.dims],
-                    "batch_size": study.batch_size,
-                    "seed": study.seed,
-                    "fit_setting": study.fit_setting,
-                    "validation_setting": study.validation_setting,
-                },
-            )
         # where the study came from, so a report can find its file and data again
-        self.store.set_meta(
-            "source",
-            {
-                "study_file": None if study.path is None else str(study.path),
-                "dataset": str(Path(study.dataset).resolve()),
-                "rig": study.rig,
-                "consignment": study.consignment,
-            },
+        self.store.write_source(
+            SourceRecord(
+                study_file=None if study.path is None else str(study.path),
+                dataset=str(Path(study.dataset).resolve()),
+                rig=study.rig,
+                consignment=study.consignment,
+            )
         )
         dataset = load_dataset(study.dataset)
         self.fit_case = TestCase(study.rig, study.consignment, study.fit_setting)
@@ -193,16 +234,15 @@ class Calibration:
             settings=study.bo,
             n_initial=study.initial,
         )
-        record = self.store.get_meta("study") or {}
-        if "sampler" not in record:
-            # the optimiser as it runs, so figures refit its surrogate with the same settings
-            settings = getattr(self.bo, "settings", None)
-            record["sampler"] = study.sampler
-            record["bo_settings"] = None if settings is None else dataclasses.asdict(settings)
-            self.store.set_meta("study", record)
+        recorded = self.store.read_study()
+        if recorded is None or not recorded.optimizer.recorded:
+            # the study and its optimiser as it runs (so figures refit its surrogate with the
+            # same settings); a store of an earlier version gets the settings in use from now on
+            self.store.write_study(study_record(study, self.bo))
         self._executor_args = (executor, scheduler, workers)
         self.progress = progress or ignore_progress
         self.last_validation: bool | None = None
+        self._validations: dict[int, ValidationRecord] = {}  # by store row id
 
     def close(self) -> None:
         """Close the store and release the folder's lock (`run` does this when it ends)."""
@@ -273,59 +313,31 @@ class Calibration:
         assert self.val_case is not None and self.val_reference is not None
         task = Task(self._full_params(params), self.val_case, f"validation-{iteration:03d}")
         ((_, result),) = list(executor.simulate(self.simulator, [task]))
-        details: dict[str, Any] = {"message": result.diagnostics.get("message")}
-        passed = False
         run_file = None
         if result.ok and result.run is not None:
             run_file = f"runs/validation-{iteration:03d}.csv"
             write_trajectory(result.run.trajectory, self.folder / run_file)
-            try:
-                verdict = validate(
-                    result.run.trajectory, result.run.transit_time, self.val_reference
-                )
-                passed = verdict.passed
-                details.update(
-                    {
-                        "passed": passed,
-                        "transit_time": {
-                            "simulated": verdict.transit_time.simulated,
-                            "low": verdict.transit_time.low,
-                            "high": verdict.transit_time.high,
-                            "passed": verdict.transit_time.passed,
-                        },
-                        "xy": {
-                            "simulated_mean": verdict.xy.simulated_mean,
-                            "largest_real_mean": verdict.xy.largest_real_mean,
-                            "passed": verdict.xy.passed,
-                        },
-                        "theta": {
-                            "simulated_mean": verdict.theta.simulated_mean,
-                            "largest_real_mean": verdict.theta.largest_real_mean,
-                            "passed": verdict.theta.passed,
-                        },
-                        # the stricter band test, reported beside the published verdict
-                        "envelope": None
-                        if verdict.envelope is None
-                        else {
-                            "inside_y": verdict.envelope.inside_y,
-                            "inside_theta": verdict.envelope.inside_theta,
-                            "worst_y_m": verdict.envelope.worst_y,
-                            "worst_theta_rad": verdict.envelope.worst_theta,
-                            "passed": verdict.envelope.passed,
-                        },
-                    }
-                )
-            except ParcelfitError as exc:
-                details["message"] = f"validation not computable: {exc}"
-        details["passed"] = passed
+        record = validation_record(
+            self.val_reference,
+            result.run.trajectory if run_file is not None and result.run is not None else None,
+            None if result.run is None else result.run.transit_time,
+            status=result.status.value,
+            message=result.diagnostics.get("message"),
+            params=params,
+            after_iteration=iteration,
+            run_file=run_file,
+        )
         self.store.finish(
             row_id,
             status=result.status.value,
-            transit_time=None if result.run is None else result.run.transit_time,
+            transit_time=record.transit_time,
             wall_time=result.wall_time,
             run_file=run_file,
-            details=details,
+            details=record.details(),
         )
+        self._validations[row_id] = record
+        passed = record.passed
+        self.write_results()
         self.last_validation = passed
         self._report(
             iteration,
@@ -336,19 +348,167 @@ class Calibration:
 
     # -- the loop ----------------------------------------------------------------------------
     def run(self) -> CalibrationResult:
-        """Run (or resume) the study until validation passes or the budget is spent; then close
-        the store, release the folder and write the study figures."""
+        """Run (or resume) the study until validation passes or the budget is spent; then write
+        the results (`parcelfit.optimize.results`), the study figures and the key frames, close
+        the store and release the folder."""
         try:
             result = self._run()
+            result = self._finish(result)
         finally:
             self.close()
+        return result
+
+    # -- what the study concluded, for the report --------------------------------------------
+    def _validation_records(self) -> list[ValidationRecord]:
+        """Every finished validation's record: those run now as they were made, earlier ones
+        (a resumed study) as the results file has them, else judged again from their stored run
+        files (no simulation; the files keep 9 significant digits)."""
+        out = []
+        rows = [r for r in self.store.evaluations("validation") if r.status != "pending"]
+        earlier = None
+        if any(r.id not in self._validations for r in rows):
+            kept = self._earlier_results()
+            earlier = {} if kept is None else {v.after_iteration: v for v in kept.validations}
+        for row in rows:
+            if self.val_reference is None:
+                continue
+            known = None if earlier is None else earlier.get(row.iteration)
+            if (
+                row.id not in self._validations
+                and known is not None
+                and (known.run_file, known.params) == (row.run_file, row.params)
+            ):
+                self._validations[row.id] = known
+            if row.id not in self._validations:
+                traj = None
+                if row.run_file is not None and (self.folder / row.run_file).is_file():
+                    traj = read_trajectory(self.folder / row.run_file)
+                self._validations[row.id] = validation_record(
+                    self.val_reference,
+                    traj,
+                    row.transit_time,
+                    status=row.status,
+                    message=row.details.get("message"),
+                    params=row.params,
+                    after_iteration=row.iteration,
+                    run_file=row.run_file,
+                )
+            out.append(self._validations[row.id])
+        return out
+
+    def surrogate(self) -> SurrogateRecord | None:
+        """The GP surrogate of the finished fitting evaluations, refitted with the optimiser
+        settings the store records, and its partial dependence curves (None without a study
+        record)."""
+        from parcelfit.optimize.plots import dependence_curves, surrogate_optimizer
+
+        record = self.store.read_study()
+        if record is None or not record.parameters:
+            return None
+        bo = surrogate_optimizer(record, self.store.evaluations("fit"))
+        curves = dependence_curves(bo)
+        return SurrogateRecord(
+            record.optimizer, bo.n_told, None if curves is None else tuple(curves)
+        )
+
+    def write_results(
+        self,
+        stop_reason: str | None = None,
+        *,
+        surrogate: SurrogateRecord | None = None,
+        key_frames: KeyFramesRecord | None = None,
+        figures: tuple[Path, ...] = (),
+    ) -> Path:
+        """Write ``results.json``: the references, every validation, the surrogate (refitted
+        here unless given), the key frames and figures; returns its path."""
+        references = {"fit": ReferenceRecord.from_selection(self.reference)}
+        if self.val_reference is not None:
+            references["validation"] = ReferenceRecord.from_selection(self.val_reference)
+        return write_results(
+            self.folder,
+            new_results(
+                references,
+                self._validation_records(),
+                stop_reason=stop_reason,
+                surrogate=surrogate or self.surrogate(),
+                key_frames=key_frames,
+                figures=[p.relative_to(self.folder).as_posix() for p in figures],
+            ),
+        )
+
+    def _finish(self, result: CalibrationResult) -> CalibrationResult:
+        """The results, study figures and key frames of a stopped study."""
+        last = -1 if result.last_iteration is None else result.last_iteration
+        surrogate = self.surrogate()
+        figures: list[Path] = []
+        key_frames = None
         if self.figures:
             from parcelfit.optimize.plots import study_figures
 
-            last = result.last_iteration
-            self._report(-1 if last is None else last, 0, "writing the study figures")
-            result = dataclasses.replace(result, figures=tuple(study_figures(self.folder)))
-        return result
+            self._report(last, 0, "writing the study figures")
+            curves = None if surrogate is None or surrogate.curves is None else surrogate.curves
+            figures += study_figures(self.folder, None if curves is None else list(curves))
+            if self.key_frames and result.best_params is not None:
+                key_frames, drawn = self._key_frames(result.best_params, last)
+                figures += drawn
+        self.write_results(
+            result.stop_reason, surrogate=surrogate, key_frames=key_frames, figures=tuple(figures)
+        )
+        return dataclasses.replace(result, figures=tuple(figures))
+
+    def _key_frames(
+        self, params: Mapping[str, float], iteration: int
+    ) -> tuple[KeyFramesRecord, list[Path]]:
+        """Draw the recommended run's key frames (MuJoCo only: one more simulation, at the
+        validation case if there is one) into ``figures/``; reused while the same."""
+        from parcelfit.figures import save_figure
+        from parcelfit.sim.mujoco import MujocoSimulator
+
+        case = self.val_case or self.fit_case
+        record = KeyFramesRecord(case.label, dict(params))
+        if not isinstance(self.simulator, MujocoSimulator):
+            return replace(record, note="Key frames are drawn for the MuJoCo backend only."), []
+        stem = self.folder / "figures" / "key-frames"
+        gif = self.folder / "figures" / "run.gif"
+        earlier = self._earlier_results()
+        kept = None if earlier is None else earlier.key_frames
+        if (
+            kept is not None
+            and kept.image is not None
+            and (kept.case, kept.params) == (record.case, record.params)
+            and stem.with_suffix(".png").is_file()
+            and (not self.animation or (kept.animation is not None and gif.is_file()))
+        ):
+            return kept, [stem.with_suffix(".png"), stem.with_suffix(".svg")]
+        self._report(iteration, 1, "drawing the key frames of the calibrated run")
+        from parcelfit.sim.mujoco.render import render_key_frames
+
+        try:
+            drawn = render_key_frames(
+                self.simulator,
+                self._full_params(params),
+                case,
+                animation=gif if self.animation else None,
+            )
+        except Exception as exc:  # a figure must not cost the study its results
+            return replace(record, note=f"The key-frame run failed: {exc}"), []
+        if drawn.figure is None:
+            return replace(record, note=f"The key-frame run ended {drawn.status}."), []
+        paths = save_figure(drawn.figure, stem)
+        return replace(
+            record,
+            image=paths[0].relative_to(self.folder).as_posix(),
+            animation=None
+            if drawn.animation is None
+            else drawn.animation.relative_to(self.folder).as_posix(),
+        ), paths
+
+    def _earlier_results(self) -> StudyResults | None:
+        """The results an earlier run of this folder wrote (None if none or unreadable)."""
+        try:
+            return read_results(self.folder)
+        except ParcelfitError:
+            return None
 
     def _run(self) -> CalibrationResult:
         study = self.study
@@ -448,7 +608,7 @@ class Calibration:
         fits = self.store.evaluations("fit")
         self.store.set_meta("stop_reason", reason)
         if best is not None:
-            self.store.set_meta("recommended", {"params": best[0], "cost": best[1]})
+            self.store.write_recommended(RecommendedRecord(best[0], best[1]))
         return CalibrationResult(
             best_params=None if best is None else best[0],
             best_cost=None if best is None else best[1],
@@ -460,10 +620,20 @@ class Calibration:
         )
 
 
+def record_summary(record: StudyRecord) -> dict[str, Any]:
+    """A study record as JSON (bounds SI), its optimiser as ``optimizer``: ``sampler``,
+    ``settings`` (BOSettings fields, None without a GP), ``recorded`` (False for a store of an
+    earlier version: the defaults stand in) and ``note`` (None, or what stands in)."""
+    doc = record.to_json()
+    del doc["sampler"], doc["bo_settings"]
+    doc["optimizer"] = {**record.optimizer.to_json(), "note": record.optimizer.note}
+    return doc
+
+
 def study_status(folder: str | Path) -> dict[str, Any]:
     """A summary of a study folder (running or finished), JSON-ready.
 
-    Keys: ``study`` (its description), ``dataset`` and ``synthetic`` (True for SYNTHETIC data,
+    Keys: ``study`` (its description, `record_summary`), ``dataset`` and ``synthetic`` (True for SYNTHETIC data,
     None when the dataset is not found), ``reference_run``, ``stop_reason`` (None while
     running), ``evaluations``, ``pending``, ``by_status`` (evaluations per status),
     ``last_iteration`` (iterations are numbered one way everywhere: 0 is the initial design,
@@ -491,22 +661,19 @@ def study_status(folder: str | Path) -> dict[str, Any]:
     try:
         fits = store.evaluations("fit")
         vals = store.evaluations("validation")
-        meta = {k: store.get_meta(k) for k in ("study", "source", "reference_run")}
-        stop_reason, recommended = store.get_meta("stop_reason"), store.get_meta("recommended")
+        record, source = store.read_study(), store.read_source() or SourceRecord()
+        reference_run, stop_reason = store.get_meta("reference_run"), store.get_meta("stop_reason")
+        recommended = store.read_recommended()
     finally:
         store.close()
-    source = meta["source"] or {}
     ok = [e for e in fits if e.status == "ok" and e.cost is not None and math.isfinite(e.cost)]
     lowest = min(ok, key=lambda e: e.cost) if ok else None  # type: ignore[arg-type, return-value]
-    if recommended is not None:
-        at = next((e.iteration for e in fits if e.params == recommended["params"]), None)
-        recommended = {**recommended, "iteration": at}
-    names = list((meta["study"] or {}).get("parameters") or (lowest.params if lowest else []))
+    names = list(record.parameters if record else (lowest.params if lowest else []))
     return {
-        "study": meta["study"],
-        "dataset": source.get("dataset"),
-        "synthetic": is_synthetic(source["dataset"]) if source.get("dataset") else None,
-        "reference_run": meta["reference_run"],
+        "study": None if record is None else record_summary(record),
+        "dataset": source.dataset,
+        "synthetic": is_synthetic(source.dataset) if source.dataset else None,
+        "reference_run": reference_run,
         "stop_reason": stop_reason,
         "evaluations": len(fits),
         "pending": sum(e.status == "pending" for e in fits),
@@ -514,7 +681,12 @@ def study_status(folder: str | Path) -> dict[str, Any]:
             s: sum(e.status == s for e in fits) for s in sorted({e.status for e in fits})
         },
         "last_iteration": max((e.iteration for e in fits), default=None),
-        "recommended": recommended,
+        "recommended": None
+        if recommended is None
+        else {
+            **recommended.to_json(),
+            "iteration": next((e.iteration for e in fits if e.params == recommended.params), None),
+        },
         "lowest_cost": None
         if lowest is None
         else {"params": lowest.params, "cost": lowest.cost, "iteration": lowest.iteration},

@@ -5,22 +5,24 @@
 * ``traces``: each fitted parameter by evaluation, coloured by cost, the best one marked.
 * ``partial_dependence``: the GP's predicted cost as one parameter varies, averaged over the
   others (uniform Monte Carlo sample of 256 points per value), with a +-1 standard deviation
-  band; the GP is refitted from the store exactly as the optimiser saw it.
+  band; the GP is refitted from the store exactly as the optimiser saw it, with the optimiser
+  settings the store records (`surrogate_optimizer`). The curves are `DependenceCurve`s
+  (`parcelfit.optimize.results`), which the calibration also stores for the report.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 from matplotlib.figure import Figure
 
 from parcelfit.figures import save_figure
 from parcelfit.optimize.bo import BatchBO, BOSettings
-from parcelfit.optimize.calibration import STORE_FILE
+from parcelfit.optimize.results import DependenceCurve
 from parcelfit.optimize.space import Dimension, Space
-from parcelfit.optimize.store import Evaluation, Store
+from parcelfit.optimize.store import STORE_FILE, Evaluation, Store, StudyRecord
 from parcelfit.sim.params import catalogue_unit, to_catalogue_units
 
 
@@ -111,29 +113,6 @@ def traces(fits: list[Evaluation], names: list[str]) -> Figure:
     return fig
 
 
-@dataclass(frozen=True)
-class DependenceCurve:
-    """The GP's partial dependence of the cost on one parameter (display units on x)."""
-
-    name: str
-    values: np.ndarray  # parameter values, catalogue units
-    cost: np.ndarray  # predicted cost averaged over the other parameters
-    sd: np.ndarray  # averaged predictive standard deviation
-    log: bool
-    transformed: bool = False  # cost after the optimiser's output transform (log or Box-Cox)
-
-    @property
-    def amplitude(self) -> float:
-        """How much the predicted cost changes across the parameter's range."""
-        return float(np.max(self.cost) - np.min(self.cost))
-
-    def indistinct(self) -> tuple[float, float]:
-        """The span of values whose predicted cost is within one (mean) predictive standard
-        deviation of the lowest: the values the surrogate cannot tell apart from the best."""
-        near = self.values[self.cost <= self.cost.min() + float(self.sd.mean())]
-        return float(near.min()), float(near.max())
-
-
 def dependence_curves(
     bo: BatchBO, n_grid: int = 40, n_mc: int = 256, seed: int = 0
 ) -> list[DependenceCurve] | None:
@@ -201,30 +180,35 @@ def dependence_figure(curves: list[DependenceCurve]) -> Figure:
 
 
 def study_optimizer(folder: str | Path) -> BatchBO | None:
-    """The optimiser of a study folder, told every finished evaluation (None without a study)."""
+    """The optimiser of a study folder, told every finished evaluation, with the study's own GP
+    settings (None without a study record). A study whose sampler has no GP (tpe), or whose
+    store predates the recorded settings, gets the default GP (`OptimizerRecord.note` says so)."""
     store = Store(Path(folder) / STORE_FILE, readonly=True)
-    meta = store.get_meta("study") or {}
-    fits = store.evaluations("fit")
-    store.close()
-    names = list(meta.get("parameters", []))
-    if not names:
+    try:
+        record = store.read_study()
+        fits = store.evaluations("fit")
+    finally:
+        store.close()
+    if record is None or not record.parameters:
         return None
-    logs = meta.get("log") or [False] * len(names)
+    return surrogate_optimizer(record, fits)
+
+
+def surrogate_optimizer(record: StudyRecord, fits: list[Evaluation]) -> BatchBO:
+    """A GP optimiser over the record's space with its recorded settings (defaults where none
+    are recorded), told every finished evaluation in ``fits`` in order."""
     space = Space(
         [
             Dimension(n, lo, hi, lg)
-            for n, (lo, hi), lg in zip(names, meta["bounds"], logs, strict=True)
+            for n, (lo, hi), lg in zip(record.parameters, record.bounds, record.log, strict=True)
         ]
     )
-    # the study's own GP settings (a study with a non-GP sampler, or one stored before the
-    # settings were recorded, gets the default GP as its surrogate)
-    stored = meta.get("bo_settings")
-    settings = BOSettings(**stored) if stored else BOSettings()
+    stored = record.optimizer.settings
     bo = BatchBO(
         space,
-        batch_size=int(meta.get("batch_size", 4)),
-        seed=int(meta.get("seed", 0)),
-        settings=settings,
+        batch_size=record.batch_size,
+        seed=record.seed,
+        settings=BOSettings(**stored) if stored else BOSettings(),
     )
     for e in fits:
         if e.status != "pending":
@@ -232,21 +216,28 @@ def study_optimizer(folder: str | Path) -> BatchBO | None:
     return bo
 
 
-def study_figures(folder: str | Path) -> list[Path]:
-    """Write history, traces and partial dependence (PNG and SVG) into ``folder/figures``."""
+def study_figures(
+    folder: str | Path, curves: list[DependenceCurve] | Literal["refit"] | None = "refit"
+) -> list[Path]:
+    """Write history, traces and partial dependence (PNG and SVG) into ``folder/figures``;
+    ``curves`` are the partial dependence curves when already computed (None: there are none),
+    else they are computed from the study's surrogate."""
     folder = Path(folder)
     store = Store(folder / STORE_FILE, readonly=True)
-    meta = store.get_meta("study") or {}
-    fits, vals = store.evaluations("fit"), store.evaluations("validation")
-    store.close()
-    names = list(meta.get("parameters", []))
+    try:
+        record = store.read_study()
+        fits, vals = store.evaluations("fit"), store.evaluations("validation")
+    finally:
+        store.close()
+    names = [] if record is None else list(record.parameters)
     out = folder / "figures"
     paths = save_figure(history(fits, vals), out / "history")
     if not fits or not names:
         return paths
     paths += save_figure(traces(fits, names), out / "traces")
-    bo = study_optimizer(folder)
-    pd_fig = None if bo is None else partial_dependence(bo)
-    if pd_fig is not None:
-        paths += save_figure(pd_fig, out / "partial_dependence")
+    if curves == "refit":
+        bo = study_optimizer(folder)
+        curves = None if bo is None else dependence_curves(bo)
+    if curves:
+        paths += save_figure(dependence_figure(curves), out / "partial_dependence")
     return paths

@@ -3,7 +3,12 @@
 Schema (``study.sqlite`` in the study folder; WAL journal, one transaction per write):
 
 ``meta(key TEXT PRIMARY KEY, value TEXT)``
-    study-level facts as JSON: the study file's fingerprint, the seed, the parameter space.
+    study-level facts as JSON. Three of them are typed records with one writer and one reader
+    here: ``study`` (`StudyRecord`: name, parameter space, batch size, seed, speed settings and
+    the optimiser as it ran, `OptimizerRecord`), ``source`` (`SourceRecord`: the study file,
+    dataset, rig and consignment) and ``recommended`` (`RecommendedRecord`: the parameters the
+    study validates and reports, with their cost). The others are plain values:
+    ``fingerprint`` (of the study file), ``reference_run`` and ``stop_reason``.
 
 ``evaluations``
     ``id`` INTEGER PRIMARY KEY, ``kind`` ('fit' | 'validation' | 'screen'), ``iteration`` (0 =
@@ -22,6 +27,10 @@ A new store is created under a temporary name and renamed once its schema is wri
 existing ``study.sqlite`` always has one: an empty (0-byte) or unreadable file is damaged and
 refused, never silently restarted. ``readonly=True`` (``status``, ``report``) opens the file with
 SQLite's ``mode=ro`` and never writes to it.
+
+Stores written by earlier versions open as they are: a record's missing fields take their
+defaults, and a study record without the optimiser (written before it was kept) reads as the
+default GP with ``OptimizerRecord.recorded`` False, so that readers can say so.
 """
 
 from __future__ import annotations
@@ -31,13 +40,15 @@ import os
 import sqlite3
 import time
 import urllib.parse
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from parcelfit.errors import ParcelfitError
+
+STORE_FILE = "study.sqlite"  # a calibration study's store, in its folder
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -78,6 +89,148 @@ class Evaluation:
     finished_at: float | None
     run_file: str | None
     details: dict[str, Any]
+
+
+# -- typed meta records ------------------------------------------------------------------------
+
+
+def _number(doc: Mapping[str, Any], key: str, default: Any) -> Any:
+    value = doc.get(key)
+    return default if value is None else value
+
+
+@dataclass(frozen=True)
+class OptimizerRecord:
+    """The optimiser a study ran: the sampler's name (gp, published, tpe) and, for a GP sampler,
+    its `BOSettings` fields as used (None for a sampler without a GP). ``recorded`` is False
+    when the store predates the record: the values are then the defaults (the default GP)."""
+
+    sampler: str = "gp"
+    settings: dict[str, Any] | None = None
+    recorded: bool = True
+
+    def to_json(self) -> dict[str, Any]:
+        """As JSON (the study record stores the fields under its own keys, see `StudyRecord`)."""
+        return {"sampler": self.sampler, "settings": self.settings, "recorded": self.recorded}
+
+    @classmethod
+    def from_json(cls, doc: Mapping[str, Any]) -> OptimizerRecord:
+        """Read `to_json`'s form."""
+        return cls(str(doc["sampler"]), doc.get("settings"), bool(doc["recorded"]))
+
+    @property
+    def note(self) -> str | None:
+        """A sentence for readers when the settings are not the study's own (else None)."""
+        if not self.recorded:
+            return (
+                "the study's store was written by an earlier parcelfit that did not record the "
+                "optimiser settings: the default GP settings are used in their place"
+            )
+        if self.settings is None:
+            return (
+                f"the {self.sampler} optimiser has no GP: the surrogate is the GP with the "
+                "default settings"
+            )
+        return None
+
+
+@dataclass(frozen=True)
+class StudyRecord:
+    """What a study is: its name, fitted parameters with bounds (SI) and log flags, batch size,
+    seed, fitting and validation speed settings, and the optimiser as it ran."""
+
+    name: str
+    parameters: tuple[str, ...]
+    bounds: tuple[tuple[float, float], ...]
+    log: tuple[bool, ...]
+    batch_size: int = 4
+    seed: int = 0
+    fit_setting: int = 1
+    validation_setting: int | None = None
+    optimizer: OptimizerRecord = field(default_factory=lambda: OptimizerRecord(recorded=False))
+
+    def to_json(self) -> dict[str, Any]:
+        """The stored form (JSON-ready; bounds in SI)."""
+        return {
+            "name": self.name,
+            "parameters": list(self.parameters),
+            "bounds": [list(b) for b in self.bounds],
+            "log": list(self.log),
+            "batch_size": self.batch_size,
+            "seed": self.seed,
+            "fit_setting": self.fit_setting,
+            "validation_setting": self.validation_setting,
+            "sampler": self.optimizer.sampler,
+            "bo_settings": self.optimizer.settings,
+        }
+
+    @classmethod
+    def from_json(cls, doc: Mapping[str, Any]) -> StudyRecord:
+        """Read a stored record, tolerating those of earlier versions (missing keys: defaults;
+        no ``sampler``: the optimiser was not recorded)."""
+        names = tuple(str(n) for n in doc.get("parameters") or ())
+        if "sampler" in doc:
+            optimizer = OptimizerRecord(str(doc["sampler"]), doc.get("bo_settings"), True)
+        else:
+            optimizer = OptimizerRecord(recorded=False)
+        setting = doc.get("validation_setting")
+        return cls(
+            name=str(doc.get("name") or "?"),
+            parameters=names,
+            bounds=tuple((float(lo), float(hi)) for lo, hi in doc.get("bounds") or ()),
+            log=tuple(bool(v) for v in doc.get("log") or [False] * len(names)),
+            batch_size=int(_number(doc, "batch_size", 4)),
+            seed=int(_number(doc, "seed", 0)),
+            fit_setting=int(_number(doc, "fit_setting", 1)),
+            validation_setting=None if setting is None else int(setting),
+            optimizer=optimizer,
+        )
+
+
+@dataclass(frozen=True)
+class SourceRecord:
+    """Where a study came from, so a report can find its file and data again (absolute paths
+    as strings, None where unknown)."""
+
+    study_file: str | None = None
+    dataset: str | None = None
+    rig: str | None = None
+    consignment: str | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        """The stored form."""
+        return {
+            "study_file": self.study_file,
+            "dataset": self.dataset,
+            "rig": self.rig,
+            "consignment": self.consignment,
+        }
+
+    @classmethod
+    def from_json(cls, doc: Mapping[str, Any]) -> SourceRecord:
+        """Read a stored record (missing keys: None)."""
+        return cls(*(doc.get(k) for k in ("study_file", "dataset", "rig", "consignment")))
+
+
+@dataclass(frozen=True)
+class RecommendedRecord:
+    """The parameters a study validates and reports (SI, fitted ones only) and their cost."""
+
+    params: dict[str, float]
+    cost: float
+
+    def to_json(self) -> dict[str, Any]:
+        """The stored form."""
+        return {"params": dict(self.params), "cost": self.cost}
+
+    @classmethod
+    def from_json(cls, doc: Mapping[str, Any]) -> RecommendedRecord:
+        """Read a stored record."""
+        return cls({str(k): float(v) for k, v in doc["params"].items()}, float(doc["cost"]))
+
+
+_RECORDS = ("study", "source", "recommended")  # meta keys read and written as records only
+_R = TypeVar("_R")
 
 
 class Store:
@@ -181,17 +334,65 @@ class Store:
         self._db.execute("COMMIT")
 
     # -- meta -------------------------------------------------------------------------------
-    def get_meta(self, key: str) -> Any:
-        """A study-level value (None if absent)."""
+    def _read_meta(self, key: str) -> Any:
         row = self._db.execute("SELECT value FROM meta WHERE key = ?", (key,)).fetchone()
         return None if row is None else json.loads(row[0])
 
-    def set_meta(self, key: str, value: Any) -> None:
-        """Store a study-level value (JSON-serialisable)."""
+    def _write_meta(self, key: str, value: Any) -> None:
         with self._transaction() as db:
             db.execute(
                 "INSERT OR REPLACE INTO meta (key, value) VALUES (?, ?)", (key, json.dumps(value))
             )
+
+    def get_meta(self, key: str) -> Any:
+        """A plain study-level value (None if absent); the records have their own readers."""
+        if key in _RECORDS:
+            raise ParcelfitError(f"the {key!r} record is read with read_{key}()")
+        return self._read_meta(key)
+
+    def set_meta(self, key: str, value: Any) -> None:
+        """Store a plain study-level value (JSON-serialisable); the records have their own
+        writers."""
+        if key in _RECORDS:
+            raise ParcelfitError(f"the {key!r} record is written with write_{key}()")
+        self._write_meta(key, value)
+
+    def _record(self, key: str, read: Callable[[Mapping[str, Any]], _R]) -> _R | None:
+        doc = self._read_meta(key)
+        if doc is None:
+            return None
+        try:
+            return read(doc)
+        except (TypeError, ValueError, KeyError, AttributeError) as exc:
+            raise ParcelfitError(
+                f"the study database's {key!r} record is damaged ({exc})",
+                file=self.path,
+                fix="restore the database from a backup",
+            ) from None
+
+    def read_study(self) -> StudyRecord | None:
+        """The study record (None before a calibration wrote one)."""
+        return self._record("study", StudyRecord.from_json)
+
+    def write_study(self, record: StudyRecord) -> None:
+        """Store the study record."""
+        self._write_meta("study", record.to_json())
+
+    def read_source(self) -> SourceRecord | None:
+        """Where the study came from (None if never written)."""
+        return self._record("source", SourceRecord.from_json)
+
+    def write_source(self, record: SourceRecord) -> None:
+        """Store where the study came from."""
+        self._write_meta("source", record.to_json())
+
+    def read_recommended(self) -> RecommendedRecord | None:
+        """The recommended parameters (None until the study stops)."""
+        return self._record("recommended", RecommendedRecord.from_json)
+
+    def write_recommended(self, record: RecommendedRecord) -> None:
+        """Store the recommended parameters."""
+        self._write_meta("recommended", record.to_json())
 
     # -- evaluations ------------------------------------------------------------------------
     def add_pending(

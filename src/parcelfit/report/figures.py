@@ -1,4 +1,5 @@
-"""Figures made for the report only (the others come from the stages' own modules).
+"""Figures made for the report only (the others come from the stages' own modules), drawn from
+the stored results (`parcelfit.optimize.results`), never from a new analysis.
 
 * ``distance_heatmaps``: a test case's DTW distance matrices (section 4), the reference run
   outlined;
@@ -9,7 +10,6 @@
 * ``validation_overlays``: lateral position y over x and heading theta over x of the real runs
   (grey) and the simulated run (colour) on the prepared trajectories the criteria use, with the
   stricter criterion's band shaded (like the published Figures 16-19);
-* ``key_frames``: the parcel's outline on the rig at a few instants.
 """
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
 
-from parcelfit.metrics import ReferenceSelection, Validation
-from parcelfit.metrics.envelope import EnvelopeBand
+from parcelfit.metrics import Validation
+from parcelfit.optimize.results import BandRecord, ReferenceRecord
 
 SIM_COLOUR = "#d35400"
 REAL_COLOUR = "#9aa0a6"
@@ -39,7 +39,7 @@ def _short(run_ids: Sequence[str]) -> list[str]:
     return [r[len(prefix) :] or r for r in run_ids]
 
 
-def distance_heatmaps(sel: ReferenceSelection) -> Figure:
+def distance_heatmaps(sel: ReferenceRecord) -> Figure:
     """Heat maps of a test case's distance matrices; the reference run's row and column outlined."""
     panels: list[tuple[str, np.ndarray]] = [
         ("DTW$_{xy}$ [m$^2$]", sel.d_xy),
@@ -64,14 +64,16 @@ def distance_heatmaps(sel: ReferenceSelection) -> Figure:
             )
         fig.colorbar(im, ax=ax, shrink=0.75)
     fig.suptitle(
-        f"{sel.case.label}: reference run {sel.reference_id} (red: its row and column)", fontsize=10
+        f"{sel.case}: reference run {sel.reference_id} (red: its row and column)", fontsize=10
     )
     return fig
 
 
-def validation_transit(sel: ReferenceSelection, verdict: Validation, label: str) -> Figure:
+def validation_transit(
+    transit_times: Sequence[float | None], verdict: Validation, label: str
+) -> Figure:
     """Box plot of the real transit times [s] with the simulated one and the tolerance interval."""
-    real = [t for t in sel.transit_times if t is not None]
+    real = [t for t in transit_times if t is not None]
     fig = Figure(figsize=(3.2, 3.6), layout="constrained")
     ax = fig.subplots()
     ax.boxplot([real], tick_labels=["real runs"], widths=0.5)
@@ -107,7 +109,7 @@ def validation_mean_dtw(verdict: Validation, label: str) -> Figure:
 
 
 def validation_overlays(
-    sel: ReferenceSelection, sim_xy: np.ndarray, sim_theta: np.ndarray, band: EnvelopeBand | None
+    sel: ReferenceRecord, sim_xy: np.ndarray, sim_theta: np.ndarray, band: BandRecord | None
 ) -> Figure:
     """y over x and heading over x: real runs grey, simulation coloured, the band shaded."""
     fig = Figure(figsize=(10, 3.8), layout="constrained")
@@ -143,11 +145,3 @@ def validation_overlays(
     ax_t.set_title("heading over travel", fontsize=9)
     ax_y.legend(fontsize=7)
     return fig
-
-
-def key_frame_indices(n_samples: int, count: int = 6) -> list[int]:
-    """``count`` sample indices spread evenly over a run of ``n_samples`` samples."""
-    if n_samples <= 0:
-        return []
-    spread = np.linspace(0, n_samples - 1, min(count, n_samples)).round().astype(int)
-    return sorted({int(i) for i in spread})

@@ -2,14 +2,34 @@
 of raw numbers.
 
 Input is a calibration study folder (or a folder holding one as ``calibration/``, as
-``parcelfit demo`` writes). From the study's store the report finds the study file and the
-dataset again; a screening folder (``screen/`` beside the study, or given) and a stricter-
-criterion example (``stricter-criterion.json``, written by the demo) are added when present.
+``parcelfit demo`` writes). From the study's store the report finds the dataset again; a
+screening folder (``screen/`` beside the study, or given), the demo's stricter-criterion example
+(``stricter-criterion.json``) and its reference runs of every test case (``reference_runs.json``)
+are added when present.
 
 Sections: summary and verdict; transit-time statistics; reference runs (distance matrices);
 screening; calibration (history, parameters with their ranges and, for synthetic data, the truth;
 identifiability from the surrogate); validation (published criteria and the stricter band test,
 figures like the published Figures 16-19); the simulated run's key frames.
+
+Architecture: the report renders, it does not analyse. The calibration writes what it concluded
+into the study folder: the store (`parcelfit.optimize.store`: the evaluations and the typed
+study, source and recommended records) and ``results.json`` (`parcelfit.optimize.results`,
+schema in docs/data.md: the reference runs it used, every validation's verdict and curves, the
+GP surrogate's partial dependence refitted with the optimiser settings the store records, the
+key frames it drew). `build_report` reads those files, turns them into plain values and
+embedded figures (one `Section` per heading, built by a ``_NAME_section`` function here; figures
+drawn by `parcelfit.report.figures` and `parcelfit.optimize.plots`), and the Jinja2 templates
+render the page (``templates/report.html.j2`` and one ``templates/sections/NAME.html.j2`` per
+section). The templates escape every value (autoescaping); only the ``<img>`` tags made here are
+marked safe, and the page's Content-Security-Policy forbids scripts should anything slip through.
+
+Nothing is simulated, validated, selected or refitted here. Where a stored result is missing (a
+study written by an earlier parcelfit, or one stopped before it validated) the page says so and
+how to write it: `parcelfit calibrate` on the same study file and folder writes the results of a
+finished study without simulating again. What the report still computes is description, not
+analysis: the dataset's transit-time statistics (as `parcelfit stats` does), the history and
+trace plots of the stored evaluations, and the identifiability spans read off the stored curves.
 
 Identifiability rule (stated in the report): along each calibrated parameter, the GP's partial
 dependence (mean cost averaged over the other parameters) is compared with its mean predictive
@@ -26,22 +46,28 @@ import io
 import json
 import math
 import time
-from dataclasses import dataclass, replace
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import jinja2
-import numpy as np
 import yaml
-from markupsafe import Markup, escape
+from markupsafe import Markup
 from matplotlib.figure import Figure
 
 from parcelfit import __version__
 from parcelfit.errors import ParcelfitError
-from parcelfit.metrics import ReferenceSelection, Validation, select_reference, validate
-from parcelfit.metrics.envelope import EnvelopeBand, envelope_band
+from parcelfit.optimize.results import (
+    DependenceCurve,
+    ReferenceRecord,
+    StudyResults,
+    ValidationRecord,
+    read_results,
+)
+from parcelfit.optimize.store import STORE_FILE, SourceRecord, Store, StudyRecord
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
-from parcelfit.runs import Dataset, TestCase, Trajectory, load_dataset, read_trajectory
+from parcelfit.runs import Dataset, load_dataset
 from parcelfit.sim.params import catalogue_unit, to_catalogue_units
 
 IDENTIFIABLE_SPAN = 0.20  # widest share of the range the surrogate may leave undecided
@@ -57,8 +83,9 @@ _TEMPLATES = jinja2.Environment(
     loader=jinja2.PackageLoader("parcelfit.report", "templates"),
     autoescape=True,
     undefined=jinja2.StrictUndefined,
+    trim_blocks=True,
+    lstrip_blocks=True,
 )
-
 
 _CSS = """
 body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;max-width:1100px;margin:2em auto;
@@ -76,35 +103,28 @@ img{max-width:100%;height:auto;display:block;margin:.6em 0}
 code{background:#f4f4f4;padding:0 .2em}
 """
 
+# what a missing stored result means, and how to write it (said once, at the top of the page)
+NO_RESULTS = (
+    "This study folder has no stored results (results.json): it was written by a parcelfit "
+    "before the calibration stored them, or the study stopped before it validated. The "
+    "sections that need them say so; nothing is recomputed here. Run `parcelfit calibrate` "
+    "again on the same study file and folder to write them: a finished study then only writes "
+    "its results, figures and key frames (no evaluation is simulated again)."
+)
+_NOT_STORED = "Not stored in this study folder (see the note at the top of the page)."
 
-def _esc(value: object) -> Markup:
-    """User text (names, ids, messages) made safe to place inside HTML."""
-    return escape(str(value))
 
-
-def figure_html(fig: Figure, alt: str, dpi: int = 100) -> str:
+def figure_html(fig: Figure, alt: str, dpi: int = 100) -> Markup:
     """A matplotlib figure as an embedded PNG ``<img>``."""
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi)
     return png_html(buf.getvalue(), alt)
 
 
-def png_html(data: bytes, alt: str, mime: str = "image/png") -> str:
+def png_html(data: bytes, alt: str, mime: str = "image/png") -> Markup:
     """Image bytes (PNG unless ``mime`` says otherwise) as an embedded ``<img>``."""
     b64 = base64.b64encode(data).decode("ascii")
-    return f'<img src="data:{mime};base64,{b64}" alt="{_esc(alt)}">'
-
-
-def _table(header: list[str], rows: list[list[str]]) -> str:
-    head = "".join(f"<th>{h}</th>" for h in header)
-    body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in r) + "</tr>" for r in rows)
-    return f"<table><tr>{head}</tr>{body}</table>"
-
-
-def _mark(passed: bool | None) -> str:
-    if passed is None:
-        return "-"
-    return '<span class="ok">pass</span>' if passed else '<span class="bad">fail</span>'
+    return Markup('<img src="data:{};base64,{}" alt="{}">').format(mime, b64, alt)
 
 
 @dataclass(frozen=True)
@@ -118,8 +138,6 @@ class StudyFolders:
 
 def locate(folder: str | Path, screen: str | Path | None = None) -> StudyFolders:
     """Find the study store in ``folder`` (or ``folder/calibration``) and a screening folder."""
-    from parcelfit.optimize.calibration import STORE_FILE
-
     folder = Path(folder)
     if (folder / STORE_FILE).is_file():
         study, root = folder, folder.parent
@@ -131,9 +149,10 @@ def locate(folder: str | Path, screen: str | Path | None = None) -> StudyFolders
             file=folder,
             fix="point at the folder `parcelfit calibrate` or `parcelfit demo` wrote",
         )
+    screen_dir: Path | None
     if screen is not None:
-        screen_dir: Path | None = Path(screen)
-        if not (screen_dir / "stage1-effects.csv").is_file():  # type: ignore[operator]
+        screen_dir = Path(screen)
+        if not (screen_dir / "stage1-effects.csv").is_file():
             raise ParcelfitError(
                 "no screening results here (no stage1-effects.csv)",
                 file=screen_dir,
@@ -145,21 +164,32 @@ def locate(folder: str | Path, screen: str | Path | None = None) -> StudyFolders
     return StudyFolders(study, root, screen_dir)
 
 
-class _Builder:
-    """The sections' HTML fragments, in page order. Fragments are markup written by this module;
-    every piece of user text inside them passes through `_esc` (the page template escapes the
-    rest, and the page's Content-Security-Policy forbids scripts should anything slip through)."""
+@dataclass(frozen=True)
+class Section:
+    """One heading of the page: its template (``templates/sections/KIND.html.j2``), title,
+    anchor and the values the template shows."""
 
-    def __init__(self, progress: ProgressCallback | None) -> None:
-        self.parts: list[Markup] = []
-        self.progress = progress or ignore_progress
+    kind: str
+    title: str
+    anchor: str
+    data: Any
 
-    def add(self, text: str) -> None:
-        self.parts.append(Markup(text))
 
-    def section(self, title: str, anchor: str) -> None:
+@dataclass
+class _Page:
+    """The sections in page order; announces each as it is made."""
+
+    progress: ProgressCallback
+    sections: list[Section] = field(default_factory=list)
+
+    def start(self, title: str) -> str:
+        """Announce a section as its making starts; returns its title."""
         self.progress(ProgressEvent("report", title))
-        self.parts.append(Markup('<h2 id="{}">{}</h2>').format(anchor, title))
+        return title
+
+    def add(self, kind: str, title: str, anchor: str, data: Any) -> None:
+        """Append a made section."""
+        self.sections.append(Section(kind, title, anchor, data))
 
 
 def _load_truth(dataset_dir: Path, consignment: str) -> dict[str, float]:
@@ -170,100 +200,117 @@ def _load_truth(dataset_dir: Path, consignment: str) -> dict[str, float]:
     return {k: float(v) for k, v in (doc.get("truth", {}).get(consignment) or {}).items()}
 
 
-def _statistics_section(b: _Builder, ds: Dataset) -> None:
+# -- transit-time statistics (a description of the dataset) -------------------------------------
+
+
+def _statistics_section(page: _Page, ds: Dataset) -> None:
     from parcelfit.analysis import dataset_title
     from parcelfit.stats.plots import transit_time_boxplots
     from parcelfit.stats.transit import compare_transit_times, transit_time_table
 
-    b.section("Transit times of the consignment types", "stats")
+    title = page.start("Transit times of the consignment types")
     times = transit_time_table(ds)
-    if times.empty:
-        b.add("<p>The dataset has no transit times.</p>")
-        return
-    tests = compare_transit_times(ds)
-    b.add(
-        "<p>Pairwise Mann-Whitney U tests per rig and speed setting, p-values adjusted by "
-        "Benjamini-Hochberg within each rig and setting; brackets mark significant pairs "
-        "(* p&lt;0.05, ** p&lt;0.01, *** p&lt;0.001).</p>"
-    )
-    b.add(figure_html(transit_time_boxplots(times, tests, dataset_title(ds)), "transit times"))
-    sig = tests[tests["significant"]]
-    b.add(
-        f"<p>{len(sig)} of {len(tests)} pairs differ significantly "
-        f"({len(times)} runs with a transit time).</p>"
-    )
+    data: dict[str, Any] = {"runs": len(times)}
+    if not times.empty:
+        tests = compare_transit_times(ds)
+        data.update(
+            figure=figure_html(
+                transit_time_boxplots(times, tests, dataset_title(ds)), "transit times"
+            ),
+            significant=int(tests["significant"].sum()),
+            tests=len(tests),
+        )
+    page.add("stats", title, "stats", data)
+
+
+# -- reference runs ----------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ReferenceRow:
+    """A test case's reference run: its id, number of runs and largest DTW distances (m, rad)."""
+
+    case: str
+    reference: str
+    runs: int
+    largest_xy: float
+    largest_theta: float
+
+
+def _dataset_references(root: Path, ds: Dataset | None) -> list[ReferenceRow] | None:
+    """The demo's reference runs of every test case (``reference_runs.json`` beside the study),
+    when they are of the study's dataset."""
+    path = root / "reference_runs.json"
+    if ds is None or not path.is_file():
+        return None
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+        if not doc or any(e.get("dataset") != ds.name for e in doc):
+            return None
+        return [
+            ReferenceRow(
+                str(e["test_case"]),
+                str(e["reference_run"]),
+                len(e["run_ids"]),
+                math.sqrt(float(e["max_d_xy_m2"])),
+                math.sqrt(float(e["max_d_theta_rad2"])),
+            )
+            for e in doc
+        ]
+    except (OSError, ValueError, TypeError, KeyError, AttributeError):
+        return None
 
 
 def _reference_section(
-    b: _Builder, ds: Dataset, shown: list[TestCase]
-) -> dict[TestCase, ReferenceSelection]:
+    page: _Page, results: StudyResults | None, root: Path, ds: Dataset | None
+) -> None:
     from parcelfit.report.figures import distance_heatmaps
 
-    b.section("Reference runs", "reference")
-    b.add(
-        "<p>For every test case the run with the smallest sum of normalised DTW distances to "
-        "the other runs (path, heading and, where known, transit time) is its reference run "
-        "(method section 4).</p>"
-    )
-    sels: dict[TestCase, ReferenceSelection] = {}
-    rows = []
-    for case_data in (ds.cases[c] for c in sorted(ds.cases)):
-        sel = select_reference(case_data)
-        sels[case_data.case] = sel
-        rows.append(
-            [
-                _esc(case_data.case.label),
-                _esc(sel.reference_id),
-                str(len(sel.run_ids)),
-                f"{math.sqrt(sel.max_xy):.3f}",
-                f"{math.sqrt(sel.max_theta):.3f}",
-            ]
+    title = page.start("Reference runs")
+    stored = [] if results is None else list(results.references.values())
+    everything = _dataset_references(root, ds)
+    rows = everything or [
+        ReferenceRow(
+            r.case, r.reference_id, len(r.run_ids), math.sqrt(r.max_xy), math.sqrt(r.max_theta)
         )
-    b.add(
-        _table(
-            [
-                "test case",
-                "reference run",
-                "runs",
-                "largest DTW<sub>xy</sub> between two runs [m]",
-                "largest DTW<sub>&theta;</sub> [rad]",
-            ],
-            rows,
-        )
-    )
-    for case in shown:
-        if case in sels:
-            b.add(figure_html(distance_heatmaps(sels[case]), f"distance matrices {case.label}"))
-    return sels
+        for r in stored
+    ]
+    data = {
+        "rows": rows,
+        "all_cases": everything is not None,
+        "missing": None if results is not None else _NOT_STORED,
+        "figures": [
+            figure_html(distance_heatmaps(r), f"distance matrices {r.case}") for r in stored
+        ],
+    }
+    page.add("reference", title, "reference", data)
 
 
-def _screen_section(b: _Builder, screen: Path | None) -> None:
-    b.section("Screening", "screening")
-    if screen is None:
-        b.add("<p class='note'>No screening results were found beside this study.</p>")
-        return
-    sel_file = screen / "selection.yaml"
-    if sel_file.is_file():
-        doc = yaml.safe_load(sel_file.read_text(encoding="utf-8")) or {}
-        chosen = doc.get("selected") or []
-        b.add(
-            f"<p>Selected for calibration: <b>{_esc(', '.join(map(str, chosen)) or 'none')}</b>."
-            "</p>"
-        )
-        reasons = doc.get("reasons") or {}
-        if reasons:
-            b.add(_table(["parameter", "why"], [[_esc(k), _esc(v)] for k, v in reasons.items()]))
-    charts = sorted(screen.glob("stage*-pareto-*.png"))
-    if charts:
-        b.add(
-            "<p>Pareto charts of the standardised effects on the DTW distances to the reference "
-            "run, per stage (red: significant; dashed: the critical value).</p>"
-        )
-        b.add(
-            "<div class='grid'>"
-            + "".join(png_html(png.read_bytes(), png.stem) for png in charts)
-            + "</div>"
-        )
+# -- screening ---------------------------------------------------------------------------------
+
+
+def _screen_section(page: _Page, screen: Path | None) -> None:
+    title = page.start("Screening")
+    data: dict[str, Any] = {
+        "found": screen is not None,
+        "selected": None,
+        "reasons": [],
+        "charts": [],
+    }
+    if screen is not None:
+        sel_file = screen / "selection.yaml"
+        if sel_file.is_file():
+            doc = yaml.safe_load(sel_file.read_text(encoding="utf-8")) or {}
+            data["selected"] = ", ".join(map(str, doc.get("selected") or [])) or "none"
+            data["reasons"] = [(str(k), str(v)) for k, v in (doc.get("reasons") or {}).items()]
+        data["charts"] = [
+            png_html(png.read_bytes(), png.stem)
+            for png in sorted(screen.glob("stage*-pareto-*.png"))
+        ]
+    page.add("screening", title, "screening", data)
+
+
+# -- calibration -------------------------------------------------------------------------------
 
 
 @dataclass(frozen=True)
@@ -287,6 +334,12 @@ class ParameterRow:
         return abs(self.best - self.truth) / (self.high - self.low)
 
     @property
+    def recovered(self) -> bool | None:
+        """Is the calibrated value within ``RECOVERY_TOLERANCE`` of the range from the truth?"""
+        err = self.error_share
+        return None if err is None else err <= RECOVERY_TOLERANCE
+
+    @property
     def identifiable(self) -> bool | None:
         """Does the surrogate pin this parameter down: are the values it cannot tell apart
         from the best within ``IDENTIFIABLE_SPAN`` of the range?"""
@@ -296,12 +349,16 @@ class ParameterRow:
 
 
 def parameter_rows(
-    meta: dict[str, Any], best: dict[str, float], truth: dict[str, float], curves: list | None
+    record: StudyRecord,
+    best: dict[str, float],
+    truth: dict[str, float],
+    curves: Sequence[DependenceCurve] | None,
 ) -> list[ParameterRow]:
-    """The calibrated parameters' table rows (catalogue units)."""
+    """The calibrated parameters' table rows (catalogue units), identifiability from the stored
+    partial dependence ``curves`` (None: not known)."""
     by_name = {c.name: c for c in curves} if curves else {}
     rows = []
-    for name, (lo, hi) in zip(meta["parameters"], meta["bounds"], strict=True):
+    for name, (lo, hi) in zip(record.parameters, record.bounds, strict=True):
         curve = by_name.get(name)
         rows.append(
             ParameterRow(
@@ -323,243 +380,209 @@ def _iteration_span(last: int) -> str:
     return "iteration 1" if last == 1 else f"iterations 1-{last}"
 
 
-def _calibration_section(
-    b: _Builder, folder: Path, meta: dict[str, Any], truth: dict[str, float], synthetic: bool
-) -> tuple[dict[str, float] | None, list[ParameterRow]]:
-    from parcelfit.optimize.calibration import STORE_FILE, study_status
-    from parcelfit.optimize.plots import dependence_curves, history, study_optimizer, traces
-    from parcelfit.optimize.store import Store
+def _surrogate_note(results: StudyResults | None) -> dict[str, Any]:
+    """What the template says about the surrogate the identifiability test read."""
+    if results is None:
+        return {"missing": _NOT_STORED}
+    sur = results.surrogate
+    if sur is None:
+        return {"missing": "The stored results hold no surrogate (no study record)."}
+    opt = sur.optimizer
+    settings = ", ".join(
+        f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}"
+        for k, v in (opt.settings or {}).items()
+    )
+    return {
+        "missing": None,
+        "evaluations": sur.evaluations,
+        "sampler": opt.sampler,
+        "settings": settings,
+        "note": opt.note,
+        "fitted": sur.curves is not None,
+    }
 
-    b.section("Calibration", "calibration")
+
+def _calibration_section(
+    page: _Page,
+    folder: Path,
+    record: StudyRecord,
+    results: StudyResults | None,
+    truth: dict[str, float],
+    synthetic: bool,
+) -> tuple[dict[str, float] | None, list[ParameterRow]]:
+    from parcelfit.optimize.calibration import study_status
+    from parcelfit.optimize.plots import dependence_figure, history, traces
+
+    title = page.start("Calibration")
     status = study_status(folder)
     store = Store(folder / STORE_FILE, readonly=True)
-    fits, vals = store.evaluations("fit"), store.evaluations("validation")
-    store.close()
-    sim_time = sum(e.wall_time or 0.0 for e in fits + vals)
+    try:
+        fits, vals = store.evaluations("fit"), store.evaluations("validation")
+    finally:
+        store.close()
     done = [e for e in fits if e.finished_at is not None]
-    span = (
-        max(e.finished_at for e in done) - min(e.asked_at for e in fits)  # type: ignore[type-var]
-        if done
-        else 0.0
-    )
     last = status["last_iteration"]
-    b.add(
-        f"<p>{status['evaluations']} simulations: the initial design (iteration 0)"
-        + (f" and {_iteration_span(last)}" if last else "")
-        + (f" (batches of {meta['batch_size']})" if last and meta.get("batch_size") else "")
-        + f", {len(vals)} validation runs; "
-        f"{span / 60:.1f} min from the first to the last result, {sim_time / 60:.1f} min of "
-        f"simulation in all. Stopped: {_esc(status.get('stop_reason') or 'not finished')}.</p>"
-    )
-    b.add(figure_html(history(fits, vals), "cost history"))
+    data: dict[str, Any] = {
+        "evaluations": status["evaluations"],
+        "iterations": _iteration_span(last) if last else None,
+        "batch_size": record.batch_size,
+        "validations": len(vals),
+        "span_min": (
+            max(e.finished_at for e in done) - min(e.asked_at for e in fits)  # type: ignore[type-var]
+            if done
+            else 0.0
+        )
+        / 60,
+        "sim_min": sum(e.wall_time or 0.0 for e in fits + vals) / 60,
+        "stopped": status.get("stop_reason") or "not finished",
+        "history": figure_html(history(fits, vals), "cost history"),
+        "best": None,
+    }
     best = status["lowest_cost"]
     if best is not None and status["recommended"] is not None:  # what the study validated
         best = {**status["recommended"], "lowest_cost": best["cost"]}
     if best is None:
-        b.add("<p class='bad'>No simulation succeeded; no parameters to report.</p>")
+        page.add("calibration", title, "calibration", data)
         return None, []
-    names = list(meta["parameters"])
-    bo = study_optimizer(folder)
-    curves = None if bo is None else dependence_curves(bo)
-    rows = parameter_rows(meta, best["params"], truth, curves)
-    header = ["parameter", "unit", "range", "calibrated"]
-    if truth:
-        header += ["truth (hidden)", "error / range width", "recovered (&le; 10 %)"]
-    header += [
-        "cost change across the range (GP)",
-        "fit about equally well (GP)",
-        "identifiable here",
-    ]
-    body = []
-    for r in rows:
-        cells = [
-            _esc(r.name),
-            _esc(r.unit),
-            f"{r.low:g} - {r.high:g}",
-            f"{r.best:.4g}",
-        ]
-        if truth:
-            err = r.error_share
-            cells += [
-                "-" if r.truth is None else f"{r.truth:g}",
-                "-" if err is None else f"{err * 100:.1f} %",
-                "-" if err is None else _mark(err <= RECOVERY_TOLERANCE),
-            ]
-        cells += [
-            "-" if r.amplitude is None else f"{r.amplitude:.3g}",
-            "-" if r.span is None else f"{r.span[0]:.4g} - {r.span[1]:.4g}",
-            "-"
-            if r.identifiable is None
-            else ("yes" if r.identifiable else '<span class="bad">no</span>'),
-        ]
-        body.append(cells)
-    b.add(
-        f"<p>Calibrated parameters: the evaluation made in iteration {best['iteration']} with cost "
-        f"{best['cost']:.4g}"
-        + (
-            f" (recommended by the GP's mean cost; the lowest single cost was "
-            f"{best['lowest_cost']:.4g})"
-            if "lowest_cost" in best
-            else ""
-        )
-        + ". "
-        + ("<b>The truth column is shown because the data are SYNTHETIC.</b>" if truth else "")
-        + "</p>"
+    curves = None
+    if results is not None and results.surrogate is not None:
+        curves = results.surrogate.curves
+    rows = parameter_rows(record, best["params"], truth, curves)
+    data.update(
+        best=best,
+        truth=bool(truth),
+        rows=rows,
+        surrogate=_surrogate_note(results),
+        flat=", ".join(r.name for r in rows if r.identifiable is False),
+        unexplained=", ".join(
+            r.name
+            for r in rows
+            if synthetic
+            and r.error_share is not None
+            and r.error_share > RECOVERY_TOLERANCE
+            and r.identifiable is not False
+        ),
+        dependence=None
+        if not curves
+        else figure_html(dependence_figure(list(curves)), "partial dependence"),
+        traces=figure_html(traces(fits, list(record.parameters)), "parameter traces"),
     )
-    b.add(_table(header, body))
-    flat = [r for r in rows if r.identifiable is False]
-    missed = [r for r in rows if r.error_share is not None and r.error_share > RECOVERY_TOLERANCE]
-    if flat:
-        b.add(
-            "<p>Not identifiable here: "
-            f"<b>{_esc(', '.join(r.name for r in flat))}</b>. Along each, the GP surrogate's "
-            "mean cost (averaged over the other parameters, the partial dependence below) stays "
-            "within one predictive standard deviation of its lowest value over more than "
-            f"{IDENTIFIABLE_SPAN * 100:.0f} % of the range (the 'fit about equally well' "
-            "column): the evaluations cannot tell those values apart, so the calibrated value "
-            "within that span is as good as chance. This test case does not constrain them; "
-            "another test case (rig or speed setting), more runs, or a direct measurement is "
-            "needed to pin them down.</p>"
-        )
-    if missed and synthetic:
-        unexplained = [r for r in missed if r.identifiable is not False]
-        if unexplained:
-            b.add(
-                f"<p class='bad'>Not recovered although the surrogate pins it down: "
-                f"{_esc(', '.join(r.name for r in unexplained))}. The model-form difference "
-                "between the twin runs and the calibrated model, or too small a budget, can "
-                "cause this.</p>"
-            )
-    if curves:
-        from parcelfit.optimize.plots import dependence_figure
-
-        b.add(figure_html(dependence_figure(curves), "partial dependence"))
-    b.add(figure_html(traces(fits, names), "parameter traces"))
+    page.add("calibration", title, "calibration", data)
     return best["params"], rows
 
 
-def _validation_figures(
-    b: _Builder,
-    sel: ReferenceSelection,
-    traj: Trajectory,
-    transit_time: float | None,
-    label: str,
-) -> Validation:
+# -- validation --------------------------------------------------------------------------------
+
+
+def _validation_view(
+    reference: ReferenceRecord, record: ValidationRecord, label: str
+) -> dict[str, Any]:
+    """The verdict's table values and figures of a stored validation (it has a verdict)."""
     from parcelfit.report.figures import (
         validation_mean_dtw,
         validation_overlays,
         validation_transit,
     )
 
-    verdict = validate(traj, transit_time, sel)
-    prepared = sel.comparison.prepare(traj)
-    real_prepared = [
-        Trajectory(t=np.arange(len(xy), dtype=float), x=xy[:, 0], y=xy[:, 1], theta=th)
-        for xy, th in zip(sel.xy_series, sel.theta_series, strict=True)
-    ]
-    band: EnvelopeBand | None = None
-    if len(real_prepared) >= 2:
-        band = envelope_band(prepared, real_prepared)
-    rows = [
-        [
-            "1. transit time within the real runs' [min, max]",
-            "-"
-            if verdict.transit_time.simulated is None
-            else f"{verdict.transit_time.simulated:.3f} s",
-            f"[{verdict.transit_time.low:.3f}, {verdict.transit_time.high:.3f}] s",
-            _mark(verdict.transit_time.passed),
-        ],
-        [
-            "2. mean DTW<sub>xy</sub> to the real runs &le; the largest real run's",
-            f"{verdict.xy.simulated_mean:.3g} m&sup2;",
-            f"&le; {verdict.xy.largest_real_mean:.3g} m&sup2;",
-            _mark(verdict.xy.passed),
-        ],
-        [
-            "3. mean DTW<sub>&theta;</sub> likewise",
-            f"{verdict.theta.simulated_mean:.3g} rad&sup2;",
-            f"&le; {verdict.theta.largest_real_mean:.3g} rad&sup2;",
-            _mark(verdict.theta.passed),
-        ],
-    ]
-    env = verdict.envelope
-    if env is not None:
-        rows.append(
-            [
-                "stricter (parcelfit): inside the real runs' band along x (&plusmn; 3 mm, "
-                "&plusmn; 1&deg;) at &ge; 95 % of the path",
-                f"y {env.inside_y * 100:.0f} %, &theta; {env.inside_theta * 100:.0f} % inside; "
-                f"worst {env.worst_y * 1e3:.1f} mm, {math.degrees(env.worst_theta):.1f}&deg; out",
-                "&ge; 95 %",
-                _mark(env.passed),
-            ]
-        )
-    b.add(_table(["criterion", "simulation", "required", "verdict"], rows))
-    b.add(
-        "<div style='display:flex;gap:1em;flex-wrap:wrap'>"
-        + figure_html(validation_transit(sel, verdict, label), "transit-time validation")
-        + figure_html(validation_mean_dtw(verdict, label), "mean DTW validation")
-        + "</div>"
-    )
-    b.add(
-        figure_html(
-            validation_overlays(sel, prepared.xy, prepared.theta, band), "trajectory overlays"
-        )
-    )
-    return verdict
+    verdict = record.verdict
+    assert verdict is not None and record.sim_xy is not None and record.sim_theta is not None
+    return {
+        "verdict": verdict,
+        "transit": figure_html(
+            validation_transit(reference.transit_times, verdict, label), "transit-time validation"
+        ),
+        "mean_dtw": figure_html(validation_mean_dtw(verdict, label), "mean DTW validation"),
+        "overlays": figure_html(
+            validation_overlays(reference, record.sim_xy, record.sim_theta, record.band),
+            "trajectory overlays",
+        ),
+        "worst_y_mm": None if verdict.envelope is None else verdict.envelope.worst_y * 1e3,
+        "worst_theta_deg": None
+        if verdict.envelope is None
+        else math.degrees(verdict.envelope.worst_theta),
+    }
 
 
-def _key_frames(
-    b: _Builder, study_file: Path, params: dict[str, float], case: TestCase, animation: bool
-) -> None:
-    from parcelfit.optimize.study import load_study
-    from parcelfit.report.figures import key_frame_indices
-    from parcelfit.sim.factory import make_simulator
-    from parcelfit.sim.mujoco import MujocoSimulator
-    from parcelfit.sim.mujoco.render import animate_run, snapshot
-
-    study = load_study(study_file)
-    sim = make_simulator(study.simulator, study.folder)
-    if not isinstance(sim, MujocoSimulator):
-        b.add("<p class='note'>Key frames are drawn for the MuJoCo backend only.</p>")
-        return
-    recorder = MujocoSimulator(
-        replace(sim.options, record_vertices=True),
-        rigs={case.rig: sim.rig(case.rig)},
-        consignments={case.consignment: sim.consignment(case.consignment)},
-    )
-    result, frames = recorder.run_with_frames({**study.fixed, **params}, case, run_id="report")
-    if frames is None or not result.ok:
-        b.add(f"<p class='bad'>The key-frame run ended {result.status.value}.</p>")
-        return
-    rig = recorder.rig(case.rig)
-    idx = key_frame_indices(len(frames.t), 7)
-    b.add(
-        figure_html(
-            snapshot(rig, frames, idx, f"{case.label}, calibrated parameters"), "key frames"
-        )
-    )
-    if animation:
-        import tempfile
-
-        with tempfile.TemporaryDirectory() as tmp:
-            gif = animate_run(rig, frames, Path(tmp) / "run.gif", f"{case.label} (calibrated)")
-            b.add(png_html(gif.read_bytes(), "animation of the simulated run", "image/gif"))
+def _validation_section(
+    page: _Page, results: StudyResults | None, record: StudyRecord
+) -> ValidationRecord | None:
+    title = page.start("Validation")
+    data: dict[str, Any] = {"missing": None, "shown": None, "view": None}
+    shown = None if results is None else results.shown_validation()
+    if results is None:
+        data["missing"] = _NOT_STORED if record.validation_setting is not None else None
+    elif shown is not None:
+        data["shown"] = shown
+        reference = results.references.get("validation")
+        if shown.verdict is not None and reference is not None:
+            data["view"] = _validation_view(reference, shown, "calibrated simulation")
+    page.add("validation", title, "validation", data)
+    return shown
 
 
-def _stricter_example_section(b: _Builder, root: Path, ds: Dataset | None) -> None:
+def _stricter_example_section(page: _Page, root: Path) -> None:
     path = root / "stricter-criterion.json"
-    if not path.is_file() or ds is None:
+    if not path.is_file():
         return
+    title = page.start("Why a stricter criterion")
     doc = json.loads(path.read_text(encoding="utf-8"))
-    case = TestCase.parse(doc["case"])
-    traj = read_trajectory(root / doc["run_file"])
-    b.section("Why a stricter criterion", "stricter")
-    b.add(
-        f"<p>{_esc(doc.get('description', ''))}</p>"
-        "<p>Below: the published three criteria against the band test for this run.</p>"
-    )
-    _validation_figures(b, select_reference(ds[case]), traj, doc.get("transit_time"), doc["label"])
+    data: dict[str, Any] = {
+        "description": str(doc.get("description", "")),
+        "view": None,
+        "missing": None,
+    }
+    if {"reference", "validation"} <= set(doc):
+        record = ValidationRecord.from_json(doc["validation"])
+        if record.verdict is not None:
+            reference = ReferenceRecord.from_json(doc["reference"])
+            data["view"] = _validation_view(reference, record, str(doc.get("label", "simulation")))
+    else:
+        data["missing"] = (
+            "This example was written by an earlier parcelfit without its stored verdict and "
+            "curves: rerun `parcelfit demo` with the same --out to add them (nothing is "
+            "simulated again)."
+        )
+    page.add("stricter", title, "stricter", data)
+
+
+# -- key frames --------------------------------------------------------------------------------
+
+
+def _frames_section(
+    page: _Page, folder: Path, results: StudyResults | None, animation: bool
+) -> None:
+    title = page.start("The simulated run")
+    data: dict[str, Any] = {"note": None, "image": None, "animation": None, "no_animation": None}
+    kf = None if results is None else results.key_frames
+    if results is None:
+        data["note"] = _NOT_STORED
+    elif kf is None:
+        data["note"] = (
+            "No key frames are stored: the calibration draws them when it stops (with its figures)."
+        )
+    else:
+        data["note"] = kf.note
+        if kf.image is not None:
+            path = folder / kf.image
+            if path.is_file():
+                data["image"] = png_html(path.read_bytes(), "key frames")
+            else:
+                data["note"] = f"The key-frame figure {kf.image} is missing from the study folder."
+        if animation:
+            gif = None if kf.animation is None else folder / kf.animation
+            if gif is not None and gif.is_file():
+                data["animation"] = png_html(
+                    gif.read_bytes(), "animation of the simulated run", "image/gif"
+                )
+            elif kf.image is not None:
+                data["no_animation"] = (
+                    "No animation is stored: `parcelfit calibrate --animation` (or the demo) "
+                    "writes one."
+                )
+    page.add("frames", title, "frames", data)
+
+
+# -- the page ----------------------------------------------------------------------------------
 
 
 def build_report(
@@ -573,87 +596,51 @@ def build_report(
 ) -> Path:
     """Write the HTML report of a study folder (or of a folder holding ``calibration/``, like
     the demo's); returns the report's path (default: ``report.html`` inside ``folder``).
-    ``progress`` receives a `ProgressEvent` as each section starts."""
-    from parcelfit.optimize.calibration import STORE_FILE
-    from parcelfit.optimize.store import Store
-
+    ``key_frames`` shows the key frames the calibration drew, ``animation`` the animation it
+    wrote (``calibrate --animation``); ``progress`` receives a `ProgressEvent` as each section
+    starts. Renders stored results only (see the module docstring)."""
     places = locate(folder, screen)
     target = _report_target(Path(out) if out is not None else Path(folder) / "report.html")
     store = Store(places.study / STORE_FILE, readonly=True)
-    meta = store.get_meta("study") or {}
-    source = store.get_meta("source") or {}
-    stop_reason = store.get_meta("stop_reason")
-    vals = [v for v in store.evaluations("validation") if v.status != "pending"]
-    store.close()
-    if not meta:
+    try:
+        record = store.read_study()
+        source = store.read_source() or SourceRecord()
+        stop_reason = store.get_meta("stop_reason")
+    finally:
+        store.close()
+    if record is None:
         raise ParcelfitError(
             "the study store has no study description",
             file=places.study / STORE_FILE,
             fix="run `parcelfit calibrate` on it first",
         )
-    b = _Builder(progress)
+    try:
+        results = read_results(places.study)
+        results_error = None
+    except ParcelfitError as exc:  # a damaged file: the page says so, the rest still renders
+        results, results_error = None, str(exc)
+    page = _Page(progress or ignore_progress)
     ds: Dataset | None = None
-    dataset_dir = Path(source["dataset"]) if source.get("dataset") else None
+    dataset_dir = Path(source.dataset) if source.dataset else None
     if dataset_dir is not None and (dataset_dir / "dataset.yaml").is_file():
         ds = load_dataset(dataset_dir)
-    rig, cons = source.get("rig"), source.get("consignment")
+    rig, cons = source.rig, source.consignment
     truth = _load_truth(dataset_dir, cons) if (dataset_dir and cons and ds and ds.synthetic) else {}
-    title = f"parcelfit report: {meta.get('name', places.study.name)}"
     if ds is not None:
-        _statistics_section(b, ds)
-        shown = []
-        if rig and cons:
-            shown = [TestCase(rig, cons, int(meta["fit_setting"]))]
-            if meta.get("validation_setting") is not None:
-                shown.append(TestCase(rig, cons, int(meta["validation_setting"])))
-        sels = _reference_section(b, ds, shown)
-    else:
-        sels = {}
-        b.add("<p class='bad'>The study's dataset was not found; data sections are left out.</p>")
-    _screen_section(b, places.screen)
-    best, rows = _calibration_section(b, places.study, meta, truth, bool(ds and ds.synthetic))
-    b.section("Validation", "validation")
-    verdict: Validation | None = None
-    val_row = next((v for v in reversed(vals) if v.details.get("passed")), None) or (
-        vals[-1] if vals else None
+        _statistics_section(page, ds)
+    _reference_section(page, results, places.root, ds)
+    _screen_section(page, places.screen)
+    best, rows = _calibration_section(
+        page, places.study, record, results, truth, bool(ds and ds.synthetic)
     )
-    val_case = (
-        TestCase(rig, cons, int(meta["validation_setting"]))
-        if rig and cons and meta.get("validation_setting") is not None
-        else None
-    )
-    if val_row is None or val_case is None:
-        b.add("<p>No validation run yet.</p>")
-    elif val_row.run_file is None:
-        b.add(
-            f"<p class='bad'>The validation run after iteration {val_row.iteration} ended "
-            f"{_esc(val_row.status)}: {_esc(val_row.details.get('message'))}</p>"
-        )
-    elif val_case in sels:
-        b.add(
-            f"<p>The calibrated parameters, validated after iteration {val_row.iteration}, "
-            "simulated at the other "
-            f"speed setting ({_esc(val_case.label)}) and compared with its real runs (method section "
-            "8). The published criteria are the first three rows; the last is parcelfit's "
-            "stricter band test.</p>"
-        )
-        traj = read_trajectory(places.study / val_row.run_file)
-        verdict = _validation_figures(
-            b, sels[val_case], traj, val_row.transit_time, "calibrated simulation"
-        )
-    _stricter_example_section(b, places.root, ds)
-    if key_frames and best is not None and rig and cons and source.get("study_file"):
-        b.section("The simulated run", "frames")
-        case = val_case or TestCase(rig, cons, int(meta["fit_setting"]))
-        study_file = Path(source["study_file"])
-        if study_file.is_file():
-            _key_frames(b, study_file, best, case, animation)
-        else:
-            b.add("<p class='note'>The study file has moved; no key frames.</p>")
+    shown = _validation_section(page, results, record)
+    _stricter_example_section(page, places.root)
+    if key_frames and best is not None:
+        _frames_section(page, places.study, results, animation)
     doc = _TEMPLATES.get_template("report.html.j2").render(
         csp=CONTENT_SECURITY_POLICY,
         css=Markup(_CSS),
-        title=title,
+        title=f"parcelfit report: {record.name}",
         version=__version__,
         generated=time.strftime("%Y-%m-%d %H:%M"),
         folder=places.study.name,
@@ -661,15 +648,20 @@ def build_report(
         consignment=cons,
         synthetic=bool(ds is not None and ds.synthetic),
         description="" if ds is None else ds.description,
-        summary=Markup(_summary(verdict, rows, stop_reason, bool(truth))),
-        sections=b.parts,
+        dataset_missing=ds is None,
+        results_error=results_error,
+        no_results=NO_RESULTS if results is None else None,
+        summary=_summary(shown, rows, stop_reason, bool(truth)),
+        sections=page.sections,
+        identifiable_span=f"{IDENTIFIABLE_SPAN * 100:.0f}",
+        recovery_tolerance=f"{RECOVERY_TOLERANCE * 100:.0f}",
     )
     _write_page(target, doc)
     return target
 
 
 def _report_target(path: Path) -> Path:
-    """Check, before anything is computed, that the report can be written to ``path``."""
+    """Check, before anything is read, that the report can be written to ``path``."""
     if path.is_dir():
         raise ParcelfitError(
             "the report's path is a folder",
@@ -700,35 +692,26 @@ def _write_page(target: Path, doc: str) -> None:
 
 
 def _summary(
-    verdict: Validation | None, rows: list[ParameterRow], stop_reason: str | None, truth: bool
-) -> str:
-    if verdict is None:
-        return "<div class='verdict fail'>No validation verdict: the study has not validated.</div>"
-    published = verdict.passed
-    strict = verdict.envelope.passed if verdict.envelope is not None else None
-    cls = "pass" if published else "fail"
-    text = (
-        f"<b>Validation {'PASSED' if published else 'FAILED'}</b> by the published criteria; "
-        f"parcelfit's stricter band test: {'passed' if strict else 'failed' if strict is False else 'n/a'}."
-    )
-    if truth and rows:
-        recovered = [r for r in rows if (r.error_share or 0) <= RECOVERY_TOLERANCE]
-        flat = [r for r in rows if r.identifiable is False]
-        text += (
-            f"<br>Parameters recovered within {RECOVERY_TOLERANCE * 100:.0f} % of their range: "
-            f"{len(recovered)} of {len(rows)}"
-            + (
-                f"; not identifiable on this test case (the surrogate cannot tell apart "
-                f"values across more than {IDENTIFIABLE_SPAN * 100:.0f} % of the range): "
-                f"{_esc(', '.join(r.name for r in flat))}"
-                if flat
-                else ""
-            )
-            + "."
-        )
-    if stop_reason:
-        text += f"<br><span class='note'>{_esc(stop_reason)}</span>"
-    return f"<div class='verdict {cls}'>{text}</div>"
+    shown: ValidationRecord | None,
+    rows: list[ParameterRow],
+    stop_reason: str | None,
+    truth: bool,
+) -> dict[str, Any]:
+    """The verdict box's values: the published and stricter verdicts of the validation shown,
+    the recovery count (synthetic data) and why the study stopped."""
+    verdict = None if shown is None else shown.verdict
+    strict = None
+    if verdict is not None and verdict.envelope is not None:
+        strict = verdict.envelope.passed
+    return {
+        "verdict": verdict,
+        "strict": strict,
+        "truth": truth and bool(rows),
+        "recovered": sum((r.error_share or 0) <= RECOVERY_TOLERANCE for r in rows),
+        "parameters": len(rows),
+        "flat": ", ".join(r.name for r in rows if r.identifiable is False),
+        "stop_reason": stop_reason,
+    }
 
 
 def verdict_text(path: str | Path) -> str:
@@ -742,4 +725,12 @@ def verdict_text(path: str | Path) -> str:
     return "validation passed" if any(v["passed"] for v in vals) else "validation failed"
 
 
-__all__ = ["build_report", "figure_html", "locate", "parameter_rows", "png_html", "verdict_text"]
+__all__ = [
+    "Section",
+    "build_report",
+    "figure_html",
+    "locate",
+    "parameter_rows",
+    "png_html",
+    "verdict_text",
+]

@@ -2,13 +2,15 @@
 
 `draw_rig` draws surfaces (with arrows for their motion), walls and light barriers;
 `animate_run` writes a GIF (Pillow) or MP4 (ffmpeg, if installed) of the shell's outline over
-time; `snapshot` draws the shell at chosen sample indices.
+time; `snapshot` draws the shell at chosen sample indices; `render_key_frames` simulates a run
+once more with the vertices recorded and draws its key frames (and optionally an animation).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -18,8 +20,9 @@ from matplotlib.patches import Polygon as MplPolygon
 from matplotlib.patches import Rectangle
 
 from parcelfit.errors import ParcelfitError
+from parcelfit.runs import TestCase
 from parcelfit.sim.mujoco.rig import Rig
-from parcelfit.sim.mujoco.simulator import Frames
+from parcelfit.sim.mujoco.simulator import Frames, MujocoSimulator
 
 _COLOURS = {"belt": "#5a5f6e", "roller": "#a0a040", "metal": "#9aa0aa"}
 
@@ -158,3 +161,48 @@ def animate_run(rig: Rig, frames: Frames, path: str | Path, title: str = "", fps
                 "writing MP4 needs ffmpeg on the PATH", fix="install ffmpeg or write a .gif"
             ) from exc
     return path
+
+
+def key_frame_indices(n_samples: int, count: int = 6) -> list[int]:
+    """``count`` sample indices spread evenly over a run of ``n_samples`` samples."""
+    if n_samples <= 0:
+        return []
+    spread = np.linspace(0, n_samples - 1, min(count, n_samples)).round().astype(int)
+    return sorted({int(i) for i in spread})
+
+
+@dataclass(frozen=True)
+class KeyFrames:
+    """A run drawn at a few instants: the recording run's status ('ok' or why it ended), the
+    figure (None unless the run succeeded) and the animation written (None if not asked)."""
+
+    status: str
+    figure: Figure | None
+    animation: Path | None = None
+
+
+def render_key_frames(
+    simulator: MujocoSimulator,
+    params: Mapping[str, float],
+    case: TestCase,
+    *,
+    count: int = 7,
+    animation: str | Path | None = None,
+) -> KeyFrames:
+    """Simulate ``case`` with SI ``params`` once more, recording the shell's vertices, and draw
+    ``count`` key frames (and, with ``animation`` a .gif or .mp4 path, write an animation)."""
+    recorder = MujocoSimulator(
+        replace(simulator.options, record_vertices=True),
+        rigs={case.rig: simulator.rig(case.rig)},
+        consignments={case.consignment: simulator.consignment(case.consignment)},
+    )
+    result, frames = recorder.run_with_frames(dict(params), case, run_id="key-frames")
+    if frames is None or not result.ok:
+        return KeyFrames(result.status.value, None)
+    rig = recorder.rig(case.rig)
+    idx = key_frame_indices(len(frames.t), count)
+    fig = snapshot(rig, frames, idx, f"{case.label}, calibrated parameters")
+    gif = None
+    if animation is not None:
+        gif = animate_run(rig, frames, animation, f"{case.label} (calibrated)")
+    return KeyFrames(result.status.value, fig, gif)
