@@ -208,3 +208,19 @@ def test_a_run_read_back_from_its_file_compares_as_the_run_in_memory(tmp_path, s
     assert vb.passed == va.passed and vb.strict_passed == va.strict_passed
     assert vb.xy.simulated_mean == pytest.approx(va.xy.simulated_mean, rel=1e-12)
     assert vb.theta.simulated_mean == pytest.approx(va.theta.simulated_mean, rel=1e-12)
+
+
+def test_a_run_file_with_nine_digits_keeps_its_last_sample(tmp_path):
+    # run files written before every digit was kept (9 significant digits) still resample to
+    # the samples of the run in memory; their values differ in the 9th digit only
+    def old_writer(tr):
+        path = tmp_path / "old.csv"
+        tr.to_frame().to_csv(path, index=False, float_format="%.9g")
+        return path
+
+    (sim, back), (a, b), (ca, cb), (va, vb) = _compare_sim_with_real(tmp_path, old_writer)
+    assert back.t[-1] != sim.t[-1]  # rounded in the file
+    assert len(b) == len(a) == len(sim)
+    np.testing.assert_allclose(b.xy, a.xy, rtol=0, atol=1e-8)
+    assert cb.value == pytest.approx(ca.value, rel=1e-6)
+    assert vb.xy.simulated_mean == pytest.approx(va.xy.simulated_mean, rel=1e-6)
