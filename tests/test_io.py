@@ -3,9 +3,11 @@ import pandas as pd
 import pytest
 
 from parcelfit import ParcelfitError
-from parcelfit.runs import read_trajectory, write_trajectory
+from parcelfit.metrics import calibration_cost, select_reference, validate
+from parcelfit.runs import TestCase, load_dataset, read_trajectory, write_trajectory
 
 from .conftest import line_trajectory
+from .fake_sim import trajectory, write_reference_dataset
 
 
 def _write(tmp_path, frame, name="run.csv"):
@@ -172,3 +174,53 @@ def test_bad_standard_deviations_are_named(tmp_path, column, values, pattern):
     f = _good(5).assign(**{column: values})
     with pytest.raises(ParcelfitError, match=pattern + r".*Fix: a standard deviation"):
         read_trajectory(_write(tmp_path, f))
+
+
+def _compare_sim_with_real(tmp_path, write):
+    """The fake simulator's run (60 Hz, t = k/60 s up to 89/60 s) in memory and as ``write``
+    stores and `read_trajectory` reads it back, each compared with four real runs."""
+    real = select_reference(
+        load_dataset(write_reference_dataset(tmp_path / "real", 4))[TestCase("R", "P", 1)]
+    )
+    sim, transit = trajectory({"mu_d_BePa": 0.45, "mu_d_MePa": 0.25}, 1)
+    back = read_trajectory(write(sim))
+    runs = (sim, back)
+    prepared = [real.comparison.prepare(r) for r in runs]
+    costs = [calibration_cost(r, real) for r in runs]
+    verdicts = [validate(r, transit, real) for r in runs]
+    return runs, prepared, costs, verdicts
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+def test_a_run_read_back_from_its_file_compares_as_the_run_in_memory(tmp_path, suffix):
+    # a CSV with 9 significant digits read t = 89/60 s back as 1.48333333 s: the 60 Hz
+    # resampling lost the last sample and the DTW cost moved by about 4 %
+    (sim, back), (a, b), (ca, cb), (va, vb) = _compare_sim_with_real(
+        tmp_path, lambda tr: write_trajectory(tr, tmp_path / f"sim{suffix}")
+    )
+    for c in ("t", "x", "y", "theta"):  # the file keeps every digit
+        np.testing.assert_allclose(getattr(back, c), getattr(sim, c), rtol=1e-15, atol=0)
+    assert len(b) == len(a) == len(sim)
+    np.testing.assert_allclose(b.xy, a.xy, rtol=1e-14, atol=1e-15)
+    np.testing.assert_allclose(b.theta, a.theta, rtol=1e-14, atol=1e-15)
+    assert cb.value == pytest.approx(ca.value, rel=1e-12)
+    assert (cb.dtw_xy, cb.dtw_theta) == pytest.approx((ca.dtw_xy, ca.dtw_theta), rel=1e-12)
+    assert vb.passed == va.passed and vb.strict_passed == va.strict_passed
+    assert vb.xy.simulated_mean == pytest.approx(va.xy.simulated_mean, rel=1e-12)
+    assert vb.theta.simulated_mean == pytest.approx(va.theta.simulated_mean, rel=1e-12)
+
+
+def test_a_run_file_with_nine_digits_keeps_its_last_sample(tmp_path):
+    # run files written before every digit was kept (9 significant digits) still resample to
+    # the samples of the run in memory; their values differ in the 9th digit only
+    def old_writer(tr):
+        path = tmp_path / "old.csv"
+        tr.to_frame().to_csv(path, index=False, float_format="%.9g")
+        return path
+
+    (sim, back), (a, b), (ca, cb), (va, vb) = _compare_sim_with_real(tmp_path, old_writer)
+    assert back.t[-1] != sim.t[-1]  # rounded in the file
+    assert len(b) == len(a) == len(sim)
+    np.testing.assert_allclose(b.xy, a.xy, rtol=0, atol=1e-8)
+    assert cb.value == pytest.approx(ca.value, rel=1e-6)
+    assert vb.xy.simulated_mean == pytest.approx(va.xy.simulated_mean, rel=1e-6)

@@ -64,6 +64,28 @@ def test_resample_is_linear_on_a_uniform_grid():
         tr.resample(0)
 
 
+@pytest.mark.parametrize("origin", [0.0, 37.25, 1000.0])
+def test_resample_keeps_the_end_of_time_stamps_rounded_in_a_file(origin):
+    # t = origin + k/60 s written with 9 significant digits (run files before they kept every
+    # digit): the end may fall a little short of the last 60 Hz grid point, which stays
+    t = origin + np.arange(90) / 60
+    x = 0.6 * np.arange(90) / 60
+    exact = Trajectory(t=t, x=x, y=np.zeros(90), theta=np.zeros(90))
+    rounded = Trajectory(t=[float(f"{v:.9g}") for v in t], x=x, y=np.zeros(90), theta=np.zeros(90))
+    assert len(exact.resample(60.0)) == len(rounded.resample(60.0)) == 90
+    # off by the rounding of the time stamps only (5e-6 s at 1000 s, at 0.6 m/s)
+    assert rounded.resample(60.0).x == pytest.approx(exact.resample(60.0).x, abs=1e-5)
+
+
+def test_resample_does_not_reach_a_grid_point_the_run_ends_short_of():
+    # the run ends a hundredth of an interval before t = 0.15 s: no sample there
+    tr = Trajectory(t=[0.0, 0.1, 0.1495], x=[0.0, 1.0, 1.495], y=[0.0] * 3, theta=[0.0] * 3)
+    assert tr.resample(20.0).t == pytest.approx([0.0, 0.05, 0.1])
+    assert Trajectory(t=[0.0, 0.1, 0.15], x=[0.0, 1, 2], y=[0.0] * 3, theta=[0.0] * 3).resample(
+        20.0
+    ).t == pytest.approx([0.0, 0.05, 0.1, 0.15])
+
+
 def test_select_and_frame_round_trip():
     tr = line_trajectory(10)
     sub = tr.select(tr.x > tr.x[4])

@@ -362,7 +362,8 @@ class Calibration:
     def _validation_records(self) -> list[ValidationRecord]:
         """Every finished validation's record: those run now as they were made, earlier ones
         (a resumed study) as the results file has them, else judged again from their stored run
-        files (no simulation; the files keep 9 significant digits)."""
+        files (no simulation; a run file keeps every digit, so the record is the one the study
+        made; run files written before that kept 9 significant digits)."""
         out = []
         rows = [r for r in self.store.evaluations("validation") if r.status != "pending"]
         earlier = None

@@ -173,9 +173,10 @@ def read_trajectory(path: str | Path) -> Trajectory:
 
 
 def write_trajectory(trajectory: Trajectory, path: str | Path) -> Path:
-    """Write a trajectory to .csv or .parquet (by suffix); returns the path written. The optional
-    columns (source, position_sd, heading_sd) are written only when the trajectory has them
-    (tracked runs, not simulated ones)."""
+    """Write a trajectory to .csv or .parquet (by suffix); returns the path written. Numbers keep
+    every digit (a CSV holds each as its shortest text that reads back to the same float). The
+    optional columns (source, position_sd, heading_sd) are written only when the trajectory has
+    them (tracked runs, not simulated ones)."""
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in SUFFIXES:
@@ -186,7 +187,10 @@ def write_trajectory(trajectory: Trajectory, path: str | Path) -> Path:
     frame = trajectory.to_frame()
     tmp = path.with_name(path.name + ".tmp")
     if suffix == ".csv":
-        frame.to_csv(tmp, index=False, float_format="%.9g")
+        # no float_format: every number as its shortest round-trip text (Python's repr), so a
+        # run read back is the run written, to the last bit (files written earlier kept 9
+        # significant digits; Trajectory.resample tolerates their rounded time stamps)
+        frame.to_csv(tmp, index=False)
     else:
         frame.to_parquet(tmp, index=False)
     tmp.replace(path)  # atomic: a crash never leaves half a file under the final name

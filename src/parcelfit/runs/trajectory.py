@@ -27,6 +27,12 @@ OPTIONAL_COLUMNS: tuple[str, ...] = ("source", "position_sd", "heading_sd")
 UNCERTAINTY_COLUMNS: tuple[str, ...] = ("position_sd", "heading_sd")
 SOURCES: tuple[str, ...] = ("detected", "filled")
 MIN_SAMPLES = 3
+# `Trajectory.resample` keeps a grid point the run ends short of by at most this fraction of the
+# grid's interval. It absorbs time stamps rounded in a file (9 significant digits in run files
+# written before they kept every digit: up to 5e-9 s per second of time, 3e-4 of a 60 Hz
+# interval at an hour) and floating-point error; the point, past the last sample, takes the
+# last sample's value, off by at most this fraction of one interval's motion.
+RESAMPLE_END_TOLERANCE = 1e-3
 
 
 def unwrap_angle(theta: np.ndarray) -> np.ndarray:
@@ -230,12 +236,17 @@ class Trajectory:
         self, rate: float, start: float | None = None, stop: float | None = None
     ) -> Trajectory:
         """Linearly interpolate onto a uniform grid of ``rate`` [Hz] between start and stop [s]
-        (the new samples have no source and no standard deviations: they are not frames)."""
+        (the new samples have no source and no standard deviations: they are not frames).
+
+        The grid is ``t0 + k / rate`` up to the end; a grid point the end falls short of by no
+        more than `RESAMPLE_END_TOLERANCE` of an interval (a rounded time stamp) is kept and
+        takes the last sample's value."""
         if not np.isfinite(rate) or rate <= 0:
             raise ParcelfitError(f"resampling rate must be a positive number of Hz, got {rate}")
         t0 = self.t[0] if start is None else max(start, self.t[0])
         t1 = self.t[-1] if stop is None else min(stop, self.t[-1])
-        n = int(np.floor((t1 - t0) * rate + 1e-9)) + 1
+        # (t1 - t0) * rate counts intervals: the tolerance is a fraction of one interval
+        n = int(np.floor((t1 - t0) * rate + RESAMPLE_END_TOLERANCE)) + 1
         t = t0 + np.arange(n) / rate
         return Trajectory(
             t=t,
