@@ -11,9 +11,11 @@ experiments do (method.md sections 2 and 3):
 * resolution: the "real" runs use the shell mesh ``real_spacing`` (default 30 mm) for rigid
   contents and ``real_soft_spacing`` (default 40 mm) around a soft content. A twin is only a
   test if its "real" side is at least as converged as the model: the defaults are the model's
-  own meshes (30 mm is within 3 mm of the 15 mm reference in docs/convergence.md). The former
-  default, 20 mm, was the outlier of that study (22 mm off the reference) and biased every
-  calibration against the twin. The remaining model-form differences are the specimen, placement,
+  own meshes (30 mm is within about 5 mm of the 15 mm reference in docs/convergence.md). The
+  former default, 20 mm, was the outlier of that study on the earlier E3 layout (22 mm off the
+  reference) and biased every calibration against the twin. The time step is the model's
+  (1/600 s), which is not converged in transit time on E3 (docs/convergence.md): the twin is
+  consistent with the model there, not finer than it. The remaining model-form differences are the specimen, placement,
   speed and tracking variations above.
 
 The truth (parameters in the catalogue's units, and every setting above) is written beside the
