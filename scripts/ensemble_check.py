@@ -4,7 +4,7 @@ across ensembles of seeded hand placements rather than single runs.
     python scripts/ensemble_check.py                        # E3 setting 1, 20 placements per type
     python scripts/ensemble_check.py --rigs E3 E1 --placements 10 --types BW KPBW KP PB
     python scripts/ensemble_check.py --all-settings         # every speed setting of each rig
-    python scripts/ensemble_check.py --rigs examples/e3-variants/E3-lead-in-in-path.yaml
+    python scripts/ensemble_check.py --rigs examples/e3-variants/E3-plate-clear.yaml
 
 For each rig and speed setting it simulates every consignment type at its default parameters
 for the placement seeds 0..N-1 (the rig's ``start.scatter``), then prints and writes

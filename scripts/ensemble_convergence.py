@@ -4,7 +4,7 @@ catch or a spin must be a converged physical outcome, not a mesh artefact).
     python scripts/ensemble_convergence.py                       # E3/1, KPBW BW KP, 20 placements
     python scripts/ensemble_convergence.py --types KPBW --placements 10 \
         --configs 30:600 20:600 15:1200
-    python scripts/ensemble_convergence.py --rig examples/e3-variants/E3-lead-in-in-path.yaml
+    python scripts/ensemble_convergence.py --rig E3
 
 For every numerical configuration (shell mesh spacing [mm] : steps per second) it simulates
 each consignment type at its default parameters for the placement seeds 0..N-1 (the rig's

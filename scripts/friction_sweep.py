@@ -1,6 +1,6 @@
 """Can friction alone make a type spin? Ensembles over a grid of belt and plate friction.
 
-    python scripts/friction_sweep.py --rig examples/e3-variants/E3-lead-in-in-path.yaml --types BW
+    python scripts/friction_sweep.py --rig E3 --types BW
     python scripts/friction_sweep.py --types BW KP --placements 20 --belt 0.3 0.6 --metal 0.15 0.35
 
 For each consignment type and each (mu_d_BePa, mu_d_MePa) pair (the other parameters at their
