@@ -562,27 +562,24 @@ def simulate(
     With --repeat N, simulate N seeded placements and write each run (OUT with -s<seed> before
     its suffix), a summary table (OUT with -ensemble.csv) and print the ensemble statistics."""
     from parcelfit.runs import TestCase, write_trajectory
-    from parcelfit.sim.mujoco import (
-        MujocoSimulator,
-        SceneOptions,
-        SimOptions,
-        load_consignment,
-        load_rig,
-    )
+    from parcelfit.sim.factory import SimulatorConfig, make_simulator
+    from parcelfit.sim.mujoco import MujocoSimulator, load_consignment, load_rig
     from parcelfit.sim.params import parse_assignments, resolve
 
     rig_obj = load_rig(rig)
     cons = load_consignment(consignment)
     params = resolve(cons.content_kind, user_values=parse_assignments(set_ or []))
-    sim = MujocoSimulator(
-        SimOptions(
-            scene=SceneOptions(timestep=timestep, spacing=spacing),
-            wall_limit=wall_limit,
-            record_vertices=video is not None,
-        ),
-        rigs={rig_obj.name: rig_obj},
-        consignments={cons.name: cons},
+    config = SimulatorConfig(
+        "mujoco",
+        rig=rig,
+        consignment=consignment,
+        timestep=timestep,
+        spacing=spacing,
+        wall_limit=wall_limit,
     )
+    sim = make_simulator(config)
+    assert isinstance(sim, MujocoSimulator)
+    sim = sim.with_options(record_vertices=video is not None)
     case = TestCase(rig_obj.name, cons.name, setting)
     rig_obj.drive_speeds(setting)  # a clear error for an unknown setting before simulating
     if repeat > 1:

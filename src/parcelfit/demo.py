@@ -132,6 +132,7 @@ def run_stricter_example(out: Path, dataset: Path) -> dict[str, Any]:
     plots (`parcelfit.optimize.results`). A file of an earlier demo without those records gets
     them from its stored run (no simulation)."""
     from parcelfit.metrics import select_reference
+    from parcelfit.sim.factory import SimulatorConfig, content_kind, make_simulator
     from parcelfit.sim.mujoco import MujocoSimulator
     from parcelfit.sim.params import resolve
 
@@ -146,9 +147,11 @@ def run_stricter_example(out: Path, dataset: Path) -> dict[str, Any]:
         doc.update(_example_records(reference, traj, doc.get("transit_time")))
         write_json(target, doc)
         return doc
-    sim = MujocoSimulator()
+    config = SimulatorConfig("mujoco", rig=case.rig, consignment=case.consignment)
+    sim = make_simulator(config)
+    assert isinstance(sim, MujocoSimulator)
     params_user = STRICTER_EXAMPLE["params"]
-    params = resolve(sim.consignment(case.consignment).content_kind, user_values=params_user)
+    params = resolve(content_kind(config), user_values=params_user)
     result = sim.run(params, case, run_id="stricter-example")
     if not result.ok or result.run is None:
         raise ParcelfitError(f"the stricter-criterion example run ended {result.status.value}")

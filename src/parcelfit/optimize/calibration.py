@@ -225,7 +225,7 @@ class Calibration:
             None if self.val_case is None else select_reference(dataset[self.val_case])
         )
         self.store.set_meta("reference_run", self.reference.reference_id)
-        self.simulator = make_simulator(study.simulator, study.folder)
+        self.simulator = make_simulator(study.simulator)
         self.bo = make_sampler(
             study.sampler,
             study.space,

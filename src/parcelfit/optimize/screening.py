@@ -67,16 +67,21 @@ from parcelfit.optimize.store import Store
 from parcelfit.optimize.study import (
     ReferenceSection,
     ScreenExecutorSection,
-    SimulatorSection,
     _to_si,
     fixed_to_si,
     reference_case,
-    simulator_settings,
 )
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.runs import TestCase, load_dataset
 from parcelfit.schema import FileModel, Number, Pair, Text, Whole, or_default, parse
-from parcelfit.sim.params import CATALOGUE, parameter, to_catalogue_units
+from parcelfit.sim.factory import SimulatorConfig, SimulatorSection, content_kind, make_simulator
+from parcelfit.sim.params import (
+    SOFT,
+    content_parameters,
+    parameter,
+    parameters_for,
+    to_catalogue_units,
+)
 
 RESPONSES = ("dtw_xy", "dtw_theta")
 _STAGES = ("fractional", "full")
@@ -125,7 +130,7 @@ def _soft_list(value: Any) -> Any:
 def _soft_parameter(name: str) -> str:
     """A catalogue parameter that applies to soft contents (checked now, not after stage 1)."""
     try:
-        parameter(name).range_for("soft")
+        parameter(name).range_for(SOFT)
     except ParcelfitError as exc:
         raise ParcelfitError(
             exc.message,
@@ -173,7 +178,7 @@ class Screen:
 
     name: str
     folder: Path
-    simulator: Mapping[str, Any]
+    simulator: SimulatorConfig
     parameters: tuple[str, ...]
     ranges: Mapping[str, tuple[float, float]]
     fixed: Mapping[str, float]
@@ -196,21 +201,14 @@ def load_screen(path: str | Path) -> Screen:
     path = Path(path)
     f = parse(ScreenFile, load_yaml(path), file=path)
     folder = path.parent.resolve()
-    sim = simulator_settings(f.simulator, folder)
+    sim = f.simulator.to_config(folder)
     backend = f.simulator.backend
     dataset, rig, cons = reference_case(f.reference, f.simulator, path, folder)
-    kind = "rigid"
-    if backend == "mujoco":
-        from parcelfit.sim.mujoco import load_consignment
-
-        kind = load_consignment(sim["consignment"]).content_kind
+    kind = content_kind(sim)
     spec = f.parameters
-    if spec is None:
-        spec = {
-            p.name: None
-            for p in CATALOGUE
-            if kind in p.ranges and p.name not in ("E_Co", "zeta_Co")
-        }
+    if spec is None:  # the consignment's candidates; its content's own are the soft_content stage
+        own = content_parameters(kind)
+        spec = {p.name: None for p in parameters_for(kind) if p not in own}
     user: dict[str, tuple[float, float]] = {}
     for name, bounds in spec.items():
         if bounds is None:
@@ -226,7 +224,7 @@ def load_screen(path: str | Path) -> Screen:
             fix="list two or more (or write parameters: all)",
         )
     for extra in f.soft_content:  # the last stage's extra factors, unless already listed
-        r = parameter(extra).range_for("soft")
+        r = parameter(extra).range_for(SOFT)
         user.setdefault(extra, (r.low, r.high))
     ranges = {}
     for name, (low, high) in user.items():
@@ -240,7 +238,7 @@ def load_screen(path: str | Path) -> Screen:
     return Screen(
         name=f.name,
         folder=folder,
-        simulator=MappingProxyType(sim),
+        simulator=sim,
         parameters=tuple(str(n) for n in spec),
         ranges=MappingProxyType(ranges),
         fixed=MappingProxyType(fixed),
@@ -287,8 +285,6 @@ def run_screen(
     ``executor`` (serial or local) and ``workers`` override the screen file's ``executor``;
     ``progress`` receives a `ProgressEvent` per stage and per finished simulation (``done`` of
     ``total`` counting the stage's simulations)."""
-    from parcelfit.sim.factory import make_simulator
-
     out = Path(out)
     check_writable(out, ("screen.sqlite",))
     out.mkdir(parents=True, exist_ok=True)
@@ -304,7 +300,7 @@ def run_screen(
         lock.release()
         raise
     reference = select_reference(load_dataset(screen.dataset)[screen.case])
-    simulator = make_simulator(screen.simulator, screen.folder)
+    simulator = make_simulator(screen.simulator)
     runner = make_executor(
         executor or screen.executor.get("kind", "local"),
         workers=workers or screen.executor.get("workers"),

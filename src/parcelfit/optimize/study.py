@@ -67,36 +67,9 @@ from parcelfit.schema import (
     or_default,
     parse,
 )
+from parcelfit.sim.factory import SimulatorConfig, SimulatorSection
 
 # -- the file's sections (file units; shared with screen files) ---------------------------------
-
-
-class SimulatorSection(FileModel):
-    """``simulator``: the backend and what it needs (``timestep`` [s], ``spacing`` [m],
-    ``wall_limit`` [s])."""
-
-    backend: Annotated[str, Choice(("mujoco", "external", "python"), what="backend")]
-    rig: Annotated[str | None, Text()] = None
-    consignment: Annotated[str | None, Text()] = None
-    timestep: Annotated[float | None, Number(unit="s", ge=1e-9)] = None
-    spacing: Annotated[float | None, Number(unit="m", ge=1e-9)] = None
-    wall_limit: Annotated[float | None, Number(unit="s", ge=1e-9)] = None
-    external: Annotated[str | None, Text()] = None
-    factory: Annotated[str | None, Text()] = None
-
-    @model_validator(mode="after")
-    def _backend_needs(self) -> SimulatorSection:
-        needed = {
-            "mujoco": ("rig", "consignment"),
-            "external": ("external",),
-            "python": ("factory",),
-        }[self.backend]
-        for key in needed:
-            if getattr(self, key) is None:
-                raise ParcelfitError(
-                    f"the {self.backend} backend needs {key!r}", fix=f"add `{key}:`"
-                )
-        return self
 
 
 class ReferenceSection(FileModel):
@@ -242,7 +215,7 @@ class Study:
 
     name: str
     folder: Path
-    simulator: Mapping[str, Any]
+    simulator: SimulatorConfig
     space: Space
     fixed: Mapping[str, float]
     dataset: Path
@@ -299,7 +272,7 @@ def load_study(path: str | Path) -> Study:
     doc = load_yaml(path)
     f = parse(StudyFile, doc, file=path)
     folder = path.parent.resolve()
-    sim = simulator_settings(f.simulator, folder)
+    sim = f.simulator.to_config(folder)
     backend = f.simulator.backend
     dims = []
     for name, bounds in f.parameters.items():
@@ -358,16 +331,6 @@ def load_study(path: str | Path) -> Study:
         fingerprint=fingerprint,
         path=path.resolve(),
     )
-
-
-def simulator_settings(section: SimulatorSection, folder: Path) -> dict[str, Any]:
-    """The ``simulator`` section as `make_simulator` takes it: the keys given, with the paths of
-    ``.yaml`` rig, consignment and solver files made absolute (relative to ``folder``)."""
-    sim = section.model_dump(exclude_none=True)
-    for key in ("rig", "consignment", "external"):
-        if key in sim and sim[key].lower().endswith((".yaml", ".yml")):
-            sim[key] = str((folder / sim[key]).resolve())
-    return sim
 
 
 def reference_case(
