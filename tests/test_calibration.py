@@ -8,8 +8,8 @@ import time
 import pytest
 
 from parcelfit import ParcelfitError
-from parcelfit.optimize.calibration import Calibration, study_status
-from parcelfit.optimize.study import load_study
+from parcelfit.study.calibration import Calibration, study_status
+from parcelfit.study.studyfile import load_study
 
 from .fake_sim import TRUTH
 from .helpers import ROOT, finished_fits, write_study
@@ -28,7 +28,7 @@ def test_calibration_recovers_the_truth_and_validates(tmp_path):
     assert info["evaluations"] == result.evaluations and info["pending"] == 0
     assert info["validations"][-1]["passed"] is True
     assert (tmp_path / "out" / "runs" / "fit-000-00.csv").is_file()
-    from parcelfit.optimize.plots import study_figures
+    from parcelfit.study.plots import study_figures
 
     names = sorted(p.name for p in study_figures(tmp_path / "out"))
     assert names == sorted(
@@ -142,7 +142,7 @@ def test_sigkill_at_any_moment_then_rerun_resumes_without_losing_or_repeating(tm
 
 @pytest.mark.slow
 def test_validation_records_the_envelope_beside_the_published_verdict(tmp_path):
-    from parcelfit.optimize.store import Store
+    from parcelfit.study.store import Store
 
     study = load_study(
         write_study(tmp_path, budget=12, validation={"speed_setting": 2, "every": 1})
@@ -156,8 +156,8 @@ def test_validation_records_the_envelope_beside_the_published_verdict(tmp_path):
 
 def test_figures_refit_the_surrogate_with_the_study_s_own_optimizer_settings(tmp_path):
     from parcelfit.optimize.bo import BOSettings
-    from parcelfit.optimize.plots import study_optimizer
-    from parcelfit.optimize.results import read_results
+    from parcelfit.study.plots import study_optimizer
+    from parcelfit.study.results import read_results
 
     study = write_study(
         tmp_path,
@@ -183,7 +183,8 @@ def test_study_results_round_trip_through_results_json(tmp_path):
     import numpy as np
 
     from parcelfit.metrics import select_reference
-    from parcelfit.optimize.results import (
+    from parcelfit.runs import TestCase, load_dataset
+    from parcelfit.study.results import (
         DependenceCurve,
         KeyFramesRecord,
         ReferenceRecord,
@@ -193,8 +194,7 @@ def test_study_results_round_trip_through_results_json(tmp_path):
         validation_record,
         write_results,
     )
-    from parcelfit.optimize.store import OptimizerRecord
-    from parcelfit.runs import TestCase, load_dataset
+    from parcelfit.study.store import OptimizerRecord
 
     from .fake_sim import trajectory, write_reference_dataset
 
@@ -236,7 +236,7 @@ def test_study_results_round_trip_through_results_json(tmp_path):
 def test_rerunning_a_finished_study_writes_its_missing_results_without_simulating(
     tmp_path, monkeypatch
 ):
-    from parcelfit.optimize.results import read_results
+    from parcelfit.study.results import read_results
 
     study = load_study(
         write_study(

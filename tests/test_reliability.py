@@ -15,12 +15,12 @@ from typer.testing import CliRunner
 
 from parcelfit import ParcelfitError
 from parcelfit.cli import app
-from parcelfit.optimize.calibration import Calibration, study_status
-from parcelfit.optimize.store import Store
-from parcelfit.optimize.study import load_study
 from parcelfit.report import build_report
 from parcelfit.report.browser import chromium, inspect_page
 from parcelfit.report.html import CONTENT_SECURITY_POLICY
+from parcelfit.study.calibration import Calibration, study_status
+from parcelfit.study.store import Store
+from parcelfit.study.studyfile import load_study
 
 from .helpers import write_study
 
@@ -258,9 +258,9 @@ def test_a_symlink_inside_the_dataset_is_fine_but_two_runs_cannot_share_a_file(
 def test_a_line_break_in_a_name_cannot_add_lines_to_a_solver_parameter_file(tmp_path):
     from pathlib import Path
 
-    from parcelfit.optimize.executors import Task, simulate_task
     from parcelfit.runs import TestCase
     from parcelfit.sim import SimStatus, defaults_si
+    from parcelfit.sim.executors import Task, simulate_task
     from parcelfit.sim.external import ExternalSimulator, load_external_solver
 
     solver = Path(__file__).parent / "data" / "external" / "solver.yaml"
@@ -300,8 +300,8 @@ def test_a_dying_local_worker_costs_time_not_results(tmp_path):
     import signal
     import threading
 
-    from parcelfit.optimize.executors import Task, local_executor
     from parcelfit.runs import TestCase
+    from parcelfit.sim.executors import Task, local_executor
 
     from .fake_sim import AnalyticSimulator, trajectory
 
@@ -433,7 +433,7 @@ def test_a_timed_out_solver_is_killed_with_its_children(tmp_path):
 
 def test_an_unreachable_scheduler_or_one_without_workers_is_a_clear_error():
     distributed = pytest.importorskip("distributed")
-    from parcelfit.optimize.executors import dask_executor
+    from parcelfit.sim.executors import dask_executor
 
     with pytest.raises(ParcelfitError, match="cannot reach the Dask scheduler"):
         dask_executor("tcp://127.0.0.1:9", connect_timeout=1)

@@ -2,7 +2,7 @@ import pandas as pd
 import pytest
 import yaml
 
-from parcelfit.optimize.screening import load_screen, run_screen
+from parcelfit.study.screening import load_screen, run_screen
 
 from .fake_sim import write_reference_dataset
 
