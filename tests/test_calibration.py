@@ -60,8 +60,9 @@ def test_a_changed_study_file_is_refused_for_the_same_folder(tmp_path):
     path = write_study(tmp_path, budget=8, validation={})
     Calibration(load_study(path), tmp_path / "out").run()
     write_study(tmp_path, budget=12, validation={})
+    calibration = Calibration(load_study(path), tmp_path / "out")  # opens nothing yet
     with pytest.raises(ParcelfitError, match="different study file"):
-        Calibration(load_study(path), tmp_path / "out")
+        calibration.run()
 
 
 @pytest.mark.parametrize(
@@ -270,3 +271,53 @@ def test_rerunning_a_finished_study_writes_its_missing_results_without_simulatin
     Calibration(study, out).run()
     kept = read_results(out)
     assert [v.to_json() for v in kept.validations] == [v.to_json() for v in again.validations]
+
+
+def _tree(folder):
+    return sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*"))
+
+
+def test_constructing_a_calibration_reads_and_writes_nothing(tmp_path):
+    """A missing dataset, an output folder that cannot be made, a simulator factory that does
+    not import: the constructor keeps its inputs; `run` (through `prepare`) meets each one."""
+    study_file = write_study(
+        tmp_path / "study",
+        reference={"dataset": "nowhere", "rig": "R", "consignment": "P", "speed_setting": 1},
+        simulator={"backend": "python", "factory": "tests.no_such_module:make"},
+    )
+    study = load_study(study_file)
+    (tmp_path / "blocked").write_text("a file where the output folder's parent would be")
+    before = _tree(tmp_path)
+    outs = [tmp_path / "out" / "deeper", tmp_path / "blocked" / "out"]
+    calibrations = [Calibration(study, out) for out in outs]
+    assert _tree(tmp_path) == before  # no folder, store or lock file
+    with pytest.raises(RuntimeError, match="not open"):
+        calibrations[0].store  # noqa: B018
+    with pytest.raises(ParcelfitError, match=r"no dataset\.yaml here") as missing:
+        calibrations[0].run()
+    assert missing.value.file == str(study.dataset)
+    with pytest.raises(ParcelfitError, match="cannot create the study folder"):
+        calibrations[1].run()  # under a file
+    assert (tmp_path / "blocked").is_file()
+
+
+def test_prepare_opens_the_study_and_run_closes_it(tmp_path):
+    from parcelfit.study.folderlock import lock_folder
+    from parcelfit.study.store import STORE_FILE
+
+    study = load_study(write_study(tmp_path, simulator={"backend": "python", "factory": "x:y"}))
+    calibration = Calibration(study, tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+    with pytest.raises(ParcelfitError, match="cannot import the simulator factory"):
+        calibration.prepare()
+    lock_folder(tmp_path / "out", "a test").release()  # the failed prepare released it
+    study = load_study(write_study(tmp_path / "good"))
+    calibration = Calibration(study, tmp_path / "good" / "out", figures=False)
+    calibration.prepare()
+    assert (tmp_path / "good" / "out" / STORE_FILE).is_file()
+    assert calibration.reference.reference_id == calibration.store.get_meta("reference_run")
+    assert calibration.val_reference is not None and calibration.simulator is not None
+    calibration.prepare()  # once open, nothing more to do
+    calibration.close()
+    with pytest.raises(RuntimeError, match="make a new one"):
+        calibration.run()

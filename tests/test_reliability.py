@@ -150,7 +150,7 @@ def test_an_empty_store_is_damaged_not_a_new_study(finished, tmp_path):
     stamps = [p.stat().st_mtime_ns for p in runs]
     (out / "study.sqlite").write_bytes(b"")  # truncated to 0 bytes
     with pytest.raises(ParcelfitError, match=r"empty \(0 bytes\)"):
-        Calibration(study, out)
+        Calibration(study, out).run()
     result = runner.invoke(app, ["status", str(out)])
     assert result.exit_code == 2 and "empty (0 bytes)" in result.output
     assert (out / "study.sqlite").stat().st_size == 0  # nothing written into it
@@ -198,8 +198,9 @@ def test_a_second_calibration_on_the_same_folder_is_refused(finished, tmp_path):
     study, out = _copy(finished, tmp_path)
     n = _fits(out)
     first = Calibration(study, out)
+    first.prepare()  # opens and locks the folder
     with pytest.raises(ParcelfitError, match="another parcelfit process is running a calibration"):
-        Calibration(study, out)
+        Calibration(study, out).run()
     first.run()  # releases the folder when it ends
     again = Calibration(study, out).run()
     assert again.evaluations == n  # the finished study is not run a second time

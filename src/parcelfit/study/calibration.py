@@ -25,8 +25,11 @@ import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
+from functools import cached_property
 from pathlib import Path
 from typing import Any
+
+from filelock import FileLock
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.metrics import ReferenceSelection, calibration_cost, select_reference
@@ -41,7 +44,7 @@ from parcelfit.runs import (
 )
 from parcelfit.sim.executors import Executor, Task, make_executor
 from parcelfit.sim.factory import make_simulator
-from parcelfit.sim.protocol import SimResult
+from parcelfit.sim.protocol import SimResult, Simulator
 from parcelfit.study.folderlock import check_writable, lock_folder
 from parcelfit.study.results import (
     KeyFramesRecord,
@@ -155,6 +158,18 @@ def _executor(
     )
 
 
+@dataclass(frozen=True)
+class _Opened:
+    """What `Calibration.prepare` opened and read: the folder's lock, the store, the reference
+    runs and the simulator."""
+
+    lock: FileLock
+    store: Store
+    reference: ReferenceSelection
+    val_reference: ReferenceSelection | None
+    simulator: Simulator
+
+
 class Calibration:
     """One study folder: its store, references, optimiser and executor (see the module doc).
 
@@ -164,7 +179,12 @@ class Calibration:
     references, validations and surrogate the report renders) and, with ``figures``, the study
     figures (`parcelfit.study.plots.study_figures`) and, with ``key_frames`` too, the
     recommended run's key frames (MuJoCo studies: one more simulation; ``animation`` adds
-    ``figures/run.gif``)."""
+    ``figures/run.gif``).
+
+    Constructing one keeps its inputs and touches nothing: `run` opens the folder, reads the
+    data and builds the simulator (through `prepare`), runs the study and closes the folder.
+    ``store``, ``reference``, ``val_reference`` and ``simulator`` exist from `prepare` on; a
+    calibration runs once (a new one on the same folder resumes it)."""
 
     def __init__(
         self,
@@ -180,10 +200,47 @@ class Calibration:
         animation: bool = False,
     ) -> None:
         self.study = study
+        self.folder = Path(folder)
         self.figures = figures
         self.key_frames = key_frames
         self.animation = animation
-        self.folder = Path(folder)
+        self.fit_case = TestCase(study.rig, study.consignment, study.fit_setting)
+        self.val_case = (
+            None
+            if study.validation_setting is None
+            else TestCase(study.rig, study.consignment, study.validation_setting)
+        )
+        self._executor_args = (executor, scheduler, workers)
+        self.progress = progress or ignore_progress
+        self.last_validation: bool | None = None
+        self._validations: dict[int, ValidationRecord] = {}  # by store row id
+        self._opened: _Opened | None = None
+        self._closed = False
+
+    @cached_property
+    def bo(self) -> Sampler:
+        """The study's optimiser (made on first use; `run` tells it the stored evaluations)."""
+        study = self.study
+        return make_sampler(
+            study.sampler,
+            study.space,
+            batch_size=study.batch_size,
+            seed=study.seed,
+            settings=study.bo,
+            n_initial=study.initial,
+        )
+
+    def prepare(self) -> None:
+        """Open the study: create and lock the folder (until `close`), open its store and
+        refuse one made from a different study file, record the study and where it came from,
+        load the dataset, select the fitting and validation reference runs and build the
+        simulator. `run` calls it; once prepared, calling it again does nothing. Whatever it
+        opened is closed again if it fails."""
+        if self._closed:
+            raise RuntimeError("this calibration has run; make a new one to resume the study")
+        if self._opened is not None:
+            return
+        study = self.study
         check_writable(self.folder, (STORE_FILE,))
         try:
             self.folder.mkdir(parents=True, exist_ok=True)
@@ -193,61 +250,81 @@ class Calibration:
                 file=self.folder,
                 fix="choose a writable output folder",
             ) from None
-        self._lock = lock_folder(self.folder, "a calibration")  # released by close()
-        self.store = Store(self.folder / STORE_FILE)
-        known = self.store.get_meta("fingerprint")
-        if known is not None and known != study.fingerprint:
-            raise ParcelfitError(
-                "this folder holds a study made from a different study file",
-                file=self.folder,
-                fix="use a new output folder, or restore the study file it was made from",
+        lock = lock_folder(self.folder, "a calibration")  # released by close()
+        store = None
+        try:
+            store = Store(self.folder / STORE_FILE)
+            known = store.get_meta("fingerprint")
+            if known is not None and known != study.fingerprint:
+                raise ParcelfitError(
+                    "this folder holds a study made from a different study file",
+                    file=self.folder,
+                    fix="use a new output folder, or restore the study file it was made from",
+                )
+            if known is None:
+                store.set_meta("fingerprint", study.fingerprint)
+            # where the study came from, so a report can find its file and data again
+            store.write_source(
+                SourceRecord(
+                    study_file=None if study.path is None else str(study.path),
+                    dataset=str(Path(study.dataset).resolve()),
+                    rig=study.rig,
+                    consignment=study.consignment,
+                )
             )
-        if known is None:
-            self.store.set_meta("fingerprint", study.fingerprint)
-        # where the study came from, so a report can find its file and data again
-        self.store.write_source(
-            SourceRecord(
-                study_file=None if study.path is None else str(study.path),
-                dataset=str(Path(study.dataset).resolve()),
-                rig=study.rig,
-                consignment=study.consignment,
+            dataset = load_dataset(study.dataset)
+            reference = select_reference(dataset[self.fit_case])
+            val_reference = (
+                None if self.val_case is None else select_reference(dataset[self.val_case])
             )
-        )
-        dataset = load_dataset(study.dataset)
-        self.fit_case = TestCase(study.rig, study.consignment, study.fit_setting)
-        self.reference: ReferenceSelection = select_reference(dataset[self.fit_case])
-        self.val_case = (
-            None
-            if study.validation_setting is None
-            else TestCase(study.rig, study.consignment, study.validation_setting)
-        )
-        self.val_reference = (
-            None if self.val_case is None else select_reference(dataset[self.val_case])
-        )
-        self.store.set_meta("reference_run", self.reference.reference_id)
-        self.simulator = make_simulator(study.simulator)
-        self.bo = make_sampler(
-            study.sampler,
-            study.space,
-            batch_size=study.batch_size,
-            seed=study.seed,
-            settings=study.bo,
-            n_initial=study.initial,
-        )
-        recorded = self.store.read_study()
-        if recorded is None or not recorded.optimizer.recorded:
-            # the study and its optimiser as it runs (so figures refit its surrogate with the
-            # same settings); a store of an earlier version gets the settings in use from now on
-            self.store.write_study(study_record(study, self.bo))
-        self._executor_args = (executor, scheduler, workers)
-        self.progress = progress or ignore_progress
-        self.last_validation: bool | None = None
-        self._validations: dict[int, ValidationRecord] = {}  # by store row id
+            store.set_meta("reference_run", reference.reference_id)
+            simulator = make_simulator(study.simulator)
+            recorded = store.read_study()
+            if recorded is None or not recorded.optimizer.recorded:
+                # the study and its optimiser as it runs (so figures refit its surrogate with
+                # the same settings); a store of an earlier version gets the settings in use
+                # from now on
+                store.write_study(study_record(study, self.bo))
+        except BaseException:
+            if store is not None:
+                store.close()
+            lock.release()
+            raise
+        self._opened = _Opened(lock, store, reference, val_reference, simulator)
+
+    def _open(self) -> _Opened:
+        if self._opened is None:
+            raise RuntimeError("the calibration is not open: call run() (or prepare() first)")
+        return self._opened
+
+    @property
+    def store(self) -> Store:
+        """The study's store (open from `prepare` to `close`)."""
+        return self._open().store
+
+    @property
+    def reference(self) -> ReferenceSelection:
+        """The fitting test case's reference run selection (from `prepare` on)."""
+        return self._open().reference
+
+    @property
+    def val_reference(self) -> ReferenceSelection | None:
+        """The validation test case's reference run selection (None without validation)."""
+        return self._open().val_reference
+
+    @property
+    def simulator(self) -> Simulator:
+        """The study's simulator (built by `prepare`)."""
+        return self._open().simulator
 
     def close(self) -> None:
-        """Close the store and release the folder's lock (`run` does this when it ends)."""
-        self.store.close()
-        self._lock.release()
+        """Close the store and release the folder's lock (`run` does this when it ends);
+        nothing to do before `prepare`."""
+        if self._opened is None or self._closed:
+            return
+        self._opened.store.close()
+        self._opened.lock.release()
+        self._closed = True
 
     # -- helpers -----------------------------------------------------------------------------
     def _full_params(self, fitted: Mapping[str, float]) -> dict[str, float]:
@@ -350,8 +427,9 @@ class Calibration:
     def run(self) -> CalibrationResult:
         """Run (or resume) the study until validation passes or the budget is spent; then write
         the results (`parcelfit.study.results`), the study figures and the key frames, close
-        the store and release the folder."""
+        the store and release the folder. Opens the study first (`prepare`)."""
         try:
+            self.prepare()
             result = self._run()
             result = self._finish(result)
         finally:
