@@ -16,8 +16,8 @@ from pathlib import Path
 
 import yaml
 
-from parcelfit.optimize.calibration import Calibration
-from parcelfit.optimize.study import load_study
+from parcelfit.study.calibration import Calibration
+from parcelfit.study.studyfile import load_study
 
 
 def run_one(study_file: Path, sampler: str, seed: int, out: Path, workers: int) -> tuple:

@@ -65,7 +65,7 @@ def write_study_store(folder: Path, dataset: Path | None) -> Path:
     """A finished study's store written by hand, no simulation: the initial design (iteration 0:
     one ok, one failed), iteration 1 (two ok), a passed validation after iteration 1, and a
     recommended point that is not the one with the lowest cost. Values are SI."""
-    from parcelfit.optimize.store import RecommendedRecord, Store
+    from parcelfit.study.store import RecommendedRecord, Store
 
     folder.mkdir(parents=True, exist_ok=True)
     store = Store(folder / "study.sqlite")
@@ -125,7 +125,8 @@ def write_study_results(folder: Path, dataset: Path, optimizer=None) -> None:
 
     from parcelfit.metrics import select_reference
     from parcelfit.optimize.bo import BOSettings
-    from parcelfit.optimize.results import (
+    from parcelfit.runs import TestCase, load_dataset
+    from parcelfit.study.results import (
         DependenceCurve,
         KeyFramesRecord,
         ReferenceRecord,
@@ -134,8 +135,7 @@ def write_study_results(folder: Path, dataset: Path, optimizer=None) -> None:
         validation_record,
         write_results,
     )
-    from parcelfit.optimize.store import OptimizerRecord
-    from parcelfit.runs import TestCase, load_dataset
+    from parcelfit.study.store import OptimizerRecord
 
     from .fake_sim import TRUTH, trajectory
 

@@ -173,8 +173,8 @@ def test_tpe_sampler_asks_batches_and_replays_its_history():
 
 @pytest.mark.parametrize("sampler", ["published", "tpe"])
 def test_a_study_file_chooses_its_optimizer(tmp_path, sampler):
-    from parcelfit.optimize.calibration import Calibration
-    from parcelfit.optimize.study import load_study
+    from parcelfit.study.calibration import Calibration
+    from parcelfit.study.studyfile import load_study
 
     from .test_calibration import write_study
 
@@ -188,7 +188,7 @@ def test_a_study_file_chooses_its_optimizer(tmp_path, sampler):
 
 
 def test_bad_optimizer_sections_name_file_key_and_fix(tmp_path):
-    from parcelfit.optimize.study import load_study
+    from parcelfit.study.studyfile import load_study
 
     from .test_calibration import write_study
 

@@ -8,8 +8,8 @@ import time
 import pytest
 
 from parcelfit import ParcelfitError
-from parcelfit.optimize.calibration import Calibration, study_status
-from parcelfit.optimize.study import load_study
+from parcelfit.study.calibration import Calibration, study_status
+from parcelfit.study.studyfile import load_study
 
 from .fake_sim import TRUTH
 from .helpers import ROOT, finished_fits, write_study
@@ -28,7 +28,7 @@ def test_calibration_recovers_the_truth_and_validates(tmp_path):
     assert info["evaluations"] == result.evaluations and info["pending"] == 0
     assert info["validations"][-1]["passed"] is True
     assert (tmp_path / "out" / "runs" / "fit-000-00.csv").is_file()
-    from parcelfit.optimize.plots import study_figures
+    from parcelfit.study.plots import study_figures
 
     names = sorted(p.name for p in study_figures(tmp_path / "out"))
     assert names == sorted(
@@ -60,8 +60,9 @@ def test_a_changed_study_file_is_refused_for_the_same_folder(tmp_path):
     path = write_study(tmp_path, budget=8, validation={})
     Calibration(load_study(path), tmp_path / "out").run()
     write_study(tmp_path, budget=12, validation={})
+    calibration = Calibration(load_study(path), tmp_path / "out")  # opens nothing yet
     with pytest.raises(ParcelfitError, match="different study file"):
-        Calibration(load_study(path), tmp_path / "out")
+        calibration.run()
 
 
 @pytest.mark.parametrize(
@@ -142,7 +143,7 @@ def test_sigkill_at_any_moment_then_rerun_resumes_without_losing_or_repeating(tm
 
 @pytest.mark.slow
 def test_validation_records_the_envelope_beside_the_published_verdict(tmp_path):
-    from parcelfit.optimize.store import Store
+    from parcelfit.study.store import Store
 
     study = load_study(
         write_study(tmp_path, budget=12, validation={"speed_setting": 2, "every": 1})
@@ -156,8 +157,8 @@ def test_validation_records_the_envelope_beside_the_published_verdict(tmp_path):
 
 def test_figures_refit_the_surrogate_with_the_study_s_own_optimizer_settings(tmp_path):
     from parcelfit.optimize.bo import BOSettings
-    from parcelfit.optimize.plots import study_optimizer
-    from parcelfit.optimize.results import read_results
+    from parcelfit.study.plots import study_optimizer
+    from parcelfit.study.results import read_results
 
     study = write_study(
         tmp_path,
@@ -183,7 +184,8 @@ def test_study_results_round_trip_through_results_json(tmp_path):
     import numpy as np
 
     from parcelfit.metrics import select_reference
-    from parcelfit.optimize.results import (
+    from parcelfit.runs import TestCase, load_dataset
+    from parcelfit.study.results import (
         DependenceCurve,
         KeyFramesRecord,
         ReferenceRecord,
@@ -193,8 +195,7 @@ def test_study_results_round_trip_through_results_json(tmp_path):
         validation_record,
         write_results,
     )
-    from parcelfit.optimize.store import OptimizerRecord
-    from parcelfit.runs import TestCase, load_dataset
+    from parcelfit.study.store import OptimizerRecord
 
     from .fake_sim import trajectory, write_reference_dataset
 
@@ -236,7 +237,7 @@ def test_study_results_round_trip_through_results_json(tmp_path):
 def test_rerunning_a_finished_study_writes_its_missing_results_without_simulating(
     tmp_path, monkeypatch
 ):
-    from parcelfit.optimize.results import read_results
+    from parcelfit.study.results import read_results
 
     study = load_study(
         write_study(
@@ -270,3 +271,53 @@ def test_rerunning_a_finished_study_writes_its_missing_results_without_simulatin
     Calibration(study, out).run()
     kept = read_results(out)
     assert [v.to_json() for v in kept.validations] == [v.to_json() for v in again.validations]
+
+
+def _tree(folder):
+    return sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*"))
+
+
+def test_constructing_a_calibration_reads_and_writes_nothing(tmp_path):
+    """A missing dataset, an output folder that cannot be made, a simulator factory that does
+    not import: the constructor keeps its inputs; `run` (through `prepare`) meets each one."""
+    study_file = write_study(
+        tmp_path / "study",
+        reference={"dataset": "nowhere", "rig": "R", "consignment": "P", "speed_setting": 1},
+        simulator={"backend": "python", "factory": "tests.no_such_module:make"},
+    )
+    study = load_study(study_file)
+    (tmp_path / "blocked").write_text("a file where the output folder's parent would be")
+    before = _tree(tmp_path)
+    outs = [tmp_path / "out" / "deeper", tmp_path / "blocked" / "out"]
+    calibrations = [Calibration(study, out) for out in outs]
+    assert _tree(tmp_path) == before  # no folder, store or lock file
+    with pytest.raises(RuntimeError, match="not open"):
+        calibrations[0].store  # noqa: B018
+    with pytest.raises(ParcelfitError, match=r"no dataset\.yaml here") as missing:
+        calibrations[0].run()
+    assert missing.value.file == str(study.dataset)
+    with pytest.raises(ParcelfitError, match="cannot create the study folder"):
+        calibrations[1].run()  # under a file
+    assert (tmp_path / "blocked").is_file()
+
+
+def test_prepare_opens_the_study_and_run_closes_it(tmp_path):
+    from parcelfit.study.folderlock import lock_folder
+    from parcelfit.study.store import STORE_FILE
+
+    study = load_study(write_study(tmp_path, simulator={"backend": "python", "factory": "x:y"}))
+    calibration = Calibration(study, tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+    with pytest.raises(ParcelfitError, match="cannot import the simulator factory"):
+        calibration.prepare()
+    lock_folder(tmp_path / "out", "a test").release()  # the failed prepare released it
+    study = load_study(write_study(tmp_path / "good"))
+    calibration = Calibration(study, tmp_path / "good" / "out", figures=False)
+    calibration.prepare()
+    assert (tmp_path / "good" / "out" / STORE_FILE).is_file()
+    assert calibration.reference.reference_id == calibration.store.get_meta("reference_run")
+    assert calibration.val_reference is not None and calibration.simulator is not None
+    calibration.prepare()  # once open, nothing more to do
+    calibration.close()
+    with pytest.raises(RuntimeError, match="make a new one"):
+        calibration.run()

@@ -7,12 +7,12 @@ import pytest
 import yaml
 
 from parcelfit import ParcelfitError
-from parcelfit.optimize.screening import load_screen
-from parcelfit.optimize.study import load_study
 from parcelfit.runs import Barrier, Box
 from parcelfit.sim.mujoco import load_consignment, load_rig
 from parcelfit.sim.mujoco.consignment import Consignment
 from parcelfit.sim.mujoco.rig import EndCondition, Rig, StartPose, Surface, Wall
+from parcelfit.study.screening import load_screen
+from parcelfit.study.studyfile import load_study
 from parcelfit.synth import load_twin_spec
 from parcelfit.tracking import load_tag_map
 

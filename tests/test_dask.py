@@ -8,10 +8,10 @@ import pytest
 
 distributed = pytest.importorskip("distributed")
 
-from parcelfit.optimize.calibration import Calibration  # noqa: E402
-from parcelfit.optimize.executors import Task, dask_executor  # noqa: E402
-from parcelfit.optimize.study import load_study  # noqa: E402
 from parcelfit.runs import TestCase  # noqa: E402
+from parcelfit.sim.executors import Task, dask_executor  # noqa: E402
+from parcelfit.study.calibration import Calibration  # noqa: E402
+from parcelfit.study.studyfile import load_study  # noqa: E402
 
 from .fake_sim import AnalyticSimulator  # noqa: E402
 from .helpers import write_study  # noqa: E402

@@ -5,9 +5,9 @@ from concurrent.futures import ThreadPoolExecutor
 import pytest
 
 from parcelfit import ParcelfitError
-from parcelfit.optimize.executors import Executor, Task, make_executor, serial_executor
 from parcelfit.runs import TestCase
 from parcelfit.sim import SimStatus
+from parcelfit.sim.executors import Executor, Task, make_executor, serial_executor
 
 from .fake_sim import AnalyticSimulator, trajectory
 
@@ -71,7 +71,7 @@ def test_any_concurrent_futures_executor_works_and_failures_become_failed_result
 
 
 def test_executor_kinds_and_the_study_file_shorthand(tmp_path):
-    from parcelfit.optimize.study import load_study
+    from parcelfit.study.studyfile import load_study
 
     from .helpers import write_study
 
@@ -91,8 +91,8 @@ def test_executor_kinds_and_the_study_file_shorthand(tmp_path):
 
 @pytest.mark.slow
 def test_a_calibration_runs_in_process_with_the_serial_executor(tmp_path):
-    from parcelfit.optimize.calibration import Calibration, study_status
-    from parcelfit.optimize.study import load_study
+    from parcelfit.study.calibration import Calibration, study_status
+    from parcelfit.study.studyfile import load_study
 
     from .helpers import write_study
 

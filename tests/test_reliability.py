@@ -15,12 +15,12 @@ from typer.testing import CliRunner
 
 from parcelfit import ParcelfitError
 from parcelfit.cli import app
-from parcelfit.optimize.calibration import Calibration, study_status
-from parcelfit.optimize.store import Store
-from parcelfit.optimize.study import load_study
 from parcelfit.report import build_report
 from parcelfit.report.browser import chromium, inspect_page
 from parcelfit.report.html import CONTENT_SECURITY_POLICY
+from parcelfit.study.calibration import Calibration, study_status
+from parcelfit.study.store import Store
+from parcelfit.study.studyfile import load_study
 
 from .helpers import write_study
 
@@ -150,7 +150,7 @@ def test_an_empty_store_is_damaged_not_a_new_study(finished, tmp_path):
     stamps = [p.stat().st_mtime_ns for p in runs]
     (out / "study.sqlite").write_bytes(b"")  # truncated to 0 bytes
     with pytest.raises(ParcelfitError, match=r"empty \(0 bytes\)"):
-        Calibration(study, out)
+        Calibration(study, out).run()
     result = runner.invoke(app, ["status", str(out)])
     assert result.exit_code == 2 and "empty (0 bytes)" in result.output
     assert (out / "study.sqlite").stat().st_size == 0  # nothing written into it
@@ -198,8 +198,9 @@ def test_a_second_calibration_on_the_same_folder_is_refused(finished, tmp_path):
     study, out = _copy(finished, tmp_path)
     n = _fits(out)
     first = Calibration(study, out)
+    first.prepare()  # opens and locks the folder
     with pytest.raises(ParcelfitError, match="another parcelfit process is running a calibration"):
-        Calibration(study, out)
+        Calibration(study, out).run()
     first.run()  # releases the folder when it ends
     again = Calibration(study, out).run()
     assert again.evaluations == n  # the finished study is not run a second time
@@ -258,9 +259,9 @@ def test_a_symlink_inside_the_dataset_is_fine_but_two_runs_cannot_share_a_file(
 def test_a_line_break_in_a_name_cannot_add_lines_to_a_solver_parameter_file(tmp_path):
     from pathlib import Path
 
-    from parcelfit.optimize.executors import Task, simulate_task
     from parcelfit.runs import TestCase
     from parcelfit.sim import SimStatus, defaults_si
+    from parcelfit.sim.executors import Task, simulate_task
     from parcelfit.sim.external import ExternalSimulator, load_external_solver
 
     solver = Path(__file__).parent / "data" / "external" / "solver.yaml"
@@ -300,8 +301,8 @@ def test_a_dying_local_worker_costs_time_not_results(tmp_path):
     import signal
     import threading
 
-    from parcelfit.optimize.executors import Task, local_executor
     from parcelfit.runs import TestCase
+    from parcelfit.sim.executors import Task, local_executor
 
     from .fake_sim import AnalyticSimulator, trajectory
 
@@ -433,7 +434,7 @@ def test_a_timed_out_solver_is_killed_with_its_children(tmp_path):
 
 def test_an_unreachable_scheduler_or_one_without_workers_is_a_clear_error():
     distributed = pytest.importorskip("distributed")
-    from parcelfit.optimize.executors import dask_executor
+    from parcelfit.sim.executors import dask_executor
 
     with pytest.raises(ParcelfitError, match="cannot reach the Dask scheduler"):
         dask_executor("tcp://127.0.0.1:9", connect_timeout=1)

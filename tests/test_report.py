@@ -8,11 +8,11 @@ from typer.testing import CliRunner
 
 from parcelfit import ParcelfitError
 from parcelfit.cli import app
-from parcelfit.optimize.calibration import Calibration
-from parcelfit.optimize.screening import load_screen, run_screen
-from parcelfit.optimize.study import load_study
 from parcelfit.report import build_report
 from parcelfit.report.browser import chromium, inspect_page, screenshot
+from parcelfit.study.calibration import Calibration
+from parcelfit.study.screening import load_screen, run_screen
+from parcelfit.study.studyfile import load_study
 
 from .fake_sim import TRUTH, write_reference_dataset
 from .helpers import write_study, write_study_results, write_study_store
@@ -58,9 +58,9 @@ def _no_analysis(monkeypatch):
         "parcelfit.metrics.reference.select_reference",
         "parcelfit.metrics.validate",
         "parcelfit.metrics.validation.validate",
-        "parcelfit.optimize.results.validate",
-        "parcelfit.optimize.plots.dependence_curves",
-        "parcelfit.optimize.plots.surrogate_optimizer",
+        "parcelfit.study.results.validate",
+        "parcelfit.study.plots.dependence_curves",
+        "parcelfit.study.plots.surrogate_optimizer",
         "parcelfit.optimize.bo.BatchBO._fit",
     ):
         monkeypatch.setattr(target, refuse)
@@ -174,8 +174,8 @@ def test_the_browser_check_sees_a_broken_image(tmp_path):
 def test_identifiability_from_the_surrogate_span():
     import numpy as np
 
-    from parcelfit.optimize.plots import DependenceCurve
     from parcelfit.report.html import ParameterRow
+    from parcelfit.study.plots import DependenceCurve
 
     xs = np.linspace(0.3, 0.6, 31)
     sharp = DependenceCurve("mu_d_BePa", xs, (xs - 0.4) ** 2 * 100, np.full(31, 0.05), False)
@@ -233,8 +233,8 @@ def test_a_study_without_stored_results_says_so_instead_of_recomputing(tmp_path,
 
 
 def test_the_report_s_surrogate_has_the_study_s_optimizer_settings(tmp_path, monkeypatch):
-    from parcelfit.optimize import plots
     from parcelfit.optimize.bo import BOSettings
+    from parcelfit.study import plots
 
     study_file = write_study(
         tmp_path,

@@ -2,7 +2,7 @@ import pandas as pd
 import pytest
 import yaml
 
-from parcelfit.optimize.screening import load_screen, run_screen
+from parcelfit.study.screening import load_screen, run_screen
 
 from .fake_sim import write_reference_dataset
 
@@ -78,3 +78,27 @@ def test_polybag_third_stage_and_centre_points(tmp_path):
     assert [s.kind for s in stages] == ["full", "full"]
     assert {"E_Co", "zeta_Co"} <= set(stages[1].factors)
     assert len(pd.read_csv(tmp_path / "out" / "stage1-design.csv")) == 8 + 2
+
+
+@pytest.mark.parametrize("consignment", ["PB", "KPBW"])
+def test_all_parameters_come_from_the_consignments_content_kind(tmp_path, consignment):
+    """``parameters: all`` is every catalogue candidate of the consignment's content kind but
+    the content's own parameters (a soft content's are the soft_content stage's)."""
+    from parcelfit.sim.mujoco import load_consignment
+    from parcelfit.sim.params import content_parameters, parameters_for
+
+    kind = load_consignment(consignment).content_kind
+    doc = {
+        "name": "all",
+        "simulator": {"backend": "mujoco", "rig": "E3", "consignment": consignment},
+        "reference": {"dataset": "data", "speed_setting": 1},
+        "parameters": "all",
+    }
+    path = tmp_path / "screen.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    screen = load_screen(path)
+    own = {p.name for p in content_parameters(kind)}
+    assert screen.parameters == tuple(p.name for p in parameters_for(kind) if p.name not in own)
+    assert len(screen.parameters) == 16
+    assert own == ({"E_Co", "zeta_Co"} if kind == "soft" else set())
+    assert not own & set(screen.parameters)

@@ -170,3 +170,45 @@ def test_mujoco_warnings_go_to_logging_not_into_a_log_file(tmp_path, monkeypatch
         mujoco.mj_step(model, data)
     assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
     assert "MuJoCo: Nan, Inf or huge value in QVEL at DOF 0" in caplog.text
+
+
+def test_make_simulator_builds_what_the_configuration_says(tmp_path):
+    from pathlib import Path
+
+    import yaml
+
+    import parcelfit.sim.mujoco
+    from parcelfit.sim.factory import (
+        SimulatorConfig,
+        SimulatorSection,
+        content_kind,
+        make_simulator,
+    )
+    from parcelfit.sim.mujoco import MujocoSimulator
+
+    doc = load_yaml(Path(parcelfit.sim.mujoco.__file__).parent / "rigs" / "E3.yaml")
+    rig_file = tmp_path / "rigs" / "mine.yaml"  # a user's rig, known to no one else
+    rig_file.parent.mkdir()
+    rig_file.write_text(yaml.safe_dump({**doc, "name": "mine"}))
+    section = SimulatorSection(
+        backend="mujoco", rig="rigs/mine.yaml", consignment="PB", timestep=0.002, wall_limit=30
+    )
+    config = section.to_config(tmp_path)
+    assert dict(config) == {
+        "backend": "mujoco",
+        "rig": str(rig_file.resolve()),  # a file's path is made absolute against its folder
+        "consignment": "PB",
+        "timestep": 0.002,
+        "wall_limit": 30,
+    }
+    assert content_kind(config) == "soft"
+    sim = make_simulator(config)
+    assert isinstance(sim, MujocoSimulator)
+    assert (sim.options.scene.timestep, sim.options.scene.spacing) == (0.002, 0.03)
+    assert sim.options.wall_limit == 30 and sim.rig("mine").name == "mine"
+    recorder = sim.with_options(record_vertices=True)
+    assert recorder.options == dataclasses.replace(sim.options, record_vertices=True)
+    assert recorder.rig("mine") is sim.rig("mine") and not sim.options.record_vertices
+    assert content_kind(SimulatorConfig("python", factory="tests.fake_sim:make")) == "rigid"
+    with pytest.raises(ParcelfitError, match="the external backend needs 'external'"):
+        SimulatorConfig("external")

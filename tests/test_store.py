@@ -3,7 +3,7 @@ import sqlite3
 import pytest
 
 from parcelfit import ParcelfitError
-from parcelfit.optimize.store import Store
+from parcelfit.study.store import Store
 
 
 def test_pending_then_finished_and_persistent(tmp_path):
@@ -61,7 +61,7 @@ def test_damaged_database_is_reported(tmp_path):
 
 
 def test_the_meta_records_round_trip_by_type(tmp_path):
-    from parcelfit.optimize.store import (
+    from parcelfit.study.store import (
         OptimizerRecord,
         RecommendedRecord,
         SourceRecord,

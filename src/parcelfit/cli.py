@@ -204,7 +204,7 @@ def demo(
     import time
 
     from parcelfit.demo import STAGES, Demo
-    from parcelfit.optimize.study import load_study
+    from parcelfit.study.studyfile import load_study
 
     if quick and full:
         raise ParcelfitError("--quick and --full exclude each other", fix="choose one")
@@ -562,27 +562,24 @@ def simulate(
     With --repeat N, simulate N seeded placements and write each run (OUT with -s<seed> before
     its suffix), a summary table (OUT with -ensemble.csv) and print the ensemble statistics."""
     from parcelfit.runs import TestCase, write_trajectory
-    from parcelfit.sim.mujoco import (
-        MujocoSimulator,
-        SceneOptions,
-        SimOptions,
-        load_consignment,
-        load_rig,
-    )
+    from parcelfit.sim.factory import SimulatorConfig, make_simulator
+    from parcelfit.sim.mujoco import MujocoSimulator, load_consignment, load_rig
     from parcelfit.sim.params import parse_assignments, resolve
 
     rig_obj = load_rig(rig)
     cons = load_consignment(consignment)
     params = resolve(cons.content_kind, user_values=parse_assignments(set_ or []))
-    sim = MujocoSimulator(
-        SimOptions(
-            scene=SceneOptions(timestep=timestep, spacing=spacing),
-            wall_limit=wall_limit,
-            record_vertices=video is not None,
-        ),
-        rigs={rig_obj.name: rig_obj},
-        consignments={cons.name: cons},
+    config = SimulatorConfig(
+        "mujoco",
+        rig=rig,
+        consignment=consignment,
+        timestep=timestep,
+        spacing=spacing,
+        wall_limit=wall_limit,
     )
+    sim = make_simulator(config)
+    assert isinstance(sim, MujocoSimulator)
+    sim = sim.with_options(record_vertices=video is not None)
     case = TestCase(rig_obj.name, cons.name, setting)
     rig_obj.drive_speeds(setting)  # a clear error for an unknown setting before simulating
     if repeat > 1:
@@ -790,8 +787,8 @@ def calibrate(
 ) -> None:
     """Calibrate by batch Bayesian optimisation; rerunning the same command resumes the study
     (a finished study only has its results, figures and key frames written again)."""
-    from parcelfit.optimize.calibration import Calibration
-    from parcelfit.optimize.study import load_study
+    from parcelfit.study.calibration import Calibration
+    from parcelfit.study.studyfile import load_study
 
     _check_executor(executor, ("serial", "local", "dask"))
     study = load_study(study_file)
@@ -817,8 +814,8 @@ def _calibrate_live(run: Callable[[ProgressCallback], Any], name: str, folder: P
     stopped, the recommended parameters and where its figures are."""
     from rich.live import Live
 
-    from parcelfit.optimize.calibration import STORE_FILE, study_status
-    from parcelfit.optimize.folderlock import check_writable
+    from parcelfit.study.calibration import STORE_FILE, study_status
+    from parcelfit.study.folderlock import check_writable
 
     check_writable(folder, (STORE_FILE,))  # before the live display starts
     state: dict[str, ProgressEvent | None] = {"p": None}
@@ -930,7 +927,7 @@ def screen(
     ] = None,
 ) -> None:
     """Screen parameters: fractional -> full factorial designs, effects, Pareto charts, a selection."""
-    from parcelfit.optimize.screening import load_screen, run_screen
+    from parcelfit.study.screening import load_screen, run_screen
 
     _check_executor(executor, ("serial", "local"))
     spec = load_screen(screen_file)
@@ -979,7 +976,7 @@ def status(
     as_json: Annotated[bool, typer.Option("--json", help="Print machine-readable JSON.")] = False,
 ) -> None:
     """Show the state of a running or finished calibration study."""
-    from parcelfit.optimize.calibration import study_status
+    from parcelfit.study.calibration import study_status
 
     info = study_status(study_dir)
     if as_json:

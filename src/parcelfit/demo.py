@@ -29,10 +29,10 @@ from typing import TYPE_CHECKING, Any
 import yaml
 
 from parcelfit.errors import ParcelfitError
-from parcelfit.optimize.results import write_json
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.runs import Dataset, TestCase, load_dataset, read_trajectory, write_trajectory
 from parcelfit.sim.params import CATALOGUE
+from parcelfit.study.results import write_json
 
 if TYPE_CHECKING:
     from parcelfit.metrics import ReferenceSelection
@@ -130,9 +130,10 @@ def write_demo_files(out: Path, profile: DemoProfile, dataset: Path) -> tuple[Pa
 def run_stricter_example(out: Path, dataset: Path) -> dict[str, Any]:
     """Simulate the stricter-criterion example and write ``stricter-criterion.json`` (+ run):
     the description, the verdicts, and the ``reference`` and ``validation`` records the report
-    plots (`parcelfit.optimize.results`). A file of an earlier demo without those records gets
+    plots (`parcelfit.study.results`). A file of an earlier demo without those records gets
     them from its stored run (no simulation)."""
     from parcelfit.metrics import select_reference
+    from parcelfit.sim.factory import SimulatorConfig, content_kind, make_simulator
     from parcelfit.sim.mujoco import MujocoSimulator
     from parcelfit.sim.params import resolve
 
@@ -147,9 +148,11 @@ def run_stricter_example(out: Path, dataset: Path) -> dict[str, Any]:
         doc.update(_example_records(reference, traj, doc.get("transit_time")))
         write_json(target, doc)
         return doc
-    sim = MujocoSimulator()
+    config = SimulatorConfig("mujoco", rig=case.rig, consignment=case.consignment)
+    sim = make_simulator(config)
+    assert isinstance(sim, MujocoSimulator)
     params_user = STRICTER_EXAMPLE["params"]
-    params = resolve(sim.consignment(case.consignment).content_kind, user_values=params_user)
+    params = resolve(content_kind(config), user_values=params_user)
     result = sim.run(params, case, run_id="stricter-example")
     if not result.ok or result.run is None:
         raise ParcelfitError(f"the stricter-criterion example run ended {result.status.value}")
@@ -189,8 +192,8 @@ def _example_records(
     reference: ReferenceSelection, trajectory: Trajectory, transit_time: float | None
 ) -> dict[str, dict[str, Any]]:
     """The example's reference and validation records (stored form) for the report."""
-    from parcelfit.optimize.results import ReferenceRecord, validation_record
     from parcelfit.sim.params import parameter
+    from parcelfit.study.results import ReferenceRecord, validation_record
 
     params = {k: parameter(k).to_si(v) for k, v in STRICTER_EXAMPLE["params"].items()}
     record = validation_record(
@@ -287,7 +290,7 @@ class Demo:
 
     def screen(self, progress: ProgressCallback | None = None) -> tuple[list[Any], dict[str, Any]]:
         """Stage 3: the screening in ``out/screen``; its stages and selection."""
-        from parcelfit.optimize.screening import load_screen, run_screen
+        from parcelfit.study.screening import load_screen, run_screen
 
         return run_screen(
             load_screen(self.files[0]),
@@ -300,8 +303,8 @@ class Demo:
     def calibration(self, progress: ProgressCallback | None = None) -> Any:
         """Stage 4: the calibration in ``out/calibration`` (with its results, figures, key
         frames and, with ``animation``, the animation the report embeds); its result."""
-        from parcelfit.optimize.calibration import Calibration
-        from parcelfit.optimize.study import load_study
+        from parcelfit.study.calibration import Calibration
+        from parcelfit.study.studyfile import load_study
 
         return Calibration(
             load_study(self.files[1]),

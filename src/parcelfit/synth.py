@@ -22,7 +22,7 @@ The truth (parameters in the catalogue's units, and every setting above) is writ
 dataset as ``truth.yaml``; the dataset is marked ``synthetic: true``.
 
 The runs are `TwinJob` objects simulated through the same executors as calibration and
-screening (`parcelfit.optimize.executors`: serial in this process, or local processes). Every
+screening (`parcelfit.sim.executors`: serial in this process, or local processes). Every
 finished run is stored at once in ``<folder>/.twin-runs/`` (keyed by its job), so an interrupted
 generation resumes where it stopped; the folder is removed when the dataset is complete.
 """
@@ -43,7 +43,6 @@ from pydantic import BeforeValidator, Field, PlainValidator
 
 from parcelfit.config import load_yaml
 from parcelfit.errors import ParcelfitError
-from parcelfit.optimize.executors import make_executor
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.runs import (
     Box,
@@ -56,6 +55,7 @@ from parcelfit.runs import (
     write_trajectory,
 )
 from parcelfit.schema import FileModel, Number, Text, Whole, keys_in, or_default, parse
+from parcelfit.sim.executors import make_executor
 from parcelfit.sim.mujoco import Consignment, MujocoSimulator, Rig, SceneOptions, SimOptions
 from parcelfit.sim.params import CATALOGUE, resolve
 

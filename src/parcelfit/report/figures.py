@@ -1,5 +1,5 @@
 """Figures made for the report only (the others come from the stages' own modules), drawn from
-the stored results (`parcelfit.optimize.results`), never from a new analysis.
+the stored results (`parcelfit.study.results`), never from a new analysis.
 
 * ``distance_heatmaps``: a test case's DTW distance matrices (section 4), the reference run
   outlined;
@@ -21,7 +21,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
 
 from parcelfit.metrics import Validation
-from parcelfit.optimize.results import BandRecord, ReferenceRecord
+from parcelfit.study.results import BandRecord, ReferenceRecord
 
 SIM_COLOUR = "#d35400"
 REAL_COLOUR = "#9aa0a6"

@@ -13,13 +13,13 @@ identifiability from the surrogate); validation (published criteria and the stri
 figures like the published Figures 16-19); the simulated run's key frames.
 
 Architecture: the report renders, it does not analyse. The calibration writes what it concluded
-into the study folder: the store (`parcelfit.optimize.store`: the evaluations and the typed
-study, source and recommended records) and ``results.json`` (`parcelfit.optimize.results`,
+into the study folder: the store (`parcelfit.study.store`: the evaluations and the typed
+study, source and recommended records) and ``results.json`` (`parcelfit.study.results`,
 schema in docs/data.md: the reference runs it used, every validation's verdict and curves, the
 GP surrogate's partial dependence refitted with the optimiser settings the store records, the
 key frames it drew). `build_report` reads those files, turns them into plain values and
 embedded figures (one `Section` per heading, built by a ``_NAME_section`` function here; figures
-drawn by `parcelfit.report.figures` and `parcelfit.optimize.plots`), and the Jinja2 templates
+drawn by `parcelfit.report.figures` and `parcelfit.study.plots`), and the Jinja2 templates
 render the page (``templates/report.html.j2`` and one ``templates/sections/NAME.html.j2`` per
 section). The templates escape every value (autoescaping); only the ``<img>`` tags made here are
 marked safe, and the page's Content-Security-Policy forbids scripts should anything slip through.
@@ -58,17 +58,17 @@ from matplotlib.figure import Figure
 
 from parcelfit import __version__
 from parcelfit.errors import ParcelfitError
-from parcelfit.optimize.results import (
+from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
+from parcelfit.runs import Dataset, load_dataset
+from parcelfit.sim.params import catalogue_unit, to_catalogue_units
+from parcelfit.study.results import (
     DependenceCurve,
     ReferenceRecord,
     StudyResults,
     ValidationRecord,
     read_results,
 )
-from parcelfit.optimize.store import STORE_FILE, SourceRecord, Store, StudyRecord
-from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
-from parcelfit.runs import Dataset, load_dataset
-from parcelfit.sim.params import catalogue_unit, to_catalogue_units
+from parcelfit.study.store import STORE_FILE, SourceRecord, Store, StudyRecord
 
 IDENTIFIABLE_SPAN = 0.20  # widest share of the range the surrogate may leave undecided
 RECOVERY_TOLERANCE = 0.10  # of the range's width
@@ -410,8 +410,8 @@ def _calibration_section(
     truth: dict[str, float],
     synthetic: bool,
 ) -> tuple[dict[str, float] | None, list[ParameterRow]]:
-    from parcelfit.optimize.calibration import study_status
-    from parcelfit.optimize.plots import dependence_figure, history, traces
+    from parcelfit.study.calibration import study_status
+    from parcelfit.study.plots import dependence_figure, history, traces
 
     title = page.start("Calibration")
     status = study_status(folder)
@@ -716,7 +716,7 @@ def _summary(
 
 def verdict_text(path: str | Path) -> str:
     """A one-line verdict of a study folder (for the command line)."""
-    from parcelfit.optimize.calibration import study_status
+    from parcelfit.study.calibration import study_status
 
     st = study_status(locate(path).study)
     vals = st["validations"]

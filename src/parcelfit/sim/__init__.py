@@ -1,7 +1,9 @@
 """Simulation: the `Simulator` protocol, the parameter catalogue and the backends.
 
 Backends: `parcelfit.sim.mujoco.MujocoSimulator` (rigs and consignments from data files) and
-`parcelfit.sim.external.ExternalSimulator` (any solver run as a command).
+`parcelfit.sim.external.ExternalSimulator` (any solver run as a command), built from a
+configuration by `parcelfit.sim.factory.make_simulator`; `parcelfit.sim.executors` runs
+simulations in this process, in local processes or on Dask.
 """
 
 from parcelfit.sim.params import (

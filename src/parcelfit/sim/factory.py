@@ -1,26 +1,124 @@
-"""Building a simulator from the ``simulator`` section of a study or screen file.
+"""Building a simulator from a configuration: the ``simulator`` section of a study or screen
+file (`SimulatorSection`, checked on load), or a `SimulatorConfig` made in code.
 
 The section's ``backend`` chooses: ``mujoco`` (a bundled or user rig and consignment, optional
 ``timestep`` [s], ``spacing`` [m] and ``wall_limit`` [s]), ``external`` (a solver description
 file run as a command) or ``python`` (``factory: package.module:callable``, imported and called:
-such a file runs code). The section has been checked by `SimulatorSection` (`parcelfit.optimize.study`).
+such a file runs code). A new named backend adds its keys to `SimulatorSection` and
+`SimulatorConfig` and its construction to `make_simulator`; everything that builds a simulator
+from a configuration (calibration, screening, ``parcelfit simulate``, the demo) goes through
+`make_simulator`.
 """
 
 from __future__ import annotations
 
 import importlib
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
+
+from pydantic import model_validator
 
 from parcelfit.errors import ParcelfitError
+from parcelfit.schema import Choice, FileModel, Number, Text
+from parcelfit.sim.params import RIGID
 from parcelfit.sim.protocol import Simulator
 
+BACKENDS = ("mujoco", "external", "python")
+_SETTINGS = (
+    "backend",
+    "rig",
+    "consignment",
+    "timestep",
+    "spacing",
+    "wall_limit",
+    "external",
+    "factory",
+)
+_NEEDS = {"mujoco": ("rig", "consignment"), "external": ("external",), "python": ("factory",)}
+DEFAULT_WALL_LIMIT = 600.0  # s, per simulation
 
-def make_simulator(sim: Mapping[str, Any], folder: Path) -> Simulator:
-    """The simulator a study's or screen's ``simulator`` section describes (``folder``: the file's)."""
-    backend = sim["backend"]
-    if backend == "mujoco":
+
+def _check_needs(backend: str, settings: Any) -> None:
+    """Refuse a configuration that leaves out what its backend needs."""
+    for key in _NEEDS[backend]:
+        if getattr(settings, key) is None:
+            raise ParcelfitError(f"the {backend} backend needs {key!r}", fix=f"add `{key}:`")
+
+
+@dataclass(frozen=True)
+class SimulatorConfig(Mapping[str, Any]):
+    """A simulator's configuration (SI): ``backend`` and what it needs (mujoco: ``rig`` and
+    ``consignment``, bundled names or ``.yaml`` paths, optional ``timestep`` [s] and ``spacing``
+    [m]; external: the solver description file ``external``; python: ``factory``), optional
+    ``wall_limit`` [s] per simulation, and ``folder``: the folder of the file it came from (an
+    external solver's runs go into ``folder/.external-runs``).
+
+    It reads as the mapping of the settings given (``dict(config)``: the keys of the file's
+    section that were set, without ``folder``), as the section did before it was typed."""
+
+    backend: str
+    rig: str | None = None
+    consignment: str | None = None
+    timestep: float | None = None
+    spacing: float | None = None
+    wall_limit: float | None = None
+    external: str | None = None
+    factory: str | None = None
+    folder: Path = Path(".")
+
+    def __post_init__(self) -> None:
+        if self.backend not in BACKENDS:
+            raise ParcelfitError(
+                f"unknown simulator backend {self.backend!r}", fix=f"use one of {list(BACKENDS)}"
+            )
+        _check_needs(self.backend, self)
+
+    def __getitem__(self, key: str) -> Any:
+        value = getattr(self, key, None) if key in _SETTINGS else None
+        if value is None:
+            raise KeyError(key)
+        return value
+
+    def __iter__(self) -> Iterator[str]:
+        return (k for k in _SETTINGS if getattr(self, k) is not None)
+
+    def __len__(self) -> int:
+        return sum(1 for _ in self)
+
+
+class SimulatorSection(FileModel):
+    """``simulator`` of a study or screen file: the backend and what it needs (``timestep``
+    [s], ``spacing`` [m], ``wall_limit`` [s])."""
+
+    backend: Annotated[str, Choice(BACKENDS, what="backend")]
+    rig: Annotated[str | None, Text()] = None
+    consignment: Annotated[str | None, Text()] = None
+    timestep: Annotated[float | None, Number(unit="s", ge=1e-9)] = None
+    spacing: Annotated[float | None, Number(unit="m", ge=1e-9)] = None
+    wall_limit: Annotated[float | None, Number(unit="s", ge=1e-9)] = None
+    external: Annotated[str | None, Text()] = None
+    factory: Annotated[str | None, Text()] = None
+
+    @model_validator(mode="after")
+    def _backend_needs(self) -> SimulatorSection:
+        _check_needs(self.backend, self)
+        return self
+
+    def to_config(self, folder: Path) -> SimulatorConfig:
+        """The configuration this section describes; the paths of ``.yaml`` rig, consignment and
+        solver files made absolute (relative to ``folder``, the file's folder)."""
+        given = self.model_dump(exclude_none=True)
+        for key in ("rig", "consignment", "external"):
+            if key in given and given[key].lower().endswith((".yaml", ".yml")):
+                given[key] = str((folder / given[key]).resolve())
+        return SimulatorConfig(**given, folder=folder)
+
+
+def make_simulator(config: SimulatorConfig) -> Simulator:
+    """The simulator ``config`` describes (files are read and a python factory is called here)."""
+    if config.backend == "mujoco":
         from parcelfit.sim.mujoco import (
             MujocoSimulator,
             SceneOptions,
@@ -29,26 +127,46 @@ def make_simulator(sim: Mapping[str, Any], folder: Path) -> Simulator:
             load_rig,
         )
 
-        rig = load_rig(sim["rig"])
-        cons = load_consignment(sim["consignment"])
-        scene = SceneOptions(**{k: float(sim[k]) for k in ("timestep", "spacing") if k in sim})
-        options = SimOptions(scene=scene, wall_limit=float(sim.get("wall_limit", 600.0)))
+        assert config.rig is not None and config.consignment is not None  # checked on creation
+        rig = load_rig(config.rig)
+        cons = load_consignment(config.consignment)
+        numerics = {k: float(config[k]) for k in ("timestep", "spacing") if k in config}
+        options = SimOptions(
+            scene=SceneOptions(**numerics),
+            wall_limit=DEFAULT_WALL_LIMIT if config.wall_limit is None else config.wall_limit,
+        )
         return MujocoSimulator(options, rigs={rig.name: rig}, consignments={cons.name: cons})
-    if backend == "external":
+    if config.backend == "external":
         from parcelfit.sim.external import ExternalSimulator, load_external_solver
 
         return ExternalSimulator(
-            load_external_solver(sim["external"]), workroot=folder / ".external-runs"
+            load_external_solver(config["external"]), workroot=config.folder / ".external-runs"
         )
-    module, _, attr = str(sim["factory"]).partition(":")
+    module, _, attr = str(config.factory).partition(":")
     try:
         factory = getattr(importlib.import_module(module), attr)
     except (ImportError, AttributeError) as exc:
         raise ParcelfitError(
-            f"cannot import the simulator factory {sim['factory']!r} ({exc})",
+            f"cannot import the simulator factory {config.factory!r} ({exc})",
             fix="give it as package.module:callable, importable from here",
         ) from exc
     return factory()
 
 
-__all__ = ["make_simulator"]
+def content_kind(config: SimulatorConfig) -> str:
+    """The content kind (``rigid`` or ``soft``, the catalogue's ranges) of the consignment
+    ``config`` simulates: the MuJoCo consignment file's; backends without one count as rigid."""
+    if config.backend == "mujoco":
+        from parcelfit.sim.mujoco import load_consignment
+
+        return load_consignment(config["consignment"]).content_kind
+    return RIGID
+
+
+__all__ = [
+    "BACKENDS",
+    "SimulatorConfig",
+    "SimulatorSection",
+    "content_kind",
+    "make_simulator",
+]

@@ -312,6 +312,12 @@ def parameters_for(content_kind: str) -> list[ParameterSpec]:
     return [p for p in CATALOGUE if content_kind in p.ranges]
 
 
+def content_parameters(content_kind: str) -> list[ParameterSpec]:
+    """The parameters of the content itself: those that apply to ``content_kind`` and to no
+    other kind (for soft contents their stiffness and damping, for rigid contents none)."""
+    return [p for p in CATALOGUE if set(p.ranges) == {content_kind}]
+
+
 def defaults_si(content_kind: str) -> dict[str, float]:
     """Default value of every parameter for a content kind, in SI units."""
     return {

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -191,11 +191,7 @@ def render_key_frames(
 ) -> KeyFrames:
     """Simulate ``case`` with SI ``params`` once more, recording the shell's vertices, and draw
     ``count`` key frames (and, with ``animation`` a .gif or .mp4 path, write an animation)."""
-    recorder = MujocoSimulator(
-        replace(simulator.options, record_vertices=True),
-        rigs={case.rig: simulator.rig(case.rig)},
-        consignments={case.consignment: simulator.consignment(case.consignment)},
-    )
+    recorder = simulator.with_options(record_vertices=True)
     result, frames = recorder.run_with_frames(dict(params), case, run_id="key-frames")
     if frames is None or not result.ok:
         return KeyFrames(result.status.value, None)

@@ -39,6 +39,7 @@ import math
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -116,11 +117,13 @@ class MujocoSimulator:
             self._consignments[name] = load_consignment(name)
         return self._consignments[name]
 
+    def with_options(self, **changes: Any) -> MujocoSimulator:
+        """The same simulator (rigs and consignments) with `SimOptions` fields changed."""
+        return MujocoSimulator(replace(self.options, **changes), self._rigs, self._consignments)
+
     def with_placement(self, seed: int | None) -> MujocoSimulator:
         """The same simulator with placement ``seed`` (None: the nominal start pose)."""
-        return MujocoSimulator(
-            replace(self.options, placement_seed=seed), self._rigs, self._consignments
-        )
+        return self.with_options(placement_seed=seed)
 
     def scene_options(self, rig: Rig) -> SceneOptions:
         """The scene settings of a run on ``rig``: the placement draw added to the start offset."""

@@ -1,0 +1,777 @@
+"""The calibration loop (method.md sections 7 and 8): reference runs, initial design, batch BO
+iterations, validation every N iterations, stop when the validation passes or the budget is
+spent. Every evaluation goes through the `Store` before the loop moves on; restarting the same
+study folder replays the store (finished evaluations are never simulated again, pending ones
+are run) and continues exactly where it stopped.
+
+Failed, unstable and timed-out simulations, and runs whose trajectory misses the regions of
+interest, are stored with their status and told to the optimiser as failures (it penalises them
+with the worst cost seen); they never stop the loop and count against the budget.
+
+Iterations are numbered one way in the store, the progress, `study_status` and the report:
+0 is the initial design, k >= 1 the k-th batch the optimiser chose; the validation "after
+iteration k" simulates the recommended parameters once iteration k has finished.
+
+What the study concluded is written for the report, which computes nothing of its own:
+``results.json`` (`parcelfit.study.results`: the reference runs used, every validation with
+its verdict and curves, the GP surrogate's partial dependence refitted with the optimiser
+settings the store records, the key frames) after every validation and when the study stops,
+with the study figures in ``figures/``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+from filelock import FileLock
+
+from parcelfit.errors import ParcelfitError
+from parcelfit.metrics import ReferenceSelection, calibration_cost, select_reference
+from parcelfit.optimize.sampler import Sampler, make_sampler
+from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
+from parcelfit.runs import (
+    TestCase,
+    is_synthetic,
+    load_dataset,
+    read_trajectory,
+    write_trajectory,
+)
+from parcelfit.sim.executors import Executor, Task, make_executor
+from parcelfit.sim.factory import make_simulator
+from parcelfit.sim.protocol import SimResult, Simulator
+from parcelfit.study.folderlock import check_writable, lock_folder
+from parcelfit.study.results import (
+    KeyFramesRecord,
+    ReferenceRecord,
+    StudyResults,
+    SurrogateRecord,
+    ValidationRecord,
+    new_results,
+    read_results,
+    validation_record,
+    write_results,
+)
+from parcelfit.study.store import (
+    STORE_FILE,
+    Evaluation,
+    OptimizerRecord,
+    RecommendedRecord,
+    SourceRecord,
+    Store,
+    StudyRecord,
+)
+from parcelfit.study.studyfile import Study
+
+LOST_WORKER_MESSAGES = (
+    "worker failed: BrokenProcessPool",
+    "dask task failed: FutureCancelledError",
+    "dask task failed: CancelledError",
+)
+
+
+@dataclass(frozen=True)
+class CalibrationResult:
+    """Outcome of a study: the recommended parameters (SI) and their cost, the number of fitting
+    evaluations, the last iteration (0 = the initial design, k >= 1 the k-th optimiser batch;
+    None before any), the validation verdict, why it stopped, the study figures written (PNG
+    and SVG in ``folder/figures``, with the key frames of MuJoCo studies)."""
+
+    best_params: dict[str, float] | None
+    best_cost: float | None
+    evaluations: int
+    last_iteration: int | None
+    validated: bool | None
+    stop_reason: str
+    folder: Path
+    figures: tuple[Path, ...] = ()
+
+
+def study_record(study: Study, sampler: Sampler) -> StudyRecord:
+    """The store's record of ``study`` with the optimiser ``sampler`` as it runs (bounds SI)."""
+    settings = getattr(sampler, "settings", None)
+    return StudyRecord(
+        name=study.name,
+        parameters=tuple(study.space.names),
+        bounds=tuple((d.low, d.high) for d in study.space.dims),
+        log=tuple(d.log for d in study.space.dims),
+        batch_size=study.batch_size,
+        seed=study.seed,
+        fit_setting=study.fit_setting,
+        validation_setting=study.validation_setting,
+        optimizer=OptimizerRecord(
+            study.sampler, None if settings is None else dataclasses.asdict(settings)
+        ),
+    )
+
+
+def record_result(
+    store: Store,
+    folder: Path,
+    row: Evaluation,
+    result: SimResult,
+    reference: ReferenceSelection,
+    w_xy: float = 1.0,
+    w_theta: float = 1.0,
+) -> dict[str, Any]:
+    """Write a simulated run next to the store, compute its cost parts, and store the result."""
+    status = result.status.value
+    out: dict[str, Any] = {
+        "status": status,
+        "cost": None,
+        "dtw_xy": None,
+        "dtw_theta": None,
+        "transit_time": None,
+        "run_file": None,
+    }
+    details: dict[str, Any] = {k: v for k, v in result.diagnostics.items() if k != "traceback"}
+    if result.run is not None:
+        out["run_file"] = f"runs/{row.kind}-{row.iteration:03d}-{row.slot:02d}.csv"
+        write_trajectory(result.run.trajectory, folder / out["run_file"])
+        out["transit_time"] = result.run.transit_time
+    if result.ok and result.run is not None:
+        try:
+            c = calibration_cost(result.run.trajectory, reference, w_xy, w_theta)
+            out.update(cost=c.value, dtw_xy=c.dtw_xy, dtw_theta=c.dtw_theta)
+        except ParcelfitError as exc:
+            out["status"], details["message"] = "failed", f"cost not computable: {exc}"
+    store.finish(row.id, wall_time=result.wall_time, details=details, **out)
+    return out
+
+
+def _executor(
+    study: Study,
+    executor: str | None,
+    scheduler: str | None,
+    workers: int | None,
+) -> Executor:
+    """The executor the command line (first) or the study file asks for; local by default."""
+    return make_executor(
+        executor or study.executor.get("kind", "local"),
+        workers=workers or study.executor.get("workers"),
+        scheduler=scheduler or study.executor.get("scheduler"),
+    )
+
+
+@dataclass(frozen=True)
+class _Opened:
+    """What `Calibration.prepare` opened and read: the folder's lock, the store, the reference
+    runs and the simulator."""
+
+    lock: FileLock
+    store: Store
+    reference: ReferenceSelection
+    val_reference: ReferenceSelection | None
+    simulator: Simulator
+
+
+class Calibration:
+    """One study folder: its store, references, optimiser and executor (see the module doc).
+
+    ``executor`` (serial, local or dask), ``scheduler`` and ``workers`` override the study
+    file's ``executor``; ``progress`` receives a `ProgressEvent` after every result. When the
+    study stops it writes its results (``results.json``, `parcelfit.study.results`: the
+    references, validations and surrogate the report renders) and, with ``figures``, the study
+    figures (`parcelfit.study.plots.study_figures`) and, with ``key_frames`` too, the
+    recommended run's key frames (MuJoCo studies: one more simulation; ``animation`` adds
+    ``figures/run.gif``).
+
+    Constructing one keeps its inputs and touches nothing: `run` opens the folder, reads the
+    data and builds the simulator (through `prepare`), runs the study and closes the folder.
+    ``store``, ``reference``, ``val_reference`` and ``simulator`` exist from `prepare` on; a
+    calibration runs once (a new one on the same folder resumes it)."""
+
+    def __init__(
+        self,
+        study: Study,
+        folder: str | Path,
+        *,
+        executor: str | None = None,
+        scheduler: str | None = None,
+        workers: int | None = None,
+        progress: ProgressCallback | None = None,
+        figures: bool = True,
+        key_frames: bool = True,
+        animation: bool = False,
+    ) -> None:
+        self.study = study
+        self.folder = Path(folder)
+        self.figures = figures
+        self.key_frames = key_frames
+        self.animation = animation
+        self.fit_case = TestCase(study.rig, study.consignment, study.fit_setting)
+        self.val_case = (
+            None
+            if study.validation_setting is None
+            else TestCase(study.rig, study.consignment, study.validation_setting)
+        )
+        self._executor_args = (executor, scheduler, workers)
+        self.progress = progress or ignore_progress
+        self.last_validation: bool | None = None
+        self._validations: dict[int, ValidationRecord] = {}  # by store row id
+        self._opened: _Opened | None = None
+        self._closed = False
+
+    @cached_property
+    def bo(self) -> Sampler:
+        """The study's optimiser (made on first use; `run` tells it the stored evaluations)."""
+        study = self.study
+        return make_sampler(
+            study.sampler,
+            study.space,
+            batch_size=study.batch_size,
+            seed=study.seed,
+            settings=study.bo,
+            n_initial=study.initial,
+        )
+
+    def prepare(self) -> None:
+        """Open the study: create and lock the folder (until `close`), open its store and
+        refuse one made from a different study file, record the study and where it came from,
+        load the dataset, select the fitting and validation reference runs and build the
+        simulator. `run` calls it; once prepared, calling it again does nothing. Whatever it
+        opened is closed again if it fails."""
+        if self._closed:
+            raise RuntimeError("this calibration has run; make a new one to resume the study")
+        if self._opened is not None:
+            return
+        study = self.study
+        check_writable(self.folder, (STORE_FILE,))
+        try:
+            self.folder.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise ParcelfitError(
+                f"cannot create the study folder ({exc.strerror or exc})",
+                file=self.folder,
+                fix="choose a writable output folder",
+            ) from None
+        lock = lock_folder(self.folder, "a calibration")  # released by close()
+        store = None
+        try:
+            store = Store(self.folder / STORE_FILE)
+            known = store.get_meta("fingerprint")
+            if known is not None and known != study.fingerprint:
+                raise ParcelfitError(
+                    "this folder holds a study made from a different study file",
+                    file=self.folder,
+                    fix="use a new output folder, or restore the study file it was made from",
+                )
+            if known is None:
+                store.set_meta("fingerprint", study.fingerprint)
+            # where the study came from, so a report can find its file and data again
+            store.write_source(
+                SourceRecord(
+                    study_file=None if study.path is None else str(study.path),
+                    dataset=str(Path(study.dataset).resolve()),
+                    rig=study.rig,
+                    consignment=study.consignment,
+                )
+            )
+            dataset = load_dataset(study.dataset)
+            reference = select_reference(dataset[self.fit_case])
+            val_reference = (
+                None if self.val_case is None else select_reference(dataset[self.val_case])
+            )
+            store.set_meta("reference_run", reference.reference_id)
+            simulator = make_simulator(study.simulator)
+            recorded = store.read_study()
+            if recorded is None or not recorded.optimizer.recorded:
+                # the study and its optimiser as it runs (so figures refit its surrogate with
+                # the same settings); a store of an earlier version gets the settings in use
+                # from now on
+                store.write_study(study_record(study, self.bo))
+        except BaseException:
+            if store is not None:
+                store.close()
+            lock.release()
+            raise
+        self._opened = _Opened(lock, store, reference, val_reference, simulator)
+
+    def _open(self) -> _Opened:
+        if self._opened is None:
+            raise RuntimeError("the calibration is not open: call run() (or prepare() first)")
+        return self._opened
+
+    @property
+    def store(self) -> Store:
+        """The study's store (open from `prepare` to `close`)."""
+        return self._open().store
+
+    @property
+    def reference(self) -> ReferenceSelection:
+        """The fitting test case's reference run selection (from `prepare` on)."""
+        return self._open().reference
+
+    @property
+    def val_reference(self) -> ReferenceSelection | None:
+        """The validation test case's reference run selection (None without validation)."""
+        return self._open().val_reference
+
+    @property
+    def simulator(self) -> Simulator:
+        """The study's simulator (built by `prepare`)."""
+        return self._open().simulator
+
+    def close(self) -> None:
+        """Close the store and release the folder's lock (`run` does this when it ends);
+        nothing to do before `prepare`."""
+        if self._opened is None or self._closed:
+            return
+        self._opened.store.close()
+        self._opened.lock.release()
+        self._closed = True
+
+    # -- helpers -----------------------------------------------------------------------------
+    def _full_params(self, fitted: Mapping[str, float]) -> dict[str, float]:
+        return {**self.study.fixed, **fitted}
+
+    def _report(self, iteration: int, running: int, message: str) -> None:
+        best = self.bo.best()
+        done = self.bo.n_told  # every finished evaluation is told exactly once
+        self.progress(
+            ProgressEvent(
+                "calibration",
+                message,
+                done=done,
+                total=self.study.budget,
+                iteration=iteration,
+                running=running,
+                best_cost=None if best is None else best[1],
+                last_validation=self.last_validation,
+            )
+        )
+
+    def _record_fit(self, row: Evaluation, result: SimResult) -> None:
+        outcome = record_result(
+            self.store,
+            self.folder,
+            row,
+            result,
+            self.reference,
+            self.study.w_xy,
+            self.study.w_theta,
+        )
+        self.bo.tell(row.params, outcome["cost"] if outcome["status"] == "ok" else None)
+
+    def _run_rows(self, rows: list[Evaluation], executor: Executor) -> None:
+        tasks = [
+            Task(self._full_params(r.params), self.fit_case, f"fit-{r.iteration:03d}-{r.slot:02d}")
+            for r in rows
+        ]
+        remaining = len(rows)
+        for i, result in executor.simulate(self.simulator, tasks):
+            self._record_fit(rows[i], result)
+            remaining -= 1
+            self._report(rows[i].iteration, remaining, f"{result.status.value}: {tasks[i].run_id}")
+
+    def _validate(self, iteration: int, executor: Executor) -> bool | None:
+        best = self.bo.recommend()
+        if best is None or self.val_case is None or self.val_reference is None:
+            return None
+        params, _ = best
+        (row_id,) = self.store.add_pending(
+            "validation", iteration, [params], self.val_case.speed_setting, [0]
+        )
+        return self._run_validation(row_id, iteration, params, executor)
+
+    def _run_validation(
+        self,
+        row_id: int,
+        iteration: int,
+        params: Mapping[str, float],
+        executor: Executor,
+    ) -> bool:
+        """Simulate a stored (pending) validation row and record its verdict."""
+        assert self.val_case is not None and self.val_reference is not None
+        task = Task(self._full_params(params), self.val_case, f"validation-{iteration:03d}")
+        ((_, result),) = list(executor.simulate(self.simulator, [task]))
+        run_file = None
+        if result.ok and result.run is not None:
+            run_file = f"runs/validation-{iteration:03d}.csv"
+            write_trajectory(result.run.trajectory, self.folder / run_file)
+        record = validation_record(
+            self.val_reference,
+            result.run.trajectory if run_file is not None and result.run is not None else None,
+            None if result.run is None else result.run.transit_time,
+            status=result.status.value,
+            message=result.diagnostics.get("message"),
+            params=params,
+            after_iteration=iteration,
+            run_file=run_file,
+        )
+        self.store.finish(
+            row_id,
+            status=result.status.value,
+            transit_time=record.transit_time,
+            wall_time=result.wall_time,
+            run_file=run_file,
+            details=record.details(),
+        )
+        self._validations[row_id] = record
+        passed = record.passed
+        self.write_results()
+        self.last_validation = passed
+        self._report(
+            iteration,
+            0,
+            f"validation after iteration {iteration}: {'passed' if passed else 'failed'}",
+        )
+        return passed
+
+    # -- the loop ----------------------------------------------------------------------------
+    def run(self) -> CalibrationResult:
+        """Run (or resume) the study until validation passes or the budget is spent; then write
+        the results (`parcelfit.study.results`), the study figures and the key frames, close
+        the store and release the folder. Opens the study first (`prepare`)."""
+        try:
+            self.prepare()
+            result = self._run()
+            result = self._finish(result)
+        finally:
+            self.close()
+        return result
+
+    # -- what the study concluded, for the report --------------------------------------------
+    def _validation_records(self) -> list[ValidationRecord]:
+        """Every finished validation's record: those run now as they were made, earlier ones
+        (a resumed study) as the results file has them, else judged again from their stored run
+        files (no simulation; a run file keeps every digit, so the record is the one the study
+        made; run files written before that kept 9 significant digits)."""
+        out = []
+        rows = [r for r in self.store.evaluations("validation") if r.status != "pending"]
+        earlier = None
+        if any(r.id not in self._validations for r in rows):
+            kept = self._earlier_results()
+            earlier = {} if kept is None else {v.after_iteration: v for v in kept.validations}
+        for row in rows:
+            if self.val_reference is None:
+                continue
+            known = None if earlier is None else earlier.get(row.iteration)
+            if (
+                row.id not in self._validations
+                and known is not None
+                and (known.run_file, known.params) == (row.run_file, row.params)
+            ):
+                self._validations[row.id] = known
+            if row.id not in self._validations:
+                traj = None
+                if row.run_file is not None and (self.folder / row.run_file).is_file():
+                    traj = read_trajectory(self.folder / row.run_file)
+                self._validations[row.id] = validation_record(
+                    self.val_reference,
+                    traj,
+                    row.transit_time,
+                    status=row.status,
+                    message=row.details.get("message"),
+                    params=row.params,
+                    after_iteration=row.iteration,
+                    run_file=row.run_file,
+                )
+            out.append(self._validations[row.id])
+        return out
+
+    def surrogate(self) -> SurrogateRecord | None:
+        """The GP surrogate of the finished fitting evaluations, refitted with the optimiser
+        settings the store records, and its partial dependence curves (None without a study
+        record)."""
+        from parcelfit.study.plots import dependence_curves, surrogate_optimizer
+
+        record = self.store.read_study()
+        if record is None or not record.parameters:
+            return None
+        bo = surrogate_optimizer(record, self.store.evaluations("fit"))
+        curves = dependence_curves(bo)
+        return SurrogateRecord(
+            record.optimizer, bo.n_told, None if curves is None else tuple(curves)
+        )
+
+    def write_results(
+        self,
+        stop_reason: str | None = None,
+        *,
+        surrogate: SurrogateRecord | None = None,
+        key_frames: KeyFramesRecord | None = None,
+        figures: tuple[Path, ...] = (),
+    ) -> Path:
+        """Write ``results.json``: the references, every validation, the surrogate (refitted
+        here unless given), the key frames and figures; returns its path."""
+        references = {"fit": ReferenceRecord.from_selection(self.reference)}
+        if self.val_reference is not None:
+            references["validation"] = ReferenceRecord.from_selection(self.val_reference)
+        return write_results(
+            self.folder,
+            new_results(
+                references,
+                self._validation_records(),
+                stop_reason=stop_reason,
+                surrogate=surrogate or self.surrogate(),
+                key_frames=key_frames,
+                figures=[p.relative_to(self.folder).as_posix() for p in figures],
+            ),
+        )
+
+    def _finish(self, result: CalibrationResult) -> CalibrationResult:
+        """The results, study figures and key frames of a stopped study."""
+        last = -1 if result.last_iteration is None else result.last_iteration
+        surrogate = self.surrogate()
+        figures: list[Path] = []
+        key_frames = None
+        if self.figures:
+            from parcelfit.study.plots import study_figures
+
+            self._report(last, 0, "writing the study figures")
+            curves = None if surrogate is None or surrogate.curves is None else surrogate.curves
+            figures += study_figures(self.folder, None if curves is None else list(curves))
+            if self.key_frames and result.best_params is not None:
+                key_frames, drawn = self._key_frames(result.best_params, last)
+                figures += drawn
+        self.write_results(
+            result.stop_reason, surrogate=surrogate, key_frames=key_frames, figures=tuple(figures)
+        )
+        return dataclasses.replace(result, figures=tuple(figures))
+
+    def _key_frames(
+        self, params: Mapping[str, float], iteration: int
+    ) -> tuple[KeyFramesRecord, list[Path]]:
+        """Draw the recommended run's key frames (MuJoCo only: one more simulation, at the
+        validation case if there is one) into ``figures/``; reused while the same."""
+        from parcelfit.figures import save_figure
+        from parcelfit.sim.mujoco import MujocoSimulator
+
+        case = self.val_case or self.fit_case
+        record = KeyFramesRecord(case.label, dict(params))
+        if not isinstance(self.simulator, MujocoSimulator):
+            return replace(record, note="Key frames are drawn for the MuJoCo backend only."), []
+        stem = self.folder / "figures" / "key-frames"
+        gif = self.folder / "figures" / "run.gif"
+        earlier = self._earlier_results()
+        kept = None if earlier is None else earlier.key_frames
+        if (
+            kept is not None
+            and kept.image is not None
+            and (kept.case, kept.params) == (record.case, record.params)
+            and stem.with_suffix(".png").is_file()
+            and (not self.animation or (kept.animation is not None and gif.is_file()))
+        ):
+            return kept, [stem.with_suffix(".png"), stem.with_suffix(".svg")]
+        self._report(iteration, 1, "drawing the key frames of the calibrated run")
+        from parcelfit.sim.mujoco.render import render_key_frames
+
+        try:
+            drawn = render_key_frames(
+                self.simulator,
+                self._full_params(params),
+                case,
+                animation=gif if self.animation else None,
+            )
+        except Exception as exc:  # a figure must not cost the study its results
+            return replace(record, note=f"The key-frame run failed: {exc}"), []
+        if drawn.figure is None:
+            return replace(record, note=f"The key-frame run ended {drawn.status}."), []
+        paths = save_figure(drawn.figure, stem)
+        return replace(
+            record,
+            image=paths[0].relative_to(self.folder).as_posix(),
+            animation=None
+            if drawn.animation is None
+            else drawn.animation.relative_to(self.folder).as_posix(),
+        ), paths
+
+    def _earlier_results(self) -> StudyResults | None:
+        """The results an earlier run of this folder wrote (None if none or unreadable)."""
+        try:
+            return read_results(self.folder)
+        except ParcelfitError:
+            return None
+
+    def _run(self) -> CalibrationResult:
+        study = self.study
+        # evaluations an earlier version stored as failed because their worker or the Dask
+        # scheduler was lost (not because the simulation failed) are run again
+        lost = [
+            r.id
+            for r in self.store.evaluations()
+            if r.status == "failed"
+            and str(r.details.get("message", "")).startswith(LOST_WORKER_MESSAGES)
+        ]
+        if lost:
+            self.store.reopen(lost)
+        rows = self.store.evaluations("fit")
+        for r in rows:  # replay: the optimiser learns every finished evaluation again
+            if r.status != "pending":
+                self.bo.tell(r.params, r.cost if r.status == "ok" else None)
+        stored = self.store.evaluations("validation")
+        validated = {v.iteration for v in stored}
+        already_passed = False
+        for v in stored:
+            if v.status == "pending":
+                continue
+            self.last_validation = bool(v.details.get("passed"))
+            already_passed = already_passed or self.last_validation
+        pending = [r for r in rows if r.status == "pending"]
+        if already_passed and not pending:
+            return self._result("validation passed")
+        iteration = max((r.iteration for r in rows), default=-1)
+        if (self._executor_args[0] or study.executor.get("kind")) == "dask":
+            self._report(iteration, 0, "connecting to the Dask scheduler, waiting for a worker")
+        executor = _executor(study, *self._executor_args)
+        try:
+            if already_passed:
+                # a finished study whose record lost fitting runs (a lost worker): complete the
+                # record, no new iterations
+                self._report(iteration, len(pending), f"resuming {len(pending)} lost simulations")
+                self._run_rows(pending, executor)
+                self.last_validation = True
+                return self._result("validation passed")
+            # a validation interrupted by a kill is run again before anything else
+            for v in stored:
+                if v.status == "pending" and self.val_case is not None:
+                    self._report(
+                        v.iteration, 1, f"resuming the validation after iteration {v.iteration}"
+                    )
+                    if self._run_validation(v.id, v.iteration, v.params, executor):
+                        return self._result("validation passed")
+            while True:
+                if pending:
+                    self._report(
+                        iteration, len(pending), f"resuming {len(pending)} pending simulations"
+                    )
+                    self._run_rows(pending, executor)
+                    pending = []
+                elif (done := len(self.store.evaluations("fit"))) < study.budget:
+                    iteration += 1
+                    n = min(
+                        study.initial if iteration == 0 else study.batch_size, study.budget - done
+                    )
+                    batch = self.bo.ask(n)
+                    seeds = [study.seed * 100003 + done + k for k in range(n)]
+                    self.store.add_pending("fit", iteration, batch, study.fit_setting, seeds)
+                    new_rows = [
+                        r for r in self.store.evaluations("fit") if r.iteration == iteration
+                    ]
+                    what = (
+                        "initial design (iteration 0)"
+                        if iteration == 0
+                        else f"iteration {iteration}"
+                    )
+                    self._report(iteration, n, f"{what}: {n} simulations")
+                    self._run_rows(new_rows, executor)
+                else:
+                    break
+                due = (
+                    iteration >= 1
+                    and iteration % study.validate_every == 0
+                    and iteration not in validated
+                )
+                if due:
+                    validated.add(iteration)
+                    if self._validate(iteration, executor):
+                        return self._result("validation passed")
+            if (
+                self.val_case is not None
+                and iteration not in validated
+                and self._validate(iteration, executor)
+            ):
+                return self._result("validation passed")
+            return self._result("budget spent")
+        finally:
+            executor.close()
+
+    def _result(self, reason: str) -> CalibrationResult:
+        best = self.bo.recommend()
+        fits = self.store.evaluations("fit")
+        self.store.set_meta("stop_reason", reason)
+        if best is not None:
+            self.store.write_recommended(RecommendedRecord(best[0], best[1]))
+        return CalibrationResult(
+            best_params=None if best is None else best[0],
+            best_cost=None if best is None else best[1],
+            evaluations=len(fits),
+            last_iteration=max((r.iteration for r in fits), default=None),
+            validated=self.last_validation,
+            stop_reason=reason,
+            folder=self.folder,
+        )
+
+
+def record_summary(record: StudyRecord) -> dict[str, Any]:
+    """A study record as JSON (bounds SI), its optimiser as ``optimizer``: ``sampler``,
+    ``settings`` (BOSettings fields, None without a GP), ``recorded`` (False for a store of an
+    earlier version: the defaults stand in) and ``note`` (None, or what stands in)."""
+    doc = record.to_json()
+    del doc["sampler"], doc["bo_settings"]
+    doc["optimizer"] = {**record.optimizer.to_json(), "note": record.optimizer.note}
+    return doc
+
+
+def study_status(folder: str | Path) -> dict[str, Any]:
+    """A summary of a study folder (running or finished), JSON-ready.
+
+    Keys: ``study`` (its description, `record_summary`), ``dataset`` and ``synthetic`` (True for SYNTHETIC data,
+    None when the dataset is not found), ``reference_run``, ``stop_reason`` (None while
+    running), ``evaluations``, ``pending``, ``by_status`` (evaluations per status),
+    ``last_iteration`` (iterations are numbered one way everywhere: 0 is the initial design,
+    k >= 1 the k-th batch the optimiser chose; None before the first), ``recommended`` (the
+    parameters the study validates and reports, with their cost and the iteration they were
+    evaluated in; set when the study stops), ``lowest_cost`` (the evaluation with the lowest
+    single cost), ``validations`` (each with the iteration it followed, its status and
+    verdict), and ``units``: parameter values are SI, in the unit given per parameter.
+    """
+    from parcelfit.sim.params import si_unit
+
+    folder = Path(folder)
+    path = folder / STORE_FILE
+    if not path.is_file():
+        inner = folder / "calibration" / STORE_FILE
+        raise ParcelfitError(
+            f"no {STORE_FILE} here"
+            + ("; the study is in the calibration/ subfolder" if inner.is_file() else ""),
+            file=folder,
+            fix=f"point at {inner.parent}"
+            if inner.is_file()
+            else "point at a study's output folder",
+        )
+    store = Store(path, readonly=True)
+    try:
+        fits = store.evaluations("fit")
+        vals = store.evaluations("validation")
+        record, source = store.read_study(), store.read_source() or SourceRecord()
+        reference_run, stop_reason = store.get_meta("reference_run"), store.get_meta("stop_reason")
+        recommended = store.read_recommended()
+    finally:
+        store.close()
+    ok = [e for e in fits if e.status == "ok" and e.cost is not None and math.isfinite(e.cost)]
+    lowest = min(ok, key=lambda e: e.cost) if ok else None  # type: ignore[arg-type, return-value]
+    names = list(record.parameters if record else (lowest.params if lowest else []))
+    return {
+        "study": None if record is None else record_summary(record),
+        "dataset": source.dataset,
+        "synthetic": is_synthetic(source.dataset) if source.dataset else None,
+        "reference_run": reference_run,
+        "stop_reason": stop_reason,
+        "evaluations": len(fits),
+        "pending": sum(e.status == "pending" for e in fits),
+        "by_status": {
+            s: sum(e.status == s for e in fits) for s in sorted({e.status for e in fits})
+        },
+        "last_iteration": max((e.iteration for e in fits), default=None),
+        "recommended": None
+        if recommended is None
+        else {
+            **recommended.to_json(),
+            "iteration": next((e.iteration for e in fits if e.params == recommended.params), None),
+        },
+        "lowest_cost": None
+        if lowest is None
+        else {"params": lowest.params, "cost": lowest.cost, "iteration": lowest.iteration},
+        "validations": [
+            {"after_iteration": v.iteration, "status": v.status, "passed": v.details.get("passed")}
+            for v in vals
+        ],
+        "units": {**{n: si_unit(n) for n in names}, "cost": "-"},
+    }

@@ -1,0 +1,590 @@
+"""What a calibration concluded, written for the report: ``results.json`` in the study folder.
+
+The calibration (`parcelfit.study.calibration`) writes this file after every validation and
+when it stops; the report renders it and computes nothing of its own. It holds
+
+* the reference runs the study used (fitting and validation test case): the distance matrices
+  behind the choice and the prepared real runs (`ReferenceRecord`);
+* every validation: its verdict by the published criteria and the stricter band test, the
+  prepared simulated run and the band (`ValidationRecord`);
+* the GP surrogate's partial dependence curves, refitted with the optimiser settings the store
+  records (`SurrogateRecord`);
+* the key frames of the calibrated run (MuJoCo studies, `KeyFramesRecord`) and the figures
+  written into ``figures/``.
+
+The file's schema is documented in docs/data.md (Study results); units are SI throughout (m,
+rad, s; squared DTW distances in m^2 and rad^2). `read_results` reads it, `write_results`
+writes it atomically. The demo's ``stricter-criterion.json`` holds one `ReferenceRecord` and one
+`ValidationRecord` in the same form.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from parcelfit import __version__
+from parcelfit.errors import ParcelfitError
+from parcelfit.metrics import (
+    MeanDistanceCheck,
+    ReferenceSelection,
+    TransitTimeCheck,
+    Validation,
+    validate,
+)
+from parcelfit.metrics.envelope import EnvelopeCheck, envelope_band
+from parcelfit.runs import Trajectory
+from parcelfit.study.store import OptimizerRecord
+
+RESULTS_FILE = "results.json"
+FORMAT = "parcelfit-study-results"
+VERSION = 1
+
+
+def _list(a: np.ndarray | Sequence[float]) -> Any:
+    """An array as (nested) lists of floats, for JSON."""
+    return np.asarray(a, dtype=float).tolist()
+
+
+def _array(v: Any) -> np.ndarray:
+    return np.asarray(v, dtype=float)
+
+
+@dataclass(frozen=True, eq=False)
+class ReferenceRecord:
+    """A test case's reference run as the study chose it (method section 4): the run ids, the
+    chosen index, the real transit times [s], the squared distance matrices (``d_time`` [s^2],
+    ``d_xy`` [m^2], ``d_theta`` [rad^2], ``d_combined`` normalised), their largest entries, and
+    the prepared real runs (``xy_series``: (n, 2) arrays [m], ``theta_series`` [rad])."""
+
+    case: str
+    run_ids: tuple[str, ...]
+    index: int
+    transit_times: tuple[float | None, ...]
+    uses_time: bool
+    d_time: np.ndarray
+    d_xy: np.ndarray
+    d_theta: np.ndarray
+    d_combined: np.ndarray
+    max_time: float
+    max_xy: float
+    max_theta: float
+    xy_series: tuple[np.ndarray, ...]
+    theta_series: tuple[np.ndarray, ...]
+
+    @property
+    def reference_id(self) -> str:
+        """Id of the chosen reference run."""
+        return self.run_ids[self.index]
+
+    @classmethod
+    def from_selection(cls, sel: ReferenceSelection) -> ReferenceRecord:
+        """The record of a selection."""
+        return cls(
+            case=sel.case.label,
+            run_ids=tuple(sel.run_ids),
+            index=sel.index,
+            transit_times=tuple(sel.transit_times),
+            uses_time=sel.uses_time,
+            d_time=sel.d_time,
+            d_xy=sel.d_xy,
+            d_theta=sel.d_theta,
+            d_combined=sel.d_combined,
+            max_time=sel.max_time,
+            max_xy=sel.max_xy,
+            max_theta=sel.max_theta,
+            xy_series=tuple(sel.xy_series),
+            theta_series=tuple(sel.theta_series),
+        )
+
+    def to_json(self) -> dict[str, Any]:
+        """The stored form."""
+        return {
+            "case": self.case,
+            "run_ids": list(self.run_ids),
+            "reference_run": self.reference_id,
+            "index": self.index,
+            "transit_times_s": list(self.transit_times),
+            "uses_transit_time": self.uses_time,
+            "d_time_s2": _list(self.d_time),
+            "d_xy_m2": _list(self.d_xy),
+            "d_theta_rad2": _list(self.d_theta),
+            "d_combined": _list(self.d_combined),
+            "max_d_time_s2": self.max_time,
+            "max_d_xy_m2": self.max_xy,
+            "max_d_theta_rad2": self.max_theta,
+            "prepared_runs": [
+                {"x_m": _list(xy[:, 0]), "y_m": _list(xy[:, 1]), "theta_rad": _list(th)}
+                for xy, th in zip(self.xy_series, self.theta_series, strict=True)
+            ],
+        }
+
+    @classmethod
+    def from_json(cls, doc: Mapping[str, Any]) -> ReferenceRecord:
+        """Read the stored form."""
+        runs = doc["prepared_runs"]
+        return cls(
+            case=str(doc["case"]),
+            run_ids=tuple(str(r) for r in doc["run_ids"]),
+            index=int(doc["index"]),
+            transit_times=tuple(None if t is None else float(t) for t in doc["transit_times_s"]),
+            uses_time=bool(doc["uses_transit_time"]),
+            d_time=_array(doc["d_time_s2"]),
+            d_xy=_array(doc["d_xy_m2"]),
+            d_theta=_array(doc["d_theta_rad2"]),
+            d_combined=_array(doc["d_combined"]),
+            max_time=float(doc["max_d_time_s2"]),
+            max_xy=float(doc["max_d_xy_m2"]),
+            max_theta=float(doc["max_d_theta_rad2"]),
+            xy_series=tuple(np.column_stack([_array(r["x_m"]), _array(r["y_m"])]) for r in runs),
+            theta_series=tuple(_array(r["theta_rad"]) for r in runs),
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class BandRecord:
+    """The stricter criterion's band along the travelled distance: ``grid`` x [m], the lateral
+    band ``y_low``..``y_high`` [m] and the heading band ``theta_low``..``theta_high`` [rad]."""
+
+    grid: np.ndarray
+    y_low: np.ndarray
+    y_high: np.ndarray
+    theta_low: np.ndarray
+    theta_high: np.ndarray
+
+    def to_json(self) -> dict[str, Any]:
+        """The stored form."""
+        return {
+            "x_m": _list(self.grid),
+            "y_low_m": _list(self.y_low),
+            "y_high_m": _list(self.y_high),
+            "theta_low_rad": _list(self.theta_low),
+            "theta_high_rad": _list(self.theta_high),
+        }
+
+    @classmethod
+    def from_json(cls, doc: Mapping[str, Any]) -> BandRecord:
+        """Read the stored form."""
+        keys = ("x_m", "y_low_m", "y_high_m", "theta_low_rad", "theta_high_rad")
+        return cls(*(_array(doc[k]) for k in keys))
+
+
+def _verdict_json(v: Validation) -> dict[str, Any]:
+    return {
+        "passed": v.passed,
+        "transit_time": asdict(v.transit_time),
+        "xy": asdict(v.xy),
+        "theta": asdict(v.theta),
+        "envelope": None if v.envelope is None else asdict(v.envelope),
+    }
+
+
+def _verdict_from_json(doc: Mapping[str, Any]) -> Validation:
+    def mean(d: Mapping[str, Any]) -> MeanDistanceCheck:
+        return MeanDistanceCheck(
+            str(d["quantity"]),
+            float(d["simulated_mean"]),
+            tuple(float(m) for m in d["real_means"]),
+            float(d["largest_real_mean"]),
+            bool(d["passed"]),
+        )
+
+    env = doc.get("envelope")
+    return Validation(
+        transit_time=TransitTimeCheck(**doc["transit_time"]),
+        xy=mean(doc["xy"]),
+        theta=mean(doc["theta"]),
+        envelope=None if env is None else EnvelopeCheck(**env),
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class ValidationRecord:
+    """One validation (method section 8): the test case, the iteration it followed (None for a
+    run that is not a study's), the parameters simulated (SI), the simulation's status and
+    message, its transit time [s] and run file (relative to the folder holding the record),
+    the verdict (None when the run failed or could not be compared), and the curves the report
+    plots: the prepared simulated run (``sim_xy`` (n, 2) [m], ``sim_theta`` [rad]) and the
+    stricter criterion's band (None with fewer than two real runs)."""
+
+    case: str
+    after_iteration: int | None
+    params: dict[str, float]
+    status: str
+    message: str | None
+    transit_time: float | None
+    run_file: str | None
+    verdict: Validation | None
+    sim_xy: np.ndarray | None = None
+    sim_theta: np.ndarray | None = None
+    band: BandRecord | None = None
+
+    @property
+    def passed(self) -> bool:
+        """True when the published criteria hold."""
+        return self.verdict is not None and self.verdict.passed
+
+    def details(self) -> dict[str, Any]:
+        """The verdict as the store's ``details`` of the validation row (message, passed, the
+        three criteria and the band test in SI)."""
+        out: dict[str, Any] = {"message": self.message, "passed": self.passed}
+        v = self.verdict
+        if v is not None:
+            out.update(
+                transit_time={
+                    k: getattr(v.transit_time, k) for k in ("simulated", "low", "high", "passed")
+                },
+                xy={k: getattr(v.xy, k) for k in ("simulated_mean", "largest_real_mean", "passed")},
+                theta={
+                    k: getattr(v.theta, k)
+                    for k in ("simulated_mean", "largest_real_mean", "passed")
+                },
+                # the stricter band test, reported beside the published verdict
+                envelope=None
+                if v.envelope is None
+                else {
+                    "inside_y": v.envelope.inside_y,
+                    "inside_theta": v.envelope.inside_theta,
+                    "worst_y_m": v.envelope.worst_y,
+                    "worst_theta_rad": v.envelope.worst_theta,
+                    "passed": v.envelope.passed,
+                },
+            )
+        return out
+
+    def to_json(self) -> dict[str, Any]:
+        """The stored form."""
+        return {
+            "case": self.case,
+            "after_iteration": self.after_iteration,
+            "params": dict(self.params),
+            "status": self.status,
+            "message": self.message,
+            "transit_time_s": self.transit_time,
+            "run_file": self.run_file,
+            "verdict": None if self.verdict is None else _verdict_json(self.verdict),
+            "simulated": None
+            if self.sim_xy is None or self.sim_theta is None
+            else {
+                "x_m": _list(self.sim_xy[:, 0]),
+                "y_m": _list(self.sim_xy[:, 1]),
+                "theta_rad": _list(self.sim_theta),
+            },
+            "band": None if self.band is None else self.band.to_json(),
+        }
+
+    @classmethod
+    def from_json(cls, doc: Mapping[str, Any]) -> ValidationRecord:
+        """Read the stored form."""
+        sim, band, verdict = doc.get("simulated"), doc.get("band"), doc.get("verdict")
+        after = doc.get("after_iteration")
+        transit = doc.get("transit_time_s")
+        return cls(
+            case=str(doc["case"]),
+            after_iteration=None if after is None else int(after),
+            params={str(k): float(v) for k, v in (doc.get("params") or {}).items()},
+            status=str(doc["status"]),
+            message=doc.get("message"),
+            transit_time=None if transit is None else float(transit),
+            run_file=doc.get("run_file"),
+            verdict=None if verdict is None else _verdict_from_json(verdict),
+            sim_xy=None
+            if sim is None
+            else np.column_stack([_array(sim["x_m"]), _array(sim["y_m"])]),
+            sim_theta=None if sim is None else _array(sim["theta_rad"]),
+            band=None if band is None else BandRecord.from_json(band),
+        )
+
+
+def validation_record(
+    reference: ReferenceSelection,
+    trajectory: Trajectory | None,
+    transit_time: float | None,
+    *,
+    status: str = "ok",
+    message: str | None = None,
+    params: Mapping[str, float] | None = None,
+    after_iteration: int | None = None,
+    run_file: str | None = None,
+) -> ValidationRecord:
+    """Validate a simulated run (``trajectory``, None when the simulation gave none; transit
+    time [s]) against the real runs behind ``reference`` and keep the curves the report plots.
+    A run that cannot be compared (it misses the regions, say) gets no verdict and a message."""
+    base = ValidationRecord(
+        case=reference.case.label,
+        after_iteration=after_iteration,
+        params=dict(params or {}),
+        status=status,
+        message=message,
+        transit_time=transit_time,
+        run_file=run_file,
+        verdict=None,
+    )
+    if trajectory is None:
+        return base
+    try:
+        verdict = validate(trajectory, transit_time, reference)
+        prepared = reference.comparison.prepare(trajectory)
+        band = None
+        if len(reference.xy_series) >= 2:
+            real = [
+                Trajectory(t=np.arange(len(xy), dtype=float), x=xy[:, 0], y=xy[:, 1], theta=th)
+                for xy, th in zip(reference.xy_series, reference.theta_series, strict=True)
+            ]
+            b = envelope_band(prepared, real)
+            band = BandRecord(b.grid, b.y_low, b.y_high, b.theta_low, b.theta_high)
+    except ParcelfitError as exc:
+        return replace(base, message=f"validation not computable: {exc}")
+    return replace(base, verdict=verdict, sim_xy=prepared.xy, sim_theta=prepared.theta, band=band)
+
+
+@dataclass(frozen=True, eq=False)
+class DependenceCurve:
+    """The GP's partial dependence of the cost on one parameter: ``values`` in catalogue units,
+    the predicted ``cost`` averaged over the other parameters and its averaged predictive
+    standard deviation ``sd``; ``transformed``: cost after the optimiser's output transform."""
+
+    name: str
+    values: np.ndarray
+    cost: np.ndarray
+    sd: np.ndarray
+    log: bool
+    transformed: bool = False
+
+    @property
+    def amplitude(self) -> float:
+        """How much the predicted cost changes across the parameter's range."""
+        return float(np.max(self.cost) - np.min(self.cost))
+
+    def indistinct(self) -> tuple[float, float]:
+        """The span of values whose predicted cost is within one (mean) predictive standard
+        deviation of the lowest: the values the surrogate cannot tell apart from the best."""
+        near = self.values[self.cost <= self.cost.min() + float(self.sd.mean())]
+        return float(near.min()), float(near.max())
+
+    def to_json(self) -> dict[str, Any]:
+        """The stored form."""
+        return {
+            "name": self.name,
+            "values": _list(self.values),
+            "cost": _list(self.cost),
+            "sd": _list(self.sd),
+            "log": self.log,
+            "transformed": self.transformed,
+        }
+
+    @classmethod
+    def from_json(cls, doc: Mapping[str, Any]) -> DependenceCurve:
+        """Read the stored form."""
+        return cls(
+            str(doc["name"]),
+            _array(doc["values"]),
+            _array(doc["cost"]),
+            _array(doc["sd"]),
+            bool(doc["log"]),
+            bool(doc.get("transformed", False)),
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class SurrogateRecord:
+    """The GP surrogate behind the identifiability test: the optimiser settings it was refitted
+    with (the store's record; `OptimizerRecord.note` says when defaults stood in), how many
+    finished fitting evaluations it learnt, and its partial dependence curves (None before two
+    evaluations succeeded)."""
+
+    optimizer: OptimizerRecord
+    evaluations: int
+    curves: tuple[DependenceCurve, ...] | None
+
+    def to_json(self) -> dict[str, Any]:
+        """The stored form."""
+        return {
+            "optimizer": self.optimizer.to_json(),
+            "evaluations": self.evaluations,
+            "curves": None if self.curves is None else [c.to_json() for c in self.curves],
+        }
+
+    @classmethod
+    def from_json(cls, doc: Mapping[str, Any]) -> SurrogateRecord:
+        """Read the stored form."""
+        curves = doc.get("curves")
+        return cls(
+            OptimizerRecord.from_json(doc["optimizer"]),
+            int(doc["evaluations"]),
+            None if curves is None else tuple(DependenceCurve.from_json(c) for c in curves),
+        )
+
+
+@dataclass(frozen=True)
+class KeyFramesRecord:
+    """The calibrated run drawn at a few instants: its test case, parameters (SI, fitted ones),
+    the figure and animation written (paths relative to the study folder, None if not), and
+    why there is no figure (``note``)."""
+
+    case: str
+    params: dict[str, float]
+    image: str | None = None
+    animation: str | None = None
+    note: str | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        """The stored form."""
+        return asdict(self)
+
+    @classmethod
+    def from_json(cls, doc: Mapping[str, Any]) -> KeyFramesRecord:
+        """Read the stored form."""
+        return cls(
+            str(doc["case"]),
+            {str(k): float(v) for k, v in (doc.get("params") or {}).items()},
+            doc.get("image"),
+            doc.get("animation"),
+            doc.get("note"),
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class StudyResults:
+    """Everything ``results.json`` holds (see the module docstring): when and by which parcelfit
+    version it was written (Unix time [s]), why the study stopped (None: written while it ran),
+    the reference runs by role (``fit``, ``validation``), the validations in order, the
+    surrogate, the key frames and the figures (paths relative to the study folder)."""
+
+    written_at: float
+    parcelfit: str
+    stop_reason: str | None
+    references: dict[str, ReferenceRecord]
+    validations: tuple[ValidationRecord, ...]
+    surrogate: SurrogateRecord | None = None
+    key_frames: KeyFramesRecord | None = None
+    figures: tuple[str, ...] = ()
+
+    def shown_validation(self) -> ValidationRecord | None:
+        """The validation a report shows: the last that passed, else the last one."""
+        passed = [v for v in self.validations if v.passed]
+        return passed[-1] if passed else (self.validations[-1] if self.validations else None)
+
+    def to_json(self) -> dict[str, Any]:
+        """The stored form."""
+        return {
+            "format": FORMAT,
+            "version": VERSION,
+            "parcelfit": self.parcelfit,
+            "written_at": self.written_at,
+            "stop_reason": self.stop_reason,
+            "references": {k: r.to_json() for k, r in self.references.items()},
+            "validations": [v.to_json() for v in self.validations],
+            "surrogate": None if self.surrogate is None else self.surrogate.to_json(),
+            "key_frames": None if self.key_frames is None else self.key_frames.to_json(),
+            "figures": list(self.figures),
+        }
+
+    @classmethod
+    def from_json(cls, doc: Mapping[str, Any]) -> StudyResults:
+        """Read the stored form."""
+        sur, kf = doc.get("surrogate"), doc.get("key_frames")
+        return cls(
+            written_at=float(doc["written_at"]),
+            parcelfit=str(doc["parcelfit"]),
+            stop_reason=doc.get("stop_reason"),
+            references={k: ReferenceRecord.from_json(r) for k, r in doc["references"].items()},
+            validations=tuple(ValidationRecord.from_json(v) for v in doc["validations"]),
+            surrogate=None if sur is None else SurrogateRecord.from_json(sur),
+            key_frames=None if kf is None else KeyFramesRecord.from_json(kf),
+            figures=tuple(str(f) for f in doc.get("figures") or ()),
+        )
+
+
+def new_results(
+    references: Mapping[str, ReferenceRecord],
+    validations: Sequence[ValidationRecord],
+    *,
+    stop_reason: str | None = None,
+    surrogate: SurrogateRecord | None = None,
+    key_frames: KeyFramesRecord | None = None,
+    figures: Sequence[str] = (),
+) -> StudyResults:
+    """Results stamped with this moment and this parcelfit version."""
+    return StudyResults(
+        time.time(),
+        __version__,
+        stop_reason,
+        dict(references),
+        tuple(validations),
+        surrogate,
+        key_frames,
+        tuple(figures),
+    )
+
+
+def write_json(path: Path, doc: Mapping[str, Any]) -> None:
+    """Write a JSON document atomically (a temporary file renamed into place)."""
+    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+    try:
+        tmp.write_text(json.dumps(doc), encoding="utf-8")
+        tmp.replace(path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def write_results(folder: str | Path, results: StudyResults) -> Path:
+    """Write ``results.json`` into the study folder; returns its path."""
+    path = Path(folder) / RESULTS_FILE
+    write_json(path, results.to_json())
+    return path
+
+
+def read_results(folder: str | Path) -> StudyResults | None:
+    """The study folder's results (None when it has none: a study stopped before writing them,
+    or one made by a parcelfit before results were written)."""
+    path = Path(folder) / RESULTS_FILE
+    if not path.is_file():
+        return None
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+        if doc.get("format") != FORMAT:
+            raise ValueError("not a parcelfit results file")
+        if int(doc.get("version", 0)) > VERSION:
+            raise ParcelfitError(
+                f"written by a newer parcelfit ({doc.get('parcelfit')}, results version "
+                f"{doc.get('version')})",
+                file=path,
+                fix="read it with that version, or rerun `parcelfit calibrate` to rewrite it",
+            )
+        return StudyResults.from_json(doc)
+    except ParcelfitError:
+        raise
+    except (OSError, ValueError, TypeError, KeyError, AttributeError) as exc:
+        raise ParcelfitError(
+            f"the study's results file is unreadable ({exc})",
+            file=path,
+            fix="rerun `parcelfit calibrate` on the study file: it rewrites the results "
+            "without simulating again",
+        ) from None
+
+
+__all__ = [
+    "FORMAT",
+    "RESULTS_FILE",
+    "VERSION",
+    "BandRecord",
+    "DependenceCurve",
+    "KeyFramesRecord",
+    "ReferenceRecord",
+    "StudyResults",
+    "SurrogateRecord",
+    "ValidationRecord",
+    "new_results",
+    "read_results",
+    "validation_record",
+    "write_json",
+    "write_results",
+]

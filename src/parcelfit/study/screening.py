@@ -1,0 +1,448 @@
+"""Screening runs (method.md section 6): designs simulated through the executors and the store.
+
+A screen file (YAML)::
+
+    name: e3-kpbw-screen
+    simulator: {backend: mujoco, rig: E3, consignment: KPBW}     # as in a study file
+    reference: {dataset: data, speed_setting: 2}                   # as in a study file
+    parameters: all              # all catalogue candidates of the consignment, or a list of names,
+                                 # or {name: [low, high]} (catalogue units; default: screening range)
+    fixed: {}                    # optional, catalogue units
+    stages: [fractional, full]   # fractional (resolution IV) -> full factorial on the survivors
+    soft_content: [E_Co, zeta_Co]   # optional third stage: survivors + these (polybag PB)
+    resolution: 4
+    centre_points: 0             # optional runs with every factor at mid-range, added to each stage
+    alpha: 0.05
+    max_full_factors: 6          # the full factorial keeps at most this many survivors (2^6 = 64 runs)
+    min_full_factors: 3          # ... and at least this many: fewer survivors are topped up with the
+                                 # next-largest effects (a 2- or 4-run design says nothing)
+    select: 4                    # parameters recommended for calibration
+    executor: {kind: local}      # or serial (in this process), or just executor: serial
+
+Responses of every run: DTW_xy [m] and DTW_theta [rad] between the simulated run and the
+reference run of the test case (the same preparation as the calibration cost), and the transit
+time [s]. After each stage the effects on DTW_xy and DTW_theta are analysed
+(`parcelfit.doe.analyse_effects`); a parameter survives if any of its effects is significant.
+Outputs in the screen folder: ``stageN-effects.csv``, ``stageN-pareto-<response>.png/.svg``,
+``stageN-design.csv`` (parameters in catalogue units and responses per run) and ``selection.yaml`` (the ranked
+recommendation with reasons, and the parameters with their ranges ready for a study file).
+
+The final selection ranks the last stage's parameters by their largest standardised effect, as
+the method asks ("by effect size, not blindly by significance"); the reasons say which effects
+were significant. A rerun resumes stage by stage and refuses a stage whose stored factors differ
+from the ones it would run now (use a new folder after changing the screen file).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import Annotated, Any
+
+import numpy as np
+import pandas as pd
+import yaml
+from pydantic import AfterValidator, BeforeValidator, Field
+
+from parcelfit.config import load_yaml
+from parcelfit.doe import (
+    EffectAnalysis,
+    analyse_effects,
+    decode,
+    fractional_factorial,
+    full_factorial,
+    pareto_chart,
+    select_parameters,
+    with_centre_points,
+)
+from parcelfit.errors import ParcelfitError
+from parcelfit.figures import save_figure
+from parcelfit.metrics import select_reference
+from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
+from parcelfit.runs import TestCase, load_dataset
+from parcelfit.schema import FileModel, Number, Pair, Text, Whole, or_default, parse
+from parcelfit.sim.executors import Task, make_executor
+from parcelfit.sim.factory import SimulatorConfig, SimulatorSection, content_kind, make_simulator
+from parcelfit.sim.params import (
+    SOFT,
+    content_parameters,
+    parameter,
+    parameters_for,
+    to_catalogue_units,
+)
+from parcelfit.study.calibration import record_result
+from parcelfit.study.folderlock import check_writable, lock_folder
+from parcelfit.study.store import Store
+from parcelfit.study.studyfile import (
+    ReferenceSection,
+    ScreenExecutorSection,
+    _to_si,
+    fixed_to_si,
+    reference_case,
+)
+
+RESPONSES = ("dtw_xy", "dtw_theta")
+_STAGES = ("fractional", "full")
+
+_Range = Annotated[
+    tuple[float, float] | None,
+    Pair(
+        what="[low, high] with low < high",
+        fix="write two numbers, or leave it empty for the screening range",
+        increasing=True,
+        nullable=True,
+    ),
+]
+
+
+def _parameters(value: Any) -> Any:
+    """``all`` -> None (every candidate), a list of names -> {name: None}, else as written."""
+    if value == "all":
+        return None
+    if isinstance(value, list):
+        return {str(n): None for n in value}
+    if value is None or isinstance(value, str):
+        raise ParcelfitError(
+            f"expected all, a list of names or {{name: [low, high]}}, got {value!r}",
+            fix="write parameters: all",
+        )
+    return value
+
+
+def _stages(value: Any) -> tuple[Any, ...]:
+    stages = tuple(value) if isinstance(value, list) else (value,)
+    if any(s not in _STAGES for s in stages):
+        raise ParcelfitError(f"unknown stages {list(stages)}", fix="use fractional and/or full")
+    return stages
+
+
+def _soft_list(value: Any) -> Any:
+    if not isinstance(value, list):
+        raise ParcelfitError(
+            f"expected a list of parameter names, got {value!r}",
+            fix="write e.g. soft_content: [E_Co, zeta_Co]",
+        )
+    return [str(n) for n in value]
+
+
+def _soft_parameter(name: str) -> str:
+    """A catalogue parameter that applies to soft contents (checked now, not after stage 1)."""
+    try:
+        parameter(name).range_for(SOFT)
+    except ParcelfitError as exc:
+        raise ParcelfitError(
+            exc.message,
+            fix=exc.fix or "name a soft-content parameter (see parcelfit params --consignment PB)",
+        ) from None
+    return name
+
+
+class ScreenFile(FileModel):
+    """A screen file as written (see the module docstring; ranges in catalogue units)."""
+
+    name: Annotated[str, Text()]
+    simulator: SimulatorSection
+    reference: ReferenceSection
+    parameters: Annotated[dict[Any, _Range] | None, BeforeValidator(_parameters)] = None
+    fixed: Annotated[dict[Any, Annotated[float, Number()]], or_default(dict)] = Field(
+        default_factory=dict
+    )
+    stages: Annotated[
+        tuple[str, ...], BeforeValidator(_stages), or_default(lambda: list(_STAGES))
+    ] = _STAGES  # before-validators run last-written first: the default, then the check
+    soft_content: Annotated[
+        tuple[Annotated[str, AfterValidator(_soft_parameter)], ...],
+        BeforeValidator(_soft_list),
+        or_default(list),
+    ] = ()
+    resolution: Annotated[int, Whole(ge=3, le=5)] = 4
+    centre_points: Annotated[int, Whole(ge=0, le=50)] = 0
+    alpha: Annotated[float, Number(ge=1e-6, le=0.5)] = 0.05
+    max_full_factors: Annotated[int, Whole(ge=2, le=10)] = 6
+    min_full_factors: Annotated[int, Whole(ge=1, le=10)] = 3
+    select: Annotated[int, Whole(ge=1)] = 4
+    executor: Annotated[ScreenExecutorSection, or_default(dict)] = Field(
+        default_factory=ScreenExecutorSection
+    )
+
+
+@dataclass(frozen=True)
+class Screen:
+    """A parsed screen file (SI units for the catalogue's parameters).
+
+    ``parameters`` are the first stage's factors; ``ranges`` holds their ranges and those of the
+    ``soft_content`` parameters of the last stage.
+    """
+
+    name: str
+    folder: Path
+    simulator: SimulatorConfig
+    parameters: tuple[str, ...]
+    ranges: Mapping[str, tuple[float, float]]
+    fixed: Mapping[str, float]
+    dataset: Path
+    case: TestCase
+    stages: tuple[str, ...]
+    soft_content: tuple[str, ...]
+    resolution: int
+    centre_points: int
+    alpha: float
+    max_full_factors: int
+    min_full_factors: int
+    select: int
+    executor: Mapping[str, Any] = field(default_factory=dict)
+
+
+def load_screen(path: str | Path) -> Screen:
+    """Read and check a screen file; ranges and fixed values are converted from catalogue units
+    to SI here (a parameter left empty takes the catalogue's screening range)."""
+    path = Path(path)
+    f = parse(ScreenFile, load_yaml(path), file=path)
+    folder = path.parent.resolve()
+    sim = f.simulator.to_config(folder)
+    backend = f.simulator.backend
+    dataset, rig, cons = reference_case(f.reference, f.simulator, path, folder)
+    kind = content_kind(sim)
+    spec = f.parameters
+    if spec is None:  # the consignment's candidates; its content's own are the soft_content stage
+        own = content_parameters(kind)
+        spec = {p.name: None for p in parameters_for(kind) if p not in own}
+    user: dict[str, tuple[float, float]] = {}
+    for name, bounds in spec.items():
+        if bounds is None:
+            r = _screening_range(str(name), kind, path, f"parameters.{name}")
+            user[str(name)] = (r.low, r.high)
+        else:
+            user[str(name)] = bounds
+    if len(user) < 2:
+        raise ParcelfitError(
+            "a screen needs at least two parameters",
+            file=path,
+            where="parameters",
+            fix="list two or more (or write parameters: all)",
+        )
+    for extra in f.soft_content:  # the last stage's extra factors, unless already listed
+        r = parameter(extra).range_for(SOFT)
+        user.setdefault(extra, (r.low, r.high))
+    ranges = {}
+    for name, (low, high) in user.items():
+        try:
+            ranges[name] = (_to_si(name, low, backend), _to_si(name, high, backend))
+        except ParcelfitError as exc:
+            raise ParcelfitError(
+                exc.message, file=path, where=f"parameters.{name}", fix=exc.fix
+            ) from None
+    fixed = fixed_to_si(f.fixed, backend, path)
+    return Screen(
+        name=f.name,
+        folder=folder,
+        simulator=sim,
+        parameters=tuple(str(n) for n in spec),
+        ranges=MappingProxyType(ranges),
+        fixed=MappingProxyType(fixed),
+        dataset=dataset,
+        case=TestCase(rig, cons, f.reference.speed_setting),
+        stages=f.stages,
+        soft_content=f.soft_content,
+        resolution=f.resolution,
+        centre_points=f.centre_points,
+        alpha=f.alpha,
+        max_full_factors=f.max_full_factors,
+        min_full_factors=f.min_full_factors,
+        select=f.select,
+        executor=MappingProxyType(f.executor.model_dump()),
+    )
+
+
+def _user(name: str, si_value: float) -> float:
+    """A value from SI back to its catalogue unit for the outputs (12 significant digits, so
+    that 0.35 mm does not come back as 0.35000000000000003)."""
+    return float(f"{float(to_catalogue_units(name, si_value)):.12g}")
+
+
+@dataclass(frozen=True)
+class StageResult:
+    """One stage: the factors, the analyses per response, the survivors."""
+
+    kind: str
+    factors: list[str]
+    analyses: list[EffectAnalysis]
+    survivors: list[str]
+
+
+def run_screen(
+    screen: Screen,
+    out: str | Path,
+    *,
+    executor: str | None = None,
+    workers: int | None = None,
+    progress: ProgressCallback | None = None,
+) -> tuple[list[StageResult], dict[str, Any]]:
+    """Run the screen's stages (resumable), write the outputs, return the stages and the selection.
+
+    ``executor`` (serial or local) and ``workers`` override the screen file's ``executor``;
+    ``progress`` receives a `ProgressEvent` per stage and per finished simulation (``done`` of
+    ``total`` counting the stage's simulations)."""
+    out = Path(out)
+    check_writable(out, ("screen.sqlite",))
+    out.mkdir(parents=True, exist_ok=True)
+    report = progress or ignore_progress
+
+    def say(message: str, done: int | None = None, total: int | None = None) -> None:
+        report(ProgressEvent("screening", message, done, total))
+
+    lock = lock_folder(out, "a screen")
+    try:
+        store = Store(out / "screen.sqlite")
+    except BaseException:
+        lock.release()
+        raise
+    reference = select_reference(load_dataset(screen.dataset)[screen.case])
+    simulator = make_simulator(screen.simulator)
+    runner = make_executor(
+        executor or screen.executor.get("kind", "local"),
+        workers=workers or screen.executor.get("workers"),
+    )
+    results: list[StageResult] = []
+    factors = list(screen.parameters)
+    try:
+        plan = list(screen.stages) + (["full"] if screen.soft_content else [])
+        for stage, kind in enumerate(plan):
+            if stage == len(screen.stages) and screen.soft_content:
+                factors = list(dict.fromkeys([*factors, *screen.soft_content]))
+            if kind == "full" and len(factors) > screen.max_full_factors:
+                say(
+                    f"stage {stage + 1}: {len(factors)} survivors, keeping the {screen.max_full_factors} strongest"
+                )
+                factors = factors[: screen.max_full_factors]
+            design = (
+                fractional_factorial(len(factors), screen.resolution)
+                if kind == "fractional"
+                else full_factorial(len(factors))
+            )
+            n_runs = len(design.matrix)
+            values = decode(
+                with_centre_points(design.matrix, screen.centre_points),
+                [screen.ranges[f] for f in factors],
+            )
+            rows = [e for e in store.evaluations("screen") if e.iteration == stage]
+            if rows and sorted(rows[0].params) != sorted(factors):
+                raise ParcelfitError(
+                    f"stage {stage + 1} was run over {sorted(rows[0].params)}, now it would be over {sorted(factors)}",
+                    file=out / "screen.sqlite",
+                    fix="use a new output folder after changing the screen file",
+                )
+            if not rows:
+                batch = [{f: float(v) for f, v in zip(factors, run, strict=True)} for run in values]
+                store.add_pending(
+                    "screen", stage, batch, screen.case.speed_setting, [0] * len(batch)
+                )
+                rows = [e for e in store.evaluations("screen") if e.iteration == stage]
+            todo = [r for r in rows if r.status == "pending"]
+            say(
+                f"stage {stage + 1} ({kind}, {len(factors)} factors): {len(rows)} runs, {len(todo)} to simulate"
+            )
+            tasks = [
+                Task({**screen.fixed, **r.params}, screen.case, f"screen-{stage}-{r.slot}")
+                for r in todo
+            ]
+            for k, (i, res) in enumerate(runner.simulate(simulator, tasks), start=1):
+                record_result(store, out, todo[i], res, reference)
+                say(
+                    f"{res.status.value}: {tasks[i].run_id} ({k} of {len(tasks)} done)",
+                    k,
+                    len(tasks),
+                )
+            rows = sorted(
+                (e for e in store.evaluations("screen") if e.iteration == stage),
+                key=lambda e: e.slot,
+            )
+            frame = pd.DataFrame(
+                [
+                    {
+                        **{f: _user(f, v) for f, v in zip(factors, values[r.slot], strict=True)},
+                        "status": r.status,
+                        "dtw_xy": r.dtw_xy,
+                        "dtw_theta": r.dtw_theta,
+                        "transit_time": r.transit_time,
+                    }
+                    for r in rows
+                ]
+            )
+            frame.to_csv(out / f"stage{stage + 1}-design.csv", index=False)
+            ok = frame["status"].eq("ok").to_numpy()
+            if ok.sum() <= len(factors):
+                first = next((r.details.get("message") for r in rows if r.status != "ok"), "")
+                raise ParcelfitError(
+                    f"stage {stage + 1}: only {int(ok.sum())} of {len(rows)} runs succeeded, too few to estimate "
+                    f"{len(factors)} effects (first failure: {first})",
+                    file=out / "screen.sqlite",
+                    fix="fix the failing simulations (see stageN-design.csv), then rerun",
+                )
+            analyses = []
+            run_ok, centre_ok = ok[:n_runs], ok[n_runs:]
+            for resp in RESPONSES:
+                y = frame[resp].to_numpy(dtype=float)
+                sub = design if run_ok.all() else _subset(design, run_ok)
+                centre = y[n_runs:][centre_ok] if screen.centre_points else None
+                a = analyse_effects(
+                    sub, factors, y[:n_runs][run_ok], name=resp, alpha=screen.alpha, centre=centre
+                )
+                analyses.append(a)
+                save_figure(pareto_chart(a), out / f"stage{stage + 1}-pareto-{resp}")
+            table = pd.concat(
+                [a.table.assign(response=a.response, method=a.method) for a in analyses]
+            )
+            table.to_csv(out / f"stage{stage + 1}-effects.csv", index=False)
+            significant = select_parameters(analyses, max_parameters=len(factors)).parameters
+            by_size = select_parameters(
+                analyses, max_parameters=len(factors), only_significant=False
+            ).parameters
+            top_up = [f for f in by_size if f not in significant]
+            survivors = significant + top_up[: max(0, screen.min_full_factors - len(significant))]
+            results.append(StageResult(kind, factors, analyses, survivors))
+            say(
+                f"stage {stage + 1}: {len(significant)} of {len(factors)} parameters have a significant effect"
+                + (
+                    f"; topped up to {len(survivors)} by effect size"
+                    if len(survivors) > len(significant)
+                    else ""
+                )
+            )
+            factors = survivors
+    finally:
+        runner.close()
+        store.close()
+        lock.release()
+    sel = select_parameters(
+        results[-1].analyses, max_parameters=screen.select, only_significant=False
+    )
+    doc = {
+        "screen": screen.name,
+        "test_case": screen.case.label,
+        "method": results[-1].analyses[0].method,
+        "selected": sel.parameters,
+        "reasons": sel.reasons,
+        "parameters": {p: [_user(p, v) for v in screen.ranges[p]] for p in sel.parameters},
+    }
+    (out / "selection.yaml").write_text(yaml.safe_dump(doc, sort_keys=False), encoding="utf-8")
+    return results, doc
+
+
+def _screening_range(name: str, kind: str, path: Path, where: str) -> Any:
+    """The catalogue's screening range of ``name`` for ``kind`` contents (catalogue units); an
+    unknown parameter, or one that does not apply, is an error naming the file and key."""
+    try:
+        return parameter(name).range_for(kind)
+    except ParcelfitError as exc:
+        raise ParcelfitError(
+            exc.message, file=path, where=where, fix=exc.fix or f"remove it from a {kind} screen"
+        ) from None
+
+
+def _subset(design: Any, keep: np.ndarray) -> Any:
+    from dataclasses import replace
+
+    return replace(design, matrix=design.matrix[keep])

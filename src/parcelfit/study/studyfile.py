@@ -1,0 +1,355 @@
+"""Study files: what to calibrate, against what, with which budget (YAML, validated on load).
+
+::
+
+    name: e3-kpbw                      # required
+    simulator:                         # required
+      backend: mujoco                  # mujoco | external | python
+      rig: E3                          # mujoco: bundled name or .yaml path (relative to this file)
+      consignment: KPBW                # mujoco: bundled name or .yaml path
+      timestep: 0.0016667              # mujoco, optional [s]
+      spacing: 0.03                    # mujoco, optional shell mesh spacing [m]
+      wall_limit: 600                  # optional, per simulation [s]
+      # external: solver.yaml          # external: solver description (parcelfit.sim.external)
+      # factory: package.module:make   # python: a callable returning a Simulator
+    parameters:                        # required: what to fit, in the catalogue's units
+      mu_d_BePa: [0.3, 0.6]
+      E_Pa: {low: 200, high: 1600, log: true}
+    fixed: {mu_s_MePa: 0.15}           # optional, catalogue units; the rest take defaults
+    reference:                         # required
+      dataset: data/e3                 # dataset folder, relative to this file
+      rig: E3                          # optional, default: simulator.rig
+      consignment: KPBW                # optional, default: simulator.consignment
+      speed_setting: 1
+    validation: {speed_setting: 2, every: 5}   # validation case and how often (iterations)
+    weights: {xy: 1.0, theta: 1.0}     # optional, equation (3)
+    batch_size: 4                      # optional
+    initial: 16                        # optional, Latin hypercube size
+    budget: 80                         # optional, most fitting evaluations
+    seed: 0                            # optional
+    optimizer: {sampler: gp, ucb_lambda: 2.0}   # optional: gp | published | tpe, BOSettings
+    executor: {kind: local, workers: 2}   # optional: local (processes) | serial (this process,
+                                       # for debugging; also executor: serial) | dask (scheduler: tcp://...)
+
+**A study file can run code.** ``backend: python`` imports the module named in ``factory`` and
+calls it, and ``backend: external`` runs the solver description's command: run only study (and
+screen) files you trust, as you would a script.
+
+Parameter values in the file are in the catalogue's user units (N/mm, N/mm^2, mm, g; see
+``parcelfit params``) for the catalogue's parameters and converted to SI on load; parameters a
+``python`` or ``external`` backend defines itself are taken as given.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Annotated, Any
+
+from pydantic import ConfigDict, Field, field_validator, model_validator
+
+from parcelfit.config import load_yaml
+from parcelfit.errors import ParcelfitError
+from parcelfit.optimize.bo import BOSettings
+from parcelfit.optimize.sampler import SAMPLERS
+from parcelfit.optimize.space import Dimension, Space
+from parcelfit.schema import (
+    Choice,
+    FileModel,
+    Flag,
+    Number,
+    Text,
+    Whole,
+    check_keys,
+    or_default,
+    parse,
+)
+from parcelfit.sim.factory import SimulatorConfig, SimulatorSection
+
+# -- the file's sections (file units; shared with screen files) ---------------------------------
+
+
+class ReferenceSection(FileModel):
+    """``reference``: the dataset folder (relative to the file), test case and speed setting."""
+
+    dataset: Annotated[str, Text()]
+    rig: Annotated[str | None, Text(nullable=True)] = None
+    consignment: Annotated[str | None, Text(nullable=True)] = None
+    speed_setting: Annotated[int, Whole(ge=1)]
+
+
+class ScreenExecutorSection(FileModel):
+    """``executor`` of a screen file: on this machine, local processes or serial (in this
+    process); ``executor: KIND`` is short for ``executor: {kind: KIND}``."""
+
+    kind: Annotated[str, Choice(("serial", "local"), what="executor")] = "local"
+    workers: Annotated[int | None, Whole(ge=1, nullable=True)] = None
+
+    @classmethod
+    def prepare(cls, data: Any) -> Any:
+        return {"kind": data} if isinstance(data, str) else data
+
+
+class ExecutorSection(ScreenExecutorSection):
+    """``executor`` of a study file: local processes, serial (in this process, for debugging),
+    or a Dask ``scheduler`` (tcp://...)."""
+
+    kind: Annotated[str, Choice(("serial", "local", "dask"), what="executor")] = "local"
+    scheduler: Annotated[str | None, Text()] = None
+
+
+class Bounds(FileModel):
+    """One fitted parameter: ``[low, high]`` or ``{low, high, log}`` (catalogue units)."""
+
+    low: Annotated[float, Number()]
+    high: Annotated[float, Number()]
+    log: Annotated[bool, Flag()] = False
+
+    @classmethod
+    def prepare(cls, data: Any) -> Any:
+        if isinstance(data, list) and len(data) == 2:
+            return {"low": data[0], "high": data[1]}
+        if not isinstance(data, Mapping):
+            raise ParcelfitError(
+                f"expected [low, high] or {{low, high, log}}, got {data!r}",
+                fix="write e.g. mu_d_BePa: [0.3, 0.6]",
+            )
+        return data
+
+
+class ValidationSection(FileModel):
+    """``validation``: the validation speed setting (none: no validation) and how often."""
+
+    speed_setting: Annotated[int | None, Whole(ge=1, nullable=True)] = None
+    every: Annotated[int, Whole(ge=1)] = 5
+
+
+class WeightsSection(FileModel):
+    """``weights`` of equation (3): position and heading terms, >= 0, not both zero."""
+
+    xy: Annotated[float, Number(ge=0)] = 1.0
+    theta: Annotated[float, Number(ge=0)] = 1.0
+
+    @model_validator(mode="after")
+    def _not_both_zero(self) -> WeightsSection:
+        if self.xy + self.theta <= 0:
+            raise ParcelfitError(
+                "both weights are zero, so every simulation would cost nothing",
+                fix="give xy or theta a positive weight",
+            )
+        return self
+
+
+_GP_KEYS = sorted(set(BOSettings.__dataclass_fields__) - {"n_initial"})
+
+
+class OptimizerSection(FileModel):
+    """``optimizer``: the sampler and, for gp and published, `BOSettings` fields (checked when
+    the settings are made)."""
+
+    model_config = ConfigDict(extra="allow")  # merged with FileModel's
+    sampler: Annotated[str, Choice(tuple(SAMPLERS), what="optimizer")] = "gp"
+
+    @classmethod
+    def allowed_keys(cls, data: Mapping[Any, Any]) -> list[str]:
+        if data.get("sampler") == "tpe":
+            check_keys(data, ["sampler"], fix="the tpe sampler takes no settings but `sampler`")
+        return ["sampler", *_GP_KEYS]
+
+    @property
+    def settings(self) -> dict[str, Any]:
+        """The BOSettings overrides, as written."""
+        return dict(self.model_extra or {})
+
+
+class StudyFile(FileModel):
+    """A study file as written (see the module docstring)."""
+
+    name: Annotated[str, Text()]
+    simulator: SimulatorSection
+    parameters: dict[Any, Bounds]
+    fixed: Annotated[dict[Any, Annotated[float, Number()]], or_default(dict)] = Field(
+        default_factory=dict
+    )
+    reference: ReferenceSection
+    validation: Annotated[ValidationSection, or_default(dict)] = Field(
+        default_factory=ValidationSection
+    )
+    weights: Annotated[WeightsSection, or_default(dict)] = Field(default_factory=WeightsSection)
+    optimizer: Annotated[OptimizerSection, or_default(dict)] = Field(
+        default_factory=OptimizerSection
+    )
+    initial: Annotated[int, Whole(ge=1)] = 16
+    executor: Annotated[ExecutorSection, or_default(dict)] = Field(default_factory=ExecutorSection)
+    batch_size: Annotated[int, Whole(ge=1)] = 4
+    budget: Annotated[int, Whole(ge=1)] = 80
+    seed: Annotated[int, Whole(ge=0, le=2**32 - 1)] = 0
+
+    @field_validator("parameters")
+    @classmethod
+    def _some(cls, value: dict[Any, Bounds]) -> dict[Any, Bounds]:
+        if not value:
+            raise ParcelfitError("no parameters to fit", fix="list at least one")
+        return value
+
+    @model_validator(mode="after")
+    def _validation_setting(self) -> StudyFile:
+        if self.validation.speed_setting == self.reference.speed_setting:
+            raise ParcelfitError(
+                "validation must use a speed setting not used for fitting",
+                where="validation.speed_setting",
+                fix=f"use a setting other than {self.reference.speed_setting}",
+            )
+        return self
+
+
+# -- the parsed study (SI) --------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Study:
+    """A parsed, checked study file (SI units for the catalogue's parameters)."""
+
+    name: str
+    folder: Path
+    simulator: SimulatorConfig
+    space: Space
+    fixed: Mapping[str, float]
+    dataset: Path
+    rig: str
+    consignment: str
+    fit_setting: int
+    validation_setting: int | None
+    validate_every: int
+    w_xy: float
+    w_theta: float
+    batch_size: int
+    initial: int
+    budget: int
+    seed: int
+    bo: BOSettings
+    sampler: str = "gp"  # gp | published | tpe (see optimize.sampler)
+    executor: Mapping[str, Any] = field(default_factory=dict)
+    fingerprint: str = ""
+    path: Path | None = None  # the study file
+
+
+def _to_si(name: str, value: float, backend: str) -> float:
+    """A parameter value from its catalogue unit to SI; a name outside the catalogue is taken
+    as given, except for the mujoco backend (which knows only the catalogue)."""
+    from parcelfit.sim.params import CATALOGUE
+
+    spec = next((p for p in CATALOGUE if p.name == name), None)
+    if spec is None:
+        if backend == "mujoco":
+            from parcelfit.sim.params import parameter
+
+            parameter(name)  # raises with a suggestion
+        return float(value)
+    return spec.to_si(float(value))
+
+
+def fixed_to_si(fixed: Mapping[Any, float], backend: str, path: Path) -> dict[str, float]:
+    """A file's ``fixed`` values (catalogue units for MuJoCo) in SI, each error naming its key."""
+    out = {}
+    for name, value in fixed.items():
+        try:
+            out[str(name)] = _to_si(str(name), value, backend)
+        except ParcelfitError as exc:
+            raise ParcelfitError(
+                exc.message, file=path, where=f"fixed.{name}", fix=exc.fix
+            ) from None
+    return out
+
+
+def load_study(path: str | Path) -> Study:
+    """Read and check a study file; every error names the file, the key and the fix. Parameter
+    values are converted from catalogue units to SI here."""
+    path = Path(path)
+    doc = load_yaml(path)
+    f = parse(StudyFile, doc, file=path)
+    folder = path.parent.resolve()
+    sim = f.simulator.to_config(folder)
+    backend = f.simulator.backend
+    dims = []
+    for name, bounds in f.parameters.items():
+        try:
+            low = _to_si(str(name), bounds.low, backend)
+            high = _to_si(str(name), bounds.high, backend)
+            dims.append(Dimension(str(name), low, high, bounds.log))
+        except ParcelfitError as exc:
+            raise ParcelfitError(
+                exc.message,
+                file=path,
+                where=f"parameters.{name}",
+                fix=exc.fix or "give low < high",
+            ) from None
+    fixed = fixed_to_si(f.fixed, backend, path)
+    overlap = set(fixed) & {d.name for d in dims}
+    if overlap:
+        raise ParcelfitError(
+            f"{sorted(overlap)} are both fitted and fixed",
+            file=path,
+            where="fixed",
+            fix="remove them from one of the two",
+        )
+    dataset, rig, consignment = reference_case(f.reference, f.simulator, path, folder)
+    try:
+        make = BOSettings.published if f.optimizer.sampler == "published" else BOSettings
+        bo = make(n_initial=f.initial, **f.optimizer.settings)
+    except (ParcelfitError, TypeError) as exc:
+        raise ParcelfitError(
+            str(exc), file=path, where="optimizer", fix="see BOSettings for the allowed values"
+        ) from None
+    fingerprint = hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[
+        :16
+    ]
+    return Study(
+        name=f.name,
+        folder=folder,
+        simulator=sim,
+        space=Space(dims),
+        fixed=fixed,
+        dataset=dataset,
+        rig=rig,
+        consignment=consignment,
+        fit_setting=f.reference.speed_setting,
+        validation_setting=f.validation.speed_setting,
+        validate_every=f.validation.every,
+        w_xy=f.weights.xy,
+        w_theta=f.weights.theta,
+        batch_size=f.batch_size,
+        initial=f.initial,
+        budget=f.budget,
+        seed=f.seed,
+        bo=bo,
+        sampler=f.optimizer.sampler,
+        executor=f.executor.model_dump(),
+        fingerprint=fingerprint,
+        path=path.resolve(),
+    )
+
+
+def reference_case(
+    ref: ReferenceSection, sim: SimulatorSection, path: Path, folder: Path
+) -> tuple[Path, str, str]:
+    """The reference dataset folder (absolute), rig and consignment names; the names default to
+    the simulator's (a ``.yaml`` file gives its stem)."""
+    dataset = (folder / ref.dataset).resolve()
+    rig = ref.rig or _name(sim.rig, path, "reference.rig")
+    consignment = ref.consignment or _name(sim.consignment, path, "reference.consignment")
+    return dataset, rig, consignment
+
+
+def _name(value: str | None, path: Path, where: str) -> str:
+    if value is None:
+        raise ParcelfitError(
+            "cannot tell which test case to compare with",
+            file=path,
+            where=where,
+            fix="give reference.rig and reference.consignment",
+        )
+    return Path(value).stem if value.lower().endswith((".yaml", ".yml")) else value
