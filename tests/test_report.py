@@ -50,6 +50,13 @@ def _no_analysis(monkeypatch):
     def refuse(*args, **kwargs):
         raise AssertionError("the report must render stored results, not recompute them")
 
+    # modules that bind these functions by name at import must be imported before the patch,
+    # or a later test would find the refusing stand-ins in them
+    import parcelfit.analysis
+    import parcelfit.cli
+    import parcelfit.demo
+    import parcelfit.study.calibration
+    import parcelfit.study.screening  # noqa: F401
     from parcelfit.sim.mujoco.simulator import MujocoSimulator
 
     for target in (
