@@ -103,6 +103,19 @@ def test_replaying_tells_gives_the_same_next_batch():
     assert fresh.ask() == bo.ask()
 
 
+def test_the_order_in_which_results_arrive_does_not_change_the_next_batch():
+    # parallel workers finish in any order; the next batch must depend only on what was told
+    bo, _asked = _run(9, 6)
+    shuffled = BatchBO(bo.space, batch_size=4, seed=9, settings=bo.settings)
+    order = np.random.default_rng(1).permutation(len(bo.observations))
+    assert list(order) != sorted(order)
+    for i in order:
+        o = bo.observations[i]
+        shuffled.tell(o.params, o.cost)
+    assert shuffled.ask() == bo.ask()
+    assert shuffled.recommend() == bo.recommend()
+
+
 def test_published_preset_is_method_section_7():
     s = BOSettings.published()
     assert (s.n_initial, s.nu, s.alpha, s.ucb_lambda, s.top_fraction) == (

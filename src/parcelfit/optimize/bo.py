@@ -190,7 +190,7 @@ class BatchBO:
         if fitted is None:
             return best
         gp = fitted[0]
-        ok = [o for o in self.observations if o.cost is not None]
+        ok = sorted((o for o in self.observations if o.cost is not None), key=lambda o: tuple(o.u))
         y = gp.predict(np.array([o.u for o in ok]))
         pick = ok[int(np.argmax(y))]  # y is the standardised negative cost
         return dict(pick.params), float(pick.cost)  # type: ignore[arg-type]
@@ -206,8 +206,16 @@ class BatchBO:
         if len(ok) < 2:
             return None
         worst = max(ok)
-        X = np.array([o.u for o in self.observations])
-        c = np.array([o.cost if o.cost is not None else worst for o in self.observations])
+        # A canonical order (by position in the unit cube, then cost): the fit depends on the set
+        # of observations, not on the order in which parallel workers happened to finish or a
+        # resumed study replayed them. Summation order changes the GP's fit in its last digits,
+        # and a rough objective amplifies that into a different next batch.
+        obs = sorted(
+            self.observations,
+            key=lambda o: (tuple(o.u), math.inf if o.cost is None else o.cost),
+        )
+        X = np.array([o.u for o in obs])
+        c = np.array([o.cost if o.cost is not None else worst for o in obs])
         return X, c
 
     def _transformed(self, c: np.ndarray) -> np.ndarray:
@@ -269,7 +277,10 @@ class BatchBO:
     def _candidates(self, rng: np.random.Generator, d: int) -> np.ndarray:
         n_local = int(self.settings.local_fraction * self.settings.n_samples)
         uniform = rng.random((self.settings.n_samples - n_local, d))
-        ok = sorted((o for o in self.observations if o.cost is not None), key=lambda o: o.cost)[:5]  # type: ignore[arg-type, return-value]
+        ok = sorted(
+            (o for o in self.observations if o.cost is not None),
+            key=lambda o: (o.cost, tuple(o.u)),  # type: ignore[arg-type, return-value]
+        )[:5]
         if not ok or n_local == 0:
             return np.vstack([uniform, rng.random((n_local, d))])
         centres = np.array([o.u for o in ok])[rng.integers(len(ok), size=n_local)]
