@@ -14,7 +14,7 @@ PACKAGE = Path(parcelfit.__file__).parent
 # bottom up; within the foundation, application and presentation layers modules may import each
 # other, in the others a package imports only itself and the layers below
 LAYERS = [
-    {"__init__", "errors", "schema", "config", "figures", "progress"},
+    {"__init__", "errors", "atomic", "schema", "config", "figures", "progress"},
     {"runs", "data"},
     {"metrics", "stats", "doe"},
     {"tracking", "sim", "optimize"},

@@ -57,6 +57,7 @@ from markupsafe import Markup
 from matplotlib.figure import Figure
 
 from parcelfit import __version__
+from parcelfit.atomic import write_text_atomic
 from parcelfit.errors import ParcelfitError
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.runs import Dataset, load_dataset
@@ -677,13 +678,10 @@ def _report_target(path: Path) -> Path:
 
 def _write_page(target: Path, doc: str) -> None:
     """Write the page atomically (a temporary file renamed); nothing is left behind on failure."""
-    tmp = target.with_name(target.name + ".tmp")
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
-        tmp.write_text(doc, encoding="utf-8")
-        tmp.replace(target)
+        write_text_atomic(target, doc)
     except OSError as exc:
-        tmp.unlink(missing_ok=True)
         raise ParcelfitError(
             f"cannot write the report ({exc.strerror or exc})",
             file=target,

@@ -31,6 +31,7 @@ from typing import Any
 
 import yaml
 
+from parcelfit.atomic import write_text_atomic
 from parcelfit.config import check_keys, get_number, get_str, load_yaml, require_mapping
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs.io import read_trajectory, write_trajectory
@@ -310,10 +311,7 @@ def save_dataset(
         entries.append(entry)
     doc = {"name": name, "description": description, "synthetic": synthetic, "test_cases": entries}
     path = folder / DATASET_FILE
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(yaml.safe_dump(doc, sort_keys=False), encoding="utf-8")
-    tmp.replace(path)
-    return path
+    return write_text_atomic(path, yaml.safe_dump(doc, sort_keys=False))
 
 
 __all__ = ["DATASET_FILE", "Box", "CaseData", "Dataset", "Polygon", "load_dataset", "save_dataset"]

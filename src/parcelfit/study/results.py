@@ -21,7 +21,6 @@ writes it atomically. The demo's ``stricter-criterion.json`` holds one `Referenc
 from __future__ import annotations
 
 import json
-import os
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, replace
@@ -31,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from parcelfit import __version__
+from parcelfit.atomic import write_text_atomic
 from parcelfit.errors import ParcelfitError
 from parcelfit.metrics import (
     MeanDistanceCheck,
@@ -527,12 +527,7 @@ def new_results(
 
 def write_json(path: Path, doc: Mapping[str, Any]) -> None:
     """Write a JSON document atomically (a temporary file renamed into place)."""
-    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
-    try:
-        tmp.write_text(json.dumps(doc), encoding="utf-8")
-        tmp.replace(path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    write_text_atomic(path, json.dumps(doc))
 
 
 def write_results(folder: str | Path, results: StudyResults) -> Path:

@@ -21,6 +21,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from parcelfit.atomic import write_text_atomic
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import CaseData, Run, TestCase, read_trajectory, save_dataset, write_trajectory
 from parcelfit.tracking.tagmap import TagMap
@@ -48,9 +49,7 @@ def write_video_track(result: VideoTrack, out: str | Path) -> list[Path]:
         tags[str(tag_id)] = entry
     quality = {"video": result.video.name, **result.quality, "parcel_tags": tags}
     qpath = out / f"{stem}.quality.json"
-    tmp = qpath.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(quality, indent=2), encoding="utf-8")
-    tmp.replace(qpath)  # written last: its presence means the video is done
+    write_text_atomic(qpath, json.dumps(quality, indent=2))  # last: its presence means done
     return [*files, qpath]
 
 
