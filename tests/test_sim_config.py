@@ -212,3 +212,53 @@ def test_make_simulator_builds_what_the_configuration_says(tmp_path):
     assert content_kind(SimulatorConfig("python", factory="tests.fake_sim:make")) == "rigid"
     with pytest.raises(ParcelfitError, match="the external backend needs 'external'"):
         SimulatorConfig("external")
+
+
+def test_membrane_cap_keeps_the_bending_stiffness_and_caps_the_stretch():
+    """The equivalent plate has the same D = E h^3 / 12 (1 - nu^2) and E h at the cap; below the
+    cap, and without one, the shell's scene is unchanged (default runs stay as they were)."""
+    import re
+
+    from parcelfit.sim.mujoco.scene import SceneOptions, build_scene, equivalent_plate
+
+    young, h = equivalent_plate(1e9, 5e-4, 3.125e4)
+    assert young * h == pytest.approx(3.125e4, rel=1e-12)
+    assert young * h**3 == pytest.approx(1e9 * 5e-4**3, rel=1e-12)
+    assert (h, young) == pytest.approx((2e-3, 1.5625e7), rel=1e-12)
+    assert equivalent_plate(1e8, 1e-4, 3.125e4) == (1e8, 1e-4)  # E h = 1e4 N/m: below the cap
+    assert equivalent_plate(1e9, 5e-4, None) == (1e9, 5e-4)
+
+    rig, cons = load_rig("E3"), load_consignment("KPBW")
+    params = resolve(cons.content_kind, si_values={})
+
+    def elasticity(options: SceneOptions) -> tuple[float, float, str]:
+        xml = build_scene(rig, cons, params, 1, options).xml
+        m = re.search(
+            r'<elasticity young="([^"]+)" poisson="[^"]+" thickness="([^"]+)" '
+            r'damping="([^"]+)"',
+            xml,
+        )
+        assert m is not None
+        return float(m[1]), float(m[2]), m[3]
+
+    plain, capped = elasticity(SceneOptions()), elasticity(SceneOptions(membrane_cap=3.125e4))
+    assert plain[:2] == (1e9, 5e-4)
+    assert capped[:2] == pytest.approx((1.5625e7, 2e-3), rel=1e-9)
+    assert capped[2] == plain[2]  # same bending stiffness and mass: the same damping
+    assert elasticity(SceneOptions(membrane_cap=1e7)) == plain  # E h = 5e5 N/m below it
+    with pytest.raises(ParcelfitError, match="membrane_cap must be positive"):
+        SceneOptions(membrane_cap=0.0)
+
+
+def test_membrane_cap_from_a_study_files_simulator_section(tmp_path):
+    from parcelfit.sim.factory import SimulatorSection, make_simulator
+
+    section = SimulatorSection(backend="mujoco", rig="E3", consignment="KPBW", membrane_cap=3e4)
+    sim = make_simulator(section.to_config(tmp_path))
+    assert sim.options.scene.membrane_cap == 3e4  # type: ignore[attr-defined]
+    assert (
+        make_simulator(  # not given: none
+            SimulatorSection(backend="mujoco", rig="E3", consignment="KPBW").to_config(tmp_path)
+        ).options.scene.membrane_cap
+        is None
+    )  # type: ignore[attr-defined]

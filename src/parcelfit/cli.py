@@ -536,6 +536,13 @@ def simulate(
     spacing: Annotated[
         float, typer.Option(help="Shell mesh spacing for rigid contents [m].")
     ] = 0.03,
+    membrane_cap: Annotated[
+        float | None,
+        typer.Option(
+            help="Largest in-plane stiffness E*t of the packaging shell [N/m]: the shell keeps "
+            "its bending stiffness (see the simulator's README, Resolution).",
+        ),
+    ] = None,
     wall_limit: Annotated[float, typer.Option(help="Wall-clock limit [s].")] = 600.0,
     seed: Annotated[
         int | None,
@@ -575,6 +582,7 @@ def simulate(
         consignment=consignment,
         timestep=timestep,
         spacing=spacing,
+        membrane_cap=membrane_cap,
         wall_limit=wall_limit,
     )
     sim = make_simulator(config)

@@ -2,7 +2,7 @@
 file (`SimulatorSection`, checked on load), or a `SimulatorConfig` made in code.
 
 The section's ``backend`` chooses: ``mujoco`` (a bundled or user rig and consignment, optional
-``timestep`` [s], ``spacing`` [m] and ``wall_limit`` [s]), ``external`` (a solver description
+``timestep`` [s], ``spacing`` [m], ``membrane_cap`` [N/m] and ``wall_limit`` [s]), ``external`` (a solver description
 file run as a command) or ``python`` (``factory: package.module:callable``, imported and called:
 such a file runs code). A new named backend adds its keys to `SimulatorSection` and
 `SimulatorConfig` and its construction to `make_simulator`; everything that builds a simulator
@@ -32,6 +32,7 @@ _SETTINGS = (
     "consignment",
     "timestep",
     "spacing",
+    "membrane_cap",
     "wall_limit",
     "external",
     "factory",
@@ -50,8 +51,8 @@ def _check_needs(backend: str, settings: Any) -> None:
 @dataclass(frozen=True)
 class SimulatorConfig(Mapping[str, Any]):
     """A simulator's configuration (SI): ``backend`` and what it needs (mujoco: ``rig`` and
-    ``consignment``, bundled names or ``.yaml`` paths, optional ``timestep`` [s] and ``spacing``
-    [m]; external: the solver description file ``external``; python: ``factory``), optional
+    ``consignment``, bundled names or ``.yaml`` paths, optional ``timestep`` [s], ``spacing``
+    [m] and ``membrane_cap`` [N/m]; external: the solver description file ``external``; python: ``factory``), optional
     ``wall_limit`` [s] per simulation, and ``folder``: the folder of the file it came from (an
     external solver's runs go into ``folder/.external-runs``).
 
@@ -63,6 +64,7 @@ class SimulatorConfig(Mapping[str, Any]):
     consignment: str | None = None
     timestep: float | None = None
     spacing: float | None = None
+    membrane_cap: float | None = None
     wall_limit: float | None = None
     external: str | None = None
     factory: str | None = None
@@ -90,13 +92,14 @@ class SimulatorConfig(Mapping[str, Any]):
 
 class SimulatorSection(FileModel):
     """``simulator`` of a study or screen file: the backend and what it needs (``timestep``
-    [s], ``spacing`` [m], ``wall_limit`` [s])."""
+    [s], ``spacing`` [m], ``membrane_cap`` [N/m], ``wall_limit`` [s])."""
 
     backend: Annotated[str, Choice(BACKENDS, what="backend")]
     rig: Annotated[str | None, Text()] = None
     consignment: Annotated[str | None, Text()] = None
     timestep: Annotated[float | None, Number(unit="s", ge=1e-9)] = None
     spacing: Annotated[float | None, Number(unit="m", ge=1e-9)] = None
+    membrane_cap: Annotated[float | None, Number(unit="N/m", ge=1e-9)] = None
     wall_limit: Annotated[float | None, Number(unit="s", ge=1e-9)] = None
     external: Annotated[str | None, Text()] = None
     factory: Annotated[str | None, Text()] = None
@@ -130,7 +133,7 @@ def make_simulator(config: SimulatorConfig) -> Simulator:
         assert config.rig is not None and config.consignment is not None  # checked on creation
         rig = load_rig(config.rig)
         cons = load_consignment(config.consignment)
-        numerics = {k: float(config[k]) for k in ("timestep", "spacing") if k in config}
+        numerics = {k: float(config[k]) for k in ("timestep", "spacing", "membrane_cap") if k in config}
         options = SimOptions(
             scene=SceneOptions(**numerics),
             wall_limit=DEFAULT_WALL_LIMIT if config.wall_limit is None else config.wall_limit,

@@ -59,6 +59,10 @@ class SceneOptions:
     speed_factors: Mapping[str, float] = field(
         default_factory=dict
     )  # drive -> factor (synthetic jitter)
+    # the largest in-plane (membrane) stiffness E t of the packaging shell [N/m]; None: E_Pa t_Pa
+    # as given. With a cap, the shell uses the equivalent plate of the same bending stiffness
+    # (`equivalent_plate`), whose stiff membrane modes no longer make the run depend on the step
+    membrane_cap: float | None = None
     start_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)  # dx [m], dy [m], dheading [deg]
     start_speed_factor: float = 1.0  # the parcel's initial speed as a fraction of its surface's
 
@@ -68,6 +72,10 @@ class SceneOptions:
         if not self.contact_frequency > 0:
             raise ParcelfitError(
                 f"contact_frequency must be positive [rad/s], got {self.contact_frequency}"
+            )
+        if self.membrane_cap is not None and not self.membrane_cap > 0:
+            raise ParcelfitError(
+                f"membrane_cap must be positive [N/m] or None, got {self.membrane_cap}"
             )
         if not 0.003 <= self.spacing <= 0.2:
             raise ParcelfitError(
@@ -184,6 +192,19 @@ def bending_omega(
     return (FREE_PLATE_BETA1 / length) ** 2 * math.sqrt(d / (density * thickness))
 
 
+def equivalent_plate(young: float, thickness: float, cap: float | None) -> tuple[float, float]:
+    """(E [Pa], h [m]) of the plate with the bending stiffness D = E h^3 / (12 (1 - nu^2)) of
+    (``young``, ``thickness``) whose membrane stiffness E h [N/m] is at most ``cap``.
+
+    h' = h sqrt(E h / cap) and E' = E (h / h')^3 keep D and make E' h' = cap; below the cap (or
+    without one) the plate is returned unchanged. The shell's mass is set separately, so only its
+    elasticity changes."""
+    if cap is None or young * thickness <= cap:
+        return young, thickness
+    h_eq = thickness * math.sqrt(young * thickness / cap)
+    return young * (thickness / h_eq) ** 3, h_eq
+
+
 def build_scene(
     rig: Rig,
     consignment: Consignment,
@@ -280,15 +301,16 @@ def build_scene(
     u0 = start_surface.unit()
     start_velocity = (v_start * u0[0], v_start * u0[1], 0.0)
 
-    rho_pa = m_pa / (2 * L * W * p["t_Pa"])
-    beta_pa = 2 * p["zeta_Pa"] / bending_omega(p["E_Pa"], p["nu_Pa"], p["t_Pa"], rho_pa, L)
+    young_pa, t_pa = equivalent_plate(p["E_Pa"], p["t_Pa"], opt.membrane_cap)
+    rho_pa = m_pa / (2 * L * W * t_pa)
+    beta_pa = 2 * p["zeta_Pa"] / bending_omega(young_pa, p["nu_Pa"], t_pa, rho_pa, L)
     points = " ".join(_f(v) for v in shell.points.ravel())
     elements = " ".join(str(i) for i in shell.triangles.ravel())
     body.append(
         f'<flexcomp name="packaging" type="direct" dim="2" pos="{_f(x0)} {_f(y0)} {_f(zc)}" quat="{q}" '
         f'radius="{_f(r)}" mass="{_f(m_pa)}" point="{points}" element="{elements}" rgba="0.85 0.75 0.55 0.8">'
         f'<contact contype="3" conaffinity="3" condim="3" selfcollide="none" priority="0"/>'
-        f'<elasticity young="{_f(p["E_Pa"])}" poisson="{_f(p["nu_Pa"])}" thickness="{_f(p["t_Pa"])}" '
+        f'<elasticity young="{_f(young_pa)}" poisson="{_f(p["nu_Pa"])}" thickness="{_f(t_pa)}" '
         f'damping="{_f(beta_pa)}" elastic2d="both"/></flexcomp>'
     )
     content_friction = f'friction="{_f(p["mu_CoPa"])} 0.005 0.0001"'
