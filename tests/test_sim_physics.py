@@ -69,6 +69,23 @@ def test_observation_starts_at_the_start_pose():
     assert traj.sample_rate() == pytest.approx(60, rel=0.01)
 
 
+@pytest.mark.parametrize("timestep", [1 / 600, 1 / 300])
+def test_each_sample_holds_the_positions_of_its_own_time(timestep):
+    """A parcel riding with a belt at v from x0 is at x0 + v t in the sample labelled t (no
+    one-step lag: mj_step integrates after computing positions, so a sample is taken after the
+    step has been completed and labelled with the time it reached)."""
+    v = 1.0
+    sim = MujocoSimulator(
+        SimOptions(scene=SceneOptions(timestep=timestep), duration=0.5),
+        rigs={"flat": flat_belt(v, start_x=0.1)},
+    )
+    traj = sim.run({}, KPBW).run.trajectory
+    assert traj.t[0] == 0.0 and len(traj.t) == 30  # 0 to 29/60 s
+    np.testing.assert_allclose(traj.x, 0.1 + v * traj.t, rtol=0, atol=1e-6)
+    # the first interval shows the belt's speed, not (1 - dt * 60) of it
+    assert (traj.x[1] - traj.x[0]) / (traj.t[1] - traj.t[0]) == pytest.approx(v, rel=1e-5)
+
+
 @pytest.fixture(scope="module")
 def e1_runs():
     """E1 at speed setting 3 (belt 2 at 1.57 m/s), the KPBW parcel at half, single and double
