@@ -98,7 +98,7 @@ def run_cell(
         else math.nan
     )
     return {
-        "coverage": len(traj) / n,
+        "coverage": (len(traj) - int(traj.filled.sum())) / n,  # measured: detected or fitted
         "mean": float(pos.mean()),
         "max": float(pos.max()),
         "head": float(head.max()),
