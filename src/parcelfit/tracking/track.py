@@ -244,7 +244,7 @@ def track_video(
     centres: dict[int, dict[int, tuple[float, float, float]]] = {i: {} for i in parcel_ids}
     corners: dict[int, dict[int, tuple[np.ndarray, np.ndarray]]] = {i: {} for i in parcel_ids}
     fitting = opts.fit and (tag_map.exposure > 0 or tag_map.readout > 0)
-    crops: dict[int, dict[int, _Crop]] = {i: {} for i in parcel_ids}
+    fitters = {i: _SmearFitter(tag_map, i, corners[i], 1 / fps, size[1], opts) for i in parcel_ids}
     last_seen: dict[int, list[tuple[int, np.ndarray]]] = {i: [] for i in parcel_ids}
     started = time.perf_counter()
     k = 0
@@ -264,7 +264,7 @@ def track_video(
                 if fitting and mapper is not None:
                     crop = _cut(grey, found.get(tag_id), last_seen[tag_id], k, opts.max_gap)
                     if crop is not None:
-                        crops[tag_id][k] = _Crop(*crop, mapper)
+                        fitters[tag_id].crops[k] = _Crop(*crop, mapper)
                     if tag_id in found:
                         last_seen[tag_id] = [*last_seen[tag_id][-1:], (k, found[tag_id])]
                 if mapper is None or tag_id not in found:
@@ -280,6 +280,9 @@ def track_video(
                 dx, dy = tag.offset
                 c, s = math.cos(th), math.sin(th)
                 rows[tag_id].append((tx - (c * dx - s * dy), ty - (s * dx + c * dy), th))
+            if fitting:
+                for fitter in fitters.values():
+                    fitter.run(k - _SmearFitter.reach)
             if progress:
                 progress(k + 1, total)
     finally:
@@ -311,13 +314,15 @@ def track_video(
         detected = np.isfinite(arr[:, 0])
         meas_sd = np.tile(_MEASUREMENT_SD[1:], (len(arr), 1))
         fitted = np.zeros(len(arr), bool)
-        if fitting and crops[tag_id]:
-            t0 = time.perf_counter()
-            fits = _fit_frames(
-                crops[tag_id], corners[tag_id], tag_map, tag_id, 1 / fps, size[1], opts
-            )
-            fit_seconds += time.perf_counter() - t0
-            fit_count += len(crops[tag_id])
+        if fitting:
+            fitter = fitters[tag_id]
+            fitter.run(frames)
+            fit_seconds += fitter.seconds
+            fit_count += fitter.tried
+            fits = fitter.fits
+            # smeared frames the fit did not support: their detection is trusted 3 times less
+            for k_bad in fitter.unsupported:
+                meas_sd[k_bad] *= 3
             tag = tag_map.parcel_tags[tag_id]
             for k_fit, (pose, sd_pos, sd_head, px) in fits.items():
                 tx, ty, th = pose
@@ -538,7 +543,7 @@ def _frames_in_view(
 
 @dataclass(frozen=True)
 class _Crop:
-    """A cut of one frame around a parcel tag, kept for the model fit (`_fit_frames`)."""
+    """A cut of one frame around a parcel tag, kept for the model fit (`_SmearFitter`)."""
 
     patch: np.ndarray  # grey, shrunk by ``shrink``
     origin: tuple[int, int]  # full-frame px of the cut's top-left
@@ -546,7 +551,7 @@ class _Crop:
     mapper: PlaneMapper  # the frame's geometry
 
 
-_FIT_SIDE_PX = 48  # cuts are shrunk so that the tag spans at most about this many pixels
+_FIT_SIDE_PX = 32  # cuts are shrunk so that the tag spans at most about twice this many pixels
 
 
 def _cut(
@@ -593,66 +598,90 @@ _FIT_SD_FACTOR = 4.0
 _FIT_SD_FLOOR = (5e-5, math.radians(0.05))
 
 
-def _fit_frames(
-    crops: dict[int, _Crop],
-    corners: dict[int, tuple[np.ndarray, np.ndarray]],
-    tag_map: TagMap,
-    tag_id: int,
-    dt: float,
-    height: int,
-    opts: TrackOptions,
-) -> dict[int, tuple[np.ndarray, float, float, np.ndarray]]:
-    """The model fit (`fit_smeared_tag`) of one parcel tag in the frames it was missed and in the
-    frames it was detected but smeared by more than ``opts.fit_smear_cells`` bits, in frame
-    order. The parcel's pose (centre x, y [m], heading [rad]) and motion at frame k come from a
-    quadratic in time through its detections and fits within 4 frames (constant acceleration
-    and turn-rate change), the tag's from the parcel's through its offset; a detected frame
-    starts from its detection, a missed one from the prediction. A fit is kept when its residual is below
+class _SmearFitter:
+    """The model fit (`fit_smeared_tag`) of one parcel tag in the frames it was missed and in
+    the frames it was detected but smeared by more than ``opts.fit_smear_cells`` bits, in frame
+    order, run while the video is read (`run`, a few frames behind the detection, so that the
+    fits use the main thread while the decoding thread reads on). The parcel's pose (centre x,
+    y [m], heading [rad]) and motion at frame k come from a quadratic in time through its
+    detections and fits within 4 frames (constant acceleration and turn-rate change), the
+    tag's from the parcel's through its offset; a detected frame starts from its detection, a
+    missed one from the prediction. A fit is kept when its residual is below
     ``opts.fit_max_rms``, it stays within half a tag and 15 degrees of its start, and its
-    standard deviations are below 1 mm and 1 degree. Returns, per fitted frame: the tag's pose,
-    the sds of its centre [m] and heading [rad], and its image corners [px]."""
-    tag = tag_map.parcel_tags[tag_id]
-    pattern = tag_pattern(tag_map.family, tag_id)
-    if len(corners) < 2:
-        return {}
-    # the motion model runs on the parcel centre (a near-straight path) and heading, not on the
-    # tag centre, which circles the parcel centre when the parcel spins
-    known = {k: np.array(_parcel_pose(corners[k][0], tag.offset)) for k in corners}
-    dx, dy = tag.offset
-    out: dict[int, tuple[np.ndarray, float, float, np.ndarray]] = {}
-    cell = tag.size / pattern.bits
-    for k, crop in sorted(crops.items()):
-        ks = np.array(sorted(known))
-        near = ks[np.abs(ks - k) <= 4]
+    standard deviations are below 1 mm and 1 degree. ``fits``: per fitted frame, the tag's
+    pose, the sds of its centre [m] and heading [rad], and its image corners [px];
+    ``unsupported``: detected frames whose smear called for a fit that was not kept."""
+
+    reach = 4  # frames either side in the motion model
+
+    def __init__(
+        self,
+        tag_map: TagMap,
+        tag_id: int,
+        detections: dict[int, tuple[np.ndarray, np.ndarray]],
+        dt: float,
+        height: int,
+        opts: TrackOptions,
+    ) -> None:
+        self.tag = tag_map.parcel_tags[tag_id]
+        self.pattern = tag_pattern(tag_map.family, tag_id)
+        self.exposure, self.readout = tag_map.exposure, tag_map.readout
+        self.detections = detections  # frame -> (rig corners, image rows), filled while reading
+        self.dt, self.height, self.opts = dt, height, opts
+        self.crops: dict[int, _Crop] = {}
+        self.fits: dict[int, tuple[np.ndarray, float, float, np.ndarray]] = {}
+        self.unsupported: set[int] = set()
+        self.tried, self.seconds = 0, 0.0
+        self._known: dict[int, np.ndarray] = {}  # frame -> the parcel's pose
+
+    def _pose(self, k: int) -> np.ndarray | None:
+        if k not in self._known and k in self.detections:
+            # the motion model runs on the parcel centre (a near-straight path) and heading,
+            # not on the tag centre, which circles the parcel centre when the parcel spins
+            self._known[k] = np.array(_parcel_pose(self.detections[k][0], self.tag.offset))
+        return self._known.get(k)
+
+    def run(self, until: int) -> None:
+        """Fit the kept cuts of frames up to ``until`` (then dropped)."""
+        for k in sorted(c for c in self.crops if c <= until):
+            crop = self.crops.pop(k)
+            t0 = time.perf_counter()
+            self.tried += 1
+            self._fit(k, crop)
+            self.seconds += time.perf_counter() - t0
+
+    def _fit(self, k: int, crop: _Crop) -> None:
+        tag, opts = self.tag, self.opts
+        near_poses = [(j, self._pose(j)) for j in range(k - self.reach, k + self.reach + 1)]
+        near = [(j, p) for j, p in near_poses if p is not None]
         if len(near) < 2:
-            continue
-        tk = (near - k) * dt
-        poses = np.array([known[j] for j in near])
+            return
+        tk = np.array([j - k for j, _ in near]) * self.dt
+        poses = np.array([p for _, p in near])
         poses[:, 2] = np.unwrap(poses[:, 2])
-        deg = 2 if len(near) >= 3 and np.ptp(tk) > 2 * dt else 1
+        deg = 2 if len(near) >= 3 and np.ptp(tk) > 2 * self.dt else 1
         coef = [np.polyfit(tk, poses[:, j], deg) for j in range(3)]
         px_, py_, th = (c[-1] for c in coef)
         vx, vy, w = (c[-2] for c in coef)
+        dx, dy = tag.offset
         c_, s_ = math.cos(th), math.sin(th)
         ox, oy = c_ * dx - s_ * dy, s_ * dx + c_ * dy  # the tag's offset in the rig frame
-        pred = np.array([px_ + ox, py_ + oy, th])
         rates = np.array([vx - w * oy, vy + w * ox, w])  # the tag centre's velocity, turn rate
-        detected = k in corners
+        detected = k in self.detections
         if detected:
-            start = np.array(_parcel_pose(corners[k][0], (0.0, 0.0)))
+            start = np.array(_parcel_pose(self.detections[k][0], (0.0, 0.0)))
             start[2] = th + math.remainder(start[2] - th, 2 * math.pi)
-            smear = (math.hypot(*rates[:2]) + abs(w) * tag.size / math.sqrt(2)) * tag_map.exposure
-            if smear < opts.fit_smear_cells * cell:
-                continue
+            smear = (math.hypot(*rates[:2]) + abs(w) * tag.size / math.sqrt(2)) * self.exposure
+            if smear < opts.fit_smear_cells * tag.size / self.pattern.bits:
+                return
         else:
-            start = pred
+            start = np.array([px_ + ox, py_ + oy, th])
         mapper = crop.mapper
 
         def corners_of(p: np.ndarray, m: PlaneMapper = mapper) -> np.ndarray:
             return m.to_image(tag_corners(p[0], p[1], tag.size, p[2]), tag.height)
 
-        px0 = corners_of(start)
-        side_px = _side(px0)
+        side_px = _side(corners_of(start))
         step_m = 0.1 * tag.size / side_px
         steps = np.array([step_m, step_m, 0.1 / (side_px / math.sqrt(2))])
         fit = fit_smeared_tag(
@@ -663,13 +692,14 @@ def _fit_frames(
             start,
             steps,
             rates,
-            pattern,
-            tag_map.exposure,
-            tag_map.readout,
-            height,
+            self.pattern,
+            self.exposure,
+            self.readout,
+            self.height,
         )
         if fit is None or not fit.rms <= opts.fit_max_rms:
-            continue
+            self.unsupported.update({k} if detected else set())
+            return
         moved = fit.params - start
         sd_pos = math.sqrt(max(fit.cov[0, 0] + fit.cov[1, 1], 0.0) / 2)
         sd_head = math.sqrt(max(fit.cov[2, 2], 0.0))
@@ -679,14 +709,14 @@ def _fit_frames(
             or sd_pos > 1e-3
             or sd_head > math.radians(1)
         ):
-            continue
+            self.unsupported.update({k} if detected else set())
+            return
         tx, ty, th = fit.params
         c_, s_ = math.cos(th), math.sin(th)
-        known[k] = np.array([tx - (c_ * dx - s_ * dy), ty - (s_ * dx + c_ * dy), th])
-        out[k] = (
+        self._known[k] = np.array([tx - (c_ * dx - s_ * dy), ty - (s_ * dx + c_ * dy), th])
+        self.fits[k] = (
             fit.params,
             math.hypot(_FIT_SD_FACTOR * sd_pos, _FIT_SD_FLOOR[0]),
             math.hypot(_FIT_SD_FACTOR * sd_head, _FIT_SD_FLOOR[1]),
             fit.corners,
         )
-    return out
