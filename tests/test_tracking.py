@@ -488,6 +488,29 @@ def test_smoother_rejects_a_bad_frame_and_keeps_a_spin():
     assert np.all(sd > 0)
 
 
+def test_smoother_weighs_each_frame_by_its_own_standard_deviation():
+    from parcelfit.tracking.track import smooth_track
+
+    n = 45
+    t = np.arange(n) / 60
+    truth = np.column_stack([-0.6 + 1.6 * t, -0.03 + 0.04 * t, np.radians(720) * t])
+    rng = np.random.default_rng(2)
+    arr = truth + rng.normal(0, 1, (n, 3)) * [5e-5, 5e-5, np.radians(0.05)]
+    arr[20, 2] += np.radians(4)  # a bad frame that says it is unsure (a smeared detection)
+    arr[20, 0] += 0.002
+    sd = np.tile([1e-4, np.radians(0.1)], (n, 1))  # fitted frames
+    sd[20] = [3 * 3e-4, 3 * np.radians(0.5)]
+    out, rejected, post = smooth_track(arr, 1 / 60, sd)
+    assert rejected == 0
+    assert np.degrees(abs(out[20, 2] - truth[20, 2])) < 0.2  # the 4-degree frame: no spike
+    assert abs(out[20, 0] - truth[20, 0]) < 2e-4
+    # with the same sd in every frame (the old smoother) the spike stays about a degree
+    same, _, _ = smooth_track(arr, 1 / 60)
+    assert np.degrees(abs(same[20, 2] - truth[20, 2])) > 0.5
+    # the posterior sds follow the measurement sds: tighter than one fitted frame in the middle
+    assert np.all(post[10:35, 0] < 1e-4) and np.all(post[:, 1] > 0)
+
+
 def test_smoother_standard_deviation_is_the_gaussian_posterior():
     """The RTS smoother's sd (written to the run files) equals the posterior sd of the same
     Gaussian model solved at once: prior, constant-acceleration steps, measurements."""
