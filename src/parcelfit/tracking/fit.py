@@ -6,26 +6,29 @@ spinning tag), the tag's pose is fitted to the image instead: the tag's known pa
 bitmap of it, with its one-bit white quiet zone) is rendered as the camera saw it and compared
 with the frame pixel by pixel.
 
-Model, in image pixels. The tag at the frame time t_k is the homography H from the pattern to
-four corners; the corners are the starting corners moved by a similarity (shift du, dv, turn
-dphi, scale 1 + ds about their centre): the four fitted parameters. During the exposure the tag
-moves rigidly with its image velocity v [px/s] and turn rate w [rad/s] (from a motion model over
-neighbouring frames, `track.py`). Image row r is exposed around t_k + (r / height - 0.5) * readout
-(rolling shutter), so the pixel p at row r sees, at the sub-exposure times tau_j (``samples``
-spread evenly over the exposure),
+Model. The tag at pose p (the caller's parameters, e.g. x, y, heading in the rig frame) is the
+homography H(p) from the pattern to its four projected corners in the frame. During the
+exposure it moves with dp/dt (the motion model over neighbouring frames, `track.py`), so a fixed
+pixel x sees, dt after the frame time, the pattern point M(dt) H(p)^-1 x with
+M(dt) = H(p + dp/dt dt)^-1 H(p). The pattern smeared over the exposure,
 
-    dt = tau_j + (r / height - 0.5) * readout,
-    p0 = c + R(-w dt) (p - c - v dt),       pattern point = H^-1 p0,
+    S(u) = mean_j pattern(M(tau_j) u),   tau_j spread evenly over the exposure (< 1 px apart),
 
-and its modelled grey is a * mean_j pattern(H^-1 p0) + b (a, b solved linearly each time; the
-pattern is pre-blurred to the pixel's footprint). Only pixels whose every sample falls on the tag
-or its quiet zone are compared (the surface around a tag is unknown). The four parameters are
-found by `scipy.optimize.least_squares`; their covariance s^2 (J'J)^-1 (s^2 the residual
-variance) gives the centre's and heading's standard deviations. The fitted corners are where
-the tag was at t_k itself (the readout is modelled), so they need no rolling-shutter correction.
+is computed once on a grid of about 3 samples per image pixel (the pattern first blurred to a
+pixel's footprint), and the modelled grey of pixel x is a * S(M(dt_r) H(p)^-1 x) + b, with
+dt_r = (r / height - 0.5) * readout the rolling-shutter delay of its row r (a, b solved
+linearly each time). Only pixels whose every sample falls on the tag or its quiet zone are
+compared (the surface around a tag is unknown). p is found by `scipy.optimize.least_squares`;
+S and the compared pixels are then rebuilt about the fitted pose (the heading turns the motion
+in the pattern's frame) and p fitted again. The covariance s^2 (J'J)^-1 (s^2 the residual
+variance) gives the parameters' standard deviations. The fitted pose is where the tag was at
+the frame time itself (the readout is modelled), so it needs no rolling-shutter correction.
+Approximations: M over the exposure is taken about the frame-time pose for every row (the
+tag turns by at most w x readout / 2 between, about 5 degrees at 720 deg/s and 15 ms, which
+turns its smear, not its position).
 
 Written by hand because no library renders a motion-smeared, rolling-shutter AprilTag or fits
-one; the rendering uses `cv2.remap`, the fit SciPy.
+one; the sampling uses `cv2.remap`, the fit SciPy.
 """
 
 from __future__ import annotations
@@ -103,7 +106,7 @@ def fit_smeared_tag(
     readout: float,
     frame_height: int,
     max_samples: int = 16,
-    rounds: int = 1,
+    rounds: int = 2,
 ) -> SmearFit | None:
     """Fit the smeared tag to ``patch`` (grey, a cut of the frame at ``origin`` (x, y) [full px],
     shrunk by the integer ``shrink``). The tag's pose at the frame time is a parameter vector p
@@ -123,19 +126,34 @@ def fit_smeared_tag(
     def patch_corners(p: np.ndarray) -> np.ndarray:
         return (np.asarray(corners_of(p), float) - to_patch) / d - 0.5
 
+    square = pattern.square.astype(np.float32)
+
+    def homography(p: np.ndarray) -> np.ndarray:
+        """pattern px -> patch px of the tag at pose p"""
+        return cv2.getPerspectiveTransform(square, patch_corners(p).astype(np.float32))
+
     c0 = patch_corners(start)
-    # the tag's image motion over the exposure (velocity [patch px/s], turn [rad/s]) from dp/dt
-    delta = 1e-3
-    ca, cb = patch_corners(start - rates * delta), patch_corners(start + rates * delta)
-    vel = (cb.mean(axis=0) - ca.mean(axis=0)) / (2 * delta)
-    turn = math.remainder(_angle(cb) - _angle(ca), 2 * math.pi) / (2 * delta)
+
+    def moved(dt: float, base: np.ndarray = start) -> np.ndarray:
+        """M(dt) = H(dt)^-1 H(0) about the pose ``base``: where, dt [s] later, the pattern
+        point a pixel sees has moved to"""
+        return np.linalg.inv(homography(base + rates * dt)) @ homography(base)
+
     side = float(np.mean(np.linalg.norm(c0 - np.roll(c0, 1, axis=0), axis=1)))
-    radius = side / math.sqrt(2)
-    smear = (float(np.linalg.norm(vel)) + abs(turn) * radius) * exposure
+    ends = [moved(-exposure / 2), moved(exposure / 2)]
+    probe = np.array([[0, 0, 1], [0, 1, 1], [1, 0, 1], [1, 1, 1]], float).T
+    probe[:2] *= pattern.image.shape[0]
+    sweep = [e @ probe for e in ends]
+    smear_tpl = float(
+        np.max(np.linalg.norm(sweep[1][:2] / sweep[1][2] - sweep[0][:2] / sweep[0][2], axis=0))
+    )
+    tpl_per_px = pattern.bits * _CELL_PX / side
+    smear = smear_tpl / tpl_per_px  # patch px
     m = int(min(max_samples, max(1, math.ceil(smear / 1.0))))
     taus = (np.arange(m) + 0.5) / m * exposure - exposure / 2
-    # the pattern blurred to a patch pixel's footprint (box of one pixel ~ sd 0.3, plus optics)
-    tpl_per_px = pattern.bits * _CELL_PX / side
+    # the smeared pattern S(u) = mean over the exposure of the pattern at M(tau) u, on a grid of
+    # about 3 samples per patch pixel; the pattern is first blurred to a patch pixel's
+    # footprint (a one-pixel box ~ sd 0.3 px, plus optics)
     image = _blurred(pattern, round(0.45 * tpl_per_px, 1))
     h_img, w_img = patch.shape
     # the pixels that can see the tag during the exposure (box around the smeared tag)
@@ -147,35 +165,61 @@ def fit_smeared_tag(
         return None
     gx, gy = np.meshgrid(np.arange(xa, xb, dtype=float), np.arange(ya, yb, dtype=float))
     obs = patch[ya:yb, xa:xb].astype(np.float64).ravel()
-    px, py = gx.ravel(), gy.ravel()
-    rows_full = oy + (py + 0.5) * d - 0.5
-    dts = taus[:, None] + ((rows_full / frame_height - 0.5) * readout)[None, :]  # (m, n)
-    cos_t, sin_t = np.cos(-turn * dts), np.sin(-turn * dts)
+    pix = np.stack([gx.ravel(), gy.ravel(), np.ones(gx.size)])
+    box = gx.shape
+    # rolling shutter: a pixel in full-frame row r sees the tag dt_r = (r / height - 0.5) *
+    # readout after the frame time, so at the pattern point M(dt_r) H(p)^-1 x (one M per row)
+    rows = np.arange(ya, yb)
+    row_dt = ((oy + (rows + 0.5) * d - 0.5) / frame_height - 0.5) * readout
     n_tpl = pattern.image.shape[0]
+    g = max(1, math.floor(tpl_per_px / 3))  # pattern px per sample: about 3 per patch pixel
+    ns = n_tpl // g
+    gu, gv = np.meshgrid((np.arange(ns) + 0.5) * g - 0.5, (np.arange(ns) + 0.5) * g - 0.5)
+    grid = np.stack([gu.ravel(), gv.ravel(), np.ones(gu.size)])
     lo, hi = 0.4 * _CELL_PX, n_tpl - 1 - 0.4 * _CELL_PX
-    square = pattern.square.astype(np.float32)
+
+    def prepare(base: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """The smeared pattern, where it saw only the tag, and per-pixel row motions, about
+        the pose ``base`` (the tag's heading turns the motion in the pattern's frame)."""
+        acc = np.zeros(gu.size, np.float32)
+        inside = np.ones(gu.size, bool)
+        for tau in taus:
+            q = moved(float(tau), base) @ grid
+            u, v = q[0] / q[2], q[1] / q[2]
+            inside &= (u >= lo) & (u <= hi) & (v >= lo) & (v <= hi)
+            acc += cv2.remap(
+                image,
+                u.astype(np.float32).reshape(ns, ns),
+                v.astype(np.float32).reshape(ns, ns),
+                cv2.INTER_LINEAR,
+                borderMode=cv2.BORDER_CONSTANT,
+                borderValue=1.0,
+            ).ravel()
+        smeared = (acc / m).reshape(ns, ns)
+        seen = inside.astype(np.float32).reshape(ns, ns)
+        per_pixel = (
+            np.stack([moved(float(t), base) for t in row_dt])[
+                np.repeat(np.arange(len(row_dt)), xb - xa)
+            ]
+            if readout
+            else None
+        )
+        return smeared, seen, per_pixel
+
+    state: list[tuple[np.ndarray, np.ndarray, np.ndarray | None]] = []
 
     def sample(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        cs = patch_corners(p)
-        c = cs.mean(axis=0)
-        hinv = np.linalg.inv(cv2.getPerspectiveTransform(square, cs.astype(np.float32)))
-        rx = px[None, :] - c[0] - vel[0] * dts
-        ry = py[None, :] - c[1] - vel[1] * dts
-        x0 = c[0] + cos_t * rx - sin_t * ry
-        y0 = c[1] + sin_t * rx + cos_t * ry
-        w = hinv[2, 0] * x0 + hinv[2, 1] * y0 + hinv[2, 2]
-        u = (hinv[0, 0] * x0 + hinv[0, 1] * y0 + hinv[0, 2]) / w
-        v = (hinv[1, 0] * x0 + hinv[1, 1] * y0 + hinv[1, 2]) / w
-        inside = np.all((u >= lo) & (u <= hi) & (v >= lo) & (v <= hi), axis=0)
+        smeared, seen, per_pixel = state[-1]
+        u0 = np.linalg.inv(homography(p)) @ pix
+        q = u0 if per_pixel is None else np.einsum("nij,jn->in", per_pixel, u0)
+        # smeared-grid coordinates of the pattern points
+        su = ((q[0] / q[2] + 0.5) / g - 0.5).astype(np.float32).reshape(box)
+        sv = ((q[1] / q[2] + 0.5) / g - 0.5).astype(np.float32).reshape(box)
         val = cv2.remap(
-            image,
-            u.astype(np.float32),
-            v.astype(np.float32),
-            cv2.INTER_LINEAR,
-            borderMode=cv2.BORDER_CONSTANT,
-            borderValue=1.0,
-        )
-        return val.mean(axis=0), inside
+            smeared, su, sv, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=1.0
+        ).ravel()
+        ok = cv2.remap(seen, su, sv, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT).ravel()
+        return val.astype(np.float64), ok > 0.999
 
     def solve(p: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, float]:
         model, _ = sample(p)
@@ -188,7 +232,8 @@ def fit_smeared_tag(
     p = start.copy()
     result = None
     mask = np.zeros(0, bool)
-    for _ in range(rounds):  # the compared pixels follow the fit
+    for _ in range(rounds):  # the smear model and the compared pixels follow the fit
+        state.append(prepare(p))
         _, mask = sample(p)
         if mask.sum() < 8 * pattern.bits * pattern.bits:
             return None
