@@ -102,7 +102,9 @@ class Renderer:
         img, _ = cv2.projectPoints(obj, self.rvec, self.tvec, self._k, self._no_dist)
         return img.reshape(-1, 2)
 
-    def _draw_tag(self, frame: np.ndarray, tag_id: int, corners: np.ndarray, height: float) -> None:
+    def _draw_tag(
+        self, frame: np.ndarray, tag_id: int, corners: np.ndarray, height: float, row0: int = 0
+    ) -> None:
         if tag_id not in self._markers:
             self._markers[tag_id] = _marker(self.scene.family, tag_id)
         marker = self._markers[tag_id]
@@ -110,7 +112,7 @@ class Renderer:
         bits = dictionary(self.scene.family).markerSize + 4
         q = n / bits  # quiet zone width in marker pixels
         src = np.array([[q, q], [n - q, q], [n - q, n - q], [q, n - q]], np.float32) - 0.5
-        dst = self.project(corners, height).astype(np.float32)
+        dst = (self.project(corners, height) - [0, row0]).astype(np.float32)
         self._warp(frame, marker, src, dst)
 
     def _warp(self, frame: np.ndarray, image: np.ndarray, src: np.ndarray, dst: np.ndarray) -> None:
@@ -154,8 +156,16 @@ class Renderer:
         return ideal[..., 0].astype(np.float32), ideal[..., 1].astype(np.float32)
 
     def _parcel(
-        self, frame: np.ndarray, x: float, y: float, theta: float, show_tag: bool = True
+        self,
+        frame: np.ndarray,
+        x: float,
+        y: float,
+        theta: float,
+        show_tag: bool = True,
+        row0: int = 0,
     ) -> None:
+        """Draw the parcel (and its tag) into ``frame``, which holds the image rows from
+        ``row0`` on."""
         sc = self.scene
         length, width = sc.parcel_outline
         c, s = math.cos(theta), math.sin(theta)
@@ -169,7 +179,7 @@ class Renderer:
             ]
         )
         top = box @ rot.T + np.array([x, y])
-        pix = self.project(top, sc.parcel_height)
+        pix = self.project(top, sc.parcel_height) - [0, row0]
         layer = np.zeros_like(frame)
         mask = np.zeros_like(frame)
         cv2.fillConvexPoly(
@@ -185,6 +195,7 @@ class Renderer:
             sc.parcel_tag_id,
             tag_corners(tx, ty, sc.parcel_tag_size, theta),
             sc.parcel_height,
+            row0,
         )
 
     def _parcel_rows(self, path: Path2D, t: float, span: float) -> tuple[float, float]:
@@ -203,16 +214,21 @@ class Renderer:
         rows = self.project(pts, sc.parcel_height)[:, 1]
         return float(rows.min()) - 20, float(rows.max()) + 20
 
-    def _exposed(self, path: Path2D, t: float, show_tag: bool) -> np.ndarray:
-        """The undistorted, noise-free image averaged over the exposure centred on ``t`` [s]."""
+    def _exposed(
+        self, path: Path2D, t: float, show_tag: bool, rows: tuple[int, int] | None = None
+    ) -> np.ndarray:
+        """The undistorted, noise-free image averaged over the exposure centred on ``t`` [s]
+        (only the image ``rows`` [first, last) when given: a rolling shutter's band)."""
         sc = self.scene
         k = max(1, sc.blur_samples)
         times = t + (np.arange(k) + 0.5) / k * sc.exposure - sc.exposure / 2
         xs, ys, ths = path(times)
-        acc = np.zeros_like(self._base)
+        a, b = rows or (0, self._base.shape[0])
+        base = self._base[a:b]
+        acc = np.zeros_like(base)
         for x, y, th in zip(xs, ys, ths, strict=True):
-            f = self._base.copy()
-            self._parcel(f, float(x), float(y), float(th), show_tag)
+            f = base.copy()
+            self._parcel(f, float(x), float(y), float(th), show_tag, a)
             acc += f
         return acc / k
 
@@ -239,7 +255,7 @@ class Renderer:
                     continue
                 mid_row = (a + b - 1) / 2
                 tb = t + (mid_row / h - 0.5) * sc.readout
-                img[a:b] = self._exposed(path, tb, show_tag)[a:b]
+                img[a:b] = self._exposed(path, tb, show_tag, (a, b))
         else:
             img = self._exposed(path, t, show_tag)
         if self._distort_maps is not None:
