@@ -7,12 +7,16 @@ tag's centre and heading at its height, and the parcel centre is
 
     (x, y) = tag centre - R(theta) * offset,     theta = tag heading.
 
-Frames where a parcel tag is missing between its first and last detection are gaps: gaps of at
-most ``max_gap`` frames are filled by linear interpolation (theta unwrapped first), listed as
-interpolated and flagged ``filled`` in the trajectory's ``source`` (the others ``detected``);
-longer gaps stay missing (their samples are left out) and are listed too. With the smoother on,
-the detected frames carry its posterior standard deviations (``position_sd``, ``heading_sd``;
-see `smooth_track` for what they assume). The
+When the tag map states the camera's timing (exposure, rolling-shutter readout), frames in which
+a parcel tag was missed, or smeared by more than ``fit_smear_cells`` of its bits, are measured
+again by fitting the tag's pattern, smeared as the camera saw it, to the frame
+(`parcelfit.tracking.fit`, `_SmearFitter`); kept fits are flagged ``fitted`` in the
+trajectory's ``source``. Frames where a parcel tag has no measurement between its first and last
+one are gaps: gaps of at most ``max_gap`` frames are filled by linear interpolation (theta
+unwrapped first), listed as interpolated and flagged ``filled`` (the others ``detected`` or
+``fitted``); longer gaps stay missing (their samples are left out) and are listed too. With the
+smoother on (each frame weighted by its own measurement sd), the measured frames carry its
+posterior standard deviations (``position_sd``, ``heading_sd``; see `smooth_track`). The
 heading is unwrapped over the run. Decoding runs in a background thread (OpenCV releases the GIL
 while decoding), so decoding and detection overlap on two cores.
 """
