@@ -382,6 +382,23 @@ def test_rolling_shutter_renders_each_band_of_rows_at_its_own_time():
     assert np.abs(frame[rows] - at_frame[rows]).max() > 50  # the parcel moved 3 mm meanwhile
 
 
+def test_exposure_renders_the_mean_of_the_sub_frames_and_the_spin_turns_at_its_rate():
+    from parcelfit.tracking.synthetic import Renderer, straight_spin
+
+    path = straight_spin(1.6, 720)
+    _, _, th = path(np.array([0.0, 0.1]))
+    assert np.degrees(th[1] - th[0]) == pytest.approx(72.0)
+    plain = dict(noise_sd=0.0, distortion=(0, 0, 0, 0, 0), tilt_deg=0.0)
+    smear = conveyor_scene(320, 180, exposure=0.008, blur_samples=4, **plain)
+    sharp = conveyor_scene(320, 180, exposure=0.0, blur_samples=1, **plain)
+    rng = np.random.default_rng(0)
+    frame = Renderer(smear).frame(path, 0.3, rng).astype(float)
+    subs = [Renderer(sharp).frame(path, 0.3 + (j + 0.5) / 4 * 0.008 - 0.004, rng) for j in range(4)]
+    mean = np.mean(np.array(subs, float), axis=0)
+    assert np.abs(frame - mean).max() <= 1.0  # rounding of each sub-frame
+    assert np.abs(frame - subs[0]).max() > 50  # the parcel moved 9.6 mm during the exposure
+
+
 def test_motion_blur_and_spin_4ms(tmp_path):
     from parcelfit.tracking.synthetic import straight_spin
 
