@@ -346,6 +346,11 @@ def test_timing_block_is_read_in_seconds_and_checked(videos, tmp_path):
     path.write_text(yaml.safe_dump(doc))
     with pytest.raises(ParcelfitError, match=r"timing\.readout_ms"):
         load_tag_map(path)
+    # longer than a frame interval (60 fps: 16.7 ms): refused when tracking, file and key named
+    doc["timing"] = {"exposure_ms": 20}
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(ParcelfitError, match=r"tags\.yaml.*timing\.exposure_ms.*frame interval"):
+        track_video(videos["root"] / "plain.mp4", load_tag_map(path))
 
 
 def test_rolling_shutter_renders_each_band_of_rows_at_its_own_time():

@@ -225,6 +225,17 @@ def track_video(
             where="camera",
             fix="calibrate the camera at the video's resolution (parcelfit camera-calibrate)",
         )
+    for key, value in (("exposure_ms", tag_map.exposure), ("readout_ms", tag_map.readout)):
+        if value > 1 / fps + 1e-9:  # both happen within one frame interval
+            cap.release()
+            raise ParcelfitError(
+                f"timing.{key} is {value * 1e3:g} ms, longer than the video's frame interval "
+                f"({1e3 / fps:.2f} ms at {fps:g} fps)",
+                file=tag_map.source,
+                where=f"timing.{key}",
+                fix="give it in milliseconds, as the camera states it (shutter time; sensor "
+                "readout, first to last row)",
+            )
     if not opts.max_reprojection_px > 0:
         raise ParcelfitError(
             f"max_reprojection_px must be > 0, got {opts.max_reprojection_px}",
