@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 
 import cv2
@@ -53,11 +53,12 @@ _MAX_NFEV = 20  # function evaluations per round
 class TagPattern:
     """A tag's bitmap in [0, 1] (black 0) with a one-bit white quiet zone; ``square``: the
     black square's corners (4, 2) in bitmap pixels, in OpenCV's corner order; ``bits``: bits
-    across the black square."""
+    across the black square; ``blurred``: blurred copies by sigma (`_blurred`)."""
 
     image: np.ndarray
     square: np.ndarray
     bits: int
+    blurred: dict[float, np.ndarray] = field(default_factory=dict)
 
 
 @lru_cache(maxsize=32)
@@ -171,7 +172,7 @@ def fit_smeared_tag(
     # the smeared pattern S(u) = mean over the exposure of the pattern at M(tau) u, on a grid of
     # about 2 samples per patch pixel; the pattern is first blurred to a patch pixel's
     # footprint (a one-pixel box ~ sd 0.3 px, plus optics)
-    image = _blurred(pattern, round(0.45 * tpl_per_px, 1))
+    image = _blurred(pattern, 0.45 * tpl_per_px)
     h_img, w_img = patch.shape
     # the pixels that can see the tag during the exposure (box around the smeared tag)
     reach = side * (pattern.bits + 2) / pattern.bits / 2 + smear + 2
@@ -308,16 +309,13 @@ def fit_smeared_tag(
     )
 
 
-@lru_cache(maxsize=64)
-def _blurred_cached(family_key: int, sigma: float) -> np.ndarray:
-    pattern = _PATTERNS[family_key]
-    return cv2.GaussianBlur(pattern.image, (0, 0), sigma) if sigma > 0 else pattern.image
-
-
-_PATTERNS: dict[int, TagPattern] = {}
-
-
 def _blurred(pattern: TagPattern, sigma: float) -> np.ndarray:
-    key = id(pattern)
-    _PATTERNS[key] = pattern
-    return _blurred_cached(key, sigma)
+    """The pattern blurred by a Gaussian of ``sigma`` [pattern px], kept per (pattern, sigma)."""
+    key = round(sigma, 1)
+    if key not in pattern.blurred:
+        if len(pattern.blurred) > 16:
+            pattern.blurred.clear()
+        pattern.blurred[key] = (
+            cv2.GaussianBlur(pattern.image, (0, 0), key) if key > 0 else pattern.image
+        )
+    return pattern.blurred[key]
