@@ -58,9 +58,7 @@ class TrackOptions:
     edge_refine: bool = True  # parcel tag corners from fitted edge lines (blur-robust)
     max_reprojection_px: float = 5.0  # reference tags' mean reprojection error above: refused
     fit: bool = True  # model-based fit of the smeared tag (`fit.py`) where detection fails or blurs
-    fit_smear_cells: float = (
-        0.5  # detected frames are fitted too when the smear exceeds this [bits]
-    )
+    fit_smear_cells: float = 0.5  # detected frames fitted too above this smear [tag bits]
     fit_max_rms: float = 0.12  # a fit is kept when its residual rms is below this [contrast]
 
 
