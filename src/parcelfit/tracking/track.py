@@ -567,7 +567,7 @@ class _Crop:
     mapper: PlaneMapper  # the frame's geometry
 
 
-_FIT_SIDE_PX = 32  # cuts are shrunk so that the tag spans at most about twice this many pixels
+_FIT_SIDE_PX = 24  # cuts are shrunk so that the tag spans at most about twice this many pixels
 
 
 def _cut(
