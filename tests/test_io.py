@@ -132,7 +132,7 @@ def test_old_csv_without_source_reads_and_a_bad_source_is_named(tmp_path):
     f = _good(5).assign(source=["detected", "filled", "interpolated", "detected", "detected"])
     with pytest.raises(
         ParcelfitError,
-        match=r"data row 3: column 'source' has 'interpolated'.*Fix: write detected or filled",
+        match=r"data row 3: column 'source' has 'interpolated'.*Fix: write detected, fitted or filled",
     ):
         read_trajectory(_write(tmp_path, f))
     f = _good(5).assign(source=["detected", None, "filled", "detected", "detected"])

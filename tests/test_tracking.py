@@ -346,6 +346,11 @@ def test_timing_block_is_read_in_seconds_and_checked(videos, tmp_path):
     path.write_text(yaml.safe_dump(doc))
     with pytest.raises(ParcelfitError, match=r"timing\.readout_ms"):
         load_tag_map(path)
+    # longer than a frame interval (60 fps: 16.7 ms): refused when tracking, file and key named
+    doc["timing"] = {"exposure_ms": 20}
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(ParcelfitError, match=r"tags\.yaml.*timing\.exposure_ms.*frame interval"):
+        track_video(videos["root"] / "plain.mp4", load_tag_map(path))
 
 
 def test_rolling_shutter_renders_each_band_of_rows_at_its_own_time():
@@ -382,10 +387,28 @@ def test_rolling_shutter_renders_each_band_of_rows_at_its_own_time():
     assert np.abs(frame[rows] - at_frame[rows]).max() > 50  # the parcel moved 3 mm meanwhile
 
 
+def test_exposure_renders_the_mean_of_the_sub_frames_and_the_spin_turns_at_its_rate():
+    from parcelfit.tracking.synthetic import Renderer, straight_spin
+
+    path = straight_spin(1.6, 720)
+    _, _, th = path(np.array([0.0, 0.1]))
+    assert np.degrees(th[1] - th[0]) == pytest.approx(72.0)
+    plain = dict(noise_sd=0.0, distortion=(0, 0, 0, 0, 0), tilt_deg=0.0)
+    smear = conveyor_scene(320, 180, exposure=0.008, blur_samples=4, **plain)
+    sharp = conveyor_scene(320, 180, exposure=0.0, blur_samples=1, **plain)
+    rng = np.random.default_rng(0)
+    frame = Renderer(smear).frame(path, 0.3, rng).astype(float)
+    subs = [Renderer(sharp).frame(path, 0.3 + (j + 0.5) / 4 * 0.008 - 0.004, rng) for j in range(4)]
+    mean = np.mean(np.array(subs, float), axis=0)
+    assert np.abs(frame - mean).max() <= 1.0  # rounding of each sub-frame
+    assert np.abs(frame - subs[0]).max() > 50  # the parcel moved 9.6 mm during the exposure
+
+
 def test_motion_blur_and_spin_4ms(tmp_path):
     from parcelfit.tracking.synthetic import straight_spin
 
-    path = straight_spin(1.6, 360)
+    path = straight_spin(1.6, 720)
+    # the tag is covered in frames 21-23: the model fit must not invent it there
     scene = conveyor_scene(
         1328,
         748,
@@ -394,6 +417,7 @@ def test_motion_blur_and_spin_4ms(tmp_path):
         duration=0.75,
         parcel_height=0.02,
         tag_offset=(0.05, 0.0),
+        hidden=((0.34, 0.39),),
     )
     truth = truth_of(render_video(tmp_path / "spin.mp4", scene, path, seed=0))
     doc = scene_tag_map(scene, barriers=BARRIERS)
@@ -401,10 +425,71 @@ def test_motion_blur_and_spin_4ms(tmp_path):
     (tmp_path / "tags.yaml").write_text(yaml.safe_dump(doc))
     result = track_video(tmp_path / "spin.mp4", load_tag_map(tmp_path / "tags.yaml"))
     track = result.tags[scene.parcel_tag_id]
-    assert len(track.trajectory) >= 0.95 * len(truth["t"])
+    traj = track.trajectory
+    assert len(traj) >= 0.95 * len(truth["t"])
     assert track.quality["frames_in_view"] == len(truth["t"])  # in view from the clip's start
-    pos, head = errors(track.trajectory, truth)
+    pos, head = errors(traj, truth)
     assert pos.mean() <= 0.001 and pos.max() <= 0.003 and head.max() <= 1.0
+    # smeared by ~1 bit: the detected frames are fitted, and say so in the run file
+    frames = np.round(traj.t * FPS).astype(int)
+    assert set(frames[traj.source == "filled"]) == {21, 22, 23}
+    assert (traj.source == "fitted").sum() >= 0.9 * (len(truth["t"]) - 3)
+    assert track.quality["fitted_frames"] == (traj.source == "fitted").sum()
+    assert track.quality["detection_rate"] == pytest.approx(42 / 45)
+    # per-frame standard deviations from the fit: small where fitted, larger next to the gap
+    assert np.nanmax(traj.position_sd[traj.source == "fitted"]) < 3e-4
+
+
+@pytest.mark.parametrize("readout", [0.0, 0.015])
+def test_smear_fit_recovers_a_spinning_tag_under_blur_and_rolling_shutter(readout):
+    import math
+
+    from parcelfit.tracking.fit import fit_smeared_tag, tag_pattern
+    from parcelfit.tracking.synthetic import Renderer, straight_spin
+    from parcelfit.tracking.tagmap import tag_corners
+
+    spin = 720.0
+    path = straight_spin(1.6, spin)
+    scene = conveyor_scene(
+        1328,
+        748,
+        exposure=0.008,
+        blur_samples=24,
+        readout=readout,
+        readout_bands=48,
+        parcel_height=0.02,
+        tag_offset=(0.05, 0.0),
+        distortion=(0, 0, 0, 0, 0),  # so that `Renderer.project` gives the frame's pixels
+    )
+    renderer = Renderer(scene)
+    t = 0.3
+    grey = renderer.frame(path, t, np.random.default_rng(1))
+    x, y, th = (float(v[0]) for v in path(np.array([t])))
+    c, s = math.cos(th), math.sin(th)
+    w = math.radians(spin)
+    truth = np.array([x + 0.05 * c, y + 0.05 * s, th])  # the tag centre and heading
+    rates = np.array([1.6 - w * 0.05 * s, 0.04 + w * 0.05 * c, w])
+
+    def corners_of(p):
+        return renderer.project(tag_corners(p[0], p[1], 0.06, p[2]), 0.02)
+
+    start = truth + np.array([0.002, -0.0015, math.radians(4)])
+    px = corners_of(start)
+    x0, y0 = (int(v) for v in px.min(axis=0) - 40)
+    x1, y1 = (int(v) for v in px.max(axis=0) + 40)
+    side = float(np.linalg.norm(px[1] - px[0]))
+    steps = np.array([0.1 * 0.06 / side, 0.1 * 0.06 / side, 0.1 / (side / math.sqrt(2))])
+    pattern = tag_pattern("tag36h11", 7)
+    args = (grey[y0:y1, x0:x1], (x0, y0), 1, corners_of, start, steps, rates, pattern)
+    fit = fit_smeared_tag(*args, 0.008, readout, 748)
+    assert fit is not None and fit.rms < 0.05
+    assert np.hypot(*(fit.params[:2] - truth[:2])) < 1.5e-4
+    assert abs(math.degrees(fit.params[2] - truth[2])) < 0.3
+    sd = np.sqrt(np.diag(fit.cov))
+    assert 0 < sd[0] < 1e-4 and 0 < sd[2] < math.radians(0.2)
+    if readout:  # the readout ignored: the fit lands 15 ms x 1.6 m/s x (row offset) away
+        blind = fit_smeared_tag(*args, 0.008, 0.0, 748)
+        assert blind is None or np.hypot(*(blind.params[:2] - truth[:2])) > 1e-3
 
 
 def test_smoother_rejects_a_bad_frame_and_keeps_a_spin():
@@ -423,6 +508,29 @@ def test_smoother_rejects_a_bad_frame_and_keeps_a_spin():
     z[30] += np.radians(20)  # a wild frame is rejected outright
     assert not rts_smooth(z, 1 / 60, r, 1e3)[2][30]
     assert np.all(sd > 0)
+
+
+def test_smoother_weighs_each_frame_by_its_own_standard_deviation():
+    from parcelfit.tracking.track import smooth_track
+
+    n = 45
+    t = np.arange(n) / 60
+    truth = np.column_stack([-0.6 + 1.6 * t, -0.03 + 0.04 * t, np.radians(720) * t])
+    rng = np.random.default_rng(2)
+    arr = truth + rng.normal(0, 1, (n, 3)) * [5e-5, 5e-5, np.radians(0.05)]
+    arr[20, 2] += np.radians(4)  # a bad frame that says it is unsure (a smeared detection)
+    arr[20, 0] += 0.002
+    sd = np.tile([1e-4, np.radians(0.1)], (n, 1))  # fitted frames
+    sd[20] = [3 * 3e-4, 3 * np.radians(0.5)]
+    out, rejected, post = smooth_track(arr, 1 / 60, sd)
+    assert rejected == 0
+    assert np.degrees(abs(out[20, 2] - truth[20, 2])) < 0.2  # the 4-degree frame: no spike
+    assert abs(out[20, 0] - truth[20, 0]) < 2e-4
+    # with the same sd in every frame (the old smoother) the spike stays about a degree
+    same, _, _ = smooth_track(arr, 1 / 60)
+    assert np.degrees(abs(same[20, 2] - truth[20, 2])) > 0.5
+    # the posterior sds follow the measurement sds: tighter than one fitted frame in the middle
+    assert np.all(post[10:35, 0] < 1e-4) and np.all(post[:, 1] > 0)
 
 
 def test_smoother_standard_deviation_is_the_gaussian_posterior():

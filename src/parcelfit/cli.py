@@ -399,7 +399,7 @@ def track(
     )
     for col in (
         "parcel tag",
-        "detected",
+        "measured (fitted)",
         "gaps (filled / missing frames)",
         "transit time [s]",
         "file",
@@ -408,7 +408,8 @@ def track(
     for tag_id, t in result.tags.items():
         table.add_row(
             str(tag_id),
-            f"{t.quality['detection_rate'] * 100:.1f} % of {t.quality['frames_in_view']} frames",
+            f"{t.quality['detection_rate'] * 100:.1f} % of {t.quality['frames_in_view']} frames"
+            f" ({t.quality['fitted_frames']})",
             f"{len(t.quality['gaps'])} ({t.quality['interpolated_frames']} / {t.quality['missing_frames']})",
             "-" if t.transit_time is None else f"{t.transit_time:.3f}",
             "-" if t.trajectory is None else f"{video.stem}-tag{tag_id}.csv",

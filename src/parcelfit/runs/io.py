@@ -2,7 +2,7 @@
 
 Schema: one row per sample; ``t`` [s] strictly increasing, ``x``, ``y`` [m] parcel centre in the
 rig frame, ``theta`` [rad] heading (wrapped or unwrapped; it is unwrapped on load). Optional:
-``source``, ``detected`` or ``filled`` per sample (tracked runs; a file without it was measured
+``source``, ``detected``, ``fitted`` or ``filled`` per sample (tracked runs; a file without it was measured
 in every sample), and ``position_sd`` [m], ``heading_sd`` [rad] per sample (empty where there is
 none). Nothing else.
 """
@@ -145,7 +145,7 @@ def check_trajectory_table(frame: pd.DataFrame, file: str | Path) -> Trajectory:
                 f"column 'source' has {raw.iloc[bad[0]]!r}",
                 file=file,
                 where=f"data row {bad[0] + 1}",
-                fix=f"write {' or '.join(SOURCES)} in every row, or drop the column",
+                fix=f"write {', '.join(SOURCES[:-1])} or {SOURCES[-1]} in every row, or drop the column",
             )
         source = text
     sds = {}

@@ -5,8 +5,10 @@ parcel centre in the rig frame: x along the conveying direction, y across it) an
 [rad] (heading of the parcel's x axis, counter-clockwise from the rig's x axis, unwrapped, so
 consecutive samples never jump by more than pi).
 
-Optionally, per sample, ``source``: ``"detected"`` (measured in that frame) or ``"filled"``
-(interpolated across a gap in the measurements). Tracked runs carry it; simulated runs and files
+Optionally, per sample, ``source``: ``"detected"`` (measured in that frame by the tag detector),
+``"fitted"`` (measured in that frame by the model fit of the motion-smeared tag, where the
+detector missed it or the smear biases it) or ``"filled"`` (interpolated across a gap in the
+measurements). Tracked runs carry it; simulated runs and files
 without the column have ``source`` None, which means every sample was measured. Tracked runs may
 also carry ``position_sd`` [m] and ``heading_sd`` [rad], a standard deviation per sample (NaN
 where there is none, e.g. in filled frames); None when not known.
@@ -25,7 +27,7 @@ COLUMNS: tuple[str, ...] = ("t", "x", "y", "theta")
 # optional per-sample columns: where each sample came from (see SOURCES) and its uncertainty
 OPTIONAL_COLUMNS: tuple[str, ...] = ("source", "position_sd", "heading_sd")
 UNCERTAINTY_COLUMNS: tuple[str, ...] = ("position_sd", "heading_sd")
-SOURCES: tuple[str, ...] = ("detected", "filled")
+SOURCES: tuple[str, ...] = ("detected", "fitted", "filled")
 MIN_SAMPLES = 3
 # `Trajectory.resample` keeps a grid point the run ends short of by at most this fraction of the
 # grid's interval. It absorbs time stamps rounded in a file (9 significant digits in run files
@@ -43,7 +45,7 @@ def unwrap_angle(theta: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True, eq=False)
 class Trajectory:
     """Sampled planar motion of a parcel: t [s], x [m], y [m], theta [rad, unwrapped]; optionally
-    ``source`` per sample ("detected" or "filled"; None: all measured) and standard deviations
+    ``source`` per sample ("detected", "fitted" or "filled"; None: all measured) and standard deviations
     ``position_sd`` [m], ``heading_sd`` [rad] (NaN where none; None: not known)."""
 
     t: np.ndarray

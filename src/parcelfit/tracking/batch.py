@@ -1,7 +1,7 @@
 """Writing tracked runs, and tracking a folder of videos into one dataset (resumable).
 
 One video: ``<out>/<stem>-tag<ID>.csv`` per parcel tag (columns t [s], x [m], y [m], theta [rad],
-the parcel centre and the heading of its x axis; source: detected or filled; position_sd [m],
+the parcel centre and the heading of its x axis; source: detected, fitted or filled; position_sd [m],
 heading_sd [rad]: the smoother's standard deviations) and
 ``<out>/<stem>.quality.json``.
 

@@ -102,7 +102,14 @@ class Renderer:
         img, _ = cv2.projectPoints(obj, self.rvec, self.tvec, self._k, self._no_dist)
         return img.reshape(-1, 2)
 
-    def _draw_tag(self, frame: np.ndarray, tag_id: int, corners: np.ndarray, height: float) -> None:
+    def _draw_tag(
+        self,
+        frame: np.ndarray,
+        tag_id: int,
+        corners: np.ndarray,
+        height: float,
+        origin: tuple[int, int] = (0, 0),
+    ) -> None:
         if tag_id not in self._markers:
             self._markers[tag_id] = _marker(self.scene.family, tag_id)
         marker = self._markers[tag_id]
@@ -110,7 +117,7 @@ class Renderer:
         bits = dictionary(self.scene.family).markerSize + 4
         q = n / bits  # quiet zone width in marker pixels
         src = np.array([[q, q], [n - q, q], [n - q, n - q], [q, n - q]], np.float32) - 0.5
-        dst = self.project(corners, height).astype(np.float32)
+        dst = (self.project(corners, height) - origin).astype(np.float32)
         self._warp(frame, marker, src, dst)
 
     def _warp(self, frame: np.ndarray, image: np.ndarray, src: np.ndarray, dst: np.ndarray) -> None:
@@ -154,8 +161,16 @@ class Renderer:
         return ideal[..., 0].astype(np.float32), ideal[..., 1].astype(np.float32)
 
     def _parcel(
-        self, frame: np.ndarray, x: float, y: float, theta: float, show_tag: bool = True
+        self,
+        frame: np.ndarray,
+        x: float,
+        y: float,
+        theta: float,
+        show_tag: bool = True,
+        origin: tuple[int, int] = (0, 0),
     ) -> None:
+        """Draw the parcel (and its tag) into ``frame``, a window of the image whose top-left
+        pixel is ``origin`` (x, y)."""
         sc = self.scene
         length, width = sc.parcel_outline
         c, s = math.cos(theta), math.sin(theta)
@@ -169,7 +184,7 @@ class Renderer:
             ]
         )
         top = box @ rot.T + np.array([x, y])
-        pix = self.project(top, sc.parcel_height)
+        pix = self.project(top, sc.parcel_height) - origin
         layer = np.zeros_like(frame)
         mask = np.zeros_like(frame)
         cv2.fillConvexPoly(
@@ -185,10 +200,12 @@ class Renderer:
             sc.parcel_tag_id,
             tag_corners(tx, ty, sc.parcel_tag_size, theta),
             sc.parcel_height,
+            origin,
         )
 
-    def _parcel_rows(self, path: Path2D, t: float, span: float) -> tuple[float, float]:
-        """Image rows [px] the parcel's box top covers within ``t`` +- ``span`` [s] (+ margin)."""
+    def _parcel_box(self, path: Path2D, t: float, span: float) -> tuple[int, int, int, int]:
+        """The image window (first row, end row, first column, end column) [px] the parcel's
+        box top covers within ``t`` +- ``span`` [s] (+ a 20 px margin), clipped to the image."""
         sc = self.scene
         xs, ys, _ = path(np.linspace(t - span, t + span, 9))
         r = math.hypot(*sc.parcel_outline) / 2 + 0.01
@@ -200,19 +217,32 @@ class Renderer:
                 for dy in (-r, r)
             ]
         )
-        rows = self.project(pts, sc.parcel_height)[:, 1]
-        return float(rows.min()) - 20, float(rows.max()) + 20
+        pix = self.project(pts, sc.parcel_height)
+        w, h = self.size
+        lo = np.clip(np.floor(pix.min(axis=0)) - 20, 0, [w, h]).astype(int)
+        hi = np.clip(np.ceil(pix.max(axis=0)) + 21, 0, [w, h]).astype(int)
+        return int(lo[1]), int(hi[1]), int(lo[0]), int(hi[0])
 
-    def _exposed(self, path: Path2D, t: float, show_tag: bool) -> np.ndarray:
-        """The undistorted, noise-free image averaged over the exposure centred on ``t`` [s]."""
+    def _exposed(
+        self,
+        path: Path2D,
+        t: float,
+        show_tag: bool,
+        window: tuple[int, int, int, int] | None = None,
+    ) -> np.ndarray:
+        """The undistorted, noise-free image averaged over the exposure centred on ``t`` [s];
+        only the ``window`` (first row, end row, first column, end column) when given (where
+        the parcel is; a rolling shutter's band)."""
         sc = self.scene
         k = max(1, sc.blur_samples)
         times = t + (np.arange(k) + 0.5) / k * sc.exposure - sc.exposure / 2
         xs, ys, ths = path(times)
-        acc = np.zeros_like(self._base)
+        a, b, c, d = window or (0, self._base.shape[0], 0, self._base.shape[1])
+        base = self._base[a:b, c:d]
+        acc = np.zeros_like(base)
         for x, y, th in zip(xs, ys, ths, strict=True):
-            f = self._base.copy()
-            self._parcel(f, float(x), float(y), float(th), show_tag)
+            f = base.copy()
+            self._parcel(f, float(x), float(y), float(th), show_tag, (c, a))
             acc += f
         return acc / k
 
@@ -232,16 +262,18 @@ class Renderer:
             bands = max(1, sc.readout_bands)
             edges = np.linspace(0, h, bands + 1).round().astype(int)
             img = self._base.copy()
-            # only the bands the parcel can reach during the readout are rendered
-            lo, hi = self._parcel_rows(path, t, sc.readout + sc.exposure)
+            # only where the parcel can be during the readout is rendered
+            lo, hi, c, d = self._parcel_box(path, t, sc.readout + sc.exposure)
             for a, b in itertools.pairwise(edges):
-                if b <= lo or a > hi:
+                if b <= lo or a >= hi:
                     continue
                 mid_row = (a + b - 1) / 2
                 tb = t + (mid_row / h - 0.5) * sc.readout
-                img[a:b] = self._exposed(path, tb, show_tag)[a:b]
+                img[a:b, c:d] = self._exposed(path, tb, show_tag, (a, b, c, d))
         else:
-            img = self._exposed(path, t, show_tag)
+            img = self._base.copy()
+            a, b, c, d = self._parcel_box(path, t, sc.exposure)
+            img[a:b, c:d] = self._exposed(path, t, show_tag, (a, b, c, d))
         if self._distort_maps is not None:
             img = cv2.remap(img, *self._distort_maps, cv2.INTER_LINEAR, borderValue=sc.belt_grey)
         img = img + rng.normal(0, sc.noise_sd, img.shape)

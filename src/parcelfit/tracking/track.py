@@ -7,12 +7,16 @@ tag's centre and heading at its height, and the parcel centre is
 
     (x, y) = tag centre - R(theta) * offset,     theta = tag heading.
 
-Frames where a parcel tag is missing between its first and last detection are gaps: gaps of at
-most ``max_gap`` frames are filled by linear interpolation (theta unwrapped first), listed as
-interpolated and flagged ``filled`` in the trajectory's ``source`` (the others ``detected``);
-longer gaps stay missing (their samples are left out) and are listed too. With the smoother on,
-the detected frames carry its posterior standard deviations (``position_sd``, ``heading_sd``;
-see `smooth_track` for what they assume). The
+When the tag map states the camera's timing (exposure, rolling-shutter readout), frames in which
+a parcel tag was missed, or smeared by more than ``fit_smear_cells`` of its bits, are measured
+again by fitting the tag's pattern, smeared as the camera saw it, to the frame
+(`parcelfit.tracking.fit`, `_SmearFitter`); kept fits are flagged ``fitted`` in the
+trajectory's ``source``. Frames where a parcel tag has no measurement between its first and last
+one are gaps: gaps of at most ``max_gap`` frames are filled by linear interpolation (theta
+unwrapped first), listed as interpolated and flagged ``filled`` (the others ``detected`` or
+``fitted``); longer gaps stay missing (their samples are left out) and are listed too. With the
+smoother on (each frame weighted by its own measurement sd), the measured frames carry its
+posterior standard deviations (``position_sd``, ``heading_sd``; see `smooth_track`). The
 heading is unwrapped over the run. Decoding runs in a background thread (OpenCV releases the GIL
 while decoding), so decoding and detection overlap on two cores.
 """
@@ -35,9 +39,10 @@ from parcelfit.errors import ParcelfitError
 from parcelfit.runs import Trajectory
 from parcelfit.tracking.barriers import barrier_times
 from parcelfit.tracking.detect import TagDetector, _side
+from parcelfit.tracking.fit import fit_smeared_tag, tag_pattern
 from parcelfit.tracking.geometry import PlaneMapper, fit_plane_mapper, tag_pose
 from parcelfit.tracking.smooth import rts_smooth
-from parcelfit.tracking.tagmap import TagMap
+from parcelfit.tracking.tagmap import TagMap, tag_corners
 
 
 @dataclass(frozen=True)
@@ -52,6 +57,9 @@ class TrackOptions:
     smooth: bool = True  # constant-acceleration Kalman/RTS smoother over the track (`smooth.py`)
     edge_refine: bool = True  # parcel tag corners from fitted edge lines (blur-robust)
     max_reprojection_px: float = 5.0  # reference tags' mean reprojection error above: refused
+    fit: bool = True  # model-based fit of the smeared tag (`fit.py`) where detection fails or blurs
+    fit_smear_cells: float = 0.5  # detected frames fitted too above this smear [tag bits]
+    fit_max_rms: float = 0.12  # a fit is kept when its residual rms is below this [contrast]
 
 
 @dataclass
@@ -140,18 +148,24 @@ def fill_gaps(
     theta: np.ndarray,
     max_gap: int,
     sd: np.ndarray | None = None,
+    fitted: np.ndarray | None = None,
 ) -> tuple[Trajectory | None, list[dict[str, Any]]]:
     """Trim to the first..last detection, unwrap theta, fill gaps <= ``max_gap`` frames linearly;
     returns the trajectory (None under two samples; its ``source`` says which samples were
     detected and which filled) and the list of gaps. ``sd`` (n, 2), the position [m] and heading
     [rad] standard deviations per frame, becomes the trajectory's position_sd and heading_sd,
-    NaN in the filled frames (no standard deviation describes a linear interpolation)."""
+    NaN in the filled frames (no standard deviation describes a linear interpolation).
+    ``fitted`` (n,) marks the measured frames whose pose came from the model fit of the smeared
+    tag (`parcelfit.tracking.fit`): their ``source`` is ``fitted``."""
     seen = np.isfinite(x)
     if seen.sum() < 2:
         return None, []
     first, last = np.flatnonzero(seen)[[0, -1]]
     t, x, y, theta = (a[first : last + 1].copy() for a in (t, x, y, theta))
     seen = seen[first : last + 1]
+    was_fitted = (
+        np.zeros(len(seen), bool) if fitted is None else np.asarray(fitted)[first : last + 1]
+    )
     if sd is not None:
         sd = np.where(seen[:, None], sd[first : last + 1], np.nan)
     theta[seen] = np.unwrap(theta[seen])
@@ -171,7 +185,7 @@ def fill_gaps(
             for arr in (x, y, theta):
                 arr[a:b] = np.interp(t[a:b], t[seen], arr[seen])
             keep[a:b] = True
-    source = np.where(seen, "detected", "filled")
+    source = np.where(seen, np.where(was_fitted, "fitted", "detected"), "filled")
     traj = Trajectory(
         t=t[keep],
         x=x[keep],
@@ -209,6 +223,17 @@ def track_video(
             where="camera",
             fix="calibrate the camera at the video's resolution (parcelfit camera-calibrate)",
         )
+    for key, value in (("exposure_ms", tag_map.exposure), ("readout_ms", tag_map.readout)):
+        if value > 1 / fps + 1e-9:  # both happen within one frame interval
+            cap.release()
+            raise ParcelfitError(
+                f"timing.{key} is {value * 1e3:g} ms, longer than the video's frame interval "
+                f"({1e3 / fps:.2f} ms at {fps:g} fps)",
+                file=tag_map.source,
+                where=f"timing.{key}",
+                fix="give it in milliseconds, as the camera states it (shutter time; sensor "
+                "readout, first to last row)",
+            )
     if not opts.max_reprojection_px > 0:
         raise ParcelfitError(
             f"max_reprojection_px must be > 0, got {opts.max_reprojection_px}",
@@ -231,6 +256,9 @@ def track_video(
     other_ids: set[int] = set()
     centres: dict[int, dict[int, tuple[float, float, float]]] = {i: {} for i in parcel_ids}
     corners: dict[int, dict[int, tuple[np.ndarray, np.ndarray]]] = {i: {} for i in parcel_ids}
+    fitting = opts.fit and (tag_map.exposure > 0 or tag_map.readout > 0)
+    fitters = {i: _SmearFitter(tag_map, i, corners[i], 1 / fps, size[1], opts) for i in parcel_ids}
+    last_seen: dict[int, list[tuple[int, np.ndarray]]] = {i: [] for i in parcel_ids}
     started = time.perf_counter()
     k = 0
     try:
@@ -246,6 +274,12 @@ def track_video(
                 reused += 1
             other_ids |= set(found) - expected - set(parcel_ids)
             for tag_id in parcel_ids:
+                if fitting and mapper is not None:
+                    crop = _cut(grey, found.get(tag_id), last_seen[tag_id], k, opts.max_gap)
+                    if crop is not None:
+                        fitters[tag_id].crops[k] = _Crop(*crop, mapper)
+                    if tag_id in found:
+                        last_seen[tag_id] = [*last_seen[tag_id][-1:], (k, found[tag_id])]
                 if mapper is None or tag_id not in found:
                     rows[tag_id].append((math.nan, math.nan, math.nan))
                     if mapper is None:
@@ -259,6 +293,9 @@ def track_video(
                 dx, dy = tag.offset
                 c, s = math.cos(th), math.sin(th)
                 rows[tag_id].append((tx - (c * dx - s * dy), ty - (s * dx + c * dy), th))
+            if fitting:
+                for fitter in fitters.values():
+                    fitter.run(k - _SmearFitter.reach)
             if progress:
                 progress(k + 1, total)
     finally:
@@ -284,18 +321,46 @@ def track_video(
         )
     t = np.arange(frames) / fps
     tags = {}
+    fit_seconds, fit_count, fit_residuals = 0.0, 0, []
     for tag_id in parcel_ids:
         arr = np.array(rows[tag_id], dtype=float).reshape(-1, 3)
+        detected = np.isfinite(arr[:, 0])
+        meas_sd = np.tile(_MEASUREMENT_SD[1:], (len(arr), 1))
+        fitted = np.zeros(len(arr), bool)
+        if fitting:
+            fitter = fitters[tag_id]
+            fitter.run(frames)
+            fit_seconds += fitter.seconds
+            fit_count += fitter.tried
+            fit_residuals += fitter.residuals
+            fits = fitter.fits
+            # smeared frames the fit did not support: their detection is trusted 3 times less
+            for k_bad in fitter.unsupported:
+                meas_sd[k_bad] *= 3
+            tag = tag_map.parcel_tags[tag_id]
+            for k_fit, (pose, sd_pos, sd_head, px) in fits.items():
+                tx, ty, th = pose
+                dx, dy = tag.offset
+                c, s_ = math.cos(th), math.sin(th)
+                arr[k_fit] = (tx - (c * dx - s_ * dy), ty - (s_ * dx + c * dy), th)
+                # the parcel centre's sd: the tag centre's and the heading's share through the offset
+                meas_sd[k_fit] = (math.hypot(sd_pos, math.hypot(dx, dy) * sd_head), sd_head)
+                fitted[k_fit] = True
+                w = tag_corners(tx, ty, tag.size, th)
+                corners[tag_id][k_fit] = (w, np.full(4, size[1] / 2))  # at the frame time
+                centres[tag_id][k_fit] = (*px.mean(axis=0), _side(px))
         if tag_map.readout > 0:
             arr = rolling_shutter_poses(
                 corners[tag_id], t, tag_map.readout, size[1], tag_map.parcel_tags[tag_id].offset
             )
         gated, sd = 0, None
         if opts.smooth:
-            arr, gated, sd = smooth_track(arr, 1 / fps)
-        traj, gaps = fill_gaps(t, arr[:, 0], arr[:, 1], arr[:, 2], opts.max_gap, sd)
-        detected = np.isfinite(arr[:, 0])
-        span = _frames_in_view(detected, centres[tag_id], size)
+            arr, gated, sd = smooth_track(arr, 1 / fps, meas_sd)
+        measured = np.isfinite(arr[:, 0])
+        traj, gaps = fill_gaps(
+            t, arr[:, 0], arr[:, 1], arr[:, 2], opts.max_gap, sd, fitted=fitted & measured
+        )
+        span = _frames_in_view(measured, centres[tag_id], size)
         crossings: dict[str, float | None] = {}
         transit = None
         if traj is not None and tag_map.barriers:
@@ -310,11 +375,14 @@ def track_video(
             crossings,
             {
                 "detected_frames": int(detected.sum()),
+                "fitted_frames": int((fitted & measured).sum()),
+                "fitted_missed_frames": int((fitted & measured & ~detected).sum()),
                 "frames_in_view": span,
-                "missed_at_clip_ends": int(span - _detected_span(detected)),
+                "missed_at_clip_ends": int(span - _detected_span(measured)),
                 "smoothed": opts.smooth,
                 "frames_rejected_by_smoother": gated,
-                "detection_rate": float(detected.sum() / span) if span else 0.0,  # coverage
+                # coverage: frames measured (detected or fitted) of the frames in view
+                "detection_rate": float(measured.sum() / span) if span else 0.0,
                 "gaps": gaps,
                 "interpolated_frames": int(sum(g["frames"] for g in gaps if g["interpolated"])),
                 "missing_frames": int(sum(g["frames"] for g in gaps if not g["interpolated"])),
@@ -343,6 +411,13 @@ def track_video(
             "full_frame_searches": detector.full_frame_searches,
         },
         "max_gap_filled_frames": opts.max_gap,
+        "smear_fit": {
+            "on": fitting,
+            "frames_tried": fit_count,
+            "seconds_per_frame_tried": fit_seconds / fit_count if fit_count else None,
+            # the mean residual of the kept fits: smallest at the right timing (docs/tracking.md)
+            "residual_rms_mean": float(np.mean(fit_residuals)) if fit_residuals else None,
+        },
         "other_tags_seen": sorted(other_ids),
     }
     if not any(t.trajectory is not None for t in tags.values()):
@@ -362,17 +437,21 @@ _MEASUREMENT_SD = (3e-4, 3e-4, math.radians(0.5))
 _JERK_DENSITY = (10.0, 10.0, 1e3)
 
 
-def smooth_track(arr: np.ndarray, dt: float) -> tuple[np.ndarray, int, np.ndarray | None]:
+def smooth_track(
+    arr: np.ndarray, dt: float, meas_sd: np.ndarray | None = None
+) -> tuple[np.ndarray, int, np.ndarray | None]:
     """Poses (n, 3) [m, m, rad] (NaN where unseen) replaced by their RTS-smoothed values at the
     seen frames (`parcelfit.tracking.smooth`); frames the smoother rejects as outliers become
     NaN. Returns the poses, how many frames were rejected, and the smoother's posterior standard
     deviations (n, 2): position [m] (root mean square of the x and y sds) and heading [rad],
     NaN where the pose is NaN (None under 3 seen frames: nothing was smoothed).
 
-    The sds are those of the smoothed estimate under the model: every frame measured with the
-    same sd (`_MEASUREMENT_SD`), x, y and theta independent, constant acceleration with white jerk
+    ``meas_sd`` (n, 2): each frame's measurement sd, position [m] (per coordinate) and heading
+    [rad] (default: `_MEASUREMENT_SD` in every frame, the edge-fitted detection; the model fit
+    of a smeared tag gives its own). The sds are those of the smoothed estimate under the model:
+    each frame measured with its sd, x, y and theta independent, constant acceleration with white jerk
     (`_JERK_DENSITY`). They grow at the track's ends and next to gaps and rejected frames; they
-    do not know that a frame was blurred or badly fitted."""
+    know a frame's blur or fit only through ``meas_sd``."""
     seen = np.isfinite(arr[:, 0])
     if seen.sum() < 3:
         return arr, 0, None
@@ -382,7 +461,11 @@ def smooth_track(arr: np.ndarray, dt: float) -> tuple[np.ndarray, int, np.ndarra
     sds = np.zeros((len(arr), 3))
     for j in range(3):
         z = out[:, j]
-        r = np.full(len(z), _MEASUREMENT_SD[j] ** 2)
+        r = (
+            np.full(len(z), _MEASUREMENT_SD[j] ** 2)
+            if meas_sd is None
+            else meas_sd[:, 0 if j < 2 else 1] ** 2
+        )
         smoothed, sds[:, j], used = rts_smooth(z, dt, r, _JERK_DENSITY[j])
         out[seen, j] = smoothed[seen]
         keep &= used | ~seen
@@ -472,3 +555,186 @@ def _frames_in_view(
     start = 0 if inside(first) else first
     end = len(detected) - 1 if inside(last) else last
     return end - start + 1
+
+
+@dataclass(frozen=True)
+class _Crop:
+    """A cut of one frame around a parcel tag, kept for the model fit (`_SmearFitter`)."""
+
+    patch: np.ndarray  # grey, shrunk by ``shrink``
+    origin: tuple[int, int]  # full-frame px of the cut's top-left
+    shrink: int
+    mapper: PlaneMapper  # the frame's geometry
+
+
+_FIT_SIDE_PX = 24  # cuts are shrunk so that the tag spans at most about twice this many pixels
+
+
+def _cut(
+    grey: np.ndarray,
+    found: np.ndarray | None,
+    last: list[tuple[int, np.ndarray]],
+    k: int,
+    max_gap: int,
+) -> tuple[np.ndarray, tuple[int, int], int] | None:
+    """A cut of frame ``k`` around the tag: around its detected corners ``found``, or, when it
+    was missed, around where its last two detections ``last`` (frame, corners) move it (for up
+    to 2 * ``max_gap`` frames after the last one). Returns (patch, origin (x, y), shrink)."""
+    if found is not None:
+        corners, grow = found, 0.0
+    elif last and k - last[-1][0] <= 2 * max_gap:
+        k1, c1 = last[-1]
+        step = (
+            (c1.mean(axis=0) - last[0][1].mean(axis=0)) / (k1 - last[0][0]) if len(last) > 1 else 0
+        )
+        corners, grow = c1 + step * (k - k1), 0.25 * (k - k1)
+    else:
+        return None
+    side = _side(corners)
+    d = max(1, math.floor(side / _FIT_SIDE_PX))
+    margin = side * (0.75 + grow)
+    h, w = grey.shape
+    x0 = max(0, int(corners[:, 0].min() - margin))
+    y0 = max(0, int(corners[:, 1].min() - margin))
+    x0, y0 = x0 - x0 % d, y0 - y0 % d
+    x1 = min(w, math.ceil(corners[:, 0].max() + margin))
+    y1 = min(h, math.ceil(corners[:, 1].max() + margin))
+    x1, y1 = x0 + (x1 - x0) // d * d, y0 + (y1 - y0) // d * d
+    if x1 - x0 < 8 * d or y1 - y0 < 8 * d:
+        return None
+    patch = grey[y0:y1, x0:x1]
+    if d > 1:
+        patch = cv2.resize(patch, ((x1 - x0) // d, (y1 - y0) // d), interpolation=cv2.INTER_AREA)
+    return patch.copy(), (x0, y0), d
+
+
+# the fit's formal standard deviations assume independent pixel noise; on the rendered H.264
+# videos its errors were up to 4 times larger, hence the factor, and never below the floors
+_FIT_SD_FACTOR = 4.0
+_FIT_SD_FLOOR = (5e-5, math.radians(0.05))
+
+
+class _SmearFitter:
+    """The model fit (`fit_smeared_tag`) of one parcel tag in the frames it was missed and in
+    the frames it was detected but smeared by more than ``opts.fit_smear_cells`` bits, in frame
+    order, run while the video is read (`run`, a few frames behind the detection, so that the
+    fits use the main thread while the decoding thread reads on). The parcel's pose (centre x,
+    y [m], heading [rad]) and motion at frame k come from a quadratic in time through its
+    detections and fits within 4 frames (constant acceleration and turn-rate change), the
+    tag's from the parcel's through its offset; a detected frame starts from its detection, a
+    missed one from the prediction. A fit is kept when its residual is below
+    ``opts.fit_max_rms``, it stays within half a tag and 15 degrees of its start, and its
+    standard deviations are below 1 mm and 1 degree. ``fits``: per fitted frame, the tag's
+    pose, the sds of its centre [m] and heading [rad], and its image corners [px];
+    ``unsupported``: detected frames whose smear called for a fit that was not kept."""
+
+    reach = 4  # frames either side in the motion model
+
+    def __init__(
+        self,
+        tag_map: TagMap,
+        tag_id: int,
+        detections: dict[int, tuple[np.ndarray, np.ndarray]],
+        dt: float,
+        height: int,
+        opts: TrackOptions,
+    ) -> None:
+        self.tag = tag_map.parcel_tags[tag_id]
+        self.pattern = tag_pattern(tag_map.family, tag_id)
+        self.exposure, self.readout = tag_map.exposure, tag_map.readout
+        self.detections = detections  # frame -> (rig corners, image rows), filled while reading
+        self.dt, self.height, self.opts = dt, height, opts
+        self.crops: dict[int, _Crop] = {}
+        self.fits: dict[int, tuple[np.ndarray, float, float, np.ndarray]] = {}
+        self.unsupported: set[int] = set()
+        self.tried, self.seconds = 0, 0.0
+        self.residuals: list[float] = []  # kept fits' residual rms [fraction of the contrast]
+        self._known: dict[int, np.ndarray] = {}  # frame -> the parcel's pose
+
+    def _pose(self, k: int) -> np.ndarray | None:
+        if k not in self._known and k in self.detections:
+            # the motion model runs on the parcel centre (a near-straight path) and heading,
+            # not on the tag centre, which circles the parcel centre when the parcel spins
+            self._known[k] = np.array(_parcel_pose(self.detections[k][0], self.tag.offset))
+        return self._known.get(k)
+
+    def run(self, until: int) -> None:
+        """Fit the kept cuts of frames up to ``until`` (then dropped)."""
+        for k in sorted(c for c in self.crops if c <= until):
+            crop = self.crops.pop(k)
+            t0 = time.perf_counter()
+            self.tried += 1
+            self._fit(k, crop)
+            self.seconds += time.perf_counter() - t0
+
+    def _fit(self, k: int, crop: _Crop) -> None:
+        tag, opts = self.tag, self.opts
+        near_poses = [(j, self._pose(j)) for j in range(k - self.reach, k + self.reach + 1)]
+        near = [(j, p) for j, p in near_poses if p is not None]
+        if len(near) < 2:
+            return
+        tk = np.array([j - k for j, _ in near]) * self.dt
+        poses = np.array([p for _, p in near])
+        poses[:, 2] = np.unwrap(poses[:, 2])
+        deg = 2 if len(near) >= 3 and np.ptp(tk) > 2 * self.dt else 1
+        coef = [np.polyfit(tk, poses[:, j], deg) for j in range(3)]
+        px_, py_, th = (c[-1] for c in coef)
+        vx, vy, w = (c[-2] for c in coef)
+        dx, dy = tag.offset
+        c_, s_ = math.cos(th), math.sin(th)
+        ox, oy = c_ * dx - s_ * dy, s_ * dx + c_ * dy  # the tag's offset in the rig frame
+        rates = np.array([vx - w * oy, vy + w * ox, w])  # the tag centre's velocity, turn rate
+        detected = k in self.detections
+        if detected:
+            start = np.array(_parcel_pose(self.detections[k][0], (0.0, 0.0)))
+            start[2] = th + math.remainder(start[2] - th, 2 * math.pi)
+            smear = (math.hypot(*rates[:2]) + abs(w) * tag.size / math.sqrt(2)) * self.exposure
+            if smear < opts.fit_smear_cells * tag.size / self.pattern.bits:
+                return
+        else:
+            start = np.array([px_ + ox, py_ + oy, th])
+        mapper = crop.mapper
+
+        def corners_of(p: np.ndarray, m: PlaneMapper = mapper) -> np.ndarray:
+            return m.to_image(tag_corners(p[0], p[1], tag.size, p[2]), tag.height)
+
+        side_px = _side(corners_of(start))
+        step_m = 0.1 * tag.size / side_px
+        steps = np.array([step_m, step_m, 0.1 / (side_px / math.sqrt(2))])
+        fit = fit_smeared_tag(
+            crop.patch,
+            crop.origin,
+            crop.shrink,
+            corners_of,
+            start,
+            steps,
+            rates,
+            self.pattern,
+            self.exposure,
+            self.readout,
+            self.height,
+        )
+        if fit is None or not fit.rms <= opts.fit_max_rms:
+            self.unsupported.update({k} if detected else set())
+            return
+        moved = fit.params - start
+        sd_pos = math.sqrt(max(fit.cov[0, 0] + fit.cov[1, 1], 0.0) / 2)
+        sd_head = math.sqrt(max(fit.cov[2, 2], 0.0))
+        if (
+            math.hypot(*moved[:2]) > tag.size / 2
+            or abs(moved[2]) > math.radians(15)
+            or sd_pos > 1e-3
+            or sd_head > math.radians(1)
+        ):
+            self.unsupported.update({k} if detected else set())
+            return
+        self.residuals.append(fit.rms)
+        tx, ty, th = fit.params
+        c_, s_ = math.cos(th), math.sin(th)
+        self._known[k] = np.array([tx - (c_ * dx - s_ * dy), ty - (s_ * dx + c_ * dy), th])
+        self.fits[k] = (
+            fit.params,
+            math.hypot(_FIT_SD_FACTOR * sd_pos, _FIT_SD_FLOOR[0]),
+            math.hypot(_FIT_SD_FACTOR * sd_head, _FIT_SD_FLOOR[1]),
+            fit.corners,
+        )
