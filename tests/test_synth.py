@@ -128,3 +128,46 @@ def test_an_interrupted_twin_dataset_resumes_from_its_cache(tmp_path, monkeypatc
     assert all(
         np.allclose(x.trajectory.xy, y.trajectory.xy, atol=1e-9) for x, y in zip(a, b, strict=True)
     )
+
+
+def test_the_twins_real_runs_take_their_own_time_step(tmp_path, monkeypatch):
+    """``real_timestep`` reaches the scene of every twin run (default: the model's 1/600 s), and a
+    spec outside [1e-5, 0.01] s is refused naming the key."""
+    import pytest
+
+    import parcelfit.synth as synth
+    from parcelfit import ParcelfitError
+    from parcelfit.sim.mujoco import load_consignment, load_rig
+
+    seen = []
+
+    class Recording:
+        def __init__(self, options, **_):
+            seen.append(options.scene.timestep)
+
+        def run(self, params, case, run_id=None):
+            raise RuntimeError("stop here")
+
+    monkeypatch.setattr(synth, "MujocoSimulator", Recording)
+    for settings, step in (
+        (TwinSettings(), 1 / 600),
+        (TwinSettings(real_timestep=1 / 2400), 1 / 2400),
+    ):
+        job = synth.TwinJob(
+            "r1",
+            TestCase("E1", "BW", 1),
+            load_rig("E1"),
+            load_consignment("BW"),
+            {},
+            settings,
+            np.random.SeedSequence(1),
+        )
+        with pytest.raises(RuntimeError, match="stop here"):
+            synth._twin_run(job)
+        assert seen[-1] == step
+    spec = tmp_path / "spec.yaml"
+    spec.write_text("cases: [E1/BW/1]\nsettings: {real_timestep: 0.00041667}\n")
+    assert synth.load_twin_spec(spec).settings.real_timestep == 0.00041667
+    spec.write_text("cases: [E1/BW/1]\nsettings: {real_timestep: 0.1}\n")
+    with pytest.raises(ParcelfitError, match="real_timestep"):
+        synth.load_twin_spec(spec)
