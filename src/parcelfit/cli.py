@@ -901,6 +901,26 @@ def _print_recommendation(info: dict[str, Any]) -> None:
             f"lowest-cost parameters so far (cost {low['cost']:.4g}, iteration "
             f"{low['iteration']}); the study recommends its parameters when it stops",
         )
+    shown = rec if rec is not None else low
+    if shown is not None and shown.get("parts"):
+        _print_parts(shown["parts"])
+
+
+def _print_parts(parts: list[dict[str, Any]]) -> None:
+    """The per-case parts of a joint or ensemble evaluation's cost."""
+    table = Table(title=Text("its cost, case by case"), title_justify="left")
+    for col in ("case", "weight", "cost", "parts"):
+        table.add_column(col, justify="left" if col in ("case", "parts") else "right")
+    for p in parts:
+        if "trajectory_term" in p:
+            se = "" if p.get("se") is None else f" (se {p['se']:.3g})"
+            tt = "-" if p.get("transit_term") is None else f"{p['transit_term']:.3g}"
+            what = f"trajectories {p['trajectory_term']:.3g}{se}, transit {tt}"
+            what += f", {len(p.get('seeds') or [])} placements"
+        else:
+            what = f"DTW_xy {p['dtw_xy']:.3g} m, DTW_theta {p['dtw_theta']:.3g} rad"
+        table.add_row(str(p["case"]), f"{p['weight']:g}", f"{p['cost']:.4g}", what)
+    console.print(table)
 
 
 def _print_params(params: dict[str, float], title: str) -> None:
@@ -999,8 +1019,9 @@ def status(
         )
     )
     for v in info["validations"]:
+        on = f" on {v['case']}" if v.get("case") else ""
         console.print(
-            f"  validation after iteration {v['after_iteration']}: {_verdict_word(v)}",
+            f"  validation after iteration {v['after_iteration']}{on}: {_verdict_word(v)}",
             markup=False,
         )
     note = (record.get("optimizer") or {}).get("note")
