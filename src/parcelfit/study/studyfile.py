@@ -264,7 +264,12 @@ class StudyFile(FileModel):
 
     @model_validator(mode="after")
     def _reference_or_cases(self) -> StudyFile:
-        if (self.reference is None) == (not self.cases):
+        if self.reference is None and not self.cases:
+            raise ParcelfitError(
+                "missing required key 'reference'",
+                fix="add `reference:`",
+            )
+        if self.reference is not None and self.cases:
             raise ParcelfitError(
                 "give either reference (one test case) or cases (a joint study)"
                 + (", not both" if self.reference is not None else ""),
