@@ -4,6 +4,11 @@ spent. Every evaluation goes through the `Store` before the loop moves on; resta
 study folder replays the store (finished evaluations are never simulated again, pending ones
 are run) and continues exactly where it stopped.
 
+A study with several fitted test cases, or with the ensemble cost, evaluates one parameter set
+by simulating every case (and placement) in one batch through the executor; the evaluation is
+one store row with the per-case parts in its details (`parcelfit.study.joint`). Its validation
+cases are simulated one after the other, and the validation passes when every case passes.
+
 Failed, unstable and timed-out simulations, and runs whose trajectory misses the regions of
 interest, are stored with their status and told to the optimiser as failures (it penalises them
 with the worst cost seen); they never stop the loop and count against the budget.
@@ -191,7 +196,11 @@ class Calibration:
     references, validations and surrogate the report renders) and, with ``figures``, the study
     figures (`parcelfit.study.plots.study_figures`) and, with ``key_frames`` too, the
     recommended run's key frames (MuJoCo studies: one more simulation; ``animation`` adds
-    ``figures/run.gif``).
+    ``figures/run.gif``). When the study stops it also analyses what its evaluations determine
+    (`parcelfit.study.identify`), runs the transfer check of a study with ``transfer`` cases
+    and, with ``advice`` and at least two validation or transfer cases, simulates the
+    calibrated set at the ends of the open intervals on each to say which case would help most
+    (`parcelfit.study.joint`); all three go into ``results.json``.
 
     Constructing one keeps its inputs and touches nothing: `run` opens the folder, reads the
     data and builds the simulator (through `prepare`), runs the study and closes the folder.
@@ -795,13 +804,13 @@ class Calibration:
     ) -> Advice | None:
         """Which candidate case (validation and transfer cases) would help most to determine
         the parameters the data leave open (`joint.advise`); None when every parameter is
-        determined, there is no candidate or it is disabled. An earlier advice for the same
-        parameters and intervals is kept."""
+        determined, there are fewer than two candidates to choose from, or it is disabled. An
+        earlier advice for the same parameters and intervals (kept in the store) is reused."""
         if ident is None or not self.advice:
             return None
         open_ = {p.name: p.interval for p in ident.parameters if not p.determined}
         candidates = [*self._validation_cases(), *self.study.transfer]
-        if not open_ or not candidates:
+        if not open_ or len(candidates) < 2:  # a choice needs two candidates
             return None
         stored = self.store.get_meta("advice")  # kept in the store, with the intervals it used
         if stored is not None:

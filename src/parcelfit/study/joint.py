@@ -166,7 +166,9 @@ def evaluation_outcome(
     if bad is not None:
         out["status"] = bad.result.status.value
         msg = bad.result.diagnostics.get("message")
-        details["message"] = f"{bad.spec.label} (placement {bad.seed}): {msg or out['status']}"
+        details["message"] = msg or f"the simulation ended {out['status']}"  # as a worker said
+        details["failed_run"] = {"case": bad.spec.label, "placement": bad.seed}  # it, so a lost
+        # worker's message is recognised on resume (calibration.LOST_WORKER_MESSAGES)
         out["details"] = details
         return out
     total = 0.0
