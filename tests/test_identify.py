@@ -152,3 +152,11 @@ def test_ensemble_real_costs_score_each_run_against_the_others(reference):
     # DTW of two real runs as the matrices hold it
     a, b = sel.xy_series[0], sel.xy_series[1]
     assert dtw_distance(a, b, sel.comparison.window) ** 2 == pytest.approx(sel.d_xy[0, 1])
+
+
+def test_when_no_parameter_set_reaches_the_real_runs_scatter_nothing_is_determined():
+    points, costs, _ = _evaluations(n=40)
+    ident = identify(SPACE, points, costs, 0.2, seed=0)  # every cost is >= about 1
+    assert not ident.reached and ident.best_acceptance < 0.05
+    assert all(p.verdict == "undetermined" for p in ident.parameters)
+    assert all(p.interval == (0, 1) for p in ident.parameters)

@@ -9,11 +9,10 @@ are added when present.
 
 Sections: summary and verdict; transit-time statistics; reference runs (distance matrices);
 screening; calibration (history, parameters with their ranges and, for synthetic data, the truth;
-what the evaluations determine: each parameter's interval and verdict, the pairwise posterior
-plot, which test case would help most); validation (published criteria and the stricter band
-test, figures like the published Figures 16-19; every validation case of a joint study); the
-transfer check (do the parameters carry over to other test cases?); the simulated run's key
-frames.
+what the evaluations determine: each parameter's interval and verdict, the pairwise plot, which
+test case would help most); validation (published criteria and the stricter band test, figures
+like the published Figures 16-19; every validation case of a joint study); the transfer check
+(do the parameters carry over to other test cases?); the simulated run's key frames.
 
 Architecture: the report renders, it does not analyse. The calibration writes what it concluded
 into the study folder: the store (`parcelfit.study.store`: the evaluations and the typed
@@ -32,12 +31,12 @@ study written by an earlier parcelfit, or one stopped before it validated) the p
 how to write it: `parcelfit calibrate` on the same study file and folder writes the results of a
 finished study without simulating again. What the report still computes is description, not
 analysis: the dataset's transit-time statistics (as `parcelfit stats` does), the history and
-trace plots of the stored evaluations, and the pairwise plot of the stored posterior sample.
+trace plots of the stored evaluations, and the pairwise plot of the stored sample.
 
 What the data determine (stated in the report) is the calibration's stored identifiability
 analysis (`parcelfit.study.identify`, formulas there): per parameter the interval of values the
-evaluations cannot tell apart (central 99 % of a posterior sample over a GP surrogate of the
-log cost, with the real runs' largest cost as the acceptance threshold) and its verdict:
+evaluations cannot tell apart (those a GP surrogate of the log cost cannot exclude at 95 %
+confidence from costing less than the real runs' largest cost) and its verdict:
 determined (interval at most 20 % of the range; reported as its midpoint +- half-width, so
 within 10 % of the range of anything in it), bounded on one side or narrowed (reported as the
 bound or interval), or undetermined (no value is reported).
@@ -466,11 +465,14 @@ def _identifiability_view(
         "threshold_source": ident.threshold_source,
         "noise_sd": ident.noise_sd,
         "level": f"{ident.level * 100:.0f}",
+        "reached": ident.reached,
+        "best_acceptance": ident.best_acceptance,
         "converged": ident.converged,
         "correlations": [(a, b, f"{r:+.2f}") for a, b, r in ident.strongest_correlations()],
         "missed": ", ".join(r.name for r in rows if synthetic and r.covers_truth is False),
         "figure": figure_html(
-            pairwise_figure(ident, _truth_si(truth) if synthetic else None), "pairwise posterior"
+            pairwise_figure(ident, _truth_si(truth) if synthetic else None),
+            "pairwise plot of the values not excluded",
         ),
         "advice": None
         if advice is None

@@ -658,12 +658,15 @@ class Calibration:
             else:  # a Study made in code without its cases
                 eps = case_threshold(self.reference, study)
                 source = f"largest equation (3) of a real run: {eps:.3g}"
+            initial = [r.cost for r in fits if r.iteration == 0 and r.status == "ok" and r.cost]
+            typical = math.exp(sum(map(math.log, initial)) / len(initial)) if initial else None
             return identify(
                 study.space,
                 [r.params for r in fits],
                 [r.cost if r.status == "ok" else None for r in fits],
                 eps,
                 threshold_source=source,
+                typical_cost=typical,
                 seed=study.seed,
             )
         except ParcelfitError:
@@ -711,7 +714,7 @@ class Calibration:
         determine, the transfer check and the advice."""
         last = -1 if result.last_iteration is None else result.last_iteration
         surrogate = self.surrogate()
-        self._report(last, 0, "what the data determine (posterior sample over the surrogate)")
+        self._report(last, 0, "what the data determine (the values the surrogate cannot exclude)")
         ident = self.identifiability()
         transfer: tuple[ValidationRecord, ...] = ()
         advice = None

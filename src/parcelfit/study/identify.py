@@ -6,53 +6,65 @@ runs, the acceptance threshold epsilon, and simulates nothing.
 
 **Threshold.** A simulation at the true parameters is, at best, like one more real run: its cost
 scores like a real run's. So epsilon is the largest cost a real run scores in the same
-cost function (`parcelfit.metrics.ensemble.real_run_costs`: for the published cost, equation 3
-of every real run against the reference run; for the ensemble cost, the ensemble cost of every
-real run against the other real runs; for a joint study the weighted sum of the cases'
-thresholds, which is conservative: the sum of the largest values is at least the largest sum).
+cost function (for the published cost, equation 3 of every real run against the reference run,
+`parcelfit.metrics.cost.real_run_costs`; for the ensemble cost, the ensemble cost of every real
+run against the other real runs, `parcelfit.metrics.ensemble.ensemble_real_costs`; for a joint
+study the weighted sum of the cases' thresholds, which is conservative: the sum of the largest
+values is at least the largest sum).
 
 **Surrogate.** A Gaussian process on the unit cube (`parcelfit.optimize.space`) models the log
 cost of the finished evaluations (failed ones carry no cost and are left out):
 
-    log c(u) ~ GP(m, k),  k = s^2 Matern_5/2(u, u'; l_1..l_d) + sigma_n^2 delta(u, u')
+    log c(u) ~ m + GP(0, k),  k = s^2 Matern_5/2(u, u'; l_1..l_d) + sigma_n^2 delta(u, u')
 
 with one length scale per parameter (l_j in [0.05, 100]: features narrower than 5 % of the range
 cannot be resolved by a few dozen evaluations; a parameter without effect gets a long one) and
 the noise variance sigma_n^2 (the run-to-run scatter of the cost) fitted by marginal likelihood
-(scikit-learn). It is fitted here, independently of the optimiser's own surrogate, so the
-analysis does not change when the optimiser's settings do.
+(scikit-learn). The constant m, what the GP reverts to far from the evaluations, is the mean log
+cost of a uniform design over the box (the study's initial Latin hypercube), not of all the
+evaluations: the optimiser crowds its evaluations where the cost is low, and their mean would
+make every unexplored region look good. The GP is fitted here, independently of the optimiser's
+own surrogate, so the analysis does not change when the optimiser's settings do.
 
-**Likelihood** (approximate Bayesian computation with a GP surrogate of the discrepancy, as in
+**Acceptance** (approximate Bayesian computation with a GP surrogate of the discrepancy, as in
 BOLFI, Gutmann and Corander 2016, JMLR 17(125)): the probability that a simulation at u scores a
 cost below epsilon,
 
     L(u) = Phi( (log epsilon - mu(u)) / sqrt(v(u) + sigma_n^2) )
 
 with mu, v the GP's predictive mean and variance of the latent log cost. Where the evaluations
-are few, v is large and L stays near 1/2: an unexplored region stays plausible.
+are few, v is large and L stays well above zero: an unexplored region stays plausible.
 
-**Posterior sample.** Prior uniform on the unit cube (log-uniform for log-scaled parameters);
-posterior p(u) ~ L(u). Sixteen random-walk Metropolis chains (seeded, started from the 16 points
-of highest L among 4096 Sobol points; Gaussian steps reflected at the cube's faces, so the
-proposal stays symmetric; the step of each parameter is adapted during the first half to
-the chains' spread and about 30 % acceptance, and then fixed), 2000 steps
-each, the second half kept. R-hat (Gelman-Rubin, split chains) is stored per parameter; above
-1.1 the report says the sample has not converged.
+**Plausible set.** The values the data cannot tell apart from the truth are
 
-**Intervals and verdicts.** Per parameter, the interval is the central 99 % of the posterior
-sample, [q_0.005, q_0.995], in the parameter's own unit. With its width W and its distances
-from the range's ends as shares of the range (high - low):
+    S = { u : L(u) >= alpha },  alpha = 0.05,
+
+i.e. a value is excluded only when the surrogate is 95 % sure that it costs more than any real
+run scores. (Not the posterior mass of L: a low but non-zero L spread over a large unexplored
+volume would outweigh a small region the data single out, and every interval would span its
+range.) S is sampled by 8192 Sobol points and 16 random-walk chains uniform on S (seeded;
+started from evaluated and Sobol points in S; Gaussian steps reflected at the cube's faces and
+accepted when they stay in S; each parameter's step adapted during the first half of 2000 steps
+to the chains' spread and about 30 % acceptance, then fixed; the second half kept). R-hat
+(Gelman-Rubin, split chains) is stored per parameter; above 1.1 the report says the sample has
+not converged. If S is empty (no parameter set reaches the real runs' scatter: the model cannot
+reproduce the data within it), every parameter is undetermined.
+
+**Intervals and verdicts.** Per parameter, the interval is the projection of S: the smallest
+and largest value among the sample, in the parameter's own unit. With its width W and its
+distances from the range's ends as shares of the range (high - low):
 
 * **determined**: W <= 20 % of the range. The estimate is the interval's midpoint, so every
-  value in the interval (the truth among them) is within 10 % of the range of it;
+  value in the interval (the truth among them, when the model can reproduce the data) is within
+  10 % of the range of it;
 * **lower bound** / **upper bound**: not determined, and the interval leaves out at least 10 % of
   the range at one end only (the data rule out low, resp. high, values and nothing else);
 * **narrowed**: not determined, and at least 10 % is left out at both ends;
 * **undetermined**: less than 10 % is left out at either end: the data cannot tell the values
   apart, and no value is reported.
 
-Correlations are the Pearson correlations of the posterior sample on the unit cube; a
-correlation near +-1 says that the data fix a combination of two parameters, not each.
+Correlations are the Pearson correlations of the sample of S on the unit cube; a correlation
+near +-1 says that the data fix a combination of two parameters, not each.
 """
 
 from __future__ import annotations
@@ -76,20 +88,21 @@ from sklearn.gaussian_process.kernels import ConstantKernel, Matern, WhiteKernel
 from parcelfit.errors import ParcelfitError
 from parcelfit.optimize.space import Space
 
-LEVEL = 0.99  # central posterior mass of the reported interval
+ALPHA = 0.05  # a value is excluded when the surrogate is 95 % sure it costs more than epsilon
+N_SOBOL = 8192  # quasi-random points that seed and complete the sample of the plausible set
 DETERMINED_WIDTH = 0.20  # widest interval (share of the range) called determined
 EXCLUDED_END = 0.10  # share of the range an end must leave out to count as a bound
 LENGTH_SCALE_BOUNDS = (0.05, 100.0)  # on the unit cube
 N_CHAINS = 16
 N_STEPS = 2000
-N_KEEP_FOR_PLOT = 2000  # posterior points stored for the pairwise plot
+N_KEEP_FOR_PLOT = 2000  # points of the plausible set stored for the pairwise plot
 VERDICTS = ("determined", "lower bound", "upper bound", "narrowed", "undetermined")
 
 
 @dataclass(frozen=True)
 class ParameterInterval:
-    """One parameter's verdict: its range and interval [low, high] (SI), the posterior median,
-    the verdict (one of `VERDICTS`) and R-hat of its chains."""
+    """One parameter's verdict: its range and interval [low, high] (SI), the median over the
+    plausible set's sample, the verdict (one of `VERDICTS`) and R-hat of its chains."""
 
     name: str
     low: float
@@ -149,10 +162,11 @@ class ParameterInterval:
 @dataclass(frozen=True, eq=False)
 class Identifiability:
     """What the evaluations say about each parameter (see the module docstring): the intervals,
-    the posterior correlation matrix (order of ``parameters``), a thinned posterior sample in
-    SI (``sample``: (m, d)), the threshold epsilon and where it came from, how many evaluations
-    the surrogate learnt, its fitted noise standard deviation (of the log cost) and the
-    posterior's effective sample size (summed over parameters' chains, smallest)."""
+    the correlation matrix of the plausible set (order of ``parameters``), a thinned sample of
+    it in SI (``sample``: (m, d)), the threshold epsilon and where it came from, how many
+    evaluations the surrogate learnt, its fitted noise standard deviation (of the log cost), the
+    confidence ``level`` of an exclusion (1 - alpha), whether any parameter set reaches the
+    real runs' scatter (``reached``) and the largest acceptance L seen."""
 
     parameters: tuple[ParameterInterval, ...]
     correlation: np.ndarray
@@ -161,7 +175,9 @@ class Identifiability:
     threshold_source: str
     evaluations: int
     noise_sd: float
-    level: float = LEVEL
+    level: float = 1.0 - ALPHA
+    reached: bool = True
+    best_acceptance: float = 1.0
 
     @property
     def names(self) -> list[str]:
@@ -199,6 +215,8 @@ class Identifiability:
             "evaluations": self.evaluations,
             "noise_sd": self.noise_sd,
             "level": self.level,
+            "reached": self.reached,
+            "best_acceptance": self.best_acceptance,
         }
 
     @classmethod
@@ -213,7 +231,9 @@ class Identifiability:
             str(doc["threshold_source"]),
             int(doc["evaluations"]),
             float(doc["noise_sd"]),
-            float(doc.get("level", LEVEL)),
+            float(doc.get("level", 1.0 - ALPHA)),
+            bool(doc.get("reached", True)),
+            float(doc.get("best_acceptance", 1.0)),
         )
 
 
@@ -296,16 +316,20 @@ class LogCostGP:
         return l_inv.T @ l_inv
 
 
-def fit_log_cost_gp(U: np.ndarray, cost: np.ndarray, seed: int = 0) -> LogCostGP:
+def fit_log_cost_gp(
+    U: np.ndarray, cost: np.ndarray, seed: int = 0, prior_mean: float | None = None
+) -> LogCostGP:
     """The GP of the module docstring fitted to points ``U`` (n, d) of the unit cube and their
-    costs (> 0, dimensionless)."""
+    costs (> 0, dimensionless); ``prior_mean`` is the log cost it reverts to far from the
+    evaluations (default: the mean of their log costs)."""
     d = U.shape[1]
     kernel = ConstantKernel(1.0, (1e-3, 1e3)) * Matern(
         length_scale=np.full(d, 0.3), length_scale_bounds=LENGTH_SCALE_BOUNDS, nu=2.5
     ) + WhiteKernel(0.05, (1e-6, 10.0))
     gp = GaussianProcessRegressor(kernel=kernel, n_restarts_optimizer=1, random_state=seed)
     z = np.log(cost)
-    mean, scale = float(z.mean()), float(z.std()) or 1.0
+    mean = float(z.mean()) if prior_mean is None else float(prior_mean)
+    scale = float(np.sqrt(np.mean((z - mean) ** 2))) or 1.0
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         gp.fit(U, (z - mean) / scale)
@@ -338,22 +362,32 @@ def _rhat(chains: np.ndarray) -> np.ndarray:
     return np.where(within > 0, r, 1.0)
 
 
-def posterior_sample(
+def plausible_sample(
     model: LogCostGP,
     log_eps: float,
     d: int,
     *,
+    alpha: float = ALPHA,
     seed: int = 0,
+    starts: np.ndarray | None = None,
     n_chains: int = N_CHAINS,
     n_steps: int = N_STEPS,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Random-walk Metropolis on the unit cube (module docstring); returns the kept sample
-    (n_chains * n_steps / 2, d) and R-hat per dimension."""
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Points of the plausible set S = {u : L(u) >= alpha} on the unit cube (module docstring):
+    the Sobol points in S and the kept states of random-walk chains uniform on S, started from
+    ``starts`` (rows of the unit cube, e.g. the evaluated points) and Sobol points in S. Returns
+    the points (m, d; empty when S is), R-hat of the chains per dimension and the largest L
+    seen."""
     rng = np.random.default_rng([seed, 0x1D])
-    sobol = qmc.Sobol(d, scramble=True, seed=rng).random(4096)
-    ll0 = _log_likelihood(model, sobol, log_eps)
-    u = sobol[np.argsort(-ll0, kind="stable")[:n_chains]].copy()
-    ll = _log_likelihood(model, u, log_eps)
+    log_alpha = math.log(alpha)
+    sobol = qmc.Sobol(d, scramble=True, seed=rng).random(N_SOBOL)
+    cand = sobol if starts is None or not len(starts) else np.vstack([starts, sobol])
+    ll0 = _log_likelihood(model, cand, log_eps)
+    best = float(np.exp(ll0.max()))
+    inside = cand[ll0 >= log_alpha]
+    if not len(inside):
+        return np.empty((0, d)), np.ones(d), best
+    u = inside[rng.choice(len(inside), n_chains, replace=len(inside) < n_chains)].copy()
     scale = np.full(d, 0.1)  # per-parameter step: factor * spread of the chains
     factor = 1.0
     burn = n_steps // 2
@@ -361,9 +395,8 @@ def posterior_sample(
     accepted = 0
     for k in range(n_steps):
         prop = _reflect(u + factor * scale * rng.standard_normal(u.shape))
-        llp = _log_likelihood(model, prop, log_eps)
-        take = np.log(rng.random(n_chains)) < llp - ll
-        u[take], ll[take] = prop[take], llp[take]
+        take = _log_likelihood(model, prop, log_eps) >= log_alpha  # uniform on S
+        u[take] = prop[take]
         accepted += int(take.sum())
         if k < burn and (k + 1) % 50 == 0:  # adapt: about 30 % acceptance, steps as wide as
             rate = accepted / (50 * n_chains)  # the chains' spread along each parameter
@@ -372,7 +405,8 @@ def posterior_sample(
             accepted = 0
         if k >= burn:
             kept[:, k - burn] = u
-    return kept.reshape(-1, d), _rhat(kept)
+    sobol_in = sobol[_log_likelihood(model, sobol, log_eps) >= log_alpha]
+    return np.vstack([kept.reshape(-1, d), sobol_in]), _rhat(kept), best
 
 
 def identify(
@@ -382,14 +416,16 @@ def identify(
     threshold: float,
     *,
     threshold_source: str = "",
+    typical_cost: float | None = None,
     seed: int = 0,
-    level: float = LEVEL,
+    alpha: float = ALPHA,
     n_steps: int = N_STEPS,
 ) -> Identifiability:
     """The identifiability of every parameter of ``space`` from evaluated ``points`` (SI) and
     their ``costs`` (dimensionless; None: failed) given the acceptance ``threshold`` epsilon
-    (the largest cost a real run scores; module docstring). Seeded: the same inputs give the
-    same result."""
+    (the largest cost a real run scores) and the ``typical_cost`` of the parameter box (the
+    geometric mean of a uniform design's costs, e.g. the initial Latin hypercube; default: of
+    all the evaluations); module docstring. Seeded: the same inputs give the same result."""
     if not math.isfinite(threshold) or threshold <= 0:
         raise ParcelfitError(
             f"the acceptance threshold must be a positive cost, got {threshold}",
@@ -409,15 +445,23 @@ def identify(
     U = np.array([space.to_unit(p) for p, _ in ok])
     floor = max(1e-12, 1e-6 * threshold)
     cost = np.maximum(np.array([c for _, c in ok], float), floor)
-    model = fit_log_cost_gp(U, cost, seed)
+    prior = None if typical_cost is None else math.log(max(typical_cost, floor))
+    model = fit_log_cost_gp(U, cost, seed, prior_mean=prior)
     d = len(space)
-    sample_u, rhat = posterior_sample(model, math.log(threshold), d, seed=seed, n_steps=n_steps)
+    sample_u, rhat, best = plausible_sample(
+        model, math.log(threshold), d, alpha=alpha, seed=seed, starts=U, n_steps=n_steps
+    )
+    reached = len(sample_u) > 0
+    if not reached:  # nothing is plausible: no value can be told from another
+        sample_u = np.random.default_rng([seed, 0x5A]).random((N_KEEP_FOR_PLOT, d))
     values = np.array([list(space.from_unit(u).values()) for u in sample_u])
-    tail = (1.0 - level) / 2
     params = []
     for j, dim in enumerate(space.dims):
-        lo, hi = np.quantile(values[:, j], [tail, 1 - tail])
-        interval = (float(lo), float(hi))
+        interval = (
+            (float(values[:, j].min()), float(values[:, j].max()))
+            if reached
+            else (dim.low, dim.high)
+        )
         params.append(
             ParameterInterval(
                 dim.name,
@@ -442,14 +486,16 @@ def identify(
         threshold_source,
         len(ok),
         math.sqrt(model.noise_var),
-        level,
+        1.0 - alpha,
+        reached,
+        best,
     )
 
 
 __all__ = [
+    "ALPHA",
     "DETERMINED_WIDTH",
     "EXCLUDED_END",
-    "LEVEL",
     "VERDICTS",
     "Advice",
     "Identifiability",
@@ -457,6 +503,6 @@ __all__ = [
     "ParameterInterval",
     "fit_log_cost_gp",
     "identify",
-    "posterior_sample",
+    "plausible_sample",
     "verdict",
 ]

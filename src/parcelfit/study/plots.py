@@ -8,7 +8,7 @@
   band; the GP is refitted from the store exactly as the optimiser saw it, with the optimiser
   settings the store records (`surrogate_optimizer`). The curves are `DependenceCurve`s
   (`parcelfit.study.results`), which the calibration also stores for the report.
-* ``pairwise``: the posterior sample of the identifiability analysis
+* ``pairwise``: the sample of the plausible set of the identifiability analysis
   (`parcelfit.study.identify`), each parameter's histogram with its interval and each pair's
   scatter with its correlation (`pairwise_figure`).
 """
@@ -258,7 +258,7 @@ _VERDICT_COLOURS = {
 
 
 def pairwise_figure(ident: Identifiability, truth: Mapping[str, float] | None = None) -> Figure:
-    """The posterior sample of the identifiability analysis, pair by pair (catalogue units):
+    """The plausible set of the identifiability analysis, pair by pair (catalogue units):
     on the diagonal each parameter's histogram with its interval shaded in its verdict's colour,
     below it the sample of each pair with its correlation r; the hidden truth (synthetic data)
     as a black line or cross where given (SI values)."""
@@ -306,8 +306,8 @@ def pairwise_figure(ident: Identifiability, truth: Mapping[str, float] | None = 
                 ax.set_ylabel(_label(pi.name), fontsize=8)
             ax.tick_params(labelsize=7)
     fig.suptitle(
-        f"Parameter values the data cannot tell apart: posterior sample over the GP surrogate "
-        f"(shaded: the central {ident.level * 100:.0f} % interval)",
+        f"Parameter values the data cannot tell apart (not excluded at {ident.level * 100:.0f} % "
+        "confidence by the GP surrogate; shaded: each parameter's interval)",
         fontsize=9,
     )
     return fig
