@@ -137,6 +137,19 @@ def test_a_joint_ensemble_study_stores_the_parts_and_checks_transfer(tmp_path, m
     assert status["validations"] and all(v["after_iteration"] >= 1 for v in status["validations"])
     # the advice, when a parameter stays open, weighs the validation and transfer cases
     assert results.advice is None or set(results.advice.changes) == {"R/P/2", "Q/P/2"}
+    # `parcelfit status` shows the parts case by case
+    from typer.testing import CliRunner
+
+    from parcelfit.cli import app
+
+    text = CliRunner().invoke(app, ["status", str(out)]).stdout
+    assert "Q/P/1" in text and "R/P/1" in text and "trajectories" in text
+    # the report: the cases, the transfer section, what the data determine
+    from parcelfit.report import build_report
+
+    page = build_report(out).read_text()
+    assert 'id="transfer"' in page and "<td>Q/P/1</td><td>fit</td><td>0.5</td>" in page
+    assert "What the data determine" in page
     # a rerun of the finished study simulates nothing
     log = tmp_path / "sims.log"
     monkeypatch.setenv("FAKE_SIM_LOG", str(log))
