@@ -970,7 +970,13 @@ class Calibration:
                         if iteration == 0
                         else f"iteration {iteration}"
                     )
-                    self._report(iteration, n, f"{what}: {n} simulations")
+                    per = len(study.cases) * len(placement_seeds(study)) if study.joint else 1
+                    count = (
+                        f"{n} evaluations ({n * per} simulations)"
+                        if study.joint
+                        else f"{n} simulations"
+                    )
+                    self._report(iteration, n, f"{what}: {count}")
                     self._run_rows(new_rows, executor)
                 else:
                     break
