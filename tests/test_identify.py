@@ -160,3 +160,21 @@ def test_when_no_parameter_set_reaches_the_real_runs_scatter_nothing_is_determin
     assert not ident.reached and ident.best_acceptance < 0.05
     assert all(p.verdict == "undetermined" for p in ident.parameters)
     assert all(p.interval == (0, 1) for p in ident.parameters)
+
+
+@pytest.mark.parametrize("seed", [1, 3])
+def test_a_design_crowded_near_the_optimum_as_an_optimiser_leaves_it(seed):
+    # 16 uniform points (the initial design) and 40 crowded around the truth, as BO does
+    rng = np.random.default_rng(seed)
+    uniform = [SPACE.from_unit(u) for u in rng.random((16, 3))]
+    t = np.array([TRUE[n] for n in SPACE.names])
+    near = [SPACE.from_unit(np.clip(t + rng.normal(0, 0.08, 3), 0, 1)) for _ in range(40)]
+    points = uniform + near
+    costs = [_cost(p, rng) for p in points]
+    eps = max(_cost(TRUE, rng) for _ in range(9))
+    typical = float(np.exp(np.mean(np.log(costs[:16]))))
+    ident = identify(SPACE, points, costs, eps, typical_cost=typical, seed=0)
+    sharp, onesided, inert = ident.parameters
+    assert all(p.contains(TRUE[p.name]) for p in ident.parameters)
+    assert sharp.verdict == "determined" and abs(sharp.estimate - TRUE["sharp"]) <= 0.1
+    assert onesided.verdict == "lower bound" and inert.verdict == "undetermined"
