@@ -667,6 +667,7 @@ class Calibration:
                 eps,
                 threshold_source=source,
                 typical_cost=typical,
+                cost_sd=[_cost_se(r) for r in fits],
                 seed=study.seed,
             )
         except ParcelfitError:
@@ -1014,6 +1015,15 @@ class Calibration:
             stop_reason=reason,
             folder=self.folder,
         )
+
+
+def _cost_se(row: Evaluation) -> float | None:
+    """The standard error of a joint ensemble evaluation's cost (its cases' trajectory-term
+    standard errors, weighted, in quadrature); None when a case states none."""
+    parts = row.details.get("cases") or []
+    if not parts or any(p.get("se") is None for p in parts):
+        return None
+    return math.sqrt(sum((p["weight"] * p["se"]) ** 2 for p in parts))
 
 
 def record_summary(record: StudyRecord) -> dict[str, Any]:

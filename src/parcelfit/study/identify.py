@@ -30,9 +30,13 @@ own surrogate, so the analysis does not change when the optimiser's settings do.
 BOLFI, Gutmann and Corander 2016, JMLR 17(125)): the probability that a simulation at u scores a
 cost below epsilon,
 
-    L(u) = Phi( (log epsilon - mu(u)) / sqrt(v(u) + sigma_n^2) )
+    L(u) = Phi( (log epsilon - mu(u)) / sqrt(v(u) + sigma_n^2 + sigma_e^2) )
 
-with mu, v the GP's predictive mean and variance of the latent log cost. Where the evaluations
+with mu, v the GP's predictive mean and variance of the latent log cost. sigma_e is the
+standard error of the cost as an estimator, when the cost states one (the ensemble cost's `se`,
+`parcelfit.metrics.ensemble`), relative to the cost (the median over the evaluations of
+se / c): with the same placement seeds in every evaluation, the placements' error is the same
+bias everywhere, which the GP cannot see as noise, so it is added here. Where the evaluations
 are few, v is large and L stays well above zero: an unexplored region stays plausible.
 
 **Plausible set.** The values the data cannot tell apart from the truth are
@@ -40,15 +44,20 @@ are few, v is large and L stays well above zero: an unexplored region stays plau
     S = { u : L(u) >= alpha },  alpha = 0.05,
 
 i.e. a value is excluded only when the surrogate is 95 % sure that it costs more than any real
-run scores. (Not the posterior mass of L: a low but non-zero L spread over a large unexplored
-volume would outweigh a small region the data single out, and every interval would span its
-range.) S is sampled by 8192 Sobol points and 16 random-walk chains uniform on S (seeded;
-started from evaluated and Sobol points in S; Gaussian steps reflected at the cube's faces and
-accepted when they stay in S; each parameter's step adapted during the first half of 2000 steps
-to the chains' spread and about 30 % acceptance, then fixed; the second half kept). R-hat
-(Gelman-Rubin, split chains) is stored per parameter; above 1.1 the report says the sample has
-not converged. If S is empty (no parameter set reaches the real runs' scatter: the model cannot
-reproduce the data within it), every parameter is undetermined.
+run scores. The threshold itself is already generous (the largest of about ten real runs' costs,
+so that a simulation at the truth scores below it about nine times in ten, L(truth) ~ 0.9), and
+alpha = 0.05 keeps a wide margin below that. (On calibrations of the analytic test simulator
+with 10 evaluations, alpha = 0.2 gave intervals that missed the truth; `benchmarks/bench_twin.py`.)
+(Not the
+posterior mass of L: a low but non-zero L spread over a large unexplored volume would outweigh a
+small region the data single out, and every interval would span its range.) S is sampled by 8192
+Sobol points and 16 random-walk chains uniform on S (seeded; started from evaluated and Sobol
+points in S; Gaussian steps reflected at the cube's faces and accepted when they stay in S; each
+parameter's step adapted during the first half of 2000 steps to the chains' spread and about 30
+% acceptance, then fixed; the second half kept). R-hat (Gelman-Rubin, split chains) is stored
+per parameter; above 1.1 the report says the sample has not converged. If S is empty (no
+parameter set reaches the real runs' scatter: the model cannot reproduce the data within it),
+every parameter is undetermined.
 
 **Intervals and verdicts.** Per parameter, the interval is the projection of S: the smallest
 and largest value among the sample, in the parameter's own unit. With its width W and its
@@ -72,7 +81,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Any
 
@@ -417,6 +426,7 @@ def identify(
     *,
     threshold_source: str = "",
     typical_cost: float | None = None,
+    cost_sd: Sequence[float | None] | None = None,
     seed: int = 0,
     alpha: float = ALPHA,
     n_steps: int = N_STEPS,
@@ -425,7 +435,8 @@ def identify(
     their ``costs`` (dimensionless; None: failed) given the acceptance ``threshold`` epsilon
     (the largest cost a real run scores) and the ``typical_cost`` of the parameter box (the
     geometric mean of a uniform design's costs, e.g. the initial Latin hypercube; default: of
-    all the evaluations); module docstring. Seeded: the same inputs give the same result."""
+    all the evaluations) and ``cost_sd``, the standard error of each cost as an estimator (None
+    where not known); module docstring. Seeded: the same inputs give the same result."""
     if not math.isfinite(threshold) or threshold <= 0:
         raise ParcelfitError(
             f"the acceptance threshold must be a positive cost, got {threshold}",
@@ -447,6 +458,13 @@ def identify(
     cost = np.maximum(np.array([c for _, c in ok], float), floor)
     prior = None if typical_cost is None else math.log(max(typical_cost, floor))
     model = fit_log_cost_gp(U, cost, seed, prior_mean=prior)
+    rel = [
+        (sd / c) ** 2
+        for sd, c in zip(cost_sd or (), costs, strict=False)
+        if sd is not None and c is not None and c > 0 and math.isfinite(sd)
+    ]
+    if rel:  # the estimator's own error (module docstring), added to the noise
+        model = replace(model, noise_var=model.noise_var + float(np.median(rel)))
     d = len(space)
     sample_u, rhat, best = plausible_sample(
         model, math.log(threshold), d, alpha=alpha, seed=seed, starts=U, n_steps=n_steps
