@@ -144,6 +144,7 @@ def test_a_joint_ensemble_study_stores_the_parts_and_checks_transfer(tmp_path, m
 
     text = CliRunner().invoke(app, ["status", str(out)]).stdout
     assert "Q/P/1" in text and "R/P/1" in text and "trajectories" in text
+    assert "what the data determine:" in text  # each parameter's verdict
     # the report: the cases, the transfer section, what the data determine
     from parcelfit.report import build_report
 

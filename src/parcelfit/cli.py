@@ -864,6 +864,7 @@ def _calibrate_live(run: Callable[[ProgressCallback], Any], name: str, folder: P
         )
     )
     _print_recommendation(study_status(folder))
+    _print_determined(folder)
     console.print(
         Text(f"figures in {folder / 'figures'} ({len(result.figures) // 2} figures, PNG and SVG)")
     )
@@ -1028,6 +1029,34 @@ def status(
     if note:
         console.print(Text(f"note: {note}", style="yellow"))
     _print_recommendation(info)
+    _print_determined(study_dir)
+
+
+def _print_determined(folder: Path) -> None:
+    """Which parameters the data determine, from a finished study's results (nothing while it
+    runs): an undetermined parameter's value above is one of many equally good ones."""
+    from parcelfit.sim.params import catalogue_unit, to_catalogue_units
+    from parcelfit.study.results import read_results
+
+    try:
+        results = read_results(folder)
+    except ParcelfitError:
+        return
+    ident = None if results is None else results.identifiability
+    if ident is None:
+        return
+    words = []
+    for p in ident.parameters:
+        lo, hi = (float(to_catalogue_units(p.name, v)) for v in p.interval)
+        unit = catalogue_unit(p.name)
+        unit = "" if unit in ("-", "SI") else f" {unit}"
+        if p.determined:
+            words.append(f"{p.name} determined: {(lo + hi) / 2:.4g} +- {(hi - lo) / 2:.2g}{unit}")
+        elif p.verdict == "undetermined":
+            words.append(f"{p.name} NOT determined (its value above is as good as any in range)")
+        else:
+            words.append(f"{p.name} {p.verdict}: {lo:.4g} - {hi:.4g}{unit}")
+    console.print(Text("what the data determine: " + "; ".join(words)), markup=False)
 
 
 def _verdict_word(v: dict[str, Any]) -> str:
