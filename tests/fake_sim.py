@@ -24,30 +24,58 @@ TRUTH = {"mu_d_BePa": 0.5, "mu_d_MePa": 0.2}
 
 
 def trajectory(
-    p: Mapping[str, float], setting: int, t_end: float = 1.5
+    p: Mapping[str, float],
+    setting: int,
+    t_end: float = 1.5,
+    rig: str = "R",
+    placement: tuple[float, float, float] = (0.0, 0.0, 0.0),
 ) -> tuple[Trajectory, float]:
-    """Analytic run: x = v t, y = 0.4 (mu_B - 0.3) t^2, theta = 3 (mu_M - 0.15) (1 - exp(-2 t))
-    + 1e-4 (E_Pa / 1 GPa) t."""
+    """Analytic run on rig R: x = v t, y = 0.4 (mu_B - 0.3) t^2, theta = 3 (mu_M - 0.15)
+    (1 - exp(-2 t)) + 1e-4 (E_Pa / 1 GPa) t. Rig Q (a second rig) turns the parcel by E_Pa as
+    well: theta + 2 (E_Pa / 1 GPa - 0.9) (1 - exp(-3 t)). ``placement`` (dy [m], dtheta [rad],
+    relative transit-time change) shifts the start as a seeded placement does."""
     t = np.arange(0.0, t_end, 1 / 60)
     v = SPEEDS[setting]
-    y = 0.4 * (p["mu_d_BePa"] - 0.3) * t**2
-    # E_Pa has a tiny effect (an almost inert parameter); the other catalogue parameters none
-    theta = (
-        3.0 * (p["mu_d_MePa"] - 0.15) * (1 - np.exp(-2 * t)) + 1e-4 * p.get("E_Pa", 1e9) / 1e9 * t
-    )
-    transit = 1.0 / v * (1 + 0.2 * (p["mu_d_BePa"] - 0.45))
+    dy, dth, dt = placement
+    y = 0.4 * (p["mu_d_BePa"] - 0.3) * t**2 + dy * (1 + t)
+    # E_Pa has a tiny effect on rig R (an almost inert parameter); the other catalogue
+    # parameters none
+    e = p.get("E_Pa", 1e9) / 1e9
+    theta = 3.0 * (p["mu_d_MePa"] - 0.15) * (1 - np.exp(-2 * t)) + 1e-4 * e * t + dth
+    if rig == "Q":
+        theta = theta + 2.0 * (e - 0.9) * (1 - np.exp(-3 * t))
+    transit = 1.0 / v * (1 + 0.2 * (p["mu_d_BePa"] - 0.45)) * (1 + dt)
     return Trajectory(t=t, x=v * t, y=y, theta=theta), transit
+
+
+def placement(seed: int) -> tuple[float, float, float]:
+    """The start scatter of placement ``seed``: dy [m], dtheta [rad], relative transit change."""
+    rng = np.random.default_rng([seed, 0x91])
+    return (
+        float(rng.normal(0, 0.002)),
+        float(rng.normal(0, 0.01)),
+        float(rng.normal(0, 0.003)),
+    )
 
 
 class AnalyticSimulator:
     """Implements the Simulator protocol with `trajectory`."""
 
     def __init__(
-        self, delay: float = 0.0, log: str | None = None, crash_once: str | None = None
+        self,
+        delay: float = 0.0,
+        log: str | None = None,
+        crash_once: str | None = None,
+        placement_seed: int | None = None,
     ) -> None:
         self.delay = delay
         self.log = log
         self.crash_once = crash_once
+        self.placement_seed = placement_seed
+
+    def with_placement(self, seed: int | None) -> AnalyticSimulator:
+        """The same simulator with placement ``seed`` (None: the nominal start)."""
+        return AnalyticSimulator(self.delay, self.log, self.crash_once, seed)
 
     def run(
         self, params: Mapping[str, float], case: TestCase, run_id: str | None = None
@@ -69,7 +97,8 @@ class AnalyticSimulator:
             return SimResult(
                 None, SimStatus.UNSTABLE, time.perf_counter() - t0, {"message": "diverged"}
             )
-        traj, transit = trajectory(params, case.speed_setting)
+        start = (0.0, 0.0, 0.0) if self.placement_seed is None else placement(self.placement_seed)
+        traj, transit = trajectory(params, case.speed_setting, rig=case.rig, placement=start)
         return SimResult(
             Run(run_id or "sim", case, traj, transit), SimStatus.OK, time.perf_counter() - t0, {}
         )
@@ -84,25 +113,32 @@ def make() -> AnalyticSimulator:
     )
 
 
-def write_reference_dataset(folder, n_runs: int = 8, seed: int = 0):
-    """Runs of the truth with specimen-to-specimen variation and tracking noise."""
+def write_reference_dataset(folder, n_runs: int = 8, seed: int = 0, rigs=("R",), truth=None):
+    """Runs of the truth (default `TRUTH`, E_Pa 1 GPa) with specimen-to-specimen variation,
+    placement scatter and tracking noise, at speed settings 1 and 2 of each rig."""
     rng = np.random.default_rng(seed)
+    truth = {**TRUTH, **(truth or {})}
     cases = []
-    for setting in (1, 2):
-        case = TestCase("R", "P", setting)
+    for rig, setting in ((r, k) for r in rigs for k in (1, 2)):
+        case = TestCase(rig, "P", setting)
         runs = []
         for k in range(n_runs):
             p = {
-                "mu_d_BePa": TRUTH["mu_d_BePa"] * (1 + rng.normal(0, 0.03)),
-                "mu_d_MePa": TRUTH["mu_d_MePa"] * (1 + rng.normal(0, 0.03)),
+                "mu_d_BePa": truth["mu_d_BePa"] * (1 + rng.normal(0, 0.03)),
+                "mu_d_MePa": truth["mu_d_MePa"] * (1 + rng.normal(0, 0.03)),
             }
-            traj, transit = trajectory(p, setting)
+            if "E_Pa" in truth:
+                p["E_Pa"] = truth["E_Pa"] * (1 + rng.normal(0, 0.03))
+            start = placement(int(rng.integers(1 << 30))) if rig != "R" else (0.0, 0.0, 0.0)
+            traj, transit = trajectory(p, setting, rig=rig, placement=start)
             noisy = Trajectory(
                 t=traj.t,
                 x=traj.x + rng.normal(0, 0.001, len(traj)),
                 y=traj.y + rng.normal(0, 0.001, len(traj)),
                 theta=traj.theta + rng.normal(0, 0.003, len(traj)),
             )
-            runs.append(Run(f"R-P-{setting}-{k}", case, noisy, transit * (1 + rng.normal(0, 0.01))))
+            runs.append(
+                Run(f"{rig}-P-{setting}-{k}", case, noisy, transit * (1 + rng.normal(0, 0.01)))
+            )
         cases.append(CaseData(case, tuple(runs)))
     return save_dataset(folder, "fake-reference", cases, synthetic=True)

@@ -121,11 +121,12 @@ def write_study_results(folder: Path, dataset: Path, optimizer=None) -> None:
     the reference runs of the fake dataset's R/P/1 and R/P/2, a validation after iteration 1 of
     the analytic run at the truth, a surrogate (sharp along mu_d_BePa, flat along E_Pa) said to
     be fitted with ``optimizer`` (default: the published configuration), no key frames."""
-    from dataclasses import asdict
+    from dataclasses import asdict, replace
 
     from parcelfit.metrics import select_reference
     from parcelfit.optimize.bo import BOSettings
     from parcelfit.runs import TestCase, load_dataset
+    from parcelfit.study.identify import Advice, Identifiability, ParameterInterval
     from parcelfit.study.results import (
         DependenceCurve,
         KeyFramesRecord,
@@ -167,5 +168,21 @@ def write_study_results(folder: Path, dataset: Path, optimizer=None) -> None:
             key_frames=KeyFramesRecord(
                 "R/P/2", params, note="Key frames are drawn for the MuJoCo backend only."
             ),
+            identifiability=Identifiability(
+                (
+                    ParameterInterval("mu_d_BePa", 0.3, 0.6, (0.43, 0.47), 0.45, "determined", 1.0),
+                    ParameterInterval(
+                        "E_Pa", 2e8, 1.6e9, (2.1e8, 1.59e9), 9e8, "undetermined", 1.0
+                    ),
+                ),
+                np.array([[1.0, 0.1], [0.1, 1.0]]),
+                np.column_stack([np.linspace(0.43, 0.47, 50), np.linspace(2.1e8, 1.59e9, 50)]),
+                1.2,
+                "largest equation (3) of a real run: 1.2 (R/P/1)",
+                3,
+                0.1,
+            ),
+            transfer=[replace(record, after_iteration=None)],
+            advice=Advice({"R/P/2": {"E_Pa": 0.02}}, "R/P/2", ("E_Pa",), params),
         ),
     )

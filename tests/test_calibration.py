@@ -185,6 +185,7 @@ def test_study_results_round_trip_through_results_json(tmp_path):
 
     from parcelfit.metrics import select_reference
     from parcelfit.runs import TestCase, load_dataset
+    from parcelfit.study.identify import Advice, Identifiability, ParameterInterval
     from parcelfit.study.results import (
         DependenceCurve,
         KeyFramesRecord,
@@ -214,6 +215,18 @@ def test_study_results_round_trip_through_results_json(tmp_path):
         surrogate=SurrogateRecord(opt, 12, (curve,)),
         key_frames=KeyFramesRecord("R/P/2", {"mu_d_BePa": 0.5}, note="MuJoCo only"),
         figures=["figures/history.png"],
+        identifiability=Identifiability(
+            (ParameterInterval("E_Pa", 2e8, 1.6e9, (3e8, 1.5e9), 9e8, "narrowed", 1.01),),
+            np.eye(1),
+            np.linspace(3e8, 1.5e9, 7)[:, None],
+            0.9,
+            "largest equation (3) of a real run",
+            12,
+            0.1,
+        ),
+        transfer=[val],
+        advice=Advice({"R/P/2": {"E_Pa": 0.3}}, "R/P/2", ("E_Pa",), {"E_Pa": 9e8}),
+        cases=[{"case": "R/P/2", "role": "validation", "weight": 1.0}],
     )
     assert read_results(tmp_path) is None  # none written yet
     write_results(tmp_path, written)
@@ -227,8 +240,10 @@ def test_study_results_round_trip_through_results_json(tmp_path):
     assert np.array_equal(shown.sim_xy, val.sim_xy) and np.array_equal(
         shown.band.grid, val.band.grid
     )
-    assert back.surrogate.optimizer == opt and back.surrogate.curves[0].indistinct() == (200, 550)
+    assert back.surrogate.optimizer == opt and back.surrogate.curves[0].name == "E_Pa"
     assert back.key_frames.note == "MuJoCo only" and back.stop_reason == "validation passed"
+    assert back.identifiability.parameters[0].verdict == "narrowed"
+    assert back.transfer[0].verdict == val.verdict and back.advice.best == "R/P/2"
     (tmp_path / "results.json").write_text("{")
     with pytest.raises(ParcelfitError, match="results file is unreadable"):
         read_results(tmp_path)

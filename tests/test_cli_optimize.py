@@ -131,7 +131,10 @@ def test_status_json_is_si_with_its_units(tmp_path):
     assert (rec["cost"], rec["iteration"]) == (0.3, 1)
     assert info["lowest_cost"]["cost"] == 0.2 and info["lowest_cost"]["iteration"] == 1
     assert info["last_iteration"] == 1 and info["synthetic"] is None
-    assert info["validations"] == [{"after_iteration": 1, "status": "ok", "passed": True}]
+    assert info["validations"] == [
+        {"after_iteration": 1, "case": None, "status": "ok", "passed": True}
+    ]
+    assert info["cases"] is None and rec["parts"] is None  # a one-case study
     assert "SYNTHETIC" not in runner.invoke(app, ["status", str(study)]).stdout
 
 

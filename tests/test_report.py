@@ -95,7 +95,10 @@ def test_report_is_one_self_contained_file_with_every_section(demo_folder, monke
         assert base64.b64decode(data)[:4] == b"\x89PNG"
     assert not re.search(r'(src|href)="(?!data:)', text)
     # the truth beside the calibrated values, and the recovery verdict (analytic truth: both)
-    assert "truth (hidden)" in text and "recovered within 10 % of their range: 2 of 2" in text
+    assert "truth (hidden)" in text
+    assert "Calibrated values within 10 % of their range of the hidden truth: 2 of 2" in text
+    # every interval holds the analytic truth
+    assert "intervals containing the truth: 2 of 2" in text
     # the published criteria and the stricter one, each with a verdict
     assert text.count("<td>1. transit time") == 1 and "stricter (parcelfit)" in text
     assert "MuJoCo backend only" in text  # key frames need a MuJoCo study
@@ -103,7 +106,7 @@ def test_report_is_one_self_contained_file_with_every_section(demo_folder, monke
     n, last = map(
         int,
         re.search(
-            r"(\d+) simulations: the initial design \(iteration 0\) and iterations 1-(\d+) "
+            r"(\d+) evaluations: the initial design \(iteration 0\) and iterations 1-(\d+) "
             r"\(batches of 4\)",
             text,
         ).groups(),
@@ -178,22 +181,17 @@ def test_the_browser_check_sees_a_broken_image(tmp_path):
     assert found["images"] == 1 and found["broken"] == 1 and found["headings"] == ["a"]
 
 
-def test_identifiability_from_the_surrogate_span():
-    import numpy as np
-
+def test_parameter_rows_report_values_only_for_determined_parameters():
     from parcelfit.report.html import ParameterRow
-    from parcelfit.study.plots import DependenceCurve
 
-    xs = np.linspace(0.3, 0.6, 31)
-    sharp = DependenceCurve("mu_d_BePa", xs, (xs - 0.4) ** 2 * 100, np.full(31, 0.05), False)
-    lo, hi = sharp.indistinct()
-    assert lo == pytest.approx(0.38) and hi == pytest.approx(0.42)  # (x-0.4)^2*100 <= 0.05
-    flat = DependenceCurve("E_Pa", xs, np.full(31, 0.5), np.full(31, 0.05), False)
-    assert flat.indistinct() == (pytest.approx(0.3), pytest.approx(0.6))
-    row = ParameterRow("mu_d_BePa", "-", 0.3, 0.6, 0.41, 0.4, sharp.amplitude, (lo, hi))
-    assert row.identifiable and row.error_share == pytest.approx(1 / 30)
-    row = ParameterRow("E_Pa", "-", 0.3, 0.6, 0.41, 0.4, flat.amplitude, flat.indistinct())
-    assert row.identifiable is False
+    row = ParameterRow("mu_d_BePa", "-", 0.3, 0.6, 0.41, 0.4, (0.38, 0.42), "determined", 0.40)
+    assert row.determined and row.covers_truth and row.error_share == pytest.approx(1 / 30)
+    assert row.bound_text == "0.4 +- 0.02"
+    row = ParameterRow("E_Pa", "-", 200, 1600, 900, 1000, (210, 1590), "undetermined")
+    assert row.determined is False and row.bound_text == "no value: the data cannot tell"
+    row = ParameterRow("k_MePa", "-", 100, 1000, 700, 900, (400, 995), "lower bound")
+    assert row.bound_text == "at least 400" and row.covers_truth
+    assert ParameterRow("x", "-", 0, 1, 0.5, None).determined is None
 
 
 def test_the_report_renders_the_stored_verdict_without_simulating_or_refitting(
@@ -213,11 +211,18 @@ def test_the_report_renders_the_stored_verdict_without_simulating_or_refitting(
     text = build_report(study, out=tmp_path / "r.html").read_text()
     assert "Validation PASSED" in text and "<td>4.56e-07 m&sup2;</td>" in text
     assert "The calibrated parameters, validated after iteration 1," in text
-    assert text.count("<td>1. transit time") == 1 and "stricter (parcelfit)" in text
+    # the validation and the transfer check (one case) each show the criteria
+    assert text.count("<td>1. transit time") == 2 and "stricter (parcelfit)" in text
     assert len(_images(text)) >= 8  # statistics, 2 distance maps, history, curves, traces, 3
-    # identifiability read off the stored curves: flat along E_Pa, pinned along mu_d_BePa
-    assert "Not identifiable here: <b>E_Pa</b>" in text
-    assert re.search(r"<td>mu_d_BePa</td>.*?<td>yes</td></tr>", text)
+    # what the data determine: the stored analysis, said plainly; no value for E_Pa
+    assert "<b>Determined by these test cases: mu_d_BePa</b>" in text
+    assert "Not determined: E_Pa</span>" in text and "no value: the data cannot tell" in text
+    assert (
+        "Determined by the data: mu_d_BePa; <b>not determined</b> (no value reported): E_Pa" in text
+    )
+    assert re.search(r"<td>mu_d_BePa</td>.*?<span class=\"ok\">determined</span>", text)
+    assert "Which further test case would help most to determine E_Pa: <b>R/P/2</b>" in text
+    assert "Do the parameters carry over? (transfer check)" in text and 'id="transfer"' in text
     # the surrogate's optimiser settings are the stored ones (the published configuration)
     assert "optimizer published" in text and "batch=kmeans" in text and "noise=fixed" in text
     assert "MuJoCo backend only" in text and 'id="frames"' in text

@@ -873,6 +873,7 @@ def _calibrate_live(run: Callable[[ProgressCallback], Any], name: str, folder: P
         )
     )
     _print_recommendation(study_status(folder))
+    _print_determined(folder)
     console.print(
         Text(f"figures in {folder / 'figures'} ({len(result.figures) // 2} figures, PNG and SVG)")
     )
@@ -910,6 +911,26 @@ def _print_recommendation(info: dict[str, Any]) -> None:
             f"lowest-cost parameters so far (cost {low['cost']:.4g}, iteration "
             f"{low['iteration']}); the study recommends its parameters when it stops",
         )
+    shown = rec if rec is not None else low
+    if shown is not None and shown.get("parts"):
+        _print_parts(shown["parts"])
+
+
+def _print_parts(parts: list[dict[str, Any]]) -> None:
+    """The per-case parts of a joint or ensemble evaluation's cost."""
+    table = Table(title=Text("its cost, case by case"), title_justify="left")
+    for col in ("case", "weight", "cost", "parts"):
+        table.add_column(col, justify="left" if col in ("case", "parts") else "right")
+    for p in parts:
+        if "trajectory_term" in p:
+            se = "" if p.get("se") is None else f" (se {p['se']:.3g})"
+            tt = "-" if p.get("transit_term") is None else f"{p['transit_term']:.3g}"
+            what = f"trajectories {p['trajectory_term']:.3g}{se}, transit {tt}"
+            what += f", {len(p.get('seeds') or [])} placements"
+        else:
+            what = f"DTW_xy {p['dtw_xy']:.3g} m, DTW_theta {p['dtw_theta']:.3g} rad"
+        table.add_row(str(p["case"]), f"{p['weight']:g}", f"{p['cost']:.4g}", what)
+    console.print(table)
 
 
 def _print_params(params: dict[str, float], title: str) -> None:
@@ -1008,14 +1029,43 @@ def status(
         )
     )
     for v in info["validations"]:
+        on = f" on {v['case']}" if v.get("case") else ""
         console.print(
-            f"  validation after iteration {v['after_iteration']}: {_verdict_word(v)}",
+            f"  validation after iteration {v['after_iteration']}{on}: {_verdict_word(v)}",
             markup=False,
         )
     note = (record.get("optimizer") or {}).get("note")
     if note:
         console.print(Text(f"note: {note}", style="yellow"))
     _print_recommendation(info)
+    _print_determined(study_dir)
+
+
+def _print_determined(folder: Path) -> None:
+    """Which parameters the data determine, from a finished study's results (nothing while it
+    runs): an undetermined parameter's value above is one of many equally good ones."""
+    from parcelfit.sim.params import catalogue_unit, to_catalogue_units
+    from parcelfit.study.results import read_results
+
+    try:
+        results = read_results(folder)
+    except ParcelfitError:
+        return
+    ident = None if results is None else results.identifiability
+    if ident is None:
+        return
+    words = []
+    for p in ident.parameters:
+        lo, hi = (float(to_catalogue_units(p.name, v)) for v in p.interval)
+        unit = catalogue_unit(p.name)
+        unit = "" if unit in ("-", "SI") else f" {unit}"
+        if p.determined:
+            words.append(f"{p.name} determined: {(lo + hi) / 2:.4g} +- {(hi - lo) / 2:.2g}{unit}")
+        elif p.verdict == "undetermined":
+            words.append(f"{p.name} NOT determined (its value above is as good as any in range)")
+        else:
+            words.append(f"{p.name} {p.verdict}: {lo:.4g} - {hi:.4g}{unit}")
+    console.print(Text("what the data determine: " + "; ".join(words)), markup=False)
 
 
 def _verdict_word(v: dict[str, Any]) -> str:

@@ -4,7 +4,7 @@ Knows nothing of where runs come from. Formulas are stated in each module's docs
 """
 
 from parcelfit.metrics.comparison import Comparison
-from parcelfit.metrics.cost import Cost, calibration_cost
+from parcelfit.metrics.cost import Cost, calibration_cost, real_run_costs
 from parcelfit.metrics.dtw import cross_dtw, dtw_distance, pairwise_dtw
 from parcelfit.metrics.reference import ReferenceSelection, normalise, select_reference
 from parcelfit.metrics.validation import (
@@ -29,6 +29,7 @@ __all__ = [
     "mean_distance_check",
     "normalise",
     "pairwise_dtw",
+    "real_run_costs",
     "select_reference",
     "transit_time_check",
     "validate",

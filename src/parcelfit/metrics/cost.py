@@ -13,6 +13,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from parcelfit.errors import ParcelfitError
 from parcelfit.metrics.dtw import dtw_distance
 from parcelfit.metrics.reference import ReferenceSelection
@@ -47,3 +49,16 @@ def calibration_cost(
     term_xy = w_xy * dtw_xy**2 / (reference.max_xy if reference.max_xy > 0 else 1.0)
     term_theta = w_theta * dtw_theta**2 / (reference.max_theta if reference.max_theta > 0 else 1.0)
     return Cost(term_xy + term_theta, dtw_xy, dtw_theta, term_xy, term_theta)
+
+
+def real_run_costs(
+    reference: ReferenceSelection, w_xy: float = 1.0, w_theta: float = 1.0
+) -> np.ndarray:
+    """Equation (3) of every real run other than the reference run, against the reference run
+    (dimensionless): what a simulation as good as one more real run would score. Read off the
+    selection's matrices, D_xy(i*, j) / max(D_xy) and D_theta(i*, j) / max(D_theta)."""
+    i = reference.index
+    sx = reference.max_xy if reference.max_xy > 0 else 1.0
+    st = reference.max_theta if reference.max_theta > 0 else 1.0
+    c = w_xy * reference.d_xy[i] / sx + w_theta * reference.d_theta[i] / st
+    return np.delete(np.asarray(c, float), i)

@@ -9,8 +9,10 @@ are added when present.
 
 Sections: summary and verdict; transit-time statistics; reference runs (distance matrices);
 screening; calibration (history, parameters with their ranges and, for synthetic data, the truth;
-identifiability from the surrogate); validation (published criteria and the stricter band test,
-figures like the published Figures 16-19); the simulated run's key frames.
+what the evaluations determine: each parameter's interval and verdict, the pairwise plot, which
+test case would help most); validation (published criteria and the stricter band test, figures
+like the published Figures 16-19; every validation case of a joint study); the transfer check
+(do the parameters carry over to other test cases?); the simulated run's key frames.
 
 Architecture: the report renders, it does not analyse. The calibration writes what it concluded
 into the study folder: the store (`parcelfit.study.store`: the evaluations and the typed
@@ -29,14 +31,15 @@ study written by an earlier parcelfit, or one stopped before it validated) the p
 how to write it: `parcelfit calibrate` on the same study file and folder writes the results of a
 finished study without simulating again. What the report still computes is description, not
 analysis: the dataset's transit-time statistics (as `parcelfit stats` does), the history and
-trace plots of the stored evaluations, and the identifiability spans read off the stored curves.
+trace plots of the stored evaluations, and the pairwise plot of the stored sample.
 
-Identifiability rule (stated in the report): along each calibrated parameter, the GP's partial
-dependence (mean cost averaged over the other parameters) is compared with its mean predictive
-standard deviation sd; the values whose mean cost is within sd of the lowest are those the
-evaluations cannot tell apart. A parameter is identifiable on this test case when that span is
-at most 20 % of its range (so the calibrated value is pinned to about +-10 %, the recovery
-tolerance); otherwise the report says it is not, and why.
+What the data determine (stated in the report) is the calibration's stored identifiability
+analysis (`parcelfit.study.identify`, formulas there): per parameter the interval of values the
+evaluations cannot tell apart (those a GP surrogate of the log cost cannot exclude at 95 %
+confidence from costing less than the real runs' largest cost) and its verdict:
+determined (interval at most 20 % of the range; reported as its midpoint +- half-width, so
+within 10 % of the range of anything in it), bounded on one side or narrowed (reported as the
+bound or interval), or undetermined (no value is reported).
 """
 
 from __future__ import annotations
@@ -62,8 +65,8 @@ from parcelfit.errors import ParcelfitError
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.runs import Dataset, load_dataset
 from parcelfit.sim.params import catalogue_unit, to_catalogue_units
+from parcelfit.study.identify import VERDICTS, Identifiability
 from parcelfit.study.results import (
-    DependenceCurve,
     ReferenceRecord,
     StudyResults,
     ValidationRecord,
@@ -71,8 +74,8 @@ from parcelfit.study.results import (
 )
 from parcelfit.study.store import STORE_FILE, SourceRecord, Store, StudyRecord
 
-IDENTIFIABLE_SPAN = 0.20  # widest share of the range the surrogate may leave undecided
 RECOVERY_TOLERANCE = 0.10  # of the range's width
+BOUNDED = ("lower bound", "upper bound", "narrowed")
 
 # The report promises to be script-free and to fetch nothing: the page forbids every script,
 # frame, font and connection, and allows only embedded (data:) images and its own inline styles.
@@ -316,7 +319,10 @@ def _screen_section(page: _Page, screen: Path | None) -> None:
 
 @dataclass(frozen=True)
 class ParameterRow:
-    """One calibrated parameter in catalogue units, with recovery and identifiability."""
+    """One calibrated parameter in catalogue units: its range, the optimiser's recommended
+    value, the hidden truth (synthetic data) and what the evaluations determine about it
+    (`parcelfit.study.identify`: the interval, the verdict and, for a determined parameter,
+    the reported value; None where no analysis is stored)."""
 
     name: str
     unit: str
@@ -324,12 +330,18 @@ class ParameterRow:
     high: float
     best: float
     truth: float | None
-    amplitude: float | None  # change of the GP's mean cost across the range
-    span: tuple[float, float] | None = None  # values the surrogate cannot tell apart
+    interval: tuple[float, float] | None = None
+    verdict: str | None = None
+    estimate: float | None = None  # the reported value: determined parameters only
+
+    @property
+    def determined(self) -> bool | None:
+        """Do the data fix this parameter (None: no analysis stored)?"""
+        return None if self.verdict is None else self.verdict == "determined"
 
     @property
     def error_share(self) -> float | None:
-        """|best - truth| as a share of the range's width."""
+        """|calibrated - truth| as a share of the range's width."""
         if self.truth is None:
             return None
         return abs(self.best - self.truth) / (self.high - self.low)
@@ -341,36 +353,55 @@ class ParameterRow:
         return None if err is None else err <= RECOVERY_TOLERANCE
 
     @property
-    def identifiable(self) -> bool | None:
-        """Does the surrogate pin this parameter down: are the values it cannot tell apart
-        from the best within ``IDENTIFIABLE_SPAN`` of the range?"""
-        if self.span is None:
+    def covers_truth(self) -> bool | None:
+        """Does the interval contain the hidden truth (None without both)?"""
+        if self.truth is None or self.interval is None:
             return None
-        return (self.span[1] - self.span[0]) <= IDENTIFIABLE_SPAN * (self.high - self.low)
+        return self.interval[0] <= self.truth <= self.interval[1]
+
+    @property
+    def bound_text(self) -> str:
+        """The verdict in words with its numbers, e.g. ``at least 0.41``."""
+        if self.interval is None or self.verdict is None:
+            return "-"
+        a, b = self.interval
+        if self.verdict == "determined":
+            return f"{(a + b) / 2 if self.estimate is None else self.estimate:.4g} +- {(b - a) / 2:.2g}"
+        return {
+            "lower bound": f"at least {a:.4g}",
+            "upper bound": f"at most {b:.4g}",
+            "narrowed": f"between {a:.4g} and {b:.4g}",
+            "undetermined": "no value: the data cannot tell",
+        }.get(self.verdict, "-")
 
 
 def parameter_rows(
     record: StudyRecord,
     best: dict[str, float],
     truth: dict[str, float],
-    curves: Sequence[DependenceCurve] | None,
+    ident: Identifiability | None,
 ) -> list[ParameterRow]:
-    """The calibrated parameters' table rows (catalogue units), identifiability from the stored
-    partial dependence ``curves`` (None: not known)."""
-    by_name = {c.name: c for c in curves} if curves else {}
+    """The calibrated parameters' table rows (catalogue units), with the stored identifiability
+    analysis ``ident`` (None: not stored)."""
+    by_name = {p.name: p for p in ident.parameters} if ident is not None else {}
     rows = []
     for name, (lo, hi) in zip(record.parameters, record.bounds, strict=True):
-        curve = by_name.get(name)
+        p = by_name.get(name)
+
+        def cat(v: float, name: str = name) -> float:
+            return float(to_catalogue_units(name, v))
+
         rows.append(
             ParameterRow(
                 name,
                 catalogue_unit(name),
-                float(to_catalogue_units(name, lo)),
-                float(to_catalogue_units(name, hi)),
-                float(to_catalogue_units(name, best[name])),
+                cat(lo),
+                cat(hi),
+                cat(best[name]),
                 truth.get(name),
-                None if curve is None else curve.amplitude,
-                None if curve is None else curve.indistinct(),
+                None if p is None else (cat(p.interval[0]), cat(p.interval[1])),
+                None if p is None else p.verdict,
+                None if p is None or p.estimate is None else cat(p.estimate),
             )
         )
     return rows
@@ -401,6 +432,67 @@ def _surrogate_note(results: StudyResults | None) -> dict[str, Any]:
         "note": opt.note,
         "fitted": sur.curves is not None,
     }
+
+
+def _identifiability_view(
+    results: StudyResults | None,
+    rows: list[ParameterRow],
+    truth: dict[str, float],
+    synthetic: bool,
+) -> dict[str, Any]:
+    """What the template says about what the evaluations determine (`parcelfit.study.identify`),
+    with the pairwise figure and the advice."""
+    from parcelfit.study.plots import pairwise_figure
+
+    ident = None if results is None else results.identifiability
+    if results is None:
+        return {"missing": _NOT_STORED}
+    if ident is None:
+        return {
+            "missing": "The stored results hold no identifiability analysis (fewer than three "
+            "successful evaluations, or results written by an earlier parcelfit: rerun "
+            "`parcelfit calibrate` on the study to write it without simulating again)."
+        }
+    by = {v: [r for r in rows if r.verdict == v] for v in VERDICTS}
+    advice = results.advice
+    return {
+        "missing": None,
+        "determined": ", ".join(r.name for r in by["determined"]),
+        "bounded": [(r.name, r.bound_text) for r in rows if r.verdict in BOUNDED],
+        "undetermined": ", ".join(r.name for r in by["undetermined"]),
+        "evaluations": ident.evaluations,
+        "threshold": ident.threshold,
+        "threshold_source": ident.threshold_source,
+        "noise_sd": ident.noise_sd,
+        "level": f"{ident.level * 100:.0f}",
+        "reached": ident.reached,
+        "best_acceptance": ident.best_acceptance,
+        "converged": ident.converged,
+        "correlations": [(a, b, f"{r:+.2f}") for a, b, r in ident.strongest_correlations()],
+        "missed": ", ".join(r.name for r in rows if synthetic and r.covers_truth is False),
+        "figure": figure_html(
+            pairwise_figure(ident, _truth_si(truth) if synthetic else None),
+            "pairwise plot of the values not excluded",
+        ),
+        "advice": None
+        if advice is None
+        else {
+            "best": advice.best,
+            "rows": [
+                (case, ", ".join(f"{p} {v:.3g}" for p, v in ch.items()) or "-", sum(ch.values()))
+                for case, ch in advice.changes.items()
+            ],
+            "parameters": ", ".join(advice.parameters),
+        },
+    }
+
+
+def _truth_si(truth: dict[str, float]) -> dict[str, float]:
+    """The hidden truth (catalogue units, as truth.yaml holds it) in SI."""
+    from parcelfit.sim.params import CATALOGUE
+
+    units = {p.name: p for p in CATALOGUE}
+    return {n: units[n].to_si(v) if n in units else v for n, v in truth.items()}
 
 
 def _calibration_section(
@@ -448,21 +540,16 @@ def _calibration_section(
     curves = None
     if results is not None and results.surrogate is not None:
         curves = results.surrogate.curves
-    rows = parameter_rows(record, best["params"], truth, curves)
+    ident = None if results is None else results.identifiability
+    rows = parameter_rows(record, best["params"], truth, ident)
     data.update(
         best=best,
         truth=bool(truth),
         rows=rows,
         surrogate=_surrogate_note(results),
-        flat=", ".join(r.name for r in rows if r.identifiable is False),
-        unexplained=", ".join(
-            r.name
-            for r in rows
-            if synthetic
-            and r.error_share is not None
-            and r.error_share > RECOVERY_TOLERANCE
-            and r.identifiable is not False
-        ),
+        identifiability=_identifiability_view(results, rows, truth, synthetic),
+        cases=[] if results is None else list(results.cases),
+        parts=status["recommended"]["parts"] if status["recommended"] else None,
         dependence=None
         if not curves
         else figure_html(dependence_figure(list(curves)), "partial dependence"),
@@ -508,17 +595,48 @@ def _validation_section(
     page: _Page, results: StudyResults | None, record: StudyRecord
 ) -> ValidationRecord | None:
     title = page.start("Validation")
-    data: dict[str, Any] = {"missing": None, "shown": None, "view": None}
-    shown = None if results is None else results.shown_validation()
+    data: dict[str, Any] = {"missing": None, "shown": None, "views": []}
+    group = [] if results is None else results.shown_validations()
+    shown = group[0] if group else None
     if results is None:
         data["missing"] = _NOT_STORED if record.validation_setting is not None else None
     elif shown is not None:
         data["shown"] = shown
-        reference = results.references.get("validation")
-        if shown.verdict is not None and reference is not None:
-            data["view"] = _validation_view(reference, shown, "calibrated simulation")
+        data["several"] = len(group) > 1
+        for v in group:
+            reference = results.reference(v.case)
+            if reference is None and len(group) == 1:
+                reference = results.references.get("validation")
+            view = None
+            if v.verdict is not None and reference is not None:
+                view = _validation_view(reference, v, "calibrated simulation")
+            data["views"].append((v, view))
     page.add("validation", title, "validation", data)
     return shown
+
+
+def _transfer_section(page: _Page, results: StudyResults | None) -> None:
+    """The transfer check (only for a study that has one)."""
+    if results is None or not results.transfer:
+        return
+    title = page.start("Do the parameters carry over? (transfer check)")
+    views = []
+    for v in results.transfer:
+        reference = results.reference(v.case)
+        view = None
+        if v.verdict is not None and reference is not None:
+            view = _validation_view(reference, v, "calibrated parameters")
+        views.append((v, view))
+    data = {
+        "views": views,
+        "passed": sum(v.passed for v in results.transfer),
+        "strict": sum(
+            bool(v.verdict and v.verdict.envelope and v.verdict.envelope.passed)
+            for v in results.transfer
+        ),
+        "total": len(results.transfer),
+    }
+    page.add("transfer", title, "transfer", data)
 
 
 def _stricter_example_section(page: _Page, root: Path) -> None:
@@ -634,7 +752,8 @@ def build_report(
     best, rows = _calibration_section(
         page, places.study, record, results, truth, bool(ds and ds.synthetic)
     )
-    shown = _validation_section(page, results, record)
+    _validation_section(page, results, record)
+    _transfer_section(page, results)
     _stricter_example_section(page, places.root)
     if key_frames and best is not None:
         _frames_section(page, places.study, results, animation)
@@ -652,9 +771,10 @@ def build_report(
         dataset_missing=ds is None,
         results_error=results_error,
         no_results=NO_RESULTS if results is None else None,
-        summary=_summary(shown, rows, stop_reason, bool(truth)),
+        summary=_summary(
+            [] if results is None else results.shown_validations(), rows, stop_reason, bool(truth)
+        ),
         sections=page.sections,
-        identifiable_span=f"{IDENTIFIABLE_SPAN * 100:.0f}",
         recovery_tolerance=f"{RECOVERY_TOLERANCE * 100:.0f}",
     )
     _write_page(target, doc)
@@ -690,24 +810,31 @@ def _write_page(target: Path, doc: str) -> None:
 
 
 def _summary(
-    shown: ValidationRecord | None,
+    shown: ValidationRecord | Sequence[ValidationRecord] | None,
     rows: list[ParameterRow],
     stop_reason: str | None,
     truth: bool,
 ) -> dict[str, Any]:
     """The verdict box's values: the published and stricter verdicts of the validation shown,
     the recovery count (synthetic data) and why the study stopped."""
-    verdict = None if shown is None else shown.verdict
+    group = [shown] if isinstance(shown, ValidationRecord) else list(shown or [])
+    verdicts = [v.verdict for v in group]
+    verdict = None
     strict = None
-    if verdict is not None and verdict.envelope is not None:
-        strict = verdict.envelope.passed
+    if group and all(v is not None for v in verdicts):  # every validation case must pass
+        verdict = {"passed": all(v.passed for v in verdicts)}  # type: ignore[union-attr]
+        if all(v.envelope is not None for v in verdicts):  # type: ignore[union-attr]
+            strict = all(v.envelope.passed for v in verdicts)  # type: ignore[union-attr]
     return {
         "verdict": verdict,
         "strict": strict,
         "truth": truth and bool(rows),
         "recovered": sum((r.error_share or 0) <= RECOVERY_TOLERANCE for r in rows),
         "parameters": len(rows),
-        "flat": ", ".join(r.name for r in rows if r.identifiable is False),
+        "determined": ", ".join(r.name for r in rows if r.determined),
+        "open": ", ".join(r.name for r in rows if r.determined is False),
+        "analysed": any(r.verdict is not None for r in rows),
+        "covered": sum(bool(r.covers_truth) for r in rows),
         "stop_reason": stop_reason,
     }
 
@@ -720,7 +847,11 @@ def verdict_text(path: str | Path) -> str:
     vals = st["validations"]
     if not vals:
         return "no validation yet"
-    return "validation passed" if any(v["passed"] for v in vals) else "validation failed"
+    by_iteration: dict[int, list[bool]] = {}
+    for v in vals:  # an iteration's validation passes when every validation case passed
+        by_iteration.setdefault(v["after_iteration"], []).append(bool(v["passed"]))
+    passed = any(all(g) for g in by_iteration.values())
+    return "validation passed" if passed else "validation failed"
 
 
 __all__ = [

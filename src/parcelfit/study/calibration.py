@@ -4,6 +4,11 @@ spent. Every evaluation goes through the `Store` before the loop moves on; resta
 study folder replays the store (finished evaluations are never simulated again, pending ones
 are run) and continues exactly where it stopped.
 
+A study with several fitted test cases, or with the ensemble cost, evaluates one parameter set
+by simulating every case (and placement) in one batch through the executor; the evaluation is
+one store row with the per-case parts in its details (`parcelfit.study.joint`). Its validation
+cases are simulated one after the other, and the validation passes when every case passes.
+
 Failed, unstable and timed-out simulations, and runs whose trajectory misses the regions of
 interest, are stored with their status and told to the optimiser as failures (it penalises them
 with the worst cost seen); they never stop the loop and count against the budget.
@@ -46,6 +51,17 @@ from parcelfit.sim.executors import Executor, Task, make_executor
 from parcelfit.sim.factory import make_simulator
 from parcelfit.sim.protocol import SimResult, Simulator
 from parcelfit.study.folderlock import check_writable, lock_folder
+from parcelfit.study.identify import Advice, Identifiability, identify
+from parcelfit.study.joint import (
+    CaseRun,
+    advise,
+    case_threshold,
+    check_placements,
+    evaluation_outcome,
+    placement_seeds,
+    simulate_items,
+    threshold,
+)
 from parcelfit.study.results import (
     KeyFramesRecord,
     ReferenceRecord,
@@ -66,7 +82,7 @@ from parcelfit.study.store import (
     Store,
     StudyRecord,
 )
-from parcelfit.study.studyfile import Study
+from parcelfit.study.studyfile import CaseSpec, Study
 
 LOST_WORKER_MESSAGES = (
     "worker failed: BrokenProcessPool",
@@ -168,6 +184,7 @@ class _Opened:
     reference: ReferenceSelection
     val_reference: ReferenceSelection | None
     simulator: Simulator
+    references: Mapping[str, ReferenceSelection] = dataclasses.field(default_factory=dict)
 
 
 class Calibration:
@@ -179,7 +196,11 @@ class Calibration:
     references, validations and surrogate the report renders) and, with ``figures``, the study
     figures (`parcelfit.study.plots.study_figures`) and, with ``key_frames`` too, the
     recommended run's key frames (MuJoCo studies: one more simulation; ``animation`` adds
-    ``figures/run.gif``).
+    ``figures/run.gif``). When the study stops it also analyses what its evaluations determine
+    (`parcelfit.study.identify`), runs the transfer check of a study with ``transfer`` cases
+    and, with ``advice`` and at least two validation or transfer cases, simulates the
+    calibrated set at the ends of the open intervals on each to say which case would help most
+    (`parcelfit.study.joint`); all three go into ``results.json``.
 
     Constructing one keeps its inputs and touches nothing: `run` opens the folder, reads the
     data and builds the simulator (through `prepare`), runs the study and closes the folder.
@@ -198,8 +219,10 @@ class Calibration:
         figures: bool = True,
         key_frames: bool = True,
         animation: bool = False,
+        advice: bool = True,
     ) -> None:
         self.study = study
+        self.advice = advice
         self.folder = Path(folder)
         self.figures = figures
         self.key_frames = key_frames
@@ -272,13 +295,14 @@ class Calibration:
                     consignment=study.consignment,
                 )
             )
-            dataset = load_dataset(study.dataset)
-            reference = select_reference(dataset[self.fit_case])
-            val_reference = (
-                None if self.val_case is None else select_reference(dataset[self.val_case])
-            )
+            references = self._select_references()
+            reference = references[self.fit_case.label]
+            val_reference = None if self.val_case is None else references[self.val_case.label]
             store.set_meta("reference_run", reference.reference_id)
+            if study.joint or len(study.validation_cases) > 1 or study.transfer:
+                store.set_meta("cases", self._case_summary(references))
             simulator = make_simulator(study.simulator)
+            check_placements(study, simulator)
             recorded = store.read_study()
             if recorded is None or not recorded.optimizer.recorded:
                 # the study and its optimiser as it runs (so figures refit its surrogate with
@@ -290,7 +314,55 @@ class Calibration:
                 store.close()
             lock.release()
             raise
-        self._opened = _Opened(lock, store, reference, val_reference, simulator)
+        self._opened = _Opened(lock, store, reference, val_reference, simulator, references)
+
+    def _select_references(self) -> dict[str, ReferenceSelection]:
+        """The reference selection of every case of the study (fitted, validation, transfer),
+        by label; each dataset is read once."""
+        study = self.study
+        datasets: dict[Path, Any] = {}
+        out = {}
+        specs = study.cases or (CaseSpec(self.fit_case, study.dataset),)
+        if not study.validation_cases and self.val_case is not None:
+            specs = (*specs, CaseSpec(self.val_case, study.dataset))
+        for spec in (*specs, *study.validation_cases, *study.transfer):
+            if spec.dataset not in datasets:
+                datasets[spec.dataset] = load_dataset(spec.dataset)
+            if spec.label not in out:
+                try:
+                    data = datasets[spec.dataset][spec.case]
+                except (KeyError, ParcelfitError):
+                    raise ParcelfitError(
+                        f"the dataset has no runs of test case {spec.label}",
+                        file=spec.dataset,
+                        fix="name a test case the dataset holds (parcelfit stats lists them)",
+                    ) from None
+                out[spec.label] = select_reference(data)
+        return out
+
+    def _case_summary(self, references: Mapping[str, ReferenceSelection]) -> list[dict[str, Any]]:
+        """The study's cases for the store and results: label, role, weight, dataset, reference
+        run and the acceptance threshold of the fitted ones."""
+        study = self.study
+        out = []
+        for role, specs in (
+            ("fit", study.cases),
+            ("validation", study.validation_cases),
+            ("transfer", study.transfer),
+        ):
+            for spec in specs:
+                ref = references[spec.label]
+                out.append(
+                    {
+                        "case": spec.label,
+                        "role": role,
+                        "weight": spec.weight,
+                        "dataset": str(spec.dataset),
+                        "reference_run": ref.reference_id,
+                        "threshold": case_threshold(ref, study) if role == "fit" else None,
+                    }
+                )
+        return out
 
     def _open(self) -> _Opened:
         if self._opened is None:
@@ -311,6 +383,11 @@ class Calibration:
     def val_reference(self) -> ReferenceSelection | None:
         """The validation test case's reference run selection (None without validation)."""
         return self._open().val_reference
+
+    @property
+    def references(self) -> Mapping[str, ReferenceSelection]:
+        """The reference selection of every case of the study, by label (from `prepare` on)."""
+        return self._open().references
 
     @property
     def simulator(self) -> Simulator:
@@ -359,6 +436,9 @@ class Calibration:
         self.bo.tell(row.params, outcome["cost"] if outcome["status"] == "ok" else None)
 
     def _run_rows(self, rows: list[Evaluation], executor: Executor) -> None:
+        if self.study.joint:
+            self._run_joint_rows(rows, executor)
+            return
         tasks = [
             Task(self._full_params(r.params), self.fit_case, f"fit-{r.iteration:03d}-{r.slot:02d}")
             for r in rows
@@ -369,15 +449,67 @@ class Calibration:
             remaining -= 1
             self._report(rows[i].iteration, remaining, f"{result.status.value}: {tasks[i].run_id}")
 
+    def _run_joint_rows(self, rows: list[Evaluation], executor: Executor) -> None:
+        """Evaluate rows of a joint or ensemble study: every case (and placement) of every row
+        in one batch; each row is stored the moment its last simulation arrives."""
+        study = self.study
+        seeds = placement_seeds(study)
+        items: list[tuple[Task, int | None]] = []
+        owner: list[tuple[int, CaseSpec, int | None]] = []
+        for i, r in enumerate(rows):
+            for k, spec in enumerate(study.cases):
+                for seed in seeds:
+                    stem = f"fit-{r.iteration:03d}-{r.slot:02d}-c{k}"
+                    run_id = stem if seed is None else f"{stem}-p{seed}"
+                    items.append((Task(self._full_params(r.params), spec.case, run_id), seed))
+                    owner.append((i, spec, seed))
+        per_row = len(study.cases) * len(seeds)
+        arrived: dict[int, list[tuple[int, CaseRun]]] = {}
+        remaining = len(rows)
+        for j, result in simulate_items(executor, self.simulator, items):
+            i, spec, seed = owner[j]
+            run_file = None
+            if result.run is not None:
+                run_file = f"runs/{items[j][0].run_id}.csv"
+                write_trajectory(result.run.trajectory, self.folder / run_file)
+            arrived.setdefault(i, []).append((j, CaseRun(spec, seed, result, run_file)))
+            if len(arrived[i]) < per_row:
+                continue
+            runs = [run for _, run in sorted(arrived.pop(i), key=lambda t: t[0])]
+            out = evaluation_outcome(runs, self.references, study)
+            row = rows[i]
+            self.store.finish(row.id, **out)
+            self.bo.tell(row.params, out["cost"] if out["status"] == "ok" else None)
+            remaining -= 1
+            self._report(
+                row.iteration,
+                remaining,
+                f"{out['status']}: fit-{row.iteration:03d}-{row.slot:02d} ({per_row} simulations)",
+            )
+
     def _validate(self, iteration: int, executor: Executor) -> bool | None:
         best = self.bo.recommend()
-        if best is None or self.val_case is None or self.val_reference is None:
+        cases = self._validation_cases()
+        if best is None or not cases:
             return None
         params, _ = best
-        (row_id,) = self.store.add_pending(
-            "validation", iteration, [params], self.val_case.speed_setting, [0]
+        ids = self.store.add_pending(
+            "validation",
+            iteration,
+            [params] * len(cases),
+            cases[0].case.speed_setting,
+            [0] * len(cases),
         )
-        return self._run_validation(row_id, iteration, params, executor)
+        passed = True
+        for slot, row_id in enumerate(ids):
+            passed = self._run_validation(row_id, iteration, params, executor, slot) and passed
+        return passed
+
+    def _validation_cases(self) -> tuple[CaseSpec, ...]:
+        """The validation cases (slot order of the validation rows of one iteration)."""
+        return self.study.validation_cases or (
+            () if self.val_case is None else (CaseSpec(self.val_case, self.study.dataset),)
+        )
 
     def _run_validation(
         self,
@@ -385,17 +517,22 @@ class Calibration:
         iteration: int,
         params: Mapping[str, float],
         executor: Executor,
+        slot: int = 0,
     ) -> bool:
-        """Simulate a stored (pending) validation row and record its verdict."""
-        assert self.val_case is not None and self.val_reference is not None
-        task = Task(self._full_params(params), self.val_case, f"validation-{iteration:03d}")
+        """Simulate a stored (pending) validation row (the validation case of its slot) and
+        record its verdict; True when it passed."""
+        cases = self._validation_cases()
+        spec = cases[slot]
+        reference = self.references[spec.label]
+        stem = f"validation-{iteration:03d}" + (f"-{slot}" if len(cases) > 1 else "")
+        task = Task(self._full_params(params), spec.case, stem)
         ((_, result),) = list(executor.simulate(self.simulator, [task]))
         run_file = None
         if result.ok and result.run is not None:
-            run_file = f"runs/validation-{iteration:03d}.csv"
+            run_file = f"runs/{stem}.csv"
             write_trajectory(result.run.trajectory, self.folder / run_file)
         record = validation_record(
-            self.val_reference,
+            reference,
             result.run.trajectory if run_file is not None and result.run is not None else None,
             None if result.run is None else result.run.transit_time,
             status=result.status.value,
@@ -404,24 +541,38 @@ class Calibration:
             after_iteration=iteration,
             run_file=run_file,
         )
+        details = record.details()
+        if len(cases) > 1:
+            details["case"] = spec.label
         self.store.finish(
             row_id,
             status=result.status.value,
             transit_time=record.transit_time,
             wall_time=result.wall_time,
             run_file=run_file,
-            details=record.details(),
+            details=details,
         )
         self._validations[row_id] = record
         passed = record.passed
-        self.write_results()
-        self.last_validation = passed
+        last = slot == len(cases) - 1
+        if last:
+            self.write_results()
+            group = [self._validations.get(r.id) for r in self._validation_rows(iteration)]
+            passed = all(v is not None and v.passed for v in group)
+            self.last_validation = passed
+        where = f" on {spec.label}" if len(cases) > 1 else ""
         self._report(
             iteration,
             0,
-            f"validation after iteration {iteration}: {'passed' if passed else 'failed'}",
+            f"validation after iteration {iteration}{where}: "
+            f"{'passed' if record.passed else 'failed'}",
         )
         return passed
+
+    def _validation_rows(self, iteration: int) -> list[Evaluation]:
+        """The validation rows of one iteration, in slot order."""
+        rows = [r for r in self.store.evaluations("validation") if r.iteration == iteration]
+        return sorted(rows, key=lambda r: r.slot)
 
     # -- the loop ----------------------------------------------------------------------------
     def run(self) -> CalibrationResult:
@@ -447,11 +598,15 @@ class Calibration:
         earlier = None
         if any(r.id not in self._validations for r in rows):
             kept = self._earlier_results()
-            earlier = {} if kept is None else {v.after_iteration: v for v in kept.validations}
+            earlier = (
+                {} if kept is None else {(v.after_iteration, v.case): v for v in kept.validations}
+            )
+        cases = self._validation_cases()
         for row in rows:
-            if self.val_reference is None:
+            if row.slot >= len(cases):
                 continue
-            known = None if earlier is None else earlier.get(row.iteration)
+            reference = self.references[cases[row.slot].label]
+            known = None if earlier is None else earlier.get((row.iteration, reference.case.label))
             if (
                 row.id not in self._validations
                 and known is not None
@@ -463,7 +618,7 @@ class Calibration:
                 if row.run_file is not None and (self.folder / row.run_file).is_file():
                     traj = read_trajectory(self.folder / row.run_file)
                 self._validations[row.id] = validation_record(
-                    self.val_reference,
+                    reference,
                     traj,
                     row.transit_time,
                     status=row.status,
@@ -490,6 +645,34 @@ class Calibration:
             record.optimizer, bo.n_told, None if curves is None else tuple(curves)
         )
 
+    def identifiability(self) -> Identifiability | None:
+        """What the finished fitting evaluations determine (`parcelfit.study.identify`), with
+        the acceptance threshold from the fitted cases' real runs (`joint.threshold`); None
+        with fewer than three successful evaluations or real runs that do not differ."""
+        study = self.study
+        fits = [r for r in self.store.evaluations("fit") if r.status != "pending"]
+        references = self.references
+        try:
+            if study.cases:
+                eps, source = threshold(references, study)
+            else:  # a Study made in code without its cases
+                eps = case_threshold(self.reference, study)
+                source = f"largest equation (3) of a real run: {eps:.3g}"
+            initial = [r.cost for r in fits if r.iteration == 0 and r.status == "ok" and r.cost]
+            typical = math.exp(sum(map(math.log, initial)) / len(initial)) if initial else None
+            return identify(
+                study.space,
+                [r.params for r in fits],
+                [r.cost if r.status == "ok" else None for r in fits],
+                eps,
+                threshold_source=source,
+                typical_cost=typical,
+                cost_sd=[_cost_se(r) for r in fits],
+                seed=study.seed,
+            )
+        except ParcelfitError:
+            return None
+
     def write_results(
         self,
         stop_reason: str | None = None,
@@ -497,12 +680,20 @@ class Calibration:
         surrogate: SurrogateRecord | None = None,
         key_frames: KeyFramesRecord | None = None,
         figures: tuple[Path, ...] = (),
+        identifiability: Identifiability | None = None,
+        transfer: tuple[ValidationRecord, ...] = (),
+        advice: Advice | None = None,
     ) -> Path:
         """Write ``results.json``: the references, every validation, the surrogate (refitted
-        here unless given), the key frames and figures; returns its path."""
+        here unless given), the key frames and figures, and what the study concluded when it
+        stopped (identifiability, transfer check, advice); returns its path."""
         references = {"fit": ReferenceRecord.from_selection(self.reference)}
         if self.val_reference is not None:
             references["validation"] = ReferenceRecord.from_selection(self.val_reference)
+        known = {r.case for r in references.values()}
+        for label, sel in self.references.items():  # the other cases of a joint study
+            if label not in known:
+                references[f"case {label}"] = ReferenceRecord.from_selection(sel)
         return write_results(
             self.folder,
             new_results(
@@ -512,28 +703,144 @@ class Calibration:
                 surrogate=surrogate or self.surrogate(),
                 key_frames=key_frames,
                 figures=[p.relative_to(self.folder).as_posix() for p in figures],
+                identifiability=identifiability,
+                transfer=transfer,
+                advice=advice,
+                cases=self._case_summary(self.references) if self.study.cases else (),
             ),
         )
 
     def _finish(self, result: CalibrationResult) -> CalibrationResult:
-        """The results, study figures and key frames of a stopped study."""
+        """The results, study figures and key frames of a stopped study, what its evaluations
+        determine, the transfer check and the advice."""
         last = -1 if result.last_iteration is None else result.last_iteration
         surrogate = self.surrogate()
+        self._report(last, 0, "what the data determine (the values the surrogate cannot exclude)")
+        ident = self.identifiability()
+        transfer: tuple[ValidationRecord, ...] = ()
+        advice = None
+        if result.best_params is not None:
+            transfer = self._transfer(result.best_params, last)
+            advice = self._advice(result.best_params, ident, last)
         figures: list[Path] = []
         key_frames = None
         if self.figures:
-            from parcelfit.study.plots import study_figures
+            from parcelfit.study.plots import pairwise_figure, study_figures
 
             self._report(last, 0, "writing the study figures")
             curves = None if surrogate is None or surrogate.curves is None else surrogate.curves
             figures += study_figures(self.folder, None if curves is None else list(curves))
+            if ident is not None:
+                from parcelfit.figures import save_figure
+
+                figures += save_figure(pairwise_figure(ident), self.folder / "figures" / "pairwise")
             if self.key_frames and result.best_params is not None:
                 key_frames, drawn = self._key_frames(result.best_params, last)
                 figures += drawn
         self.write_results(
-            result.stop_reason, surrogate=surrogate, key_frames=key_frames, figures=tuple(figures)
+            result.stop_reason,
+            surrogate=surrogate,
+            key_frames=key_frames,
+            figures=tuple(figures),
+            identifiability=ident,
+            transfer=transfer,
+            advice=advice,
         )
         return dataclasses.replace(result, figures=tuple(figures))
+
+    def _simulate_tasks(self, tasks: list[Task]) -> list[SimResult]:
+        """Simulate tasks with the study's executor; results in task order."""
+        out: dict[int, SimResult] = {}
+        executor = _executor(self.study, *self._executor_args)
+        try:
+            for i, r in executor.simulate(self.simulator, tasks):
+                out[i] = r
+        finally:
+            executor.close()
+        return [out[i] for i in range(len(tasks))]
+
+    def _transfer(
+        self, params: Mapping[str, float], iteration: int
+    ) -> tuple[ValidationRecord, ...]:
+        """The transfer check: the recommended parameters simulated on every transfer case and
+        judged like a validation; an earlier result for the same parameters is kept (the run
+        files stay in ``runs/``)."""
+        specs = self.study.transfer
+        if not specs:
+            return ()
+        stored = self.store.get_meta("transfer") or []  # kept in the store: a rerun without
+        kept = {
+            v.case: v for v in map(ValidationRecord.from_json, stored)
+        }  # results simulates none
+        todo = [s for s in specs if not (s.label in kept and kept[s.label].params == dict(params))]
+        fresh: dict[str, ValidationRecord] = {}
+        if todo:
+            self._report(iteration, len(todo), f"transfer check on {len(todo)} test cases")
+            tasks = [
+                Task(
+                    self._full_params(params),
+                    s.case,
+                    f"transfer-{s.case.rig}-{s.case.speed_setting}",
+                )
+                for s in todo
+            ]
+            for spec, task, result in zip(todo, tasks, self._simulate_tasks(tasks), strict=True):
+                run_file = None
+                if result.ok and result.run is not None:
+                    run_file = f"runs/{task.run_id}.csv"
+                    write_trajectory(result.run.trajectory, self.folder / run_file)
+                fresh[spec.label] = validation_record(
+                    self.references[spec.label],
+                    None if run_file is None or result.run is None else result.run.trajectory,
+                    None if result.run is None else result.run.transit_time,
+                    status=result.status.value,
+                    message=result.diagnostics.get("message"),
+                    params=params,
+                    run_file=run_file,
+                )
+        out = tuple(fresh.get(s.label) or kept[s.label] for s in specs)
+        if fresh:
+            self.store.set_meta("transfer", [v.to_json() for v in out])
+        return out
+
+    def _advice(
+        self, params: Mapping[str, float], ident: Identifiability | None, iteration: int
+    ) -> Advice | None:
+        """Which candidate case (validation and transfer cases) would help most to determine
+        the parameters the data leave open (`joint.advise`); None when every parameter is
+        determined, there are fewer than two candidates to choose from, or it is disabled. An
+        earlier advice for the same parameters and intervals (kept in the store) is reused."""
+        if ident is None or not self.advice:
+            return None
+        open_ = {p.name: p.interval for p in ident.parameters if not p.determined}
+        candidates = [*self._validation_cases(), *self.study.transfer]
+        if not open_ or len(candidates) < 2:  # a choice needs two candidates
+            return None
+        stored = self.store.get_meta("advice")  # kept in the store, with the intervals it used
+        if stored is not None:
+            kept = Advice.from_json(stored["advice"])
+            same = {k: tuple(v) for k, v in stored["intervals"].items()} == {
+                k: tuple(v) for k, v in open_.items()
+            }
+            if same and kept.params == {k: float(v) for k, v in params.items()}:
+                return kept
+        n = 2 * len(open_) * len(candidates)
+        self._report(iteration, n, f"which test case would help most: {n} simulations")
+        advice = advise(
+            self._full_params(params),
+            open_,
+            candidates,
+            self.references,
+            self._simulate_tasks,
+            self.study.w_xy,
+            self.study.w_theta,
+        )
+        advice = dataclasses.replace(advice, params={k: float(v) for k, v in params.items()})
+        self.store.set_meta(
+            "advice",
+            {"advice": advice.to_json(), "intervals": {k: list(v) for k, v in open_.items()}},
+        )
+        return advice
 
     def _key_frames(
         self, params: Mapping[str, float], iteration: int
@@ -608,10 +915,11 @@ class Calibration:
         stored = self.store.evaluations("validation")
         validated = {v.iteration for v in stored}
         already_passed = False
-        for v in stored:
-            if v.status == "pending":
+        for it in sorted(validated):  # an iteration's validation passes when all its cases do
+            group = [v for v in stored if v.iteration == it]
+            if any(v.status == "pending" for v in group):
                 continue
-            self.last_validation = bool(v.details.get("passed"))
+            self.last_validation = all(bool(v.details.get("passed")) for v in group)
             already_passed = already_passed or self.last_validation
         pending = [r for r in rows if r.status == "pending"]
         if already_passed and not pending:
@@ -630,11 +938,15 @@ class Calibration:
                 return self._result("validation passed")
             # a validation interrupted by a kill is run again before anything else
             for v in stored:
-                if v.status == "pending" and self.val_case is not None:
+                if v.status == "pending" and self._validation_cases():
                     self._report(
                         v.iteration, 1, f"resuming the validation after iteration {v.iteration}"
                     )
-                    if self._run_validation(v.id, v.iteration, v.params, executor):
+                    self._run_validation(v.id, v.iteration, v.params, executor, v.slot)
+                    group = self._validation_rows(v.iteration)
+                    if all(r.status != "pending" for r in group) and all(
+                        bool(r.details.get("passed")) for r in group
+                    ):
                         return self._result("validation passed")
             while True:
                 if pending:
@@ -659,7 +971,13 @@ class Calibration:
                         if iteration == 0
                         else f"iteration {iteration}"
                     )
-                    self._report(iteration, n, f"{what}: {n} simulations")
+                    per = len(study.cases) * len(placement_seeds(study)) if study.joint else 1
+                    count = (
+                        f"{n} evaluations ({n * per} simulations)"
+                        if study.joint
+                        else f"{n} simulations"
+                    )
+                    self._report(iteration, n, f"{what}: {count}")
                     self._run_rows(new_rows, executor)
                 else:
                     break
@@ -673,7 +991,7 @@ class Calibration:
                     if self._validate(iteration, executor):
                         return self._result("validation passed")
             if (
-                self.val_case is not None
+                self._validation_cases()
                 and iteration not in validated
                 and self._validate(iteration, executor)
             ):
@@ -699,6 +1017,15 @@ class Calibration:
         )
 
 
+def _cost_se(row: Evaluation) -> float | None:
+    """The standard error of a joint ensemble evaluation's cost (its cases' trajectory-term
+    standard errors, weighted, in quadrature); None when a case states none."""
+    parts = row.details.get("cases") or []
+    if not parts or any(p.get("se") is None for p in parts):
+        return None
+    return math.sqrt(sum((p["weight"] * p["se"]) ** 2 for p in parts))
+
+
 def record_summary(record: StudyRecord) -> dict[str, Any]:
     """A study record as JSON (bounds SI), its optimiser as ``optimizer``: ``sampler``,
     ``settings`` (BOSettings fields, None without a GP), ``recorded`` (False for a store of an
@@ -719,8 +1046,11 @@ def study_status(folder: str | Path) -> dict[str, Any]:
     k >= 1 the k-th batch the optimiser chose; None before the first), ``recommended`` (the
     parameters the study validates and reports, with their cost and the iteration they were
     evaluated in; set when the study stops), ``lowest_cost`` (the evaluation with the lowest
-    single cost), ``validations`` (each with the iteration it followed, its status and
-    verdict), and ``units``: parameter values are SI, in the unit given per parameter.
+    single cost), both with ``parts``: the per-case costs of a joint or ensemble study (None
+    otherwise), ``cases`` (a joint study's test cases: label, role fit/validation/transfer,
+    weight, dataset, reference run and acceptance threshold; None for a one-case study),
+    ``validations`` (each with the iteration it followed, its case, status and verdict), and
+    ``units``: parameter values are SI, in the unit given per parameter.
     """
     from parcelfit.sim.params import si_unit
 
@@ -742,6 +1072,7 @@ def study_status(folder: str | Path) -> dict[str, Any]:
         vals = store.evaluations("validation")
         record, source = store.read_study(), store.read_source() or SourceRecord()
         reference_run, stop_reason = store.get_meta("reference_run"), store.get_meta("stop_reason")
+        cases = store.get_meta("cases")
         recommended = store.read_recommended()
     finally:
         store.close()
@@ -765,12 +1096,26 @@ def study_status(folder: str | Path) -> dict[str, Any]:
         else {
             **recommended.to_json(),
             "iteration": next((e.iteration for e in fits if e.params == recommended.params), None),
+            "parts": next(
+                (e.details.get("cases") for e in fits if e.params == recommended.params), None
+            ),
         },
         "lowest_cost": None
         if lowest is None
-        else {"params": lowest.params, "cost": lowest.cost, "iteration": lowest.iteration},
+        else {
+            "params": lowest.params,
+            "cost": lowest.cost,
+            "iteration": lowest.iteration,
+            "parts": lowest.details.get("cases"),
+        },
+        "cases": cases,
         "validations": [
-            {"after_iteration": v.iteration, "status": v.status, "passed": v.details.get("passed")}
+            {
+                "after_iteration": v.iteration,
+                "case": v.details.get("case"),
+                "status": v.status,
+                "passed": v.details.get("passed"),
+            }
             for v in vals
         ],
         "units": {**{n: si_unit(n) for n in names}, "cost": "-"},

@@ -8,10 +8,14 @@
   band; the GP is refitted from the store exactly as the optimiser saw it, with the optimiser
   settings the store records (`surrogate_optimizer`). The curves are `DependenceCurve`s
   (`parcelfit.study.results`), which the calibration also stores for the report.
+* ``pairwise``: the sample of the plausible set of the identifiability analysis
+  (`parcelfit.study.identify`), each parameter's histogram with its interval and each pair's
+  scatter with its correlation (`pairwise_figure`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Literal
 
@@ -22,6 +26,7 @@ from parcelfit.figures import save_figure
 from parcelfit.optimize.bo import BatchBO, BOSettings
 from parcelfit.optimize.space import Dimension, Space
 from parcelfit.sim.params import catalogue_unit, to_catalogue_units
+from parcelfit.study.identify import Identifiability
 from parcelfit.study.results import DependenceCurve
 from parcelfit.study.store import STORE_FILE, Evaluation, Store, StudyRecord
 
@@ -241,3 +246,68 @@ def study_figures(
     if curves:
         paths += save_figure(dependence_figure(curves), out / "partial_dependence")
     return paths
+
+
+_VERDICT_COLOURS = {
+    "determined": "#1e8449",
+    "lower bound": "#d68910",
+    "upper bound": "#d68910",
+    "narrowed": "#d68910",
+    "undetermined": "#c0392b",
+}
+
+
+def pairwise_figure(ident: Identifiability, truth: Mapping[str, float] | None = None) -> Figure:
+    """The plausible set of the identifiability analysis, pair by pair (catalogue units):
+    on the diagonal each parameter's histogram with its interval shaded in its verdict's colour,
+    below it the sample of each pair with its correlation r; the hidden truth (synthetic data)
+    as a black line or cross where given (SI values)."""
+    names = ident.names
+    d = len(names)
+    fig = Figure(figsize=(2.3 * d + 0.6, 2.3 * d + 0.4), layout="constrained")
+    axes = np.atleast_2d(fig.subplots(d, d, squeeze=False))
+    values = [np.asarray(to_catalogue_units(n, ident.sample[:, j])) for j, n in enumerate(names)]
+    truth_cat = {n: float(to_catalogue_units(n, v)) for n, v in (truth or {}).items() if n in names}
+    for i, pi in enumerate(ident.parameters):
+        lo_r, hi_r = (float(to_catalogue_units(pi.name, x)) for x in (pi.low, pi.high))
+        for j, pj in enumerate(ident.parameters):
+            ax = axes[i, j]
+            if j > i:
+                ax.set_axis_off()
+                continue
+            if i == j:
+                ax.hist(values[i], bins=30, range=(lo_r, hi_r), color="#95a5a6")
+                a, b = (float(to_catalogue_units(pi.name, x)) for x in pi.interval)
+                ax.axvspan(a, b, color=_VERDICT_COLOURS.get(pi.verdict, "#7f8c8d"), alpha=0.2)
+                ax.set_title(f"{pi.name}: {pi.verdict}", fontsize=8)
+                ax.set_yticks([])
+                if pi.name in truth_cat:
+                    ax.axvline(truth_cat[pi.name], color="black", lw=1.2)
+            else:
+                lo_c, hi_c = (float(to_catalogue_units(pj.name, x)) for x in (pj.low, pj.high))
+                ax.scatter(values[j], values[i], s=2, alpha=0.25, color="#2c3e50")
+                ax.set_xlim(lo_c, hi_c)
+                ax.set_ylim(lo_r, hi_r)
+                ax.text(
+                    0.03,
+                    0.95,
+                    f"r = {ident.correlation[i, j]:+.2f}",
+                    transform=ax.transAxes,
+                    va="top",
+                    fontsize=7,
+                    color="#c0392b",
+                )
+                if pi.name in truth_cat and pj.name in truth_cat:
+                    ax.plot(truth_cat[pj.name], truth_cat[pi.name], "kx", ms=7, mew=1.5)
+            ax.set_xlim(*((lo_r, hi_r) if i == j else ax.get_xlim()))
+            if i == d - 1:
+                ax.set_xlabel(_label(pj.name), fontsize=8)
+            if j == 0 and i > 0:
+                ax.set_ylabel(_label(pi.name), fontsize=8)
+            ax.tick_params(labelsize=7)
+    fig.suptitle(
+        f"Parameter values the data cannot tell apart (not excluded at {ident.level * 100:.0f} % "
+        "confidence by the GP surrogate; shaded: each parameter's interval)",
+        fontsize=9,
+    )
+    return fig

@@ -10,7 +10,12 @@ when it stops; the report renders it and computes nothing of its own. It holds
 * the GP surrogate's partial dependence curves, refitted with the optimiser settings the store
   records (`SurrogateRecord`);
 * the key frames of the calibrated run (MuJoCo studies, `KeyFramesRecord`) and the figures
-  written into ``figures/``.
+  written into ``figures/``;
+* what the evaluations determine: every parameter's interval and verdict, the posterior
+  correlations and sample (`parcelfit.study.identify.Identifiability`), and which candidate
+  test case would help most (`parcelfit.study.joint.Advice`);
+* the transfer check: the calibrated parameters judged on other test cases
+  (`ValidationRecord` each), and the study's test cases with their roles and weights.
 
 The file's schema is documented in docs/data.md (Study results); units are SI throughout (m,
 rad, s; squared DTW distances in m^2 and rad^2). `read_results` reads it, `write_results`
@@ -41,6 +46,7 @@ from parcelfit.metrics import (
 )
 from parcelfit.metrics.envelope import EnvelopeCheck, envelope_band
 from parcelfit.runs import Trajectory
+from parcelfit.study.identify import Advice, Identifiability
 from parcelfit.study.store import OptimizerRecord
 
 RESULTS_FILE = "results.json"
@@ -363,12 +369,6 @@ class DependenceCurve:
         """How much the predicted cost changes across the parameter's range."""
         return float(np.max(self.cost) - np.min(self.cost))
 
-    def indistinct(self) -> tuple[float, float]:
-        """The span of values whose predicted cost is within one (mean) predictive standard
-        deviation of the lowest: the values the surrogate cannot tell apart from the best."""
-        near = self.values[self.cost <= self.cost.min() + float(self.sd.mean())]
-        return float(near.min()), float(near.max())
-
     def to_json(self) -> dict[str, Any]:
         """The stored form."""
         return {
@@ -395,7 +395,7 @@ class DependenceCurve:
 
 @dataclass(frozen=True, eq=False)
 class SurrogateRecord:
-    """The GP surrogate behind the identifiability test: the optimiser settings it was refitted
+    """The optimiser's GP surrogate behind the partial dependence plot: the settings it was refitted
     with (the store's record; `OptimizerRecord.note` says when defaults stood in), how many
     finished fitting evaluations it learnt, and its partial dependence curves (None before two
     evaluations succeeded)."""
@@ -466,11 +466,30 @@ class StudyResults:
     surrogate: SurrogateRecord | None = None
     key_frames: KeyFramesRecord | None = None
     figures: tuple[str, ...] = ()
+    identifiability: Identifiability | None = None
+    transfer: tuple[ValidationRecord, ...] = ()
+    advice: Advice | None = None
+    cases: tuple[dict[str, Any], ...] = ()  # the study's test cases: case, role, weight
 
     def shown_validation(self) -> ValidationRecord | None:
-        """The validation a report shows: the last that passed, else the last one."""
-        passed = [v for v in self.validations if v.passed]
-        return passed[-1] if passed else (self.validations[-1] if self.validations else None)
+        """The validation a report shows: the last that passed, else the last one (of a study
+        with several validation cases: the first case's record of that iteration)."""
+        shown = self.shown_validations()
+        return shown[0] if shown else None
+
+    def shown_validations(self) -> list[ValidationRecord]:
+        """Every case's record of the validation a report shows: the last iteration whose
+        validation passed on every case, else the last one."""
+        by_iter: dict[int | None, list[ValidationRecord]] = {}
+        for v in self.validations:
+            by_iter.setdefault(v.after_iteration, []).append(v)
+        groups = list(by_iter.values())
+        passed = [g for g in groups if all(v.passed for v in g)]
+        return passed[-1] if passed else (groups[-1] if groups else [])
+
+    def reference(self, case: str) -> ReferenceRecord | None:
+        """The stored reference record of a test case (by label), None if not stored."""
+        return next((r for r in self.references.values() if r.case == case), None)
 
     def to_json(self) -> dict[str, Any]:
         """The stored form."""
@@ -485,6 +504,12 @@ class StudyResults:
             "surrogate": None if self.surrogate is None else self.surrogate.to_json(),
             "key_frames": None if self.key_frames is None else self.key_frames.to_json(),
             "figures": list(self.figures),
+            "identifiability": None
+            if self.identifiability is None
+            else self.identifiability.to_json(),
+            "transfer": [v.to_json() for v in self.transfer],
+            "advice": None if self.advice is None else self.advice.to_json(),
+            "cases": [dict(c) for c in self.cases],
         }
 
     @classmethod
@@ -500,6 +525,12 @@ class StudyResults:
             surrogate=None if sur is None else SurrogateRecord.from_json(sur),
             key_frames=None if kf is None else KeyFramesRecord.from_json(kf),
             figures=tuple(str(f) for f in doc.get("figures") or ()),
+            identifiability=None
+            if doc.get("identifiability") is None
+            else Identifiability.from_json(doc["identifiability"]),
+            transfer=tuple(ValidationRecord.from_json(v) for v in doc.get("transfer") or ()),
+            advice=None if doc.get("advice") is None else Advice.from_json(doc["advice"]),
+            cases=tuple(dict(c) for c in doc.get("cases") or ()),
         )
 
 
@@ -511,6 +542,10 @@ def new_results(
     surrogate: SurrogateRecord | None = None,
     key_frames: KeyFramesRecord | None = None,
     figures: Sequence[str] = (),
+    identifiability: Identifiability | None = None,
+    transfer: Sequence[ValidationRecord] = (),
+    advice: Advice | None = None,
+    cases: Sequence[Mapping[str, Any]] = (),
 ) -> StudyResults:
     """Results stamped with this moment and this parcelfit version."""
     return StudyResults(
@@ -522,6 +557,10 @@ def new_results(
         surrogate,
         key_frames,
         tuple(figures),
+        identifiability,
+        tuple(transfer),
+        advice,
+        tuple(dict(c) for c in cases),
     )
 
 

@@ -22,6 +22,14 @@
       consignment: KPBW                # optional, default: simulator.consignment
       speed_setting: 1
     validation: {speed_setting: 2, every: 5}   # validation case and how often (iterations)
+    # a joint study lists its test cases instead of `reference` (each with its weight; dataset,
+    # rig and consignment default to the first case's, resp. the simulator's):
+    # cases:
+    #   - {dataset: data/e3, rig: E3, speed_setting: 1, weight: 1.0}
+    #   - {rig: E1, speed_setting: 3, weight: 1.0}
+    # validation: {every: 5, cases: [{rig: E3, speed_setting: 2}]}  # all must pass
+    # cost: {kind: ensemble, placements: 6, transit_weight: 1.0}   # optional, default published
+    # transfer: [{rig: E1, speed_setting: 1}]   # optional: judged once the study stops
     weights: {xy: 1.0, theta: 1.0}     # optional, equation (3)
     batch_size: 4                      # optional
     initial: 16                        # optional, Latin hypercube size
@@ -35,6 +43,14 @@
 calls it, and ``backend: external`` runs the solver description's command: run only study (and
 screen) files you trust, as you would a script.
 
+A study file with ``reference`` (one test case) is the published method; ``cases`` fits several
+test cases at once: one evaluation simulates every case (in parallel) and its cost is the
+weighted sum of the cases' costs. ``cost.kind`` chooses the cost of a case: ``published``
+(equation 3 against the reference run, `parcelfit.metrics.cost`) or ``ensemble`` (``placements``
+seeded placements against all real runs with a transit-time term, `parcelfit.metrics.ensemble`).
+``transfer`` lists test cases (usually on other rigs) that the calibrated parameters are judged
+on, with the validation criteria and the band test, once the study stops.
+
 Parameter values in the file are in the catalogue's user units (N/mm, N/mm^2, mm, g; see
 ``parcelfit params``) for the catalogue's parameters and converted to SI on load; parameters a
 ``python`` or ``external`` backend defines itself are taken as given.
@@ -45,7 +61,7 @@ from __future__ import annotations
 import hashlib
 import json
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -56,6 +72,7 @@ from parcelfit.errors import ParcelfitError
 from parcelfit.optimize.bo import BOSettings
 from parcelfit.optimize.sampler import SAMPLERS
 from parcelfit.optimize.space import Dimension, Space
+from parcelfit.runs import TestCase
 from parcelfit.schema import (
     Choice,
     FileModel,
@@ -79,6 +96,42 @@ class ReferenceSection(FileModel):
     rig: Annotated[str | None, Text(nullable=True)] = None
     consignment: Annotated[str | None, Text(nullable=True)] = None
     speed_setting: Annotated[int, Whole(ge=1)]
+
+
+class CaseSection(FileModel):
+    """One test case of ``cases``, ``validation.cases`` or ``transfer``: dataset folder
+    (relative to the file; default the first case's), rig and consignment (default the
+    simulator's), speed setting, and (``cases`` only) its weight in the cost."""
+
+    dataset: Annotated[str | None, Text(nullable=True)] = None
+    rig: Annotated[str | None, Text(nullable=True)] = None
+    consignment: Annotated[str | None, Text(nullable=True)] = None
+    speed_setting: Annotated[int, Whole(ge=1)]
+    weight: Annotated[float, Number(ge=0)] = 1.0
+
+
+class CostSection(FileModel):
+    """``cost``: ``published`` (equation 3 against the reference run) or ``ensemble``
+    (``placements`` seeded placements against all real runs, plus the transit-time term
+    weighted by ``transit_weight``)."""
+
+    kind: Annotated[str, Choice(("published", "ensemble"), what="cost")] = "published"
+    placements: Annotated[int, Whole(ge=1)] = 1
+    transit_weight: Annotated[float, Number(ge=0)] = 1.0
+
+    @classmethod
+    def prepare(cls, data: Any) -> Any:
+        return {"kind": data} if isinstance(data, str) else data
+
+    @model_validator(mode="after")
+    def _published_is_one_run(self) -> CostSection:
+        if self.kind == "published" and self.placements != 1:
+            raise ParcelfitError(
+                "the published cost compares one simulation with the reference run",
+                where="placements",
+                fix="use kind: ensemble for several placements, or leave placements out",
+            )
+        return self
 
 
 class ScreenExecutorSection(FileModel):
@@ -125,6 +178,17 @@ class ValidationSection(FileModel):
 
     speed_setting: Annotated[int | None, Whole(ge=1, nullable=True)] = None
     every: Annotated[int, Whole(ge=1)] = 5
+    cases: Annotated[list[CaseSection], or_default(list)] = Field(default_factory=list)
+
+    @model_validator(mode="after")
+    def _one_way(self) -> ValidationSection:
+        if self.speed_setting is not None and self.cases:
+            raise ParcelfitError(
+                "both speed_setting and cases are given",
+                where="cases",
+                fix="list the validation speed setting as one of the cases",
+            )
+        return self
 
 
 class WeightsSection(FileModel):
@@ -174,7 +238,10 @@ class StudyFile(FileModel):
     fixed: Annotated[dict[Any, Annotated[float, Number()]], or_default(dict)] = Field(
         default_factory=dict
     )
-    reference: ReferenceSection
+    reference: ReferenceSection | None = None
+    cases: Annotated[list[CaseSection], or_default(list)] = Field(default_factory=list)
+    cost: Annotated[CostSection, or_default(dict)] = Field(default_factory=CostSection)
+    transfer: Annotated[list[CaseSection], or_default(list)] = Field(default_factory=list)
     validation: Annotated[ValidationSection, or_default(dict)] = Field(
         default_factory=ValidationSection
     )
@@ -196,7 +263,37 @@ class StudyFile(FileModel):
         return value
 
     @model_validator(mode="after")
+    def _reference_or_cases(self) -> StudyFile:
+        if self.reference is None and not self.cases:
+            raise ParcelfitError(
+                "missing required key 'reference'",
+                fix="add `reference:`",
+            )
+        if self.reference is not None and self.cases:
+            raise ParcelfitError(
+                "give either reference (one test case) or cases (a joint study)"
+                + (", not both" if self.reference is not None else ""),
+                where="cases" if self.cases else "reference",
+                fix="e.g. reference: {dataset: data, speed_setting: 1}",
+            )
+        if self.cases and self.validation.speed_setting is not None:
+            raise ParcelfitError(
+                "a joint study names its validation cases",
+                where="validation.speed_setting",
+                fix="write validation: {cases: [{rig: ..., speed_setting: ...}]}",
+            )
+        if self.cases and not any(c.weight > 0 for c in self.cases):
+            raise ParcelfitError(
+                "every case has weight 0, so every simulation would cost nothing",
+                where="cases",
+                fix="give at least one case a positive weight",
+            )
+        return self
+
+    @model_validator(mode="after")
     def _validation_setting(self) -> StudyFile:
+        if self.reference is None:
+            return self
         if self.validation.speed_setting == self.reference.speed_setting:
             raise ParcelfitError(
                 "validation must use a speed setting not used for fitting",
@@ -235,6 +332,33 @@ class Study:
     executor: Mapping[str, Any] = field(default_factory=dict)
     fingerprint: str = ""
     path: Path | None = None  # the study file
+    cases: tuple[CaseSpec, ...] = ()  # fitted test cases (one for a `reference` study)
+    validation_cases: tuple[CaseSpec, ...] = ()
+    transfer: tuple[CaseSpec, ...] = ()
+    cost_kind: str = "published"  # published | ensemble
+    placements: int = 1  # seeded placements per case and evaluation (ensemble)
+    transit_weight: float = 1.0  # w_T of the ensemble cost
+
+    @property
+    def joint(self) -> bool:
+        """True when an evaluation is more than one simulation against one reference run
+        (several cases, or the ensemble cost)."""
+        return len(self.cases) > 1 or self.cost_kind != "published"
+
+
+@dataclass(frozen=True)
+class CaseSpec:
+    """A test case of a study with the dataset folder (absolute) holding its real runs and its
+    weight in the cost (1 for validation and transfer cases)."""
+
+    case: TestCase
+    dataset: Path
+    weight: float = 1.0
+
+    @property
+    def label(self) -> str:
+        """The test case's label, e.g. ``E3/KPBW/1``."""
+        return self.case.label
 
 
 def _to_si(name: str, value: float, backend: str) -> float:
@@ -296,7 +420,9 @@ def load_study(path: str | Path) -> Study:
             where="fixed",
             fix="remove them from one of the two",
         )
-    dataset, rig, consignment = reference_case(f.reference, f.simulator, path, folder)
+    cases, validation_cases, transfer = study_cases(f, path, folder)
+    first = cases[0]
+    dataset, rig, consignment = first.dataset, first.case.rig, first.case.consignment
     try:
         make = BOSettings.published if f.optimizer.sampler == "published" else BOSettings
         bo = make(n_initial=f.initial, **f.optimizer.settings)
@@ -316,8 +442,8 @@ def load_study(path: str | Path) -> Study:
         dataset=dataset,
         rig=rig,
         consignment=consignment,
-        fit_setting=f.reference.speed_setting,
-        validation_setting=f.validation.speed_setting,
+        fit_setting=first.case.speed_setting,
+        validation_setting=validation_cases[0].case.speed_setting if validation_cases else None,
         validate_every=f.validation.every,
         w_xy=f.weights.xy,
         w_theta=f.weights.theta,
@@ -330,7 +456,92 @@ def load_study(path: str | Path) -> Study:
         executor=f.executor.model_dump(),
         fingerprint=fingerprint,
         path=path.resolve(),
+        cases=cases,
+        validation_cases=validation_cases,
+        transfer=transfer,
+        cost_kind=f.cost.kind,
+        placements=f.cost.placements,
+        transit_weight=f.cost.transit_weight,
     )
+
+
+def study_cases(
+    f: StudyFile, path: Path, folder: Path
+) -> tuple[tuple[CaseSpec, ...], tuple[CaseSpec, ...], tuple[CaseSpec, ...]]:
+    """The fitted, validation and transfer cases of a study file (datasets absolute). A
+    ``reference`` study has one fitted case and at most one validation case, at
+    ``validation.speed_setting`` of the same rig and consignment."""
+    if f.reference is not None:
+        dataset, rig, consignment = reference_case(f.reference, f.simulator, path, folder)
+        cases: tuple[CaseSpec, ...] = (
+            CaseSpec(TestCase(rig, consignment, f.reference.speed_setting), dataset),
+        )
+    else:
+        first = f.cases[0]
+        if first.dataset is None:
+            raise ParcelfitError(
+                "the first case names no dataset",
+                file=path,
+                where="cases[0].dataset",
+                fix="add dataset: FOLDER (relative to the study file)",
+            )
+        cases = tuple(
+            _case(c, f.simulator, path, folder, folder / first.dataset, f"cases[{i}]")
+            for i, c in enumerate(f.cases)
+        )
+    default = cases[0].dataset
+    if f.validation.cases:
+        validation = tuple(
+            replace(
+                _case(c, f.simulator, path, folder, default, f"validation.cases[{i}]"), weight=1.0
+            )
+            for i, c in enumerate(f.validation.cases)
+        )
+    elif f.validation.speed_setting is not None:
+        c0 = cases[0].case
+        validation = (
+            CaseSpec(TestCase(c0.rig, c0.consignment, f.validation.speed_setting), default),
+        )
+    else:
+        validation = ()
+    transfer = tuple(
+        replace(_case(c, f.simulator, path, folder, default, f"transfer[{i}]"), weight=1.0)
+        for i, c in enumerate(f.transfer)
+    )
+    fitted = {c.case for c in cases}
+    for where, group in (("validation.cases", validation), ("transfer", transfer)):
+        for i, c in enumerate(group):
+            if c.case in fitted:
+                raise ParcelfitError(
+                    f"{c.label} is also fitted: a case used for fitting cannot judge the fit",
+                    file=path,
+                    where=f"{where}[{i}]"
+                    if where == "transfer" or f.validation.cases
+                    else "validation.speed_setting",
+                    fix="use a test case not listed under cases",
+                )
+    if len({c.case for c in cases}) != len(cases):
+        raise ParcelfitError(
+            "a test case is listed twice", file=path, where="cases", fix="list each case once"
+        )
+    return cases, validation, transfer
+
+
+def _case(
+    c: CaseSection, sim: SimulatorSection, path: Path, folder: Path, default: Path, where: str
+) -> CaseSpec:
+    """One case section as a `CaseSpec` (names default to the simulator's)."""
+    dataset = (folder / c.dataset).resolve() if c.dataset is not None else default.resolve()
+    rig = c.rig or _name(sim.rig, path, f"{where}.rig")
+    consignment = c.consignment or _name(sim.consignment, path, f"{where}.consignment")
+    if sim.backend == "mujoco" and rig.lower().endswith((".yaml", ".yml")):
+        raise ParcelfitError(
+            "a case's rig is a bundled rig's name, or the simulator's own rig file",
+            file=path,
+            where=f"{where}.rig",
+            fix="name a bundled rig (parcelfit rigs), or leave rig out for the simulator's",
+        )
+    return CaseSpec(TestCase(rig, consignment, c.speed_setting), dataset, c.weight)
 
 
 def reference_case(

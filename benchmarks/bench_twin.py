@@ -1,0 +1,339 @@
+"""Twin benchmark: are the calibrated parameters right, not only passing?
+
+    python benchmarks/bench_twin.py [--out bench-twin] [--workers 2] [--truths 3]
+                                    [--placements 2] [--budget 48] [--setups published,joint]
+
+For each of several hidden truths (other than the bundled twin's), the benchmark makes a twin
+dataset with parcelfit's MuJoCo model (E3/KPBW at speed settings 1 and 2, E1/KPBW at 1 and 3,
+10 runs each; `parcelfit.synth`), calibrates it with each setup and prints one table row per
+truth and setup:
+
+* ``published``: the published method (E3 setting 1 against its reference run, validation at
+  setting 2, the published optimiser configuration, budget 80);
+* ``joint``: E3 setting 1 and E1 setting 3 fitted jointly with the ensemble cost (``placements``
+  seeded placements per case and evaluation), validation on E3 setting 2, transfer check on E1
+  setting 1, the default optimiser, ``budget`` evaluations.
+
+Columns: parameters whose calibrated value is within 10 % of the range of the truth; how many
+the identifiability analysis calls determined, and how many of those are within 10 % (the
+report's values); how many reported intervals contain the truth; optimiser evaluations;
+simulations (fits, validations, transfer and advice runs); wall time [min]; the validation
+verdict (published criteria) and the transfer check (cases passed). The table is also written
+as ``results.json`` and ``results.md`` in the output folder. Everything resumes: rerunning the
+same command reuses the twin datasets and finished studies.
+
+This takes hours with MuJoCo (each twin dataset 40 simulations, each calibration up to
+budget x cases x placements simulations); it runs on demand, not in CI. The test suite runs the
+same code on the analytic test simulator with a tiny budget.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from parcelfit.study.calibration import Calibration
+from parcelfit.study.results import read_results
+from parcelfit.study.store import STORE_FILE, Store
+from parcelfit.study.studyfile import load_study
+
+TOLERANCE = 0.10  # of the range's width
+PARAMETERS = {  # catalogue units, the published KP/BW calibration set
+    "mu_d_BePa": [0.3, 0.6],
+    "mu_d_MePa": [0.15, 0.35],
+    "E_Pa": [200, 1600],
+    "k_MePa": [100, 1000],
+}
+# hidden truths as fractions of the ranges (the bundled twin is 0.33 / 0.75 / 0.29 / 0.33)
+FRACTIONS = [
+    (0.70, 0.30, 0.70, 0.70),
+    (0.25, 0.60, 0.40, 0.20),
+    (0.50, 0.85, 0.15, 0.55),
+    (0.85, 0.50, 0.60, 0.85),
+]
+
+
+@dataclass(frozen=True)
+class Setup:
+    """One way to calibrate: a name and the study-file keys it sets (paths relative to the
+    study file; ``{dataset}`` is replaced by the twin dataset's folder)."""
+
+    name: str
+    keys: Mapping[str, Any]
+
+
+@dataclass
+class Row:
+    """One calibration's line of the table."""
+
+    truth: str
+    setup: str
+    within: int
+    parameters: int
+    determined: int
+    determined_within: int
+    covered: int
+    evaluations: int
+    simulations: int
+    minutes: float
+    validated: bool | None
+    transfer: str
+    details: dict[str, Any] = field(default_factory=dict)
+
+
+def mujoco_setups(placements: int, budget: int) -> list[Setup]:
+    """The published and the joint ensemble setups on the E3/E1 twin data (module docstring)."""
+    published = Setup(
+        "published",
+        {
+            "reference": {"dataset": "{dataset}", "rig": "E3", "speed_setting": 1},
+            "validation": {"speed_setting": 2, "every": 5},
+            "optimizer": {"sampler": "published"},
+            "budget": 80,
+        },
+    )
+    joint = Setup(
+        "joint",
+        {
+            "cases": [
+                {"dataset": "{dataset}", "rig": "E3", "speed_setting": 1},
+                {"rig": "E1", "speed_setting": 3},
+            ],
+            "validation": {"every": 5, "cases": [{"rig": "E3", "speed_setting": 2}]},
+            "transfer": [{"rig": "E1", "speed_setting": 1}],
+            "cost": {"kind": "ensemble", "placements": placements},
+            "budget": budget,
+        },
+    )
+    return [published, joint]
+
+
+def _fill(value: Any, dataset: str) -> Any:
+    """``value`` with every ``{dataset}`` string replaced."""
+    if isinstance(value, str):
+        return value.replace("{dataset}", dataset)
+    if isinstance(value, list):
+        return [_fill(v, dataset) for v in value]
+    if isinstance(value, dict):
+        return {k: _fill(v, dataset) for k, v in value.items()}
+    return value
+
+
+def write_study_file(
+    folder: Path,
+    setup: Setup,
+    simulator: Mapping[str, Any],
+    parameters: Mapping[str, Sequence[float]],
+    dataset: Path,
+    seed: int,
+    extra: Mapping[str, Any] | None = None,
+) -> Path:
+    """The study file of one setup on one twin dataset (``folder/<setup>.yaml``)."""
+    doc = {
+        "name": setup.name,
+        "simulator": dict(simulator),
+        "parameters": {k: list(v) for k, v in parameters.items()},
+        "seed": seed,
+        **_fill(dict(setup.keys), str(dataset.resolve())),
+        **dict(extra or {}),
+    }
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{setup.name}.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return path
+
+
+def truth_values(fractions: Sequence[float], parameters: Mapping[str, Sequence[float]]) -> dict:
+    """Catalogue values at ``fractions`` of the parameters' ranges."""
+    return {
+        name: round(lo + f * (hi - lo), 6)
+        for (name, (lo, hi)), f in zip(parameters.items(), fractions, strict=True)
+    }
+
+
+def assess(folder: Path, truth_si: Mapping[str, float]) -> dict[str, Any]:
+    """Recovery, intervals and effort of a finished study folder against the truth (SI)."""
+    store = Store(folder / STORE_FILE, readonly=True)
+    try:
+        record = store.read_study()
+        recommended = store.read_recommended()
+        fits, vals = store.evaluations("fit"), store.evaluations("validation")
+        cases = store.get_meta("cases") or []
+        advice = store.get_meta("advice")
+    finally:
+        store.close()
+    results = read_results(folder)
+    assert record is not None
+    names = list(record.parameters)
+    bounds = dict(zip(names, record.bounds, strict=True))
+    best = {} if recommended is None else recommended.params
+    err = {n: abs(best[n] - truth_si[n]) / (hi - lo) for n, (lo, hi) in bounds.items() if n in best}
+    ident = None if results is None else results.identifiability
+    intervals = {} if ident is None else {p.name: p for p in ident.parameters}
+    determined = [n for n, p in intervals.items() if p.determined]
+    per_eval = sum(1 for c in cases if c["role"] == "fit") or 1
+    per_eval *= max(
+        (len((f.details.get("cases") or [{}])[0].get("seeds") or [None]) for f in fits), default=1
+    )
+    n_advice = 0
+    if advice is not None:
+        a = advice["advice"]
+        n_advice = 2 * len(a["parameters"]) * len(a["changes"])
+    transfer = [] if results is None else list(results.transfer)
+    by_iter: dict[int, list[bool]] = {}
+    for v in vals:
+        by_iter.setdefault(v.iteration, []).append(bool(v.details.get("passed")))
+    return {
+        "within": sum(e <= TOLERANCE for e in err.values()),
+        "errors": err,
+        "parameters": len(names),
+        "determined": len(determined),
+        "determined_within": sum(
+            abs(intervals[n].estimate - truth_si[n]) / (bounds[n][1] - bounds[n][0]) <= TOLERANCE
+            for n in determined
+        ),
+        "covered": sum(p.contains(truth_si[n]) for n, p in intervals.items()),
+        "verdicts": {n: p.verdict for n, p in intervals.items()},
+        "intervals": {n: list(p.interval) for n, p in intervals.items()},
+        "evaluations": len(fits),
+        "simulations": len(fits) * per_eval + len(vals) + len(transfer) + n_advice,
+        "validated": any(all(g) for g in by_iter.values()) if by_iter else None,
+        "transfer": f"{sum(v.passed for v in transfer)}/{len(transfer)}" if transfer else "-",
+    }
+
+
+def run(
+    truths: Mapping[str, Mapping[str, float]],
+    setups: Sequence[Setup],
+    make_dataset: Callable[[Path, Mapping[str, float], int], Path],
+    simulator: Mapping[str, Any],
+    parameters: Mapping[str, Sequence[float]],
+    out: Path,
+    *,
+    to_si: Callable[[str, float], float],
+    extra: Mapping[str, Any] | None = None,
+    workers: int | None = None,
+    figures: bool = True,
+    say: Callable[[str], None] = print,
+) -> list[Row]:
+    """Make each truth's twin dataset (``make_dataset(folder, truth, seed)`` returns its folder),
+    calibrate it with every setup and assess it; ``truths`` maps a label to catalogue values,
+    ``to_si`` converts one. ``extra`` adds study-file keys to every setup (e.g. a small
+    ``optimizer``); ``figures`` writes each study's figures (the report needs them)."""
+    rows = []
+    for k, (label, truth) in enumerate(truths.items()):
+        dataset = make_dataset(out / label / "data", truth, 100 + k)
+        truth_si = {n: to_si(n, v) for n, v in truth.items()}
+        for setup in setups:
+            path = write_study_file(
+                out / label, setup, simulator, parameters, dataset, seed=k, extra=extra
+            )
+            folder = out / label / setup.name
+            say(f"{label} / {setup.name}: calibrating ({folder})")
+            t0 = time.perf_counter()
+            timing = folder / "wall_time.json"
+            Calibration(
+                load_study(path), folder, workers=workers, figures=figures, key_frames=False
+            ).run()
+            if not timing.is_file():  # the wall time of the run that did the work
+                timing.write_text(json.dumps({"minutes": (time.perf_counter() - t0) / 60}))
+            a = assess(folder, truth_si)
+            rows.append(
+                Row(
+                    label,
+                    setup.name,
+                    a["within"],
+                    a["parameters"],
+                    a["determined"],
+                    a["determined_within"],
+                    a["covered"],
+                    a["evaluations"],
+                    a["simulations"],
+                    json.loads(timing.read_text())["minutes"],
+                    a["validated"],
+                    a["transfer"],
+                    {"truth": dict(truth), **a},
+                )
+            )
+    (out / "results.json").write_text(json.dumps([r.__dict__ for r in rows], indent=1))
+    (out / "results.md").write_text(table(rows))
+    return rows
+
+
+def table(rows: Sequence[Row]) -> str:
+    """The benchmark's table (Markdown)."""
+    lines = [
+        "| truth | setup | within 10 % | determined | determined within 10 % | intervals "
+        "containing the truth | evaluations | simulations | wall [min] | validation | transfer |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        verdict = "-" if r.validated is None else ("passed" if r.validated else "failed")
+        lines.append(
+            f"| {r.truth} | {r.setup} | {r.within}/{r.parameters} | {r.determined} | "
+            f"{r.determined_within}/{r.determined} | {r.covered}/{r.parameters} | "
+            f"{r.evaluations} | {r.simulations} | {r.minutes:.1f} | {verdict} | {r.transfer} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument("--out", type=Path, default=Path("bench-twin"))
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--truths", type=int, default=3, help=f"1-{len(FRACTIONS)}")
+    ap.add_argument("--placements", type=int, default=2)
+    ap.add_argument("--budget", type=int, default=48)
+    ap.add_argument("--setups", default="published,joint")
+    args = ap.parse_args()
+
+    from parcelfit.runs import TestCase
+    from parcelfit.sim.params import CATALOGUE
+    from parcelfit.synth import TwinSettings, make_twin_dataset
+
+    specs = {p.name: p for p in CATALOGUE}
+    cases = [TestCase("E3", "KPBW", 1), TestCase("E3", "KPBW", 2)]
+    cases += [TestCase("E1", "KPBW", 1), TestCase("E1", "KPBW", 3)]
+
+    def make_dataset(folder: Path, truth: Mapping[str, float], seed: int) -> Path:
+        if not (folder / "dataset.yaml").is_file():
+            make_twin_dataset(
+                folder,
+                cases,
+                {"KPBW": dict(truth)},
+                settings=TwinSettings(),
+                seed=seed,
+                name=f"twin-{folder.parent.name}",
+                workers=args.workers,
+            )
+        return folder
+
+    wanted = set(args.setups.split(","))
+    setups = [s for s in mujoco_setups(args.placements, args.budget) if s.name in wanted]
+    truths = {
+        f"truth{k + 1}": truth_values(f, PARAMETERS) for k, f in enumerate(FRACTIONS[: args.truths])
+    }
+    rows = run(
+        truths,
+        setups,
+        make_dataset,
+        {"backend": "mujoco", "rig": "E3", "consignment": "KPBW"},
+        PARAMETERS,
+        args.out,
+        to_si=lambda n, v: specs[n].to_si(v),
+        workers=args.workers,
+    )
+    print(table(rows))
+
+
+if __name__ == "__main__":
+    main()

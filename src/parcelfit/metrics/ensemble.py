@@ -1,0 +1,150 @@
+"""The ensemble cost: a set of simulated runs against the set of real runs of a test case.
+
+Equation (3) compares one simulation with one reference run, so its value at the true
+parameters is as random as the placement of that one simulation and the choice of that one real
+run. The ensemble cost compares K simulations of one parameter set (K seeded placements) with
+all n real runs instead. With the prepared runs (`parcelfit.metrics.comparison`), the squared
+DTW distances normalised as in equation (3),
+
+    D(s, r) = w_xy DTW_xy(s, r)^2 / max(D_xy) + w_theta DTW_theta(s, r)^2 / max(D_theta)
+
+(max over the real runs' matrices of section 4), the cost of a case is
+
+    c = (1 / (K n)) sum_s sum_r D(s, r)  +  w_T (mean T_sim - mean T_real)^2 / SE^2,
+    SE^2 = s_sim^2 / K + s_real^2 / n
+
+with the sample variances s^2 of the transit times [s^2] (s_sim^2 is replaced by s_real^2 when
+fewer than two simulations have a transit time: one run tells nothing of the model's scatter).
+The first term estimates E[D(S, R)] for a simulated run S and a real run R drawn independently
+(unbiased: every pair counts once); the second is the squared z statistic of the difference of
+the mean transit times, about chi-square with one degree of freedom (mean 1) when the model's
+mean transit time is the real one, and growing with the square of the difference in units of
+its standard error otherwise. The transit term is left out (``transit_term`` None) when the real
+runs have no transit times or no simulation has one.
+
+**Variance of the estimator.** The first term is a two-sample mean over all pairs (a
+generalised U-statistic); to first order
+
+    Var(c_traj) ~ var_s(mean_r D(s, r)) / K + var_r(mean_s D(s, r)) / n
+
+(the variances of the row and column means of D); `EnsembleCost.se` is its square root (None with
+fewer than two simulations or real runs). More placements shrink the first part only; the real
+runs' part is fixed by the experiment.
+
+**Real runs on the same scale.** `ensemble_real_costs` scores every real run j as a one-member
+ensemble against the other n - 1 real runs (its transit time against their mean, SE^2 = s^2 (1 +
+1 / (n - 1)) with their sample variance): what a simulation as good as one more real run would
+score. Its largest value is the acceptance threshold of the identifiability analysis
+(`parcelfit.study.identify`), conservative for K > 1 (an average of K runs scatters less than
+one run).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from parcelfit.errors import ParcelfitError
+from parcelfit.metrics.dtw import cross_dtw
+from parcelfit.metrics.reference import ReferenceSelection
+from parcelfit.runs import Trajectory
+
+
+@dataclass(frozen=True)
+class EnsembleCost:
+    """The ensemble cost of one case (dimensionless) with its parts: the trajectory term, the
+    weighted transit term (None when not computable), the standard error of the trajectory
+    term (None with fewer than two simulations or real runs), the simulations compared, and
+    the mean simulated transit time [s] (None without one)."""
+
+    value: float
+    trajectory_term: float
+    transit_term: float | None
+    se: float | None
+    n_sims: int
+    mean_transit: float | None
+
+
+def _scales(reference: ReferenceSelection) -> tuple[float, float]:
+    return (
+        reference.max_xy if reference.max_xy > 0 else 1.0,
+        reference.max_theta if reference.max_theta > 0 else 1.0,
+    )
+
+
+def ensemble_cost(
+    sims: Sequence[Trajectory],
+    transit_times: Sequence[float | None],
+    reference: ReferenceSelection,
+    w_xy: float = 1.0,
+    w_theta: float = 1.0,
+    w_transit: float = 1.0,
+) -> EnsembleCost:
+    """The ensemble cost (module docstring) of simulated runs ``sims`` (raw trajectories, SI)
+    with their transit times [s] against the real runs behind ``reference``."""
+    if not sims:
+        raise ParcelfitError("an ensemble cost needs at least one simulated run")
+    if min(w_xy, w_theta, w_transit) < 0:
+        raise ParcelfitError("the weights of the ensemble cost must be >= 0")
+    comparison = reference.comparison
+    prepared = [comparison.prepare(t) for t in sims]
+    window = comparison.window
+    sx, st = _scales(reference)
+    d = (
+        w_xy * cross_dtw([p.xy for p in prepared], reference.xy_series, window) ** 2 / sx
+        + w_theta * cross_dtw([p.theta for p in prepared], reference.theta_series, window) ** 2 / st
+    )
+    k, n = d.shape
+    traj = float(d.mean())
+    se = None
+    if k >= 2 and n >= 2:
+        se = math.sqrt(d.mean(axis=1).var(ddof=1) / k + d.mean(axis=0).var(ddof=1) / n)
+    elif n >= 2:  # one simulation: the real runs' part of the variance only
+        se = math.sqrt(d.mean(axis=0).var(ddof=1) / n)
+    sim_t = [t for t in transit_times if t is not None and math.isfinite(t)]
+    real_t = [t for t in reference.transit_times if t is not None]
+    transit = None
+    mean_t = float(np.mean(sim_t)) if sim_t else None
+    if sim_t and len(real_t) >= 2 and w_transit > 0:
+        var_real = float(np.var(real_t, ddof=1))
+        var_sim = float(np.var(sim_t, ddof=1)) if len(sim_t) >= 2 else var_real
+        se2 = var_sim / len(sim_t) + var_real / len(real_t)
+        diff2 = (float(np.mean(sim_t)) - float(np.mean(real_t))) ** 2
+        transit = w_transit * (diff2 / se2 if se2 > 0 else (0.0 if diff2 == 0 else math.inf))
+    value = traj + (transit or 0.0)
+    return EnsembleCost(value, traj, transit, se, k, mean_t)
+
+
+def ensemble_real_costs(
+    reference: ReferenceSelection,
+    w_xy: float = 1.0,
+    w_theta: float = 1.0,
+    w_transit: float = 1.0,
+) -> np.ndarray:
+    """The ensemble cost of every real run as a one-member ensemble against the other real runs
+    (module docstring), from the selection's matrices (dimensionless, one per real run)."""
+    n = len(reference.run_ids)
+    if n < 2:
+        raise ParcelfitError(
+            f"test case {reference.case.label} has {n} real run: too few to compare sets"
+        )
+    sx, st = _scales(reference)
+    d = w_xy * reference.d_xy / sx + w_theta * reference.d_theta / st
+    out = np.empty(n)
+    times = [t for t in reference.transit_times if t is not None]
+    use_t = len(times) == n and n >= 3 and w_transit > 0
+    for j in range(n):
+        others = [r for r in range(n) if r != j]
+        out[j] = d[j, others].mean()
+        if use_t:
+            t_others = np.array([times[r] for r in others])
+            se2 = float(t_others.var(ddof=1)) * (1 + 1 / len(others))
+            diff2 = (times[j] - float(t_others.mean())) ** 2
+            out[j] += w_transit * (diff2 / se2 if se2 > 0 else 0.0)
+    return out
+
+
+__all__ = ["EnsembleCost", "ensemble_cost", "ensemble_real_costs"]

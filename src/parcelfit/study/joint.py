@@ -1,0 +1,288 @@
+"""Joint and ensemble evaluations, the acceptance threshold, the transfer check and the advice
+on which test case to add (method.md sections 7 and 8, extended).
+
+**Joint evaluation.** A study with several fitted cases, or with the ensemble cost, evaluates one
+parameter set by simulating every case k (``placements`` K seeded placements each; the published
+cost simulates the nominal placement once) and costs it
+
+    c = sum_k w_k c_k
+
+with c_k equation (3) against case k's reference run (``cost.kind: published``) or the ensemble
+cost against all of case k's real runs (``ensemble``, `parcelfit.metrics.ensemble`). Each case's
+cost is normalised by its own real runs (section 4), so cases of different rigs add on one
+scale. The placement seeds are 1..K for every evaluation (common random numbers: two parameter
+sets are compared under the same placements, which removes the placements' scatter from their
+difference). An evaluation whose simulations do not all succeed is a failure (the first failed
+simulation's status).
+
+**Threshold.** The identifiability analysis (`parcelfit.study.identify`) accepts a parameter
+set when its cost is below epsilon = sum_k w_k max_j c_k(real run j): the largest cost a real run
+of case k scores in the same cost (`parcelfit.metrics.cost.real_run_costs`,
+`parcelfit.metrics.ensemble.ensemble_real_costs`).
+
+**Transfer check.** The calibrated parameters simulated on other test cases (usually other rigs
+with the same consignment), each judged like a validation: the published criteria and the band
+test. A bias shared by two speed settings of one rig can pass a validation at the other setting;
+it is unlikely to pass on another rig.
+
+**Advice.** For every parameter the data do not determine, the calibrated set is simulated with
+that parameter at each end of its interval on every candidate case (the validation and transfer
+cases); the change between the two runs, in the candidate's own normalisation,
+
+    Delta_k = w_xy DTW_xy(lo, hi)^2 / max(D_xy) + w_theta DTW_theta(lo, hi)^2 / max(D_theta)
+              + (T_lo - T_hi)^2 / s_real^2,
+
+is summed over the undetermined parameters; the case with the largest sum would help most:
+there the undetermined values give runs that differ most, measured against the real runs'
+own scatter.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from functools import partial
+from typing import Any
+
+import numpy as np
+
+from parcelfit.errors import ParcelfitError
+from parcelfit.metrics import ReferenceSelection, calibration_cost, real_run_costs
+from parcelfit.metrics.dtw import dtw_distance
+from parcelfit.metrics.ensemble import ensemble_cost, ensemble_real_costs
+from parcelfit.runs import Trajectory
+from parcelfit.sim.executors import Executor, Task, simulate_task
+from parcelfit.sim.protocol import SimResult, SimStatus, Simulator
+from parcelfit.study.identify import Advice
+from parcelfit.study.studyfile import CaseSpec, Study
+
+
+def placement_seeds(study: Study) -> list[int | None]:
+    """The placement seeds of every case of an evaluation: 1..K for the ensemble cost, the
+    nominal placement (None) for the published cost."""
+    if study.cost_kind == "ensemble":
+        return list(range(1, study.placements + 1))
+    return [None]
+
+
+def check_placements(study: Study, simulator: Simulator) -> None:
+    """Refuse an ensemble of several placements with a simulator that cannot place runs."""
+    placeable = callable(getattr(simulator, "with_placement", None))
+    if study.cost_kind == "ensemble" and study.placements > 1 and not placeable:
+        raise ParcelfitError(
+            f"the {type(simulator).__name__} simulator has no seeded placements "
+            "(with_placement), so an ensemble of placements would repeat one run",
+            file=study.path,
+            where="cost.placements",
+            fix="use placements: 1, or a simulator with seeded placements (mujoco)",
+        )
+
+
+def simulate_placed(simulator: Simulator, item: tuple[Task, int | None]) -> SimResult:
+    """Simulate a task with the placement seed (None: the nominal placement)."""
+    task, seed = item
+    if seed is not None:
+        simulator = simulator.with_placement(seed)  # type: ignore[attr-defined]
+    return simulate_task(simulator, task)
+
+
+def simulate_items(
+    executor: Executor, simulator: Simulator, items: Sequence[tuple[Task, int | None]]
+) -> Iterator[tuple[int, SimResult]]:
+    """Simulate ``(task, placement seed)`` items; yield ``(index, SimResult)`` as they arrive
+    (a task that could not run is a ``failed`` result, as `Executor.simulate` gives)."""
+    for i, out in executor.map(partial(simulate_placed, simulator), items):
+        result = out.value
+        if result is None:
+            result = SimResult(None, SimStatus.FAILED, 0.0, {"message": out.error})
+        yield i, result
+
+
+@dataclass(frozen=True)
+class CaseRun:
+    """One simulation of an evaluation: its case, placement seed and result, and where its run
+    was written (relative to the study folder, None without one)."""
+
+    spec: CaseSpec
+    seed: int | None
+    result: SimResult
+    run_file: str | None = None
+
+
+def case_cost(
+    spec: CaseSpec,
+    runs: Sequence[CaseRun],
+    reference: ReferenceSelection,
+    study: Study,
+) -> dict[str, Any]:
+    """The cost part of one case (its runs all succeeded): ``cost`` (unweighted), ``weight``
+    and the parts of the chosen cost (DTW distances [m], [rad] and transit time [s] for the
+    published one; trajectory and transit terms, standard error for the ensemble)."""
+    trajs: list[Trajectory] = [r.result.run.trajectory for r in runs]  # type: ignore[union-attr]
+    transits = [r.result.run.transit_time for r in runs]  # type: ignore[union-attr]
+    out: dict[str, Any] = {
+        "case": spec.label,
+        "weight": spec.weight,
+        "run_files": [r.run_file for r in runs],
+        "seeds": [r.seed for r in runs],
+        "transit_times": transits,
+    }
+    if study.cost_kind == "ensemble":
+        e = ensemble_cost(
+            trajs, transits, reference, study.w_xy, study.w_theta, study.transit_weight
+        )
+        out.update(
+            cost=e.value,
+            trajectory_term=e.trajectory_term,
+            transit_term=e.transit_term,
+            se=e.se,
+            mean_transit_time=e.mean_transit,
+        )
+    else:
+        c = calibration_cost(trajs[0], reference, study.w_xy, study.w_theta)
+        out.update(cost=c.value, dtw_xy=c.dtw_xy, dtw_theta=c.dtw_theta)
+    return out
+
+
+def evaluation_outcome(
+    runs: Sequence[CaseRun],
+    references: Mapping[str, ReferenceSelection],
+    study: Study,
+) -> dict[str, Any]:
+    """The store's fields of a joint evaluation from all its runs (in case order): status,
+    cost (the weighted sum), the first case's transit time and run file, and ``details`` with
+    the per-case parts under ``cases``."""
+    wall = sum(r.result.wall_time for r in runs)
+    bad = next((r for r in runs if not (r.result.ok and r.result.run is not None)), None)
+    out: dict[str, Any] = {
+        "status": "ok",
+        "cost": None,
+        "transit_time": None,
+        "run_file": runs[0].run_file if runs else None,
+        "wall_time": wall,
+    }
+    details: dict[str, Any] = {"cases": []}
+    if bad is not None:
+        out["status"] = bad.result.status.value
+        msg = bad.result.diagnostics.get("message")
+        details["message"] = msg or f"the simulation ended {out['status']}"  # as a worker said
+        details["failed_run"] = {"case": bad.spec.label, "placement": bad.seed}  # it, so a lost
+        # worker's message is recognised on resume (calibration.LOST_WORKER_MESSAGES)
+        out["details"] = details
+        return out
+    total = 0.0
+    try:
+        for spec in study.cases:
+            mine = [r for r in runs if r.spec.case == spec.case]
+            part = case_cost(spec, mine, references[spec.label], study)
+            details["cases"].append(part)
+            total += spec.weight * part["cost"]
+    except ParcelfitError as exc:
+        out["status"] = "failed"
+        details["message"] = f"cost not computable: {exc}"
+        out["details"] = details
+        return out
+    first = runs[0].result.run
+    out.update(cost=total, transit_time=None if first is None else first.transit_time)
+    out["details"] = details
+    return out
+
+
+def case_threshold(reference: ReferenceSelection, study: Study) -> float:
+    """The largest cost a real run of this case scores in the study's cost (dimensionless)."""
+    if study.cost_kind == "ensemble":
+        costs = ensemble_real_costs(reference, study.w_xy, study.w_theta, study.transit_weight)
+    else:
+        costs = real_run_costs(reference, study.w_xy, study.w_theta)
+    return float(np.max(costs)) if len(costs) else math.nan
+
+
+def threshold(references: Mapping[str, ReferenceSelection], study: Study) -> tuple[float, str]:
+    """The acceptance threshold epsilon of the identifiability analysis and how it was made."""
+    parts = [(s, case_threshold(references[s.label], study)) for s in study.cases]
+    total = sum(s.weight * t for s, t in parts)
+    what = (
+        "ensemble cost"
+        if study.cost_kind == "ensemble"
+        else "equation (3) against the reference run"
+    )
+    words = " + ".join(f"{s.weight:g} x {t:.3g} ({s.label})" for s, t in parts)
+    return total, f"largest {what} of a real run: {words}"
+
+
+# -- advice: which test case would help most ---------------------------------------------------
+
+
+def response_change(
+    a: SimResult, b: SimResult, reference: ReferenceSelection, w_xy: float, w_theta: float
+) -> float | None:
+    """Delta between two runs of one case (module docstring; None if either has no run)."""
+    if a.run is None or b.run is None or not (a.ok and b.ok):
+        return None
+    comp = reference.comparison
+    pa, pb = comp.prepare(a.run.trajectory), comp.prepare(b.run.trajectory)
+    sx = reference.max_xy if reference.max_xy > 0 else 1.0
+    st = reference.max_theta if reference.max_theta > 0 else 1.0
+    out = (
+        w_xy * dtw_distance(pa.xy, pb.xy, comp.window) ** 2 / sx
+        + w_theta * dtw_distance(pa.theta, pb.theta, comp.window) ** 2 / st
+    )
+    real = [t for t in reference.transit_times if t is not None]
+    if a.run.transit_time is not None and b.run.transit_time is not None and len(real) >= 2:
+        var = float(np.var(real, ddof=1))
+        if var > 0:
+            out += (a.run.transit_time - b.run.transit_time) ** 2 / var
+    return float(out)
+
+
+def advise(
+    params: Mapping[str, float],
+    intervals: Mapping[str, tuple[float, float]],
+    candidates: Sequence[CaseSpec],
+    references: Mapping[str, ReferenceSelection],
+    simulate: Callable[[list[Task]], list[SimResult]],
+    w_xy: float = 1.0,
+    w_theta: float = 1.0,
+) -> Advice:
+    """The advice of the module docstring: ``params`` the full calibrated set (SI),
+    ``intervals`` the undetermined parameters' intervals (SI), ``simulate`` runs a list of
+    tasks and returns their results in order."""
+    tasks = []
+    for spec in candidates:
+        for name, (lo, hi) in intervals.items():
+            for end, value in (("lo", lo), ("hi", hi)):
+                tasks.append(
+                    Task({**params, name: value}, spec.case, f"advice-{spec.label}-{name}-{end}")
+                )
+    results = simulate(tasks) if tasks else []
+    changes: dict[str, dict[str, float]] = {}
+    k = 0
+    for spec in candidates:
+        per = {}
+        for name in intervals:
+            delta = response_change(
+                results[k], results[k + 1], references[spec.label], w_xy, w_theta
+            )
+            k += 2
+            if delta is not None:
+                per[name] = delta
+        changes[spec.label] = per
+    scored = {c: sum(v.values()) for c, v in changes.items() if v}
+    best = max(scored, key=lambda c: scored[c]) if scored else None
+    return Advice(changes, best, tuple(intervals))
+
+
+__all__ = [
+    "CaseRun",
+    "advise",
+    "case_cost",
+    "case_threshold",
+    "check_placements",
+    "evaluation_outcome",
+    "placement_seeds",
+    "response_change",
+    "simulate_items",
+    "simulate_placed",
+    "threshold",
+]

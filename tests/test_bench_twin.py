@@ -1,0 +1,92 @@
+"""The twin benchmark's plumbing (benchmarks/bench_twin.py) on the analytic test simulator:
+three hidden truths, the published and a joint ensemble setup, a tiny budget."""
+
+import importlib.util
+import sys
+
+import pytest
+
+from parcelfit.sim.params import CATALOGUE
+
+from .fake_sim import write_reference_dataset
+from .helpers import ROOT
+
+SPECS = {p.name: p for p in CATALOGUE}
+
+
+def _bench():
+    spec = importlib.util.spec_from_file_location(
+        "bench_twin", ROOT / "benchmarks" / "bench_twin.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # its dataclasses look their module up
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.slow
+def test_the_twin_benchmark_runs_end_to_end_on_the_fake_simulator(tmp_path):
+    bench = _bench()
+    parameters = {"mu_d_BePa": [0.3, 0.55], "mu_d_MePa": [0.15, 0.35], "E_Pa": [200, 1600]}
+    truths = {
+        f"truth{k + 1}": bench.truth_values(f, parameters)
+        for k, f in enumerate([(0.7, 0.3, 0.5), (0.3, 0.6, 0.7), (0.5, 0.8, 0.3)])
+    }
+
+    def make_dataset(folder, truth, seed):
+        si = {n: SPECS[n].to_si(v) for n, v in truth.items()}
+        write_reference_dataset(folder, rigs=("R", "Q"), truth=si, seed=seed)
+        return folder
+
+    setups = [
+        bench.Setup(
+            "published",
+            {
+                "reference": {"dataset": "{dataset}", "rig": "R", "speed_setting": 1},
+                "validation": {"speed_setting": 2, "every": 1},
+            },
+        ),
+        bench.Setup(
+            "joint",
+            {
+                "cases": [
+                    {"dataset": "{dataset}", "rig": "R", "speed_setting": 1},
+                    {"rig": "Q", "speed_setting": 1},
+                ],
+                "validation": {"every": 1, "cases": [{"rig": "R", "speed_setting": 2}]},
+                "transfer": [{"rig": "Q", "speed_setting": 2}],
+                "cost": {"kind": "ensemble", "placements": 2},
+            },
+        ),
+    ]
+    rows = bench.run(
+        truths,
+        setups,
+        make_dataset,
+        {"backend": "python", "factory": "tests.fake_sim:make", "consignment": "P"},
+        parameters,
+        tmp_path,
+        to_si=lambda n, v: SPECS[n].to_si(v),
+        extra={
+            "initial": 8,
+            "batch_size": 2,
+            "budget": 10,
+            "optimizer": {"n_samples": 500, "n_restarts": 0},
+            "executor": "serial",
+        },
+        figures=False,
+        say=lambda _: None,
+    )
+    assert [(r.truth, r.setup) for r in rows] == [
+        (t, s) for t in truths for s in ("published", "joint")
+    ]
+    for r in rows:
+        assert r.evaluations == 10 and r.parameters == 3 and r.minutes > 0
+        # honest intervals: every interval holds the truth, every determined value is close
+        assert r.covered == 3, r.details
+        assert r.determined_within == r.determined, r.details
+    joint = [r for r in rows if r.setup == "joint"]
+    assert all(r.transfer.endswith("/1") for r in joint)
+    assert all(r.simulations >= 10 * 2 * 2 for r in joint)  # 2 cases x 2 placements each
+    text = (tmp_path / "results.md").read_text()
+    assert text.count("| truth | setup |") == 1 and text.count("| joint |") == 3

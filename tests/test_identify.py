@@ -1,0 +1,180 @@
+"""What the data determine (parcelfit.study.identify) and the ensemble cost
+(parcelfit.metrics.ensemble), on objectives and data whose truth is known."""
+
+import numpy as np
+import pytest
+
+from parcelfit import ParcelfitError
+from parcelfit.metrics import calibration_cost, real_run_costs, select_reference
+from parcelfit.metrics.dtw import dtw_distance
+from parcelfit.metrics.ensemble import ensemble_cost, ensemble_real_costs
+from parcelfit.optimize.space import Dimension, Space
+from parcelfit.runs import TestCase, load_dataset
+from parcelfit.study.identify import Identifiability, identify, verdict
+
+from .fake_sim import write_reference_dataset
+
+SPACE = Space([Dimension("sharp", 0, 1), Dimension("onesided", 0, 1), Dimension("inert", 0, 1)])
+TRUE = {"sharp": 0.4, "onesided": 0.8, "inert": 0.3}
+
+
+def _cost(p, rng):
+    """Known truth: 'sharp' pinned at 0.4, 'onesided' only bounded below (anything >= 0.6 is as
+    good), 'inert' without effect; 10 % multiplicative run-to-run noise."""
+    c = 1 + 100 * (p["sharp"] - 0.4) ** 2 + 8 * max(0.0, 0.6 - p["onesided"]) ** 2
+    return c * float(np.exp(rng.normal(0, 0.1)))
+
+
+def _evaluations(seed: int = 1, n: int = 80):
+    rng = np.random.default_rng(seed)
+    points = [SPACE.from_unit(u) for u in rng.random((n, 3))]
+    costs = [_cost(p, rng) for p in points]
+    real = [_cost(TRUE, rng) for _ in range(9)]  # "real runs" at the truth
+    return points, costs, max(real)
+
+
+@pytest.fixture(scope="module")
+def analysed():
+    points, costs, eps = _evaluations()
+    return identify(SPACE, points, costs, eps, seed=0), (points, costs, eps)
+
+
+def test_a_sharp_parameter_is_determined_with_the_truth_in_its_interval(analysed):
+    ident, _ = analysed
+    sharp = ident.parameters[0]
+    assert sharp.verdict == "determined" and sharp.contains(TRUE["sharp"])
+    assert sharp.width_share <= 0.2
+    assert abs(sharp.estimate - TRUE["sharp"]) <= 0.1  # within 10 % of the range
+    assert sharp.rhat < 1.1
+
+
+def test_a_one_sided_parameter_is_a_bound_and_an_inert_one_undetermined(analysed):
+    ident, _ = analysed
+    onesided, inert = ident.parameters[1], ident.parameters[2]
+    assert onesided.verdict == "lower bound" and onesided.contains(TRUE["onesided"])
+    assert 0.3 < onesided.interval[0] < 0.6 and onesided.interval[1] > 0.9
+    assert onesided.estimate is None  # no value for a parameter that is not determined
+    assert inert.verdict == "undetermined" and inert.estimate is None
+    assert inert.interval[0] < 0.05 and inert.interval[1] > 0.95
+    assert ident.converged and ident.by_verdict("determined") == ["sharp"]
+    assert np.all(np.abs(ident.correlation[np.triu_indices(3, 1)]) < 0.3)
+
+
+def test_the_analysis_is_seeded_and_survives_its_stored_form(analysed):
+    ident, (points, costs, eps) = analysed
+    again = identify(SPACE, points, costs, eps, seed=0)
+    assert [p.interval for p in again.parameters] == [p.interval for p in ident.parameters]
+    back = Identifiability.from_json(ident.to_json())
+    assert back.parameters == ident.parameters and np.array_equal(back.sample, ident.sample)
+    assert back.threshold == eps and back.sample.shape[1] == 3
+
+
+def test_failed_evaluations_are_left_out_and_too_few_refused():
+    points, costs, eps = _evaluations(n=40)
+    costs[:5] = [None] * 5
+    ident = identify(SPACE, points, costs, eps, seed=0)
+    assert ident.evaluations == 35
+    with pytest.raises(ParcelfitError, match="too few"):
+        identify(SPACE, points[:2], costs[:2], eps)
+    with pytest.raises(ParcelfitError, match="positive cost"):
+        identify(SPACE, points, costs, 0.0)
+
+
+@pytest.mark.parametrize(
+    ("interval", "expected"),
+    [
+        ((0.40, 0.60), "determined"),
+        ((0.30, 0.99), "lower bound"),
+        ((0.01, 0.70), "upper bound"),
+        ((0.15, 0.85), "narrowed"),
+        ((0.05, 0.95), "undetermined"),
+    ],
+)
+def test_verdicts_of_intervals(interval, expected):
+    assert verdict(0.0, 1.0, interval) == expected
+    assert verdict(10.0, 20.0, (10 + 10 * interval[0], 10 + 10 * interval[1])) == expected
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("data")
+    write_reference_dataset(folder, rigs=("R", "Q"))
+    ds = load_dataset(folder)
+    return ds, select_reference(ds[TestCase("Q", "P", 1)])
+
+
+def test_real_run_costs_are_equation_3_of_each_real_run(reference):
+    ds, sel = reference
+    runs = ds[TestCase("Q", "P", 1)].runs
+    costs = real_run_costs(sel)
+    others = [r for i, r in enumerate(runs) if i != sel.index]
+    assert len(costs) == len(runs) - 1
+    for c, run in zip(costs, others, strict=True):
+        assert c == pytest.approx(calibration_cost(run.trajectory, sel).value, rel=1e-9)
+
+
+def test_ensemble_cost_of_the_real_runs_themselves(reference):
+    ds, sel = reference
+    runs = ds[TestCase("Q", "P", 1)].runs
+    trajs = [r.trajectory for r in runs]
+    times = [r.transit_time for r in runs]
+    e = ensemble_cost(trajs, times, sel)
+    d = sel.d_xy / sel.max_xy + sel.d_theta / sel.max_theta  # every pair, diagonal 0
+    assert e.trajectory_term == pytest.approx(d.mean(), rel=1e-9)
+    assert e.transit_term == pytest.approx(0.0, abs=1e-12)  # same mean transit time
+    n = len(runs)
+    se = np.sqrt(d.mean(axis=1).var(ddof=1) / n + d.mean(axis=0).var(ddof=1) / n)
+    assert e.se == pytest.approx(se, rel=1e-9) and e.n_sims == n
+
+
+def test_ensemble_transit_term_is_the_squared_z_of_the_mean_difference(reference):
+    _, sel = reference
+    real = np.array(sel.transit_times, float)
+    from .fake_sim import TRUTH, trajectory
+
+    traj, _ = trajectory({**TRUTH, "E_Pa": 1e9}, 1, rig="Q")
+    shifted = [real.mean() + 0.01, real.mean() + 0.02, real.mean() + 0.03]
+    e = ensemble_cost([traj] * 3, shifted, sel, w_transit=2.0)
+    se2 = np.var(shifted, ddof=1) / 3 + real.var(ddof=1) / len(real)
+    assert e.transit_term == pytest.approx(2.0 * 0.02**2 / se2, rel=1e-9)
+    assert e.value == pytest.approx(e.trajectory_term + e.transit_term)
+
+
+def test_ensemble_real_costs_score_each_run_against_the_others(reference):
+    _, sel = reference
+    costs = ensemble_real_costs(sel)
+    j = 2
+    others = [r for r in range(len(sel.run_ids)) if r != j]
+    d = sel.d_xy[j, others] / sel.max_xy + sel.d_theta[j, others] / sel.max_theta
+    t = np.array(sel.transit_times, float)
+    se2 = t[others].var(ddof=1) * (1 + 1 / len(others))
+    assert costs[j] == pytest.approx(d.mean() + (t[j] - t[others].mean()) ** 2 / se2, rel=1e-9)
+    # DTW of two real runs as the matrices hold it
+    a, b = sel.xy_series[0], sel.xy_series[1]
+    assert dtw_distance(a, b, sel.comparison.window) ** 2 == pytest.approx(sel.d_xy[0, 1])
+
+
+def test_when_no_parameter_set_reaches_the_real_runs_scatter_nothing_is_determined():
+    points, costs, _ = _evaluations(n=40)
+    ident = identify(SPACE, points, costs, 0.2, seed=0)  # every cost is >= about 1
+    assert not ident.reached and ident.best_acceptance < 0.05
+    assert all(p.verdict == "undetermined" for p in ident.parameters)
+    assert all(p.interval == (0, 1) for p in ident.parameters)
+
+
+@pytest.mark.parametrize("seed", [1, 3])
+def test_a_design_crowded_near_the_optimum_as_an_optimiser_leaves_it(seed):
+    # 16 uniform points (the initial design) and 40 crowded around the truth, as BO does
+    rng = np.random.default_rng(seed)
+    uniform = [SPACE.from_unit(u) for u in rng.random((16, 3))]
+    t = np.array([TRUE[n] for n in SPACE.names])
+    near = [SPACE.from_unit(np.clip(t + rng.normal(0, 0.08, 3), 0, 1)) for _ in range(40)]
+    points = uniform + near
+    costs = [_cost(p, rng) for p in points]
+    eps = max(_cost(TRUE, rng) for _ in range(9))
+    typical = float(np.exp(np.mean(np.log(costs[:16]))))
+    ident = identify(SPACE, points, costs, eps, typical_cost=typical, seed=0)
+    sharp, onesided, inert = ident.parameters
+    assert all(p.contains(TRUE[p.name]) for p in ident.parameters)
+    assert sharp.verdict == "determined" and abs(sharp.estimate - TRUE["sharp"]) <= 0.1
+    assert onesided.verdict == "lower bound" and inert.verdict == "undetermined"

@@ -1,0 +1,187 @@
+"""Joint studies (several test cases), the ensemble cost, the transfer check and the advice,
+on the analytic fake simulator (rig R and a second rig Q on which E_Pa turns the parcel)."""
+
+import json
+
+import pytest
+import yaml
+
+from parcelfit import ParcelfitError
+from parcelfit.study.calibration import Calibration, study_status
+from parcelfit.study.results import read_results
+from parcelfit.study.studyfile import load_study
+
+from .fake_sim import write_reference_dataset
+from .helpers import write_study
+
+PARAMS = {"mu_d_BePa": [0.3, 0.55], "mu_d_MePa": [0.15, 0.35], "E_Pa": [200, 1600]}
+
+
+def _joint_study(tmp_path, **overrides):
+    """A joint ensemble study: R/P/1 and Q/P/1 fitted, R/P/2 validated, Q/P/2 transferred."""
+    write_reference_dataset(tmp_path / "data", rigs=("R", "Q"), truth={"E_Pa": 1e9})
+    doc = {
+        "name": "joint",
+        "simulator": {"backend": "python", "factory": "tests.fake_sim:make"},
+        "parameters": PARAMS,
+        "cases": [
+            {"dataset": "data", "rig": "R", "consignment": "P", "speed_setting": 1},
+            {"rig": "Q", "consignment": "P", "speed_setting": 1, "weight": 0.5},
+        ],
+        "validation": {"every": 1, "cases": [{"rig": "R", "consignment": "P", "speed_setting": 2}]},
+        "transfer": [{"rig": "Q", "consignment": "P", "speed_setting": 2}],
+        "cost": {"kind": "ensemble", "placements": 3},
+        "batch_size": 2,
+        "initial": 6,
+        "budget": 8,
+        "seed": 1,
+        "optimizer": {"n_samples": 500, "n_restarts": 0},
+        "executor": "serial",
+    }
+    doc.update(overrides)
+    path = tmp_path / "study.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+def test_an_old_single_case_study_file_is_read_as_before(tmp_path):
+    study = load_study(write_study(tmp_path))
+    assert not study.joint and len(study.cases) == 1 and study.cost_kind == "published"
+    assert study.cases[0].label == "R/P/1" and study.validation_cases[0].label == "R/P/2"
+    assert (study.rig, study.fit_setting, study.validation_setting) == ("R", 1, 2)
+    assert study.transfer == () and study.placements == 1
+
+
+def test_a_joint_study_file_lists_its_cases(tmp_path):
+    study = load_study(_joint_study(tmp_path))
+    assert study.joint and [c.label for c in study.cases] == ["R/P/1", "Q/P/1"]
+    assert [c.weight for c in study.cases] == [1.0, 0.5]
+    assert study.cases[1].dataset == (tmp_path / "data").resolve()  # the first case's
+    assert [c.label for c in study.validation_cases] == ["R/P/2"]
+    assert [c.label for c in study.transfer] == ["Q/P/2"]
+    assert (study.cost_kind, study.placements, study.transit_weight) == ("ensemble", 3, 1.0)
+
+
+@pytest.mark.parametrize(
+    ("change", "pattern"),
+    [
+        (
+            {"reference": {"dataset": "data", "speed_setting": 1}},
+            r"cases: give either reference .* not both",
+        ),
+        ({"cases": []}, r"top level: missing required key 'reference'"),
+        ({"cost": {"kind": "published", "placements": 3}}, r"cost\.placements: the published"),
+        ({"cost": {"kind": "mean"}}, r"cost\.kind: unknown cost 'mean'"),
+        (
+            {"validation": {"speed_setting": 2}},
+            r"validation\.speed_setting: a joint study names its validation cases",
+        ),
+        (
+            {"transfer": [{"rig": "R", "consignment": "P", "speed_setting": 1}]},
+            r"transfer\[0\]: R/P/1 is also fitted",
+        ),
+        (
+            {
+                "cases": [
+                    {
+                        "dataset": "data",
+                        "rig": "R",
+                        "consignment": "P",
+                        "speed_setting": 1,
+                        "weight": 0,
+                    }
+                ]
+            },
+            r"cases: every case has weight 0",
+        ),
+        (
+            {"cases": [{"rig": "R", "consignment": "P", "speed_setting": 1}]},
+            r"cases\[0\]\.dataset: the first case names no dataset",
+        ),
+        (
+            {"cases": [{"dataset": "data", "rig": "R", "speed_setting": 1, "wieght": 1}]},
+            r"cases\[0\]: unknown key 'wieght'.*did you mean 'weight'",
+        ),
+    ],
+)
+def test_joint_study_file_errors_name_file_key_and_fix(tmp_path, change, pattern):
+    path = _joint_study(tmp_path, **change)
+    with pytest.raises(ParcelfitError, match=pattern) as info:
+        load_study(path)
+    assert "study.yaml" in str(info.value)
+
+
+@pytest.mark.slow
+def test_a_joint_ensemble_study_stores_the_parts_and_checks_transfer(tmp_path, monkeypatch):
+    study = load_study(_joint_study(tmp_path))
+    out = tmp_path / "out"
+    result = Calibration(study, out, figures=False).run()
+    assert result.evaluations == 8
+    status = study_status(out)
+    assert [c["case"] for c in status["cases"]] == ["R/P/1", "Q/P/1", "R/P/2", "Q/P/2"]
+    assert [c["role"] for c in status["cases"]] == ["fit", "fit", "validation", "transfer"]
+    parts = status["recommended"]["parts"]
+    assert [p["case"] for p in parts] == ["R/P/1", "Q/P/1"] and len(parts[0]["seeds"]) == 3
+    assert status["recommended"]["cost"] == pytest.approx(
+        parts[0]["cost"] + 0.5 * parts[1]["cost"], rel=1e-12
+    )
+    for p in parts:  # each part: trajectory term + transit term, with its standard error
+        assert p["cost"] == pytest.approx(p["trajectory_term"] + p["transit_term"], rel=1e-12)
+        assert p["se"] > 0 and all((out / f).is_file() for f in p["run_files"])
+    results = read_results(out)
+    assert [v.case for v in results.transfer] == ["Q/P/2"]
+    assert results.transfer[0].verdict is not None
+    assert results.identifiability is not None and results.identifiability.evaluations == 8
+    eps = sum(c["weight"] * c["threshold"] for c in status["cases"] if c["role"] == "fit")
+    assert results.identifiability.threshold == pytest.approx(eps, rel=1e-12)
+    assert status["validations"] and all(v["after_iteration"] >= 1 for v in status["validations"])
+    # the advice, when a parameter stays open, weighs the validation and transfer cases
+    assert results.advice is None or set(results.advice.changes) == {"R/P/2", "Q/P/2"}
+    # `parcelfit status` shows the parts case by case
+    from typer.testing import CliRunner
+
+    from parcelfit.cli import app
+
+    text = CliRunner().invoke(app, ["status", str(out)]).stdout
+    assert "Q/P/1" in text and "R/P/1" in text and "trajectories" in text
+    assert "what the data determine:" in text  # each parameter's verdict
+    # the report: the cases, the transfer section, what the data determine
+    from parcelfit.report import build_report
+
+    page = build_report(out).read_text()
+    assert 'id="transfer"' in page and "<td>Q/P/1</td><td>fit</td><td>0.5</td>" in page
+    assert "What the data determine" in page
+    # a rerun of the finished study simulates nothing
+    log = tmp_path / "sims.log"
+    monkeypatch.setenv("FAKE_SIM_LOG", str(log))
+    again = Calibration(study, out, figures=False).run()
+    assert again.evaluations == 8 and not log.exists()
+    assert read_results(out).transfer[0].params == results.transfer[0].params
+
+
+@pytest.mark.slow
+def test_the_advice_names_the_rig_where_an_undetermined_parameter_matters(tmp_path):
+    # fitted on rig R only, where E_Pa has almost no effect: it stays open, and of the two
+    # candidates (R at the other speed, rig Q) only Q responds to it
+    path = write_study(
+        tmp_path,
+        parameters=PARAMS,
+        transfer=[{"rig": "Q", "consignment": "P", "speed_setting": 1}],
+        initial=10,
+        batch_size=2,
+        budget=12,
+        validation={"speed_setting": 2, "every": 5},
+        optimizer={"n_samples": 500, "n_restarts": 0},
+        executor="serial",
+    )  # writes rig R's data; rewritten with rig Q's added:
+    write_reference_dataset(tmp_path / "data", rigs=("R", "Q"), truth={"E_Pa": 1e9})
+    out = tmp_path / "out"
+    Calibration(load_study(path), out, figures=False).run()
+    results = read_results(out)
+    e_pa = next(p for p in results.identifiability.parameters if p.name == "E_Pa")
+    assert not e_pa.determined
+    advice = results.advice
+    assert advice.best == "Q/P/1" and "E_Pa" in advice.parameters
+    assert advice.changes["Q/P/1"]["E_Pa"] > 10 * advice.changes["R/P/2"]["E_Pa"]
+    doc = json.loads((out / "results.json").read_text())
+    assert doc["advice"]["best"] == "Q/P/1"
