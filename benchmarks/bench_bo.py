@@ -207,10 +207,37 @@ for _name, _settings in ABLATIONS.items():
     METHODS[_name] = lambda b, f, s, n, _st=_settings: run_parcelfit(b, f, s, n, _st)
 
 
+def _variant(method: str):
+    """``gp:key=value:...`` (the default with changed `BOSettings`) or ``pub:key=value:...``
+    (the published preset with changes), e.g. ``gp:transform=none`` or ``pub:noise=fit``."""
+    base, *pairs = method.split(":")
+    make = {"gp": BOSettings, "pub": BOSettings.published}[base]
+    fields = {f.name: f.type for f in BOSettings.__dataclass_fields__.values()}
+    kw: dict[str, object] = {}
+    for pair in pairs:
+        key, value = pair.split("=")
+        kind = fields[key]
+        kw[key] = (
+            (value == "true")
+            if kind == "bool"
+            else int(value)
+            if kind == "int"
+            else (float(value) if kind == "float" else value)
+        )
+    settings = make(**kw)
+    return lambda b, f, s, n: run_parcelfit(b, f, s, n, settings)
+
+
 def evals_to_regret(values, optimum, tol=0.01):
     best = np.minimum.accumulate(values)
     hit = np.flatnonzero(best - optimum <= tol)
     return int(hit[0]) + 1 if hit.size else None
+
+
+def _one_thread() -> None:
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(1)
 
 
 def one(job):
@@ -224,7 +251,8 @@ def one(job):
 
     t0 = time.perf_counter()
     try:
-        METHODS[method](bounds, objective, seed, budget)
+        run = METHODS[method] if method in METHODS else _variant(method)
+        run(bounds, objective, seed, budget)
     except ImportError as exc:
         return fname, method, seed, "missing", str(exc), 0.0
     values = true_values[:budget]
@@ -284,7 +312,9 @@ def main() -> None:
     print(
         f"{'function':<12}{'method':<16}{'median evals':>13}{'reached':>9}{'median final regret':>21}{'s/run':>7}"
     )
-    with multiprocessing.get_context("spawn").Pool(args.jobs) as pool:
+    # one BLAS thread per worker: with two workers on a shared machine, multithreaded BLAS
+    # oversubscribes the cores and the timings measure contention instead of the methods
+    with multiprocessing.get_context("spawn").Pool(args.jobs, initializer=_one_thread) as pool:
         for fname in functions:  # one function at a time, printed as soon as it is done
             budget = next(fn[5] for fn in FUNCTIONS if fn[0] == fname)
             jobs = [(fname, m, s) for m in methods for s in range(args.seeds)]
