@@ -275,7 +275,8 @@ def test_mean_incumbent_is_the_best_posterior_mean_at_an_evaluated_point():
     settings = BOSettings(incumbent="mean", n_initial=24, n_restarts=0, transform="none")
     _, fit = _fitted(cost, settings)
     assert fit.y_best == pytest.approx(float(fit.gp.predict(fit.gp.X_train_).max()), abs=1e-12)
-    _, observed = _fitted(cost, BOSettings(n_initial=24, n_restarts=0, transform="none"))
+    settings = BOSettings(incumbent="observed", n_initial=24, n_restarts=0, transform="none")
+    _, observed = _fitted(cost, settings)
     assert observed.y_best == pytest.approx(float(observed.gp.y_train_.max()), abs=1e-12)
 
 

@@ -41,6 +41,7 @@ from sklearn.exceptions import ConvergenceWarning
 from sklearn.gaussian_process import GaussianProcessRegressor
 from sklearn.gaussian_process.kernels import ConstantKernel, Matern, Product, WhiteKernel
 from sklearn.preprocessing import PowerTransformer
+from threadpoolctl import threadpool_limits
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.optimize.space import Space
@@ -64,7 +65,7 @@ class BOSettings:
     n_restarts: int = 1  # optimiser restarts of the GP's hyperparameters
     # "none", "log", "power" (Box-Cox, lambda fitted to the costs' marginal distribution) or
     # "auto" (of none and power, the one whose warped GP explains the costs best; see _fit)
-    transform: str = "power"
+    transform: str = "auto"
     acquisition: str = "logei"  # "ucb" or "logei" (log expected improvement)
     polish: int = 2  # L-BFGS-B polishing starts from the best candidates (0: sampled only)
     batch: str = "believer"  # "believer" (kriging believer, sequential) or "kmeans" (published)
@@ -75,7 +76,7 @@ class BOSettings:
     recommend: str = "posterior_mean"  # or "best_observed" (published); see BatchBO.recommend
     # the incumbent y* of expected improvement: "observed" (best observed y) or "mean" (highest
     # posterior mean at an evaluated point, the usual choice for noisy or rough costs)
-    incumbent: str = "observed"
+    incumbent: str = "mean"
 
     def __post_init__(self) -> None:
         if (
@@ -109,6 +110,7 @@ class BOSettings:
             "ard": False,
             "amplitude": False,
             "recommend": "best_observed",
+            "incumbent": "observed",
             "n_restarts": 3,
         }
         return cls(**{**base, **overrides})
@@ -166,7 +168,10 @@ class BatchBO:
         while self._initial and len(out) < n:
             out.append(self._initial.pop(0))
         if len(out) < n:
-            out += self._suggest(n - len(out), extra_pending=out)
+            # one BLAS thread: the matrices are small (n x n for n evaluations), and on a machine
+            # busy with simulations threaded BLAS spins and makes a 200 x 200 Cholesky 1000x slower
+            with threadpool_limits(1):
+                out += self._suggest(n - len(out), extra_pending=out)
         self.pending += out
         return [self.space.from_unit(u) for u in out]
 
@@ -210,7 +215,8 @@ class BatchBO:
         best = self.best()
         if best is None or self.settings.recommend == "best_observed":
             return best
-        fitted = self._fit(np.random.default_rng([self.seed, len(self.observations)]), [])
+        with threadpool_limits(1):
+            fitted = self._fit(np.random.default_rng([self.seed, len(self.observations)]), [])
         if fitted is None:
             return best
         gp = fitted[0]
