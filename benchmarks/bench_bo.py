@@ -11,7 +11,8 @@ the noise-free value) and Rough4 (4-D, 100: a smooth bowl plus deterministic, pa
 roughness like the parcel cost). For each method: the median number of evaluations until the
 simple regret (best true value found minus the global minimum) is at most 0.01, counting seeds
 that never get there as "more than the budget", the share of seeds that get there, the median
-final regret and the median seconds per run. Methods:
+final regret and the median CPU seconds per run; after each problem, the ratio of our median
+final regret to each peer's, measured in the same run. Methods:
 
 * ``parcelfit``: `BatchBO` with its defaults (see docs/optimizer.md: noise fitted by marginal
   likelihood, output transform chosen by the warped-GP likelihood, log EI with the posterior-mean
@@ -302,6 +303,21 @@ def ask_overhead(n_obs: int = 200, dims: int = 4, repeats: int = 5) -> float:
     return statistics.median(times)
 
 
+PEERS = ("mango-default", "mango-published", "optuna-tpe", "published")
+
+
+def _ratios(finals: dict[str, float], ours: str = "parcelfit") -> str:
+    """One line: our median final regret over each peer's, all measured in this run."""
+    if ours not in finals:
+        return ""
+    parts = [
+        f"{p} {finals[ours] / finals[p]:.3g}" if finals[p] > 0 else f"{p} (peer regret 0)"
+        for p in PEERS
+        if p in finals
+    ]
+    return f"{'':<12}{ours} / peer, median final regret: " + ", ".join(parts)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -335,6 +351,7 @@ def main() -> None:
             budget = next(fn[5] for fn in FUNCTIONS if fn[0] == fname)
             jobs = [(fname, m, s) for m in methods for s in range(args.seeds)]
             results = pool.map(one, jobs, chunksize=1)
+            finals: dict[str, float] = {}
             for m in methods:
                 rows = [r for r in results if r[1] == m]
                 if any(r[3] == "missing" for r in rows):
@@ -344,12 +361,13 @@ def main() -> None:
                 med = statistics.median(hits)
                 med_txt = f">{budget}" if math.isinf(med) else f"{med:g}"
                 reached = sum(h != math.inf for h in hits) / len(hits)
-                final = statistics.median(r[4] for r in rows)
+                final = finals[m] = statistics.median(r[4] for r in rows)
                 secs = statistics.median(r[5] for r in rows)
                 print(
-                    f"{fname:<12}{m:<16}{med_txt:>13}{reached:>9.0%}{final:>21.4f}{secs:>10.1f}",
+                    f"{fname:<12}{m:<16}{med_txt:>13}{reached:>9.0%}{final:>21.2e}{secs:>10.1f}",
                     flush=True,
                 )
+            print(_ratios(finals), flush=True)
     print(
         f"ask(4) with 200 observations in 4-D, one core: {ask_overhead():.2f} CPU s (target: <= 2 s)"
     )

@@ -133,6 +133,7 @@ def test_published_preset_is_method_section_7():
         "kmeans",
     )
     assert (s.local_fraction, s.ard, s.recommend) == (0.0, False, "best_observed")
+    assert not s.amplitude  # scikit-learn's Matern kernel alone, as the published surrogate
     bo, _ = _run(4, 6, BOSettings.published(n_samples=1000, n_restarts=0))
     assert len(bo.observations) == 24 and bo.best()[1] < min(o.cost for o in bo.observations[:16])
     with pytest.raises(ParcelfitError, match="invalid BO settings"):

@@ -4,14 +4,15 @@ Two configurations of one `BatchBO` (`BOSettings`):
 
 * the default, measured in ``benchmarks/bench_bo.py``: Latin hypercube of 16; GP (scikit-learn)
   with Matern 5/2, one length scale per input and the noise variance fitted by marginal
-  likelihood within [1e-6, 0.35^2] of the standardised cost; the cost Box-Cox transformed
-  (lambda fitted to the data, SciPy/scikit-learn ``PowerTransformer``) before standardising; the
-  acquisition log expected improvement, maximised over Monte Carlo candidates and polished by
+  likelihood within [1e-6, 0.35^2] of the standardised cost; the cost left as it is or Box-Cox
+  transformed (lambda fitted, scikit-learn ``PowerTransformer``), whichever gives the costs the
+  higher warped-GP likelihood; the acquisition log expected improvement over the highest
+  posterior mean at an evaluated point, maximised over Monte Carlo candidates and polished by
   L-BFGS-B from the best of them; the batch chosen by kriging believer (pick one point, believe
   it at its predicted mean, refit with the kernel fixed, pick the next); the recommendation is
   the evaluated point with the lowest GP mean cost;
-* ``BOSettings.published()``, method.md section 7: Matern 5/2 with one length scale, noise
-  0.35^2, untransformed cost, UCB (lambda 2) on uniform Monte Carlo samples, k-means (k = batch
+* ``BOSettings.published()``, method.md section 7: the Matern 5/2 kernel alone with one length
+  scale, noise 0.35^2, untransformed cost, UCB (lambda 2) on uniform Monte Carlo samples, k-means (k = batch
   size) on the best 25 % with the best-UCB sample of each cluster as the batch, recommendation
   the lowest observed cost.
 
