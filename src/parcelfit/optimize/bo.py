@@ -12,9 +12,9 @@ Two configurations of one `BatchBO` (`BOSettings`):
   it at its predicted mean, refit with the kernel fixed, pick the next); the recommendation is
   the evaluated point with the lowest GP mean cost;
 * ``BOSettings.published()``, method.md section 7: the Matern 5/2 kernel alone with one length
-  scale, noise 0.35^2, untransformed cost, UCB (lambda 2) on uniform Monte Carlo samples, k-means (k = batch
-  size) on the best 25 % with the best-UCB sample of each cluster as the batch, recommendation
-  the lowest observed cost.
+  scale, noise 0.35^2, untransformed cost, UCB (lambda 2) on uniform Monte Carlo samples,
+  k-means (k = batch size) on the best 25 % with the best-UCB sample of each cluster as the
+  batch, recommendation the lowest observed cost.
 
 Common to both: the GP models the standardised negative (transformed) cost; pending points
 (asked, not yet told) enter as kriging-believer fantasies so asking again does not repeat them;
@@ -249,10 +249,11 @@ class BatchBO:
         c = np.array([o.cost if o.cost is not None else worst for o in obs])
         return X, c
 
-    def _transformed(self, c: np.ndarray, kind: str | None = None) -> tuple[np.ndarray, float]:
-        """The cost after the output transform ``kind`` (default: the setting's; not "auto"),
-        before standardising, and sum_i log |dz/dc| at the costs (the transform's Jacobian)."""
-        kind = kind or self.settings.transform
+    def _transformed(self, c: np.ndarray, kind: str) -> tuple[np.ndarray, float]:
+        """The cost after the output transform ``kind`` ("none", "log" or "power"), before
+        standardising, and sum_i log |dz/dc| at the costs (the transform's Jacobian)."""
+        if kind not in ("none", "log", "power"):
+            raise ValueError(f"not a single transform: {kind!r}")
         if kind == "none" or np.ptp(c) <= 0:
             return c, 0.0
         shifted = c - c.min() + 0.01 * float(np.ptp(c))
