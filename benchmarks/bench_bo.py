@@ -340,7 +340,7 @@ def main() -> None:
         flush=True,
     )
     print(
-        f"{'function':<12}{'method':<16}{'median evals':>13}{'reached':>9}{'median final regret':>21}{'cpu s/run':>10}"
+        f"{'function':<12}{'method':<24}{'median evals':>13}{'reached':>9}{'median final regret':>21}{'cpu s/run':>10}"
     )
     # one BLAS thread per worker: with two workers on a shared machine, multithreaded BLAS
     # oversubscribes the cores and the timings measure contention instead of the methods
@@ -355,7 +355,7 @@ def main() -> None:
             for m in methods:
                 rows = [r for r in results if r[1] == m]
                 if any(r[3] == "missing" for r in rows):
-                    print(f"{fname:<12}{m:<16}  not installed: {rows[0][4]}")
+                    print(f"{fname:<12}{m:<24}  not installed: {rows[0][4]}")
                     continue
                 hits = [r[3] if r[3] is not None else math.inf for r in rows]
                 med = statistics.median(hits)
@@ -364,7 +364,7 @@ def main() -> None:
                 final = finals[m] = statistics.median(r[4] for r in rows)
                 secs = statistics.median(r[5] for r in rows)
                 print(
-                    f"{fname:<12}{m:<16}{med_txt:>13}{reached:>9.0%}{final:>21.2e}{secs:>10.1f}",
+                    f"{fname:<12}{m:<24}{med_txt:>13}{reached:>9.0%}{final:>21.2e}{secs:>10.1f}",
                     flush=True,
                 )
             print(_ratios(finals), flush=True)
