@@ -292,3 +292,18 @@ def test_published_gp_is_a_plain_matern_with_the_fixed_noise():
 
 def _quadratic_2d(p):
     return (p["a"] - 0.3) ** 2 + (p["b"] - 0.7) ** 2
+
+
+def test_polish_moves_kmeans_picks_uphill_on_the_acquisition():
+    base = BOSettings.published(n_samples=300, n_restarts=0)
+    rough, _ = _run(4, 5, base)
+    polished, _ = _run(4, 5, BOSettings.published(n_samples=300, n_restarts=0, polish=1))
+    u0 = np.array([rough.space.to_unit(p) for p in rough.ask()])
+    u1 = np.array([polished.space.to_unit(p) for p in polished.ask()])
+    assert not np.allclose(u0, u1)  # polish acts on the k-means batch too
+    fit = polished._fit(np.random.default_rng(0), [])
+    start = np.array([rough.space.to_unit(p) for p in rough.ask()])
+    after = np.array([polished._polish(fit.gp, fit.y_best, u) for u in start])
+    a0 = polished._acquisition(fit.gp, fit.y_best, start)
+    a1 = polished._acquisition(fit.gp, fit.y_best, after)
+    assert np.all(a1 >= a0)

@@ -418,7 +418,9 @@ class BatchBO:
         batch = []
         for k in range(n):
             members = top[km.labels_ == k]
-            batch.append(cand[members[np.argmax(acq[members])]])
+            u = cand[members[np.argmax(acq[members])]]
+            # polish > 0: each cluster's best sample is a start of L-BFGS-B (published: 0)
+            batch.append(self._polish(gp, y_best, u) if self.settings.polish else u)
         return batch
 
 
