@@ -367,7 +367,8 @@ def main() -> None:
                     f"{fname:<12}{m:<24}{med_txt:>13}{reached:>9.0%}{final:>21.2e}{secs:>10.1f}",
                     flush=True,
                 )
-            print(_ratios(finals), flush=True)
+            if ratios := _ratios(finals):
+                print(ratios, flush=True)
     print(
         f"ask(4) with 200 observations in 4-D, one core: {ask_overhead():.2f} CPU s (target: <= 2 s)"
     )
