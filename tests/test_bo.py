@@ -133,6 +133,7 @@ def test_published_preset_is_method_section_7():
         "kmeans",
     )
     assert (s.local_fraction, s.ard, s.recommend) == (0.0, False, "best_observed")
+    assert not s.amplitude  # scikit-learn's Matern kernel alone, as the published surrogate
     bo, _ = _run(4, 6, BOSettings.published(n_samples=1000, n_restarts=0))
     assert len(bo.observations) == 24 and bo.best()[1] < min(o.cost for o in bo.observations[:16])
     with pytest.raises(ParcelfitError, match="invalid BO settings"):
@@ -223,3 +224,86 @@ def test_fast_prediction_matches_scikit_learn():
         mu, sd = _predict(gp, U)
         ref_mu, ref_sd = gp.predict(U, return_std=True)
         assert mu == pytest.approx(ref_mu, abs=1e-9) and sd == pytest.approx(ref_sd, abs=1e-7)
+
+
+def _fitted(cost, settings, n=24, seed=0):
+    bo = BatchBO(
+        Space.from_bounds({"a": (0, 1), "b": (0, 1)}), batch_size=4, seed=seed, settings=settings
+    )
+    for p in bo.ask(n):
+        bo.tell(p, cost(p))
+    return bo, bo._fit(np.random.default_rng(0), [])
+
+
+def test_auto_transform_warps_a_heavy_tailed_cost_and_leaves_a_smooth_one():
+    settings = BOSettings(transform="auto", n_initial=24, n_restarts=0)
+    for seed in (0, 1):
+        _, heavy = _fitted(lambda p: np.exp(8 * p["a"]) + np.exp(6 * p["b"]), settings, seed=seed)
+        _, smooth = _fitted(
+            lambda p: (p["a"] - 0.3) ** 2 + (p["b"] - 0.6) ** 2, settings, seed=seed
+        )
+        assert (heavy.transform, smooth.transform) == ("power", "none")
+
+
+def test_auto_transform_compares_likelihoods_of_the_costs_including_the_jacobian():
+    # the chosen transform's warped-GP likelihood is the higher one, computed by hand here
+    def cost(p):
+        return np.exp(8 * p["a"]) + p["b"]
+
+    bo, fit = _fitted(cost, BOSettings(transform="auto", n_initial=24, n_restarts=0))
+    X, c = bo._training_data()
+    scores = {}
+    for kind in ("none", "power"):
+        z, log_jac = bo._transformed(c, kind)
+        y = -(z - z.mean()) / z.std()
+        gp = bo._fit_gp(X, y, 0)
+        scores[kind] = gp.log_marginal_likelihood_value_ + log_jac - len(y) * np.log(z.std())
+    assert fit.transform == max(scores, key=scores.get)
+    # the Jacobian of log is -sum log s: check it against a numerical derivative
+    z, log_jac = bo._transformed(c, "log")
+    h = 1e-7
+    bumped = [bo._transformed(np.r_[c[:i], c[i] + h, c[i + 1 :]], "log")[0][i] for i in (3, 7)]
+    numeric = [np.log(abs((b - z[i]) / h)) for b, i in zip(bumped, (3, 7), strict=True)]
+    shifted = c - c.min() + 0.01 * np.ptp(c)
+    assert numeric == pytest.approx(list(-np.log(shifted[[3, 7]])), abs=1e-4)
+    assert log_jac == pytest.approx(-np.log(shifted).sum())
+
+
+def test_mean_incumbent_is_the_best_posterior_mean_at_an_evaluated_point():
+    def cost(p):
+        return (p["a"] - 0.3) ** 2 + 0.05 * np.sin(40 * p["b"])
+
+    settings = BOSettings(incumbent="mean", n_initial=24, n_restarts=0, transform="none")
+    _, fit = _fitted(cost, settings)
+    assert fit.y_best == pytest.approx(float(fit.gp.predict(fit.gp.X_train_).max()), abs=1e-12)
+    settings = BOSettings(incumbent="observed", n_initial=24, n_restarts=0, transform="none")
+    _, observed = _fitted(cost, settings)
+    assert observed.y_best == pytest.approx(float(observed.gp.y_train_.max()), abs=1e-12)
+
+
+def test_published_gp_is_a_plain_matern_with_the_fixed_noise():
+    from sklearn.gaussian_process.kernels import Matern
+
+    _, fit = _fitted(_quadratic_2d, BOSettings.published(n_restarts=0))
+    assert isinstance(fit.gp.kernel_, Matern) and fit.gp.kernel_.nu == 2.5
+    assert np.ndim(fit.gp.kernel_.length_scale) == 0  # one shared length scale
+    assert fit.gp.alpha == pytest.approx(0.35**2) and fit.transform == "none"
+
+
+def _quadratic_2d(p):
+    return (p["a"] - 0.3) ** 2 + (p["b"] - 0.7) ** 2
+
+
+def test_polish_moves_kmeans_picks_uphill_on_the_acquisition():
+    base = BOSettings.published(n_samples=300, n_restarts=0)
+    rough, _ = _run(4, 5, base)
+    polished, _ = _run(4, 5, BOSettings.published(n_samples=300, n_restarts=0, polish=1))
+    u0 = np.array([rough.space.to_unit(p) for p in rough.ask()])
+    u1 = np.array([polished.space.to_unit(p) for p in polished.ask()])
+    assert not np.allclose(u0, u1)  # polish acts on the k-means batch too
+    fit = polished._fit(np.random.default_rng(0), [])
+    start = np.array([rough.space.to_unit(p) for p in rough.ask()])
+    after = np.array([polished._polish(fit.gp, fit.y_best, u) for u in start])
+    a0 = polished._acquisition(fit.gp, fit.y_best, start)
+    a1 = polished._acquisition(fit.gp, fit.y_best, after)
+    assert np.all(a1 >= a0)

@@ -4,16 +4,17 @@ Two configurations of one `BatchBO` (`BOSettings`):
 
 * the default, measured in ``benchmarks/bench_bo.py``: Latin hypercube of 16; GP (scikit-learn)
   with Matern 5/2, one length scale per input and the noise variance fitted by marginal
-  likelihood within [1e-6, 0.35^2] of the standardised cost; the cost Box-Cox transformed
-  (lambda fitted to the data, SciPy/scikit-learn ``PowerTransformer``) before standardising; the
-  acquisition log expected improvement, maximised over Monte Carlo candidates and polished by
+  likelihood within [1e-6, 0.35^2] of the standardised cost; the cost left as it is or Box-Cox
+  transformed (lambda fitted, scikit-learn ``PowerTransformer``), whichever gives the costs the
+  higher warped-GP likelihood; the acquisition log expected improvement over the highest
+  posterior mean at an evaluated point, maximised over Monte Carlo candidates and polished by
   L-BFGS-B from the best of them; the batch chosen by kriging believer (pick one point, believe
   it at its predicted mean, refit with the kernel fixed, pick the next); the recommendation is
   the evaluated point with the lowest GP mean cost;
-* ``BOSettings.published()``, method.md section 7: Matern 5/2 with one length scale, noise
-  0.35^2, untransformed cost, UCB (lambda 2) on uniform Monte Carlo samples, k-means (k = batch
-  size) on the best 25 % with the best-UCB sample of each cluster as the batch, recommendation
-  the lowest observed cost.
+* ``BOSettings.published()``, method.md section 7: the Matern 5/2 kernel alone with one length
+  scale, noise 0.35^2, untransformed cost, UCB (lambda 2) on uniform Monte Carlo samples,
+  k-means (k = batch size) on the best 25 % with the best-UCB sample of each cluster as the
+  batch, recommendation the lowest observed cost.
 
 Common to both: the GP models the standardised negative (transformed) cost; pending points
 (asked, not yet told) enter as kriging-believer fantasies so asking again does not repeat them;
@@ -29,7 +30,7 @@ import math
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from scipy.linalg import solve_triangular
@@ -41,6 +42,7 @@ from sklearn.exceptions import ConvergenceWarning
 from sklearn.gaussian_process import GaussianProcessRegressor
 from sklearn.gaussian_process.kernels import ConstantKernel, Matern, Product, WhiteKernel
 from sklearn.preprocessing import PowerTransformer
+from threadpoolctl import threadpool_limits
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.optimize.space import Space
@@ -62,12 +64,20 @@ class BOSettings:
         "fit"  # "fit": noise variance by marginal likelihood in [1e-6, 0.35^2]; "fixed": alpha
     )
     n_restarts: int = 1  # optimiser restarts of the GP's hyperparameters
-    transform: str = "power"  # "none", "log" or "power" (Box-Cox with lambda fitted to the data)
+    # "none", "log", "power" (Box-Cox, lambda fitted to the costs' marginal distribution) or
+    # "auto" (of none and power, the one whose warped GP explains the costs best; see _fit)
+    transform: str = "auto"
     acquisition: str = "logei"  # "ucb" or "logei" (log expected improvement)
     polish: int = 2  # L-BFGS-B polishing starts from the best candidates (0: sampled only)
     batch: str = "believer"  # "believer" (kriging believer, sequential) or "kmeans" (published)
     ard: bool = True  # one length scale per input (False: one shared length scale)
+    # a fitted signal variance sigma_f^2 times the Matern kernel (False: the Matern kernel alone
+    # on the standardised cost, as scikit-learn's GP in the published work, Mango's surrogate)
+    amplitude: bool = True
     recommend: str = "posterior_mean"  # or "best_observed" (published); see BatchBO.recommend
+    # the incumbent y* of expected improvement: "observed" (best observed y) or "mean" (highest
+    # posterior mean at an evaluated point, the usual choice for noisy or rough costs)
+    incumbent: str = "mean"
 
     def __post_init__(self) -> None:
         if (
@@ -78,10 +88,11 @@ class BOSettings:
             or self.alpha <= 0
             or self.polish < 0
             or self.noise not in ("fit", "fixed")
-            or self.transform not in ("none", "log", "power")
+            or self.transform not in TRANSFORMS
             or self.acquisition not in ("ucb", "logei")
             or self.batch not in ("believer", "kmeans")
             or self.recommend not in ("posterior_mean", "best_observed")
+            or self.incumbent not in ("observed", "mean")
         ):
             raise ParcelfitError(f"invalid BO settings: {self}")
 
@@ -98,10 +109,26 @@ class BOSettings:
             "batch": "kmeans",
             "local_fraction": 0.0,
             "ard": False,
+            "amplitude": False,
             "recommend": "best_observed",
+            "incumbent": "observed",
             "n_restarts": 3,
         }
         return cls(**{**base, **overrides})
+
+
+TRANSFORMS = ("none", "log", "power", "auto")
+
+
+class Fit(NamedTuple):
+    """A GP fitted to the observations: it predicts y = -(z - mean) / std, z the cost after
+    ``transform``; ``y_best`` is the incumbent of expected improvement."""
+
+    gp: GaussianProcessRegressor
+    mean: float
+    std: float
+    y_best: float
+    transform: str
 
 
 @dataclass
@@ -142,7 +169,10 @@ class BatchBO:
         while self._initial and len(out) < n:
             out.append(self._initial.pop(0))
         if len(out) < n:
-            out += self._suggest(n - len(out), extra_pending=out)
+            # one BLAS thread: the matrices are small (n x n for n evaluations), and on a machine
+            # busy with simulations threaded BLAS spins and makes a 200 x 200 Cholesky 1000x slower
+            with threadpool_limits(1):
+                out += self._suggest(n - len(out), extra_pending=out)
         self.pending += out
         return [self.space.from_unit(u) for u in out]
 
@@ -186,7 +216,8 @@ class BatchBO:
         best = self.best()
         if best is None or self.settings.recommend == "best_observed":
             return best
-        fitted = self._fit(np.random.default_rng([self.seed, len(self.observations)]), [])
+        with threadpool_limits(1):
+            fitted = self._fit(np.random.default_rng([self.seed, len(self.observations)]), [])
         if fitted is None:
             return best
         gp = fitted[0]
@@ -218,36 +249,80 @@ class BatchBO:
         c = np.array([o.cost if o.cost is not None else worst for o in obs])
         return X, c
 
-    def _transformed(self, c: np.ndarray) -> np.ndarray:
-        """The cost after the output transform, before standardising."""
-        s = self.settings
-        if s.transform == "none" or np.ptp(c) <= 0:
-            return c
+    def _transformed(self, c: np.ndarray, kind: str) -> tuple[np.ndarray, float]:
+        """The cost after the output transform ``kind`` ("none", "log" or "power"), before
+        standardising, and sum_i log |dz/dc| at the costs (the transform's Jacobian)."""
+        if kind not in ("none", "log", "power"):
+            raise ValueError(f"not a single transform: {kind!r}")
+        if kind == "none" or np.ptp(c) <= 0:
+            return c, 0.0
         shifted = c - c.min() + 0.01 * float(np.ptp(c))
-        if s.transform == "log":
-            return np.log(shifted)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            out = PowerTransformer(method="box-cox", standardize=False).fit_transform(
-                shifted[:, None]
-            )[:, 0]
-        return out if np.all(np.isfinite(out)) and np.ptp(out) > 0 else np.log(shifted)
+        log_shifted = np.log(shifted)
+        if kind == "power":
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                pt = PowerTransformer(method="box-cox", standardize=False)
+                out = pt.fit_transform(shifted[:, None])[:, 0]
+            if np.all(np.isfinite(out)) and np.ptp(out) > 0:
+                lam = float(pt.lambdas_[0])  # dz/dc = s^(lambda - 1)
+                return out, float((lam - 1.0) * log_shifted.sum())
+        return log_shifted, float(-log_shifted.sum())  # log: dz/dc = 1 / s
 
-    def _fit(self, rng: np.random.Generator, fantasies: Sequence[np.ndarray]) -> tuple | None:
+    def _fit(self, rng: np.random.Generator, fantasies: Sequence[np.ndarray]) -> Fit | None:
+        """The GP on the observations (``fantasies``: pending points, believed at their mean).
+
+        With ``transform: auto`` a GP is fitted for each of "none" and "power", and the one with
+        the higher likelihood of the costs themselves wins: the log marginal likelihood of the
+        standardised transformed y plus the log Jacobian sum_i log |dy_i/dc_i| (a warped GP's
+        likelihood). Box-Cox alone picks lambda from the costs' histogram; this compares the
+        transforms by how well a smooth GP explains the costs over the inputs.
+        """
         data = self._training_data()
         if data is None:
             return None
         X, c = data
-        z = self._transformed(c)
-        mean, std = z.mean(), z.std()
-        y = -(z - mean) / (std if std > 0 else 1.0)
         s = self.settings
-        d = X.shape[1]
-        kernel: Any = ConstantKernel(1.0, (1e-2, 1e2)) * Matern(
-            length_scale=np.full(d, 0.3) if s.ard else 0.3,
+        state = int(rng.integers(2**31 - 1))
+        kinds = ("none", "power") if s.transform == "auto" else (s.transform,)
+        best: tuple[float, GaussianProcessRegressor, float, float, np.ndarray, str] | None = None
+        for kind in kinds:
+            z, log_jac = self._transformed(c, kind)
+            mean, std = float(z.mean()), float(z.std())
+            scale = std if std > 0 else 1.0
+            y = -(z - mean) / scale
+            gp = self._fit_gp(X, y, state)
+            score = float(gp.log_marginal_likelihood_value_) + log_jac - len(y) * math.log(scale)
+            if best is None or score > best[0]:
+                best = (score, gp, mean, std, y, kind)
+        assert best is not None
+        _, gp, mean, std, y, kind = best
+        if s.noise == "fit":
+            # predict the latent cost: the fitted noise becomes alpha, the kernel stays fixed
+            gp = _conditioned(gp.kernel_.k1, gp.kernel_.k2.noise_level, X, y)
+        y_best = float(y.max())
+        if s.incumbent == "mean":
+            y_best = float(gp.predict(X).max())
+        if fantasies:
+            # kriging believer: pending points count as observed at the predicted mean, with
+            # the fitted kernel kept fixed, so they lower the uncertainty around themselves
+            F = np.asarray(fantasies)
+            believed = gp.predict(F)
+            gp = _conditioned(
+                gp.kernel_, gp.alpha, np.vstack([X, F]), np.concatenate([y, believed])
+            )
+            y_best = max(y_best, float(believed.max()))
+        return Fit(gp, mean, std, y_best, kind)
+
+    def _fit_gp(self, X: np.ndarray, y: np.ndarray, state: int) -> GaussianProcessRegressor:
+        """scikit-learn's GP with the hyperparameters maximising the marginal likelihood."""
+        s = self.settings
+        kernel: Any = Matern(
+            length_scale=np.full(X.shape[1], 0.3) if s.ard else 0.3,
             length_scale_bounds=(1e-2, 1e2),
             nu=s.nu,
         )
+        if s.amplitude:
+            kernel = ConstantKernel(1.0, (1e-2, 1e2)) * kernel
         if s.noise == "fit":
             kernel = kernel + WhiteKernel(0.01, (NOISE_LOW, NOISE_HIGH))
         gp = GaussianProcessRegressor(
@@ -255,24 +330,11 @@ class BatchBO:
             alpha=s.alpha if s.noise == "fixed" else 1e-10,
             normalize_y=False,
             n_restarts_optimizer=s.n_restarts,
-            random_state=int(rng.integers(2**31 - 1)),
+            random_state=state,
         )
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)
-            gp.fit(X, y)
-            if s.noise == "fit":
-                # predict the latent cost: the fitted noise becomes alpha, the kernel stays fixed
-                gp = _conditioned(gp.kernel_.k1, gp.kernel_.k2.noise_level, X, y)
-            if fantasies:
-                # kriging believer: pending points count as observed at the predicted mean, with
-                # the fitted kernel kept fixed, so they lower the uncertainty around themselves
-                F = np.asarray(fantasies)
-                believed = gp.predict(F)
-                gp = _conditioned(
-                    gp.kernel_, gp.alpha, np.vstack([X, F]), np.concatenate([y, believed])
-                )
-                return gp, mean, std, float(max(y.max(), believed.max()))
-        return gp, mean, std, float(y.max())
+            return gp.fit(X, y)
 
     def _candidates(self, rng: np.random.Generator, d: int) -> np.ndarray:
         n_local = int(self.settings.local_fraction * self.settings.n_samples)
@@ -333,7 +395,7 @@ class BatchBO:
         d = len(self.space)
         if fitted is None:  # fewer than two successes: keep exploring with random points
             return list(rng.random((n, d)))
-        gp, _, _, y_best = fitted
+        gp, y_best = fitted.gp, fitted.y_best
         cand = self._candidates(rng, d)
         if self.settings.batch == "believer" or n == 1:
             batch: list[np.ndarray] = []
@@ -356,7 +418,9 @@ class BatchBO:
         batch = []
         for k in range(n):
             members = top[km.labels_ == k]
-            batch.append(cand[members[np.argmax(acq[members])]])
+            u = cand[members[np.argmax(acq[members])]]
+            # polish > 0: each cluster's best sample is a start of L-BFGS-B (published: 0)
+            batch.append(self._polish(gp, y_best, u) if self.settings.polish else u)
         return batch
 
 
@@ -374,27 +438,27 @@ def _conditioned(kernel: Any, alpha: Any, X: np.ndarray, y: np.ndarray) -> Gauss
 def _predict(gp: GaussianProcessRegressor, U: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Posterior mean and sd at the rows of U, as ``gp.predict(U, return_std=True)``.
 
-    Written out for the kernel sigma_f^2 Matern_5/2 that `BatchBO` fits: scikit-learn's predict
+    Written out for the kernels sigma_f^2 Matern_5/2 and Matern_5/2 that `BatchBO` fits:
+    scikit-learn's predict
     spends most of its time on input checks, which dominate the many one-point calls of the
     L-BFGS-B polish. Other kernels fall back to scikit-learn.
     """
     k = gp.kernel_
-    if not (
-        isinstance(k, Product)
-        and isinstance(k.k1, ConstantKernel)
-        and isinstance(k.k2, Matern)
-        and k.k2.nu == 2.5
-    ):
+    if isinstance(k, Product) and isinstance(k.k1, ConstantKernel):
+        amplitude, matern = float(k.k1.constant_value), k.k2
+    else:
+        amplitude, matern = 1.0, k
+    if not (isinstance(matern, Matern) and matern.nu == 2.5):
         return gp.predict(U, return_std=True)
     r = np.sqrt(
         np.maximum(
-            (((U[:, None, :] - gp.X_train_[None, :, :]) / k.k2.length_scale) ** 2).sum(-1), 0.0
+            (((U[:, None, :] - gp.X_train_[None, :, :]) / matern.length_scale) ** 2).sum(-1), 0.0
         )
     )
-    K = k.k1.constant_value * (1.0 + SQRT_5 * r + 5.0 / 3.0 * r**2) * np.exp(-SQRT_5 * r)
+    K = amplitude * (1.0 + SQRT_5 * r + 5.0 / 3.0 * r**2) * np.exp(-SQRT_5 * r)
     mu = K @ gp.alpha_
     V = solve_triangular(gp.L_, K.T, lower=True, check_finite=False)
-    var = k.k1.constant_value - np.einsum("ij,ij->j", V, V)
+    var = amplitude - np.einsum("ij,ij->j", V, V)
     return mu, np.sqrt(np.maximum(var, 0.0))
 
 

@@ -127,7 +127,7 @@ def dependence_curves(
         return None
     gp, mean, std = fitted[:3]
     scale = std if std > 0 else 1.0
-    transformed = bo.settings.transform != "none"
+    transformed = fitted.transform != "none"
     rng = np.random.default_rng(seed)
     d = len(bo.space)
     others = rng.random((n_mc, d))
