@@ -27,7 +27,8 @@ def run_one(study_file: Path, sampler: str, seed: int, out: Path, workers: int) 
     doc["seed"] = seed
     doc["reference"]["dataset"] = str((study_file.parent / doc["reference"]["dataset"]).resolve())
     variant = study_file.parent / f".{study_file.stem}-{sampler}-{seed}.yaml"
-    variant.write_text(yaml.safe_dump(doc))
+    variant.write_text(yaml.safe_dump(doc, sort_keys=False))  # the study as written: the order
+    # of its parameters sets the initial design
     try:
         result = Calibration(
             load_study(variant), out / f"{sampler}-seed{seed}", workers=workers
