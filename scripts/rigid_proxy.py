@@ -33,9 +33,11 @@ from collections.abc import Mapping
 import mujoco
 import numpy as np
 
+from parcelfit.errors import ParcelfitError
 from parcelfit.sim.mujoco import load_rig
 from parcelfit.sim.mujoco.consignment import load_consignment
 from parcelfit.sim.mujoco.rig import Rig
+from parcelfit.sim.params import parse_assignments
 
 TYPES = ("BW", "KPBW", "KP")
 SLAB = 0.02  # half-thickness of belt boxes [m]
@@ -153,14 +155,9 @@ def rotation(
     return math.degrees(float(unwrapped[-1] - unwrapped[0]))
 
 
-def _pairs(items: list[str], what: str) -> Mapping[str, float]:
-    out = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        if not sep:
-            raise SystemExit(f"{what}: expected TYPE=VALUE, got {item!r}")
-        out[key.upper().replace("/", "")] = float(value)
-    return out
+def _per_type(items: list[str]) -> Mapping[str, float]:
+    """TYPE=VALUE options (parsed as parcelfit simulate's --set) keyed by the bundled type name."""
+    return {k.upper().replace("/", ""): v for k, v in parse_assignments(items).items()}
 
 
 def main() -> None:
@@ -174,7 +171,10 @@ def main() -> None:
     ap.add_argument("--mu-belt", type=float, default=0.45)
     ap.add_argument("--mu-metal", type=float, default=0.25)
     args = ap.parse_args()
-    footprints = _pairs(args.footprint, "--footprint")
+    try:
+        footprints = _per_type(args.footprint)
+    except ParcelfitError as exc:
+        raise SystemExit(f"--footprint: {exc}") from exc
     t0 = time.perf_counter()
     for rig_name in args.rigs:
         rig = load_rig(rig_name)
