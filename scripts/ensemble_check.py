@@ -5,6 +5,7 @@ across ensembles of seeded hand placements rather than single runs.
     python scripts/ensemble_check.py --rigs E3 E1 --placements 10 --types BW KPBW KP PB
     python scripts/ensemble_check.py --all-settings         # every speed setting of each rig
     python scripts/ensemble_check.py --rigs examples/e3-variants/E3-plate-clear.yaml
+    python scripts/ensemble_check.py --bulge BW=0.3 KPBW=0.45 --set zeta_MePa=0.1 --scene impratio=10
 
 For each rig and speed setting it simulates every consignment type at its default parameters
 for the placement seeds 0..N-1 (the rig's ``start.scatter``), then prints and writes
@@ -19,7 +20,9 @@ observations as checks:
 
 and a figure per rig and setting (``ensemble-<rig>-<setting>.png``): the top view of every
 placement's path and the heading over the travelled distance, like the published Figures 17
-and 19. Runs go over all cores (``--workers``).
+and 19. Runs go over all cores (``--workers``). ``--set`` changes parameters (catalogue units) for
+every type, ``--bulge TYPE=FOOTPRINT`` gives a type's packaging a bulging bottom
+(``--bulge-depth``, `parcelfit.sim.mujoco.shell`), ``--scene`` sets scene options.
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ import os
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import replace
 from pathlib import Path
 
 import matplotlib
@@ -40,8 +44,15 @@ import numpy as np
 
 from parcelfit.runs import TestCase
 from parcelfit.sim.ensemble import EnsembleSummary, Member, simulate_ensemble, summarise
-from parcelfit.sim.mujoco import MujocoSimulator, load_rig
+from parcelfit.sim.mujoco import (
+    MujocoSimulator,
+    SceneOptions,
+    SimOptions,
+    load_consignment,
+    load_rig,
+)
 from parcelfit.sim.mujoco.rig import Rig
+from parcelfit.sim.params import parameter, parse_assignments, resolve
 
 TYPES = ("BW", "KPBW", "KP", "PB")
 COLOURS = {"BW": "tab:orange", "KPBW": "tab:blue", "KP": "tab:green", "PB": "tab:red"}
@@ -148,18 +159,44 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--all-settings", action="store_true", help="every speed setting, not only 1")
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--out", type=Path, default=Path("docs"))
+    ap.add_argument(
+        "--scene",
+        nargs="*",
+        default=[],
+        metavar="KEY=VALUE",
+        help="scene options other than the defaults (e.g. impratio=10 timestep=0.000833)",
+    )
+    ap.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE", help="catalogue units")
+    ap.add_argument("--bulge", nargs="*", default=[], metavar="TYPE=FOOTPRINT")
+    ap.add_argument("--bulge-depth", type=float, default=0.004, help="[m]")
     args = ap.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "figures").mkdir(exist_ok=True)
     rigs = [load_rig(r) for r in args.rigs]  # bundled names or rig files
-    sim = MujocoSimulator(rigs={r.name: r for r in rigs})
+    scene = SceneOptions(**{k: float(v) for k, v in (a.split("=", 1) for a in args.scene)})
+    bulges = {k.upper().replace("/", ""): v for k, v in parse_assignments(args.bulge).items()}
+    consignments = {
+        t: replace(c, bulge=(args.bulge_depth, bulges[t])) if t in bulges else c
+        for t, c in ((t, load_consignment(t)) for t in args.types)
+    }
+    user = parse_assignments(args.set)
+    sim = MujocoSimulator(
+        SimOptions(scene=scene), rigs={r.name: r for r in rigs}, consignments=consignments
+    )
     seeds = list(range(args.placements))
     lines = [
         "# Ensemble check: the models against the published observations",
         "",
         f"Written by `python scripts/ensemble_check.py --rigs {' '.join(args.rigs)} "
         f"--types {' '.join(args.types)} "
-        f"--placements {args.placements}{' --all-settings' if args.all_settings else ''}`: "
+        f"--placements {args.placements}{' --all-settings' if args.all_settings else ''}"
+        + "".join(
+            f" --{k} {' '.join(v)}"
+            for k, v in (("set", args.set), ("bulge", args.bulge), ("scene", args.scene))
+            if v
+        )
+        + (f" --bulge-depth {args.bulge_depth}" if args.bulge else "")
+        + "`: "
         "every consignment type at its default parameters, placement seeds "
         f"0-{args.placements - 1} (the rig's hand-placement scatter). Rotation is the net "
         "change of heading from the first to the last sample; a spin is a rotation above "
@@ -177,8 +214,11 @@ def main(argv: list[str] | None = None) -> int:
                 members: dict[str, list[Member]] = {}
                 for cons in args.types:
                     case = TestCase(rig_name, cons, setting)
+                    kind = consignments[cons].content_kind
+                    params = {k: parameter(k).to_si(v) for k, v in user.items()}
+                    resolve(kind, si_values=params)  # checks names and ranges
                     members[cons] = simulate_ensemble(
-                        sim.with_placement, {}, case, seeds, executor=ex
+                        sim.with_placement, params, case, seeds, executor=ex
                     )
                     print(f"{case.label}: done ({time.perf_counter() - t0:.0f} s)", flush=True)
                 stats = {c: summarise(m) for c, m in members.items()}

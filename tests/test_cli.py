@@ -86,6 +86,8 @@ def test_demo_quick_end_to_end_on_bundled_data(tmp_path):
     report = out / "report.html"
     text = report.read_text()
     assert "SYNTHETIC DATA" in text and 'id="stricter"' in text and 'id="frames"' in text
+    # the joint calibration: both fitted cases, the transfer check, what the data determine
+    assert 'id="transfer"' in text and "E1/KPBW/3" in text and "What the data determine" in text
     assert "report:" in result.output and report.name in result.output
     assert "verdict: validation" in result.output
     example = json.loads((out / "stricter-criterion.json").read_text())
@@ -116,5 +118,8 @@ def test_demo_stages_are_library_calls(tmp_path):
         and len(json.loads((tmp_path / "demo" / "reference_runs.json").read_text())) == 16
     )
     screen_file, study_file = d.files
-    assert yaml.safe_load(study_file.read_text())["budget"] == 16
+    study = yaml.safe_load(study_file.read_text())
+    assert study["budget"] == 16
+    assert [(c["rig"], c["speed_setting"]) for c in study["cases"]] == [("E3", 1), ("E1", 3)]
+    assert study["transfer"] == [{"rig": "E1", "speed_setting": 1}]
     assert yaml.safe_load(screen_file.read_text())["stages"] == ["fractional"]

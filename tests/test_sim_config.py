@@ -262,3 +262,80 @@ def test_membrane_cap_from_a_study_files_simulator_section(tmp_path):
         ).options.scene.membrane_cap
         is None
     )  # type: ignore[attr-defined]
+
+
+def test_bulge_lowers_a_flat_patch_under_the_content_and_leaves_other_shells_alone():
+    """The bulging bottom: a flat patch of f times the outer size, d below the content's face,
+    rising linearly to the content's edges; the belt-contact face is that patch. Without a bulge
+    the mesh is the plain pillow (grid lines on the content's edges, bottom flat under it)."""
+    import numpy as np
+
+    from parcelfit.sim.mujoco.shell import pillow_shell
+
+    outer, content, h, d, f = (0.2, 0.15), (0.165, 0.125), 0.0115, 0.004, 0.3
+    flat = pillow_shell(outer, content, h, 0.03)
+    bulged = pillow_shell(outer, content, h, 0.03, (d, f))
+    assert flat.bulge_depth == 0.0 and bulged.bulge_depth == d
+    face = flat.points[flat.bottom_face]
+    assert np.allclose(face[:, 2], -h) and np.ptp(face[:, 0]) == pytest.approx(content[0])
+    patch = bulged.points[bulged.bottom_face]
+    assert np.allclose(patch[:, 2], -h - d)
+    assert np.ptp(patch[:, 0]) == pytest.approx(f * outer[0])
+    assert np.ptp(patch[:, 1]) == pytest.approx(f * outer[1])
+    # the bottom between the patch and the content's edge rises linearly to -h at the edge
+    pts = bulged.points
+    bottom = pts[pts[:, 2] < -h + 1e-12]
+    x_edge = bottom[np.isclose(np.abs(bottom[:, 0]), content[0] / 2) & (np.abs(bottom[:, 1]) < 0.01)]
+    assert x_edge.size and np.allclose(x_edge[:, 2], -h)
+    # top sheet and seam untouched
+    assert np.allclose(pts[bulged.top][:, 2], h) and np.allclose(pts[bulged.seam][:, 2], 0)
+    assert bulged.face_contacts < flat.face_contacts
+    with pytest.raises(ParcelfitError, match="patch .* smaller than the content"):
+        pillow_shell(outer, content, h, 0.03, (d, 0.9))
+
+
+def test_consignment_bulge_is_checked_and_moves_the_parcel_up_by_its_depth():
+    good = {
+        "name": "X",
+        "mass": 0.1,
+        "outer": [0.2, 0.15, 0.02],
+        "content": {"kind": "rigid", "size": [0.165, 0.125, 0.02]},
+        "bulge": {"depth": 0.004, "footprint": 0.3},
+    }
+    assert parse_consignment(good, "c.yaml").bulge == (0.004, 0.3)
+    assert parse_consignment({**good, "bulge": None}, "c.yaml").bulge is None
+    with pytest.raises(ParcelfitError, match=r"c\.yaml: bulge\.footprint: .*not smaller"):
+        parse_consignment({**good, "bulge": {"depth": 0.004, "footprint": 0.9}}, "c.yaml")
+    with pytest.raises(ParcelfitError, match=r"bulge\.depth"):
+        parse_consignment({**good, "bulge": {"depth": 0.2, "footprint": 0.3}}, "c.yaml")
+    soft = {**good, "content": {"kind": "soft", "size": [0.165, 0.125, 0.02]}}
+    with pytest.raises(ParcelfitError, match="a bulge needs a rigid content"):
+        parse_consignment(soft, "c.yaml")
+
+    from parcelfit.sim.mujoco.scene import build_scene
+
+    rig = load_rig("E3")
+    flat = load_consignment("BW")
+    bulged = dataclasses.replace(flat, bulge=(0.004, 0.3))
+    params = resolve(flat.content_kind, si_values={})
+
+    def height(c: object) -> float:
+        import re
+
+        xml = build_scene(rig, c, params, 1).xml  # type: ignore[arg-type]
+        m = re.search(r'<flexcomp name="packaging"[^>]* pos="[^ ]+ [^ ]+ ([^"]+)"', xml)
+        assert m is not None
+        return float(m[1])
+
+    assert height(bulged) - height(flat) == pytest.approx(0.004)
+
+
+def test_impratio_reaches_the_model_and_is_checked():
+    from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
+
+    rig, cons = load_rig("E3"), load_consignment("KPBW")
+    params = resolve(cons.content_kind, si_values={})
+    assert 'impratio="1"' in build_scene(rig, cons, params, 1, SceneOptions()).xml
+    assert 'impratio="10"' in build_scene(rig, cons, params, 1, SceneOptions(impratio=10)).xml
+    with pytest.raises(ParcelfitError, match="impratio must be at least 1"):
+        SceneOptions(impratio=0.5)

@@ -7,6 +7,12 @@ A consignment file (YAML, SI units)::
     mass: 0.140                      # whole consignment [kg]
     outer: [0.275, 0.20, 0.02]       # packed outer length, width, height [m]
     content: {kind: rigid, size: [0.165, 0.125, 0.02]}   # kind: rigid | soft; size L, W, H [m]
+    bulge: {depth: 0.004, footprint: 0.3}   # optional: the bottom bulges under the content
+
+``bulge`` (optional, rigid contents): a bubble mailer's bottom that bulges below the content's
+face by ``depth`` [m] over a centred patch of ``footprint`` times the outer length and width
+(`parcelfit.sim.mujoco.shell`), so that the parcel rides on that patch. Without it the bottom is
+flat under the whole content.
 
 The content must fit inside the outer dimensions (length and width strictly smaller, height not
 larger). The packaging's mass is a simulation parameter (m_Pa); the content gets the rest.
@@ -38,6 +44,7 @@ class Consignment:
     content_kind: str
     content: tuple[float, float, float]
     source: str = ""
+    bulge: tuple[float, float] | None = None  # depth [m], footprint [-] (see the module docstring)
 
 
 def _size(value: Any) -> tuple[float, float, float]:
@@ -70,6 +77,13 @@ class ContentSection(FileModel):
     size: _Size
 
 
+class BulgeSection(FileModel):
+    """``bulge``: depth [m] and footprint (fraction of the outer length and width)."""
+
+    depth: Annotated[float, Number(unit="m", ge=0.0005, le=0.05)]
+    footprint: Annotated[float, Number(ge=0.05, le=0.95)]
+
+
 class ConsignmentFile(FileModel):
     """A consignment file as written (see the module docstring): mass [kg], sizes [m]."""
 
@@ -78,6 +92,7 @@ class ConsignmentFile(FileModel):
     mass: Annotated[float, Number(unit="kg", ge=0.001, le=100)]
     outer: _Size
     content: ContentSection
+    bulge: BulgeSection | None = None
 
     @model_validator(mode="after")
     def _content_fits(self) -> ConsignmentFile:
@@ -88,6 +103,18 @@ class ConsignmentFile(FileModel):
                 where="content.size",
                 fix="make the content shorter and narrower than the packed parcel",
             )
+        if self.bulge is not None:
+            f = self.bulge.footprint
+            if self.content.kind != RIGID:
+                raise ParcelfitError(
+                    "a bulge needs a rigid content", where="bulge", fix="remove the bulge"
+                )
+            if not (f * outer[0] < inner[0] and f * outer[1] < inner[1]):
+                raise ParcelfitError(
+                    f"the bulge's patch ({f} of the outer size) is not smaller than the content",
+                    where="bulge.footprint",
+                    fix=f"use a footprint below {min(inner[0] / outer[0], inner[1] / outer[1]):.2f}",
+                )
         return self
 
 
@@ -103,6 +130,7 @@ def parse_consignment(doc: Any, file: str) -> Consignment:
         content_kind=f.content.kind,
         content=f.content.size,
         source=file,
+        bulge=None if f.bulge is None else (f.bulge.depth, f.bulge.footprint),
     )
 
 

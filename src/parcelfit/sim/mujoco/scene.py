@@ -63,6 +63,10 @@ class SceneOptions:
     # as given. With a cap, the shell uses the equivalent plate of the same bending stiffness
     # (`equivalent_plate`), whose stiff membrane modes no longer make the run depend on the step
     membrane_cap: float | None = None
+    # MuJoCo's ratio of frictional to normal constraint impedance: at 1 a contact below its
+    # friction limit still creeps (a corner held on a guide plate slid at 30-80 mm/s); larger
+    # values make friction as stiff as the normal contact, the sliding limit unchanged
+    impratio: float = 1.0
     start_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)  # dx [m], dy [m], dheading [deg]
     start_speed_factor: float = 1.0  # the parcel's initial speed as a fraction of its surface's
 
@@ -73,6 +77,8 @@ class SceneOptions:
             raise ParcelfitError(
                 f"contact_frequency must be positive [rad/s], got {self.contact_frequency}"
             )
+        if not self.impratio >= 1:
+            raise ParcelfitError(f"impratio must be at least 1, got {self.impratio}")
         if self.membrane_cap is not None and not self.membrane_cap > 0:
             raise ParcelfitError(
                 f"membrane_cap must be positive [N/m] or None, got {self.membrane_cap}"
@@ -222,7 +228,11 @@ def build_scene(
     half_height = cH / 2 + r + CONTACT_GAP
     soft = consignment.content_kind == SOFT
     shell = pillow_shell(
-        (L, W), (cL, cW), half_height, opt.soft_shell_spacing if soft else opt.spacing
+        (L, W),
+        (cL, cW),
+        half_height,
+        opt.soft_shell_spacing if soft else opt.spacing,
+        consignment.bulge,
     )
     nv = len(shell.points)
     m_pa = p["m_Pa"]
@@ -291,7 +301,7 @@ def build_scene(
     dx, dy, dh = opt.start_offset
     x0, y0 = rig.start.position[0] + dx, rig.start.position[1] + dy
     heading = rig.start.heading + dh
-    zc = start_surface.top + half_height + r + CONTACT_GAP
+    zc = start_surface.top + half_height + shell.bulge_depth + r + CONTACT_GAP
     q = _quat(heading)
     v_start = (
         speeds[start_surface.drive]
@@ -337,7 +347,7 @@ def build_scene(
     xml = f"""<mujoco model="{rig.name}-{consignment.name}">
 <compiler angle="degree"/>
 <option timestep="{_f(dt)}" integrator="discrete" solver="{opt.solver}" cone="elliptic"
-        iterations="{opt.iterations}" tolerance="{_f(opt.tolerance)}"/>
+        impratio="{_f(opt.impratio)}" iterations="{opt.iterations}" tolerance="{_f(opt.tolerance)}"/>
 <size memory="256M"/>
 <visual><global offwidth="1280" offheight="720"/></visual>
 <worldbody>

@@ -10,6 +10,16 @@ seam at height 0. Grid lines lie exactly on the content's edges, so the shell ne
 the content (a shell that does makes the parcel lag the belt). The spacing of the grid is the
 mesh resolution: each of the three bands (rim, content, rim) per axis is divided into the
 number of cells closest to band width / spacing (at least one).
+
+A bubble mailer's bottom may **bulge** under the content (``bulge = (d, f)``): the bottom sheet
+over the content is lowered by
+
+    b(x, y) = d * min(g(x; c_L, f L), g(y; c_W, f W)),   g(s; c, a) = clip((c/2 - |s|) / ((c - a)/2), 0, 1)
+
+flat at depth d over a centred patch of f times the outer length and width, rising linearly to
+the content's edges. The belt then carries the parcel on that patch (its `bottom_face`), so a
+spin is braked by a friction torque about f times smaller than a flat face's. Grid lines lie on
+the patch's edges too (five bands per axis).
 """
 
 from __future__ import annotations
@@ -21,12 +31,19 @@ import numpy as np
 from parcelfit.errors import ParcelfitError
 
 
-def _axis(outer: float, inner: float, spacing: float) -> np.ndarray:
-    rim = (outer - inner) / 2
-    n_rim = max(1, round(rim / spacing))
-    n_mid = max(1, round(inner / spacing))
-    left = np.linspace(-outer / 2, -inner / 2, n_rim + 1)[:-1]
-    mid = np.linspace(-inner / 2, inner / 2, n_mid + 1)
+def _band(a: float, b: float, spacing: float) -> np.ndarray:
+    """Grid lines from a to b (b excluded), about ``spacing`` apart, at least one cell."""
+    return np.linspace(a, b, max(1, round((b - a) / spacing)) + 1)[:-1]
+
+
+def _axis(outer: float, inner: float, spacing: float, patch: float | None = None) -> np.ndarray:
+    left = _band(-outer / 2, -inner / 2, spacing)
+    if patch is None:
+        mid = np.append(_band(-inner / 2, inner / 2, spacing), inner / 2)
+    else:
+        side = _band(-inner / 2, -patch / 2, spacing)
+        centre = np.append(_band(-patch / 2, patch / 2, spacing), patch / 2)
+        mid = np.concatenate([side, centre, -side[::-1]])
     return np.concatenate([left, mid, -left[::-1]])
 
 
@@ -40,6 +57,7 @@ class ShellMesh:
     bottom_face: np.ndarray  # bottom-sheet vertices over the content footprint (the flat face)
     seam: np.ndarray  # boundary ring
     half_height: float  # H [m]
+    bulge_depth: float  # how far the bottom's patch lies below the content's face [m]
     bottom_triangles: np.ndarray  # indices into triangles of the bottom sheet
 
     @property
@@ -51,21 +69,43 @@ class ShellMesh:
 
 
 def pillow_shell(
-    outer: tuple[float, float], content: tuple[float, float], half_height: float, spacing: float
+    outer: tuple[float, float],
+    content: tuple[float, float],
+    half_height: float,
+    spacing: float,
+    bulge: tuple[float, float] | None = None,
 ) -> ShellMesh:
-    """Build the pillow shell for outer (L, W) and content (c_L, c_W) footprints [m]."""
+    """Build the pillow shell for outer (L, W) and content (c_L, c_W) footprints [m], with the
+    bottom bulging by depth d [m] over a patch of f times the outer size when ``bulge = (d, f)``
+    (module docstring)."""
     (L, W), (cL, cW) = outer, content
     if not (0 < cL < L and 0 < cW < W):
         raise ParcelfitError(f"content {content} must be smaller than the outer footprint {outer}")
     if spacing <= 0 or spacing > max(L, W):
         raise ParcelfitError(f"mesh spacing must be in (0, {max(L, W)}] m, got {spacing}")
-    xs, ys = _axis(L, cL, spacing), _axis(W, cW, spacing)
+    depth, (pL, pW) = 0.0, (None, None)
+    if bulge is not None:
+        depth, f = bulge
+        pL, pW = f * L, f * W
+        if not (depth > 0 and 0 < pL < cL and 0 < pW < cW):
+            raise ParcelfitError(
+                f"bulge {bulge}: the depth must be positive and the patch ({pL:.3f} x {pW:.3f} m) "
+                f"smaller than the content {content}"
+            )
+    xs, ys = _axis(L, cL, spacing, pL), _axis(W, cW, spacing, pW)
     nx, ny = len(xs), len(ys)
 
     def height(x: float, y: float) -> float:
         fx = np.clip((L / 2 - abs(x)) / ((L - cL) / 2), 0, 1)
         fy = np.clip((W / 2 - abs(y)) / ((W - cW) / 2), 0, 1)
         return half_height * min(fx, fy)
+
+    def sag(x: float, y: float) -> float:  # the bulge below the content (0 without one)
+        if pL is None or pW is None:
+            return 0.0
+        gx = np.clip((cL / 2 - abs(x)) / ((cL - pL) / 2), 0, 1)
+        gy = np.clip((cW / 2 - abs(y)) / ((cW - pW) / 2), 0, 1)
+        return depth * min(gx, gy)
 
     pts: list[list[float]] = []
     top: dict[tuple[int, int], int] = {}
@@ -80,7 +120,7 @@ def pillow_shell(
                 bot[i, j] = top[i, j]
             else:
                 bot[i, j] = len(pts)
-                pts.append([x, y, -height(x, y)])
+                pts.append([x, y, -height(x, y) - sag(x, y)])
     tris: list[int] = []
     bottom_tris: list[int] = []
     for i in range(nx - 1):
@@ -102,6 +142,16 @@ def pillow_shell(
         for j in range(ny)
         if abs(xs[i]) <= cL / 2 + eps and abs(ys[j]) <= cW / 2 + eps
     ]
+    face = (
+        inside
+        if pL is None or pW is None
+        else [
+            (i, j)
+            for i in range(nx)
+            for j in range(ny)
+            if abs(xs[i]) <= pL / 2 + eps and abs(ys[j]) <= pW / 2 + eps
+        ]
+    )
     seam = sorted(
         {top[i, j] for i in range(nx) for j in range(ny) if i in (0, nx - 1) or j in (0, ny - 1)}
     )
@@ -109,8 +159,9 @@ def pillow_shell(
         points=points,
         triangles=np.asarray(tris, dtype=int).reshape(-1, 3),
         top=np.array([top[k] for k in inside]),
-        bottom_face=np.array([bot[k] for k in inside]),
+        bottom_face=np.array([bot[k] for k in face]),
         seam=np.array(seam),
         half_height=half_height,
+        bulge_depth=depth,
         bottom_triangles=np.array(bottom_tris),
     )
