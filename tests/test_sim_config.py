@@ -285,12 +285,14 @@ def test_bulge_lowers_a_flat_patch_under_the_content_and_leaves_other_shells_alo
     # the bottom between the patch and the content's edge rises linearly to -h at the edge
     pts = bulged.points
     bottom = pts[pts[:, 2] < -h + 1e-12]
-    x_edge = bottom[np.isclose(np.abs(bottom[:, 0]), content[0] / 2) & (np.abs(bottom[:, 1]) < 0.01)]
+    x_edge = bottom[
+        np.isclose(np.abs(bottom[:, 0]), content[0] / 2) & (np.abs(bottom[:, 1]) < 0.01)
+    ]
     assert x_edge.size and np.allclose(x_edge[:, 2], -h)
     # top sheet and seam untouched
     assert np.allclose(pts[bulged.top][:, 2], h) and np.allclose(pts[bulged.seam][:, 2], 0)
     assert bulged.face_contacts < flat.face_contacts
-    with pytest.raises(ParcelfitError, match="patch .* smaller than the content"):
+    with pytest.raises(ParcelfitError, match=r"patch .* smaller than the content"):
         pillow_shell(outer, content, h, 0.03, (d, 0.9))
 
 

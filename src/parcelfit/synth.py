@@ -342,9 +342,7 @@ class TwinSettingsSection(FileModel):
     real_soft_spacing: Annotated[float, Number(unit="m", ge=0.003, le=0.2)] = (
         TwinSettings.real_soft_spacing
     )
-    real_timestep: Annotated[float, Number(unit="s", ge=1e-5, le=0.01)] = (
-        TwinSettings.real_timestep
-    )
+    real_timestep: Annotated[float, Number(unit="s", ge=1e-5, le=0.01)] = TwinSettings.real_timestep
 
 
 _Truth = Annotated[

@@ -133,7 +133,9 @@ def make_simulator(config: SimulatorConfig) -> Simulator:
         assert config.rig is not None and config.consignment is not None  # checked on creation
         rig = load_rig(config.rig)
         cons = load_consignment(config.consignment)
-        numerics = {k: float(config[k]) for k in ("timestep", "spacing", "membrane_cap") if k in config}
+        numerics = {
+            k: float(config[k]) for k in ("timestep", "spacing", "membrane_cap") if k in config
+        }
         options = SimOptions(
             scene=SceneOptions(**numerics),
             wall_limit=DEFAULT_WALL_LIMIT if config.wall_limit is None else config.wall_limit,
