@@ -58,6 +58,16 @@ TYPES = ("BW", "KPBW", "KP", "PB")
 COLOURS = {"BW": "tab:orange", "KPBW": "tab:blue", "KP": "tab:green", "PB": "tab:red"}
 
 
+def _value(text: str) -> float | str:
+    """A scene option's value: a number (``1/1200`` reads as a fraction) where it reads as one,
+    else the text."""
+    num, slash, den = text.partition("/")
+    try:
+        return float(num) / float(den) if slash else float(text)
+    except ValueError:
+        return text
+
+
 def _deg(x: float) -> float:
     return math.degrees(x)
 
@@ -164,7 +174,7 @@ def main(argv: list[str] | None = None) -> int:
         nargs="*",
         default=[],
         metavar="KEY=VALUE",
-        help="scene options other than the defaults (e.g. impratio=10 timestep=0.000833)",
+        help="scene options other than the defaults (e.g. impratio=10 timestep=1/2400)",
     )
     ap.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE", help="catalogue units")
     ap.add_argument("--bulge", nargs="*", default=[], metavar="TYPE=FOOTPRINT")
@@ -173,7 +183,7 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "figures").mkdir(exist_ok=True)
     rigs = [load_rig(r) for r in args.rigs]  # bundled names or rig files
-    scene = SceneOptions(**{k: float(v) for k, v in (a.split("=", 1) for a in args.scene)})
+    scene = SceneOptions(**{k: _value(v) for k, v in (a.split("=", 1) for a in args.scene)})
     bulges = {k.upper().replace("/", ""): v for k, v in parse_assignments(args.bulge).items()}
     consignments = {
         t: replace(c, bulge=(args.bulge_depth, bulges[t])) if t in bulges else c

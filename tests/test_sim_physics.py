@@ -165,3 +165,22 @@ def test_soft_polybag_runs_briefly():
     res = MujocoSimulator(SimOptions(duration=0.15)).run({}, TestCase("E3", "PB", 1))
     assert res.status is SimStatus.OK
     assert res.run.trajectory.x[-1] > res.run.trajectory.x[0]
+
+
+@pytest.mark.parametrize("name", ["BW", "KP"])
+def test_a_spinning_parcel_keeps_its_spin_in_free_flight_and_stops_as_a_rigid_body(name):
+    """With a quadratic shell the parcel keeps a 10 rad/s spin in free flight (no force acts on
+    it) and the belt stops it after about the rigid Coulomb turn; the default shell (a degree of
+    freedom per vertex) at 1/600 s loses most of it (docs/spin-check.md)."""
+    from parcelfit.sim.mujoco.spin import spin_test
+
+    cons = load_consignment(name)
+    quadratic = SceneOptions(shell_dof="quadratic")
+    free = spin_test(cons, free=True, options=quadratic)
+    assert free.retained > 0.9
+    assert free.turn == pytest.approx(math.radians(57.3) * free.retained, rel=0.1)  # ~w0 * 0.1 s
+    if name == "BW":  # the estimate counts KP's interpolation nodes' masses at the box corners
+        down = spin_test(cons, options=quadratic)
+        assert down.coulomb_turn is not None
+        assert down.turn == pytest.approx(down.coulomb_turn, rel=0.15)
+    assert spin_test(cons, free=True).retained < 0.5  # the default shell, 1/600 s

@@ -39,7 +39,7 @@ class Indentation:
     n_face: int
 
 
-def _plate_rig(material: str) -> Rig:
+def plate_rig(material: str) -> Rig:
     return parse_rig(
         {
             "name": "plate",
@@ -93,7 +93,7 @@ def indentation_test(
             "the indentation test presses a rigid content", fix="use a rigid-content consignment"
         )
     full = resolve(consignment.content_kind, si_values=params or {})
-    scene = build_scene(_plate_rig(material), consignment, full, 1, options)
+    scene = build_scene(plate_rig(material), consignment, full, 1, options)
     model = mujoco.MjModel.from_xml_string(scene.xml)
     data = mujoco.MjData(model)
     plate = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "plate")

@@ -67,6 +67,12 @@ class SceneOptions:
     # friction limit still creeps (a corner held on a guide plate slid at 30-80 mm/s); larger
     # values make friction as stiff as the normal contact, the sliding limit unchanged
     impratio: float = 1.0
+    # how MuJoCo moves the shell's vertices: "full" (each vertex its own 3 degrees of freedom) or
+    # interpolated from a grid of nodes over the parcel's box, "quadratic" (3 x 3 x 3 nodes) or
+    # "trilinear" (2 x 2 x 2); "auto": quadratic around a rigid content, full around a soft one.
+    # A full shell loses most of its spin at 1/600 s (spin.py, the README's "Spin"); the contact
+    # stiffness mapping (contact.py) is not yet adapted to interpolated shells
+    shell_dof: str = "full"
     start_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)  # dx [m], dy [m], dheading [deg]
     start_speed_factor: float = 1.0  # the parcel's initial speed as a fraction of its surface's
 
@@ -76,6 +82,10 @@ class SceneOptions:
         if not self.contact_frequency > 0:
             raise ParcelfitError(
                 f"contact_frequency must be positive [rad/s], got {self.contact_frequency}"
+            )
+        if self.shell_dof not in ("auto", "full", "quadratic", "trilinear"):
+            raise ParcelfitError(
+                f"shell_dof must be auto, full, quadratic or trilinear, got {self.shell_dof!r}"
             )
         if not self.impratio >= 1:
             raise ParcelfitError(f"impratio must be at least 1, got {self.impratio}")
@@ -315,9 +325,11 @@ def build_scene(
     rho_pa = m_pa / (2 * L * W * t_pa)
     beta_pa = 2 * p["zeta_Pa"] / bending_omega(young_pa, p["nu_Pa"], t_pa, rho_pa, L)
     points = " ".join(_f(v) for v in shell.points.ravel())
+    shell_dof = opt.shell_dof if opt.shell_dof != "auto" else ("full" if soft else "quadratic")
+    dof = "" if shell_dof == "full" else f' dof="{shell_dof}"'
     elements = " ".join(str(i) for i in shell.triangles.ravel())
     body.append(
-        f'<flexcomp name="packaging" type="direct" dim="2" pos="{_f(x0)} {_f(y0)} {_f(zc)}" quat="{q}" '
+        f'<flexcomp name="packaging" type="direct" dim="2"{dof} pos="{_f(x0)} {_f(y0)} {_f(zc)}" quat="{q}" '
         f'radius="{_f(r)}" mass="{_f(m_pa)}" point="{points}" element="{elements}" rgba="0.85 0.75 0.55 0.8">'
         f'<contact contype="3" conaffinity="3" condim="3" selfcollide="none" priority="0"/>'
         f'<elasticity young="{_f(young_pa)}" poisson="{_f(p["nu_Pa"])}" thickness="{_f(t_pa)}" '

@@ -1,0 +1,152 @@
+"""Virtual spin tests: does a parcel model keep and lose its spin as a body should?
+
+A parcel that a guide plate sets spinning turns until friction under it has taken its spin
+away. Two checks on a parcel at rest on a still plate of belt material (default parameters):
+
+**Free spin** (gravity off, the parcel lifted clear of the plate): the parcel is given the rigid
+angular velocity w0 about the vertical through its content's centre (every vertex and node
+v = w0 x r). No force acts on it, so its angular momentum must stay: the check reports the
+fraction of w0 its content still has after ``duration`` seconds (1 for a faithful model).
+
+**Spin-down on the plate** (gravity on): the same kick, and the parcel turns until the belt's
+friction has stopped it. For a rigid body with Coulomb friction and the contact forces f_i at
+distances r_i from the centre that the model itself carries at rest, the turn is
+
+    theta = I_z w0^2 / (2 mu sum_i f_i r_i)
+
+(I_z: the parcel's moment of inertia about the vertical through its centre, mu: the belt
+friction coefficient). The check reports the model's turn beside this estimate.
+
+Measured with these checks (docs/spin-check.md): the packaging shell with a degree of freedom per
+vertex (`SceneOptions.shell_dof` "full") loses most of its spin in free flight at the default
+time step, which brakes every spin the plate starts; a shell whose vertices follow a quadratic
+field over its box ("quadratic") keeps it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from parcelfit.errors import ParcelfitError
+from parcelfit.sim.mujoco.consignment import Consignment
+from parcelfit.sim.mujoco.indentation import plate_rig
+from parcelfit.sim.mujoco.mjlog import CountedWarnings
+from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
+from parcelfit.sim.params import resolve
+
+
+@dataclass(frozen=True)
+class SpinTest:
+    """Outcome of one spin test: the kick w0 [rad/s], the content's angular velocity left at the
+    end [rad/s] and its fraction of w0, the turn [rad] and the time it took [s], and for the
+    spin-down the rigid Coulomb estimate of the turn [rad] (None in free flight)."""
+
+    w0: float
+    w_end: float
+    retained: float
+    turn: float
+    time: float
+    coulomb_turn: float | None
+
+
+def _yaw(quat: np.ndarray) -> float:
+    w, x, y, z = quat
+    return math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+
+
+def _add_velocity(
+    model: mujoco.MjModel, data: mujoco.MjData, linear: np.ndarray, w: float, centre: np.ndarray
+) -> None:
+    """Add the rigid velocity ``linear + w e_z x (x - centre)`` to every free and slide joint."""
+    spin = np.array([0.0, 0.0, w])
+    for j in range(model.njnt):
+        a = model.jnt_dofadr[j]
+        if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE:
+            body = model.jnt_bodyid[j]
+            data.qvel[a : a + 3] += linear + np.cross(spin, data.xpos[body] - centre)
+            data.qvel[a + 3 : a + 6] += data.xmat[body].reshape(3, 3).T @ spin
+        elif model.jnt_type[j] == mujoco.mjtJoint.mjJNT_SLIDE:
+            body = model.jnt_bodyid[j]
+            v = linear + np.cross(spin, data.xpos[body] - centre)
+            data.qvel[a] += float(np.dot(data.xaxis[j], v))
+    mujoco.mj_forward(model, data)
+
+
+def spin_test(
+    consignment: Consignment,
+    *,
+    w0: float = 10.0,
+    free: bool = False,
+    duration: float = 0.1,
+    params: Mapping[str, float] | None = None,
+    options: SceneOptions | None = None,
+    settle: float = 0.3,
+) -> SpinTest:
+    """Kick the parcel (settled ``settle`` s on a still belt-material plate) with w0 [rad/s]
+    about the vertical and follow its content: in free flight (``free``: gravity off, lifted at
+    0.3 m/s) for ``duration`` s, else until it stops turning (at most 2 s). SI ``params``
+    override the defaults."""
+    if consignment.content_kind != "rigid":
+        raise ParcelfitError("the spin test needs a rigid content (it follows the content body)")
+    with CountedWarnings():  # MuJoCo's per-step notes (e.g. on interpolated shells) counted
+        return _spin_test(consignment, w0, free, duration, params, options, settle)
+
+
+def _spin_test(
+    consignment: Consignment,
+    w0: float,
+    free: bool,
+    duration: float,
+    params: Mapping[str, float] | None,
+    options: SceneOptions | None,
+    settle: float,
+) -> SpinTest:
+    full = resolve(consignment.content_kind, si_values=dict(params or {}))
+    rig = plate_rig("belt")
+    scene = build_scene(rig, consignment, full, 1, options)
+    model = mujoco.MjModel.from_xml_string(scene.xml)
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    for _ in range(round(settle / model.opt.timestep)):
+        mujoco.mj_step(model, data)
+    content = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "content")
+    centre = data.xpos[content].copy()
+    coulomb = None
+    if not free:
+        belt = [g for g in range(model.ngeom) if model.geom(g).name.startswith("plate")]
+        mu = float(model.geom_friction[belt[0], 0])
+        moment = 0.0
+        for i in range(data.ncon):
+            if data.contact[i].geom[0] in belt or data.contact[i].geom[1] in belt:
+                f = np.zeros(6)
+                mujoco.mj_contactForce(model, data, i, f)
+                moment += f[0] * float(np.hypot(*(data.contact[i].pos - centre)[:2]))
+        inertia = model.body_inertia[content] @ (data.xmat[content].reshape(3, 3)[2] ** 2)
+        for b in range(1, model.nbody):
+            if b != content:
+                inertia += model.body_mass[b] * float(np.sum((data.xpos[b] - centre)[:2] ** 2))
+        coulomb = inertia * w0**2 / (2 * mu * moment) if moment > 0 else None
+    else:
+        model.opt.gravity[:] = 0.0
+    _add_velocity(model, data, np.array([0.0, 0.0, 0.3 if free else 0.0]), w0, centre)
+    prev = _yaw(data.xquat[content])
+    turn, t = 0.0, 0.0
+    end = duration if free else 2.0
+    while t < end:
+        mujoco.mj_step(model, data)
+        t += model.opt.timestep
+        yaw = _yaw(data.xquat[content])
+        turn += (yaw - prev + math.pi) % (2 * math.pi) - math.pi
+        prev = yaw
+        if not free and t > 0.01 and abs(data.cvel[content][2]) < 0.01:
+            break
+    w_end = float(data.cvel[content][2])
+    return SpinTest(w0, w_end, w_end / w0, turn, t, coulomb)
+
+
+__all__ = ["SpinTest", "spin_test"]
