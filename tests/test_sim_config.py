@@ -341,3 +341,31 @@ def test_impratio_reaches_the_model_and_is_checked():
     assert 'impratio="10"' in build_scene(rig, cons, params, 1, SceneOptions(impratio=10)).xml
     with pytest.raises(ParcelfitError, match="impratio must be at least 1"):
         SceneOptions(impratio=0.5)
+
+
+def test_an_interpolated_shells_nodes_span_the_parcels_own_box():
+    """MuJoCo lays an interpolated shell's nodes on a box aligned with the flexcomp's parent
+    body; the scene puts the shell in a static frame turned like the parcel (E3 starts at 30
+    degrees), so the nodes span the parcel's length and width, not a world-aligned box."""
+    import math
+
+    import mujoco
+    import numpy as np
+
+    from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
+
+    rig, cons = load_rig("E3"), load_consignment("KPBW")
+    params = resolve(cons.content_kind, si_values={})
+    scene = build_scene(rig, cons, params, 1, SceneOptions(shell_dof="quadratic"))
+    model = mujoco.MjModel.from_xml_string(scene.xml)
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    adr, num = model.flex_nodeadr[0], model.flex_nodenum[0]
+    assert num == 27
+    nodes = np.array([data.xpos[b][:2] for b in model.flex_nodebodyid[adr : adr + num]])
+    h = math.radians(rig.start.heading)
+    along = nodes @ np.array([math.cos(h), math.sin(h)])
+    across = nodes @ np.array([-math.sin(h), math.cos(h)])
+    assert np.ptp(along) == pytest.approx(cons.outer[0], abs=1e-6)
+    assert np.ptp(across) == pytest.approx(cons.outer[1], abs=1e-6)
+    assert "packaging_frame" not in build_scene(rig, cons, params, 1).xml  # the default shell

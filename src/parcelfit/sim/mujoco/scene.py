@@ -328,12 +328,18 @@ def build_scene(
     shell_dof = opt.shell_dof if opt.shell_dof != "auto" else ("full" if soft else "quadratic")
     dof = "" if shell_dof == "full" else f' dof="{shell_dof}"'
     elements = " ".join(str(i) for i in shell.triangles.ravel())
+    # an interpolated shell's nodes lie on a box aligned with the axes of the flexcomp's parent
+    # body: a static frame turned like the parcel keeps that box aligned with the parcel
+    frame_open, frame_close, place = "", "", f'pos="{_f(x0)} {_f(y0)} {_f(zc)}" quat="{q}"'
+    if shell_dof != "full":
+        frame_open = f'<body name="packaging_frame" {place}>'
+        frame_close, place = "</body>", 'pos="0 0 0" quat="1 0 0 0"'
     body.append(
-        f'<flexcomp name="packaging" type="direct" dim="2"{dof} pos="{_f(x0)} {_f(y0)} {_f(zc)}" quat="{q}" '
+        f'{frame_open}<flexcomp name="packaging" type="direct" dim="2"{dof} {place} '
         f'radius="{_f(r)}" mass="{_f(m_pa)}" point="{points}" element="{elements}" rgba="0.85 0.75 0.55 0.8">'
         f'<contact contype="3" conaffinity="3" condim="3" selfcollide="none" priority="0"/>'
         f'<elasticity young="{_f(young_pa)}" poisson="{_f(p["nu_Pa"])}" thickness="{_f(t_pa)}" '
-        f'damping="{_f(beta_pa)}" elastic2d="both"/></flexcomp>'
+        f'damping="{_f(beta_pa)}" elastic2d="both"/></flexcomp>{frame_close}'
     )
     content_friction = f'friction="{_f(p["mu_CoPa"])} 0.005 0.0001"'
     if soft:
