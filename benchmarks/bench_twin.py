@@ -2,7 +2,7 @@
 
     python benchmarks/bench_twin.py [--out bench-twin] [--workers 2] [--truths 3]
                                     [--placements 2] [--budget 48] [--setups published,joint]
-                                    [--real-timestep 0.000833]
+                                    [--real-timestep 0.000417]
 
 For each of several hidden truths (other than the bundled twin's), the benchmark makes a twin
 dataset with parcelfit's MuJoCo model (E3/KPBW at speed settings 1 and 2, E1/KPBW at 1 and 3,
@@ -299,9 +299,9 @@ def main() -> None:
     ap.add_argument(
         "--real-timestep",
         type=float,
-        default=1 / 1200,
-        help="time step [s] of the twin's 'real' runs (default 1/1200 s: half the model's "
-        "1/600 s, so the 'real' side is the more converged one)",
+        default=1 / 2400,
+        help="time step [s] of the twin's 'real' runs (default 1/2400 s: half the model's "
+        "1/1200 s, so the 'real' side is the more converged one)",
     )
     args = ap.parse_args()
 

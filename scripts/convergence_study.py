@@ -57,12 +57,12 @@ def main() -> None:
         "",
     ]
     blocks = [
-        ("KPBW", "spacing", [0.015, 0.02, 0.03, 0.04, 0.05], {"timestep": 1 / 600}),
-        ("KPBW", "timestep", [1 / 2400, 1 / 1200, 1 / 600, 1 / 400], {"spacing": 0.03}),
-        ("PB", "soft_shell_spacing", [0.03, 0.04, 0.05], {"timestep": 1 / 600}),
+        ("KPBW", "spacing", [0.015, 0.02, 0.03, 0.04, 0.05], {"timestep": 1 / 1200}),
+        ("KPBW", "timestep", [1 / 4800, 1 / 2400, 1 / 1200, 1 / 600], {"spacing": 0.03}),
+        ("PB", "soft_shell_spacing", [0.03, 0.04, 0.05], {"timestep": 1 / 1200}),
     ]
     if args.quick:
-        blocks = [("KPBW", "spacing", [0.03, 0.05], {"timestep": 1 / 600})]
+        blocks = [("KPBW", "spacing", [0.03, 0.05], {"timestep": 1 / 1200})]
     for cons, key, values, fixed in blocks:
         case = TestCase("E3", cons, 1)
         results = [(v, *run(case, **{key: v}, **fixed)) for v in values]

@@ -314,7 +314,7 @@ def test_consignment_bulge_is_checked_and_moves_the_parcel_up_by_its_depth():
     with pytest.raises(ParcelfitError, match="a bulge needs a rigid content"):
         parse_consignment(soft, "c.yaml")
 
-    from parcelfit.sim.mujoco.scene import build_scene
+    from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
 
     rig = load_rig("E3")
     flat = load_consignment("BW")
@@ -324,7 +324,8 @@ def test_consignment_bulge_is_checked_and_moves_the_parcel_up_by_its_depth():
     def height(c: object) -> float:
         import re
 
-        xml = build_scene(rig, c, params, 1).xml  # type: ignore[arg-type]
+        full = SceneOptions(shell_dof="full")  # the flexcomp itself carries the position
+        xml = build_scene(rig, c, params, 1, full).xml  # type: ignore[arg-type]
         m = re.search(r'<flexcomp name="packaging"[^>]* pos="[^ ]+ [^ ]+ ([^"]+)"', xml)
         assert m is not None
         return float(m[1])
@@ -368,4 +369,5 @@ def test_an_interpolated_shells_nodes_span_the_parcels_own_box():
     across = nodes @ np.array([-math.sin(h), math.cos(h)])
     assert np.ptp(along) == pytest.approx(cons.outer[0], abs=1e-6)
     assert np.ptp(across) == pytest.approx(cons.outer[1], abs=1e-6)
-    assert "packaging_frame" not in build_scene(rig, cons, params, 1).xml  # the default shell
+    full = SceneOptions(shell_dof="full")
+    assert "packaging_frame" not in build_scene(rig, cons, params, 1, full).xml

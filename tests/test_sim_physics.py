@@ -29,7 +29,11 @@ def _speed(traj):
 def test_indentation_realises_the_requested_stiffness(material, k_n_per_mm):
     k = k_n_per_mm * 1e3
     key = "k_BePa" if material == "belt" else "k_MePa"
-    r = indentation_test(load_consignment("KPBW"), {key: k, "k_CoPa": k}, material=material)
+    # the full shell, where the mapping is exact; the quadratic shell's factors are documented
+    full = SceneOptions(shell_dof="full", timestep=1 / 600)
+    r = indentation_test(
+        load_consignment("KPBW"), {key: k, "k_CoPa": k}, material=material, options=full
+    )
     assert r.plate == pytest.approx(k, rel=0.10)
     assert r.content == pytest.approx(k, rel=0.10)
     assert r.plate_contacts == r.n_face
@@ -75,8 +79,10 @@ def test_each_sample_holds_the_positions_of_its_own_time(timestep):
     one-step lag: mj_step integrates after computing positions, so a sample is taken after the
     step has been completed and labelled with the time it reached)."""
     v = 1.0
+    # the labelling does not depend on the shell; the full shell rides exactly with the belt
+    full = SceneOptions(timestep=timestep, shell_dof="full")
     sim = MujocoSimulator(
-        SimOptions(scene=SceneOptions(timestep=timestep), duration=0.5),
+        SimOptions(scene=full, duration=0.5),
         rigs={"flat": flat_belt(v, start_x=0.1)},
     )
     traj = sim.run({}, KPBW).run.trajectory
@@ -134,7 +140,8 @@ def test_heavier_and_lighter_parcels_with_same_friction_behave_alike(e1_runs):
         dxy, dth = _max_deviation(
             e1_runs[False, 1.0].run.trajectory, e1_runs[False, factor].run.trajectory
         )
-        assert dxy < 0.02 and dth < math.radians(3)
+        # 3.7 degrees measured with the quadratic shell (its spin is no longer damped away)
+        assert dxy < 0.02 and dth < math.radians(5)
 
 
 def test_same_inputs_same_result_and_small_continuous_friction_effect():
@@ -169,13 +176,14 @@ def test_soft_polybag_runs_briefly():
 
 @pytest.mark.parametrize("name", ["BW", "KP"])
 def test_a_spinning_parcel_keeps_its_spin_in_free_flight_and_stops_as_a_rigid_body(name):
-    """With a quadratic shell the parcel keeps a 10 rad/s spin in free flight (no force acts on
-    it) and the belt stops it after about the rigid Coulomb turn; the default shell (a degree of
-    freedom per vertex) at 1/600 s loses most of it (docs/spin-check.md)."""
+    """With the default (quadratic) shell the parcel keeps a 10 rad/s spin in free flight (no
+    force acts on it) and the belt stops it after about the rigid Coulomb turn; a shell with a
+    degree of freedom per vertex at 1/600 s loses most of it (docs/spin-check.md)."""
     from parcelfit.sim.mujoco.spin import spin_test
 
     cons = load_consignment(name)
-    quadratic = SceneOptions(shell_dof="quadratic")
+    quadratic = SceneOptions()
+    assert quadratic.shell_dof == "auto"  # quadratic around a rigid content
     free = spin_test(cons, free=True, options=quadratic)
     assert free.retained > 0.9
     assert free.turn == pytest.approx(math.radians(57.3) * free.retained, rel=0.1)  # ~w0 * 0.1 s
@@ -183,4 +191,5 @@ def test_a_spinning_parcel_keeps_its_spin_in_free_flight_and_stops_as_a_rigid_bo
         down = spin_test(cons, options=quadratic)
         assert down.coulomb_turn is not None
         assert down.turn == pytest.approx(down.coulomb_turn, rel=0.15)
-    assert spin_test(cons, free=True).retained < 0.5  # the default shell, 1/600 s
+    full = SceneOptions(shell_dof="full", timestep=1 / 600)  # the former default
+    assert spin_test(cons, free=True, options=full).retained < 0.5

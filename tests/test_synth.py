@@ -131,7 +131,7 @@ def test_an_interrupted_twin_dataset_resumes_from_its_cache(tmp_path, monkeypatc
 
 
 def test_the_twins_real_runs_take_their_own_time_step(tmp_path, monkeypatch):
-    """``real_timestep`` reaches the scene of every twin run (default: the model's 1/600 s), and a
+    """``real_timestep`` reaches the scene of every twin run (default: the model's 1/1200 s), and a
     spec outside [1e-5, 0.01] s is refused naming the key."""
     import pytest
 
@@ -150,7 +150,7 @@ def test_the_twins_real_runs_take_their_own_time_step(tmp_path, monkeypatch):
 
     monkeypatch.setattr(synth, "MujocoSimulator", Recording)
     for settings, step in (
-        (TwinSettings(), 1 / 600),
+        (TwinSettings(), 1 / 1200),
         (TwinSettings(real_timestep=1 / 2400), 1 / 2400),
     ):
         job = synth.TwinJob(

@@ -14,11 +14,9 @@ experiments do (method.md sections 2 and 3):
   own meshes (30 mm is within about 5 mm of the 15 mm reference in docs/convergence.md). The
   former default, 20 mm, was the outlier of that study on the earlier E3 layout (22 mm off the
   reference) and biased every calibration against the twin. The time step is ``real_timestep``
-  (default the model's, 1/600 s). At 1/600 s the model is not converged in transit time on E3
-  (a parcel that catches on the lead-in arrives 0.3-0.4 s later than at 1/2400 s,
-  docs/timestep-convergence.md): with the default the twin is consistent with the model there,
-  not finer than it; a finer ``real_timestep`` lets the twin expose that step error to a
-  calibration (a bias-free twin needs a model that converges first). The remaining model-form
+  (default the model's, 1/1200 s): with the default the twin is consistent with the model, not
+  finer than it; a finer ``real_timestep`` (``benchmarks/bench_twin.py`` uses half the model's)
+  lets the twin expose the model's remaining step error to a calibration. The remaining model-form
   differences are the specimen, placement, speed and tracking variations above.
 
 The truth (parameters in the catalogue's units, and every setting above) is written beside the
@@ -77,7 +75,7 @@ class TwinSettings:
     heading_sd: float = 0.003
     real_spacing: float = 0.03
     real_soft_spacing: float = 0.04
-    real_timestep: float = 1.0 / 600.0
+    real_timestep: float = 1.0 / 1200.0
 
 
 def _specimen(

@@ -41,7 +41,9 @@ FREE_PLATE_BETA1 = 4.730  # first free-free beam mode, beta_1 L
 class SceneOptions:
     """Numerical settings of a scene (not calibrated): step [s], mesh spacing [m], etc."""
 
-    timestep: float = 1.0 / 600.0
+    # 1/1200 s: the quadratic shell's E3 ensemble is converged against 1/2400 s there, not at
+    # 1/600 s (docs/ensemble-convergence-E3-quadratic.md)
+    timestep: float = 1.0 / 1200.0
     spacing: float = 0.03  # shell grid spacing, rigid contents [m]
     soft_shell_spacing: float = 0.04  # shell grid spacing around a soft content [m]
     soft_spacing: float = 0.06  # vertex spacing of a soft content [m]
@@ -69,10 +71,9 @@ class SceneOptions:
     impratio: float = 1.0
     # how MuJoCo moves the shell's vertices: "full" (each vertex its own 3 degrees of freedom) or
     # interpolated from a grid of nodes over the parcel's box, "quadratic" (3 x 3 x 3 nodes) or
-    # "trilinear" (2 x 2 x 2); "auto": quadratic around a rigid content, full around a soft one.
-    # A full shell loses most of its spin at 1/600 s (spin.py, the README's "Spin"); the contact
-    # stiffness mapping (contact.py) is not yet adapted to interpolated shells
-    shell_dof: str = "full"
+    # "trilinear" (2 x 2 x 2); "auto": quadratic around a rigid content, full around a soft one
+    # (a full shell loses most of a spin: spin.py, the README's "Spin")
+    shell_dof: str = "auto"
     start_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)  # dx [m], dy [m], dheading [deg]
     start_speed_factor: float = 1.0  # the parcel's initial speed as a fraction of its surface's
 
