@@ -199,6 +199,15 @@ def test_parameter_rows_report_values_only_for_determined_parameters():
     row = ParameterRow("k_MePa", "-", 100, 1000, 700, 900, (400, 995), "lower bound")
     assert row.bound_text == "at least 400" and row.covers_truth
     assert ParameterRow("x", "-", 0, 1, 0.5, None).determined is None
+    # the verdict box tells a bound from "no value": a bounded parameter is listed with its bound
+    from parcelfit.report.html import _summary
+
+    rows = [
+        ParameterRow("E_Pa", "-", 200, 1600, 900, 1000, (210, 1590), "undetermined"),
+        ParameterRow("k_MePa", "-", 100, 1000, 700, 900, (400, 995), "lower bound"),
+    ]
+    summary = _summary(None, rows, None, True)
+    assert summary["bounded"] == "k_MePa (at least 400)" and summary["open"] == "E_Pa"
 
 
 def test_the_report_renders_the_stored_verdict_without_simulating_or_refitting(
