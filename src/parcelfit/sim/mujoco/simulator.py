@@ -305,16 +305,33 @@ class MujocoSimulator:
         return result, rec
 
 
-def _set_velocity(model: mujoco.MjModel, data: mujoco.MjData, v: np.ndarray) -> None:
-    """Give every degree of freedom the world velocity ``v`` [m/s] (free joints, slide joints)."""
-    mujoco.mj_forward(model, data)
+def add_rigid_velocity(
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    linear: np.ndarray,
+    w: float = 0.0,
+    centre: np.ndarray | None = None,
+) -> None:
+    """Add the rigid velocity ``linear + w e_z x (x - centre)`` [m/s, rad/s, m] to every free
+    and slide joint (content, shell vertices or nodes); positions must be computed."""
+    spin = np.array([0.0, 0.0, w])
+    c = np.zeros(3) if centre is None else centre
     for j in range(model.njnt):
         a = model.jnt_dofadr[j]
+        body = model.jnt_bodyid[j]
         if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE:
-            data.qvel[a : a + 3] = v
+            data.qvel[a : a + 3] += linear + np.cross(spin, data.xpos[body] - c)
+            data.qvel[a + 3 : a + 6] += data.xmat[body].reshape(3, 3).T @ spin
         elif model.jnt_type[j] == mujoco.mjtJoint.mjJNT_SLIDE:
-            data.qvel[a] = float(np.dot(data.xaxis[j], v))
+            v = linear + np.cross(spin, data.xpos[body] - c)
+            data.qvel[a] += float(np.dot(data.xaxis[j], v))
     mujoco.mj_forward(model, data)
+
+
+def _set_velocity(model: mujoco.MjModel, data: mujoco.MjData, v: np.ndarray) -> None:
+    """Give every degree of freedom (at rest) the world velocity ``v`` [m/s]."""
+    mujoco.mj_forward(model, data)
+    add_rigid_velocity(model, data, v)
 
 
 class _FrictionSwitch:

@@ -37,6 +37,7 @@ from parcelfit.sim.mujoco.consignment import Consignment
 from parcelfit.sim.mujoco.indentation import plate_rig
 from parcelfit.sim.mujoco.mjlog import CountedWarnings
 from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
+from parcelfit.sim.mujoco.simulator import add_rigid_velocity
 from parcelfit.sim.params import resolve
 
 
@@ -57,24 +58,6 @@ class SpinTest:
 def _yaw(quat: np.ndarray) -> float:
     w, x, y, z = quat
     return math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
-
-
-def _add_velocity(
-    model: mujoco.MjModel, data: mujoco.MjData, linear: np.ndarray, w: float, centre: np.ndarray
-) -> None:
-    """Add the rigid velocity ``linear + w e_z x (x - centre)`` to every free and slide joint."""
-    spin = np.array([0.0, 0.0, w])
-    for j in range(model.njnt):
-        a = model.jnt_dofadr[j]
-        if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE:
-            body = model.jnt_bodyid[j]
-            data.qvel[a : a + 3] += linear + np.cross(spin, data.xpos[body] - centre)
-            data.qvel[a + 3 : a + 6] += data.xmat[body].reshape(3, 3).T @ spin
-        elif model.jnt_type[j] == mujoco.mjtJoint.mjJNT_SLIDE:
-            body = model.jnt_bodyid[j]
-            v = linear + np.cross(spin, data.xpos[body] - centre)
-            data.qvel[a] += float(np.dot(data.xaxis[j], v))
-    mujoco.mj_forward(model, data)
 
 
 def spin_test(
@@ -133,7 +116,7 @@ def _spin_test(
         coulomb = inertia * w0**2 / (2 * mu * moment) if moment > 0 else None
     else:
         model.opt.gravity[:] = 0.0
-    _add_velocity(model, data, np.array([0.0, 0.0, 0.3 if free else 0.0]), w0, centre)
+    add_rigid_velocity(model, data, np.array([0.0, 0.0, 0.3 if free else 0.0]), w0, centre)
     prev = _yaw(data.xquat[content])
     turn, t = 0.0, 0.0
     end = duration if free else 2.0
