@@ -2,7 +2,7 @@
 
     python benchmarks/bench_twin.py [--out bench-twin] [--workers 2] [--truths 3]
                                     [--placements 2] [--budget 48] [--setups published,joint]
-                                    [--real-timestep 0.000417]
+                                    [--real-timestep 1/4800] [--model-timestep 1/2400]
 
 For each of several hidden truths (other than the bundled twin's), the benchmark makes a twin
 dataset with parcelfit's MuJoCo model (E3/KPBW at speed settings 1 and 2, E1/KPBW at 1 and 3,
@@ -24,8 +24,9 @@ verdict (published criteria) and the transfer check (cases passed). The table is
 as ``results.json`` and ``results.md`` in the output folder. Everything resumes: rerunning the
 same command reuses the twin datasets and finished studies.
 
-This takes hours with MuJoCo (each twin dataset 40 simulations, each calibration up to
-budget x cases x placements simulations); it runs on demand, not in CI. The test suite runs the
+With MuJoCo it takes 15-30 min on 2 cores for three truths (each twin dataset 40
+simulations, each calibration up to budget x cases x placements simulations; docs/twin-benchmark.md
+has the measured table); it runs on demand, not in CI. The test suite runs the
 same code on the analytic test simulator with a tiny budget.
 """
 
@@ -36,6 +37,7 @@ import json
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from fractions import Fraction
 from pathlib import Path
 from typing import Any
 
@@ -286,6 +288,11 @@ def table(rows: Sequence[Row]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _seconds(text: str) -> float:
+    """A time step [s] as a number or a fraction (``1/2400``)."""
+    return float(Fraction(text))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -298,10 +305,16 @@ def main() -> None:
     ap.add_argument("--setups", default="published,joint")
     ap.add_argument(
         "--real-timestep",
-        type=float,
-        default=1 / 2400,
-        help="time step [s] of the twin's 'real' runs (default 1/2400 s: half the model's "
-        "1/1200 s, so the 'real' side is the more converged one)",
+        type=_seconds,
+        default=1 / 4800,
+        help="time step [s] of the twin's 'real' runs (default 1/4800 s: half the model's "
+        "1/2400 s, so the 'real' side is the more converged one)",
+    )
+    ap.add_argument(
+        "--model-timestep",
+        type=_seconds,
+        default=None,
+        help="time step [s] of the calibrated model (default: the model's own default)",
     )
     args = ap.parse_args()
 
@@ -335,7 +348,8 @@ def main() -> None:
         truths,
         setups,
         make_dataset,
-        {"backend": "mujoco", "rig": "E3", "consignment": "KPBW"},
+        {"backend": "mujoco", "rig": "E3", "consignment": "KPBW"}
+        | ({} if args.model_timestep is None else {"timestep": args.model_timestep}),
         PARAMETERS,
         args.out,
         to_si=lambda n, v: specs[n].to_si(v),

@@ -99,7 +99,7 @@ def test_help_keeps_units_in_square_brackets_and_shows_the_timestep_readably():
     assert result.exit_code == 0, result.output
     text = " ".join(result.output.split())
     assert "Time step [s]." in text and "Wall-clock limit [s]." in text
-    assert "1/1200 s" in text and "0.00083333" not in text
+    assert "1/2400 s (rigid contents), 1/1200 s (soft)" in text and "0.00041667" not in text
     result = runner.invoke(app, ["camera-calibrate", "--help"], terminal_width=200)
     assert "Side of one square [mm]." in " ".join(result.output.split())
 

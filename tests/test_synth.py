@@ -131,7 +131,8 @@ def test_an_interrupted_twin_dataset_resumes_from_its_cache(tmp_path, monkeypatc
 
 
 def test_the_twins_real_runs_take_their_own_time_step(tmp_path, monkeypatch):
-    """``real_timestep`` reaches the scene of every twin run (default: the model's 1/1200 s), and a
+    """``real_timestep`` reaches the scene of every twin run (default None: the model's own
+    step, 1/2400 s around BW's rigid content), and a
     spec outside [1e-5, 0.01] s is refused naming the key."""
     import pytest
 
@@ -143,15 +144,15 @@ def test_the_twins_real_runs_take_their_own_time_step(tmp_path, monkeypatch):
 
     class Recording:
         def __init__(self, options, **_):
-            seen.append(options.scene.timestep)
+            seen.append(options.scene.step_for(soft=False))
 
         def run(self, params, case, run_id=None):
             raise RuntimeError("stop here")
 
     monkeypatch.setattr(synth, "MujocoSimulator", Recording)
     for settings, step in (
-        (TwinSettings(), 1 / 1200),
-        (TwinSettings(real_timestep=1 / 2400), 1 / 2400),
+        (TwinSettings(), 1 / 2400),
+        (TwinSettings(real_timestep=1 / 4800), 1 / 4800),
     ):
         job = synth.TwinJob(
             "r1",

@@ -49,7 +49,6 @@ app = typer.Typer(
 )
 console = Console()
 err_console = Console(stderr=True)
-TIMESTEP_S = 1.0 / 1200.0  # the default simulation time step [s]
 
 
 def _progress(status: Any, prefix: str) -> ProgressCallback:
@@ -532,8 +531,11 @@ def simulate(
         typer.Option(help="Also write a top-view animation (.gif, or .mp4 with ffmpeg)."),
     ] = None,
     timestep: Annotated[
-        float, typer.Option(help="Time step [s].", show_default="1/1200 s")
-    ] = TIMESTEP_S,
+        float | None,
+        typer.Option(
+            help="Time step [s].", show_default="1/2400 s (rigid contents), 1/1200 s (soft)"
+        ),
+    ] = None,
     spacing: Annotated[
         float, typer.Option(help="Shell mesh spacing for rigid contents [m].")
     ] = 0.03,

@@ -14,8 +14,8 @@ experiments do (method.md sections 2 and 3):
   own meshes (30 mm is within about 5 mm of the 15 mm reference in docs/convergence.md). The
   former default, 20 mm, was the outlier of that study on the earlier E3 layout (22 mm off the
   reference) and biased every calibration against the twin. The time step is ``real_timestep``
-  (default the model's, 1/1200 s): with the default the twin is consistent with the model, not
-  finer than it; a finer ``real_timestep`` (``benchmarks/bench_twin.py`` uses half the model's)
+  (default None: the model's own default, 1/2400 s around rigid contents and 1/1200 s around a
+  soft one): with the default the twin is consistent with the model, not finer than it; a finer ``real_timestep`` (``benchmarks/bench_twin.py`` uses half the model's)
   lets the twin expose the model's remaining step error to a calibration. The remaining model-form
   differences are the specimen, placement, speed and tracking variations above.
 
@@ -75,7 +75,7 @@ class TwinSettings:
     heading_sd: float = 0.003
     real_spacing: float = 0.03
     real_soft_spacing: float = 0.04
-    real_timestep: float = 1.0 / 1200.0
+    real_timestep: float | None = None  # [s]; None: the model's default for the consignment
 
 
 def _specimen(
@@ -278,7 +278,12 @@ def make_twin_dataset(
             f"SYNTHETIC twin-experiment data, not measured: simulated with parcelfit's MuJoCo model from hidden "
             f"true parameters (truth.yaml), {s.runs} specimens per test case with friction, stiffness, placement, "
             f"belt-speed and tracking variation; shell mesh {s.real_spacing * 1e3:g} mm (rigid contents), "
-            f"{s.real_soft_spacing * 1e3:g} mm (soft contents), time step 1/{1 / s.real_timestep:.0f} s."
+            f"{s.real_soft_spacing * 1e3:g} mm (soft contents), time step "
+            + (
+                "the model's default (1/2400 s rigid, 1/1200 s soft contents)."
+                if s.real_timestep is None
+                else f"1/{1 / s.real_timestep:.0f} s."
+            )
         ),
     )
     units = {p.name: p for p in CATALOGUE}
@@ -340,7 +345,9 @@ class TwinSettingsSection(FileModel):
     real_soft_spacing: Annotated[float, Number(unit="m", ge=0.003, le=0.2)] = (
         TwinSettings.real_soft_spacing
     )
-    real_timestep: Annotated[float, Number(unit="s", ge=1e-5, le=0.01)] = TwinSettings.real_timestep
+    real_timestep: Annotated[float | None, Number(unit="s", ge=1e-5, le=0.01)] = (
+        TwinSettings.real_timestep
+    )
 
 
 _Truth = Annotated[

@@ -37,13 +37,19 @@ CONTACT_GAP = 0.0005  # clearance between content and shell, and under the parce
 FREE_PLATE_BETA1 = 4.730  # first free-free beam mode, beta_1 L
 
 
+# default time steps [s] by shell (SceneOptions.step_for)
+INTERPOLATED_SHELL_STEP = 1.0 / 2400.0
+FULL_SHELL_STEP = 1.0 / 1200.0
+
+
 @dataclass(frozen=True)
 class SceneOptions:
     """Numerical settings of a scene (not calibrated): step [s], mesh spacing [m], etc."""
 
-    # 1/1200 s: the quadratic shell's E3 ensemble is converged against 1/2400 s there, not at
-    # 1/600 s (docs/ensemble-convergence-E3-quadratic.md)
-    timestep: float = 1.0 / 1200.0
+    # None: the default of the shell (`step_for`): 1/2400 s for an interpolated shell, where
+    # transit times are converged to a few ms (at 1/1200 s E1 setting 3 came out 20-25 ms short,
+    # docs/transit-convergence.md), 1/1200 s for the full shell around a soft content
+    timestep: float | None = None
     spacing: float = 0.03  # shell grid spacing, rigid contents [m]
     soft_shell_spacing: float = 0.04  # shell grid spacing around a soft content [m]
     soft_spacing: float = 0.06  # vertex spacing of a soft content [m]
@@ -78,7 +84,7 @@ class SceneOptions:
     start_speed_factor: float = 1.0  # the parcel's initial speed as a fraction of its surface's
 
     def __post_init__(self) -> None:
-        if not 1e-5 <= self.timestep <= 0.01:
+        if self.timestep is not None and not 1e-5 <= self.timestep <= 0.01:
             raise ParcelfitError(f"timestep must lie in [1e-5, 0.01] s, got {self.timestep}")
         if not self.contact_frequency > 0:
             raise ParcelfitError(
@@ -98,6 +104,20 @@ class SceneOptions:
             raise ParcelfitError(
                 f"mesh spacing must lie in [3, 200] mm, got {self.spacing * 1e3:g} mm"
             )
+
+
+    def shell_for(self, soft: bool) -> str:
+        """The shell's degrees of freedom around a soft (True) or rigid content."""
+        if self.shell_dof != "auto":
+            return self.shell_dof
+        return "full" if soft else "quadratic"
+
+    def step_for(self, soft: bool) -> float:
+        """The time step [s] of a scene with a soft (True) or rigid content: ``timestep`` if
+        given, else 1/1200 s for the full shell and 1/2400 s for an interpolated one."""
+        if self.timestep is not None:
+            return self.timestep
+        return FULL_SHELL_STEP if self.shell_for(soft) == "full" else INTERPOLATED_SHELL_STEP
 
 
 @dataclass(frozen=True)
@@ -256,7 +276,7 @@ def build_scene(
         )
     m_v = m_pa / nv
     n_face = shell.face_contacts
-    dt = opt.timestep
+    dt = opt.step_for(soft)
     f_c = opt.contact_frequency
 
     # --- contact parameters (effective inverse mass of a flex contact: see contact.py) ------------
@@ -326,7 +346,7 @@ def build_scene(
     rho_pa = m_pa / (2 * L * W * t_pa)
     beta_pa = 2 * p["zeta_Pa"] / bending_omega(young_pa, p["nu_Pa"], t_pa, rho_pa, L)
     points = " ".join(_f(v) for v in shell.points.ravel())
-    shell_dof = opt.shell_dof if opt.shell_dof != "auto" else ("full" if soft else "quadratic")
+    shell_dof = opt.shell_for(soft)
     dof = "" if shell_dof == "full" else f' dof="{shell_dof}"'
     elements = " ".join(str(i) for i in shell.triangles.ravel())
     # an interpolated shell's nodes lie on a box aligned with the axes of the flexcomp's parent
