@@ -60,7 +60,9 @@ def test_transit_time_between_light_barriers_on_a_plain_belt():
         SimOptions(duration=1.5), rigs={"flat": flat_belt(1.2, barriers=(0.4, 1.0))}
     )
     res = sim.run({}, KPBW)
-    assert res.run.transit_time == pytest.approx(0.6 / 1.2, abs=2 * sim.options.scene.step_for(soft=False))
+    assert res.run.transit_time == pytest.approx(
+        0.6 / 1.2, abs=2 * sim.options.scene.step_for(soft=False)
+    )
 
 
 def test_observation_starts_at_the_start_pose():

@@ -15,9 +15,10 @@ experiments do (method.md sections 2 and 3):
   former default, 20 mm, was the outlier of that study on the earlier E3 layout (22 mm off the
   reference) and biased every calibration against the twin. The time step is ``real_timestep``
   (default None: the model's own default, 1/2400 s around rigid contents and 1/1200 s around a
-  soft one): with the default the twin is consistent with the model, not finer than it; a finer ``real_timestep`` (``benchmarks/bench_twin.py`` uses half the model's)
-  lets the twin expose the model's remaining step error to a calibration. The remaining model-form
-  differences are the specimen, placement, speed and tracking variations above.
+  soft one): with the default the twin is consistent with the model, not finer than it; a finer
+  ``real_timestep`` (``benchmarks/bench_twin.py`` uses half the model's) lets the twin expose
+  the model's remaining step error to a calibration. The remaining model-form differences are
+  the specimen, placement, speed and tracking variations above.
 
 The truth (parameters in the catalogue's units, and every setting above) is written beside the
 dataset as ``truth.yaml``; the dataset is marked ``synthetic: true``.

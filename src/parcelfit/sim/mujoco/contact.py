@@ -30,14 +30,15 @@ quantity), e.g. at an edge pressed against a guide plate. The virtual indentatio
 
 Choosing d: the contact's constraint-space dynamics have angular frequency omega = sqrt(s)
 [rad/s], the time scale of an impact. It is a property of the contact, not of the integrator:
-omega = min(omega_c, omega_dt / dt) with omega_c = 300 rad/s (``SceneOptions.contact_frequency``)
-and omega_dt = 0.5, i.e. 1 - d = omega^2 / (K_c A_hat), capped to [1e-4, 0.1] (MuJoCo clamps d
-to at most 0.9999). At 1/600 s both terms are equal (at the default 1/2400 and 1/1200 s, omega_c rules); a finer step resolves the
-same contact dynamics more accurately (so impacts such as a corner catching on a plate converge
-as the step shrinks), and a coarser step, which could not resolve omega_c, softens the contact to
-omega_dt / dt. (Before, omega was always 0.5 / dt: every halving of the step made impacts twice
-as fast, and a catch on a plate could not converge in the step.) Damping: b = 2 zeta omega
-(zeta = 1: critically damped). The static stiffness K_c is the same for any omega.
+omega = min(omega_c, omega_dt / dt) with omega_c = 300 rad/s
+(``SceneOptions.contact_frequency``) and omega_dt = 0.5, i.e. 1 - d = omega^2 / (K_c A_hat),
+capped to [1e-4, 0.1] (MuJoCo clamps d to at most 0.9999). At 1/600 s both terms are equal (at
+the default 1/2400 and 1/1200 s, omega_c rules); a finer step resolves the same contact dynamics
+more accurately (so impacts such as a corner catching on a plate converge as the step shrinks),
+and a coarser step, which could not resolve omega_c, softens the contact to omega_dt / dt.
+(Before, omega was always 0.5 / dt: every halving of the step made impacts twice as fast, and a
+catch on a plate could not converge in the step.) Damping: b = 2 zeta omega (zeta = 1:
+critically damped). The static stiffness K_c is the same for any omega.
 """
 
 from __future__ import annotations

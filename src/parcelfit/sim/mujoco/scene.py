@@ -105,7 +105,6 @@ class SceneOptions:
                 f"mesh spacing must lie in [3, 200] mm, got {self.spacing * 1e3:g} mm"
             )
 
-
     def shell_for(self, soft: bool) -> str:
         """The shell's degrees of freedom around a soft (True) or rigid content."""
         if self.shell_dof != "auto":
