@@ -371,3 +371,26 @@ def test_an_interpolated_shells_nodes_span_the_parcels_own_box():
     assert np.ptp(across) == pytest.approx(cons.outer[1], abs=1e-6)
     full = SceneOptions(shell_dof="full")
     assert "packaging_frame" not in build_scene(rig, cons, params, 1, full).xml
+
+
+def test_the_default_step_follows_the_shell_and_a_given_step_wins():
+    """1/2400 s around a rigid content (interpolated shell), 1/1200 s around a soft one (full
+    shell) or for a full shell asked for explicitly; a given ``timestep`` overrides both."""
+    import re
+
+    from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
+
+    def step(cons_name: str, options: SceneOptions) -> float:
+        cons = load_consignment(cons_name)
+        xml = build_scene(load_rig("E1"), cons, resolve(cons.content_kind), 1, options).xml
+        m = re.search(r'<option timestep="([^"]+)"', xml)
+        assert m is not None
+        return float(m[1])
+
+    assert step("KPBW", SceneOptions()) == pytest.approx(1 / 2400)
+    assert step("PB", SceneOptions()) == pytest.approx(1 / 1200)
+    assert step("KPBW", SceneOptions(shell_dof="full")) == pytest.approx(1 / 1200)
+    assert step("PB", SceneOptions(timestep=1 / 600)) == pytest.approx(1 / 600)
+    assert SceneOptions().step_for(soft=False) == pytest.approx(1 / 2400)
+    with pytest.raises(ParcelfitError, match="timestep must lie in"):
+        SceneOptions(timestep=0.1)
