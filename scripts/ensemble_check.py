@@ -52,20 +52,11 @@ from parcelfit.sim.mujoco import (
     load_rig,
 )
 from parcelfit.sim.mujoco.rig import Rig
+from parcelfit.sim.mujoco.scene import parse_scene_options
 from parcelfit.sim.params import parameter, parse_assignments, resolve
 
 TYPES = ("BW", "KPBW", "KP", "PB")
 COLOURS = {"BW": "tab:orange", "KPBW": "tab:blue", "KP": "tab:green", "PB": "tab:red"}
-
-
-def _value(text: str) -> float | str:
-    """A scene option's value: a number (``1/1200`` reads as a fraction) where it reads as one,
-    else the text."""
-    num, slash, den = text.partition("/")
-    try:
-        return float(num) / float(den) if slash else float(text)
-    except ValueError:
-        return text
 
 
 def _deg(x: float) -> float:
@@ -183,7 +174,7 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "figures").mkdir(exist_ok=True)
     rigs = [load_rig(r) for r in args.rigs]  # bundled names or rig files
-    scene = SceneOptions(**{k: _value(v) for k, v in (a.split("=", 1) for a in args.scene)})
+    scene = SceneOptions(**parse_scene_options(args.scene))  # type: ignore[arg-type]
     bulges = {k.upper().replace("/", ""): v for k, v in parse_assignments(args.bulge).items()}
     consignments = {
         t: replace(c, bulge=(args.bulge_depth, bulges[t])) if t in bulges else c

@@ -20,13 +20,13 @@ import math
 import os
 import time
 from concurrent.futures import ProcessPoolExecutor
-from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
 
 from parcelfit.runs import TestCase
 from parcelfit.sim.mujoco import MujocoSimulator, SceneOptions, SimOptions
+from parcelfit.sim.mujoco.scene import parse_scene_options
 from parcelfit.sim.params import resolve
 
 DEFAULT_CASES = (
@@ -40,25 +40,11 @@ DEFAULT_CASES = (
 )
 
 
-def _scene_value(text: str) -> float | str:
-    try:
-        return float(Fraction(text))
-    except ValueError:
-        return text
-
-
-def _variant(text: str) -> dict[str, float | str]:
-    out: dict[str, float | str] = {}
-    for item in filter(None, text.split(",")):
-        key, _, value = item.partition("=")
-        out[key.strip()] = _scene_value(value.strip())
-    return out
-
-
 def simulate(job: tuple[str, int, str, int]) -> tuple[tuple, float | None, float, float]:
     """(job, transit time [s] or None, net rotation [deg], wall time [s]) of one run."""
     case_label, seed, variant, n = job
-    scene = SceneOptions(timestep=1 / n, **_variant(variant))  # type: ignore[arg-type]
+    options = parse_scene_options(filter(None, variant.split(",")))
+    scene = SceneOptions(timestep=1 / n, **options)  # type: ignore[arg-type]
     sim = MujocoSimulator(SimOptions(scene=scene))
     if seed >= 0:
         sim = sim.with_placement(seed)

@@ -31,10 +31,11 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from parcelfit.metrics.dtw import cross_dtw
+from parcelfit.metrics.dtw import dtw_distance
 from parcelfit.metrics.reference import select_reference
-from parcelfit.runs import TestCase
+from parcelfit.runs import TestCase, Trajectory
 from parcelfit.runs.dataset import load_dataset
+from parcelfit.sim.ensemble import rotation
 from parcelfit.sim.mujoco.rig import load_rig
 from parcelfit.sim.mujoco.scene import SceneOptions
 from parcelfit.sim.mujoco.simulator import MujocoSimulator, SimOptions
@@ -52,10 +53,7 @@ def _replay(
     rig = load_rig(case.rig)
     sx, sy = rig.start.position
     offset = (x0 - sx, y0 - sy, math.degrees(th0) - rig.start.heading)
-    scene = SceneOptions(start_offset=offset)
-    if timestep is not None:
-        scene = SceneOptions(start_offset=offset, timestep=timestep)
-    sim = MujocoSimulator(SimOptions(scene=scene))
+    sim = MujocoSimulator(SimOptions(scene=SceneOptions(start_offset=offset, timestep=timestep)))
     si = {k: parameter(k).to_si(v) for k, v in values.items()}
     res = sim.run(si, case)
     if not res.ok or res.run is None:
@@ -63,9 +61,8 @@ def _replay(
     return res.run.trajectory, res.run.transit_time
 
 
-def _rotation_deg(theta: np.ndarray) -> float:
-    t = np.unwrap(np.asarray(theta, dtype=float))
-    return abs(float(t[-1] - t[0])) * 180 / math.pi
+def _rotation_deg(trajectory: Trajectory) -> float:
+    return math.degrees(rotation(trajectory))
 
 
 def main() -> None:
@@ -108,28 +105,31 @@ def main() -> None:
     print(f"# {case.label}: {len(poses)} real runs replayed from their first pose, {step}")
     print(
         "real rotations [deg]: "
-        + " ".join(f"{_rotation_deg(r.trajectory.theta):.0f}" for r in case_data.runs)
+        + " ".join(f"{_rotation_deg(r.trajectory):.0f}" for r in case_data.runs)
     )
     print(
         "| set | mean D | median D | runs with D > 1 | dT mean [ms] | dT rms [ms] | rotations [deg] |"
     )
     print("|---|---|---|---|---|---|---|")
+    timestep = None if args.timestep is None else float(args.timestep)
+    window = ref.comparison.window
     with ProcessPoolExecutor(args.workers) as pool:
         for label, values in sets:
-            step = None if args.timestep is None else float(args.timestep)
-            out = list(pool.map(_replay, [(case, values, p, step) for p in poses]))
+            out = list(pool.map(_replay, [(case, values, p, timestep) for p in poses]))
             if any(t is None for t, _ in out):
                 print(f"| {label} | a replay failed | | | | | |")
                 continue
             prepared = [ref.comparison.prepare(t) for t, _ in out]
-            w = ref.comparison.window
-            d = (
-                np.diag(cross_dtw([p.xy for p in prepared], ref.xy_series, w)) ** 2 / ref.max_xy
-                + np.diag(cross_dtw([p.theta for p in prepared], ref.theta_series, w)) ** 2
-                / ref.max_theta
+            # each replay against its own real run only (the pairs, not every combination)
+            d = np.array(
+                [
+                    dtw_distance(p.xy, xy, window) ** 2 / ref.max_xy
+                    + dtw_distance(p.theta, theta, window) ** 2 / ref.max_theta
+                    for p, xy, theta in zip(prepared, ref.xy_series, ref.theta_series, strict=True)
+                ]
             )
             dt = (np.array([t for _, t in out], dtype=float) - real_t) * 1e3
-            rots = " ".join(f"{_rotation_deg(t.theta):.0f}" for t, _ in out)
+            rots = " ".join(f"{_rotation_deg(t):.0f}" for t, _ in out)
             print(
                 f"| {label} | {d.mean():.3g} | {np.median(d):.3g} | {int((d > 1).sum())} | "
                 f"{np.nanmean(dt):+.1f} | {math.sqrt(np.nanmean(dt**2)):.1f} | {rots} |",

@@ -394,3 +394,15 @@ def test_the_default_step_follows_the_shell_and_a_given_step_wins():
     assert SceneOptions().step_for(soft=False) == pytest.approx(1 / 2400)
     with pytest.raises(ParcelfitError, match="timestep must lie in"):
         SceneOptions(timestep=0.1)
+
+
+def test_scene_options_read_from_key_value_texts():
+    """``KEY=VALUE`` texts (the scripts' ``--scene``) become `SceneOptions` arguments: numbers
+    and fractions as floats, other values as text; a text without ``=`` is refused."""
+    from parcelfit.sim.mujoco.scene import SceneOptions, parse_scene_options
+
+    given = parse_scene_options(["timestep=1/2400", "shell_dof=full", " impratio = 10 "])
+    assert given == {"timestep": 1 / 2400, "shell_dof": "full", "impratio": 10.0}
+    assert SceneOptions(**given).step_for(soft=False) == 1 / 2400  # type: ignore[arg-type]
+    with pytest.raises(ParcelfitError, match="not KEY=VALUE"):
+        parse_scene_options(["timestep"])

@@ -59,6 +59,7 @@ from parcelfit.runs import (
 from parcelfit.schema import FileModel, Number, Text, Whole, keys_in, or_default, parse
 from parcelfit.sim.executors import make_executor
 from parcelfit.sim.mujoco import Consignment, MujocoSimulator, Rig, SceneOptions, SimOptions
+from parcelfit.sim.mujoco.scene import FULL_SHELL_STEP, INTERPOLATED_SHELL_STEP
 from parcelfit.sim.params import CATALOGUE, resolve
 
 
@@ -281,7 +282,8 @@ def make_twin_dataset(
             f"belt-speed and tracking variation; shell mesh {s.real_spacing * 1e3:g} mm (rigid contents), "
             f"{s.real_soft_spacing * 1e3:g} mm (soft contents), time step "
             + (
-                "the model's default (1/2400 s rigid, 1/1200 s soft contents)."
+                f"the model's default (1/{1 / INTERPOLATED_SHELL_STEP:.0f} s rigid, "
+                f"1/{1 / FULL_SHELL_STEP:.0f} s soft contents)."
                 if s.real_timestep is None
                 else f"1/{1 / s.real_timestep:.0f} s."
             )

@@ -20,8 +20,9 @@ Scene conventions:
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
+from fractions import Fraction
 
 import numpy as np
 
@@ -117,6 +118,24 @@ class SceneOptions:
         if self.timestep is not None:
             return self.timestep
         return FULL_SHELL_STEP if self.shell_for(soft) == "full" else INTERPOLATED_SHELL_STEP
+
+
+def parse_scene_options(items: Iterable[str]) -> dict[str, float | str]:
+    """``KEY=VALUE`` texts (e.g. ``timestep=1/2400``, ``shell_dof=full``) as `SceneOptions`
+    keyword arguments: a value that reads as a number, a fraction included, becomes a float [the
+    option's unit], any other stays text."""
+    out: dict[str, float | str] = {}
+    for item in items:
+        key, eq, value = item.partition("=")
+        if not eq or not key.strip():
+            raise ParcelfitError(
+                f"scene option {item!r} is not KEY=VALUE", fix="write e.g. timestep=1/2400"
+            )
+        try:
+            out[key.strip()] = float(Fraction(value.strip()))
+        except (ValueError, ZeroDivisionError):
+            out[key.strip()] = value.strip()
+    return out
 
 
 @dataclass(frozen=True)
