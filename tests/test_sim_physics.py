@@ -176,6 +176,19 @@ def test_soft_polybag_runs_briefly():
     assert res.run.trajectory.x[-1] > res.run.trajectory.x[0]
 
 
+@pytest.mark.parametrize("mu", [0.3, 0.6])
+def test_a_sliding_parcel_stops_after_the_coulomb_distance(mu):
+    """Kicked to 1 m/s on a still belt-material plate, a BW slides v0^2 / (2 mu g) and stops
+    after v0 / (mu g), as a body with Coulomb friction does (docs/sliding-lift.md)."""
+    from parcelfit.sim.mujoco.spin import slide_test
+
+    res = slide_test(load_consignment("BW"), v0=1.0, params={"mu_d_BePa": mu})
+    assert res.coulomb_slide == pytest.approx(1.0 / (2 * mu * 9.81), rel=1e-6)
+    assert res.slide == pytest.approx(res.coulomb_slide, rel=0.05)
+    assert res.time == pytest.approx(1.0 / (mu * 9.81), rel=0.05)
+    assert 0.0 <= res.no_contact <= 1.0
+
+
 @pytest.mark.parametrize("name", ["BW", "KP"])
 def test_a_spinning_parcel_keeps_its_spin_in_free_flight_and_stops_as_a_rigid_body(name):
     """With the default (quadratic) shell the parcel keeps a 10 rad/s spin in free flight (no

@@ -1,4 +1,5 @@
-"""Virtual spin tests: does a parcel model keep and lose its spin as a body should?
+"""Virtual spin and slide tests: does a parcel model keep and lose its spin and its speed as a
+body should?
 
 A parcel that a guide plate sets spinning turns until friction under it has taken its spin
 away. Two checks on a parcel at rest on a still plate of belt material (default parameters):
@@ -16,6 +17,17 @@ distances r_i from the centre that the model itself carries at rest, the turn is
 
 (I_z: the parcel's moment of inertia about the vertical through its centre, mu: the belt
 friction coefficient). The check reports the model's turn beside this estimate.
+
+**Slide on the plate** (gravity on): the parcel is given the horizontal speed v0 and slides
+until the plate's friction stops it. A body with Coulomb friction slides
+
+    s = v0^2 / (2 mu g)
+
+and keeps touching the plate all the way. The check reports the model's slide (the shell's mean
+displacement) beside this estimate, and the share of steps of the slide in which the shell
+touches the plate nowhere: MuJoCo's convex contact model lifts a contact that slides (its
+documented "motion in the normal direction" at the onset of slip), so a sliding parcel hops
+(docs/sliding-lift.md).
 
 Measured with these checks (docs/spin-check.md): the packaging shell with a degree of freedom per
 vertex (`SceneOptions.shell_dof` "full") loses most of its spin in free flight at the default
@@ -80,6 +92,75 @@ def spin_test(
         return _spin_test(consignment, w0, free, duration, params, options, settle)
 
 
+@dataclass(frozen=True)
+class SlideTest:
+    """Outcome of one slide test: the kick v0 [m/s], the model's slide [m] and the Coulomb
+    slide v0^2 / (2 mu g) [m], the time it took [s], and the share of the sliding steps in which
+    the shell touched the plate nowhere."""
+
+    v0: float
+    slide: float
+    coulomb_slide: float
+    time: float
+    no_contact: float
+
+
+def _settled(
+    consignment: Consignment,
+    params: Mapping[str, float] | None,
+    options: SceneOptions | None,
+    settle: float,
+) -> tuple[mujoco.MjModel, mujoco.MjData, dict[str, float]]:
+    """The parcel settled ``settle`` s on a still belt-material plate, and the SI parameters."""
+    full = resolve(consignment.content_kind, si_values=dict(params or {}))
+    scene = build_scene(plate_rig("belt"), consignment, full, 1, options)
+    model = mujoco.MjModel.from_xml_string(scene.xml)
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    for _ in range(round(settle / model.opt.timestep)):
+        mujoco.mj_step(model, data)
+    return model, data, full
+
+
+def slide_test(
+    consignment: Consignment,
+    *,
+    v0: float = 1.0,
+    params: Mapping[str, float] | None = None,
+    options: SceneOptions | None = None,
+    settle: float = 0.3,
+) -> SlideTest:
+    """Kick the parcel (settled ``settle`` s on a still belt-material plate) to v0 [m/s] along
+    the plate and follow it until it stops (at most 2 s): its slide [m] beside v0^2 / (2 mu g),
+    and the share of sliding steps without any contact with the plate. SI ``params`` override
+    the defaults."""
+    if not v0 > 0:
+        raise ParcelfitError(f"the slide test needs a positive speed [m/s], got {v0}")
+    with CountedWarnings():
+        model, data, full = _settled(consignment, params, options, settle)
+        plate = np.array([g for g in range(model.ngeom) if model.geom(g).name.startswith("plate")])
+        flex = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, "packaging")
+        verts = slice(model.flex_vertadr[flex], model.flex_vertadr[flex] + model.flex_vertnum[flex])
+        x0 = float(data.flexvert_xpos[verts, 0].mean())
+        add_rigid_velocity(model, data, np.array([v0, 0.0, 0.0]))
+        dt = model.opt.timestep
+        prev, t, sliding, lifted = x0, 0.0, 0, 0
+        while t < 2.0:
+            mujoco.mj_step(model, data)
+            t += dt
+            x = float(data.flexvert_xpos[verts, 0].mean())
+            # positions lag the step by one (simulator.py), so the first step shows no motion
+            if t > 2 * dt and (x - prev) / dt < 0.01 * v0:  # stopped (1 % of the kick)
+                break
+            prev = x
+            sliding += 1
+            geoms = data.contact.geom[: data.ncon]
+            lifted += not bool(np.isin(geoms, plate).any())
+    mu = full["mu_d_BePa"]
+    coulomb = v0**2 / (2 * mu * float(np.linalg.norm(model.opt.gravity)))
+    return SlideTest(v0, x - x0, coulomb, t, lifted / max(sliding, 1))
+
+
 def _spin_test(
     consignment: Consignment,
     w0: float,
@@ -89,14 +170,7 @@ def _spin_test(
     options: SceneOptions | None,
     settle: float,
 ) -> SpinTest:
-    full = resolve(consignment.content_kind, si_values=dict(params or {}))
-    rig = plate_rig("belt")
-    scene = build_scene(rig, consignment, full, 1, options)
-    model = mujoco.MjModel.from_xml_string(scene.xml)
-    data = mujoco.MjData(model)
-    mujoco.mj_forward(model, data)
-    for _ in range(round(settle / model.opt.timestep)):
-        mujoco.mj_step(model, data)
+    model, data, _ = _settled(consignment, params, options, settle)
     content = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "content")
     centre = data.xpos[content].copy()
     coulomb = None
@@ -132,4 +206,4 @@ def _spin_test(
     return SpinTest(w0, w_end, w_end / w0, turn, t, coulomb)
 
 
-__all__ = ["SpinTest", "spin_test"]
+__all__ = ["SlideTest", "SpinTest", "slide_test", "spin_test"]
