@@ -6,6 +6,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from parcelfit.errors import ParcelfitError
 from parcelfit.runs import TestCase
 from parcelfit.sim import SimStatus
 from parcelfit.sim.mujoco import MujocoSimulator, SceneOptions, SimOptions, load_consignment
@@ -187,6 +188,35 @@ def test_a_sliding_parcel_stops_after_the_coulomb_distance(mu):
     assert res.slide == pytest.approx(res.coulomb_slide, rel=0.05)
     assert res.time == pytest.approx(1.0 / (mu * 9.81), rel=0.05)
     assert 0.0 <= res.no_contact <= 1.0
+
+
+def test_coulomb_belt_friction_slides_the_coulomb_distance_without_hopping():
+    """With belt friction applied as Coulomb forces at the contact points (MuJoCo's belt
+    contacts frictionless), a KP/BW kicked to 1 m/s slides v0^2 / (2 mu g) within 2 % and keeps
+    touching the plate in every step; with MuJoCo's friction it hops (docs/sliding-lift.md)."""
+    from parcelfit.sim.mujoco.spin import slide_test
+
+    cons = load_consignment("KPBW")
+    coulomb = slide_test(cons, options=SceneOptions(belt_friction="coulomb"))
+    assert coulomb.slide == pytest.approx(coulomb.coulomb_slide, rel=0.02)
+    assert coulomb.no_contact == 0.0
+    assert slide_test(cons).no_contact > 0.2  # MuJoCo's friction lifts a sliding contact
+
+
+def test_coulomb_belt_friction_makes_belt_contacts_frictionless_in_mujoco():
+    from parcelfit.sim.mujoco import load_rig
+    from parcelfit.sim.mujoco.scene import build_scene
+
+    rig, cons = load_rig("E3"), load_consignment("KPBW")
+    xml = build_scene(rig, cons, resolve("rigid"), 1, SceneOptions(belt_friction="coulomb")).xml
+    assert 'name="main"' in xml and 'name="guide"' in xml
+    for line in xml.splitlines():
+        if 'name="main"' in line or 'name="strips_0"' in line:
+            assert 'condim="1"' in line
+        if 'name="guide"' in line:
+            assert 'condim="3"' in line  # guide plates keep MuJoCo's friction
+    with pytest.raises(ParcelfitError, match="belt_friction"):
+        SceneOptions(belt_friction="viscous")
 
 
 @pytest.mark.parametrize("name", ["BW", "KP"])

@@ -81,6 +81,11 @@ class SceneOptions:
     # "trilinear" (2 x 2 x 2); "auto": quadratic around a rigid content, full around a soft one
     # (a full shell loses most of a spin: spin.py, the README's "Spin")
     shell_dof: str = "auto"
+    # friction between the packaging and belts, strips and rollers: "mujoco" (MuJoCo's own
+    # contact friction) or "coulomb" (those contacts frictionless in MuJoCo and Coulomb friction
+    # applied as forces at the contact points before every step, `coulomb.CoulombBelts`):
+    # MuJoCo's friction lifts sliding contacts (docs/sliding-lift.md)
+    belt_friction: str = "mujoco"
     start_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)  # dx [m], dy [m], dheading [deg]
     start_speed_factor: float = 1.0  # the parcel's initial speed as a fraction of its surface's
 
@@ -94,6 +99,10 @@ class SceneOptions:
         if self.shell_dof not in ("auto", "full", "quadratic", "trilinear"):
             raise ParcelfitError(
                 f"shell_dof must be auto, full, quadratic or trilinear, got {self.shell_dof!r}"
+            )
+        if self.belt_friction not in ("mujoco", "coulomb"):
+            raise ParcelfitError(
+                f"belt_friction must be mujoco or coulomb, got {self.belt_friction!r}"
             )
         if not self.impratio >= 1:
             raise ParcelfitError(f"impratio must be at least 1, got {self.impratio}")
@@ -183,12 +192,12 @@ def _f(v: float) -> str:
 
 
 def _surface_geoms(
-    s: Surface, speed: float, cp: ContactParams, mu: float
+    s: Surface, speed: float, cp: ContactParams, mu: float, condim: int = 3
 ) -> tuple[list[str], list[SurfaceGeom]]:
     u, n = s.unit(), np.array([-s.unit()[1], s.unit()[0]])
     common = (
         f'friction="{_f(mu)} 0.005 0.0001" priority="2" solref="{cp.solref}" solimp="{cp.solimp}" '
-        f'contype="1" conaffinity="1" condim="3"'
+        f'contype="1" conaffinity="1" condim="{condim}"'
     )
     xml, geoms = [], []
     if s.type == "belt":
@@ -317,7 +326,10 @@ def build_scene(
     for s in rig.surfaces:
         factor = opt.speed_factors.get(s.drive, 1.0)
         cp, mu = (metal_cp, p["mu_d_MePa"]) if s.material == "metal" else (belt_cp, p["mu_d_BePa"])
-        xml, geoms = _surface_geoms(s, speeds[s.drive] * factor, cp, mu)
+        # with Coulomb belt friction MuJoCo's contacts with belts, strips and rollers are
+        # frictionless (condim 1; the surfaces' priority makes their condim the contact's)
+        condim = 1 if opt.belt_friction == "coulomb" and s.material != "metal" else 3
+        xml, geoms = _surface_geoms(s, speeds[s.drive] * factor, cp, mu, condim)
         body += xml
         driven += geoms
     metal = []

@@ -47,6 +47,7 @@ import numpy as np
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import Run, TestCase, Trajectory
 from parcelfit.sim.mujoco.consignment import Consignment, load_consignment
+from parcelfit.sim.mujoco.coulomb import CoulombBelts
 from parcelfit.sim.mujoco.mjlog import CountedWarnings
 from parcelfit.sim.mujoco.rig import Barrier, Rig, Surface, load_rig
 from parcelfit.sim.mujoco.scene import Scene, SceneOptions, build_scene
@@ -194,6 +195,7 @@ class MujocoSimulator:
         _set_velocity(model, data, np.asarray(scene.start_velocity))
 
         friction = _FrictionSwitch(model, scene, rig, params)
+        coulomb = CoulombBelts(model, data, scene) if opt.scene.belt_friction == "coulomb" else None
         duration = opt.duration if opt.duration is not None else rig.end.duration
         n_steps = round(duration / dt)
         every = max(1, round(1.0 / (opt.sample_rate * dt)))
@@ -265,6 +267,8 @@ class MujocoSimulator:
                     break
                 friction.update(model, data, c, speed_vec)
             prev_c = c.copy()
+            if coulomb is not None:
+                coulomb.apply(model, data)
             mujoco.mj_step(model, data)
             step += 1
         wall = time.perf_counter() - t_wall

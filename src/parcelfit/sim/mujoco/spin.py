@@ -38,7 +38,7 @@ field over its box ("quadratic") keeps it.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import mujoco
@@ -46,6 +46,7 @@ import numpy as np
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.sim.mujoco.consignment import Consignment
+from parcelfit.sim.mujoco.coulomb import CoulombBelts
 from parcelfit.sim.mujoco.indentation import plate_rig
 from parcelfit.sim.mujoco.mjlog import CountedWarnings
 from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
@@ -110,16 +111,28 @@ def _settled(
     params: Mapping[str, float] | None,
     options: SceneOptions | None,
     settle: float,
-) -> tuple[mujoco.MjModel, mujoco.MjData, dict[str, float]]:
-    """The parcel settled ``settle`` s on a still belt-material plate, and the SI parameters."""
+) -> tuple[mujoco.MjModel, mujoco.MjData, dict[str, float], Callable[[], None]]:
+    """The parcel settled ``settle`` s on a still belt-material plate, the SI parameters and
+    the step function (MuJoCo's step, after the Coulomb belt friction where the scene has it)."""
     full = resolve(consignment.content_kind, si_values=dict(params or {}))
     scene = build_scene(plate_rig("belt"), consignment, full, 1, options)
     model = mujoco.MjModel.from_xml_string(scene.xml)
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
-    for _ in range(round(settle / model.opt.timestep)):
+    coulomb = (
+        CoulombBelts(model, data, scene)
+        if (options or SceneOptions()).belt_friction == "coulomb"
+        else None
+    )
+
+    def step() -> None:
+        if coulomb is not None:
+            coulomb.apply(model, data)
         mujoco.mj_step(model, data)
-    return model, data, full
+
+    for _ in range(round(settle / model.opt.timestep)):
+        step()
+    return model, data, full, step
 
 
 def slide_test(
@@ -137,7 +150,7 @@ def slide_test(
     if not v0 > 0:
         raise ParcelfitError(f"the slide test needs a positive speed [m/s], got {v0}")
     with CountedWarnings():
-        model, data, full = _settled(consignment, params, options, settle)
+        model, data, full, step = _settled(consignment, params, options, settle)
         plate = np.array([g for g in range(model.ngeom) if model.geom(g).name.startswith("plate")])
         flex = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, "packaging")
         verts = slice(model.flex_vertadr[flex], model.flex_vertadr[flex] + model.flex_vertnum[flex])
@@ -146,7 +159,7 @@ def slide_test(
         dt = model.opt.timestep
         prev, t, sliding, lifted = x0, 0.0, 0, 0
         while t < 2.0:
-            mujoco.mj_step(model, data)
+            step()
             t += dt
             x = float(data.flexvert_xpos[verts, 0].mean())
             # positions lag the step by one (simulator.py), so the first step shows no motion
@@ -170,7 +183,7 @@ def _spin_test(
     options: SceneOptions | None,
     settle: float,
 ) -> SpinTest:
-    model, data, _ = _settled(consignment, params, options, settle)
+    model, data, _, step = _settled(consignment, params, options, settle)
     content = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "content")
     centre = data.xpos[content].copy()
     coulomb = None
@@ -195,7 +208,7 @@ def _spin_test(
     turn, t = 0.0, 0.0
     end = duration if free else 2.0
     while t < end:
-        mujoco.mj_step(model, data)
+        step()
         t += model.opt.timestep
         yaw = _yaw(data.xquat[content])
         turn += (yaw - prev + math.pi) % (2 * math.pi) - math.pi
