@@ -1,6 +1,6 @@
 """Simulation speed: 2 s of E3 (induction) with the flexible parcels, one core.
 
-    python benchmarks/bench_sim.py [--repeats 3]
+    python benchmarks/bench_sim.py [--repeats 3] [--scene KEY=VALUE ...]
 
 Simulates exactly 2 s (the end box is widened so the run does not stop at the rig's end) for
 KPBW (flexible packaging, rigid content) and PB (polybag, soft content) at speed setting 1 and
@@ -17,6 +17,7 @@ from dataclasses import replace
 
 from parcelfit.runs import TestCase
 from parcelfit.sim.mujoco import MujocoSimulator, SceneOptions, SimOptions, load_rig
+from parcelfit.sim.mujoco.scene import parse_scene_options
 
 PUBLISHED_SECONDS = 5 * 3600.0
 BUDGET = {"KPBW": 15.0, "PB": 30.0}  # s, the targets of the physics issue
@@ -33,14 +34,24 @@ def main() -> None:
         default=None,
         help="MuJoCo's iteration cap instead of the default (e.g. 50, the former default, as a peer)",
     )
+    ap.add_argument(
+        "--scene",
+        nargs="*",
+        default=[],
+        metavar="KEY=VALUE",
+        help="scene options other than the defaults (e.g. belt_friction=coulomb)",
+    )
     args = ap.parse_args()
     rig = load_rig("E3")
     rig = replace(rig, end=replace(rig.end, x=(-1.0, 3.9), duration=2.0, after_last_barrier=10.0))
-    scene = SceneOptions() if args.iterations is None else SceneOptions(iterations=args.iterations)
+    given = parse_scene_options(args.scene)
+    if args.iterations is not None:
+        given["iterations"] = args.iterations
+    scene = SceneOptions(**given)  # type: ignore[arg-type]
     sim = MujocoSimulator(SimOptions(scene=scene), rigs={"E3": rig})
     print(
         f"E3, speed setting 1, 2.0 s simulated, default resolution, one core, "
-        f"iteration cap {scene.iterations}"
+        f"iteration cap {scene.iterations}, belt friction {scene.belt_friction}"
     )
     print(f"{'case':<10}{'wall [s]':>10}{'steps/s':>10}{'x faster than 5 h':>20}{'target [s]':>12}")
     for cons in ("KPBW", "PB"):

@@ -3,6 +3,7 @@
     python benchmarks/bench_twin.py [--out bench-twin] [--workers 2] [--truths 3]
                                     [--placements 2] [--budget 48] [--setups published,joint]
                                     [--real-timestep 1/4800] [--model-timestep 1/2400]
+                                    [--belt-friction mujoco|coulomb]
 
 For each of several hidden truths (other than the bundled twin's), the benchmark makes a twin
 dataset with parcelfit's MuJoCo model (E3/KPBW at speed settings 1 and 2, E1/KPBW at 1 and 3,
@@ -316,6 +317,12 @@ def main() -> None:
         default=None,
         help="time step [s] of the calibrated model (default: the model's own default)",
     )
+    ap.add_argument(
+        "--belt-friction",
+        choices=("mujoco", "coulomb"),
+        default="mujoco",
+        help="law of friction on belts, strips and rollers, for the twin and the model alike",
+    )
     args = ap.parse_args()
 
     from parcelfit.runs import TestCase
@@ -332,7 +339,9 @@ def main() -> None:
                 folder,
                 cases,
                 {"KPBW": dict(truth)},
-                settings=TwinSettings(real_timestep=args.real_timestep),
+                settings=TwinSettings(
+                    real_timestep=args.real_timestep, real_belt_friction=args.belt_friction
+                ),
                 seed=seed,
                 name=f"twin-{folder.parent.name}",
                 workers=args.workers,
@@ -348,7 +357,12 @@ def main() -> None:
         truths,
         setups,
         make_dataset,
-        {"backend": "mujoco", "rig": "E3", "consignment": "KPBW"}
+        {
+            "backend": "mujoco",
+            "rig": "E3",
+            "consignment": "KPBW",
+            "belt_friction": args.belt_friction,
+        }
         | ({} if args.model_timestep is None else {"timestep": args.model_timestep}),
         PARAMETERS,
         args.out,

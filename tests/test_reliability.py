@@ -652,6 +652,10 @@ BAD_INPUTS = {
         lambda p: _study_sim(p, timestep="fast"),
         r"simulator\.timestep: expected a number in s, got 'fast'",
     ),
+    "belt friction sticky": (
+        lambda p: _study_sim(p, belt_friction="sticky"),
+        r"simulator\.belt_friction: unknown belt friction law 'sticky'.*mujoco, coulomb",
+    ),
     "screen string bounds": (
         lambda p: _screen(p, parameters={"mu_d_BePa": ["a", "b"], "mu_d_MePa": [0.15, 0.35]}),
         r"parameters\.mu_d_BePa: expected \[low, high\] with low < high, got \['a', 'b'\]",

@@ -406,3 +406,20 @@ def test_scene_options_read_from_key_value_texts():
     assert SceneOptions(**given).step_for(soft=False) == 1 / 2400  # type: ignore[arg-type]
     with pytest.raises(ParcelfitError, match="not KEY=VALUE"):
         parse_scene_options(["timestep"])
+
+
+def test_belt_friction_from_a_study_files_simulator_section_and_a_twins_settings(tmp_path):
+    from parcelfit.sim.factory import SimulatorSection, make_simulator
+    from parcelfit.synth import TwinSettings, TwinSettingsSection
+
+    section = SimulatorSection(
+        backend="mujoco", rig="E3", consignment="KPBW", belt_friction="coulomb"
+    )
+    sim = make_simulator(section.to_config(tmp_path))
+    assert sim.options.scene.belt_friction == "coulomb"  # type: ignore[attr-defined]
+    default = SimulatorSection(backend="mujoco", rig="E3", consignment="KPBW")
+    assert make_simulator(default.to_config(tmp_path)).options.scene.belt_friction == "mujoco"  # type: ignore[attr-defined]
+    assert TwinSettings().real_belt_friction == "mujoco"
+    assert TwinSettingsSection(real_belt_friction="coulomb").real_belt_friction == "coulomb"
+    with pytest.raises(Exception, match="unknown belt friction law 'dry'"):
+        TwinSettingsSection(real_belt_friction="dry")

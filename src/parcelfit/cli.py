@@ -546,6 +546,13 @@ def simulate(
             "its bending stiffness (see the simulator's README, Resolution).",
         ),
     ] = None,
+    belt_friction: Annotated[
+        str,
+        typer.Option(
+            help="Friction law on belts, strips and rollers: mujoco (MuJoCo's contacts) or "
+            "coulomb (Coulomb forces at the contact points; see the simulator's README, Sliding).",
+        ),
+    ] = "mujoco",
     wall_limit: Annotated[float, typer.Option(help="Wall-clock limit [s].")] = 600.0,
     seed: Annotated[
         int | None,
@@ -586,6 +593,7 @@ def simulate(
         timestep=timestep,
         spacing=spacing,
         membrane_cap=membrane_cap,
+        belt_friction=belt_friction,
         wall_limit=wall_limit,
     )
     sim = make_simulator(config)

@@ -17,8 +17,10 @@ experiments do (method.md sections 2 and 3):
   (default None: the model's own default, 1/2400 s around rigid contents and 1/1200 s around a
   soft one): with the default the twin is consistent with the model, not finer than it; a finer
   ``real_timestep`` (``benchmarks/bench_twin.py`` uses half the model's) lets the twin expose
-  the model's remaining step error to a calibration. The remaining model-form differences are
-  the specimen, placement, speed and tracking variations above.
+  the model's remaining step error to a calibration. ``real_belt_friction`` (``mujoco``,
+  default, or ``coulomb``) is the twin's law of friction on belts, strips and rollers
+  (`parcelfit.sim.mujoco.scene.SceneOptions.belt_friction`). The remaining model-form
+  differences are the specimen, placement, speed and tracking variations above.
 
 The truth (parameters in the catalogue's units, and every setting above) is written beside the
 dataset as ``truth.yaml``; the dataset is marked ``synthetic: true``.
@@ -56,8 +58,9 @@ from parcelfit.runs import (
     save_dataset,
     write_trajectory,
 )
-from parcelfit.schema import FileModel, Number, Text, Whole, keys_in, or_default, parse
+from parcelfit.schema import Choice, FileModel, Number, Text, Whole, keys_in, or_default, parse
 from parcelfit.sim.executors import make_executor
+from parcelfit.sim.factory import BELT_FRICTION
 from parcelfit.sim.mujoco import Consignment, MujocoSimulator, Rig, SceneOptions, SimOptions
 from parcelfit.sim.mujoco.scene import FULL_SHELL_STEP, INTERPOLATED_SHELL_STEP
 from parcelfit.sim.params import CATALOGUE, resolve
@@ -78,6 +81,7 @@ class TwinSettings:
     real_spacing: float = 0.03
     real_soft_spacing: float = 0.04
     real_timestep: float | None = None  # [s]; None: the model's default for the consignment
+    real_belt_friction: str = "mujoco"  # "mujoco" or "coulomb", see SceneOptions.belt_friction
 
 
 def _specimen(
@@ -131,6 +135,7 @@ def _twin_run(job: TwinJob) -> tuple[Run, float]:
     drives = sorted({d for sp in rig.speeds.values() for d in sp})
     scene = SceneOptions(
         timestep=s.real_timestep,
+        belt_friction=s.real_belt_friction,
         spacing=s.real_spacing,
         soft_shell_spacing=s.real_soft_spacing,
         speed_factors={d: 1 + rng.uniform(-s.speed_dev, s.speed_dev) for d in drives},
@@ -287,6 +292,11 @@ def make_twin_dataset(
                 if s.real_timestep is None
                 else f"1/{1 / s.real_timestep:.0f} s."
             )
+            + (
+                " Coulomb friction on belts, strips and rollers."
+                if s.real_belt_friction == "coulomb"
+                else ""
+            )
         ),
     )
     units = {p.name: p for p in CATALOGUE}
@@ -350,6 +360,9 @@ class TwinSettingsSection(FileModel):
     )
     real_timestep: Annotated[float | None, Number(unit="s", ge=1e-5, le=0.01)] = (
         TwinSettings.real_timestep
+    )
+    real_belt_friction: Annotated[str, Choice(BELT_FRICTION, what="belt friction law")] = (
+        TwinSettings.real_belt_friction
     )
 
 

@@ -2,7 +2,8 @@
 file (`SimulatorSection`, checked on load), or a `SimulatorConfig` made in code.
 
 The section's ``backend`` chooses: ``mujoco`` (a bundled or user rig and consignment, optional
-``timestep`` [s], ``spacing`` [m], ``membrane_cap`` [N/m] and ``wall_limit`` [s]), ``external`` (a solver description
+``timestep`` [s], ``spacing`` [m], ``membrane_cap`` [N/m], ``belt_friction`` (``mujoco`` or
+``coulomb``, see `SceneOptions`) and ``wall_limit`` [s]), ``external`` (a solver description
 file run as a command) or ``python`` (``factory: package.module:callable``, imported and called:
 such a file runs code). A new named backend adds its keys to `SimulatorSection` and
 `SimulatorConfig` and its construction to `make_simulator`; everything that builds a simulator
@@ -26,6 +27,7 @@ from parcelfit.sim.params import RIGID
 from parcelfit.sim.protocol import Simulator
 
 BACKENDS = ("mujoco", "external", "python")
+BELT_FRICTION = ("mujoco", "coulomb")
 _SETTINGS = (
     "backend",
     "rig",
@@ -33,6 +35,7 @@ _SETTINGS = (
     "timestep",
     "spacing",
     "membrane_cap",
+    "belt_friction",
     "wall_limit",
     "external",
     "factory",
@@ -52,9 +55,10 @@ def _check_needs(backend: str, settings: Any) -> None:
 class SimulatorConfig(Mapping[str, Any]):
     """A simulator's configuration (SI): ``backend`` and what it needs (mujoco: ``rig`` and
     ``consignment``, bundled names or ``.yaml`` paths, optional ``timestep`` [s], ``spacing``
-    [m] and ``membrane_cap`` [N/m]; external: the solver description file ``external``; python: ``factory``), optional
-    ``wall_limit`` [s] per simulation, and ``folder``: the folder of the file it came from (an
-    external solver's runs go into ``folder/.external-runs``).
+    [m], ``membrane_cap`` [N/m] and ``belt_friction``; external: the solver description file
+    ``external``; python: ``factory``), optional ``wall_limit`` [s] per simulation, and
+    ``folder``: the folder of the file it came from (an external solver's runs go into
+    ``folder/.external-runs``).
 
     It reads as the mapping of the settings given (``dict(config)``: the keys of the file's
     section that were set, without ``folder``), as the section did before it was typed."""
@@ -65,6 +69,7 @@ class SimulatorConfig(Mapping[str, Any]):
     timestep: float | None = None
     spacing: float | None = None
     membrane_cap: float | None = None
+    belt_friction: str | None = None
     wall_limit: float | None = None
     external: str | None = None
     factory: str | None = None
@@ -92,7 +97,7 @@ class SimulatorConfig(Mapping[str, Any]):
 
 class SimulatorSection(FileModel):
     """``simulator`` of a study or screen file: the backend and what it needs (``timestep``
-    [s], ``spacing`` [m], ``membrane_cap`` [N/m], ``wall_limit`` [s])."""
+    [s], ``spacing`` [m], ``membrane_cap`` [N/m], ``belt_friction``, ``wall_limit`` [s])."""
 
     backend: Annotated[str, Choice(BACKENDS, what="backend")]
     rig: Annotated[str | None, Text()] = None
@@ -100,6 +105,7 @@ class SimulatorSection(FileModel):
     timestep: Annotated[float | None, Number(unit="s", ge=1e-9)] = None
     spacing: Annotated[float | None, Number(unit="m", ge=1e-9)] = None
     membrane_cap: Annotated[float | None, Number(unit="N/m", ge=1e-9)] = None
+    belt_friction: Annotated[str | None, Choice(BELT_FRICTION, what="belt friction law")] = None
     wall_limit: Annotated[float | None, Number(unit="s", ge=1e-9)] = None
     external: Annotated[str | None, Text()] = None
     factory: Annotated[str | None, Text()] = None
@@ -133,9 +139,11 @@ def make_simulator(config: SimulatorConfig) -> Simulator:
         assert config.rig is not None and config.consignment is not None  # checked on creation
         rig = load_rig(config.rig)
         cons = load_consignment(config.consignment)
-        numerics = {
+        numerics: dict[str, Any] = {
             k: float(config[k]) for k in ("timestep", "spacing", "membrane_cap") if k in config
         }
+        if "belt_friction" in config:
+            numerics["belt_friction"] = config["belt_friction"]
         options = SimOptions(
             scene=SceneOptions(**numerics),
             wall_limit=DEFAULT_WALL_LIMIT if config.wall_limit is None else config.wall_limit,
