@@ -19,7 +19,9 @@ relative to their start (as every comparison in parcelfit):
 * ratio        = effect / noise floor (>= 3 asked for every parameter and measure).
 
 With ``--placements K`` each quantity is the mean over the placement seeds 0..K-1 (matched
-pairs: both runs of a pair share the placement). Writes ``docs/parameter-effects.md`` (``--out``).
+pairs: both runs of a pair share the placement). ``--scene KEY=VALUE`` sets scene options other
+than the defaults (e.g. ``belt_friction=coulomb``). Writes ``docs/parameter-effects.md``
+(``--out``).
 """
 
 from __future__ import annotations
@@ -36,16 +38,23 @@ import numpy as np
 from parcelfit.metrics.comparison import Comparison
 from parcelfit.metrics.dtw import dtw_distance
 from parcelfit.runs import Run, TestCase
-from parcelfit.sim.mujoco import MujocoSimulator, load_consignment, load_rig
+from parcelfit.sim.mujoco import (
+    MujocoSimulator,
+    SceneOptions,
+    SimOptions,
+    load_consignment,
+    load_rig,
+)
+from parcelfit.sim.mujoco.scene import parse_scene_options
 from parcelfit.sim.params import CATALOGUE, resolve
 
 PUBLISHED_E3 = ("k_CoPa", "k_MePa", "mu_d_BePa", "mu_d_MePa", "mu_s_MePa", "E_Pa")
 MEASURES = ("DTW_xy [m]", "DTW_theta [rad]", "transit [s]")
 
 
-def _simulate(job: tuple[dict[str, float], TestCase, int]) -> Run | None:
-    params, case, seed = job
-    result = MujocoSimulator().with_placement(seed).run(params, case)
+def _simulate(job: tuple[dict[str, float], TestCase, int, SceneOptions]) -> Run | None:
+    params, case, seed, scene = job
+    result = MujocoSimulator(SimOptions(scene=scene)).with_placement(seed).run(params, case)
     return result.run if result.ok else None
 
 
@@ -71,6 +80,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--step", type=float, default=0.001, help="relative change for the floor")
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--out", type=Path, default=Path("docs"))
+    ap.add_argument("--scene", nargs="*", default=[], metavar="KEY=VALUE")
     args = ap.parse_args(argv)
     rig = load_rig(args.rig)
     kind = load_consignment(args.consignment).content_kind
@@ -78,7 +88,8 @@ def main(argv: list[str] | None = None) -> int:
     defaults = resolve(kind, si_values={})
     spec = {p.name: p for p in CATALOGUE}
     seeds = list(range(args.placements))
-    jobs: dict[tuple[str, str, int], tuple[dict[str, float], TestCase, int]] = {}
+    scene = SceneOptions(**parse_scene_options(args.scene))  # type: ignore[arg-type]
+    jobs: dict[tuple[str, str, int], tuple[dict[str, float], TestCase, int, SceneOptions]] = {}
     for name in args.params:
         r = spec[name].range_for(kind)
         d = defaults[name]
@@ -89,7 +100,7 @@ def main(argv: list[str] | None = None) -> int:
             ("plus", d * (1 + args.step)),
         ):
             for s in seeds:
-                jobs[name, label, s] = ({**defaults, name: value}, case, s)
+                jobs[name, label, s] = ({**defaults, name: value}, case, s, scene)
     t0 = time.perf_counter()
     with ProcessPoolExecutor(args.workers) as ex:
         runs = dict(zip(jobs, ex.map(_simulate, jobs.values()), strict=True))
@@ -110,7 +121,9 @@ def main(argv: list[str] | None = None) -> int:
         "",
         f"Written by `python scripts/parameter_effects.py --rig {args.rig} --consignment "
         f"{args.consignment} --setting {args.setting} --placements {args.placements} --step "
-        f"{args.step:g}`: {len(runs)} simulations ({failed} not ok) in {wall:.0f} s on "
+        f"{args.step:g}"
+        + (f" --scene {' '.join(args.scene)}" if args.scene else "")
+        + f" --out {args.out}`: {len(runs)} simulations ({failed} not ok) in {wall:.0f} s on "
         f"{args.workers} processes. Effect: the response between the runs at the two ends of "
         f"the parameter's screening range; floor: between the runs at the default "
         f"-+{args.step:.1%}; ratio: effect / noise floor (median of the floors).",
