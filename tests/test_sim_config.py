@@ -391,6 +391,7 @@ def test_the_default_step_follows_the_shell_and_a_given_step_wins():
     assert step("PB", SceneOptions()) == pytest.approx(1 / 1200)
     assert step("KPBW", SceneOptions(shell_dof="full")) == pytest.approx(1 / 1200)
     assert step("PB", SceneOptions(timestep=1 / 600)) == pytest.approx(1 / 600)
+    assert step("PB", SceneOptions(belt_friction="coulomb")) == pytest.approx(1 / 2400)
     assert SceneOptions().step_for(soft=False) == pytest.approx(1 / 2400)
     with pytest.raises(ParcelfitError, match="timestep must lie in"):
         SceneOptions(timestep=0.1)

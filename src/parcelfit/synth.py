@@ -62,7 +62,6 @@ from parcelfit.schema import Choice, FileModel, Number, Text, Whole, keys_in, or
 from parcelfit.sim.executors import make_executor
 from parcelfit.sim.factory import BELT_FRICTION
 from parcelfit.sim.mujoco import Consignment, MujocoSimulator, Rig, SceneOptions, SimOptions
-from parcelfit.sim.mujoco.scene import FULL_SHELL_STEP, INTERPOLATED_SHELL_STEP
 from parcelfit.sim.params import CATALOGUE, resolve
 
 
@@ -276,6 +275,7 @@ def make_twin_dataset(
         )
         regions = tuple(r for r in rig.regions if isinstance(r, Box)) or rig.regions
         out_cases.append(CaseData(case, runs, regions, rig.margin))
+    steps = SceneOptions(belt_friction=s.real_belt_friction)  # the default steps it implies
     path = save_dataset(
         folder,
         name,
@@ -287,8 +287,8 @@ def make_twin_dataset(
             f"belt-speed and tracking variation; shell mesh {s.real_spacing * 1e3:g} mm (rigid contents), "
             f"{s.real_soft_spacing * 1e3:g} mm (soft contents), time step "
             + (
-                f"the model's default (1/{1 / INTERPOLATED_SHELL_STEP:.0f} s rigid, "
-                f"1/{1 / FULL_SHELL_STEP:.0f} s soft contents)."
+                f"the model's default (1/{1 / steps.step_for(False):.0f} s rigid, "
+                f"1/{1 / steps.step_for(True):.0f} s soft contents)."
                 if s.real_timestep is None
                 else f"1/{1 / s.real_timestep:.0f} s."
             )
