@@ -238,3 +238,33 @@ def test_a_spinning_parcel_keeps_its_spin_in_free_flight_and_stops_as_a_rigid_bo
         assert down.turn == pytest.approx(down.coulomb_turn, rel=0.15)
     full = SceneOptions(shell_dof="full", timestep=1 / 600)  # the former default
     assert spin_test(cons, free=True, options=full).retained < 0.5
+
+
+def test_coulomb_belt_friction_warns_on_a_full_shell(caplog):
+    """The explicit Coulomb forces are not trustworthy on a soft content's full shell: a
+    warning says so when such a scene is built (none for an interpolated shell)."""
+    import logging
+
+    import mujoco
+
+    from parcelfit.sim.mujoco import load_rig
+    from parcelfit.sim.mujoco.coulomb import CoulombBelts
+    from parcelfit.sim.mujoco.scene import build_scene
+    from parcelfit.sim.params import resolve
+
+    def build(name: str, kind: str) -> None:
+        scene = build_scene(
+            load_rig("E1"),
+            load_consignment(name),
+            resolve(kind),
+            1,
+            SceneOptions(belt_friction="coulomb"),
+        )
+        model = mujoco.MjModel.from_xml_string(scene.xml)
+        CoulombBelts(model, mujoco.MjData(model), scene)
+
+    with caplog.at_level(logging.WARNING, logger="parcelfit.sim.mujoco"):
+        build("KPBW", "rigid")
+        assert "not trustworthy" not in caplog.text
+        build("PB", "soft")
+    assert "Coulomb belt friction on a full shell" in caplog.text

@@ -23,6 +23,13 @@ nodes, or a full shell's own vertices) through a constant linear map V (vertex =
 found once by moving each degree of freedom in turn. So the point's velocity is
 J_c qdot with J_c = sum_a w_a V_a, and the force enters as the generalised force J_c^T F_c,
 exactly as a contact force of MuJoCo's would.
+
+Measured limits (the simulator README, "Sliding"): around rigid contents (an interpolated
+shell) the forces are stable at 1/1200 s and finer. Around a soft content (PB's full shell,
+whose film vertices weigh a fraction of a gram) they are not trustworthy: at 1/1200 s an E1 run
+turned 42 degrees and stalled, and at 1/2400 s E1 placements turn 7-29 degrees with transit-time
+spreads of 23-107 ms where MuJoCo's friction gives 0-3 degrees and 1-3 ms. A full shell with
+Coulomb friction therefore logs a warning.
 """
 
 from __future__ import annotations
@@ -31,6 +38,7 @@ import mujoco
 import numpy as np
 
 from parcelfit.errors import ParcelfitError
+from parcelfit.sim.mujoco.mjlog import LOGGER
 from parcelfit.sim.mujoco.scene import Scene
 
 SLIP_REG = 0.005  # [m/s]
@@ -58,6 +66,12 @@ class CoulombBelts:
             raise ParcelfitError("Coulomb belt friction: the scene has no belt, strip or roller")
         self.belt_ids = np.array(sorted(self.surface_velocity), dtype=int)
         self.dofs, self.vmap = self._vertex_map(model, data)
+        if not model.flex_interp[flex]:
+            LOGGER.warning(
+                "Coulomb belt friction on a full shell (soft content) is not trustworthy: its "
+                "explicit forces on the film's light vertices turn and delay the parcel "
+                "(simulator README, Sliding); use belt_friction: mujoco for this consignment"
+            )
 
     def _vertex_map(
         self, model: mujoco.MjModel, data: mujoco.MjData
