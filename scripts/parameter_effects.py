@@ -19,7 +19,14 @@ relative to their start (as every comparison in parcelfit):
 * ratio        = effect / noise floor (>= 3 asked for every parameter and measure).
 
 With ``--placements K`` each quantity is the mean over the placement seeds 0..K-1 (matched
-pairs: both runs of a pair share the placement). ``--scene KEY=VALUE`` sets scene options other
+pairs: both runs of a pair share the placement). With K >= 2 the script also measures what a
+parameter does to the *ensemble* (`parcelfit.sim.ensemble.ensemble_shift`): the change of the
+median rotation, the median transit time and the share of spins between the K runs at the low
+and the K runs at the high end, against the same change between the runs at the default
+-+step (the ensemble's noise floor, median over the parameters) and against the bootstrap
+standard error of the change (how much another draw of K placements would move it). On a rig
+where single placements near the spin/slide threshold change branch with any small change, this
+is the response a parameter has to move. ``--scene KEY=VALUE`` sets scene options other
 than the defaults (e.g. ``belt_friction=coulomb``). Writes ``docs/parameter-effects.md``
 (``--out``).
 """
@@ -38,6 +45,7 @@ import numpy as np
 from parcelfit.metrics.comparison import Comparison
 from parcelfit.metrics.dtw import dtw_distance
 from parcelfit.runs import Run, TestCase
+from parcelfit.sim.ensemble import EnsembleShift, Member, ensemble_shift, rotation
 from parcelfit.sim.mujoco import (
     MujocoSimulator,
     SceneOptions,
@@ -47,15 +55,108 @@ from parcelfit.sim.mujoco import (
 )
 from parcelfit.sim.mujoco.scene import parse_scene_options
 from parcelfit.sim.params import CATALOGUE, resolve
+from parcelfit.sim.protocol import SimStatus
 
 PUBLISHED_E3 = ("k_CoPa", "k_MePa", "mu_d_BePa", "mu_d_MePa", "mu_s_MePa", "E_Pa")
 MEASURES = ("DTW_xy [m]", "DTW_theta [rad]", "transit [s]")
+ENSEMBLE_MEASURES = ("median rotation [deg]", "median transit [s]", "spin share [-]")
 
 
 def _simulate(job: tuple[dict[str, float], TestCase, int, SceneOptions]) -> Run | None:
     params, case, seed, scene = job
     result = MujocoSimulator(SimOptions(scene=scene)).with_placement(seed).run(params, case)
     return result.run if result.ok else None
+
+
+def _members(runs: dict[tuple[str, str, int], Run | None], name: str, label: str) -> list[Member]:
+    out = []
+    for (n, lab, seed), run in runs.items():
+        if (n, lab) != (name, label):
+            continue
+        out.append(
+            Member(
+                seed=seed,
+                status=SimStatus.OK if run is not None else SimStatus.UNSTABLE,
+                transit_time=run.transit_time if run is not None else None,
+                rotation=rotation(run.trajectory) if run is not None else None,
+                run=run,
+                wall_time=0.0,
+            )
+        )
+    return out
+
+
+def _shift_values(sh: EnsembleShift) -> tuple[np.ndarray, np.ndarray]:
+    """(|differences|, standard errors) in the units of ENSEMBLE_MEASURES."""
+    deg = 180 / np.pi
+    values = np.abs([sh.rotation_median * deg, sh.transit_median, sh.spin_share])
+    ses = np.array([sh.rotation_median_se * deg, sh.transit_median_se, sh.spin_share_se])
+    return values, ses
+
+
+def _ensemble_lines(
+    runs: dict[tuple[str, str, int], Run | None], params: list[str], n: int
+) -> list[str]:
+    effect, se, floor = {}, {}, {}
+    for name in params:
+        effect[name], se[name] = _shift_values(
+            ensemble_shift(_members(runs, name, "low"), _members(runs, name, "high"))
+        )
+        floor[name], _ = _shift_values(
+            ensemble_shift(_members(runs, name, "minus"), _members(runs, name, "plus"))
+        )
+    noise = np.nanmedian(np.array(list(floor.values())), axis=0)
+    lines = [
+        "",
+        f"## The ensemble of {n} placements",
+        "",
+        "What each parameter does to the ensemble's statistics: effect = |change| between the "
+        f"{n} runs at the low and the {n} runs at the high end (matched placements), with its "
+        "paired bootstrap standard error (SE); floor = the same change between the runs at the "
+        "default -+step; noise floor = median of the floors. A ratio is effect / noise floor "
+        "(inf where the floor is 0: no placement changed), z = effect / SE.",
+        "",
+        "**Ensemble noise floor**: "
+        + ", ".join(f"{m} {v:.4g}" for m, v in zip(ENSEMBLE_MEASURES, noise, strict=True)),
+        "",
+        "| parameter | "
+        + " | ".join(f"effect {m} (SE)" for m in ENSEMBLE_MEASURES)
+        + " | "
+        + " | ".join(f"floor {m}" for m in ENSEMBLE_MEASURES)
+        + " | ratio rotation | ratio transit | ratio spins | z rotation | z transit | z spins |",
+        "|---" * 13 + "|",
+    ]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for name in params:
+            ratio = effect[name] / noise
+            z = effect[name] / se[name]
+            lines.append(
+                f"| {name} | "
+                + " | ".join(
+                    f"{v:.4g} ({e:.2g})" for v, e in zip(effect[name], se[name], strict=True)
+                )
+                + " | "
+                + " | ".join(f"{v:.4g}" for v in floor[name])
+                + " | "
+                + " | ".join(f"{v:.1f}" for v in ratio)
+                + " | "
+                + " | ".join(f"{v:.1f}" for v in z)
+                + " |"
+            )
+        moved = {
+            n_: bool(np.any((effect[n_] / noise >= 3) & (effect[n_] / se[n_] >= 2)))
+            for n_ in params
+        }
+    lines += [
+        "",
+        "Parameters that move at least one ensemble statistic by >= 3 times its floor and >= 2 "
+        "standard errors: "
+        + (", ".join(n_ for n_ in params if moved[n_]) or "none")
+        + "; not: "
+        + (", ".join(n_ for n_ in params if not moved[n_]) or "none")
+        + ".",
+    ]
+    return lines
 
 
 def _response(a: Run | None, b: Run | None, cmp: Comparison) -> np.ndarray:
@@ -152,6 +253,8 @@ def main(argv: list[str] | None = None) -> int:
         )
     ok = all(np.all(effect[n] / noise >= 3) for n in args.params)
     lines += ["", f"Every ratio >= 3: **{'yes' if ok else 'no'}**."]
+    if len(seeds) >= 2:
+        lines += _ensemble_lines(runs, args.params, len(seeds))
     text = "\n".join(lines) + "\n"
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "parameter-effects.md").write_text(text)

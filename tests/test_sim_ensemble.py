@@ -15,7 +15,7 @@ from parcelfit.cli import app
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import TestCase, Trajectory, read_trajectory
 from parcelfit.sim import SimStatus
-from parcelfit.sim.ensemble import Member, rotation, summarise
+from parcelfit.sim.ensemble import Member, ensemble_shift, rotation, summarise
 from parcelfit.sim.mujoco import MujocoSimulator, SceneOptions, SimOptions, load_rig
 from parcelfit.sim.mujoco.rig import SCATTER_CUT, parse_rig
 from parcelfit.sim.mujoco.simulator import STICK_SPEED, _FrictionSwitch
@@ -146,6 +146,35 @@ def test_ensemble_summary_statistics():
     assert st.transit_sem == pytest.approx(np.std([1.2, 1.22, 1.3, 1.4], ddof=1) / 2)
     assert st.rank_correlation == pytest.approx(1.0)
     assert members[4].outcome == "failed"
+
+
+def test_ensemble_shift_pairs_placements_and_bounds_its_error():
+    a = [_member(i, r, t) for i, (r, t) in enumerate([(10, 1.2), (20, 1.3), (30, 1.4), (40, 1.5)])]
+    # b: every run 5 degrees more and 10 ms slower, placement 1 now spins, placement 3 failed,
+    # and a placement a does not have
+    b = [
+        _member(0, 15, 1.21),
+        _member(1, 120, 1.31),
+        _member(2, 35, 1.41),
+        _member(3, None, None),
+        _member(9, 300, 2.0),
+    ]
+    sh = ensemble_shift(a, b, seed=1)
+    assert sh.n_pairs == 3  # seeds 0, 1, 2
+    # medians over the matched pairs: a 20 deg / 1.3 s, b 35 deg / 1.31 s
+    assert math.degrees(sh.rotation_median) == pytest.approx(15.0)
+    assert sh.transit_median == pytest.approx(0.01)
+    assert sh.spin_share == pytest.approx(1 / 3)
+    assert sh.rotation_median_se > 0 and sh.spin_share_se > 0
+    assert ensemble_shift(a, b, seed=1) == sh  # seeded bootstrap
+    # a constant shift of every pair has no sampling error
+    c = [_member(m.seed, math.degrees(m.rotation) + 2, m.transit_time + 0.005) for m in a]
+    same = ensemble_shift(a, c)
+    assert same.transit_median == pytest.approx(0.005)
+    assert same.spin_share == 0 and same.spin_share_se == 0
+    assert same.transit_median_se == pytest.approx(0.0, abs=1e-12)
+    # no common placement: nothing measured
+    assert math.isnan(ensemble_shift(a, [_member(7, 1, 1.0)]).rotation_median)
 
 
 def test_rotation_is_the_net_unwrapped_turn():
