@@ -37,7 +37,7 @@ import argparse
 import os
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 import numpy as np
@@ -203,8 +203,15 @@ def main(argv: list[str] | None = None) -> int:
             for s in seeds:
                 jobs[name, label, s] = ({**defaults, name: value}, case, s, scene)
     t0 = time.perf_counter()
+    print(f"{len(jobs)} simulations on {args.workers} processes", flush=True)
     with ProcessPoolExecutor(args.workers) as ex:
-        runs = dict(zip(jobs, ex.map(_simulate, jobs.values()), strict=True))
+        futures = {ex.submit(_simulate, job): key for key, job in jobs.items()}
+        done: dict[tuple[str, str, int], Run | None] = {}
+        for i, fut in enumerate(as_completed(futures), 1):
+            done[futures[fut]] = fut.result()
+            if i % max(1, len(jobs) // 20) == 0 or i == len(jobs):
+                print(f"  {i}/{len(jobs)} ({time.perf_counter() - t0:.0f} s)", flush=True)
+    runs = {key: done[key] for key in jobs}
     wall = time.perf_counter() - t0
     cmp = Comparison(regions=rig.regions, margin=rig.margin)
     effect, floor = {}, {}
