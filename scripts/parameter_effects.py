@@ -68,6 +68,29 @@ def _simulate(job: tuple[dict[str, float], TestCase, int, SceneOptions]) -> Run 
     return result.run if result.ok else None
 
 
+def _table_head(
+    label: str,
+    measures: tuple[str, ...],
+    noise: np.ndarray,
+    first: list[str],
+    effect_suffix: str,
+    last: list[str],
+) -> list[str]:
+    """The noise-floor line and the head of an effects table (effect and floor per measure)."""
+    columns = [
+        *first,
+        *(f"effect {m}{effect_suffix}" for m in measures),
+        *(f"floor {m}" for m in measures),
+        *last,
+    ]
+    return [
+        f"**{label}**: " + ", ".join(f"{m} {v:.4g}" for m, v in zip(measures, noise, strict=True)),
+        "",
+        "| " + " | ".join(columns) + " |",
+        "|---" * len(columns) + "|",
+    ]
+
+
 def _members(runs: dict[tuple[str, str, int], Run | None], name: str, label: str) -> list[Member]:
     out = []
     for (n, lab, seed), run in runs.items():
@@ -116,15 +139,14 @@ def _ensemble_lines(
         "default -+step; noise floor = median of the floors. A ratio is effect / noise floor "
         "(inf where the floor is 0: no placement changed), z = effect / SE.",
         "",
-        "**Ensemble noise floor**: "
-        + ", ".join(f"{m} {v:.4g}" for m, v in zip(ENSEMBLE_MEASURES, noise, strict=True)),
-        "",
-        "| parameter | "
-        + " | ".join(f"effect {m} (SE)" for m in ENSEMBLE_MEASURES)
-        + " | "
-        + " | ".join(f"floor {m}" for m in ENSEMBLE_MEASURES)
-        + " | ratio rotation | ratio transit | ratio spins | z rotation | z transit | z spins |",
-        "|---" * 13 + "|",
+        *_table_head(
+            "Ensemble noise floor",
+            ENSEMBLE_MEASURES,
+            noise,
+            ["parameter"],
+            " (SE)",
+            [f"{kind} {m}" for kind in ("ratio", "z") for m in ("rotation", "transit", "spins")],
+        ),
     ]
     with np.errstate(divide="ignore", invalid="ignore"):
         for name in params:
@@ -236,15 +258,14 @@ def main(argv: list[str] | None = None) -> int:
         f"the parameter's screening range; floor: between the runs at the default "
         f"-+{args.step:.1%}; ratio: effect / noise floor (median of the floors).",
         "",
-        "**Noise floor**: "
-        + ", ".join(f"{m} {v:.4g}" for m, v in zip(MEASURES, noise, strict=True)),
-        "",
-        "| parameter | range | "
-        + " | ".join(f"effect {m}" for m in MEASURES)
-        + " | "
-        + " | ".join(f"floor {m}" for m in MEASURES)
-        + " | ratio xy | ratio theta | ratio transit |",
-        "|---" * 11 + "|",
+        *_table_head(
+            "Noise floor",
+            MEASURES,
+            noise,
+            ["parameter", "range"],
+            "",
+            ["ratio xy", "ratio theta", "ratio transit"],
+        ),
     ]
     for name in args.params:
         r = spec[name].range_for(kind)
