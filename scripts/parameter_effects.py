@@ -45,7 +45,7 @@ import numpy as np
 from parcelfit.metrics.comparison import Comparison
 from parcelfit.metrics.dtw import dtw_distance
 from parcelfit.runs import Run, TestCase
-from parcelfit.sim.ensemble import EnsembleShift, Member, ensemble_shift, rotation
+from parcelfit.sim.ensemble import EnsembleShift, Member, ensemble_shift, member_of
 from parcelfit.sim.mujoco import (
     MujocoSimulator,
     SceneOptions,
@@ -55,17 +55,16 @@ from parcelfit.sim.mujoco import (
 )
 from parcelfit.sim.mujoco.scene import parse_scene_options
 from parcelfit.sim.params import CATALOGUE, resolve
-from parcelfit.sim.protocol import SimStatus
 
 PUBLISHED_E3 = ("k_CoPa", "k_MePa", "mu_d_BePa", "mu_d_MePa", "mu_s_MePa", "E_Pa")
 MEASURES = ("DTW_xy [m]", "DTW_theta [rad]", "transit [s]")
 ENSEMBLE_MEASURES = ("median rotation [deg]", "median transit [s]", "spin share [-]")
 
 
-def _simulate(job: tuple[dict[str, float], TestCase, int, SceneOptions]) -> Run | None:
+def _simulate(job: tuple[dict[str, float], TestCase, int, SceneOptions]) -> Member:
     params, case, seed, scene = job
-    result = MujocoSimulator(SimOptions(scene=scene)).with_placement(seed).run(params, case)
-    return result.run if result.ok else None
+    sim = MujocoSimulator(SimOptions(scene=scene)).with_placement(seed)
+    return member_of(seed, sim.run(params, case))
 
 
 def _table_head(
@@ -91,22 +90,8 @@ def _table_head(
     ]
 
 
-def _members(runs: dict[tuple[str, str, int], Run | None], name: str, label: str) -> list[Member]:
-    out = []
-    for (n, lab, seed), run in runs.items():
-        if (n, lab) != (name, label):
-            continue
-        out.append(
-            Member(
-                seed=seed,
-                status=SimStatus.OK if run is not None else SimStatus.UNSTABLE,
-                transit_time=run.transit_time if run is not None else None,
-                rotation=rotation(run.trajectory) if run is not None else None,
-                run=run,
-                wall_time=0.0,
-            )
-        )
-    return out
+def _members(runs: dict[tuple[str, str, int], Member], name: str, label: str) -> list[Member]:
+    return [m for (n, lab, _), m in runs.items() if (n, lab) == (name, label)]
 
 
 def _shift_values(sh: EnsembleShift) -> tuple[np.ndarray, np.ndarray]:
@@ -118,7 +103,7 @@ def _shift_values(sh: EnsembleShift) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _ensemble_lines(
-    runs: dict[tuple[str, str, int], Run | None], params: list[str], n: int
+    runs: dict[tuple[str, str, int], Member], params: list[str], n: int
 ) -> list[str]:
     effect, se, floor = {}, {}, {}
     for name in params:
@@ -228,7 +213,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{len(jobs)} simulations on {args.workers} processes", flush=True)
     with ProcessPoolExecutor(args.workers) as ex:
         futures = {ex.submit(_simulate, job): key for key, job in jobs.items()}
-        done: dict[tuple[str, str, int], Run | None] = {}
+        done: dict[tuple[str, str, int], Member] = {}
         for i, fut in enumerate(as_completed(futures), 1):
             done[futures[fut]] = fut.result()
             if i % max(1, len(jobs) // 20) == 0 or i == len(jobs):
@@ -239,13 +224,15 @@ def main(argv: list[str] | None = None) -> int:
     effect, floor = {}, {}
     for name in args.params:
         effect[name] = np.nanmean(
-            [_response(runs[name, "low", s], runs[name, "high", s], cmp) for s in seeds], axis=0
+            [_response(runs[name, "low", s].run, runs[name, "high", s].run, cmp) for s in seeds],
+            axis=0,
         )
         floor[name] = np.nanmean(
-            [_response(runs[name, "minus", s], runs[name, "plus", s], cmp) for s in seeds], axis=0
+            [_response(runs[name, "minus", s].run, runs[name, "plus", s].run, cmp) for s in seeds],
+            axis=0,
         )
     noise = np.nanmedian(np.array(list(floor.values())), axis=0)
-    failed = sum(r is None for r in runs.values())
+    failed = sum(m.run is None for m in runs.values())
     lines = [
         "# Parameter effects against the numerical noise floor",
         "",

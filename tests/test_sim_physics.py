@@ -1,16 +1,26 @@
 """Physics checks with analytic expectations (method.md sections 1, 2, 5)."""
 
+import logging
 import math
 from dataclasses import replace
 
+import mujoco
 import numpy as np
 import pytest
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import TestCase
 from parcelfit.sim import SimStatus
-from parcelfit.sim.mujoco import MujocoSimulator, SceneOptions, SimOptions, load_consignment
+from parcelfit.sim.mujoco import (
+    MujocoSimulator,
+    SceneOptions,
+    SimOptions,
+    load_consignment,
+    load_rig,
+)
+from parcelfit.sim.mujoco.coulomb import CoulombBelts
 from parcelfit.sim.mujoco.indentation import indentation_test
+from parcelfit.sim.mujoco.scene import build_scene
 from parcelfit.sim.params import resolve
 
 from .simhelpers import flat_belt
@@ -243,14 +253,6 @@ def test_a_spinning_parcel_keeps_its_spin_in_free_flight_and_stops_as_a_rigid_bo
 def test_coulomb_belt_friction_warns_on_a_full_shell(caplog):
     """The explicit Coulomb forces are not trustworthy on a soft content's full shell: a
     warning says so when such a scene is built (none for an interpolated shell)."""
-    import logging
-
-    import mujoco
-
-    from parcelfit.sim.mujoco import load_rig
-    from parcelfit.sim.mujoco.coulomb import CoulombBelts
-    from parcelfit.sim.mujoco.scene import build_scene
-    from parcelfit.sim.params import resolve
 
     def build(name: str, kind: str) -> None:
         scene = build_scene(

@@ -43,7 +43,7 @@ import numpy as np
 from scipy import stats
 
 from parcelfit.runs import Run, TestCase, Trajectory
-from parcelfit.sim.protocol import SimStatus
+from parcelfit.sim.protocol import SimResult, SimStatus
 
 SPIN_ANGLE = math.pi / 2  # rotation [rad] above which a run counts as a spin
 
@@ -184,11 +184,8 @@ def ensemble_shift(a: Sequence[Member], b: Sequence[Member], seed: int = 0) -> E
     return EnsembleShift(n_pairs, *rot, *tt, *spin)
 
 
-def _member(
-    factory: Callable[[int], object], params: Mapping[str, float], case: TestCase, seed: int
-) -> Member:
-    sim = factory(seed)
-    result = sim.run(params, case)  # type: ignore[attr-defined]
+def member_of(seed: int, result: SimResult) -> Member:
+    """The ensemble member of placement ``seed`` from its simulation's result."""
     run = result.run if result.ok else None
     return Member(
         seed=seed,
@@ -198,6 +195,12 @@ def _member(
         run=run,
         wall_time=result.wall_time,
     )
+
+
+def _member(
+    factory: Callable[[int], object], params: Mapping[str, float], case: TestCase, seed: int
+) -> Member:
+    return member_of(seed, factory(seed).run(params, case))  # type: ignore[attr-defined]
 
 
 def simulate_ensemble(
@@ -235,6 +238,7 @@ __all__ = [
     "EnsembleSummary",
     "Member",
     "ensemble_shift",
+    "member_of",
     "rotation",
     "simulate_ensemble",
     "summarise",
