@@ -53,7 +53,7 @@ from parcelfit.sim.mujoco import (
 )
 from parcelfit.sim.mujoco.rig import Rig
 from parcelfit.sim.mujoco.scene import parse_scene_options
-from parcelfit.sim.params import parameter, parse_assignments, resolve
+from parcelfit.sim.params import parameter, parse_assignments
 
 TYPES = ("BW", "KPBW", "KP", "PB")
 COLOURS = {"BW": "tab:orange", "KPBW": "tab:blue", "KP": "tab:green", "PB": "tab:red"}
@@ -215,9 +215,8 @@ def main(argv: list[str] | None = None) -> int:
                 members: dict[str, list[Member]] = {}
                 for cons in args.types:
                     case = TestCase(rig_name, cons, setting)
-                    kind = consignments[cons].content_kind
                     params = {k: parameter(k).to_si(v) for k, v in user.items()}
-                    resolve(kind, si_values=params)  # checks names and ranges
+                    consignments[cons].parameter_values(si_values=params)  # checks names, ranges
                     members[cons] = simulate_ensemble(
                         sim.with_placement, params, case, seeds, executor=ex
                     )

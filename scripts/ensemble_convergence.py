@@ -35,7 +35,6 @@ from parcelfit.sim.ensemble import Member, simulate_ensemble, summarise
 from parcelfit.sim.mujoco import MujocoSimulator, load_rig
 from parcelfit.sim.mujoco.scene import SceneOptions
 from parcelfit.sim.mujoco.simulator import SimOptions
-from parcelfit.sim.params import resolve
 
 DEFAULT_CONFIGS = ("40:600", "30:600", "20:600", "30:1200", "15:600", "15:1200")
 
@@ -157,7 +156,7 @@ def main(argv: list[str] | None = None) -> int:
         for cons in args.types:
             for k, cfg in enumerate(configs):
                 factory = _Factory(cfg, args.rig)
-                params = resolve(factory(0).consignment(cons).content_kind)
+                params = factory(0).consignment(cons).parameter_values()
                 case = TestCase(rig.name, cons, args.setting)
                 members = simulate_ensemble(factory, params, case, seeds, executor=pool)
                 results[cons, k] = members

@@ -19,7 +19,6 @@ from parcelfit.demo import demo_dataset
 from parcelfit.metrics import select_reference, validate
 from parcelfit.runs import TestCase, load_dataset
 from parcelfit.sim.mujoco import MujocoSimulator
-from parcelfit.sim.params import resolve
 
 CASE = TestCase("E3", "PB", 2)
 TRUTH = {"mu_d_BePa": 0.50, "mu_d_MePa": 0.20, "E_Pa": 120.0, "k_MePa": 300.0}
@@ -27,7 +26,7 @@ TRUTH = {"mu_d_BePa": 0.50, "mu_d_MePa": 0.20, "E_Pa": 120.0, "k_MePa": 300.0}
 
 def verdict(user: dict[str, float]) -> tuple[dict[str, float], str]:
     sim = MujocoSimulator()
-    params = resolve(sim.consignment("PB").content_kind, user_values={**TRUTH, **user})
+    params = sim.consignment("PB").parameter_values({**TRUTH, **user})
     res = sim.run(params, CASE)
     if not res.ok or res.run is None:
         return user, f"simulation {res.status.value}"

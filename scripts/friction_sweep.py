@@ -23,7 +23,6 @@ from pathlib import Path
 from parcelfit.runs import TestCase
 from parcelfit.sim.ensemble import simulate_ensemble, summarise
 from parcelfit.sim.mujoco import MujocoSimulator, load_rig
-from parcelfit.sim.params import resolve
 
 
 class _Factory:
@@ -68,9 +67,9 @@ def main(argv: list[str] | None = None) -> int:
     ]
     with ProcessPoolExecutor(args.workers) as pool:
         for cons in args.types:
-            kind = factory(0).consignment(cons).content_kind
+            consignment = factory(0).consignment(cons)
             for belt, metal in itertools.product(args.belt, args.metal):
-                params = resolve(kind, user_values={"mu_d_BePa": belt, "mu_d_MePa": metal})
+                params = consignment.parameter_values({"mu_d_BePa": belt, "mu_d_MePa": metal})
                 members = simulate_ensemble(
                     factory, params, TestCase(rig.name, cons, 1), seeds, executor=pool
                 )

@@ -54,7 +54,7 @@ from parcelfit.sim.mujoco import (
     load_rig,
 )
 from parcelfit.sim.mujoco.scene import parse_scene_options
-from parcelfit.sim.params import CATALOGUE, resolve
+from parcelfit.sim.params import CATALOGUE
 
 PUBLISHED_E3 = ("k_CoPa", "k_MePa", "mu_d_BePa", "mu_d_MePa", "mu_s_MePa", "E_Pa")
 MEASURES = ("DTW_xy [m]", "DTW_theta [rad]", "transit [s]")
@@ -191,9 +191,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scene", nargs="*", default=[], metavar="KEY=VALUE")
     args = ap.parse_args(argv)
     rig = load_rig(args.rig)
-    kind = load_consignment(args.consignment).content_kind
+    cons = load_consignment(args.consignment)
+    kind = cons.content_kind
     case = TestCase(args.rig, args.consignment, args.setting)
-    defaults = resolve(kind, si_values={})
+    defaults = cons.parameter_values()
     spec = {p.name: p for p in CATALOGUE}
     seeds = list(range(args.placements))
     scene = SceneOptions(**parse_scene_options(args.scene))  # type: ignore[arg-type]

@@ -27,7 +27,7 @@ import numpy as np
 
 from parcelfit.runs import TestCase
 from parcelfit.sim.mujoco import MujocoSimulator, SceneOptions, SimOptions
-from parcelfit.sim.params import parse_assignments, resolve
+from parcelfit.sim.params import parse_assignments
 
 STEPS = (1 / 600, 1 / 1200, 1 / 2400)
 DURATION = 2.6  # s: long enough for a parcel that catches on the plate to reach LS2
@@ -43,7 +43,7 @@ def simulate(
     if seed >= 0:
         sim = sim.with_placement(seed)
     t0 = time.perf_counter()
-    params = resolve(sim.consignment(cons).content_kind, parse_assignments(assignments))
+    params = sim.consignment(cons).parameter_values(parse_assignments(assignments))
     run = sim.run(params, TestCase("E3", cons, 1)).run
     assert run is not None, f"{job} failed"
     tr = run.trajectory

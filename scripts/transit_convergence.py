@@ -27,7 +27,6 @@ import numpy as np
 from parcelfit.runs import TestCase
 from parcelfit.sim.mujoco import MujocoSimulator, SceneOptions, SimOptions
 from parcelfit.sim.mujoco.scene import parse_scene_options
-from parcelfit.sim.params import resolve
 
 DEFAULT_CASES = (
     "E1/KPBW/1",
@@ -50,7 +49,7 @@ def simulate(job: tuple[str, int, str, int]) -> tuple[tuple, float | None, float
         sim = sim.with_placement(seed)
     case = TestCase.parse(case_label)
     t0 = time.perf_counter()
-    res = sim.run(resolve(sim.consignment(case.consignment).content_kind), case)
+    res = sim.run(sim.consignment(case.consignment).parameter_values(), case)
     if not res.ok or res.run is None:
         return job, None, math.nan, time.perf_counter() - t0
     theta = np.unwrap(np.asarray(res.run.trajectory.theta, dtype=float))

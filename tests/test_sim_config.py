@@ -89,6 +89,45 @@ def test_bad_consignment_files():
         parse_consignment({**good, "outer": [300, 200]}, "c.yaml")
 
 
+def test_a_types_own_defaults_sit_between_the_catalogue_and_the_user():
+    from parcelfit.runs import TestCase
+    from parcelfit.sim.mujoco import MujocoSimulator
+
+    bw, kpbw = load_consignment("BW"), load_consignment("KPBW")
+    assert dict(bw.parameters) == {"mu_d_BePa": 0.565, "mu_d_MePa": 0.350}
+    catalogue = resolve("rigid")
+    own = bw.parameter_values()
+    assert (own["mu_d_BePa"], own["mu_d_MePa"]) == (0.565, 0.350)
+    assert {k: v for k, v in own.items() if not k.startswith("mu_d_")} == {
+        k: v for k, v in catalogue.items() if not k.startswith("mu_d_")
+    }
+    assert bw.parameter_values({"mu_d_BePa": 0.4})["mu_d_BePa"] == 0.4
+    assert bw.parameter_values(si_values={"mu_d_MePa": 0.2})["mu_d_MePa"] == 0.2
+    assert kpbw.parameter_values()["mu_d_BePa"] == 0.300
+    # a run that leaves them out gets them; a given value wins
+    sim = MujocoSimulator()
+    xml = sim.scene({}, TestCase("E3", "BW", 1)).xml
+    assert 'friction="0.565 ' in xml and 'friction="0.35 ' in xml
+    xml = sim.scene({"mu_d_BePa": 0.4}, TestCase("E3", "BW", 1)).xml
+    assert 'friction="0.4 ' in xml and "0.565" not in xml
+
+    good = {
+        "name": "X",
+        "mass": 0.1,
+        "outer": [0.3, 0.2, 0.02],
+        "content": {"kind": "rigid", "size": [0.2, 0.1, 0.02]},
+    }
+    assert parse_consignment(good, "c.yaml").parameter_values() == catalogue
+    with pytest.raises(ParcelfitError, match=r"c\.yaml: parameters\.mu_x: unknown parameter"):
+        parse_consignment({**good, "parameters": {"mu_x": 0.3}}, "c.yaml")
+    with pytest.raises(
+        ParcelfitError, match=r"c\.yaml: parameters\.mu_d_BePa: mu_d_BePa = 5 is outside"
+    ):
+        parse_consignment({**good, "parameters": {"mu_d_BePa": 5}}, "c.yaml")
+    with pytest.raises(ParcelfitError, match=r"parameters\.E_Co: .*does not apply to rigid"):
+        parse_consignment({**good, "parameters": {"E_Co": 0.1}}, "c.yaml")
+
+
 def test_catalogue_counts_units_and_published_values():
     assert len(parameters_for("rigid")) == 16
     assert len(parameters_for("soft")) == 18

@@ -581,11 +581,11 @@ def simulate(
     from parcelfit.runs import TestCase, write_trajectory
     from parcelfit.sim.factory import SimulatorConfig, make_simulator
     from parcelfit.sim.mujoco import MujocoSimulator, load_consignment, load_rig
-    from parcelfit.sim.params import parse_assignments, resolve
+    from parcelfit.sim.params import parse_assignments
 
     rig_obj = load_rig(rig)
     cons = load_consignment(consignment)
-    params = resolve(cons.content_kind, user_values=parse_assignments(set_ or []))
+    params = cons.parameter_values(user_values=parse_assignments(set_ or []))
     config = SimulatorConfig(
         "mujoco",
         rig=rig,
@@ -756,9 +756,11 @@ def params(
 
     cons = load_consignment(consignment)
     specs = parameters_for(cons.content_kind)
+    own = dict(cons.parameters)
     table = Table(
         title=f"{len(specs)} parameters for {cons.name} ({cons.content_kind} content); "
-        "* = published screening range",
+        "* = published screening range"
+        + ("; ^ = this type's own default (its consignment file)" if own else ""),
         title_justify="left",
     )
     for col in ("name", "meaning", "unit", "low", "high", "default"):
@@ -771,7 +773,7 @@ def params(
             p.unit,
             f"{r.low:g}",
             f"{r.high:g}",
-            f"{r.default:g}",
+            f"{own[p.name]:g} ^" if p.name in own else f"{r.default:g}",
         )
     console.print(table)
 

@@ -145,9 +145,8 @@ def run_stricter_example(out: Path, dataset: Path) -> dict[str, Any]:
     plots (`parcelfit.study.results`). A file of an earlier demo without those records gets
     them from its stored run (no simulation)."""
     from parcelfit.metrics import select_reference
-    from parcelfit.sim.factory import SimulatorConfig, content_kind, make_simulator
+    from parcelfit.sim.factory import SimulatorConfig, make_simulator
     from parcelfit.sim.mujoco import MujocoSimulator
-    from parcelfit.sim.params import resolve
 
     case = TestCase.parse(STRICTER_EXAMPLE["case"])
     target = out / "stricter-criterion.json"
@@ -164,7 +163,7 @@ def run_stricter_example(out: Path, dataset: Path) -> dict[str, Any]:
     sim = make_simulator(config)
     assert isinstance(sim, MujocoSimulator)
     params_user = STRICTER_EXAMPLE["params"]
-    params = resolve(content_kind(config), user_values=params_user)
+    params = sim.consignment(case.consignment).parameter_values(user_values=params_user)
     result = sim.run(params, case, run_id="stricter-example")
     if not result.ok or result.run is None:
         raise ParcelfitError(f"the stricter-criterion example run ended {result.status.value}")

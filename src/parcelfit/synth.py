@@ -62,7 +62,7 @@ from parcelfit.schema import Choice, FileModel, Number, Text, Whole, keys_in, or
 from parcelfit.sim.executors import make_executor
 from parcelfit.sim.factory import BELT_FRICTION
 from parcelfit.sim.mujoco import Consignment, MujocoSimulator, Rig, SceneOptions, SimOptions
-from parcelfit.sim.params import CATALOGUE, resolve
+from parcelfit.sim.params import CATALOGUE
 
 
 @dataclass(frozen=True)
@@ -226,8 +226,8 @@ def make_twin_dataset(
     for i, case in enumerate(cases):
         cons = sim.consignment(case.consignment)
         if case.consignment not in truth_si:
-            truth_si[case.consignment] = resolve(
-                cons.content_kind, user_values=truth_user.get(case.consignment, {})
+            truth_si[case.consignment] = cons.parameter_values(
+                user_values=truth_user.get(case.consignment, {})
             )
         rig = sim.rig(case.rig)
         for k in range(s.runs):

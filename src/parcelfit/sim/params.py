@@ -329,11 +329,17 @@ def resolve(
     content_kind: str,
     user_values: Mapping[str, float] | None = None,
     si_values: Mapping[str, float] | None = None,
+    type_defaults: Mapping[str, float] | None = None,
 ) -> dict[str, float]:
-    """Defaults overridden by values in user units and/or SI; every value checked (SI result)."""
+    """Defaults overridden by values in user units and/or SI; every value checked (SI result).
+
+    Precedence, lowest first: the catalogue's defaults, ``type_defaults`` (a consignment type's
+    own defaults, user units), ``user_values`` (user units), ``si_values`` (SI).
+    """
     out = defaults_si(content_kind)
     known = {p.name for p in parameters_for(content_kind)}
-    for values, in_si in ((user_values or {}, False), (si_values or {}, True)):
+    layers = ((type_defaults or {}, False), (user_values or {}, False), (si_values or {}, True))
+    for values, in_si in layers:
         for name, value in values.items():
             spec = parameter(name)
             if name not in known:

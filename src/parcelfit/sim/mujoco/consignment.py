@@ -8,11 +8,17 @@ A consignment file (YAML, SI units)::
     outer: [0.275, 0.20, 0.02]       # packed outer length, width, height [m]
     content: {kind: rigid, size: [0.165, 0.125, 0.02]}   # kind: rigid | soft; size L, W, H [m]
     bulge: {depth: 0.004, footprint: 0.3}   # optional: the bottom bulges under the content
+    parameters: {mu_d_BePa: 0.30}    # optional: this type's own defaults (catalogue units)
 
 ``bulge`` (optional, rigid contents): a bubble mailer's bottom that bulges below the content's
 face by ``depth`` [m] over a centred patch of ``footprint`` times the outer length and width
 (`parcelfit.sim.mujoco.shell`), so that the parcel rides on that patch. Without it the bottom is
 flat under the whole content.
+
+``parameters`` (optional): defaults of simulation parameters that belong to this type's
+materials rather than to the catalogue's generic midpoints (e.g. the friction of its outer
+packaging), in the catalogue's units (`parcelfit.sim.params`). They replace the catalogue
+default for this type only; a study, ``--set`` or a calibration still overrides them.
 
 The content must fit inside the outer dimensions (length and width strictly smaller, height not
 larger). The packaging's mass is a simulation parameter (m_Pa); the content gets the rest.
@@ -20,6 +26,7 @@ larger). The packaging's mass is a simulation parameter (m_Pa); the content gets
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any
@@ -30,7 +37,7 @@ from parcelfit.config import load_yaml
 from parcelfit.errors import ParcelfitError
 from parcelfit.schema import Choice, FileModel, Number, Text, parse
 from parcelfit.sim.mujoco.bundled import bundled_names, resolve_file
-from parcelfit.sim.params import RIGID, SOFT
+from parcelfit.sim.params import RIGID, SOFT, resolve
 
 
 @dataclass(frozen=True)
@@ -45,6 +52,19 @@ class Consignment:
     content: tuple[float, float, float]
     source: str = ""
     bulge: tuple[float, float] | None = None  # depth [m], footprint [-] (see the module docstring)
+    # this type's own defaults, (name, value in catalogue units), see the module docstring
+    parameters: tuple[tuple[str, float], ...] = ()
+
+    def parameter_values(
+        self,
+        user_values: Mapping[str, float] | None = None,
+        si_values: Mapping[str, float] | None = None,
+    ) -> dict[str, float]:
+        """Every simulation parameter of this type in SI: the catalogue's defaults, this type's
+        own (``parameters``), then ``user_values`` (catalogue units) and ``si_values`` (SI)."""
+        return resolve(
+            self.content_kind, user_values, si_values, type_defaults=dict(self.parameters)
+        )
 
 
 def _size(value: Any) -> tuple[float, float, float]:
@@ -93,6 +113,7 @@ class ConsignmentFile(FileModel):
     outer: _Size
     content: ContentSection
     bulge: BulgeSection | None = None
+    parameters: dict[str, float] | None = None
 
     @model_validator(mode="after")
     def _content_fits(self) -> ConsignmentFile:
@@ -115,6 +136,11 @@ class ConsignmentFile(FileModel):
                     where="bulge.footprint",
                     fix=f"use a footprint below {min(inner[0] / outer[0], inner[1] / outer[1]):.2f}",
                 )
+        for name, value in (self.parameters or {}).items():
+            try:
+                resolve(self.content.kind, type_defaults={name: value})
+            except ParcelfitError as exc:
+                raise ParcelfitError(exc.message, where=f"parameters.{name}", fix=exc.fix) from None
         return self
 
 
@@ -131,6 +157,7 @@ def parse_consignment(doc: Any, file: str) -> Consignment:
         content=f.content.size,
         source=file,
         bulge=None if f.bulge is None else (f.bulge.depth, f.bulge.footprint),
+        parameters=tuple((f.parameters or {}).items()),
     )
 
 

@@ -25,7 +25,7 @@ from parcelfit.errors import ParcelfitError
 from parcelfit.sim.mujoco.consignment import Consignment
 from parcelfit.sim.mujoco.rig import Rig, parse_rig
 from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
-from parcelfit.sim.params import RIGID, resolve
+from parcelfit.sim.params import RIGID
 
 
 @dataclass(frozen=True)
@@ -92,7 +92,7 @@ def indentation_test(
         raise ParcelfitError(
             "the indentation test presses a rigid content", fix="use a rigid-content consignment"
         )
-    full = resolve(consignment.content_kind, si_values=params or {})
+    full = consignment.parameter_values(si_values=params or {})
     scene = build_scene(plate_rig(material), consignment, full, 1, options)
     model = mujoco.MjModel.from_xml_string(scene.xml)
     data = mujoco.MjData(model)

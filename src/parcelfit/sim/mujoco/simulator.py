@@ -51,7 +51,6 @@ from parcelfit.sim.mujoco.coulomb import CoulombBelts
 from parcelfit.sim.mujoco.mjlog import CountedWarnings
 from parcelfit.sim.mujoco.rig import Barrier, Rig, Surface, load_rig
 from parcelfit.sim.mujoco.scene import Scene, SceneOptions, build_scene
-from parcelfit.sim.params import resolve
 from parcelfit.sim.protocol import SimResult, SimStatus
 
 STICK_SPEED = 0.005  # m/s
@@ -139,7 +138,7 @@ class MujocoSimulator:
         """The MJCF scene for SI ``params`` (defaults filled in) and a test case."""
         cons = self.consignment(case.consignment)
         rig = self.rig(case.rig)
-        full = resolve(cons.content_kind, si_values=params)
+        full = cons.parameter_values(si_values=params)
         return build_scene(rig, cons, full, case.speed_setting, self.scene_options(rig))
 
     def run(
@@ -156,7 +155,7 @@ class MujocoSimulator:
         t_wall = time.perf_counter()
         rig = self.rig(case.rig)
         cons = self.consignment(case.consignment)
-        full = resolve(cons.content_kind, si_values=params)
+        full = cons.parameter_values(si_values=params)
         scene = build_scene(rig, cons, full, case.speed_setting, self.scene_options(rig))
         with CountedWarnings() as warnings:
             try:

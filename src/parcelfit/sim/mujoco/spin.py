@@ -51,7 +51,6 @@ from parcelfit.sim.mujoco.indentation import plate_rig
 from parcelfit.sim.mujoco.mjlog import CountedWarnings
 from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
 from parcelfit.sim.mujoco.simulator import add_rigid_velocity
-from parcelfit.sim.params import resolve
 
 
 @dataclass(frozen=True)
@@ -114,7 +113,7 @@ def _settled(
 ) -> tuple[mujoco.MjModel, mujoco.MjData, dict[str, float], Callable[[], None]]:
     """The parcel settled ``settle`` s on a still belt-material plate, the SI parameters and
     the step function (MuJoCo's step, after the Coulomb belt friction where the scene has it)."""
-    full = resolve(consignment.content_kind, si_values=dict(params or {}))
+    full = consignment.parameter_values(si_values=dict(params or {}))
     scene = build_scene(plate_rig("belt"), consignment, full, 1, options)
     model = mujoco.MjModel.from_xml_string(scene.xml)
     data = mujoco.MjData(model)
