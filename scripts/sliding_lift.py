@@ -313,10 +313,9 @@ def transit_rows(steps: list[int], zetas: list[float]) -> list[str]:
             sim = MujocoSimulator(SimOptions(scene=SceneOptions(timestep=1.0 / n)))
             if seed >= 0:
                 sim = sim.with_placement(seed)
-            cons = sim.consignment(TestCase.parse(case).consignment)
-            res = sim.run(
-                cons.parameter_values(FRICTION, {"zeta_BePa": zeta}), TestCase.parse(case)
-            )
+            test_case = TestCase.parse(case)
+            cons = sim.consignment(test_case.consignment)
+            res = sim.run(cons.parameter_values(FRICTION, {"zeta_BePa": zeta}), test_case)
             times[n] = res.run.transit_time if res.ok and res.run is not None else None
         ref = times[finest]
         cells = [

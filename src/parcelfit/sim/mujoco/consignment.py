@@ -136,6 +136,10 @@ class ConsignmentFile(FileModel):
                     where="bulge.footprint",
                     fix=f"use a footprint below {min(inner[0] / outer[0], inner[1] / outer[1]):.2f}",
                 )
+        return self
+
+    @model_validator(mode="after")
+    def _parameters_apply(self) -> ConsignmentFile:
         for name, value in (self.parameters or {}).items():
             try:
                 resolve(self.content.kind, type_defaults={name: value})
