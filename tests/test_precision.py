@@ -1,0 +1,111 @@
+"""What a set of test cases can determine: the precision estimate of parcelfit.study.precision."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from parcelfit.errors import ParcelfitError
+from parcelfit.metrics.comparison import Comparison
+from parcelfit.runs import Run, TestCase, Trajectory
+from parcelfit.runs.regions import Box
+from parcelfit.study.precision import (
+    CaseSensitivity,
+    precision,
+    run_statistics,
+    sensitivity,
+)
+
+Z = 1.959963984540054
+NO_INFORMATION = Z / math.sqrt(12.0)  # the uniform prior alone
+
+
+def _orthogonal_real(mean: np.ndarray, sd: np.ndarray) -> np.ndarray:
+    """Four real runs whose statistics have exactly the sample means ``mean``, the sample
+    standard deviations ``sd`` and no correlation (orthogonal +-1 columns)."""
+    signs = np.array([[1, 1, 1], [-1, 1, -1], [1, -1, -1], [-1, -1, 1]], dtype=float)
+    # each column has sample variance 4 / 3 with ddof=1
+    return mean + signs * sd / math.sqrt(4.0 / 3.0)
+
+
+def test_run_statistics_are_transit_rotation_and_drift_inside_the_regions() -> None:
+    t = np.linspace(0.0, 2.0, 121)
+    x = 0.5 * t - 0.2
+    y = np.where(x > 0.3, -0.1 * (x - 0.3), 0.0)
+    theta = np.where(x > 0.3, -2.0 * (x - 0.3), 0.0)
+    run = Run("r", TestCase("E3", "KPBW", 1), Trajectory(t, x, y, theta), transit_time=1.5)
+    whole = run_statistics(run, Comparison(rate=None))
+    assert whole is not None
+    assert whole[0] == 1.5
+    assert whole[1] == pytest.approx(2.0 * 0.5, abs=1e-12)  # theta goes 0 -> -1 rad
+    assert whole[2] == pytest.approx(-0.05, abs=1e-12)
+    cropped = run_statistics(run, Comparison(regions=(Box(xmin=0.0, xmax=0.29),), rate=None))
+    assert cropped is not None
+    assert cropped[1] == pytest.approx(0.0, abs=1e-12)  # nothing turns before x = 0.3
+    assert cropped[2] == pytest.approx(0.0, abs=1e-12)
+    no_time = Run("n", TestCase("E3", "KPBW", 1), Trajectory(t, x, y, theta))
+    assert run_statistics(no_time, Comparison(rate=None)) is None
+
+
+def test_information_is_n_times_the_squared_effect_over_the_variance() -> None:
+    # uncorrelated real statistics with known sd: F_jj = n sum_s J_sj^2 / sd_s^2 exactly
+    sd = np.array([0.02, 0.1, 0.005])
+    real = _orthogonal_real(np.array([1.4, 0.4, 0.1]), sd)
+    jac = np.array([[0.05, 0.0], [0.3, 0.0], [0.0, 0.0]])
+    case = CaseSensitivity("E3/KPBW/1", ("a", "b"), jac, np.zeros_like(jac), real)
+    info = case.information()
+    expected = 4 * ((0.05 / 0.02) ** 2 + (0.3 / 0.1) ** 2)
+    assert info[0, 0] == pytest.approx(expected, rel=1e-9)
+    assert info[1, 1] == pytest.approx(0.0, abs=1e-9)
+    p = precision([case])
+    assert p.alone[0] == pytest.approx(Z / math.sqrt(expected + 12.0), rel=1e-9)
+    assert p.joint[0] == pytest.approx(p.alone[0], rel=1e-9)  # b shares nothing with a
+    # a parameter that moves nothing keeps the prior's width: undetermined
+    assert p.joint[1] == pytest.approx(NO_INFORMATION, rel=1e-9)
+    assert p.determined(0.10) == {"a": p.joint[0] <= 0.10, "b": False}
+
+
+def test_two_cases_add_their_information_and_confounded_parameters_share_it() -> None:
+    sd = np.array([0.02, 0.1, 0.005])
+    real = _orthogonal_real(np.array([1.4, 0.4, 0.1]), sd)
+    same = np.array([[0.2, 0.2], [0.0, 0.0], [0.0, 0.0]])  # a and b move only the transit, alike
+    c1 = CaseSensitivity("E3/KPBW/1", ("a", "b"), same, np.zeros_like(same), real)
+    one = precision([c1])
+    # alone each is well determined, jointly only their sum is: the joint width is far wider
+    assert one.alone[0] < 0.10
+    assert one.joint[0] > 4 * one.alone[0]
+    # a second case that moves only b breaks the tie
+    other = np.array([[0.0, 0.2], [0.0, 0.0], [0.0, 0.0]])
+    c2 = CaseSensitivity("E1/KPBW/3", ("a", "b"), other, np.zeros_like(other), real)
+    both = precision([c1, c2])
+    assert both.joint[0] < 0.5 * one.joint[0]
+    assert both.labels == ("E3/KPBW/1", "E1/KPBW/3")
+    # the same case twice holds twice the information
+    twice = precision([c1, c1])
+    f = c1.information()[0, 0]
+    assert twice.alone[0] == pytest.approx(Z / math.sqrt(2 * f + 12.0), rel=1e-9)
+
+
+def test_sensitivity_pairs_placements_and_drops_failed_ones() -> None:
+    low = {"a": [np.array([1.0, 0.1, 0.0]), None, np.array([1.2, 0.3, 0.0])]}
+    high = {"a": [np.array([1.1, 0.1, 0.0]), np.array([9.0, 9.0, 9.0]), np.array([1.4, 0.3, 0.0])]}
+    real = [np.array([1.0, 0.1, 0.0]), None, np.array([1.1, 0.2, 0.01])]
+    s = sensitivity("E3/KPBW/1", ["a"], low, high, real)
+    # placement 2 failed at the low end, so its high-end run is dropped too
+    assert s.jacobian[:, 0] == pytest.approx([0.15, 0.0, 0.0])
+    assert s.jacobian_se[0, 0] == pytest.approx(np.std([0.1, 0.2], ddof=1) / math.sqrt(2))
+    assert s.resolved[0, 0] and not s.resolved[1, 0]
+    assert s.real.shape == (2, 3)  # the unusable real run is left out
+    with pytest.raises(ParcelfitError, match="both ends"):
+        sensitivity("E3/KPBW/1", ["a"], {"a": [None]}, {"a": [np.zeros(3)]}, real)
+
+
+def test_a_case_with_one_real_run_is_refused() -> None:
+    jac = np.ones((3, 1))
+    case = CaseSensitivity("E3/KPBW/1", ("a",), jac, np.zeros_like(jac), np.ones((1, 3)))
+    with pytest.raises(ParcelfitError, match="two or more"):
+        precision([case])
+    with pytest.raises(ParcelfitError, match="no test cases"):
+        precision([])
