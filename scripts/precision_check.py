@@ -215,4 +215,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        sys.exit(main())
+    except ParcelfitError as exc:  # a bad study, dataset or --at: say what and how to fix it
+        print(f"error: {exc}", file=sys.stderr)
+        sys.exit(2)
