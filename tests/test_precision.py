@@ -3,10 +3,14 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
+from typer.testing import CliRunner
 
+from parcelfit.cli import app
 from parcelfit.errors import ParcelfitError
 from parcelfit.metrics.comparison import Comparison
 from parcelfit.runs import Run, TestCase, Trajectory
@@ -17,6 +21,9 @@ from parcelfit.study.precision import (
     run_statistics,
     sensitivity,
 )
+from parcelfit.study.precision_check import run_precision_check
+
+from .fake_sim import write_reference_dataset
 
 Z = 1.959963984540054
 NO_INFORMATION = Z / math.sqrt(12.0)  # the uniform prior alone
@@ -109,3 +116,53 @@ def test_a_case_with_one_real_run_is_refused() -> None:
         precision([case])
     with pytest.raises(ParcelfitError, match="no test cases"):
         precision([])
+
+
+def _two_rig_study(tmp_path: Path) -> Path:
+    """R/P/1 fitted, Q/P/1 as the transfer case: on the analytic simulator E_Pa turns the parcel
+    on rig Q only, the frictions act on both."""
+    write_reference_dataset(tmp_path / "data", rigs=("R", "Q"), truth={"E_Pa": 1e9})
+    doc = {
+        "name": "precision",
+        "simulator": {"backend": "python", "factory": "tests.fake_sim:make"},
+        "parameters": {"mu_d_BePa": [0.3, 0.55], "mu_d_MePa": [0.15, 0.35], "E_Pa": [200, 1600]},
+        "cases": [{"dataset": "data", "rig": "R", "consignment": "P", "speed_setting": 1}],
+        "transfer": [{"rig": "Q", "consignment": "P", "speed_setting": 1}],
+        "executor": "serial",
+    }
+    path = tmp_path / "study.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+def test_the_check_says_which_case_determines_which_parameter_and_resumes(tmp_path: Path) -> None:
+    study = _two_rig_study(tmp_path)
+    check = run_precision_check(study, tmp_path / "out", placements=3, executor="serial")
+    assert check.simulations == check.simulated_now == 2 * 3 * 2 * 3
+    rows = dict(check.rows())
+    e = check.names.index("E_Pa")
+    alone = rows["R/P/1 (fitted)"]
+    # rig R cannot see E_Pa: the prior's width, undetermined; the frictions it determines
+    assert alone.joint[e] == pytest.approx(NO_INFORMATION, rel=1e-3)
+    assert alone.determined() == {"E_Pa": False, "mu_d_BePa": True, "mu_d_MePa": True}
+    # adding rig Q, where E_Pa turns the parcel, determines it too
+    assert rows["fitted + Q/P/1"].joint[e] < 0.10
+    # a rerun simulates nothing and gives the same answer
+    again = run_precision_check(study, tmp_path / "out", placements=3, executor="serial")
+    assert again.simulated_now == 0 and again.simulations == check.simulations
+    for (t1, p1), (t2, p2) in zip(check.rows(), again.rows(), strict=True):
+        assert t1 == t2 and np.array_equal(p1.joint, p2.joint)
+
+
+def test_the_precision_command_writes_its_table_and_refuses_bad_input(tmp_path: Path) -> None:
+    study = _two_rig_study(tmp_path)
+    out = tmp_path / "check"
+    args = ["precision", str(study), "--placements", "2", "--executor", "serial", "--out", str(out)]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    table = (out / "precision-check.md").read_text()
+    assert "| R/P/1 (fitted) | 57 % |" in table and "fitted + Q/P/1" in table
+    bad = CliRunner().invoke(app, [*args, "--at", "k_MePa=400"])
+    assert bad.exit_code == 2 and "not a parameter of the study" in bad.output
+    few = CliRunner().invoke(app, [*args[:2], "--placements", "1"])
+    assert few.exit_code == 2

@@ -169,6 +169,9 @@ def _print_tests(tests: Any) -> None:
     console.print(table)
 
 
+WorkersOption = Annotated[
+    int | None, typer.Option(min=1, help="Local worker processes (default: one per core).")
+]
 ExecutorOption = Annotated[
     str | None,
     typer.Option(
@@ -795,9 +798,7 @@ def calibrate(
     scheduler: Annotated[
         str | None, typer.Option(help="Dask scheduler address, e.g. tcp://HOST:8786.")
     ] = None,
-    workers: Annotated[
-        int | None, typer.Option(min=1, help="Local worker processes (default: one per core).")
-    ] = None,
+    workers: WorkersOption = None,
     animation: Annotated[
         bool,
         typer.Option(
@@ -964,9 +965,7 @@ def screen(
         Path | None, typer.Option(help="Screen folder (default: next to the file, named after it).")
     ] = None,
     executor: ExecutorOption = None,
-    workers: Annotated[
-        int | None, typer.Option(min=1, help="Local worker processes (default: one per core).")
-    ] = None,
+    workers: WorkersOption = None,
 ) -> None:
     """Screen parameters: fractional -> full factorial designs, effects, Pareto charts, a selection."""
     from parcelfit.study.screening import load_screen, run_screen
@@ -1010,6 +1009,64 @@ def _print_screen(stages: Any, selection: dict[str, Any]) -> None:
     console.print(
         f"[bold]selected for calibration:[/] {', '.join(selection['selected']) or 'none'}"
     )
+
+
+@app.command()
+def precision(
+    study_file: Annotated[Path, typer.Argument(help="Study file (YAML).")],
+    placements: Annotated[
+        int, typer.Option(min=2, help="Seeded placements per case and parameter end.")
+    ] = 10,
+    candidate: Annotated[
+        list[str] | None,
+        typer.Option(help="A further test case to judge, RIG/TYPE/SETTING (repeatable)."),
+    ] = None,
+    at: Annotated[
+        list[str] | None,
+        typer.Option(help="NAME=VALUE (catalogue units): the point to judge at, else the centre."),
+    ] = None,
+    out: Annotated[
+        Path | None,
+        typer.Option(help="Output folder (default: next to the file, named STEM-precision)."),
+    ] = None,
+    executor: ExecutorOption = None,
+    workers: WorkersOption = None,
+) -> None:
+    """Which parameters can the study's test cases determine, before calibrating (resumable)."""
+    from parcelfit.atomic import write_text_atomic
+    from parcelfit.sim.params import parse_assignments
+    from parcelfit.study.precision_check import TABLE_FILE, run_precision_check
+
+    _check_executor(executor, ("serial", "local"))
+    folder = out or study_file.parent / f"{study_file.stem}-precision"
+    with console.status("precision check") as status_line:
+        check = run_precision_check(
+            study_file,
+            folder,
+            placements=placements,
+            candidates=candidate or [],
+            at=parse_assignments(at or []),
+            executor=executor or "local",
+            workers=workers,
+            progress=_progress(status_line, "precision check: "),
+        )
+    command = (
+        f"parcelfit precision {study_file.as_posix()} --placements {placements}"
+        + "".join(f" --candidate {c}" for c in candidate or [])
+        + "".join(f" --at {a}" for a in at or [])
+    )
+    text = check.markdown(command, workers)
+    write_text_atomic(folder / TABLE_FILE, text)
+    table = Table(title="95 % half-width as a share of the range (joint; * within 10 %)")
+    table.add_column("cases")
+    for name in check.names:
+        table.add_column(name, justify="right")
+    for title, p in check.rows():
+        table.add_row(
+            Text(title), *(f"{100 * h:.0f} %" + (" *" if h <= 0.10 else "") for h in p.joint)
+        )
+    console.print(table)
+    console.print(Text(f"tables in {folder / TABLE_FILE}"))
 
 
 @app.command()
