@@ -152,6 +152,14 @@ def test_the_check_says_which_case_determines_which_parameter_and_resumes(tmp_pa
     assert again.simulated_now == 0 and again.simulations == check.simulations
     for (t1, p1), (t2, p2) in zip(check.rows(), again.rows(), strict=True):
         assert t1 == t2 and np.array_equal(p1.joint, p2.joint)
+    # at the same point, other ranges make other runs: nothing of the check before is reused
+    at = {"mu_d_BePa": 0.4, "mu_d_MePa": 0.25, "E_Pa": 1000}
+    run_precision_check(study, tmp_path / "at", placements=2, at=at, executor="serial")
+    doc = yaml.safe_load(study.read_text())
+    doc["parameters"]["E_Pa"] = [400, 1600]
+    study.write_text(yaml.safe_dump(doc))
+    moved = run_precision_check(study, tmp_path / "at", placements=2, at=at, executor="serial")
+    assert moved.simulated_now == moved.simulations
 
 
 def test_the_precision_command_writes_its_table_and_refuses_bad_input(tmp_path: Path) -> None:

@@ -171,14 +171,21 @@ def run_precision_check(
 
     out.mkdir(parents=True, exist_ok=True)
     cache_file = out / STATISTICS_FILE
-    setup = json.loads(json.dumps({"point": point, "simulator": repr(study.simulator)}))
+    bounds = {n: [dims[n].low, dims[n].high] for n in names}
+    setup = json.loads(
+        json.dumps({"point": point, "bounds": bounds, "simulator": repr(study.simulator)})
+    )
     cache: dict[str, list[float] | None] = {}
     if cache_file.exists():
         saved = json.loads(cache_file.read_text(encoding="utf-8"))
         if saved.get("setup") == setup:
             cache = saved["runs"]
         else:
-            progress(ProgressEvent("precision", f"{cache_file} is from another point or simulator"))
+            progress(
+                ProgressEvent(
+                    "precision", f"{cache_file} is from another point, range or simulator: not used"
+                )
+            )
 
     keys = []
     items = []
