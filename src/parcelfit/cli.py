@@ -1046,7 +1046,7 @@ def precision(
             placements=placements,
             candidates=candidate or [],
             at=parse_assignments(at or []),
-            executor=executor or "local",
+            executor=executor,
             workers=workers,
             progress=_progress(status_line, "precision check: "),
         )

@@ -160,7 +160,7 @@ def record_result(
     return out
 
 
-def _executor(
+def study_executor(
     study: Study,
     executor: str | None,
     scheduler: str | None,
@@ -751,7 +751,7 @@ class Calibration:
     def _simulate_tasks(self, tasks: list[Task]) -> list[SimResult]:
         """Simulate tasks with the study's executor; results in task order."""
         out: dict[int, SimResult] = {}
-        executor = _executor(self.study, *self._executor_args)
+        executor = study_executor(self.study, *self._executor_args)
         try:
             for i, r in executor.simulate(self.simulator, tasks):
                 out[i] = r
@@ -927,7 +927,7 @@ class Calibration:
         iteration = max((r.iteration for r in rows), default=-1)
         if (self._executor_args[0] or study.executor.get("kind")) == "dask":
             self._report(iteration, 0, "connecting to the Dask scheduler, waiting for a worker")
-        executor = _executor(study, *self._executor_args)
+        executor = study_executor(study, *self._executor_args)
         try:
             if already_passed:
                 # a finished study whose record lost fitting runs (a lost worker): complete the

@@ -26,8 +26,9 @@ from parcelfit.errors import ParcelfitError
 from parcelfit.metrics.comparison import Comparison
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.runs import TestCase, load_dataset
-from parcelfit.sim.executors import Task, make_executor
+from parcelfit.sim.executors import Task
 from parcelfit.sim.factory import make_simulator
+from parcelfit.study.calibration import study_executor
 from parcelfit.study.joint import simulate_items
 from parcelfit.study.precision import (
     STATISTICS,
@@ -128,12 +129,13 @@ def run_precision_check(
     placements: int = 10,
     candidates: Sequence[str] = (),
     at: Mapping[str, float] | None = None,
-    executor: str = "local",
+    executor: str | None = None,
     workers: int | None = None,
     progress: ProgressCallback = ignore_progress,
 ) -> PrecisionCheck:
     """Run the check of the module docstring for ``study_file`` into the folder ``out``;
-    ``candidates`` are test-case labels (RIG/TYPE/SETTING), ``at`` values in catalogue units."""
+    ``candidates`` are test-case labels (RIG/TYPE/SETTING), ``at`` values in catalogue units;
+    ``executor`` and ``workers`` override the study file's ``executor`` (as for a calibration)."""
     if placements < 2:
         raise ParcelfitError(
             f"{placements} placement(s): the sensitivity's standard error needs two or more",
@@ -217,7 +219,7 @@ def run_precision_check(
         ProgressEvent("precision", f"{total} simulations ({len(keys) - total} kept)", 0, total)
     )
     if items:
-        with make_executor(executor, workers=workers) as pool:
+        with study_executor(study, executor, None, workers) as pool:
             for done, (i, result) in enumerate(simulate_items(pool, simulator, items), 1):
                 label, run_id = owners[i]
                 stats = None
