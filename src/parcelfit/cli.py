@@ -1035,6 +1035,7 @@ def precision(
     """Which parameters can the study's test cases determine, before calibrating (resumable)."""
     from parcelfit.atomic import write_text_atomic
     from parcelfit.sim.params import parse_assignments
+    from parcelfit.study.precision import half_width_text
     from parcelfit.study.precision_check import TABLE_FILE, run_precision_check
 
     _check_executor(executor, ("serial", "local"))
@@ -1062,9 +1063,7 @@ def precision(
     for name in check.names:
         table.add_column(name, justify="right")
     for title, p in check.rows():
-        table.add_row(
-            Text(title), *(f"{100 * h:.0f} %" + (" *" if h <= 0.10 else "") for h in p.joint)
-        )
+        table.add_row(Text(title), *(half_width_text(h) for h in p.joint))
     console.print(table)
     console.print(Text(f"tables in {folder / TABLE_FILE}"))
 

@@ -67,6 +67,7 @@ from parcelfit.runs import Run
 STATISTICS = ("transit [s]", "rotation [rad]", "lateral drift [m]")
 PRIOR_INFORMATION = 12.0  # 1 / variance of a uniform share on [0, 1]
 Z95 = 1.959963984540054  # two-sided 95 % normal quantile
+WITHIN = 0.10  # share of the range within which a parameter counts as determined (recovery's 10 %)
 
 
 def run_statistics(run: Run, comparison: Comparison) -> np.ndarray | None:
@@ -164,7 +165,7 @@ class Precision:
     joint: np.ndarray
     alone: np.ndarray
 
-    def determined(self, share: float = 0.10) -> dict[str, bool]:
+    def determined(self, share: float = WITHIN) -> dict[str, bool]:
         """Whether each parameter could be determined within ``share`` of its range (joint)."""
         return {n: bool(h <= share) for n, h in zip(self.names, self.joint, strict=True)}
 
@@ -184,10 +185,17 @@ def precision(cases: Sequence[CaseSensitivity]) -> Precision:
     return Precision(tuple(c.label for c in cases), names, joint, alone)
 
 
+def half_width_text(h: float) -> str:
+    """A 95 % half-width [share of the range] as a percentage, starred where <= `WITHIN`."""
+    return f"{100 * h:.0f} %" + (" *" if h <= WITHIN else "")
+
+
 __all__ = [
     "STATISTICS",
+    "WITHIN",
     "CaseSensitivity",
     "Precision",
+    "half_width_text",
     "precision",
     "run_statistics",
     "sensitivity",

@@ -34,6 +34,7 @@ from parcelfit.study.precision import (
     STATISTICS,
     CaseSensitivity,
     Precision,
+    half_width_text,
     precision,
     run_statistics,
     sensitivity,
@@ -94,7 +95,8 @@ class PrecisionCheck:
         ]
         for title, p in self.rows():
             cells = " | ".join(
-                f"{_share(j)} | {_share(a)}" for j, a in zip(p.joint, p.alone, strict=True)
+                f"{half_width_text(j)} | {half_width_text(a)}"
+                for j, a in zip(p.joint, p.alone, strict=True)
             )
             lines.append(f"| {title} | {cells} |")
         lines += [
@@ -116,10 +118,6 @@ class PrecisionCheck:
                 )
                 lines.append(f"| {label} ({len(s.real)} real) | {stat} | {sd[k]:.3g} | {cells} |")
         return "\n".join(lines) + "\n"
-
-
-def _share(h: float) -> str:
-    return f"{100 * h:.0f} %" + (" *" if h <= 0.10 else "")
 
 
 def run_precision_check(
