@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -17,11 +18,12 @@ from parcelfit.runs import Run, TestCase, Trajectory
 from parcelfit.runs.regions import Box
 from parcelfit.study.precision import (
     CaseSensitivity,
+    best_subsets,
     precision,
     run_statistics,
     sensitivity,
 )
-from parcelfit.study.precision_check import run_precision_check
+from parcelfit.study.precision_check import PrecisionCheck, run_precision_check
 
 from .fake_sim import write_reference_dataset
 
@@ -93,6 +95,58 @@ def test_two_cases_add_their_information_and_confounded_parameters_share_it() ->
     twice = precision([c1, c1])
     f = c1.information()[0, 0]
     assert twice.alone[0] == pytest.approx(Z / math.sqrt(2 * f + 12.0), rel=1e-9)
+
+
+def test_best_subsets_pick_what_the_cases_determine_and_never_a_confounded_pair() -> None:
+    sd = np.array([0.02, 0.1, 0.005])
+    real = _orthogonal_real(np.array([1.4, 0.4, 0.1]), sd)
+    # a and b move the transit alike (confounded), c the rotation strongly, d the drift weakly,
+    # e nothing
+    jac = np.array(
+        [[0.2, 0.2, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.004, 0.0]]
+    )
+    case = CaseSensitivity("E3/KPBW/1", tuple("abcde"), jac, np.zeros_like(jac), real)
+    info = case.information()
+    found = best_subsets([case], 2, top=20)
+    assert len(found) == 10  # C(5, 2)
+    best = found[0]
+    # c is determined within 10 % in any company; a or b alone beside it, never both
+    assert "c" in best.names and best.determined == 2
+    assert best.names in (("a", "c"), ("b", "c"))
+    k = best.names.index("c")
+    assert best.half_widths[k] == pytest.approx(Z / math.sqrt(info[2, 2] + 12.0), rel=1e-9)
+    pair = next(s for s in found if s.names == ("a", "b"))
+    assert pair.determined == 0  # together only their sum is fixed
+    assert found[-1].names in (("d", "e"),)  # the weakest pair ranks last
+    assert np.allclose(
+        next(s for s in found if s.names == ("d", "e")).half_widths[1], NO_INFORMATION
+    )
+    # ranked: determined count never rises down the list
+    counts = [s.determined for s in found]
+    assert counts == sorted(counts, reverse=True)
+    with pytest.raises(ParcelfitError, match="choose a size"):
+        best_subsets([case], 6)
+    with pytest.raises(ParcelfitError, match="no test cases"):
+        best_subsets([], 2)
+
+
+def test_with_many_parameters_the_table_lists_one_per_row_and_names_the_best_four() -> None:
+    sd = np.array([0.02, 0.1, 0.005])
+    real = _orthogonal_real(np.array([1.4, 0.4, 0.1]), sd)
+    names = tuple(f"p{i}" for i in range(7))
+    jac = np.zeros((3, 7))
+    jac[0, 2], jac[1, 5] = 0.3, 2.0  # only p2 (transit) and p5 (rotation) move anything
+    case = CaseSensitivity("E3/KPBW/1", names, jac, np.zeros_like(jac), real)
+    check = PrecisionCheck(names, ("E3/KPBW/1",), (), {"E3/KPBW/1": case}, 3, 42, 0, 0.0, False)
+    text = check.markdown("cmd", 2)
+    rows = [line for line in text.splitlines() if re.match(r"\| p\d", line)]
+    assert len(rows) == 7 + 5  # one row per parameter, then the five best subsets of four
+    assert rows[2].startswith("| p2 | ") and " * / " in rows[2]  # determined, joint and alone
+    assert rows[0].startswith("| p0 | 57 % / 57 %")
+    ((title, found),) = check.subsets(top=5)
+    assert title == "E3/KPBW/1 (fitted)"
+    assert all({"p2", "p5"} <= set(s.names) and s.determined == 2 for s in found)
+    assert "Which 4 to calibrate" in text
 
 
 def test_sensitivity_pairs_placements_and_drops_failed_ones() -> None:

@@ -1065,6 +1065,9 @@ def precision(
     for title, p in check.rows():
         table.add_row(Text(title), *(half_width_text(h) for h in p.joint))
     console.print(table)
+    for title, found in check.subsets(top=1):
+        best = found[0]
+        console.print(Text(f"best {len(best.names)} to calibrate on {title}: {best.widths_text()}"))
     console.print(Text(f"tables in {folder / TABLE_FILE}"))
 
 

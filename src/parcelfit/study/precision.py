@@ -44,6 +44,14 @@ jointly (other parameters free, so confounded parameters share the information) 
 determine the parameter within 10 % of its range; with no information h_j = 1.96 / sqrt(12) =
 0.57 (undetermined).
 
+**Which parameters to calibrate.** A calibration fits a few parameters and fixes the rest. For
+a subset S of the parameters, fitted while the others are fixed at the point's values, the
+information is F restricted to S (others known), and the half-widths are 1.96 sqrt(diag((F_SS +
+12 I)^-1)). `best_subsets` ranks every subset of a given size by how many of its parameters
+would be determined within `WITHIN` (then by the largest half-width, smaller first): what the
+screening's "at most four, by effect size" means when the effect is measured against the real
+runs' scatter. It assumes the fixed parameters are right; a wrong fixed value biases the fit.
+
 This is an estimate, not a bound: the linear secant and the Gaussian approximation can be off
 either way (a threshold response such as spin or slide is neither linear nor Gaussian), and the
 three statistics do not hold everything the DTW comparison sees. What it does show reliably is
@@ -53,6 +61,7 @@ the parameter cannot be recovered from those cases, whatever the calibration doe
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -185,6 +194,51 @@ def precision(cases: Sequence[CaseSensitivity]) -> Precision:
     return Precision(tuple(c.label for c in cases), names, joint, alone)
 
 
+@dataclass(frozen=True)
+class Subset:
+    """A set of parameters to calibrate with the others fixed, and the 95 % half-widths
+    [share of the range] the cases would allow each of them."""
+
+    names: tuple[str, ...]
+    half_widths: np.ndarray
+
+    @property
+    def determined(self) -> int:
+        """How many of the subset's parameters would be determined within `WITHIN`."""
+        return int(np.sum(self.half_widths <= WITHIN))
+
+    def widths_text(self) -> str:
+        """Each parameter with its half-width, as `half_width_text` writes it."""
+        return ", ".join(
+            f"{n} {half_width_text(h)}" for n, h in zip(self.names, self.half_widths, strict=True)
+        )
+
+
+def best_subsets(cases: Sequence[CaseSensitivity], size: int, top: int = 5) -> list[Subset]:
+    """The ``top`` subsets of ``size`` parameters that ``cases`` would determine best, each
+    fitted with the other parameters fixed (module docstring): most parameters within
+    `WITHIN` first, then the smaller largest half-width."""
+    if not cases:
+        raise ParcelfitError("no test cases to judge", fix="give at least one case")
+    names = cases[0].names
+    if not 1 <= size <= len(names):
+        raise ParcelfitError(
+            f"a subset of {size} from {len(names)} parameter(s)",
+            fix=f"choose a size from 1 to {len(names)}",
+        )
+    info = sum(c.information() for c in cases)
+    prior = PRIOR_INFORMATION * np.eye(size)
+    # every subset: C(16, 4) = 1820 inversions of 4 x 4 matrices, instant; no library ranks
+    # parameter subsets by a Fisher information, so the loop is ours
+    found = []
+    for idx in itertools.combinations(range(len(names)), size):
+        sub = info[np.ix_(idx, idx)]
+        widths = Z95 * np.sqrt(np.diag(np.linalg.inv(sub + prior)))
+        found.append(Subset(tuple(names[i] for i in idx), widths))
+    found.sort(key=lambda s: (-s.determined, float(s.half_widths.max()), s.names))
+    return found[:top]
+
+
 def half_width_text(h: float) -> str:
     """A 95 % half-width [share of the range] as a percentage, starred where <= `WITHIN`."""
     return f"{100 * h:.0f} %" + (" *" if h <= WITHIN else "")
@@ -195,6 +249,8 @@ __all__ = [
     "WITHIN",
     "CaseSensitivity",
     "Precision",
+    "Subset",
+    "best_subsets",
     "half_width_text",
     "precision",
     "run_statistics",

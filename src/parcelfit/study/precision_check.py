@@ -32,8 +32,11 @@ from parcelfit.study.calibration import study_executor
 from parcelfit.study.joint import simulate_items
 from parcelfit.study.precision import (
     STATISTICS,
+    WITHIN,
     CaseSensitivity,
     Precision,
+    Subset,
+    best_subsets,
     half_width_text,
     precision,
     run_statistics,
@@ -43,6 +46,8 @@ from parcelfit.study.studyfile import CaseSpec, fixed_to_si, load_study
 
 STATISTICS_FILE = "statistics.json"
 TABLE_FILE = "precision-check.md"
+SUBSET_SIZE = 4  # the method's "at most four parameters go into calibration" (method.md 6)
+WIDE = 6  # with more parameters than this, the table lists one parameter per row
 
 
 @dataclass(frozen=True)
@@ -73,6 +78,18 @@ class PrecisionCheck:
             groups.append(("fitted + every candidate", list(sens.values())))
         return [(title, precision(group)) for title, group in groups]
 
+    def subsets(self, top: int = 5) -> list[tuple[str, list[Subset]]]:
+        """With more parameters than `SUBSET_SIZE`: the ``top`` subsets of that many that the
+        fitted cases (and, with candidates, all cases) would determine best, the others fixed;
+        otherwise nothing."""
+        if len(self.names) <= SUBSET_SIZE:
+            return []
+        sens = self.sensitivities
+        groups = [(" + ".join(self.fitted) + " (fitted)", [sens[f] for f in self.fitted])]
+        if self.candidates:
+            groups.append(("fitted + every candidate", list(sens.values())))
+        return [(title, best_subsets(group, SUBSET_SIZE, top)) for title, group in groups]
+
     def markdown(self, command: str, workers: int | None) -> str:
         """The tables of the check, headed by the ``command`` that wrote them."""
         lines = [
@@ -90,15 +107,42 @@ class PrecisionCheck:
             "where <= 10 %; 57 % means no information). Joint: the other parameters free; alone: "
             "the others known.",
             "",
-            "| cases | " + " | ".join(f"{n} joint | {n} alone" for n in self.names) + " |",
-            "|" + "---|" * (1 + 2 * len(self.names)),
         ]
-        for title, p in self.rows():
-            cells = " | ".join(
-                f"{half_width_text(j)} | {half_width_text(a)}"
-                for j, a in zip(p.joint, p.alone, strict=True)
-            )
-            lines.append(f"| {title} | {cells} |")
+        rows = self.rows()
+        if len(self.names) > WIDE:  # one row per parameter, one column per set of cases
+            lines += [
+                "| parameter | " + " | ".join(f"{t} joint / alone" for t, _ in rows) + " |",
+                "|" + "---|" * (1 + len(rows)),
+            ]
+            for j, name in enumerate(self.names):
+                cells = " | ".join(
+                    f"{half_width_text(p.joint[j])} / {half_width_text(p.alone[j])}"
+                    for _, p in rows
+                )
+                lines.append(f"| {name} | {cells} |")
+        else:
+            lines += [
+                "| cases | " + " | ".join(f"{n} joint | {n} alone" for n in self.names) + " |",
+                "|" + "---|" * (1 + 2 * len(self.names)),
+            ]
+            for title, p in rows:
+                cells = " | ".join(
+                    f"{half_width_text(j)} | {half_width_text(a)}"
+                    for j, a in zip(p.joint, p.alone, strict=True)
+                )
+                lines.append(f"| {title} | {cells} |")
+        for title, found in self.subsets():
+            lines += [
+                "",
+                f"Which {SUBSET_SIZE} to calibrate, {title}: the subsets these cases would "
+                "determine best, each fitted with every other parameter fixed at the point's "
+                "value (`parcelfit.study.precision.best_subsets`; 95 % half-widths).",
+                "",
+                f"| parameters | within {WITHIN:.0%} | half-widths |",
+                "|---|---|---|",
+            ]
+            for sub in found:
+                lines.append(f"| {', '.join(sub.names)} | {sub.determined} | {sub.widths_text()} |")
         lines += [
             "",
             "Sensitivity per case: change of the mean statistic over the parameter's whole range "
