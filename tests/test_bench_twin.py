@@ -90,3 +90,18 @@ def test_the_twin_benchmark_runs_end_to_end_on_the_fake_simulator(tmp_path):
     assert all(r.simulations >= 10 * 2 * 2 for r in joint)  # 2 cases x 2 placements each
     text = (tmp_path / "results.md").read_text()
     assert text.count("| truth | setup |") == 1 and text.count("| joint |") == 3
+
+
+def test_the_benchmark_reads_the_parameters_to_calibrate_and_refuses_bad_ones():
+    bench = _bench()
+    assert bench.parse_ranges(["t_Pa=0.2:1", "E_Pa=200:1600"]) == {
+        "t_Pa": [0.2, 1.0],
+        "E_Pa": [200.0, 1600.0],
+    }
+    for bad, says in (
+        ("t_Pa=0.2", "NAME=LOW:HIGH"),
+        ("x_Pa=1:2", "not a catalogue parameter"),
+        ("t_Pa=1:0.2", "LOW must be below HIGH"),
+    ):
+        with pytest.raises(SystemExit, match=says):
+            bench.parse_ranges([bad])
