@@ -138,7 +138,7 @@ class PrecisionCheck:
                 "determine best, each fitted with every other parameter fixed at the point's "
                 "value (`parcelfit.study.precision.best_subsets`; 95 % half-widths).",
                 "",
-                f"| parameters | within {WITHIN:.0%} | half-widths |",
+                f"| parameters | within {100 * WITHIN:.0f} % | half-widths |",
                 "|---|---|---|",
             ]
             for sub in found:
