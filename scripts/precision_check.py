@@ -1,7 +1,8 @@
 """Which parameters can a study's test cases determine, given the real runs' scatter?
 
     python scripts/precision_check.py STUDY.yaml [--placements 10] [--candidates E2a/KPBW/2 ...]
-                                      [--at NAME=VALUE ...] [--workers 2] [--out precision-check]
+                                      [--at NAME=VALUE ...] [--adjust-transit] [--workers 2]
+                                      [--out precision-check]
 
 The same as ``parcelfit precision`` (`parcelfit.study.precision_check`): for every parameter of
 the study, the study's fitted test cases (and, as candidates, its validation and transfer cases
@@ -10,12 +11,13 @@ the parameter at the low and the high end of its range, every other parameter at
 its range (or at ``--at`` values, catalogue units, e.g. a twin's hidden truth), over
 ``--placements`` seeded placements (seeds 1..K, the same at both ends).
 `parcelfit.study.precision` turns the change of the mean statistics (transit time, rotation,
-lateral drift) and the real runs' scatter into the 95 % half-width each parameter could be
-determined to, as a share of its range: the fitted cases jointly, each alone, and the fitted
-cases plus each candidate. A half-width above 10 % says that no calibration on these cases can
-be expected to recover the parameter within 10 % of its range. Writes ``precision-check.md``
-and prints it; resumes from ``statistics.json`` in the output folder. The simulations are
-cases x parameters x 2 x K.
+lateral drift; with ``--adjust-transit`` the transit time adjusted for the belt speeds each run
+rode at, `parcelfit.metrics.transit_adjustment`) and the real runs' scatter into the 95 %
+half-width each parameter could be determined to, as a share of its range: the fitted cases
+jointly, each alone, and the fitted cases plus each candidate. A half-width above 10 % says
+that no calibration on these cases can be expected to recover the parameter within 10 % of its
+range. Writes ``precision-check.md`` and prints it; resumes from ``statistics.json`` in the
+output folder. The simulations are cases x parameters x 2 x K.
 """
 
 from __future__ import annotations
@@ -40,6 +42,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--placements", type=int, default=10)
     ap.add_argument("--candidates", nargs="*", default=[], metavar="RIG/TYPE/SETTING")
     ap.add_argument("--at", nargs="*", default=[], metavar="NAME=VALUE")
+    ap.add_argument(
+        "--adjust-transit",
+        action="store_true",
+        help="compare transit times adjusted for the belt speeds each run rode at",
+    )
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--out", type=Path, default=Path("precision-check"))
     args = ap.parse_args(argv)
@@ -54,6 +61,7 @@ def main(argv: list[str] | None = None) -> int:
         placements=args.placements,
         candidates=args.candidates,
         at=parse_assignments(args.at),
+        adjust_transit=args.adjust_transit,
         workers=args.workers,
         progress=say,
     )
@@ -61,6 +69,7 @@ def main(argv: list[str] | None = None) -> int:
         f"python scripts/precision_check.py {args.study.as_posix()} --placements {args.placements}"
         + (f" --candidates {' '.join(args.candidates)}" if args.candidates else "")
         + (f" --at {' '.join(args.at)}" if args.at else "")
+        + (" --adjust-transit" if args.adjust_transit else "")
     )
     text = check.markdown(command, args.workers)
     write_text_atomic(args.out / TABLE_FILE, text)

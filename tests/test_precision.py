@@ -206,6 +206,17 @@ def test_the_check_says_which_case_determines_which_parameter_and_resumes(tmp_pa
     assert again.simulated_now == 0 and again.simulations == check.simulations
     for (t1, p1), (t2, p2) in zip(check.rows(), again.rows(), strict=True):
         assert t1 == t2 and np.array_equal(p1.joint, p2.joint)
+    # adjusting the transit times for the belt speeds reuses every stored run (the cache keeps
+    # the ridden speeds) and says per case what the adjustment did
+    adjusted = run_precision_check(
+        study, tmp_path / "out", placements=3, adjust_transit=True, executor="serial"
+    )
+    assert adjusted.simulated_now == 0
+    assert set(adjusted.adjustments) == {"R/P/1", "Q/P/1"}
+    assert all(a.runs >= 2 for a in adjusted.adjustments.values())
+    text = adjusted.markdown("cmd", 1)
+    assert "Transit times adjusted for the belt speeds" in text and "- R/P/1: transit" in text
+    assert not check.adjustments and "Transit times adjusted" not in check.markdown("cmd", 1)
     # at the same point, other ranges make other runs: nothing of the check before is reused
     at = {"mu_d_BePa": 0.4, "mu_d_MePa": 0.25, "E_Pa": 1000}
     run_precision_check(study, tmp_path / "at", placements=2, at=at, executor="serial")
@@ -224,6 +235,10 @@ def test_the_precision_command_writes_its_table_and_refuses_bad_input(tmp_path: 
     assert result.exit_code == 0, result.output
     table = (out / "precision-check.md").read_text()
     assert "| R/P/1 (fitted) | 57 % |" in table and "fitted + Q/P/1" in table
+    adjusted = CliRunner().invoke(app, [*args, "--adjust-transit"])
+    assert adjusted.exit_code == 0, adjusted.output
+    table = (out / "precision-check.md").read_text()
+    assert "--adjust-transit" in table and "Transit times adjusted" in table
     bad = CliRunner().invoke(app, [*args, "--at", "k_MePa=400"])
     assert bad.exit_code == 2 and "not a parameter of the study" in bad.output
     few = CliRunner().invoke(app, [*args[:2], "--placements", "1"])

@@ -1025,6 +1025,13 @@ def precision(
         list[str] | None,
         typer.Option(help="NAME=VALUE (catalogue units): the point to judge at, else the centre."),
     ] = None,
+    adjust_transit: Annotated[
+        bool,
+        typer.Option(
+            "--adjust-transit",
+            help="Compare transit times adjusted for the belt speeds each run rode at.",
+        ),
+    ] = False,
     out: Annotated[
         Path | None,
         typer.Option(help="Output folder (default: next to the file, named STEM-precision)."),
@@ -1047,6 +1054,7 @@ def precision(
             placements=placements,
             candidates=candidate or [],
             at=parse_assignments(at or []),
+            adjust_transit=adjust_transit,
             executor=executor,
             workers=workers,
             progress=_progress(status_line, "precision check: "),
@@ -1055,6 +1063,7 @@ def precision(
         f"parcelfit precision {study_file.as_posix()} --placements {placements}"
         + "".join(f" --candidate {c}" for c in candidate or [])
         + "".join(f" --at {a}" for a in at or [])
+        + (" --adjust-transit" if adjust_transit else "")
     )
     text = check.markdown(command, workers)
     write_text_atomic(folder / TABLE_FILE, text)

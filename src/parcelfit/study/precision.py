@@ -13,7 +13,10 @@ to the start, cropped), by
 
     s = (T, |theta_end - theta_0|, y_end - y_0)   [s, rad, m]
 
-the transit time, the net rotation and the lateral drift.
+the transit time, the net rotation and the lateral drift. Optionally T is the transit time
+adjusted for the belt speeds each run rode at (`parcelfit.metrics.transit_adjustment`: fitted on
+the case's real runs, applied alike to real and simulated runs), which takes the belts' speed
+deviation out of the real runs' scatter.
 
 **Sensitivity.** With u_j = (p_j - low_j) / (high_j - low_j) the parameter's share of its range,
 the Jacobian column of parameter j is the change of the mean statistics of K seeded placements
@@ -71,6 +74,7 @@ from sklearn.covariance import LedoitWolf
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.metrics.comparison import Comparison
+from parcelfit.metrics.transit_adjustment import TransitAdjustment
 from parcelfit.runs import Run
 
 STATISTICS = ("transit [s]", "rotation [rad]", "lateral drift [m]")
@@ -79,10 +83,13 @@ Z95 = 1.959963984540054  # two-sided 95 % normal quantile
 WITHIN = 0.10  # share of the range within which a parameter counts as determined (recovery's 10 %)
 
 
-def run_statistics(run: Run, comparison: Comparison) -> np.ndarray | None:
+def run_statistics(
+    run: Run, comparison: Comparison, adjustment: TransitAdjustment | None = None
+) -> np.ndarray | None:
     """The statistics s = (T [s], net rotation [rad], lateral drift [m]) of a run on its case's
-    prepared regions of interest; None without a transit time or with fewer than two samples
-    in the regions."""
+    prepared regions of interest, T adjusted for the belt speeds the run rode at when an
+    ``adjustment`` is given (`parcelfit.metrics.transit_adjustment`); None without a transit
+    time or with fewer than two samples in the regions."""
     if run.transit_time is None:
         return None
     traj = comparison.prepare(run.trajectory)
@@ -90,7 +97,8 @@ def run_statistics(run: Run, comparison: Comparison) -> np.ndarray | None:
         return None
     theta = np.unwrap(np.asarray(traj.theta, dtype=float))
     xy = np.asarray(traj.xy, dtype=float)
-    return np.array([run.transit_time, abs(theta[-1] - theta[0]), xy[-1, 1] - xy[0, 1]])
+    transit = run.transit_time if adjustment is None else adjustment.adjust_run(run)
+    return np.array([transit, abs(theta[-1] - theta[0]), xy[-1, 1] - xy[0, 1]])
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +24,11 @@ import numpy as np
 from parcelfit.atomic import write_text_atomic
 from parcelfit.errors import ParcelfitError
 from parcelfit.metrics.comparison import Comparison
+from parcelfit.metrics.transit_adjustment import (
+    TransitAdjustment,
+    fit_transit_adjustment,
+    ridden_speeds,
+)
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.runs import TestCase, load_dataset
 from parcelfit.sim.executors import Task
@@ -45,6 +50,9 @@ from parcelfit.study.precision import (
 from parcelfit.study.studyfile import CaseSpec, fixed_to_si, load_study
 
 STATISTICS_FILE = "statistics.json"
+# what statistics.json holds per run: the raw statistics, then the ridden speeds (an adjustment
+# of the transit time is applied when the table is made, so one cache serves both)
+CACHED = "transit s, rotation rad, lateral drift m, v_start m/s, v_end m/s"
 TABLE_FILE = "precision-check.md"
 SUBSET_SIZE = 4  # the method's "at most four parameters go into calibration" (method.md 6)
 WIDE = 6  # with more parameters than this, the table lists one parameter per row
@@ -64,6 +72,7 @@ class PrecisionCheck:
     simulated_now: int
     wall_time: float  # s, of the simulations run now
     at_given: bool
+    adjustments: Mapping[str, TransitAdjustment] = field(default_factory=dict)
 
     def rows(self) -> list[tuple[str, Precision]]:
         """The fitted cases jointly, each fitted case alone (if several), the fitted cases plus
@@ -103,6 +112,16 @@ class PrecisionCheck:
             "mean transit time, rotation and lateral drift over each parameter's range and the "
             "real runs' scatter).",
             "",
+        ]
+        if self.adjustments:
+            lines += [
+                "Transit times adjusted for the belt speeds each run rode at "
+                "(`parcelfit.metrics.transit_adjustment`), real and simulated runs alike:",
+                "",
+                *(f"- {label}: {a.describe()}" for label, a in self.adjustments.items()),
+                "",
+            ]
+        lines += [
             "95 % half-width each parameter could be determined to, as a share of its range (* "
             "where <= 10 %; 57 % means no information). Joint: the other parameters free; alone: "
             "the others known.",
@@ -171,13 +190,16 @@ def run_precision_check(
     placements: int = 10,
     candidates: Sequence[str] = (),
     at: Mapping[str, float] | None = None,
+    adjust_transit: bool = False,
     executor: str | None = None,
     workers: int | None = None,
     progress: ProgressCallback = ignore_progress,
 ) -> PrecisionCheck:
     """Run the check of the module docstring for ``study_file`` into the folder ``out``;
     ``candidates`` are test-case labels (RIG/TYPE/SETTING), ``at`` values in catalogue units;
-    ``executor`` and ``workers`` override the study file's ``executor`` (as for a calibration)."""
+    ``adjust_transit`` compares transit times adjusted for the belt speeds each run rode at
+    (`parcelfit.metrics.transit_adjustment`); ``executor`` and ``workers`` override the study
+    file's ``executor`` (as for a calibration)."""
     if placements < 2:
         raise ParcelfitError(
             f"{placements} placement(s): the sensitivity's standard error needs two or more",
@@ -206,18 +228,31 @@ def run_precision_check(
     datasets = {}
     comparisons: dict[str, Comparison] = {}
     real: dict[str, list[np.ndarray | None]] = {}
+    adjustments: dict[str, TransitAdjustment] = {}
     for spec in specs:
         if spec.dataset not in datasets:
             datasets[spec.dataset] = load_dataset(spec.dataset)
         data = datasets[spec.dataset][spec.case]
         comparisons[spec.label] = Comparison.for_case(data)
-        real[spec.label] = [run_statistics(r, comparisons[spec.label]) for r in data.runs]
+        if adjust_transit:
+            adjustments[spec.label] = fit_transit_adjustment(data.runs)
+        real[spec.label] = [
+            run_statistics(r, comparisons[spec.label], adjustments.get(spec.label))
+            for r in data.runs
+        ]
 
     out.mkdir(parents=True, exist_ok=True)
     cache_file = out / STATISTICS_FILE
     bounds = {n: [dims[n].low, dims[n].high] for n in names}
     setup = json.loads(
-        json.dumps({"point": point, "bounds": bounds, "simulator": repr(study.simulator)})
+        json.dumps(
+            {
+                "point": point,
+                "bounds": bounds,
+                "simulator": repr(study.simulator),
+                "stored": CACHED,
+            }
+        )
     )
     cache: dict[str, list[float] | None] = {}
     if cache_file.exists():
@@ -267,6 +302,8 @@ def run_precision_check(
                 stats = None
                 if result.ok and result.run is not None:
                     stats = run_statistics(result.run, comparisons[label])
+                    if stats is not None:  # raw statistics and the speeds an adjustment needs
+                        stats = [*stats, *ridden_speeds(result.run.trajectory)]
                 cache[run_id] = None if stats is None else [float(v) for v in stats]
                 if done % 20 == 0 or done == total:
                     save()
@@ -277,7 +314,12 @@ def run_precision_check(
     per_end: dict[tuple[str, str, str], list[np.ndarray | None]] = {}
     for label, name, end, run_id in keys:
         v = cache[run_id]
-        per_end.setdefault((label, name, end), []).append(None if v is None else np.array(v))
+        stats = None
+        if v is not None:
+            stats = np.array(v[:3])
+            if label in adjustments:
+                stats[0] = adjustments[label].adjust(v[0], v[3:5])
+        per_end.setdefault((label, name, end), []).append(stats)
     sens = {
         spec.label: sensitivity(
             spec.label,
@@ -298,6 +340,7 @@ def run_precision_check(
         total,
         wall,
         bool(given),
+        adjustments,
     )
 
 
