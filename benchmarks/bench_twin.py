@@ -16,7 +16,10 @@ truth and setup:
   setting 2, the published optimiser configuration, budget 80);
 * ``joint``: E3 setting 1 and E1 setting 3 fitted jointly with the ensemble cost (``placements``
   seeded placements per case and evaluation), validation on E3 setting 2, transfer check on E1
-  setting 1, the default optimiser, ``budget`` evaluations.
+  setting 1, the default optimiser, ``budget`` evaluations;
+* ``joint-adjusted`` (only when named in ``--setups``): the joint setup with the transit times
+  adjusted for the belt speeds each run rode at (``cost.transit: adjusted``,
+  `parcelfit.metrics.transit_adjustment`).
 
 ``--parameters`` calibrates four other parameters than the published set (catalogue names and
 units, e.g. the four a precision check names as the ones the cases determine best); the truths
@@ -99,7 +102,8 @@ class Row:
 
 
 def mujoco_setups(placements: int, budget: int) -> list[Setup]:
-    """The published and the joint ensemble setups on the E3/E1 twin data (module docstring)."""
+    """The published, the joint ensemble and the joint ensemble on adjusted transit times
+    setups on the E3/E1 twin data (module docstring)."""
     published = Setup(
         "published",
         {
@@ -122,7 +126,14 @@ def mujoco_setups(placements: int, budget: int) -> list[Setup]:
             "budget": budget,
         },
     )
-    return [published, joint]
+    adjusted = Setup(
+        "joint-adjusted",
+        {
+            **joint.keys,
+            "cost": {"kind": "ensemble", "placements": placements, "transit": "adjusted"},
+        },
+    )
+    return [published, joint, adjusted]
 
 
 def _fill(value: Any, dataset: str) -> Any:

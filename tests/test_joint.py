@@ -73,6 +73,11 @@ def test_a_joint_study_file_lists_its_cases(tmp_path):
         ({"cost": {"kind": "published", "placements": 3}}, r"cost\.placements: the published"),
         ({"cost": {"kind": "mean"}}, r"cost\.kind: unknown cost 'mean'"),
         (
+            {"cost": {"kind": "published", "transit": "adjusted"}},
+            r"cost\.transit: the published cost has no transit-time term",
+        ),
+        ({"cost": {"kind": "ensemble", "transit": "raw"}}, r"cost\.transit: unknown transit"),
+        (
             {"validation": {"speed_setting": 2}},
             r"validation\.speed_setting: a joint study names its validation cases",
         ),
@@ -185,3 +190,39 @@ def test_the_advice_names_the_rig_where_an_undetermined_parameter_matters(tmp_pa
     assert advice.changes["Q/P/1"]["E_Pa"] > 10 * advice.changes["R/P/2"]["E_Pa"]
     doc = json.loads((out / "results.json").read_text())
     assert doc["advice"]["best"] == "Q/P/1"
+
+
+def test_an_ensemble_on_adjusted_transit_times_adjusts_real_and_simulated_runs_alike(tmp_path):
+    from parcelfit.metrics import select_reference
+    from parcelfit.metrics.transit_adjustment import adjusted_reference, ridden_speeds
+    from parcelfit.runs import load_dataset, read_trajectory
+
+    cost = {"kind": "ensemble", "placements": 2, "transit": "adjusted"}
+    path = _joint_study(tmp_path, cost=cost, budget=4, initial=4, transfer=[])
+    study = load_study(path)
+    assert study.transit_adjusted
+    out = tmp_path / "out"
+    Calibration(study, out, figures=False).run()
+    data = load_dataset(tmp_path / "data")
+    parts = study_status(out)["recommended"]["parts"]
+    for part, spec in zip(parts, study.cases, strict=True):
+        runs = data[spec.case].runs
+        reference = adjusted_reference(select_reference(data[spec.case]), runs)
+        adjustment = reference.transit_adjustment
+        assert adjustment is not None and adjustment.runs == len(runs)
+        # the real runs' times are adjusted ...
+        assert reference.transit_times == tuple(adjustment.adjust_run(r) for r in runs)
+        # ... and every simulated run with the same coefficients and mean speeds
+        for raw, adjusted, f in zip(
+            part["transit_times"], part["adjusted_transit_times"], part["run_files"], strict=True
+        ):
+            speeds = ridden_speeds(read_trajectory(out / f))
+            assert adjusted == pytest.approx(adjustment.adjust(raw, speeds), abs=1e-12)
+    # the validation case keeps its measured times (the published criteria judge it)
+    assert "adjusted_transit_times" not in json.dumps(study_status(out)["validations"])
+    # the report says per fitted case what the adjustment did
+    from parcelfit.report import build_report
+
+    page = build_report(out).read_text()
+    assert "adjusted for the belt speeds each run rode at" in page
+    assert "<li>Q/P/1: transit times adjusted to the real runs" in page

@@ -31,6 +31,12 @@ generalised U-statistic); to first order
 fewer than two simulations or real runs). More placements shrink the first part only; the real
 runs' part is fixed by the experiment.
 
+**Adjusted transit times.** With ``cost.transit: adjusted`` the real runs' transit times in the
+reference are adjusted for the belt speeds each run rode at
+(`parcelfit.metrics.transit_adjustment.adjusted_reference`) and the simulated runs' times
+alike before they reach this module: T above is then T^a, and s_real^2 the adjusted times'
+variance (smaller by what the belt speeds explain).
+
 **Real runs on the same scale.** `ensemble_real_costs` scores every real run j as a one-member
 ensemble against the other n - 1 real runs (its transit time against their mean, SE^2 = s^2 (1 +
 1 / (n - 1)) with their sample variance): what a simulation as good as one more real run would

@@ -17,6 +17,7 @@ they normalise the calibration cost (equation 3).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -24,6 +25,9 @@ from parcelfit.errors import ParcelfitError
 from parcelfit.metrics.comparison import Comparison
 from parcelfit.metrics.dtw import pairwise_dtw
 from parcelfit.runs import CaseData, Run, TestCase
+
+if TYPE_CHECKING:
+    from parcelfit.metrics.transit_adjustment import TransitAdjustment
 
 
 def normalise(matrix: np.ndarray) -> tuple[np.ndarray, float]:
@@ -54,6 +58,10 @@ class ReferenceSelection:
     transit_times: tuple[float | None, ...]
     xy_series: list[np.ndarray] = field(repr=False)
     theta_series: list[np.ndarray] = field(repr=False)
+    # set when ``transit_times`` are adjusted for the belt speeds each run rode at
+    # (`parcelfit.metrics.transit_adjustment.adjusted_reference`): simulated runs compared with
+    # them are adjusted alike
+    transit_adjustment: TransitAdjustment | None = None
 
     @property
     def reference_id(self) -> str:

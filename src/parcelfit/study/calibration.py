@@ -38,6 +38,7 @@ from filelock import FileLock
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.metrics import ReferenceSelection, calibration_cost, select_reference
+from parcelfit.metrics.transit_adjustment import adjusted_reference
 from parcelfit.optimize.sampler import Sampler, make_sampler
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.runs import (
@@ -338,6 +339,9 @@ class Calibration:
                         fix="name a test case the dataset holds (parcelfit stats lists them)",
                     ) from None
                 out[spec.label] = select_reference(data)
+                fitted = any(spec.case == c.case for c in study.cases)
+                if study.transit_adjusted and fitted:  # the ensemble cost's cases
+                    out[spec.label] = adjusted_reference(out[spec.label], data.runs)
         return out
 
     def _case_summary(self, references: Mapping[str, ReferenceSelection]) -> list[dict[str, Any]]:
@@ -360,6 +364,9 @@ class Calibration:
                         "dataset": str(spec.dataset),
                         "reference_run": ref.reference_id,
                         "threshold": case_threshold(ref, study) if role == "fit" else None,
+                        "transit": None
+                        if ref.transit_adjustment is None
+                        else ref.transit_adjustment.describe(),
                     }
                 )
         return out

@@ -29,6 +29,7 @@
     #   - {rig: E1, speed_setting: 3, weight: 1.0}
     # validation: {every: 5, cases: [{rig: E3, speed_setting: 2}]}  # all must pass
     # cost: {kind: ensemble, placements: 6, transit_weight: 1.0}   # optional, default published
+    #   (add transit: adjusted to compare transit times at the real runs' mean belt speeds)
     # transfer: [{rig: E1, speed_setting: 1}]   # optional: judged once the study stops
     weights: {xy: 1.0, theta: 1.0}     # optional, equation (3)
     batch_size: 4                      # optional
@@ -47,7 +48,9 @@ A study file with ``reference`` (one test case) is the published method; ``cases
 test cases at once: one evaluation simulates every case (in parallel) and its cost is the
 weighted sum of the cases' costs. ``cost.kind`` chooses the cost of a case: ``published``
 (equation 3 against the reference run, `parcelfit.metrics.cost`) or ``ensemble`` (``placements``
-seeded placements against all real runs with a transit-time term, `parcelfit.metrics.ensemble`).
+seeded placements against all real runs with a transit-time term, `parcelfit.metrics.ensemble`;
+with ``transit: adjusted`` the fitted cases' transit times, real and simulated, are adjusted for
+the belt speeds each run rode at, `parcelfit.metrics.transit_adjustment`).
 ``transfer`` lists test cases (usually on other rigs) that the calibrated parameters are judged
 on, with the validation criteria and the band test, once the study stops.
 
@@ -113,11 +116,13 @@ class CaseSection(FileModel):
 class CostSection(FileModel):
     """``cost``: ``published`` (equation 3 against the reference run) or ``ensemble``
     (``placements`` seeded placements against all real runs, plus the transit-time term
-    weighted by ``transit_weight``)."""
+    weighted by ``transit_weight``, on the transit times as measured or, with ``transit:
+    adjusted``, adjusted for the belt speeds each run rode at)."""
 
     kind: Annotated[str, Choice(("published", "ensemble"), what="cost")] = "published"
     placements: Annotated[int, Whole(ge=1)] = 1
     transit_weight: Annotated[float, Number(ge=0)] = 1.0
+    transit: Annotated[str, Choice(("measured", "adjusted"), what="transit time")] = "measured"
 
     @classmethod
     def prepare(cls, data: Any) -> Any:
@@ -130,6 +135,12 @@ class CostSection(FileModel):
                 "the published cost compares one simulation with the reference run",
                 where="placements",
                 fix="use kind: ensemble for several placements, or leave placements out",
+            )
+        if self.kind == "published" and self.transit != "measured":
+            raise ParcelfitError(
+                "the published cost has no transit-time term to adjust",
+                where="transit",
+                fix="use kind: ensemble with transit: adjusted, or leave transit out",
             )
         return self
 
@@ -338,6 +349,7 @@ class Study:
     cost_kind: str = "published"  # published | ensemble
     placements: int = 1  # seeded placements per case and evaluation (ensemble)
     transit_weight: float = 1.0  # w_T of the ensemble cost
+    transit_adjusted: bool = False  # ensemble transit term on belt-speed-adjusted times
 
     @property
     def joint(self) -> bool:
@@ -462,6 +474,7 @@ def load_study(path: str | Path) -> Study:
         cost_kind=f.cost.kind,
         placements=f.cost.placements,
         transit_weight=f.cost.transit_weight,
+        transit_adjusted=f.cost.transit == "adjusted",
     )
 
 
