@@ -220,6 +220,12 @@ def test_an_ensemble_on_adjusted_transit_times_adjusts_real_and_simulated_runs_a
             assert adjusted == pytest.approx(adjustment.adjust(raw, speeds), abs=1e-12)
     # the validation case keeps its measured times (the published criteria judge it)
     assert "adjusted_transit_times" not in json.dumps(study_status(out)["validations"])
+    # `parcelfit status` says the transit term is on adjusted times
+    from typer.testing import CliRunner
+
+    from parcelfit.cli import app
+
+    assert "(adjusted times)" in CliRunner().invoke(app, ["status", str(out)]).stdout
     # the report says per fitted case what the adjustment did
     from parcelfit.report import build_report
 

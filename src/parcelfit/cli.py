@@ -938,7 +938,8 @@ def _print_parts(parts: list[dict[str, Any]]) -> None:
         if "trajectory_term" in p:
             se = "" if p.get("se") is None else f" (se {p['se']:.3g})"
             tt = "-" if p.get("transit_term") is None else f"{p['transit_term']:.3g}"
-            what = f"trajectories {p['trajectory_term']:.3g}{se}, transit {tt}"
+            adjusted = " (adjusted times)" if "adjusted_transit_times" in p else ""
+            what = f"trajectories {p['trajectory_term']:.3g}{se}, transit {tt}{adjusted}"
             what += f", {len(p.get('seeds') or [])} placements"
         else:
             what = f"DTW_xy {p['dtw_xy']:.3g} m, DTW_theta {p['dtw_theta']:.3g} rad"
