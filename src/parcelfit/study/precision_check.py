@@ -262,7 +262,8 @@ def run_precision_check(
         else:
             progress(
                 ProgressEvent(
-                    "precision", f"{cache_file} is from another point, range or simulator: not used"
+                    "precision",
+                    f"{cache_file} is from another point, range, simulator or parcelfit version: not used",
                 )
             )
 
