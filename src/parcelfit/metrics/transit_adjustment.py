@@ -109,11 +109,16 @@ class TransitAdjustment:
             return float(transit_time)
         return float(transit_time - np.dot(self.coefficients, u - np.asarray(self.mean_speeds)))
 
+    def adjust_track(self, transit_time: float | None, trajectory: Trajectory) -> float | None:
+        """The adjusted transit time [s] of a run with ``transit_time`` [s] (None: none) and
+        track ``trajectory``, its speeds read over this adjustment's window."""
+        if transit_time is None:
+            return None
+        return self.adjust(transit_time, ridden_speeds(trajectory, self.window))
+
     def adjust_run(self, run: Run) -> float | None:
         """The adjusted transit time [s] of ``run`` (None without a transit time)."""
-        if run.transit_time is None:
-            return None
-        return self.adjust(run.transit_time, ridden_speeds(run.trajectory, self.window))
+        return self.adjust_track(run.transit_time, run.trajectory)
 
     def describe(self) -> str:
         """One line for a report: what the adjustment did to the real runs' scatter."""

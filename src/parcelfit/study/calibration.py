@@ -339,8 +339,8 @@ class Calibration:
                         fix="name a test case the dataset holds (parcelfit stats lists them)",
                     ) from None
                 out[spec.label] = select_reference(data)
-                fitted = any(spec.case == c.case for c in study.cases)
-                if study.transit_adjusted and fitted:  # the ensemble cost's cases
+                if study.transit_adjusted and any(spec.case == c.case for c in study.cases):
+                    # a fitted case: the ensemble cost compares its adjusted transit times
                     out[spec.label] = adjusted_reference(out[spec.label], data.runs)
         return out
 

@@ -51,7 +51,6 @@ from parcelfit.errors import ParcelfitError
 from parcelfit.metrics import ReferenceSelection, calibration_cost, real_run_costs
 from parcelfit.metrics.dtw import dtw_distance
 from parcelfit.metrics.ensemble import ensemble_cost, ensemble_real_costs
-from parcelfit.metrics.transit_adjustment import ridden_speeds
 from parcelfit.runs import Trajectory
 from parcelfit.sim.executors import Executor, Task, simulate_task
 from parcelfit.sim.protocol import SimResult, SimStatus, Simulator
@@ -131,10 +130,7 @@ def case_cost(
     }
     adjustment = reference.transit_adjustment
     if adjustment is not None:  # compared with the real runs' adjusted times: adjust alike
-        transits = [
-            None if t is None else adjustment.adjust(t, ridden_speeds(tr, adjustment.window))
-            for t, tr in zip(transits, trajs, strict=True)
-        ]
+        transits = [adjustment.adjust_track(t, tr) for t, tr in zip(transits, trajs, strict=True)]
         out["adjusted_transit_times"] = transits
     if study.cost_kind == "ensemble":
         e = ensemble_cost(
