@@ -20,4 +20,5 @@ fi
 
 python3 -m pip install -e ".[test]"
 python3 -m ruff check .
-python3 -m pytest "$@"
+# -n auto: one test process per core (xdist); pass -n 0 to run in this process only
+python3 -m pytest -n auto "$@"

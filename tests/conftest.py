@@ -46,3 +46,9 @@ def make_dataset(tmp_path: Path) -> Callable[..., Path]:
         return root
 
     return build
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Start the longest tests first: with several test processes (``-n auto``) the others then
+    share the rest instead of waiting for one long test at the end."""
+    items.sort(key=lambda item: item.get_closest_marker("longest") is None)  # stable

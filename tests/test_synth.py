@@ -5,11 +5,15 @@ import yaml
 from parcelfit.runs import TestCase, load_dataset
 from parcelfit.synth import TwinSettings, make_twin_dataset
 
+# These tests check how twin datasets are made (scatter, determinism, cache), not the physics:
+# a coarse step (about 1/1200 s, written as in a spec file) keeps them quick.
+QUICK_STEP = 0.00083333
+
 
 @pytest.mark.slow
 @pytest.mark.mujoco
 def test_twin_dataset_scatters_like_real_runs_and_keeps_the_truth(tmp_path):
-    settings = TwinSettings(runs=3, real_spacing=0.05)
+    settings = TwinSettings(runs=3, real_spacing=0.05, real_timestep=QUICK_STEP)
     path = make_twin_dataset(
         tmp_path, [TestCase("E1", "BW", 1)], {"BW": {"mu_d_BePa": 0.5}}, settings=settings, seed=4
     )
@@ -45,7 +49,7 @@ def test_synth_command_makes_the_dataset_from_a_spec(tmp_path):
     spec = tmp_path / "spec.yaml"
     spec.write_text(
         "name: tiny\nseed: 2\ncases: [E1/BW/1]\ntruth: {BW: {mu_d_BePa: 0.5}}\n"
-        "settings: {runs: 2, real_spacing: 0.05}\n"
+        "settings: {runs: 2, real_spacing: 0.05, real_timestep: 0.00083333}\n"
     )
     result = CliRunner().invoke(
         app, ["synth", str(spec), "--out", str(tmp_path / "out"), "--workers", "2"]
@@ -58,7 +62,7 @@ def test_synth_command_makes_the_dataset_from_a_spec(tmp_path):
         tmp_path / "serial",
         [TestCase("E1", "BW", 1)],
         {"BW": {"mu_d_BePa": 0.5}},
-        settings=TwinSettings(runs=2, real_spacing=0.05),
+        settings=TwinSettings(runs=2, real_spacing=0.05, real_timestep=QUICK_STEP),
         seed=2,
         workers=1,
     )
@@ -93,7 +97,7 @@ def test_an_interrupted_twin_dataset_resumes_from_its_cache(tmp_path, monkeypatc
 
     import parcelfit.synth as synth
 
-    settings = TwinSettings(runs=3, real_spacing=0.05)
+    settings = TwinSettings(runs=3, real_spacing=0.05, real_timestep=QUICK_STEP)
     real = synth._twin_run
     calls = []
 
