@@ -60,11 +60,13 @@ class DemoProfile:
     initial: int
     budget: int
     validate_every: int
+    advice: bool = True  # simulate the candidate cases to say which would help most
 
 
 PROFILES = {
-    # a smoke run: an 8-run half fraction over the four calibrated parameters, a short calibration
-    "quick": DemoProfile("quick", list(CALIBRATED), ("fractional",), 4, 8, 16, 2),
+    # a smoke run: an 8-run half fraction over the four calibrated parameters, a short calibration,
+    # no advice on the next test case (its 16 simulations would be a third of the run)
+    "quick": DemoProfile("quick", list(CALIBRATED), ("fractional",), 4, 8, 16, 2, advice=False),
     # the default: the published 32-run resolution IV screen of all 16 parameters, then the
     # calibration with the published batch size and validation every 5 iterations
     "default": DemoProfile("default", "all", ("fractional",), 4, 16, 60, 5),
@@ -324,6 +326,7 @@ class Demo:
             workers=self.workers,
             progress=progress,
             animation=self.animation,
+            advice=self.profile.advice,
         ).run()
 
     def stricter_example(self) -> dict[str, Any]:
