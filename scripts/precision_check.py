@@ -31,7 +31,7 @@ from parcelfit.atomic import write_text_atomic
 from parcelfit.errors import ParcelfitError
 from parcelfit.progress import ProgressEvent
 from parcelfit.sim.params import parse_assignments
-from parcelfit.study.precision_check import TABLE_FILE, run_precision_check
+from parcelfit.study.precision_check import TABLE_FILE, command_line, run_precision_check
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -65,11 +65,14 @@ def main(argv: list[str] | None = None) -> int:
         workers=args.workers,
         progress=say,
     )
-    command = (
-        f"python scripts/precision_check.py {args.study.as_posix()} --placements {args.placements}"
-        + (f" --candidates {' '.join(args.candidates)}" if args.candidates else "")
-        + (f" --at {' '.join(args.at)}" if args.at else "")
-        + (" --adjust-transit" if args.adjust_transit else "")
+    command = command_line(
+        "python scripts/precision_check.py",
+        args.study,
+        placements=args.placements,
+        candidates=args.candidates or [],
+        at=args.at or [],
+        adjust_transit=args.adjust_transit,
+        repeated=False,
     )
     text = check.markdown(command, args.workers)
     write_text_atomic(args.out / TABLE_FILE, text)

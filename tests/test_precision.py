@@ -243,3 +243,28 @@ def test_the_precision_command_writes_its_table_and_refuses_bad_input(tmp_path: 
     assert bad.exit_code == 2 and "not a parameter of the study" in bad.output
     few = CliRunner().invoke(app, [*args[:2], "--placements", "1"])
     assert few.exit_code == 2
+
+
+def test_the_cited_command_repeats_the_options_as_each_program_takes_them() -> None:
+    from parcelfit.study.precision_check import command_line
+
+    options = {
+        "placements": 4,
+        "candidates": ["E1/KP/1", "E2a/KP/1"],
+        "at": ["E_Pa=600", "k_MePa=400"],
+        "adjust_transit": True,
+    }
+    cli = command_line("parcelfit precision", Path("a/study.yaml"), **options, repeated=True)
+    assert cli == (
+        "parcelfit precision a/study.yaml --placements 4 --candidate E1/KP/1 --candidate "
+        "E2a/KP/1 --at E_Pa=600 --at k_MePa=400 --adjust-transit"
+    )
+    script = command_line("python s.py", Path("a/study.yaml"), **options, repeated=False)
+    assert script == (
+        "python s.py a/study.yaml --placements 4 --candidates E1/KP/1 E2a/KP/1 "
+        "--at E_Pa=600 k_MePa=400 --adjust-transit"
+    )
+    bare = command_line(
+        "p", Path("s.yaml"), placements=2, candidates=[], at=[], adjust_transit=False, repeated=True
+    )
+    assert bare == "p s.yaml --placements 2"

@@ -1044,7 +1044,7 @@ def precision(
     from parcelfit.atomic import write_text_atomic
     from parcelfit.sim.params import parse_assignments
     from parcelfit.study.precision import half_width_text
-    from parcelfit.study.precision_check import TABLE_FILE, run_precision_check
+    from parcelfit.study.precision_check import TABLE_FILE, command_line, run_precision_check
 
     _check_executor(executor, ("serial", "local"))
     folder = out or study_file.parent / f"{study_file.stem}-precision"
@@ -1060,11 +1060,14 @@ def precision(
             workers=workers,
             progress=_progress(status_line, "precision check: "),
         )
-    command = (
-        f"parcelfit precision {study_file.as_posix()} --placements {placements}"
-        + "".join(f" --candidate {c}" for c in candidate or [])
-        + "".join(f" --at {a}" for a in at or [])
-        + (" --adjust-transit" if adjust_transit else "")
+    command = command_line(
+        "parcelfit precision",
+        study_file,
+        placements=placements,
+        candidates=candidate or [],
+        at=at or [],
+        adjust_transit=adjust_transit,
+        repeated=True,
     )
     text = check.markdown(command, workers)
     write_text_atomic(folder / TABLE_FILE, text)

@@ -345,4 +345,37 @@ def run_precision_check(
     )
 
 
-__all__ = ["STATISTICS_FILE", "TABLE_FILE", "PrecisionCheck", "run_precision_check"]
+def command_line(
+    program: str,
+    study_file: Path,
+    *,
+    placements: int,
+    candidates: Sequence[str],
+    at: Sequence[str],
+    adjust_transit: bool,
+    repeated: bool,
+) -> str:
+    """The command that reproduces a check, as its tables cite it: ``program`` followed by the
+    study file and the options as given (``repeated``: one ``--candidate``/``--at`` per value,
+    as the CLI takes them; otherwise ``--candidates``/``--at`` followed by all values, as the
+    script takes them)."""
+    parts = [program, study_file.as_posix(), "--placements", str(placements)]
+    for flag, values in (("--candidate", candidates), ("--at", at)):
+        if not values:
+            continue
+        if repeated:
+            parts += [item for v in values for item in (flag, v)]
+        else:
+            parts += [flag if flag == "--at" else "--candidates", *values]
+    if adjust_transit:
+        parts.append("--adjust-transit")
+    return " ".join(parts)
+
+
+__all__ = [
+    "STATISTICS_FILE",
+    "TABLE_FILE",
+    "PrecisionCheck",
+    "command_line",
+    "run_precision_check",
+]
