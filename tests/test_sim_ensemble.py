@@ -18,7 +18,7 @@ from parcelfit.sim import SimStatus
 from parcelfit.sim.ensemble import Member, ensemble_shift, rotation, summarise
 from parcelfit.sim.mujoco import MujocoSimulator, SceneOptions, SimOptions, load_rig
 from parcelfit.sim.mujoco.rig import SCATTER_CUT, parse_rig
-from parcelfit.sim.mujoco.simulator import STICK_SPEED, _FrictionSwitch
+from parcelfit.sim.mujoco.simulator import _FrictionSwitch
 
 from .simhelpers import flat_belt
 
@@ -185,7 +185,7 @@ def test_rotation_is_the_net_unwrapped_turn():
     assert math.degrees(rotation(traj)) == pytest.approx(270.0, abs=1e-6)
 
 
-def _box_on_metal(v0):
+def _box_on_metal(v0, stick_speed=SceneOptions.stick_speed, slip_speed=None):
     xml = """<mujoco><option timestep="0.002" cone="elliptic"/><worldbody>
     <geom name="plate" type="plane" size="2 2 .1" friction="0.2 0.005 0.0001" priority="2"/>
     <body pos="0 0 0.0495"><freejoint/><geom type="box" size=".05 .05 .05" mass="0.2"/></body>
@@ -196,9 +196,8 @@ def _box_on_metal(v0):
     for _ in range(20):
         mujoco.mj_step(model, data)
     scene = SimpleNamespace(metal_geoms=("plate",), driven=())
-    switch = _FrictionSwitch(
-        model, scene, None, {"mu_d_MePa": 0.2, "mu_s_MePa": 0.3, "mu_d_BePa": 0.4, "mu_s_BePa": 0}
-    )
+    params = {"mu_d_MePa": 0.2, "mu_s_MePa": 0.3, "mu_d_BePa": 0.4, "mu_s_BePa": 0}
+    switch = _FrictionSwitch(model, scene, None, params, stick_speed, slip_speed)
     switch.update(model, data, np.zeros(2), np.zeros(2))
     return float(model.geom_friction[model.geom("plate").id, 0])
 
@@ -206,9 +205,25 @@ def _box_on_metal(v0):
 def test_static_friction_follows_the_slip_of_the_contacts_on_the_plate():
     """A packaging at rest on a metal surface sticks (friction mu_d + offset); one sliding over
     it at 1 m/s, far above the stick speed, has mu_d."""
-    assert STICK_SPEED < 0.01
+    assert SceneOptions().stick_speed < 0.01 and SceneOptions().slip_speed is None
     assert _box_on_metal(0.0) == pytest.approx(0.5, abs=1e-3)
     assert _box_on_metal(1.0) == pytest.approx(0.2, abs=1e-6)
+    assert _box_on_metal(0.3) == pytest.approx(0.2, abs=1e-6)  # sliding at about 0.22 m/s
+
+
+def test_a_slip_speed_lets_the_static_offset_act_on_slow_sliding_and_fade_by_it():
+    """With stick_speed 0.1 and slip_speed 1 m/s (a multibody solver's velocity-dependent
+    friction): the whole offset at rest, nearly all of it sliding at about 0.22 m/s (cubic step:
+    0.95), a few hundredths of it at about 0.92 m/s, none above 1 m/s."""
+    law = {"stick_speed": 0.1, "slip_speed": 1.0}
+    assert _box_on_metal(0.0, **law) == pytest.approx(0.5, abs=1e-3)
+    assert 0.2 + 0.3 * 0.93 < _box_on_metal(0.3, **law) < 0.2 + 0.3 * 0.97
+    assert 0.2 < _box_on_metal(1.0, **law) < 0.2 + 0.3 * 0.05
+    assert _box_on_metal(1.5, **law) == pytest.approx(0.2, abs=1e-6)
+    with pytest.raises(ParcelfitError, match="slip_speed must exceed stick_speed"):
+        SceneOptions(stick_speed=0.1, slip_speed=0.05)
+    with pytest.raises(ParcelfitError, match="stick_speed must be positive"):
+        SceneOptions(stick_speed=0)
 
 
 def test_simulate_repeat_writes_an_ensemble_reproducible_per_seed(tmp_path):

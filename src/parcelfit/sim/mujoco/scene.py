@@ -87,6 +87,14 @@ class SceneOptions:
     # MuJoCo's friction lifts sliding contacts (docs/sliding-lift.md). The forces are explicit in
     # time: around a soft content (full shell) they need 1/2400 s (`step_for`)
     belt_friction: str = "mujoco"
+    # how the static friction offsets (mu_s_MePa, mu_s_BePa) fade with the slip speed v [m/s]:
+    # without ``slip_speed``, fully while the contact sticks, exp(-(v / stick_speed)^2) (a few
+    # mm/s: static friction only where the packaging does not slide); with it, as the velocity-
+    # dependent friction law of multibody solvers' contacts: the whole offset up to stick_speed,
+    # a cubic step down to none at slip_speed (e.g. stick_speed=0.1 slip_speed=1: the offset
+    # acts on the slow sliding along a guide plate too)
+    stick_speed: float = 0.005
+    slip_speed: float | None = None
     start_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)  # dx [m], dy [m], dheading [deg]
     start_speed_factor: float = 1.0  # the parcel's initial speed as a fraction of its surface's
 
@@ -104,6 +112,13 @@ class SceneOptions:
         if self.belt_friction not in ("mujoco", "coulomb"):
             raise ParcelfitError(
                 f"belt_friction must be mujoco or coulomb, got {self.belt_friction!r}"
+            )
+        if not self.stick_speed > 0:
+            raise ParcelfitError(f"stick_speed must be positive [m/s], got {self.stick_speed}")
+        if self.slip_speed is not None and not self.slip_speed > self.stick_speed:
+            raise ParcelfitError(
+                f"slip_speed must exceed stick_speed ({self.stick_speed} m/s) or be None, "
+                f"got {self.slip_speed}"
             )
         if not self.impratio >= 1:
             raise ParcelfitError(f"impratio must be at least 1, got {self.impratio}")

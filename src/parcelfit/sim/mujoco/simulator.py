@@ -53,7 +53,6 @@ from parcelfit.sim.mujoco.rig import Barrier, Rig, Surface, load_rig
 from parcelfit.sim.mujoco.scene import Scene, SceneOptions, build_scene
 from parcelfit.sim.protocol import SimResult, SimStatus
 
-STICK_SPEED = 0.005  # m/s
 MAX_SPEED = 20.0  # m/s
 FALL_DEPTH = 0.2  # m
 
@@ -193,7 +192,9 @@ class MujocoSimulator:
         ].mean(axis=0)
         _set_velocity(model, data, np.asarray(scene.start_velocity))
 
-        friction = _FrictionSwitch(model, scene, rig, params)
+        friction = _FrictionSwitch(
+            model, scene, rig, params, opt.scene.stick_speed, opt.scene.slip_speed
+        )
         coulomb = CoulombBelts(model, data, scene) if opt.scene.belt_friction == "coulomb" else None
         duration = opt.duration if opt.duration is not None else rig.end.duration
         n_steps = round(duration / dt)
@@ -341,8 +342,15 @@ class _FrictionSwitch:
     """Raise a surface's friction by the static offset while the packaging sticks to it."""
 
     def __init__(
-        self, model: mujoco.MjModel, scene: Scene, rig: Rig, params: Mapping[str, float]
+        self,
+        model: mujoco.MjModel,
+        scene: Scene,
+        rig: Rig,
+        params: Mapping[str, float],
+        stick_speed: float,
+        slip_speed: float | None,
     ) -> None:
+        self.stick_speed, self.slip_speed = stick_speed, slip_speed
         metal_ids = np.array([model.geom(n).id for n in scene.metal_geoms], dtype=int)
         self.metal = (
             (metal_ids, params["mu_d_MePa"], params["mu_s_MePa"])
@@ -358,10 +366,16 @@ class _FrictionSwitch:
             ]
         self.mu_belt = (params["mu_d_BePa"], params["mu_s_BePa"])
 
-    @staticmethod
-    def _stick(slip: np.ndarray | float) -> np.ndarray | float:
-        """1 while the contact sticks (slip speed 0), falling to 0 above a few mm/s."""
-        return np.exp(-((np.asarray(slip) / STICK_SPEED) ** 2))
+    def _stick(self, slip: np.ndarray | float) -> np.ndarray | float:
+        """The share of the static offset at slip speed ``slip`` [m/s]: without a slip speed 1
+        while the contact sticks, falling to 0 above a few stick speeds (Gaussian); with one, 1
+        up to the stick speed, then a cubic step (3 u^2 - 2 u^3 falling) to 0 at the slip
+        speed."""
+        v = np.asarray(slip)
+        if self.slip_speed is None:
+            return np.exp(-((v / self.stick_speed) ** 2))
+        u = np.clip((v - self.stick_speed) / (self.slip_speed - self.stick_speed), 0.0, 1.0)
+        return 1.0 - u * u * (3.0 - 2.0 * u)
 
     def update(
         self,
