@@ -656,6 +656,10 @@ BAD_INPUTS = {
         lambda p: _study_sim(p, belt_friction="sticky"),
         r"simulator\.belt_friction: unknown belt friction law 'sticky'.*mujoco, coulomb",
     ),
+    "slip speed below the stick speed": (
+        lambda p: _study_sim(p, stick_speed=0.1, slip_speed=0.05),
+        r"simulator\.slip_speed: slip_speed \(0\.05 m/s\) must exceed stick_speed \(0\.1 m/s\)",
+    ),
     "screen string bounds": (
         lambda p: _screen(p, parameters={"mu_d_BePa": ["a", "b"], "mu_d_MePa": [0.15, 0.35]}),
         r"parameters\.mu_d_BePa: expected \[low, high\] with low < high, got \['a', 'b'\]",

@@ -463,3 +463,18 @@ def test_belt_friction_from_a_study_files_simulator_section_and_a_twins_settings
     assert TwinSettingsSection(real_belt_friction="coulomb").real_belt_friction == "coulomb"
     with pytest.raises(Exception, match="unknown belt friction law 'dry'"):
         TwinSettingsSection(real_belt_friction="dry")
+
+
+def test_the_static_friction_law_from_a_study_files_simulator_section(tmp_path):
+    from parcelfit.sim.factory import SimulatorSection, make_simulator
+
+    section = SimulatorSection(
+        backend="mujoco", rig="E3", consignment="KPBW", stick_speed=0.1, slip_speed=1.0
+    )
+    scene = make_simulator(section.to_config(tmp_path)).options.scene  # type: ignore[attr-defined]
+    assert (scene.stick_speed, scene.slip_speed) == (0.1, 1.0)
+    default = SimulatorSection(backend="mujoco", rig="E3", consignment="KPBW")
+    scene = make_simulator(default.to_config(tmp_path)).options.scene  # type: ignore[attr-defined]
+    assert (scene.stick_speed, scene.slip_speed) == (0.005, None)
+    with pytest.raises(Exception, match=r"slip_speed \(0\.004 m/s\) must exceed stick_speed"):
+        SimulatorSection(backend="mujoco", rig="E3", consignment="KPBW", slip_speed=0.004)

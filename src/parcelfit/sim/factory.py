@@ -3,12 +3,13 @@ file (`SimulatorSection`, checked on load), or a `SimulatorConfig` made in code.
 
 The section's ``backend`` chooses: ``mujoco`` (a bundled or user rig and consignment, optional
 ``timestep`` [s], ``spacing`` [m], ``membrane_cap`` [N/m], ``belt_friction`` (``mujoco`` or
-``coulomb``, see `SceneOptions`) and ``wall_limit`` [s]), ``external`` (a solver description
-file run as a command) or ``python`` (``factory: package.module:callable``, imported and called:
-such a file runs code). A new named backend adds its keys to `SimulatorSection` and
-`SimulatorConfig` and its construction to `make_simulator`; everything that builds a simulator
-from a configuration (calibration, screening, ``parcelfit simulate``, the demo) goes through
-`make_simulator`.
+``coulomb``, see `SceneOptions`), ``stick_speed`` and ``slip_speed`` [m/s] (how the static
+friction offsets fade with the slip speed, see `SceneOptions`) and ``wall_limit`` [s]),
+``external`` (a solver description file run as a command) or ``python`` (``factory:
+package.module:callable``, imported and called: such a file runs code). A new named backend
+adds its keys to `SimulatorSection` and `SimulatorConfig` and its construction to
+`make_simulator`; everything that builds a simulator from a configuration (calibration,
+screening, ``parcelfit simulate``, the demo) goes through `make_simulator`.
 """
 
 from __future__ import annotations
@@ -36,6 +37,8 @@ _SETTINGS = (
     "spacing",
     "membrane_cap",
     "belt_friction",
+    "stick_speed",
+    "slip_speed",
     "wall_limit",
     "external",
     "factory",
@@ -55,7 +58,8 @@ def _check_needs(backend: str, settings: Any) -> None:
 class SimulatorConfig(Mapping[str, Any]):
     """A simulator's configuration (SI): ``backend`` and what it needs (mujoco: ``rig`` and
     ``consignment``, bundled names or ``.yaml`` paths, optional ``timestep`` [s], ``spacing``
-    [m], ``membrane_cap`` [N/m] and ``belt_friction``; external: the solver description file
+    [m], ``membrane_cap`` [N/m], ``belt_friction``, ``stick_speed`` and ``slip_speed`` [m/s];
+    external: the solver description file
     ``external``; python: ``factory``), optional ``wall_limit`` [s] per simulation, and
     ``folder``: the folder of the file it came from (an external solver's runs go into
     ``folder/.external-runs``).
@@ -70,6 +74,8 @@ class SimulatorConfig(Mapping[str, Any]):
     spacing: float | None = None
     membrane_cap: float | None = None
     belt_friction: str | None = None
+    stick_speed: float | None = None
+    slip_speed: float | None = None
     wall_limit: float | None = None
     external: str | None = None
     factory: str | None = None
@@ -97,7 +103,8 @@ class SimulatorConfig(Mapping[str, Any]):
 
 class SimulatorSection(FileModel):
     """``simulator`` of a study or screen file: the backend and what it needs (``timestep``
-    [s], ``spacing`` [m], ``membrane_cap`` [N/m], ``belt_friction``, ``wall_limit`` [s])."""
+    [s], ``spacing`` [m], ``membrane_cap`` [N/m], ``belt_friction``, ``stick_speed`` and
+    ``slip_speed`` [m/s], ``wall_limit`` [s])."""
 
     backend: Annotated[str, Choice(BACKENDS, what="backend")]
     rig: Annotated[str | None, Text()] = None
@@ -106,6 +113,8 @@ class SimulatorSection(FileModel):
     spacing: Annotated[float | None, Number(unit="m", ge=1e-9)] = None
     membrane_cap: Annotated[float | None, Number(unit="N/m", ge=1e-9)] = None
     belt_friction: Annotated[str | None, Choice(BELT_FRICTION, what="belt friction law")] = None
+    stick_speed: Annotated[float | None, Number(unit="m/s", ge=1e-9)] = None
+    slip_speed: Annotated[float | None, Number(unit="m/s", ge=1e-9)] = None
     wall_limit: Annotated[float | None, Number(unit="s", ge=1e-9)] = None
     external: Annotated[str | None, Text()] = None
     factory: Annotated[str | None, Text()] = None
@@ -113,6 +122,14 @@ class SimulatorSection(FileModel):
     @model_validator(mode="after")
     def _backend_needs(self) -> SimulatorSection:
         _check_needs(self.backend, self)
+        stick = 0.005 if self.stick_speed is None else self.stick_speed  # SceneOptions' default
+        if self.slip_speed is not None and self.slip_speed <= stick:
+            raise ParcelfitError(
+                f"slip_speed ({self.slip_speed} m/s) must exceed stick_speed ({stick} m/s): the "
+                "static friction offset fades between the two",
+                where="slip_speed",
+                fix="give a slip_speed above stick_speed (e.g. stick_speed: 0.1, slip_speed: 1)",
+            )
         return self
 
     def to_config(self, folder: Path) -> SimulatorConfig:
@@ -140,7 +157,9 @@ def make_simulator(config: SimulatorConfig) -> Simulator:
         rig = load_rig(config.rig)
         cons = load_consignment(config.consignment)
         numerics: dict[str, Any] = {
-            k: float(config[k]) for k in ("timestep", "spacing", "membrane_cap") if k in config
+            k: float(config[k])
+            for k in ("timestep", "spacing", "membrane_cap", "stick_speed", "slip_speed")
+            if k in config
         }
         if "belt_friction" in config:
             numerics["belt_friction"] = config["belt_friction"]
