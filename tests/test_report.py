@@ -242,6 +242,13 @@ def test_the_report_renders_the_stored_verdict_without_simulating_or_refitting(
     # the surrogate's optimiser settings are the stored ones (the published configuration)
     assert "optimizer published" in text and "batch=kmeans" in text and "noise=fixed" in text
     assert "MuJoCo backend only" in text and 'id="frames"' in text
+    # without advice (left out, or too few candidates) the page says there is none
+    assert "No advice on which further test case" not in text
+    doc["advice"] = None
+    path.write_text(json.dumps(doc))
+    text = build_report(study, out=tmp_path / "r2.html").read_text()
+    assert "No advice on which further test case would help most" in text
+    assert "Which further test case would help most to determine" not in text
 
 
 def test_a_study_without_stored_results_says_so_instead_of_recomputing(tmp_path, monkeypatch):
