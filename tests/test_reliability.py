@@ -660,6 +660,10 @@ BAD_INPUTS = {
         lambda p: _study_sim(p, stick_speed=0.1, slip_speed=0.05),
         r"simulator\.slip_speed: slip_speed \(0\.05 m/s\) must exceed stick_speed \(0\.1 m/s\)",
     ),
+    "rig time step of a second": (
+        lambda p: _study_sim(p, rig_timesteps={"E1": 1}),
+        r"simulator\.rig_timesteps\.E1: 1 is outside \[1e-05, 0\.01\] s",
+    ),
     "screen string bounds": (
         lambda p: _screen(p, parameters={"mu_d_BePa": ["a", "b"], "mu_d_MePa": [0.15, 0.35]}),
         r"parameters\.mu_d_BePa: expected \[low, high\] with low < high, got \['a', 'b'\]",

@@ -478,3 +478,24 @@ def test_the_static_friction_law_from_a_study_files_simulator_section(tmp_path):
     assert (scene.stick_speed, scene.slip_speed) == (0.005, None)
     with pytest.raises(Exception, match=r"slip_speed \(0\.004 m/s\) must exceed stick_speed"):
         SimulatorSection(backend="mujoco", rig="E3", consignment="KPBW", slip_speed=0.004)
+
+
+def test_a_rig_may_have_its_own_time_step(tmp_path):
+    """``rig_timesteps`` (study file: ``simulator.rig_timesteps``) sets the step of runs on the
+    rigs it names and leaves the others at theirs; the run really steps at it."""
+    from parcelfit.runs import TestCase
+    from parcelfit.sim.factory import SimulatorSection, make_simulator
+    from parcelfit.sim.mujoco import SceneOptions, load_rig
+
+    section = SimulatorSection(
+        backend="mujoco", rig="E3", consignment="KPBW", rig_timesteps={"E1": 1 / 4800}
+    )
+    sim = make_simulator(section.to_config(tmp_path))
+    assert sim.scene_options(load_rig("E1")).step_for(soft=False) == 1 / 4800  # type: ignore[attr-defined]
+    assert sim.scene_options(load_rig("E3")).step_for(soft=False) == 1 / 2400  # type: ignore[attr-defined]
+    short = sim.with_options(duration=0.05)  # type: ignore[attr-defined]
+    for rig, step in (("E1", 1 / 4800), ("E3", 1 / 2400)):
+        d = short.run({}, TestCase(rig, "KPBW", 1)).diagnostics
+        assert d["simulated_time"] / d["steps"] == pytest.approx(step, rel=1e-9)
+    with pytest.raises(ParcelfitError, match="time step for rig E1"):
+        SceneOptions(rig_timesteps={"E1": 1.0})

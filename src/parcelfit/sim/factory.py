@@ -4,7 +4,8 @@ file (`SimulatorSection`, checked on load), or a `SimulatorConfig` made in code.
 The section's ``backend`` chooses: ``mujoco`` (a bundled or user rig and consignment, optional
 ``timestep`` [s], ``spacing`` [m], ``membrane_cap`` [N/m], ``belt_friction`` (``mujoco`` or
 ``coulomb``, see `SceneOptions`), ``stick_speed`` and ``slip_speed`` [m/s] (how the static
-friction offsets fade with the slip speed, see `SceneOptions`) and ``wall_limit`` [s]),
+friction offsets fade with the slip speed, see `SceneOptions`), ``rig_timesteps`` (a time step
+[s] by rig name) and ``wall_limit`` [s]),
 ``external`` (a solver description file run as a command) or ``python`` (``factory:
 package.module:callable``, imported and called: such a file runs code). A new named backend
 adds its keys to `SimulatorSection` and `SimulatorConfig` and its construction to
@@ -39,6 +40,7 @@ _SETTINGS = (
     "belt_friction",
     "stick_speed",
     "slip_speed",
+    "rig_timesteps",
     "wall_limit",
     "external",
     "factory",
@@ -58,8 +60,8 @@ def _check_needs(backend: str, settings: Any) -> None:
 class SimulatorConfig(Mapping[str, Any]):
     """A simulator's configuration (SI): ``backend`` and what it needs (mujoco: ``rig`` and
     ``consignment``, bundled names or ``.yaml`` paths, optional ``timestep`` [s], ``spacing``
-    [m], ``membrane_cap`` [N/m], ``belt_friction``, ``stick_speed`` and ``slip_speed`` [m/s];
-    external: the solver description file
+    [m], ``membrane_cap`` [N/m], ``belt_friction``, ``stick_speed`` and ``slip_speed`` [m/s],
+    ``rig_timesteps`` (rig name -> time step [s]); external: the solver description file
     ``external``; python: ``factory``), optional ``wall_limit`` [s] per simulation, and
     ``folder``: the folder of the file it came from (an external solver's runs go into
     ``folder/.external-runs``).
@@ -76,6 +78,7 @@ class SimulatorConfig(Mapping[str, Any]):
     belt_friction: str | None = None
     stick_speed: float | None = None
     slip_speed: float | None = None
+    rig_timesteps: Mapping[str, float] | None = None
     wall_limit: float | None = None
     external: str | None = None
     factory: str | None = None
@@ -104,7 +107,7 @@ class SimulatorConfig(Mapping[str, Any]):
 class SimulatorSection(FileModel):
     """``simulator`` of a study or screen file: the backend and what it needs (``timestep``
     [s], ``spacing`` [m], ``membrane_cap`` [N/m], ``belt_friction``, ``stick_speed`` and
-    ``slip_speed`` [m/s], ``wall_limit`` [s])."""
+    ``slip_speed`` [m/s], ``rig_timesteps`` (rig name -> time step [s]), ``wall_limit`` [s])."""
 
     backend: Annotated[str, Choice(BACKENDS, what="backend")]
     rig: Annotated[str | None, Text()] = None
@@ -115,6 +118,9 @@ class SimulatorSection(FileModel):
     belt_friction: Annotated[str | None, Choice(BELT_FRICTION, what="belt friction law")] = None
     stick_speed: Annotated[float | None, Number(unit="m/s", ge=1e-9)] = None
     slip_speed: Annotated[float | None, Number(unit="m/s", ge=1e-9)] = None
+    rig_timesteps: (
+        dict[Annotated[str, Text()], Annotated[float, Number(unit="s", ge=1e-5, le=0.01)]] | None
+    ) = None
     wall_limit: Annotated[float | None, Number(unit="s", ge=1e-9)] = None
     external: Annotated[str | None, Text()] = None
     factory: Annotated[str | None, Text()] = None
@@ -163,6 +169,8 @@ def make_simulator(config: SimulatorConfig) -> Simulator:
         }
         if "belt_friction" in config:
             numerics["belt_friction"] = config["belt_friction"]
+        if "rig_timesteps" in config:
+            numerics["rig_timesteps"] = {k: float(v) for k, v in config["rig_timesteps"].items()}
         options = SimOptions(
             scene=SceneOptions(**numerics),
             wall_limit=DEFAULT_WALL_LIMIT if config.wall_limit is None else config.wall_limit,

@@ -9,6 +9,10 @@
       consignment: KPBW                # mujoco: bundled name or .yaml path
       timestep: 0.0016667              # mujoco, optional [s]
       spacing: 0.03                    # mujoco, optional shell mesh spacing [m]
+      rig_timesteps: {E1: 0.000208333} # mujoco, optional: a rig's own time step [s]
+      # belt_friction: coulomb         # mujoco, optional (default mujoco)
+      # stick_speed: 0.1               # mujoco, optional: the static friction's fade with the
+      # slip_speed: 1                  #   slip speed [m/s] (SceneOptions; default 0.005, none)
       wall_limit: 600                  # optional, per simulation [s]
       # external: solver.yaml          # external: solver description (parcelfit.sim.external)
       # factory: package.module:make   # python: a callable returning a Simulator

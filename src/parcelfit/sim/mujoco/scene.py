@@ -95,6 +95,10 @@ class SceneOptions:
     # acts on the slow sliding along a guide plate too)
     stick_speed: float = 0.005
     slip_speed: float | None = None
+    # a time step [s] for runs on particular rigs, by rig name (e.g. {"E1": 1/4800}: the transfer
+    # onto E1's fast belt converges more slowly than the rest, docs/transit-convergence.md); it
+    # overrides ``timestep`` and the shell's default on those rigs
+    rig_timesteps: Mapping[str, float] = field(default_factory=dict)
     start_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)  # dx [m], dy [m], dheading [deg]
     start_speed_factor: float = 1.0  # the parcel's initial speed as a fraction of its surface's
 
@@ -113,6 +117,11 @@ class SceneOptions:
             raise ParcelfitError(
                 f"belt_friction must be mujoco or coulomb, got {self.belt_friction!r}"
             )
+        for rig, step in self.rig_timesteps.items():
+            if not 1e-5 <= step <= 0.01:
+                raise ParcelfitError(
+                    f"the time step for rig {rig} must lie in [1e-5, 0.01] s, got {step}"
+                )
         if not self.stick_speed > 0:
             raise ParcelfitError(f"stick_speed must be positive [m/s], got {self.stick_speed}")
         if self.slip_speed is not None and not self.slip_speed > self.stick_speed:
