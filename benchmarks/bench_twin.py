@@ -334,6 +334,17 @@ def _seconds(text: str) -> float:
     return float(Fraction(text))
 
 
+def _rig_step(text: str) -> tuple[str, float]:
+    """``RIG=STEP``: a rig's own time step [s], a number or a fraction (``E1=1/4800``)."""
+    rig, eq, step = text.partition("=")
+    if not eq or not rig:
+        raise argparse.ArgumentTypeError(f"expected RIG=STEP (e.g. E1=1/4800), got {text!r}")
+    try:
+        return rig, _seconds(step)
+    except (ValueError, ZeroDivisionError) as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: {step!r} is not a time step") from exc
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -356,6 +367,15 @@ def main() -> None:
         type=_seconds,
         default=None,
         help="time step [s] of the calibrated model (default: the model's own default)",
+    )
+    ap.add_argument(
+        "--rig-timestep",
+        type=_rig_step,
+        nargs="*",
+        default=[],
+        metavar="RIG=STEP",
+        help="a rig's own time step [s] in the calibrated model (simulator.rig_timesteps), "
+        "e.g. E1=1/4800",
     )
     ap.add_argument(
         "--belt-friction",
@@ -411,7 +431,8 @@ def main() -> None:
             "consignment": "KPBW",
             "belt_friction": args.belt_friction,
         }
-        | ({} if args.model_timestep is None else {"timestep": args.model_timestep}),
+        | ({} if args.model_timestep is None else {"timestep": args.model_timestep})
+        | ({"rig_timesteps": dict(args.rig_timestep)} if args.rig_timestep else {}),
         parameters,
         args.out,
         to_si=lambda n, v: specs[n].to_si(v),

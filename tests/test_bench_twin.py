@@ -105,3 +105,14 @@ def test_the_benchmark_reads_the_parameters_to_calibrate_and_refuses_bad_ones():
     ):
         with pytest.raises(SystemExit, match=says):
             bench.parse_ranges([bad])
+
+
+def test_a_rig_s_own_time_step_is_read_as_a_fraction_and_bad_ones_are_refused():
+    import argparse
+
+    bench = _bench()
+    assert bench._rig_step("E1=1/4800") == ("E1", 1 / 4800)
+    assert bench._rig_step("E2a=0.0002") == ("E2a", 0.0002)
+    for bad in ("E1", "=1/4800", "E1=fast", "E1=1/0"):
+        with pytest.raises(argparse.ArgumentTypeError):
+            bench._rig_step(bad)
