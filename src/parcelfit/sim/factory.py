@@ -25,7 +25,7 @@ from pydantic import model_validator
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.schema import Choice, FileModel, Number, Text
-from parcelfit.sim.params import RIGID
+from parcelfit.sim.params import RIGID, STICK_SPEED
 from parcelfit.sim.protocol import Simulator
 
 BACKENDS = ("mujoco", "external", "python")
@@ -128,7 +128,7 @@ class SimulatorSection(FileModel):
     @model_validator(mode="after")
     def _backend_needs(self) -> SimulatorSection:
         _check_needs(self.backend, self)
-        stick = 0.005 if self.stick_speed is None else self.stick_speed  # SceneOptions' default
+        stick = STICK_SPEED if self.stick_speed is None else self.stick_speed
         if self.slip_speed is not None and self.slip_speed <= stick:
             raise ParcelfitError(
                 f"slip_speed ({self.slip_speed} m/s) must exceed stick_speed ({stick} m/s): the "

@@ -21,6 +21,9 @@ from parcelfit.errors import ParcelfitError
 
 RIGID = "rigid"
 SOFT = "soft"
+# the slip speed [m/s] below which a static friction offset (mu_s_*) acts by default; the scene's
+# `stick_speed` and a study file's check of `slip_speed` both start from it
+STICK_SPEED = 0.005
 
 
 @dataclass(frozen=True)

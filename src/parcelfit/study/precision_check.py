@@ -360,13 +360,11 @@ def command_line(
     as the CLI takes them; otherwise ``--candidates``/``--at`` followed by all values, as the
     script takes them)."""
     parts = [program, study_file.as_posix(), "--placements", str(placements)]
-    for flag, values in (("--candidate", candidates), ("--at", at)):
-        if not values:
-            continue
-        if repeated:
-            parts += [item for v in values for item in (flag, v)]
-        else:
-            parts += [flag if flag == "--at" else "--candidates", *values]
+    for one, many, values in (("--candidate", "--candidates", candidates), ("--at", "--at", at)):
+        if values and repeated:
+            parts += [item for v in values for item in (one, v)]
+        elif values:
+            parts += [many, *values]
     if adjust_transit:
         parts.append("--adjust-transit")
     return " ".join(parts)

@@ -31,7 +31,7 @@ from parcelfit.sim.mujoco.consignment import Consignment
 from parcelfit.sim.mujoco.contact import ContactParams, contact_params
 from parcelfit.sim.mujoco.rig import Rig, Surface
 from parcelfit.sim.mujoco.shell import ShellMesh, pillow_shell
-from parcelfit.sim.params import SOFT
+from parcelfit.sim.params import SOFT, STICK_SPEED
 
 SLAB = 0.02  # half-thickness of belt and strip boxes [m]
 CONTACT_GAP = 0.0005  # clearance between content and shell, and under the parcel at the start [m]
@@ -93,7 +93,7 @@ class SceneOptions:
     # dependent friction law of multibody solvers' contacts: the whole offset up to stick_speed,
     # a cubic step down to none at slip_speed (e.g. stick_speed=0.1 slip_speed=1: the offset
     # acts on the slow sliding along a guide plate too)
-    stick_speed: float = 0.005
+    stick_speed: float = STICK_SPEED
     slip_speed: float | None = None
     # a time step [s] for runs on particular rigs, by rig name (e.g. {"E1": 1/4800}: the transfer
     # onto E1's fast belt converges more slowly than the rest, docs/transit-convergence.md); it
