@@ -193,6 +193,40 @@ def test_contact_dynamics_do_not_follow_the_time_step():
     assert faster.omega_dt == pytest.approx(0.5)
 
 
+def test_contact_frequency_can_follow_the_stiffness():
+    """With contact_frequency_stiffness K_ref a contact of stiffness K vibrates at
+    contact_frequency * sqrt(K / K_ref), as a body on a spring does; the static stiffness stays
+    K, the default keeps one frequency for every stiffness, and the scene's metal contact carries
+    it (k_MePa 100 against 400 N/mm: half the frequency)."""
+    from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
+
+    plain, scaled = SceneOptions(), SceneOptions(contact_frequency_stiffness=4e5)
+    assert plain.frequency_for(1e5) == plain.frequency_for(1e6) == 300.0
+    assert scaled.frequency_for(4e5) == pytest.approx(300.0)
+    assert scaled.frequency_for(1e5) == pytest.approx(150.0)
+    for k in (1e5, 1e6):
+        cp = contact_params(k, 50, 1 / 1e-4, 1.0, 1 / 2400, frequency=scaled.frequency_for(k))
+        assert cp.stiffness**0.5 == pytest.approx(scaled.frequency_for(k))
+        assert realised_stiffness(cp, 50, 1 / 1e-4) == pytest.approx(k, rel=1e-12)
+    with pytest.raises(ParcelfitError, match="contact_frequency_stiffness must be positive"):
+        SceneOptions(contact_frequency_stiffness=0.0)
+
+    rig, cons = load_rig("E3"), load_consignment("KPBW")
+
+    def metal_solref(k_mepa: float) -> float:
+        params = resolve(cons.content_kind, si_values={"k_MePa": k_mepa})
+        xml = build_scene(rig, cons, params, 1, scaled).xml
+        solrefs = {
+            float(line.split('solref="')[1].split()[0])
+            for line in xml.splitlines()
+            if 'solref="' in line and 'name="guide' in line
+        }
+        assert len(solrefs) == 1, solrefs
+        return -solrefs.pop()
+
+    assert metal_solref(1e5) == pytest.approx(metal_solref(4e5) / 4, rel=1e-6)
+
+
 @pytest.mark.mujoco
 def test_mujoco_warnings_go_to_logging_not_into_a_log_file(tmp_path, monkeypatch, caplog):
     import mujoco

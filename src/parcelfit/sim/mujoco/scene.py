@@ -58,6 +58,11 @@ class SceneOptions:
     # the contacts' own angular frequency [rad/s] (see contact.py): fixed, so that a finer time
     # step resolves the same impact instead of a faster one
     contact_frequency: float = 300.0
+    # None: every contact has ``contact_frequency``. A whole-face stiffness K_ref [N/m]: a contact
+    # of stiffness K gets contact_frequency * sqrt(K / K_ref), as a body on a spring does
+    # (omega = sqrt(K / m)), so a stiffer contact makes a shorter impact; capped by the step as
+    # before (contact.py)
+    contact_frequency_stiffness: float | None = None
     solver: str = "Newton"
     # MuJoCo's iteration cap, shared by the constraint solver (Newton converges in a few) and the
     # conjugate-gradient solve of the 3-D flex's effective inertia M + h^2 K, which needs several
@@ -109,6 +114,14 @@ class SceneOptions:
             raise ParcelfitError(
                 f"contact_frequency must be positive [rad/s], got {self.contact_frequency}"
             )
+        if (
+            self.contact_frequency_stiffness is not None
+            and not self.contact_frequency_stiffness > 0
+        ):
+            raise ParcelfitError(
+                "contact_frequency_stiffness must be positive [N/m] or None, got "
+                f"{self.contact_frequency_stiffness}"
+            )
         if self.shell_dof not in ("auto", "full", "quadratic", "trilinear"):
             raise ParcelfitError(
                 f"shell_dof must be auto, full, quadratic or trilinear, got {self.shell_dof!r}"
@@ -139,6 +152,14 @@ class SceneOptions:
             raise ParcelfitError(
                 f"mesh spacing must lie in [3, 200] mm, got {self.spacing * 1e3:g} mm"
             )
+
+    def frequency_for(self, stiffness: float) -> float:
+        """The angular frequency [rad/s] of a contact whose whole-face stiffness is ``stiffness``
+        [N/m]: ``contact_frequency``, scaled by sqrt(stiffness / contact_frequency_stiffness)
+        when that is set."""
+        if self.contact_frequency_stiffness is None:
+            return self.contact_frequency
+        return self.contact_frequency * math.sqrt(stiffness / self.contact_frequency_stiffness)
 
     def shell_for(self, soft: bool) -> str:
         """The shell's degrees of freedom around a soft (True) or rigid content."""
@@ -334,20 +355,33 @@ def build_scene(
     m_v = m_pa / nv
     n_face = shell.face_contacts
     dt = opt.step_for(soft)
-    f_c = opt.contact_frequency
 
     # --- contact parameters (effective inverse mass of a flex contact: see contact.py) ------------
-    belt_cp = contact_params(p["k_BePa"], n_face, 1 / m_v, p["zeta_BePa"], dt, frequency=f_c)
-    metal_cp = contact_params(p["k_MePa"], n_face, 1 / m_v, p["zeta_MePa"], dt, frequency=f_c)
+    belt_cp = contact_params(
+        p["k_BePa"], n_face, 1 / m_v, p["zeta_BePa"], dt, frequency=opt.frequency_for(p["k_BePa"])
+    )
+    metal_cp = contact_params(
+        p["k_MePa"], n_face, 1 / m_v, p["zeta_MePa"], dt, frequency=opt.frequency_for(p["k_MePa"])
+    )
     if soft:
         counts = [max(2, round(s / opt.soft_spacing) + 1) for s in (cL, cW)] + [2]
         m_cv = m_co / (counts[0] * counts[1] * counts[2])
         content_cp = contact_params(
-            p["k_CoPa"], n_face, 1 / m_v + 1 / m_cv, p["zeta_CoPa"], dt, frequency=f_c
+            p["k_CoPa"],
+            n_face,
+            1 / m_v + 1 / m_cv,
+            p["zeta_CoPa"],
+            dt,
+            frequency=opt.frequency_for(p["k_CoPa"]),
         )
     else:
         content_cp = contact_params(
-            p["k_CoPa"], n_face, 1 / m_v + 1 / m_co, p["zeta_CoPa"], dt, frequency=f_c
+            p["k_CoPa"],
+            n_face,
+            1 / m_v + 1 / m_co,
+            p["zeta_CoPa"],
+            dt,
+            frequency=opt.frequency_for(p["k_CoPa"]),
         )
 
     # --- rig ------------------------------------------------------------------------------------
