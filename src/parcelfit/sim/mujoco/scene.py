@@ -357,32 +357,21 @@ def build_scene(
     dt = opt.step_for(soft)
 
     # --- contact parameters (effective inverse mass of a flex contact: see contact.py) ------------
-    belt_cp = contact_params(
-        p["k_BePa"], n_face, 1 / m_v, p["zeta_BePa"], dt, frequency=opt.frequency_for(p["k_BePa"])
-    )
-    metal_cp = contact_params(
-        p["k_MePa"], n_face, 1 / m_v, p["zeta_MePa"], dt, frequency=opt.frequency_for(p["k_MePa"])
-    )
+    def contact(pair: str, other_inverse_mass: float = 0.0) -> ContactParams:
+        # a flex vertex (1/m_v) against a static surface or the content (its inverse mass)
+        k = p[f"k_{pair}"]
+        inverse_mass = 1 / m_v + other_inverse_mass
+        return contact_params(
+            k, n_face, inverse_mass, p[f"zeta_{pair}"], dt, frequency=opt.frequency_for(k)
+        )
+
+    belt_cp, metal_cp = contact("BePa"), contact("MePa")
     if soft:
         counts = [max(2, round(s / opt.soft_spacing) + 1) for s in (cL, cW)] + [2]
         m_cv = m_co / (counts[0] * counts[1] * counts[2])
-        content_cp = contact_params(
-            p["k_CoPa"],
-            n_face,
-            1 / m_v + 1 / m_cv,
-            p["zeta_CoPa"],
-            dt,
-            frequency=opt.frequency_for(p["k_CoPa"]),
-        )
+        content_cp = contact("CoPa", 1 / m_cv)
     else:
-        content_cp = contact_params(
-            p["k_CoPa"],
-            n_face,
-            1 / m_v + 1 / m_co,
-            p["zeta_CoPa"],
-            dt,
-            frequency=opt.frequency_for(p["k_CoPa"]),
-        )
+        content_cp = contact("CoPa", 1 / m_co)
 
     # --- rig ------------------------------------------------------------------------------------
     body: list[str] = []
