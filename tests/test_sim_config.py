@@ -480,6 +480,10 @@ def test_scene_options_read_from_key_value_texts():
     assert SceneOptions(**given).step_for(soft=False) == 1 / 2400  # type: ignore[arg-type]
     with pytest.raises(ParcelfitError, match="not KEY=VALUE"):
         parse_scene_options(["timestep"])
+    offset = parse_scene_options(["start_offset=-0.0125, 0.02165,1/2"])
+    assert offset == {"start_offset": (-0.0125, 0.02165, 0.5)}
+    assert SceneOptions(**offset).start_offset == (-0.0125, 0.02165, 0.5)  # type: ignore[arg-type]
+    assert parse_scene_options(["shell_dof=a,b"]) == {"shell_dof": "a,b"}
 
 
 def test_belt_friction_from_a_study_files_simulator_section_and_a_twins_settings(tmp_path):

@@ -180,11 +180,16 @@ class SceneOptions:
         return INTERPOLATED_SHELL_STEP
 
 
-def parse_scene_options(items: Iterable[str]) -> dict[str, float | str]:
-    """``KEY=VALUE`` texts (e.g. ``timestep=1/2400``, ``shell_dof=full``) as `SceneOptions`
-    keyword arguments: a value that reads as a number, a fraction included, becomes a float [the
-    option's unit], any other stays text."""
-    out: dict[str, float | str] = {}
+def _number(text: str) -> float:
+    return float(Fraction(text.strip()))
+
+
+def parse_scene_options(items: Iterable[str]) -> dict[str, float | str | tuple[float, ...]]:
+    """``KEY=VALUE`` texts (e.g. ``timestep=1/2400``, ``shell_dof=full``,
+    ``start_offset=-0.0125,0.02165,0``) as `SceneOptions` keyword arguments: a value that reads
+    as a number, a fraction included, becomes a float [the option's unit], comma-separated
+    numbers a tuple of floats, any other value stays text."""
+    out: dict[str, float | str | tuple[float, ...]] = {}
     for item in items:
         key, eq, value = item.partition("=")
         if not eq or not key.strip():
@@ -192,7 +197,10 @@ def parse_scene_options(items: Iterable[str]) -> dict[str, float | str]:
                 f"scene option {item!r} is not KEY=VALUE", fix="write e.g. timestep=1/2400"
             )
         try:
-            out[key.strip()] = float(Fraction(value.strip()))
+            if "," in value:
+                out[key.strip()] = tuple(_number(part) for part in value.split(","))
+            else:
+                out[key.strip()] = _number(value)
         except (ValueError, ZeroDivisionError):
             out[key.strip()] = value.strip()
     return out
