@@ -62,7 +62,7 @@ from parcelfit.schema import Choice, FileModel, Number, Text, Whole, keys_in, or
 from parcelfit.sim.executors import make_executor
 from parcelfit.sim.factory import BELT_FRICTION
 from parcelfit.sim.mujoco import Consignment, MujocoSimulator, Rig, SceneOptions, SimOptions
-from parcelfit.sim.params import CATALOGUE
+from parcelfit.sim.params import CATALOGUE, MAX_TIMESTEP, MIN_TIMESTEP
 
 
 @dataclass(frozen=True)
@@ -358,7 +358,7 @@ class TwinSettingsSection(FileModel):
     real_soft_spacing: Annotated[float, Number(unit="m", ge=0.003, le=0.2)] = (
         TwinSettings.real_soft_spacing
     )
-    real_timestep: Annotated[float | None, Number(unit="s", ge=1e-5, le=0.01)] = (
+    real_timestep: Annotated[float | None, Number(unit="s", ge=MIN_TIMESTEP, le=MAX_TIMESTEP)] = (
         TwinSettings.real_timestep
     )
     real_belt_friction: Annotated[str, Choice(BELT_FRICTION, what="belt friction law")] = (

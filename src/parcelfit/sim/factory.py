@@ -25,7 +25,7 @@ from pydantic import model_validator
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.schema import Choice, FileModel, Number, Text
-from parcelfit.sim.params import RIGID, STICK_SPEED
+from parcelfit.sim.params import MAX_TIMESTEP, MIN_TIMESTEP, RIGID, STICK_SPEED
 from parcelfit.sim.protocol import Simulator
 
 BACKENDS = ("mujoco", "external", "python")
@@ -119,7 +119,11 @@ class SimulatorSection(FileModel):
     stick_speed: Annotated[float | None, Number(unit="m/s", ge=1e-9)] = None
     slip_speed: Annotated[float | None, Number(unit="m/s", ge=1e-9)] = None
     rig_timesteps: (
-        dict[Annotated[str, Text()], Annotated[float, Number(unit="s", ge=1e-5, le=0.01)]] | None
+        dict[
+            Annotated[str, Text()],
+            Annotated[float, Number(unit="s", ge=MIN_TIMESTEP, le=MAX_TIMESTEP)],
+        ]
+        | None
     ) = None
     wall_limit: Annotated[float | None, Number(unit="s", ge=1e-9)] = None
     external: Annotated[str | None, Text()] = None

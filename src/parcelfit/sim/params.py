@@ -24,6 +24,8 @@ SOFT = "soft"
 # the slip speed [m/s] below which a static friction offset (mu_s_*) acts by default; the scene's
 # `stick_speed` and a study file's check of `slip_speed` both start from it
 STICK_SPEED = 0.005
+# the time steps [s] a scene accepts (its ``timestep``, a rig's own step, a study's or a twin's)
+MIN_TIMESTEP, MAX_TIMESTEP = 1e-5, 0.01
 
 
 @dataclass(frozen=True)

@@ -31,7 +31,7 @@ from parcelfit.sim.mujoco.consignment import Consignment
 from parcelfit.sim.mujoco.contact import ContactParams, contact_params
 from parcelfit.sim.mujoco.rig import Rig, Surface
 from parcelfit.sim.mujoco.shell import ShellMesh, pillow_shell
-from parcelfit.sim.params import SOFT, STICK_SPEED
+from parcelfit.sim.params import MAX_TIMESTEP, MIN_TIMESTEP, SOFT, STICK_SPEED
 
 SLAB = 0.02  # half-thickness of belt and strip boxes [m]
 CONTACT_GAP = 0.0005  # clearance between content and shell, and under the parcel at the start [m]
@@ -41,6 +41,13 @@ FREE_PLATE_BETA1 = 4.730  # first free-free beam mode, beta_1 L
 # default time steps [s] by shell (SceneOptions.step_for)
 INTERPOLATED_SHELL_STEP = 1.0 / 2400.0
 FULL_SHELL_STEP = 1.0 / 1200.0
+
+
+def _check_step(step: float, what: str) -> None:
+    if not MIN_TIMESTEP <= step <= MAX_TIMESTEP:
+        raise ParcelfitError(
+            f"{what} must lie in [{MIN_TIMESTEP:g}, {MAX_TIMESTEP:g}] s, got {step}"
+        )
 
 
 @dataclass(frozen=True)
@@ -108,8 +115,8 @@ class SceneOptions:
     start_speed_factor: float = 1.0  # the parcel's initial speed as a fraction of its surface's
 
     def __post_init__(self) -> None:
-        if self.timestep is not None and not 1e-5 <= self.timestep <= 0.01:
-            raise ParcelfitError(f"timestep must lie in [1e-5, 0.01] s, got {self.timestep}")
+        if self.timestep is not None:
+            _check_step(self.timestep, "timestep")
         if not self.contact_frequency > 0:
             raise ParcelfitError(
                 f"contact_frequency must be positive [rad/s], got {self.contact_frequency}"
@@ -131,10 +138,7 @@ class SceneOptions:
                 f"belt_friction must be mujoco or coulomb, got {self.belt_friction!r}"
             )
         for rig, step in self.rig_timesteps.items():
-            if not 1e-5 <= step <= 0.01:
-                raise ParcelfitError(
-                    f"the time step for rig {rig} must lie in [1e-5, 0.01] s, got {step}"
-                )
+            _check_step(step, f"the time step for rig {rig}")
         if not self.stick_speed > 0:
             raise ParcelfitError(f"stick_speed must be positive [m/s], got {self.stick_speed}")
         if self.slip_speed is not None and not self.slip_speed > self.stick_speed:
