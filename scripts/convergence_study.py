@@ -5,7 +5,10 @@ several shell mesh spacings and time steps; each run is compared with the finest
 largest distance between the two parcel centres at equal times [mm] over the first 1.2 s, the
 final heading difference [deg] and the transit time difference [ms], next to its wall time.
 
-    python scripts/convergence_study.py [--quick]
+    python scripts/convergence_study.py [--quick] [--out FILE]
+
+The tables are rewritten; the hand-written text after the marker line (`MARKER`) in the output
+file is kept.
 """
 
 from __future__ import annotations
@@ -42,9 +45,26 @@ def compare(ref, other) -> tuple[float, float, float]:
     return 1e3 * float(np.max(np.hypot(dx, dy))), dth, dtt
 
 
+# Everything after this line in the output file is written by hand (readings, earlier
+# measurements) and is kept when the script rewrites the tables above it.
+MARKER = (
+    "<!-- The tables above are written by scripts/convergence_study.py; the text below is kept. -->"
+)
+
+
+def kept_text(path: Path) -> str:
+    """The hand-written part of an earlier output file: everything after `MARKER` ("" if the
+    file or the marker is missing)."""
+    if not path.is_file():
+        return ""
+    _, found, tail = path.read_text(encoding="utf-8").partition(MARKER)
+    return tail.lstrip("\n") if found else ""
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="fewer variants (for a smoke test)")
+    ap.add_argument("--out", type=Path, default=OUT, help=f"file to write (default {OUT.name})")
     args = ap.parse_args()
     lines = [
         "# Convergence of the parcel model",
@@ -91,8 +111,9 @@ def main() -> None:
                 flush=True,
             )
         lines.append("")
-    OUT.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    print(f"wrote {OUT}")
+    lines += [MARKER, "", kept_text(args.out)]
+    args.out.write_text("\n".join(lines).rstrip("\n") + "\n", encoding="utf-8")
+    print(f"wrote {args.out}")
 
 
 if __name__ == "__main__":
