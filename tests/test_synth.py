@@ -136,8 +136,9 @@ def test_an_interrupted_twin_dataset_resumes_from_its_cache(tmp_path, monkeypatc
 
 def test_the_twins_real_runs_take_their_own_time_step(tmp_path, monkeypatch):
     """``real_timestep`` reaches the scene of every twin run (default None: the model's own
-    step, 1/2400 s around BW's rigid content), and a
-    spec outside [1e-5, 0.01] s is refused naming the key."""
+    step, 1/2400 s around BW's rigid content, 1/1200 s around PB's soft one),
+    ``real_soft_timestep`` overrides it around a soft content only, and a spec outside
+    [1e-5, 0.01] s is refused naming the key."""
     import pytest
 
     import parcelfit.synth as synth
@@ -147,22 +148,28 @@ def test_the_twins_real_runs_take_their_own_time_step(tmp_path, monkeypatch):
     seen = []
 
     class Recording:
-        def __init__(self, options, **_):
-            seen.append(options.scene.step_for(soft=False))
+        def __init__(self, options, consignments, **_):
+            soft = next(iter(consignments.values())).content_kind == "soft"
+            seen.append(options.scene.step_for(soft=soft))
 
         def run(self, params, case, run_id=None):
             raise RuntimeError("stop here")
 
     monkeypatch.setattr(synth, "MujocoSimulator", Recording)
-    for settings, step in (
-        (TwinSettings(), 1 / 2400),
-        (TwinSettings(real_timestep=1 / 4800), 1 / 4800),
+    for settings, consignment, step in (
+        (TwinSettings(), "BW", 1 / 2400),
+        (TwinSettings(), "PB", 1 / 1200),
+        (TwinSettings(real_timestep=1 / 4800), "BW", 1 / 4800),
+        (TwinSettings(real_timestep=1 / 4800), "PB", 1 / 4800),
+        (TwinSettings(real_soft_timestep=1 / 2400), "BW", 1 / 2400),
+        (TwinSettings(real_timestep=1 / 4800, real_soft_timestep=1 / 2400), "BW", 1 / 4800),
+        (TwinSettings(real_timestep=1 / 4800, real_soft_timestep=1 / 2400), "PB", 1 / 2400),
     ):
         job = synth.TwinJob(
             "r1",
-            TestCase("E1", "BW", 1),
+            TestCase("E1", consignment, 1),
             load_rig("E1"),
-            load_consignment("BW"),
+            load_consignment(consignment),
             {},
             settings,
             np.random.SeedSequence(1),
@@ -175,4 +182,9 @@ def test_the_twins_real_runs_take_their_own_time_step(tmp_path, monkeypatch):
     assert synth.load_twin_spec(spec).settings.real_timestep == 0.00041667
     spec.write_text("cases: [E1/BW/1]\nsettings: {real_timestep: 0.1}\n")
     with pytest.raises(ParcelfitError, match="real_timestep"):
+        synth.load_twin_spec(spec)
+    spec.write_text("cases: [E1/BW/1]\nsettings: {real_soft_timestep: 0.00041667}\n")
+    assert synth.load_twin_spec(spec).settings.real_soft_timestep == 0.00041667
+    spec.write_text("cases: [E1/BW/1]\nsettings: {real_soft_timestep: -1}\n")
+    with pytest.raises(ParcelfitError, match="real_soft_timestep"):
         synth.load_twin_spec(spec)

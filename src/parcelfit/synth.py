@@ -15,8 +15,9 @@ experiments do (method.md sections 2 and 3):
   former default, 20 mm, was the outlier of that study on the earlier E3 layout (22 mm off the
   reference) and biased every calibration against the twin. The time step is ``real_timestep``
   (default None: the model's own default, 1/2400 s around rigid contents and 1/1200 s around a
-  soft one): with the default the twin is consistent with the model, not finer than it; a finer
-  ``real_timestep`` (``benchmarks/bench_twin.py`` uses half the model's) lets the twin expose
+  soft one), and ``real_soft_timestep`` around a soft content (default None: ``real_timestep``):
+  with the defaults the twin is consistent with the model, not finer than it; a finer step
+  (the bundled twin and ``benchmarks/bench_twin.py`` use half the model's) lets the twin expose
   the model's remaining step error to a calibration. ``real_belt_friction`` (``mujoco``,
   default, or ``coulomb``) is the twin's law of friction on belts, strips and rollers
   (`parcelfit.sim.mujoco.scene.SceneOptions.belt_friction`). The remaining model-form
@@ -62,7 +63,7 @@ from parcelfit.schema import Choice, FileModel, Number, Text, Whole, keys_in, or
 from parcelfit.sim.executors import make_executor
 from parcelfit.sim.factory import BELT_FRICTION
 from parcelfit.sim.mujoco import Consignment, MujocoSimulator, Rig, SceneOptions, SimOptions
-from parcelfit.sim.params import CATALOGUE, MAX_TIMESTEP, MIN_TIMESTEP
+from parcelfit.sim.params import CATALOGUE, MAX_TIMESTEP, MIN_TIMESTEP, SOFT
 
 
 @dataclass(frozen=True)
@@ -80,6 +81,7 @@ class TwinSettings:
     real_spacing: float = 0.03
     real_soft_spacing: float = 0.04
     real_timestep: float | None = None  # [s]; None: the model's default for the consignment
+    real_soft_timestep: float | None = None  # [s] around a soft content; None: real_timestep
     real_belt_friction: str = "mujoco"  # "mujoco" or "coulomb", see SceneOptions.belt_friction
 
 
@@ -132,8 +134,10 @@ def _twin_run(job: TwinJob) -> tuple[Run, float]:
     rig, cons = job.rig, job.consignment
     params = _specimen(job.truth, rng, s)
     drives = sorted({d for sp in rig.speeds.values() for d in sp})
+    soft = cons.content_kind == SOFT
+    step = s.real_soft_timestep if soft and s.real_soft_timestep is not None else s.real_timestep
     scene = SceneOptions(
-        timestep=s.real_timestep,
+        timestep=step,
         belt_friction=s.real_belt_friction,
         spacing=s.real_spacing,
         soft_shell_spacing=s.real_soft_spacing,
@@ -287,10 +291,14 @@ def make_twin_dataset(
             f"belt-speed and tracking variation; shell mesh {s.real_spacing * 1e3:g} mm (rigid contents), "
             f"{s.real_soft_spacing * 1e3:g} mm (soft contents), time step "
             + (
-                f"the model's default (1/{1 / steps.step_for(False):.0f} s rigid, "
-                f"1/{1 / steps.step_for(True):.0f} s soft contents)."
-                if s.real_timestep is None
-                else f"1/{1 / s.real_timestep:.0f} s."
+                f"1/{1 / (s.real_timestep or steps.step_for(False)):.0f} s (rigid contents), "
+                f"1/{1 / (s.real_soft_timestep or s.real_timestep or steps.step_for(True)):.0f} s "
+                "(soft contents)"
+                + (
+                    ", the model's defaults."
+                    if s.real_timestep is None and s.real_soft_timestep is None
+                    else "."
+                )
             )
             + (
                 " Coulomb friction on belts, strips and rollers."
@@ -361,6 +369,9 @@ class TwinSettingsSection(FileModel):
     real_timestep: Annotated[float | None, Number(unit="s", ge=MIN_TIMESTEP, le=MAX_TIMESTEP)] = (
         TwinSettings.real_timestep
     )
+    real_soft_timestep: Annotated[
+        float | None, Number(unit="s", ge=MIN_TIMESTEP, le=MAX_TIMESTEP)
+    ] = TwinSettings.real_soft_timestep
     real_belt_friction: Annotated[str, Choice(BELT_FRICTION, what="belt friction law")] = (
         TwinSettings.real_belt_friction
     )
