@@ -84,6 +84,13 @@ class TwinSettings:
     real_soft_timestep: float | None = None  # [s] around a soft content; None: real_timestep
     real_belt_friction: str = "mujoco"  # "mujoco" or "coulomb", see SceneOptions.belt_friction
 
+    def step_for(self, soft: bool) -> float | None:
+        """The "real" runs' time step [s] around a soft (True) or rigid content: the soft one
+        falls back to ``real_timestep``; None: the model's default (`SceneOptions.step_for`)."""
+        if soft and self.real_soft_timestep is not None:
+            return self.real_soft_timestep
+        return self.real_timestep
+
 
 def _specimen(
     truth: Mapping[str, float], rng: np.random.Generator, s: TwinSettings
@@ -134,10 +141,8 @@ def _twin_run(job: TwinJob) -> tuple[Run, float]:
     rig, cons = job.rig, job.consignment
     params = _specimen(job.truth, rng, s)
     drives = sorted({d for sp in rig.speeds.values() for d in sp})
-    soft = cons.content_kind == SOFT
-    step = s.real_soft_timestep if soft and s.real_soft_timestep is not None else s.real_timestep
     scene = SceneOptions(
-        timestep=step,
+        timestep=s.step_for(cons.content_kind == SOFT),
         belt_friction=s.real_belt_friction,
         spacing=s.real_spacing,
         soft_shell_spacing=s.real_soft_spacing,
@@ -291,12 +296,11 @@ def make_twin_dataset(
             f"belt-speed and tracking variation; shell mesh {s.real_spacing * 1e3:g} mm (rigid contents), "
             f"{s.real_soft_spacing * 1e3:g} mm (soft contents), time step "
             + (
-                f"1/{1 / (s.real_timestep or steps.step_for(False)):.0f} s (rigid contents), "
-                f"1/{1 / (s.real_soft_timestep or s.real_timestep or steps.step_for(True)):.0f} s "
-                "(soft contents)"
+                f"1/{1 / (s.step_for(False) or steps.step_for(False)):.0f} s (rigid contents), "
+                f"1/{1 / (s.step_for(True) or steps.step_for(True)):.0f} s (soft contents)"
                 + (
                     ", the model's defaults."
-                    if s.real_timestep is None and s.real_soft_timestep is None
+                    if s.step_for(False) is None and s.step_for(True) is None
                     else "."
                 )
             )
