@@ -71,9 +71,34 @@ def test_transit_time_between_light_barriers_on_a_plain_belt():
         SimOptions(duration=1.5), rigs={"flat": flat_belt(1.2, barriers=(0.4, 1.0))}
     )
     res = sim.run({}, KPBW)
-    assert res.run.transit_time == pytest.approx(
-        0.6 / 1.2, abs=2 * sim.options.scene.step_for(soft=False)
+    # the crossings are interpolated within the step: far below one step (0.42 ms)
+    assert res.run.transit_time == pytest.approx(0.6 / 1.2, abs=1e-5)
+
+
+@pytest.mark.parametrize("timestep", [1 / 300, 1 / 2400])
+def test_light_barriers_break_when_the_front_edge_reaches_them(timestep):
+    """A parcel riding with a belt at v, its front edge at x_f: the beam at x breaks at
+    (x - x_f) / v, whatever the step (the full shell rides rigidly)."""
+    v, start_x = 1.2, 0.1
+    cons = load_consignment("KPBW")
+    full = SceneOptions(timestep=timestep, shell_dof="full")
+    sim = MujocoSimulator(
+        SimOptions(scene=full, duration=1.0),
+        rigs={"flat": flat_belt(v, start_x=start_x, barriers=(0.4, 0.75))},
     )
+    res = sim.run({}, KPBW)
+    t1, t2 = res.diagnostics["barrier_times"]
+    # the front of the shell, at the start pose, from the scene's own vertices
+    scene = build_scene(flat_belt(v, start_x=start_x), cons, resolve("rigid"), 1, full)
+    model = mujoco.MjModel.from_xml_string(scene.xml)
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    front = float(data.flexvert_xpos[:, 0].max())
+    # within 10 us (12 um of belt travel: the shell settles on its contacts), a step is 417 us
+    # to 3.3 ms
+    assert t1 == pytest.approx((0.4 - front) / v, abs=1e-5)
+    assert t2 == pytest.approx((0.75 - front) / v, abs=1e-5)
+    assert res.run.transit_time == pytest.approx(0.35 / v, abs=1e-7)
 
 
 def test_observation_starts_at_the_start_pose():
@@ -270,3 +295,26 @@ def test_coulomb_belt_friction_warns_on_a_full_shell(caplog):
         assert "not trustworthy" not in caplog.text
         build("PB", "soft")
     assert "Coulomb belt friction on a full shell" in caplog.text
+
+
+def test_a_beam_breaks_by_interpolation_from_either_side_and_at_any_angle():
+    from parcelfit.sim.mujoco.rig import Barrier
+    from parcelfit.sim.mujoco.simulator import _beam_margin, _crossing_time
+
+    beam = Barrier("LS", (0.0, 0.0), (1.0, 1.0))  # diagonal, 1.41 m long
+    square = np.array([[0.0, 0.0], [0.1, 0.0], [0.1, 0.1], [0.0, 0.1]])
+
+    def margin(shift):
+        return _beam_margin(square + np.asarray(shift), beam)
+
+    # a square's nearest corner 0.1 / sqrt(2) m from the line, on either side
+    assert margin((0.5, 0.3)) == pytest.approx(-0.1 / math.sqrt(2))
+    assert margin((0.3, 0.5)) == pytest.approx(-0.1 / math.sqrt(2))
+    assert margin((0.45, 0.4)) > 0  # astride the line
+    assert margin((3.0, 0.0)) is None  # beside the segment
+    # moving along -x at 1 m/s from (0.6, 0.3) (corner (0.6, 0.4) is 0.2 / sqrt(2) m off the
+    # line): the corner reaches it after 0.2 s; steps of 0.15 s interpolate that exactly
+    states = [(t, margin((0.6 - t, 0.3))) for t in (0.0, 0.15, 0.3)]
+    assert states[1][1] < 0 <= states[2][1]
+    assert _crossing_time(states[1], *states[2]) == pytest.approx(0.2)
+    assert _crossing_time(None, 0.3, 0.0) == 0.3

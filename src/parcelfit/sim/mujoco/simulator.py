@@ -12,7 +12,12 @@ rig frame), which is exact for rigid motion and averages out local wrinkles othe
 
 Light barriers: a beam is interrupted when the packaging vertices' (x, y) lie on both sides of
 its line with some of them over the segment; the transit time is the time between the first
-interruption of LS1 and of LS2, checked every step.
+interruption of LS1 and of LS2, checked every step. Within the step of the interruption the
+time is interpolated linearly: with s_i the signed distances [m] of the vertices over the
+segment to the beam's line, the beam's margin g = min(max_i s_i, -min_i s_i) is negative while
+all lie on one side and reaches 0 as the first one crosses, so the beam broke at
+t_prev + dt * g_prev / (g_prev - g_now). (Counting whole steps made transit times multiples of
+the step, a floor of one step on every transit difference.)
 
 Static friction offset (mu_s_*): every step, the friction of each metal geom is set to
 mu_d + offset * S, where S is the stick factor of its contacts in the step before,
@@ -78,17 +83,30 @@ class Frames:
     triangles: np.ndarray
 
 
-def _barrier_state(xy: np.ndarray, barrier: Barrier) -> bool:
+def _beam_margin(xy: np.ndarray, barrier: Barrier) -> float | None:
+    """The beam's margin [m]: min(max s_i, -min s_i) over the signed distances s_i of the points
+    ``xy`` [m] over the beam's segment to its line; >= 0 when the beam is interrupted (points on
+    both sides), minus the nearest point's distance otherwise; None when no point is over it."""
     a, b = np.asarray(barrier.start), np.asarray(barrier.end)
     d = b - a
     rel = xy - a
-    side = d[0] * rel[:, 1] - d[1] * rel[:, 0]
     along = (rel @ d) / (d @ d)
     over = (along >= 0) & (along <= 1)
     if not over.any():
-        return False
-    s = side[over]
-    return bool(s.min() <= 0 <= s.max())
+        return None
+    side = (d[0] * rel[over, 1] - d[1] * rel[over, 0]) / math.hypot(*d)
+    return float(min(side.max(), -side.min()))
+
+
+def _crossing_time(previous: tuple[float, float] | None, t_now: float, margin_now: float) -> float:
+    """The time [s] the beam broke: interpolated within the step from the last uninterrupted
+    (time [s], margin [m]) to ``margin_now`` >= 0 at ``t_now`` [s], else ``t_now``."""
+    if previous is None:
+        return t_now
+    t_prev, margin_prev = previous
+    if not (margin_prev < 0 <= margin_now and t_prev < t_now):
+        return t_now
+    return t_prev + (t_now - t_prev) * margin_prev / (margin_prev - margin_now)
 
 
 class MujocoSimulator:
@@ -205,6 +223,8 @@ class MujocoSimulator:
         lowest = min(s.top for s in rig.surfaces) - FALL_DEPTH
         (x_lo, x_hi), (y_lo, y_hi) = rig.end.x, rig.end.y
         crossed: list[float | None] = [None, None]
+        # each beam's last uninterrupted (time [s], margin [m]), for the crossing within a step
+        clear: list[tuple[float, float] | None] = [None, None]
         samples: list[tuple[float, float, float, float]] = []
         frames: list[np.ndarray] = []
         status, message = SimStatus.OK, "reached the end of the run"
@@ -252,12 +272,15 @@ class MujocoSimulator:
             if step >= stop_at:
                 break
             for k, barrier in enumerate(rig.barriers):
-                if (
-                    crossed[k] is None
-                    and (k == 0 or crossed[0] is not None)
-                    and _barrier_state(verts[:, :2], barrier)
-                ):
-                    crossed[k] = t_pos
+                if crossed[k] is not None or (k == 1 and crossed[0] is None):
+                    continue
+                margin = _beam_margin(verts[:, :2], barrier)
+                if margin is None:
+                    clear[k] = None
+                elif margin < 0:
+                    clear[k] = (t_pos, margin)
+                else:
+                    crossed[k] = _crossing_time(clear[k], t_pos, margin)
                     if k == 1:
                         stop_at = min(n_steps, step + round(rig.end.after_last_barrier / dt))
             if prev_c is not None:
