@@ -123,12 +123,10 @@ def test_demo_stages_are_library_calls(tmp_path):
     assert study["budget"] == 16
     assert [(c["rig"], c["speed_setting"]) for c in study["cases"]] == [("E3", 1), ("E1", 3)]
     assert study["transfer"] == [{"rig": "E1", "speed_setting": 1}]
-    # the smoke run keeps E1 at the model's default step, the other profiles refine it
-    assert "rig_timesteps" not in study["simulator"]
-    from parcelfit.demo import E1_TIMESTEP, PROFILES, demo_dataset, write_demo_files
+    # the smoke run coarsens E1 to the other rigs' step, the other profiles keep E1's own
+    from parcelfit.demo import PROFILES, SMOKE_E1_TIMESTEP, demo_dataset, write_demo_files
 
+    assert study["simulator"]["rig_timesteps"] == {"E1": SMOKE_E1_TIMESTEP}
     _, full_study = write_demo_files(tmp_path / "full", PROFILES["full"], demo_dataset())
-    assert yaml.safe_load(full_study.read_text())["simulator"]["rig_timesteps"] == {
-        "E1": E1_TIMESTEP
-    }
+    assert "rig_timesteps" not in yaml.safe_load(full_study.read_text())["simulator"]
     assert yaml.safe_load(screen_file.read_text())["stages"] == ["fractional"]

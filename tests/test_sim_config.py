@@ -59,6 +59,11 @@ def _e3_doc():
             lambda d: d["speeds"].update({0: {"main": 1}}),
             r"speed setting 0 must be an integer >= 1",
         ),
+        (
+            lambda d: d.update(step_refinement=1.5),
+            r"step_refinement: expected a whole number",
+        ),
+        (lambda d: d.update(step_refinement=0), r"step_refinement: 0 is out of range"),
     ],
 )
 def test_bad_rig_files(change, pattern):
@@ -537,3 +542,27 @@ def test_a_rig_may_have_its_own_time_step(tmp_path):
         assert d["simulated_time"] / d["steps"] == pytest.approx(step, rel=1e-9)
     with pytest.raises(ParcelfitError, match="time step for rig E1"):
         SceneOptions(rig_timesteps={"E1": 1.0})
+
+
+def test_a_rig_file_refines_the_default_step_on_its_own_runs(tmp_path):
+    """E1's rig file halves the default step (``step_refinement: 2``): 1/4800 s around rigid
+    contents, 1/2400 s around the soft one; E3 keeps the defaults; a study's ``rig_timesteps``
+    or an explicit ``timestep`` wins; the run really steps at it."""
+    from parcelfit.runs import TestCase
+    from parcelfit.sim.mujoco import MujocoSimulator, SceneOptions, SimOptions
+
+    e1, e3 = load_rig("E1"), load_rig("E3")
+    assert (e1.step_refinement, e3.step_refinement) == (2, 1)
+    sim = MujocoSimulator()
+    assert sim.scene_options(e1).step_for(soft=False) == pytest.approx(1 / 4800)
+    assert sim.scene_options(e1).step_for(soft=True) == pytest.approx(1 / 2400)
+    assert sim.scene_options(e3).step_for(soft=False) == pytest.approx(1 / 2400)
+    assert sim.scene_options(e3).step_for(soft=True) == pytest.approx(1 / 1200)
+    own = MujocoSimulator(SimOptions(scene=SceneOptions(rig_timesteps={"E1": 1 / 2400})))
+    assert own.scene_options(e1).step_for(soft=False) == pytest.approx(1 / 2400)
+    given = MujocoSimulator(SimOptions(scene=SceneOptions(timestep=1 / 1000)))
+    assert given.scene_options(e1).step_for(soft=False) == pytest.approx(1 / 1000)
+    d = sim.with_options(duration=0.02).run({}, TestCase("E1", "KPBW", 1)).diagnostics
+    assert d["simulated_time"] / d["steps"] == pytest.approx(1 / 4800, rel=1e-9)
+    with pytest.raises(ParcelfitError, match="step_refinement must be a whole number"):
+        SceneOptions(step_refinement=0)

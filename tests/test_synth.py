@@ -136,7 +136,8 @@ def test_an_interrupted_twin_dataset_resumes_from_its_cache(tmp_path, monkeypatc
 
 def test_the_twins_real_runs_take_their_own_time_step(tmp_path, monkeypatch):
     """``real_timestep`` reaches the scene of every twin run (default None: the model's own
-    step, 1/2400 s around BW's rigid content, 1/1200 s around PB's soft one),
+    step on the rig, on E1 1/4800 s around BW's rigid content, 1/2400 s around PB's soft one,
+    half the defaults elsewhere, which the dataset's description says),
     ``real_soft_timestep`` overrides it around a soft content only, and a spec outside
     [1e-5, 0.01] s is refused naming the key."""
     import pytest
@@ -147,21 +148,23 @@ def test_the_twins_real_runs_take_their_own_time_step(tmp_path, monkeypatch):
 
     seen = []
 
+    real = synth.MujocoSimulator
+
     class Recording:
         def __init__(self, options, consignments, **_):
             soft = next(iter(consignments.values())).content_kind == "soft"
-            seen.append(options.scene.step_for(soft=soft))
+            seen.append(real(options).scene_options(load_rig("E1")).step_for(soft=soft))
 
         def run(self, params, case, run_id=None):
             raise RuntimeError("stop here")
 
     monkeypatch.setattr(synth, "MujocoSimulator", Recording)
     for settings, consignment, step in (
-        (TwinSettings(), "BW", 1 / 2400),
-        (TwinSettings(), "PB", 1 / 1200),
+        (TwinSettings(), "BW", 1 / 4800),
+        (TwinSettings(), "PB", 1 / 2400),
         (TwinSettings(real_timestep=1 / 4800), "BW", 1 / 4800),
         (TwinSettings(real_timestep=1 / 4800), "PB", 1 / 4800),
-        (TwinSettings(real_soft_timestep=1 / 2400), "BW", 1 / 2400),
+        (TwinSettings(real_soft_timestep=1 / 2400), "BW", 1 / 4800),
         (TwinSettings(real_timestep=1 / 4800, real_soft_timestep=1 / 2400), "BW", 1 / 4800),
         (TwinSettings(real_timestep=1 / 4800, real_soft_timestep=1 / 2400), "PB", 1 / 2400),
     ):
@@ -176,7 +179,12 @@ def test_the_twins_real_runs_take_their_own_time_step(tmp_path, monkeypatch):
         )
         with pytest.raises(RuntimeError, match="stop here"):
             synth._twin_run(job)
-        assert seen[-1] == step
+        assert seen[-1] == pytest.approx(step, rel=1e-12)
+    e1, e3 = load_rig("E1"), load_rig("E3")
+    assert "divided by 2 on E1" in synth._refined_rigs(TwinSettings(), [e1, e3])
+    assert synth._refined_rigs(TwinSettings(), [e3]) == ""
+    both = TwinSettings(real_timestep=1 / 4800, real_soft_timestep=1 / 2400)
+    assert synth._refined_rigs(both, [e1]) == ""
     spec = tmp_path / "spec.yaml"
     spec.write_text("cases: [E1/BW/1]\nsettings: {real_timestep: 0.00041667}\n")
     assert synth.load_twin_spec(spec).settings.real_timestep == 0.00041667

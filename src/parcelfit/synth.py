@@ -134,6 +134,18 @@ class TwinJob:
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
+def _refined_rigs(s: TwinSettings, rigs: Sequence[Rig]) -> str:
+    """Where a "real" step is the model's default and a rig refines it (``step_refinement``),
+    the clause saying so for the dataset's description; else empty."""
+    if s.step_for(False) is not None and s.step_for(True) is not None:
+        return ""
+    refined = sorted({(r.name, r.step_refinement) for r in rigs if r.step_refinement > 1})
+    if not refined:
+        return ""
+    which = ", ".join(f"{n} on {name}" for name, n in refined)
+    return f" where given by the model's default, divided by {which} (the rig's step_refinement)"
+
+
 def _twin_run(job: TwinJob) -> tuple[Run, float]:
     """Simulate one twin run; returns the noisy run and its wall time [s]."""
     s = job.settings
@@ -299,10 +311,12 @@ def make_twin_dataset(
                 f"1/{1 / (s.step_for(False) or steps.step_for(False)):.0f} s (rigid contents), "
                 f"1/{1 / (s.step_for(True) or steps.step_for(True)):.0f} s (soft contents)"
                 + (
-                    ", the model's defaults."
+                    ", the model's defaults"
                     if s.step_for(False) is None and s.step_for(True) is None
-                    else "."
+                    else ""
                 )
+                + _refined_rigs(s, [sim.rig(c.rig) for c in cases])
+                + "."
             )
             + (
                 " Coulomb friction on belts, strips and rollers."

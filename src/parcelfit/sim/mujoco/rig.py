@@ -30,12 +30,18 @@ A rig file (YAML, SI units, angles in degrees counter-clockwise from the rig's x
     regions: [{x: [-0.3, 1.6]}]   # regions of interest for comparisons (see parcelfit.runs.regions)
     margin: 0.02                  # [m]
     end: {x: [-1.0, 3.0], y: [-1.0, 1.0], duration: 3.0, after_last_barrier: 0.3}
+    step_refinement: 1            # optional: this rig needs steps this many times finer than
+                                  # the default (1/2400 s rigid, 1/1200 s soft contents)
 
 ``start.scatter`` describes how a hand-placed parcel varies from run to run: standard deviations
 of a normal distribution along and across the start surface's heading [m] and of the heading
 [deg], each draw cut off at 2.5 standard deviations. A simulation with a placement seed draws its
 start pose from it (`Rig.placement`), so an ensemble of seeds gives a distribution of outcomes
 like the repeated real runs of a test case; without a seed the parcel starts at the nominal pose.
+
+``step_refinement`` is the rig's own demand on the time step: where its outcome converges only
+at finer steps (E1's transfer onto a fast belt, 2), every run on it divides the default step by
+this. A study's ``rig_timesteps`` or an explicit ``timestep`` overrides it.
 
 The run ends when the parcel centre leaves the ``end`` box, ``after_last_barrier`` seconds
 after it interrupts the second light barrier, or after ``duration`` seconds of simulated time.
@@ -60,6 +66,7 @@ from parcelfit.schema import (
     Number,
     Pair,
     Text,
+    Whole,
     or_default,
     parse,
     require_mapping,
@@ -149,6 +156,7 @@ class Rig:
     margin: float
     end: EndCondition
     source: str = ""
+    step_refinement: int = 1  # the default time step is divided by this on this rig
 
     def surface(self, name: str) -> Surface:
         """The surface called ``name``."""
@@ -351,6 +359,7 @@ class RigFile(FileModel):
         tuple[Annotated[Region, PlainValidator(_region)], ...], or_default(tuple)
     ] = ()
     margin: Annotated[float, Number(unit="m", ge=0.0)] = 0.0
+    step_refinement: Annotated[int, Whole(ge=1, le=64)] = 1
     end: EndSection
 
     @field_validator("surfaces")
@@ -436,6 +445,7 @@ def parse_rig(doc: Any, file: str) -> Rig:
         margin=f.margin,
         end=EndCondition(f.end.x, f.end.y, f.end.duration, f.end.after_last_barrier),
         source=file,
+        step_refinement=f.step_refinement,
     )
 
 

@@ -111,6 +111,9 @@ class SceneOptions:
     # onto E1's fast belt converges more slowly than the rest, docs/transit-convergence.md); it
     # overrides ``timestep`` and the shell's default on those rigs
     rig_timesteps: Mapping[str, float] = field(default_factory=dict)
+    # the default step is divided by this (a rig's own ``step_refinement``, set per run by the
+    # simulator): E1's transfer onto a fast belt needs half the shell's default step
+    step_refinement: int = 1
     start_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)  # dx [m], dy [m], dheading [deg]
     start_speed_factor: float = 1.0  # the parcel's initial speed as a fraction of its surface's
 
@@ -136,6 +139,12 @@ class SceneOptions:
         if self.belt_friction not in ("mujoco", "coulomb"):
             raise ParcelfitError(
                 f"belt_friction must be mujoco or coulomb, got {self.belt_friction!r}"
+            )
+        if isinstance(self.step_refinement, bool) or not (
+            isinstance(self.step_refinement, int) and 1 <= self.step_refinement <= 64
+        ):
+            raise ParcelfitError(
+                f"step_refinement must be a whole number in [1, 64], got {self.step_refinement!r}"
             )
         for rig, step in self.rig_timesteps.items():
             _check_step(step, f"the time step for rig {rig}")
@@ -173,15 +182,15 @@ class SceneOptions:
 
     def step_for(self, soft: bool) -> float:
         """The time step [s] of a scene with a soft (True) or rigid content: ``timestep`` if
-        given, else 1/1200 s for the full shell and 1/2400 s for an interpolated one; 1/2400 s
+        given, else 1/1200 s for the full shell and 1/2400 s for an interpolated one (1/2400 s
         for the full shell too with Coulomb belt friction, whose explicit forces on the film's
-        light vertices went unstable at 1/1200 s (E1 PB setting 1 turned 42 degrees and stalled,
-        the simulator README's "Sliding")."""
+        light vertices went unstable at 1/1200 s: E1 PB setting 1 turned 42 degrees and stalled,
+        the simulator README's "Sliding"), divided by ``step_refinement``."""
         if self.timestep is not None:
             return self.timestep
         if self.shell_for(soft) == "full" and self.belt_friction != "coulomb":
-            return FULL_SHELL_STEP
-        return INTERPOLATED_SHELL_STEP
+            return FULL_SHELL_STEP / self.step_refinement
+        return INTERPOLATED_SHELL_STEP / self.step_refinement
 
 
 def _number(text: str) -> float:
