@@ -143,7 +143,7 @@ def _refined_rigs(s: TwinSettings, rigs: Sequence[Rig]) -> str:
     if not refined:
         return ""
     which = ", ".join(f"{n} on {name}" for name, n in refined)
-    return f" where given by the model's default, divided by {which} (the rig's step_refinement)"
+    return f"; where a step is the model's default, it is divided by {which} (the rig's step_refinement)"
 
 
 def _twin_run(job: TwinJob) -> tuple[Run, float]:
