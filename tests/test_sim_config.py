@@ -460,7 +460,8 @@ def test_the_default_step_follows_the_shell_and_a_given_step_wins():
 
     def step(cons_name: str, options: SceneOptions) -> float:
         cons = load_consignment(cons_name)
-        xml = build_scene(load_rig("E1"), cons, resolve(cons.content_kind), 1, options).xml
+        # E3 does not refine the default step (E1 does: the next tests)
+        xml = build_scene(load_rig("E3"), cons, resolve(cons.content_kind), 1, options).xml
         m = re.search(r'<option timestep="([^"]+)"', xml)
         assert m is not None
         return float(m[1])
@@ -534,8 +535,9 @@ def test_a_rig_may_have_its_own_time_step(tmp_path):
         backend="mujoco", rig="E3", consignment="KPBW", rig_timesteps={"E1": 1 / 4800}
     )
     sim = make_simulator(section.to_config(tmp_path))
-    assert sim.scene_options(load_rig("E1")).step_for(soft=False) == 1 / 4800  # type: ignore[attr-defined]
-    assert sim.scene_options(load_rig("E3")).step_for(soft=False) == 1 / 2400  # type: ignore[attr-defined]
+    scene = sim.options.scene  # type: ignore[attr-defined]
+    assert scene.step_for(soft=False, rig=load_rig("E1")) == 1 / 4800
+    assert scene.step_for(soft=False, rig=load_rig("E3")) == 1 / 2400
     short = sim.with_options(duration=0.05)  # type: ignore[attr-defined]
     for rig, step in (("E1", 1 / 4800), ("E3", 1 / 2400)):
         d = short.run({}, TestCase(rig, "KPBW", 1)).diagnostics
@@ -550,19 +552,22 @@ def test_a_rig_file_refines_the_default_step_on_its_own_runs(tmp_path):
     or an explicit ``timestep`` wins; the run really steps at it."""
     from parcelfit.runs import TestCase
     from parcelfit.sim.mujoco import MujocoSimulator, SceneOptions, SimOptions
+    from parcelfit.sim.mujoco.scene import build_scene
 
     e1, e3 = load_rig("E1"), load_rig("E3")
     assert (e1.step_refinement, e3.step_refinement) == (2, 1)
     sim = MujocoSimulator()
-    assert sim.scene_options(e1).step_for(soft=False) == pytest.approx(1 / 4800)
-    assert sim.scene_options(e1).step_for(soft=True) == pytest.approx(1 / 2400)
-    assert sim.scene_options(e3).step_for(soft=False) == pytest.approx(1 / 2400)
-    assert sim.scene_options(e3).step_for(soft=True) == pytest.approx(1 / 1200)
+    assert sim.options.scene.step_for(soft=False, rig=e1) == pytest.approx(1 / 4800)
+    assert sim.options.scene.step_for(soft=True, rig=e1) == pytest.approx(1 / 2400)
+    assert sim.options.scene.step_for(soft=False, rig=e3) == pytest.approx(1 / 2400)
+    assert sim.options.scene.step_for(soft=True, rig=e3) == pytest.approx(1 / 1200)
     own = MujocoSimulator(SimOptions(scene=SceneOptions(rig_timesteps={"E1": 1 / 2400})))
-    assert own.scene_options(e1).step_for(soft=False) == pytest.approx(1 / 2400)
+    assert own.options.scene.step_for(soft=False, rig=e1) == pytest.approx(1 / 2400)
     given = MujocoSimulator(SimOptions(scene=SceneOptions(timestep=1 / 1000)))
-    assert given.scene_options(e1).step_for(soft=False) == pytest.approx(1 / 1000)
+    assert given.options.scene.step_for(soft=False, rig=e1) == pytest.approx(1 / 1000)
     d = sim.with_options(duration=0.02).run({}, TestCase("E1", "KPBW", 1)).diagnostics
     assert d["simulated_time"] / d["steps"] == pytest.approx(1 / 4800, rel=1e-9)
-    with pytest.raises(ParcelfitError, match="step_refinement must be a whole number"):
-        SceneOptions(step_refinement=0)
+    # a scene built directly for the rig steps at it too
+    cons = load_consignment("KPBW")
+    xml = build_scene(e1, cons, resolve("rigid"), 1, SceneOptions()).xml
+    assert f'timestep="{1 / 4800:.9g}"' in xml

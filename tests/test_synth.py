@@ -148,12 +148,10 @@ def test_the_twins_real_runs_take_their_own_time_step(tmp_path, monkeypatch):
 
     seen = []
 
-    real = synth.MujocoSimulator
-
     class Recording:
         def __init__(self, options, consignments, **_):
             soft = next(iter(consignments.values())).content_kind == "soft"
-            seen.append(real(options).scene_options(load_rig("E1")).step_for(soft=soft))
+            seen.append(options.scene.step_for(soft=soft, rig=load_rig("E1")))
 
         def run(self, params, case, run_id=None):
             raise RuntimeError("stop here")

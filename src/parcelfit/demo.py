@@ -118,12 +118,7 @@ def demo_dataset() -> Path:
 def write_demo_files(out: Path, profile: DemoProfile, dataset: Path) -> tuple[Path, Path]:
     """Write ``screen.yaml`` and ``study.yaml`` for the demo into ``out``; returns both paths."""
     out.mkdir(parents=True, exist_ok=True)
-    sim = {
-        "backend": "mujoco",
-        "rig": RIG,
-        "consignment": CONSIGNMENT,
-        "wall_limit": 300,
-    }
+    sim = {"backend": "mujoco", "rig": RIG, "consignment": CONSIGNMENT, "wall_limit": 300}
     if profile.e1_timestep is not None:
         sim["rig_timesteps"] = {"E1": profile.e1_timestep}
     head = (

@@ -111,9 +111,6 @@ class SceneOptions:
     # onto E1's fast belt converges more slowly than the rest, docs/transit-convergence.md); it
     # overrides ``timestep`` and the shell's default on those rigs
     rig_timesteps: Mapping[str, float] = field(default_factory=dict)
-    # the default step is divided by this (a rig's own ``step_refinement``, set per run by the
-    # simulator): E1's transfer onto a fast belt needs half the shell's default step
-    step_refinement: int = 1
     start_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)  # dx [m], dy [m], dheading [deg]
     start_speed_factor: float = 1.0  # the parcel's initial speed as a fraction of its surface's
 
@@ -139,12 +136,6 @@ class SceneOptions:
         if self.belt_friction not in ("mujoco", "coulomb"):
             raise ParcelfitError(
                 f"belt_friction must be mujoco or coulomb, got {self.belt_friction!r}"
-            )
-        if isinstance(self.step_refinement, bool) or not (
-            isinstance(self.step_refinement, int) and 1 <= self.step_refinement <= 64
-        ):
-            raise ParcelfitError(
-                f"step_refinement must be a whole number in [1, 64], got {self.step_refinement!r}"
             )
         for rig, step in self.rig_timesteps.items():
             _check_step(step, f"the time step for rig {rig}")
@@ -180,17 +171,21 @@ class SceneOptions:
             return self.shell_dof
         return "full" if soft else "quadratic"
 
-    def step_for(self, soft: bool) -> float:
-        """The time step [s] of a scene with a soft (True) or rigid content: ``timestep`` if
-        given, else 1/1200 s for the full shell and 1/2400 s for an interpolated one (1/2400 s
-        for the full shell too with Coulomb belt friction, whose explicit forces on the film's
-        light vertices went unstable at 1/1200 s: E1 PB setting 1 turned 42 degrees and stalled,
-        the simulator README's "Sliding"), divided by ``step_refinement``."""
+    def step_for(self, soft: bool, rig: Rig | None = None) -> float:
+        """The time step [s] of a scene with a soft (True) or rigid content on ``rig``: the
+        step ``rig_timesteps`` gives that rig, else ``timestep`` if given, else 1/1200 s for the
+        full shell and 1/2400 s for an interpolated one (1/2400 s for the full shell too with
+        Coulomb belt friction, whose explicit forces on the film's light vertices went unstable
+        at 1/1200 s: E1 PB setting 1 turned 42 degrees and stalled, the simulator README's
+        "Sliding"), divided by the rig's ``step_refinement``."""
+        if rig is not None and rig.name in self.rig_timesteps:
+            return self.rig_timesteps[rig.name]
         if self.timestep is not None:
             return self.timestep
+        refinement = rig.step_refinement if rig is not None else 1
         if self.shell_for(soft) == "full" and self.belt_friction != "coulomb":
-            return FULL_SHELL_STEP / self.step_refinement
-        return INTERPOLATED_SHELL_STEP / self.step_refinement
+            return FULL_SHELL_STEP / refinement
+        return INTERPOLATED_SHELL_STEP / refinement
 
 
 def _number(text: str) -> float:
@@ -375,7 +370,7 @@ def build_scene(
         )
     m_v = m_pa / nv
     n_face = shell.face_contacts
-    dt = opt.step_for(soft)
+    dt = opt.step_for(soft, rig)
 
     # --- contact parameters (effective inverse mass of a flex contact: see contact.py) ------------
     def contact(pair: str, other_inverse_mass: float = 0.0) -> ContactParams:

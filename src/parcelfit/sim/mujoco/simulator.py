@@ -143,15 +143,9 @@ class MujocoSimulator:
         return self.with_options(placement_seed=seed)
 
     def scene_options(self, rig: Rig) -> SceneOptions:
-        """The scene settings of a run on ``rig``: the study's time step for it if it has one
-        (``rig_timesteps``), else the rig's own refinement of the default step
-        (``step_refinement``, ignored under an explicit ``timestep``), the placement draw added
-        to the start offset."""
+        """The scene settings of a run on ``rig``: the placement draw added to the start offset
+        (the step on the rig follows from them, `SceneOptions.step_for`)."""
         opt = self.options.scene
-        if rig.name in opt.rig_timesteps:
-            opt = replace(opt, timestep=opt.rig_timesteps[rig.name])
-        elif rig.step_refinement != opt.step_refinement:
-            opt = replace(opt, step_refinement=rig.step_refinement)
         if self.options.placement_seed is None:
             return opt
         dx, dy, dh = rig.placement(self.options.placement_seed)
