@@ -318,3 +318,27 @@ def test_a_beam_breaks_by_interpolation_from_either_side_and_at_any_angle():
     assert states[1][1] < 0 <= states[2][1]
     assert _crossing_time(states[1], *states[2]) == pytest.approx(0.2)
     assert _crossing_time(None, 0.3, 0.0) == 0.3
+
+
+def test_the_beam_line_distance_and_the_belt_rectangles_test():
+    from parcelfit.sim.mujoco.rig import Barrier
+    from parcelfit.sim.mujoco.simulator import _BeamLine, _Rectangles
+
+    line = _BeamLine(Barrier("LS", (0.0, 0.0), (1.0, 1.0)))
+    # (1, 0) lies 1 / sqrt(2) m from the diagonal, on either side alike; the line is infinite
+    assert line.distance(np.array([1.0, 0.0])) == pytest.approx(1 / math.sqrt(2))
+    assert line.distance(np.array([0.0, 1.0])) == pytest.approx(1 / math.sqrt(2))
+    assert line.distance(np.array([5.0, 5.0])) == pytest.approx(0.0)
+
+    rig = load_rig("E3")
+    surfaces = list(rig.surfaces)
+    area = _Rectangles(surfaces)
+    # each surface's own centre lies over it, and a point 1 mm beyond its end does not
+    for k, s in enumerate(surfaces):
+        u = s.unit()
+        assert area.contain(np.asarray(s.centre))[k]
+        beyond = np.asarray(s.centre) + (s.length / 2 + 0.001) * u
+        inside_edge = np.asarray(s.centre) + (s.length / 2 - 0.001) * u
+        assert not area.contain(beyond)[k]
+        assert area.contain(inside_edge)[k]
+    assert _Rectangles([]).contain(np.zeros(2)) == []

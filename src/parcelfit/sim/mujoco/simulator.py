@@ -12,10 +12,11 @@ rig frame), which is exact for rigid motion and averages out local wrinkles othe
 
 Light barriers: a beam is interrupted when the packaging vertices' (x, y) lie on both sides of
 its line with some of them over the segment; the transit time is the time between the first
-interruption of LS1 and of LS2, checked every step. Within the step of the interruption the
-time is interpolated linearly: with s_i the signed distances [m] of the vertices over the
-segment to the beam's line, the beam's margin g = min(max_i s_i, -min_i s_i) is negative while
-all lie on one side and reaches 0 as the first one crosses, so the beam broke at
+interruption of LS1 and of LS2, checked every step while the parcel's centre is within its
+reach of the beam's line (farther away no vertex can meet it within a step). Within the step
+of the interruption the time is interpolated linearly: with s_i the signed distances [m] of the
+vertices over the segment to the beam's line, the beam's margin g = min(max_i s_i, -min_i s_i)
+is negative while all lie on one side and reaches 0 as the first one crosses, so the beam broke at
 t_prev + dt * g_prev / (g_prev - g_now). (Counting whole steps made transit times multiples of
 the step, a floor of one step on every transit difference.)
 
@@ -60,6 +61,11 @@ from parcelfit.sim.protocol import SimResult, SimStatus
 
 MAX_SPEED = 20.0  # m/s
 FALL_DEPTH = 0.2  # m
+# a beam is checked only while the parcel's centre is within its reach (the rest shell's largest
+# distance from the centre) plus this much of the beam's line: more than the packaging deforms
+# and moves in one step (MAX_SPEED * dt is 17 mm at 1/1200 s), so skipping farther steps never
+# skips an interruption or the clear step before it, and costs nothing per step far away
+BEAM_SKIP_MARGIN = 0.05  # m
 
 
 @dataclass(frozen=True)
@@ -96,6 +102,20 @@ def _beam_margin(xy: np.ndarray, barrier: Barrier) -> float | None:
         return None
     side = (d[0] * rel[over, 1] - d[1] * rel[over, 0]) / math.hypot(*d)
     return float(min(side.max(), -side.min()))
+
+
+class _BeamLine:
+    """A light barrier's line, for the distance [m] of a point from it."""
+
+    def __init__(self, barrier: Barrier) -> None:
+        a, b = np.asarray(barrier.start, dtype=float), np.asarray(barrier.end, dtype=float)
+        d = b - a
+        self.a = a
+        self.normal = np.array([-d[1], d[0]]) / math.hypot(*d)
+
+    def distance(self, point: np.ndarray) -> float:
+        """|n . (point - a)|: the distance [m] of ``point`` [m] from the beam's (infinite) line."""
+        return abs(float(self.normal @ (point - self.a)))
 
 
 def _crossing_time(previous: tuple[float, float] | None, t_now: float, margin_now: float) -> float:
@@ -206,9 +226,12 @@ class MujocoSimulator:
         dt = model.opt.timestep
         flex = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, "packaging")
         adr, num = model.flex_vertadr[flex], model.flex_vertnum[flex]
-        rest = scene.shell.points[scene.shell.top, :2] - scene.shell.points[
-            scene.shell.top, :2
-        ].mean(axis=0)
+        points = scene.shell.points[:, :2]
+        centre0 = points[scene.shell.top].mean(axis=0)
+        rest = points[scene.shell.top] - centre0
+        n_top = len(rest)
+        reach = float(np.max(np.linalg.norm(points - centre0, axis=1))) + BEAM_SKIP_MARGIN
+        beams = [_BeamLine(b) for b in rig.barriers]
         _set_velocity(model, data, np.asarray(scene.start_velocity))
 
         friction = _FrictionSwitch(
@@ -236,7 +259,7 @@ class MujocoSimulator:
             t_pos = pos_step * dt
             verts = data.flexvert_xpos[adr : adr + num]
             top = verts[scene.shell.top]
-            c = top[:, :2].mean(axis=0)
+            c = np.add.reduce(top[:, :2], axis=0) / n_top  # the centroid, as mean() computes it
             if pos_step % every == 0 and step != 1:
                 q = top[:, :2] - c
                 theta = math.atan2(
@@ -271,6 +294,9 @@ class MujocoSimulator:
                 break
             for k, barrier in enumerate(rig.barriers):
                 if crossed[k] is not None or (k == 1 and crossed[0] is None):
+                    continue
+                if beams[k].distance(c) > reach:  # no vertex near the beam's line
+                    clear[k] = None
                     continue
                 margin = _beam_margin(verts[:, :2], barrier)
                 if margin is None:
@@ -388,6 +414,7 @@ class _FrictionSwitch:
                 for g in scene.driven
                 if g.material != "metal"
             ]
+        self.belt_area = _Rectangles([surface for _, _, surface in self.belts])
         self.mu_belt = (params["mu_d_BePa"], params["mu_s_BePa"])
 
     def _stick(self, slip: np.ndarray | float) -> np.ndarray | float:
@@ -428,24 +455,36 @@ class _FrictionSwitch:
                         if total > 0:
                             stick = float(np.sum(force * self._stick(slip)) / total)
                 model.geom_friction[gid, 0] = mu_d + offset * stick
+        if not self.belts:
+            return
         mu_d, offset = self.mu_belt
-        for gid, v_surface, surface in self.belts:
-            stick = (
-                float(self._stick(float(np.hypot(*(velocity - v_surface)))))
-                if _inside(surface, centre)
-                else 0.0
-            )
+        inside = self.belt_area.contain(centre)
+        for (gid, v_surface, _), over in zip(self.belts, inside, strict=True):
+            stick = float(self._stick(float(np.hypot(*(velocity - v_surface))))) if over else 0.0
             model.geom_friction[gid, 0] = mu_d + offset * stick
 
 
-def _inside(surface: Surface, point: np.ndarray) -> bool:
-    """Is ``point`` [m] over the surface's rectangle?"""
-    u = surface.unit()
-    rel = point - np.asarray(surface.centre)
-    return (
-        abs(rel @ u) <= surface.length / 2
-        and abs(rel @ np.array([-u[1], u[0]])) <= surface.width / 2
-    )
+class _Rectangles:
+    """The rectangles of some surfaces, to test which lie under a point. It runs on every step,
+    so each rectangle is kept as plain floats (a few surfaces: scalar arithmetic is faster than
+    building arrays)."""
+
+    def __init__(self, surfaces: list[Surface]) -> None:
+        self.rects = [
+            (*map(float, s.centre), *map(float, s.unit()), s.length / 2, s.width / 2)
+            for s in surfaces
+        ]
+
+    def contain(self, point: np.ndarray) -> list[bool]:
+        """Which rectangles (in order) ``point`` [m] lies over, edges included."""
+        px, py = float(point[0]), float(point[1])
+        out = []
+        for cx, cy, ux, uy, half_length, half_width in self.rects:
+            rx, ry = px - cx, py - cy
+            out.append(
+                abs(rx * ux + ry * uy) <= half_length and abs(ry * ux - rx * uy) <= half_width
+            )
+        return out
 
 
 __all__ = ["Frames", "MujocoSimulator", "SimOptions"]
