@@ -41,7 +41,7 @@ from scipy.stats import truncnorm
 
 from parcelfit.atomic import write_text_atomic
 from parcelfit.runs import TestCase
-from parcelfit.sim.ensemble import rotation
+from parcelfit.sim.ensemble import SPIN_ANGLE, TYPE_COLOURS, rotation
 from parcelfit.sim.mujoco import (
     MujocoSimulator,
     SceneOptions,
@@ -53,10 +53,8 @@ from parcelfit.sim.mujoco.rig import SCATTER_CUT
 from parcelfit.sim.mujoco.scene import parse_scene_options
 from parcelfit.sim.params import parameter, parse_assignments
 
-SPIN = math.radians(90.0)
 MIN_COVERED = 0.95  # a convention's row needs this share of every type's scatter swept
 RESULTS_FILE = "catch-window.json"  # every run's (rotation [rad], transit [s]); reruns resume
-COLOURS = {"BW": "tab:orange", "KPBW": "tab:blue", "KP": "tab:green", "PB": "tab:red"}
 
 
 def _run(job: tuple[str, str, int, float, dict[str, float], list[str]]) -> tuple[float, float]:
@@ -85,7 +83,7 @@ def _key(job: tuple[str, str, int, float, dict[str, float], list[str]]) -> str:
 
 def _windows(offsets: np.ndarray, rotations: np.ndarray) -> list[tuple[float, float]]:
     """The runs of consecutive offsets [m] whose rotation exceeds 90 degrees, as (first, last)."""
-    caught = np.abs(rotations) > SPIN
+    caught = np.abs(rotations) > SPIN_ANGLE
     out: list[tuple[float, float]] = []
     for k in np.flatnonzero(caught):
         if out and k > 0 and caught[k - 1]:
@@ -100,12 +98,12 @@ def _scatter_share(offsets: np.ndarray, rotations: np.ndarray, sd: float) -> flo
     on a caught offset, each offset standing for the interval of half a step either side."""
     if sd <= 0:
         i = int(np.argmin(np.abs(offsets)))
-        return float(abs(rotations[i]) > SPIN)
+        return float(abs(rotations[i]) > SPIN_ANGLE)
     step = float(offsets[1] - offsets[0])
     dist = truncnorm(-SCATTER_CUT, SCATTER_CUT, loc=0.0, scale=sd)
     lo, hi = offsets - step / 2, offsets + step / 2
     mass = dist.cdf(hi) - dist.cdf(lo)
-    return float(np.sum(mass[np.abs(rotations) > SPIN]))
+    return float(np.sum(mass[np.abs(rotations) > SPIN_ANGLE]))
 
 
 CONVENTIONS = {
@@ -230,7 +228,7 @@ def main(argv: list[str] | None = None) -> int:
     (args.out / "figures").mkdir(exist_ok=True)
     fig, (ax_r, ax_t) = plt.subplots(2, 1, figsize=(7.5, 6.5), sharex=True)
     for i, cons in enumerate(args.types):
-        colour = COLOURS.get(cons)
+        colour = TYPE_COLOURS.get(cons)
         ax_r.plot(offsets * 1e3, np.degrees(np.abs(rot[i])), "o-", ms=3, color=colour, label=cons)
         ax_t.plot(offsets * 1e3, transit[i], "o-", ms=3, color=colour, label=cons)
     ax_r.axhline(90, color="0.4", lw=0.8, ls="--")

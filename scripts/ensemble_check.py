@@ -43,7 +43,13 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from parcelfit.runs import TestCase
-from parcelfit.sim.ensemble import EnsembleSummary, Member, simulate_ensemble, summarise
+from parcelfit.sim.ensemble import (
+    TYPE_COLOURS,
+    EnsembleSummary,
+    Member,
+    simulate_ensemble,
+    summarise,
+)
 from parcelfit.sim.mujoco import (
     MujocoSimulator,
     SceneOptions,
@@ -56,7 +62,6 @@ from parcelfit.sim.mujoco.scene import parse_scene_options
 from parcelfit.sim.params import parameter, parse_assignments
 
 TYPES = ("BW", "KPBW", "KP", "PB")
-COLOURS = {"BW": "tab:orange", "KPBW": "tab:blue", "KP": "tab:green", "PB": "tab:red"}
 
 
 def _deg(x: float) -> float:
@@ -88,8 +93,10 @@ def _figure(rig: Rig, setting: int, members: dict[str, list[Member]], path: Path
             if m.run is None:
                 continue
             tr = m.run.trajectory
-            top.plot(tr.x, tr.y, color=COLOURS.get(cons, "k"), lw=0.7, alpha=0.7)
-            head.plot(tr.x, np.degrees(np.unwrap(tr.theta)), color=COLOURS.get(cons, "k"), lw=0.7)
+            top.plot(tr.x, tr.y, color=TYPE_COLOURS.get(cons, "k"), lw=0.7, alpha=0.7)
+            head.plot(
+                tr.x, np.degrees(np.unwrap(tr.theta)), color=TYPE_COLOURS.get(cons, "k"), lw=0.7
+            )
         top.set_xlim(*rig.end.x)
         top.set_ylim(*rig.end.y)
         top.set_aspect("equal")

@@ -46,6 +46,8 @@ from parcelfit.runs import Run, TestCase, Trajectory
 from parcelfit.sim.protocol import SimResult, SimStatus
 
 SPIN_ANGLE = math.pi / 2  # rotation [rad] above which a run counts as a spin
+# one colour per bundled consignment type in the ensemble figures (matplotlib colour names)
+TYPE_COLOURS = {"BW": "tab:orange", "KPBW": "tab:blue", "KP": "tab:green", "PB": "tab:red"}
 
 
 def rotation(trajectory: Trajectory) -> float:
@@ -234,6 +236,7 @@ def simulate_ensemble(
 
 __all__ = [
     "SPIN_ANGLE",
+    "TYPE_COLOURS",
     "EnsembleShift",
     "EnsembleSummary",
     "Member",
