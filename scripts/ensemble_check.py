@@ -59,7 +59,7 @@ from parcelfit.sim.mujoco import (
 )
 from parcelfit.sim.mujoco.rig import Rig
 from parcelfit.sim.mujoco.scene import parse_scene_options
-from parcelfit.sim.params import parameter, parse_assignments
+from parcelfit.sim.params import SOFT, parameter, parse_assignments
 
 TYPES = ("BW", "KPBW", "KP", "PB")
 
@@ -181,7 +181,10 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "figures").mkdir(exist_ok=True)
     rigs = [load_rig(r) for r in args.rigs]  # bundled names or rig files
-    scene = SceneOptions(**parse_scene_options(args.scene))  # type: ignore[arg-type]
+    try:
+        scene = SceneOptions(**parse_scene_options(args.scene))  # type: ignore[arg-type]
+    except TypeError as exc:  # an unknown key
+        ap.error(f"--scene: {exc}; the keys are the fields of SceneOptions")
     bulges = {k.upper().replace("/", ""): v for k, v in parse_assignments(args.bulge).items()}
     consignments = {
         t: replace(c, bulge=(args.bulge_depth, bulges[t])) if t in bulges else c
@@ -247,11 +250,20 @@ def main(argv: list[str] | None = None) -> int:
                     *(
                         f"- {c}: "
                         + ", ".join(
-                            "failed" if m.rotation is None else f"{_deg(m.rotation):.0f}"
+                            f"failed ({m.status.value})"
+                            if m.rotation is None
+                            else f"{_deg(m.rotation):.0f}"
                             for m in ms
                         )
                         for c, ms in members.items()
                     ),
+                    "",
+                    "Time steps: "
+                    + ", ".join(
+                        f"{c} 1/{1 / scene.step_for(consignments[c].content_kind == SOFT, rig):.0f} s"
+                        for c in members
+                    )
+                    + ".",
                     "",
                 ]
                 for text, ok in _checks(rig_name, stats):
