@@ -299,13 +299,13 @@ def test_coulomb_belt_friction_warns_on_a_full_shell(caplog):
 
 def test_a_beam_breaks_by_interpolation_from_either_side_and_at_any_angle():
     from parcelfit.sim.mujoco.rig import Barrier
-    from parcelfit.sim.mujoco.simulator import _beam_margin, _crossing_time
+    from parcelfit.sim.mujoco.simulator import _Beam, _crossing_time
 
     beam = Barrier("LS", (0.0, 0.0), (1.0, 1.0))  # diagonal, 1.41 m long
     square = np.array([[0.0, 0.0], [0.1, 0.0], [0.1, 0.1], [0.0, 0.1]])
 
     def margin(shift):
-        return _beam_margin(square + np.asarray(shift), beam)
+        return _Beam(beam).margin(square + np.asarray(shift))
 
     # a square's nearest corner 0.1 / sqrt(2) m from the line, on either side
     assert margin((0.5, 0.3)) == pytest.approx(-0.1 / math.sqrt(2))
@@ -322,9 +322,9 @@ def test_a_beam_breaks_by_interpolation_from_either_side_and_at_any_angle():
 
 def test_the_beam_line_distance_and_the_belt_rectangles_test():
     from parcelfit.sim.mujoco.rig import Barrier
-    from parcelfit.sim.mujoco.simulator import _BeamLine, _Rectangles
+    from parcelfit.sim.mujoco.simulator import _Beam, _Rectangles
 
-    line = _BeamLine(Barrier("LS", (0.0, 0.0), (1.0, 1.0)))
+    line = _Beam(Barrier("LS", (0.0, 0.0), (1.0, 1.0)))
     # (1, 0) lies 1 / sqrt(2) m from the diagonal, on either side alike; the line is infinite
     assert line.distance(np.array([1.0, 0.0])) == pytest.approx(1 / math.sqrt(2))
     assert line.distance(np.array([0.0, 1.0])) == pytest.approx(1 / math.sqrt(2))

@@ -89,29 +89,29 @@ class Frames:
     triangles: np.ndarray
 
 
-def _beam_margin(xy: np.ndarray, barrier: Barrier) -> float | None:
-    """The beam's margin [m]: min(max s_i, -min s_i) over the signed distances s_i of the points
-    ``xy`` [m] over the beam's segment to its line; >= 0 when the beam is interrupted (points on
-    both sides), minus the nearest point's distance otherwise; None when no point is over it."""
-    a, b = np.asarray(barrier.start), np.asarray(barrier.end)
-    d = b - a
-    rel = xy - a
-    along = (rel @ d) / (d @ d)
-    over = (along >= 0) & (along <= 1)
-    if not over.any():
-        return None
-    side = (d[0] * rel[over, 1] - d[1] * rel[over, 0]) / math.hypot(*d)
-    return float(min(side.max(), -side.min()))
-
-
-class _BeamLine:
-    """A light barrier's line, for the distance [m] of a point from it."""
+class _Beam:
+    """A light barrier's beam, from its ends [m]: the margin of the packaging's points over it
+    and the distance of a point from its line (computed on every step near it)."""
 
     def __init__(self, barrier: Barrier) -> None:
-        a, b = np.asarray(barrier.start, dtype=float), np.asarray(barrier.end, dtype=float)
-        d = b - a
-        self.a = a
-        self.normal = np.array([-d[1], d[0]]) / math.hypot(*d)
+        self.a = np.asarray(barrier.start, dtype=float)
+        self.d = np.asarray(barrier.end, dtype=float) - self.a
+        self.d2 = float(self.d @ self.d)
+        self.length = math.hypot(*self.d)
+        self.normal = np.array([-self.d[1], self.d[0]]) / self.length
+
+    def margin(self, xy: np.ndarray) -> float | None:
+        """The beam's margin [m]: min(max s_i, -min s_i) over the signed distances s_i of the
+        points ``xy`` [m] over the beam's segment to its line; >= 0 when the beam is interrupted
+        (points on both sides), minus the nearest point's distance otherwise; None when no
+        point is over it."""
+        rel = xy - self.a
+        along = (rel @ self.d) / self.d2
+        over = (along >= 0) & (along <= 1)
+        if not over.any():
+            return None
+        side = (self.d[0] * rel[over, 1] - self.d[1] * rel[over, 0]) / self.length
+        return float(min(side.max(), -side.min()))
 
     def distance(self, point: np.ndarray) -> float:
         """|n . (point - a)|: the distance [m] of ``point`` [m] from the beam's (infinite) line."""
@@ -231,7 +231,7 @@ class MujocoSimulator:
         rest = points[scene.shell.top] - centre0
         n_top = len(rest)
         reach = float(np.max(np.linalg.norm(points - centre0, axis=1))) + BEAM_SKIP_MARGIN
-        beams = [_BeamLine(b) for b in rig.barriers]
+        beams = [_Beam(b) for b in rig.barriers]
         _set_velocity(model, data, np.asarray(scene.start_velocity))
 
         friction = _FrictionSwitch(
@@ -292,13 +292,13 @@ class MujocoSimulator:
                     break
             if step >= stop_at:
                 break
-            for k, barrier in enumerate(rig.barriers):
+            for k, beam in enumerate(beams):
                 if crossed[k] is not None or (k == 1 and crossed[0] is None):
                     continue
-                if beams[k].distance(c) > reach:  # no vertex near the beam's line
+                if beam.distance(c) > reach:  # no vertex near the beam's line
                     clear[k] = None
                     continue
-                margin = _beam_margin(verts[:, :2], barrier)
+                margin = beam.margin(verts[:, :2])
                 if margin is None:
                     clear[k] = None
                 elif margin < 0:
