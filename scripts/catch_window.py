@@ -61,10 +61,10 @@ def _run(job: tuple[str, str, int, float, dict[str, float], list[str]]) -> tuple
     """(net rotation [rad], transit [s] or nan) of one start moved ``across`` [m]."""
     rig_ref, cons, setting, across, params, scene_args = job
     rig = load_rig(rig_ref)
-    u = rig.surface(rig.start.surface).unit()
     scene = SceneOptions(**parse_scene_options(scene_args))  # type: ignore[arg-type]
     x0, y0, h0 = scene.start_offset
-    scene = replace(scene, start_offset=(x0 - across * u[1], y0 + across * u[0], h0))
+    dx, dy = rig.start_shift(0.0, across)
+    scene = replace(scene, start_offset=(x0 + dx, y0 + dy, h0))
     sim = MujocoSimulator(SimOptions(scene=scene), rigs={rig.name: rig})
     result = sim.run(params, TestCase(rig.name, cons, setting))
     if result.run is None:
@@ -99,10 +99,7 @@ def _scatter_share(offsets: np.ndarray, rotations: np.ndarray, sd: float) -> flo
     if sd <= 0:
         i = int(np.argmin(np.abs(offsets)))
         return float(abs(rotations[i]) > SPIN_ANGLE)
-    step = float(offsets[1] - offsets[0])
-    dist = truncnorm(-SCATTER_CUT, SCATTER_CUT, loc=0.0, scale=sd)
-    lo, hi = offsets - step / 2, offsets + step / 2
-    mass = dist.cdf(hi) - dist.cdf(lo)
+    mass = _scatter_mass(offsets, sd, 0.0)
     return float(np.sum(mass[np.abs(rotations) > SPIN_ANGLE]))
 
 

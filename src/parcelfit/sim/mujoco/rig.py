@@ -173,12 +173,13 @@ class Rig:
             float(np.clip(rng.standard_normal(), -SCATTER_CUT, SCATTER_CUT)) * sd
             for sd in self.start.scatter
         )
+        return (*self.start_shift(along, across), heading)
+
+    def start_shift(self, along: float, across: float) -> tuple[float, float]:
+        """The rig-frame offset (dx, dy) [m] of a start moved ``along`` and ``across`` [m] its
+        surface (across: to the left of the surface's direction)."""
         u = self.surface(self.start.surface).unit()
-        return (
-            along * u[0] - across * u[1],
-            along * u[1] + across * u[0],
-            heading,
-        )
+        return along * u[0] - across * u[1], along * u[1] + across * u[0]
 
     def drive_speeds(self, setting: int) -> Mapping[str, float]:
         """Surface speed [m/s] of every drive at a speed setting."""
