@@ -97,8 +97,7 @@ class _Beam:
         self.a = np.asarray(barrier.start, dtype=float)
         self.d = np.asarray(barrier.end, dtype=float) - self.a
         self.d2 = float(self.d @ self.d)
-        self.length = math.hypot(*self.d)
-        self.normal = np.array([-self.d[1], self.d[0]]) / self.length
+        self.normal = np.array([-self.d[1], self.d[0]]) / math.sqrt(self.d2)
 
     def margin(self, xy: np.ndarray) -> float | None:
         """The beam's margin [m]: min(max s_i, -min s_i) over the signed distances s_i of the
@@ -110,7 +109,7 @@ class _Beam:
         over = (along >= 0) & (along <= 1)
         if not over.any():
             return None
-        side = (self.d[0] * rel[over, 1] - self.d[1] * rel[over, 0]) / self.length
+        side = rel[over] @ self.normal
         return float(min(side.max(), -side.min()))
 
     def distance(self, point: np.ndarray) -> float:
