@@ -59,7 +59,7 @@ from parcelfit.sim.mujoco import (
 )
 from parcelfit.sim.mujoco.rig import Rig
 from parcelfit.sim.mujoco.scene import parse_scene_options
-from parcelfit.sim.params import SOFT, parameter, parse_assignments
+from parcelfit.sim.params import parameter, parse_assignments
 
 TYPES = ("BW", "KPBW", "KP", "PB")
 
@@ -260,7 +260,7 @@ def main(argv: list[str] | None = None) -> int:
                     "",
                     "Time steps: "
                     + ", ".join(
-                        f"{c} 1/{1 / scene.step_for(consignments[c].content_kind == SOFT, rig):.0f} s"
+                        f"{c} 1/{1 / scene.step_for(consignments[c].soft, rig):.0f} s"
                         for c in members
                     )
                     + ".",

@@ -63,7 +63,7 @@ from parcelfit.schema import Choice, FileModel, Number, Text, Whole, keys_in, or
 from parcelfit.sim.executors import make_executor
 from parcelfit.sim.factory import BELT_FRICTION
 from parcelfit.sim.mujoco import Consignment, MujocoSimulator, Rig, SceneOptions, SimOptions
-from parcelfit.sim.params import CATALOGUE, MAX_TIMESTEP, MIN_TIMESTEP, SOFT
+from parcelfit.sim.params import CATALOGUE, MAX_TIMESTEP, MIN_TIMESTEP
 
 
 @dataclass(frozen=True)
@@ -154,7 +154,7 @@ def _twin_run(job: TwinJob) -> tuple[Run, float]:
     params = _specimen(job.truth, rng, s)
     drives = sorted({d for sp in rig.speeds.values() for d in sp})
     scene = SceneOptions(
-        timestep=s.step_for(cons.content_kind == SOFT),
+        timestep=s.step_for(cons.soft),
         belt_friction=s.real_belt_friction,
         spacing=s.real_spacing,
         soft_shell_spacing=s.real_soft_spacing,

@@ -55,6 +55,11 @@ class Consignment:
     # this type's own defaults, (name, value in catalogue units), see the module docstring
     parameters: tuple[tuple[str, float], ...] = ()
 
+    @property
+    def soft(self) -> bool:
+        """Whether the content is soft (a 3-D flex, the polybag's) rather than a rigid box."""
+        return self.content_kind == SOFT
+
     def parameter_values(
         self,
         user_values: Mapping[str, float] | None = None,

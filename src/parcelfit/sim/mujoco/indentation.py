@@ -25,7 +25,6 @@ from parcelfit.errors import ParcelfitError
 from parcelfit.sim.mujoco.consignment import Consignment
 from parcelfit.sim.mujoco.rig import Rig, parse_rig
 from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
-from parcelfit.sim.params import RIGID
 
 
 @dataclass(frozen=True)
@@ -88,7 +87,7 @@ def indentation_test(
     options: SceneOptions | None = None,
 ) -> Indentation:
     """Measure the realised stiffness [N/m] of the plate/packaging and content/packaging faces."""
-    if consignment.content_kind != RIGID:
+    if consignment.soft:
         raise ParcelfitError(
             "the indentation test presses a rigid content", fix="use a rigid-content consignment"
         )

@@ -31,7 +31,7 @@ from parcelfit.sim.mujoco.consignment import Consignment
 from parcelfit.sim.mujoco.contact import ContactParams, contact_params
 from parcelfit.sim.mujoco.rig import Rig, Surface
 from parcelfit.sim.mujoco.shell import ShellMesh, pillow_shell
-from parcelfit.sim.params import MAX_TIMESTEP, MIN_TIMESTEP, SOFT, STICK_SPEED
+from parcelfit.sim.params import MAX_TIMESTEP, MIN_TIMESTEP, STICK_SPEED
 
 SLAB = 0.02  # half-thickness of belt and strip boxes [m]
 CONTACT_GAP = 0.0005  # clearance between content and shell, and under the parcel at the start [m]
@@ -351,7 +351,7 @@ def build_scene(
     cL, cW, cH = consignment.content
     r = opt.vertex_radius
     half_height = cH / 2 + r + CONTACT_GAP
-    soft = consignment.content_kind == SOFT
+    soft = consignment.soft
     shell = pillow_shell(
         (L, W),
         (cL, cW),

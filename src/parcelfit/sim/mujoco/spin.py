@@ -86,7 +86,7 @@ def spin_test(
     about the vertical and follow its content: in free flight (``free``: gravity off, lifted at
     0.3 m/s) for ``duration`` s, else until it stops turning (at most 2 s). SI ``params``
     override the defaults."""
-    if consignment.content_kind != "rigid":
+    if consignment.soft:
         raise ParcelfitError("the spin test needs a rigid content (it follows the content body)")
     with CountedWarnings():  # MuJoCo's per-step notes (e.g. on interpolated shells) counted
         return _spin_test(consignment, w0, free, duration, params, options, settle)
