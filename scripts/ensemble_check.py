@@ -168,6 +168,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--out", type=Path, default=Path("docs"))
     ap.add_argument(
+        "--wall-limit",
+        type=float,
+        default=SimOptions.wall_limit,
+        help="wall-clock limit per run [s] (fine meshes and steps need more than the default)",
+    )
+    ap.add_argument(
         "--scene",
         nargs="*",
         default=[],
@@ -178,6 +184,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--bulge", nargs="*", default=[], metavar="TYPE=FOOTPRINT")
     ap.add_argument("--bulge-depth", type=float, default=0.004, help="[m]")
     args = ap.parse_args(argv)
+    if not args.wall_limit > 0:
+        ap.error(f"--wall-limit must be positive [s], got {args.wall_limit:g}")
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "figures").mkdir(exist_ok=True)
     rigs = [load_rig(r) for r in args.rigs]  # bundled names or rig files
@@ -192,7 +200,9 @@ def main(argv: list[str] | None = None) -> int:
     }
     user = parse_assignments(args.set)
     sim = MujocoSimulator(
-        SimOptions(scene=scene), rigs={r.name: r for r in rigs}, consignments=consignments
+        SimOptions(scene=scene, wall_limit=args.wall_limit),
+        rigs={r.name: r for r in rigs},
+        consignments=consignments,
     )
     seeds = list(range(args.placements))
     lines = [
@@ -207,6 +217,7 @@ def main(argv: list[str] | None = None) -> int:
             if v
         )
         + (f" --bulge-depth {args.bulge_depth}" if args.bulge else "")
+        + (f" --wall-limit {args.wall_limit:g}" if args.wall_limit != SimOptions.wall_limit else "")
         + "`: "
         "every consignment type at its default parameters, placement seeds "
         f"0-{args.placements - 1} (the rig's hand-placement scatter). Rotation is the net "
