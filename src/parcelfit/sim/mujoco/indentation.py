@@ -38,25 +38,51 @@ class Indentation:
     n_face: int
 
 
-def plate_rig(material: str) -> Rig:
+def plate_rig(material: str, tile: float | None = None) -> Rig:
+    """A still 1 m x 1 m plate of ``material`` ("belt" or "metal") centred at the origin, as one
+    surface named ``plate`` or, with ``tile`` [m], as n x n touching square tiles
+    ``plate_<i>_<j>`` of side 1/n m, n = round(1 / tile): physically the same plate, but MuJoCo
+    meets each tile as its own contact pair (at most 50 contacts each with an interpolated
+    shell), so a model that depends on the split is not converged in it."""
+    if tile is None:
+        tiles = [("plate", 0.0, 0.0, 1.0)]
+    else:
+        if not 0.01 <= tile <= 1.0:
+            raise ParcelfitError(
+                f"plate tile must lie in [10, 1000] mm, got {tile * 1e3:g} mm",
+                fix="give the tile side in metres, e.g. 0.05",
+            )
+        n = max(1, round(1.0 / tile))
+        side = 1.0 / n
+        tiles = [
+            (f"plate_{i}_{j}", (i - (n - 1) / 2) * side, (j - (n - 1) / 2) * side, side)
+            for i in range(n)
+            for j in range(n)
+        ]
     return parse_rig(
         {
             "name": "plate",
             "speeds": {1: {"none": 0.0}},
             "surfaces": [
                 {
-                    "name": "plate",
+                    "name": name,
                     "type": "belt",
                     "material": material,
-                    "centre": [0, 0],
-                    "length": 1.0,
-                    "width": 1.0,
+                    "centre": [x, y],
+                    "length": side,
+                    "width": side,
                     "heading": 0,
                     "top": 0.0,
                     "drive": "none",
                 }
+                for name, x, y, side in tiles
             ],
-            "start": {"position": [0, 0], "heading": 0, "surface": "plate"},
+            # the parcel starts at the origin, on the tile nearest to it (all lie at one height)
+            "start": {
+                "position": [0, 0],
+                "heading": 0,
+                "surface": min(tiles, key=lambda t: t[1] ** 2 + t[2] ** 2)[0],
+            },
             "light_barriers": [
                 {"name": "a", "from": [0.4, -1], "to": [0.4, 1]},
                 {"name": "b", "from": [0.45, -1], "to": [0.45, 1]},

@@ -57,7 +57,9 @@ from parcelfit.sim.mujoco.simulator import add_rigid_velocity
 class SpinTest:
     """Outcome of one spin test: the kick w0 [rad/s], the content's angular velocity left at the
     end [rad/s] and its fraction of w0, the turn [rad] and the time it took [s], and for the
-    spin-down the rigid Coulomb estimate of the turn [rad] (None in free flight)."""
+    spin-down (None in free flight) the rigid Coulomb estimate of the turn [rad], the lever
+    [m] (the mean distance of the plate's contacts from the content's centre at rest, weighted
+    by their normal forces: sum f r / sum f) and how many contacts the plate had then."""
 
     w0: float
     w_end: float
@@ -65,6 +67,8 @@ class SpinTest:
     turn: float
     time: float
     coulomb_turn: float | None
+    lever: float | None = None
+    plate_contacts: int | None = None
 
 
 def _yaw(quat: np.ndarray) -> float:
@@ -81,15 +85,17 @@ def spin_test(
     params: Mapping[str, float] | None = None,
     options: SceneOptions | None = None,
     settle: float = 0.3,
+    plate_tile: float | None = None,
 ) -> SpinTest:
     """Kick the parcel (settled ``settle`` s on a still belt-material plate) with w0 [rad/s]
     about the vertical and follow its content: in free flight (``free``: gravity off, lifted at
     0.3 m/s) for ``duration`` s, else until it stops turning (at most 2 s). SI ``params``
-    override the defaults."""
+    override the defaults. ``plate_tile`` [m] builds the plate of square tiles of about that
+    side (`indentation.plate_rig`): physically the same plate, numerically more contact pairs."""
     if consignment.soft:
         raise ParcelfitError("the spin test needs a rigid content (it follows the content body)")
     with CountedWarnings():  # MuJoCo's per-step notes (e.g. on interpolated shells) counted
-        return _spin_test(consignment, w0, free, duration, params, options, settle)
+        return _spin_test(consignment, w0, free, duration, params, options, settle, plate_tile)
 
 
 @dataclass(frozen=True)
@@ -110,11 +116,13 @@ def _settled(
     params: Mapping[str, float] | None,
     options: SceneOptions | None,
     settle: float,
+    plate_tile: float | None = None,
 ) -> tuple[mujoco.MjModel, mujoco.MjData, dict[str, float], Callable[[], None]]:
-    """The parcel settled ``settle`` s on a still belt-material plate, the SI parameters and
-    the step function (MuJoCo's step, after the Coulomb belt friction where the scene has it)."""
+    """The parcel settled ``settle`` s on a still belt-material plate (of tiles about
+    ``plate_tile`` [m] wide if given), the SI parameters and the step function (MuJoCo's step,
+    after the Coulomb belt friction where the scene has it)."""
     full = consignment.parameter_values(si_values=dict(params or {}))
-    scene = build_scene(plate_rig("belt"), consignment, full, 1, options)
+    scene = build_scene(plate_rig("belt", plate_tile), consignment, full, 1, options)
     model = mujoco.MjModel.from_xml_string(scene.xml)
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
@@ -181,20 +189,26 @@ def _spin_test(
     params: Mapping[str, float] | None,
     options: SceneOptions | None,
     settle: float,
+    plate_tile: float | None,
 ) -> SpinTest:
-    model, data, _, step = _settled(consignment, params, options, settle)
+    model, data, _, step = _settled(consignment, params, options, settle, plate_tile)
     content = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "content")
     centre = data.xpos[content].copy()
-    coulomb = None
+    coulomb = lever = None
+    n_plate = None
     if not free:
         belt = [g for g in range(model.ngeom) if model.geom(g).name.startswith("plate")]
         mu = float(model.geom_friction[belt[0], 0])
-        moment = 0.0
+        moment = load = 0.0
+        n_plate = 0
         for i in range(data.ncon):
             if data.contact[i].geom[0] in belt or data.contact[i].geom[1] in belt:
                 f = np.zeros(6)
                 mujoco.mj_contactForce(model, data, i, f)
                 moment += f[0] * float(np.hypot(*(data.contact[i].pos - centre)[:2]))
+                load += f[0]
+                n_plate += 1
+        lever = moment / load if load > 0 else None
         inertia = model.body_inertia[content] @ (data.xmat[content].reshape(3, 3)[2] ** 2)
         for b in range(1, model.nbody):
             if b != content:
@@ -215,7 +229,7 @@ def _spin_test(
         if not free and t > 0.01 and abs(data.cvel[content][2]) < 0.01:
             break
     w_end = float(data.cvel[content][2])
-    return SpinTest(w0, w_end, w_end / w0, turn, t, coulomb)
+    return SpinTest(w0, w_end, w_end / w0, turn, t, coulomb, lever, n_plate)
 
 
 __all__ = ["SlideTest", "SpinTest", "slide_test", "spin_test"]
