@@ -656,6 +656,10 @@ BAD_INPUTS = {
         lambda p: _study_sim(p, belt_friction="sticky"),
         r"simulator\.belt_friction: unknown belt friction law 'sticky'.*mujoco, coulomb",
     ),
+    "shell dof floppy": (
+        lambda p: _study_sim(p, shell_dof="floppy"),
+        r"simulator\.shell_dof: unknown shell degrees of freedom 'floppy'.*auto, full",
+    ),
     "slip speed below the stick speed": (
         lambda p: _study_sim(p, stick_speed=0.1, slip_speed=0.05),
         r"simulator\.slip_speed: slip_speed \(0\.05 m/s\) must exceed stick_speed \(0\.1 m/s\)",

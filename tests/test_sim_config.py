@@ -509,6 +509,32 @@ def test_belt_friction_from_a_study_files_simulator_section_and_a_twins_settings
         TwinSettingsSection(real_belt_friction="dry")
 
 
+def test_the_shells_degrees_of_freedom_from_a_study_file_and_the_simulate_command(tmp_path):
+    """``shell_dof`` in a study's simulator section (and `parcelfit simulate --shell-dof`)
+    reaches the scene: the full shell gets one degree of freedom per vertex, the default stays
+    ``auto`` (quadratic around a rigid content), and an unknown value is refused."""
+    from typer.testing import CliRunner
+
+    from parcelfit.cli import app
+    from parcelfit.sim.factory import SimulatorConfig, SimulatorSection, make_simulator
+
+    full = SimulatorSection(backend="mujoco", rig="E3", consignment="KPBW", shell_dof="full")
+    sim = make_simulator(full.to_config(tmp_path))
+    assert sim.options.scene.shell_dof == "full"  # type: ignore[attr-defined]
+    assert sim.options.scene.shell_for(soft=False) == "full"  # type: ignore[attr-defined]
+    default = SimulatorSection(backend="mujoco", rig="E3", consignment="KPBW")
+    assert "shell_dof" not in dict(default.to_config(tmp_path))
+    assert make_simulator(default.to_config(tmp_path)).options.scene.shell_dof == "auto"  # type: ignore[attr-defined]
+    with pytest.raises(ParcelfitError, match="unknown shell_dof 'floppy'"):
+        SimulatorConfig("mujoco", rig="E3", consignment="KPBW", shell_dof="floppy")
+    result = CliRunner().invoke(
+        app, ["simulate", "--shell-dof", "floppy", "--out", str(tmp_path / "r.csv")]
+    )
+    assert result.exit_code != 0
+    assert "unknown shell_dof 'floppy'" in result.output
+    assert not (tmp_path / "r.csv").exists()
+
+
 def test_the_static_friction_law_from_a_study_files_simulator_section(tmp_path):
     from parcelfit.sim.factory import SimulatorSection, make_simulator
 

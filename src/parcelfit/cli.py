@@ -556,6 +556,15 @@ def simulate(
             "coulomb (Coulomb forces at the contact points; see the simulator's README, Sliding).",
         ),
     ] = "mujoco",
+    shell_dof: Annotated[
+        str,
+        typer.Option(
+            help="The packaging shell's degrees of freedom: auto (quadratic around a rigid "
+            "content, full around a soft one), full (one per vertex; give a fine --timestep, "
+            "e.g. 0.000208333 for 1/4800 s), quadratic or trilinear (see the simulator's "
+            "README, Spin).",
+        ),
+    ] = "auto",
     wall_limit: Annotated[float, typer.Option(help="Wall-clock limit [s].")] = 600.0,
     seed: Annotated[
         int | None,
@@ -596,6 +605,7 @@ def simulate(
         timestep=timestep,
         spacing=spacing,
         membrane_cap=membrane_cap,
+        shell_dof=shell_dof,
         belt_friction=belt_friction,
         wall_limit=wall_limit,
     )

@@ -2,10 +2,11 @@
 file (`SimulatorSection`, checked on load), or a `SimulatorConfig` made in code.
 
 The section's ``backend`` chooses: ``mujoco`` (a bundled or user rig and consignment, optional
-``timestep`` [s], ``spacing`` [m], ``membrane_cap`` [N/m], ``belt_friction`` (``mujoco`` or
-``coulomb``, see `SceneOptions`), ``stick_speed`` and ``slip_speed`` [m/s] (how the static
-friction offsets fade with the slip speed, see `SceneOptions`), ``rig_timesteps`` (a time step
-[s] by rig name) and ``wall_limit`` [s]),
+``timestep`` [s], ``spacing`` [m], ``membrane_cap`` [N/m], ``shell_dof`` (``auto``, ``full``,
+``quadratic`` or ``trilinear``: the packaging shell's degrees of freedom, see `SceneOptions`),
+``belt_friction`` (``mujoco`` or ``coulomb``, see `SceneOptions`), ``stick_speed`` and
+``slip_speed`` [m/s] (how the static friction offsets fade with the slip speed, see
+`SceneOptions`), ``rig_timesteps`` (a time step [s] by rig name) and ``wall_limit`` [s]),
 ``external`` (a solver description file run as a command) or ``python`` (``factory:
 package.module:callable``, imported and called: such a file runs code). A new named backend
 adds its keys to `SimulatorSection` and `SimulatorConfig` and its construction to
@@ -30,6 +31,7 @@ from parcelfit.sim.protocol import Simulator
 
 BACKENDS = ("mujoco", "external", "python")
 BELT_FRICTION = ("mujoco", "coulomb")
+SHELL_DOFS = ("auto", "full", "quadratic", "trilinear")
 _SETTINGS = (
     "backend",
     "rig",
@@ -37,6 +39,7 @@ _SETTINGS = (
     "timestep",
     "spacing",
     "membrane_cap",
+    "shell_dof",
     "belt_friction",
     "stick_speed",
     "slip_speed",
@@ -60,8 +63,8 @@ def _check_needs(backend: str, settings: Any) -> None:
 class SimulatorConfig(Mapping[str, Any]):
     """A simulator's configuration (SI): ``backend`` and what it needs (mujoco: ``rig`` and
     ``consignment``, bundled names or ``.yaml`` paths, optional ``timestep`` [s], ``spacing``
-    [m], ``membrane_cap`` [N/m], ``belt_friction``, ``stick_speed`` and ``slip_speed`` [m/s],
-    ``rig_timesteps`` (rig name -> time step [s]); external: the solver description file
+    [m], ``membrane_cap`` [N/m], ``shell_dof``, ``belt_friction``, ``stick_speed`` and
+    ``slip_speed`` [m/s], ``rig_timesteps`` (rig name -> time step [s]); external: the solver description file
     ``external``; python: ``factory``), optional ``wall_limit`` [s] per simulation, and
     ``folder``: the folder of the file it came from (an external solver's runs go into
     ``folder/.external-runs``).
@@ -75,6 +78,7 @@ class SimulatorConfig(Mapping[str, Any]):
     timestep: float | None = None
     spacing: float | None = None
     membrane_cap: float | None = None
+    shell_dof: str | None = None
     belt_friction: str | None = None
     stick_speed: float | None = None
     slip_speed: float | None = None
@@ -90,6 +94,10 @@ class SimulatorConfig(Mapping[str, Any]):
                 f"unknown simulator backend {self.backend!r}", fix=f"use one of {list(BACKENDS)}"
             )
         _check_needs(self.backend, self)
+        if self.shell_dof is not None and self.shell_dof not in SHELL_DOFS:
+            raise ParcelfitError(
+                f"unknown shell_dof {self.shell_dof!r}", fix=f"use one of {list(SHELL_DOFS)}"
+            )
 
     def __getitem__(self, key: str) -> Any:
         value = getattr(self, key, None) if key in _SETTINGS else None
@@ -106,8 +114,8 @@ class SimulatorConfig(Mapping[str, Any]):
 
 class SimulatorSection(FileModel):
     """``simulator`` of a study or screen file: the backend and what it needs (``timestep``
-    [s], ``spacing`` [m], ``membrane_cap`` [N/m], ``belt_friction``, ``stick_speed`` and
-    ``slip_speed`` [m/s], ``rig_timesteps`` (rig name -> time step [s]), ``wall_limit`` [s])."""
+    [s], ``spacing`` [m], ``membrane_cap`` [N/m], ``shell_dof``, ``belt_friction``,
+    ``stick_speed`` and ``slip_speed`` [m/s], ``rig_timesteps`` (rig name -> time step [s]), ``wall_limit`` [s])."""
 
     backend: Annotated[str, Choice(BACKENDS, what="backend")]
     rig: Annotated[str | None, Text()] = None
@@ -115,6 +123,7 @@ class SimulatorSection(FileModel):
     timestep: Annotated[float | None, Number(unit="s", ge=1e-9)] = None
     spacing: Annotated[float | None, Number(unit="m", ge=1e-9)] = None
     membrane_cap: Annotated[float | None, Number(unit="N/m", ge=1e-9)] = None
+    shell_dof: Annotated[str | None, Choice(SHELL_DOFS, what="shell degrees of freedom")] = None
     belt_friction: Annotated[str | None, Choice(BELT_FRICTION, what="belt friction law")] = None
     stick_speed: Annotated[float | None, Number(unit="m/s", ge=1e-9)] = None
     slip_speed: Annotated[float | None, Number(unit="m/s", ge=1e-9)] = None
@@ -171,8 +180,9 @@ def make_simulator(config: SimulatorConfig) -> Simulator:
             for k in ("timestep", "spacing", "membrane_cap", "stick_speed", "slip_speed")
             if k in config
         }
-        if "belt_friction" in config:
-            numerics["belt_friction"] = config["belt_friction"]
+        for key in ("belt_friction", "shell_dof"):
+            if key in config:
+                numerics[key] = config[key]
         if "rig_timesteps" in config:
             numerics["rig_timesteps"] = {k: float(v) for k, v in config["rig_timesteps"].items()}
         options = SimOptions(
