@@ -28,6 +28,7 @@ every type, ``--bulge TYPE=FOOTPRINT`` gives a type's packaging a bulging bottom
 from __future__ import annotations
 
 import argparse
+import itertools
 import math
 import os
 import sys
@@ -47,6 +48,7 @@ from parcelfit.sim.ensemble import (
     TYPE_COLOURS,
     EnsembleSummary,
     Member,
+    paired_order,
     simulate_ensemble,
     summarise,
 )
@@ -156,6 +158,25 @@ def _checks(rig: str, stats: dict[str, EnsembleSummary]) -> list[tuple[str, bool
     if rig.startswith("E1") and "BW" in have and len(have) >= 2:
         fastest = min(have, key=lambda c: stats[c].transit_median)
         out.append((f"BW fastest on E1 (fastest: {fastest})", fastest == "BW"))
+    return out
+
+
+def _paired_lines(rig: str, members: dict[str, list[Member]]) -> list[str]:
+    """On E3, seed by seed, how often each type of the published order turns further than the
+    next (`parcelfit.sim.ensemble.paired_order`): information beside the medians' check."""
+    order = [c for c in ("BW", "KPBW", "KP") if c in members]
+    if not rig.startswith("E3") or len(order) < 2:
+        return []
+    out = []
+    for further, less in itertools.pairwise(order):
+        po = paired_order(members[less], members[further])
+        p = "-" if math.isnan(po.p_value) else f"{po.p_value:.2g}"
+        out.append(
+            f"- seed by seed, {further} turns further than {less} at {po.b_further} of "
+            f"{po.n_pairs} placements, less at {po.a_further}, as far (within 0.5 degrees) at "
+            f"{po.ties}; sign test p = {p}; median paired difference "
+            f"{_deg(po.median_difference):+.1f} degrees"
+        )
     return out
 
 
@@ -281,6 +302,7 @@ def main(argv: list[str] | None = None) -> int:
                     mark = "met" if ok else "NOT met"
                     failures += not ok
                     lines.append(f"- {text}: **{mark}**")
+                lines += _paired_lines(rig_name, members)
                 lines.append("")
     lines.append(
         f"Wall time {time.perf_counter() - t0:.0f} s on {args.workers} processes "

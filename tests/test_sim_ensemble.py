@@ -15,7 +15,7 @@ from parcelfit.cli import app
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import TestCase, Trajectory, read_trajectory
 from parcelfit.sim import SimStatus
-from parcelfit.sim.ensemble import Member, ensemble_shift, rotation, summarise
+from parcelfit.sim.ensemble import Member, ensemble_shift, paired_order, rotation, summarise
 from parcelfit.sim.mujoco import MujocoSimulator, SceneOptions, SimOptions, load_rig
 from parcelfit.sim.mujoco.rig import SCATTER_CUT, parse_rig
 from parcelfit.sim.mujoco.simulator import _FrictionSwitch
@@ -128,6 +128,27 @@ def _member(seed, rot_deg, transit):
         run=None,
         wall_time=1.0,
     )
+
+
+def test_paired_order_counts_matched_placements_and_gives_the_sign_test():
+    """Seed by seed: b further at 3 seeds, a at 1, one tie (0.2 degrees), a failed run and a
+    seed only b has left out; the two-sided sign test of 3 of 4 is 0.625."""
+    a = [_member(0, 20, 1.2), _member(1, 25, 1.2), _member(2, 30, 1.2), _member(3, 110, 1.5)]
+    a += [_member(4, 22, 1.2), _member(5, None, None)]
+    b = [_member(0, 22, 1.2), _member(1, 25.2, 1.2), _member(2, 29, 1.2), _member(3, 200, 1.6)]
+    b += [_member(4, 23, 1.2), _member(5, 40, 1.2), _member(9, 100, 1.4)]
+    order = paired_order(a, b)
+    assert (order.n_pairs, order.b_further, order.a_further, order.ties) == (5, 3, 1, 1)
+    assert order.p_value == pytest.approx(0.625)
+    assert math.degrees(order.median_difference) == pytest.approx(1.0)
+    reverse = paired_order(b, a)
+    assert (reverse.b_further, reverse.a_further) == (1, 3)
+    tied = paired_order(a[:2], a[:2])
+    assert tied.ties == 2 and math.isnan(tied.p_value)
+    twenty = paired_order(
+        [_member(i, 20, 1.2) for i in range(20)], [_member(i, 22, 1.2) for i in range(20)]
+    )
+    assert twenty.p_value == pytest.approx(2 * 0.5**20)
 
 
 def test_ensemble_summary_statistics():
