@@ -44,13 +44,12 @@ from parcelfit.runs import TestCase
 from parcelfit.sim.ensemble import SPIN_ANGLE, TYPE_COLOURS, rotation
 from parcelfit.sim.mujoco import (
     MujocoSimulator,
-    SceneOptions,
     SimOptions,
     load_consignment,
     load_rig,
 )
 from parcelfit.sim.mujoco.rig import SCATTER_CUT
-from parcelfit.sim.mujoco.scene import parse_scene_options
+from parcelfit.sim.mujoco.scene import scene_options
 from parcelfit.sim.params import parameter, parse_assignments
 
 MIN_COVERED = 0.95  # a convention's row needs this share of every type's scatter swept
@@ -61,7 +60,7 @@ def _run(job: tuple[str, str, int, float, dict[str, float], list[str]]) -> tuple
     """(net rotation [rad], transit [s] or nan) of one start moved ``across`` [m]."""
     rig_ref, cons, setting, across, params, scene_args = job
     rig = load_rig(rig_ref)
-    scene = SceneOptions(**parse_scene_options(scene_args))  # type: ignore[arg-type]
+    scene = scene_options(scene_args)
     x0, y0, h0 = scene.start_offset
     dx, dy = rig.start_shift(0.0, across)
     scene = replace(scene, start_offset=(x0 + dx, y0 + dy, h0))

@@ -43,6 +43,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from parcelfit.errors import ParcelfitError
 from parcelfit.runs import TestCase
 from parcelfit.sim.ensemble import (
     TYPE_COLOURS,
@@ -54,13 +55,12 @@ from parcelfit.sim.ensemble import (
 )
 from parcelfit.sim.mujoco import (
     MujocoSimulator,
-    SceneOptions,
     SimOptions,
     load_consignment,
     load_rig,
 )
 from parcelfit.sim.mujoco.rig import Rig
-from parcelfit.sim.mujoco.scene import parse_scene_options
+from parcelfit.sim.mujoco.scene import scene_options
 from parcelfit.sim.params import parameter, parse_assignments
 
 TYPES = ("BW", "KPBW", "KP", "PB")
@@ -211,9 +211,9 @@ def main(argv: list[str] | None = None) -> int:
     (args.out / "figures").mkdir(exist_ok=True)
     rigs = [load_rig(r) for r in args.rigs]  # bundled names or rig files
     try:
-        scene = SceneOptions(**parse_scene_options(args.scene))  # type: ignore[arg-type]
-    except TypeError as exc:  # an unknown key
-        ap.error(f"--scene: {exc}; the keys are the fields of SceneOptions")
+        scene = scene_options(args.scene)
+    except ParcelfitError as exc:
+        ap.error(f"--scene: {exc}")
     bulges = {k.upper().replace("/", ""): v for k, v in parse_assignments(args.bulge).items()}
     consignments = {
         t: replace(c, bulge=(args.bulge_depth, bulges[t])) if t in bulges else c

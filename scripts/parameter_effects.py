@@ -53,7 +53,7 @@ from parcelfit.sim.mujoco import (
     load_consignment,
     load_rig,
 )
-from parcelfit.sim.mujoco.scene import parse_scene_options
+from parcelfit.sim.mujoco.scene import scene_options
 from parcelfit.sim.params import CATALOGUE
 
 PUBLISHED_E3 = ("k_CoPa", "k_MePa", "mu_d_BePa", "mu_d_MePa", "mu_s_MePa", "E_Pa")
@@ -197,7 +197,7 @@ def main(argv: list[str] | None = None) -> int:
     defaults = cons.parameter_values()
     spec = {p.name: p for p in CATALOGUE}
     seeds = list(range(args.placements))
-    scene = SceneOptions(**parse_scene_options(args.scene))  # type: ignore[arg-type]
+    scene = scene_options(args.scene)
     jobs: dict[tuple[str, str, int], tuple[dict[str, float], TestCase, int, SceneOptions]] = {}
     for name in args.params:
         r = spec[name].range_for(kind)

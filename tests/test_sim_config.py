@@ -492,6 +492,18 @@ def test_scene_options_read_from_key_value_texts():
     assert parse_scene_options(["shell_dof=a,b"]) == {"shell_dof": "a,b"}
 
 
+def test_scene_options_from_texts_refuse_an_unknown_key_and_a_bad_value():
+    from parcelfit.sim.mujoco.scene import SceneOptions, scene_options
+
+    opt = scene_options(["spacing=0.06", "timestep=1/4800"])
+    assert opt == SceneOptions(spacing=0.06, timestep=1 / 4800)
+    assert scene_options([]) == SceneOptions()
+    with pytest.raises(ParcelfitError, match=r"unknown scene option\(s\) colour, sapcing"):
+        scene_options(["sapcing=0.06", "colour=red"])
+    with pytest.raises(ParcelfitError, match="unknown shell_dof 'floppy'"):
+        scene_options(["shell_dof=floppy"])
+
+
 def test_belt_friction_from_a_study_files_simulator_section_and_a_twins_settings(tmp_path):
     from parcelfit.sim.factory import SimulatorSection, make_simulator
     from parcelfit.synth import TwinSettings, TwinSettingsSection
@@ -526,7 +538,7 @@ def test_the_shells_degrees_of_freedom_from_a_study_file_and_the_simulate_comman
     assert "shell_dof" not in dict(default.to_config(tmp_path))
     assert make_simulator(default.to_config(tmp_path)).options.scene.shell_dof == "auto"  # type: ignore[attr-defined]
     with pytest.raises(ParcelfitError, match="unknown shell_dof 'floppy'"):
-        SimulatorConfig("mujoco", rig="E3", consignment="KPBW", shell_dof="floppy")
+        make_simulator(SimulatorConfig("mujoco", rig="E3", consignment="KPBW", shell_dof="floppy"))
     result = CliRunner().invoke(
         app, ["simulate", "--shell-dof", "floppy", "--out", str(tmp_path / "r.csv")]
     )

@@ -61,9 +61,8 @@ from parcelfit.runs import (
 )
 from parcelfit.schema import Choice, FileModel, Number, Text, Whole, keys_in, or_default, parse
 from parcelfit.sim.executors import make_executor
-from parcelfit.sim.factory import BELT_FRICTION
 from parcelfit.sim.mujoco import Consignment, MujocoSimulator, Rig, SceneOptions, SimOptions
-from parcelfit.sim.params import CATALOGUE, MAX_TIMESTEP, MIN_TIMESTEP
+from parcelfit.sim.params import BELT_FRICTION, CATALOGUE, MAX_TIMESTEP, MIN_TIMESTEP
 
 
 @dataclass(frozen=True)

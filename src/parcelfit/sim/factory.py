@@ -26,12 +26,17 @@ from pydantic import model_validator
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.schema import Choice, FileModel, Number, Text
-from parcelfit.sim.params import MAX_TIMESTEP, MIN_TIMESTEP, RIGID, STICK_SPEED
+from parcelfit.sim.params import (
+    BELT_FRICTION,
+    MAX_TIMESTEP,
+    MIN_TIMESTEP,
+    RIGID,
+    SHELL_DOFS,
+    STICK_SPEED,
+)
 from parcelfit.sim.protocol import Simulator
 
 BACKENDS = ("mujoco", "external", "python")
-BELT_FRICTION = ("mujoco", "coulomb")
-SHELL_DOFS = ("auto", "full", "quadratic", "trilinear")
 _SETTINGS = (
     "backend",
     "rig",
@@ -94,10 +99,6 @@ class SimulatorConfig(Mapping[str, Any]):
                 f"unknown simulator backend {self.backend!r}", fix=f"use one of {list(BACKENDS)}"
             )
         _check_needs(self.backend, self)
-        if self.shell_dof is not None and self.shell_dof not in SHELL_DOFS:
-            raise ParcelfitError(
-                f"unknown shell_dof {self.shell_dof!r}", fix=f"use one of {list(SHELL_DOFS)}"
-            )
 
     def __getitem__(self, key: str) -> Any:
         value = getattr(self, key, None) if key in _SETTINGS else None

@@ -26,6 +26,10 @@ SOFT = "soft"
 STICK_SPEED = 0.005
 # the time steps [s] a scene accepts (its ``timestep``, a rig's own step, a study's or a twin's)
 MIN_TIMESTEP, MAX_TIMESTEP = 1e-5, 0.01
+# the values a scene's ``shell_dof`` and ``belt_friction`` take (`SceneOptions`); a study's
+# simulator section and a twin's settings check against the same lists
+SHELL_DOFS = ("auto", "full", "quadratic", "trilinear")
+BELT_FRICTION = ("mujoco", "coulomb")
 
 
 @dataclass(frozen=True)

@@ -52,7 +52,7 @@ def plate_rig(material: str, tile: float | None = None) -> Rig:
                 f"plate tile must lie in [10, 1000] mm, got {tile * 1e3:g} mm",
                 fix="give the tile side in metres, e.g. 0.05",
             )
-        n = max(1, round(1.0 / tile))
+        n = round(1.0 / tile)  # at least 1: tile <= 1 m
         side = 1.0 / n
         tiles = [
             (f"plate_{i}_{j}", (i - (n - 1) / 2) * side, (j - (n - 1) / 2) * side, side)
@@ -91,6 +91,11 @@ def plate_rig(material: str, tile: float | None = None) -> Rig:
         },
         "<indentation plate>",
     )
+
+
+def plate_geoms(model: mujoco.MjModel) -> list[int]:
+    """The geom ids of a `plate_rig` plate in a compiled scene: ``plate`` or its tiles."""
+    return [g for g in range(model.ngeom) if model.geom(g).name.startswith("plate")]
 
 
 def _penetrations(

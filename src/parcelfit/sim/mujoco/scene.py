@@ -31,7 +31,13 @@ from parcelfit.sim.mujoco.consignment import Consignment
 from parcelfit.sim.mujoco.contact import ContactParams, contact_params
 from parcelfit.sim.mujoco.rig import Rig, Surface
 from parcelfit.sim.mujoco.shell import ShellMesh, pillow_shell
-from parcelfit.sim.params import MAX_TIMESTEP, MIN_TIMESTEP, STICK_SPEED
+from parcelfit.sim.params import (
+    BELT_FRICTION,
+    MAX_TIMESTEP,
+    MIN_TIMESTEP,
+    SHELL_DOFS,
+    STICK_SPEED,
+)
 
 SLAB = 0.02  # half-thickness of belt and strip boxes [m]
 CONTACT_GAP = 0.0005  # clearance between content and shell, and under the parcel at the start [m]
@@ -129,11 +135,11 @@ class SceneOptions:
                 "contact_frequency_stiffness must be positive [N/m] or None, got "
                 f"{self.contact_frequency_stiffness}"
             )
-        if self.shell_dof not in ("auto", "full", "quadratic", "trilinear"):
+        if self.shell_dof not in SHELL_DOFS:
             raise ParcelfitError(
-                f"shell_dof must be auto, full, quadratic or trilinear, got {self.shell_dof!r}"
+                f"unknown shell_dof {self.shell_dof!r}", fix=f"use one of {list(SHELL_DOFS)}"
             )
-        if self.belt_friction not in ("mujoco", "coulomb"):
+        if self.belt_friction not in BELT_FRICTION:
             raise ParcelfitError(
                 f"belt_friction must be mujoco or coulomb, got {self.belt_friction!r}"
             )
@@ -212,6 +218,19 @@ def parse_scene_options(items: Iterable[str]) -> dict[str, float | str | tuple[f
         except (ValueError, ZeroDivisionError):
             out[key.strip()] = value.strip()
     return out
+
+
+def scene_options(items: Iterable[str]) -> SceneOptions:
+    """`SceneOptions` from ``KEY=VALUE`` texts (`parse_scene_options`; units as the fields'),
+    the defaults for the keys not given; an unknown key is refused with the fields' names."""
+    given = parse_scene_options(items)
+    unknown = sorted(set(given) - set(SceneOptions.__dataclass_fields__))
+    if unknown:
+        raise ParcelfitError(
+            f"unknown scene option(s) {', '.join(unknown)}",
+            fix=f"the keys are the fields of SceneOptions: {', '.join(SceneOptions.__dataclass_fields__)}",
+        )
+    return SceneOptions(**given)  # type: ignore[arg-type]
 
 
 @dataclass(frozen=True)

@@ -47,7 +47,7 @@ import numpy as np
 from parcelfit.errors import ParcelfitError
 from parcelfit.sim.mujoco.consignment import Consignment
 from parcelfit.sim.mujoco.coulomb import CoulombBelts
-from parcelfit.sim.mujoco.indentation import plate_rig
+from parcelfit.sim.mujoco.indentation import plate_geoms, plate_rig
 from parcelfit.sim.mujoco.mjlog import CountedWarnings
 from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
 from parcelfit.sim.mujoco.simulator import add_rigid_velocity
@@ -158,7 +158,7 @@ def slide_test(
         raise ParcelfitError(f"the slide test needs a positive speed [m/s], got {v0}")
     with CountedWarnings():
         model, data, full, step = _settled(consignment, params, options, settle)
-        plate = np.array([g for g in range(model.ngeom) if model.geom(g).name.startswith("plate")])
+        plate = np.array(plate_geoms(model))
         flex = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, "packaging")
         verts = slice(model.flex_vertadr[flex], model.flex_vertadr[flex] + model.flex_vertnum[flex])
         x0 = float(data.flexvert_xpos[verts, 0].mean())
@@ -197,7 +197,7 @@ def _spin_test(
     coulomb = lever = None
     n_plate = None
     if not free:
-        belt = [g for g in range(model.ngeom) if model.geom(g).name.startswith("plate")]
+        belt = plate_geoms(model)
         mu = float(model.geom_friction[belt[0], 0])
         moment = load = 0.0
         n_plate = 0
