@@ -76,12 +76,15 @@ def main(argv: list[str] | None = None) -> int:
         "plate until friction stops it, beside the rigid Coulomb estimate I w0^2 / (2 mu sum f r) "
         "from the model's own contact forces at rest and its own masses; lever: the plate's "
         "contacts' mean distance from the centre at rest, weighted by their normal forces "
-        "(sum f r / sum f). Plate: one surface, or square tiles of the given side (physically "
-        "the same plate; MuJoCo meets each tile as its own contact pair).",
+        "(sum f r / sum f); content load: the normal forces between packaging and content at "
+        "rest, beside the content's weight (more where the shell clamps it). Plate: one "
+        "surface, or square tiles of the given side (physically the same plate; MuJoCo meets "
+        "each tile as its own contact pair).",
         "",
         "| type | shell dof | time step | plate | free flight: spin kept | spin-down [deg] | "
-        "Coulomb estimate [deg] | lever at rest [mm] | plate contacts | wall [s] |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "Coulomb estimate [deg] | lever at rest [mm] | plate contacts | "
+        "content load at rest / weight [N] | wall [s] |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     t_all = time.perf_counter()
     for name in args.types:
@@ -100,10 +103,15 @@ def main(argv: list[str] | None = None) -> int:
                     )
                     lever = "-" if down.lever is None else f"{down.lever * 1e3:.1f}"
                     plate = "one" if tile is None else f"tiles {tile * 1e3:g} mm"
+                    held = (
+                        "-"
+                        if down.content_load is None or down.content_weight is None
+                        else f"{down.content_load:.2f} / {down.content_weight:.2f}"
+                    )
                     row = (
                         f"| {name} | {dof} | 1/{n} s | {plate} | {free.retained:.2f} | "
                         f"{math.degrees(down.turn):.1f} | {est} | {lever} | "
-                        f"{down.plate_contacts} | {time.perf_counter() - t0:.1f} |"
+                        f"{down.plate_contacts} | {held} | {time.perf_counter() - t0:.1f} |"
                     )
                     print(row, flush=True)
                     lines.append(row)

@@ -422,6 +422,66 @@ def test_impratio_reaches_the_model_and_is_checked():
         SceneOptions(impratio=0.5)
 
 
+@pytest.mark.parametrize("name", ["BW", "KPBW", "KP", "PB"])
+@pytest.mark.parametrize("dof", ["auto", "full"])
+def test_the_shell_touches_its_content_nowhere_at_rest(name, dof):
+    """At the start the shell presses on its content nowhere: no packaging-content contact
+    penetrates (the polybag's sheets lie at the contact distance from its content's vertices,
+    so they touch without overlap), and the flat bands widen only where a short rim's taper
+    would pass the content's edge closer than the contact distance (KP's 5 mm rim around 3 cm,
+    the polybag's 12.5 mm around 1.8 cm). A shell that touches pushes on its content from the
+    first step and clamps it."""
+    import mujoco
+    import numpy as np
+
+    from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
+
+    cons = load_consignment(name)
+    params = resolve(cons.content_kind, si_values={})
+    scene = build_scene(load_rig("E3"), cons, params, 1, SceneOptions(shell_dof=dof))
+    model = mujoco.MjModel.from_xml_string(scene.xml)
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    packaging = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, "packaging")
+    content_flex = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, "content")
+    content_geom = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "content")
+    overlaps = [
+        float(data.contact.dist[i])
+        for i in range(data.ncon)
+        if (content_geom >= 0 and content_geom in data.contact.geom[i])
+        or (content_flex >= 0 and set(data.contact.flex[i]) == {packaging, content_flex})
+    ]
+    assert min(overlaps, default=0.0) > -1e-5  # [m]; unwidened: KP 0.57, PB 0.35 mm
+    # the flat top sheet spans the content's footprint, widened on KP's and PB's axes only
+    top = scene.shell.points[scene.shell.top]
+    widened = {"BW": (0, 0), "KPBW": (0, 0), "KP": (2.39e-3, 1.55e-3), "PB": (1.13e-3, 1.13e-3)}
+    for axis in (0, 1):
+        assert np.ptp(top[:, axis]) == pytest.approx(
+            cons.content[axis] + widened[name][axis], abs=2e-5
+        )
+
+
+def test_the_edge_widening_clears_the_content_by_the_sheets_clearance():
+    """d(g) of the shell module's docstring: 0 where the taper already lies beyond the contact
+    distance; otherwise the g at which the taper's line lies exactly the clearance from the
+    content's edge (checked against the point-line distance), and a rim shorter than the
+    clearance is refused."""
+    import math
+
+    from parcelfit.sim.mujoco.shell import edge_widening
+
+    assert edge_widening(0.0175, 0.0115, 0.0015, 0.001) == 0.0  # BW: 1.25 mm > 1 mm
+    rim, H, s = 0.005, 0.0165, 0.0015  # KP along its length
+    g = edge_widening(rim, H, s, 0.001)
+    assert 0 < g < rim
+    # the taper from (g, H) to (rim, 0) against the content's edge at (0, H - s)
+    (ax, ay), (bx, by), (px, py) = (g, H), (rim, 0.0), (0.0, H - s)
+    distance = abs((bx - ax) * (ay - py) - (ax - px) * (by - ay)) / math.hypot(bx - ax, by - ay)
+    assert distance == pytest.approx(s, rel=1e-9)
+    with pytest.raises(ParcelfitError, match="rim"):
+        edge_widening(0.001, H, s, 0.001)
+
+
 def test_an_interpolated_shells_nodes_span_the_parcels_own_box():
     """MuJoCo lays an interpolated shell's nodes on a box aligned with the flexcomp's parent
     body; the scene puts the shell in a static frame turned like the parcel (E3 starts at 30

@@ -267,8 +267,8 @@ def test_a_spinning_parcel_keeps_its_spin_in_free_flight_and_stops_as_a_rigid_bo
     free = spin_test(cons, free=True, options=quadratic)
     assert free.retained > 0.9
     assert free.turn == pytest.approx(math.radians(57.3) * free.retained, rel=0.1)  # ~w0 * 0.1 s
-    if name == "BW":  # KP's quadratic shell at 30 mm is not converged in its spin-down
-        # (its turn follows the step and how the plate is split; docs/spin-check-plates)
+    if name == "BW":  # KP's quadratic shell turns 96-101 degrees at any step and plate split
+        # but two thirds of its Coulomb estimate (143-153; docs/spin-check-plates)
         down = spin_test(cons, options=quadratic)
         assert down.coulomb_turn is not None
         assert down.turn == pytest.approx(down.coulomb_turn, rel=0.15)

@@ -377,6 +377,10 @@ def build_scene(
         half_height,
         opt.soft_shell_spacing if soft else opt.spacing,
         consignment.bulge,
+        content_half_height=cH / 2,
+        # a shell element touches a box content at its radius, a soft content's vertices
+        # (radius r / 2) at 1.5 r
+        contact=1.5 * r if soft else r,
     )
     nv = len(shell.points)
     m_pa = p["m_Pa"]

@@ -5,9 +5,10 @@ their boundary ring (the seam). Heights follow
 
     h(x, y) = H * min(f(x; L, c_L), f(y; W, c_W)),   f(s; L, c) = clip((L/2 - |s|) / ((L - c)/2), 0, 1)
 
-(top at +h, bottom at -h): flat over the content footprint c_L x c_W, tapering linearly to the
-seam at height 0. Grid lines lie exactly on the content's edges, so the shell never cuts into
-the content (a shell that does makes the parcel lag the belt). The spacing of the grid is the
+(top at +h, bottom at -h): flat over the content footprint c_L x c_W (or a band slightly wider,
+below), tapering linearly to the seam at height 0. Grid lines lie exactly on the flat band's
+edges, so the shell never cuts into the content (a shell that does makes the parcel lag the
+belt). The spacing of the grid is the
 mesh resolution: each of the three bands (rim, content, rim) per axis is divided into the
 number of cells closest to band width / spacing (at least one).
 
@@ -20,13 +21,31 @@ flat at depth d over a centred patch of f times the outer length and width, risi
 the content's edges. The belt then carries the parcel on that patch (its `bottom_face`), so a
 spin is braked by a friction torque about f times smaller than a flat face's. Grid lines lie on
 the patch's edges too (five bands per axis).
+
+**Clearance at the content's edges.** The sheets lie s = H - h_c beyond the content's faces
+(h_c its half height). Where the rim is short and the content thick, the taper from the flat
+band's edge down to the seam passes the content's edge closer than that: with the band ending at
+the content's edge (rim R = (L - c_L)/2, g = 0) the taper's line lies
+
+    d(g) = (g H + s (R - g)) / sqrt((R - g)^2 + H^2)
+
+from the content's edge when the band reaches g beyond it (0.4 mm for KP's 5 mm rim around its
+3 cm content, against a vertex radius of 1 mm). The shell then touches its content at rest, and
+the contacts' push tensions it: the content is clamped along its ends by several times its
+weight and the parcel rests on its rim. With ``content_half_height`` and ``contact`` (the distance
+below which a shell element and the content touch) given, an axis whose taper would touch
+(d(0) < contact) gets its flat band widened by the g at which d(g) = s, so that the taper clears
+the edge as the sheets clear the faces; the grid lines then lie on the widened band's edges.
+Axes that clear the content already keep their band on the content's edges.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import brentq
 
 from parcelfit.errors import ParcelfitError
 
@@ -45,6 +64,28 @@ def _axis(outer: float, inner: float, spacing: float, patch: float | None = None
         centre = np.append(_band(-patch / 2, patch / 2, spacing), patch / 2)
         mid = np.concatenate([side, centre, -side[::-1]])
     return np.concatenate([left, mid, -left[::-1]])
+
+
+def edge_widening(rim: float, half_height: float, clearance: float, contact: float) -> float:
+    """How far [m] the flat band must reach beyond the content's edge so that the taper (from
+    the band's edge at height ``half_height`` down to the seam ``rim`` beyond the content's
+    edge) clears that edge by ``clearance`` [m], or 0 when the taper already lies ``contact`` [m]
+    or more from it (module docstring, d(g))."""
+    H, s, R = half_height, clearance, rim
+
+    def distance(g: float) -> float:
+        return (g * H + s * (R - g)) / math.hypot(R - g, H)
+
+    if distance(0.0) >= contact:
+        return 0.0
+    if s >= R:
+        raise ParcelfitError(
+            f"the packaging's rim ({R * 1e3:g} mm beyond the content) is too short to clear the "
+            f"content by {s * 1e3:g} mm",
+            fix="make the outer size larger than the content by more than the clearance",
+        )
+    # d(g) rises from d(0) < s to d(R) = R > s (dd/dg > 0 as H > s): one root
+    return float(brentq(lambda g: distance(g) - s, 0.0, R))
 
 
 @dataclass(frozen=True)
@@ -74,15 +115,26 @@ def pillow_shell(
     half_height: float,
     spacing: float,
     bulge: tuple[float, float] | None = None,
+    *,
+    content_half_height: float | None = None,
+    contact: float = 0.0,
 ) -> ShellMesh:
     """Build the pillow shell for outer (L, W) and content (c_L, c_W) footprints [m], with the
-    bottom bulging by depth d [m] over a patch of f times the outer size when ``bulge = (d, f)``
-    (module docstring)."""
+    bottom bulging by depth d [m] over a patch of f times the outer size when ``bulge = (d, f)``;
+    with ``content_half_height`` [m], an axis whose taper would come within ``contact`` [m] of
+    the content's edge gets a flat band wide enough to clear it (module docstring)."""
     (L, W), (cL, cW) = outer, content
     if not (0 < cL < L and 0 < cW < W):
         raise ParcelfitError(f"content {content} must be smaller than the outer footprint {outer}")
     if spacing <= 0 or spacing > max(L, W):
         raise ParcelfitError(f"mesh spacing must be in (0, {max(L, W)}] m, got {spacing}")
+    # the flat band over the content: the content's footprint, widened where the taper would
+    # touch the content's edge
+    bL, bW = cL, cW
+    if content_half_height is not None:
+        clearance = half_height - content_half_height
+        bL += 2 * edge_widening((L - cL) / 2, half_height, clearance, contact)
+        bW += 2 * edge_widening((W - cW) / 2, half_height, clearance, contact)
     depth, (pL, pW) = 0.0, (None, None)
     if bulge is not None:
         depth, f = bulge
@@ -92,12 +144,12 @@ def pillow_shell(
                 f"bulge {bulge}: the depth must be positive and the patch ({pL:.3f} x {pW:.3f} m) "
                 f"smaller than the content {content}"
             )
-    xs, ys = _axis(L, cL, spacing, pL), _axis(W, cW, spacing, pW)
+    xs, ys = _axis(L, bL, spacing, pL), _axis(W, bW, spacing, pW)
     nx, ny = len(xs), len(ys)
 
     def height(x: float, y: float) -> float:
-        fx = np.clip((L / 2 - abs(x)) / ((L - cL) / 2), 0, 1)
-        fy = np.clip((W / 2 - abs(y)) / ((W - cW) / 2), 0, 1)
+        fx = np.clip((L / 2 - abs(x)) / ((L - bL) / 2), 0, 1)
+        fy = np.clip((W / 2 - abs(y)) / ((W - bW) / 2), 0, 1)
         return half_height * min(fx, fy)
 
     def sag(x: float, y: float) -> float:  # the bulge below the content (0 without one)
@@ -140,7 +192,7 @@ def pillow_shell(
         (i, j)
         for i in range(nx)
         for j in range(ny)
-        if abs(xs[i]) <= cL / 2 + eps and abs(ys[j]) <= cW / 2 + eps
+        if abs(xs[i]) <= bL / 2 + eps and abs(ys[j]) <= bW / 2 + eps
     ]
     face = (
         inside

@@ -59,7 +59,10 @@ class SpinTest:
     end [rad/s] and its fraction of w0, the turn [rad] and the time it took [s], and for the
     spin-down (None in free flight) the rigid Coulomb estimate of the turn [rad], the lever
     [m] (the mean distance of the plate's contacts from the content's centre at rest, weighted
-    by their normal forces: sum f r / sum f) and how many contacts the plate had then."""
+    by their normal forces: sum f r / sum f), how many contacts the plate had then, and the
+    sum of the normal forces between the packaging and the content at rest [N] beside the
+    content's weight [N] (about equal where the shell only carries it; more where it clamps
+    it)."""
 
     w0: float
     w_end: float
@@ -69,6 +72,8 @@ class SpinTest:
     coulomb_turn: float | None
     lever: float | None = None
     plate_contacts: int | None = None
+    content_load: float | None = None
+    content_weight: float | None = None
 
 
 def _yaw(quat: np.ndarray) -> float:
@@ -194,20 +199,25 @@ def _spin_test(
     model, data, _, step = _settled(consignment, params, options, settle, plate_tile)
     content = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "content")
     centre = data.xpos[content].copy()
-    coulomb = lever = None
+    coulomb = lever = content_load = weight = None
     n_plate = None
     if not free:
         belt = plate_geoms(model)
+        content_geom = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "content")
         mu = float(model.geom_friction[belt[0], 0])
-        moment = load = 0.0
+        moment = load = content_load = 0.0
+        weight = float(model.body_mass[content] * np.linalg.norm(model.opt.gravity))
         n_plate = 0
         for i in range(data.ncon):
-            if data.contact[i].geom[0] in belt or data.contact[i].geom[1] in belt:
-                f = np.zeros(6)
-                mujoco.mj_contactForce(model, data, i, f)
+            geoms = data.contact[i].geom
+            f = np.zeros(6)
+            mujoco.mj_contactForce(model, data, i, f)
+            if geoms[0] in belt or geoms[1] in belt:
                 moment += f[0] * float(np.hypot(*(data.contact[i].pos - centre)[:2]))
                 load += f[0]
                 n_plate += 1
+            elif content_geom in geoms:
+                content_load += f[0]
         lever = moment / load if load > 0 else None
         inertia = model.body_inertia[content] @ (data.xmat[content].reshape(3, 3)[2] ** 2)
         for b in range(1, model.nbody):
@@ -229,7 +239,7 @@ def _spin_test(
         if not free and t > 0.01 and abs(data.cvel[content][2]) < 0.01:
             break
     w_end = float(data.cvel[content][2])
-    return SpinTest(w0, w_end, w_end / w0, turn, t, coulomb, lever, n_plate)
+    return SpinTest(w0, w_end, w_end / w0, turn, t, coulomb, lever, n_plate, content_load, weight)
 
 
 __all__ = ["SlideTest", "SpinTest", "slide_test", "spin_test"]
