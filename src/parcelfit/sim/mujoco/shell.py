@@ -94,8 +94,8 @@ class ShellMesh:
 
     points: np.ndarray
     triangles: np.ndarray
-    top: np.ndarray  # top-sheet vertices over the content footprint (where a tag would sit)
-    bottom_face: np.ndarray  # bottom-sheet vertices over the content footprint (the flat face)
+    top: np.ndarray  # top-sheet vertices over the flat band (content footprint; where a tag sits)
+    bottom_face: np.ndarray  # bottom-sheet vertices over the flat band (the flat face)
     seam: np.ndarray  # boundary ring
     half_height: float  # H [m]
     bulge_depth: float  # how far the bottom's patch lies below the content's face [m]
