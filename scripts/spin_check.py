@@ -9,7 +9,8 @@ For each rigid-content type, shell degrees of freedom (`SceneOptions.shell_dof`)
 vertical: in free flight (gravity off) the fraction of the spin its content keeps after 0.1 s
 (1 for a faithful model), and on the plate the turn until friction stops it beside the rigid
 Coulomb estimate from the model's own contact forces at rest, with their lever (the mean
-distance of the plate's contacts from the centre, weighted by their forces). ``--plates``: the
+distance of the plate's contacts from the centre, weighted by their forces) and the load between
+packaging and content at rest beside the content's weight. ``--plates``: the
 plate as one surface ("one") and/or as square tiles of the given side [m], physically the same
 plate; a model whose turn depends on the split is not converged in it. A type may be a
 consignment file (e.g. a variant with another content size); ``--scene`` sets other scene

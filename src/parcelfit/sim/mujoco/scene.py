@@ -371,6 +371,7 @@ def build_scene(
     r = opt.vertex_radius
     half_height = cH / 2 + r + CONTACT_GAP
     soft = consignment.soft
+    content_radius = r / 2 if soft else 0.0  # a soft content's vertices; a box has none
     shell = pillow_shell(
         (L, W),
         (cL, cW),
@@ -378,9 +379,7 @@ def build_scene(
         opt.soft_shell_spacing if soft else opt.spacing,
         consignment.bulge,
         content_half_height=cH / 2,
-        # a shell element touches a box content at its radius, a soft content's vertices
-        # (radius r / 2) at 1.5 r
-        contact=1.5 * r if soft else r,
+        contact=r + content_radius,  # where a shell element touches the content
     )
     nv = len(shell.points)
     m_pa = p["m_Pa"]
@@ -492,7 +491,7 @@ def build_scene(
         body.append(
             f'<flexcomp name="content" type="grid" dim="3" count="{counts[0]} {counts[1]} {counts[2]}" '
             f'spacing="{" ".join(_f(s) for s in spacing)}" pos="{_f(x0)} {_f(y0)} {_f(zc)}" quat="{q}" '
-            f'radius="{_f(r / 2)}" mass="{_f(m_co)}" rgba="0.3 0.5 0.9 1">'
+            f'radius="{_f(content_radius)}" mass="{_f(m_co)}" rgba="0.3 0.5 0.9 1">'
             f'<contact contype="2" conaffinity="2" condim="3" selfcollide="none" priority="1" {content_friction} '
             f'solref="{content_cp.solref}" solimp="{content_cp.solimp}"/>'
             f'<elasticity young="{_f(p["E_Co"])}" poisson="0.3" damping="{_f(beta_co)}"/></flexcomp>'
