@@ -292,7 +292,7 @@ def main(argv: list[str] | None = None) -> int:
                     "",
                     "Time steps: "
                     + ", ".join(
-                        f"{c} 1/{1 / scene.step_for(consignments[c].soft, rig):.0f} s"
+                        f"{c} 1/{1 / scene.step_for(consignments[c].soft, rig, consignments[c].shell):.0f} s"
                         for c in members
                     )
                     + ".",

@@ -94,6 +94,46 @@ def test_bad_consignment_files():
         parse_consignment({**good, "outer": [300, 200]}, "c.yaml")
 
 
+def test_a_type_may_choose_its_shell_and_a_scene_still_overrides_it():
+    """KP's file takes the trilinear shell (its content fills the envelope), the others leave it
+    to the scene's default; the scene's ``shell_dof`` beats the type's choice, the choice is
+    checked on load, and it reaches the MuJoCo model (2 x 2 x 2 nodes instead of 27)."""
+    import mujoco
+
+    from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
+
+    shells = {n: load_consignment(n).shell for n in ("BW", "KPBW", "KP", "PB")}
+    assert shells == {"BW": None, "KPBW": None, "KP": "trilinear", "PB": None}
+    auto = SceneOptions()
+    kp, kpbw, pb = (load_consignment(n) for n in ("KP", "KPBW", "PB"))
+    assert auto.shell_for(kp.soft, kp.shell) == "trilinear"
+    assert auto.shell_for(kpbw.soft, kpbw.shell) == "quadratic"
+    assert auto.shell_for(pb.soft, pb.shell) == "full"
+    assert SceneOptions(shell_dof="quadratic").shell_for(kp.soft, kp.shell) == "quadratic"
+    # an interpolated shell keeps the interpolated step, the full shell its own
+    assert auto.step_for(kp.soft, None, kp.shell) == pytest.approx(1 / 2400)
+    assert auto.step_for(False, None, "full") == pytest.approx(1 / 1200)
+
+    def nodes(options):
+        xml = build_scene(load_rig("E3"), kp, kp.parameter_values(), 1, options).xml
+        return mujoco.MjModel.from_xml_string(xml).flex_nodenum[0]
+
+    assert nodes(auto) == 8
+    assert nodes(SceneOptions(shell_dof="quadratic")) == 27
+    good = {
+        "name": "X",
+        "mass": 0.1,
+        "outer": [0.3, 0.2, 0.02],
+        "content": {"kind": "rigid", "size": [0.2, 0.1, 0.02]},
+    }
+    assert parse_consignment({**good, "shell": "full"}, "c.yaml").shell == "full"
+    for bad in ("auto", "floppy"):
+        with pytest.raises(
+            ParcelfitError, match=rf"c\.yaml: shell: unknown shell degrees of freedom '{bad}'"
+        ):
+            parse_consignment({**good, "shell": bad}, "c.yaml")
+
+
 def test_a_types_own_defaults_sit_between_the_catalogue_and_the_user():
     from parcelfit.runs import TestCase
     from parcelfit.sim.mujoco import MujocoSimulator

@@ -256,25 +256,30 @@ def test_coulomb_belt_friction_makes_belt_contacts_frictionless_in_mujoco():
 
 @pytest.mark.parametrize("name", ["BW", "KP"])
 def test_a_spinning_parcel_keeps_its_spin_in_free_flight_and_stops_as_a_rigid_body(name):
-    """With the default (quadratic) shell the parcel keeps a 10 rad/s spin in free flight (no
-    force acts on it) and the belt stops it after about the rigid Coulomb turn; a shell with a
-    degree of freedom per vertex at 1/600 s loses most of it (docs/spin-check.md)."""
+    """With the default interpolated shell (BW quadratic, KP trilinear) the parcel keeps a
+    10 rad/s spin in free flight (no force acts on it) and the belt stops it after about the
+    rigid Coulomb turn (BW) or the full shell's turn (KP); a shell with a degree of freedom per
+    vertex at 1/600 s loses most of it (docs/spin-check.md)."""
     from parcelfit.sim.mujoco.spin import spin_test
 
     cons = load_consignment(name)
-    quadratic = SceneOptions()
-    assert quadratic.shell_dof == "auto"  # quadratic around a rigid content
-    free = spin_test(cons, free=True, options=quadratic)
+    default = SceneOptions()
+    assert default.shell_dof == "auto"  # BW quadratic, KP trilinear (its consignment file)
+    free = spin_test(cons, free=True, options=default)
     assert free.retained > 0.9
     assert free.turn == pytest.approx(math.radians(57.3) * free.retained, rel=0.1)  # ~w0 * 0.1 s
-    down = spin_test(cons, options=quadratic)
-    if name == "BW":  # KP's quadratic shell turns 96-101 degrees at any step and plate split
-        # but two thirds of its Coulomb estimate (143-153; docs/spin-check-plates)
+    down = spin_test(cons, options=default)
+    if name == "BW":
         assert down.coulomb_turn is not None
         assert down.turn == pytest.approx(down.coulomb_turn, rel=0.15)
-    else:  # KP's shell carries its content's weight, no more (it clamped it with 2.4 times
-        # that while its rim's taper overlapped the content; docs/shell-clearance.md)
+    else:
+        # KP's shell carries its content's weight, no more (it clamped it with 2.4 times that
+        # while its rim's taper overlapped the content; docs/shell-clearance.md)
         assert down.content_load == pytest.approx(down.content_weight, rel=0.05)
+        # and stops as the full shell does (84 degrees at 1/2400 s, 88 at 1/4800 s; the
+        # quadratic shell turned 97: docs/trilinear-kp.md)
+        reference = spin_test(cons, options=SceneOptions(shell_dof="full", timestep=1 / 2400))
+        assert down.turn == pytest.approx(reference.turn, rel=0.10)
     full = SceneOptions(shell_dof="full", timestep=1 / 600)  # the former default
     assert spin_test(cons, free=True, options=full).retained < 0.5
 

@@ -743,8 +743,18 @@ def rigs() -> None:
     from parcelfit.sim.mujoco import bundled_consignment_names, load_consignment
 
     table = Table(title="Bundled consignment types (--consignment NAME)", title_justify="left")
-    for col in ("type", "mass [g]", "outer L x W x H [mm]", "content", "content L x W x H [mm]"):
+    for col in (
+        "type",
+        "mass [g]",
+        "outer L x W x H [mm]",
+        "content",
+        "content L x W x H [mm]",
+        "packaging shell",
+    ):
         table.add_column(escape(col))
+    from parcelfit.sim.mujoco.scene import SceneOptions
+
+    default_scene = SceneOptions()
     for name in bundled_consignment_names():
         c = load_consignment(name)
         table.add_row(
@@ -753,6 +763,7 @@ def rigs() -> None:
             " x ".join(f"{v * 1e3:g}" for v in c.outer),
             c.content_kind,
             " x ".join(f"{v * 1e3:g}" for v in c.content),
+            default_scene.shell_for(c.soft, c.shell),
         )
     console.print(table)
 

@@ -9,6 +9,7 @@ A consignment file (YAML, SI units)::
     content: {kind: rigid, size: [0.165, 0.125, 0.02]}   # kind: rigid | soft; size L, W, H [m]
     bulge: {depth: 0.004, footprint: 0.3}   # optional: the bottom bulges under the content
     parameters: {mu_d_BePa: 0.30}    # optional: this type's own defaults (catalogue units)
+    shell: trilinear                 # optional: the packaging shell's degrees of freedom
 
 ``bulge`` (optional, rigid contents): a bubble mailer's bottom that bulges below the content's
 face by ``depth`` [m] over a centred patch of ``footprint`` times the outer length and width
@@ -19,6 +20,13 @@ flat under the whole content.
 materials rather than to the catalogue's generic midpoints (e.g. the friction of its outer
 packaging), in the catalogue's units (`parcelfit.sim.params`). They replace the catalogue
 default for this type only; a study, ``--set`` or a calibration still overrides them.
+
+``shell`` (optional): how the packaging's vertices move when the scene leaves it to the type
+(`SceneOptions.shell_dof` "auto", the default): ``quadratic`` (over 3 x 3 x 3 nodes),
+``trilinear`` (2 x 2 x 2) or ``full`` (each vertex on its own). Without it: quadratic around a
+rigid content, full around a soft one. A type's choice is the cheapest shell that reproduces the
+full shell at a fine step and mesh (the reference) on the E3 ensemble; KP, whose content fills
+its envelope, takes the trilinear shell (docs/trilinear-kp.md), the others the default.
 
 The content must fit inside the outer dimensions (length and width strictly smaller, height not
 larger). The packaging's mass is a simulation parameter (m_Pa); the content gets the rest.
@@ -37,7 +45,10 @@ from parcelfit.config import load_yaml
 from parcelfit.errors import ParcelfitError
 from parcelfit.schema import Choice, FileModel, Number, Text, parse
 from parcelfit.sim.mujoco.bundled import bundled_names, resolve_file
-from parcelfit.sim.params import RIGID, SOFT, resolve
+from parcelfit.sim.params import RIGID, SHELL_DOFS, SOFT, resolve
+
+# what a consignment file's ``shell`` takes: a scene's choices but "auto"
+TYPE_SHELL_DOFS = tuple(d for d in SHELL_DOFS if d != "auto")
 
 
 @dataclass(frozen=True)
@@ -54,6 +65,9 @@ class Consignment:
     bulge: tuple[float, float] | None = None  # depth [m], footprint [-] (see the module docstring)
     # this type's own defaults, (name, value in catalogue units), see the module docstring
     parameters: tuple[tuple[str, float], ...] = ()
+    # the shell's degrees of freedom under the scene's "auto" (see the module docstring); None:
+    # quadratic around a rigid content, full around a soft one
+    shell: str | None = None
 
     @property
     def soft(self) -> bool:
@@ -119,6 +133,7 @@ class ConsignmentFile(FileModel):
     content: ContentSection
     bulge: BulgeSection | None = None
     parameters: dict[str, float] | None = None
+    shell: Annotated[str | None, Choice(TYPE_SHELL_DOFS, what="shell degrees of freedom")] = None
 
     @model_validator(mode="after")
     def _content_fits(self) -> ConsignmentFile:
@@ -167,6 +182,7 @@ def parse_consignment(doc: Any, file: str) -> Consignment:
         source=file,
         bulge=None if f.bulge is None else (f.bulge.depth, f.bulge.footprint),
         parameters=tuple((f.parameters or {}).items()),
+        shell=f.shell,
     )
 
 

@@ -171,25 +171,30 @@ class SceneOptions:
             return self.contact_frequency
         return self.contact_frequency * math.sqrt(stiffness / self.contact_frequency_stiffness)
 
-    def shell_for(self, soft: bool) -> str:
-        """The shell's degrees of freedom around a soft (True) or rigid content."""
+    def shell_for(self, soft: bool, own: str | None = None) -> str:
+        """The shell's degrees of freedom around a soft (True) or rigid content: ``shell_dof``
+        if set, else the consignment's ``own`` choice (`Consignment.shell`), else full around
+        a soft content and quadratic around a rigid one."""
         if self.shell_dof != "auto":
             return self.shell_dof
+        if own is not None:
+            return own
         return "full" if soft else "quadratic"
 
-    def step_for(self, soft: bool, rig: Rig | None = None) -> float:
+    def step_for(self, soft: bool, rig: Rig | None = None, own: str | None = None) -> float:
         """The time step [s] of a scene with a soft (True) or rigid content on ``rig``: the
         step ``rig_timesteps`` gives that rig, else ``timestep`` if given, else 1/1200 s for the
         full shell and 1/2400 s for an interpolated one (1/2400 s for the full shell too with
         Coulomb belt friction, whose explicit forces on the film's light vertices went unstable
         at 1/1200 s: E1 PB setting 1 turned 42 degrees and stalled, the simulator README's
-        "Sliding"), divided by the rig's ``step_refinement``."""
+        "Sliding"), divided by the rig's ``step_refinement``; ``own``: the consignment's shell
+        (`shell_for`)."""
         if rig is not None and rig.name in self.rig_timesteps:
             return self.rig_timesteps[rig.name]
         if self.timestep is not None:
             return self.timestep
         refinement = rig.step_refinement if rig is not None else 1
-        if self.shell_for(soft) == "full" and self.belt_friction != "coulomb":
+        if self.shell_for(soft, own) == "full" and self.belt_friction != "coulomb":
             return FULL_SHELL_STEP / refinement
         return INTERPOLATED_SHELL_STEP / refinement
 
@@ -392,7 +397,7 @@ def build_scene(
         )
     m_v = m_pa / nv
     n_face = shell.face_contacts
-    dt = opt.step_for(soft, rig)
+    dt = opt.step_for(soft, rig, consignment.shell)
 
     # --- contact parameters (effective inverse mass of a flex contact: see contact.py) ------------
     def contact(pair: str, other_inverse_mass: float = 0.0) -> ContactParams:
@@ -467,7 +472,7 @@ def build_scene(
     rho_pa = m_pa / (2 * L * W * t_pa)
     beta_pa = 2 * p["zeta_Pa"] / bending_omega(young_pa, p["nu_Pa"], t_pa, rho_pa, L)
     points = " ".join(_f(v) for v in shell.points.ravel())
-    shell_dof = opt.shell_for(soft)
+    shell_dof = opt.shell_for(soft, consignment.shell)
     dof = "" if shell_dof == "full" else f' dof="{shell_dof}"'
     elements = " ".join(str(i) for i in shell.triangles.ravel())
     # an interpolated shell's nodes lie on a box aligned with the axes of the flexcomp's parent
