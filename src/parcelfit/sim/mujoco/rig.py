@@ -41,7 +41,8 @@ like the repeated real runs of a test case; without a seed the parcel starts at 
 
 ``step_refinement`` is the rig's own demand on the time step: where its outcome converges only
 at finer steps (E1's transfer onto a fast belt, 2; E2a's roller module, where the polybag stalled
-at 1/1200 s, 2), every run on it divides the default step by this. A study's ``rig_timesteps`` or an explicit ``timestep`` overrides it.
+at 1/1200 s, 2), every run on it divides the default step by this. A study's ``rig_timesteps``
+or an explicit ``timestep`` overrides it.
 
 The run ends when the parcel centre leaves the ``end`` box, ``after_last_barrier`` seconds
 after it interrupts the second light barrier, or after ``duration`` seconds of simulated time.
