@@ -6,7 +6,8 @@ Simulates exactly 2 s (the end box is widened so the run does not stop at the ri
 KPBW (flexible packaging, rigid content) and PB (polybag, soft content), or the ``--types``
 given, at speed setting 1 and the default resolution, and prints the median wall time, steps
 per second, and the ratio to the published cost of one such simulation (about 5 hours on a
-16-core desktop with a commercial MFBD solver, method.md section 10). MuJoCo runs one simulation on one core.
+16-core desktop with a commercial MFBD solver, method.md section 10). MuJoCo runs one
+simulation on one core.
 """
 
 from __future__ import annotations

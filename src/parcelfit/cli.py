@@ -559,7 +559,8 @@ def simulate(
     shell_dof: Annotated[
         str,
         typer.Option(
-            help="The packaging shell's degrees of freedom: auto (quadratic around a rigid "
+            help="The packaging shell's degrees of freedom: auto (the consignment file's "
+            "shell if it names one, e.g. KP's trilinear; else quadratic around a rigid "
             "content, full around a soft one), full (one per vertex; give a fine --timestep, "
             "e.g. 0.000208333 for 1/4800 s), quadratic or trilinear (see the simulator's "
             "README, Spin).",

@@ -96,7 +96,8 @@ class SceneOptions:
     impratio: float = 1.0
     # how MuJoCo moves the shell's vertices: "full" (each vertex its own 3 degrees of freedom) or
     # interpolated from a grid of nodes over the parcel's box, "quadratic" (3 x 3 x 3 nodes) or
-    # "trilinear" (2 x 2 x 2); "auto": quadratic around a rigid content, full around a soft one
+    # "trilinear" (2 x 2 x 2); "auto": the consignment's own choice (`Consignment.shell`, KP's
+    # trilinear), else quadratic around a rigid content, full around a soft one
     # (a full shell loses most of a spin: spin.py, the README's "Spin")
     shell_dof: str = "auto"
     # friction between the packaging and belts, strips and rollers: "mujoco" (MuJoCo's own
