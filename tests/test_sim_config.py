@@ -92,12 +92,19 @@ def test_bad_consignment_files():
         parse_consignment(bad, "c.yaml")
     with pytest.raises(ParcelfitError, match=r"expected \[length, width, height\]"):
         parse_consignment({**good, "outer": [300, 200]}, "c.yaml")
+    # the shell a type chooses (a scene's choices but "auto")
+    assert parse_consignment({**good, "shell": "full"}, "c.yaml").shell == "full"
+    for bad in ("auto", "floppy"):
+        with pytest.raises(
+            ParcelfitError, match=rf"c\.yaml: shell: unknown shell degrees of freedom '{bad}'"
+        ):
+            parse_consignment({**good, "shell": bad}, "c.yaml")
 
 
 def test_a_type_may_choose_its_shell_and_a_scene_still_overrides_it():
     """KP's file takes the trilinear shell (its content fills the envelope), the others leave it
-    to the scene's default; the scene's ``shell_dof`` beats the type's choice, the choice is
-    checked on load, and it reaches the MuJoCo model (2 x 2 x 2 nodes instead of 27)."""
+    to the scene's default; the scene's ``shell_dof`` beats the type's choice, and it reaches the
+    MuJoCo model (2 x 2 x 2 nodes instead of 27). Bad choices: `test_bad_consignment_files`."""
     import mujoco
 
     from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
@@ -120,18 +127,6 @@ def test_a_type_may_choose_its_shell_and_a_scene_still_overrides_it():
 
     assert nodes(auto) == 8
     assert nodes(SceneOptions(shell_dof="quadratic")) == 27
-    good = {
-        "name": "X",
-        "mass": 0.1,
-        "outer": [0.3, 0.2, 0.02],
-        "content": {"kind": "rigid", "size": [0.2, 0.1, 0.02]},
-    }
-    assert parse_consignment({**good, "shell": "full"}, "c.yaml").shell == "full"
-    for bad in ("auto", "floppy"):
-        with pytest.raises(
-            ParcelfitError, match=rf"c\.yaml: shell: unknown shell degrees of freedom '{bad}'"
-        ):
-            parse_consignment({**good, "shell": bad}, "c.yaml")
 
 
 def test_a_types_own_defaults_sit_between_the_catalogue_and_the_user():

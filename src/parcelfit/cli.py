@@ -741,7 +741,7 @@ def rigs() -> None:
             " -> ".join(b.name for b in r.barriers),
         )
     console.print(table)
-    from parcelfit.sim.mujoco import bundled_consignment_names, load_consignment
+    from parcelfit.sim.mujoco import SceneOptions, bundled_consignment_names, load_consignment
 
     table = Table(title="Bundled consignment types (--consignment NAME)", title_justify="left")
     for col in (
@@ -753,8 +753,6 @@ def rigs() -> None:
         "packaging shell",
     ):
         table.add_column(escape(col))
-    from parcelfit.sim.mujoco.scene import SceneOptions
-
     default_scene = SceneOptions()
     for name in bundled_consignment_names():
         c = load_consignment(name)
