@@ -660,6 +660,14 @@ BAD_INPUTS = {
         lambda p: _study_sim(p, shell_dof="floppy"),
         r"simulator\.shell_dof: unknown shell degrees of freedom 'floppy'.*auto, full",
     ),
+    "shell cells two": (
+        lambda p: _study_sim(p, shell_cells=[4, 4]),
+        r"simulator\.shell_cells: shell cells must be three whole numbers from 1 to 12",
+    ),
+    "shell cells zero": (
+        lambda p: _study_sim(p, shell_cells=[0, 4, 1]),
+        r"simulator\.shell_cells\[0\]: 0 is outside \[1, 12\]",
+    ),
     "slip speed below the stick speed": (
         lambda p: _study_sim(p, stick_speed=0.1, slip_speed=0.05),
         r"simulator\.slip_speed: slip_speed \(0\.05 m/s\) must exceed stick_speed \(0\.1 m/s\)",

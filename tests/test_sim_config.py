@@ -99,34 +99,63 @@ def test_bad_consignment_files():
             ParcelfitError, match=rf"c\.yaml: shell: unknown shell degrees of freedom '{bad}'"
         ):
             parse_consignment({**good, "shell": bad}, "c.yaml")
+    # its grid of cells: three whole numbers, with an interpolated shell of its own
+    cells = parse_consignment({**good, "shell": "trilinear", "shell_cells": [4, 3, 1]}, "c.yaml")
+    assert cells.shell_cells == (4, 3, 1)
+    assert parse_consignment(good, "c.yaml").shell_cells == (1, 1, 1)
+    for shell, value, pattern in (
+        (None, [4, 4, 1], "shell_cells: shell_cells needs an interpolated shell"),
+        ("full", [4, 4, 1], "shell_cells: shell_cells needs an interpolated shell"),
+        ("trilinear", [4, 4], "shell_cells: shell cells must be three whole numbers"),
+        ("trilinear", [4.5, 4, 1], "shell_cells: shell cells must be three whole numbers"),
+        ("trilinear", [4, 13, 1], r"shell_cells\[1\]: 13 is outside \[1, 12\]"),
+    ):
+        doc = {**good, "shell_cells": value} | ({"shell": shell} if shell else {})
+        with pytest.raises(ParcelfitError, match=rf"c\.yaml: {pattern}"):
+            parse_consignment(doc, "c.yaml")
 
 
 def test_a_type_may_choose_its_shell_and_a_scene_still_overrides_it():
-    """KP's file takes the trilinear shell (its content fills the envelope), the others leave it
-    to the scene's default; the scene's ``shell_dof`` beats the type's choice, and it reaches the
-    MuJoCo model (2 x 2 x 2 nodes instead of 27). Bad choices: `test_bad_consignment_files`."""
+    """The rigid-content types' files take a trilinear shell over 4 x 4 x 1 cells, PB leaves it
+    to the scene's default (full around a soft content); a scene's ``shell_dof`` beats the
+    type's choice and then takes one cell unless it gives ``shell_cells`` too, and the choice
+    reaches the MuJoCo model (5 x 5 x 2 nodes, 8 for one trilinear cell, 27 for the quadratic
+    shell). Bad choices: `test_bad_consignment_files`."""
     import mujoco
 
     from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
 
-    shells = {n: load_consignment(n).shell for n in ("BW", "KPBW", "KP", "PB")}
-    assert shells == {"BW": None, "KPBW": None, "KP": "trilinear", "PB": None}
+    types = {n: load_consignment(n) for n in ("BW", "KPBW", "KP", "PB")}
+    assert {n: (c.shell, c.shell_cells) for n, c in types.items()} == {
+        "BW": ("trilinear", (4, 4, 1)),
+        "KPBW": ("trilinear", (4, 4, 1)),
+        "KP": ("trilinear", (4, 4, 1)),
+        "PB": (None, (1, 1, 1)),
+    }
     auto = SceneOptions()
-    kp, kpbw, pb = (load_consignment(n) for n in ("KP", "KPBW", "PB"))
-    assert auto.shell_for(kp.soft, kp.shell) == "trilinear"
-    assert auto.shell_for(kpbw.soft, kpbw.shell) == "quadratic"
-    assert auto.shell_for(pb.soft, pb.shell) == "full"
-    assert SceneOptions(shell_dof="quadratic").shell_for(kp.soft, kp.shell) == "quadratic"
+    kp, pb = types["KP"], types["PB"]
+    assert auto.shell_of(kp) == ("trilinear", (4, 4, 1))
+    assert auto.shell_of(pb) == ("full", (1, 1, 1))
+    assert SceneOptions(shell_dof="quadratic").shell_of(kp) == ("quadratic", (1, 1, 1))
+    assert SceneOptions(shell_dof="trilinear").shell_of(kp) == ("trilinear", (1, 1, 1))
+    assert SceneOptions(shell_cells=(2, 3, 1)).shell_of(kp) == ("trilinear", (2, 3, 1))
+    assert SceneOptions(shell_dof="full", shell_cells=(2, 3, 1)).shell_of(kp) == ("full", (1, 1, 1))
+    # a type without a shell of its own: quadratic, one cell, under the scene's default
+    plain = dataclasses.replace(kp, shell=None, shell_cells=(1, 1, 1))
+    assert auto.shell_of(plain) == ("quadratic", (1, 1, 1))
     # an interpolated shell keeps the interpolated step, the full shell its own
     assert auto.step_for(kp.soft, None, kp.shell) == pytest.approx(1 / 2400)
     assert auto.step_for(False, None, "full") == pytest.approx(1 / 1200)
 
     def nodes(options):
         xml = build_scene(load_rig("E3"), kp, kp.parameter_values(), 1, options).xml
-        return mujoco.MjModel.from_xml_string(xml).flex_nodenum[0]
+        model = mujoco.MjModel.from_xml_string(xml)
+        return model.flex_nodenum[0], tuple(model.flex_cellnum[0])
 
-    assert nodes(auto) == 8
-    assert nodes(SceneOptions(shell_dof="quadratic")) == 27
+    assert nodes(auto) == (50, (4, 4, 1))
+    assert nodes(SceneOptions(shell_dof="trilinear")) == (8, (1, 1, 1))
+    assert nodes(SceneOptions(shell_dof="quadratic")) == (27, (1, 1, 1))
+    assert nodes(SceneOptions(shell_cells=(2, 3, 1))) == (24, (2, 3, 1))
 
 
 def test_a_types_own_defaults_sit_between_the_catalogue_and_the_user():
@@ -592,6 +621,9 @@ def test_scene_options_from_texts_refuse_an_unknown_key_and_a_bad_value():
 
     opt = scene_options(["spacing=0.06", "timestep=1/4800"])
     assert opt == SceneOptions(spacing=0.06, timestep=1 / 4800)
+    assert scene_options(["shell_cells=4,3,1"]).shell_cells == (4, 3, 1)
+    with pytest.raises(ParcelfitError, match="shell cells must be three whole numbers"):
+        scene_options(["shell_cells=4,3"])
     assert scene_options([]) == SceneOptions()
     with pytest.raises(ParcelfitError, match=r"unknown scene option\(s\) colour, sapcing"):
         scene_options(["sapcing=0.06", "colour=red"])

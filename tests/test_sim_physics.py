@@ -235,7 +235,10 @@ def test_coulomb_belt_friction_slides_the_coulomb_distance_without_hopping():
     coulomb = slide_test(cons, options=SceneOptions(belt_friction="coulomb"))
     assert coulomb.slide == pytest.approx(coulomb.coulomb_slide, rel=0.02)
     assert coulomb.no_contact == 0.0
-    assert slide_test(cons).no_contact > 0.2  # MuJoCo's friction lifts a sliding contact
+    # MuJoCo's friction lifts a sliding contact: the default shell (trilinear over 4 x 4 x 1
+    # cells) touches the plate nowhere in 12 % of the sliding steps, the quadratic one in more
+    assert slide_test(cons).no_contact > 0.1
+    assert slide_test(cons, options=SceneOptions(shell_dof="quadratic")).no_contact > 0.2
 
 
 def test_coulomb_belt_friction_makes_belt_contacts_frictionless_in_mujoco():
@@ -256,7 +259,7 @@ def test_coulomb_belt_friction_makes_belt_contacts_frictionless_in_mujoco():
 
 @pytest.mark.parametrize("name", ["BW", "KP"])
 def test_a_spinning_parcel_keeps_its_spin_in_free_flight_and_stops_as_a_rigid_body(name):
-    """With the default interpolated shell (BW quadratic, KP trilinear) the parcel keeps a
+    """With the default interpolated shell (trilinear over 4 x 4 x 1 cells) the parcel keeps a
     10 rad/s spin in free flight (no force acts on it) and the belt stops it after about the
     rigid Coulomb turn (BW) or the full shell's turn (KP); a shell with a degree of freedom per
     vertex at 1/600 s loses most of it (docs/spin-check.md)."""
@@ -264,7 +267,7 @@ def test_a_spinning_parcel_keeps_its_spin_in_free_flight_and_stops_as_a_rigid_bo
 
     cons = load_consignment(name)
     default = SceneOptions()
-    assert default.shell_dof == "auto"  # BW quadratic, KP trilinear (its consignment file)
+    assert default.shell_dof == "auto"  # the consignment file's shell
     free = spin_test(cons, free=True, options=default)
     assert free.retained > 0.9
     assert free.turn == pytest.approx(math.radians(57.3) * free.retained, rel=0.1)  # ~w0 * 0.1 s
@@ -300,7 +303,7 @@ def test_a_plate_of_tiles_is_the_same_plate_for_a_converged_model():
         plate_rig("belt", 0.001)
 
     cons = load_consignment("BW")
-    opt = SceneOptions(timestep=1 / 1200)
+    opt = SceneOptions(timestep=1 / 1200, shell_dof="quadratic")
     one = spin_test(cons, options=opt)
     tiles = spin_test(cons, options=opt, plate_tile=0.05)
     assert one.lever is not None and tiles.lever is not None

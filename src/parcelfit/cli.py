@@ -566,6 +566,13 @@ def simulate(
             "README, Spin).",
         ),
     ] = "auto",
+    shell_cells: Annotated[
+        str | None,
+        typer.Option(
+            help="An interpolated shell's grid of cells along the parcel's length, width and "
+            "height, e.g. 4,4,1 (default: the consignment file's with its own shell, else one).",
+        ),
+    ] = None,
     wall_limit: Annotated[float, typer.Option(help="Wall-clock limit [s].")] = 600.0,
     seed: Annotated[
         int | None,
@@ -607,6 +614,7 @@ def simulate(
         spacing=spacing,
         membrane_cap=membrane_cap,
         shell_dof=shell_dof,
+        shell_cells=None if shell_cells is None else _shell_cells(shell_cells),
         belt_friction=belt_friction,
         wall_limit=wall_limit,
     )
@@ -644,6 +652,26 @@ def simulate(
             console.print(Text(f"wrote {animate_run(rig_obj, frames, video, title=case.label)}"))
     if not result.ok:
         raise typer.Exit(code=1)
+
+
+def _shell_cells(text: str) -> tuple[int, int, int]:
+    """``--shell-cells`` text (``4,4,1``) as three whole numbers, checked."""
+    from parcelfit.sim.params import shell_cells
+
+    try:
+        numbers = [float(part) for part in text.split(",")]
+    except ValueError:
+        raise ParcelfitError(
+            f"--shell-cells {text!r} is not three numbers", fix="write e.g. 4,4,1"
+        ) from None
+    return shell_cells(numbers)
+
+
+def _shell_text(dof: str, cells: tuple[int, int, int]) -> str:
+    """A shell for a table: its degrees of freedom and, if more than one, its cells."""
+    if cells == (1, 1, 1):
+        return dof
+    return f"{dof}, {cells[0]} x {cells[1]} x {cells[2]} cells"
 
 
 def _simulate_ensemble(
@@ -762,7 +790,7 @@ def rigs() -> None:
             " x ".join(f"{v * 1e3:g}" for v in c.outer),
             c.content_kind,
             " x ".join(f"{v * 1e3:g}" for v in c.content),
-            default_scene.shell_for(c.soft, c.shell),
+            _shell_text(*default_scene.shell_of(c)),
         )
     console.print(table)
 

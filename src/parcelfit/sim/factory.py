@@ -4,6 +4,7 @@ file (`SimulatorSection`, checked on load), or a `SimulatorConfig` made in code.
 The section's ``backend`` chooses: ``mujoco`` (a bundled or user rig and consignment, optional
 ``timestep`` [s], ``spacing`` [m], ``membrane_cap`` [N/m], ``shell_dof`` (``auto``, ``full``,
 ``quadratic`` or ``trilinear``: the packaging shell's degrees of freedom, see `SceneOptions`),
+``shell_cells`` (an interpolated shell's grid of cells, e.g. ``[4, 4, 1]``),
 ``belt_friction`` (``mujoco`` or ``coulomb``, see `SceneOptions`), ``stick_speed`` and
 ``slip_speed`` [m/s] (how the static friction offsets fade with the slip speed, see
 `SceneOptions`), ``rig_timesteps`` (a time step [s] by rig name) and ``wall_limit`` [s]),
@@ -28,11 +29,13 @@ from parcelfit.errors import ParcelfitError
 from parcelfit.schema import Choice, FileModel, Number, Text
 from parcelfit.sim.params import (
     BELT_FRICTION,
+    MAX_SHELL_CELLS,
     MAX_TIMESTEP,
     MIN_TIMESTEP,
     RIGID,
     SHELL_DOFS,
     STICK_SPEED,
+    shell_cells,
 )
 from parcelfit.sim.protocol import Simulator
 
@@ -45,6 +48,7 @@ _SETTINGS = (
     "spacing",
     "membrane_cap",
     "shell_dof",
+    "shell_cells",
     "belt_friction",
     "stick_speed",
     "slip_speed",
@@ -68,7 +72,7 @@ def _check_needs(backend: str, settings: Any) -> None:
 class SimulatorConfig(Mapping[str, Any]):
     """A simulator's configuration (SI): ``backend`` and what it needs (mujoco: ``rig`` and
     ``consignment``, bundled names or ``.yaml`` paths, optional ``timestep`` [s], ``spacing``
-    [m], ``membrane_cap`` [N/m], ``shell_dof``, ``belt_friction``, ``stick_speed`` and
+    [m], ``membrane_cap`` [N/m], ``shell_dof``, ``shell_cells``, ``belt_friction``, ``stick_speed`` and
     ``slip_speed`` [m/s], ``rig_timesteps`` (rig name -> time step [s]); external: the solver description file
     ``external``; python: ``factory``), optional ``wall_limit`` [s] per simulation, and
     ``folder``: the folder of the file it came from (an external solver's runs go into
@@ -84,6 +88,7 @@ class SimulatorConfig(Mapping[str, Any]):
     spacing: float | None = None
     membrane_cap: float | None = None
     shell_dof: str | None = None
+    shell_cells: tuple[int, int, int] | None = None
     belt_friction: str | None = None
     stick_speed: float | None = None
     slip_speed: float | None = None
@@ -115,7 +120,7 @@ class SimulatorConfig(Mapping[str, Any]):
 
 class SimulatorSection(FileModel):
     """``simulator`` of a study or screen file: the backend and what it needs (``timestep``
-    [s], ``spacing`` [m], ``membrane_cap`` [N/m], ``shell_dof``, ``belt_friction``,
+    [s], ``spacing`` [m], ``membrane_cap`` [N/m], ``shell_dof``, ``shell_cells``, ``belt_friction``,
     ``stick_speed`` and ``slip_speed`` [m/s], ``rig_timesteps`` (rig name -> time step [s]), ``wall_limit`` [s])."""
 
     backend: Annotated[str, Choice(BACKENDS, what="backend")]
@@ -125,6 +130,7 @@ class SimulatorSection(FileModel):
     spacing: Annotated[float | None, Number(unit="m", ge=1e-9)] = None
     membrane_cap: Annotated[float | None, Number(unit="N/m", ge=1e-9)] = None
     shell_dof: Annotated[str | None, Choice(SHELL_DOFS, what="shell degrees of freedom")] = None
+    shell_cells: list[Annotated[float, Number(ge=1, le=MAX_SHELL_CELLS)]] | None = None
     belt_friction: Annotated[str | None, Choice(BELT_FRICTION, what="belt friction law")] = None
     stick_speed: Annotated[float | None, Number(unit="m/s", ge=1e-9)] = None
     slip_speed: Annotated[float | None, Number(unit="m/s", ge=1e-9)] = None
@@ -142,6 +148,11 @@ class SimulatorSection(FileModel):
     @model_validator(mode="after")
     def _backend_needs(self) -> SimulatorSection:
         _check_needs(self.backend, self)
+        if self.shell_cells is not None:
+            try:
+                shell_cells(self.shell_cells)
+            except ParcelfitError as exc:
+                raise ParcelfitError(exc.message, where="shell_cells", fix=exc.fix) from None
         stick = STICK_SPEED if self.stick_speed is None else self.stick_speed
         if self.slip_speed is not None and self.slip_speed <= stick:
             raise ParcelfitError(
@@ -159,6 +170,8 @@ class SimulatorSection(FileModel):
         for key in ("rig", "consignment", "external"):
             if key in given and given[key].lower().endswith((".yaml", ".yml")):
                 given[key] = str((folder / given[key]).resolve())
+        if "shell_cells" in given:
+            given["shell_cells"] = shell_cells(given["shell_cells"])
         return SimulatorConfig(**given, folder=folder)
 
 
@@ -181,7 +194,7 @@ def make_simulator(config: SimulatorConfig) -> Simulator:
             for k in ("timestep", "spacing", "membrane_cap", "stick_speed", "slip_speed")
             if k in config
         }
-        for key in ("belt_friction", "shell_dof"):
+        for key in ("belt_friction", "shell_dof", "shell_cells"):
             if key in config:
                 numerics[key] = config[key]
         if "rig_timesteps" in config:

@@ -29,6 +29,25 @@ MIN_TIMESTEP, MAX_TIMESTEP = 1e-5, 0.01
 # the values a scene's ``shell_dof`` and ``belt_friction`` take (`SceneOptions`); a study's
 # simulator section and a twin's settings check against the same lists
 SHELL_DOFS = ("auto", "full", "quadratic", "trilinear")
+# the most cells an interpolated shell's grid takes along one axis (``shell_cells``): MuJoCo's
+# multi-cell flexes cost more with every cell (a dense solve over their nodes)
+MAX_SHELL_CELLS = 12
+
+
+def shell_cells(value: Iterable[float]) -> tuple[int, int, int]:
+    """An interpolated shell's grid of cells (along the parcel's length, width, height) as three
+    whole numbers from 1 to `MAX_SHELL_CELLS`; anything else is refused."""
+    cells = tuple(value)
+    if len(cells) != 3 or not all(
+        float(c).is_integer() and 1 <= c <= MAX_SHELL_CELLS for c in cells
+    ):
+        raise ParcelfitError(
+            f"shell cells must be three whole numbers from 1 to {MAX_SHELL_CELLS}, got {cells}",
+            fix="give cells along the length, width and height, e.g. 4,4,1",
+        )
+    return (int(cells[0]), int(cells[1]), int(cells[2]))
+
+
 BELT_FRICTION = ("mujoco", "coulomb")
 
 

@@ -10,6 +10,7 @@ A consignment file (YAML, SI units)::
     bulge: {depth: 0.004, footprint: 0.3}   # optional: the bottom bulges under the content
     parameters: {mu_d_BePa: 0.30}    # optional: this type's own defaults (catalogue units)
     shell: trilinear                 # optional: the packaging shell's degrees of freedom
+    shell_cells: [4, 4, 1]           # optional: its grid of cells (length, width, height)
 
 ``bulge`` (optional, rigid contents): a bubble mailer's bottom that bulges below the content's
 face by ``depth`` [m] over a centred patch of ``footprint`` times the outer length and width
@@ -24,9 +25,13 @@ default for this type only; a study, ``--set`` or a calibration still overrides 
 ``shell`` (optional): how the packaging's vertices move when the scene leaves it to the type
 (`SceneOptions.shell_dof` "auto", the default): ``quadratic`` (over 3 x 3 x 3 nodes),
 ``trilinear`` (2 x 2 x 2) or ``full`` (each vertex on its own). Without it: quadratic around a
-rigid content, full around a soft one. A type's choice is the cheapest shell that reproduces the
-full shell at a fine step and mesh (the reference) on the E3 ensemble; KP, whose content fills
-its envelope, takes the trilinear shell (docs/trilinear-kp.md), the others the default.
+rigid content, full around a soft one. ``shell_cells`` (optional, with an interpolated
+``shell``): the field is interpolated within each cell of a grid of that many cells along the
+parcel's length, width and height (MuJoCo's multi-cell flexes; default one cell), so that a
+rim can bend apart from the face it borders. A type's choice is the cheapest shell that
+reproduces the full shell at a fine step and mesh (the reference) on the E3 ensemble and keeps
+its outcome when refined: BW, KP/BW and KP take a trilinear shell over 4 x 4 x 1 cells
+(docs/multicell-shell.md), PB the full shell around its soft content.
 
 The content must fit inside the outer dimensions (length and width strictly smaller, height not
 larger). The packaging's mass is a simulation parameter (m_Pa); the content gets the rest.
@@ -45,7 +50,7 @@ from parcelfit.config import load_yaml
 from parcelfit.errors import ParcelfitError
 from parcelfit.schema import Choice, FileModel, Number, Text, parse
 from parcelfit.sim.mujoco.bundled import bundled_names, resolve_file
-from parcelfit.sim.params import RIGID, SHELL_DOFS, SOFT, resolve
+from parcelfit.sim.params import MAX_SHELL_CELLS, RIGID, SHELL_DOFS, SOFT, resolve, shell_cells
 
 # what a consignment file's ``shell`` takes: a scene's choices but "auto"
 TYPE_SHELL_DOFS = tuple(d for d in SHELL_DOFS if d != "auto")
@@ -68,6 +73,9 @@ class Consignment:
     # the shell's degrees of freedom under the scene's "auto" (see the module docstring); None:
     # quadratic around a rigid content, full around a soft one
     shell: str | None = None
+    # the grid of cells of that shell along the length, width and height (see the module
+    # docstring); one cell unless the file says otherwise
+    shell_cells: tuple[int, int, int] = (1, 1, 1)
 
     @property
     def soft(self) -> bool:
@@ -134,6 +142,7 @@ class ConsignmentFile(FileModel):
     bulge: BulgeSection | None = None
     parameters: dict[str, float] | None = None
     shell: Annotated[str | None, Choice(TYPE_SHELL_DOFS, what="shell degrees of freedom")] = None
+    shell_cells: list[Annotated[float, Number(ge=1, le=MAX_SHELL_CELLS)]] | None = None
 
     @model_validator(mode="after")
     def _content_fits(self) -> ConsignmentFile:
@@ -156,6 +165,22 @@ class ConsignmentFile(FileModel):
                     where="bulge.footprint",
                     fix=f"use a footprint below {min(inner[0] / outer[0], inner[1] / outer[1]):.2f}",
                 )
+        return self
+
+    @model_validator(mode="after")
+    def _cells_fit_the_shell(self) -> ConsignmentFile:
+        if self.shell_cells is None:
+            return self
+        if self.shell not in ("trilinear", "quadratic"):
+            raise ParcelfitError(
+                "shell_cells needs an interpolated shell",
+                where="shell_cells",
+                fix="add `shell: trilinear` (or quadratic), or remove shell_cells",
+            )
+        try:
+            shell_cells(self.shell_cells)
+        except ParcelfitError as exc:
+            raise ParcelfitError(exc.message, where="shell_cells", fix=exc.fix) from None
         return self
 
     @model_validator(mode="after")
@@ -183,6 +208,7 @@ def parse_consignment(doc: Any, file: str) -> Consignment:
         bulge=None if f.bulge is None else (f.bulge.depth, f.bulge.footprint),
         parameters=tuple((f.parameters or {}).items()),
         shell=f.shell,
+        shell_cells=(1, 1, 1) if f.shell_cells is None else shell_cells(f.shell_cells),
     )
 
 

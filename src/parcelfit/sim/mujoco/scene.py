@@ -37,6 +37,7 @@ from parcelfit.sim.params import (
     MIN_TIMESTEP,
     SHELL_DOFS,
     STICK_SPEED,
+    shell_cells,
 )
 
 SLAB = 0.02  # half-thickness of belt and strip boxes [m]
@@ -96,10 +97,16 @@ class SceneOptions:
     impratio: float = 1.0
     # how MuJoCo moves the shell's vertices: "full" (each vertex its own 3 degrees of freedom) or
     # interpolated from a grid of nodes over the parcel's box, "quadratic" (3 x 3 x 3 nodes) or
-    # "trilinear" (2 x 2 x 2); "auto": the consignment's own choice (`Consignment.shell`, KP's
-    # trilinear), else quadratic around a rigid content, full around a soft one
+    # "trilinear" (2 x 2 x 2); "auto": the consignment's own choice (`Consignment.shell`: the
+    # bundled rigid-content types' trilinear over 4 x 4 x 1 cells), else quadratic around a rigid
+    # content, full around a soft one
     # (a full shell loses most of a spin: spin.py, the README's "Spin")
     shell_dof: str = "auto"
+    # an interpolated shell's grid of cells along the parcel's length, width and height (MuJoCo's
+    # multi-cell flexes: the field is trilinear or quadratic within each cell, so a rim can bend
+    # apart from the face it borders); None: the consignment's own (`Consignment.shell_cells`)
+    # where the shell is its own choice, else one cell
+    shell_cells: tuple[int, int, int] | None = None
     # friction between the packaging and belts, strips and rollers: "mujoco" (MuJoCo's own
     # contact friction) or "coulomb" (those contacts frictionless in MuJoCo and Coulomb friction
     # applied as forces at the contact points before every step, `coulomb.CoulombBelts`):
@@ -140,6 +147,8 @@ class SceneOptions:
             raise ParcelfitError(
                 f"unknown shell_dof {self.shell_dof!r}", fix=f"use one of {list(SHELL_DOFS)}"
             )
+        if self.shell_cells is not None:
+            object.__setattr__(self, "shell_cells", shell_cells(self.shell_cells))
         if self.belt_friction not in BELT_FRICTION:
             raise ParcelfitError(
                 f"belt_friction must be mujoco or coulomb, got {self.belt_friction!r}"
@@ -181,6 +190,19 @@ class SceneOptions:
         if own is not None:
             return own
         return "full" if soft else "quadratic"
+
+    def shell_of(self, consignment: Consignment) -> tuple[str, tuple[int, int, int]]:
+        """The shell of ``consignment`` in this scene: its degrees of freedom (`shell_for`) and,
+        for an interpolated shell, its grid of cells: ``shell_cells`` if set, else the type's
+        own where the type's own shell is used, else one cell."""
+        dof = self.shell_for(consignment.soft, consignment.shell)
+        if dof == "full":
+            return dof, (1, 1, 1)
+        if self.shell_cells is not None:
+            return dof, self.shell_cells
+        if self.shell_dof == "auto" and consignment.shell is not None:
+            return dof, consignment.shell_cells
+        return dof, (1, 1, 1)
 
     def step_for(self, soft: bool, rig: Rig | None = None, own: str | None = None) -> float:
         """The time step [s] of a scene with a soft (True) or rigid content on ``rig``: the
@@ -473,8 +495,10 @@ def build_scene(
     rho_pa = m_pa / (2 * L * W * t_pa)
     beta_pa = 2 * p["zeta_Pa"] / bending_omega(young_pa, p["nu_Pa"], t_pa, rho_pa, L)
     points = " ".join(_f(v) for v in shell.points.ravel())
-    shell_dof = opt.shell_for(soft, consignment.shell)
+    shell_dof, cells = opt.shell_of(consignment)
     dof = "" if shell_dof == "full" else f' dof="{shell_dof}"'
+    if cells != (1, 1, 1):
+        dof += f' cellcount="{cells[0]} {cells[1]} {cells[2]}"'
     elements = " ".join(str(i) for i in shell.triangles.ravel())
     # an interpolated shell's nodes lie on a box aligned with the axes of the flexcomp's parent
     # body: a static frame turned like the parcel keeps that box aligned with the parcel
