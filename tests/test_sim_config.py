@@ -651,7 +651,8 @@ def test_belt_friction_from_a_study_files_simulator_section_and_a_twins_settings
 def test_the_shells_degrees_of_freedom_from_a_study_file_and_the_simulate_command(tmp_path):
     """``shell_dof`` in a study's simulator section (and `parcelfit simulate --shell-dof`)
     reaches the scene: the full shell gets one degree of freedom per vertex, the default stays
-    ``auto`` (quadratic around a rigid content), and an unknown value is refused."""
+    ``auto`` (the consignment file's shell), and an unknown value is refused; ``shell_cells``
+    (and ``--shell-cells``) likewise."""
     from typer.testing import CliRunner
 
     from parcelfit.cli import app
@@ -672,6 +673,17 @@ def test_the_shells_degrees_of_freedom_from_a_study_file_and_the_simulate_comman
     assert result.exit_code != 0
     assert "unknown shell_dof 'floppy'" in result.output
     assert not (tmp_path / "r.csv").exists()
+    # the shell's grid of cells: from the section to the scene, and refused when it is no grid
+    cells = SimulatorSection(backend="mujoco", rig="E3", consignment="KPBW", shell_cells=[2, 3, 1])
+    scene = make_simulator(cells.to_config(tmp_path)).options.scene  # type: ignore[attr-defined]
+    assert scene.shell_cells == (2, 3, 1)
+    for text, message in (("4,4,x", "is not three numbers"), ("4,0,1", "three whole numbers")):
+        result = CliRunner().invoke(
+            app, ["simulate", "--shell-cells", text, "--out", str(tmp_path / "r.csv")]
+        )
+        assert result.exit_code != 0
+        assert message in result.output
+        assert not (tmp_path / "r.csv").exists()
 
 
 def test_the_static_friction_law_from_a_study_files_simulator_section(tmp_path):

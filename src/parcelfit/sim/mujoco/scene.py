@@ -147,7 +147,7 @@ class SceneOptions:
             raise ParcelfitError(
                 f"unknown shell_dof {self.shell_dof!r}", fix=f"use one of {list(SHELL_DOFS)}"
             )
-        if self.shell_cells is not None:
+        if self.shell_cells is not None:  # checked, and whole numbers (texts give floats)
             object.__setattr__(self, "shell_cells", shell_cells(self.shell_cells))
         if self.belt_friction not in BELT_FRICTION:
             raise ParcelfitError(
