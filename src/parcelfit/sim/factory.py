@@ -29,13 +29,12 @@ from parcelfit.errors import ParcelfitError
 from parcelfit.schema import Choice, FileModel, Number, Text
 from parcelfit.sim.params import (
     BELT_FRICTION,
-    MAX_SHELL_CELLS,
     MAX_TIMESTEP,
     MIN_TIMESTEP,
     RIGID,
     SHELL_DOFS,
     STICK_SPEED,
-    shell_cells,
+    ShellCellsField,
 )
 from parcelfit.sim.protocol import Simulator
 
@@ -130,7 +129,7 @@ class SimulatorSection(FileModel):
     spacing: Annotated[float | None, Number(unit="m", ge=1e-9)] = None
     membrane_cap: Annotated[float | None, Number(unit="N/m", ge=1e-9)] = None
     shell_dof: Annotated[str | None, Choice(SHELL_DOFS, what="shell degrees of freedom")] = None
-    shell_cells: list[Annotated[float, Number(ge=1, le=MAX_SHELL_CELLS)]] | None = None
+    shell_cells: ShellCellsField | None = None
     belt_friction: Annotated[str | None, Choice(BELT_FRICTION, what="belt friction law")] = None
     stick_speed: Annotated[float | None, Number(unit="m/s", ge=1e-9)] = None
     slip_speed: Annotated[float | None, Number(unit="m/s", ge=1e-9)] = None
@@ -148,11 +147,6 @@ class SimulatorSection(FileModel):
     @model_validator(mode="after")
     def _backend_needs(self) -> SimulatorSection:
         _check_needs(self.backend, self)
-        if self.shell_cells is not None:
-            try:
-                shell_cells(self.shell_cells)
-            except ParcelfitError as exc:
-                raise ParcelfitError(exc.message, where="shell_cells", fix=exc.fix) from None
         stick = STICK_SPEED if self.stick_speed is None else self.stick_speed
         if self.slip_speed is not None and self.slip_speed <= stick:
             raise ParcelfitError(
@@ -170,8 +164,6 @@ class SimulatorSection(FileModel):
         for key in ("rig", "consignment", "external"):
             if key in given and given[key].lower().endswith((".yaml", ".yml")):
                 given[key] = str((folder / given[key]).resolve())
-        if "shell_cells" in given:
-            given["shell_cells"] = shell_cells(given["shell_cells"])
         return SimulatorConfig(**given, folder=folder)
 
 

@@ -14,10 +14,13 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Annotated, Any
+
+from pydantic import AfterValidator
 
 from parcelfit.config import suggest
 from parcelfit.errors import ParcelfitError
+from parcelfit.schema import Number
 
 RIGID = "rigid"
 SOFT = "soft"
@@ -46,6 +49,14 @@ def shell_cells(value: Iterable[float]) -> tuple[int, int, int]:
             fix="give cells along the length, width and height, e.g. 4,4,1",
         )
     return (int(cells[0]), int(cells[1]), int(cells[2]))
+
+
+# ``shell_cells`` as a file writes it (a consignment file, a study's simulator section): each
+# number checked where it stands (``shell_cells[1]: 13 is outside ...``), then the three as a
+# whole by `shell_cells`, so the model holds the checked tuple
+ShellCellsField = Annotated[
+    tuple[Annotated[float, Number(ge=1, le=MAX_SHELL_CELLS)], ...], AfterValidator(shell_cells)
+]
 
 
 BELT_FRICTION = ("mujoco", "coulomb")

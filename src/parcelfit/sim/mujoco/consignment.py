@@ -50,7 +50,7 @@ from parcelfit.config import load_yaml
 from parcelfit.errors import ParcelfitError
 from parcelfit.schema import Choice, FileModel, Number, Text, parse
 from parcelfit.sim.mujoco.bundled import bundled_names, resolve_file
-from parcelfit.sim.params import MAX_SHELL_CELLS, RIGID, SHELL_DOFS, SOFT, resolve, shell_cells
+from parcelfit.sim.params import RIGID, SHELL_DOFS, SOFT, ShellCellsField, resolve
 
 # what a consignment file's ``shell`` takes: a scene's choices but "auto"
 TYPE_SHELL_DOFS = tuple(d for d in SHELL_DOFS if d != "auto")
@@ -142,7 +142,7 @@ class ConsignmentFile(FileModel):
     bulge: BulgeSection | None = None
     parameters: dict[str, float] | None = None
     shell: Annotated[str | None, Choice(TYPE_SHELL_DOFS, what="shell degrees of freedom")] = None
-    shell_cells: list[Annotated[float, Number(ge=1, le=MAX_SHELL_CELLS)]] | None = None
+    shell_cells: ShellCellsField | None = None
 
     @model_validator(mode="after")
     def _content_fits(self) -> ConsignmentFile:
@@ -169,18 +169,12 @@ class ConsignmentFile(FileModel):
 
     @model_validator(mode="after")
     def _cells_fit_the_shell(self) -> ConsignmentFile:
-        if self.shell_cells is None:
-            return self
-        if self.shell not in ("trilinear", "quadratic"):
+        if self.shell_cells is not None and self.shell not in ("trilinear", "quadratic"):
             raise ParcelfitError(
                 "shell_cells needs an interpolated shell",
                 where="shell_cells",
                 fix="add `shell: trilinear` (or quadratic), or remove shell_cells",
             )
-        try:
-            shell_cells(self.shell_cells)
-        except ParcelfitError as exc:
-            raise ParcelfitError(exc.message, where="shell_cells", fix=exc.fix) from None
         return self
 
     @model_validator(mode="after")
@@ -208,7 +202,7 @@ def parse_consignment(doc: Any, file: str) -> Consignment:
         bulge=None if f.bulge is None else (f.bulge.depth, f.bulge.footprint),
         parameters=tuple((f.parameters or {}).items()),
         shell=f.shell,
-        shell_cells=(1, 1, 1) if f.shell_cells is None else shell_cells(f.shell_cells),
+        shell_cells=f.shell_cells or (1, 1, 1),
     )
 
 
