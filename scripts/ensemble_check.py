@@ -6,6 +6,7 @@ across ensembles of seeded hand placements rather than single runs.
     python scripts/ensemble_check.py --all-settings         # every speed setting of each rig
     python scripts/ensemble_check.py --rigs examples/e3-variants/E3-plate-clear.yaml
     python scripts/ensemble_check.py --bulge BW=0.3 KPBW=0.45 --set zeta_MePa=0.1 --scene impratio=10
+    python scripts/ensemble_check.py --rigs E2a --nose-radius 0   # square belt ends
 
 For each rig and speed setting it simulates every consignment type at its default parameters
 for the placement seeds 0..N-1 (the rig's ``start.scatter``), then prints and writes
@@ -22,7 +23,9 @@ and a figure per rig and setting (``ensemble-<rig>-<setting>.png``): the top vie
 placement's path and the heading over the travelled distance, like the published Figures 17
 and 19. Runs go over all cores (``--workers``). ``--set`` changes parameters (catalogue units) for
 every type, ``--bulge TYPE=FOOTPRINT`` gives a type's packaging a bulging bottom
-(``--bulge-depth``, `parcelfit.sim.mujoco.shell`), ``--scene`` sets scene options.
+(``--bulge-depth``, `parcelfit.sim.mujoco.shell`), ``--scene`` sets scene options,
+``--nose-radius`` the radius [m] of the drums every belt and strip set of the rigs runs round at
+its ends (0: square ends) in place of the rig files' own (`Rig.with_drum_ends`).
 """
 
 from __future__ import annotations
@@ -204,12 +207,24 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE", help="catalogue units")
     ap.add_argument("--bulge", nargs="*", default=[], metavar="TYPE=FOOTPRINT")
     ap.add_argument("--bulge-depth", type=float, default=0.004, help="[m]")
+    ap.add_argument(
+        "--nose-radius",
+        type=float,
+        default=None,
+        help="drum radius at the ends of every belt and strip set [m] (0: square ends); "
+        "default: each rig file's own",
+    )
     args = ap.parse_args(argv)
     if not args.wall_limit > 0:
         ap.error(f"--wall-limit must be positive [s], got {args.wall_limit:g}")
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "figures").mkdir(exist_ok=True)
     rigs = [load_rig(r) for r in args.rigs]  # bundled names or rig files
+    if args.nose_radius is not None:
+        try:
+            rigs = [r.with_drum_ends(args.nose_radius) for r in rigs]
+        except ParcelfitError as exc:
+            ap.error(f"--nose-radius: {exc}")
     try:
         scene = scene_options(args.scene)
     except ParcelfitError as exc:
@@ -238,6 +253,7 @@ def main(argv: list[str] | None = None) -> int:
             if v
         )
         + (f" --bulge-depth {args.bulge_depth}" if args.bulge else "")
+        + (f" --nose-radius {args.nose_radius:g}" if args.nose_radius is not None else "")
         + (f" --wall-limit {args.wall_limit:g}" if args.wall_limit != SimOptions.wall_limit else "")
         + "`: "
         "every consignment type at its default parameters, placement seeds "

@@ -295,7 +295,11 @@ CASES = {
     "rig key of another surface type": (
         "rig",
         lambda d: d["surfaces"][0].update(count=3),
-        ("surfaces[0]", "unknown key 'count'", "known keys: " + ", ".join(RIG["surfaces"][0])),
+        (
+            "surfaces[0]",
+            "unknown key 'count'",
+            "known keys: " + ", ".join([*RIG["surfaces"][0], "nose_radius"]),
+        ),
     ),
     "rig unknown surface type": (
         "rig",

@@ -64,6 +64,15 @@ def _e3_doc():
             r"step_refinement: expected a whole number",
         ),
         (lambda d: d.update(step_refinement=0), r"step_refinement: 0 is out of range"),
+        (
+            lambda d: d["surfaces"][0].update(nose_radius=-0.01),
+            r"surfaces\[0\]\.nose_radius: -0\.01 is outside",
+        ),
+        (
+            lambda d: d["surfaces"][1].update(length=0.3, nose_radius=0.15),
+            r"surfaces\[1\]\.nose_radius: nose_radius 0\.15 m leaves no flat top on a surface "
+            r"0\.3 m long",
+        ),
     ],
 )
 def test_bad_rig_files(change, pattern):
@@ -72,6 +81,17 @@ def test_bad_rig_files(change, pattern):
     with pytest.raises(ParcelfitError, match=pattern) as info:
         parse_rig(doc, "my_rig.yaml")
     assert str(info.value).startswith("my_rig.yaml")
+
+
+def test_rollers_have_no_drum_ends():
+    doc = copy.deepcopy(load_yaml(load_rig("E2a").source))
+    assert [s.get("nose_radius") for s in doc["surfaces"]] == [0.02, None, 0.02]
+    doc["surfaces"][1]["nose_radius"] = 0.02
+    with pytest.raises(ParcelfitError, match=r"surfaces\[1\]: unknown key 'nose_radius'"):
+        parse_rig(doc, "my_rig.yaml")
+    doc["surfaces"][1].pop("nose_radius")
+    doc["surfaces"][0].pop("nose_radius")
+    assert parse_rig(doc, "my_rig.yaml").surface("infeed").nose_radius == 0.0
 
 
 def test_bad_consignment_files():

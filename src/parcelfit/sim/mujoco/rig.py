@@ -16,6 +16,8 @@ A rig file (YAML, SI units, angles in degrees counter-clockwise from the rig's x
         heading: 0                # direction of motion [deg]
         top: 0.0                  # height of the conveying surface [m]
         drive: main               # key into speeds
+        nose_radius: 0.02         # optional (belt, strips): radius of the end drums [m]; 0 (the
+                                  # default): square ends
         # strips:  count, strip_width, pitch           (type strips)
         # rollers: rows, columns, radius, roller_width, swivel [deg]   (type rollers)
     walls:                        # vertical plates (guide plates, side walls)
@@ -51,7 +53,7 @@ after it interrupts the second light barrier, or after ``duration`` seconds of s
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -82,6 +84,8 @@ _SURFACE_KEYS = {
     "rollers": ("rows", "columns", "radius", "roller_width", "swivel"),
 }
 _COMMON = ("name", "type", "material", "centre", "length", "width", "heading", "top", "drive")
+_NOSED = ("belt", "strips")  # surface types that may have rounded ends (``nose_radius``)
+MAX_NOSE_RADIUS = 0.2  # [m]
 PLACEMENT_STREAM = 0x51ACE  # keeps placement draws apart from other seeded streams
 SCATTER_CUT = 2.5  # placement draws are cut off at this many standard deviations
 
@@ -100,6 +104,8 @@ class Surface:
     top: float
     drive: str
     extra: Mapping[str, float]
+    # radius of the drums a belt or strip runs round at its two ends [m]; 0: square ends
+    nose_radius: float = 0.0
 
     def unit(self) -> np.ndarray:
         """Unit vector of the heading (direction of motion) in the plane."""
@@ -191,6 +197,25 @@ class Rig:
             )
         return self.speeds[setting]
 
+    def with_drum_ends(self, radius: float) -> Rig:
+        """The rig with every belt and strip set running round drums of ``radius`` [m] at its
+        ends (0: square ends), in place of the rig file's ``nose_radius``."""
+        if not 0.0 <= radius <= MAX_NOSE_RADIUS:
+            raise ParcelfitError(
+                f"drum radius {radius:g} m is outside [0, {MAX_NOSE_RADIUS:g}] m",
+                fix="give the radius in metres, e.g. 0.02",
+            )
+        nosed = [s for s in self.surfaces if s.type in _NOSED]
+        if any(2 * radius >= s.length for s in nosed):
+            raise ParcelfitError(
+                f"drum radius {radius:g} m leaves no flat top on a surface of rig {self.name}",
+                fix="make the radius less than half the shortest belt",
+            )
+        surfaces = tuple(
+            replace(s, nose_radius=radius) if s.type in _NOSED else s for s in self.surfaces
+        )
+        return replace(self, surfaces=surfaces)
+
 
 # -- the file as written (its units: m, m/s, s, deg) ----------------------------------
 
@@ -265,6 +290,7 @@ class SurfaceEntry(FileModel):
     radius: _Extra = None
     roller_width: _Extra = None
     swivel: _Extra = None
+    nose_radius: Annotated[float, Number(unit="m", ge=0.0, le=MAX_NOSE_RADIUS)] = 0.0
 
     @classmethod
     def allowed_keys(cls, data: Mapping[Any, Any]) -> list[str]:
@@ -275,13 +301,20 @@ class SurfaceEntry(FileModel):
             stype = _SURFACE_TYPE.check(data["type"])
         except ParcelfitError as exc:
             raise ParcelfitError(exc.message, where="type", fix=exc.fix) from None
-        return [*_COMMON, *_SURFACE_KEYS[stype]]
+        return [*_COMMON, *_SURFACE_KEYS[stype], *(("nose_radius",) if stype in _NOSED else ())]
 
     @model_validator(mode="after")
     def _type_keys(self) -> SurfaceEntry:
         for key in _SURFACE_KEYS[self.type]:
             if getattr(self, key) is None:
                 raise ParcelfitError(f"missing required key {key!r}", fix=f"add `{key}:`")
+        if 2 * self.nose_radius >= self.length:
+            raise ParcelfitError(
+                f"nose_radius {self.nose_radius:g} m leaves no flat top on a surface "
+                f"{self.length:g} m long",
+                where="nose_radius",
+                fix="make the radius less than half the length",
+            )
         return self
 
     @property
@@ -418,6 +451,7 @@ def parse_rig(doc: Any, file: str) -> Rig:
                 top=s.top,
                 drive=s.drive,
                 extra=s.extra,
+                nose_radius=s.nose_radius,
             )
             for s in f.surfaces
         ),

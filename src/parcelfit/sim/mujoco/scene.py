@@ -328,13 +328,31 @@ def _surface_geoms(
         ]
     else:
         parts = []
+    r = s.nose_radius
     for name, c, width in parts:
+        # with rounded ends the flat top stops r short of each end, where the belt runs round a
+        # drum of radius r whose top is level with it
         xml.append(
-            f'<geom name="{name}" type="box" size="{_f(s.length / 2)} {_f(width / 2)} {SLAB}" '
+            f'<geom name="{name}" type="box" size="{_f(s.length / 2 - r)} {_f(width / 2)} {SLAB}" '
             f'pos="{_f(c[0])} {_f(c[1])} {_f(s.top - SLAB)}" quat="{_quat(s.heading)}" '
             f'surfacevel="{_f(speed)} 0 0 0 0 0" rgba="0.25 0.25 0.3 1" {common}/>'
         )
         geoms.append(SurfaceGeom(name, s.material, (speed * u[0], speed * u[1], 0.0), s.name))
+        if r <= 0:
+            continue
+        for end, sign in (("tail", -1), ("head", 1)):
+            p = c + sign * (s.length / 2 - r) * u
+            # a cylinder across the heading, R = Rz(heading) Rx(90 deg): its axis (local z) is
+            # world -n, so the local angular velocity -speed / r turns it with the belt: speed
+            # along u on top, up at the tail, down at the head (surface velocity w x arm)
+            xml.append(
+                f'<geom name="{name}_{end}" type="cylinder" size="{_f(r)} {_f(width / 2)}" '
+                f'pos="{_f(p[0])} {_f(p[1])} {_f(s.top - r)}" quat="{_quat(s.heading, 90)}" '
+                f'surfacevel="0 0 0 0 0 {_f(-speed / r)}" rgba="0.25 0.25 0.3 1" {common}/>'
+            )
+            geoms.append(
+                SurfaceGeom(f"{name}_{end}", s.material, (speed * u[0], speed * u[1], 0.0), s.name)
+            )
     if s.type == "rollers":
         rows, cols = int(s.extra["rows"]), int(s.extra["columns"])
         radius, half = s.extra["radius"], s.extra["roller_width"] / 2

@@ -1,0 +1,137 @@
+"""Where does a parcel catch? The packaging's contacts with the rig, surface by surface, over time.
+
+    python scripts/contact_trace.py --rig E2a --consignment KPBW --setting 1 --seed 3
+                                    --from 1.76 --to 1.9 [--every 0.01] [--scene KEY=VALUE ...]
+
+Runs one simulation as `parcelfit simulate` does and prints, at every ``--every`` seconds of the
+window [``--from``, ``--to``] (simulated time, s): the packaging's centre [m] (the mean of its
+vertices) and how far it has turned since the start [deg] (a line through two of its vertices),
+and for the rig geoms that push it hardest about the vertical through its centre their yaw
+torque [N m] and the world force they exert on the packaging [N]. A catch on an edge shows as a
+large horizontal force against the direction of travel from one geom. Also printed: how many
+contacts the packaging has with each body MuJoCo collides it with as one pair (the world with
+all the rig's geoms, the content); MuJoCo keeps at most 50 per pair (``mjMAXCONPAIR``), so a
+count of 50 means some were dropped. ``--rig`` and ``--consignment`` take bundled names or files.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import math
+import sys
+
+import mujoco
+import numpy as np
+
+from parcelfit.errors import ParcelfitError
+from parcelfit.runs import TestCase
+from parcelfit.sim.mujoco import MujocoSimulator, SimOptions, load_consignment, load_rig
+from parcelfit.sim.mujoco.scene import scene_options
+
+CAP = 50  # MuJoCo's mjMAXCONPAIR: contacts kept per colliding pair (geom-flex, body-flex)
+
+
+def _line_angle(model: mujoco.MjModel, data: mujoco.MjData) -> float:
+    """The direction [deg] of the line from the packaging's first vertex to its last."""
+    flex = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, "packaging")
+    first, last = model.flex_vertadr[flex], model.flex_vertadr[flex] + model.flex_vertnum[flex] - 1
+    d = data.flexvert_xpos[last] - data.flexvert_xpos[first]
+    return math.degrees(math.atan2(d[1], d[0]))
+
+
+def _trace(model: mujoco.MjModel, data: mujoco.MjData, top: int, start_angle: float) -> str:
+    flex = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, "packaging")
+    adr, num = model.flex_vertadr[flex], model.flex_vertnum[flex]
+    verts = data.flexvert_xpos[adr : adr + num]
+    centre = verts.mean(axis=0)
+    turn = (_line_angle(model, data) - start_angle + 180) % 360 - 180
+    torque: dict[str, float] = collections.defaultdict(float)
+    force: dict[str, np.ndarray] = collections.defaultdict(lambda: np.zeros(3))
+    pairs: collections.Counter[str] = collections.Counter()
+    f6 = np.zeros(6)
+    for i in range(data.ncon):
+        con = data.contact[i]
+        if flex not in (con.flex[0], con.flex[1]):
+            continue
+        geom = con.geom[0] if con.geom[0] >= 0 else con.geom[1]
+        if geom < 0:  # packaging and a soft content (flex against flex)
+            pairs["content"] += 1
+            continue
+        body = int(model.geom_bodyid[geom])
+        pairs["world" if body == 0 else model.body(body).name] += 1
+        if body != 0:
+            continue
+        mujoco.mj_contactForce(model, data, i, f6)
+        # the frame's normal points from object 1 to object 2: the force on object 2
+        on_second = con.frame.reshape(3, 3).T @ f6[:3]
+        f = on_second if con.geom[0] == geom else -on_second
+        arm = con.pos - centre
+        name = model.geom(geom).name
+        torque[name] += arm[0] * f[1] - arm[1] * f[0]
+        force[name] += f
+    hardest = sorted(torque, key=lambda k: -abs(torque[k]))[:top]
+    parts = [
+        f"{k} {torque[k]:+.4f} N m (F {force[k][0]:+.2f} {force[k][1]:+.2f} {force[k][2]:+.2f} N)"
+        for k in hardest
+    ]
+    counts = " ".join(f"{k}={n}{'(cap)' if n >= CAP else ''}" for k, n in sorted(pairs.items()))
+    return (
+        f"t {data.time:.3f} s  x {centre[0]:+.3f} y {centre[1]:+.4f} m  turned {turn:+.2f} deg"
+        f"  yaw torque {sum(torque.values()):+.4f} N m | contacts {counts}\n    "
+        + ("; ".join(parts) if parts else "no rig contact")
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rig", required=True)
+    ap.add_argument("--consignment", required=True)
+    ap.add_argument("--setting", type=int, default=1)
+    ap.add_argument("--seed", type=int, default=None, help="placement seed (default: nominal)")
+    ap.add_argument("--from", dest="t0", type=float, default=0.0, help="[s]")
+    ap.add_argument("--to", dest="t1", type=float, default=math.inf, help="[s]")
+    ap.add_argument("--every", type=float, default=0.01, help="[s]")
+    ap.add_argument("--top", type=int, default=4, help="geoms listed per sample")
+    ap.add_argument("--scene", nargs="*", default=[], metavar="KEY=VALUE")
+    args = ap.parse_args(argv)
+    if not (args.every > 0 and args.t1 > args.t0 and args.top > 0):
+        ap.error("--every and --top must be positive and --to after --from")
+    try:
+        rig, cons = load_rig(args.rig), load_consignment(args.consignment)
+        options = SimOptions(scene=scene_options(args.scene))
+    except ParcelfitError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    sim = MujocoSimulator(options, {rig.name: rig}, {cons.name: cons}).with_placement(args.seed)
+    # the simulator owns its stepping loop; wrapping MuJoCo's step function in this process is
+    # the one way to look at every step of exactly that loop without changing it
+    step, state = mujoco.mj_step, {"next": args.t0}
+
+    def traced_step(model: mujoco.MjModel, data: mujoco.MjData) -> None:
+        step(model, data)
+        if "start" not in state:
+            state["start"] = _line_angle(model, data)
+        if args.t0 <= data.time <= args.t1 and data.time >= state["next"] - 1e-9:
+            state["next"] = data.time + args.every
+            print(_trace(model, data, args.top, state["start"]), flush=True)
+
+    mujoco.mj_step = traced_step
+    try:
+        result = sim.run({}, TestCase(rig.name, cons.name, args.setting))
+    finally:
+        mujoco.mj_step = step
+    run = result.run
+    if run is None:
+        print(f"run failed: {result.status.value} ({result.diagnostics.get('message')})")
+        return 1
+    theta = np.unwrap(run.trajectory.theta)
+    print(
+        f"rotation {math.degrees(theta[-1] - theta[0]):+.1f} deg, transit "
+        + (f"{run.transit_time:.3f} s" if run.transit_time is not None else "none")
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

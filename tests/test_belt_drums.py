@@ -1,0 +1,97 @@
+"""Belts and strips that run round drums at their ends (``nose_radius`` in a rig file)."""
+
+import math
+
+import mujoco
+import numpy as np
+import pytest
+
+from parcelfit.config import load_yaml
+from parcelfit.errors import ParcelfitError
+from parcelfit.runs import TestCase
+from parcelfit.sim.mujoco import MujocoSimulator, SceneOptions, SimOptions, load_rig
+from parcelfit.sim.mujoco.rig import parse_rig
+
+pytestmark = pytest.mark.mujoco
+
+
+def _surface_velocity(model: mujoco.MjModel, data: mujoco.MjData, geom: int, point: np.ndarray):
+    """MuJoCo's material velocity of a geom's surface at a world point [m/s]: the geom's linear
+    surfacevel plus (its angular surfacevel) x (point - geom centre), both turned to the world."""
+    sv = model.geom_surfacevel[geom]
+    rot = data.geom_xmat[geom].reshape(3, 3)
+    return rot @ sv[:3] + np.cross(rot @ sv[3:], point - data.geom_xpos[geom])
+
+
+@pytest.mark.parametrize(
+    ("rig_name", "surface", "geom"),
+    [("E2a", "outfeed", "outfeed"), ("E2b", "outfeed", "outfeed_4")],
+)
+def test_a_drum_is_level_with_the_top_and_turns_with_the_belt(rig_name, surface, geom):
+    rig = load_rig(rig_name)
+    s = rig.surface(surface)
+    r, speed = s.nose_radius, rig.drive_speeds(2)[s.drive]
+    assert r == pytest.approx(0.02)
+    model = mujoco.MjModel.from_xml_string(
+        MujocoSimulator().scene({}, TestCase(rig_name, "KPBW", 2)).xml
+    )
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    u = np.array([*s.unit(), 0.0])
+    up = np.array([0.0, 0.0, 1.0])
+    box = model.geom(geom).id
+    # the flat top stops r before each end of the surface's length
+    assert model.geom_size[box][0] == pytest.approx(s.length / 2 - r)
+    for end, sign in (("tail", -1), ("head", 1)):
+        drum = model.geom(f"{geom}_{end}").id
+        centre = data.geom_xpos[drum]
+        assert model.geom_type[drum] == mujoco.mjtGeom.mjGEOM_CYLINDER
+        assert model.geom_size[drum][0] == pytest.approx(r)
+        # its top is level with the belt's and meets the box's end; its axis lies across
+        assert centre[2] + r == pytest.approx(s.top)
+        box_end = data.geom_xpos[box] + sign * model.geom_size[box][0] * u
+        assert np.allclose(centre[:2], box_end[:2])
+        assert abs(data.geom_xmat[drum].reshape(3, 3)[:, 2] @ u) < 1e-9
+        # the belt's speed along u on top, up where it comes round the tail, down at the head
+        top = centre + r * up
+        assert np.allclose(_surface_velocity(model, data, drum, top), speed * u)
+        face = centre + sign * r * u
+        assert np.allclose(_surface_velocity(model, data, drum, face), -sign * speed * up)
+
+
+@pytest.mark.slow
+def test_on_e2a_the_mailer_crosses_onto_the_outfeed_without_catching_on_any_shell_grid():
+    # placement 3 of KP/BW on E2a setting 1: with square belt ends its front caught on the
+    # outfeed belt's edge and it turned 13 degrees over 4 x 4 x 1 cells (26-28 degrees at other
+    # placements over 5 x 5 x 1); the full shell does not turn (docs/belt-drums.md)
+    case = TestCase("E2a", "KPBW", 1)
+    rows = []
+    for cells in ((4, 4, 1), (5, 5, 1)):
+        sim = MujocoSimulator(SimOptions(scene=SceneOptions(shell_cells=cells))).with_placement(3)
+        run = sim.run({}, case).run
+        assert run is not None and run.transit_time is not None
+        theta = np.unwrap(run.trajectory.theta)
+        rows.append((math.degrees(abs(theta[-1] - theta[0])), run.transit_time))
+    assert all(rot < 2.0 for rot, _ in rows)
+    assert rows[0][1] == pytest.approx(rows[1][1], abs=0.003)
+
+
+def test_with_drum_ends_rounds_every_belt_and_strip_set_and_checks_the_radius():
+    e3 = load_rig("E3")
+    assert {s.name: s.nose_radius for s in e3.surfaces} == {"main": 0.0, "strips": 0.0}
+    assert {s.name: s.nose_radius for s in e3.with_drum_ends(0.01).surfaces} == {
+        "main": 0.01,
+        "strips": 0.01,
+    }
+    e2a = load_rig("E2a").with_drum_ends(0.0)
+    assert [s.nose_radius for s in e2a.surfaces] == [0.0, 0.0, 0.0]
+    xml = MujocoSimulator(rigs={"E2a": e2a}).scene({}, TestCase("E2a", "KP", 1)).xml
+    assert "outfeed_tail" not in xml and 'name="outfeed" type="box" size="0.75 ' in xml
+    with pytest.raises(ParcelfitError, match=r"drum radius -0\.01 m is outside \[0, 0\.2\] m"):
+        e3.with_drum_ends(-0.01)
+    doc = load_yaml(e3.source)
+    doc["surfaces"][1]["length"] = 0.3
+    short = parse_rig(doc, "short.yaml")
+    assert short.with_drum_ends(0.149).surface("strips").nose_radius == 0.149
+    with pytest.raises(ParcelfitError, match=r"drum radius 0\.15 m leaves no flat top"):
+        short.with_drum_ends(0.15)
