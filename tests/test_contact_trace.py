@@ -1,0 +1,56 @@
+"""scripts/contact_trace.py: which rig geom pushes the parcel, and how hard (docs/belt-drums.md)."""
+
+import importlib.util
+import re
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from parcelfit.sim.mujoco import load_rig
+
+from .helpers import ROOT
+
+pytestmark = pytest.mark.mujoco
+
+
+@pytest.fixture(scope="module")
+def trace():
+    spec = importlib.util.spec_from_file_location(
+        "contact_trace", ROOT / "scripts" / "contact_trace.py"
+    )
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["contact_trace"] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_bad_arguments_are_refused(trace, capsys):
+    with pytest.raises(SystemExit):
+        trace.main(["--rig", "E2a", "--consignment", "KPBW", "--from", "1", "--to", "0.5"])
+    assert "--to after --from" in capsys.readouterr().err
+    assert trace.main(["--rig", "E9", "--consignment", "KPBW"]) == 2
+    assert "unknown rig 'E9'" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_the_square_end_catch_on_e2a_is_the_outfeed_pushing_the_parcel_back(
+    trace, capsys, tmp_path
+):
+    doc = yaml.safe_load(Path(load_rig("E2a").source).read_text())
+    for surface in doc["surfaces"]:
+        surface.pop("nose_radius", None)
+    square = tmp_path / "E2a-square.yaml"
+    square.write_text(yaml.safe_dump(doc))
+    args = ["--rig", str(square), "--consignment", "KPBW", "--seed", "3", "--top", "1"]
+    assert trace.main([*args, "--from", "1.79", "--to", "1.801"]) == 0
+    out = capsys.readouterr().out
+    hardest = re.search(
+        r"\n    outfeed ([-+.\d]+) N m \(F ([-+.\d]+) ([-+.\d]+) ([-+.\d]+) N\)", out
+    )
+    assert hardest is not None, out
+    torque, fx, fz = float(hardest.group(1)), float(hardest.group(2)), float(hardest.group(4))
+    assert fx < -10.0 and abs(fz) < 1.0 and abs(torque) > 0.3  # a horizontal push, off centre
+    assert re.search(r"rotation -1[23]\.\d deg, transit 2\.1[34]\d s", out)
