@@ -11,7 +11,8 @@ torque [N m] and the world force they exert on the packaging [N]. A catch on an 
 large horizontal force against the direction of travel from one geom. Also printed: how many
 contacts the packaging has with each body MuJoCo collides it with as one pair (the world with
 all the rig's geoms, the content); MuJoCo keeps at most 50 per pair (``mjMAXCONPAIR``), so a
-count of 50 means some were dropped. ``--rig`` and ``--consignment`` take bundled names or files.
+count of 50 means the cap was reached and others may have been dropped. ``--rig`` and
+``--consignment`` take bundled names or files.
 """
 
 from __future__ import annotations

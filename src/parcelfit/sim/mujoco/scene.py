@@ -350,6 +350,8 @@ def _surface_geoms(
                 f'pos="{_f(p[0])} {_f(p[1])} {_f(s.top - r)}" quat="{_quat(s.heading, 90)}" '
                 f'surfacevel="0 0 0 0 0 {_f(-speed / r)}" rgba="0.25 0.25 0.3 1" {common}/>'
             )
+            # one velocity per geom: the drum's on top (Coulomb belt friction and the static
+            # friction switch compare a slip against it; on a drum's flank it is approximate)
             geoms.append(
                 SurfaceGeom(f"{name}_{end}", s.material, (speed * u[0], speed * u[1], 0.0), s.name)
             )
