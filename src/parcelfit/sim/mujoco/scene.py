@@ -328,7 +328,7 @@ def _surface_geoms(
         ]
     else:
         parts = []
-    r = s.nose_radius
+    r, velocity = s.nose_radius, (speed * u[0], speed * u[1], 0.0)
     for name, c, width in parts:
         # with rounded ends the flat top stops r short of each end, where the belt runs round a
         # drum of radius r whose top is level with it
@@ -337,7 +337,7 @@ def _surface_geoms(
             f'pos="{_f(c[0])} {_f(c[1])} {_f(s.top - SLAB)}" quat="{_quat(s.heading)}" '
             f'surfacevel="{_f(speed)} 0 0 0 0 0" rgba="0.25 0.25 0.3 1" {common}/>'
         )
-        geoms.append(SurfaceGeom(name, s.material, (speed * u[0], speed * u[1], 0.0), s.name))
+        geoms.append(SurfaceGeom(name, s.material, velocity, s.name))
         if r <= 0:
             continue
         for end, sign in (("tail", -1), ("head", 1)):
@@ -352,9 +352,7 @@ def _surface_geoms(
             )
             # one velocity per geom: the drum's on top (Coulomb belt friction and the static
             # friction switch compare a slip against it; on a drum's flank it is approximate)
-            geoms.append(
-                SurfaceGeom(f"{name}_{end}", s.material, (speed * u[0], speed * u[1], 0.0), s.name)
-            )
+            geoms.append(SurfaceGeom(f"{name}_{end}", s.material, velocity, s.name))
     if s.type == "rollers":
         rows, cols = int(s.extra["rows"]), int(s.extra["columns"])
         radius, half = s.extra["radius"], s.extra["roller_width"] / 2
