@@ -78,10 +78,14 @@ def test_on_e2a_the_mailer_crosses_onto_the_outfeed_without_catching_on_any_shel
 
 def test_with_drum_ends_rounds_every_belt_and_strip_set_and_checks_the_radius():
     e3 = load_rig("E3")
-    assert {s.name: s.nose_radius for s in e3.surfaces} == {"main": 0.0, "strips": 0.0}
+    assert {s.name: s.nose_radius for s in e3.surfaces} == {"main": 0.02, "strips": 0.02}
     assert {s.name: s.nose_radius for s in e3.with_drum_ends(0.01).surfaces} == {
         "main": 0.01,
         "strips": 0.01,
+    }
+    assert {s.name: s.nose_radius for s in e3.with_drum_ends(0.0).surfaces} == {
+        "main": 0.0,
+        "strips": 0.0,
     }
     e2a = load_rig("E2a").with_drum_ends(0.0)
     assert [s.nose_radius for s in e2a.surfaces] == [0.0, 0.0, 0.0]

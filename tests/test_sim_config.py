@@ -198,7 +198,7 @@ def test_a_types_own_defaults_sit_between_the_catalogue_and_the_user():
     xml = sim.scene({}, TestCase("E3", "BW", 1)).xml
     assert 'friction="0.565 ' in xml and 'friction="0.35 ' in xml
     xml = sim.scene({"mu_d_BePa": 0.4}, TestCase("E3", "BW", 1)).xml
-    assert 'friction="0.4 ' in xml and "0.565" not in xml
+    assert 'friction="0.4 ' in xml and 'friction="0.565' not in xml
 
     good = {
         "name": "X",
