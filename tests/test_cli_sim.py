@@ -45,6 +45,7 @@ def test_simulate_bad_input_is_one_message(tmp_path):
         (["--set", "mu_d_BePa=7"], "outside its physical range"),
         (["--set", "E_Co=0.1"], "E_Co does not apply to rigid contents"),
         (["--rig", str(tmp_path / "nope.yaml")], "file not found"),
+        (["--film-spacing", "0.001"], "film mesh spacing around a soft content must lie in"),
     ):
         result = runner.invoke(app, ["simulate", *args, "--out", str(tmp_path / "r.csv")])
         assert result.exit_code == 2, (args, result.output)

@@ -426,6 +426,27 @@ def test_membrane_cap_from_a_study_files_simulator_section(tmp_path):
     )  # type: ignore[attr-defined]
 
 
+def test_film_spacing_from_a_study_files_simulator_section_meshes_a_soft_contents_film(tmp_path):
+    from parcelfit.runs import TestCase
+    from parcelfit.sim.factory import SimulatorSection, make_simulator
+
+    def film_vertices(**given: float) -> tuple[float, int]:
+        section = SimulatorSection(backend="mujoco", rig="E3", consignment="PB", **given)
+        sim = make_simulator(section.to_config(tmp_path))
+        scene = sim.options.scene  # type: ignore[attr-defined]
+        xml = sim.scene({}, TestCase("E3", "PB", 1)).xml  # type: ignore[attr-defined]
+        shell = xml[xml.index('<flexcomp name="packaging"') :]
+        points = shell[shell.index('point="') + 7 :]
+        return scene.soft_shell_spacing, len(points[: points.index('"')].split()) // 3
+
+    default_spacing, default_count = film_vertices()
+    assert default_spacing == 0.04 and default_count == 128  # pillow_shell at 40 mm
+    fine_spacing, fine_count = film_vertices(film_spacing=0.03)
+    assert fine_spacing == 0.03 and fine_count == 218
+    with pytest.raises(ParcelfitError, match=r"must lie in \[5, 200\] mm, got 1 mm"):
+        film_vertices(film_spacing=0.001)
+
+
 def test_bulge_lowers_a_flat_patch_under_the_content_and_leaves_other_shells_alone():
     """The bulging bottom: a flat patch of f times the outer size, d below the content's face,
     rising linearly to the content's edges; the belt-contact face is that patch. Without a bulge

@@ -542,6 +542,13 @@ def simulate(
     spacing: Annotated[
         float, typer.Option(help="Shell mesh spacing for rigid contents [m].")
     ] = 0.03,
+    film_spacing: Annotated[
+        float | None,
+        typer.Option(
+            help="Film mesh spacing around a soft content [m] (see docs/pb-film-mesh-E3.md).",
+            show_default="0.04 m",
+        ),
+    ] = None,
     membrane_cap: Annotated[
         float | None,
         typer.Option(
@@ -613,6 +620,7 @@ def simulate(
         consignment=consignment,
         timestep=timestep,
         spacing=spacing,
+        film_spacing=film_spacing,
         membrane_cap=membrane_cap,
         shell_dof=shell_dof,
         shell_cells=None if shell_cells is None else _shell_cells(shell_cells),

@@ -2,7 +2,9 @@
 file (`SimulatorSection`, checked on load), or a `SimulatorConfig` made in code.
 
 The section's ``backend`` chooses: ``mujoco`` (a bundled or user rig and consignment, optional
-``timestep`` [s], ``spacing`` [m], ``membrane_cap`` [N/m], ``shell_dof`` (``auto``, ``full``,
+``timestep`` [s], ``spacing`` [m] (the packaging mesh around a rigid content),
+``film_spacing`` [m] (the film mesh around a soft content), ``membrane_cap`` [N/m],
+``shell_dof`` (``auto``, ``full``,
 ``quadratic`` or ``trilinear``: the packaging shell's degrees of freedom, see `SceneOptions`),
 ``shell_cells`` (an interpolated shell's grid of cells, e.g. ``[4, 4, 1]``),
 ``belt_friction`` (``mujoco`` or ``coulomb``, see `SceneOptions`), ``stick_speed`` and
@@ -45,6 +47,7 @@ _SETTINGS = (
     "consignment",
     "timestep",
     "spacing",
+    "film_spacing",
     "membrane_cap",
     "shell_dof",
     "shell_cells",
@@ -71,11 +74,11 @@ def _check_needs(backend: str, settings: Any) -> None:
 class SimulatorConfig(Mapping[str, Any]):
     """A simulator's configuration (SI): ``backend`` and what it needs (mujoco: ``rig`` and
     ``consignment``, bundled names or ``.yaml`` paths, optional ``timestep`` [s], ``spacing``
-    [m], ``membrane_cap`` [N/m], ``shell_dof``, ``shell_cells``, ``belt_friction``, ``stick_speed`` and
-    ``slip_speed`` [m/s], ``rig_timesteps`` (rig name -> time step [s]); external: the solver description file
-    ``external``; python: ``factory``), optional ``wall_limit`` [s] per simulation, and
-    ``folder``: the folder of the file it came from (an external solver's runs go into
-    ``folder/.external-runs``).
+    and ``film_spacing`` [m], ``membrane_cap`` [N/m], ``shell_dof``, ``shell_cells``,
+    ``belt_friction``, ``stick_speed`` and ``slip_speed`` [m/s], ``rig_timesteps`` (rig name ->
+    time step [s]); external: the solver description file ``external``; python: ``factory``),
+    optional ``wall_limit`` [s] per simulation, and ``folder``: the folder of the file it came
+    from (an external solver's runs go into ``folder/.external-runs``).
 
     It reads as the mapping of the settings given (``dict(config)``: the keys of the file's
     section that were set, without ``folder``), as the section did before it was typed."""
@@ -85,6 +88,7 @@ class SimulatorConfig(Mapping[str, Any]):
     consignment: str | None = None
     timestep: float | None = None
     spacing: float | None = None
+    film_spacing: float | None = None
     membrane_cap: float | None = None
     shell_dof: str | None = None
     shell_cells: tuple[int, int, int] | None = None
@@ -119,14 +123,16 @@ class SimulatorConfig(Mapping[str, Any]):
 
 class SimulatorSection(FileModel):
     """``simulator`` of a study or screen file: the backend and what it needs (``timestep``
-    [s], ``spacing`` [m], ``membrane_cap`` [N/m], ``shell_dof``, ``shell_cells``, ``belt_friction``,
-    ``stick_speed`` and ``slip_speed`` [m/s], ``rig_timesteps`` (rig name -> time step [s]), ``wall_limit`` [s])."""
+    [s], ``spacing`` and ``film_spacing`` [m], ``membrane_cap`` [N/m], ``shell_dof``,
+    ``shell_cells``, ``belt_friction``, ``stick_speed`` and ``slip_speed`` [m/s],
+    ``rig_timesteps`` (rig name -> time step [s]), ``wall_limit`` [s])."""
 
     backend: Annotated[str, Choice(BACKENDS, what="backend")]
     rig: Annotated[str | None, Text()] = None
     consignment: Annotated[str | None, Text()] = None
     timestep: Annotated[float | None, Number(unit="s", ge=1e-9)] = None
     spacing: Annotated[float | None, Number(unit="m", ge=1e-9)] = None
+    film_spacing: Annotated[float | None, Number(unit="m", ge=1e-9)] = None
     membrane_cap: Annotated[float | None, Number(unit="N/m", ge=1e-9)] = None
     shell_dof: Annotated[str | None, Choice(SHELL_DOFS, what="shell degrees of freedom")] = None
     shell_cells: ShellCellsField | None = None
@@ -186,6 +192,8 @@ def make_simulator(config: SimulatorConfig) -> Simulator:
             for k in ("timestep", "spacing", "membrane_cap", "stick_speed", "slip_speed")
             if k in config
         }
+        if "film_spacing" in config:
+            numerics["soft_shell_spacing"] = float(config["film_spacing"])
         for key in ("belt_friction", "shell_dof", "shell_cells"):
             if key in config:
                 numerics[key] = config[key]

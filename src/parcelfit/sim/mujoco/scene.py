@@ -172,6 +172,11 @@ class SceneOptions:
             raise ParcelfitError(
                 f"mesh spacing must lie in [3, 200] mm, got {self.spacing * 1e3:g} mm"
             )
+        if not 0.005 <= self.soft_shell_spacing <= 0.2:
+            raise ParcelfitError(
+                "film mesh spacing around a soft content must lie in [5, 200] mm, got "
+                f"{self.soft_shell_spacing * 1e3:g} mm"
+            )
 
     def frequency_for(self, stiffness: float) -> float:
         """The angular frequency [rad/s] of a contact whose whole-face stiffness is ``stiffness``
