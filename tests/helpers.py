@@ -1,9 +1,13 @@
-"""Helpers shared by test modules: study files for the fake simulator, store reads, a DTW peer."""
+"""Helpers shared by test modules: study files for the fake simulator, store reads, a DTW peer,
+and the scripts and benchmarks loaded as modules."""
 
 from __future__ import annotations
 
+import importlib.util
 import sqlite3
+import sys
 from pathlib import Path
+from types import ModuleType
 
 import dtw as dtw_python
 import numpy as np
@@ -12,6 +16,19 @@ import yaml
 from .fake_sim import write_reference_dataset
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def load_file_module(relative: str) -> ModuleType:
+    """Import a script or benchmark of the repository (``relative`` to its root, e.g.
+    ``scripts/catch_window.py``) as a module named after its file; it is registered in
+    ``sys.modules`` first, since dataclasses look their module up there."""
+    path = ROOT / relative
+    spec = importlib.util.spec_from_file_location(path.stem, path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
 
 
 def write_study(tmp_path: Path, **overrides) -> Path:

@@ -1,27 +1,18 @@
 """The twin benchmark's plumbing (benchmarks/bench_twin.py) on the analytic test simulator:
 three hidden truths, the published and a joint ensemble setup, a tiny budget."""
 
-import importlib.util
-import sys
-
 import pytest
 
 from parcelfit.sim.params import CATALOGUE
 
 from .fake_sim import write_reference_dataset
-from .helpers import ROOT
+from .helpers import load_file_module
 
 SPECS = {p.name: p for p in CATALOGUE}
 
 
 def _bench():
-    spec = importlib.util.spec_from_file_location(
-        "bench_twin", ROOT / "benchmarks" / "bench_twin.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # its dataclasses look their module up
-    spec.loader.exec_module(module)
-    return module
+    return load_file_module("benchmarks/bench_twin.py")
 
 
 @pytest.mark.slow

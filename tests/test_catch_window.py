@@ -1,24 +1,15 @@
 """The catch-window script's reading of a sweep (scripts/catch_window.py): windows, the
 across scatter's mass on them, and the medians a placement convention would give."""
 
-import importlib.util
-import sys
-
 import numpy as np
 import pytest
 from scipy.stats import norm
 
-from .helpers import ROOT
+from .helpers import load_file_module
 
 
 def _script():
-    spec = importlib.util.spec_from_file_location(
-        "catch_window", ROOT / "scripts" / "catch_window.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
+    return load_file_module("scripts/catch_window.py")
 
 
 OFFSETS = np.arange(-30, 31, 3) / 1000.0  # m

@@ -1,8 +1,6 @@
 """scripts/contact_trace.py: which rig geom pushes the parcel, and how hard (docs/belt-drums.md)."""
 
-import importlib.util
 import re
-import sys
 from pathlib import Path
 
 import pytest
@@ -10,21 +8,14 @@ import yaml
 
 from parcelfit.sim.mujoco import load_rig
 
-from .helpers import ROOT
+from .helpers import load_file_module
 
 pytestmark = pytest.mark.mujoco
 
 
 @pytest.fixture(scope="module")
 def trace():
-    spec = importlib.util.spec_from_file_location(
-        "contact_trace", ROOT / "scripts" / "contact_trace.py"
-    )
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["contact_trace"] = module
-    spec.loader.exec_module(module)
-    return module
+    return load_file_module("scripts/contact_trace.py")
 
 
 def test_bad_arguments_are_refused(trace, capsys):

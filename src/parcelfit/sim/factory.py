@@ -61,6 +61,9 @@ _SETTINGS = (
 )
 _NEEDS = {"mujoco": ("rig", "consignment"), "external": ("external",), "python": ("factory",)}
 DEFAULT_WALL_LIMIT = 600.0  # s, per simulation
+# a setting whose SceneOptions field has another name (SceneOptions.soft_spacing is the soft
+# content's own vertex spacing, so the film's setting cannot take that name)
+_SCENE_NAMES = {"film_spacing": "soft_shell_spacing"}
 
 
 def _check_needs(backend: str, settings: Any) -> None:
@@ -188,12 +191,17 @@ def make_simulator(config: SimulatorConfig) -> Simulator:
         rig = load_rig(config.rig)
         cons = load_consignment(config.consignment)
         numerics: dict[str, Any] = {
-            k: float(config[k])
-            for k in ("timestep", "spacing", "membrane_cap", "stick_speed", "slip_speed")
+            _SCENE_NAMES.get(k, k): float(config[k])
+            for k in (
+                "timestep",
+                "spacing",
+                "film_spacing",
+                "membrane_cap",
+                "stick_speed",
+                "slip_speed",
+            )
             if k in config
         }
-        if "film_spacing" in config:
-            numerics["soft_shell_spacing"] = float(config["film_spacing"])
         for key in ("belt_friction", "shell_dof", "shell_cells"):
             if key in config:
                 numerics[key] = config[key]
