@@ -789,3 +789,56 @@ def test_a_rig_file_refines_the_default_step_on_its_own_runs(tmp_path):
     cons = load_consignment("KPBW")
     xml = build_scene(e1, cons, resolve("rigid"), 1, SceneOptions()).xml
     assert f'timestep="{1 / 4800:.9g}"' in xml
+
+
+@pytest.mark.parametrize("spacing", [0.02, 0.03, 0.04, 0.05])
+def test_radiating_diagonals_make_the_shell_mirror_symmetric_at_every_spacing(spacing):
+    """The default triangulation is the same under x -> -x and y -> -y (but in a row of cells
+    that straddles an axis, where no diagonal is), and each corner of the seam is the tip of two
+    triangles per sheet, whatever the cell counts' parity; the old alternating one is not
+    symmetric at the polybag's former 40 mm film, where two corners are the tip of only one
+    triangle per sheet (shell.py, "Diagonals")."""
+    import numpy as np
+
+    from parcelfit.sim.mujoco.scene import SceneOptions
+    from parcelfit.sim.mujoco.shell import pillow_shell
+
+    def shell(diagonals):
+        return pillow_shell(
+            (0.315, 0.225),
+            (0.29, 0.20),
+            0.0105,
+            spacing,
+            diagonals=diagonals,
+            content_half_height=0.009,
+            contact=0.0015,
+        )
+
+    def triangles_as_points(mesh, flip):  # those of cells that do not straddle an axis
+        pts = mesh.points * np.array(flip)
+        cells = [t for t in mesh.triangles if np.ptp(np.sign(np.round(pts[t, :2], 9)), 0).max() < 2]
+        return {tuple(sorted(tuple(np.round(pts[k], 9) + 0.0) for k in t)) for t in cells}
+
+    def corner_tips(mesh):
+        corners = [
+            k for k in mesh.seam if np.allclose(np.abs(mesh.points[k, :2]), (0.1575, 0.1125))
+        ]
+        assert len(corners) == 4
+        return [int((mesh.triangles == k).sum()) for k in corners]
+
+    radiating = shell("radiating")
+    plain = triangles_as_points(radiating, (1, 1, 1))
+    assert triangles_as_points(radiating, (-1, 1, 1)) == plain
+    assert triangles_as_points(radiating, (1, -1, 1)) == plain
+    assert corner_tips(radiating) == [4, 4, 4, 4]  # two triangles in each sheet
+    alternating = shell("alternating")
+    assert len(alternating.triangles) == len(radiating.triangles)
+    if spacing == 0.04:
+        assert sorted(corner_tips(alternating)) == [2, 2, 4, 4]
+        assert triangles_as_points(alternating, (-1, 1, 1)) != triangles_as_points(
+            alternating, (1, 1, 1)
+        )
+    with pytest.raises(ParcelfitError, match="unknown shell diagonals 'crossed'"):
+        shell("crossed")
+    with pytest.raises(ParcelfitError, match="unknown shell_diagonals 'crossed'"):
+        SceneOptions(shell_diagonals="crossed")

@@ -30,7 +30,7 @@ from parcelfit.errors import ParcelfitError
 from parcelfit.sim.mujoco.consignment import Consignment
 from parcelfit.sim.mujoco.contact import ContactParams, contact_params
 from parcelfit.sim.mujoco.rig import Rig, Surface
-from parcelfit.sim.mujoco.shell import ShellMesh, pillow_shell
+from parcelfit.sim.mujoco.shell import DIAGONALS, ShellMesh, pillow_shell
 from parcelfit.sim.params import (
     BELT_FRICTION,
     MAX_TIMESTEP,
@@ -102,6 +102,10 @@ class SceneOptions:
     # content, full around a soft one
     # (a full shell loses most of a spin: spin.py, the README's "Spin")
     shell_dof: str = "auto"
+    # how the shell's grid cells are split into triangles: "radiating" (mirror-symmetric, every
+    # corner the tip of two triangles) or "alternating" (the mesh before 2026-11-28, whose corners
+    # depend on the parity of the cell count; shell.py, "Diagonals")
+    shell_diagonals: str = "radiating"
     # an interpolated shell's grid of cells along the parcel's length, width and height (MuJoCo's
     # multi-cell flexes: the field is trilinear or quadratic within each cell, so a rim can bend
     # apart from the face it borders); None: the consignment's own (`Consignment.shell_cells`)
@@ -146,6 +150,11 @@ class SceneOptions:
         if self.shell_dof not in SHELL_DOFS:
             raise ParcelfitError(
                 f"unknown shell_dof {self.shell_dof!r}", fix=f"use one of {list(SHELL_DOFS)}"
+            )
+        if self.shell_diagonals not in DIAGONALS:
+            raise ParcelfitError(
+                f"unknown shell_diagonals {self.shell_diagonals!r}",
+                fix=f"use one of {list(DIAGONALS)}",
             )
         if self.shell_cells is not None:  # checked, and whole numbers (texts give floats)
             object.__setattr__(self, "shell_cells", shell_cells(self.shell_cells))
@@ -431,6 +440,7 @@ def build_scene(
         consignment.bulge,
         content_half_height=cH / 2,
         contact=r + content_radius,  # where a shell element touches the content
+        diagonals=opt.shell_diagonals,
     )
     nv = len(shell.points)
     m_pa = p["m_Pa"]

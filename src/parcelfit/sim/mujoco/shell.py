@@ -37,6 +37,17 @@ below which a shell element and the content touch) given, an axis whose taper wo
 (d(0) < contact) gets its flat band widened by the g at which d(g) = s, so that the taper clears
 the edge as the sheets clear the faces; the grid lines then lie on the widened band's edges.
 Axes that clear the content already keep their band on the content's edges.
+
+**Diagonals.** Each grid cell is split into two triangles along one of its diagonals.
+"radiating" (the default) takes, in every quadrant of the parcel, the diagonal that points away
+from its centre (the one through the cell's corners at (x_i, y_j) and (x_i+1, y_j+1) where
+(x_i + x_i+1)(y_j + y_j+1) > 0): the mesh is mirror-symmetric about both axes (but in a row of
+cells that straddles an axis, which an odd cell count leaves and no diagonal can make symmetric),
+and every corner of the seam is the tip of two triangles per sheet. "alternating" (before 2026-11-28) alternated
+the diagonal cell by cell, so that whether a corner of the seam was the tip of two triangles or
+of one depended on the parity of the number of cells, i.e. on the mesh spacing; a corner that is
+one triangle's tip folds away where the other holds. On E3 that decided, mesh by mesh, whether a
+polybag meeting the guide plate's lead-in caught and spun or slid (docs/pb-film-mesh-E3.md).
 """
 
 from __future__ import annotations
@@ -48,6 +59,8 @@ import numpy as np
 from scipy.optimize import brentq
 
 from parcelfit.errors import ParcelfitError
+
+DIAGONALS = ("radiating", "alternating")  # how a grid cell is split into two triangles
 
 
 def _band(a: float, b: float, spacing: float) -> np.ndarray:
@@ -118,12 +131,19 @@ def pillow_shell(
     *,
     content_half_height: float | None = None,
     contact: float = 0.0,
+    diagonals: str = "radiating",
 ) -> ShellMesh:
     """Build the pillow shell for outer (L, W) and content (c_L, c_W) footprints [m], with the
     bottom bulging by depth d [m] over a patch of f times the outer size when ``bulge = (d, f)``;
     with ``content_half_height`` [m], an axis whose taper would come within ``contact`` [m] of
-    the content's edge gets a flat band wide enough to clear it (module docstring)."""
+    the content's edge gets a flat band wide enough to clear it (module docstring).
+    ``diagonals`` splits each grid cell into two triangles, "radiating" or "alternating"
+    (module docstring, "Diagonals")."""
     (L, W), (cL, cW) = outer, content
+    if diagonals not in DIAGONALS:
+        raise ParcelfitError(
+            f"unknown shell diagonals {diagonals!r}", fix=f"use one of {list(DIAGONALS)}"
+        )
     if not (0 < cL < L and 0 < cW < W):
         raise ParcelfitError(f"content {content} must be smaller than the outer footprint {outer}")
     if spacing <= 0 or spacing > max(L, W):
@@ -181,8 +201,11 @@ def pillow_shell(
                 if flip:
                     bottom_tris += [len(tris) // 3, len(tris) // 3 + 1]
                 a, b, c, d = grid[i, j], grid[i + 1, j], grid[i + 1, j + 1], grid[i, j + 1]
-                # alternate the diagonal for symmetry; reverse the bottom's winding (outward = -z)
-                quad = [a, b, c, a, c, d] if (i + j) % 2 == 0 else [a, b, d, b, c, d]
+                # the cell's diagonal (module docstring, "Diagonals"); reverse the bottom's
+                # winding (outward = -z)
+                radiating = (xs[i] + xs[i + 1]) * (ys[j] + ys[j + 1]) > 0
+                rising = radiating if diagonals == "radiating" else (i + j) % 2 == 0
+                quad = [a, b, c, a, c, d] if rising else [a, b, d, b, c, d]
                 if flip:
                     quad = [quad[0], quad[2], quad[1], quad[3], quad[5], quad[4]]
                 tris += quad
