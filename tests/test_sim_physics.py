@@ -236,8 +236,9 @@ def test_coulomb_belt_friction_slides_the_coulomb_distance_without_hopping():
     assert coulomb.slide == pytest.approx(coulomb.coulomb_slide, rel=0.02)
     assert coulomb.no_contact == 0.0
     # MuJoCo's friction lifts a sliding contact: the default shell (trilinear over 4 x 4 x 1
-    # cells) touches the plate nowhere in 12 % of the sliding steps, the quadratic one in more
-    assert slide_test(cons).no_contact > 0.1
+    # cells) touches the plate nowhere in 9 % of the sliding steps (12 % with the former
+    # alternating diagonals), the quadratic one in more
+    assert slide_test(cons).no_contact > 0.05
     assert slide_test(cons, options=SceneOptions(shell_dof="quadratic")).no_contact > 0.2
 
 
