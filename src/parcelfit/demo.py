@@ -105,7 +105,7 @@ PROFILES = {
 # model's step, the lateral band by up to 9.7 mm, 84 % inside).
 STRICTER_EXAMPLE = {
     "case": "E3/PB/2",
-    "params": {"mu_d_BePa": 0.60, "mu_d_MePa": 0.15, "E_Pa": 120.0, "k_MePa": 300.0},
+    "params": {"mu_d_BePa": 0.55, "mu_d_MePa": 0.15, "E_Pa": 120.0, "k_MePa": 300.0},
 }
 
 
