@@ -796,7 +796,7 @@ def test_radiating_diagonals_make_the_shell_mirror_symmetric_at_every_spacing(sp
     """The default triangulation is the same under x -> -x and y -> -y (but in a row of cells
     that straddles an axis, where no diagonal is), and each corner of the seam is the tip of two
     triangles per sheet, whatever the cell counts' parity; the old alternating one is not
-    symmetric at the polybag's former 40 mm film, where two corners are the tip of only one
+    symmetric at the polybag's default 40 mm film, where two corners are the tip of only one
     triangle per sheet (shell.py, "Diagonals")."""
     import numpy as np
 

@@ -43,11 +43,12 @@ Axes that clear the content already keep their band on the content's edges.
 from its centre (the one through the cell's corners at (x_i, y_j) and (x_i+1, y_j+1) where
 (x_i + x_i+1)(y_j + y_j+1) > 0): the mesh is mirror-symmetric about both axes (but in a row of
 cells that straddles an axis, which an odd cell count leaves and no diagonal can make symmetric),
-and every corner of the seam is the tip of two triangles per sheet. "alternating" (before 2026-11-28) alternated
-the diagonal cell by cell, so that whether a corner of the seam was the tip of two triangles or
-of one depended on the parity of the number of cells, i.e. on the mesh spacing; a corner that is
-one triangle's tip folds away where the other holds. On E3 that decided, mesh by mesh, whether a
-polybag meeting the guide plate's lead-in caught and spun or slid (docs/pb-film-mesh-E3.md).
+and every corner of the seam is the tip of two triangles per sheet. "alternating" (before
+2026-11-28) alternated the diagonal cell by cell, so that whether a corner of the seam was the
+tip of two triangles or of one depended on the parity of the number of cells, i.e. on the mesh
+spacing; a corner that is one triangle's tip folds away where the other holds. On E3 that
+decided, mesh by mesh, whether a polybag meeting the guide plate's lead-in caught and spun or
+slid (docs/pb-film-mesh-E3.md).
 """
 
 from __future__ import annotations
