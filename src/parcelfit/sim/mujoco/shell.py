@@ -198,14 +198,17 @@ def pillow_shell(
     bottom_tris: list[int] = []
     for i in range(nx - 1):
         for j in range(ny - 1):
+            # the cell's diagonal, the same in both sheets (module docstring, "Diagonals")
+            rising = (
+                (xs[i] + xs[i + 1]) * (ys[j] + ys[j + 1]) > 0
+                if diagonals == "radiating"
+                else (i + j) % 2 == 0
+            )
             for grid, flip in ((top, False), (bot, True)):
                 if flip:
                     bottom_tris += [len(tris) // 3, len(tris) // 3 + 1]
                 a, b, c, d = grid[i, j], grid[i + 1, j], grid[i + 1, j + 1], grid[i, j + 1]
-                # the cell's diagonal (module docstring, "Diagonals"); reverse the bottom's
-                # winding (outward = -z)
-                radiating = (xs[i] + xs[i + 1]) * (ys[j] + ys[j + 1]) > 0
-                rising = radiating if diagonals == "radiating" else (i + j) % 2 == 0
+                # reverse the bottom's winding (outward = -z)
                 quad = [a, b, c, a, c, d] if rising else [a, b, d, b, c, d]
                 if flip:
                     quad = [quad[0], quad[2], quad[1], quad[3], quad[5], quad[4]]
