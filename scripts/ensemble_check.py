@@ -4,6 +4,7 @@ across ensembles of seeded hand placements rather than single runs.
     python scripts/ensemble_check.py                        # E3 setting 1, 20 placements per type
     python scripts/ensemble_check.py --rigs E3 E1 --placements 10 --types BW KPBW KP PB
     python scripts/ensemble_check.py --all-settings         # every speed setting of each rig
+    python scripts/ensemble_check.py --rigs E1 --settings 3    # only these speed settings
     python scripts/ensemble_check.py --rigs examples/e3-variants/E3-plate-clear.yaml
     python scripts/ensemble_check.py --bulge BW=0.3 KPBW=0.45 --set zeta_MePa=0.1 --scene impratio=10
     python scripts/ensemble_check.py --rigs E2a --nose-radius 0   # square belt ends
@@ -188,7 +189,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rigs", nargs="+", default=["E3"])
     ap.add_argument("--types", nargs="+", default=list(TYPES))
     ap.add_argument("--placements", type=int, default=20)
-    ap.add_argument("--all-settings", action="store_true", help="every speed setting, not only 1")
+    which = ap.add_mutually_exclusive_group()
+    which.add_argument(
+        "--all-settings", action="store_true", help="every speed setting, not only 1"
+    )
+    which.add_argument(
+        "--settings", nargs="+", type=int, default=None, help="these speed settings of every rig"
+    )
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--out", type=Path, default=Path("docs"))
     ap.add_argument(
@@ -220,6 +227,13 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "figures").mkdir(exist_ok=True)
     rigs = [load_rig(r) for r in args.rigs]  # bundled names or rig files
+    for rig in rigs:
+        missing = sorted(set(args.settings or []) - set(rig.speeds))
+        if missing:
+            ap.error(
+                f"--settings: rig {rig.name} has no speed setting {', '.join(map(str, missing))} "
+                f"(it has {', '.join(map(str, sorted(rig.speeds)))})"
+            )
     if args.nose_radius is not None:
         try:
             rigs = [r.with_drum_ends(args.nose_radius) for r in rigs]
@@ -247,6 +261,7 @@ def main(argv: list[str] | None = None) -> int:
         f"Written by `python scripts/ensemble_check.py --rigs {' '.join(args.rigs)} "
         f"--types {' '.join(args.types)} "
         f"--placements {args.placements}{' --all-settings' if args.all_settings else ''}"
+        + (f" --settings {' '.join(map(str, args.settings))}" if args.settings else "")
         + "".join(
             f" --{k} {' '.join(v)}"
             for k, v in (("set", args.set), ("bulge", args.bulge), ("scene", args.scene))
@@ -268,7 +283,11 @@ def main(argv: list[str] | None = None) -> int:
     with ProcessPoolExecutor(args.workers) as ex:
         for rig in rigs:
             rig_name = rig.name
-            settings = sorted(rig.speeds) if args.all_settings else [min(rig.speeds)]
+            settings = (
+                sorted(rig.speeds)
+                if args.all_settings
+                else (args.settings if args.settings else [min(rig.speeds)])
+            )
             for setting in settings:
                 members: dict[str, list[Member]] = {}
                 for cons in args.types:
