@@ -59,6 +59,35 @@ def test_a_drum_is_level_with_the_top_and_turns_with_the_belt(rig_name, surface,
         assert np.allclose(_surface_velocity(model, data, drum, face), -sign * speed * up)
 
 
+@pytest.mark.parametrize("rig_name", ["E1", "E2a", "E3"])
+def test_every_driven_geom_reports_the_material_velocity_mujoco_gives_its_surface(rig_name):
+    # Coulomb belt friction compares the packaging with `SurfaceGeom.velocity_at` at each contact
+    # point: on a drum that is spin x arm, not the belt's velocity on top
+    scene = MujocoSimulator().scene({}, TestCase(rig_name, "KPBW", 2))
+    model = mujoco.MjModel.from_xml_string(scene.xml)
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    up = np.array([0.0, 0.0, 1.0])
+    drums = 0
+    for g in scene.driven:
+        gid = model.geom(g.name).id
+        centre, rot = data.geom_xpos[gid], data.geom_xmat[gid].reshape(3, 3)
+        if model.geom_type[gid] == mujoco.mjtGeom.mjGEOM_CYLINDER:
+            drums += 1
+            r = model.geom_size[gid][0]
+            across = rot[:, 2]  # the drum's axis
+            along = np.cross(across, up)
+            points = [centre + r * d for d in (up, along, -along, (up + along) / math.sqrt(2))]
+            points.append(points[0] + 0.3 * model.geom_size[gid][1] * across)
+        else:
+            top = centre + model.geom_size[gid][2] * up if model.geom_type[gid] == 6 else centre
+            points = [top, top + 0.05 * rot[:, 0] + 0.02 * rot[:, 1]]
+        expected = np.array([_surface_velocity(model, data, gid, q) for q in points])
+        # (the MJCF text rounds positions and angles, hence micrometres per second)
+        assert np.allclose(g.velocity_at(np.array(points)), expected, atol=1e-6), g.name
+    assert drums >= 2
+
+
 @pytest.mark.slow
 def test_on_e2a_the_mailer_crosses_onto_the_outfeed_without_catching_on_any_shell_grid():
     # placement 3 of KP/BW on E2a setting 1: with square belt ends its front caught on the

@@ -11,7 +11,8 @@ the packaging with such a surface
     F_c = -mu N_c s_c / max(|s_c|, s_reg)
 
 where N_c [N] is the contact's normal force from the step before, s_c [m/s] the slip of the
-packaging's material point at c against the surface's own velocity, projected onto the contact's
+packaging's material point at c against the surface's own material velocity at c (a belt's top
+velocity, or on a drum at a belt's end the drum's spin x arm), projected onto the contact's
 tangent plane, mu the surface's current friction coefficient (mu_d plus any static offset the
 simulator's friction switch has set) and s_reg = 5 mm/s the slip below which the force is
 linear in the slip (a parcel at belt speed is held like a stiff viscous coupling instead of
@@ -57,14 +58,10 @@ class CoulombBelts:
         self.nvert = int(model.flex_vertnum[flex])
         elem = model.flex_elem[model.flex_elemdataadr[flex] :]
         self.triangles = np.asarray(elem[: 3 * int(model.flex_elemnum[flex])]).reshape(-1, 3)
-        self.surface_velocity = {
-            model.geom(g.name).id: np.asarray(g.velocity, dtype=float)
-            for g in scene.driven
-            if g.material != "metal"
-        }
-        if not self.surface_velocity:
+        self.surfaces = {model.geom(g.name).id: g for g in scene.driven if g.material != "metal"}
+        if not self.surfaces:
             raise ParcelfitError("Coulomb belt friction: the scene has no belt, strip or roller")
-        self.belt_ids = np.array(sorted(self.surface_velocity), dtype=int)
+        self.belt_ids = np.array(sorted(self.surfaces), dtype=int)
         self.dofs, self.vmap = self._vertex_map(model, data)
         if not model.flex_interp[flex]:
             LOGGER.warning(
@@ -131,7 +128,11 @@ class CoulombBelts:
         weights = _barycentric(con.pos[idx], verts[tri])  # (k, 3)
         jac = np.einsum("ka,kaxd->kxd", weights, self.vmap[tri])  # (k, 3, ndof)
         velocity = np.einsum("kxd,d->kx", jac, data.qvel[self.dofs])
-        surface = np.array([self.surface_velocity[int(g)] for g in geom0[idx]])
+        points = con.pos[idx]
+        surface = np.empty_like(points)
+        for g in np.unique(geom0[idx]):  # a drum's material moves differently at each point
+            rows = geom0[idx] == g
+            surface[rows] = self.surfaces[int(g)].velocity_at(points[rows])
         normal = con.frame[idx, :3]
         slip = velocity - surface
         slip -= np.sum(slip * normal, axis=1, keepdims=True) * normal

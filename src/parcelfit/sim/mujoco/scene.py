@@ -277,12 +277,28 @@ def scene_options(items: Iterable[str]) -> SceneOptions:
 
 @dataclass(frozen=True)
 class SurfaceGeom:
-    """A driven geom: name, material and world velocity of its surface [m/s]."""
+    """A driven geom: name, material, world velocity of its surface on top [m/s] and the rig
+    surface it belongs to. A drum also has its world angular velocity ``spin`` [rad/s] and a
+    point ``axis`` [m] on its axis: its material moves at spin x (point - axis), the belt's
+    velocity on top, up round the tail and down round the head."""
 
     name: str
     material: str
     velocity: tuple[float, float, float]
     surface: str
+    spin: tuple[float, float, float] | None = None
+    axis: tuple[float, float, float] | None = None
+
+    def velocity_at(self, points: np.ndarray) -> np.ndarray:
+        """The surface's material velocity [m/s] at world ``points`` (n, 3) [m], as MuJoCo's
+        ``surfacevel`` moves it: the same everywhere on a flat belt, strip or roller, spin x arm
+        on a drum."""
+        pts = np.atleast_2d(np.asarray(points, dtype=float))
+        if self.spin is None or self.axis is None:
+            return np.broadcast_to(np.asarray(self.velocity, dtype=float), pts.shape).copy()
+        return np.cross(
+            np.asarray(self.spin, dtype=float), pts - np.asarray(self.axis, dtype=float)
+        )
 
 
 @dataclass(frozen=True)
@@ -364,9 +380,20 @@ def _surface_geoms(
                 f'pos="{_f(p[0])} {_f(p[1])} {_f(s.top - r)}" quat="{_quat(s.heading, 90)}" '
                 f'surfacevel="0 0 0 0 0 {_f(-speed / r)}" rgba="0.25 0.25 0.3 1" {common}/>'
             )
-            # one velocity per geom: the drum's on top (Coulomb belt friction and the static
-            # friction switch compare a slip against it; on a drum's flank it is approximate)
-            geoms.append(SurfaceGeom(f"{name}_{end}", s.material, velocity, s.name))
+            # the drum's world angular velocity is (speed / r) n: (speed / r) n x (0, 0, r) = speed u
+            # on top. Coulomb belt friction takes the material velocity at each contact point
+            # from it (`SurfaceGeom.velocity_at`); the static friction switch compares the
+            # parcel's centre with the top velocity
+            geoms.append(
+                SurfaceGeom(
+                    f"{name}_{end}",
+                    s.material,
+                    velocity,
+                    s.name,
+                    spin=(speed / r * n[0], speed / r * n[1], 0.0),
+                    axis=(float(p[0]), float(p[1]), s.top - r),
+                )
+            )
     if s.type == "rollers":
         rows, cols = int(s.extra["rows"]), int(s.extra["columns"])
         radius, half = s.extra["radius"], s.extra["roller_width"] / 2
