@@ -59,33 +59,56 @@ def test_a_drum_is_level_with_the_top_and_turns_with_the_belt(rig_name, surface,
         assert np.allclose(_surface_velocity(model, data, drum, face), -sign * speed * up)
 
 
-@pytest.mark.parametrize("rig_name", ["E1", "E2a", "E3"])
-def test_every_driven_geom_reports_the_material_velocity_mujoco_gives_its_surface(rig_name):
+@pytest.mark.parametrize(
+    ("rig_name", "rollers"),
+    [("E1", "linear"), ("E2a", "linear"), ("E2a", "turning"), ("E2b", "turning"), ("E3", "linear")],
+)
+def test_every_driven_geom_reports_the_material_velocity_mujoco_gives_its_surface(
+    rig_name, rollers
+):
     # Coulomb belt friction compares the packaging with `SurfaceGeom.velocity_at` at each contact
-    # point: on a drum that is spin x arm, not the belt's velocity on top
-    scene = MujocoSimulator().scene({}, TestCase(rig_name, "KPBW", 2))
+    # point: on a drum, or a roller that turns, that is spin x arm, not the velocity on top
+    sim = MujocoSimulator(SimOptions(scene=SceneOptions(roller_surface=rollers)))
+    scene = sim.scene({}, TestCase(rig_name, "KPBW", 2))
     model = mujoco.MjModel.from_xml_string(scene.xml)
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
     up = np.array([0.0, 0.0, 1.0])
-    drums = 0
+    round_kinds = (int(mujoco.mjtGeom.mjGEOM_CYLINDER), int(mujoco.mjtGeom.mjGEOM_CAPSULE))
+    turning = 0
     for g in scene.driven:
         gid = model.geom(g.name).id
         centre, rot = data.geom_xpos[gid], data.geom_xmat[gid].reshape(3, 3)
-        if model.geom_type[gid] == mujoco.mjtGeom.mjGEOM_CYLINDER:
-            drums += 1
+        kind = int(model.geom_type[gid])
+        if kind in round_kinds:
             r = model.geom_size[gid][0]
-            across = rot[:, 2]  # the drum's axis
+            across = rot[:, 2]  # the drum's or roller's axis
             along = np.cross(across, up)
             points = [centre + r * d for d in (up, along, -along, (up + along) / math.sqrt(2))]
             points.append(points[0] + 0.3 * model.geom_size[gid][1] * across)
         else:
-            top = centre + model.geom_size[gid][2] * up if model.geom_type[gid] == 6 else centre
+            assert kind == int(mujoco.mjtGeom.mjGEOM_BOX), g.name
+            top = centre + model.geom_size[gid][2] * up
             points = [top, top + 0.05 * rot[:, 0] + 0.02 * rot[:, 1]]
         expected = np.array([_surface_velocity(model, data, gid, q) for q in points])
         # (the MJCF text rounds positions and angles, hence micrometres per second)
         assert np.allclose(g.velocity_at(np.array(points)), expected, atol=1e-6), g.name
-    assert drums >= 2
+        assert np.allclose(g.velocity_at(points[0][None])[0], g.velocity, atol=1e-6), g.name
+        # drums always turn, rollers when asked: on the flank the material moves up or down
+        turns = kind == int(mujoco.mjtGeom.mjGEOM_CYLINDER) or (
+            kind == int(mujoco.mjtGeom.mjGEOM_CAPSULE) and rollers == "turning"
+        )
+        assert (g.spin is not None) == turns, g.name
+        if turns:
+            turning += 1
+            assert np.linalg.norm(expected[1][:2]) < 1e-6, g.name
+            assert abs(expected[1][2]) == pytest.approx(np.linalg.norm(g.velocity), rel=1e-6)
+    assert turning >= 2
+
+
+def test_an_unknown_roller_surface_is_refused():
+    with pytest.raises(ParcelfitError, match="unknown roller_surface 'rolling'"):
+        SceneOptions(roller_surface="rolling")
 
 
 @pytest.mark.slow

@@ -41,6 +41,7 @@ from parcelfit.sim.params import (
 )
 
 SLAB = 0.02  # half-thickness of belt and strip boxes [m]
+ROLLER_SURFACES = ("linear", "turning")  # SceneOptions.roller_surface
 CONTACT_GAP = 0.0005  # clearance between content and shell, and under the parcel at the start [m]
 FREE_PLATE_BETA1 = 4.730  # first free-free beam mode, beta_1 L
 
@@ -117,6 +118,11 @@ class SceneOptions:
     # MuJoCo's friction lifts sliding contacts (docs/sliding-lift.md). The forces are explicit in
     # time: around a soft content (full shell) they need 1/2400 s (`step_for`)
     belt_friction: str = "mujoco"
+    # how a flow splitter's roller units move the packaging: "linear" (a surface velocity along
+    # the roller's heading everywhere on it, also on its flanks) or "turning" (an angular surface
+    # velocity, as a driven roller turns: the conveying speed on top, up and down on its flanks,
+    # like the belts' drums); measured in docs/belt-drums.md, "Turning rollers"
+    roller_surface: str = "linear"
     # how the static friction offsets (mu_s_MePa, mu_s_BePa) fade with the slip speed v [m/s]:
     # without ``slip_speed``, fully while the contact sticks, exp(-(v / stick_speed)^2) (a few
     # mm/s: static friction only where the packaging does not slide); with it, as the velocity-
@@ -158,6 +164,11 @@ class SceneOptions:
             )
         if self.shell_cells is not None:  # checked, and whole numbers (texts give floats)
             object.__setattr__(self, "shell_cells", shell_cells(self.shell_cells))
+        if self.roller_surface not in ROLLER_SURFACES:
+            raise ParcelfitError(
+                f"unknown roller_surface {self.roller_surface!r}",
+                fix=f"use one of {list(ROLLER_SURFACES)}",
+            )
         if self.belt_friction not in BELT_FRICTION:
             raise ParcelfitError(
                 f"belt_friction must be mujoco or coulomb, got {self.belt_friction!r}"
@@ -336,7 +347,12 @@ def _f(v: float) -> str:
 
 
 def _surface_geoms(
-    s: Surface, speed: float, cp: ContactParams, mu: float, condim: int = 3
+    s: Surface,
+    speed: float,
+    cp: ContactParams,
+    mu: float,
+    condim: int = 3,
+    roller_surface: str = "linear",
 ) -> tuple[list[str], list[SurfaceGeom]]:
     u, n = s.unit(), np.array([-s.unit()[1], s.unit()[0]])
     common = (
@@ -407,15 +423,29 @@ def _surface_geoms(
                     + (r - (rows - 1) / 2) * (s.width / rows) * n
                 )
                 name = f"{s.name}_{r}_{c_}"
-                # capsule axis (local z) across the roller's heading: R = Rz(heading) Rx(90 deg)
+                # capsule axis (local z) across the roller's heading: R = Rz(heading) Rx(90 deg).
+                # "linear": the surface moves along the heading everywhere; "turning": an angular
+                # surface velocity -speed / radius about that axis, as a driven roller turns (the
+                # conveying speed on top, up or down on its flanks; world spin (speed / radius) n_a,
+                # n_a across the heading)
+                turning = roller_surface == "turning"
+                surfacevel = (
+                    f"0 0 0 0 0 {_f(-speed / radius)}" if turning else f"{_f(speed)} 0 0 0 0 0"
+                )
                 xml.append(
                     f'<geom name="{name}" type="capsule" size="{_f(radius)} {_f(half)}" '
                     f'pos="{_f(c[0])} {_f(c[1])} {_f(s.top - radius)}" quat="{_quat(heading, 90)}" '
-                    f'surfacevel="{_f(speed)} 0 0 0 0 0" rgba="0.6 0.6 0.2 1" {common}/>'
+                    f'surfacevel="{surfacevel}" rgba="0.6 0.6 0.2 1" {common}/>'
                 )
+                spin = (-speed / radius * math.sin(a), speed / radius * math.cos(a), 0.0)
                 geoms.append(
                     SurfaceGeom(
-                        name, s.material, (speed * math.cos(a), speed * math.sin(a), 0.0), s.name
+                        name,
+                        s.material,
+                        (speed * math.cos(a), speed * math.sin(a), 0.0),
+                        s.name,
+                        spin=spin if turning else None,
+                        axis=(float(c[0]), float(c[1]), s.top - radius) if turning else None,
                     )
                 )
     return xml, geoms
@@ -508,7 +538,7 @@ def build_scene(
         # with Coulomb belt friction MuJoCo's contacts with belts, strips and rollers are
         # frictionless (condim 1; the surfaces' priority makes their condim the contact's)
         condim = 1 if opt.belt_friction == "coulomb" and s.material != "metal" else 3
-        xml, geoms = _surface_geoms(s, speeds[s.drive] * factor, cp, mu, condim)
+        xml, geoms = _surface_geoms(s, speeds[s.drive] * factor, cp, mu, condim, opt.roller_surface)
         body += xml
         driven += geoms
     metal = []
