@@ -12,7 +12,7 @@ the packaging with such a surface
 
 where N_c [N] is the contact's normal force from the step before, s_c [m/s] the slip of the
 packaging's material point at c against the surface's own material velocity at c (a belt's top
-velocity, or on a drum at a belt's end the drum's spin x arm), projected onto the contact's
+velocity, or on a drum at a belt's end or a turning roller spin x arm), projected onto the contact's
 tangent plane, mu the surface's current friction coefficient (mu_d plus any static offset the
 simulator's friction switch has set) and s_reg = 5 mm/s the slip below which the force is
 linear in the slip (a parcel at belt speed is held like a stiff viscous coupling instead of
@@ -130,7 +130,7 @@ class CoulombBelts:
         velocity = np.einsum("kxd,d->kx", jac, data.qvel[self.dofs])
         points = con.pos[idx]
         surface = np.empty_like(points)
-        for g in np.unique(geom0[idx]):  # a drum's material moves differently at each point
+        for g in np.unique(geom0[idx]):  # a drum or turning roller: spin x arm per point
             rows = geom0[idx] == g
             surface[rows] = self.surfaces[int(g)].velocity_at(points[rows])
         normal = con.frame[idx, :3]

@@ -289,9 +289,10 @@ def scene_options(items: Iterable[str]) -> SceneOptions:
 @dataclass(frozen=True)
 class SurfaceGeom:
     """A driven geom: name, material, world velocity of its surface on top [m/s] and the rig
-    surface it belongs to. A drum also has its world angular velocity ``spin`` [rad/s] and a
-    point ``axis`` [m] on its axis: its material moves at spin x (point - axis), the belt's
-    velocity on top, up round the tail and down round the head."""
+    surface it belongs to. A drum (or a turning roller, `SceneOptions.roller_surface`) also has
+    its world angular velocity ``spin`` [rad/s] and a point ``axis`` [m] on its axis: its
+    material moves at spin x (point - axis), the belt's velocity on top, up round the tail and
+    down round the head."""
 
     name: str
     material: str
@@ -302,8 +303,8 @@ class SurfaceGeom:
 
     def velocity_at(self, points: np.ndarray) -> np.ndarray:
         """The surface's material velocity [m/s] at world ``points`` (n, 3) [m], as MuJoCo's
-        ``surfacevel`` moves it: the same everywhere on a flat belt, strip or roller, spin x arm
-        on a drum."""
+        ``surfacevel`` moves it: the same everywhere on a flat belt, strip or linear roller, spin x
+        arm on a drum or a turning roller."""
         pts = np.atleast_2d(np.asarray(points, dtype=float))
         if self.spin is None or self.axis is None:
             return np.broadcast_to(np.asarray(self.velocity, dtype=float), pts.shape).copy()
