@@ -306,7 +306,7 @@ class SurfaceGeom:
         ``surfacevel`` moves it: the same everywhere on a flat belt, strip or linear roller, spin x
         arm on a drum or a turning roller."""
         pts = np.atleast_2d(np.asarray(points, dtype=float))
-        if self.spin is None or self.axis is None:
+        if self.spin is None or self.axis is None:  # set together (`_turning`)
             return np.broadcast_to(np.asarray(self.velocity, dtype=float), pts.shape).copy()
         return np.cross(
             np.asarray(self.spin, dtype=float), pts - np.asarray(self.axis, dtype=float)
@@ -345,6 +345,19 @@ def _quat(yaw_deg: float, roll_deg: float = 0.0) -> str:
 
 def _f(v: float) -> str:
     return f"{v:.9g}"
+
+
+def _turning(
+    speed: float, radius: float, across: np.ndarray, axis: tuple[float, float, float]
+) -> tuple[str, dict[str, tuple[float, float, float]]]:
+    """A cylinder or capsule turned Rz(heading) Rx(90 deg) (local z = world -across) that turns
+    with its surface moving at ``speed`` [m/s] on top: its MJCF surfacevel (angular, -speed /
+    radius about local z) and the `SurfaceGeom` fields for it, world spin (speed / radius) across
+    [rad/s] about the point ``axis`` [m] ((speed / r) across x (0, 0, r) = speed along on top,
+    up round its upstream side, down round its downstream side)."""
+    w = speed / radius
+    spin = (float(w * across[0]), float(w * across[1]), 0.0)
+    return f"0 0 0 0 0 {_f(-w)}", {"spin": spin, "axis": axis}
 
 
 def _surface_geoms(
@@ -389,28 +402,17 @@ def _surface_geoms(
             continue
         for end, sign in (("tail", -1), ("head", 1)):
             p = c + sign * (s.length / 2 - r) * u
-            # a cylinder across the heading, R = Rz(heading) Rx(90 deg): its axis (local z) is
-            # world -n, so the local angular velocity -speed / r turns it with the belt: speed
-            # along u on top, up at the tail, down at the head (surface velocity w x arm)
+            # a cylinder across the heading that turns with the belt: speed along u on top, up
+            # at the tail, down at the head. Coulomb belt friction takes the material velocity at
+            # each contact point (`SurfaceGeom.velocity_at`); the static friction switch compares
+            # the parcel's centre with the top velocity
+            surfacevel, turns = _turning(speed, r, n, (float(p[0]), float(p[1]), s.top - r))
             xml.append(
                 f'<geom name="{name}_{end}" type="cylinder" size="{_f(r)} {_f(width / 2)}" '
                 f'pos="{_f(p[0])} {_f(p[1])} {_f(s.top - r)}" quat="{_quat(s.heading, 90)}" '
-                f'surfacevel="0 0 0 0 0 {_f(-speed / r)}" rgba="0.25 0.25 0.3 1" {common}/>'
+                f'surfacevel="{surfacevel}" rgba="0.25 0.25 0.3 1" {common}/>'
             )
-            # the drum's world angular velocity is (speed / r) n: (speed / r) n x (0, 0, r) = speed u
-            # on top. Coulomb belt friction takes the material velocity at each contact point
-            # from it (`SurfaceGeom.velocity_at`); the static friction switch compares the
-            # parcel's centre with the top velocity
-            geoms.append(
-                SurfaceGeom(
-                    f"{name}_{end}",
-                    s.material,
-                    velocity,
-                    s.name,
-                    spin=(speed / r * n[0], speed / r * n[1], 0.0),
-                    axis=(float(p[0]), float(p[1]), s.top - r),
-                )
-            )
+            geoms.append(SurfaceGeom(f"{name}_{end}", s.material, velocity, s.name, **turns))
     if s.type == "rollers":
         rows, cols = int(s.extra["rows"]), int(s.extra["columns"])
         radius, half = s.extra["radius"], s.extra["roller_width"] / 2
@@ -425,30 +427,20 @@ def _surface_geoms(
                 )
                 name = f"{s.name}_{r}_{c_}"
                 # capsule axis (local z) across the roller's heading: R = Rz(heading) Rx(90 deg).
-                # "linear": the surface moves along the heading everywhere; "turning": an angular
-                # surface velocity -speed / radius about that axis, as a driven roller turns (the
-                # conveying speed on top, up or down on its flanks; world spin (speed / radius) n_a,
-                # n_a across the heading)
-                turning = roller_surface == "turning"
-                surfacevel = (
-                    f"0 0 0 0 0 {_f(-speed / radius)}" if turning else f"{_f(speed)} 0 0 0 0 0"
-                )
+                # "linear": the surface moves along the heading everywhere; "turning": it turns
+                # as a driven roller does (the conveying speed on top, up or down on its flanks)
+                surfacevel, turns = f"{_f(speed)} 0 0 0 0 0", {}
+                if roller_surface == "turning":
+                    across = np.array([-math.sin(a), math.cos(a)])
+                    axis = (float(c[0]), float(c[1]), s.top - radius)
+                    surfacevel, turns = _turning(speed, radius, across, axis)
                 xml.append(
                     f'<geom name="{name}" type="capsule" size="{_f(radius)} {_f(half)}" '
                     f'pos="{_f(c[0])} {_f(c[1])} {_f(s.top - radius)}" quat="{_quat(heading, 90)}" '
                     f'surfacevel="{surfacevel}" rgba="0.6 0.6 0.2 1" {common}/>'
                 )
-                spin = (-speed / radius * math.sin(a), speed / radius * math.cos(a), 0.0)
-                geoms.append(
-                    SurfaceGeom(
-                        name,
-                        s.material,
-                        (speed * math.cos(a), speed * math.sin(a), 0.0),
-                        s.name,
-                        spin=spin if turning else None,
-                        axis=(float(c[0]), float(c[1]), s.top - radius) if turning else None,
-                    )
-                )
+                conveying = (speed * math.cos(a), speed * math.sin(a), 0.0)
+                geoms.append(SurfaceGeom(name, s.material, conveying, s.name, **turns))
     return xml, geoms
 
 
