@@ -656,6 +656,14 @@ BAD_INPUTS = {
         lambda p: _study_sim(p, belt_friction="sticky"),
         r"simulator\.belt_friction: unknown belt friction law 'sticky'.*mujoco, coulomb",
     ),
+    "roller surface spinning": (
+        lambda p: _study_sim(p, roller_surface="spinning"),
+        r"simulator\.roller_surface: unknown roller surface motion 'spinning'.*linear, turning",
+    ),
+    "shell diagonals crossed": (
+        lambda p: _study_sim(p, shell_diagonals="crossed"),
+        r"simulator\.shell_diagonals: unknown split of the shell's cells 'crossed'.*radiating",
+    ),
     "shell dof floppy": (
         lambda p: _study_sim(p, shell_dof="floppy"),
         r"simulator\.shell_dof: unknown shell degrees of freedom 'floppy'.*auto, full",

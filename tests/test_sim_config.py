@@ -689,6 +689,30 @@ def test_belt_friction_from_a_study_files_simulator_section_and_a_twins_settings
         TwinSettingsSection(real_belt_friction="dry")
 
 
+def test_roller_surface_and_shell_diagonals_from_a_study_files_simulator_section(tmp_path):
+    """``roller_surface`` and ``shell_diagonals`` in a study's simulator section reach the
+    scene (the flow splitter's rollers turn: their geoms carry a spin; the shell's cells split
+    the other way: another mesh), and leaving them out keeps the defaults."""
+    from parcelfit.runs import TestCase
+    from parcelfit.sim.factory import SimulatorSection, make_simulator
+
+    def sim(**given):
+        section = SimulatorSection(backend="mujoco", rig="E2a", consignment="KPBW", **given)
+        return make_simulator(section.to_config(tmp_path))
+
+    default, turning = sim(), sim(roller_surface="turning", shell_diagonals="alternating")
+    assert default.options.scene.roller_surface == "linear"  # type: ignore[attr-defined]
+    assert default.options.scene.shell_diagonals == "radiating"  # type: ignore[attr-defined]
+    assert turning.options.scene.roller_surface == "turning"  # type: ignore[attr-defined]
+    assert turning.options.scene.shell_diagonals == "alternating"  # type: ignore[attr-defined]
+    case = TestCase("E2a", "KPBW", 1)
+    a, b = default.scene({}, case), turning.scene({}, case)  # type: ignore[attr-defined]
+    rollers = [g for g in b.driven if g.surface == "splitter"]
+    assert len(rollers) == 56 and all(g.spin is not None for g in rollers)
+    assert all(g.spin is None for g in a.driven if g.surface == "splitter")
+    assert a.shell.triangles.tolist() != b.shell.triangles.tolist()
+
+
 def test_the_shells_degrees_of_freedom_from_a_study_file_and_the_simulate_command(tmp_path):
     """``shell_dof`` in a study's simulator section (and `parcelfit simulate --shell-dof`)
     reaches the scene: the full shell gets one degree of freedom per vertex, the default stays

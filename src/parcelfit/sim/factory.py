@@ -7,9 +7,12 @@ The section's ``backend`` chooses: ``mujoco`` (a bundled or user rig and consign
 ``shell_dof`` (``auto``, ``full``,
 ``quadratic`` or ``trilinear``: the packaging shell's degrees of freedom, see `SceneOptions`),
 ``shell_cells`` (an interpolated shell's grid of cells, e.g. ``[4, 4, 1]``),
-``belt_friction`` (``mujoco`` or ``coulomb``, see `SceneOptions`), ``stick_speed`` and
-``slip_speed`` [m/s] (how the static friction offsets fade with the slip speed, see
-`SceneOptions`), ``rig_timesteps`` (a time step [s] by rig name) and ``wall_limit`` [s]),
+``shell_diagonals`` (``radiating`` or ``alternating``: how the shell's cells are split into
+triangles), ``belt_friction`` (``mujoco`` or ``coulomb``, see `SceneOptions`),
+``roller_surface`` (``linear`` or ``turning``: how a flow splitter's rollers move the
+packaging), ``stick_speed`` and ``slip_speed`` [m/s] (how the static friction offsets fade with
+the slip speed, see `SceneOptions`), ``rig_timesteps`` (a time step [s] by rig name) and
+``wall_limit`` [s]),
 ``external`` (a solver description file run as a command) or ``python`` (``factory:
 package.module:callable``, imported and called: such a file runs code). A new named backend
 adds its keys to `SimulatorSection` and `SimulatorConfig` and its construction to
@@ -34,6 +37,8 @@ from parcelfit.sim.params import (
     MAX_TIMESTEP,
     MIN_TIMESTEP,
     RIGID,
+    ROLLER_SURFACES,
+    SHELL_DIAGONALS,
     SHELL_DOFS,
     STICK_SPEED,
     ShellCellsField,
@@ -51,7 +56,9 @@ _SETTINGS = (
     "membrane_cap",
     "shell_dof",
     "shell_cells",
+    "shell_diagonals",
     "belt_friction",
+    "roller_surface",
     "stick_speed",
     "slip_speed",
     "rig_timesteps",
@@ -78,8 +85,9 @@ class SimulatorConfig(Mapping[str, Any]):
     """A simulator's configuration (SI): ``backend`` and what it needs (mujoco: ``rig`` and
     ``consignment``, bundled names or ``.yaml`` paths, optional ``timestep`` [s], ``spacing``
     and ``film_spacing`` [m], ``membrane_cap`` [N/m], ``shell_dof``, ``shell_cells``,
-    ``belt_friction``, ``stick_speed`` and ``slip_speed`` [m/s], ``rig_timesteps`` (rig name ->
-    time step [s]); external: the solver description file ``external``; python: ``factory``),
+    ``shell_diagonals``, ``belt_friction``, ``roller_surface``, ``stick_speed`` and
+    ``slip_speed`` [m/s], ``rig_timesteps`` (rig name -> time step [s]); external: the solver
+    description file ``external``; python: ``factory``),
     optional ``wall_limit`` [s] per simulation, and ``folder``: the folder of the file it came
     from (an external solver's runs go into ``folder/.external-runs``).
 
@@ -95,7 +103,9 @@ class SimulatorConfig(Mapping[str, Any]):
     membrane_cap: float | None = None
     shell_dof: str | None = None
     shell_cells: tuple[int, int, int] | None = None
+    shell_diagonals: str | None = None
     belt_friction: str | None = None
+    roller_surface: str | None = None
     stick_speed: float | None = None
     slip_speed: float | None = None
     rig_timesteps: Mapping[str, float] | None = None
@@ -127,8 +137,9 @@ class SimulatorConfig(Mapping[str, Any]):
 class SimulatorSection(FileModel):
     """``simulator`` of a study or screen file: the backend and what it needs (``timestep``
     [s], ``spacing`` and ``film_spacing`` [m], ``membrane_cap`` [N/m], ``shell_dof``,
-    ``shell_cells``, ``belt_friction``, ``stick_speed`` and ``slip_speed`` [m/s],
-    ``rig_timesteps`` (rig name -> time step [s]), ``wall_limit`` [s])."""
+    ``shell_cells``, ``shell_diagonals``, ``belt_friction``, ``roller_surface``, ``stick_speed``
+    and ``slip_speed`` [m/s], ``rig_timesteps`` (rig name -> time step [s]), ``wall_limit``
+    [s])."""
 
     backend: Annotated[str, Choice(BACKENDS, what="backend")]
     rig: Annotated[str | None, Text()] = None
@@ -139,7 +150,13 @@ class SimulatorSection(FileModel):
     membrane_cap: Annotated[float | None, Number(unit="N/m", ge=1e-9)] = None
     shell_dof: Annotated[str | None, Choice(SHELL_DOFS, what="shell degrees of freedom")] = None
     shell_cells: ShellCellsField | None = None
+    shell_diagonals: Annotated[
+        str | None, Choice(SHELL_DIAGONALS, what="split of the shell's cells")
+    ] = None
     belt_friction: Annotated[str | None, Choice(BELT_FRICTION, what="belt friction law")] = None
+    roller_surface: Annotated[str | None, Choice(ROLLER_SURFACES, what="roller surface motion")] = (
+        None
+    )
     stick_speed: Annotated[float | None, Number(unit="m/s", ge=1e-9)] = None
     slip_speed: Annotated[float | None, Number(unit="m/s", ge=1e-9)] = None
     rig_timesteps: (
@@ -202,7 +219,13 @@ def make_simulator(config: SimulatorConfig) -> Simulator:
             )
             if k in config
         }
-        for key in ("belt_friction", "shell_dof", "shell_cells"):
+        for key in (
+            "belt_friction",
+            "roller_surface",
+            "shell_dof",
+            "shell_cells",
+            "shell_diagonals",
+        ):
             if key in config:
                 numerics[key] = config[key]
         if "rig_timesteps" in config:

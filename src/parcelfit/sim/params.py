@@ -60,6 +60,11 @@ ShellCellsField = Annotated[
 
 
 BELT_FRICTION = ("mujoco", "coulomb")
+# how a flow splitter's rollers move the packaging (`SceneOptions.roller_surface`) and how the
+# shell's grid cells are split into triangles (`SceneOptions.shell_diagonals`); a study's
+# simulator section checks against the same lists
+ROLLER_SURFACES = ("linear", "turning")
+SHELL_DIAGONALS = ("radiating", "alternating")
 
 
 @dataclass(frozen=True)

@@ -11,6 +11,8 @@
       spacing: 0.03                    # mujoco, optional shell mesh spacing [m]
       rig_timesteps: {E1: 0.000208333} # mujoco, optional: a rig's own time step [s]
       # belt_friction: coulomb         # mujoco, optional (default mujoco)
+      # roller_surface: turning        # mujoco, optional: flow-splitter rollers (default linear)
+      # shell_diagonals: alternating   # mujoco, optional: shell cell split (default radiating)
       # stick_speed: 0.1               # mujoco, optional: the static friction's fade with the
       # slip_speed: 1                  #   slip speed [m/s] (SceneOptions; default 0.005, none)
       wall_limit: 600                  # optional, per simulation [s]

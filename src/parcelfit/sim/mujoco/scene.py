@@ -30,18 +30,19 @@ from parcelfit.errors import ParcelfitError
 from parcelfit.sim.mujoco.consignment import Consignment
 from parcelfit.sim.mujoco.contact import ContactParams, contact_params
 from parcelfit.sim.mujoco.rig import Rig, Surface
-from parcelfit.sim.mujoco.shell import DIAGONALS, ShellMesh, pillow_shell
+from parcelfit.sim.mujoco.shell import ShellMesh, pillow_shell
 from parcelfit.sim.params import (
     BELT_FRICTION,
     MAX_TIMESTEP,
     MIN_TIMESTEP,
+    ROLLER_SURFACES,
+    SHELL_DIAGONALS,
     SHELL_DOFS,
     STICK_SPEED,
     shell_cells,
 )
 
 SLAB = 0.02  # half-thickness of belt and strip boxes [m]
-ROLLER_SURFACES = ("linear", "turning")  # SceneOptions.roller_surface
 CONTACT_GAP = 0.0005  # clearance between content and shell, and under the parcel at the start [m]
 FREE_PLATE_BETA1 = 4.730  # first free-free beam mode, beta_1 L
 
@@ -157,10 +158,10 @@ class SceneOptions:
             raise ParcelfitError(
                 f"unknown shell_dof {self.shell_dof!r}", fix=f"use one of {list(SHELL_DOFS)}"
             )
-        if self.shell_diagonals not in DIAGONALS:
+        if self.shell_diagonals not in SHELL_DIAGONALS:
             raise ParcelfitError(
                 f"unknown shell_diagonals {self.shell_diagonals!r}",
-                fix=f"use one of {list(DIAGONALS)}",
+                fix=f"use one of {list(SHELL_DIAGONALS)}",
             )
         if self.shell_cells is not None:  # checked, and whole numbers (texts give floats)
             object.__setattr__(self, "shell_cells", shell_cells(self.shell_cells))

@@ -60,8 +60,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from parcelfit.errors import ParcelfitError
-
-DIAGONALS = ("radiating", "alternating")  # how a grid cell is split into two triangles
+from parcelfit.sim.params import SHELL_DIAGONALS
 
 
 def _band(a: float, b: float, spacing: float) -> np.ndarray:
@@ -141,9 +140,9 @@ def pillow_shell(
     ``diagonals`` splits each grid cell into two triangles, "radiating" or "alternating"
     (module docstring, "Diagonals")."""
     (L, W), (cL, cW) = outer, content
-    if diagonals not in DIAGONALS:
+    if diagonals not in SHELL_DIAGONALS:
         raise ParcelfitError(
-            f"unknown shell diagonals {diagonals!r}", fix=f"use one of {list(DIAGONALS)}"
+            f"unknown shell diagonals {diagonals!r}", fix=f"use one of {list(SHELL_DIAGONALS)}"
         )
     if not (0 < cL < L and 0 < cW < W):
         raise ParcelfitError(f"content {content} must be smaller than the outer footprint {outer}")
