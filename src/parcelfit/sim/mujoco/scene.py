@@ -122,7 +122,7 @@ class SceneOptions:
     # how a flow splitter's roller units move the packaging: "linear" (a surface velocity along
     # the roller's heading everywhere on it, also on its flanks) or "turning" (an angular surface
     # velocity, as a driven roller turns: the conveying speed on top, up and down on its flanks,
-    # like the belts' drums); measured in docs/belt-drums.md, "Leads for the delay on the module"
+    # like the belts' drums); measured in docs/belt-drums.md, "What it costs"
     roller_surface: str = "linear"
     # how the static friction offsets (mu_s_MePa, mu_s_BePa) fade with the slip speed v [m/s]:
     # without ``slip_speed``, fully while the contact sticks, exp(-(v / stick_speed)^2) (a few
