@@ -251,7 +251,7 @@ def shell_model(step: float, equal_speeds: bool, belt_friction: str = "mujoco") 
         belt_friction=belt_friction,
     )
     scene = build_scene(load_rig("E1"), cons, cons.parameter_values(FRICTION), 3, options)
-    model = mujoco.MjModel.from_xml_string(scene.xml)
+    model = scene.model()
     data = mujoco.MjData(model)
     flex = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, "packaging")
     adr, num = model.flex_vertadr[flex], model.flex_vertnum[flex]

@@ -70,7 +70,7 @@ def test_every_driven_geom_reports_the_material_velocity_mujoco_gives_its_surfac
     # point: on a drum, or a roller that turns, that is spin x arm, not the velocity on top
     sim = MujocoSimulator(SimOptions(scene=SceneOptions(roller_surface=rollers)))
     scene = sim.scene({}, TestCase(rig_name, "KPBW", 2))
-    model = mujoco.MjModel.from_xml_string(scene.xml)
+    model = scene.model()
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
     up = np.array([0.0, 0.0, 1.0])

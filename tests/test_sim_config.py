@@ -544,7 +544,7 @@ def test_the_shell_touches_its_content_nowhere_at_rest(name, dof):
     cons = load_consignment(name)
     params = resolve(cons.content_kind, si_values={})
     scene = build_scene(load_rig("E3"), cons, params, 1, SceneOptions(shell_dof=dof))
-    model = mujoco.MjModel.from_xml_string(scene.xml)
+    model = scene.model()
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
     packaging = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, "packaging")
@@ -601,7 +601,7 @@ def test_an_interpolated_shells_nodes_span_the_parcels_own_box():
     rig, cons = load_rig("E3"), load_consignment("KPBW")
     params = resolve(cons.content_kind, si_values={})
     scene = build_scene(rig, cons, params, 1, SceneOptions(shell_dof="quadratic"))
-    model = mujoco.MjModel.from_xml_string(scene.xml)
+    model = scene.model()
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
     adr, num = model.flex_nodeadr[0], model.flex_nodenum[0]

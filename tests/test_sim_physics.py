@@ -90,7 +90,7 @@ def test_light_barriers_break_when_the_front_edge_reaches_them(timestep):
     t1, t2 = res.diagnostics["barrier_times"]
     # the front of the shell, at the start pose, from the scene's own vertices
     scene = build_scene(flat_belt(v, start_x=start_x), cons, resolve("rigid"), 1, full)
-    model = mujoco.MjModel.from_xml_string(scene.xml)
+    model = scene.model()
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
     front = float(data.flexvert_xpos[:, 0].max())
@@ -329,7 +329,7 @@ def test_coulomb_belt_friction_warns_on_a_full_shell(caplog):
             1,
             SceneOptions(belt_friction="coulomb"),
         )
-        model = mujoco.MjModel.from_xml_string(scene.xml)
+        model = scene.model()
         CoulombBelts(model, mujoco.MjData(model), scene)
 
     with caplog.at_level(logging.WARNING, logger="parcelfit.sim.mujoco"):

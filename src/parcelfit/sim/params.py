@@ -65,6 +65,8 @@ BELT_FRICTION = ("mujoco", "coulomb")
 # simulator section checks against the same lists
 ROLLER_SURFACES = ("linear", "turning")
 SHELL_DIAGONALS = ("radiating", "alternating")
+# how a flex's mass is spread over its bodies (sim/mujoco/lumped_mass.py)
+MASS_LUMPINGS = ("area", "equal")
 
 
 @dataclass(frozen=True)

@@ -124,7 +124,7 @@ def indentation_test(
         )
     full = consignment.parameter_values(si_values=params or {})
     scene = build_scene(plate_rig(material), consignment, full, 1, options)
-    model = mujoco.MjModel.from_xml_string(scene.xml)
+    model = scene.model()
     data = mujoco.MjData(model)
     plate = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "plate")
     content = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "content")

@@ -24,15 +24,18 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from fractions import Fraction
 
+import mujoco
 import numpy as np
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.sim.mujoco.consignment import Consignment
 from parcelfit.sim.mujoco.contact import ContactParams, contact_params
+from parcelfit.sim.mujoco.lumped_mass import compile_model
 from parcelfit.sim.mujoco.rig import Rig, Surface
 from parcelfit.sim.mujoco.shell import ShellMesh, pillow_shell
 from parcelfit.sim.params import (
     BELT_FRICTION,
+    MASS_LUMPINGS,
     MAX_TIMESTEP,
     MIN_TIMESTEP,
     ROLLER_SURFACES,
@@ -108,6 +111,12 @@ class SceneOptions:
     # corner the tip of two triangles) or "alternating" (the mesh before 2026-11-28, whose corners
     # depend on the parity of the cell count; shell.py, "Diagonals")
     shell_diagonals: str = "radiating"
+    # how the packaging's and a soft content's mass is spread over the bodies that carry it:
+    # "area" (each triangle's area, or each grid cell's volume, shared by its corners, and an
+    # interpolated shell's nodes weighted by how much of the film they move) or "equal"
+    # (MuJoCo's own: every vertex or node the same, the model before 2026-11-28, which put
+    # BW's packaging inertia 28-50 % above its value; lumped_mass.py)
+    mass_lumping: str = "area"
     # an interpolated shell's grid of cells along the parcel's length, width and height (MuJoCo's
     # multi-cell flexes: the field is trilinear or quadratic within each cell, so a rim can bend
     # apart from the face it borders); None: the consignment's own (`Consignment.shell_cells`)
@@ -165,6 +174,11 @@ class SceneOptions:
             )
         if self.shell_cells is not None:  # checked, and whole numbers (texts give floats)
             object.__setattr__(self, "shell_cells", shell_cells(self.shell_cells))
+        if self.mass_lumping not in MASS_LUMPINGS:
+            raise ParcelfitError(
+                f"unknown mass_lumping {self.mass_lumping!r}",
+                fix=f"use one of {list(MASS_LUMPINGS)}",
+            )
         if self.roller_surface not in ROLLER_SURFACES:
             raise ParcelfitError(
                 f"unknown roller_surface {self.roller_surface!r}",
@@ -326,6 +340,12 @@ class Scene:
     contacts: Mapping[str, ContactParams]
     n_shell_vertices: int
     content_flex: bool
+    mass_lumping: str = "area"  # how the flexes' masses are spread (`SceneOptions.mass_lumping`)
+
+    def model(self) -> mujoco.MjModel:
+        """The compiled MuJoCo model of this scene, its flexes' masses lumped as the scene says
+        (`parcelfit.sim.mujoco.lumped_mass.compile_model`)."""
+        return compile_model(self.xml, self.mass_lumping)
 
 
 def _quat(yaw_deg: float, roll_deg: float = 0.0) -> str:
@@ -638,4 +658,5 @@ def build_scene(
         contacts={"belt": belt_cp, "metal": metal_cp, "content": content_cp},
         n_shell_vertices=nv,
         content_flex=soft,
+        mass_lumping=opt.mass_lumping,
     )

@@ -196,7 +196,7 @@ class MujocoSimulator:
         scene = build_scene(rig, cons, full, case.speed_setting, self.scene_options(rig))
         with CountedWarnings() as warnings:
             try:
-                model = mujoco.MjModel.from_xml_string(scene.xml)
+                model = scene.model()
             except ValueError as exc:
                 return SimResult(
                     None,

@@ -128,7 +128,7 @@ def _settled(
     after the Coulomb belt friction where the scene has it)."""
     full = consignment.parameter_values(si_values=dict(params or {}))
     scene = build_scene(plate_rig("belt", plate_tile), consignment, full, 1, options)
-    model = mujoco.MjModel.from_xml_string(scene.xml)
+    model = scene.model()
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
     coulomb = (
