@@ -2,6 +2,7 @@
 
     python scripts/contact_trace.py --rig E2a --consignment KPBW --setting 1 --seed 3
                                     --from 1.76 --to 1.9 [--every 0.01] [--scene KEY=VALUE ...]
+                                    [--bulge FOOTPRINT [--bulge-depth D]] [--bottom]
 
 Runs one simulation as `parcelfit simulate` does and prints, at every ``--every`` seconds of the
 window [``--from``, ``--to``] (simulated time, s): the packaging's centre [m] (the mean of its
@@ -13,6 +14,14 @@ contacts the packaging has with each body MuJoCo collides it with as one pair (t
 all the rig's geoms, the content); MuJoCo keeps at most 50 per pair (``mjMAXCONPAIR``), so a
 count of 50 means the cap was reached and others may have been dropped. ``--rig`` and
 ``--consignment`` take bundled names or files.
+
+``--bulge`` gives the packaging a bottom that bulges below a rigid content (footprint: the
+patch's fraction of the outline; ``--bulge-depth`` [m], `parcelfit.sim.mujoco.shell`), and
+``--bottom`` adds to each sample how the bottom sheet lies: the lowest and the mean height [mm]
+of the vertices of its face (the flat patch under the content, or the bulge's patch) and of the
+rest of the bottom sheet (the rim, seam excluded), both above the bottom sheet's lowest vertex,
+and the content's height above that vertex [mm], its heading [deg] and its yaw rate [rad/s] (a
+rigid content). A bulge that the weight presses flat shows as a rim as low as the face.
 """
 
 from __future__ import annotations
@@ -21,6 +30,7 @@ import argparse
 import collections
 import math
 import sys
+from dataclasses import replace
 
 import mujoco
 import numpy as np
@@ -84,6 +94,33 @@ def _trace(model: mujoco.MjModel, data: mujoco.MjData, top: int, start_angle: fl
     )
 
 
+def _bottom(model: mujoco.MjModel, data: mujoco.MjData, face: np.ndarray, rim: np.ndarray) -> str:
+    """How the bottom sheet lies: face and rim heights [mm] above its lowest vertex, the content."""
+    flex = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, "packaging")
+    verts = data.flexvert_xpos[
+        model.flex_vertadr[flex] : model.flex_vertadr[flex] + model.flex_vertnum[flex]
+    ]
+    sheet = verts[np.concatenate([face, rim])]
+    top = sheet[:, 2].min()
+    zf, zr = (verts[face, 2] - top) * 1e3, (sheet[len(face) :, 2] - top) * 1e3
+    if not len(zr):  # a sheet without a rim: its face stands for both
+        zr = zf
+    text = (
+        f"    bottom: face min {zf.min():.2f} mean {zf.mean():.2f} mm,"
+        f" rim min {zr.min():.2f} mean {zr.mean():.2f} mm"
+    )
+    body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "content")
+    if body >= 0:
+        xmat = data.xmat[body].reshape(3, 3)
+        yaw = math.degrees(math.atan2(xmat[1, 0], xmat[0, 0]))
+        dof = model.jnt_dofadr[model.body_jntadr[body]]
+        text += (
+            f"; content at {(data.xpos[body][2] - top) * 1e3:.2f} mm, heading {yaw:+.1f} deg,"
+            f" yaw rate {data.qvel[dof + 5]:+.2f} rad/s"
+        )
+    return text
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rig", required=True)
@@ -95,16 +132,26 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--every", type=float, default=0.01, help="[s]")
     ap.add_argument("--top", type=int, default=4, help="geoms listed per sample")
     ap.add_argument("--scene", nargs="*", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--bulge", type=float, default=None, metavar="FOOTPRINT")
+    ap.add_argument("--bulge-depth", type=float, default=0.004, help="[m]")
+    ap.add_argument("--bottom", action="store_true", help="print how the bottom sheet lies")
     args = ap.parse_args(argv)
     if not (args.every > 0 and args.t1 > args.t0 and args.top > 0):
         ap.error("--every and --top must be positive and --to after --from")
     try:
         rig, cons = load_rig(args.rig), load_consignment(args.consignment)
+        if args.bulge is not None:
+            cons = replace(cons, bulge=(args.bulge_depth, args.bulge))
         options = SimOptions(scene=scene_options(args.scene))
+        sim = MujocoSimulator(options, {rig.name: rig}, {cons.name: cons}).with_placement(args.seed)
+        case = TestCase(rig.name, cons.name, args.setting)
+        shell = sim.scene({}, case).shell
     except ParcelfitError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    sim = MujocoSimulator(options, {rig.name: rig}, {cons.name: cons}).with_placement(args.seed)
+    face = np.asarray(shell.bottom_face)
+    sheet = set(shell.triangles[shell.bottom_triangles].ravel()) - set(shell.seam) - set(face)
+    rim = np.array(sorted(sheet), dtype=int)
     # the simulator owns its stepping loop; wrapping MuJoCo's step function in this process is
     # the one way to look at every step of exactly that loop without changing it
     step, state = mujoco.mj_step, {"next": args.t0}
@@ -116,10 +163,12 @@ def main(argv: list[str] | None = None) -> int:
         if args.t0 <= data.time <= args.t1 and data.time >= state["next"] - 1e-9:
             state["next"] = data.time + args.every
             print(_trace(model, data, args.top, state["start"]), flush=True)
+            if args.bottom:
+                print(_bottom(model, data, face, rim), flush=True)
 
     mujoco.mj_step = traced_step
     try:
-        result = sim.run({}, TestCase(rig.name, cons.name, args.setting))
+        result = sim.run({}, case)
     finally:
         mujoco.mj_step = step
     run = result.run

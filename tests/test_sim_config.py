@@ -514,6 +514,10 @@ def test_consignment_bulge_is_checked_and_moves_the_parcel_up_by_its_depth():
         return float(m[1])
 
     assert height(bulged) - height(flat) == pytest.approx(0.004)
+    # a consignment changed in code, past the file's check, is refused by the scene
+    pb = dataclasses.replace(load_consignment("PB"), bulge=(0.004, 0.5))
+    with pytest.raises(ParcelfitError, match="a bulge needs a rigid content"):
+        build_scene(rig, pb, resolve(pb.content_kind, si_values={}), 1)
 
 
 def test_impratio_reaches_the_model_and_is_checked():

@@ -495,6 +495,12 @@ def build_scene(
 ) -> Scene:
     """The MJCF scene of ``rig`` at ``setting`` with ``consignment`` and SI ``params``."""
     opt = options or SceneOptions()
+    if consignment.bulge is not None and consignment.soft:
+        # the consignment file refuses it too; a consignment changed in code reaches this
+        raise ParcelfitError(
+            f"consignment {consignment.name}: a bulge needs a rigid content",
+            fix="remove the bulge (a soft content's shell sags on its own)",
+        )
     p = params
     speeds = rig.drive_speeds(setting)
     L, W, _H = consignment.outer
