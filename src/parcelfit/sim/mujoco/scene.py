@@ -114,8 +114,9 @@ class SceneOptions:
     # how the packaging's and a soft content's mass is spread over the bodies that carry it:
     # "area" (each triangle's area, or each grid cell's volume, shared by its corners, and an
     # interpolated shell's nodes weighted by how much of the film they move) or "equal"
-    # (MuJoCo's own: every vertex or node the same, the model before 2026-11-28, which put
-    # BW's packaging inertia 28-50 % above its value; lumped_mass.py)
+    # (MuJoCo's own: every vertex or node the same, the model before 2026-11-28, which put the
+    # packaging's moment of inertia up to 30 % and PB's content's 32 % above the lumped values;
+    # lumped_mass.py, docs/mass-lumping.md)
     mass_lumping: str = "area"
     # an interpolated shell's grid of cells along the parcel's length, width and height (MuJoCo's
     # multi-cell flexes: the field is trilinear or quadratic within each cell, so a rim can bend
