@@ -30,7 +30,7 @@ import numpy as np
 from parcelfit.errors import ParcelfitError
 from parcelfit.sim.mujoco.consignment import Consignment
 from parcelfit.sim.mujoco.contact import ContactParams, contact_params
-from parcelfit.sim.mujoco.lumped_mass import compile_model
+from parcelfit.sim.mujoco.lumped_mass import compile_model, element_vertex_masses
 from parcelfit.sim.mujoco.rig import Rig, Surface
 from parcelfit.sim.mujoco.shell import ShellMesh, pillow_shell
 from parcelfit.sim.params import (
@@ -529,8 +529,16 @@ def build_scene(
             f"(consignment {consignment.mass * 1e3:g} g)",
             fix="lower m_Pa",
         )
-    m_v = m_pa / nv
     n_face = shell.face_contacts
+    # a vertex's contact is as stiff as its mass is large (README, "Contact stiffness in N/mm"):
+    # the mapping takes the mean mass over the contacts of the flat bottom face, so that the
+    # whole face has the stiffness asked for whatever the masses
+    if opt.mass_lumping == "area":
+        corners = shell.triangles[shell.bottom_triangles]
+        on_face = corners[np.isin(corners, shell.bottom_face)]
+        m_v = float(element_vertex_masses(shell.points, shell.triangles, m_pa)[on_face].mean())
+    else:
+        m_v = m_pa / nv
     dt = opt.step_for(soft, rig, consignment.shell)
 
     # --- contact parameters (effective inverse mass of a flex contact: see contact.py) ------------
