@@ -24,6 +24,34 @@ def test_bad_arguments_are_refused(trace, capsys):
     assert "--to after --from" in capsys.readouterr().err
     assert trace.main(["--rig", "E9", "--consignment", "KPBW"]) == 2
     assert "unknown rig 'E9'" in capsys.readouterr().err
+    # a bulge needs a rigid content, and a patch smaller than it
+    assert trace.main(["--rig", "E3", "--consignment", "PB", "--bulge", "0.5"]) == 2
+    assert "a bulge needs a rigid content" in capsys.readouterr().err
+    assert trace.main(["--rig", "E3", "--consignment", "BW", "--bulge", "0.95"]) == 2
+    assert "smaller than the content" in capsys.readouterr().err
+
+
+def test_the_bottom_sheet_of_a_bulged_mailer_lies_on_its_patch(trace, capsys):
+    # a short run on the strips: the bulge's patch carries BW, its rim stays up by most of the
+    # bulge's depth (4 mm) and the content above it; a flat bottom's rim lies as low as its face
+    pattern = re.compile(
+        r"bottom: face min ([\d.]+) mean ([\d.]+) mm, rim min ([\d.]+) mean ([\d.]+) mm; "
+        r"content at ([\d.]+) mm, heading ([-+.\d]+) deg"
+    )
+
+    def bottom(*extra: str) -> list[float]:
+        args = ["--rig", "E3", "--consignment", "BW", "--bottom", *extra]
+        assert trace.main([*args, "--from", "0.2", "--to", "0.21", "--every", "0.01"]) == 0
+        found = pattern.search(capsys.readouterr().out)
+        assert found is not None
+        return [float(found.group(i)) for i in range(1, 6)]
+
+    face_min, face_mean, rim_min, rim_mean, content = bottom("--bulge", "0.5")
+    assert face_min == pytest.approx(0.0, abs=0.05) and face_mean < 1.0
+    assert 2.0 < rim_min < 5.0 and 2.0 < rim_mean < 5.0
+    assert content > rim_mean
+    _, _, flat_rim_min, _, flat_content = bottom()
+    assert flat_rim_min < 0.5 and flat_content < content
 
 
 @pytest.mark.slow

@@ -154,3 +154,26 @@ def test_an_unknown_lumping_is_refused() -> None:
         SceneOptions(mass_lumping="volume")
     with pytest.raises(ValueError, match="unknown mass lumping"):
         compile_model("<mujoco/>", "volume")
+
+
+def test_the_lumping_from_a_study_file_and_the_simulate_command(tmp_path) -> None:
+    """``mass_lumping`` in a study's simulator section and `parcelfit simulate --mass-lumping`
+    reach the scene; leaving it out keeps lumped masses."""
+    from typer.testing import CliRunner
+
+    from parcelfit.cli import app
+    from parcelfit.sim.factory import SimulatorSection, make_simulator
+
+    def sim(**given: str):
+        section = SimulatorSection(backend="mujoco", rig="E3", consignment="BW", **given)
+        return make_simulator(section.to_config(tmp_path))
+
+    case = TestCase("E3", "BW", 1)
+    lumped = sim().scene({}, case).model()  # type: ignore[attr-defined]
+    equal = sim(mass_lumping="equal").scene({}, case).model()  # type: ignore[attr-defined]
+    assert np.ptp(_packaging(equal)[0]) == 0 and np.ptp(_packaging(lumped)[0]) > 0
+    out = tmp_path / "run.csv"
+    runner = CliRunner()
+    args = ["simulate", "--rig", "E3", "--consignment", "BW", "--out", str(out)]
+    bad = runner.invoke(app, [*args, "--mass-lumping", "volume"])
+    assert bad.exit_code != 0 and "mass_lumping" in bad.output

@@ -664,6 +664,10 @@ BAD_INPUTS = {
         lambda p: _study_sim(p, shell_diagonals="crossed"),
         r"simulator\.shell_diagonals: unknown split of the shell's cells 'crossed'.*radiating",
     ),
+    "mass lumping by volume": (
+        lambda p: _study_sim(p, mass_lumping="volume"),
+        r"simulator\.mass_lumping: unknown spread of the packaging's mass 'volume'.*area, equal",
+    ),
     "shell dof floppy": (
         lambda p: _study_sim(p, shell_dof="floppy"),
         r"simulator\.shell_dof: unknown shell degrees of freedom 'floppy'.*auto, full",

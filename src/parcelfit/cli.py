@@ -581,6 +581,14 @@ def simulate(
             "height, e.g. 4,4,1 (default: the consignment file's with its own shell, else one).",
         ),
     ] = None,
+    mass_lumping: Annotated[
+        str,
+        typer.Option(
+            help="How the packaging's (and a soft content's) mass is spread over the bodies that "
+            "carry it: area (lumped by area and volume) or equal (MuJoCo's own equal shares, the "
+            "model before 2026-11-28; see docs/mass-lumping.md).",
+        ),
+    ] = "area",
     wall_limit: Annotated[float, typer.Option(help="Wall-clock limit [s].")] = 600.0,
     seed: Annotated[
         int | None,
@@ -625,6 +633,7 @@ def simulate(
         shell_dof=shell_dof,
         shell_cells=None if shell_cells is None else _shell_cells(shell_cells),
         belt_friction=belt_friction,
+        mass_lumping=mass_lumping,
         wall_limit=wall_limit,
     )
     sim = make_simulator(config)

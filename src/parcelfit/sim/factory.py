@@ -8,7 +8,8 @@ The section's ``backend`` chooses: ``mujoco`` (a bundled or user rig and consign
 ``quadratic`` or ``trilinear``: the packaging shell's degrees of freedom, see `SceneOptions`),
 ``shell_cells`` (an interpolated shell's grid of cells, e.g. ``[4, 4, 1]``),
 ``shell_diagonals`` (``radiating`` or ``alternating``: how the shell's cells are split into
-triangles), ``belt_friction`` (``mujoco`` or ``coulomb``, see `SceneOptions`),
+triangles), ``mass_lumping`` (``area`` or ``equal``: how the packaging's mass is spread over its
+vertices, see `SceneOptions`), ``belt_friction`` (``mujoco`` or ``coulomb``, see `SceneOptions`),
 ``roller_surface`` (``linear`` or ``turning``: how a flow splitter's rollers move the
 packaging), ``stick_speed`` and ``slip_speed`` [m/s] (how the static friction offsets fade with
 the slip speed, see `SceneOptions`), ``rig_timesteps`` (a time step [s] by rig name) and
@@ -34,6 +35,7 @@ from parcelfit.errors import ParcelfitError
 from parcelfit.schema import Choice, FileModel, Number, Text
 from parcelfit.sim.params import (
     BELT_FRICTION,
+    MASS_LUMPINGS,
     MAX_TIMESTEP,
     MIN_TIMESTEP,
     RIGID,
@@ -57,6 +59,7 @@ _SETTINGS = (
     "shell_dof",
     "shell_cells",
     "shell_diagonals",
+    "mass_lumping",
     "belt_friction",
     "roller_surface",
     "stick_speed",
@@ -85,7 +88,7 @@ class SimulatorConfig(Mapping[str, Any]):
     """A simulator's configuration (SI): ``backend`` and what it needs (mujoco: ``rig`` and
     ``consignment``, bundled names or ``.yaml`` paths, optional ``timestep`` [s], ``spacing``
     and ``film_spacing`` [m], ``membrane_cap`` [N/m], ``shell_dof``, ``shell_cells``,
-    ``shell_diagonals``, ``belt_friction``, ``roller_surface``, ``stick_speed`` and
+    ``shell_diagonals``, ``mass_lumping``, ``belt_friction``, ``roller_surface``, ``stick_speed`` and
     ``slip_speed`` [m/s], ``rig_timesteps`` (rig name -> time step [s]); external: the solver
     description file ``external``; python: ``factory``),
     optional ``wall_limit`` [s] per simulation, and ``folder``: the folder of the file it came
@@ -104,6 +107,7 @@ class SimulatorConfig(Mapping[str, Any]):
     shell_dof: str | None = None
     shell_cells: tuple[int, int, int] | None = None
     shell_diagonals: str | None = None
+    mass_lumping: str | None = None
     belt_friction: str | None = None
     roller_surface: str | None = None
     stick_speed: float | None = None
@@ -137,7 +141,7 @@ class SimulatorConfig(Mapping[str, Any]):
 class SimulatorSection(FileModel):
     """``simulator`` of a study or screen file: the backend and what it needs (``timestep``
     [s], ``spacing`` and ``film_spacing`` [m], ``membrane_cap`` [N/m], ``shell_dof``,
-    ``shell_cells``, ``shell_diagonals``, ``belt_friction``, ``roller_surface``, ``stick_speed``
+    ``shell_cells``, ``shell_diagonals``, ``mass_lumping``, ``belt_friction``, ``roller_surface``, ``stick_speed``
     and ``slip_speed`` [m/s], ``rig_timesteps`` (rig name -> time step [s]), ``wall_limit``
     [s])."""
 
@@ -152,6 +156,9 @@ class SimulatorSection(FileModel):
     shell_cells: ShellCellsField | None = None
     shell_diagonals: Annotated[
         str | None, Choice(SHELL_DIAGONALS, what="split of the shell's cells")
+    ] = None
+    mass_lumping: Annotated[
+        str | None, Choice(MASS_LUMPINGS, what="spread of the packaging's mass")
     ] = None
     belt_friction: Annotated[str | None, Choice(BELT_FRICTION, what="belt friction law")] = None
     roller_surface: Annotated[str | None, Choice(ROLLER_SURFACES, what="roller surface motion")] = (
@@ -225,6 +232,7 @@ def make_simulator(config: SimulatorConfig) -> Simulator:
             "shell_dof",
             "shell_cells",
             "shell_diagonals",
+            "mass_lumping",
         ):
             if key in config:
                 numerics[key] = config[key]
