@@ -24,21 +24,16 @@ import numpy as np
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import TestCase
 from parcelfit.sim.mujoco import MujocoSimulator, SimOptions, load_consignment
+from parcelfit.sim.mujoco.lumped_mass import mass_bodies
 from parcelfit.sim.mujoco.scene import SceneOptions
 
 G_CM2 = 1e7  # kg m^2 -> g cm^2
 
 
 def _bodies(model: mujoco.MjModel, name: str) -> np.ndarray:
-    """The bodies that carry flex ``name``'s mass (its nodes if interpolated, else vertices)."""
+    """The bodies that carry flex ``name``'s mass (none if the model has no such flex)."""
     f = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, name)
-    if f < 0:
-        return np.array([], dtype=int)
-    if model.flex_nodenum[f] > 0 and model.flex_vertbodyid[model.flex_vertadr[f]] < 0:
-        a = model.flex_nodeadr[f]
-        return model.flex_nodebodyid[a : a + model.flex_nodenum[f]]
-    a = model.flex_vertadr[f]
-    return model.flex_vertbodyid[a : a + model.flex_vertnum[f]]
+    return np.array([], dtype=int) if f < 0 else mass_bodies(model, f)
 
 
 def yaw_inertia(model: mujoco.MjModel, bodies: np.ndarray) -> float:

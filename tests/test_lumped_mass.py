@@ -17,6 +17,7 @@ from parcelfit.sim.mujoco.lumped_mass import (
     grid_vertex_masses,
     interpolation_weights,
     lumped_masses,
+    mass_bodies,
 )
 from parcelfit.sim.mujoco.scene import SceneOptions
 
@@ -28,13 +29,7 @@ def _scene(consignment: str, **options: object):
 
 def _packaging(model: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
     """Masses [kg] and rest positions [m] of the bodies that carry the packaging's mass."""
-    f = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, "packaging")
-    if model.flex_nodenum[f] > 0 and model.flex_vertbodyid[model.flex_vertadr[f]] < 0:
-        a = model.flex_nodeadr[f]
-        bodies = model.flex_nodebodyid[a : a + model.flex_nodenum[f]]
-    else:
-        a = model.flex_vertadr[f]
-        bodies = model.flex_vertbodyid[a : a + model.flex_vertnum[f]]
+    bodies = mass_bodies(model, mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, "packaging"))
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
     return model.body_mass[bodies].copy(), data.xpos[bodies].copy()

@@ -143,6 +143,16 @@ def interpolation_weights(model: mujoco.MjModel, flex: int) -> np.ndarray:
     return weights
 
 
+def mass_bodies(model: mujoco.MjModel, flex: int) -> np.ndarray:
+    """The bodies that carry flex ``flex``'s mass: its nodes if it is interpolated (its
+    vertices then have no bodies of their own), else its vertices' bodies."""
+    vadr = model.flex_vertadr[flex]
+    if model.flex_nodenum[flex] > 0 and model.flex_vertbodyid[vadr] < 0:
+        nadr = model.flex_nodeadr[flex]
+        return model.flex_nodebodyid[nadr : nadr + model.flex_nodenum[flex]]
+    return model.flex_vertbodyid[vadr : vadr + model.flex_vertnum[flex]]
+
+
 def lumped_masses(model: mujoco.MjModel) -> list[FlexMasses]:
     """The lumped masses (module docstring) of every flex of ``model`` whose bodies carry its
     mass, computed from the model's rest pose and its flexes' total masses."""
@@ -158,13 +168,7 @@ def lumped_masses(model: mujoco.MjModel) -> list[FlexMasses]:
         elements = model.flex_elem[eadr : eadr + enum_ * (dim + 1)].reshape(enum_, dim + 1)
         points = data.flexvert_xpos[vadr : vadr + vnum]
         interpolated = model.flex_nodenum[f] > 0 and model.flex_vertbodyid[vadr] < 0
-        bodies = (
-            model.flex_nodebodyid[
-                model.flex_nodeadr[f] : model.flex_nodeadr[f] + model.flex_nodenum[f]
-            ]
-            if interpolated
-            else model.flex_vertbodyid[vadr : vadr + vnum]
-        )
+        bodies = mass_bodies(model, f)
         total = float(model.body_mass[bodies].sum())
         grid = grid_vertex_masses(points, total) if dim == 3 else None
         m_v = grid if grid is not None else element_vertex_masses(points, elements, total)
