@@ -21,6 +21,13 @@ from parcelfit.sim.mujoco.lumped_mass import (
 )
 from parcelfit.sim.mujoco.scene import SceneOptions
 
+from .helpers import load_file_module
+
+
+def _script():
+    """scripts/mass_lumping.py, whose moment of inertia the tests share."""
+    return load_file_module("scripts/mass_lumping.py")
+
 
 def _scene(consignment: str, **options: object):
     sim = MujocoSimulator(SimOptions(scene=SceneOptions(**options)))  # type: ignore[arg-type]
@@ -37,9 +44,8 @@ def _packaging(model: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
 
 def _yaw_inertia(model: mujoco.MjModel) -> float:
     """The packaging's moment of inertia [kg m^2] about the vertical through its centre of mass."""
-    m, x = _packaging(model)
-    c = (m[:, None] * x).sum(axis=0) / m.sum()
-    return float(np.sum(m * ((x[:, 0] - c[0]) ** 2 + (x[:, 1] - c[1]) ** 2)))
+    flex = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, "packaging")
+    return _script().yaw_inertia(model, mass_bodies(model, flex))
 
 
 def test_triangles_share_their_area_among_their_corners() -> None:

@@ -172,16 +172,13 @@ def lumped_masses(model: mujoco.MjModel) -> list[FlexMasses]:
         total = float(model.body_mass[bodies].sum())
         grid = grid_vertex_masses(points, total) if dim == 3 else None
         m_v = grid if grid is not None else element_vertex_masses(points, elements, total)
-        probed = all(
-            model.body_jntnum[b] > 0
-            and model.jnt_type[model.body_jntadr[b]] == mujoco.mjtJoint.mjJNT_SLIDE
-            for b in bodies
-        )
-        if interpolated and not probed:  # a node fixed to its frame (MuJoCo's quadratic shell)
-            masses, lumped = model.body_mass[bodies], False
-        else:
-            masses = interpolation_weights(model, f).T @ m_v if interpolated else m_v
-            lumped = bool(np.all(masses >= MIN_SHARE * total / len(bodies)))
+        masses, lumped = m_v, True
+        if interpolated:
+            try:
+                masses = interpolation_weights(model, f).T @ m_v
+            except ValueError:  # a node fixed to its frame (MuJoCo's quadratic shell)
+                lumped = False
+        lumped = lumped and bool(np.all(masses >= MIN_SHARE * total / len(bodies)))
         names = [model.body(int(b)).name for b in bodies]
         values = masses if lumped else model.body_mass[bodies]
         name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_FLEX, f) or str(f)

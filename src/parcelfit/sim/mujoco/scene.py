@@ -341,7 +341,7 @@ class Scene:
     contacts: Mapping[str, ContactParams]
     n_shell_vertices: int
     content_flex: bool
-    mass_lumping: str = "area"  # how the flexes' masses are spread (`SceneOptions.mass_lumping`)
+    mass_lumping: str  # how the flexes' masses are spread (`SceneOptions.mass_lumping`)
 
     def model(self) -> mujoco.MjModel:
         """The compiled MuJoCo model of this scene, its flexes' masses lumped as the scene says
@@ -534,9 +534,8 @@ def build_scene(
     # the mapping takes the mean mass over the contacts of the flat bottom face, so that the
     # whole face has the stiffness asked for whatever the masses
     if opt.mass_lumping == "area":
-        corners = shell.triangles[shell.bottom_triangles]
-        on_face = corners[np.isin(corners, shell.bottom_face)]
-        m_v = float(element_vertex_masses(shell.points, shell.triangles, m_pa)[on_face].mean())
+        m_vert = element_vertex_masses(shell.points, shell.triangles, m_pa)
+        m_v = float(m_vert[shell.face_contact_vertices].mean())
     else:
         m_v = m_pa / nv
     dt = opt.step_for(soft, rig, consignment.shell)

@@ -118,8 +118,13 @@ class ShellMesh:
     def face_contacts(self) -> int:
         """Contacts MuJoCo creates when the flat bottom face lies on a plane: one per corner of a
         bottom-sheet triangle that lies on the face (flex collisions are per triangle element)."""
+        return len(self.face_contact_vertices)
+
+    @property
+    def face_contact_vertices(self) -> np.ndarray:
+        """The vertex of each of those contacts (a vertex once per triangle it is a corner of)."""
         corners = self.triangles[self.bottom_triangles]
-        return int(np.isin(corners, self.bottom_face).sum())
+        return corners[np.isin(corners, self.bottom_face)]
 
 
 def pillow_shell(
