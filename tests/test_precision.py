@@ -149,6 +149,39 @@ def test_with_many_parameters_the_table_lists_one_per_row_and_names_the_best_fou
     assert "Which 4 to calibrate" in text
 
 
+def test_an_effect_the_placements_do_not_resolve_carries_no_information() -> None:
+    # the real runs scatter little (0.02 rad) where the placements' mean rotation moves by
+    # 0.3 +- 0.2 rad (not resolved: below twice its standard error): counted, it would pin a
+    # within 6 % of its range; it must count for nothing, and the table must say so
+    sd = np.array([0.02, 0.02, 0.005])
+    real = _orthogonal_real(np.array([1.4, 0.4, 0.1]), sd)
+    jac = np.array([[0.0, 0.05], [0.3, 0.0], [0.0, 0.0]])
+    se = np.array([[0.0, 0.001], [0.2, 0.0], [0.0, 0.0]])
+    case = CaseSensitivity("E3/KPBW/1", ("a", "b"), jac, se, real)
+    assert not case.resolved[1, 0] and case.resolved[0, 1]
+    assert case.information()[0, 0] == pytest.approx(0.0, abs=1e-12)
+    counted = 4 * (0.3 / 0.02) ** 2
+    assert case.information(resolved_only=False)[0, 0] == pytest.approx(counted, rel=1e-9)
+    p = precision([case])
+    assert p.alone[0] == pytest.approx(NO_INFORMATION, rel=1e-9)
+    assert p.joint[0] == pytest.approx(NO_INFORMATION, rel=1e-9)
+    assert p.alone_unresolved[0] == pytest.approx(Z / math.sqrt(counted + 12.0), rel=1e-9)
+    assert p.alone[1] == pytest.approx(p.alone_unresolved[1], rel=1e-9)  # b is resolved
+    assert p.unresolved() == ("a",)
+    check = PrecisionCheck(
+        ("a", "b"), ("E3/KPBW/1",), (), {"E3/KPBW/1": case}, 3, 12, 0, 0.0, False
+    )
+    text = check.markdown("cmd", 2)
+    assert "| E3/KPBW/1 (fitted) | 57 % | 57 % |" in text
+    assert "- E3/KPBW/1 (fitted): a 6 % *" in text
+    # with every effect resolved there is nothing to name
+    sure = CaseSensitivity("E3/KPBW/1", ("a", "b"), jac, np.zeros_like(se), real)
+    assert precision([sure]).unresolved() == ()
+    assert "Not counted" not in PrecisionCheck(
+        ("a", "b"), ("E3/KPBW/1",), (), {"E3/KPBW/1": sure}, 3, 12, 0, 0.0, False
+    ).markdown("cmd", 2)
+
+
 def test_sensitivity_pairs_placements_and_drops_failed_ones() -> None:
     low = {"a": [np.array([1.0, 0.1, 0.0]), None, np.array([1.2, 0.3, 0.0])]}
     high = {"a": [np.array([1.1, 0.1, 0.0]), np.array([9.0, 9.0, 9.0]), np.array([1.4, 0.3, 0.0])]}
@@ -217,13 +250,19 @@ def test_the_check_says_which_case_determines_which_parameter_and_resumes(tmp_pa
     text = adjusted.markdown("cmd", 1)
     assert "Transit times adjusted for the belt speeds" in text and "- R/P/1: transit" in text
     assert not check.adjustments and "Transit times adjusted" not in check.markdown("cmd", 1)
-    # at the same point, other ranges make other runs: nothing of the check before is reused
+    # at the same point, other ranges make other runs: the check before is neither reused nor
+    # overwritten; the same ranges in another folder simulate afresh
     at = {"mu_d_BePa": 0.4, "mu_d_MePa": 0.25, "E_Pa": 1000}
     run_precision_check(study, tmp_path / "at", placements=2, at=at, executor="serial")
+    kept = (tmp_path / "at" / "statistics.json").read_bytes()
     doc = yaml.safe_load(study.read_text())
     doc["parameters"]["E_Pa"] = [400, 1600]
     study.write_text(yaml.safe_dump(doc))
-    moved = run_precision_check(study, tmp_path / "at", placements=2, at=at, executor="serial")
+    with pytest.raises(ParcelfitError, match="another point, range or simulator") as refused:
+        run_precision_check(study, tmp_path / "at", placements=2, at=at, executor="serial")
+    assert "another --out folder" in str(refused.value)
+    assert (tmp_path / "at" / "statistics.json").read_bytes() == kept
+    moved = run_precision_check(study, tmp_path / "at2", placements=2, at=at, executor="serial")
     assert moved.simulated_now == moved.simulations
 
 

@@ -8,7 +8,9 @@ simulated with the parameter at the low and at the high end of its range, every 
 at the centre of its range or at the values ``at`` gives (catalogue units), over K seeded
 placements (seeds 1..K, the same at both ends). Each run's statistics are written to
 ``statistics.json`` in the output folder as they arrive, so a killed check resumes and a rerun
-with more candidates simulates only the new cases; the table goes to ``precision-check.md``.
+with more candidates simulates only the new cases; a folder holding the runs of a check at
+another point, range or simulator is refused, never overwritten. The table goes to
+``precision-check.md``.
 """
 
 from __future__ import annotations
@@ -124,7 +126,7 @@ class PrecisionCheck:
         lines += [
             "95 % half-width each parameter could be determined to, as a share of its range (* "
             "where <= 10 %; 57 % means no information). Joint: the other parameters free; alone: "
-            "the others known.",
+            "the others known. Only the effects the placements resolve count.",
             "",
         ]
         rows = self.rows()
@@ -150,6 +152,22 @@ class PrecisionCheck:
                     for j, a in zip(p.joint, p.alone, strict=True)
                 )
                 lines.append(f"| {title} | {cells} |")
+        doubtful = [(title, p) for title, p in rows if p.unresolved()]
+        if doubtful:
+            lines += [
+                "",
+                "Not counted: effects the placements do not resolve (below twice their standard "
+                "error, marked - below) carry no information. Counted as if they were real they "
+                f"would determine these parameters within {100 * WITHIN:.0f} % alone; more "
+                "placements (`--placements`) would tell whether they are:",
+                "",
+            ]
+            for title, p in doubtful:
+                found = ", ".join(
+                    f"{n} {half_width_text(p.alone_unresolved[p.names.index(n)])}"
+                    for n in p.unresolved()
+                )
+                lines.append(f"- {title}: {found}")
         for title, found in self.subsets():
             lines += [
                 "",
@@ -257,15 +275,15 @@ def run_precision_check(
     cache: dict[str, list[float] | None] = {}
     if cache_file.exists():
         saved = json.loads(cache_file.read_text(encoding="utf-8"))
-        if saved.get("setup") == setup:
-            cache = saved["runs"]
-        else:
-            progress(
-                ProgressEvent(
-                    "precision",
-                    f"{cache_file} is from another point, range, simulator or parcelfit version: not used",
-                )
+        if saved.get("setup") != setup:
+            # never overwrite another check's simulations (hours of them, perhaps)
+            raise ParcelfitError(
+                f"{cache_file} holds the runs of a check at another point, range or simulator "
+                "(the study file's folder included)",
+                file=cache_file,
+                fix="give another --out folder, or delete the file to simulate afresh",
             )
+        cache = saved["runs"]
 
     keys = []
     items = []
