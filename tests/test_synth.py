@@ -3,11 +3,35 @@ import pytest
 import yaml
 
 from parcelfit.runs import TestCase, load_dataset
-from parcelfit.synth import TwinSettings, make_twin_dataset
+from parcelfit.sim.mujoco import load_rig
+from parcelfit.synth import TwinSettings, _placement, make_twin_dataset
 
 # These tests check how twin datasets are made (scatter, determinism, cache), not the physics:
 # a coarse step (about 1/1200 s, written as in a spec file) keeps them quick.
 QUICK_STEP = 0.00083333
+
+
+def test_twin_placements_scatter_like_the_rigs_hand_placement_unless_told_otherwise():
+    # the model's ensemble draws its placements from the rig's start.scatter; a twin's "real"
+    # runs must scatter alike, or the ensemble cost is not lowest at the truth
+    rig = load_rig("E3")
+    rng = np.random.default_rng(0)
+    draws = np.array([_placement(rig, rng, TwinSettings()) for _ in range(4000)])
+    u = rig.surface(rig.start.surface).unit()
+    along = draws[:, 0] * u[0] + draws[:, 1] * u[1]
+    across = -draws[:, 0] * u[1] + draws[:, 1] * u[0]
+    # a standard normal clipped at 2.5 sd has sd 0.9887
+    for values, sd in zip((along, across, draws[:, 2]), rig.start.scatter, strict=True):
+        assert np.std(values) == pytest.approx(0.9887 * sd, rel=0.05)
+        assert np.max(np.abs(values)) <= 2.5 * sd + 1e-12
+        assert abs(np.mean(values)) < 0.1 * sd
+    model = np.array([rig.placement(seed) for seed in range(4000)])
+    assert np.std(model, axis=0) == pytest.approx(np.std(draws, axis=0), rel=0.08)
+    # the twin's own stream: not the model's seeds (a twin must not replay the model's starts)
+    assert not np.allclose(draws[:10], model[:10])
+    jitter = TwinSettings(placement_sd=0.005, angle_sd=1.5)
+    fixed = np.array([_placement(rig, rng, jitter) for _ in range(4000)])
+    assert np.std(fixed, axis=0) == pytest.approx([0.005, 0.005, 1.5], rel=0.05)
 
 
 @pytest.mark.slow

@@ -5,7 +5,13 @@ experiments do (method.md sections 2 and 3):
 
 * specimen: every friction coefficient x (1 + N(0, friction_cv)), every contact stiffness and
   Young's modulus x (1 + N(0, stiffness_cv));
-* placement jitter at the start guide: N(0, placement_sd) [m] in x and y, N(0, angle_sd) [deg];
+* placement: by default drawn from the rig's own hand-placement scatter (``start.scatter``,
+  `parcelfit.sim.mujoco.rig.Rig.draw_placement`), the distribution the model's seeded
+  placements come from, so that at the truth the model's ensemble and the "real" runs scatter
+  alike (with the former fixed jitter of 5 mm and 1.5 degrees, narrower than E3's 20 / 15 mm and
+  3 degrees, all ten "real" E3 setting-1 KP/BW runs of the bundled twin slid, rotation sd 0.02
+  rad, where the model's placements spin at 2 of 20); ``placement_sd`` [m] (x and y) and
+  ``angle_sd`` [deg] replace the position and the heading draw with a normal jitter of their own;
 * belt speeds: every drive x (1 + U(-speed_dev, speed_dev)) (real belts deviate up to 3 %);
 * tracking noise: N(0, tracking_sd) [m] on x and y, N(0, heading_sd) [rad] on theta;
 * resolution: the "real" runs use the shell mesh ``real_spacing`` (default 30 mm) for rigid
@@ -72,8 +78,8 @@ class TwinSettings:
     runs: int = 10
     friction_cv: float = 0.03
     stiffness_cv: float = 0.05
-    placement_sd: float = 0.005
-    angle_sd: float = 1.5
+    placement_sd: float | None = None  # [m]; None: the rig's start.scatter
+    angle_sd: float | None = None  # [deg]; None: the rig's start.scatter
     speed_dev: float = 0.03
     tracking_sd: float = 0.001
     heading_sd: float = 0.003
@@ -145,6 +151,17 @@ def _refined_rigs(s: TwinSettings, rigs: Sequence[Rig]) -> str:
     return f"; where a step is the model's default, it is divided by {which} (the rig's step_refinement)"
 
 
+def _placement(rig: Rig, rng: np.random.Generator, s: TwinSettings) -> tuple[float, float, float]:
+    """A twin run's start offset (dx [m], dy [m], dheading [deg]): the rig's hand-placement
+    scatter, or the settings' own jitter where they give one."""
+    dx, dy, dh = rig.draw_placement(rng)
+    if s.placement_sd is not None:
+        dx, dy = (float(v) for v in rng.normal(0, s.placement_sd, 2))
+    if s.angle_sd is not None:
+        dh = float(rng.normal(0, s.angle_sd))
+    return dx, dy, dh
+
+
 def _twin_run(job: TwinJob) -> tuple[Run, float]:
     """Simulate one twin run; returns the noisy run and its wall time [s]."""
     s = job.settings
@@ -158,11 +175,7 @@ def _twin_run(job: TwinJob) -> tuple[Run, float]:
         spacing=s.real_spacing,
         soft_shell_spacing=s.real_soft_spacing,
         speed_factors={d: 1 + rng.uniform(-s.speed_dev, s.speed_dev) for d in drives},
-        start_offset=(
-            rng.normal(0, s.placement_sd),
-            rng.normal(0, s.placement_sd),
-            rng.normal(0, s.angle_sd),
-        ),
+        start_offset=_placement(rig, rng, s),
     )
     twin = MujocoSimulator(
         SimOptions(scene=scene), rigs={rig.name: rig}, consignments={cons.name: cons}
@@ -374,8 +387,8 @@ class TwinSettingsSection(FileModel):
     runs: Annotated[int, Whole(ge=1)] = TwinSettings.runs
     friction_cv: Annotated[float, Number(ge=0)] = TwinSettings.friction_cv
     stiffness_cv: Annotated[float, Number(ge=0)] = TwinSettings.stiffness_cv
-    placement_sd: Annotated[float, Number(unit="m", ge=0)] = TwinSettings.placement_sd
-    angle_sd: Annotated[float, Number(unit="deg", ge=0)] = TwinSettings.angle_sd
+    placement_sd: Annotated[float | None, Number(unit="m", ge=0)] = TwinSettings.placement_sd
+    angle_sd: Annotated[float | None, Number(unit="deg", ge=0)] = TwinSettings.angle_sd
     speed_dev: Annotated[float, Number(ge=0)] = TwinSettings.speed_dev
     tracking_sd: Annotated[float, Number(unit="m", ge=0)] = TwinSettings.tracking_sd
     heading_sd: Annotated[float, Number(unit="rad", ge=0)] = TwinSettings.heading_sd

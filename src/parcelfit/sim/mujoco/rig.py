@@ -175,7 +175,12 @@ class Rig:
     def placement(self, seed: int) -> tuple[float, float, float]:
         """The start-pose offset (dx [m], dy [m], dheading [deg]) of placement ``seed``: a draw
         from ``start.scatter`` (normal, cut at 2.5 sd), along/across rotated into the rig frame."""
-        rng = np.random.default_rng([PLACEMENT_STREAM, seed])
+        return self.draw_placement(np.random.default_rng([PLACEMENT_STREAM, seed]))
+
+    def draw_placement(self, rng: np.random.Generator) -> tuple[float, float, float]:
+        """A start-pose offset (dx [m], dy [m], dheading [deg]) drawn with ``rng`` from
+        ``start.scatter`` as `placement` draws it (a twin's "real" runs draw from the same
+        distribution with their own random stream)."""
         along, across, heading = (
             float(np.clip(rng.standard_normal(), -SCATTER_CUT, SCATTER_CUT)) * sd
             for sd in self.start.scatter
