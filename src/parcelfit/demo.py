@@ -98,14 +98,14 @@ PROFILES = {
 }
 
 # Found on the bundled twin data by scripts/find_stricter_example.py (catalogue units): belt
-# friction 0.55 and plate friction 0.15 instead of the hidden 0.50 and 0.20 pass all three
-# published criteria on E3/PB/2 but leave the real runs' lateral band over 28 % of the path (72 %
-# inside, by up to 38.4 mm; twin data regenerated with the shell's radiating diagonals). Before,
-# belt friction 0.60 was the example (81 % inside, by up to 6.8 mm); on today's data it fails the
-# published criteria.
+# friction 0.40 and plate friction 0.15 instead of the hidden 0.50 and 0.20 pass all three
+# published criteria on E3/PB/2 but leave the real runs' band: lateral path 90 % inside, by up to
+# 15.0 mm, heading 85 % (twin data regenerated with placements from the rig's scatter). Before,
+# belt friction 0.55 was the example (72 % inside, by up to 38.4 mm); on today's data the band,
+# now as wide as the rig's placement scatter makes it, holds that run.
 STRICTER_EXAMPLE = {
     "case": "E3/PB/2",
-    "params": {"mu_d_BePa": 0.55, "mu_d_MePa": 0.15, "E_Pa": 120.0, "k_MePa": 300.0},
+    "params": {"mu_d_BePa": 0.40, "mu_d_MePa": 0.15, "E_Pa": 120.0, "k_MePa": 300.0},
 }
 
 
