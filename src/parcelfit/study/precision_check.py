@@ -152,7 +152,8 @@ class PrecisionCheck:
                     for j, a in zip(p.joint, p.alone, strict=True)
                 )
                 lines.append(f"| {title} | {cells} |")
-        doubtful = [(title, p) for title, p in rows if p.unresolved()]
+        doubtful = [(title, p, p.unresolved()) for title, p in rows]
+        doubtful = [(title, p, names) for title, p, names in doubtful if names]
         if doubtful:
             lines += [
                 "",
@@ -162,10 +163,11 @@ class PrecisionCheck:
                 "placements (`--placements`) would tell whether they are:",
                 "",
             ]
-            for title, p in doubtful:
+            for title, p, names in doubtful:
                 found = ", ".join(
-                    f"{n} {half_width_text(p.alone_unresolved[p.names.index(n)])}"
-                    for n in p.unresolved()
+                    f"{n} {half_width_text(h)}"
+                    for n, h in zip(p.names, p.alone_unresolved, strict=True)
+                    if n in names
                 )
                 lines.append(f"- {title}: {found}")
         for title, found in self.subsets():
