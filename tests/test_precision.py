@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import re
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -182,6 +183,27 @@ def test_an_effect_the_placements_do_not_resolve_carries_no_information() -> Non
     ).markdown("cmd", 2)
 
 
+def test_where_the_placements_scatter_more_than_the_real_runs_their_scatter_counts() -> None:
+    # ten real runs that all slid (rotation sd 0.02 rad) against placements that spin at some
+    # seeds (sd 0.5 rad): the real runs' mean is known no better than the population's scatter
+    # allows, so the information is that of sd 0.5, not 0.02
+    sd = np.array([0.02, 0.02, 0.005])
+    real = _orthogonal_real(np.array([1.4, 0.4, 0.1]), sd)
+    jac = np.array([[0.0, 0.05], [0.3, 0.0], [0.0, 0.0]])
+    narrow = CaseSensitivity("E3/KPBW/1", ("a", "b"), jac, np.zeros_like(jac), real)
+    model_sd = np.array([0.01, 0.5, 0.001])  # transit and drift: the real runs scatter more
+    wide = CaseSensitivity("E3/KPBW/1", ("a", "b"), jac, np.zeros_like(jac), real, model_sd)
+    assert wide.scatter == pytest.approx([0.02, 0.5, 0.005])
+    assert narrow.information()[0, 0] == pytest.approx(4 * (0.3 / 0.02) ** 2, rel=1e-9)
+    assert wide.information()[0, 0] == pytest.approx(4 * (0.3 / 0.5) ** 2, rel=1e-9)
+    # b acts on the transit time, where the real runs' own scatter is the larger: unchanged
+    assert wide.information()[1, 1] == pytest.approx(narrow.information()[1, 1], rel=1e-9)
+    assert precision([narrow]).alone[0] < 0.10 < precision([wide]).alone[0]
+    # a statistic every run shows alike keeps the tracking resolution as its floor
+    flat = CaseSensitivity("E3/KPBW/1", ("a", "b"), jac, jac, np.ones((4, 3)), np.zeros(3))
+    assert flat.scatter == pytest.approx([1e-3, 1e-3, 1e-3])
+
+
 def test_sensitivity_pairs_placements_and_drops_failed_ones() -> None:
     low = {"a": [np.array([1.0, 0.1, 0.0]), None, np.array([1.2, 0.3, 0.0])]}
     high = {"a": [np.array([1.1, 0.1, 0.0]), np.array([9.0, 9.0, 9.0]), np.array([1.4, 0.3, 0.0])]}
@@ -192,6 +214,10 @@ def test_sensitivity_pairs_placements_and_drops_failed_ones() -> None:
     assert s.jacobian_se[0, 0] == pytest.approx(np.std([0.1, 0.2], ddof=1) / math.sqrt(2))
     assert s.resolved[0, 0] and not s.resolved[1, 0]
     assert s.real.shape == (2, 3)  # the unusable real run is left out
+    # the placements' scatter: root mean of the two ends' sample variances over the same pairs
+    low_var = np.var([[1.0, 0.1, 0.0], [1.2, 0.3, 0.0]], axis=0, ddof=1)
+    high_var = np.var([[1.1, 0.1, 0.0], [1.4, 0.3, 0.0]], axis=0, ddof=1)
+    assert s.model_sd == pytest.approx(np.sqrt(0.5 * (low_var + high_var)))
     with pytest.raises(ParcelfitError, match="both ends"):
         sensitivity("E3/KPBW/1", ["a"], {"a": [None]}, {"a": [np.zeros(3)]}, real)
 
@@ -264,6 +290,17 @@ def test_the_check_says_which_case_determines_which_parameter_and_resumes(tmp_pa
     assert (tmp_path / "at" / "statistics.json").read_bytes() == kept
     moved = run_precision_check(study, tmp_path / "at2", placements=2, at=at, executor="serial")
     assert moved.simulated_now == moved.simulations
+    # the same study and data in another folder (another checkout) reuse the runs: the key
+    # holds the study's settings, not the absolute path of its folder
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    shutil.copytree(tmp_path / "data", elsewhere / "data")
+    shutil.copy(study, elsewhere / "study.yaml")
+    reused = run_precision_check(
+        elsewhere / "study.yaml", tmp_path / "at2", placements=2, at=at, executor="serial"
+    )
+    assert reused.simulated_now == 0
+    assert np.array_equal(reused.rows()[0][1].joint, moved.rows()[0][1].joint)
 
 
 def test_the_precision_command_writes_its_table_and_refuses_bad_input(tmp_path: Path) -> None:

@@ -112,7 +112,7 @@ class PrecisionCheck:
             + ("the given values" if self.at_given else "the centre of its range")
             + " (`parcelfit.study.precision`: linear, Gaussian estimate from the change of the "
             "mean transit time, rotation and lateral drift over each parameter's range and the "
-            "real runs' scatter).",
+            "scatter of the real runs or, where larger, of the placements).",
             "",
         ]
         if self.adjustments:
@@ -185,21 +185,26 @@ class PrecisionCheck:
         lines += [
             "",
             "Sensitivity per case: change of the mean statistic over the parameter's whole range "
-            "(standard error over the placements; - where not resolved, below twice it), and the "
-            "real runs' standard deviation.",
+            "(standard error over the placements; - where not resolved, below twice it), the "
+            "real runs' standard deviation and the placements' (pooled over the parameter ends; "
+            "the larger of the two counts).",
             "",
-            "| case | statistic | real sd | " + " | ".join(self.names) + " |",
-            "|" + "---|" * (3 + len(self.names)),
+            "| case | statistic | real sd | placements' sd | " + " | ".join(self.names) + " |",
+            "|" + "---|" * (4 + len(self.names)),
         ]
         for label, s in self.sensitivities.items():
             sd = s.real.std(axis=0, ddof=1) if len(s.real) > 1 else np.full(len(STATISTICS), np.nan)
+            model = s.model_sd if s.model_sd is not None else np.full(len(STATISTICS), np.nan)
             for k, stat in enumerate(STATISTICS):
                 cells = " | ".join(
                     f"{s.jacobian[k, j]:+.4g} ({s.jacobian_se[k, j]:.2g})"
                     + ("" if s.resolved[k, j] else " -")
                     for j in range(len(self.names))
                 )
-                lines.append(f"| {label} ({len(s.real)} real) | {stat} | {sd[k]:.3g} | {cells} |")
+                lines.append(
+                    f"| {label} ({len(s.real)} real) | {stat} | {sd[k]:.3g} | {model[k]:.3g} "
+                    f"| {cells} |"
+                )
         return "\n".join(lines) + "\n"
 
 
@@ -269,7 +274,9 @@ def run_precision_check(
             {
                 "point": point,
                 "bounds": bounds,
-                "simulator": repr(study.simulator),
+                # the settings the study file gives, without the folder it lies in: the same
+                # study in another checkout or folder keeps its runs
+                "simulator": {k: repr(v) for k, v in dict(study.simulator).items()},
                 "stored": CACHED,
             }
         )
@@ -280,8 +287,7 @@ def run_precision_check(
         if saved.get("setup") != setup:
             # never overwrite another check's simulations (hours of them, perhaps)
             raise ParcelfitError(
-                f"{cache_file} holds the runs of a check at another point, range or simulator "
-                "(the study file's folder included)",
+                f"{cache_file} holds the runs of a check at another point, range or simulator",
                 file=cache_file,
                 fix="give another --out folder, or delete the file to simulate afresh",
             )
