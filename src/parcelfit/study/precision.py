@@ -48,11 +48,14 @@ sample variances over the K placements at each parameter end, `CaseSensitivity.m
 the model is right at the point, its placements and the real runs sample one population; ten
 real runs can miss an outcome the placements show at some seeds (a spin), and their sample sd
 then understates the scatter their mean has. Measured so: the bundled twin's ten E3/KPBW/1 runs
-all slid (rotation sd 0.02 rad) where the placements spun at 2 of 20, and the belt friction came
-out at +-1 % from the rotation alone. The floor of 1e-3 in each unit is a tracked run's
-resolution (1 ms, 1 mrad, 1 mm) for a statistic every run shows alike. This is the data's limit:
-a calibration that simulates K placements per evaluation adds the scatter of its own mean on
-top. In the linear, Gaussian approximation the Fisher information of the shares u is
+all slid (rotation sd 0.02 rad) where the placements spun at some seeds (pooled sd 0.79 rad), and
+the belt friction came out at +-1 % from the rotation alone; with the placements' scatter, +-21 %
+(docs/precision-check.md). The pooled sd is taken over the parameters' ends, not at the point
+itself: where one end spins far more often than the point, it overstates the scatter there.
+The floor of 1e-3 in each unit is a tracked run's resolution (1 ms, 1 mrad, 1 mm) for a
+statistic every run shows alike. This is the data's limit: a calibration that simulates K
+placements per evaluation adds the scatter of its own mean on top. In the linear, Gaussian
+approximation the Fisher information of the shares u is
 
     F = sum_c J_c^T (Sigma_c / n_c)^-1 J_c,
 
