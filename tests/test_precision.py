@@ -202,6 +202,12 @@ def test_where_the_placements_scatter_more_than_the_real_runs_their_scatter_coun
     # a statistic every run shows alike keeps the tracking resolution as its floor
     flat = CaseSensitivity("E3/KPBW/1", ("a", "b"), jac, jac, np.ones((4, 3)), np.zeros(3))
     assert flat.scatter == pytest.approx([1e-3, 1e-3, 1e-3])
+    # real runs that all show the same rotation (no scatter of their own) against placements
+    # that scatter by 0.5 rad: the rotation counts with the placements' 0.5 rad, in full
+    same = real.copy()
+    same[:, 1] = 0.4
+    alike = CaseSensitivity("E3/KPBW/1", ("a", "b"), jac, np.zeros_like(jac), same, model_sd)
+    assert alike.information()[0, 0] == pytest.approx(4 * (0.3 / 0.5) ** 2, rel=1e-9)
 
 
 def test_sensitivity_pairs_placements_and_drops_failed_ones() -> None:

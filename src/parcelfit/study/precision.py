@@ -166,10 +166,16 @@ class CaseSensitivity:
             )
         own = np.maximum(real.std(axis=0, ddof=1), 1e-3)
         z = (real - real.mean(axis=0)) / own
-        # scikit-learn's estimate divides by n; n / (n - 1) makes it the unbiased sample scale.
-        # Its diagonal is about 1 (shrunk correlations off it); rescaled by the population's sd
+        # the real runs' correlations, shrunk: with every column standardised Ledoit-Wolf's
+        # diagonal is (n - 1) / n for each; made exactly 1, also for a statistic every real run
+        # shows alike (a zero column), then rescaled by the population's sd
+        shrunk = LedoitWolf().fit(z).covariance_
+        d = np.sqrt(np.diag(shrunk))
+        d[d == 0] = 1.0
+        corr = shrunk / np.outer(d, d)
+        np.fill_diagonal(corr, 1.0)
         scale = self.scatter
-        cov = LedoitWolf().fit(z).covariance_ * (n / (n - 1)) * np.outer(scale, scale)
+        cov = corr * np.outer(scale, scale)
         jac = np.asarray(self.jacobian, dtype=float)
         if resolved_only:
             jac = np.where(self.resolved, jac, 0.0)
