@@ -88,6 +88,7 @@ import itertools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from sklearn.covariance import LedoitWolf
@@ -137,11 +138,19 @@ class CaseSensitivity:
     model_sd: np.ndarray | None = None
 
     @property
+    def real_sd(self) -> np.ndarray:
+        """The real runs' sample standard deviation per statistic [s, rad, m]; NaN with fewer
+        than two runs."""
+        real = np.asarray(self.real, dtype=float).reshape(-1, len(STATISTICS))
+        if len(real) < 2:
+            return np.full(len(STATISTICS), np.nan)
+        return real.std(axis=0, ddof=1)
+
+    @property
     def scatter(self) -> np.ndarray:
         """The population's standard deviation per statistic (module docstring): the larger of
         the real runs' and the placements' [s, rad, m], at least 1e-3 in each unit."""
-        real = np.asarray(self.real, dtype=float)
-        sd = real.std(axis=0, ddof=1)
+        sd = self.real_sd
         if self.model_sd is not None:
             sd = np.maximum(sd, np.nan_to_num(np.asarray(self.model_sd, dtype=float)))
         # a statistic every run shows alike carries no scatter to compare against; give it the
@@ -157,6 +166,15 @@ class CaseSensitivity:
         """The Fisher information of the parameters' shares from this case's real runs
         (module docstring): J^T (Sigma / n)^-1 J, with the entries of J the placements do not
         resolve set to 0 unless ``resolved_only`` is False."""
+        jac = np.asarray(self.jacobian, dtype=float)
+        if resolved_only:
+            jac = np.where(self.resolved, jac, 0.0)
+        return jac.T @ np.linalg.solve(self._mean_covariance, jac)
+
+    @cached_property
+    def _mean_covariance(self) -> np.ndarray:
+        """Sigma / n, the covariance of the real runs' mean statistics (module docstring); one
+        Ledoit-Wolf fit per case, shared by every information the case gives."""
         real = np.asarray(self.real, dtype=float)
         n = real.shape[0]
         if n < 2:
@@ -164,7 +182,7 @@ class CaseSensitivity:
                 f"test case {self.label} has {n} usable real run(s); the scatter needs two or more",
                 fix="add real runs of this case, or leave it out",
             )
-        own = np.maximum(real.std(axis=0, ddof=1), 1e-3)
+        own = np.maximum(self.real_sd, 1e-3)
         z = (real - real.mean(axis=0)) / own
         # the real runs' correlations, shrunk: with every column standardised Ledoit-Wolf's
         # diagonal is (n - 1) / n for each; made exactly 1, also for a statistic every real run
@@ -175,11 +193,7 @@ class CaseSensitivity:
         corr = shrunk / np.outer(d, d)
         np.fill_diagonal(corr, 1.0)
         scale = self.scatter
-        cov = corr * np.outer(scale, scale)
-        jac = np.asarray(self.jacobian, dtype=float)
-        if resolved_only:
-            jac = np.where(self.resolved, jac, 0.0)
-        return jac.T @ np.linalg.solve(cov / n, jac)
+        return corr * np.outer(scale, scale) / n
 
 
 def sensitivity(

@@ -193,7 +193,7 @@ class PrecisionCheck:
             "|" + "---|" * (4 + len(self.names)),
         ]
         for label, s in self.sensitivities.items():
-            sd = s.real.std(axis=0, ddof=1) if len(s.real) > 1 else np.full(len(STATISTICS), np.nan)
+            sd = s.real_sd
             model = s.model_sd if s.model_sd is not None else np.full(len(STATISTICS), np.nan)
             for k, stat in enumerate(STATISTICS):
                 cells = " | ".join(
