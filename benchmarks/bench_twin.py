@@ -1,7 +1,8 @@
 """Twin benchmark: are the calibrated parameters right, not only passing?
 
     python benchmarks/bench_twin.py [--out bench-twin] [--workers 2] [--truths 3]
-                                    [--placements 2] [--budget 48] [--setups published,joint]
+                                    [--placements 2] [--e1-placements N] [--budget 48]
+                                    [--setups published,joint]
                                     [--real-timestep 1/4800] [--model-timestep 1/2400]
                                     [--belt-friction mujoco|coulomb]
                                     [--parameters NAME=LOW:HIGH ...]
@@ -15,8 +16,8 @@ truth and setup:
 * ``published``: the published method (E3 setting 1 against its reference run, validation at
   setting 2, the published optimiser configuration, budget 80);
 * ``joint``: E3 setting 1 and E1 setting 3 fitted jointly with the ensemble cost (``placements``
-  seeded placements per case and evaluation), validation on E3 setting 2, transfer check on E1
-  setting 1, the default optimiser, ``budget`` evaluations;
+  seeded placements per case and evaluation, or ``--e1-placements`` on E1), validation on E3
+  setting 2, transfer check on E1 setting 1, the default optimiser, ``budget`` evaluations;
 * ``joint-adjusted`` (only when named in ``--setups``): the joint setup with the transit times
   adjusted for the belt speeds each run rode at (``cost.transit: adjusted``,
   `parcelfit.metrics.transit_adjustment`).
@@ -101,9 +102,15 @@ class Row:
     details: dict[str, Any] = field(default_factory=dict)
 
 
-def mujoco_setups(placements: int, budget: int) -> list[Setup]:
+def mujoco_setups(placements: int, budget: int, e1_placements: int | None = None) -> list[Setup]:
     """The published, the joint ensemble and the joint ensemble on adjusted transit times
-    setups on the E3/E1 twin data (module docstring)."""
+    setups on the E3/E1 twin data (module docstring); ``e1_placements`` gives the E1 case its
+    own number of placements (the joint setups' names then end in ``-e1x<N>``)."""
+    e1: dict[str, Any] = {"rig": "E1", "speed_setting": 3}
+    suffix = ""
+    if e1_placements is not None and e1_placements != placements:
+        e1["placements"] = e1_placements
+        suffix = f"-e1x{e1_placements}"
     published = Setup(
         "published",
         {
@@ -114,12 +121,9 @@ def mujoco_setups(placements: int, budget: int) -> list[Setup]:
         },
     )
     joint = Setup(
-        "joint",
+        "joint" + suffix,
         {
-            "cases": [
-                {"dataset": "{dataset}", "rig": "E3", "speed_setting": 1},
-                {"rig": "E1", "speed_setting": 3},
-            ],
+            "cases": [{"dataset": "{dataset}", "rig": "E3", "speed_setting": 1}, e1],
             "validation": {"every": 5, "cases": [{"rig": "E3", "speed_setting": 2}]},
             "transfer": [{"rig": "E1", "speed_setting": 1}],
             "cost": {"kind": "ensemble", "placements": placements},
@@ -127,7 +131,7 @@ def mujoco_setups(placements: int, budget: int) -> list[Setup]:
         },
     )
     adjusted = Setup(
-        "joint-adjusted",
+        "joint-adjusted" + suffix,
         {
             **joint.keys,
             "cost": {"kind": "ensemble", "placements": placements, "transit": "adjusted"},
@@ -353,6 +357,13 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--truths", type=int, default=3, help=f"1-{len(FRACTIONS)}")
     ap.add_argument("--placements", type=int, default=2)
+    ap.add_argument(
+        "--e1-placements",
+        type=int,
+        default=None,
+        help="placements of the joint setups' E1 case, if not --placements (E1's placements "
+        "scatter far less than its real runs; the setups' names then end in -e1x<N>)",
+    )
     ap.add_argument("--budget", type=int, default=48)
     ap.add_argument("--setups", default="published,joint")
     ap.add_argument(
@@ -417,7 +428,11 @@ def main() -> None:
         return folder
 
     wanted = set(args.setups.split(","))
-    setups = [s for s in mujoco_setups(args.placements, args.budget) if s.name in wanted]
+    setups = [
+        s
+        for s in mujoco_setups(args.placements, args.budget, args.e1_placements)
+        if s.name.split("-e1x")[0] in wanted
+    ]
     truths = {
         f"truth{k + 1}": truth_values(f, parameters) for k, f in enumerate(FRACTIONS[: args.truths])
     }

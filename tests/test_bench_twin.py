@@ -107,3 +107,32 @@ def test_a_rig_s_own_time_step_is_read_as_a_fraction_and_bad_ones_are_refused():
     for bad in ("E1", "=1/4800", "E1=fast", "E1=1/0"):
         with pytest.raises(argparse.ArgumentTypeError):
             bench._rig_step(bad)
+
+
+def test_the_joint_setups_give_e1_its_own_placements_when_asked(tmp_path):
+    bench = _bench()
+    same = {s.name: s for s in bench.mujoco_setups(4, 60)}
+    assert set(same) == {"published", "joint", "joint-adjusted"}
+    assert all("placements" not in c for c in same["joint"].keys["cases"])
+    own = {s.name: s for s in bench.mujoco_setups(4, 60, e1_placements=2)}
+    assert set(own) == {"published", "joint-e1x2", "joint-adjusted-e1x2"}
+    for name in ("joint-e1x2", "joint-adjusted-e1x2"):
+        e3, e1 = own[name].keys["cases"]
+        assert (e3.get("placements"), e1["rig"], e1["placements"]) == (None, "E1", 2)
+        assert own[name].keys["cost"]["placements"] == 4
+    # the study file it writes reads back with E1's own placements
+    from parcelfit.study.joint import simulations_per_evaluation
+    from parcelfit.study.studyfile import load_study
+
+    write_reference_dataset(tmp_path / "data", rigs=("E3", "E1"))
+    path = bench.write_study_file(
+        tmp_path,
+        own["joint-adjusted-e1x2"],
+        {"backend": "python", "factory": "tests.fake_sim:make", "consignment": "KPBW"},
+        {"mu_d_BePa": [0.3, 0.6]},
+        tmp_path / "data",
+        seed=1,
+    )
+    study = load_study(path)
+    assert [c.placements for c in study.cases] == [None, 2]
+    assert simulations_per_evaluation(study) == 4 + 2

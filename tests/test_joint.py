@@ -107,6 +107,40 @@ def test_a_joint_study_file_lists_its_cases(tmp_path):
             {"cases": [{"dataset": "data", "rig": "R", "speed_setting": 1, "wieght": 1}]},
             r"cases\[0\]: unknown key 'wieght'.*did you mean 'weight'",
         ),
+        (
+            {
+                "cases": [
+                    {"dataset": "data", "rig": "R", "consignment": "P", "speed_setting": 1},
+                    {"rig": "Q", "consignment": "P", "speed_setting": 1, "placements": 0},
+                ]
+            },
+            r"cases\[1\]\.placements: 0 is out of range.*at least 1",
+        ),
+        (
+            {
+                "cases": [
+                    {"dataset": "data", "rig": "R", "consignment": "P", "speed_setting": 1},
+                    {"rig": "Q", "consignment": "P", "speed_setting": 1, "placements": 2},
+                ],
+                "cost": {"kind": "published"},
+            },
+            r"cases\[1\]\.placements: a case's placements belong to the ensemble cost",
+        ),
+        (
+            {"transfer": [{"rig": "Q", "consignment": "P", "speed_setting": 2, "placements": 2}]},
+            r"transfer\[0\]\.placements: only fitted cases take placements",
+        ),
+        (
+            {
+                "validation": {
+                    "every": 1,
+                    "cases": [
+                        {"rig": "R", "consignment": "P", "speed_setting": 2, "placements": 1}
+                    ],
+                }
+            },
+            r"validation\.cases\[0\]\.placements: only fitted cases take placements",
+        ),
     ],
 )
 def test_joint_study_file_errors_name_file_key_and_fix(tmp_path, change, pattern):
@@ -114,6 +148,31 @@ def test_joint_study_file_errors_name_file_key_and_fix(tmp_path, change, pattern
     with pytest.raises(ParcelfitError, match=pattern) as info:
         load_study(path)
     assert "study.yaml" in str(info.value)
+
+
+def test_a_case_with_its_own_placements_is_simulated_that_often(tmp_path):
+    from parcelfit.study.joint import placement_seeds, simulations_per_evaluation
+
+    cases = [
+        {"dataset": "data", "rig": "R", "consignment": "P", "speed_setting": 1},
+        {"rig": "Q", "consignment": "P", "speed_setting": 1, "weight": 0.5, "placements": 1},
+    ]
+    path = _joint_study(tmp_path, cases=cases, budget=4, initial=4, transfer=[])
+    study = load_study(path)
+    assert [c.placements for c in study.cases] == [None, 1]
+    assert [placement_seeds(study, c) for c in study.cases] == [[1, 2, 3], [1]]
+    assert simulations_per_evaluation(study) == 4
+    out = tmp_path / "out"
+    Calibration(study, out, figures=False).run()
+    status = study_status(out)
+    parts = status["recommended"]["parts"]
+    assert [p["seeds"] for p in parts] == [[1, 2, 3], [1]]
+    runs = sorted(f.name for f in (out / "runs").glob("fit-*.csv"))
+    assert len(runs) == 4 * 4  # four evaluations of 3 + 1 simulations
+    assert sum(name.endswith("-c1-p1.csv") for name in runs) == 4
+    assert not any("-c1-p2" in name for name in runs)
+    # with one placement the standard error is the real runs' part alone, still stated
+    assert parts[0]["se"] > 0 and parts[1]["se"] > 0
 
 
 @pytest.mark.slow

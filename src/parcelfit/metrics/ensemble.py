@@ -28,8 +28,8 @@ generalised U-statistic); to first order
     Var(c_traj) ~ var_s(mean_r D(s, r)) / K + var_r(mean_s D(s, r)) / n
 
 (the variances of the row and column means of D); `EnsembleCost.se` is its square root (None with
-fewer than two simulations or real runs). More placements shrink the first part only; the real
-runs' part is fixed by the experiment.
+fewer than two real runs; with one simulation the second part alone). More placements shrink
+the first part only; the real runs' part is fixed by the experiment.
 
 **Adjusted transit times.** With ``cost.transit: adjusted`` the real runs' transit times in the
 reference are adjusted for the belt speeds each run rode at
@@ -63,7 +63,8 @@ from parcelfit.runs import Trajectory
 class EnsembleCost:
     """The ensemble cost of one case (dimensionless) with its parts: the trajectory term, the
     weighted transit term (None when not computable), the standard error of the trajectory
-    term (None with fewer than two simulations or real runs), the simulations compared, and
+    term (None with fewer than two real runs; with one simulation the real runs' part of it
+    only), the simulations compared, and
     the mean simulated transit time [s] (None without one)."""
 
     value: float

@@ -61,6 +61,7 @@ from parcelfit.study.joint import (
     evaluation_outcome,
     placement_seeds,
     simulate_items,
+    simulations_per_evaluation,
     threshold,
 )
 from parcelfit.study.results import (
@@ -460,17 +461,16 @@ class Calibration:
         """Evaluate rows of a joint or ensemble study: every case (and placement) of every row
         in one batch; each row is stored the moment its last simulation arrives."""
         study = self.study
-        seeds = placement_seeds(study)
         items: list[tuple[Task, int | None]] = []
         owner: list[tuple[int, CaseSpec, int | None]] = []
         for i, r in enumerate(rows):
             for k, spec in enumerate(study.cases):
-                for seed in seeds:
+                for seed in placement_seeds(study, spec):
                     stem = f"fit-{r.iteration:03d}-{r.slot:02d}-c{k}"
                     run_id = stem if seed is None else f"{stem}-p{seed}"
                     items.append((Task(self._full_params(r.params), spec.case, run_id), seed))
                     owner.append((i, spec, seed))
-        per_row = len(study.cases) * len(seeds)
+        per_row = simulations_per_evaluation(study)
         arrived: dict[int, list[tuple[int, CaseRun]]] = {}
         remaining = len(rows)
         for j, result in simulate_items(executor, self.simulator, items):
@@ -978,7 +978,7 @@ class Calibration:
                         if iteration == 0
                         else f"iteration {iteration}"
                     )
-                    per = len(study.cases) * len(placement_seeds(study)) if study.joint else 1
+                    per = simulations_per_evaluation(study) if study.joint else 1
                     count = (
                         f"{n} evaluations ({n * per} simulations)"
                         if study.joint

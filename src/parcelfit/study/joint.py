@@ -2,8 +2,9 @@
 on which test case to add (method.md sections 7 and 8, extended).
 
 **Joint evaluation.** A study with several fitted cases, or with the ensemble cost, evaluates one
-parameter set by simulating every case k (``placements`` K seeded placements each; the published
-cost simulates the nominal placement once) and costs it
+parameter set by simulating every case k (K_k seeded placements each: the case's own
+``placements`` or else ``cost.placements``; the published cost simulates the nominal placement
+once) and costs it
 
     c = sum_k w_k c_k
 
@@ -58,18 +59,27 @@ from parcelfit.study.identify import Advice
 from parcelfit.study.studyfile import CaseSpec, Study
 
 
-def placement_seeds(study: Study) -> list[int | None]:
-    """The placement seeds of every case of an evaluation: 1..K for the ensemble cost, the
+def placement_seeds(study: Study, spec: CaseSpec | None = None) -> list[int | None]:
+    """The placement seeds of a case (``spec``, default the study's setting) in an evaluation:
+    1..K for the ensemble cost, K the case's own ``placements`` or else the study's, the
     nominal placement (None) for the published cost."""
     if study.cost_kind == "ensemble":
-        return list(range(1, study.placements + 1))
+        k = study.placements if spec is None or spec.placements is None else spec.placements
+        return list(range(1, k + 1))
     return [None]
+
+
+def simulations_per_evaluation(study: Study) -> int:
+    """How many simulations one fitting evaluation of a joint or ensemble study runs: every
+    fitted case times its placements."""
+    return sum(len(placement_seeds(study, spec)) for spec in study.cases)
 
 
 def check_placements(study: Study, simulator: Simulator) -> None:
     """Refuse an ensemble of several placements with a simulator that cannot place runs."""
     placeable = callable(getattr(simulator, "with_placement", None))
-    if study.cost_kind == "ensemble" and study.placements > 1 and not placeable:
+    most = max(len(placement_seeds(study, spec)) for spec in study.cases)
+    if study.cost_kind == "ensemble" and most > 1 and not placeable:
         raise ParcelfitError(
             f"the {type(simulator).__name__} simulator has no seeded placements "
             "(with_placement), so an ensemble of placements would repeat one run",
@@ -288,5 +298,6 @@ __all__ = [
     "response_change",
     "simulate_items",
     "simulate_placed",
+    "simulations_per_evaluation",
     "threshold",
 ]
