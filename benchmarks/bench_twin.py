@@ -34,9 +34,10 @@ verdict (published criteria) and the transfer check (cases passed). The table is
 as ``results.json`` and ``results.md`` in the output folder. Everything resumes: rerunning the
 same command reuses the twin datasets and finished studies.
 
-With MuJoCo it takes 15-30 min on 2 cores for three truths (each twin dataset 40
-simulations, each calibration up to budget x cases x placements simulations; docs/twin-benchmark.md
-has the measured table); it runs on demand, not in CI. The test suite runs the
+With MuJoCo it takes 40-95 min on 2 cores for three truths with the published and one joint
+setup, the twin datasets made once (each 40 simulations; each calibration up to budget x the
+cases' placements simulations; docs/twin-benchmark.md has the measured tables); it runs on
+demand, not in CI. The test suite runs the
 same code on the analytic test simulator with a tiny budget.
 """
 
@@ -190,7 +191,6 @@ def assess(folder: Path, truth_si: Mapping[str, float]) -> dict[str, Any]:
         record = store.read_study()
         recommended = store.read_recommended()
         fits, vals = store.evaluations("fit"), store.evaluations("validation")
-        cases = store.get_meta("cases") or []
         advice = store.get_meta("advice")
     finally:
         store.close()
@@ -203,10 +203,16 @@ def assess(folder: Path, truth_si: Mapping[str, float]) -> dict[str, Any]:
     ident = None if results is None else results.identifiability
     intervals = {} if ident is None else {p.name: p for p in ident.parameters}
     determined = [n for n, p in intervals.items() if p.determined]
-    per_eval = sum(1 for c in cases if c["role"] == "fit") or 1
-    per_eval *= max(
-        (len((f.details.get("cases") or [{}])[0].get("seeds") or [None]) for f in fits), default=1
+    # an evaluation: every case's placements (a case may have its own number; a failed
+    # evaluation stores no parts, so the count is read from those that have them), or one run
+    per_eval = max(
+        (
+            sum(len(part.get("seeds") or [None]) for part in f.details.get("cases") or [{}])
+            for f in fits
+        ),
+        default=1,
     )
+    fit_sims = len(fits) * per_eval
     n_advice = 0
     if advice is not None:
         a = advice["advice"]
@@ -228,7 +234,8 @@ def assess(folder: Path, truth_si: Mapping[str, float]) -> dict[str, Any]:
         "verdicts": {n: p.verdict for n, p in intervals.items()},
         "intervals": {n: list(p.interval) for n, p in intervals.items()},
         "evaluations": len(fits),
-        "simulations": len(fits) * per_eval + len(vals) + len(transfer) + n_advice,
+        "fit_simulations": fit_sims,
+        "simulations": fit_sims + len(vals) + len(transfer) + n_advice,
         "validated": any(all(g) for g in by_iter.values()) if by_iter else None,
         "transfer": f"{sum(v.passed for v in transfer)}/{len(transfer)}" if transfer else "-",
     }

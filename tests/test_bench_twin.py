@@ -136,3 +136,35 @@ def test_the_joint_setups_give_e1_its_own_placements_when_asked(tmp_path):
     study = load_study(path)
     assert [c.placements for c in study.cases] == [None, 2]
     assert simulations_per_evaluation(study) == 4 + 2
+
+
+def test_the_benchmark_counts_each_case_s_own_placements(tmp_path):
+    import yaml
+
+    from parcelfit.study.calibration import Calibration
+    from parcelfit.study.studyfile import load_study
+
+    bench = _bench()
+    write_reference_dataset(tmp_path / "data", rigs=("R", "Q"))
+    doc = {
+        "name": "own",
+        "simulator": {"backend": "python", "factory": "tests.fake_sim:make", "consignment": "P"},
+        "parameters": {"mu_d_BePa": [0.3, 0.55], "mu_d_MePa": [0.15, 0.35], "E_Pa": [200, 1600]},
+        "cases": [
+            {"dataset": "data", "rig": "R", "speed_setting": 1},
+            {"rig": "Q", "speed_setting": 1, "placements": 1},
+        ],
+        "cost": {"kind": "ensemble", "placements": 3},
+        "initial": 4,
+        "batch_size": 2,
+        "budget": 4,
+        "optimizer": {"n_samples": 200, "n_restarts": 0},
+        "executor": "serial",
+    }
+    path = tmp_path / "study.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    Calibration(load_study(path), tmp_path / "out", figures=False).run()
+    truth = {"mu_d_BePa": 0.4, "mu_d_MePa": 0.25, "E_Pa": 8e8}
+    a = bench.assess(tmp_path / "out", truth)
+    assert a["evaluations"] == 4 and a["fit_simulations"] == 4 * (3 + 1)
+    assert a["simulations"] >= a["fit_simulations"]
