@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import re
 import shutil
@@ -224,6 +225,14 @@ def test_sensitivity_pairs_placements_and_drops_failed_ones() -> None:
     low_var = np.var([[1.0, 0.1, 0.0], [1.2, 0.3, 0.0]], axis=0, ddof=1)
     high_var = np.var([[1.1, 0.1, 0.0], [1.4, 0.3, 0.0]], axis=0, ddof=1)
     assert s.model_sd == pytest.approx(np.sqrt(0.5 * (low_var + high_var)))
+    # with runs at the point itself, their scatter counts (failed ones left out)
+    point = [np.array([1.0, 0.0, 0.0]), None, np.array([1.3, 2.0, 0.02])]
+    at = sensitivity("E3/KPBW/1", ["a"], low, high, real, point)
+    assert at.model_sd == pytest.approx(np.std([[1.0, 0.0, 0.0], [1.3, 2.0, 0.02]], axis=0, ddof=1))
+    assert np.array_equal(at.jacobian, s.jacobian)
+    # one usable run at the point has no scatter: the ends' pooled scatter stands in
+    one = sensitivity("E3/KPBW/1", ["a"], low, high, real, [None, point[0]])
+    assert one.model_sd == pytest.approx(s.model_sd)
     with pytest.raises(ParcelfitError, match="both ends"):
         sensitivity("E3/KPBW/1", ["a"], {"a": [None]}, {"a": [np.zeros(3)]}, real)
 
@@ -257,7 +266,10 @@ def _two_rig_study(tmp_path: Path) -> Path:
 def test_the_check_says_which_case_determines_which_parameter_and_resumes(tmp_path: Path) -> None:
     study = _two_rig_study(tmp_path)
     check = run_precision_check(study, tmp_path / "out", placements=3, executor="serial")
-    assert check.simulations == check.simulated_now == 2 * 3 * 2 * 3
+    # 2 cases x (3 parameters x 2 ends + the point) x 3 placements
+    assert check.simulations == check.simulated_now == 2 * (3 * 2 + 1) * 3
+    stored = json.loads((tmp_path / "out" / "statistics.json").read_text())["runs"]
+    assert sum("-point-" in k for k in stored) == 2 * 3
     rows = dict(check.rows())
     e = check.names.index("E_Pa")
     alone = rows["R/P/1 (fitted)"]

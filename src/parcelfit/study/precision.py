@@ -43,15 +43,16 @@ well) scaled by the population's standard deviation per statistic,
 
     sd_k = max(sd_real,k, sd_model,k, 1e-3),
 
-the larger of the real runs' sample sd and the placements' pooled sd (the root mean of the
-sample variances over the K placements at each parameter end, `CaseSensitivity.model_sd`). If
-the model is right at the point, its placements and the real runs sample one population; ten
-real runs can miss an outcome the placements show at some seeds (a spin), and their sample sd
-then understates the scatter their mean has. Measured so: the bundled twin's ten E3/KPBW/1 runs
-all slid (rotation sd 0.02 rad) where the placements spun at some seeds (pooled sd 0.79 rad), and
-the belt friction came out at +-1 % from the rotation alone; with the placements' scatter, +-21 %
-(docs/precision-check.md). The pooled sd is taken over the parameters' ends, not at the point
-itself: where one end spins far more often than the point, it overstates the scatter there.
+the larger of the real runs' sample sd and the placements' sd at the point (the sample sd of K
+placements simulated at the point itself, `CaseSensitivity.model_sd`). If the model is right at
+the point, its placements and the real runs sample one population; ten real runs can miss an
+outcome the placements show at some seeds (a spin), and their sample sd then understates the
+scatter their mean has. Measured so: the bundled twin's ten E3/KPBW/1 runs all slid (rotation
+sd 0.02 rad) where the placements spun at some seeds (sd 0.79 rad), and the belt friction came
+out at +-1 % from the rotation alone; with the placements' scatter, +-21 %
+(docs/precision-check.md). Without runs at the point (`sensitivity`'s ``at_point``) the
+placements' sd is pooled over the parameters' ends (the root mean of the sample variances at
+each end), which overstates the scatter at the point where one end spins far more often.
 The floor of 1e-3 in each unit is a tracked run's resolution (1 ms, 1 mrad, 1 mm) for a
 statistic every run shows alike. This is the data's limit: a calibration that simulates K
 placements per evaluation adds the scatter of its own mean on top. In the linear, Gaussian
@@ -133,8 +134,8 @@ class CaseSensitivity:
     jacobian: np.ndarray
     jacobian_se: np.ndarray
     real: np.ndarray
-    # the placements' pooled standard deviation per statistic (root mean of the sample variances
-    # at each parameter end); None: not known, the real runs' scatter alone counts
+    # the placements' standard deviation per statistic at the point (or, without runs there,
+    # pooled over the parameter ends); None: not known, the real runs' scatter alone counts
     model_sd: np.ndarray | None = None
 
     @property
@@ -202,11 +203,13 @@ def sensitivity(
     low: Mapping[str, Sequence[np.ndarray | None]],
     high: Mapping[str, Sequence[np.ndarray | None]],
     real: Sequence[np.ndarray | None],
+    at_point: Sequence[np.ndarray | None] | None = None,
 ) -> CaseSensitivity:
     """A case's sensitivity from the statistics of its simulated runs at each parameter's low
     and high end (``low[name][i]`` and ``high[name][i]`` share placement i; None where a run
     failed, dropped with its partner) and of its real runs (None: not usable); the placements'
-    pooled scatter from the same pairs."""
+    scatter from the runs ``at_point`` (placements at the point itself, two or more usable), or
+    else pooled over the pairs' ends."""
     jac = np.zeros((len(STATISTICS), len(names)))
     se = np.zeros_like(jac)
     variances = []  # the placements' sample variance at each parameter end
@@ -229,6 +232,9 @@ def sensitivity(
             variances += [np.var(end, axis=0, ddof=1) for end in ends]
     rows = [s for s in real if s is not None]
     model_sd = np.sqrt(np.mean(variances, axis=0)) if variances else None
+    point = [s for s in at_point or () if s is not None]
+    if len(point) >= 2:
+        model_sd = np.std(np.array(point), axis=0, ddof=1)
     return CaseSensitivity(
         label, tuple(names), jac, se, np.array(rows).reshape(-1, len(STATISTICS)), model_sd
     )

@@ -6,7 +6,8 @@ For every parameter of the study, every fitted case and every candidate (the stu
 and transfer cases and any named in ``candidates``, real runs from the first case's dataset) is
 simulated with the parameter at the low and at the high end of its range, every other parameter
 at the centre of its range or at the values ``at`` gives (catalogue units), over K seeded
-placements (seeds 1..K, the same at both ends). Each run's statistics are written to
+placements (seeds 1..K, the same at both ends); the same K placements at the point itself give
+the placements' scatter there. Each run's statistics are written to
 ``statistics.json`` in the output folder as they arrive, so a killed check resumes and a rerun
 with more candidates simulates only the new cases; a folder holding the runs of a check at
 another point, range or simulator is refused, never overwritten. The table goes to
@@ -186,8 +187,8 @@ class PrecisionCheck:
             "",
             "Sensitivity per case: change of the mean statistic over the parameter's whole range "
             "(standard error over the placements; - where not resolved, below twice it), the "
-            "real runs' standard deviation and the placements' (pooled over the parameter ends; "
-            "the larger of the two counts).",
+            "real runs' standard deviation and the placements' (at the point, over the same "
+            "placements; the larger of the two counts).",
             "",
             "| case | statistic | real sd | placements' sd | " + " | ".join(self.names) + " |",
             "|" + "---|" * (4 + len(self.names)),
@@ -297,6 +298,12 @@ def run_precision_check(
     items = []
     owners = []
     for spec in specs:
+        for seed in range(1, placements + 1):  # the placements' scatter at the point itself
+            run_id = f"precision-{spec.label}-point-{seed}"
+            keys.append((spec.label, "", "point", run_id))
+            if run_id not in cache:
+                items.append((Task(dict(point), spec.case, run_id), seed))
+                owners.append((spec.label, run_id))
         for name in names:
             for end, value in (("low", dims[name].low), ("high", dims[name].high)):
                 for seed in range(1, placements + 1):
@@ -354,6 +361,7 @@ def run_precision_check(
             {n: per_end[(spec.label, n, "low")] for n in names},
             {n: per_end[(spec.label, n, "high")] for n in names},
             real[spec.label],
+            per_end[(spec.label, "", "point")],
         )
         for spec in specs
     }
