@@ -112,7 +112,7 @@ class CaseSection(FileModel):
     (relative to the file; default the first case's), rig and consignment (default the
     simulator's), speed setting, and (``cases`` only) its weight in the cost and, with the
     ensemble cost, its own number of placements (default ``cost.placements``): a case whose
-    placements scatter less than its real runs (E1: 2.2 ms of transit time against the real
+    placements scatter less than its real runs (E1: 1.5 ms of transit time against the real
     runs' 16.8 ms, 3.4 ms adjusted for belt speeds) loses less by fewer than one whose
     placements spin at some seeds (E3)."""
 
