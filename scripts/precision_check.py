@@ -9,7 +9,8 @@ the study, the study's fitted test cases (and, as candidates, its validation and
 and any named with ``--candidates``, real runs from the first case's dataset) are simulated with
 the parameter at the low and the high end of its range, every other parameter at the centre of
 its range (or at ``--at`` values, catalogue units, e.g. a twin's hidden truth), over
-``--placements`` seeded placements (seeds 1..K, the same at both ends).
+``--placements`` seeded placements (seeds 1..K, the same at both ends and, for the placements'
+scatter, at the point itself).
 `parcelfit.study.precision` turns the change of the mean statistics (transit time, rotation,
 lateral drift; with ``--adjust-transit`` the transit time adjusted for the belt speeds each run
 rode at, `parcelfit.metrics.transit_adjustment`) and the real runs' scatter into the 95 %
@@ -17,7 +18,7 @@ half-width each parameter could be determined to, as a share of its range: the f
 jointly, each alone, and the fitted cases plus each candidate. A half-width above 10 % says
 that no calibration on these cases can be expected to recover the parameter within 10 % of its
 range. Writes ``precision-check.md`` and prints it; resumes from ``statistics.json`` in the
-output folder. The simulations are cases x parameters x 2 x K.
+output folder. The simulations are cases x (parameters x 2 + 1) x K.
 """
 
 from __future__ import annotations

@@ -48,7 +48,7 @@ placements simulated at the point itself, `CaseSensitivity.model_sd`). If the mo
 the point, its placements and the real runs sample one population; ten real runs can miss an
 outcome the placements show at some seeds (a spin), and their sample sd then understates the
 scatter their mean has. Measured so: the bundled twin's ten E3/KPBW/1 runs all slid (rotation
-sd 0.02 rad) where the placements spun at some seeds (sd 0.79 rad), and the belt friction came
+sd 0.02 rad) where the placements spun at some seeds (their sd 0.79 rad), and the belt friction came
 out at +-1 % from the rotation alone; with the placements' scatter, +-21 %
 (docs/precision-check.md). Without runs at the point (`sensitivity`'s ``at_point``) the
 placements' sd is pooled over the parameters' ends (the root mean of the sample variances at
