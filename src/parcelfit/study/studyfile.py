@@ -542,6 +542,7 @@ def study_cases(
                 where=f"cases[{i}].placements",
                 fix="use cost: {kind: ensemble, ...}, or leave placements out",
             )
+    fitted = {c.case for c in cases}
     for where, group in (("validation.cases", validation), ("transfer", transfer)):
         for i, c in enumerate(group):
             if c.placements is not None:
@@ -552,9 +553,6 @@ def study_cases(
                     where=f"{where}[{i}].placements",
                     fix="leave placements out here",
                 )
-    fitted = {c.case for c in cases}
-    for where, group in (("validation.cases", validation), ("transfer", transfer)):
-        for i, c in enumerate(group):
             if c.case in fitted:
                 raise ParcelfitError(
                     f"{c.label} is also fitted: a case used for fitting cannot judge the fit",
