@@ -253,7 +253,8 @@ def test_the_advice_names_the_rig_where_an_undetermined_parameter_matters(tmp_pa
 
 def test_an_ensemble_on_adjusted_transit_times_adjusts_real_and_simulated_runs_alike(tmp_path):
     from parcelfit.metrics import select_reference
-    from parcelfit.metrics.transit_adjustment import adjusted_reference, ridden_speeds
+    from parcelfit.metrics.reference import adjusted_reference
+    from parcelfit.metrics.transit_adjustment import ridden_speeds
     from parcelfit.runs import load_dataset, read_trajectory
 
     cost = {"kind": "ensemble", "placements": 2, "transit": "adjusted"}

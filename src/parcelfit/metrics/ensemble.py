@@ -33,7 +33,7 @@ the first part only; the real runs' part is fixed by the experiment.
 
 **Adjusted transit times.** With ``cost.transit: adjusted`` the real runs' transit times in the
 reference are adjusted for the belt speeds each run rode at
-(`parcelfit.metrics.transit_adjustment.adjusted_reference`) and the simulated runs' times
+(`parcelfit.metrics.reference.adjusted_reference`) and the simulated runs' times
 alike before they reach this module: T above is then T^a, and s_real^2 the adjusted times'
 variance (smaller by what the belt speeds explain).
 

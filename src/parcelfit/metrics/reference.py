@@ -16,18 +16,16 @@ they normalise the calibration cost (equation 3).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.metrics.comparison import Comparison
 from parcelfit.metrics.dtw import pairwise_dtw
+from parcelfit.metrics.transit_adjustment import TransitAdjustment, fit_transit_adjustment
 from parcelfit.runs import CaseData, Run, TestCase
-
-if TYPE_CHECKING:
-    from parcelfit.metrics.transit_adjustment import TransitAdjustment
 
 
 def normalise(matrix: np.ndarray) -> tuple[np.ndarray, float]:
@@ -59,8 +57,7 @@ class ReferenceSelection:
     xy_series: list[np.ndarray] = field(repr=False)
     theta_series: list[np.ndarray] = field(repr=False)
     # set when ``transit_times`` are adjusted for the belt speeds each run rode at
-    # (`parcelfit.metrics.transit_adjustment.adjusted_reference`): simulated runs compared with
-    # them are adjusted alike
+    # (`adjusted_reference`): simulated runs compared with them are adjusted alike
     transit_adjustment: TransitAdjustment | None = None
 
     @property
@@ -126,3 +123,20 @@ def select_reference(
         xy_series=xy,
         theta_series=theta,
     )
+
+
+def adjusted_reference(reference: ReferenceSelection, runs: Sequence[Run]) -> ReferenceSelection:
+    """``reference`` with its transit times [s] adjusted by an adjustment fitted on ``runs``
+    (the case's real runs, the ones the reference was chosen from), which it keeps in
+    ``transit_adjustment`` so that simulated runs are adjusted alike. The choice of the
+    reference run and its matrices stay as they were."""
+    by_id = {r.id: r for r in runs}
+    missing = [i for i in reference.run_ids if i not in by_id]
+    if missing:
+        raise ParcelfitError(
+            f"runs {', '.join(missing)} of test case {reference.case.label} are not given",
+            fix="adjust with the runs the reference was chosen from",
+        )
+    adjustment = fit_transit_adjustment([by_id[i] for i in reference.run_ids])
+    times = tuple(adjustment.adjust_run(by_id[i]) for i in reference.run_ids)
+    return replace(reference, transit_times=times, transit_adjustment=adjustment)

@@ -45,12 +45,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
-from parcelfit.errors import ParcelfitError
-from parcelfit.metrics.reference import ReferenceSelection
 from parcelfit.runs import Run, Trajectory
 
 WINDOW = 0.25  # s: long enough for a 1 mm tracking noise to give the speed to about 0.5 %
@@ -166,27 +164,9 @@ def fit_transit_adjustment(runs: Sequence[Run], window: float = WINDOW) -> Trans
     )
 
 
-def adjusted_reference(reference: ReferenceSelection, runs: Sequence[Run]) -> ReferenceSelection:
-    """``reference`` with its transit times [s] adjusted by an adjustment fitted on ``runs``
-    (the case's real runs, the ones the reference was chosen from), which it keeps in
-    ``transit_adjustment`` so that simulated runs are adjusted alike. The choice of the
-    reference run and its matrices stay as they were."""
-    by_id = {r.id: r for r in runs}
-    missing = [i for i in reference.run_ids if i not in by_id]
-    if missing:
-        raise ParcelfitError(
-            f"runs {', '.join(missing)} of test case {reference.case.label} are not given",
-            fix="adjust with the runs the reference was chosen from",
-        )
-    adjustment = fit_transit_adjustment([by_id[i] for i in reference.run_ids])
-    times = tuple(adjustment.adjust_run(by_id[i]) for i in reference.run_ids)
-    return replace(reference, transit_times=times, transit_adjustment=adjustment)
-
-
 __all__ = [
     "WINDOW",
     "TransitAdjustment",
-    "adjusted_reference",
     "fit_transit_adjustment",
     "ridden_speeds",
     "window_speed",

@@ -38,7 +38,7 @@ from filelock import FileLock
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.metrics import ReferenceSelection, calibration_cost, select_reference
-from parcelfit.metrics.transit_adjustment import adjusted_reference
+from parcelfit.metrics.reference import adjusted_reference
 from parcelfit.optimize.sampler import Sampler, make_sampler
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.runs import (
