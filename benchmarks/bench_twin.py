@@ -78,10 +78,16 @@ FRACTIONS = [
 @dataclass(frozen=True)
 class Setup:
     """One way to calibrate: a name and the study-file keys it sets (paths relative to the
-    study file; ``{dataset}`` is replaced by the twin dataset's folder)."""
+    study file; ``{dataset}`` is replaced by the twin dataset's folder); ``kind``: the name
+    ``--setups`` selects it by (the name without a suffix such as ``-e1x2``; default: the name)."""
 
     name: str
     keys: Mapping[str, Any]
+    kind: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.kind:
+            object.__setattr__(self, "kind", self.name)
 
 
 @dataclass
@@ -123,7 +129,8 @@ def mujoco_setups(placements: int, budget: int, e1_placements: int | None = None
     )
     joint = Setup(
         "joint" + suffix,
-        {
+        kind="joint",
+        keys={
             "cases": [{"dataset": "{dataset}", "rig": "E3", "speed_setting": 1}, e1],
             "validation": {"every": 5, "cases": [{"rig": "E3", "speed_setting": 2}]},
             "transfer": [{"rig": "E1", "speed_setting": 1}],
@@ -133,7 +140,8 @@ def mujoco_setups(placements: int, budget: int, e1_placements: int | None = None
     )
     adjusted = Setup(
         "joint-adjusted" + suffix,
-        {
+        kind="joint-adjusted",
+        keys={
             **joint.keys,
             "cost": {"kind": "ensemble", "placements": placements, "transit": "adjusted"},
         },
@@ -438,7 +446,7 @@ def main() -> None:
     setups = [
         s
         for s in mujoco_setups(args.placements, args.budget, args.e1_placements)
-        if s.name.split("-e1x")[0] in wanted
+        if s.kind in wanted
     ]
     truths = {
         f"truth{k + 1}": truth_values(f, parameters) for k, f in enumerate(FRACTIONS[: args.truths])

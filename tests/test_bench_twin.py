@@ -116,6 +116,13 @@ def test_the_joint_setups_give_e1_its_own_placements_when_asked(tmp_path):
     assert all("placements" not in c for c in same["joint"].keys["cases"])
     own = {s.name: s for s in bench.mujoco_setups(4, 60, e1_placements=2)}
     assert set(own) == {"published", "joint-e1x2", "joint-adjusted-e1x2"}
+    # --setups names the kind, whatever suffix the name carries
+    assert {n: s.kind for n, s in own.items()} == {
+        "published": "published",
+        "joint-e1x2": "joint",
+        "joint-adjusted-e1x2": "joint-adjusted",
+    }
+    assert all(s.kind == n for n, s in same.items())
     for name in ("joint-e1x2", "joint-adjusted-e1x2"):
         e3, e1 = own[name].keys["cases"]
         assert (e3.get("placements"), e1["rig"], e1["placements"]) == (None, "E1", 2)
