@@ -1,6 +1,7 @@
 """Simulation speed: 2 s of E3 (induction) with the flexible parcels, one core.
 
     python benchmarks/bench_sim.py [--repeats 3] [--types KPBW PB] [--scene KEY=VALUE ...]
+                                   [--profile]
 
 Simulates exactly 2 s (the end box is widened so the run does not stop at the rig's end) for
 KPBW (flexible packaging, rigid content) and PB (polybag, soft content), or the ``--types``
@@ -8,6 +9,11 @@ given, at speed setting 1 and the default resolution, and prints the median wall
 per second, and the ratio to the published cost of one such simulation (about 5 hours on a
 16-core desktop with a commercial MFBD solver, method.md section 10). MuJoCo runs one
 simulation on one core.
+
+``--profile`` then steps each type's scene once more for the same 2 s with MuJoCo's own timers
+and prints where a step's time goes: the constraint solver, positions and collisions, and the
+rest (mostly the smooth dynamics' factorisation), with the mean Newton iterations, contacts,
+constraint rows and degrees of freedom (nv).
 """
 
 from __future__ import annotations
@@ -16,9 +22,14 @@ import argparse
 import statistics
 from dataclasses import replace
 
+import mujoco
+import numpy as np
+
 from parcelfit.runs import TestCase
 from parcelfit.sim.mujoco import MujocoSimulator, SceneOptions, SimOptions, load_rig
+from parcelfit.sim.mujoco.mjlog import CountedWarnings
 from parcelfit.sim.mujoco.scene import parse_scene_options
+from parcelfit.sim.mujoco.simulator import _set_velocity
 
 PUBLISHED_SECONDS = 5 * 3600.0
 BUDGET = {"KPBW": 15.0, "PB": 30.0}  # s, the targets of the physics issue
@@ -48,6 +59,11 @@ def main() -> None:
         metavar="KEY=VALUE",
         help="scene options other than the defaults (e.g. belt_friction=coulomb)",
     )
+    ap.add_argument(
+        "--profile",
+        action="store_true",
+        help="also print where a step's time goes (MuJoCo's timers, Newton iterations, contacts)",
+    )
     args = ap.parse_args()
     rig = load_rig("E3")
     rig = replace(rig, end=replace(rig.end, x=(-1.0, 3.9), duration=2.0, after_last_barrier=10.0))
@@ -73,6 +89,43 @@ def main() -> None:
             f"{'E3/' + cons:<10}{wall:>10.2f}{statistics.median(rates):>10.0f}{PUBLISHED_SECONDS / wall:>20.0f}"
             + (f"{BUDGET[cons]:>12.0f}" if cons in BUDGET else f"{'-':>12}")
         )
+    if args.profile:
+        print(
+            f"\n{'case':<10}{'ms/step':>9}{'solver':>8}{'pos+col':>9}{'rest':>7}"
+            f"{'Newton it':>11}{'contacts':>10}{'rows':>7}{'nv':>6}"
+        )
+        for cons in args.types:
+            print(f"{'E3/' + cons:<10}" + _profile(sim, cons))
+
+
+def _profile(sim: MujocoSimulator, cons: str) -> str:
+    """One 2 s run of ``cons`` on E3 stepped here with MuJoCo's timers: per step [ms] in total,
+    in the constraint solver, in positions and collisions, and the rest; mean Newton
+    iterations, contacts and constraint rows per step; the degrees of freedom."""
+    scene = sim.scene({}, TestCase("E3", cons, 1))
+    iters = contacts = rows = 0
+    with CountedWarnings():  # counted, not printed, as in the simulator's own runs
+        model = scene.model()
+        data = mujoco.MjData(model)
+        _set_velocity(model, data, np.asarray(scene.start_velocity))
+        n = round(2.0 / model.opt.timestep)
+        for _ in range(n):
+            mujoco.mj_step(model, data)
+            iters += int(data.solver_niter[0])
+            contacts += data.ncon
+            rows += data.nefc
+
+    def per_step(timer: mujoco.mjtTimer) -> float:
+        t = data.timer[timer]
+        return 1e3 * t.duration / max(t.number, 1)
+
+    total = per_step(mujoco.mjtTimer.mjTIMER_STEP)
+    solver = per_step(mujoco.mjtTimer.mjTIMER_CONSTRAINT)
+    position = per_step(mujoco.mjtTimer.mjTIMER_POSITION)
+    return (
+        f"{total:>9.2f}{solver:>8.2f}{position:>9.2f}{total - solver - position:>7.2f}"
+        f"{iters / n:>11.2f}{contacts / n:>10.0f}{rows / n:>7.0f}{model.nv:>6d}"
+    )
 
 
 if __name__ == "__main__":

@@ -6,7 +6,8 @@ catch or a spin must be a converged physical outcome, not a mesh artefact).
         --configs 30:600 20:600 15:1200
     python scripts/ensemble_convergence.py --rig E3
 
-For every numerical configuration (shell mesh spacing [mm] : steps per second) it simulates
+For every numerical configuration (shell mesh spacing [mm] : steps per second; the spacing of
+the packaging around a rigid content and of the polybag's film alike) it simulates
 each consignment type at its default parameters for the placement seeds 0..N-1 (the rig's
 ``start.scatter``) and reports the ensemble statistics the published observations are judged by:
 median absolute rotation, share of spins (> 90 degrees), median transit time, and, paired by
@@ -41,19 +42,27 @@ DEFAULT_CONFIGS = ("40:600", "30:600", "20:600", "30:1200", "15:600", "15:1200")
 
 @dataclass(frozen=True)
 class Config:
-    """Shell mesh spacing [m] and time step [s]."""
+    """Shell mesh spacing [m], time step [s] and, if given, a soft content's vertex spacing [m]
+    (None: the default, `SceneOptions.soft_spacing`)."""
 
     spacing: float
     timestep: float
+    content_spacing: float | None = None
 
     @classmethod
     def parse(cls, text: str) -> Config:
-        mm, rate = text.split(":")
-        return cls(float(mm) / 1e3, 1.0 / float(rate))
+        parts = text.split(":")
+        if len(parts) not in (2, 3):
+            raise ValueError(f"{text!r}: expected spacing_mm:steps_per_second[:content_spacing_mm]")
+        content = float(parts[2]) / 1e3 if len(parts) == 3 else None
+        return cls(float(parts[0]) / 1e3, 1.0 / float(parts[1]), content)
 
     @property
     def label(self) -> str:
-        return f"{self.spacing * 1e3:g} mm, 1/{round(1 / self.timestep)} s"
+        text = f"{self.spacing * 1e3:g} mm, 1/{round(1 / self.timestep)} s"
+        if self.content_spacing is not None:
+            text += f", content {self.content_spacing * 1e3:g} mm"
+        return text
 
 
 class _Factory:
@@ -64,7 +73,18 @@ class _Factory:
 
     def __call__(self, seed: int) -> MujocoSimulator:
         rig = load_rig(self.rig_arg)
-        scene = SceneOptions(timestep=self.config.timestep, spacing=self.config.spacing)
+        # the spacing is the shell's around either content: the film of a soft one too
+        content = (
+            {}
+            if self.config.content_spacing is None
+            else {"soft_spacing": self.config.content_spacing}
+        )
+        scene = SceneOptions(
+            timestep=self.config.timestep,
+            spacing=self.config.spacing,
+            soft_shell_spacing=self.config.spacing,
+            **content,
+        )
         sim = MujocoSimulator(SimOptions(scene=scene), rigs={rig.name: rig})
         return sim.with_placement(seed)
 
@@ -91,9 +111,10 @@ def _write(args, rig, configs, results, walls, types_done) -> None:
         "placements whose outcome (spin > 90 degrees / slide) differs.",
         "",
         "| type | mesh, step | median rotation [deg] | spins | median T [ms] | "
-        "paired |d rot| [deg] | paired |d T| [ms] | outcome differs | s/run |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "paired |d rot| [deg] | paired |d T| [ms] | paired d T [ms] | outcome differs | s/run |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
+    per_seed: list[str] = []
     for cons in types_done:
         reference = _outcomes(results[cons, ref])
         for k, cfg in enumerate(configs):
@@ -107,14 +128,15 @@ def _write(args, rig, configs, results, walls, types_done) -> None:
                 both += 1
                 d_rot.append(abs(math.degrees(m.rotation - r.rotation)))
                 if m.transit_time is not None and r.transit_time is not None:
-                    d_t.append(abs(m.transit_time - r.transit_time) * 1e3)
+                    d_t.append((m.transit_time - r.transit_time) * 1e3)
                 differs += m.outcome != r.outcome
             paired = (
-                ("-", "-", "-")
+                ("-", "-", "-", "-")
                 if k == ref
                 else (
                     f"{np.median(d_rot):.1f}" if d_rot else "n/a",
-                    f"{np.median(d_t):.1f}" if d_t else "n/a",
+                    f"{np.median(np.abs(d_t)):.1f}" if d_t else "n/a",
+                    f"{np.median(d_t):+.1f}" if d_t else "n/a",
                     f"{differs}/{both}",
                 )
             )
@@ -122,8 +144,24 @@ def _write(args, rig, configs, results, walls, types_done) -> None:
                 f"| {cons} | {cfg.label} | {math.degrees(s.rotation_median):.1f} "
                 f"({math.degrees(s.rotation_q25):.0f}-{math.degrees(s.rotation_q75):.0f}) | "
                 f"{s.spins}/{s.n} | {s.transit_median * 1e3:.1f} | {paired[0]} | {paired[1]} | "
-                f"{paired[2]} | {walls[cons, k]:.1f} |"
+                f"{paired[2]} | {paired[3]} | {walls[cons, k]:.1f} |"
             )
+            by_seed = sorted(members, key=lambda m: m.seed)
+            rot = ", ".join(
+                "-" if m.rotation is None else f"{math.degrees(m.rotation):.0f}" for m in by_seed
+            )
+            tt = ", ".join(
+                "-" if m.transit_time is None else f"{m.transit_time:.3f}" for m in by_seed
+            )
+            per_seed.append(f"| {cons} | {cfg.label} | {rot} | {tt} |")
+    lines += [
+        "",
+        "Each placement (seeds in order): net rotation [deg] and transit time [s].",
+        "",
+        "| type | mesh, step | rotations | transit times |",
+        "|---|---|---|---|",
+        *per_seed,
+    ]
     args.out.mkdir(parents=True, exist_ok=True)
     target = args.out / f"ensemble-convergence-{Path(args.rig).stem}.md"
     target.write_text("\n".join(lines) + "\n", encoding="utf-8")
@@ -140,14 +178,18 @@ def main(argv: list[str] | None = None) -> int:
         "--configs",
         nargs="+",
         default=list(DEFAULT_CONFIGS),
-        help="spacing_mm:steps_per_second, finest (the reference) last",
+        help="spacing_mm:steps_per_second[:content_spacing_mm] (the last: a soft content's "
+        "vertex spacing), finest (the reference) last",
     )
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--out", type=Path, default=Path("docs"))
     args = ap.parse_args(argv)
 
     rig = load_rig(args.rig)
-    configs = [Config.parse(c) for c in args.configs]
+    try:
+        configs = [Config.parse(c) for c in args.configs]
+    except ValueError as exc:
+        ap.error(f"--configs: {exc}")
     seeds = list(range(args.placements))
     results: dict[tuple[str, int], list[Member]] = {}
     walls: dict[tuple[str, int], float] = {}
