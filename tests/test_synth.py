@@ -218,3 +218,46 @@ def test_the_twins_real_runs_take_their_own_time_step(tmp_path, monkeypatch):
     spec.write_text("cases: [E1/BW/1]\nsettings: {real_soft_timestep: -1}\n")
     with pytest.raises(ParcelfitError, match="real_soft_timestep"):
         synth.load_twin_spec(spec)
+
+
+def test_the_twins_real_runs_take_their_own_content_mesh(tmp_path, monkeypatch):
+    """``real_content_spacing`` reaches the scene of every twin run (default None: the model's
+    own soft content mesh), and a spec outside [3 mm, 300 mm] is refused naming the key."""
+    import pytest
+
+    import parcelfit.synth as synth
+    from parcelfit import ParcelfitError
+    from parcelfit.sim.mujoco import SceneOptions, load_consignment, load_rig
+
+    seen = []
+
+    class Recording:
+        def __init__(self, options, consignments, **_):
+            seen.append(options.scene.soft_spacing)
+
+        def run(self, params, case, run_id=None):
+            raise RuntimeError("stop here")
+
+    monkeypatch.setattr(synth, "MujocoSimulator", Recording)
+    for settings, spacing in (
+        (TwinSettings(), SceneOptions().soft_spacing),
+        (TwinSettings(real_content_spacing=0.03), 0.03),
+    ):
+        job = synth.TwinJob(
+            "r1",
+            TestCase("E3", "PB", 1),
+            load_rig("E3"),
+            load_consignment("PB"),
+            {},
+            settings,
+            np.random.SeedSequence(1),
+        )
+        with pytest.raises(RuntimeError, match="stop here"):
+            synth._twin_run(job)
+        assert seen[-1] == spacing
+    spec = tmp_path / "spec.yaml"
+    spec.write_text("cases: [E3/PB/1]\nsettings: {real_content_spacing: 0.06}\n")
+    assert synth.load_twin_spec(spec).settings.real_content_spacing == 0.06
+    spec.write_text("cases: [E3/PB/1]\nsettings: {real_content_spacing: 0.5}\n")
+    with pytest.raises(ParcelfitError, match="real_content_spacing"):
+        synth.load_twin_spec(spec)
