@@ -167,7 +167,6 @@ def test_the_twins_real_runs_take_their_own_time_step(tmp_path, monkeypatch):
     import pytest
 
     import parcelfit.synth as synth
-    from parcelfit import ParcelfitError
     from parcelfit.sim.mujoco import load_consignment, load_rig
 
     seen = []
@@ -207,17 +206,8 @@ def test_the_twins_real_runs_take_their_own_time_step(tmp_path, monkeypatch):
     assert synth._refined_rigs(TwinSettings(), [e3]) == ""
     both = TwinSettings(real_timestep=1 / 4800, real_soft_timestep=1 / 2400)
     assert synth._refined_rigs(both, [e1]) == ""
-    spec = tmp_path / "spec.yaml"
-    spec.write_text("cases: [E1/BW/1]\nsettings: {real_timestep: 0.00041667}\n")
-    assert synth.load_twin_spec(spec).settings.real_timestep == 0.00041667
-    spec.write_text("cases: [E1/BW/1]\nsettings: {real_timestep: 0.1}\n")
-    with pytest.raises(ParcelfitError, match="real_timestep"):
-        synth.load_twin_spec(spec)
-    spec.write_text("cases: [E1/BW/1]\nsettings: {real_soft_timestep: 0.00041667}\n")
-    assert synth.load_twin_spec(spec).settings.real_soft_timestep == 0.00041667
-    spec.write_text("cases: [E1/BW/1]\nsettings: {real_soft_timestep: -1}\n")
-    with pytest.raises(ParcelfitError, match="real_soft_timestep"):
-        synth.load_twin_spec(spec)
+    _check_setting(tmp_path, "E1/BW/1", "real_timestep", 0.00041667, 0.1)
+    _check_setting(tmp_path, "E1/BW/1", "real_soft_timestep", 0.00041667, -1)
 
 
 def test_the_twins_real_runs_take_their_own_content_mesh(tmp_path, monkeypatch):
@@ -226,7 +216,6 @@ def test_the_twins_real_runs_take_their_own_content_mesh(tmp_path, monkeypatch):
     import pytest
 
     import parcelfit.synth as synth
-    from parcelfit import ParcelfitError
     from parcelfit.sim.mujoco import SceneOptions, load_consignment, load_rig
 
     seen = []
@@ -255,9 +244,20 @@ def test_the_twins_real_runs_take_their_own_content_mesh(tmp_path, monkeypatch):
         with pytest.raises(RuntimeError, match="stop here"):
             synth._twin_run(job)
         assert seen[-1] == spacing
+    _check_setting(tmp_path, "E3/PB/1", "real_content_spacing", 0.06, 0.5)
+
+
+def _check_setting(tmp_path, case: str, key: str, good: float, bad: float) -> None:
+    """A twin spec's ``settings.<key>`` reads back as written when ``good`` and is refused
+    naming the key when ``bad``."""
+    import pytest
+
+    import parcelfit.synth as synth
+    from parcelfit import ParcelfitError
+
     spec = tmp_path / "spec.yaml"
-    spec.write_text("cases: [E3/PB/1]\nsettings: {real_content_spacing: 0.06}\n")
-    assert synth.load_twin_spec(spec).settings.real_content_spacing == 0.06
-    spec.write_text("cases: [E3/PB/1]\nsettings: {real_content_spacing: 0.5}\n")
-    with pytest.raises(ParcelfitError, match="real_content_spacing"):
+    spec.write_text(f"cases: [{case}]\nsettings: {{{key}: {good}}}\n")
+    assert getattr(synth.load_twin_spec(spec).settings, key) == good
+    spec.write_text(f"cases: [{case}]\nsettings: {{{key}: {bad}}}\n")
+    with pytest.raises(ParcelfitError, match=key):
         synth.load_twin_spec(spec)
