@@ -297,21 +297,21 @@ def run_precision_check(
     keys = []
     items = []
     owners = []
+    # (parameter, end, values, run-id tag): the point itself, for the placements' scatter there,
+    # then each parameter at each end of its range
+    variants = [("", "point", dict(point), "point")] + [
+        (name, end, {**point, name: value}, f"{name}-{end}")
+        for name in names
+        for end, value in (("low", dims[name].low), ("high", dims[name].high))
+    ]
     for spec in specs:
-        for seed in range(1, placements + 1):  # the placements' scatter at the point itself
-            run_id = f"precision-{spec.label}-point-{seed}"
-            keys.append((spec.label, "", "point", run_id))
-            if run_id not in cache:
-                items.append((Task(dict(point), spec.case, run_id), seed))
-                owners.append((spec.label, run_id))
-        for name in names:
-            for end, value in (("low", dims[name].low), ("high", dims[name].high)):
-                for seed in range(1, placements + 1):
-                    run_id = f"precision-{spec.label}-{name}-{end}-{seed}"
-                    keys.append((spec.label, name, end, run_id))
-                    if run_id not in cache:
-                        items.append((Task({**point, name: value}, spec.case, run_id), seed))
-                        owners.append((spec.label, run_id))
+        for name, end, values, tag in variants:
+            for seed in range(1, placements + 1):
+                run_id = f"precision-{spec.label}-{tag}-{seed}"
+                keys.append((spec.label, name, end, run_id))
+                if run_id not in cache:
+                    items.append((Task(dict(values), spec.case, run_id), seed))
+                    owners.append((spec.label, run_id))
     simulator = make_simulator(study.simulator)
     if items and not callable(getattr(simulator, "with_placement", None)):
         raise ParcelfitError(
