@@ -78,16 +78,17 @@ FRACTIONS = [
 @dataclass(frozen=True)
 class Setup:
     """One way to calibrate: a name and the study-file keys it sets (paths relative to the
-    study file; ``{dataset}`` is replaced by the twin dataset's folder); ``kind``: the name
-    ``--setups`` selects it by (the name without a suffix such as ``-e1x2``; default: the name)."""
+    study file; ``{dataset}`` is replaced by the twin dataset's folder); ``kind`` is what
+    ``--setups`` selects it by, its name that kind with ``suffix`` (such as ``-e1x2``)."""
 
-    name: str
+    kind: str
     keys: Mapping[str, Any]
-    kind: str = ""
+    suffix: str = ""
 
-    def __post_init__(self) -> None:
-        if not self.kind:
-            object.__setattr__(self, "kind", self.name)
+    @property
+    def name(self) -> str:
+        """The setup's name: its kind and suffix (the folder and table row of its runs)."""
+        return self.kind + self.suffix
 
 
 @dataclass
@@ -128,8 +129,8 @@ def mujoco_setups(placements: int, budget: int, e1_placements: int | None = None
         },
     )
     joint = Setup(
-        "joint" + suffix,
-        kind="joint",
+        "joint",
+        suffix=suffix,
         keys={
             "cases": [{"dataset": "{dataset}", "rig": "E3", "speed_setting": 1}, e1],
             "validation": {"every": 5, "cases": [{"rig": "E3", "speed_setting": 2}]},
@@ -139,8 +140,8 @@ def mujoco_setups(placements: int, budget: int, e1_placements: int | None = None
         },
     )
     adjusted = Setup(
-        "joint-adjusted" + suffix,
-        kind="joint-adjusted",
+        "joint-adjusted",
+        suffix=suffix,
         keys={
             **joint.keys,
             "cost": {"kind": "ensemble", "placements": placements, "transit": "adjusted"},
