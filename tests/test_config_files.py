@@ -489,3 +489,24 @@ def test_a_consignment_file_holds_its_values(tmp_path):
     assert load_consignment(path) == Consignment(
         "C", "a box", 0.14, (0.275, 0.2, 0.02), "rigid", (0.165, 0.125, 0.02), str(path)
     )
+
+
+def test_numbers_in_exponent_form_are_read_as_numbers(tmp_path):
+    """``1e-6`` and ``2E5`` are floats (YAML 1.2), not the text PyYAML's YAML 1.1 makes of them,
+    so a setting written that way is accepted; quoted text and words stay text."""
+    from parcelfit.config import load_yaml
+
+    path = tmp_path / "numbers.yaml"
+    path.write_text("a: 1e-6\nb: 2E5\nc: 1.0e-6\nd: 12\ne: '1e-6'\nf: abc1e5\ng: -3e+2\n")
+    assert load_yaml(path) == {
+        "a": 1e-6,
+        "b": 2e5,
+        "c": 1e-6,
+        "d": 12,
+        "e": "1e-6",
+        "f": "abc1e5",
+        "g": -300.0,
+    }
+    spec = tmp_path / "spec.yaml"
+    spec.write_text("cases: [E3/PB/1]\nsettings: {tracking_sd: 1e-3}\n")
+    assert load_twin_spec(spec).settings.tracking_sd == 1e-3

@@ -10,6 +10,7 @@ is reported the same way.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
@@ -24,6 +25,19 @@ from parcelfit.schema import require_mapping as _require_mapping
 T = TypeVar("T")
 
 
+class _Loader(yaml.SafeLoader):
+    """PyYAML's safe loader, reading numbers as YAML 1.2 does: ``1e-6`` and ``2E5`` are floats.
+    PyYAML follows YAML 1.1, where a float needs a dot and a signed exponent, so ``1e-6`` came
+    back as the text '1e-06' and a setting written that way was refused as not a number."""
+
+
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+    list("-+0123456789"),
+)
+
+
 def load_yaml(path: str | Path) -> Any:
     """Parse a YAML file; a missing file or a syntax error becomes a `ParcelfitError`."""
     path = Path(path)
@@ -31,7 +45,7 @@ def load_yaml(path: str | Path) -> Any:
         raise ParcelfitError("file not found", file=path, fix="check the path")
     try:
         with path.open(encoding="utf-8") as fh:
-            return yaml.safe_load(fh)
+            return yaml.load(fh, Loader=_Loader)  # a safe loader (SafeLoader subclass)
     except UnicodeDecodeError as exc:
         raise ParcelfitError(
             f"not UTF-8 text (byte {exc.start}: {exc.object[exc.start : exc.start + 1]!r})",
