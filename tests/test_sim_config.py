@@ -440,7 +440,7 @@ def test_film_spacing_from_a_study_files_simulator_section_meshes_a_soft_content
         return scene.soft_shell_spacing, len(points[: points.index('"')].split()) // 3
 
     default_spacing, default_count = film_vertices()
-    assert default_spacing == 0.04 and default_count == 128  # pillow_shell at 40 mm
+    assert default_spacing == 0.05 and default_count == 98  # pillow_shell at 50 mm
     fine_spacing, fine_count = film_vertices(film_spacing=0.03)
     assert fine_spacing == 0.03 and fine_count == 218
     with pytest.raises(ParcelfitError, match=r"must lie in \[5, 200\] mm, got 1 mm"):
@@ -529,6 +529,26 @@ def test_impratio_reaches_the_model_and_is_checked():
     assert 'impratio="10"' in build_scene(rig, cons, params, 1, SceneOptions(impratio=10)).xml
     with pytest.raises(ParcelfitError, match="impratio must be at least 1"):
         SceneOptions(impratio=0.5)
+
+
+def test_ccd_tolerance_is_tight_around_a_soft_content_and_can_be_set():
+    """1e-8 m around the polybag's soft content (MuJoCo's own 1e-6 misjudges a film vertex
+    right above a content vertex by 0.2 mm), MuJoCo's default around a rigid one."""
+    from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
+
+    def option(name, **given):
+        rig, cons = load_rig("E3"), load_consignment(name)
+        scene = build_scene(
+            rig, cons, resolve(cons.content_kind, si_values={}), 1, SceneOptions(**given)
+        )
+        return scene.model().opt.ccd_tolerance
+
+    assert option("PB") == pytest.approx(1e-8)
+    assert option("KPBW") == pytest.approx(1e-6)  # MuJoCo's own
+    assert option("PB", ccd_tolerance=1e-6) == pytest.approx(1e-6)
+    assert option("KPBW", ccd_tolerance=1e-9) == pytest.approx(1e-9)
+    with pytest.raises(ParcelfitError, match="ccd_tolerance must be positive"):
+        SceneOptions(ccd_tolerance=0.0)
 
 
 @pytest.mark.parametrize("name", ["BW", "KPBW", "KP", "PB"])
@@ -824,7 +844,7 @@ def test_radiating_diagonals_make_the_shell_mirror_symmetric_at_every_spacing(sp
     """The default triangulation is the same under x -> -x and y -> -y (but in a row of cells
     that straddles an axis, where no diagonal is), and each corner of the seam is the tip of two
     triangles per sheet, whatever the cell counts' parity; the old alternating one is not
-    symmetric at the polybag's default 40 mm film, where two corners are the tip of only one
+    symmetric at a 40 mm film (the polybag's default until 2026-11-29), where two corners are the tip of only one
     triangle per sheet (shell.py, "Diagonals")."""
     import numpy as np
 

@@ -211,8 +211,8 @@ def test_the_twins_real_runs_take_their_own_time_step(tmp_path, monkeypatch):
 
 
 def test_the_twins_real_runs_take_their_own_content_mesh(tmp_path, monkeypatch):
-    """``real_content_spacing`` reaches the scene of every twin run (default None: the model's
-    own soft content mesh), and a spec outside [3 mm, 300 mm] is refused naming the key."""
+    """``real_content_spacing`` and ``real_ccd_tolerance`` reach the scene of every twin run
+    (default None: the model's own), and a spec out of range is refused naming the key."""
     import pytest
 
     import parcelfit.synth as synth
@@ -222,15 +222,15 @@ def test_the_twins_real_runs_take_their_own_content_mesh(tmp_path, monkeypatch):
 
     class Recording:
         def __init__(self, options, consignments, **_):
-            seen.append(options.scene.soft_spacing)
+            seen.append((options.scene.soft_spacing, options.scene.ccd_tolerance))
 
         def run(self, params, case, run_id=None):
             raise RuntimeError("stop here")
 
     monkeypatch.setattr(synth, "MujocoSimulator", Recording)
-    for settings, spacing in (
-        (TwinSettings(), SceneOptions().soft_spacing),
-        (TwinSettings(real_content_spacing=0.03), 0.03),
+    for settings, expected in (
+        (TwinSettings(), (SceneOptions().soft_spacing, None)),
+        (TwinSettings(real_content_spacing=0.03, real_ccd_tolerance=1e-6), (0.03, 1e-6)),
     ):
         job = synth.TwinJob(
             "r1",
@@ -243,8 +243,9 @@ def test_the_twins_real_runs_take_their_own_content_mesh(tmp_path, monkeypatch):
         )
         with pytest.raises(RuntimeError, match="stop here"):
             synth._twin_run(job)
-        assert seen[-1] == spacing
+        assert seen[-1] == expected
     _check_setting(tmp_path, "E3/PB/1", "real_content_spacing", 0.06, 0.5)
+    _check_setting(tmp_path, "E3/PB/1", "real_ccd_tolerance", 1e-6, 0.5)
 
 
 def _check_setting(tmp_path, case: str, key: str, good: float, bad: float) -> None:

@@ -545,8 +545,8 @@ def simulate(
     film_spacing: Annotated[
         float | None,
         typer.Option(
-            help="Film mesh spacing around a soft content [m] (see docs/pb-film-mesh-E3.md).",
-            show_default="0.04 m",
+            help="Film mesh spacing around a soft content [m] (see docs/pb-speed.md).",
+            show_default="0.05 m",
         ),
     ] = None,
     membrane_cap: Annotated[

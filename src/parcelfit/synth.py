@@ -15,10 +15,12 @@ experiments do (method.md sections 2 and 3):
 * belt speeds: every drive x (1 + U(-speed_dev, speed_dev)) (real belts deviate up to 3 %);
 * tracking noise: N(0, tracking_sd) [m] on x and y, N(0, heading_sd) [rad] on theta;
 * resolution: the "real" runs use the shell mesh ``real_spacing`` (default 30 mm) for rigid
-  contents and ``real_soft_spacing`` (default 40 mm) around a soft content, whose own vertices
-  lie ``real_content_spacing`` apart (default None: the model's own, 100 mm). A twin is only a
-  test if its "real" side is at least as converged as the model: the defaults are the model's
-  own meshes (30 mm is within about 5 mm of the 15 mm reference in docs/convergence.md). The
+  contents and ``real_soft_spacing`` (default 40 mm, finer than the model's 50 mm) around a soft
+  content, whose own vertices lie ``real_content_spacing`` apart (default None: the model's own,
+  100 mm), and MuJoCo's collision tolerance is ``real_ccd_tolerance`` (default None: the
+  model's own, `SceneOptions.ccd_tolerance`). A twin is only a test if its "real" side is at
+  least as converged as the model: the defaults are the model's own meshes or finer (30 mm is
+  within about 5 mm of the 15 mm reference in docs/convergence.md). The
   former default, 20 mm, was the outlier of that study on the earlier E3 layout (22 mm off the
   reference) and biased every calibration against the twin. The time step is ``real_timestep``
   (default None: the model's own default, 1/2400 s around rigid contents and 1/1200 s around a
@@ -87,6 +89,7 @@ class TwinSettings:
     real_spacing: float = 0.03
     real_soft_spacing: float = 0.04
     real_content_spacing: float | None = None  # [m] a soft content's vertices; None: the model's
+    real_ccd_tolerance: float | None = None  # [m] MuJoCo's collision tolerance; None: the model's
     real_timestep: float | None = None  # [s]; None: the model's default for the consignment
     real_soft_timestep: float | None = None  # [s] around a soft content; None: real_timestep
     real_belt_friction: str = "mujoco"  # "mujoco" or "coulomb", see SceneOptions.belt_friction
@@ -177,6 +180,7 @@ def _twin_run(job: TwinJob) -> tuple[Run, float]:
         spacing=s.real_spacing,
         soft_shell_spacing=s.real_soft_spacing,
         **({} if s.real_content_spacing is None else {"soft_spacing": s.real_content_spacing}),
+        ccd_tolerance=s.real_ccd_tolerance,
         speed_factors={d: 1 + rng.uniform(-s.speed_dev, s.speed_dev) for d in drives},
         start_offset=_placement(rig, rng, s),
     )
@@ -402,6 +406,9 @@ class TwinSettingsSection(FileModel):
     )
     real_content_spacing: Annotated[float | None, Number(unit="m", ge=0.003, le=0.3)] = (
         TwinSettings.real_content_spacing
+    )
+    real_ccd_tolerance: Annotated[float | None, Number(unit="m", ge=1e-12, le=1e-3)] = (
+        TwinSettings.real_ccd_tolerance
     )
     real_timestep: Annotated[float | None, Number(unit="s", ge=MIN_TIMESTEP, le=MAX_TIMESTEP)] = (
         TwinSettings.real_timestep
