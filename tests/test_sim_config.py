@@ -531,18 +531,45 @@ def test_impratio_reaches_the_model_and_is_checked():
         SceneOptions(impratio=0.5)
 
 
+def _scene_at_rest(name, options):
+    from parcelfit.sim.mujoco.scene import build_scene
+
+    cons = load_consignment(name)
+    return build_scene(load_rig("E3"), cons, resolve(cons.content_kind, si_values={}), 1, options)
+
+
+def _deepest_shell_content_contact(scene) -> float:
+    """The most negative distance [m] MuJoCo reports between the packaging and its content in
+    the scene's start pose (0 when they do not touch)."""
+    import mujoco
+
+    model = scene.model()
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    packaging = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, "packaging")
+    content_flex = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, "content")
+    content_geom = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "content")
+    overlaps = [
+        float(data.contact.dist[i])
+        for i in range(data.ncon)
+        if (content_geom >= 0 and content_geom in data.contact.geom[i])
+        or (content_flex >= 0 and set(data.contact.flex[i]) == {packaging, content_flex})
+    ]
+    return min(overlaps, default=0.0)
+
+
 def test_ccd_tolerance_is_tight_around_a_soft_content_and_can_be_set():
-    """1e-8 m around the polybag's soft content (MuJoCo's own 1e-6 misjudges a film vertex
-    right above a content vertex by 0.2 mm), MuJoCo's default around a rigid one."""
-    from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
+    """1e-8 m around the polybag's soft content, MuJoCo's default around a rigid one. At
+    MuJoCo's own 1e-6 a vertex of the 50 mm film lying right above one of the 100 mm content's
+    is reported 0.2 mm deep in it at rest, where the two just touch (docs/pb-speed.md)."""
+    from parcelfit.sim.mujoco.scene import SceneOptions
 
     def option(name, **given):
-        rig, cons = load_rig("E3"), load_consignment(name)
-        scene = build_scene(
-            rig, cons, resolve(cons.content_kind, si_values={}), 1, SceneOptions(**given)
-        )
-        return scene.model().opt.ccd_tolerance
+        return _scene_at_rest(name, SceneOptions(**given)).model().opt.ccd_tolerance
 
+    assert _deepest_shell_content_contact(_scene_at_rest("PB", SceneOptions())) > -1e-5
+    loose = _deepest_shell_content_contact(_scene_at_rest("PB", SceneOptions(ccd_tolerance=1e-6)))
+    assert loose == pytest.approx(-1.96e-4, abs=1e-5)
     assert option("PB") == pytest.approx(1e-8)
     assert option("KPBW") == pytest.approx(1e-6)  # MuJoCo's own
     assert option("PB", ccd_tolerance=1e-6) == pytest.approx(1e-6)
@@ -560,33 +587,18 @@ def test_the_shell_touches_its_content_nowhere_at_rest(name, dof):
     would pass the content's edge closer than the contact distance (KP's 5 mm rim around 3 cm,
     the polybag's 12.5 mm around 1.8 cm). A shell that touches pushes on its content from the
     first step and clamps it."""
-    import mujoco
     import numpy as np
 
-    from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
+    from parcelfit.sim.mujoco.scene import SceneOptions
 
-    cons = load_consignment(name)
-    params = resolve(cons.content_kind, si_values={})
-    scene = build_scene(load_rig("E3"), cons, params, 1, SceneOptions(shell_dof=dof))
-    model = scene.model()
-    data = mujoco.MjData(model)
-    mujoco.mj_forward(model, data)
-    packaging = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, "packaging")
-    content_flex = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, "content")
-    content_geom = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "content")
-    overlaps = [
-        float(data.contact.dist[i])
-        for i in range(data.ncon)
-        if (content_geom >= 0 and content_geom in data.contact.geom[i])
-        or (content_flex >= 0 and set(data.contact.flex[i]) == {packaging, content_flex})
-    ]
-    assert min(overlaps, default=0.0) > -1e-5  # [m]; unwidened: KP 0.57, PB 0.35 mm
+    scene = _scene_at_rest(name, SceneOptions(shell_dof=dof))
+    assert _deepest_shell_content_contact(scene) > -1e-5  # [m]; unwidened: KP 0.57, PB 0.35 mm
     # the flat top sheet spans the content's footprint, widened on KP's and PB's axes only
     top = scene.shell.points[scene.shell.top]
     widened = {"BW": (0, 0), "KPBW": (0, 0), "KP": (2.39e-3, 1.55e-3), "PB": (1.13e-3, 1.13e-3)}
     for axis in (0, 1):
         assert np.ptp(top[:, axis]) == pytest.approx(
-            cons.content[axis] + widened[name][axis], abs=2e-5
+            load_consignment(name).content[axis] + widened[name][axis], abs=2e-5
         )
 
 

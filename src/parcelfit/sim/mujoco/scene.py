@@ -72,7 +72,7 @@ class SceneOptions:
     timestep: float | None = None
     spacing: float = 0.03  # shell grid spacing, rigid contents [m]
     # shell grid spacing around a soft content [m]: 50 mm spins or slides every E3 placement
-    # as 30 mm does (20 per setting, with the 100 mm content) at 0.7 times 40 mm's cost
+    # as 30 mm does (20 per setting, with the 100 mm content) at 0.7-0.85 times 40 mm's cost
     # (docs/pb-speed.md)
     soft_shell_spacing: float = 0.05
     # vertex spacing of a soft content [m]: 100 mm (4 x 3 x 2 vertices for the polybag's) keeps
@@ -98,8 +98,9 @@ class SceneOptions:
     # MuJoCo's tolerance of its convex collision [m]; None: 1e-8 around a soft content, MuJoCo's
     # own (1e-6) around a rigid one. At 1e-6 a film vertex lying right above a content vertex
     # (the polybag's 50 mm film over its 100 mm content, at rest) is reported 0.2 mm deep in
-    # it, where the geometry has them just touching; at 1e-8 1e-6 mm (docs/pb-speed.md). The
-    # mailers' scenes keep MuJoCo's default, where the same check finds no such error
+    # it, where the geometry has them just touching; at 1e-8 none deeper than 10 um, at no
+    # measurable cost (docs/pb-speed.md). The mailers' scenes keep MuJoCo's default, where the
+    # same check finds no such error
     ccd_tolerance: float | None = None
     speed_factors: Mapping[str, float] = field(
         default_factory=dict
