@@ -72,7 +72,7 @@ class SceneOptions:
     timestep: float | None = None
     spacing: float = 0.03  # shell grid spacing, rigid contents [m]
     # shell grid spacing around a soft content [m]: 50 mm spins or slides every E3 placement
-    # as 30 mm does (20 per setting, with the 100 mm content) at 0.7-0.85 times 40 mm's cost
+    # as 30 mm does (20 per setting, with the 100 mm content) at 0.7-0.88 times 40 mm's cost
     # (docs/pb-speed.md)
     soft_shell_spacing: float = 0.05
     # vertex spacing of a soft content [m]: 100 mm (4 x 3 x 2 vertices for the polybag's) keeps
