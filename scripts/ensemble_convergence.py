@@ -74,16 +74,11 @@ class _Factory:
     def __call__(self, seed: int) -> MujocoSimulator:
         rig = load_rig(self.rig_arg)
         # the spacing is the shell's around either content: the film of a soft one too
-        content = (
-            {}
-            if self.config.content_spacing is None
-            else {"soft_spacing": self.config.content_spacing}
-        )
         scene = SceneOptions(
             timestep=self.config.timestep,
             spacing=self.config.spacing,
             soft_shell_spacing=self.config.spacing,
-            **content,
+            soft_spacing=self.config.content_spacing or SceneOptions.soft_spacing,
         )
         sim = MujocoSimulator(SimOptions(scene=scene), rigs={rig.name: rig})
         return sim.with_placement(seed)

@@ -179,7 +179,7 @@ def _twin_run(job: TwinJob) -> tuple[Run, float]:
         belt_friction=s.real_belt_friction,
         spacing=s.real_spacing,
         soft_shell_spacing=s.real_soft_spacing,
-        **({} if s.real_content_spacing is None else {"soft_spacing": s.real_content_spacing}),
+        soft_spacing=s.real_content_spacing or SceneOptions.soft_spacing,
         ccd_tolerance=s.real_ccd_tolerance,
         speed_factors={d: 1 + rng.uniform(-s.speed_dev, s.speed_dev) for d in drives},
         start_offset=_placement(rig, rng, s),

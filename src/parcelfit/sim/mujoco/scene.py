@@ -46,6 +46,8 @@ from parcelfit.sim.params import (
 )
 
 SLAB = 0.02  # half-thickness of belt and strip boxes [m]
+# MuJoCo's convex-collision tolerance around a soft content [m] (`SceneOptions.ccd_tolerance`)
+SOFT_CCD_TOLERANCE = 1e-8
 CONTACT_GAP = 0.0005  # clearance between content and shell, and under the parcel at the start [m]
 FREE_PLATE_BETA1 = 4.730  # first free-free beam mode, beta_1 L
 
@@ -261,6 +263,14 @@ class SceneOptions:
         if self.shell_dof == "auto" and consignment.shell is not None:
             return dof, consignment.shell_cells
         return dof, (1, 1, 1)
+
+    def ccd_tolerance_for(self, soft: bool) -> float | None:
+        """MuJoCo's convex-collision tolerance [m] for a scene with a soft (True) or rigid
+        content: ``ccd_tolerance`` if set, else 1e-8 around a soft content and None (MuJoCo's
+        own, 1e-6) around a rigid one."""
+        if self.ccd_tolerance is not None:
+            return self.ccd_tolerance
+        return SOFT_CCD_TOLERANCE if soft else None
 
     def step_for(self, soft: bool, rig: Rig | None = None, own: str | None = None) -> float:
         """The time step [s] of a scene with a soft (True) or rigid content on ``rig``: the
@@ -669,7 +679,7 @@ def build_scene(
             f'solimp="{content_cp.solimp}" rgba="0.6 0.4 0.2 1"/></body>'
         )
 
-    ccd_tolerance = opt.ccd_tolerance if opt.ccd_tolerance is not None else (1e-8 if soft else None)
+    ccd_tolerance = opt.ccd_tolerance_for(soft)
     ccd = "" if ccd_tolerance is None else f' ccd_tolerance="{_f(ccd_tolerance)}"'
     xml = f"""<mujoco model="{rig.name}-{consignment.name}">
 <compiler angle="degree"/>
