@@ -268,8 +268,7 @@ def load_tag_map(path: str | Path) -> TagMap:
 def save_camera(path: str | Path, camera: Camera) -> None:
     """Write ``camera`` into the tag map at ``path`` (keeping its other keys and comments lost)."""
     path = Path(path)
-    doc = yaml.safe_load(path.read_text(encoding="utf-8")) if path.is_file() else {}
-    doc = doc or {}
+    doc = (load_yaml(path) if path.is_file() else None) or {}
     doc["camera"] = {
         "fx": camera.fx,
         "fy": camera.fy,
