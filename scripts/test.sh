@@ -1,7 +1,16 @@
 #!/usr/bin/env bash
-# Install what the tests need and run them: Debian's Chromium (the HTML report is checked in a
-# real headless browser), the Python test extras, then the linter and the test suite.
-# This is the README's test command; CI (.ci/run) runs exactly this.
+# The README's test command; CI (.ci/run) runs exactly this.
+#
+# 1. The base install, as a newcomer gets it: a fresh virtual environment, `pip install -e .`
+#    with no extras, then `parcelfit --help` and the README's main job in its quick form
+#    (`parcelfit demo --quick`). An import that only an extra brings in fails here.
+# 2. Only then the test extras into that same environment: the linter, the dependency check
+#    (deptry: every import in src/ is a declared dependency) and the test suite.
+# Debian's Chromium is installed first where possible (the HTML report is checked in a real
+# headless browser).
+#
+# Arguments are passed to pytest (e.g. `-m "not slow"`, `-n 0`). PARCELFIT_SKIP_BASE_CHECK=1
+# skips step 1's demo (the fresh environment is still made); for quick local runs only.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -18,7 +27,27 @@ if ! command -v chromium >/dev/null 2>&1; then
   fi
 fi
 
-python3 -m pip install -e ".[test]"
-python3 -m ruff check .
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+venv="$work/venv"
+py="$venv/bin/python"
+
+echo "== base install (no extras) into a fresh virtual environment"
+python3 -m venv "$venv"
+"$py" -m pip install -q --upgrade pip
+"$py" -m pip install -q -e .
+"$venv/bin/parcelfit" --help >/dev/null
+echo "parcelfit --help: ok"
+if [ "${PARCELFIT_SKIP_BASE_CHECK:-0}" != 1 ]; then
+  start=$(date +%s)
+  "$venv/bin/parcelfit" demo --quick --no-animation --out "$work/demo"
+  test -s "$work/demo/report.html"
+  echo "parcelfit demo --quick: ok in $(( $(date +%s) - start )) s, report written"
+fi
+
+echo "== test extras, lint, dependency check, tests"
+"$py" -m pip install -q -e ".[test]"
+"$py" -m ruff check .
+"$py" -m deptry src
 # -n auto: one test process per core (xdist); pass -n 0 to run in this process only
-python3 -m pytest -n auto "$@"
+"$py" -m pytest -n auto "$@"

@@ -9,7 +9,6 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Any
 
-import click
 import typer
 from rich.console import Console
 from rich.markup import escape
@@ -27,7 +26,7 @@ class _Commands(TyperGroup):
     """The command group. Errors are handled here, once for every command: a `ParcelfitError`
     is shown as one red message and exits with status 2, without a traceback."""
 
-    def invoke(self, ctx: click.Context) -> Any:
+    def invoke(self, ctx: typer.Context) -> Any:
         try:
             return super().invoke(ctx)
         except ParcelfitError as exc:
