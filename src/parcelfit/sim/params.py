@@ -27,6 +27,10 @@ SOFT = "soft"
 # the slip speed [m/s] below which a static friction offset (mu_s_*) acts by default; the scene's
 # `stick_speed` and a study file's check of `slip_speed` both start from it
 STICK_SPEED = 0.005
+# the per-contact friction law's static and dynamic thresholds [m/s] (sim/mujoco/friction.py):
+# the published solver's defaults
+STATIC_THRESHOLD = 0.001
+DYNAMIC_THRESHOLD = 0.0015
 # the time steps [s] a scene accepts (its ``timestep``, a rig's own step, a study's or a twin's)
 MIN_TIMESTEP, MAX_TIMESTEP = 1e-5, 0.01
 # the values a scene's ``shell_dof`` and ``belt_friction`` take (`SceneOptions`); a study's

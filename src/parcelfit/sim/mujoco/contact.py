@@ -39,6 +39,37 @@ and a coarser step, which could not resolve omega_c, softens the contact to omeg
 (Before, omega was always 0.5 / dt: every halving of the step made impacts twice as fast, and a
 catch on a plate could not converge in the step.) Damping: b = 2 zeta omega (zeta = 1:
 critically damped). The static stiffness K_c is the same for any omega.
+
+**Two laws** (`SceneOptions.contact_law`). What the derivation above leaves out is how the
+contact moves. For one contact of inverse effective mass A on a body of mass m = 1/A, MuJoCo's
+soft constraint behaves (measured: an impact on a plate, `tests/test_sim_config.py`) as a spring
+of the static stiffness K_c with the frequency omega = sqrt(s), i.e. as a penalty spring K_c on
+a body whose inertia along the contact normal is K_c / omega^2 instead of m: the contact adds
+
+    m_added = K_c / omega^2 - m = m d / (1 - d)        [kg, along the normal, per contact]
+
+* ``impedance`` (the law before 2026-12-01): omega fixed (``contact_frequency``, 300 rad/s,
+  below), d from it. With the catalogue's stiffnesses the added mass of a whole face is
+  K_face / omega^2, several kilograms on a parcel of 80-380 g, and that of an edge on a guide
+  plate tens to hundreds of grams: an impact lasts pi / omega = 10 ms whatever the stiffness, and
+  k_CoPa, k_MePa and E_Pa change only the static penetration.
+* ``penalty`` (default): the penalty law of multibody solvers, f = K_c delta + c_c d(delta)/dt
+  per contact, as the published solver's standard contact force (its manual) with linear
+  exponents. MuJoCo reaches it with the smallest impedance it accepts, d = 1e-4
+  (`MIN_ONE_MINUS_D`'s mirror, mjMINIMP): the added mass is 1e-4 m, and
+
+      s = K_c A (1 - d)       (static stiffness K_c, as above)
+      b = c_c A (1 - d)       (damping coefficient c_c [N s/m] of the contact)
+
+  so the impact's frequency is the spring's own, sqrt(K_c A), and a stiffer packaging makes a
+  shorter, harder impact. The damping is a property of the parcel on its face, not of one
+  vertex: the whole face is a Kelvin-Voigt layer of stiffness K_face and damping
+  c_face = 2 zeta sqrt(K_face M) (M the mass that rests on it: the whole parcel on a belt or
+  plate, the content on its packaging), shared by the face's contacts, c_c = c_face / n_face.
+  MuJoCo integrates the constraint implicitly in velocity, so the spring is stable at any step;
+  where omega dt is large the step damps the impact numerically (an undamped drop on a plate at
+  omega dt = 0.35 rebounds with 0.61 of its speed, at 0.09 with 0.87), which is why the run's
+  outcome is checked at half the step (docs/research/contact-law.md).
 """
 
 from __future__ import annotations
@@ -52,6 +83,8 @@ OMEGA_DT = 0.5  # the largest omega * dt used: a coarser step softens the contac
 CONTACT_FREQUENCY = 300.0  # omega_c [rad/s], the contact's own angular frequency (= 0.5 at 1/600 s)
 MIN_ONE_MINUS_D = 1e-4  # MuJoCo's mjMAXIMP = 0.9999
 MAX_ONE_MINUS_D = 0.1  # d >= 0.9, MuJoCo's default impedance
+PENALTY_IMPEDANCE = 1e-4  # MuJoCo's mjMINIMP: the penalty law's d (no added inertia)
+CONTACT_LAWS = ("penalty", "impedance")
 
 
 @dataclass(frozen=True)
@@ -113,6 +146,30 @@ def contact_params(
         stiffness=s,
         damping=2 * zeta * math.sqrt(s),
         impedance=1 - one_minus_d,
+        omega_dt=math.sqrt(s) * timestep,
+    )
+
+
+def penalty_contact(
+    stiffness: float, n_face: int, inverse_mass: float, zeta: float, mass: float, timestep: float
+) -> ContactParams:
+    """solref/solimp of the penalty law (module docstring): a whole face of stiffness
+    ``stiffness`` [N/m] and damping 2 zeta sqrt(stiffness * mass) [N s/m] (``mass`` [kg]: what
+    rests on the face) spread over ``n_face`` contacts of inverse effective mass
+    ``inverse_mass`` [1/kg]; ``timestep`` [s] only reports omega * dt."""
+    if stiffness <= 0 or n_face < 1 or inverse_mass <= 0 or zeta < 0 or mass <= 0 or timestep <= 0:
+        raise ParcelfitError(
+            f"bad contact inputs: stiffness={stiffness} N/m, n_face={n_face}, "
+            f"inverse_mass={inverse_mass} 1/kg, zeta={zeta}, mass={mass} kg, timestep={timestep} s"
+        )
+    one_minus_d = 1.0 - PENALTY_IMPEDANCE
+    k_c = stiffness / n_face
+    c_c = 2.0 * zeta * math.sqrt(stiffness * mass) / n_face
+    s = k_c * inverse_mass * one_minus_d
+    return ContactParams(
+        stiffness=s,
+        damping=c_c * inverse_mass * one_minus_d,
+        impedance=PENALTY_IMPEDANCE,
         omega_dt=math.sqrt(s) * timestep,
     )
 

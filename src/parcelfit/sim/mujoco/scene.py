@@ -29,22 +29,30 @@ import numpy as np
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.sim.mujoco.consignment import Consignment
-from parcelfit.sim.mujoco.contact import ContactParams, contact_params
+from parcelfit.sim.mujoco.contact import (
+    CONTACT_LAWS,
+    ContactParams,
+    contact_params,
+    penalty_contact,
+)
 from parcelfit.sim.mujoco.lumped_mass import compile_model, element_vertex_masses
 from parcelfit.sim.mujoco.rig import Rig, Surface
 from parcelfit.sim.mujoco.shell import ShellMesh, pillow_shell
 from parcelfit.sim.params import (
     BELT_FRICTION,
+    DYNAMIC_THRESHOLD,
     MASS_LUMPINGS,
     MAX_TIMESTEP,
     MIN_TIMESTEP,
     ROLLER_SURFACES,
     SHELL_DIAGONALS,
     SHELL_DOFS,
+    STATIC_THRESHOLD,
     STICK_SPEED,
     shell_cells,
 )
 
+PENALTY_IMPRATIO = 1e4  # the penalty law's friction stiffness (`SceneOptions.impratio`)
 SLAB = 0.02  # half-thickness of belt and strip boxes [m]
 # MuJoCo's convex-collision tolerance around a soft content [m] (`SceneOptions.ccd_tolerance`)
 SOFT_CCD_TOLERANCE = 1e-8
@@ -82,10 +90,15 @@ class SceneOptions:
     # does not (docs/pb-speed.md)
     soft_spacing: float = 0.10
     vertex_radius: float = 0.001
-    # the contacts' own angular frequency [rad/s] (see contact.py): fixed, so that a finer time
+    # how a contact's force follows its penetration (contact.py): "penalty" (the spring and
+    # damper of the catalogue's stiffness, so that a stiffer packaging makes a shorter, harder
+    # impact) or "impedance" (the law before 2026-12-01: every contact at ``contact_frequency``,
+    # the stiffness setting only the static penetration)
+    contact_law: str = "penalty"
+    # "impedance" law only: the contacts' own angular frequency [rad/s] (see contact.py): fixed, so that a finer time
     # step resolves the same impact instead of a faster one
     contact_frequency: float = 300.0
-    # None: every contact has ``contact_frequency``. A whole-face stiffness K_ref [N/m]: a contact
+    # "impedance" law only. None: every contact has ``contact_frequency``. A whole-face stiffness K_ref [N/m]: a contact
     # of stiffness K gets contact_frequency * sqrt(K / K_ref), as a body on a spring does
     # (omega = sqrt(K / m)), so a stiffer contact makes a shorter impact; capped by the step as
     # before (contact.py)
@@ -113,8 +126,15 @@ class SceneOptions:
     membrane_cap: float | None = None
     # MuJoCo's ratio of frictional to normal constraint impedance: at 1 a contact below its
     # friction limit still creeps (a corner held on a guide plate slid at 30-80 mm/s); larger
-    # values make friction as stiff as the normal contact, the sliding limit unchanged
-    impratio: float = 1.0
+    # values make friction as stiff as the normal contact, the sliding limit unchanged. None:
+    # 1e4 with the penalty law, whose contacts take MuJoCo's smallest impedance (at 1 their
+    # friction rows are as soft: a KP/BW pushed at half its weight with mu_s 0.6 slid off at
+    # once; at 100 it creeps 0.03 mm/s, at 1e3 and more it holds), 1 with the impedance law
+    impratio: float | None = None
+    # MuJoCo's friction cone ("elliptic" or "pyramidal") and its no-slip post-solver iterations
+    # (0: off), two of the means against sliding contacts lifting off a belt (docs/research/contact-law.md)
+    cone: str = "elliptic"
+    noslip_iterations: int = 0
     # how MuJoCo moves the shell's vertices: "full" (each vertex its own 3 degrees of freedom) or
     # interpolated from a grid of nodes over the parcel's box, "quadratic" (3 x 3 x 3 nodes) or
     # "trilinear" (2 x 2 x 2); "auto": the consignment's own choice (`Consignment.shell`: the
@@ -157,6 +177,16 @@ class SceneOptions:
     # acts on the slow sliding along a guide plate too)
     stick_speed: float = STICK_SPEED
     slip_speed: float | None = None
+    # how the packaging's friction on belts, strips, rollers and plates is decided: "contact"
+    # (each contact from its own slip: sticking contacts in MuJoCo's solver, sliding ones by hand,
+    # friction.py) or "geom" (the model before 2026-12-01: MuJoCo's friction per surface, its
+    # static offset switched by the parcel centre's speed on belts and by the last step's contacts
+    # on plates, simulator._FrictionSwitch; with it ``belt_friction``, ``stick_speed`` and
+    # ``slip_speed`` apply)
+    friction: str = "contact"
+    # the "contact" law's static and dynamic thresholds [m/s] (the published solver's defaults)
+    static_threshold: float = STATIC_THRESHOLD
+    dynamic_threshold: float = DYNAMIC_THRESHOLD
     # a time step [s] for runs on particular rigs, by rig name (e.g. {"E1": 1/4800}: the transfer
     # onto E1's fast belt converges more slowly than the rest, docs/transit-convergence.md); it
     # overrides ``timestep`` and the shell's default on those rigs
@@ -178,6 +208,10 @@ class SceneOptions:
             raise ParcelfitError(
                 "contact_frequency_stiffness must be positive [N/m] or None, got "
                 f"{self.contact_frequency_stiffness}"
+            )
+        if self.contact_law not in CONTACT_LAWS:
+            raise ParcelfitError(
+                f"unknown contact_law {self.contact_law!r}", fix=f"use one of {list(CONTACT_LAWS)}"
             )
         if self.shell_dof not in SHELL_DOFS:
             raise ParcelfitError(
@@ -213,7 +247,28 @@ class SceneOptions:
                 f"slip_speed must exceed stick_speed ({self.stick_speed} m/s) or be None, "
                 f"got {self.slip_speed}"
             )
-        if not self.impratio >= 1:
+        if self.friction not in ("contact", "geom"):
+            raise ParcelfitError(
+                f"unknown friction {self.friction!r}", fix="use contact or geom"
+            )
+        if not 0 < self.static_threshold < self.dynamic_threshold:
+            raise ParcelfitError(
+                "the friction thresholds must satisfy 0 < static_threshold < dynamic_threshold "
+                f"[m/s], got {self.static_threshold} and {self.dynamic_threshold}"
+            )
+        if self.friction == "contact" and self.belt_friction != "mujoco":
+            raise ParcelfitError(
+                "belt_friction applies to friction=geom only",
+                fix="set friction=geom to use belt_friction=coulomb",
+            )
+        if self.cone not in ("elliptic", "pyramidal"):
+            raise ParcelfitError(f"cone must be elliptic or pyramidal, got {self.cone!r}")
+        if not (float(self.noslip_iterations).is_integer() and 0 <= self.noslip_iterations <= 1000):
+            raise ParcelfitError(
+                f"noslip_iterations must be a whole number from 0 to 1000, got {self.noslip_iterations}"
+            )
+        object.__setattr__(self, "noslip_iterations", int(self.noslip_iterations))
+        if self.impratio is not None and not self.impratio >= 1:
             raise ParcelfitError(f"impratio must be at least 1, got {self.impratio}")
         if self.ccd_tolerance is not None and not self.ccd_tolerance > 0:
             raise ParcelfitError(
@@ -232,6 +287,13 @@ class SceneOptions:
                 "film mesh spacing around a soft content must lie in [5, 200] mm, got "
                 f"{self.soft_shell_spacing * 1e3:g} mm"
             )
+
+    def impratio_for(self) -> float:
+        """MuJoCo's impratio of this scene: ``impratio`` if set, else 1e4 with the penalty
+        contact law and 1 with the impedance law."""
+        if self.impratio is not None:
+            return self.impratio
+        return PENALTY_IMPRATIO if self.contact_law == "penalty" else 1.0
 
     def frequency_for(self, stiffness: float) -> float:
         """The angular frequency [rad/s] of a contact whose whole-face stiffness is ``stiffness``
@@ -568,21 +630,25 @@ def build_scene(
     dt = opt.step_for(soft, rig, consignment.shell)
 
     # --- contact parameters (effective inverse mass of a flex contact: see contact.py) ------------
-    def contact(pair: str, other_inverse_mass: float = 0.0) -> ContactParams:
-        # a flex vertex (1/m_v) against a static surface or the content (its inverse mass)
+    def contact(pair: str, resting: float, other_inverse_mass: float = 0.0) -> ContactParams:
+        # a flex vertex (1/m_v) against a static surface or the content (its inverse mass);
+        # ``resting`` [kg]: the mass that rests on the face (the penalty law's damping)
         k = p[f"k_{pair}"]
         inverse_mass = 1 / m_v + other_inverse_mass
+        if opt.contact_law == "penalty":
+            return penalty_contact(k, n_face, inverse_mass, p[f"zeta_{pair}"], resting, dt)
         return contact_params(
             k, n_face, inverse_mass, p[f"zeta_{pair}"], dt, frequency=opt.frequency_for(k)
         )
 
-    belt_cp, metal_cp = contact("BePa"), contact("MePa")
+    belt_cp = contact("BePa", consignment.mass)
+    metal_cp = contact("MePa", consignment.mass)
     if soft:
         counts = [max(2, round(s / opt.soft_spacing) + 1) for s in (cL, cW)] + [2]
         m_cv = m_co / (counts[0] * counts[1] * counts[2])
-        content_cp = contact("CoPa", 1 / m_cv)
+        content_cp = contact("CoPa", m_co, 1 / m_cv)
     else:
-        content_cp = contact("CoPa", 1 / m_co)
+        content_cp = contact("CoPa", m_co, 1 / m_co)
 
     # --- rig ------------------------------------------------------------------------------------
     body: list[str] = []
@@ -683,8 +749,9 @@ def build_scene(
     ccd = "" if ccd_tolerance is None else f' ccd_tolerance="{_f(ccd_tolerance)}"'
     xml = f"""<mujoco model="{rig.name}-{consignment.name}">
 <compiler angle="degree"/>
-<option timestep="{_f(dt)}" integrator="discrete" solver="{opt.solver}" cone="elliptic"
-        impratio="{_f(opt.impratio)}" iterations="{opt.iterations}" tolerance="{_f(opt.tolerance)}"{ccd}/>
+<option timestep="{_f(dt)}" integrator="discrete" solver="{opt.solver}" cone="{opt.cone}"
+        impratio="{_f(opt.impratio_for())}" iterations="{opt.iterations}" tolerance="{_f(opt.tolerance)}"
+        noslip_iterations="{opt.noslip_iterations}"{ccd}/>
 <size memory="256M"/>
 <visual><global offwidth="1280" offheight="720"/></visual>
 <worldbody>

@@ -53,7 +53,7 @@ import numpy as np
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import Run, TestCase, Trajectory
 from parcelfit.sim.mujoco.consignment import Consignment, load_consignment
-from parcelfit.sim.mujoco.coulomb import CoulombBelts
+from parcelfit.sim.mujoco.friction import Stepper
 from parcelfit.sim.mujoco.mjlog import CountedWarnings
 from parcelfit.sim.mujoco.rig import Barrier, Rig, Surface, load_rig
 from parcelfit.sim.mujoco.scene import Scene, SceneOptions, build_scene
@@ -233,10 +233,12 @@ class MujocoSimulator:
         beams = [_Beam(b) for b in rig.barriers]
         _set_velocity(model, data, np.asarray(scene.start_velocity))
 
-        friction = _FrictionSwitch(
-            model, scene, rig, params, opt.scene.stick_speed, opt.scene.slip_speed
+        stepper = Stepper(model, data, scene, params, opt.scene)
+        friction = (
+            _FrictionSwitch(model, scene, rig, params, opt.scene.stick_speed, opt.scene.slip_speed)
+            if opt.scene.friction == "geom"
+            else None
         )
-        coulomb = CoulombBelts(model, data, scene) if opt.scene.belt_friction == "coulomb" else None
         duration = opt.duration if opt.duration is not None else rig.end.duration
         n_steps = round(duration / dt)
         every = max(1, round(1.0 / (opt.sample_rate * dt)))
@@ -314,11 +316,10 @@ class MujocoSimulator:
                         "energy blow-up (parcel faster than 20 m/s)",
                     )
                     break
-                friction.update(model, data, c, speed_vec)
+                if friction is not None:
+                    friction.update(model, data, c, speed_vec)
             prev_c = c.copy()
-            if coulomb is not None:
-                coulomb.apply(model, data)
-            mujoco.mj_step(model, data)
+            stepper.step()
             step += 1
         wall = time.perf_counter() - t_wall
         transit = (
@@ -330,6 +331,7 @@ class MujocoSimulator:
             "simulated_time": float(data.time),
             "steps_per_second": step / wall if wall > 0 else float("nan"),
             "barrier_times": tuple(crossed),
+            **stepper.diagnostics(),
             # MuJoCo flags a step whose effective-inertia (M + K for flexes) solve is singular or
             # under-converged with mjWARN_INERTIA; it prints the first only, but counts them all
             "under_converged_steps": int(data.warning[mujoco.mjtWarning.mjWARN_INERTIA].number),

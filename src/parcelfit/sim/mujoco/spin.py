@@ -46,7 +46,7 @@ import numpy as np
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.sim.mujoco.consignment import Consignment
-from parcelfit.sim.mujoco.coulomb import CoulombBelts
+from parcelfit.sim.mujoco.friction import Stepper
 from parcelfit.sim.mujoco.indentation import plate_geoms, plate_rig
 from parcelfit.sim.mujoco.mjlog import CountedWarnings
 from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
@@ -131,16 +131,7 @@ def _settled(
     model = scene.model()
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
-    coulomb = (
-        CoulombBelts(model, data, scene)
-        if (options or SceneOptions()).belt_friction == "coulomb"
-        else None
-    )
-
-    def step() -> None:
-        if coulomb is not None:
-            coulomb.apply(model, data)
-        mujoco.mj_step(model, data)
+    step = Stepper(model, data, scene, full, options or SceneOptions()).step
 
     for _ in range(round(settle / model.opt.timestep)):
         step()
