@@ -38,6 +38,7 @@ import numpy as np
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import TestCase
 from parcelfit.sim.mujoco import MujocoSimulator, SimOptions, load_consignment, load_rig
+from parcelfit.sim.mujoco.friction import Stepper
 from parcelfit.sim.mujoco.scene import scene_options
 
 CAP = 50  # MuJoCo's mjMAXCONPAIR: contacts kept per colliding pair (geom-flex, body-flex)
@@ -152,12 +153,13 @@ def main(argv: list[str] | None = None) -> int:
     face = np.asarray(shell.bottom_face)
     sheet = set(shell.triangles[shell.bottom_triangles].ravel()) - set(shell.seam) - set(face)
     rim = np.array(sorted(sheet), dtype=int)
-    # the simulator owns its stepping loop; wrapping MuJoCo's step function in this process is
-    # the one way to look at every step of exactly that loop without changing it
-    step, state = mujoco.mj_step, {"next": args.t0}
+    # the simulator owns its stepping loop; wrapping its stepper in this process is the one way
+    # to look at every step of exactly that loop without changing it
+    step, state = Stepper.step, {"next": args.t0}
 
-    def traced_step(model: mujoco.MjModel, data: mujoco.MjData) -> None:
-        step(model, data)
+    def traced_step(stepper: Stepper) -> None:
+        step(stepper)
+        model, data = stepper.model, stepper.data
         if "start" not in state:
             state["start"] = _line_angle(model, data)
         if args.t0 <= data.time <= args.t1 and data.time >= state["next"] - 1e-9:
@@ -166,11 +168,11 @@ def main(argv: list[str] | None = None) -> int:
             if args.bottom:
                 print(_bottom(model, data, face, rim), flush=True)
 
-    mujoco.mj_step = traced_step
+    Stepper.step = traced_step  # type: ignore[method-assign]
     try:
         result = sim.run({}, case)
     finally:
-        mujoco.mj_step = step
+        Stepper.step = step  # type: ignore[method-assign]
     run = result.run
     if run is None:
         print(f"run failed: {result.status.value} ({result.diagnostics.get('message')})")

@@ -54,16 +54,8 @@ def draw_rig(ax: Axes, rig: Rig) -> None:
         c = np.asarray(s.centre)
         colour = _COLOURS.get(s.material, "grey")
         if s.type == "strips":
-            k = int(s.extra["count"])
-            for i in range(k):
-                _rect(
-                    ax,
-                    c + (i - (k - 1) / 2) * s.extra["pitch"] * n,
-                    s.length,
-                    s.extra["strip_width"],
-                    s.heading,
-                    colour,
-                )
+            for _name, centre, length, width in s.parts():
+                _rect(ax, centre, length, width, s.heading, colour)
         elif s.type == "rollers":
             rows, cols = int(s.extra["rows"]), int(s.extra["columns"])
             h = s.heading + s.extra["swivel"]

@@ -18,6 +18,11 @@ A rig file (YAML, SI units, angles in degrees counter-clockwise from the rig's x
         drive: main               # key into speeds
         nose_radius: 0.02         # optional (belt, strips): radius of the end drums [m]; 0 (the
                                   # default): square ends
+        # end_heading: 0          # optional (strips): the strips' downstream ends lie on a line
+                                  # at this heading [deg] through the set's end centre, each
+                                  # strip as much longer or shorter as that takes (a staggered
+                                  # merge whose ends run along the next belt); absent: all
+                                  # strips as long as ``length``, their ends square to them
         # strips:  count, strip_width, pitch           (type strips)
         # rollers: rows, columns, radius, roller_width, swivel [deg]   (type rollers)
     walls:                        # vertical plates (guide plates, side walls)
@@ -52,6 +57,7 @@ after it interrupts the second light barrier, or after ``duration`` seconds of s
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -106,11 +112,45 @@ class Surface:
     extra: Mapping[str, float]
     # radius of the drums a belt or strip runs round at its two ends [m]; 0: square ends
     nose_radius: float = 0.0
+    # strips only: the heading [deg] of the line the strips' downstream ends lie on (None: each
+    # strip ``length`` long, the ends square to the heading)
+    end_heading: float | None = None
 
     def unit(self) -> np.ndarray:
         """Unit vector of the heading (direction of motion) in the plane."""
         a = np.radians(self.heading)
         return np.array([np.cos(a), np.sin(a)])
+
+    def parts(self) -> list[tuple[str, np.ndarray, float, float]]:
+        """The belt, or each strip of a strip set, as (name, centre [m], length [m], width [m]);
+        none for a roller matrix. With ``end_heading`` a strip at offset o across the set keeps
+        its upstream end and ends on the line at that heading through the set's end centre:
+        it is s = -o (n x e) / (u x e) longer (u the heading, n across it, e the end line)."""
+        u = self.unit()
+        n = np.array([-u[1], u[0]])
+        c = np.asarray(self.centre, dtype=float)
+        if self.type == "belt":
+            return [(self.name, c, self.length, self.width)]
+        if self.type != "strips":
+            return []
+        k = int(self.extra["count"])
+        out = []
+        for i in range(k):
+            offset = (i - (k - 1) / 2) * self.extra["pitch"]
+            extra = 0.0
+            if self.end_heading is not None:
+                a = np.radians(self.end_heading)
+                e = np.array([np.cos(a), np.sin(a)])
+                extra = -offset * float(n[0] * e[1] - n[1] * e[0]) / float(u[0] * e[1] - u[1] * e[0])
+            out.append(
+                (
+                    f"{self.name}_{i}",
+                    c + offset * n + extra / 2 * u,
+                    self.length + extra,
+                    self.extra["strip_width"],
+                )
+            )
+        return out
 
 
 @dataclass(frozen=True)
@@ -296,6 +336,7 @@ class SurfaceEntry(FileModel):
     roller_width: _Extra = None
     swivel: _Extra = None
     nose_radius: Annotated[float, Number(unit="m", ge=0.0, le=MAX_NOSE_RADIUS)] = 0.0
+    end_heading: Annotated[float | None, Number(unit="deg", ge=-360, le=360)] = None
 
     @classmethod
     def allowed_keys(cls, data: Mapping[Any, Any]) -> list[str]:
@@ -306,13 +347,36 @@ class SurfaceEntry(FileModel):
             stype = _SURFACE_TYPE.check(data["type"])
         except ParcelfitError as exc:
             raise ParcelfitError(exc.message, where="type", fix=exc.fix) from None
-        return [*_COMMON, *_SURFACE_KEYS[stype], *(("nose_radius",) if stype in _NOSED else ())]
+        return [
+            *_COMMON,
+            *_SURFACE_KEYS[stype],
+            *(("nose_radius",) if stype in _NOSED else ()),
+            *(("end_heading",) if stype == "strips" else ()),
+        ]
 
     @model_validator(mode="after")
     def _type_keys(self) -> SurfaceEntry:
         for key in _SURFACE_KEYS[self.type]:
             if getattr(self, key) is None:
                 raise ParcelfitError(f"missing required key {key!r}", fix=f"add `{key}:`")
+        if self.end_heading is not None:
+            a, b = math.radians(self.heading), math.radians(self.end_heading)
+            if abs(math.sin(b - a)) < math.sin(math.radians(5)):
+                raise ParcelfitError(
+                    f"end_heading {self.end_heading:g} deg runs (nearly) along the strips "
+                    f"(heading {self.heading:g} deg): their ends cannot lie on it",
+                    where="end_heading",
+                    fix="give the heading of the belt the strips end at, e.g. 0",
+                )
+            half = (self.count - 1) / 2 * self.pitch  # type: ignore[operator]
+            stretch = half * abs(math.cos(b - a) / math.sin(b - a))
+            if self.length - stretch <= 2 * self.nose_radius + 0.05:
+                raise ParcelfitError(
+                    f"with end_heading {self.end_heading:g} deg the outermost strip would be "
+                    f"{self.length - stretch:.3f} m long",
+                    where="end_heading",
+                    fix="make the strips longer or the end line less oblique",
+                )
         if 2 * self.nose_radius >= self.length:
             raise ParcelfitError(
                 f"nose_radius {self.nose_radius:g} m leaves no flat top on a surface "
@@ -457,6 +521,7 @@ def parse_rig(doc: Any, file: str) -> Rig:
                 drive=s.drive,
                 extra=s.extra,
                 nose_radius=s.nose_radius,
+                end_heading=s.end_heading,
             )
             for s in f.surfaces
         ),

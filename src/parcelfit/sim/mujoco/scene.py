@@ -485,26 +485,12 @@ def _surface_geoms(
         f'contype="1" conaffinity="1" condim="{condim}"'
     )
     xml, geoms = [], []
-    if s.type == "belt":
-        parts = [(s.name, np.array(s.centre), s.width)]
-    elif s.type == "strips":
-        k = int(s.extra["count"])
-        parts = [
-            (
-                f"{s.name}_{i}",
-                np.array(s.centre) + (i - (k - 1) / 2) * s.extra["pitch"] * n,
-                s.extra["strip_width"],
-            )
-            for i in range(k)
-        ]
-    else:
-        parts = []
     r, velocity = s.nose_radius, (speed * u[0], speed * u[1], 0.0)
-    for name, c, width in parts:
+    for name, c, length, width in s.parts():
         # with rounded ends the flat top stops r short of each end, where the belt runs round a
         # drum of radius r whose top is level with it
         xml.append(
-            f'<geom name="{name}" type="box" size="{_f(s.length / 2 - r)} {_f(width / 2)} {SLAB}" '
+            f'<geom name="{name}" type="box" size="{_f(length / 2 - r)} {_f(width / 2)} {SLAB}" '
             f'pos="{_f(c[0])} {_f(c[1])} {_f(s.top - SLAB)}" quat="{_quat(s.heading)}" '
             f'surfacevel="{_f(speed)} 0 0 0 0 0" rgba="0.25 0.25 0.3 1" {common}/>'
         )
@@ -512,7 +498,7 @@ def _surface_geoms(
         if r <= 0:
             continue
         for end, sign in (("tail", -1), ("head", 1)):
-            p = c + sign * (s.length / 2 - r) * u
+            p = c + sign * (length / 2 - r) * u
             # a cylinder across the heading that turns with the belt: speed along u on top, up
             # at the tail, down at the head. Coulomb belt friction takes the material velocity at
             # each contact point (`SurfaceGeom.velocity_at`); the static friction switch compares
