@@ -104,6 +104,26 @@ class AnalyticSimulator:
         )
 
 
+class BrokenSimulator:
+    """A simulator whose every run raises (a broken set-up: a missing solver, an expired
+    licence); its message spans two lines. With FAKE_SIM_FIXED set it runs as `make`'s."""
+
+    def with_placement(self, seed: int | None) -> BrokenSimulator:
+        return self
+
+    def run(
+        self, params: Mapping[str, float], case: TestCase, run_id: str | None = None
+    ) -> SimResult:
+        if os.environ.get("FAKE_SIM_FIXED"):
+            return make().run(params, case, run_id)
+        raise RuntimeError("solver licence expired\nask the licence server's admin")
+
+
+def make_broken() -> BrokenSimulator:
+    """Factory named in study files (tests.fake_sim:make_broken)."""
+    return BrokenSimulator()
+
+
 def make() -> AnalyticSimulator:
     """Factory named in study files (tests.fake_sim:make)."""
     return AnalyticSimulator(

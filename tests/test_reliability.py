@@ -778,3 +778,92 @@ def test_calibrate_on_a_read_only_folder_says_so_and_keeps_the_results(
     assert result.exit_code == 2
     assert "read-only" in result.output and "results already in it are intact" in result.output
     assert "move" not in result.output and (out / "study.sqlite").read_bytes() == before
+
+
+# -- runtime failures: nothing hangs, nothing is lost, one clear line (issue 51) --------------
+
+
+def _error_lines(result) -> list[str]:
+    """The non-empty lines a command printed on stderr."""
+    return [line for line in result.stderr.splitlines() if line.strip()]
+
+
+def test_a_study_whose_every_simulation_fails_stops_after_8_and_quotes_the_first(
+    tmp_path, monkeypatch
+):
+    study = write_study(
+        tmp_path,
+        simulator={"backend": "python", "factory": "tests.fake_sim:make_broken"},
+        executor={"kind": "serial"},
+        initial=8,
+        batch_size=4,
+        budget=12,
+        validation={},
+    )
+    out = tmp_path / "o"
+    result = runner.invoke(app, ["calibrate", str(study), "--out", str(out)])
+    assert result.exit_code == 2, result.output
+    assert _error_lines(result) == [
+        f"error: {out}: 8 simulations in a row failed, so the run stopped early; the first: "
+        "failed: RuntimeError: solver licence expired ask the licence server's admin Fix: fix "
+        "the cause the first failure names, then rerun the same command to resume (what "
+        "failed is run again while nothing has succeeded yet)"
+    ]
+    info = study_status(out)
+    assert info["by_status"] == {"failed": 8} and info["stop_reason"] is None
+    assert not (out / "results.json").exists()
+    # the set-up fixed, the same command runs the 8 failed simulations again and goes on
+    monkeypatch.setenv("FAKE_SIM_FIXED", "1")
+    result = runner.invoke(app, ["calibrate", str(study), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    info = study_status(out)
+    assert info["evaluations"] == 12 and "failed" not in info["by_status"]
+    assert info["stop_reason"] == "budget spent"
+
+
+def test_a_small_study_whose_every_simulation_fails_stops_at_its_budget(tmp_path):
+    study = write_study(
+        tmp_path,
+        simulator={"backend": "python", "factory": "tests.fake_sim:make_broken"},
+        executor={"kind": "serial"},
+        initial=4,
+        batch_size=2,
+        budget=5,
+        validation={},
+    )
+    with pytest.raises(ParcelfitError, match=r"^\S+: 5 simulations in a row failed"):
+        Calibration(load_study(study), tmp_path / "o").run()
+    assert study_status(tmp_path / "o")["by_status"] == {"failed": 5}
+
+
+def test_a_screen_whose_every_simulation_fails_stops_after_8_and_resumes_once_fixed(
+    tmp_path, monkeypatch
+):
+    args = _screen(
+        tmp_path,
+        simulator={"backend": "python", "factory": "tests.fake_sim:make_broken"},
+        parameters={
+            "mu_d_BePa": [0.3, 0.58],
+            "mu_d_MePa": [0.15, 0.35],
+            "E_Pa": [400, 1600],
+            "mu_d_PaPa": [0.2, 0.6],
+        },
+        executor="serial",
+    )
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2, result.output
+    (line,) = _error_lines(result)
+    assert line.startswith(
+        f"error: {tmp_path / 'o'}: 8 simulations in a row failed, so the run stopped early; the "
+        "first: failed: RuntimeError: solver licence expired"
+    )
+    store = Store(tmp_path / "o" / "screen.sqlite", readonly=True)
+    statuses = [e.status for e in store.evaluations("screen")]
+    store.close()
+    assert len(statuses) == 16 and statuses.count("failed") == 8  # a 2^4 design, 8 tried
+    monkeypatch.setenv("FAKE_SIM_FIXED", "1")
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    store = Store(tmp_path / "o" / "screen.sqlite", readonly=True)
+    assert {e.status for e in store.evaluations("screen")} == {"ok"}
+    store.close()

@@ -11,7 +11,13 @@ cases are simulated one after the other, and the validation passes when every ca
 
 Failed, unstable and timed-out simulations, and runs whose trajectory misses the regions of
 interest, are stored with their status and told to the optimiser as failures (it penalises them
-with the worst cost seen); they never stop the loop and count against the budget.
+with the worst cost seen) and count against the budget. One failure never stops the loop, but
+`FAILURES_IN_A_ROW` fitting evaluations failing one after the other do (`FailureStreak`): a
+study whose every simulation fails (a broken simulator or solver set-up, parameter ranges
+where nothing runs) stops with a `ParcelfitError` quoting the first failure, instead of
+spending its budget. A rerun of a study that has no successful evaluation yet runs its failed
+ones again (the cause may have been fixed); otherwise it continues, the optimiser knowing the
+failures.
 
 Iterations are numbered one way in the store, the progress, `study_status` and the report:
 0 is the initial design, k >= 1 the k-th batch the optimiser chose; the validation "after
@@ -86,6 +92,7 @@ from parcelfit.study.store import (
 )
 from parcelfit.study.studyfile import CaseSpec, Study
 
+FAILURES_IN_A_ROW = 8  # evaluations failing one after the other that stop a study or a screen
 LOST_WORKER_MESSAGES = (
     "worker failed: BrokenProcessPool",
     "dask task failed: FutureCancelledError",
@@ -108,6 +115,53 @@ class CalibrationResult:
     stop_reason: str
     folder: Path
     figures: tuple[Path, ...] = ()
+
+
+class FailureStreak:
+    """Counts simulations (or evaluations) that failed one after the other, in the order they
+    arrive, and stops the run when ``limit`` of them did.
+
+    Why 8: a batch is 4 by default, so 8 is two whole batches, or the whole initial design of
+    the default study, without a single success; a fixed set-up problem (a simulator that
+    raises, a solver that is missing) fails every simulation in about the same time as one, so
+    stopping there costs minutes, while a study whose optimiser merely strays into a region
+    where the physics breaks down has successes between its failures. ``what`` names the counted
+    things in the message, ``where`` is the folder the message names. With ``until_success``
+    only a streak before the first success counts (a screening design, whose failures after a
+    success are a property of its fixed design, not of the set-up)."""
+
+    def __init__(
+        self, limit: int, where: Path, what: str = "simulations", *, until_success: bool = False
+    ) -> None:
+        self.limit = max(1, limit)
+        self.where = where
+        self.what = what
+        self.until_success = until_success
+        self.succeeded = False
+        self.ids: list[int] = []  # store rows of the current streak, in arrival order
+        self.first: str | None = None  # the first failure's message, one line
+
+    def add(self, row_id: int, status: str, message: str | None) -> None:
+        """Count one finished evaluation (store row ``row_id``): ``status`` ok ends a streak;
+        any other status extends it, and reaching the limit raises the `ParcelfitError` that
+        stops the run, quoting the streak's first failure."""
+        if status == "ok":
+            self.ids, self.first, self.succeeded = [], None, True
+            return
+        if self.until_success and self.succeeded:
+            return
+        if not self.ids:
+            text = " ".join(str(message or "").split()) or "no message"
+            self.first = f"{status}: {text if len(text) <= 300 else text[:297] + '...'}"
+        self.ids.append(row_id)
+        if len(self.ids) >= self.limit:
+            raise ParcelfitError(
+                f"{len(self.ids)} {self.what} in a row failed, so the run stopped early; "
+                f"the first: {self.first}",
+                file=self.where,
+                fix="fix the cause the first failure names, then rerun the same command to "
+                "resume (what failed is run again while nothing has succeeded yet)",
+            )
 
 
 def study_record(study: Study, sampler: Sampler) -> StudyRecord:
@@ -137,7 +191,9 @@ def record_result(
     w_xy: float = 1.0,
     w_theta: float = 1.0,
 ) -> dict[str, Any]:
-    """Write a simulated run next to the store, compute its cost parts, and store the result."""
+    """Write a simulated run next to the store, compute its cost parts, and store the result;
+    returns the stored fields (status, cost [-], DTW distances [m], [rad], transit time [s],
+    run file) and ``message``, why it failed (None if it did not say)."""
     status = result.status.value
     out: dict[str, Any] = {
         "status": status,
@@ -159,7 +215,7 @@ def record_result(
         except ParcelfitError as exc:
             out["status"], details["message"] = "failed", f"cost not computable: {exc}"
     store.finish(row.id, wall_time=result.wall_time, details=details, **out)
-    return out
+    return {**out, "message": details.get("message")}
 
 
 def study_executor(
@@ -241,6 +297,11 @@ class Calibration:
         self._validations: dict[int, ValidationRecord] = {}  # by store row id
         self._opened: _Opened | None = None
         self._closed = False
+        self._streak = FailureStreak(
+            min(FAILURES_IN_A_ROW, study.budget),
+            self.folder,
+            "evaluations" if study.joint else "simulations",
+        )
 
     @cached_property
     def bo(self) -> Sampler:
@@ -431,7 +492,7 @@ class Calibration:
             )
         )
 
-    def _record_fit(self, row: Evaluation, result: SimResult) -> None:
+    def _record_fit(self, row: Evaluation, result: SimResult) -> dict[str, Any]:
         outcome = record_result(
             self.store,
             self.folder,
@@ -442,6 +503,7 @@ class Calibration:
             self.study.w_theta,
         )
         self.bo.tell(row.params, outcome["cost"] if outcome["status"] == "ok" else None)
+        return outcome
 
     def _run_rows(self, rows: list[Evaluation], executor: Executor) -> None:
         if self.study.joint:
@@ -453,9 +515,10 @@ class Calibration:
         ]
         remaining = len(rows)
         for i, result in executor.simulate(self.simulator, tasks):
-            self._record_fit(rows[i], result)
+            outcome = self._record_fit(rows[i], result)
             remaining -= 1
-            self._report(rows[i].iteration, remaining, f"{result.status.value}: {tasks[i].run_id}")
+            self._report(rows[i].iteration, remaining, f"{outcome['status']}: {tasks[i].run_id}")
+            self._streak.add(rows[i].id, outcome["status"], outcome["message"])
 
     def _run_joint_rows(self, rows: list[Evaluation], executor: Executor) -> None:
         """Evaluate rows of a joint or ensemble study: every case (and placement) of every row
@@ -493,6 +556,7 @@ class Calibration:
                 remaining,
                 f"{out['status']}: fit-{row.iteration:03d}-{row.slot:02d} ({per_row} simulations)",
             )
+            self._streak.add(row.id, out["status"], out["details"].get("message"))
 
     def _validate(self, iteration: int, executor: Executor) -> bool | None:
         best = self.bo.recommend()
@@ -913,6 +977,11 @@ class Calibration:
             if r.status == "failed"
             and str(r.details.get("message", "")).startswith(LOST_WORKER_MESSAGES)
         ]
+        fits = self.store.evaluations("fit")
+        if not any(r.status == "ok" for r in fits):
+            # nothing has succeeded yet: what failed is run again (a set-up problem that
+            # stopped the study, see FailureStreak, may have been fixed since)
+            lost += [r.id for r in fits if r.status != "pending" and r.id not in lost]
         if lost:
             self.store.reopen(lost)
         rows = self.store.evaluations("fit")
