@@ -867,3 +867,44 @@ def test_a_screen_whose_every_simulation_fails_stops_after_8_and_resumes_once_fi
     store = Store(tmp_path / "o" / "screen.sqlite", readonly=True)
     assert {e.status for e in store.evaluations("screen")} == {"ok"}
     store.close()
+
+
+def _long(tmp_path, kind: str) -> Path:
+    """A path the file system refuses: one 300-character name, or 20 names of 250 characters
+    (5000 characters in all, beyond PATH_MAX)."""
+    return tmp_path / ("a" * 300 if kind == "name" else "/".join(["b" * 250] * 20))
+
+
+LONG_PATHS = {
+    "calibrate --out": lambda p, long: [*_study(p, budget=8)[:2], "--out", str(long)],
+    "reference": lambda p, long: ["reference", str(long)],
+    "stats --out": lambda p, long: ["stats", _dataset(p)[1], "--out", str(long)],
+    "screen --out": lambda p, long: [*_screen(p)[:2], "--out", str(long)],
+    "simulate --out": lambda p, long: ["simulate", "--out", str(long / "run.csv")],
+}
+
+
+@pytest.mark.parametrize("kind", ["name", "total"])
+@pytest.mark.parametrize("command", list(LONG_PATHS))
+def test_a_path_too_long_for_the_system_is_one_clear_line(tmp_path, command, kind):
+    long = _long(tmp_path, kind)
+    t0 = time.perf_counter()
+    result = runner.invoke(app, LONG_PATHS[command](tmp_path, long))
+    assert result.exit_code == 2, (result.output, result.exception)
+    assert time.perf_counter() - t0 < 5  # refused before simulating (simulate: 11 s before)
+    (line,) = _error_lines(result)
+    head, _, rest = line.partition(": the path is too long for the file system: ")
+    name = "a" * 300 if kind == "name" else "b" * 250
+    assert head.startswith(f"error: {str(tmp_path)[:20]}") and "..." in head, line
+    assert len(head) <= len("error: ") + 80  # the path shortened to fit one line
+    assert re.fullmatch(
+        rf"\d+ characters with a name of {len(name)}, where names may have at most \d+ and "
+        r"paths \d+ Fix: choose a shorter path: a folder nearer the root, or shorter names",
+        rest,
+    ), line
+
+
+def test_a_calibration_into_a_path_too_long_raises_a_parcelfit_error(tmp_path):
+    study = load_study(write_study(tmp_path, budget=8))
+    with pytest.raises(ParcelfitError, match="the path is too long for the file system"):
+        Calibration(study, _long(tmp_path, "name")).run()

@@ -7,7 +7,7 @@ import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, NoReturn
 
 import typer
 from rich.console import Console
@@ -18,22 +18,33 @@ from rich.text import Text
 from typer.core import TyperGroup
 
 from parcelfit import __version__
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, os_error
 from parcelfit.progress import ProgressCallback, ProgressEvent
 
 
 class _Commands(TyperGroup):
-    """The command group. Errors are handled here, once for every command: a `ParcelfitError`
+    """The command group. Errors are handled here, once for every command: a `ParcelfitError`,
+    and an `OSError` a user can fix (a path too long, a full disk: `parcelfit.errors.os_error`),
     is shown as one red message and exits with status 2, without a traceback."""
 
     def invoke(self, ctx: typer.Context) -> Any:
         try:
             return super().invoke(ctx)
         except ParcelfitError as exc:
-            # user text (paths, keys, run ids) is printed as it is, never read as Rich markup
-            message = Text.assemble(("error:", "bold red"), " ", str(exc))
-            err_console.print(message, highlight=False, soft_wrap=True)
-            raise typer.Exit(code=2) from None
+            _fail(exc)
+        except OSError as exc:  # a path too long, a full disk: wherever a file is written
+            error = os_error(exc)
+            if error is None:
+                raise
+            _fail(error)
+
+
+def _fail(exc: ParcelfitError) -> NoReturn:
+    """Print ``exc`` as one red line on stderr and exit with status 2."""
+    # user text (paths, keys, run ids) is printed as it is, never read as Rich markup
+    message = Text.assemble(("error:", "bold red"), " ", str(exc))
+    err_console.print(message, highlight=False, soft_wrap=True)
+    raise typer.Exit(code=2) from None
 
 
 app = typer.Typer(
@@ -48,6 +59,14 @@ app = typer.Typer(
 )
 console = Console()
 err_console = Console(stderr=True)
+
+
+def _check_paths(*paths: Path | None) -> None:
+    """Refuse at once, before any work, an output path the file system cannot hold (too long:
+    the command group shows the error as one line); the paths are not created."""
+    for path in paths:
+        if path is not None:
+            path.exists()  # raises OSError (ENAMETOOLONG) for a path too long
 
 
 def _progress(status: Any, prefix: str) -> ProgressCallback:
@@ -324,6 +343,7 @@ def synth(
     from parcelfit.synth import load_twin_spec, make_twin_dataset
 
     _check_executor(executor, ("serial", "local"))
+    _check_paths(out)
     tw = load_twin_spec(spec)
     total = len(tw.cases) * tw.settings.runs
     serial = executor == "serial" or (executor is None and workers <= 1)
@@ -618,6 +638,7 @@ def simulate(
     from parcelfit.sim.mujoco import MujocoSimulator, load_consignment, load_rig
     from parcelfit.sim.params import parse_assignments
 
+    _check_paths(out, video)  # before a simulation of minutes
     rig_obj = load_rig(rig)
     cons = load_consignment(consignment)
     params = cons.parameter_values(user_values=parse_assignments(set_ or []))

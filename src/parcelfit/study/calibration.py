@@ -42,7 +42,7 @@ from typing import Any
 
 from filelock import FileLock
 
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, os_error
 from parcelfit.metrics import ReferenceSelection, calibration_cost, select_reference
 from parcelfit.metrics.reference import adjusted_reference
 from parcelfit.optimize.sampler import Sampler, make_sampler
@@ -331,7 +331,7 @@ class Calibration:
         try:
             self.folder.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
-            raise ParcelfitError(
+            raise os_error(exc, self.folder) or ParcelfitError(
                 f"cannot create the study folder ({exc.strerror or exc})",
                 file=self.folder,
                 fix="choose a writable output folder",
