@@ -15,6 +15,7 @@ from typer.testing import CliRunner
 
 from parcelfit import ParcelfitError
 from parcelfit.cli import app
+from parcelfit.errors import short_path
 from parcelfit.report import build_report
 from parcelfit.report.browser import chromium, inspect_page
 from parcelfit.report.html import CONTENT_SECURITY_POLICY
@@ -22,7 +23,7 @@ from parcelfit.study.calibration import Calibration, study_status
 from parcelfit.study.store import Store
 from parcelfit.study.studyfile import load_study
 
-from .helpers import write_study
+from .helpers import finished_fits, write_study
 
 runner = CliRunner()
 NEED_BROWSER = os.environ.get("CI") == "true"
@@ -908,3 +909,94 @@ def test_a_calibration_into_a_path_too_long_raises_a_parcelfit_error(tmp_path):
     study = load_study(write_study(tmp_path, budget=8))
     with pytest.raises(ParcelfitError, match="the path is too long for the file system"):
         Calibration(study, _long(tmp_path, "name")).run()
+
+
+class _FillingDisk:
+    """An SQLite connection whose disk fills up: the write of the result after ``room`` stored
+    ones fails as SQLite fails it, at the UPDATE (``where`` "update") or at its COMMIT."""
+
+    def __init__(self, db, room: int, where: str) -> None:
+        self._db, self.room, self.where = db, room, where
+        self.results = 0  # UPDATEs of a result seen
+        self.failing = False
+
+    def execute(self, sql, *args):
+        if sql.startswith("UPDATE evaluations SET status = ?"):
+            self.results += 1
+            self.failing = self.results > self.room
+            if self.failing and self.where == "update":
+                raise sqlite3.OperationalError("database or disk is full")
+        if sql == "COMMIT" and self.failing:
+            raise sqlite3.OperationalError("database or disk is full")
+        return self._db.execute(sql, *args)
+
+    def __getattr__(self, name):
+        return getattr(self._db, name)
+
+
+@pytest.mark.parametrize("where", ["update", "commit"])
+def test_a_full_disk_while_storing_a_result_is_one_line_and_loses_nothing(
+    tmp_path, monkeypatch, where
+):
+    study = write_study(tmp_path, executor={"kind": "serial"}, budget=12, validation={})
+    out = tmp_path / "o"
+    opened = Store.__init__
+
+    def filling(self, path, **kw):
+        opened(self, path, **kw)
+        if not self.readonly:
+            self._db = _FillingDisk(self._db, 5, where)
+
+    monkeypatch.setattr(Store, "__init__", filling)
+    result = runner.invoke(app, ["calibrate", str(study), "--out", str(out)])
+    assert result.exit_code == 2, (result.output, result.exception)
+    assert _error_lines(result) == [
+        f"error: {short_path(out / 'study.sqlite')}: disk full while writing study.sqlite; "
+        "nothing stored "
+        "is lost Fix: free space on its disk, then rerun the same command: it resumes"
+    ]
+    monkeypatch.setattr(Store, "__init__", opened)
+    info = study_status(out)
+    assert info["by_status"] == {"ok": 5, "pending": 3}  # the sixth result rolled back
+    kept = finished_fits(out / "study.sqlite")
+    result = runner.invoke(app, ["calibrate", str(study), "--out", str(out)])  # space freed
+    assert result.exit_code == 0, result.output
+    after = finished_fits(out / "study.sqlite")
+    assert len(after) == 12 and all(after[k] == v for k, v in kept.items())
+
+
+def test_a_full_disk_while_writing_a_run_file_is_one_line_and_loses_nothing(tmp_path, monkeypatch):
+    import errno
+
+    import pandas as pd
+
+    study = write_study(tmp_path, executor={"kind": "serial"}, budget=12, validation={})
+    out = tmp_path / "o"
+    to_csv, written = pd.DataFrame.to_csv, []
+
+    def filling(self, path, *args, **kw):
+        if len(written) == 5:
+            Path(path).write_text("half")  # what a full disk leaves: part of a file
+            raise OSError(errno.ENOSPC, "No space left on device")
+        written.append(path)
+        return to_csv(self, path, *args, **kw)
+
+    monkeypatch.setattr(pd.DataFrame, "to_csv", filling)
+    result = runner.invoke(app, ["calibrate", str(study), "--out", str(out)])
+    assert result.exit_code == 2, (result.output, result.exception)
+    assert _error_lines(result) == [
+        f"error: {short_path(out / 'runs' / 'fit-000-05.csv')}: disk full while writing "
+        "fit-000-05.csv; "
+        "nothing stored is lost Fix: free space on its disk, then rerun the same command: it "
+        "resumes"
+    ]
+    assert sorted(p.name for p in (out / "runs").iterdir()) == [
+        f"fit-000-0{k}.csv" for k in range(5)
+    ]  # no half-written file
+    monkeypatch.setattr(pd.DataFrame, "to_csv", to_csv)
+    assert study_status(out)["by_status"] == {"ok": 5, "pending": 3}
+    result = runner.invoke(app, ["calibrate", str(study), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    info = study_status(out)
+    assert info["evaluations"] == 12 and not {"pending", "failed"} & set(info["by_status"])
+    assert all((out / "runs" / f"fit-000-0{k}.csv").stat().st_size > 100 for k in range(8))

@@ -649,11 +649,14 @@ class Calibration:
     def run(self) -> CalibrationResult:
         """Run (or resume) the study until validation passes or the budget is spent; then write
         the results (`parcelfit.study.results`), the study figures and the key frames, close
-        the store and release the folder. Opens the study first (`prepare`)."""
+        the store and release the folder. Opens the study first (`prepare`). A full disk stops
+        it with a `ParcelfitError` (what is stored stays; a rerun resumes)."""
         try:
             self.prepare()
             result = self._run()
             result = self._finish(result)
+        except OSError as exc:  # a full disk while writing a run or the results
+            raise os_error(exc, resumes=True) or exc from None
         finally:
             self.close()
         return result

@@ -59,7 +59,7 @@ from parcelfit.doe import (
     select_parameters,
     with_centre_points,
 )
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, os_error
 from parcelfit.figures import save_figure
 from parcelfit.metrics import select_reference
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
@@ -424,6 +424,8 @@ def run_screen(
                 )
             )
             factors = survivors
+    except OSError as exc:  # a full disk while writing a run or a table
+        raise os_error(exc, resumes=True) or exc from None
     finally:
         runner.close()
         store.close()
