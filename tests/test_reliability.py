@@ -1000,3 +1000,45 @@ def test_a_full_disk_while_writing_a_run_file_is_one_line_and_loses_nothing(tmp_
     info = study_status(out)
     assert info["evaluations"] == 12 and not {"pending", "failed"} & set(info["by_status"])
     assert all((out / "runs" / f"fit-000-0{k}.csv").stat().st_size > 100 for k in range(8))
+
+
+def _snapshot(folder: Path) -> dict[str, bytes]:
+    """Every file under ``folder`` (relative path: bytes), but the folder's lock."""
+    return {
+        p.relative_to(folder).as_posix(): p.read_bytes()
+        for p in sorted(folder.rglob("*"))
+        if p.is_file() and p.name != ".parcelfit.lock"
+    }
+
+
+def test_a_study_folder_without_its_store_is_refused_until_restart(tmp_path):
+    study = write_study(tmp_path, executor={"kind": "serial"}, budget=8, validation={})
+    out = tmp_path / "o"
+    args = ["calibrate", str(study), "--out", str(out)]
+    assert runner.invoke(app, args).exit_code == 0
+    first = _snapshot(out)
+    assert "results.json" in first and any(n.startswith("runs/") for n in first)
+    (out / "study.sqlite").unlink()  # deleted by hand, the outputs left
+    del first["study.sqlite"]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2, result.output
+    assert _error_lines(result) == [
+        f"error: {out}: this folder holds an earlier study's outputs (runs/, results.json, "
+        "figures/) but no study.sqlite, so a new study would overwrite them Fix: restore "
+        "study.sqlite to resume that study, use a new output folder, or rerun with --restart "
+        "to move them into earlier-TIME/ in the folder and start afresh"
+    ]
+    assert _snapshot(out) == first  # nothing written, nothing overwritten
+    result = runner.invoke(app, [*args, "--restart"])
+    assert result.exit_code == 0, result.output
+    (earlier,) = out.glob("earlier-*")
+    assert re.fullmatch(r"earlier-\d{8}-\d{6}", earlier.name)
+    said = "".join(result.output.split())  # unwrapped
+    assert "".join(f"the earlier study's outputs are in {earlier}".split()) in said
+    assert _snapshot(earlier) == first  # moved as they were
+    assert study_status(out)["evaluations"] == 8  # a new study, run in full
+    # --restart on a folder with its store sets the store aside as well
+    again = runner.invoke(app, [*args, "--restart"])
+    assert again.exit_code == 0, again.output
+    assert len(list(out.glob("earlier-*/study.sqlite"))) == 1
+    assert study_status(out)["evaluations"] == 8

@@ -892,6 +892,14 @@ def calibrate(
             "`report --animation` embeds it)."
         ),
     ] = False,
+    restart: Annotated[
+        bool,
+        typer.Option(
+            "--restart",
+            help="Start the study afresh: first move the folder's study.sqlite, runs/, "
+            "results.json and figures/ into earlier-TIME/ inside it.",
+        ),
+    ] = False,
 ) -> None:
     """Calibrate by batch Bayesian optimisation; rerunning the same command resumes the study
     (a finished study only has its results, figures and key frames written again)."""
@@ -911,8 +919,12 @@ def calibrate(
             workers=workers,
             progress=progress,
             animation=animation,
+            restart=restart,
         )
-        return calibration.run()
+        result = calibration.run()
+        if calibration.set_aside is not None:
+            console.print(Text(f"the earlier study's outputs are in {calibration.set_aside}"))
+        return result
 
     _calibrate_live(run, study.name, folder)
 

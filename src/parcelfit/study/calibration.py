@@ -34,6 +34,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
+import time
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from functools import cached_property
@@ -115,6 +117,58 @@ class CalibrationResult:
     stop_reason: str
     folder: Path
     figures: tuple[Path, ...] = ()
+
+
+STUDY_OUTPUTS = ("runs", "results.json", "figures", "report.html")  # beside the store
+
+
+def _outputs(folder: Path) -> list[str]:
+    """The outputs of a study that ``folder`` holds (a folder counts when not empty)."""
+    return [
+        name
+        for name in STUDY_OUTPUTS
+        if (folder / name).is_file()
+        or ((folder / name).is_dir() and any((folder / name).iterdir()))
+    ]
+
+
+def refuse_orphaned_outputs(folder: Path) -> None:
+    """Refuse to start a new study in a folder that holds an earlier study's outputs (run
+    files, results, figures) without its store (``study.sqlite`` deleted or moved): the new
+    study would overwrite them."""
+    if (folder / STORE_FILE).exists():
+        return
+    found = _outputs(folder)
+    if found:
+        names = ", ".join(f"{n}/" if (folder / n).is_dir() else n for n in found)
+        raise ParcelfitError(
+            f"this folder holds an earlier study's outputs ({names}) but no {STORE_FILE}, so a "
+            "new study would overwrite them",
+            file=folder,
+            fix=f"restore {STORE_FILE} to resume that study, use a new output folder, or "
+            "rerun with --restart to move them into earlier-TIME/ in the folder and start afresh",
+        )
+
+
+def set_aside_outputs(folder: Path) -> Path | None:
+    """Move a study's store and outputs out of the way, into ``folder/earlier-YYYYmmdd-HHMMSS``
+    (the UTC time; a new name if taken), so that a new study starts afresh; returns that
+    folder (None when there was nothing to move). Call with the folder locked."""
+    names = [
+        n for n in (STORE_FILE, f"{STORE_FILE}-wal", f"{STORE_FILE}-shm") if (folder / n).exists()
+    ] + _outputs(folder)
+    if not names:
+        return None
+    stamp = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
+    target = folder / f"earlier-{stamp}"
+    k = 1
+    while target.exists():
+        k += 1
+        target = folder / f"earlier-{stamp}-{k}"
+    target.mkdir()
+    for name in names:  # the store's WAL files with it: they hold its latest transactions
+        os.replace(folder / name, target / name)
+    return target
 
 
 class FailureStreak:
@@ -260,6 +314,11 @@ class Calibration:
     calibrated set at the ends of the open intervals on each to say which case would help most
     (`parcelfit.study.joint`); all three go into ``results.json``.
 
+    A folder holding an earlier study's outputs (``runs/``, ``results.json``, ``figures/``)
+    without its store is refused (`refuse_orphaned_outputs`); with ``restart`` the folder's
+    store and outputs are first moved into ``earlier-TIME/`` in it (`set_aside_outputs`,
+    ``set_aside`` says where) and the study starts afresh.
+
     Constructing one keeps its inputs and touches nothing: `run` opens the folder, reads the
     data and builds the simulator (through `prepare`), runs the study and closes the folder.
     ``store``, ``reference``, ``val_reference`` and ``simulator`` exist from `prepare` on; a
@@ -278,9 +337,12 @@ class Calibration:
         key_frames: bool = True,
         animation: bool = False,
         advice: bool = True,
+        restart: bool = False,
     ) -> None:
         self.study = study
         self.advice = advice
+        self.restart = restart
+        self.set_aside: Path | None = None  # where a restart moved the earlier outputs
         self.folder = Path(folder)
         self.figures = figures
         self.key_frames = key_frames
@@ -317,7 +379,8 @@ class Calibration:
         )
 
     def prepare(self) -> None:
-        """Open the study: create and lock the folder (until `close`), open its store and
+        """Open the study: create and lock the folder (until `close`), set an earlier study
+        aside (``restart``) or refuse its outputs without a store, open its store and
         refuse one made from a different study file, record the study and where it came from,
         load the dataset, select the fitting and validation reference runs and build the
         simulator. `run` calls it; once prepared, calling it again does nothing. Whatever it
@@ -339,6 +402,10 @@ class Calibration:
         lock = lock_folder(self.folder, "a calibration")  # released by close()
         store = None
         try:
+            if self.restart:
+                self.set_aside = set_aside_outputs(self.folder)
+            else:
+                refuse_orphaned_outputs(self.folder)
             store = Store(self.folder / STORE_FILE)
             known = store.get_meta("fingerprint")
             if known is not None and known != study.fingerprint:
@@ -972,6 +1039,8 @@ class Calibration:
 
     def _run(self) -> CalibrationResult:
         study = self.study
+        if self.set_aside is not None:
+            self._report(-1, 0, f"restarted: the earlier study is in {self.set_aside.name}/")
         # evaluations an earlier version stored as failed because their worker or the Dask
         # scheduler was lost (not because the simulation failed) are run again
         lost = [
