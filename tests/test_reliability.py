@@ -3,6 +3,7 @@ read-only study stores."""
 
 import contextlib
 import html
+import json
 import os
 import re
 import sqlite3
@@ -1042,3 +1043,43 @@ def test_a_study_folder_without_its_store_is_refused_until_restart(tmp_path):
     assert again.exit_code == 0, again.output
     assert len(list(out.glob("earlier-*/study.sqlite"))) == 1
     assert study_status(out)["evaluations"] == 8
+
+
+@pytest.mark.slow
+def test_a_killed_precision_check_keeps_every_finished_simulation(tmp_path):
+    import signal
+    import subprocess
+    import sys
+
+    from parcelfit.study.precision_check import run_precision_check
+
+    from .helpers import ROOT
+    from .test_precision import _two_rig_study
+
+    study = _two_rig_study(tmp_path)
+    out = tmp_path / "check"
+    log = tmp_path / "log"
+    env = {**os.environ, "FAKE_SIM_DELAY": "0.3", "FAKE_SIM_LOG": str(log)}
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH")) if p)
+    cmd = [sys.executable, "-m", "parcelfit", "precision", str(study), "--placements", "2"]
+    proc = subprocess.Popen(
+        [*cmd, "--executor", "serial", "--out", str(out)],
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        deadline = time.time() + 60
+        while time.time() < deadline and len(log.read_text().split() if log.exists() else []) < 5:
+            time.sleep(0.01)
+        os.kill(proc.pid, signal.SIGKILL)  # 4 simulations finished, the fifth running
+    finally:
+        proc.kill()
+        proc.wait()
+    started = log.read_text().split()
+    assert len(started) == 5
+    kept = json.loads((out / "statistics.json").read_text())["runs"]
+    assert sorted(kept) == sorted(started[:4])  # each finished one kept, not one of 20 lost
+    resumed = run_precision_check(study, out, placements=2, executor="serial")
+    assert resumed.simulated_now == resumed.simulations - 4  # the four are reused
