@@ -104,6 +104,31 @@ class AnalyticSimulator:
         )
 
 
+PARENT_MARK: str | None = None  # set by a test in its own process: a forked worker has it too
+
+
+class EnsembleProbe(AnalyticSimulator):
+    """Stands in for the MuJoCo simulator of `parcelfit simulate --repeat`: every run appends
+    its process id and the `PARENT_MARK` it sees to the file ``probe``."""
+
+    def __init__(self, probe: str, placement_seed: int | None = None) -> None:
+        super().__init__(placement_seed=placement_seed)
+        self.probe = probe
+
+    def with_options(self, **_: object) -> EnsembleProbe:
+        return self
+
+    def with_placement(self, seed: int | None) -> EnsembleProbe:
+        return EnsembleProbe(self.probe, seed)
+
+    def run(
+        self, params: Mapping[str, float], case: TestCase, run_id: str | None = None
+    ) -> SimResult:
+        with open(self.probe, "a") as fh:
+            fh.write(f"{os.getpid()} {PARENT_MARK}\n")
+        return super().run(params, case, run_id)
+
+
 class BrokenSimulator:
     """A simulator whose every run raises (a broken set-up: a missing solver, an expired
     licence); its message spans two lines. With FAKE_SIM_FIXED set it runs as `make`'s."""

@@ -1083,3 +1083,30 @@ def test_a_killed_precision_check_keeps_every_finished_simulation(tmp_path):
     assert sorted(kept) == sorted(started[:4])  # each finished one kept, not one of 20 lost
     resumed = run_precision_check(study, out, placements=2, executor="serial")
     assert resumed.simulated_now == resumed.simulations - 4  # the four are reused
+
+
+@pytest.mark.slow
+def test_simulate_repeat_runs_its_placements_in_spawned_workers(tmp_path, monkeypatch):
+    """MuJoCo and numba are not fork-safe: the ensemble runs in the project's spawned worker
+    processes (`parcelfit.sim.executors`), never in forks of the command's process."""
+    import parcelfit.sim.factory
+    import parcelfit.sim.mujoco
+
+    from . import fake_sim
+
+    probe = tmp_path / "probe"
+    monkeypatch.setattr(fake_sim, "PARENT_MARK", "inherited")
+    monkeypatch.setattr(parcelfit.sim.mujoco, "MujocoSimulator", fake_sim.EnsembleProbe)
+    monkeypatch.setattr(
+        parcelfit.sim.factory, "make_simulator", lambda config: fake_sim.EnsembleProbe(str(probe))
+    )
+    out = tmp_path / "run.csv"
+    args = ["simulate", "--rig", "E1", "--consignment", "BW", "--out", str(out)]
+    result = runner.invoke(app, [*args, "--repeat", "3", "--workers", "2"])
+    assert result.exit_code == 0, (result.output, result.exception)
+    runs = [line.split() for line in probe.read_text().splitlines()]
+    assert len(runs) == 3 and all(pid != str(os.getpid()) for pid, _ in runs)
+    assert {mark for _, mark in runs} == {"None"}  # a fresh interpreter, not a fork
+    table = (tmp_path / "run-ensemble.csv").read_text().splitlines()
+    assert [line.split(",")[:2] for line in table[1:]] == [["0", "ok"], ["1", "ok"], ["2", "ok"]]
+    assert all((tmp_path / f"run-s{seed}.csv").is_file() for seed in range(3))

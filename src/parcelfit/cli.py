@@ -715,43 +715,50 @@ def _shell_text(dof: str, cells: tuple[int, int, int]) -> str:
 def _simulate_ensemble(
     sim: Any, params: dict[str, float], case: Any, first: int, n: int, workers: int, out: Path
 ) -> None:
-    """Simulate ``n`` placements from seed ``first``, write runs and a summary (see simulate)."""
+    """Simulate ``n`` placements from seed ``first``, write runs and a summary (see simulate).
+    The placements run in the project's executor (`parcelfit.sim.executors`: spawned worker
+    processes that die with this one, as MuJoCo and numba are not fork-safe; in this process
+    for one worker); each run is written the moment it arrives."""
     import math
-    from concurrent.futures import ProcessPoolExecutor
 
     import pandas as pd
     from rich.markup import escape
 
     from parcelfit.runs import write_trajectory
-    from parcelfit.sim.ensemble import simulate_ensemble, summarise
+    from parcelfit.sim.ensemble import member_of, summarise
+    from parcelfit.sim.executors import Task, local_executor, serial_executor
+    from parcelfit.study.joint import simulate_items
 
     seeds = list(range(first, first + n))
     rows: list[dict[str, Any]] = []
-
-    def done(m: Any) -> None:
-        if m.run is not None:
-            write_trajectory(m.run.trajectory, out.with_name(f"{out.stem}-s{m.seed}{out.suffix}"))
-        rows.append(
-            {
-                "seed": m.seed,
-                "status": m.status.value,
-                "transit_time_s": m.transit_time,
-                "rotation_deg": None if m.rotation is None else math.degrees(m.rotation),
-                "outcome": m.outcome,
-                "wall_time_s": m.wall_time,
-            }
-        )
-        progress.advance(task)
-
-    with Progress(
-        *Progress.get_default_columns(), TimeElapsedColumn(), console=console
-    ) as progress:
+    members: list[Any] = []
+    items = [(Task(params, case, f"{out.stem}-s{seed}"), seed) for seed in seeds]
+    executor = local_executor(min(workers, n)) if workers > 1 else serial_executor()
+    with (
+        executor,
+        Progress(*Progress.get_default_columns(), TimeElapsedColumn(), console=console) as progress,
+    ):
         task = progress.add_task(f"{case.label}: {n} placements", total=n)
-        if workers > 1:
-            with ProcessPoolExecutor(min(workers, n)) as ex:
-                members = simulate_ensemble(sim.with_placement, params, case, seeds, ex, done)
-        else:
-            members = simulate_ensemble(sim.with_placement, params, case, seeds, None, done)
+        for i, result in simulate_items(executor, sim, items):
+            m = member_of(seeds[i], result)
+            if m.run is not None:
+                write_trajectory(
+                    m.run.trajectory, out.with_name(f"{out.stem}-s{m.seed}{out.suffix}")
+                )
+            members.append(m)
+            rows.append(
+                {
+                    "seed": m.seed,
+                    "status": m.status.value,
+                    "transit_time_s": m.transit_time,
+                    "rotation_deg": None if m.rotation is None else math.degrees(m.rotation),
+                    "outcome": m.outcome,
+                    "wall_time_s": m.wall_time,
+                }
+            )
+            progress.advance(task)
+    members.sort(key=lambda m: m.seed)
+    rows.sort(key=lambda r: r["seed"])
     table_path = out.with_name(f"{out.stem}-ensemble.csv")
     out.parent.mkdir(parents=True, exist_ok=True)
     pd.DataFrame(rows).to_csv(table_path, index=False)
