@@ -1110,3 +1110,19 @@ def test_simulate_repeat_runs_its_placements_in_spawned_workers(tmp_path, monkey
     table = (tmp_path / "run-ensemble.csv").read_text().splitlines()
     assert [line.split(",")[:2] for line in table[1:]] == [["0", "ok"], ["1", "ok"], ["2", "ok"]]
     assert all((tmp_path / f"run-s{seed}.csv").is_file() for seed in range(3))
+
+
+def test_an_error_during_the_live_display_starts_on_a_line_of_its_own(tmp_path):
+    """Outside a terminal (a log, CI) the calibration's live table is printed when it stops,
+    without ending its last line: the error must not run onto it."""
+    study = write_study(
+        tmp_path,
+        simulator={"backend": "python", "factory": "tests.fake_sim:make_broken"},
+        executor={"kind": "serial"},
+        budget=8,
+        validation={},
+    )
+    result = runner.invoke(app, ["calibrate", str(study), "--out", str(tmp_path / "o")])
+    assert result.exit_code == 2
+    lines = result.output.splitlines()  # stdout and stderr as a log holding both has them
+    assert lines[-1].startswith("error: ") and lines[-2].startswith("└") and lines[-2][-1] == "┘"

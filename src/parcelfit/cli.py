@@ -969,20 +969,25 @@ def _calibrate_live(run: Callable[[ProgressCallback], Any], name: str, folder: P
         table.add_row("last event", Text(p.message))
         return table
 
-    with Live(render(), console=console, refresh_per_second=4, transient=False) as live:
+    live = Live(render(), console=console, refresh_per_second=4, transient=False)
+    try:
+        with live:
 
-        def update(p: ProgressEvent) -> None:
-            state["p"] = p
-            live.update(render())
-            if not console.is_terminal:  # a log or CI: the table shows only at the end
-                best = "-" if p.best_cost is None else f"{p.best_cost:.4g}"
-                console.print(
-                    Text(f"{p.message} ({p.done}/{p.total} evaluations, best cost {best})"),
-                    highlight=False,
-                )
+            def update(p: ProgressEvent) -> None:
+                state["p"] = p
+                live.update(render())
+                if not console.is_terminal:  # a log or CI: the table shows only at the end
+                    best = "-" if p.best_cost is None else f"{p.best_cost:.4g}"
+                    console.print(
+                        Text(f"{p.message} ({p.done}/{p.total} evaluations, best cost {best})"),
+                        highlight=False,
+                    )
 
-        result = run(update)
-    console.print()
+            result = run(update)
+    finally:
+        # the display stopped; outside a terminal its last line is left open: end it, so that
+        # what follows (an error too) starts on a line of its own
+        console.print()
     console.print(
         Text.assemble(
             (result.stop_reason, "bold"),
