@@ -4,7 +4,10 @@ A parcel moves along x at the speed setting's belt speed; its lateral drift is s
 mu_d_BePa and its turn by mu_d_MePa, so both are identifiable from the trajectory. Environment:
 FAKE_SIM_DELAY [s] sleeps per simulation (for kill tests); FAKE_SIM_LOG appends each run id
 when its simulation starts; FAKE_SIM_CRASH_ONCE names a file: the first simulation to find it
-missing creates it and kills its own process with SIGKILL (a worker dying mid-simulation).
+missing creates it and kills its own process with SIGKILL (a worker dying mid-simulation);
+FAKE_SIM_HANG names a file: a simulation finding it there runs for 120 s more;
+FAKE_SIM_INTERRUPT_AFTER=k: the simulation after the k-th one started in a process raises
+KeyboardInterrupt (Ctrl-C; count in `started`).
 """
 
 from __future__ import annotations
@@ -58,6 +61,9 @@ def placement(seed: int) -> tuple[float, float, float]:
     )
 
 
+started = 0  # simulations started in this process
+
+
 class AnalyticSimulator:
     """Implements the Simulator protocol with `trajectory`."""
 
@@ -86,6 +92,14 @@ class AnalyticSimulator:
                 fh.write(f"{run_id}\n")
         if self.delay:
             time.sleep(self.delay)
+        global started
+        started += 1
+        limit = int(os.environ.get("FAKE_SIM_INTERRUPT_AFTER", "1000000000"))
+        if started > limit:
+            raise KeyboardInterrupt  # Ctrl-C during a simulation in this process (serial)
+        hang = os.environ.get("FAKE_SIM_HANG")
+        if hang and os.path.exists(hang):  # a simulation of minutes, started after the file
+            time.sleep(120)
         if self.crash_once:
             try:
                 open(self.crash_once, "x").close()

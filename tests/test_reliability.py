@@ -1126,3 +1126,89 @@ def test_an_error_during_the_live_display_starts_on_a_line_of_its_own(tmp_path):
     assert result.exit_code == 2
     lines = result.output.splitlines()  # stdout and stderr as a log holding both has them
     assert lines[-1].startswith("error: ") and lines[-2].startswith("└") and lines[-2][-1] == "┘"
+
+
+@pytest.mark.slow
+def test_ctrl_c_stops_the_workers_quietly_and_says_how_to_resume(tmp_path):
+    import signal
+    import subprocess
+    import sys
+
+    import psutil
+
+    from .helpers import ROOT
+
+    study = write_study(tmp_path, budget=12, initial=4, batch_size=2, validation={})
+    out, log, hang = tmp_path / "out", tmp_path / "log", tmp_path / "hang"
+    env = {
+        **os.environ,
+        "FAKE_SIM_DELAY": "0.2",
+        "FAKE_SIM_LOG": str(log),
+        "FAKE_SIM_HANG": str(hang),
+    }
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH")) if p)
+    calibrate = [sys.executable, "-m", "parcelfit", "calibrate", str(study), "--out", str(out)]
+    proc = subprocess.Popen(
+        [*calibrate, "--workers", "3"],  # a batch of 2 leaves one worker idle
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,  # its own process group, as a terminal's foreground job
+    )
+    try:
+        deadline = time.time() + 90
+        while len(finished_fits(out / "study.sqlite")) < 4 and time.time() < deadline:
+            time.sleep(0.05)
+        hang.touch()  # from now on a simulation runs for minutes
+        started = len(log.read_text().split())
+        while len(log.read_text().split()) == started and time.time() < deadline:
+            time.sleep(0.05)
+        time.sleep(0.5)
+        workers = [c.pid for c in psutil.Process(proc.pid).children(recursive=True)]
+        t0 = time.time()
+        os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C: the whole foreground process group
+        stdout, stderr = proc.communicate(timeout=60)
+        waited = time.time() - t0
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+    stored = len(finished_fits(out / "study.sqlite"))
+    assert proc.returncode == 130, stderr
+    assert [line for line in stderr.splitlines() if line.strip()] == [
+        f"interrupted: {stored} evaluations stored; rerun the same command to resume"
+    ]
+    assert "Traceback" not in stdout + stderr
+    assert waited < 20  # the simulation running (120 s) was stopped, not waited for
+    assert not _gone(workers, timeout=10)
+    kept = finished_fits(out / "study.sqlite")
+    hang.unlink()
+    done = subprocess.run(calibrate, cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    after = finished_fits(out / "study.sqlite")
+    assert len(after) == 12 and all(after[k] == v for k, v in kept.items())
+
+
+@pytest.mark.parametrize("command", ["calibrate", "screen", "precision"])
+def test_ctrl_c_says_what_each_resumable_command_stored(tmp_path, monkeypatch, command):
+    from . import fake_sim
+    from .test_precision import _two_rig_study
+
+    monkeypatch.setattr(fake_sim, "started", 0)
+    monkeypatch.setenv("FAKE_SIM_INTERRUPT_AFTER", "3")
+    if command == "calibrate":
+        args = [*_study(tmp_path, executor={"kind": "serial"}, validation={})]
+        what = "evaluations"
+    elif command == "screen":
+        args = _screen(tmp_path, executor="serial")
+        what = "simulations"
+    else:
+        args = ["precision", str(_two_rig_study(tmp_path)), "--placements", "2"]
+        args += ["--executor", "serial", "--out", str(tmp_path / "o")]
+        what = "simulations"
+    result = runner.invoke(app, args)
+    assert result.exit_code == 130, (result.output, result.exception)
+    assert _error_lines(result) == [
+        f"interrupted: 3 {what} stored; rerun the same command to resume"
+    ]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import sys
@@ -25,9 +26,12 @@ from parcelfit.progress import ProgressCallback, ProgressEvent
 class _Commands(TyperGroup):
     """The command group. Errors are handled here, once for every command: a `ParcelfitError`,
     and an `OSError` a user can fix (a path too long, a full disk: `parcelfit.errors.os_error`),
-    is shown as one red message and exits with status 2, without a traceback."""
+    is shown as one red message and exits with status 2, without a traceback. Ctrl-C prints
+    one line, for a resumable command (`_resumes`) with what it stored and how to resume, and
+    exits with status 130."""
 
     def invoke(self, ctx: typer.Context) -> Any:
+        _resumable.clear()
         try:
             return super().invoke(ctx)
         except ParcelfitError as exc:
@@ -37,6 +41,44 @@ class _Commands(TyperGroup):
             if error is None:
                 raise
             _fail(error)
+        except KeyboardInterrupt:  # Ctrl-C: the workers are stopped already (Executor.close)
+            stored = _resumable.pop("stored", None)
+            text = "interrupted"
+            if stored is not None:
+                with contextlib.suppress(Exception):  # what is stored, if it can be read
+                    kept = stored()
+                    text += "" if kept is None else f": {kept}"
+                text += "; rerun the same command to resume"
+            err_console.print(Text(text), highlight=False, soft_wrap=True)
+            raise typer.Exit(code=130) from None
+
+
+_resumable: dict[str, Callable[[], str | None]] = {}
+
+
+def _resumes(stored: Callable[[], str | None] = lambda: None) -> None:
+    """Declare the running command resumable: interrupted (Ctrl-C), it says
+    ``interrupted: <stored()>; rerun the same command to resume`` and exits with status 130.
+    ``stored`` words what is kept, e.g. "12 evaluations stored" (None: not counted)."""
+    _resumable["stored"] = stored
+
+
+def _stored(db: Path, kind: str, what: str) -> Callable[[], str]:
+    """How many finished evaluations of ``kind`` the store ``db`` holds, as "N what stored"."""
+
+    def count() -> str:
+        from parcelfit.study.store import Store
+
+        n = 0
+        if db.is_file():
+            store = Store(db, readonly=True)
+            try:
+                n = sum(e.status != "pending" for e in store.evaluations(kind))
+            finally:
+                store.close()
+        return f"{n} {what} stored"
+
+    return count
 
 
 def _fail(exc: ParcelfitError) -> NoReturn:
@@ -229,6 +271,7 @@ def demo(
     if quick and full:
         raise ParcelfitError("--quick and --full exclude each other", fix="choose one")
     _check_executor(executor, ("serial", "local"))
+    _resumes()
     t0 = time.perf_counter()
     d = Demo(
         out,
@@ -344,6 +387,7 @@ def synth(
 
     _check_executor(executor, ("serial", "local"))
     _check_paths(out)
+    _resumes()
     tw = load_twin_spec(spec)
     total = len(tw.cases) * tw.settings.runs
     serial = executor == "serial" or (executor is None and workers <= 1)
@@ -916,6 +960,7 @@ def calibrate(
     _check_executor(executor, ("serial", "local", "dask"))
     study = load_study(study_file)
     folder = out or study_file.parent / study_file.stem
+    _resumes(_stored(folder / "study.sqlite", "fit", "evaluations"))
 
     def run(progress: ProgressCallback) -> Any:
         calibration = Calibration(
@@ -1084,6 +1129,7 @@ def screen(
     _check_executor(executor, ("serial", "local"))
     spec = load_screen(screen_file)
     folder = out or screen_file.parent / screen_file.stem
+    _resumes(_stored(folder / "screen.sqlite", "screen", "simulations"))
     with console.status("screening") as status_line:
         stages, selection = run_screen(
             spec,
@@ -1158,6 +1204,15 @@ def precision(
 
     _check_executor(executor, ("serial", "local"))
     folder = out or study_file.parent / f"{study_file.stem}-precision"
+
+    def stored() -> str:
+        from parcelfit.study.precision_check import STATISTICS_FILE
+
+        cache = folder / STATISTICS_FILE
+        runs = json.loads(cache.read_text(encoding="utf-8"))["runs"] if cache.is_file() else {}
+        return f"{len(runs)} simulations stored"
+
+    _resumes(stored)
     with console.status("precision check") as status_line:
         check = run_precision_check(
             study_file,

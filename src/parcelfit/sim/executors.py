@@ -7,7 +7,8 @@ in study and screen files, ``--executor`` on the command line):
   so a simulator or a twin run can be stepped through in a debugger;
 * ``local`` (default): a ``ProcessPoolExecutor`` with the ``spawn`` start method (MuJoCo and
   numba are not fork-safe), one simulation per core; workers die with the process that started
-  them (`parcelfit.sim.lifetime.die_with_parent`);
+  them (`parcelfit.sim.lifetime.die_with_parent`), leave Ctrl-C to it, and are ended when the
+  executor is closed;
 * ``dask``: ``client.get_executor()`` of a ``distributed.Client`` on a scheduler address.
 
 `Executor.map` submits a batch and yields ``(index, Outcome)`` in the order results arrive, so
@@ -30,6 +31,7 @@ import contextlib
 import inspect
 import multiprocessing
 import os
+import signal
 import threading
 import time
 import traceback
@@ -255,11 +257,28 @@ class Executor:
 
 
 def _shutdown(pool: cf.Executor) -> None:
-    """Shut ``pool`` down without waiting, cancelling what has not started."""
+    """Shut ``pool`` down without waiting, cancelling what has not started; the worker
+    processes of a local pool are ended too (SIGTERM: each kills its external solvers, see
+    `parcelfit.sim.lifetime`), so that a simulation still running (the pool is closed early:
+    an error, Ctrl-C) does not keep this process from exiting until it ends."""
+    workers = list((getattr(pool, "_processes", None) or {}).values())
     try:
         pool.shutdown(wait=False, cancel_futures=True)
     except TypeError:  # Dask's executor cancels on shutdown(wait=False) and has no such option
         pool.shutdown(wait=False)
+    for process in workers:
+        with contextlib.suppress(Exception):  # gone already
+            if process.is_alive():
+                process.terminate()
+
+
+def _local_worker(parent_pid: int) -> None:
+    """Initializer of a local worker process: Ctrl-C (SIGINT, sent to the terminal's whole
+    process group) is left to the parent, which stops the workers itself; and the worker dies
+    with its parent (`parcelfit.sim.lifetime.die_with_parent`)."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    die_with_parent(parent_pid)
 
 
 def serial_executor() -> Executor:
@@ -276,7 +295,7 @@ def local_executor(workers: int | None = None, max_restarts: int = 3) -> Executo
         return cf.ProcessPoolExecutor(
             max_workers=n,
             mp_context=multiprocessing.get_context("spawn"),
-            initializer=die_with_parent,
+            initializer=_local_worker,
             initargs=(os.getpid(),),
         )
 
