@@ -1257,3 +1257,31 @@ def test_a_dask_cluster_left_without_workers_is_reported_not_waited_on(capfd):
     )
     assert waited < 10
     assert "distributed" not in capfd.readouterr().err  # its own log lines are silenced
+
+
+def test_a_full_disk_during_a_precision_check_keeps_what_it_saved(tmp_path, monkeypatch):
+    import errno
+
+    import parcelfit.study.precision_check as check
+
+    from .test_precision import _two_rig_study
+
+    study, out = _two_rig_study(tmp_path), tmp_path / "o"
+    write, saved = check.write_text_atomic, []
+
+    def filling(path, text):
+        if len(saved) == 3:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        saved.append(path)
+        return write(path, text)
+
+    monkeypatch.setattr(check, "write_text_atomic", filling)
+    args = ["precision", str(study), "--placements", "2", "--executor", "serial"]
+    result = runner.invoke(app, [*args, "--out", str(out)])
+    assert result.exit_code == 2, (result.output, result.exception)
+    assert _error_lines(result) == [
+        f"error: {short_path(out / 'statistics.json')}: disk full while writing "
+        "statistics.json; nothing stored is lost Fix: free space on its disk, then rerun the "
+        "same command: it resumes"
+    ]
+    assert len(json.loads((out / "statistics.json").read_text())["runs"]) == 3

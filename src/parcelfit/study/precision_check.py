@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from parcelfit.atomic import write_text_atomic
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, os_error
 from parcelfit.metrics.comparison import Comparison
 from parcelfit.metrics.transit_adjustment import (
     TransitAdjustment,
@@ -324,7 +324,10 @@ def run_precision_check(
         )
 
     def save() -> None:
-        write_text_atomic(cache_file, json.dumps({"setup": setup, "runs": cache}))
+        try:
+            write_text_atomic(cache_file, json.dumps({"setup": setup, "runs": cache}))
+        except OSError as exc:  # a full disk: the file keeps the runs saved before
+            raise os_error(exc, cache_file, resumes=True) or exc from None
 
     start = time.perf_counter()
     total = len(items)
