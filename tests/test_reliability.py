@@ -936,6 +936,7 @@ class _FillingDisk:
         return getattr(self._db, name)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("where", ["update", "commit"])
 def test_a_full_disk_while_storing_a_result_is_one_line_and_loses_nothing(
     tmp_path, monkeypatch, where
@@ -967,6 +968,7 @@ def test_a_full_disk_while_storing_a_result_is_one_line_and_loses_nothing(
     assert len(after) == 12 and all(after[k] == v for k, v in kept.items())
 
 
+@pytest.mark.slow
 def test_a_full_disk_while_writing_a_run_file_is_one_line_and_loses_nothing(tmp_path, monkeypatch):
     import errno
 
@@ -1013,6 +1015,7 @@ def _snapshot(folder: Path) -> dict[str, bytes]:
     }
 
 
+@pytest.mark.slow
 def test_a_study_folder_without_its_store_is_refused_until_restart(tmp_path):
     study = write_study(tmp_path, executor={"kind": "serial"}, budget=8, validation={})
     out = tmp_path / "o"

@@ -30,8 +30,8 @@ recommendation with reasons, and the parameters with their ranges ready for a st
 The final selection ranks the last stage's parameters by their largest standardised effect, as
 the method asks ("by effect size, not blindly by significance"); the reasons say which effects
 were significant. A stage whose first 8 runs all fail stops at once, quoting the first failure
-(`parcelfit.study.calibration.FailureStreak`); its failed runs run again on a rerun, as long as
-none of the stage has succeeded. A rerun resumes stage by stage and refuses a stage whose stored factors differ
+(`parcelfit.study.calibration.FailureStreak`); the failed runs of a stage none of whose runs
+succeeded run again on a rerun. A rerun resumes stage by stage and refuses a stage whose stored factors differ
 from the ones it would run now (use a new folder after changing the screen file).
 """
 
@@ -356,8 +356,9 @@ def run_screen(
                 for r in todo
             ]
             # a stage stops early only while none of its runs has succeeded: once one has, its
-            # failures are a property of the design, which the analysis copes with
-            streak = FailureStreak(min(FAILURES_IN_A_ROW, len(rows)), out, until_success=True)
+            # failures are a property of the design, which the analysis copes with (a stage of
+            # at most 8 runs is judged whole, below: too few succeeded)
+            streak = FailureStreak(FAILURES_IN_A_ROW, out, until_success=True)
             streak.succeeded = any(r.status == "ok" for r in rows)
             for k, (i, res) in enumerate(runner.simulate(simulator, tasks), start=1):
                 outcome = record_result(store, out, todo[i], res, reference)
