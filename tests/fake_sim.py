@@ -4,7 +4,10 @@ A parcel moves along x at the speed setting's belt speed; its lateral drift is s
 mu_d_BePa and its turn by mu_d_MePa, so both are identifiable from the trajectory. Environment:
 FAKE_SIM_DELAY [s] sleeps per simulation (for kill tests); FAKE_SIM_LOG appends each run id
 when its simulation starts; FAKE_SIM_CRASH_ONCE names a file: the first simulation to find it
-missing creates it and kills its own process with SIGKILL (a worker dying mid-simulation).
+missing creates it and kills its own process with SIGKILL (a worker dying mid-simulation);
+FAKE_SIM_HANG names a file: a simulation finding it there runs for 120 s more;
+FAKE_SIM_INTERRUPT_AFTER=k: the simulation after the k-th one started in a process raises
+KeyboardInterrupt (Ctrl-C; count in `started`).
 """
 
 from __future__ import annotations
@@ -58,6 +61,9 @@ def placement(seed: int) -> tuple[float, float, float]:
     )
 
 
+started = 0  # simulations started in this process
+
+
 class AnalyticSimulator:
     """Implements the Simulator protocol with `trajectory`."""
 
@@ -86,6 +92,14 @@ class AnalyticSimulator:
                 fh.write(f"{run_id}\n")
         if self.delay:
             time.sleep(self.delay)
+        global started
+        started += 1
+        limit = int(os.environ.get("FAKE_SIM_INTERRUPT_AFTER", "1000000000"))
+        if started > limit:
+            raise KeyboardInterrupt  # Ctrl-C during a simulation in this process (serial)
+        hang = os.environ.get("FAKE_SIM_HANG")
+        if hang and os.path.exists(hang):  # a simulation of minutes, started after the file
+            time.sleep(120)
         if self.crash_once:
             try:
                 open(self.crash_once, "x").close()
@@ -102,6 +116,51 @@ class AnalyticSimulator:
         return SimResult(
             Run(run_id or "sim", case, traj, transit), SimStatus.OK, time.perf_counter() - t0, {}
         )
+
+
+PARENT_MARK: str | None = None  # set by a test in its own process: a forked worker has it too
+
+
+class EnsembleProbe(AnalyticSimulator):
+    """Stands in for the MuJoCo simulator of `parcelfit simulate --repeat`: every run appends
+    its process id and the `PARENT_MARK` it sees to the file ``probe``."""
+
+    def __init__(self, probe: str, placement_seed: int | None = None) -> None:
+        super().__init__(placement_seed=placement_seed)
+        self.probe = probe
+
+    def with_options(self, **_: object) -> EnsembleProbe:
+        return self
+
+    def with_placement(self, seed: int | None) -> EnsembleProbe:
+        return EnsembleProbe(self.probe, seed)
+
+    def run(
+        self, params: Mapping[str, float], case: TestCase, run_id: str | None = None
+    ) -> SimResult:
+        with open(self.probe, "a") as fh:
+            fh.write(f"{os.getpid()} {PARENT_MARK}\n")
+        return super().run(params, case, run_id)
+
+
+class BrokenSimulator:
+    """A simulator whose every run raises (a broken set-up: a missing solver, an expired
+    licence); its message spans two lines. With FAKE_SIM_FIXED set it runs as `make`'s."""
+
+    def with_placement(self, seed: int | None) -> BrokenSimulator:
+        return self
+
+    def run(
+        self, params: Mapping[str, float], case: TestCase, run_id: str | None = None
+    ) -> SimResult:
+        if os.environ.get("FAKE_SIM_FIXED"):
+            return make().run(params, case, run_id)
+        raise RuntimeError("solver licence expired\nask the licence server's admin")
+
+
+def make_broken() -> BrokenSimulator:
+    """Factory named in study files (tests.fake_sim:make_broken)."""
+    return BrokenSimulator()
 
 
 def make() -> AnalyticSimulator:

@@ -3,6 +3,7 @@ read-only study stores."""
 
 import contextlib
 import html
+import json
 import os
 import re
 import sqlite3
@@ -15,6 +16,7 @@ from typer.testing import CliRunner
 
 from parcelfit import ParcelfitError
 from parcelfit.cli import app
+from parcelfit.errors import short_path
 from parcelfit.report import build_report
 from parcelfit.report.browser import chromium, inspect_page
 from parcelfit.report.html import CONTENT_SECURITY_POLICY
@@ -22,7 +24,7 @@ from parcelfit.study.calibration import Calibration, study_status
 from parcelfit.study.store import Store
 from parcelfit.study.studyfile import load_study
 
-from .helpers import write_study
+from .helpers import finished_fits, write_study
 
 runner = CliRunner()
 NEED_BROWSER = os.environ.get("CI") == "true"
@@ -531,9 +533,10 @@ def test_losing_the_dask_scheduler_stops_cleanly_and_the_study_resumes(tmp_path)
         os.killpg(scheduler.pid, signal.SIGKILL)  # the scheduler is lost mid-batch
         _, err = proc.communicate(timeout=120)
         assert proc.returncode == 2, err
-        assert "error: lost the Dask scheduler" in err
-        # distributed may log its own reconnection attempts; parcelfit itself does not crash
-        assert not re.search(r'File "[^"]*parcelfit[/\\]', err), err
+        # one line: no traceback of parcelfit, and distributed's own reconnection attempts and
+        # tracebacks are silenced
+        (line,) = [line for line in err.splitlines() if line.strip()]
+        assert line.startswith(f"error: lost the Dask scheduler at {address}"), err
     finally:
         for p in spawned:
             with contextlib.suppress(ProcessLookupError):
@@ -778,3 +781,510 @@ def test_calibrate_on_a_read_only_folder_says_so_and_keeps_the_results(
     assert result.exit_code == 2
     assert "read-only" in result.output and "results already in it are intact" in result.output
     assert "move" not in result.output and (out / "study.sqlite").read_bytes() == before
+
+
+# -- runtime failures: nothing hangs, nothing is lost, one clear line (issue 51) --------------
+
+
+def _error_lines(result) -> list[str]:
+    """The non-empty lines a command printed on stderr."""
+    return [line for line in result.stderr.splitlines() if line.strip()]
+
+
+def test_a_study_whose_every_simulation_fails_stops_after_8_and_quotes_the_first(
+    tmp_path, monkeypatch
+):
+    study = write_study(
+        tmp_path,
+        simulator={"backend": "python", "factory": "tests.fake_sim:make_broken"},
+        executor={"kind": "serial"},
+        initial=8,
+        batch_size=4,
+        budget=12,
+        validation={},
+    )
+    out = tmp_path / "o"
+    result = runner.invoke(app, ["calibrate", str(study), "--out", str(out)])
+    assert result.exit_code == 2, result.output
+    assert _error_lines(result) == [
+        f"error: {out}: 8 simulations in a row failed, so the run stopped early; the first: "
+        "failed: RuntimeError: solver licence expired ask the licence server's admin Fix: fix "
+        "the cause the first failure names, then rerun the same command to resume (what "
+        "failed is run again while nothing has succeeded yet)"
+    ]
+    info = study_status(out)
+    assert info["by_status"] == {"failed": 8} and info["stop_reason"] is None
+    assert not (out / "results.json").exists()
+    # the set-up fixed, the same command runs the 8 failed simulations again and goes on
+    monkeypatch.setenv("FAKE_SIM_FIXED", "1")
+    result = runner.invoke(app, ["calibrate", str(study), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    info = study_status(out)
+    assert info["evaluations"] == 12 and "failed" not in info["by_status"]
+    assert info["stop_reason"] == "budget spent"
+
+
+def test_a_small_study_whose_every_simulation_fails_stops_at_its_budget(tmp_path):
+    study = write_study(
+        tmp_path,
+        simulator={"backend": "python", "factory": "tests.fake_sim:make_broken"},
+        executor={"kind": "serial"},
+        initial=4,
+        batch_size=2,
+        budget=5,
+        validation={},
+    )
+    with pytest.raises(ParcelfitError, match=r"^\S+: 5 simulations in a row failed"):
+        Calibration(load_study(study), tmp_path / "o").run()
+    assert study_status(tmp_path / "o")["by_status"] == {"failed": 5}
+
+
+def test_a_screen_whose_every_simulation_fails_stops_after_8_and_resumes_once_fixed(
+    tmp_path, monkeypatch
+):
+    args = _screen(
+        tmp_path,
+        simulator={"backend": "python", "factory": "tests.fake_sim:make_broken"},
+        parameters={
+            "mu_d_BePa": [0.3, 0.58],
+            "mu_d_MePa": [0.15, 0.35],
+            "E_Pa": [400, 1600],
+            "mu_d_PaPa": [0.2, 0.6],
+        },
+        executor="serial",
+    )
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2, result.output
+    (line,) = _error_lines(result)
+    assert line.startswith(
+        f"error: {tmp_path / 'o'}: 8 simulations in a row failed, so the run stopped early; the "
+        "first: failed: RuntimeError: solver licence expired"
+    )
+    store = Store(tmp_path / "o" / "screen.sqlite", readonly=True)
+    statuses = [e.status for e in store.evaluations("screen")]
+    store.close()
+    assert len(statuses) == 16 and statuses.count("failed") == 8  # a 2^4 design, 8 tried
+    monkeypatch.setenv("FAKE_SIM_FIXED", "1")
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    store = Store(tmp_path / "o" / "screen.sqlite", readonly=True)
+    assert {e.status for e in store.evaluations("screen")} == {"ok"}
+    store.close()
+
+
+def _long(tmp_path, kind: str) -> Path:
+    """A path the file system refuses: one 300-character name, or 20 names of 250 characters
+    (5000 characters in all, beyond PATH_MAX)."""
+    return tmp_path / ("a" * 300 if kind == "name" else "/".join(["b" * 250] * 20))
+
+
+LONG_PATHS = {
+    "calibrate --out": lambda p, long: [*_study(p, budget=8)[:2], "--out", str(long)],
+    "reference": lambda p, long: ["reference", str(long)],
+    "stats --out": lambda p, long: ["stats", _dataset(p)[1], "--out", str(long)],
+    "screen --out": lambda p, long: [*_screen(p)[:2], "--out", str(long)],
+    "simulate --out": lambda p, long: ["simulate", "--out", str(long / "run.csv")],
+}
+
+
+@pytest.mark.parametrize("kind", ["name", "total"])
+@pytest.mark.parametrize("command", list(LONG_PATHS))
+def test_a_path_too_long_for_the_system_is_one_clear_line(tmp_path, command, kind):
+    long = _long(tmp_path, kind)
+    t0 = time.perf_counter()
+    result = runner.invoke(app, LONG_PATHS[command](tmp_path, long))
+    assert result.exit_code == 2, (result.output, result.exception)
+    assert time.perf_counter() - t0 < 5  # refused before simulating (simulate: 11 s before)
+    (line,) = _error_lines(result)
+    head, _, rest = line.partition(": the path is too long for the file system: ")
+    name = "a" * 300 if kind == "name" else "b" * 250
+    assert head.startswith(f"error: {str(tmp_path)[:20]}") and "..." in head, line
+    assert len(head) <= len("error: ") + 80  # the path shortened to fit one line
+    assert re.fullmatch(
+        rf"\d+ characters with a name of {len(name)}, where names may have at most \d+ and "
+        r"paths \d+ Fix: choose a shorter path: a folder nearer the root, or shorter names",
+        rest,
+    ), line
+
+
+def test_a_calibration_into_a_path_too_long_raises_a_parcelfit_error(tmp_path):
+    study = load_study(write_study(tmp_path, budget=8))
+    with pytest.raises(ParcelfitError, match="the path is too long for the file system"):
+        Calibration(study, _long(tmp_path, "name")).run()
+
+
+class _FillingDisk:
+    """An SQLite connection whose disk fills up: the write of the result after ``room`` stored
+    ones fails as SQLite fails it, at the UPDATE (``where`` "update") or at its COMMIT."""
+
+    def __init__(self, db, room: int, where: str) -> None:
+        self._db, self.room, self.where = db, room, where
+        self.results = 0  # UPDATEs of a result seen
+        self.failing = False
+
+    def execute(self, sql, *args):
+        if sql.startswith("UPDATE evaluations SET status = ?"):
+            self.results += 1
+            self.failing = self.results > self.room
+            if self.failing and self.where == "update":
+                raise sqlite3.OperationalError("database or disk is full")
+        if sql == "COMMIT" and self.failing:
+            raise sqlite3.OperationalError("database or disk is full")
+        return self._db.execute(sql, *args)
+
+    def __getattr__(self, name):
+        return getattr(self._db, name)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("where", ["update", "commit"])
+def test_a_full_disk_while_storing_a_result_is_one_line_and_loses_nothing(
+    tmp_path, monkeypatch, where
+):
+    study = write_study(tmp_path, executor={"kind": "serial"}, budget=12, validation={})
+    out = tmp_path / "o"
+    opened = Store.__init__
+
+    def filling(self, path, **kw):
+        opened(self, path, **kw)
+        if not self.readonly:
+            self._db = _FillingDisk(self._db, 5, where)
+
+    monkeypatch.setattr(Store, "__init__", filling)
+    result = runner.invoke(app, ["calibrate", str(study), "--out", str(out)])
+    assert result.exit_code == 2, (result.output, result.exception)
+    assert _error_lines(result) == [
+        f"error: {short_path(out / 'study.sqlite')}: disk full while writing study.sqlite; "
+        "nothing stored "
+        "is lost Fix: free space on its disk, then rerun the same command: it resumes"
+    ]
+    monkeypatch.setattr(Store, "__init__", opened)
+    info = study_status(out)
+    assert info["by_status"] == {"ok": 5, "pending": 3}  # the sixth result rolled back
+    kept = finished_fits(out / "study.sqlite")
+    result = runner.invoke(app, ["calibrate", str(study), "--out", str(out)])  # space freed
+    assert result.exit_code == 0, result.output
+    after = finished_fits(out / "study.sqlite")
+    assert len(after) == 12 and all(after[k] == v for k, v in kept.items())
+
+
+@pytest.mark.slow
+def test_a_full_disk_while_writing_a_run_file_is_one_line_and_loses_nothing(tmp_path, monkeypatch):
+    import errno
+
+    import pandas as pd
+
+    study = write_study(tmp_path, executor={"kind": "serial"}, budget=12, validation={})
+    out = tmp_path / "o"
+    to_csv, written = pd.DataFrame.to_csv, []
+
+    def filling(self, path, *args, **kw):
+        if len(written) == 5:
+            Path(path).write_text("half")  # what a full disk leaves: part of a file
+            raise OSError(errno.ENOSPC, "No space left on device")
+        written.append(path)
+        return to_csv(self, path, *args, **kw)
+
+    monkeypatch.setattr(pd.DataFrame, "to_csv", filling)
+    result = runner.invoke(app, ["calibrate", str(study), "--out", str(out)])
+    assert result.exit_code == 2, (result.output, result.exception)
+    assert _error_lines(result) == [
+        f"error: {short_path(out / 'runs' / 'fit-000-05.csv')}: disk full while writing "
+        "fit-000-05.csv; "
+        "nothing stored is lost Fix: free space on its disk, then rerun the same command: it "
+        "resumes"
+    ]
+    assert sorted(p.name for p in (out / "runs").iterdir()) == [
+        f"fit-000-0{k}.csv" for k in range(5)
+    ]  # no half-written file
+    monkeypatch.setattr(pd.DataFrame, "to_csv", to_csv)
+    assert study_status(out)["by_status"] == {"ok": 5, "pending": 3}
+    result = runner.invoke(app, ["calibrate", str(study), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    info = study_status(out)
+    assert info["evaluations"] == 12 and not {"pending", "failed"} & set(info["by_status"])
+    assert all((out / "runs" / f"fit-000-0{k}.csv").stat().st_size > 100 for k in range(8))
+
+
+def _snapshot(folder: Path) -> dict[str, bytes]:
+    """Every file under ``folder`` (relative path: bytes), but the folder's lock."""
+    return {
+        p.relative_to(folder).as_posix(): p.read_bytes()
+        for p in sorted(folder.rglob("*"))
+        if p.is_file() and p.name != ".parcelfit.lock"
+    }
+
+
+@pytest.mark.slow
+def test_a_study_folder_without_its_store_is_refused_until_restart(tmp_path):
+    study = write_study(tmp_path, executor={"kind": "serial"}, budget=8, validation={})
+    out = tmp_path / "o"
+    args = ["calibrate", str(study), "--out", str(out)]
+    assert runner.invoke(app, args).exit_code == 0
+    first = _snapshot(out)
+    assert "results.json" in first and any(n.startswith("runs/") for n in first)
+    (out / "study.sqlite").unlink()  # deleted by hand, the outputs left
+    del first["study.sqlite"]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2, result.output
+    assert _error_lines(result) == [
+        f"error: {out}: this folder holds an earlier study's outputs (runs/, results.json, "
+        "figures/) but no study.sqlite, so a new study would overwrite them Fix: restore "
+        "study.sqlite to resume that study, use a new output folder, or rerun with --restart "
+        "to move them into earlier-TIME/ in the folder and start afresh"
+    ]
+    assert _snapshot(out) == first  # nothing written, nothing overwritten
+    result = runner.invoke(app, [*args, "--restart"])
+    assert result.exit_code == 0, result.output
+    (earlier,) = out.glob("earlier-*")
+    assert re.fullmatch(r"earlier-\d{8}-\d{6}", earlier.name)
+    said = "".join(result.output.split())  # unwrapped
+    assert "".join(f"the earlier study's outputs are in {earlier}".split()) in said
+    assert _snapshot(earlier) == first  # moved as they were
+    assert study_status(out)["evaluations"] == 8  # a new study, run in full
+    # --restart on a folder with its store sets the store aside as well
+    again = runner.invoke(app, [*args, "--restart"])
+    assert again.exit_code == 0, again.output
+    assert len(list(out.glob("earlier-*/study.sqlite"))) == 1
+    assert study_status(out)["evaluations"] == 8
+
+
+@pytest.mark.slow
+def test_a_killed_precision_check_keeps_every_finished_simulation(tmp_path):
+    import signal
+    import subprocess
+    import sys
+
+    from parcelfit.study.precision_check import run_precision_check
+
+    from .helpers import ROOT
+    from .test_precision import _two_rig_study
+
+    study = _two_rig_study(tmp_path)
+    out = tmp_path / "check"
+    log = tmp_path / "log"
+    env = {**os.environ, "FAKE_SIM_DELAY": "0.3", "FAKE_SIM_LOG": str(log)}
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH")) if p)
+    cmd = [sys.executable, "-m", "parcelfit", "precision", str(study), "--placements", "2"]
+    proc = subprocess.Popen(
+        [*cmd, "--executor", "serial", "--out", str(out)],
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        deadline = time.time() + 60
+        while time.time() < deadline and len(log.read_text().split() if log.exists() else []) < 5:
+            time.sleep(0.01)
+        os.kill(proc.pid, signal.SIGKILL)  # 4 simulations finished, the fifth running
+    finally:
+        proc.kill()
+        proc.wait()
+    started = log.read_text().split()
+    assert len(started) == 5
+    kept = json.loads((out / "statistics.json").read_text())["runs"]
+    assert sorted(kept) == sorted(started[:4])  # each finished one kept, not one of 20 lost
+    resumed = run_precision_check(study, out, placements=2, executor="serial")
+    assert resumed.simulated_now == resumed.simulations - 4  # the four are reused
+
+
+@pytest.mark.slow
+def test_simulate_repeat_runs_its_placements_in_spawned_workers(tmp_path, monkeypatch):
+    """MuJoCo and numba are not fork-safe: the ensemble runs in the project's spawned worker
+    processes (`parcelfit.sim.executors`), never in forks of the command's process."""
+    import parcelfit.sim.factory
+    import parcelfit.sim.mujoco
+
+    from . import fake_sim
+
+    probe = tmp_path / "probe"
+    monkeypatch.setattr(fake_sim, "PARENT_MARK", "inherited")
+    monkeypatch.setattr(parcelfit.sim.mujoco, "MujocoSimulator", fake_sim.EnsembleProbe)
+    monkeypatch.setattr(
+        parcelfit.sim.factory, "make_simulator", lambda config: fake_sim.EnsembleProbe(str(probe))
+    )
+    out = tmp_path / "run.csv"
+    args = ["simulate", "--rig", "E1", "--consignment", "BW", "--out", str(out)]
+    result = runner.invoke(app, [*args, "--repeat", "3", "--workers", "2"])
+    assert result.exit_code == 0, (result.output, result.exception)
+    runs = [line.split() for line in probe.read_text().splitlines()]
+    assert len(runs) == 3 and all(pid != str(os.getpid()) for pid, _ in runs)
+    assert {mark for _, mark in runs} == {"None"}  # a fresh interpreter, not a fork
+    table = (tmp_path / "run-ensemble.csv").read_text().splitlines()
+    assert [line.split(",")[:2] for line in table[1:]] == [["0", "ok"], ["1", "ok"], ["2", "ok"]]
+    assert all((tmp_path / f"run-s{seed}.csv").is_file() for seed in range(3))
+
+
+def test_an_error_during_the_live_display_starts_on_a_line_of_its_own(tmp_path):
+    """Outside a terminal (a log, CI) the calibration's live table is printed when it stops,
+    without ending its last line: the error must not run onto it."""
+    study = write_study(
+        tmp_path,
+        simulator={"backend": "python", "factory": "tests.fake_sim:make_broken"},
+        executor={"kind": "serial"},
+        budget=8,
+        validation={},
+    )
+    result = runner.invoke(app, ["calibrate", str(study), "--out", str(tmp_path / "o")])
+    assert result.exit_code == 2
+    lines = result.output.splitlines()  # stdout and stderr as a log holding both has them
+    assert lines[-1].startswith("error: ") and lines[-2].startswith("└") and lines[-2][-1] == "┘"
+
+
+@pytest.mark.slow
+def test_ctrl_c_stops_the_workers_quietly_and_says_how_to_resume(tmp_path):
+    import signal
+    import subprocess
+    import sys
+
+    import psutil
+
+    from .helpers import ROOT
+
+    study = write_study(tmp_path, budget=12, initial=4, batch_size=2, validation={})
+    out, log, hang = tmp_path / "out", tmp_path / "log", tmp_path / "hang"
+    env = {
+        **os.environ,
+        "FAKE_SIM_DELAY": "0.2",
+        "FAKE_SIM_LOG": str(log),
+        "FAKE_SIM_HANG": str(hang),
+    }
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH")) if p)
+    calibrate = [sys.executable, "-m", "parcelfit", "calibrate", str(study), "--out", str(out)]
+    proc = subprocess.Popen(
+        [*calibrate, "--workers", "3"],  # a batch of 2 leaves one worker idle
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,  # its own process group, as a terminal's foreground job
+    )
+    try:
+        deadline = time.time() + 90
+        while len(finished_fits(out / "study.sqlite")) < 4 and time.time() < deadline:
+            time.sleep(0.05)
+        hang.touch()  # from now on a simulation runs for minutes
+        started = len(log.read_text().split())
+        while len(log.read_text().split()) == started and time.time() < deadline:
+            time.sleep(0.05)
+        time.sleep(0.5)
+        workers = [c.pid for c in psutil.Process(proc.pid).children(recursive=True)]
+        t0 = time.time()
+        os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C: the whole foreground process group
+        stdout, stderr = proc.communicate(timeout=60)
+        waited = time.time() - t0
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+    stored = len(finished_fits(out / "study.sqlite"))
+    assert proc.returncode == 130, stderr
+    assert [line for line in stderr.splitlines() if line.strip()] == [
+        f"interrupted: {stored} evaluations stored; rerun the same command to resume"
+    ]
+    assert "Traceback" not in stdout + stderr
+    assert waited < 20  # the simulation running (120 s) was stopped, not waited for
+    assert not _gone(workers, timeout=10)
+    kept = finished_fits(out / "study.sqlite")
+    hang.unlink()
+    done = subprocess.run(calibrate, cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    after = finished_fits(out / "study.sqlite")
+    assert len(after) == 12 and all(after[k] == v for k, v in kept.items())
+
+
+@pytest.mark.parametrize("command", ["calibrate", "screen", "precision"])
+def test_ctrl_c_says_what_each_resumable_command_stored(tmp_path, monkeypatch, command):
+    from . import fake_sim
+    from .test_precision import _two_rig_study
+
+    monkeypatch.setattr(fake_sim, "started", 0)
+    monkeypatch.setenv("FAKE_SIM_INTERRUPT_AFTER", "3")
+    if command == "calibrate":
+        args = [*_study(tmp_path, executor={"kind": "serial"}, validation={})]
+        what = "evaluations"
+    elif command == "screen":
+        args = _screen(tmp_path, executor="serial")
+        what = "simulations"
+    else:
+        args = ["precision", str(_two_rig_study(tmp_path)), "--placements", "2"]
+        args += ["--executor", "serial", "--out", str(tmp_path / "o")]
+        what = "simulations"
+    result = runner.invoke(app, args)
+    assert result.exit_code == 130, (result.output, result.exception)
+    assert _error_lines(result) == [
+        f"interrupted: 3 {what} stored; rerun the same command to resume"
+    ]
+
+
+def _sleep(seconds: float) -> float:
+    time.sleep(seconds)
+    return seconds
+
+
+@pytest.mark.slow
+def test_a_dask_cluster_left_without_workers_is_reported_not_waited_on(capfd):
+    distributed = pytest.importorskip("distributed")
+    import threading
+
+    from parcelfit.sim.executors import dask_executor
+
+    outcome = []
+    with distributed.LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None
+    ) as cluster:
+        executor = dask_executor(cluster.scheduler_address, worker_wait=2)
+
+        def run() -> None:
+            try:
+                outcome.append(list(executor.map(_sleep, [1.0, 1.0, 1.0])))
+            except ParcelfitError as exc:
+                outcome.append(exc)
+
+        waiting = threading.Thread(target=run, daemon=True)
+        waiting.start()
+        time.sleep(0.3)
+        cluster.scale(0)  # the only worker leaves while the tasks wait
+        t0 = time.perf_counter()
+        waiting.join(timeout=30)
+        waited = time.perf_counter() - t0
+        still_waiting = waiting.is_alive()
+        executor.close()
+    assert not still_waiting, "after 30 s still waiting for a worker, without a word"
+    (error,) = outcome
+    assert isinstance(error, ParcelfitError)
+    assert str(error).startswith(
+        f"no Dask worker has been attached to the scheduler at {cluster.scheduler_address} for "
+        "2 s, so nothing runs; the simulations in flight were not recorded and stay pending"
+    )
+    assert waited < 10
+    assert "distributed" not in capfd.readouterr().err  # its own log lines are silenced
+
+
+def test_a_full_disk_during_a_precision_check_keeps_what_it_saved(tmp_path, monkeypatch):
+    import errno
+
+    import parcelfit.study.precision_check as check
+
+    from .test_precision import _two_rig_study
+
+    study, out = _two_rig_study(tmp_path), tmp_path / "o"
+    write, saved = check.write_text_atomic, []
+
+    def filling(path, text):
+        if len(saved) == 3:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        saved.append(path)
+        return write(path, text)
+
+    monkeypatch.setattr(check, "write_text_atomic", filling)
+    args = ["precision", str(study), "--placements", "2", "--executor", "serial"]
+    result = runner.invoke(app, [*args, "--out", str(out)])
+    assert result.exit_code == 2, (result.output, result.exception)
+    assert _error_lines(result) == [
+        f"error: {short_path(out / 'statistics.json')}: disk full while writing "
+        "statistics.json; nothing stored is lost Fix: free space on its disk, then rerun the "
+        "same command: it resumes"
+    ]
+    assert len(json.loads((out / "statistics.json").read_text())["runs"]) == 3

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, NoReturn
 
 import typer
 from rich.console import Console
@@ -18,22 +19,74 @@ from rich.text import Text
 from typer.core import TyperGroup
 
 from parcelfit import __version__
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, os_error
 from parcelfit.progress import ProgressCallback, ProgressEvent
 
 
 class _Commands(TyperGroup):
-    """The command group. Errors are handled here, once for every command: a `ParcelfitError`
-    is shown as one red message and exits with status 2, without a traceback."""
+    """The command group. Errors are handled here, once for every command: a `ParcelfitError`,
+    and an `OSError` a user can fix (a path too long, a full disk: `parcelfit.errors.os_error`),
+    is shown as one red message and exits with status 2, without a traceback. Ctrl-C prints
+    one line, for a resumable command (`_resumes`) with what it stored and how to resume, and
+    exits with status 130."""
 
     def invoke(self, ctx: typer.Context) -> Any:
+        _resumable.clear()
         try:
             return super().invoke(ctx)
         except ParcelfitError as exc:
-            # user text (paths, keys, run ids) is printed as it is, never read as Rich markup
-            message = Text.assemble(("error:", "bold red"), " ", str(exc))
-            err_console.print(message, highlight=False, soft_wrap=True)
-            raise typer.Exit(code=2) from None
+            _fail(exc)
+        except OSError as exc:  # a path too long, a full disk: wherever a file is written
+            error = os_error(exc)
+            if error is None:
+                raise
+            _fail(error)
+        except KeyboardInterrupt:  # Ctrl-C: the workers are stopped already (Executor.close)
+            stored = _resumable.pop("stored", None)
+            text = "interrupted"
+            if stored is not None:
+                with contextlib.suppress(Exception):  # what is stored, if it can be read
+                    kept = stored()
+                    text += "" if kept is None else f": {kept}"
+                text += "; rerun the same command to resume"
+            err_console.print(Text(text), highlight=False, soft_wrap=True)
+            raise typer.Exit(code=130) from None
+
+
+_resumable: dict[str, Callable[[], str | None]] = {}
+
+
+def _resumes(stored: Callable[[], str | None] = lambda: None) -> None:
+    """Declare the running command resumable: interrupted (Ctrl-C), it says
+    ``interrupted: <stored()>; rerun the same command to resume`` and exits with status 130.
+    ``stored`` words what is kept, e.g. "12 evaluations stored" (None: not counted)."""
+    _resumable["stored"] = stored
+
+
+def _stored(db: Path, kind: str, what: str) -> Callable[[], str]:
+    """How many finished evaluations of ``kind`` the store ``db`` holds, as "N what stored"."""
+
+    def count() -> str:
+        from parcelfit.study.store import Store
+
+        n = 0
+        if db.is_file():
+            store = Store(db, readonly=True)
+            try:
+                n = sum(e.status != "pending" for e in store.evaluations(kind))
+            finally:
+                store.close()
+        return f"{n} {what} stored"
+
+    return count
+
+
+def _fail(exc: ParcelfitError) -> NoReturn:
+    """Print ``exc`` as one red line on stderr and exit with status 2."""
+    # user text (paths, keys, run ids) is printed as it is, never read as Rich markup
+    message = Text.assemble(("error:", "bold red"), " ", str(exc))
+    err_console.print(message, highlight=False, soft_wrap=True)
+    raise typer.Exit(code=2) from None
 
 
 app = typer.Typer(
@@ -48,6 +101,14 @@ app = typer.Typer(
 )
 console = Console()
 err_console = Console(stderr=True)
+
+
+def _check_paths(*paths: Path | None) -> None:
+    """Refuse at once, before any work, an output path the file system cannot hold (too long:
+    the command group shows the error as one line); the paths are not created."""
+    for path in paths:
+        if path is not None:
+            path.exists()  # raises OSError (ENAMETOOLONG) for a path too long
 
 
 def _progress(status: Any, prefix: str) -> ProgressCallback:
@@ -210,6 +271,7 @@ def demo(
     if quick and full:
         raise ParcelfitError("--quick and --full exclude each other", fix="choose one")
     _check_executor(executor, ("serial", "local"))
+    _resumes()
     t0 = time.perf_counter()
     d = Demo(
         out,
@@ -324,6 +386,8 @@ def synth(
     from parcelfit.synth import load_twin_spec, make_twin_dataset
 
     _check_executor(executor, ("serial", "local"))
+    _check_paths(out)
+    _resumes()
     tw = load_twin_spec(spec)
     total = len(tw.cases) * tw.settings.runs
     serial = executor == "serial" or (executor is None and workers <= 1)
@@ -618,6 +682,7 @@ def simulate(
     from parcelfit.sim.mujoco import MujocoSimulator, load_consignment, load_rig
     from parcelfit.sim.params import parse_assignments
 
+    _check_paths(out, video)  # before a simulation of minutes
     rig_obj = load_rig(rig)
     cons = load_consignment(consignment)
     params = cons.parameter_values(user_values=parse_assignments(set_ or []))
@@ -694,43 +759,50 @@ def _shell_text(dof: str, cells: tuple[int, int, int]) -> str:
 def _simulate_ensemble(
     sim: Any, params: dict[str, float], case: Any, first: int, n: int, workers: int, out: Path
 ) -> None:
-    """Simulate ``n`` placements from seed ``first``, write runs and a summary (see simulate)."""
+    """Simulate ``n`` placements from seed ``first``, write runs and a summary (see simulate).
+    The placements run in the project's executor (`parcelfit.sim.executors`: spawned worker
+    processes that die with this one, as MuJoCo and numba are not fork-safe; in this process
+    for one worker); each run is written the moment it arrives."""
     import math
-    from concurrent.futures import ProcessPoolExecutor
 
     import pandas as pd
     from rich.markup import escape
 
     from parcelfit.runs import write_trajectory
-    from parcelfit.sim.ensemble import simulate_ensemble, summarise
+    from parcelfit.sim.ensemble import member_of, summarise
+    from parcelfit.sim.executors import Task, local_executor, serial_executor
+    from parcelfit.study.joint import simulate_items
 
     seeds = list(range(first, first + n))
     rows: list[dict[str, Any]] = []
-
-    def done(m: Any) -> None:
-        if m.run is not None:
-            write_trajectory(m.run.trajectory, out.with_name(f"{out.stem}-s{m.seed}{out.suffix}"))
-        rows.append(
-            {
-                "seed": m.seed,
-                "status": m.status.value,
-                "transit_time_s": m.transit_time,
-                "rotation_deg": None if m.rotation is None else math.degrees(m.rotation),
-                "outcome": m.outcome,
-                "wall_time_s": m.wall_time,
-            }
-        )
-        progress.advance(task)
-
-    with Progress(
-        *Progress.get_default_columns(), TimeElapsedColumn(), console=console
-    ) as progress:
+    members: list[Any] = []
+    items = [(Task(params, case, f"{out.stem}-s{seed}"), seed) for seed in seeds]
+    executor = local_executor(min(workers, n)) if workers > 1 else serial_executor()
+    with (
+        executor,
+        Progress(*Progress.get_default_columns(), TimeElapsedColumn(), console=console) as progress,
+    ):
         task = progress.add_task(f"{case.label}: {n} placements", total=n)
-        if workers > 1:
-            with ProcessPoolExecutor(min(workers, n)) as ex:
-                members = simulate_ensemble(sim.with_placement, params, case, seeds, ex, done)
-        else:
-            members = simulate_ensemble(sim.with_placement, params, case, seeds, None, done)
+        for i, result in simulate_items(executor, sim, items):
+            m = member_of(seeds[i], result)
+            if m.run is not None:
+                write_trajectory(
+                    m.run.trajectory, out.with_name(f"{out.stem}-s{m.seed}{out.suffix}")
+                )
+            members.append(m)
+            rows.append(
+                {
+                    "seed": m.seed,
+                    "status": m.status.value,
+                    "transit_time_s": m.transit_time,
+                    "rotation_deg": None if m.rotation is None else math.degrees(m.rotation),
+                    "outcome": m.outcome,
+                    "wall_time_s": m.wall_time,
+                }
+            )
+            progress.advance(task)
+    members.sort(key=lambda m: m.seed)
+    rows.sort(key=lambda r: r["seed"])
     table_path = out.with_name(f"{out.stem}-ensemble.csv")
     out.parent.mkdir(parents=True, exist_ok=True)
     pd.DataFrame(rows).to_csv(table_path, index=False)
@@ -871,6 +943,14 @@ def calibrate(
             "`report --animation` embeds it)."
         ),
     ] = False,
+    restart: Annotated[
+        bool,
+        typer.Option(
+            "--restart",
+            help="Start the study afresh: first move the folder's study.sqlite, runs/, "
+            "results.json and figures/ into earlier-TIME/ inside it.",
+        ),
+    ] = False,
 ) -> None:
     """Calibrate by batch Bayesian optimisation; rerunning the same command resumes the study
     (a finished study only has its results, figures and key frames written again)."""
@@ -880,6 +960,7 @@ def calibrate(
     _check_executor(executor, ("serial", "local", "dask"))
     study = load_study(study_file)
     folder = out or study_file.parent / study_file.stem
+    _resumes(_stored(folder / "study.sqlite", "fit", "evaluations"))
 
     def run(progress: ProgressCallback) -> Any:
         calibration = Calibration(
@@ -890,8 +971,12 @@ def calibrate(
             workers=workers,
             progress=progress,
             animation=animation,
+            restart=restart,
         )
-        return calibration.run()
+        result = calibration.run()
+        if calibration.set_aside is not None:
+            console.print(Text(f"the earlier study's outputs are in {calibration.set_aside}"))
+        return result
 
     _calibrate_live(run, study.name, folder)
 
@@ -929,20 +1014,25 @@ def _calibrate_live(run: Callable[[ProgressCallback], Any], name: str, folder: P
         table.add_row("last event", Text(p.message))
         return table
 
-    with Live(render(), console=console, refresh_per_second=4, transient=False) as live:
+    live = Live(render(), console=console, refresh_per_second=4, transient=False)
+    try:
+        with live:
 
-        def update(p: ProgressEvent) -> None:
-            state["p"] = p
-            live.update(render())
-            if not console.is_terminal:  # a log or CI: the table shows only at the end
-                best = "-" if p.best_cost is None else f"{p.best_cost:.4g}"
-                console.print(
-                    Text(f"{p.message} ({p.done}/{p.total} evaluations, best cost {best})"),
-                    highlight=False,
-                )
+            def update(p: ProgressEvent) -> None:
+                state["p"] = p
+                live.update(render())
+                if not console.is_terminal:  # a log or CI: the table shows only at the end
+                    best = "-" if p.best_cost is None else f"{p.best_cost:.4g}"
+                    console.print(
+                        Text(f"{p.message} ({p.done}/{p.total} evaluations, best cost {best})"),
+                        highlight=False,
+                    )
 
-        result = run(update)
-    console.print()
+            result = run(update)
+    finally:
+        # the display stopped; outside a terminal its last line is left open: end it, so that
+        # what follows (an error too) starts on a line of its own
+        console.print()
     console.print(
         Text.assemble(
             (result.stop_reason, "bold"),
@@ -1039,6 +1129,7 @@ def screen(
     _check_executor(executor, ("serial", "local"))
     spec = load_screen(screen_file)
     folder = out or screen_file.parent / screen_file.stem
+    _resumes(_stored(folder / "screen.sqlite", "screen", "simulations"))
     with console.status("screening") as status_line:
         stages, selection = run_screen(
             spec,
@@ -1113,6 +1204,15 @@ def precision(
 
     _check_executor(executor, ("serial", "local"))
     folder = out or study_file.parent / f"{study_file.stem}-precision"
+
+    def stored() -> str:
+        from parcelfit.study.precision_check import STATISTICS_FILE
+
+        cache = folder / STATISTICS_FILE
+        runs = json.loads(cache.read_text(encoding="utf-8"))["runs"] if cache.is_file() else {}
+        return f"{len(runs)} simulations stored"
+
+    _resumes(stored)
     with console.status("precision check") as status_line:
         check = run_precision_check(
             study_file,

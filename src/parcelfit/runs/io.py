@@ -186,12 +186,18 @@ def write_trajectory(trajectory: Trajectory, path: str | Path) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     frame = trajectory.to_frame()
     tmp = path.with_name(path.name + ".tmp")
-    if suffix == ".csv":
-        # no float_format: every number as its shortest round-trip text (Python's repr), so a
-        # run read back is the run written, to the last bit (files written earlier kept 9
-        # significant digits; Trajectory.resample tolerates their rounded time stamps)
-        frame.to_csv(tmp, index=False)
-    else:
-        frame.to_parquet(tmp, index=False)
-    tmp.replace(path)  # atomic: a crash never leaves half a file under the final name
+    try:
+        if suffix == ".csv":
+            # no float_format: every number as its shortest round-trip text (Python's repr), so
+            # a run read back is the run written, to the last bit (files written earlier kept 9
+            # significant digits; Trajectory.resample tolerates their rounded time stamps)
+            frame.to_csv(tmp, index=False)
+        else:
+            frame.to_parquet(tmp, index=False)
+        tmp.replace(path)  # atomic: a crash never leaves half a file under the final name
+    except OSError as exc:  # a full disk: nothing half-written stays, the error names the file
+        tmp.unlink(missing_ok=True)
+        if exc.filename is None or exc.filename == str(tmp):
+            exc.filename = str(path)
+        raise
     return path

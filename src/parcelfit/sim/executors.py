@@ -7,8 +7,11 @@ in study and screen files, ``--executor`` on the command line):
   so a simulator or a twin run can be stepped through in a debugger;
 * ``local`` (default): a ``ProcessPoolExecutor`` with the ``spawn`` start method (MuJoCo and
   numba are not fork-safe), one simulation per core; workers die with the process that started
-  them (`parcelfit.sim.lifetime.die_with_parent`);
-* ``dask``: ``client.get_executor()`` of a ``distributed.Client`` on a scheduler address.
+  them (`parcelfit.sim.lifetime.die_with_parent`), leave Ctrl-C to it, and are ended when the
+  executor is closed;
+* ``dask``: ``client.get_executor()`` of a ``distributed.Client`` on a scheduler address;
+  distributed's own loggers are silent while the executor is open (parcelfit reports a lost
+  scheduler, or a cluster without workers, in one line).
 
 `Executor.map` submits a batch and yields ``(index, Outcome)`` in the order results arrive, so
 a caller can store each result the moment it exists; `Executor.simulate` does the same for
@@ -28,8 +31,10 @@ from __future__ import annotations
 import concurrent.futures as cf
 import contextlib
 import inspect
+import logging
 import multiprocessing
 import os
+import signal
 import threading
 import time
 import traceback
@@ -126,6 +131,8 @@ class Executor:
     ``lost`` tells, from an error, whether the pool itself is gone (it returns the error to stop
     with, or None); ``explain`` words the error of a task that raised; ``on_close`` releases
     what the pool depends on (a Dask client).
+    ``idle`` is asked every ``poll`` seconds [s] while no result arrives whether to stop
+    waiting (it returns the error to stop with, or None: a Dask cluster left without workers).
     ``restarts`` counts the pools recreated after a worker died.
     """
 
@@ -138,6 +145,8 @@ class Executor:
         lost: Callable[[BaseException], ParcelfitError | None] | None = None,
         on_close: Callable[[], None] | None = None,
         explain: Callable[[BaseException], str] | None = None,
+        idle: Callable[[], ParcelfitError | None] | None = None,
+        poll: float = 2.0,
     ) -> None:
         self._make = None if isinstance(pool, cf.Executor) else pool
         self._pool: cf.Executor = pool if isinstance(pool, cf.Executor) else pool()
@@ -146,6 +155,8 @@ class Executor:
         self._lost = lost or (lambda exc: None)
         self._on_close = on_close
         self._explain = explain or (lambda exc: f"worker failed: {exc!r}")
+        self._idle = idle
+        self.poll = poll
         self.restarts = 0
 
     def map(self, fn: Callable[[T], R], items: Sequence[T]) -> Iterator[tuple[int, Outcome[R]]]:
@@ -159,7 +170,16 @@ class Executor:
             again: list[int] = []
             broken = self._submit(fn, items, queue, futures, self.window or len(todo))
             while futures:
-                finished, _ = cf.wait(futures, return_when=cf.FIRST_COMPLETED)
+                finished, _ = cf.wait(
+                    futures,
+                    timeout=None if self._idle is None else self.poll,
+                    return_when=cf.FIRST_COMPLETED,
+                )
+                if not finished:  # nothing for `poll` seconds: is anyone still working?
+                    stop = self._idle() if self._idle is not None else None
+                    if stop is not None:
+                        raise stop
+                    continue
                 for fut in sorted(finished, key=futures.__getitem__):
                     i = futures.pop(fut)
                     outcome = self._outcome(fut, deaths, i)
@@ -255,11 +275,28 @@ class Executor:
 
 
 def _shutdown(pool: cf.Executor) -> None:
-    """Shut ``pool`` down without waiting, cancelling what has not started."""
+    """Shut ``pool`` down without waiting, cancelling what has not started; the worker
+    processes of a local pool are ended too (SIGTERM: each kills its external solvers, see
+    `parcelfit.sim.lifetime`), so that a simulation still running (the pool is closed early:
+    an error, Ctrl-C) does not keep this process from exiting until it ends."""
+    workers = list((getattr(pool, "_processes", None) or {}).values())
     try:
         pool.shutdown(wait=False, cancel_futures=True)
     except TypeError:  # Dask's executor cancels on shutdown(wait=False) and has no such option
         pool.shutdown(wait=False)
+    for process in workers:
+        with contextlib.suppress(Exception):  # gone already
+            if process.is_alive():
+                process.terminate()
+
+
+def _local_worker(parent_pid: int) -> None:
+    """Initializer of a local worker process: Ctrl-C (SIGINT, sent to the terminal's whole
+    process group) is left to the parent, which stops the workers itself; and the worker dies
+    with its parent (`parcelfit.sim.lifetime.die_with_parent`)."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    die_with_parent(parent_pid)
 
 
 def serial_executor() -> Executor:
@@ -276,11 +313,35 @@ def local_executor(workers: int | None = None, max_restarts: int = 3) -> Executo
         return cf.ProcessPoolExecutor(
             max_workers=n,
             mp_context=multiprocessing.get_context("spawn"),
-            initializer=die_with_parent,
+            initializer=_local_worker,
             initargs=(os.getpid(),),
         )
 
     return Executor(pool, max_restarts=max_restarts)
+
+
+_QUIET_LOGGERS = ("distributed", "tornado", "asyncio")  # what a Dask client logs with
+
+
+def _silence(prefixes: Sequence[str]) -> Callable[[], None]:
+    """Silence the loggers named ``prefixes`` and their children (those made later too, which
+    inherit the level); returns the function that restores them as they were."""
+    manager = logging.Logger.manager
+    names = [
+        name
+        for name in list(manager.loggerDict)
+        if any(name == p or name.startswith(p + ".") for p in prefixes)
+    ]
+    loggers = [logging.getLogger(name) for name in {*names, *prefixes}]
+    saved = [(logger, logger.level) for logger in loggers]
+    for logger in loggers:
+        logger.setLevel(logging.CRITICAL + 1)
+
+    def restore() -> None:
+        for logger, level in saved:
+            logger.setLevel(level)
+
+    return restore
 
 
 def dask_executor(
@@ -294,7 +355,9 @@ def dask_executor(
     ``distributed.Client``. Each task is retried up to ``retries`` times if its worker dies.
 
     A scheduler that cannot be reached within ``connect_timeout`` [s], or has no worker attached
-    after ``worker_wait`` [s], is an error before anything runs.
+    after ``worker_wait`` [s], is an error before anything runs; a cluster left without workers
+    while tasks are waiting is one after ``worker_wait`` [s] (checked every 2 s), the tasks in
+    flight unrecorded.
     """
     try:
         from distributed import Client
@@ -304,10 +367,14 @@ def dask_executor(
         ) from exc
     own = not hasattr(scheduler, "submit")
     address = str(scheduler) if own else str(scheduler.scheduler.address)
+    # distributed logs its reconnection attempts and tracebacks of its own when the scheduler
+    # or the workers go away; parcelfit says what happened in one line instead
+    loud = _silence(_QUIET_LOGGERS)
     if own:
         try:
             client = Client(scheduler, timeout=connect_timeout)
         except (OSError, TimeoutError, ValueError, TypeError) as exc:
+            loud()
             raise ParcelfitError(
                 f"cannot reach the Dask scheduler at {scheduler!r} ({exc})",
                 fix="check the address (tcp://HOST:8786) and that the scheduler runs",
@@ -316,9 +383,12 @@ def dask_executor(
         client = scheduler
 
     def close() -> None:
-        if own:
-            with contextlib.suppress(Exception):
-                client.close(timeout=5)
+        try:
+            if own:
+                with contextlib.suppress(Exception):
+                    client.close(timeout=5)
+        finally:
+            loud()
 
     try:
         client.wait_for_workers(1, timeout=worker_wait)
@@ -350,8 +420,34 @@ def dask_executor(
             return f"its worker died {retries + 1} times: {exc}"
         return f"dask task failed: {exc!r}"
 
+    alone_since: list[float] = []  # when the cluster was last seen without a worker
+
+    def idle() -> ParcelfitError | None:
+        """While results are awaited: stop when no worker has been attached for
+        ``worker_wait`` seconds (the scheduler keeps the tasks and waits for ever)."""
+        if not connected():  # a lost scheduler is reported by the tasks themselves
+            return None
+        try:
+            workers = int(client.scheduler_info(n_workers=0).get("n_workers", 1))
+        except Exception:  # the scheduler did not answer: ask again later
+            return None
+        if workers:
+            alone_since.clear()
+            return None
+        if not alone_since:
+            alone_since.append(time.monotonic())
+        if time.monotonic() - alone_since[0] < worker_wait:
+            return None
+        return ParcelfitError(
+            f"no Dask worker has been attached to the scheduler at {address} for "
+            f"{worker_wait:g} s, so nothing runs; the simulations in flight were not recorded "
+            "and stay pending",
+            fix=f"start workers, e.g. `dask worker {address}` (or use --executor local), then "
+            "rerun the same command: it resumes",
+        )
+
     pool = client.get_executor(pure=False, retries=retries)
-    return Executor(pool, lost=lost, on_close=close, explain=explain)
+    return Executor(pool, lost=lost, on_close=close, explain=explain, idle=idle)
 
 
 def make_executor(

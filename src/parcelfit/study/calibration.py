@@ -11,7 +11,13 @@ cases are simulated one after the other, and the validation passes when every ca
 
 Failed, unstable and timed-out simulations, and runs whose trajectory misses the regions of
 interest, are stored with their status and told to the optimiser as failures (it penalises them
-with the worst cost seen); they never stop the loop and count against the budget.
+with the worst cost seen) and count against the budget. One failure never stops the loop, but
+`FAILURES_IN_A_ROW` fitting evaluations failing one after the other do (`FailureStreak`): a
+study whose every simulation fails (a broken simulator or solver set-up, parameter ranges
+where nothing runs) stops with a `ParcelfitError` quoting the first failure, instead of
+spending its budget. A rerun of a study that has no successful evaluation yet runs its failed
+ones again (the cause may have been fixed); otherwise it continues, the optimiser knowing the
+failures.
 
 Iterations are numbered one way in the store, the progress, `study_status` and the report:
 0 is the initial design, k >= 1 the k-th batch the optimiser chose; the validation "after
@@ -28,6 +34,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
+import time
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from functools import cached_property
@@ -36,7 +44,7 @@ from typing import Any
 
 from filelock import FileLock
 
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, os_error
 from parcelfit.metrics import ReferenceSelection, calibration_cost, select_reference
 from parcelfit.metrics.reference import adjusted_reference
 from parcelfit.optimize.sampler import Sampler, make_sampler
@@ -86,6 +94,7 @@ from parcelfit.study.store import (
 )
 from parcelfit.study.studyfile import CaseSpec, Study
 
+FAILURES_IN_A_ROW = 8  # evaluations failing one after the other that stop a study or a screen
 LOST_WORKER_MESSAGES = (
     "worker failed: BrokenProcessPool",
     "dask task failed: FutureCancelledError",
@@ -108,6 +117,105 @@ class CalibrationResult:
     stop_reason: str
     folder: Path
     figures: tuple[Path, ...] = ()
+
+
+STUDY_OUTPUTS = ("runs", "results.json", "figures", "report.html")  # beside the store
+
+
+def _outputs(folder: Path) -> list[str]:
+    """The outputs of a study that ``folder`` holds (a folder counts when not empty)."""
+    return [
+        name
+        for name in STUDY_OUTPUTS
+        if (folder / name).is_file()
+        or ((folder / name).is_dir() and any((folder / name).iterdir()))
+    ]
+
+
+def refuse_orphaned_outputs(folder: Path) -> None:
+    """Refuse to start a new study in a folder that holds an earlier study's outputs (run
+    files, results, figures) without its store (``study.sqlite`` deleted or moved): the new
+    study would overwrite them."""
+    if (folder / STORE_FILE).exists():
+        return
+    found = _outputs(folder)
+    if found:
+        names = ", ".join(f"{n}/" if (folder / n).is_dir() else n for n in found)
+        raise ParcelfitError(
+            f"this folder holds an earlier study's outputs ({names}) but no {STORE_FILE}, so a "
+            "new study would overwrite them",
+            file=folder,
+            fix=f"restore {STORE_FILE} to resume that study, use a new output folder, or "
+            "rerun with --restart to move them into earlier-TIME/ in the folder and start afresh",
+        )
+
+
+def set_aside_outputs(folder: Path) -> Path | None:
+    """Move a study's store and outputs out of the way, into ``folder/earlier-YYYYmmdd-HHMMSS``
+    (the UTC time; a new name if taken), so that a new study starts afresh; returns that
+    folder (None when there was nothing to move). Call with the folder locked."""
+    names = [
+        n for n in (STORE_FILE, f"{STORE_FILE}-wal", f"{STORE_FILE}-shm") if (folder / n).exists()
+    ] + _outputs(folder)
+    if not names:
+        return None
+    stamp = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
+    target = folder / f"earlier-{stamp}"
+    k = 1
+    while target.exists():
+        k += 1
+        target = folder / f"earlier-{stamp}-{k}"
+    target.mkdir()
+    for name in names:  # the store's WAL files with it: they hold its latest transactions
+        os.replace(folder / name, target / name)
+    return target
+
+
+class FailureStreak:
+    """Counts simulations (or evaluations) that failed one after the other, in the order they
+    arrive, and stops the run when ``limit`` of them did.
+
+    Why 8: a batch is 4 by default, so 8 is two whole batches, or the whole initial design of
+    the default study, without a single success; a fixed set-up problem (a simulator that
+    raises, a solver that is missing) fails every simulation in about the same time as one, so
+    stopping there costs minutes, while a study whose optimiser merely strays into a region
+    where the physics breaks down has successes between its failures. ``what`` names the counted
+    things in the message, ``where`` is the folder the message names. With ``until_success``
+    only a streak before the first success counts (a screening design, whose failures after a
+    success are a property of its fixed design, not of the set-up)."""
+
+    def __init__(
+        self, limit: int, where: Path, what: str = "simulations", *, until_success: bool = False
+    ) -> None:
+        self.limit = max(1, limit)
+        self.where = where
+        self.what = what
+        self.until_success = until_success
+        self.succeeded = False
+        self.ids: list[int] = []  # store rows of the current streak, in arrival order
+        self.first: str | None = None  # the first failure's message, one line
+
+    def add(self, row_id: int, status: str, message: str | None) -> None:
+        """Count one finished evaluation (store row ``row_id``): ``status`` ok ends a streak;
+        any other status extends it, and reaching the limit raises the `ParcelfitError` that
+        stops the run, quoting the streak's first failure."""
+        if status == "ok":
+            self.ids, self.first, self.succeeded = [], None, True
+            return
+        if self.until_success and self.succeeded:
+            return
+        if not self.ids:
+            text = " ".join(str(message or "").split()) or "no message"
+            self.first = f"{status}: {text if len(text) <= 300 else text[:297] + '...'}"
+        self.ids.append(row_id)
+        if len(self.ids) >= self.limit:
+            raise ParcelfitError(
+                f"{len(self.ids)} {self.what} in a row failed, so the run stopped early; "
+                f"the first: {self.first}",
+                file=self.where,
+                fix="fix the cause the first failure names, then rerun the same command to "
+                "resume (what failed is run again while nothing has succeeded yet)",
+            )
 
 
 def study_record(study: Study, sampler: Sampler) -> StudyRecord:
@@ -137,7 +245,9 @@ def record_result(
     w_xy: float = 1.0,
     w_theta: float = 1.0,
 ) -> dict[str, Any]:
-    """Write a simulated run next to the store, compute its cost parts, and store the result."""
+    """Write a simulated run next to the store, compute its cost parts, and store the result;
+    returns the stored fields (status, cost [-], DTW distances [m], [rad], transit time [s],
+    run file) and ``message``, why it failed (None if it did not say)."""
     status = result.status.value
     out: dict[str, Any] = {
         "status": status,
@@ -159,7 +269,7 @@ def record_result(
         except ParcelfitError as exc:
             out["status"], details["message"] = "failed", f"cost not computable: {exc}"
     store.finish(row.id, wall_time=result.wall_time, details=details, **out)
-    return out
+    return {**out, "message": details.get("message")}
 
 
 def study_executor(
@@ -204,6 +314,11 @@ class Calibration:
     calibrated set at the ends of the open intervals on each to say which case would help most
     (`parcelfit.study.joint`); all three go into ``results.json``.
 
+    A folder holding an earlier study's outputs (``runs/``, ``results.json``, ``figures/``)
+    without its store is refused (`refuse_orphaned_outputs`); with ``restart`` the folder's
+    store and outputs are first moved into ``earlier-TIME/`` in it (`set_aside_outputs`,
+    ``set_aside`` says where) and the study starts afresh.
+
     Constructing one keeps its inputs and touches nothing: `run` opens the folder, reads the
     data and builds the simulator (through `prepare`), runs the study and closes the folder.
     ``store``, ``reference``, ``val_reference`` and ``simulator`` exist from `prepare` on; a
@@ -222,9 +337,12 @@ class Calibration:
         key_frames: bool = True,
         animation: bool = False,
         advice: bool = True,
+        restart: bool = False,
     ) -> None:
         self.study = study
         self.advice = advice
+        self.restart = restart
+        self.set_aside: Path | None = None  # where a restart moved the earlier outputs
         self.folder = Path(folder)
         self.figures = figures
         self.key_frames = key_frames
@@ -241,6 +359,11 @@ class Calibration:
         self._validations: dict[int, ValidationRecord] = {}  # by store row id
         self._opened: _Opened | None = None
         self._closed = False
+        self._streak = FailureStreak(
+            min(FAILURES_IN_A_ROW, study.budget),
+            self.folder,
+            "evaluations" if study.joint else "simulations",
+        )
 
     @cached_property
     def bo(self) -> Sampler:
@@ -256,7 +379,8 @@ class Calibration:
         )
 
     def prepare(self) -> None:
-        """Open the study: create and lock the folder (until `close`), open its store and
+        """Open the study: create and lock the folder (until `close`), set an earlier study
+        aside (``restart``) or refuse its outputs without a store, open its store and
         refuse one made from a different study file, record the study and where it came from,
         load the dataset, select the fitting and validation reference runs and build the
         simulator. `run` calls it; once prepared, calling it again does nothing. Whatever it
@@ -270,7 +394,7 @@ class Calibration:
         try:
             self.folder.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
-            raise ParcelfitError(
+            raise os_error(exc, self.folder) or ParcelfitError(
                 f"cannot create the study folder ({exc.strerror or exc})",
                 file=self.folder,
                 fix="choose a writable output folder",
@@ -278,6 +402,10 @@ class Calibration:
         lock = lock_folder(self.folder, "a calibration")  # released by close()
         store = None
         try:
+            if self.restart:
+                self.set_aside = set_aside_outputs(self.folder)
+            else:
+                refuse_orphaned_outputs(self.folder)
             store = Store(self.folder / STORE_FILE)
             known = store.get_meta("fingerprint")
             if known is not None and known != study.fingerprint:
@@ -431,7 +559,7 @@ class Calibration:
             )
         )
 
-    def _record_fit(self, row: Evaluation, result: SimResult) -> None:
+    def _record_fit(self, row: Evaluation, result: SimResult) -> dict[str, Any]:
         outcome = record_result(
             self.store,
             self.folder,
@@ -442,6 +570,7 @@ class Calibration:
             self.study.w_theta,
         )
         self.bo.tell(row.params, outcome["cost"] if outcome["status"] == "ok" else None)
+        return outcome
 
     def _run_rows(self, rows: list[Evaluation], executor: Executor) -> None:
         if self.study.joint:
@@ -453,9 +582,10 @@ class Calibration:
         ]
         remaining = len(rows)
         for i, result in executor.simulate(self.simulator, tasks):
-            self._record_fit(rows[i], result)
+            outcome = self._record_fit(rows[i], result)
             remaining -= 1
-            self._report(rows[i].iteration, remaining, f"{result.status.value}: {tasks[i].run_id}")
+            self._report(rows[i].iteration, remaining, f"{outcome['status']}: {tasks[i].run_id}")
+            self._streak.add(rows[i].id, outcome["status"], outcome["message"])
 
     def _run_joint_rows(self, rows: list[Evaluation], executor: Executor) -> None:
         """Evaluate rows of a joint or ensemble study: every case (and placement) of every row
@@ -493,6 +623,7 @@ class Calibration:
                 remaining,
                 f"{out['status']}: fit-{row.iteration:03d}-{row.slot:02d} ({per_row} simulations)",
             )
+            self._streak.add(row.id, out["status"], out["details"].get("message"))
 
     def _validate(self, iteration: int, executor: Executor) -> bool | None:
         best = self.bo.recommend()
@@ -585,11 +716,14 @@ class Calibration:
     def run(self) -> CalibrationResult:
         """Run (or resume) the study until validation passes or the budget is spent; then write
         the results (`parcelfit.study.results`), the study figures and the key frames, close
-        the store and release the folder. Opens the study first (`prepare`)."""
+        the store and release the folder. Opens the study first (`prepare`). A full disk stops
+        it with a `ParcelfitError` (what is stored stays; a rerun resumes)."""
         try:
             self.prepare()
             result = self._run()
             result = self._finish(result)
+        except OSError as exc:  # a full disk while writing a run or the results
+            raise os_error(exc, resumes=True) or exc from None
         finally:
             self.close()
         return result
@@ -905,6 +1039,8 @@ class Calibration:
 
     def _run(self) -> CalibrationResult:
         study = self.study
+        if self.set_aside is not None:
+            self._report(-1, 0, f"restarted: the earlier study is in {self.set_aside.name}/")
         # evaluations an earlier version stored as failed because their worker or the Dask
         # scheduler was lost (not because the simulation failed) are run again
         lost = [
@@ -913,6 +1049,11 @@ class Calibration:
             if r.status == "failed"
             and str(r.details.get("message", "")).startswith(LOST_WORKER_MESSAGES)
         ]
+        fits = self.store.evaluations("fit")
+        if not any(r.status == "ok" for r in fits):
+            # nothing has succeeded yet: what failed is run again (a set-up problem that
+            # stopped the study, see FailureStreak, may have been fixed since)
+            lost += [r.id for r in fits if r.status != "pending" and r.id not in lost]
         if lost:
             self.store.reopen(lost)
         rows = self.store.evaluations("fit")

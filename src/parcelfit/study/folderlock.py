@@ -14,13 +14,21 @@ from pathlib import Path
 
 from filelock import FileLock, Timeout
 
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, os_error
 
 LOCK_FILE = ".parcelfit.lock"
 
 
 def check_writable(folder: Path, files: tuple[str, ...] = ()) -> None:
-    """Refuse a folder (or one of its ``files``) parcelfit cannot write, naming it and the fix."""
+    """Refuse a folder (or one of its ``files``) parcelfit cannot write, naming it and the fix;
+    a path too long for the file system is refused too (`parcelfit.errors.os_error`)."""
+    try:
+        _check_writable(folder, files)
+    except OSError as exc:
+        raise (os_error(exc, folder) or exc) from None
+
+
+def _check_writable(folder: Path, files: tuple[str, ...]) -> None:
     if folder.exists() and not folder.is_dir():
         raise ParcelfitError(
             "the output folder is a file", file=folder, fix="choose another output folder"

@@ -8,8 +8,10 @@ simulated with the parameter at the low and at the high end of its range, every 
 at the centre of its range or at the values ``at`` gives (catalogue units), over K seeded
 placements (seeds 1..K, the same at both ends); the same K placements at the point itself give
 the placements' scatter there. Each run's statistics are written to
-``statistics.json`` in the output folder as they arrive, so a killed check resumes and a rerun
-with more candidates simulates only the new cases; a folder holding the runs of a check at
+``statistics.json`` in the output folder the moment it arrives (the file rewritten through a
+temporary one, `parcelfit.atomic.write_text_atomic`), so a killed or interrupted check keeps
+every finished simulation and resumes with the others, and a rerun with more candidates
+simulates only the new cases; a folder holding the runs of a check at
 another point, range or simulator is refused, never overwritten. The table goes to
 ``precision-check.md``.
 """
@@ -25,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from parcelfit.atomic import write_text_atomic
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, os_error
 from parcelfit.metrics.comparison import Comparison
 from parcelfit.metrics.transit_adjustment import (
     TransitAdjustment,
@@ -322,7 +324,10 @@ def run_precision_check(
         )
 
     def save() -> None:
-        write_text_atomic(cache_file, json.dumps({"setup": setup, "runs": cache}))
+        try:
+            write_text_atomic(cache_file, json.dumps({"setup": setup, "runs": cache}))
+        except OSError as exc:  # a full disk: the file keeps the runs saved before
+            raise os_error(exc, cache_file, resumes=True) or exc from None
 
     start = time.perf_counter()
     total = len(items)
@@ -339,8 +344,7 @@ def run_precision_check(
                     if stats is not None:  # raw statistics and the speeds an adjustment needs
                         stats = [*stats, *ridden_speeds(result.run.trajectory)]
                 cache[run_id] = None if stats is None else [float(v) for v in stats]
-                if done % 20 == 0 or done == total:
-                    save()
+                save()  # every run as it arrives: a kill loses only the runs still going
                 message = f"{done}/{total} simulations ({time.perf_counter() - start:.0f} s)"
                 progress(ProgressEvent("precision", message, done, total))
     wall = time.perf_counter() - start

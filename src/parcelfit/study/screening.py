@@ -29,7 +29,9 @@ recommendation with reasons, and the parameters with their ranges ready for a st
 
 The final selection ranks the last stage's parameters by their largest standardised effect, as
 the method asks ("by effect size, not blindly by significance"); the reasons say which effects
-were significant. A rerun resumes stage by stage and refuses a stage whose stored factors differ
+were significant. A stage whose first 8 runs all fail stops at once, quoting the first failure
+(`parcelfit.study.calibration.FailureStreak`); the failed runs of a stage none of whose runs
+succeeded run again on a rerun. A rerun resumes stage by stage and refuses a stage whose stored factors differ
 from the ones it would run now (use a new folder after changing the screen file).
 """
 
@@ -57,7 +59,7 @@ from parcelfit.doe import (
     select_parameters,
     with_centre_points,
 )
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, os_error
 from parcelfit.figures import save_figure
 from parcelfit.metrics import select_reference
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
@@ -72,7 +74,7 @@ from parcelfit.sim.params import (
     parameters_for,
     to_catalogue_units,
 )
-from parcelfit.study.calibration import record_result
+from parcelfit.study.calibration import FAILURES_IN_A_ROW, FailureStreak, record_result
 from parcelfit.study.folderlock import check_writable, lock_folder
 from parcelfit.study.store import Store
 from parcelfit.study.studyfile import (
@@ -340,6 +342,11 @@ def run_screen(
                     "screen", stage, batch, screen.case.speed_setting, [0] * len(batch)
                 )
                 rows = [e for e in store.evaluations("screen") if e.iteration == stage]
+            if not any(r.status == "ok" for r in rows):
+                # nothing of the stage has succeeded: what failed is run again (a set-up problem
+                # that stopped the screen, see FailureStreak, may have been fixed since)
+                store.reopen([r.id for r in rows if r.status != "pending"])
+                rows = [e for e in store.evaluations("screen") if e.iteration == stage]
             todo = [r for r in rows if r.status == "pending"]
             say(
                 f"stage {stage + 1} ({kind}, {len(factors)} factors): {len(rows)} runs, {len(todo)} to simulate"
@@ -348,13 +355,19 @@ def run_screen(
                 Task({**screen.fixed, **r.params}, screen.case, f"screen-{stage}-{r.slot}")
                 for r in todo
             ]
+            # a stage stops early only while none of its runs has succeeded: once one has, its
+            # failures are a property of the design, which the analysis copes with (a stage of
+            # at most 8 runs is judged whole, below: too few succeeded)
+            streak = FailureStreak(FAILURES_IN_A_ROW, out, until_success=True)
+            streak.succeeded = any(r.status == "ok" for r in rows)
             for k, (i, res) in enumerate(runner.simulate(simulator, tasks), start=1):
-                record_result(store, out, todo[i], res, reference)
+                outcome = record_result(store, out, todo[i], res, reference)
                 say(
-                    f"{res.status.value}: {tasks[i].run_id} ({k} of {len(tasks)} done)",
+                    f"{outcome['status']}: {tasks[i].run_id} ({k} of {len(tasks)} done)",
                     k,
                     len(tasks),
                 )
+                streak.add(todo[i].id, outcome["status"], outcome["message"])
             rows = sorted(
                 (e for e in store.evaluations("screen") if e.iteration == stage),
                 key=lambda e: e.slot,
@@ -412,6 +425,8 @@ def run_screen(
                 )
             )
             factors = survivors
+    except OSError as exc:  # a full disk while writing a run or a table
+        raise os_error(exc, resumes=True) or exc from None
     finally:
         runner.close()
         store.close()

@@ -23,6 +23,9 @@ A batch is written as ``pending`` rows before any of it runs; each result replac
 transaction the moment it arrives. A study killed at any point therefore finds on restart every
 finished evaluation (never simulated again) and exactly the pending ones to run.
 
+A write that fails (a full disk: SQLITE_FULL, a read-only file) is rolled back, leaving the
+store as it was before it, and raised as a `ParcelfitError` saying so.
+
 A new store is created under a temporary name and renamed once its schema is written, so an
 existing ``study.sqlite`` always has one: an empty (0-byte) or unreadable file is damaged and
 refused, never silently restarted. ``readonly=True`` (``status``, ``report``) opens the file with
@@ -35,18 +38,19 @@ default GP with ``OptimizerRecord.recorded`` False, so that readers can say so.
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import sqlite3
 import time
 import urllib.parse
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
 
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, os_error
 
 STORE_FILE = "study.sqlite"  # a calibration study's store, in its folder
 
@@ -229,6 +233,13 @@ class RecommendedRecord:
         return cls({str(k): float(v) for k, v in doc["params"].items()}, float(doc["cost"]))
 
 
+def _full(exc: sqlite3.Error) -> bool:
+    """Whether SQLite failed because the disk (or quota) is full (SQLITE_FULL)."""
+    return getattr(exc, "sqlite_errorcode", None) == sqlite3.SQLITE_FULL or "disk is full" in str(
+        exc
+    )
+
+
 _RECORDS = ("study", "source", "recommended")  # meta keys read and written as records only
 _R = TypeVar("_R")
 
@@ -297,6 +308,9 @@ class Store:
 
     def _error(self, exc: sqlite3.Error) -> ParcelfitError:
         """A database error as a message that says what to do without endangering results."""
+        if _full(exc):
+            full = OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(self.path))
+            return os_error(full, resumes=True)  # type: ignore[return-value]
         if "readonly" in str(exc) or "read-only" in str(exc):
             return ParcelfitError(
                 "the study folder or its database is read-only, so the study cannot go on "
@@ -315,23 +329,32 @@ class Store:
         """Close the database."""
         self._db.close()
 
+    def _write_error(self, exc: sqlite3.OperationalError) -> BaseException:
+        """What a failed write raises: a read-only or full store as a `ParcelfitError` that
+        says the results are intact, anything else as it is."""
+        if "readonly" in str(exc) or _full(exc):
+            return self._error(exc)
+        return exc
+
     @contextmanager
     def _transaction(self) -> Iterator[sqlite3.Connection]:
+        """One transaction: committed when the block ends, rolled back (the store as before)
+        when it or the commit fails; a full disk or read-only store is a `ParcelfitError`."""
         if self.readonly:
             raise ParcelfitError("this store was opened read-only", file=self.path)
         try:
             self._db.execute("BEGIN IMMEDIATE")
         except sqlite3.OperationalError as exc:
-            raise (self._error(exc) if "readonly" in str(exc) else exc) from exc
+            raise self._write_error(exc) from exc
         try:
             yield self._db
-        except sqlite3.OperationalError as exc:
-            self._db.execute("ROLLBACK")
-            raise (self._error(exc) if "readonly" in str(exc) else exc) from exc
-        except BaseException:
-            self._db.execute("ROLLBACK")
+            self._db.execute("COMMIT")  # a full disk may fail here, the transaction still open
+        except BaseException as exc:
+            with suppress(sqlite3.Error):  # nothing to roll back if SQLite already did
+                self._db.execute("ROLLBACK")
+            if isinstance(exc, sqlite3.OperationalError):
+                raise self._write_error(exc) from exc
             raise
-        self._db.execute("COMMIT")
 
     # -- meta -------------------------------------------------------------------------------
     def _read_meta(self, key: str) -> Any:
