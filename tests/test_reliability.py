@@ -432,6 +432,104 @@ def test_a_timed_out_solver_is_killed_with_its_children(tmp_path):
     assert not _gone([child], timeout=5)
 
 
+# A solver whose child escapes into its own session (setsid) or is double-forked away, keeping
+# the solver's stdout and stderr open and sleeping for ever; in mode "fail" the solver exits 1
+# at once after starting it, else it sleeps for ever itself.
+ESCAPER = """
+import os, subprocess, sys, time
+workdir, mode, how = sys.argv[1], sys.argv[2], sys.argv[3]
+forever = [sys.executable, "-c", "import time; time.sleep(1e9)"]
+if how == "setsid":
+    pids = [subprocess.Popen(forever, start_new_session=True).pid]
+else:  # a daemon: the middle process exits at once, its child is orphaned
+    r, w = os.pipe()
+    if os.fork() == 0:
+        os.setsid()
+        pid = os.fork()
+        if pid == 0:
+            os.execv(sys.executable, forever)
+        os.write(w, str(pid).encode())
+        os._exit(0)
+    pids = [int(os.read(r, 32))]
+with open(os.path.join(workdir, "pids"), "w") as fh:
+    fh.write(" ".join(map(str, [os.getpid(), *pids])))
+if mode == "fail":
+    print("solver: licence server not reachable", file=sys.stderr, flush=True)
+    sys.exit(1)
+time.sleep(1e9)
+"""
+
+
+def _escaper(tmp_path, mode, how, timeout):
+    import sys
+
+    from parcelfit.sim.external import ExternalSimulator, load_external_solver
+
+    (tmp_path / "escaper.py").write_text(ESCAPER)
+    (tmp_path / "p.tmpl").write_text("mu = ${mu_d_BePa}\n")
+    (tmp_path / "solver.yaml").write_text(
+        yaml.safe_dump(
+            {
+                "name": "escaper",
+                "command": [sys.executable, "${solver_dir}/escaper.py", "${workdir}", mode, how],
+                "template": "p.tmpl",
+                "timeout": timeout,
+            }
+        )
+    )
+    return ExternalSimulator(load_external_solver(tmp_path / "solver.yaml"), tmp_path / "w")
+
+
+def _running(pid):
+    """Whether ``pid`` is a live process (not a zombie), read from /proc."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rpartition(")")[2].split()[0]
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+    return state not in "ZX"
+
+
+LINUX_ONLY = pytest.mark.skipif(
+    not os.path.isdir("/proc/self"), reason="escaped descendants are found through Linux's /proc"
+)
+
+
+@LINUX_ONLY
+@pytest.mark.parametrize("how", ["setsid", "double-fork"])
+def test_a_solver_whose_child_escapes_its_session_times_out_on_time_leaving_nothing(tmp_path, how):
+    from parcelfit.runs import TestCase
+    from parcelfit.sim import SimStatus, defaults_si
+
+    sim = _escaper(tmp_path, "hang", how, timeout=3)
+    t0 = time.perf_counter()
+    result = sim.run(defaults_si("rigid"), TestCase("E1", "KPBW", 1))
+    elapsed = time.perf_counter() - t0
+    pids = [int(p) for p in (Path(result.diagnostics["workdir"]) / "pids").read_text().split()]
+    assert result.status is SimStatus.TIMEOUT
+    assert result.diagnostics["message"] == "killed after the timeout of 3 s"
+    assert 3.0 <= elapsed < 4.0  # was 61 s with a child sleeping 60 s, for ever with this one
+    assert [p for p in pids if _running(p)] == []  # the solver and its escaped child: gone
+
+
+@LINUX_ONLY
+def test_a_solver_that_fails_at_once_is_failed_at_once_with_its_message(tmp_path):
+    from parcelfit.runs import TestCase
+    from parcelfit.sim import SimStatus, defaults_si
+
+    sim = _escaper(tmp_path, "fail", "setsid", timeout=30)
+    t0 = time.perf_counter()
+    result = sim.run(defaults_si("rigid"), TestCase("E1", "KPBW", 1))
+    elapsed = time.perf_counter() - t0
+    pids = [int(p) for p in (Path(result.diagnostics["workdir"]) / "pids").read_text().split()]
+    assert result.status is SimStatus.FAILED  # not a timeout after 30 s
+    assert elapsed < 1.0
+    assert result.diagnostics["message"] == (
+        "the solver exited with status 1: solver: licence server not reachable"
+    )
+    assert result.diagnostics["output_tail"] == "solver: licence server not reachable"
+    assert [p for p in pids if _running(p)] == []
+
+
 def test_an_unreachable_scheduler_or_one_without_workers_is_a_clear_error():
     distributed = pytest.importorskip("distributed")
     from parcelfit.sim.executors import dask_executor

@@ -16,13 +16,18 @@ parameter in SI units (``${mu_d_BePa}``), ``${rig}``, ``${consignment}``, ``${sp
 description file). A placeholder that is not known, or a value holding a line break or another
 control character (which could add lines to the parameter file), is an error before anything
 runs. Each run gets its own work folder; the command runs there, is never
-passed through a shell, runs in its own process group, and the whole group (the solver's own
-children too) is killed at the timeout. Exit status 0 and a readable trajectory
-give ``ok``; anything else ``failed`` (with the solver's last output lines) or ``timeout``.
+passed through a shell, reads nothing (stdin is empty) and writes its output to
+``parcelfit-solver.stdout`` and ``parcelfit-solver.stderr`` there. The run ends when the command
+exits or at the timeout, and then every process the command started is killed, on Linux also
+those that started their own session (`parcelfit.sim.lifetime.run_command`). Exit status 0 and
+a readable trajectory give ``ok``; a non-zero status ``failed`` at once, with the status and the
+solver's last line on stderr in the message and its last output lines in ``output_tail``; the
+timeout ``timeout``.
 """
 
 from __future__ import annotations
 
+import signal
 import string
 import subprocess
 import tempfile
@@ -40,7 +45,7 @@ from parcelfit.config import (
 )
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import Run, TestCase, read_trajectory
-from parcelfit.sim.lifetime import run_command
+from parcelfit.sim.lifetime import STDERR_FILE, STDOUT_FILE, run_command
 from parcelfit.sim.protocol import SimResult, SimStatus
 
 _KEYS = ("name", "command", "template", "params_file", "output_file", "transit_file", "timeout")
@@ -122,6 +127,21 @@ def _substitute(text: str, values: Mapping[str, Any], what: str) -> str:
         ) from None
 
 
+def _last_lines(*texts: str | bytes | None, n: int = 10) -> str:
+    """The last ``n`` non-empty lines of ``texts`` joined (output captured as text or bytes)."""
+    joined = "\n".join(
+        t.decode("utf-8", "replace") if isinstance(t, bytes) else t for t in texts if t
+    )
+    return "\n".join([line for line in joined.splitlines() if line.strip()][-n:])
+
+
+def _signal_name(number: int) -> str:
+    try:
+        return signal.Signals(number).name
+    except ValueError:
+        return str(number)
+
+
 class ExternalSimulator:
     """`Simulator` that renders a parameter file, runs a command and reads its trajectory back."""
 
@@ -134,6 +154,13 @@ class ExternalSimulator:
     ) -> SimResult:
         """Run the solver for SI ``params`` and ``case``; failures become a status, never an exception."""
         t0 = time.perf_counter()
+        logs = {STDOUT_FILE, STDERR_FILE}
+        if logs & {self.solver.params_file, self.solver.output_file, self.solver.transit_file}:
+            raise ParcelfitError(
+                f"the solver's files may not be named {' or '.join(sorted(logs))}: parcelfit "
+                "writes the solver's output there",
+                fix="rename params_file, output_file or transit_file in the solver description",
+            )
         if self.workroot is not None:
             self.workroot.mkdir(parents=True, exist_ok=True)
         workdir = Path(tempfile.mkdtemp(prefix=f"{self.solver.name}-", dir=self.workroot))
@@ -154,16 +181,22 @@ class ExternalSimulator:
         diagnostics: dict[str, object] = {"workdir": str(workdir), "command": args}
         try:
             proc = run_command(args, workdir, self.solver.timeout)
-        except subprocess.TimeoutExpired:
+        except subprocess.TimeoutExpired as exc:
             diagnostics["message"] = f"killed after the timeout of {self.solver.timeout:g} s"
+            diagnostics["output_tail"] = _last_lines(exc.stdout, exc.stderr)
             return SimResult(None, SimStatus.TIMEOUT, time.perf_counter() - t0, diagnostics)
         except OSError as exc:
             diagnostics["message"] = f"could not start the solver: {exc}"
             return SimResult(None, SimStatus.FAILED, time.perf_counter() - t0, diagnostics)
-        tail = "\n".join((proc.stdout + proc.stderr).strip().splitlines()[-10:])
-        diagnostics["output_tail"] = tail
+        diagnostics["output_tail"] = _last_lines(proc.stdout, proc.stderr)
         if proc.returncode != 0:
-            diagnostics["message"] = f"the solver exited with status {proc.returncode}"
+            # what the solver said last on stderr (else stdout) belongs in the one-line message
+            said = _last_lines(proc.stderr, n=1) or _last_lines(proc.stdout, n=1)
+            if proc.returncode < 0:
+                how = f"was killed by signal {_signal_name(-proc.returncode)}"
+            else:
+                how = f"exited with status {proc.returncode}"
+            diagnostics["message"] = f"the solver {how}" + (f": {said}" if said else "")
             return SimResult(None, SimStatus.FAILED, time.perf_counter() - t0, diagnostics)
         try:
             traj = read_trajectory(workdir / self.solver.output_file)
