@@ -274,6 +274,27 @@ def test_a_line_break_in_a_name_cannot_add_lines_to_a_solver_parameter_file(tmp_
     assert not list(tmp_path.glob("*/params.txt"))  # nothing was written, nothing ran
 
 
+@pytest.mark.parametrize(
+    "brk", ["\u2028", "\u2029", "\u0085", "\r", "\x0b", "\x0c", "\x1c", "\x1e"]
+)
+def test_no_unicode_line_break_can_add_lines_to_a_solver_parameter_file(tmp_path, brk):
+    from parcelfit.runs import TestCase
+    from parcelfit.sim import defaults_si
+    from parcelfit.sim.external import ExternalSimulator, load_external_solver
+
+    assert len(f"a{brk}b".splitlines()) == 2  # a line break to str.splitlines
+    solver = Path(__file__).parent / "data" / "external" / "solver.yaml"
+    sim = ExternalSimulator(load_external_solver(solver), workroot=tmp_path)
+    for case, params in (
+        (TestCase(f"E1{brk}mu_d_BePa = 9", "KPBW", 1), defaults_si("rigid")),
+        (TestCase("E1", f"KPBW{brk}E_Pa = 1", 1), defaults_si("rigid")),
+        (TestCase("E1", "KPBW", 1), {**defaults_si("rigid"), f"x{brk}y": 1.0}),
+    ):
+        with pytest.raises(ParcelfitError, match="line break"):
+            sim.run(params, case)
+    assert not list(tmp_path.glob("*/params.txt"))  # nothing was written, nothing ran
+
+
 @pytest.mark.slow
 def test_a_validation_killed_midway_is_run_again_on_resume(finished, tmp_path):
     study, out = _copy(finished, tmp_path)

@@ -105,17 +105,28 @@ def load_external_solver(path: str | Path) -> ExternalSolver:
     )
 
 
+# control characters (Cc: \n, \r, \x0b, \x0c, \x1c-\x1e, U+0085, ...) and the line and
+# paragraph separators (Zl U+2028, Zp U+2029): every character str.splitlines breaks at
+_BREAKING = frozenset({"Cc", "Zl", "Zp"})
+
+
+def _breaks(text: str) -> bool:
+    """Whether ``text`` holds a line break or another control character."""
+    return any(unicodedata.category(c) in _BREAKING for c in text)
+
+
 def _substitute(text: str, values: Mapping[str, Any], what: str) -> str:
     for key, value in values.items():
         # a line break (or any control character) in a name would add lines to the file
-        if any(unicodedata.category(c) == "Cc" for c in str(value)):
+        if _breaks(str(key)) or _breaks(str(value)):
+            name = repr(key) if _breaks(str(key)) else key
             raise ParcelfitError(
-                f"the value of ${{{key}}} ({str(value)!r}) holds a line break or another control "
-                f"character, which would change {what}",
+                f"the value of ${{{name}}} ({str(value)!r}) holds a line break or another "
+                f"control character, which would change {what}",
                 fix="use names without line breaks or control characters",
             )
     try:
-        return string.Template(text).substitute({k: str(v) for k, v in values.items()})
+        out = string.Template(text).substitute({k: str(v) for k, v in values.items()})
     except KeyError as exc:
         raise ParcelfitError(
             f"{what} uses the unknown placeholder ${{{exc.args[0]}}}",
@@ -125,6 +136,12 @@ def _substitute(text: str, values: Mapping[str, Any], what: str) -> str:
         raise ParcelfitError(
             f"{what} has a malformed placeholder ({exc})", fix="write placeholders as ${name}"
         ) from None
+    if len(out.splitlines()) != len(text.splitlines()):  # the checks above hold: defence in depth
+        raise ParcelfitError(
+            f"filling in {what} would change its number of lines",
+            fix="use names without line breaks or control characters",
+        )
+    return out
 
 
 def _last_lines(*texts: str | bytes | None, n: int = 10) -> str:
