@@ -533,6 +533,43 @@ def test_a_solver_whose_child_escapes_its_session_times_out_on_time_leaving_noth
 
 
 @LINUX_ONLY
+def test_a_solver_and_its_escaped_child_die_when_the_process_running_it_is_killed(tmp_path):
+    import signal
+    import subprocess
+    import sys
+
+    import parcelfit
+
+    (tmp_path / "escaper.py").write_text(ESCAPER)
+    code = (
+        "import sys; from parcelfit.sim.lifetime import run_command; "
+        "run_command([sys.executable, sys.argv[1], sys.argv[2], 'hang', 'setsid'], sys.argv[2], 600)"
+    )
+    env = {**os.environ, "PYTHONPATH": str(Path(parcelfit.__file__).parents[1])}
+    runner_proc = subprocess.Popen(
+        [sys.executable, "-c", code, str(tmp_path / "escaper.py"), str(tmp_path)], env=env
+    )
+    pids_file = tmp_path / "pids"
+    deadline = time.time() + 30
+    while time.time() < deadline and not pids_file.is_file():
+        time.sleep(0.05)
+    time.sleep(0.2)  # the file is written; the solver sleeps
+    pids = [int(p) for p in pids_file.read_text().split()]
+    try:
+        assert all(_running(p) for p in pids)
+        runner_proc.kill()  # SIGKILL, as the out-of-memory killer does: no cleanup of its own
+        runner_proc.wait()
+        deadline = time.time() + 2
+        while time.time() < deadline and any(_running(p) for p in pids):
+            time.sleep(0.05)
+        assert [p for p in pids if _running(p)] == []
+    finally:
+        for pid in pids:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+
+
+@LINUX_ONLY
 def test_a_solver_that_fails_at_once_is_failed_at_once_with_its_message(tmp_path):
     from parcelfit.runs import TestCase
     from parcelfit.sim import SimStatus, defaults_si
