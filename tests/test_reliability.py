@@ -96,6 +96,125 @@ def test_the_page_policy_blocks_a_script_that_slipped_through(tmp_path):
     assert inspect_page(page)["title"] in ("X", "Y")
 
 
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+def _spy_on_reads(monkeypatch):
+    """Every file opened from now on (builtins.open, io.open: what pathlib uses), resolved."""
+    import builtins
+    import io
+
+    opened, real_open = [], io.open
+
+    def spy(file, *args, **kwargs):
+        if isinstance(file, str | os.PathLike):
+            opened.append(Path(file).resolve())
+        return real_open(file, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "open", spy)
+    monkeypatch.setattr(io, "open", spy)
+    return opened
+
+
+def _study_with_outside_files(tmp_path):
+    """A finished study (no simulation) at a/b/study, a PNG image outside it (``secret.png``),
+    one inside (``frames.png``) and links inside it leading out and in."""
+    from .helpers import write_reference_dataset, write_study_results, write_study_store
+
+    write_reference_dataset(tmp_path / "data")
+    study = write_study_store(tmp_path / "a" / "b" / "study", tmp_path / "data")
+    write_study_results(study, tmp_path / "data")
+    secret = tmp_path / "secret.png"
+    secret.write_bytes(PNG + b"secret bytes of an image outside the study folder")
+    (study / "frames.png").write_bytes(PNG + b"the key frames")
+    (study / "sub").mkdir()
+    (study / "link.png").symlink_to(secret)
+    (study / "inner-link.png").symlink_to(study / "frames.png")
+    return study, secret
+
+
+def _store_key_frames(study, image, animation):
+    import json
+
+    doc = json.loads((study / "results.json").read_text())
+    doc["key_frames"].update(image=image, animation=animation)
+    (study / "results.json").write_text(json.dumps(doc))
+
+
+@pytest.mark.parametrize(
+    ("name", "embedded", "note"),
+    [
+        ("../../../secret.png", False, "outside the study folder"),
+        ("ABSOLUTE", False, "outside the study folder"),
+        ("link.png", False, "outside the study folder"),  # a link inside, leading out
+        ("sub/../frames.png", True, None),
+        ("inner-link.png", True, None),  # a link inside, leading inside
+        ("study.sqlite", False, "not a PNG image"),
+        ("gone.png", False, "missing"),
+        ("", False, "not a file name"),
+    ],
+)
+def test_key_frames_are_embedded_only_from_inside_the_study_folder(
+    tmp_path, monkeypatch, name, embedded, note
+):
+    import base64
+
+    from parcelfit.report.html import _frames_section, _Page
+    from parcelfit.study.results import read_results
+
+    study, secret = _study_with_outside_files(tmp_path)
+    stored = str(secret) if name == "ABSOLUTE" else name
+    _store_key_frames(study, stored, stored)
+    results = read_results(study)
+    opened = _spy_on_reads(monkeypatch)
+    page = _Page(lambda event: None)
+    _frames_section(page, study, results, animation=True)
+    data = page.sections[0].data
+    assert secret.resolve() not in opened  # never read, not even its first bytes
+    assert (data["image"] is not None) is embedded
+    if embedded:
+        assert base64.b64encode(PNG + b"the key frames").decode() in data["image"]
+    elif note == "missing":
+        assert data["note"] == f"The key-frame figure {stored} is missing from the study folder."
+    else:
+        assert data["note"] == f"The key-frame figure {stored} is not embedded: {note}."
+        reason = note.replace("PNG", "GIF")
+        assert data["no_animation"] == f"The animation {stored} is not embedded: {reason}."
+    assert data["animation"] is None  # a PNG is no GIF, and the others are refused
+
+
+@pytest.mark.slow  # draws the whole report (~10 s)
+def test_the_report_reads_no_file_outside_the_study_and_screening_folders(tmp_path, monkeypatch):
+    import base64
+
+    study, secret = _study_with_outside_files(tmp_path)
+    _store_key_frames(study, "../../../secret.png", str(secret))
+    # the demo's extra files beside the study and a screening folder: links leading out
+    outside = tmp_path / "outside.json"
+    outside.write_text('{"description": "SECRET", "selected": ["SECRET"]}')
+    for extra in ("reference_runs.json", "stricter-criterion.json"):
+        (study.parent / extra).symlink_to(outside)
+    screen = tmp_path / "screen"
+    screen.mkdir()
+    (screen / "stage1-effects.csv").write_text("parameter,effect\n")
+    (screen / "selection.yaml").symlink_to(outside)
+    (screen / "stage1-pareto-xy.png").symlink_to(secret)
+    opened = _spy_on_reads(monkeypatch)
+    page = build_report(study, out=tmp_path / "r.html", screen=screen, animation=True)
+    text = html.unescape(" ".join(page.read_text().split()))
+    assert secret.resolve() not in opened and outside.resolve() not in opened
+    assert base64.b64encode(secret.read_bytes()).decode() not in text and "SECRET" not in text
+    assert (
+        "The key-frame figure ../../../secret.png is not embedded: outside the study folder."
+        in text
+    )
+    assert f"The animation {secret} is not embedded: outside the study folder." in text
+    for refused in ("reference_runs.json", "stricter-criterion.json"):
+        assert f"{refused} is not embedded: outside its folder." in text
+    for refused in ("selection.yaml", "stage1-pareto-xy.png"):
+        assert f"{refused} is not embedded: outside the screening folder." in text
+
+
 @pytest.mark.parametrize("name", ["a[/i]", "[/b]", "run[/bold]", "[red]x[/red]"])
 def test_square_brackets_in_user_text_are_printed_as_they_are(tmp_path, name):
     folder = tmp_path / name
