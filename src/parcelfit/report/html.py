@@ -142,7 +142,7 @@ _MAGIC = {"image/png": (b"\x89PNG\r\n\x1a\n",), "image/gif": (b"GIF87a", b"GIF89
 
 
 @dataclass(frozen=True)
-class _Refused:
+class Refused:
     """Why a file named by stored data or found in a folder was not read."""
 
     name: str
@@ -152,26 +152,26 @@ class _Refused:
         return f"{self.name} is not embedded: {self.reason}."
 
 
-def inside(folder: Path, name: object, what: str = "the study folder") -> Path | _Refused | None:
+def inside(folder: Path, name: object, what: str = "the study folder") -> Path | Refused | None:
     """The file ``name`` (relative to ``folder``, as stored) resolved, when it lies inside the
-    resolved ``folder`` and is a regular file; `_Refused` (saying why) when it leads out of it
+    resolved ``folder`` and is a regular file; `Refused` (saying why) when it leads out of it
     or is not a file name; None when it does not exist. Never opens the file."""
     shown = str(name)
     if not isinstance(name, str) or not name or "\0" in name:
-        return _Refused(shown, "not a file name")
+        return Refused(shown, "not a file name")
     try:
         base = folder.resolve(strict=True)
         path = (folder / name).resolve()
         if not path.is_relative_to(base):
-            return _Refused(shown, f"outside {what}")
+            return Refused(shown, f"outside {what}")
         return path if path.is_file() else None
     except (OSError, RuntimeError, ValueError):  # a loop of links, an unreadable folder
-        return _Refused(shown, "not readable")
+        return Refused(shown, "not readable")
 
 
-def _embeddable(folder: Path, name: object, mime: str, what: str) -> bytes | _Refused | None:
+def _embeddable(folder: Path, name: object, mime: str, what: str) -> bytes | Refused | None:
     """The bytes of a file that `inside` accepts and that is a ``mime`` image (PNG or GIF) of
-    at most `MAX_EMBED_BYTES`; `_Refused` or None (missing) otherwise."""
+    at most `MAX_EMBED_BYTES`; `Refused` or None (missing) otherwise."""
     path = inside(folder, name, what)
     if not isinstance(path, Path):
         return path
@@ -179,13 +179,13 @@ def _embeddable(folder: Path, name: object, mime: str, what: str) -> bytes | _Re
         with open(path, "rb") as fh:
             head = fh.read(8)
             if not head.startswith(_MAGIC[mime]):
-                return _Refused(str(name), f"not a {mime.split('/')[1].upper()} image")
+                return Refused(str(name), f"not a {mime.split('/')[1].upper()} image")
             if fh.seek(0, io.SEEK_END) > MAX_EMBED_BYTES:
-                return _Refused(str(name), f"larger than {MAX_EMBED_BYTES >> 20} MiB")
+                return Refused(str(name), f"larger than {MAX_EMBED_BYTES >> 20} MiB")
             fh.seek(0)
             return fh.read()
     except OSError:
-        return _Refused(str(name), "not readable")
+        return Refused(str(name), "not readable")
 
 
 @dataclass(frozen=True)
@@ -341,7 +341,7 @@ def _reference_section(
         "rows": rows,
         "all_cases": everything is not None,
         "missing": None if results is not None else _NOT_STORED,
-        "refused": [str(refused)] if isinstance(refused, _Refused) else [],
+        "refused": [str(refused)] if isinstance(refused, Refused) else [],
         "figures": [
             figure_html(distance_heatmaps(r), f"distance matrices {r.case}") for r in stored
         ],
@@ -364,7 +364,7 @@ def _screen_section(page: _Page, screen: Path | None) -> None:
     if screen is not None:
         where = "the screening folder"
         sel_file = inside(screen, "selection.yaml", where)
-        if isinstance(sel_file, _Refused):
+        if isinstance(sel_file, Refused):
             data["refused"].append(str(sel_file))
         elif sel_file is not None:
             doc = yaml.safe_load(sel_file.read_text(encoding="utf-8")) or {}
@@ -709,7 +709,7 @@ def _stricter_example_section(page: _Page, root: Path) -> None:
     if path is None:
         return
     title = page.start("Why a stricter criterion")
-    if isinstance(path, _Refused):
+    if isinstance(path, Refused):
         page.add(
             "stricter", title, "stricter", {"description": "", "view": None, "missing": str(path)}
         )
@@ -767,7 +767,7 @@ def _frames_section(
             )
             if isinstance(gif, bytes):
                 data["animation"] = png_html(gif, "animation of the simulated run", "image/gif")
-            elif isinstance(gif, _Refused):
+            elif isinstance(gif, Refused):
                 data["no_animation"] = f"The animation {gif}"
             elif kf.image is not None:
                 data["no_animation"] = (
