@@ -707,6 +707,42 @@ def test_a_solver_that_fails_at_once_is_failed_at_once_with_its_message(tmp_path
     assert [p for p in pids if _running(p)] == []
 
 
+@pytest.mark.parametrize(
+    ("module", "extra", "study", "args", "what"),
+    [
+        (
+            "distributed",
+            "dask",
+            {"executor": {"kind": "serial"}},
+            ["--executor", "dask", "--scheduler", "tcp://127.0.0.1:9"],
+            "the dask executor",
+        ),
+        (
+            "optuna",
+            "optuna",
+            {"optimizer": {"sampler": "tpe"}, "executor": {"kind": "serial"}},
+            [],
+            "the tpe optimizer",
+        ),
+    ],
+)
+def test_a_missing_optional_dependency_names_the_extra_to_install(
+    tmp_path, monkeypatch, module, extra, study, args, what
+):
+    import sys
+
+    study_file = write_study(tmp_path, initial=4, batch_size=2, budget=8, **study)
+    monkeypatch.setitem(sys.modules, module, None)  # as if not installed: import fails
+    result = runner.invoke(app, ["calibrate", str(study_file), "--out", str(tmp_path / "o"), *args])
+    assert result.exit_code == 2 and isinstance(result.exception, SystemExit), result.output
+    error = " ".join(result.output[result.output.index("error:") :].split())
+    assert error.startswith(f"error: {what} needs the '{extra}' extra ({module} cannot be")
+    assert error.endswith(
+        f'Fix: pip install "parcelfit[{extra}]" (in a clone of the repository: '
+        f'pip install -e ".[{extra}]")'
+    )
+
+
 def test_an_unreachable_scheduler_or_one_without_workers_is_a_clear_error():
     distributed = pytest.importorskip("distributed")
     from parcelfit.sim.executors import dask_executor

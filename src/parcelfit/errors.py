@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from types import ModuleType
 
 
 class ParcelfitError(ValueError):
@@ -32,3 +33,19 @@ class ParcelfitError(ValueError):
         if self.fix:
             text += f" Fix: {self.fix}"
         return text
+
+
+def require(module: str, *, extra: str, what: str) -> ModuleType:
+    """Import the optional dependency ``module``, or stop with a `ParcelfitError` naming the
+    extra of parcelfit that installs it: ``what`` (e.g. "the dask executor") needs it. Every
+    import of an optional dependency in parcelfit goes through here."""
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ImportError as exc:
+        raise ParcelfitError(
+            f"{what} needs the {extra!r} extra ({module} cannot be imported: {exc})",
+            fix=f'pip install "parcelfit[{extra}]" (in a clone of the repository: '
+            f'pip install -e ".[{extra}]")',
+        ) from exc

@@ -39,7 +39,7 @@ from dataclasses import dataclass, field, replace
 from functools import partial
 from typing import Any, Generic, TypeVar
 
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, require
 from parcelfit.runs import TestCase
 from parcelfit.sim.lifetime import die_with_parent
 from parcelfit.sim.protocol import SimResult, SimStatus, Simulator
@@ -296,12 +296,7 @@ def dask_executor(
     A scheduler that cannot be reached within ``connect_timeout`` [s], or has no worker attached
     after ``worker_wait`` [s], is an error before anything runs.
     """
-    try:
-        from distributed import Client
-    except ImportError as exc:
-        raise ParcelfitError(
-            "the dask executor needs the 'dask' extra", fix='pip install "parcelfit[dask]"'
-        ) from exc
+    Client = require("distributed", extra="dask", what="the dask executor").Client
     own = not hasattr(scheduler, "submit")
     address = str(scheduler) if own else str(scheduler.scheduler.address)
     if own:
