@@ -98,6 +98,125 @@ def test_the_page_policy_blocks_a_script_that_slipped_through(tmp_path):
     assert inspect_page(page)["title"] in ("X", "Y")
 
 
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+def _spy_on_reads(monkeypatch):
+    """Every file opened from now on (builtins.open, io.open: what pathlib uses), resolved."""
+    import builtins
+    import io
+
+    opened, real_open = [], io.open
+
+    def spy(file, *args, **kwargs):
+        if isinstance(file, str | os.PathLike):
+            opened.append(Path(file).resolve())
+        return real_open(file, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "open", spy)
+    monkeypatch.setattr(io, "open", spy)
+    return opened
+
+
+def _study_with_outside_files(tmp_path):
+    """A finished study (no simulation) at a/b/study, a PNG image outside it (``secret.png``),
+    one inside (``frames.png``) and links inside it leading out and in."""
+    from .helpers import write_reference_dataset, write_study_results, write_study_store
+
+    write_reference_dataset(tmp_path / "data")
+    study = write_study_store(tmp_path / "a" / "b" / "study", tmp_path / "data")
+    write_study_results(study, tmp_path / "data")
+    secret = tmp_path / "secret.png"
+    secret.write_bytes(PNG + b"secret bytes of an image outside the study folder")
+    (study / "frames.png").write_bytes(PNG + b"the key frames")
+    (study / "sub").mkdir()
+    (study / "link.png").symlink_to(secret)
+    (study / "inner-link.png").symlink_to(study / "frames.png")
+    return study, secret
+
+
+def _store_key_frames(study, image, animation):
+    import json
+
+    doc = json.loads((study / "results.json").read_text())
+    doc["key_frames"].update(image=image, animation=animation)
+    (study / "results.json").write_text(json.dumps(doc))
+
+
+@pytest.mark.parametrize(
+    ("name", "embedded", "note"),
+    [
+        ("../../../secret.png", False, "outside the study folder"),
+        ("ABSOLUTE", False, "outside the study folder"),
+        ("link.png", False, "outside the study folder"),  # a link inside, leading out
+        ("sub/../frames.png", True, None),
+        ("inner-link.png", True, None),  # a link inside, leading inside
+        ("study.sqlite", False, "not a PNG image"),
+        ("gone.png", False, "missing"),
+        ("", False, "not a file name"),
+    ],
+)
+def test_key_frames_are_embedded_only_from_inside_the_study_folder(
+    tmp_path, monkeypatch, name, embedded, note
+):
+    import base64
+
+    from parcelfit.report.html import _frames_section, _Page
+    from parcelfit.study.results import read_results
+
+    study, secret = _study_with_outside_files(tmp_path)
+    stored = str(secret) if name == "ABSOLUTE" else name
+    _store_key_frames(study, stored, stored)
+    results = read_results(study)
+    opened = _spy_on_reads(monkeypatch)
+    page = _Page(lambda event: None)
+    _frames_section(page, study, results, animation=True)
+    data = page.sections[0].data
+    assert secret.resolve() not in opened  # never read, not even its first bytes
+    assert (data["image"] is not None) is embedded
+    if embedded:
+        assert base64.b64encode(PNG + b"the key frames").decode() in data["image"]
+    elif note == "missing":
+        assert data["note"] == f"The key-frame figure {stored} is missing from the study folder."
+    else:
+        assert data["note"] == f"The key-frame figure {stored} is not embedded: {note}."
+        reason = note.replace("PNG", "GIF")
+        assert data["no_animation"] == f"The animation {stored} is not embedded: {reason}."
+    assert data["animation"] is None  # a PNG is no GIF, and the others are refused
+
+
+@pytest.mark.slow  # draws the whole report (~10 s)
+def test_the_report_reads_no_file_outside_the_study_and_screening_folders(tmp_path, monkeypatch):
+    import base64
+
+    study, secret = _study_with_outside_files(tmp_path)
+    _store_key_frames(study, "../../../secret.png", str(secret))
+    # the demo's extra files beside the study and a screening folder: links leading out
+    outside = tmp_path / "outside.json"
+    outside.write_text('{"description": "SECRET", "selected": ["SECRET"]}')
+    for extra in ("reference_runs.json", "stricter-criterion.json"):
+        (study.parent / extra).symlink_to(outside)
+    screen = tmp_path / "screen"
+    screen.mkdir()
+    (screen / "stage1-effects.csv").write_text("parameter,effect\n")
+    (screen / "selection.yaml").symlink_to(outside)
+    (screen / "stage1-pareto-xy.png").symlink_to(secret)
+    opened = _spy_on_reads(monkeypatch)
+    page = build_report(study, out=tmp_path / "r.html", screen=screen, animation=True)
+    text = html.unescape(" ".join(page.read_text().split()))
+    assert secret.resolve() not in opened and outside.resolve() not in opened
+    assert base64.b64encode(secret.read_bytes()).decode() not in text and "SECRET" not in text
+    assert (
+        "The key-frame figure ../../../secret.png is not embedded: outside the study folder."
+        in text
+    )
+    assert f"The animation {secret} is not embedded: outside the study folder." in text
+    for refused in ("reference_runs.json", "stricter-criterion.json"):
+        assert f"{refused} is not embedded: outside its folder." in text
+    for refused in ("selection.yaml", "stage1-pareto-xy.png"):
+        assert f"{refused} is not embedded: outside the screening folder." in text
+
+
 @pytest.mark.parametrize("name", ["a[/i]", "[/b]", "run[/bold]", "[red]x[/red]"])
 def test_square_brackets_in_user_text_are_printed_as_they_are(tmp_path, name):
     folder = tmp_path / name
@@ -276,6 +395,27 @@ def test_a_line_break_in_a_name_cannot_add_lines_to_a_solver_parameter_file(tmp_
     assert not list(tmp_path.glob("*/params.txt"))  # nothing was written, nothing ran
 
 
+@pytest.mark.parametrize(
+    "brk", ["\u2028", "\u2029", "\u0085", "\r", "\x0b", "\x0c", "\x1c", "\x1e"]
+)
+def test_no_unicode_line_break_can_add_lines_to_a_solver_parameter_file(tmp_path, brk):
+    from parcelfit.runs import TestCase
+    from parcelfit.sim import defaults_si
+    from parcelfit.sim.external import ExternalSimulator, load_external_solver
+
+    assert len(f"a{brk}b".splitlines()) == 2  # a line break to str.splitlines
+    solver = Path(__file__).parent / "data" / "external" / "solver.yaml"
+    sim = ExternalSimulator(load_external_solver(solver), workroot=tmp_path)
+    for case, params in (
+        (TestCase(f"E1{brk}mu_d_BePa = 9", "KPBW", 1), defaults_si("rigid")),
+        (TestCase("E1", f"KPBW{brk}E_Pa = 1", 1), defaults_si("rigid")),
+        (TestCase("E1", "KPBW", 1), {**defaults_si("rigid"), f"x{brk}y": 1.0}),
+    ):
+        with pytest.raises(ParcelfitError, match="line break"):
+            sim.run(params, case)
+    assert not list(tmp_path.glob("*/params.txt"))  # nothing was written, nothing ran
+
+
 @pytest.mark.slow
 def test_a_validation_killed_midway_is_run_again_on_resume(finished, tmp_path):
     study, out = _copy(finished, tmp_path)
@@ -432,6 +572,177 @@ def test_a_timed_out_solver_is_killed_with_its_children(tmp_path):
     assert result.status is SimStatus.TIMEOUT
     child = int((Path(result.diagnostics["workdir"]) / "child.pid").read_text())
     assert not _gone([child], timeout=5)
+
+
+# A solver whose child escapes into its own session (setsid) or is double-forked away, keeping
+# the solver's stdout and stderr open and sleeping for ever; in mode "fail" the solver exits 1
+# at once after starting it, else it sleeps for ever itself.
+ESCAPER = """
+import os, subprocess, sys, time
+workdir, mode, how = sys.argv[1], sys.argv[2], sys.argv[3]
+forever = [sys.executable, "-c", "import time; time.sleep(1e9)"]
+if how == "setsid":
+    pids = [subprocess.Popen(forever, start_new_session=True).pid]
+else:  # a daemon: the middle process exits at once, its child is orphaned
+    r, w = os.pipe()
+    if os.fork() == 0:
+        os.setsid()
+        pid = os.fork()
+        if pid == 0:
+            os.execv(sys.executable, forever)
+        os.write(w, str(pid).encode())
+        os._exit(0)
+    pids = [int(os.read(r, 32))]
+with open(os.path.join(workdir, "pids"), "w") as fh:
+    fh.write(" ".join(map(str, [os.getpid(), *pids])))
+if mode == "fail":
+    print("solver: licence server not reachable", file=sys.stderr, flush=True)
+    sys.exit(1)
+time.sleep(1e9)
+"""
+
+
+def _escaper(tmp_path, mode, how, timeout):
+    import sys
+
+    from parcelfit.sim.external import ExternalSimulator, load_external_solver
+
+    (tmp_path / "escaper.py").write_text(ESCAPER)
+    (tmp_path / "p.tmpl").write_text("mu = ${mu_d_BePa}\n")
+    (tmp_path / "solver.yaml").write_text(
+        yaml.safe_dump(
+            {
+                "name": "escaper",
+                "command": [sys.executable, "${solver_dir}/escaper.py", "${workdir}", mode, how],
+                "template": "p.tmpl",
+                "timeout": timeout,
+            }
+        )
+    )
+    return ExternalSimulator(load_external_solver(tmp_path / "solver.yaml"), tmp_path / "w")
+
+
+def _running(pid):
+    """Whether ``pid`` is a live process (not a zombie), read from /proc."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rpartition(")")[2].split()[0]
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+    return state not in "ZX"
+
+
+LINUX_ONLY = pytest.mark.skipif(
+    not os.path.isdir("/proc/self"), reason="escaped descendants are found through Linux's /proc"
+)
+
+
+@LINUX_ONLY
+@pytest.mark.parametrize("how", ["setsid", "double-fork"])
+def test_a_solver_whose_child_escapes_its_session_times_out_on_time_leaving_nothing(tmp_path, how):
+    from parcelfit.runs import TestCase
+    from parcelfit.sim import SimStatus, defaults_si
+
+    sim = _escaper(tmp_path, "hang", how, timeout=3)
+    t0 = time.perf_counter()
+    result = sim.run(defaults_si("rigid"), TestCase("E1", "KPBW", 1))
+    elapsed = time.perf_counter() - t0
+    pids = [int(p) for p in (Path(result.diagnostics["workdir"]) / "pids").read_text().split()]
+    assert result.status is SimStatus.TIMEOUT
+    assert result.diagnostics["message"] == "killed after the timeout of 3 s"
+    assert 3.0 <= elapsed < 4.0  # was 61 s with a child sleeping 60 s, for ever with this one
+    assert [p for p in pids if _running(p)] == []  # the solver and its escaped child: gone
+
+
+@LINUX_ONLY
+def test_a_solver_and_its_escaped_child_die_when_the_process_running_it_is_killed(tmp_path):
+    import signal
+    import subprocess
+    import sys
+
+    import parcelfit
+
+    (tmp_path / "escaper.py").write_text(ESCAPER)
+    code = (
+        "import sys; from parcelfit.sim.lifetime import run_command; "
+        "run_command([sys.executable, sys.argv[1], sys.argv[2], 'hang', 'setsid'], sys.argv[2], 600)"
+    )
+    env = {**os.environ, "PYTHONPATH": str(Path(parcelfit.__file__).parents[1])}
+    runner_proc = subprocess.Popen(
+        [sys.executable, "-c", code, str(tmp_path / "escaper.py"), str(tmp_path)], env=env
+    )
+    pids_file = tmp_path / "pids"
+    deadline = time.time() + 30
+    while time.time() < deadline and not pids_file.is_file():
+        time.sleep(0.05)
+    time.sleep(0.2)  # the file is written; the solver sleeps
+    pids = [int(p) for p in pids_file.read_text().split()]
+    try:
+        assert all(_running(p) for p in pids)
+        runner_proc.kill()  # SIGKILL, as the out-of-memory killer does: no cleanup of its own
+        runner_proc.wait()
+        deadline = time.time() + 2
+        while time.time() < deadline and any(_running(p) for p in pids):
+            time.sleep(0.05)
+        assert [p for p in pids if _running(p)] == []
+    finally:
+        for pid in pids:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+
+
+@LINUX_ONLY
+def test_a_solver_that_fails_at_once_is_failed_at_once_with_its_message(tmp_path):
+    from parcelfit.runs import TestCase
+    from parcelfit.sim import SimStatus, defaults_si
+
+    sim = _escaper(tmp_path, "fail", "setsid", timeout=30)
+    t0 = time.perf_counter()
+    result = sim.run(defaults_si("rigid"), TestCase("E1", "KPBW", 1))
+    elapsed = time.perf_counter() - t0
+    pids = [int(p) for p in (Path(result.diagnostics["workdir"]) / "pids").read_text().split()]
+    assert result.status is SimStatus.FAILED  # not a timeout after 30 s
+    assert elapsed < 1.0
+    assert result.diagnostics["message"] == (
+        "the solver exited with status 1: solver: licence server not reachable"
+    )
+    assert result.diagnostics["output_tail"] == "solver: licence server not reachable"
+    assert [p for p in pids if _running(p)] == []
+
+
+@pytest.mark.parametrize(
+    ("module", "extra", "study", "args", "what"),
+    [
+        (
+            "distributed",
+            "dask",
+            {"executor": {"kind": "serial"}},
+            ["--executor", "dask", "--scheduler", "tcp://127.0.0.1:9"],
+            "the dask executor",
+        ),
+        (
+            "optuna",
+            "optuna",
+            {"optimizer": {"sampler": "tpe"}, "executor": {"kind": "serial"}},
+            [],
+            "the tpe optimizer",
+        ),
+    ],
+)
+def test_a_missing_optional_dependency_names_the_extra_to_install(
+    tmp_path, monkeypatch, module, extra, study, args, what
+):
+    import sys
+
+    study_file = write_study(tmp_path, initial=4, batch_size=2, budget=8, **study)
+    monkeypatch.setitem(sys.modules, module, None)  # as if not installed: import fails
+    result = runner.invoke(app, ["calibrate", str(study_file), "--out", str(tmp_path / "o"), *args])
+    assert result.exit_code == 2 and isinstance(result.exception, SystemExit), result.output
+    error = " ".join(result.output[result.output.index("error:") :].split())
+    assert error.startswith(f"error: {what} needs the '{extra}' extra ({module} cannot be")
+    assert error.endswith(
+        f'Fix: pip install "parcelfit[{extra}]" (in a clone of the repository: '
+        f'pip install -e ".[{extra}]")'
+    )
 
 
 def test_an_unreachable_scheduler_or_one_without_workers_is_a_clear_error():

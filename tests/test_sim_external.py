@@ -78,3 +78,29 @@ def test_unknown_placeholder_and_bad_description(sim, tmp_path):
     desc.write_text("name: x\ncommand: [run]\ntemplate: missing.tmpl\n")
     with pytest.raises(ParcelfitError, match=r"template 'missing\.tmpl' not found"):
         load_external_solver(desc)
+
+
+def test_output_goes_to_files_stdin_is_empty_and_a_signal_is_named(sim):
+    import sys
+
+    says = (
+        "import os, signal, sys; print('stdin:', repr(sys.stdin.read())); sys.stdout.flush(); "
+        "print('solver: out of memory', file=sys.stderr); sys.stderr.flush(); "
+        "os.kill(os.getpid(), signal.SIGTERM)"
+    )
+    killed = ExternalSimulator(
+        replace(sim.solver, command=(sys.executable, "-c", says)), workroot=sim.workroot
+    )
+    res = killed.run(defaults_si("rigid"), CASE)
+    assert res.status is SimStatus.FAILED
+    assert res.diagnostics["message"] == (
+        "the solver was killed by signal SIGTERM: solver: out of memory"
+    )
+    workdir = Path(res.diagnostics["workdir"])
+    assert (workdir / "parcelfit-solver.stdout").read_text() == "stdin: ''\n"
+    assert (workdir / "parcelfit-solver.stderr").read_text() == "solver: out of memory\n"
+    clash = ExternalSimulator(
+        replace(sim.solver, output_file="parcelfit-solver.stdout"), workroot=sim.workroot
+    )
+    with pytest.raises(ParcelfitError, match=r"may not be named parcelfit-solver\.stderr or"):
+        clash.run(defaults_si("rigid"), CASE)

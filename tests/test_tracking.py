@@ -1,6 +1,7 @@
 import json
 import shutil
 
+import cv2
 import numpy as np
 import pandas as pd
 import pytest
@@ -563,3 +564,52 @@ def test_smoother_standard_deviation_is_the_gaussian_posterior():
         info[3 * k, 3 * k] += 1 / r
     posterior_sd = np.sqrt(np.diag(np.linalg.inv(info))[0::3])
     assert sd == pytest.approx(posterior_sd, rel=1e-6)
+
+
+def _write_avi(path, width, height, frames, fps=30.0):
+    """A Motion-JPEG AVI (OpenCV's own encoder, present in every build) of grey frames."""
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), fps, (width, height))
+    assert writer.isOpened()
+    for k in range(frames):
+        writer.write(np.full((height, width, 3), 40 * k % 256, np.uint8))
+    writer.release()
+    return path
+
+
+@pytest.mark.parametrize(
+    ("name", "make", "message"),
+    [
+        ("one.avi", lambda p: _write_avi(p, 1, 1, 5), "frames are 1 x 1 px, too small"),
+        ("two.avi", lambda p: _write_avi(p, 2, 2, 5), "frames are 2 x 2 px, too small"),
+        ("line.avi", lambda p: _write_avi(p, 1, 500, 5), "frames are 1 x 500 px, too small"),
+        ("small.avi", lambda p: _write_avi(p, 40, 14, 5), "frames are 40 x 14 px, too small"),
+        ("empty.avi", lambda p: _write_avi(p, 64, 48, 0), "no frame that can be decoded"),
+        ("slow.avi", lambda p: _write_avi(p, 64, 48, 3, fps=1.0), "frame rate of 1 fps"),
+        ("junk.mp4", lambda p: p.write_bytes(b"not a video" * 100), "cannot decode this video"),
+        ("zero.mp4", lambda p: p.write_bytes(b""), "cannot decode this video"),
+        ("folder.mp4", lambda p: p.mkdir(), "not a video file"),
+    ],
+)
+def test_degenerate_videos_stop_with_one_line_naming_the_file(tmp_path, name, make, message):
+    tags = tmp_path / "tags.yaml"
+    tags.write_text(yaml.safe_dump(scene_tag_map(conveyor_scene(), camera=False)))
+    video = tmp_path / name
+    make(video)
+    result = runner.invoke(app, ["track", str(video), "--tags", str(tags), "--out", str(tmp_path)])
+    assert result.exit_code == 2, result.output
+    assert isinstance(result.exception, SystemExit)  # no traceback
+    assert str(video) in result.output and message in result.output
+    calib = runner.invoke(app, ["camera-calibrate", str(video), "--tags", str(tmp_path / "c.yaml")])
+    if name != "slow.avi":  # the board finder does not care about the frame rate
+        assert calib.exit_code == 2 and message in calib.output, calib.output
+
+
+def test_the_detector_finds_nothing_in_frames_too_small_for_a_tag():
+    from parcelfit.tracking.detect import TagDetector
+
+    for shape in ((1, 1), (3, 3), (7, 200), (200, 7)):
+        detector = TagDetector()
+        for _ in range(3):  # the first frame is searched at shrink factors 1, 2 and 4
+            assert detector.detect(np.zeros(shape, np.uint8)) == {}
+    with pytest.raises(ParcelfitError, match="8-bit frame"):
+        TagDetector().detect(np.zeros((32, 32), np.float32))

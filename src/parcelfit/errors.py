@@ -1,11 +1,13 @@
-"""The one exception type parcelfit raises for bad input, with where and how to fix it, and
-`os_error`: the operating-system errors a user can fix (a path too long, a full disk) as one."""
+"""The one exception type parcelfit raises for bad input, with where and how to fix it;
+`os_error`: the operating-system errors a user can fix (a path too long, a full disk) as one;
+`require`: an optional dependency, or the extra that installs it."""
 
 from __future__ import annotations
 
 import errno
 import os
 from pathlib import Path
+from types import ModuleType
 
 
 class ParcelfitError(ValueError):
@@ -96,3 +98,19 @@ def os_error(
             + (": it resumes" if resumes else ""),
         )
     return None
+
+
+def require(module: str, *, extra: str, what: str) -> ModuleType:
+    """Import the optional dependency ``module``, or stop with a `ParcelfitError` naming the
+    extra of parcelfit that installs it: ``what`` (e.g. "the dask executor") needs it. Every
+    import of an optional dependency in parcelfit goes through here."""
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ImportError as exc:
+        raise ParcelfitError(
+            f"{what} needs the {extra!r} extra ({module} cannot be imported: {exc})",
+            fix=f'pip install "parcelfit[{extra}]" (in a clone of the repository: '
+            f'pip install -e ".[{extra}]")',
+        ) from exc

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, require
 from parcelfit.optimize.space import Space
 
 
@@ -32,12 +32,7 @@ class OptunaSampler:
         kind: str = "tpe",
         n_startup_trials: int = 10,
     ) -> None:
-        try:
-            import optuna
-        except ImportError as exc:  # pragma: no cover - depends on the install
-            raise ParcelfitError(
-                "the tpe optimizer needs Optuna", fix="pip install 'parcelfit[optuna]'"
-            ) from exc
+        optuna = require("optuna", extra="optuna", what="the tpe optimizer")
         if kind != "tpe":
             raise ParcelfitError(f"unknown Optuna sampler {kind!r}", fix="use tpe")
         optuna.logging.set_verbosity(optuna.logging.WARNING)

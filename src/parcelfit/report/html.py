@@ -131,6 +131,63 @@ def png_html(data: bytes, alt: str, mime: str = "image/png") -> Markup:
     return Markup('<img src="data:{};base64,{}" alt="{}">').format(mime, b64, alt)
 
 
+# The files the report embeds or reads are named by stored data (``results.json``'s key frames)
+# or found by name in the folders it is given; a study folder may come from someone else. A file
+# is read only when its resolved path (symbolic links followed) lies inside the resolved folder,
+# so neither ``../../secret.txt``, an absolute path nor a link leading out is ever opened; the
+# page says which file it refused. Embedded images must also be what they claim (PNG, GIF) and
+# at most `MAX_EMBED_BYTES`.
+MAX_EMBED_BYTES = 64 * 1024 * 1024
+_MAGIC = {"image/png": (b"\x89PNG\r\n\x1a\n",), "image/gif": (b"GIF87a", b"GIF89a")}
+
+
+@dataclass(frozen=True)
+class Refused:
+    """Why a file named by stored data or found in a folder was not read."""
+
+    name: str
+    reason: str
+
+    def __str__(self) -> str:
+        return f"{self.name} is not embedded: {self.reason}."
+
+
+def inside(folder: Path, name: object, what: str = "the study folder") -> Path | Refused | None:
+    """The file ``name`` (relative to ``folder``, as stored) resolved, when it lies inside the
+    resolved ``folder`` and is a regular file; `Refused` (saying why) when it leads out of it
+    or is not a file name; None when it does not exist. Never opens the file."""
+    shown = str(name)
+    if not isinstance(name, str) or not name or "\0" in name:
+        return Refused(shown, "not a file name")
+    try:
+        base = folder.resolve(strict=True)
+        path = (folder / name).resolve()
+        if not path.is_relative_to(base):
+            return Refused(shown, f"outside {what}")
+        return path if path.is_file() else None
+    except (OSError, RuntimeError, ValueError):  # a loop of links, an unreadable folder
+        return Refused(shown, "not readable")
+
+
+def _embeddable(folder: Path, name: object, mime: str, what: str) -> bytes | Refused | None:
+    """The bytes of a file that `inside` accepts and that is a ``mime`` image (PNG or GIF) of
+    at most `MAX_EMBED_BYTES`; `Refused` or None (missing) otherwise."""
+    path = inside(folder, name, what)
+    if not isinstance(path, Path):
+        return path
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(8)
+            if not head.startswith(_MAGIC[mime]):
+                return Refused(str(name), f"not a {mime.split('/')[1].upper()} image")
+            if fh.seek(0, io.SEEK_END) > MAX_EMBED_BYTES:
+                return Refused(str(name), f"larger than {MAX_EMBED_BYTES >> 20} MiB")
+            fh.seek(0)
+            return fh.read()
+    except OSError:
+        return Refused(str(name), "not readable")
+
+
 @dataclass(frozen=True)
 class StudyFolders:
     """Where a report's inputs are."""
@@ -244,8 +301,8 @@ class ReferenceRow:
 def _dataset_references(root: Path, ds: Dataset | None) -> list[ReferenceRow] | None:
     """The demo's reference runs of every test case (``reference_runs.json`` beside the study),
     when they are of the study's dataset."""
-    path = root / "reference_runs.json"
-    if ds is None or not path.is_file():
+    path = inside(root, "reference_runs.json", "its folder")
+    if ds is None or not isinstance(path, Path):
         return None
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))
@@ -273,6 +330,7 @@ def _reference_section(
     title = page.start("Reference runs")
     stored = [] if results is None else list(results.references.values())
     everything = _dataset_references(root, ds)
+    refused = inside(root, "reference_runs.json", "its folder")
     rows = everything or [
         ReferenceRow(
             r.case, r.reference_id, len(r.run_ids), math.sqrt(r.max_xy), math.sqrt(r.max_theta)
@@ -283,6 +341,7 @@ def _reference_section(
         "rows": rows,
         "all_cases": everything is not None,
         "missing": None if results is not None else _NOT_STORED,
+        "refused": [str(refused)] if isinstance(refused, Refused) else [],
         "figures": [
             figure_html(distance_heatmaps(r), f"distance matrices {r.case}") for r in stored
         ],
@@ -300,17 +359,23 @@ def _screen_section(page: _Page, screen: Path | None) -> None:
         "selected": None,
         "reasons": [],
         "charts": [],
+        "refused": [],
     }
     if screen is not None:
-        sel_file = screen / "selection.yaml"
-        if sel_file.is_file():
+        where = "the screening folder"
+        sel_file = inside(screen, "selection.yaml", where)
+        if isinstance(sel_file, Refused):
+            data["refused"].append(str(sel_file))
+        elif sel_file is not None:
             doc = yaml.safe_load(sel_file.read_text(encoding="utf-8")) or {}
             data["selected"] = ", ".join(map(str, doc.get("selected") or [])) or "none"
             data["reasons"] = [(str(k), str(v)) for k, v in (doc.get("reasons") or {}).items()]
-        data["charts"] = [
-            png_html(png.read_bytes(), png.stem)
-            for png in sorted(screen.glob("stage*-pareto-*.png"))
-        ]
+        for png in sorted(screen.glob("stage*-pareto-*.png")):
+            chart = _embeddable(screen, png.name, "image/png", where)
+            if isinstance(chart, bytes):
+                data["charts"].append(png_html(chart, png.stem))
+            elif chart is not None:
+                data["refused"].append(str(chart))
     page.add("screening", title, "screening", data)
 
 
@@ -640,10 +705,15 @@ def _transfer_section(page: _Page, results: StudyResults | None) -> None:
 
 
 def _stricter_example_section(page: _Page, root: Path) -> None:
-    path = root / "stricter-criterion.json"
-    if not path.is_file():
+    path = inside(root, "stricter-criterion.json", "its folder")
+    if path is None:
         return
     title = page.start("Why a stricter criterion")
+    if isinstance(path, Refused):
+        page.add(
+            "stricter", title, "stricter", {"description": "", "view": None, "missing": str(path)}
+        )
+        return
     doc = json.loads(path.read_text(encoding="utf-8"))
     data: dict[str, Any] = {
         "description": str(doc.get("description", "")),
@@ -682,17 +752,23 @@ def _frames_section(
     else:
         data["note"] = kf.note
         if kf.image is not None:
-            path = folder / kf.image
-            if path.is_file():
-                data["image"] = png_html(path.read_bytes(), "key frames")
-            else:
+            image = _embeddable(folder, kf.image, "image/png", "the study folder")
+            if isinstance(image, bytes):
+                data["image"] = png_html(image, "key frames")
+            elif image is None:
                 data["note"] = f"The key-frame figure {kf.image} is missing from the study folder."
+            else:
+                data["note"] = f"The key-frame figure {image}"
         if animation:
-            gif = None if kf.animation is None else folder / kf.animation
-            if gif is not None and gif.is_file():
-                data["animation"] = png_html(
-                    gif.read_bytes(), "animation of the simulated run", "image/gif"
-                )
+            gif = (
+                None
+                if kf.animation is None
+                else _embeddable(folder, kf.animation, "image/gif", "the study folder")
+            )
+            if isinstance(gif, bytes):
+                data["animation"] = png_html(gif, "animation of the simulated run", "image/gif")
+            elif isinstance(gif, Refused):
+                data["no_animation"] = f"The animation {gif}"
             elif kf.image is not None:
                 data["no_animation"] = (
                     "No animation is stored: `parcelfit calibrate --animation` (or the demo) "

@@ -16,13 +16,18 @@ parameter in SI units (``${mu_d_BePa}``), ``${rig}``, ``${consignment}``, ``${sp
 description file). A placeholder that is not known, or a value holding a line break or another
 control character (which could add lines to the parameter file), is an error before anything
 runs. Each run gets its own work folder; the command runs there, is never
-passed through a shell, runs in its own process group, and the whole group (the solver's own
-children too) is killed at the timeout. Exit status 0 and a readable trajectory
-give ``ok``; anything else ``failed`` (with the solver's last output lines) or ``timeout``.
+passed through a shell, reads nothing (stdin is empty) and writes its output to
+``parcelfit-solver.stdout`` and ``parcelfit-solver.stderr`` there. The run ends when the command
+exits or at the timeout, and then every process the command started is killed, on Linux also
+those that started their own session (`parcelfit.sim.lifetime.run_command`). Exit status 0 and
+a readable trajectory give ``ok``; a non-zero status ``failed`` at once, with the status and the
+solver's last line on stderr in the message and its last output lines in ``output_tail``; the
+timeout ``timeout``.
 """
 
 from __future__ import annotations
 
+import signal
 import string
 import subprocess
 import tempfile
@@ -40,7 +45,7 @@ from parcelfit.config import (
 )
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import Run, TestCase, read_trajectory
-from parcelfit.sim.lifetime import run_command
+from parcelfit.sim.lifetime import STDERR_FILE, STDOUT_FILE, run_command
 from parcelfit.sim.protocol import SimResult, SimStatus
 
 _KEYS = ("name", "command", "template", "params_file", "output_file", "transit_file", "timeout")
@@ -100,17 +105,28 @@ def load_external_solver(path: str | Path) -> ExternalSolver:
     )
 
 
+# control characters (Cc: \n, \r, \x0b, \x0c, \x1c-\x1e, U+0085, ...) and the line and
+# paragraph separators (Zl U+2028, Zp U+2029): every character str.splitlines breaks at
+_BREAKING = frozenset({"Cc", "Zl", "Zp"})
+
+
+def _breaks(text: str) -> bool:
+    """Whether ``text`` holds a line break or another control character."""
+    return any(unicodedata.category(c) in _BREAKING for c in text)
+
+
 def _substitute(text: str, values: Mapping[str, Any], what: str) -> str:
     for key, value in values.items():
         # a line break (or any control character) in a name would add lines to the file
-        if any(unicodedata.category(c) == "Cc" for c in str(value)):
+        if _breaks(str(key)) or _breaks(str(value)):
+            name = repr(key) if _breaks(str(key)) else key
             raise ParcelfitError(
-                f"the value of ${{{key}}} ({str(value)!r}) holds a line break or another control "
-                f"character, which would change {what}",
+                f"the value of ${{{name}}} ({str(value)!r}) holds a line break or another "
+                f"control character, which would change {what}",
                 fix="use names without line breaks or control characters",
             )
     try:
-        return string.Template(text).substitute({k: str(v) for k, v in values.items()})
+        out = string.Template(text).substitute({k: str(v) for k, v in values.items()})
     except KeyError as exc:
         raise ParcelfitError(
             f"{what} uses the unknown placeholder ${{{exc.args[0]}}}",
@@ -120,6 +136,27 @@ def _substitute(text: str, values: Mapping[str, Any], what: str) -> str:
         raise ParcelfitError(
             f"{what} has a malformed placeholder ({exc})", fix="write placeholders as ${name}"
         ) from None
+    if len(out.splitlines()) != len(text.splitlines()):  # the checks above hold: defence in depth
+        raise ParcelfitError(
+            f"filling in {what} would change its number of lines",
+            fix="use names without line breaks or control characters",
+        )
+    return out
+
+
+def _last_lines(*texts: str | bytes | None, n: int = 10) -> str:
+    """The last ``n`` non-empty lines of ``texts`` joined (output captured as text or bytes)."""
+    joined = "\n".join(
+        t.decode("utf-8", "replace") if isinstance(t, bytes) else t for t in texts if t
+    )
+    return "\n".join([line for line in joined.splitlines() if line.strip()][-n:])
+
+
+def _signal_name(number: int) -> str:
+    try:
+        return signal.Signals(number).name
+    except ValueError:
+        return str(number)
 
 
 class ExternalSimulator:
@@ -134,6 +171,13 @@ class ExternalSimulator:
     ) -> SimResult:
         """Run the solver for SI ``params`` and ``case``; failures become a status, never an exception."""
         t0 = time.perf_counter()
+        logs = {STDOUT_FILE, STDERR_FILE}
+        if logs & {self.solver.params_file, self.solver.output_file, self.solver.transit_file}:
+            raise ParcelfitError(
+                f"the solver's files may not be named {' or '.join(sorted(logs))}: parcelfit "
+                "writes the solver's output there",
+                fix="rename params_file, output_file or transit_file in the solver description",
+            )
         if self.workroot is not None:
             self.workroot.mkdir(parents=True, exist_ok=True)
         workdir = Path(tempfile.mkdtemp(prefix=f"{self.solver.name}-", dir=self.workroot))
@@ -154,16 +198,22 @@ class ExternalSimulator:
         diagnostics: dict[str, object] = {"workdir": str(workdir), "command": args}
         try:
             proc = run_command(args, workdir, self.solver.timeout)
-        except subprocess.TimeoutExpired:
+        except subprocess.TimeoutExpired as exc:
             diagnostics["message"] = f"killed after the timeout of {self.solver.timeout:g} s"
+            diagnostics["output_tail"] = _last_lines(exc.stdout, exc.stderr)
             return SimResult(None, SimStatus.TIMEOUT, time.perf_counter() - t0, diagnostics)
         except OSError as exc:
             diagnostics["message"] = f"could not start the solver: {exc}"
             return SimResult(None, SimStatus.FAILED, time.perf_counter() - t0, diagnostics)
-        tail = "\n".join((proc.stdout + proc.stderr).strip().splitlines()[-10:])
-        diagnostics["output_tail"] = tail
+        diagnostics["output_tail"] = _last_lines(proc.stdout, proc.stderr)
         if proc.returncode != 0:
-            diagnostics["message"] = f"the solver exited with status {proc.returncode}"
+            # what the solver said last on stderr (else stdout) belongs in the one-line message
+            said = _last_lines(proc.stderr, n=1) or _last_lines(proc.stdout, n=1)
+            if proc.returncode < 0:
+                how = f"was killed by signal {_signal_name(-proc.returncode)}"
+            else:
+                how = f"exited with status {proc.returncode}"
+            diagnostics["message"] = f"the solver {how}" + (f": {said}" if said else "")
             return SimResult(None, SimStatus.FAILED, time.perf_counter() - t0, diagnostics)
         try:
             traj = read_trajectory(workdir / self.solver.output_file)

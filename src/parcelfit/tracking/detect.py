@@ -32,6 +32,11 @@ DICTIONARIES = {
 }
 
 
+# the smallest image side [px] searched for tags: a 36h11 tag with its black border is 8 bits
+# wide, so at under one pixel a bit nothing can be decoded
+_MIN_SEARCH_PX = 8
+
+
 def dictionary(family: str) -> cv2.aruco.Dictionary:
     """OpenCV's predefined dictionary of an AprilTag family."""
     if family not in DICTIONARIES:
@@ -148,6 +153,8 @@ class TagDetector:
         self.edge_ids: set[int] = set()  # tags refined by their edges (`refine_by_edges`)
 
     def _detect(self, gray: np.ndarray, s: int) -> dict[int, np.ndarray]:
+        if min(gray.shape[0], gray.shape[1]) // s < _MIN_SEARCH_PX:
+            return {}  # no tag fits (and cv2.resize refuses a frame shrunk to 0 px)
         # INTER_LINEAR: ~40x faster than INTER_AREA on a full 5312 x 2988 frame; the shrunk
         # frame only has to find the tags, their corners are refined at full resolution
         small = (
@@ -203,6 +210,8 @@ class TagDetector:
         tags that fail at full resolution decode smaller)."""
         if gray.ndim != 2:
             raise ParcelfitError("the detector needs a single-channel (grey) frame")
+        if gray.dtype != np.uint8:
+            raise ParcelfitError(f"the detector needs an 8-bit frame, got {gray.dtype}")
         self._frame += 1
         s = self.downscale or 1
         found: dict[int, np.ndarray] = {}

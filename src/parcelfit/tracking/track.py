@@ -37,6 +37,7 @@ import numpy as np
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import Trajectory
+from parcelfit.runs.io import MAX_SAMPLE_INTERVAL_S, MIN_SAMPLE_INTERVAL_S
 from parcelfit.tracking.barriers import barrier_times
 from parcelfit.tracking.detect import TagDetector, _side
 from parcelfit.tracking.fit import fit_smeared_tag, tag_pattern
@@ -85,20 +86,51 @@ class VideoTrack:
     quality: dict[str, Any] = field(default_factory=dict)
 
 
+# the smallest frame side [px] that can show a tag: OpenCV still decodes a 36h11 tag 8 px wide
+# (one pixel a bit), which needs its white border around it; smaller frames are refused before
+# any OpenCV call sees them (a 1 x 1 px frame shrunk for the detector has no pixel left)
+MIN_FRAME_PX = 16
+
+
 def open_video(path: str | Path) -> cv2.VideoCapture:
-    """Open a video, or raise a clear error (missing file, unreadable)."""
+    """Open a video, or raise a clear error naming the file: missing, not a file, not
+    decodable (a damaged or empty file), no frame, or frames under `MIN_FRAME_PX` pixels a side."""
     path = Path(path)
     if not path.is_file():
-        raise ParcelfitError("video not found", file=path, fix="check the path")
-    cap = cv2.VideoCapture(str(path))
+        raise ParcelfitError(
+            "video not found" if not path.exists() else "not a video file",
+            file=path,
+            fix="check the path",
+        )
+    try:
+        cap = cv2.VideoCapture(str(path))
+    except cv2.error as exc:  # some backends raise instead of returning a closed capture
+        raise ParcelfitError(
+            f"cannot decode this video ({exc.__class__.__name__})",
+            file=path,
+            fix="convert it to H.264/HEVC MP4 with ffmpeg",
+        ) from None
     if not cap.isOpened():
         raise ParcelfitError(
             "cannot decode this video", file=path, fix="convert it to H.264/HEVC MP4 with ffmpeg"
         )
-    ok, _ = cap.read()
-    if not ok:
+    ok, frame = cap.read()
+    if not ok or frame is None or frame.size == 0:
         cap.release()
-        raise ParcelfitError("the video has no readable frame", file=path, fix="check the file")
+        raise ParcelfitError(
+            "the video has no frame that can be decoded (0 frames or a damaged file)",
+            file=path,
+            fix="check the file; convert it to H.264/HEVC MP4 with ffmpeg",
+        )
+    h, w = frame.shape[:2]
+    if min(w, h) < MIN_FRAME_PX:
+        cap.release()
+        raise ParcelfitError(
+            f"the video's frames are {w} x {h} px, too small to show a tag "
+            f"(at least {MIN_FRAME_PX} px a side)",
+            file=path,
+            fix="track the camera's original recording, not a thumbnail or a cropped copy",
+        )
     cap.set(cv2.CAP_PROP_POS_FRAMES, 0)
     return cap
 
@@ -211,8 +243,20 @@ def track_video(
     fps = float(cap.get(cv2.CAP_PROP_FPS)) or 0.0
     if not fps > 0:
         cap.release()
-        raise ParcelfitError("the video does not state its frame rate", file=video)
-    total = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+        raise ParcelfitError(
+            "the video does not state its frame rate",
+            file=video,
+            fix="write the frame rate into the container, e.g. ffmpeg -r FPS -i IN -c copy OUT",
+        )
+    if not 1 / MAX_SAMPLE_INTERVAL_S <= fps <= 1 / MIN_SAMPLE_INTERVAL_S:
+        cap.release()
+        raise ParcelfitError(
+            f"the video states a frame rate of {fps:g} fps; a tracked run is sampled at "
+            f"{1 / MAX_SAMPLE_INTERVAL_S:g} to {1 / MIN_SAMPLE_INTERVAL_S:g} fps",
+            file=video,
+            fix="write the camera's true frame rate into the container (ffmpeg -r FPS)",
+        )
+    total = max(0, int(cap.get(cv2.CAP_PROP_FRAME_COUNT)))  # some containers say -1
     size = (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
     cam = tag_map.camera
     if cam is not None and cam.width and (cam.width, cam.height) != size:
