@@ -12,6 +12,13 @@ primitive and the primitive's outward unit normal n there:
   an end cap, delta = l - |q_z|, whichever is less;
 * capsule: delta = r - |q - q_axis| from the nearest point of its segment, n along that line.
 
+A side point stands for its band of the side's height (`geometry`: h = H / n_z along the body's
+z). Against a box its band is clipped to the box's extent along the box's local z (vertical for
+every box of a rig: walls and slabs): the point is moved within its band to the middle of the
+part inside, and its area weight scaled by that part's share of the band. A guide plate mounted
+a few millimetres above the belt then meets the exact share of a parcel's side whatever the
+number of rows.
+
 Normal force (RecurDyn's standard contact with linear exponents, one spring-damper per point):
 
     f_n = max(0, k_i delta + c_i d(delta)/dt),   d(delta)/dt = -(v_i - v_s(p_i)) . n
@@ -35,12 +42,14 @@ zero at rest, the static value at the static threshold speed v_s, the dynamic on
 dynamic threshold v_d. Below v_s it acts as a viscous friction mu_s f_n / v_s.
 
 **Lead-in** (a vertical cylinder of radius r at a wall's upstream end): met by the parcel's box
-outline analytically, so that a catch does not depend on the contact points' spacing. At each
-side row's body height zeta_j (height weight h_j, `geometry`), the cylinder's axis meets the plane
-z_body = zeta_j at a point a of the body frame (skipped when that point lies outside the
-cylinder's height or the parcel stands more than 60 degrees tilted); within that plane the
-lead-in's section is taken as the circle of radius r around a, the parcel's as its rectangle
-|x| <= L/2, |y| <= W/2. Then
+outline analytically, so that a catch does not depend on the contact points' spacing. The
+parcel's height is cut into the side rows' bands (`geometry`); of each band, the part whose
+crossing with the cylinder's axis lies within the cylinder's height is kept (its length h_j along
+the body's z and its middle zeta_j: for a parcel lying flat their sum is exactly the height the
+parcel and the lead-in share, whatever the number of rows); the axis meets the plane
+z_body = zeta_j at a point a of the body frame (skipped when the parcel stands more than 60
+degrees tilted); within that plane the lead-in's section is taken as the circle of radius r
+around a, the parcel's as its rectangle |x| <= L/2, |y| <= W/2. Then
 
     f_n = max(0, (K / A_b) h_j A_o + c_a h_j l_o d(delta)/dt),   c_a = 2 zeta sqrt(K M) / A_b
 
@@ -205,12 +214,19 @@ def _lead_in(F, T, x, R, v, w, half, row_z, row_h, j, centre, size, law_m, v_s, 
         return
     kappa, cdens, mu_d, mu_s = law_m[0], law_m[1], law_m[2], law_m[3]
     hx, hy = half[0], half[1]
-    for i in range(row_z.shape[0]):
-        zeta = row_z[i]
-        dz = (zeta - R[0, 2] * dx0 - R[1, 2] * dy0) / R[2, 2]
-        z = x[2] + dz
-        if z < cz - hh or z > cz + hh:
+    base = R[0, 2] * dx0 + R[1, 2] * dy0  # the axis point at body height zeta lies at world
+    for i in range(row_z.shape[0]):  # z = x_z + (zeta - base) / R_zz
+        # the part of the row's band [zeta_i - h_i/2, zeta_i + h_i/2] whose axis point lies
+        # within the lead-in's height: its middle and its length along the body's z
+        za = x[2] + (row_z[i] - 0.5 * row_h[i] - base) / R[2, 2]
+        zb = x[2] + (row_z[i] + 0.5 * row_h[i] - base) / R[2, 2]
+        lo, hi = max(min(za, zb), cz - hh), min(max(za, zb), cz + hh)
+        if hi <= lo:
             continue
+        zeta_lo, zeta_hi = R[2, 2] * (lo - x[2]) + base, R[2, 2] * (hi - x[2]) + base
+        zeta = 0.5 * (zeta_lo + zeta_hi)
+        h = abs(zeta_hi - zeta_lo)
+        dz = (zeta - base) / R[2, 2]
         ax = R[0, 0] * dx0 + R[1, 0] * dy0 + R[2, 0] * dz
         ay = R[0, 1] * dx0 + R[1, 1] * dy0 + R[2, 1] * dz
         if abs(ax) >= hx + r or abs(ay) >= hy + r:
@@ -249,7 +265,6 @@ def _lead_in(F, T, x, R, v, w, half, row_z, row_h, j, centre, size, law_m, v_s, 
         vx = v[0] + w[1] * rz - w[2] * ry
         vy = v[1] + w[2] * rx - w[0] * rz
         vz = v[2] + w[0] * ry - w[1] * rx
-        h = row_h[i]
         # the spring's "k delta" is kappa h A_o, its damper c_a h l_o (as k = 1, c = c_a h l_o)
         _spring_friction(
             F, T, x, px, py, pz, vx, vy, vz, nx, ny, 0.0,
@@ -260,7 +275,8 @@ def _lead_in(F, T, x, R, v, w, half, row_z, row_h, j, centre, size, law_m, v_s, 
 @njit(cache=True)
 def contact_forces(
     x, R, v, w,
-    points, area, tile_start, tile_end, tile_centre, tile_radius, half, row_z, row_h, radius,
+    points, area, band, tile_start, tile_end, tile_centre, tile_radius, half, row_z, row_h,
+    radius,
     kind, centre, rot, size, material, vel, spin, reach,
     law, v_s, v_d, mem_face, mem_step, count, F, T,
 ):  # fmt: skip
@@ -281,6 +297,9 @@ def contact_forces(
             continue
         kappa, cdens, mu_d, mu_s = law[m, 0], law[m, 1], law[m, 2], law[m, 3]
         s0, s1, s2 = size[j, 0], size[j, 1], size[j, 2]
+        # the body's z axis in the primitive's frame (side points' bands)
+        ex, ey, ez = _primitive_of(x[0] + R[0, 2], x[1] + R[1, 2], x[2] + R[2, 2], j, centre, rot)
+        ex, ey, ez = ex - cx, ey - cy, ez - cz
         for t in range(tile_start.shape[0]):
             tc = tile_centre[t]
             wx = x[0] + R[0, 0] * tc[0] + R[0, 1] * tc[1] + R[0, 2] * tc[2]
@@ -296,7 +315,20 @@ def contact_forces(
                 rz = R[2, 0] * b0 + R[2, 1] * b1 + R[2, 2] * b2
                 px, py, pz = x[0] + rx, x[1] + ry, x[2] + rz
                 qx, qy, qz = _primitive_of(px, py, pz, j, centre, rot)
+                a = area[i]
                 if kj == BOX:
+                    hb = band[i]
+                    if hb > 0.0:  # a side point's band against the box's z extent
+                        reach_z = 0.5 * hb * abs(ez)
+                        if reach_z > 1e-12:
+                            lo, hi = max(qz - reach_z, -s2), min(qz + reach_z, s2)
+                            if hi <= lo:
+                                continue
+                            a *= (hi - lo) / (2.0 * reach_z)
+                            tau = (0.5 * (lo + hi) - qz) / ez  # along the body's z, |tau| <= hb/2
+                            qx, qy, qz = qx + tau * ex, qy + tau * ey, 0.5 * (lo + hi)
+                            rx, ry, rz = rx + tau * R[0, 2], ry + tau * R[1, 2], rz + tau * R[2, 2]
+                            px, py, pz = x[0] + rx, x[1] + ry, x[2] + rz
                     if abs(qx) >= s0 or abs(qy) >= s1 or abs(qz) >= s2:
                         continue
                     if mem_step[i, j] == count - 1:
@@ -357,7 +389,6 @@ def contact_forces(
                 vx = v[0] + w[1] * rz - w[2] * ry - sx
                 vy = v[1] + w[2] * rx - w[0] * rz - sy
                 vz = v[2] + w[0] * ry - w[1] * rx - sz
-                a = area[i]
                 _spring_friction(
                     F, T, x, px, py, pz, vx, vy, vz, nx, ny, nz, delta,
                     kappa * a, cdens * a, mu_d, mu_s, v_s, v_d,

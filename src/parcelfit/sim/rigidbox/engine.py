@@ -102,7 +102,8 @@ class Motion:
     def _args(self) -> tuple:
         b, p, world = self.world.body, self.world.primitives, self.world
         return (
-            b.points, b.area, b.tile_start, b.tile_end, b.tile_centre, b.tile_radius, b.half,
+            b.points, b.area, b.band, b.tile_start, b.tile_end, b.tile_centre, b.tile_radius,
+            b.half,
             b.row_z, b.row_h, b.radius,
             p.kind, p.centre, p.rot, p.size, p.material, p.vel, p.spin, p.reach,
             world.law, world.stick_speed, world.slip_speed, self.mem_face, self.mem_step,
@@ -158,4 +159,5 @@ class Motion:
     @property
     def barrier_times(self) -> tuple[float | None, float | None]:
         """When each beam broke [s] (None: not yet, or no barriers)."""
-        return tuple(None if not math.isfinite(t) else float(t) for t in self.crossed)  # type: ignore[return-value]
+        a, b = (None if not math.isfinite(t) else float(t) for t in self.crossed)
+        return a, b

@@ -298,7 +298,8 @@ def rig_primitives(
 class Body:
     """The parcel as a rigid box (see the module docstring): mass [kg], principal inertia (3,)
     [kg m^2], half extents (3,) [m], contact points (n, 3) [m, body frame], their area weights
-    (n,) [m^2] and groups (n,) (bottom, top, side), tiles (start, end index into the points,
+    (n,) [m^2], groups (n,) (bottom, top, side) and height bands (n,) [m] (a side point's row
+    height, 0 for the others), tiles (start, end index into the points,
     centre (3,), radius), the bottom patch's area [m^2], the side rows' body z (m,) and height
     weights (m,) [m] (the lead-in's analytic contact is taken at these levels)."""
 
@@ -308,6 +309,7 @@ class Body:
     points: np.ndarray
     area: np.ndarray
     group: np.ndarray
+    band: np.ndarray
     tile_start: np.ndarray
     tile_end: np.ndarray
     tile_centre: np.ndarray
@@ -427,7 +429,9 @@ def parcel_body(
             starts.append(n)
             ends.append(n + len(t))
             centres.append(c)
-            radii.append(float(np.max(np.linalg.norm(p - c, axis=1))))
+            # a side point's band reaches half a row above and below it
+            reach = H / nz / 2 if g == SIDE else 0.0
+            radii.append(float(np.max(np.linalg.norm(p - c, axis=1))) + reach)
             n += len(t)
     return Body(
         mass=mass,
@@ -436,6 +440,7 @@ def parcel_body(
         points=np.concatenate(points),
         area=np.concatenate(area),
         group=np.concatenate(group).astype(np.int64),
+        band=np.where(np.concatenate(group) == SIDE, H / nz, 0.0),
         tile_start=np.array(starts, dtype=np.int64),
         tile_end=np.array(ends, dtype=np.int64),
         tile_centre=np.array(centres),

@@ -97,7 +97,8 @@ def free_rotation(q, pi, inertia, h):
 @njit(cache=True)
 def evaluate(
     x, q, v, pi, R, w, F, T, mass, inertia, gravity,
-    points, area, tile_start, tile_end, tile_centre, tile_radius, half, row_z, row_h, radius,
+    points, area, band, tile_start, tile_end, tile_centre, tile_radius, half, row_z, row_h,
+    radius,
     kind, centre, rot, size, material, vel, spin, reach,
     law, v_s, v_d, mem_face, mem_step, count,
 ):  # fmt: skip
@@ -112,7 +113,8 @@ def evaluate(
     F[2] = -mass * gravity
     contact_forces(
         x, R, v, w,
-        points, area, tile_start, tile_end, tile_centre, tile_radius, half, row_z, row_h, radius,
+        points, area, band, tile_start, tile_end, tile_centre, tile_radius, half, row_z, row_h,
+    radius,
         kind, centre, rot, size, material, vel, spin, reach,
         law, v_s, v_d, mem_face, mem_step, count, F, T,
     )  # fmt: skip
@@ -151,7 +153,8 @@ def _beam_margin(x, R, corners, a, d, d2, nrm):
 @njit(cache=True)
 def advance(
     x, q, v, pi, R, w, F, T, mass, inertia, gravity, dt, n_steps, counters,
-    points, area, tile_start, tile_end, tile_centre, tile_radius, half, row_z, row_h, radius,
+    points, area, band, tile_start, tile_end, tile_centre, tile_radius, half, row_z, row_h,
+    radius,
     kind, centre, rot, size, material, vel, spin, reach,
     law, v_s, v_d, mem_face, mem_step,
     corners, beam_a, beam_d, beam_d2, beam_n, crossed, clear_t, clear_g, after_steps,
@@ -170,8 +173,8 @@ def advance(
         counters[1] += 1
         evaluate(
             x, q, v, pi, R, w, F, T, mass, inertia, gravity,
-            points, area, tile_start, tile_end, tile_centre, tile_radius, half, row_z, row_h,
-            radius, kind, centre, rot, size, material, vel, spin, reach,
+            points, area, band, tile_start, tile_end, tile_centre, tile_radius, half, row_z,
+            row_h, radius, kind, centre, rot, size, material, vel, spin, reach,
             law, v_s, v_d, mem_face, mem_step, counters[1],
         )  # fmt: skip
         _kick(v, pi, R, F, T, mass, half_dt)
