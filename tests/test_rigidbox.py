@@ -304,3 +304,39 @@ def test_the_default_step_resolves_the_stiffest_contact():
     assert (1 / 60) / dt == pytest.approx(round((1 / 60) / dt))
     assert opt.step_for(1e9, 0.08) < 1e-5  # a stiffer contact takes a finer step
     assert RigidBoxOptions(timestep=2e-5).step_for(1e9, 0.08) == 2e-5
+
+
+def test_a_study_s_simulator_section_makes_a_rigidbox_simulator(tmp_path):
+    from parcelfit.sim.factory import (
+        SimulatorConfig,
+        SimulatorSection,
+        content_kind,
+        make_simulator,
+    )
+
+    section = SimulatorSection(
+        backend="rigidbox", rig="E3", consignment="KPBW", spacing=0.005, bottom_patch="content",
+        stick_speed=0.002, wall_limit=60,
+    )  # fmt: skip
+    config = section.to_config(tmp_path)
+    sim = make_simulator(config)
+    assert isinstance(sim, RigidBoxSimulator)
+    opt = sim.options
+    assert (opt.spacing, opt.bottom_patch, opt.wall_limit) == (0.005, "content", 60)
+    assert (opt.stick_speed, opt.slip_speed) == (0.002, pytest.approx(0.003))
+    assert content_kind(config) == "rigid"
+    assert (
+        make_simulator(
+            SimulatorSection(backend="rigidbox", rig="E3", consignment="BW").to_config(tmp_path)
+        ).options
+        == RigidBoxOptions()
+    )
+    with pytest.raises(ParcelfitError, match="does not take shell_dof"):
+        SimulatorConfig("rigidbox", rig="E3", consignment="BW", shell_dof="full")
+    with pytest.raises(ParcelfitError, match="bottom_patch is a setting of the rigidbox"):
+        SimulatorConfig("mujoco", rig="E3", consignment="BW", bottom_patch="content")
+    with pytest.raises(Exception, match="must exceed stick_speed"):  # the rigid box's 1 mm/s
+        SimulatorSection(backend="rigidbox", rig="E3", consignment="BW", slip_speed=0.0008)
+    pb = SimulatorSection(backend="rigidbox", rig="E3", consignment="PB").to_config(tmp_path)
+    with pytest.raises(ParcelfitError, match="rigid contents only"):
+        make_simulator(pb)
