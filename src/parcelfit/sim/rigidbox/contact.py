@@ -231,7 +231,7 @@ def _lead_in(F, T, x, R, v, w, half, row_z, row_h, j, centre, size, law_m, v_s, 
         ay = R[0, 1] * dx0 + R[1, 1] * dy0 + R[2, 1] * dz
         if abs(ax) >= hx + r or abs(ay) >= hy + r:
             continue
-        inside = abs(ax) < hx and abs(ay) < hy
+        inside = abs(ax) <= hx and abs(ay) <= hy  # closed: outside, the nearest point differs
         if inside:
             ex, ey = hx - abs(ax), hy - abs(ay)
             if ex < ey:
