@@ -14,6 +14,11 @@ vertices, see `SceneOptions`), ``belt_friction`` (``mujoco`` or ``coulomb``, see
 packaging), ``stick_speed`` and ``slip_speed`` [m/s] (how the static friction offsets fade with
 the slip speed, see `SceneOptions`), ``rig_timesteps`` (a time step [s] by rig name) and
 ``wall_limit`` [s]),
+``rigidbox`` (the rigid-box reference, `parcelfit.sim.rigidbox`: a bundled or user rig and a
+consignment with a rigid content, optional ``timestep`` [s], ``spacing`` [m] (its contact points),
+``bottom_patch`` (``outline`` or ``content``), ``stick_speed`` and ``slip_speed`` [m/s] (its
+friction's static and dynamic threshold speeds, default 0.001 and 0.0015), ``roller_surface``
+and ``wall_limit`` [s]; the MuJoCo scene's other settings are refused),
 ``external`` (a solver description file run as a command) or ``python`` (``factory:
 package.module:callable``, imported and called: such a file runs code). A new named backend
 adds its keys to `SimulatorSection` and `SimulatorConfig` and its construction to
@@ -47,7 +52,20 @@ from parcelfit.sim.params import (
 )
 from parcelfit.sim.protocol import Simulator
 
-BACKENDS = ("mujoco", "external", "python")
+BACKENDS = ("mujoco", "rigidbox", "external", "python")
+BOTTOM_PATCHES = ("outline", "content")  # the rigid-box reference's (sim/rigidbox/geometry.py)
+# the MuJoCo scene's settings, which the rigid-box reference does not take
+_MUJOCO_ONLY = (
+    "film_spacing",
+    "membrane_cap",
+    "shell_dof",
+    "shell_cells",
+    "shell_diagonals",
+    "mass_lumping",
+    "belt_friction",
+    "rig_timesteps",
+)
+RIGIDBOX_STICK_SPEED = 0.001  # m/s, the rigid-box reference's default (RecurDyn's)
 _SETTINGS = (
     "backend",
     "rig",
@@ -65,11 +83,17 @@ _SETTINGS = (
     "stick_speed",
     "slip_speed",
     "rig_timesteps",
+    "bottom_patch",
     "wall_limit",
     "external",
     "factory",
 )
-_NEEDS = {"mujoco": ("rig", "consignment"), "external": ("external",), "python": ("factory",)}
+_NEEDS = {
+    "mujoco": ("rig", "consignment"),
+    "rigidbox": ("rig", "consignment"),
+    "external": ("external",),
+    "python": ("factory",),
+}
 DEFAULT_WALL_LIMIT = 600.0  # s, per simulation
 # a setting whose SceneOptions field has another name (SceneOptions.soft_spacing is the soft
 # content's own vertex spacing, so the film's setting cannot take that name)
@@ -77,10 +101,20 @@ _SCENE_NAMES = {"film_spacing": "soft_shell_spacing"}
 
 
 def _check_needs(backend: str, settings: Any) -> None:
-    """Refuse a configuration that leaves out what its backend needs."""
+    """Refuse a configuration that leaves out what its backend needs, or gives the rigid-box
+    reference a MuJoCo setting (or MuJoCo the rigid box's ``bottom_patch``)."""
     for key in _NEEDS[backend]:
         if getattr(settings, key) is None:
             raise ParcelfitError(f"the {backend} backend needs {key!r}", fix=f"add `{key}:`")
+    if backend == "rigidbox":
+        given = [k for k in _MUJOCO_ONLY if getattr(settings, k) is not None]
+        if given:
+            raise ParcelfitError(
+                f"the rigidbox backend does not take {', '.join(given)}",
+                fix="remove it (a setting of the MuJoCo scene)",
+            )
+    elif settings.bottom_patch is not None:
+        raise ParcelfitError("bottom_patch is a setting of the rigidbox backend", fix="remove it")
 
 
 @dataclass(frozen=True)
@@ -89,8 +123,10 @@ class SimulatorConfig(Mapping[str, Any]):
     ``consignment``, bundled names or ``.yaml`` paths, optional ``timestep`` [s], ``spacing``
     and ``film_spacing`` [m], ``membrane_cap`` [N/m], ``shell_dof``, ``shell_cells``,
     ``shell_diagonals``, ``mass_lumping``, ``belt_friction``, ``roller_surface``, ``stick_speed`` and
-    ``slip_speed`` [m/s], ``rig_timesteps`` (rig name -> time step [s]); external: the solver
-    description file ``external``; python: ``factory``),
+    ``slip_speed`` [m/s], ``rig_timesteps`` (rig name -> time step [s]); rigidbox: ``rig`` and
+    ``consignment``, optional ``timestep``, ``spacing``, ``bottom_patch``, ``stick_speed``,
+    ``slip_speed``, ``roller_surface``; external: the solver description file ``external``;
+    python: ``factory``),
     optional ``wall_limit`` [s] per simulation, and ``folder``: the folder of the file it came
     from (an external solver's runs go into ``folder/.external-runs``).
 
@@ -113,6 +149,7 @@ class SimulatorConfig(Mapping[str, Any]):
     stick_speed: float | None = None
     slip_speed: float | None = None
     rig_timesteps: Mapping[str, float] | None = None
+    bottom_patch: str | None = None
     wall_limit: float | None = None
     external: str | None = None
     factory: str | None = None
@@ -173,6 +210,7 @@ class SimulatorSection(FileModel):
         ]
         | None
     ) = None
+    bottom_patch: Annotated[str | None, Choice(BOTTOM_PATCHES, what="bottom contact patch")] = None
     wall_limit: Annotated[float | None, Number(unit="s", ge=1e-9)] = None
     external: Annotated[str | None, Text()] = None
     factory: Annotated[str | None, Text()] = None
@@ -180,7 +218,8 @@ class SimulatorSection(FileModel):
     @model_validator(mode="after")
     def _backend_needs(self) -> SimulatorSection:
         _check_needs(self.backend, self)
-        stick = STICK_SPEED if self.stick_speed is None else self.stick_speed
+        default = RIGIDBOX_STICK_SPEED if self.backend == "rigidbox" else STICK_SPEED
+        stick = default if self.stick_speed is None else self.stick_speed
         if self.slip_speed is not None and self.slip_speed <= stick:
             raise ParcelfitError(
                 f"slip_speed ({self.slip_speed} m/s) must exceed stick_speed ({stick} m/s): the "
@@ -243,6 +282,34 @@ def make_simulator(config: SimulatorConfig) -> Simulator:
             wall_limit=DEFAULT_WALL_LIMIT if config.wall_limit is None else config.wall_limit,
         )
         return MujocoSimulator(options, rigs={rig.name: rig}, consignments={cons.name: cons})
+    if config.backend == "rigidbox":
+        from parcelfit.sim.mujoco import load_consignment, load_rig
+        from parcelfit.sim.rigidbox import RigidBoxOptions, RigidBoxSimulator
+
+        assert config.rig is not None and config.consignment is not None  # checked on creation
+        rig = load_rig(config.rig)
+        cons = load_consignment(config.consignment)
+        if cons.soft:
+            raise ParcelfitError(
+                f"consignment {cons.name} has a soft content: the rigidbox backend represents "
+                "rigid contents only",
+                fix="use the mujoco backend",
+            )
+        given: dict[str, Any] = {
+            k: float(config[k])
+            for k in ("timestep", "spacing", "stick_speed", "slip_speed")
+            if k in config
+        }
+        for key in ("bottom_patch", "roller_surface"):
+            if key in config:
+                given[key] = config[key]
+        if "stick_speed" in given and "slip_speed" not in given:
+            given["slip_speed"] = 1.5 * given["stick_speed"]  # RecurDyn's defaults' ratio
+        box = RigidBoxOptions(
+            **given,
+            wall_limit=DEFAULT_WALL_LIMIT if config.wall_limit is None else config.wall_limit,
+        )
+        return RigidBoxSimulator(box, rigs={rig.name: rig}, consignments={cons.name: cons})
     if config.backend == "external":
         from parcelfit.sim.external import ExternalSimulator, load_external_solver
 
@@ -262,8 +329,9 @@ def make_simulator(config: SimulatorConfig) -> Simulator:
 
 def content_kind(config: SimulatorConfig) -> str:
     """The content kind (``rigid`` or ``soft``, the catalogue's ranges) of the consignment
-    ``config`` simulates: the MuJoCo consignment file's; backends without one count as rigid."""
-    if config.backend == "mujoco":
+    ``config`` simulates: the consignment file's (mujoco, rigidbox); backends without one count
+    as rigid."""
+    if config.backend in ("mujoco", "rigidbox"):
         from parcelfit.sim.mujoco import load_consignment
 
         return load_consignment(config["consignment"]).content_kind

@@ -4,7 +4,7 @@
 
     name: e3-kpbw                      # required
     simulator:                         # required
-      backend: mujoco                  # mujoco | external | python
+      backend: mujoco                  # mujoco | rigidbox | external | python
       rig: E3                          # mujoco: bundled name or .yaml path (relative to this file)
       consignment: KPBW                # mujoco: bundled name or .yaml path
       timestep: 0.0016667              # mujoco, optional [s]
@@ -387,12 +387,12 @@ class CaseSpec:
 
 def _to_si(name: str, value: float, backend: str) -> float:
     """A parameter value from its catalogue unit to SI; a name outside the catalogue is taken
-    as given, except for the mujoco backend (which knows only the catalogue)."""
+    as given, except for the mujoco and rigidbox backends (which know only the catalogue)."""
     from parcelfit.sim.params import CATALOGUE
 
     spec = next((p for p in CATALOGUE if p.name == name), None)
     if spec is None:
-        if backend == "mujoco":
+        if backend in ("mujoco", "rigidbox"):
             from parcelfit.sim.params import parameter
 
             parameter(name)  # raises with a suggestion
@@ -576,7 +576,7 @@ def _case(
     dataset = (folder / c.dataset).resolve() if c.dataset is not None else default.resolve()
     rig = c.rig or _name(sim.rig, path, f"{where}.rig")
     consignment = c.consignment or _name(sim.consignment, path, f"{where}.consignment")
-    if sim.backend == "mujoco" and rig.lower().endswith((".yaml", ".yml")):
+    if sim.backend in ("mujoco", "rigidbox") and rig.lower().endswith((".yaml", ".yml")):
         raise ParcelfitError(
             "a case's rig is a bundled rig's name, or the simulator's own rig file",
             file=path,

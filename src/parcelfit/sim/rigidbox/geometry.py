@@ -1,0 +1,451 @@
+"""The rigid-box reference's world and body: static primitives from a `Rig`, the parcel as one
+rigid box with area-weighted contact points.
+
+**Primitives** (world frame, SI units; each has a local frame R (columns: local axes in world), a
+centre c, a material index (0 belt/roller: the BePa parameters, 1 metal: MePa) and a surface
+velocity field v_s(p) = vel + spin x (p - c)):
+
+* ``BOX`` (half extents hx, hy, hz): a belt's or strip's slab under its top face, as in the MuJoCo
+  scene (top at ``surface.top``, half-thickness 0.02 m, the flat top shortened by the drum radius
+  at each end; vel = speed * heading unit vector), and a wall as a thin vertical box from ``base``
+  to ``base + height`` (still).
+* ``CYLINDER`` (radius r, half-length; axis = local z): the drum a belt or strip runs round at each
+  end (radius ``nose_radius``, axis across the heading at height top - r, its top level with the
+  belt's), turning with the belt: spin = (speed / r) n with n the unit vector across the heading
+  (to its left), so spin x (p - c) is the belt speed along the heading on top, upwards round the
+  tail and downwards round the head.
+* ``CAPSULE`` (radius, half-length of the segment; axis = local z): a roller unit of a flow
+  splitter, lying across its heading (heading + swivel) with its top at ``surface.top``; its
+  surface moves at the conveying speed along that heading everywhere ("linear", the MuJoCo
+  scene's default) or turns like a driven roller ("turning": spin = (speed / radius) across).
+* ``LEAD_IN`` (radius, half-height; vertical axis): a wall's rolled lead-in, met by the parcel's
+  box outline analytically (`parcelfit.sim.rigidbox.contact`), not by its contact points.
+
+**Parcel**: one rigid body, the consignment's outer box L x W x H with its total mass M. Its
+inertia is the content's box (mass M - m_Pa, content size cL x cW x cH) plus the packaging as two
+thin sheets L x W of m_Pa / 2 each at z = +-H/2:
+
+    I_xx = m_c (cW^2 + cH^2) / 12 + m_Pa (W^2 / 12 + H^2 / 4)
+    I_yy = m_c (cL^2 + cH^2) / 12 + m_Pa (L^2 / 12 + H^2 / 4)
+    I_zz = m_c (cL^2 + cW^2) / 12 + m_Pa (L^2 + W^2) / 12
+
+with the centre of mass at the box centre (body frame: x along L, y along W, z up).
+
+**Contact points** (body frame, each with an area weight A_i [m^2]):
+
+* bottom and top faces (z = -+H/2): a node grid of ceil(L / s) x ceil(W / s) cells over the face
+  (spacing option s, default 10 mm), nodes on the edges and corners included, trapezoidal weights
+  (a node's share of the cells around it: edge nodes half a cell, corners a quarter), so the
+  weights of a face sum to its area;
+* the four side faces: the same node spacing along the side (corner columns included, half
+  weights), and n_z = max(3, ceil(H / s)) rows at the centres of equal height bands
+  (z = -H/2 + (j + 1/2) H / n_z, weight H / n_z along the height): the faces' edges are carried by
+  the bottom and top grids, so no point is counted twice when the parcel lies flat.
+* the **bottom contact patch** (option): ``outline``: the bottom grid covers the whole L x W face;
+  ``content``: the bottom grid covers only the content's footprint cL x cW (centred): the rim
+  beyond it carries no bottom contact (a bubble mailer's flexible rim that lifts off). The top
+  face always covers L x W.
+
+The points are grouped into tiles (3 x 3 bottom or top nodes, 3 columns of a side) with a
+bounding sphere each, so that the contact search skips tiles far from a primitive.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from parcelfit.errors import ParcelfitError
+from parcelfit.sim.mujoco.consignment import Consignment
+from parcelfit.sim.mujoco.rig import Rig
+
+BOX, CYLINDER, CAPSULE, LEAD_IN = 0, 1, 2, 3
+KIND_NAMES = {BOX: "box", CYLINDER: "cylinder", CAPSULE: "capsule", LEAD_IN: "lead-in"}
+BELT, METAL = 0, 1  # material indices: the BePa and MePa parameter sets
+SLAB = 0.02  # half-thickness of belt and strip slabs [m], as the MuJoCo scene's
+BOTTOM, TOP, SIDE = 0, 1, 2  # point groups
+BOTTOM_PATCHES = ("outline", "content")
+ROLLER_SURFACES = ("linear", "turning")
+TILE = 3  # nodes per tile edge
+MIN_SIDE_ROWS = 3
+
+
+def _material(name: str) -> int:
+    return METAL if name == "metal" else BELT  # belt and roller: the belt/packaging parameters
+
+
+def rot_z(deg: float) -> np.ndarray:
+    """Rotation about world z by ``deg`` degrees."""
+    a = math.radians(deg)
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def rot_across(deg: float) -> np.ndarray:
+    """Rz(deg) Rx(90 deg): local z lies horizontal, across the heading ``deg`` (a drum's or a
+    roller's axis)."""
+    rx = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+    return rot_z(deg) @ rx
+
+
+@dataclass(frozen=True)
+class Primitives:
+    """Static primitives as arrays (see the module docstring): kind (n,), centre (n, 3), rot
+    (n, 3, 3) local axes as columns, size (n, 3) (box half extents; cylinder, capsule and lead-in:
+    radius, half-length, 0), material (n,), vel (n, 3) and spin (n, 3) of the surface, reach
+    (n, 3): local half extents of a box around the primitive (the search's bounds), names."""
+
+    kind: np.ndarray
+    centre: np.ndarray
+    rot: np.ndarray
+    size: np.ndarray
+    material: np.ndarray
+    vel: np.ndarray
+    spin: np.ndarray
+    reach: np.ndarray
+    names: tuple[str, ...]
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    @staticmethod
+    def of(items: list[dict]) -> Primitives:
+        """Primitives from a list of dicts with the fields (see `primitive`)."""
+        if not items:
+            raise ParcelfitError("a rigid-box world needs at least one primitive")
+        return Primitives(
+            kind=np.array([it["kind"] for it in items], dtype=np.int64),
+            centre=np.array([it["centre"] for it in items], dtype=float).reshape(-1, 3),
+            rot=np.array([it["rot"] for it in items], dtype=float).reshape(-1, 3, 3),
+            size=np.array([it["size"] for it in items], dtype=float).reshape(-1, 3),
+            material=np.array([it["material"] for it in items], dtype=np.int64),
+            vel=np.array([it["vel"] for it in items], dtype=float).reshape(-1, 3),
+            spin=np.array([it["spin"] for it in items], dtype=float).reshape(-1, 3),
+            reach=np.array([it["reach"] for it in items], dtype=float).reshape(-1, 3),
+            names=tuple(it["name"] for it in items),
+        )
+
+    def velocity_at(self, j: int, point: np.ndarray) -> np.ndarray:
+        """The material velocity [m/s] of primitive ``j`` at world ``point`` [m]."""
+        return self.vel[j] + np.cross(self.spin[j], np.asarray(point) - self.centre[j])
+
+
+def primitive(
+    name: str,
+    kind: int,
+    centre: np.ndarray | tuple[float, float, float],
+    rot: np.ndarray,
+    size: tuple[float, float, float],
+    material: int,
+    vel: tuple[float, float, float] | np.ndarray = (0.0, 0.0, 0.0),
+    spin: tuple[float, float, float] | np.ndarray = (0.0, 0.0, 0.0),
+) -> dict:
+    """One primitive's fields (for `Primitives.of`); its search bounds follow from the kind."""
+    a, b, c = size
+    if kind == BOX:
+        reach = (a, b, c)
+    elif kind in (CYLINDER, LEAD_IN):
+        reach = (a, a, b)
+    elif kind == CAPSULE:
+        reach = (a, a, b + a)
+    else:
+        raise ParcelfitError(f"unknown primitive kind {kind}")
+    return {
+        "name": name,
+        "kind": kind,
+        "centre": np.asarray(centre, dtype=float),
+        "rot": np.asarray(rot, dtype=float),
+        "size": (float(a), float(b), float(c)),
+        "material": int(material),
+        "vel": np.asarray(vel, dtype=float),
+        "spin": np.asarray(spin, dtype=float),
+        "reach": reach,
+    }
+
+
+def _turning(speed: float, radius: float, across: np.ndarray) -> np.ndarray:
+    """The spin [rad/s] of a drum or roller whose surface moves at ``speed`` on top: (speed /
+    radius) across (across: the unit vector to the left of the heading)."""
+    return (speed / radius) * np.array([across[0], across[1], 0.0])
+
+
+def rig_primitives(
+    rig: Rig,
+    setting: int,
+    speed_factors: Mapping[str, float] | None = None,
+    roller_surface: str = "linear",
+) -> Primitives:
+    """The static primitives of ``rig`` at speed ``setting`` (drive speeds times
+    ``speed_factors``, as the MuJoCo scene's option): see the module docstring."""
+    if roller_surface not in ROLLER_SURFACES:
+        raise ParcelfitError(
+            f"unknown roller_surface {roller_surface!r}", fix=f"use one of {list(ROLLER_SURFACES)}"
+        )
+    speeds = rig.drive_speeds(setting)
+    factors = speed_factors or {}
+    items: list[dict] = []
+    for s in rig.surfaces:
+        speed = speeds[s.drive] * factors.get(s.drive, 1.0)
+        u = s.unit()
+        n = np.array([-u[1], u[0]])
+        mat = _material(s.material)
+        if s.type == "belt":
+            parts = [(s.name, np.array(s.centre), s.width)]
+        elif s.type == "strips":
+            k = int(s.extra["count"])
+            parts = [
+                (
+                    f"{s.name}_{i}",
+                    np.array(s.centre) + (i - (k - 1) / 2) * s.extra["pitch"] * n,
+                    s.extra["strip_width"],
+                )
+                for i in range(k)
+            ]
+        else:
+            parts = []
+        r = s.nose_radius
+        vel = (speed * u[0], speed * u[1], 0.0)
+        for name, c, width in parts:
+            items.append(
+                primitive(
+                    name,
+                    BOX,
+                    (c[0], c[1], s.top - SLAB),
+                    rot_z(s.heading),
+                    (s.length / 2 - r, width / 2, SLAB),
+                    mat,
+                    vel=vel,
+                )
+            )
+            if r <= 0:
+                continue
+            for end, sign in (("tail", -1), ("head", 1)):
+                p = c + sign * (s.length / 2 - r) * u
+                items.append(
+                    primitive(
+                        f"{name}_{end}",
+                        CYLINDER,
+                        (p[0], p[1], s.top - r),
+                        rot_across(s.heading),
+                        (r, width / 2, 0.0),
+                        mat,
+                        spin=_turning(speed, r, n),
+                    )
+                )
+        if s.type == "rollers":
+            rows, cols = int(s.extra["rows"]), int(s.extra["columns"])
+            radius, half = s.extra["radius"], s.extra["roller_width"] / 2
+            heading = s.heading + s.extra["swivel"]
+            a = math.radians(heading)
+            along = np.array([math.cos(a), math.sin(a)])
+            across = np.array([-math.sin(a), math.cos(a)])
+            for i in range(rows):
+                for j in range(cols):
+                    c = (
+                        np.array(s.centre)
+                        + (j - (cols - 1) / 2) * (s.length / cols) * u
+                        + (i - (rows - 1) / 2) * (s.width / rows) * n
+                    )
+                    # as the MuJoCo scene's capsule of size (radius, half): a segment of
+                    # half-length ``half`` with hemispherical caps of ``radius``
+                    kw: dict = {"vel": (speed * along[0], speed * along[1], 0.0)}
+                    if roller_surface == "turning":
+                        kw = {"spin": _turning(speed, radius, across)}
+                    items.append(
+                        primitive(
+                            f"{s.name}_{i}_{j}",
+                            CAPSULE,
+                            (c[0], c[1], s.top - radius),
+                            rot_across(heading),
+                            (radius, half, 0.0),
+                            mat,
+                            **kw,
+                        )
+                    )
+    for w in rig.walls:
+        a, b = np.array(w.start), np.array(w.end)
+        c, length = (a + b) / 2, float(np.linalg.norm(b - a))
+        yaw = math.degrees(math.atan2(b[1] - a[1], b[0] - a[0]))
+        mat = _material(w.material)
+        items.append(
+            primitive(
+                w.name,
+                BOX,
+                (c[0], c[1], w.base + w.height / 2),
+                rot_z(yaw),
+                (length / 2, w.thickness / 2, w.height / 2),
+                mat,
+            )
+        )
+        if w.lead_in > 0:
+            items.append(
+                primitive(
+                    f"{w.name}_lead_in",
+                    LEAD_IN,
+                    (a[0], a[1], w.base + w.height / 2),
+                    np.eye(3),
+                    (w.lead_in, w.height / 2, 0.0),
+                    mat,
+                )
+            )
+    return Primitives.of(items)
+
+
+@dataclass(frozen=True)
+class Body:
+    """The parcel as a rigid box (see the module docstring): mass [kg], principal inertia (3,)
+    [kg m^2], half extents (3,) [m], contact points (n, 3) [m, body frame], their area weights
+    (n,) [m^2], groups (n,) (bottom, top, side) and height bands (n,) [m] (a side point's row
+    height, 0 for the others), tiles (start, end index into the points,
+    centre (3,), radius), the bottom patch's area [m^2], the side rows' body z (m,) and height
+    weights (m,) [m] (the lead-in's analytic contact is taken at these levels)."""
+
+    mass: float
+    inertia: np.ndarray
+    half: np.ndarray
+    points: np.ndarray
+    area: np.ndarray
+    group: np.ndarray
+    band: np.ndarray
+    tile_start: np.ndarray
+    tile_end: np.ndarray
+    tile_centre: np.ndarray
+    tile_radius: np.ndarray
+    bottom_area: float
+    row_z: np.ndarray
+    row_h: np.ndarray
+
+    @property
+    def radius(self) -> float:
+        """The half diagonal of the box [m]: no point lies farther from the centre."""
+        return float(np.linalg.norm(self.half))
+
+
+def box_inertia(
+    mass: float,
+    outer: tuple[float, float, float],
+    content: tuple[float, float, float],
+    packaging_mass: float,
+) -> np.ndarray:
+    """Principal moments [kg m^2] of the content box plus two packaging sheets (module doc)."""
+    L, W, H = outer
+    cL, cW, cH = content
+    mc, mp = mass - packaging_mass, packaging_mass
+    return np.array(
+        [
+            mc * (cW**2 + cH**2) / 12 + mp * (W**2 / 12 + H**2 / 4),
+            mc * (cL**2 + cH**2) / 12 + mp * (L**2 / 12 + H**2 / 4),
+            mc * (cL**2 + cW**2) / 12 + mp * (L**2 + W**2) / 12,
+        ]
+    )
+
+
+def _axis(extent: float, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """Nodes over [-extent/2, extent/2] at most ``spacing`` apart and their trapezoidal weights."""
+    n = max(1, math.ceil(extent / spacing - 1e-9))
+    x = np.linspace(-extent / 2, extent / 2, n + 1)
+    w = np.full(n + 1, extent / n)
+    w[0] = w[-1] = extent / n / 2
+    return x, w
+
+
+def _tiles_of_grid(nx: int, ny: int) -> list[np.ndarray]:
+    """Index blocks (row-major over an nx x ny node grid) of TILE x TILE nodes."""
+    idx = np.arange(nx * ny).reshape(nx, ny)
+    return [
+        idx[i : i + TILE, j : j + TILE].ravel()
+        for i in range(0, nx, TILE)
+        for j in range(0, ny, TILE)
+    ]
+
+
+def parcel_body(
+    consignment: Consignment,
+    packaging_mass: float,
+    spacing: float = 0.01,
+    bottom_patch: str = "outline",
+) -> Body:
+    """The rigid box of ``consignment`` (see the module docstring)."""
+    if consignment.soft:
+        raise ParcelfitError(
+            f"consignment {consignment.name} has a soft content: the rigid-box reference "
+            "represents rigid contents only",
+            fix="use the MuJoCo backend for soft contents",
+        )
+    if bottom_patch not in BOTTOM_PATCHES:
+        raise ParcelfitError(
+            f"unknown bottom_patch {bottom_patch!r}", fix=f"use one of {list(BOTTOM_PATCHES)}"
+        )
+    if not 0.001 <= spacing <= 0.1:
+        raise ParcelfitError(
+            f"contact point spacing must lie in [1, 100] mm, got {spacing * 1e3:g} mm"
+        )
+    mass = consignment.mass
+    if not 0 < packaging_mass < mass:
+        raise ParcelfitError(
+            f"packaging mass {packaging_mass * 1e3:g} g leaves no mass for the content "
+            f"(consignment {mass * 1e3:g} g)",
+            fix="lower m_Pa",
+        )
+    L, W, H = consignment.outer
+    cL, cW, _ = consignment.content
+    blocks: list[tuple[np.ndarray, np.ndarray, int, list[np.ndarray]]] = []
+
+    def face(size: tuple[float, float], z: float, group: int) -> None:
+        x, wx = _axis(size[0], spacing)
+        y, wy = _axis(size[1], spacing)
+        X, Y = np.meshgrid(x, y, indexing="ij")
+        pts = np.column_stack([X.ravel(), Y.ravel(), np.full(X.size, z)])
+        blocks.append((pts, np.outer(wx, wy).ravel(), group, _tiles_of_grid(len(x), len(y))))
+
+    bottom = (cL, cW) if bottom_patch == "content" else (L, W)
+    face(bottom, -H / 2, BOTTOM)
+    face((L, W), H / 2, TOP)
+    nz = max(MIN_SIDE_ROWS, math.ceil(H / spacing - 1e-9))
+    row_z = -H / 2 + (np.arange(nz) + 0.5) * H / nz
+    row_h = np.full(nz, H / nz)
+    for extent, fixed, axis in ((W, L / 2, 0), (W, -L / 2, 0), (L, W / 2, 1), (L, -W / 2, 1)):
+        s, ws = _axis(extent, spacing)
+        S, Z = np.meshgrid(s, row_z, indexing="ij")
+        pts = np.empty((S.size, 3))
+        pts[:, axis] = fixed
+        pts[:, 1 - axis] = S.ravel()
+        pts[:, 2] = Z.ravel()
+        blocks.append((pts, np.outer(ws, row_h).ravel(), SIDE, _tiles_of_grid(len(s), nz)))
+    # points ordered tile by tile, so that a tile is a contiguous index range
+    points, area, group = [], [], []
+    starts, ends, centres, radii = [], [], [], []
+    n = 0
+    for pts, w, g, tiles in blocks:
+        for t in tiles:
+            p = pts[t]
+            points.append(p)
+            area.append(w[t])
+            group.append(np.full(len(t), g))
+            c = p.mean(axis=0)
+            starts.append(n)
+            ends.append(n + len(t))
+            centres.append(c)
+            # a side point's band reaches half a row above and below it
+            reach = H / nz / 2 if g == SIDE else 0.0
+            radii.append(float(np.max(np.linalg.norm(p - c, axis=1))) + reach)
+            n += len(t)
+    return Body(
+        mass=mass,
+        inertia=box_inertia(mass, consignment.outer, consignment.content, packaging_mass),
+        half=np.array([L / 2, W / 2, H / 2]),
+        points=np.concatenate(points),
+        area=np.concatenate(area),
+        group=np.concatenate(group).astype(np.int64),
+        band=np.where(np.concatenate(group) == SIDE, H / nz, 0.0),
+        tile_start=np.array(starts, dtype=np.int64),
+        tile_end=np.array(ends, dtype=np.int64),
+        tile_centre=np.array(centres),
+        tile_radius=np.array(radii),
+        bottom_area=float(bottom[0] * bottom[1]),
+        row_z=row_z,
+        row_h=row_h,
+    )

@@ -1,0 +1,261 @@
+"""The rigid-box reference as a `Simulator` backend: a rig and a consignment in, a run sampled
+like the camera out (`parcelfit.sim.protocol`).
+
+A run: the parcel starts on its start surface (``rig.start``: centre, heading, plus the
+placement draw of ``placement_seed`` (`Rig.placement`) and ``start_offset``), its bottom face on
+the surface's top, moving with that surface's speed (times ``speed_factors`` of its drive and
+``start_speed_factor``), as the MuJoCo scene starts it. Every 1/sample_rate s (60 Hz) the box
+centre (x, y) and the heading of its x axis projected onto the plane, theta = atan2(R_yx, R_xx),
+are sampled (a `Trajectory`, unwrapped). The light barriers are timed every step (the box's
+footprint, `integrator`), and the run ends as the MuJoCo simulator's does: when the centre leaves
+the rig's end box (checked at the samples), ``after_last_barrier`` s after the second beam
+breaks, or after the rig's duration (``duration`` overrides it).
+
+Status: ``unstable`` on a non-finite state, a speed above 20 m/s or the centre falling 0.2 m
+below the lowest surface's top; ``timeout`` when ``wall_limit`` passes (checked at the samples);
+``ok`` otherwise.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from parcelfit.errors import ParcelfitError
+from parcelfit.runs import Run, TestCase, Trajectory
+from parcelfit.sim.mujoco.consignment import Consignment, load_consignment
+from parcelfit.sim.mujoco.rig import Rig, load_rig
+from parcelfit.sim.protocol import SimResult, SimStatus
+from parcelfit.sim.rigidbox import integrator as ig
+from parcelfit.sim.rigidbox.contact import law_array
+from parcelfit.sim.rigidbox.engine import GRAVITY, Motion, World, yaw_quaternion
+from parcelfit.sim.rigidbox.geometry import (
+    BOTTOM_PATCHES,
+    METAL,
+    ROLLER_SURFACES,
+    parcel_body,
+    rig_primitives,
+)
+
+FALL_DEPTH = 0.2  # m
+MAX_STEP = 1e-5  # s, the largest default step
+OMEGA_DT = 0.1  # the default step keeps omega_max * dt at most this
+# the friction's static and dynamic threshold speeds [m/s] (RecurDyn's defaults: 1 and 1.5 mm/s)
+STICK_SPEED = 0.001
+SLIP_SPEED = 0.0015
+
+
+@dataclass(frozen=True)
+class RigidBoxOptions:
+    """Numerical settings of the rigid-box reference (not calibrated).
+
+    ``timestep`` [s] (None: the default of `step_for`), ``spacing`` [m] of the contact points,
+    ``bottom_patch`` (``outline`` or ``content``, `geometry`), the friction's static and dynamic
+    threshold speeds ``stick_speed`` < ``slip_speed`` [m/s], ``speed_factors`` (drive ->
+    factor), ``roller_surface`` (``linear`` or ``turning``), the start's ``start_offset`` (dx [m],
+    dy [m], dheading [deg]) and ``start_speed_factor``, ``sample_rate`` [Hz], ``wall_limit`` [s],
+    ``duration`` [s] (None: the rig's), ``placement_seed`` (None: the nominal start pose),
+    ``gravity`` [m/s^2]."""
+
+    timestep: float | None = None
+    spacing: float = 0.01
+    bottom_patch: str = "outline"
+    stick_speed: float = STICK_SPEED
+    slip_speed: float = SLIP_SPEED
+    speed_factors: Mapping[str, float] = field(default_factory=dict)
+    roller_surface: str = "linear"
+    start_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    start_speed_factor: float = 1.0
+    sample_rate: float = 60.0
+    wall_limit: float = 600.0
+    duration: float | None = None
+    placement_seed: int | None = None
+    gravity: float = GRAVITY
+
+    def __post_init__(self) -> None:
+        if self.timestep is not None and not 1e-7 <= self.timestep <= 1e-3:
+            raise ParcelfitError(f"timestep must lie in [1e-7, 1e-3] s, got {self.timestep}")
+        if self.bottom_patch not in BOTTOM_PATCHES:
+            raise ParcelfitError(
+                f"unknown bottom_patch {self.bottom_patch!r}",
+                fix=f"use one of {list(BOTTOM_PATCHES)}",
+            )
+        if self.roller_surface not in ROLLER_SURFACES:
+            raise ParcelfitError(
+                f"unknown roller_surface {self.roller_surface!r}",
+                fix=f"use one of {list(ROLLER_SURFACES)}",
+            )
+        if not 0 < self.stick_speed < self.slip_speed:
+            raise ParcelfitError(
+                f"need 0 < stick_speed < slip_speed, got {self.stick_speed}, {self.slip_speed} m/s"
+            )
+        if not self.sample_rate > 0:
+            raise ParcelfitError(f"sample_rate must be positive [Hz], got {self.sample_rate}")
+
+    def step_for(self, stiffness: float, mass: float) -> float:
+        """The time step [s]: ``timestep`` if given, else the largest 1 / (sample_rate n) (n
+        whole) with omega_max dt <= 0.1, omega_max = sqrt(stiffness / mass) (the stiffest
+        whole-face contact [N/m] and the parcel's mass [kg]), and dt <= 1e-5 s."""
+        if self.timestep is not None:
+            return self.timestep
+        limit = min(MAX_STEP, OMEGA_DT / math.sqrt(stiffness / mass))
+        return 1.0 / (self.sample_rate * math.ceil(1.0 / (self.sample_rate * limit) - 1e-9))
+
+
+class RigidBoxSimulator:
+    """The rigid-box reference backend for bundled or user rigs and consignments (module doc)."""
+
+    def __init__(
+        self,
+        options: RigidBoxOptions | None = None,
+        rigs: Mapping[str, Rig] | None = None,
+        consignments: Mapping[str, Consignment] | None = None,
+    ) -> None:
+        self.options = options or RigidBoxOptions()
+        self._rigs = dict(rigs or {})
+        self._consignments = dict(consignments or {})
+
+    def rig(self, name: str) -> Rig:
+        """The rig called ``name`` (given at construction, else bundled)."""
+        if name not in self._rigs:
+            self._rigs[name] = load_rig(name)
+        return self._rigs[name]
+
+    def consignment(self, name: str) -> Consignment:
+        """The consignment type called ``name`` (given at construction, else bundled)."""
+        if name not in self._consignments:
+            self._consignments[name] = load_consignment(name)
+        return self._consignments[name]
+
+    def with_options(self, **changes: Any) -> RigidBoxSimulator:
+        """The same simulator (rigs and consignments) with `RigidBoxOptions` fields changed."""
+        return RigidBoxSimulator(replace(self.options, **changes), self._rigs, self._consignments)
+
+    def with_placement(self, seed: int | None) -> RigidBoxSimulator:
+        """The same simulator with placement ``seed`` (None: the nominal start pose)."""
+        return self.with_options(placement_seed=seed)
+
+    def world(self, params: Mapping[str, float], case: TestCase) -> tuple[World, float]:
+        """The world of ``case`` with SI ``params`` (defaults filled in) and its time step [s]."""
+        opt = self.options
+        rig, cons = self.rig(case.rig), self.consignment(case.consignment)
+        p = cons.parameter_values(si_values=params)
+        body = parcel_body(cons, p["m_Pa"], opt.spacing, opt.bottom_patch)
+        prims = rig_primitives(rig, case.speed_setting, opt.speed_factors, opt.roller_surface)
+        law = law_array(
+            (p["k_BePa"], p["k_MePa"]),
+            (p["zeta_BePa"], p["zeta_MePa"]),
+            (p["mu_d_BePa"], p["mu_d_MePa"]),
+            (p["mu_s_BePa"], p["mu_s_MePa"]),
+            body.mass,
+            body.bottom_area,
+        )
+        stiffness = p["k_BePa"]
+        if np.any(prims.material == METAL):
+            stiffness = max(stiffness, p["k_MePa"])
+        world = World(body, prims, law, opt.stick_speed, opt.slip_speed, opt.gravity)
+        return world, opt.step_for(stiffness, body.mass)
+
+    def start(self, rig: Rig, case: TestCase, half_height: float) -> dict[str, np.ndarray]:
+        """The start pose and velocity of a run on ``rig`` (module docstring)."""
+        opt = self.options
+        dx, dy, dh = opt.start_offset
+        if opt.placement_seed is not None:
+            px, py, ph = rig.placement(opt.placement_seed)
+            dx, dy, dh = dx + px, dy + py, dh + ph
+        surface = rig.surface(rig.start.surface)
+        speed = (
+            rig.drive_speeds(case.speed_setting)[surface.drive]
+            * opt.speed_factors.get(surface.drive, 1.0)
+            * opt.start_speed_factor
+        )
+        u = surface.unit()
+        return {
+            "position": np.array(
+                [rig.start.position[0] + dx, rig.start.position[1] + dy, surface.top + half_height]
+            ),
+            "quaternion": yaw_quaternion(rig.start.heading + dh),
+            "velocity": np.array([speed * u[0], speed * u[1], 0.0]),
+        }
+
+    def run(
+        self, params: Mapping[str, float], case: TestCase, run_id: str | None = None
+    ) -> SimResult:
+        """Simulate ``case`` with SI ``params``; see the module docstring."""
+        t_wall = time.perf_counter()
+        opt = self.options
+        rig = self.rig(case.rig)
+        world, dt = self.world(params, case)
+        motion = Motion(
+            world,
+            **self.start(rig, case, float(world.body.half[2])),
+            barriers=rig.barriers,
+            after_last_barrier=rig.end.after_last_barrier,
+        )
+        duration = opt.duration if opt.duration is not None else rig.end.duration
+        n_steps = round(duration / dt)
+        motion.counters[2] = n_steps  # stop at the duration at the latest
+        every = max(1, round(1.0 / (opt.sample_rate * dt)))
+        lowest = min(s.top for s in rig.surfaces) - FALL_DEPTH
+        (x_lo, x_hi), (y_lo, y_hi) = rig.end.x, rig.end.y
+        samples = [(0.0, float(motion.x[0]), float(motion.x[1]), motion.heading)]
+        status, message = SimStatus.OK, "reached the end of the run"
+        while True:
+            code = motion.advance(dt, every)
+            if code == ig.NOT_FINITE:
+                status, message = SimStatus.UNSTABLE, "numerical blow-up (non-finite state)"
+                break
+            if code == ig.TOO_FAST:
+                status, message = SimStatus.UNSTABLE, "energy blow-up (parcel faster than 20 m/s)"
+                break
+            step = motion.steps
+            if step % every == 0:
+                samples.append((step * dt, float(motion.x[0]), float(motion.x[1]), motion.heading))
+            if code == ig.STOPPED:
+                break
+            c = motion.x
+            if c[2] < lowest:
+                status, message = SimStatus.UNSTABLE, "the parcel fell off the rig"
+                break
+            if not (x_lo <= c[0] <= x_hi and y_lo <= c[1] <= y_hi):
+                message = "the parcel left the rig's end box"
+                break
+            if time.perf_counter() - t_wall > opt.wall_limit:
+                status, message = (
+                    SimStatus.TIMEOUT,
+                    f"wall-clock limit of {opt.wall_limit:g} s reached",
+                )
+                break
+        wall = time.perf_counter() - t_wall
+        crossed = motion.barrier_times
+        transit = (
+            crossed[1] - crossed[0] if crossed[0] is not None and crossed[1] is not None else None
+        )
+        diagnostics: dict[str, object] = {
+            "message": message,
+            "steps": motion.steps,
+            "simulated_time": motion.steps * dt,
+            "timestep": dt,
+            "steps_per_second": motion.steps / wall if wall > 0 else float("nan"),
+            "barrier_times": crossed,
+            "contact_points": len(world.body.points),
+        }
+        run = None
+        if len(samples) >= 3 and status is not SimStatus.UNSTABLE:
+            arr = np.asarray(samples)
+            traj = Trajectory.from_arrays(arr[:, 0], arr[:, 1], arr[:, 2], arr[:, 3])
+            run = Run(
+                run_id or f"rigidbox-{case.rig}-{case.consignment}-{case.speed_setting}",
+                case,
+                traj,
+                transit,
+            )
+        return SimResult(run, status, wall, diagnostics)
+
+
+__all__ = ["RigidBoxOptions", "RigidBoxSimulator"]

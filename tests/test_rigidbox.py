@@ -1,0 +1,343 @@
+"""The rigid-box reference (parcelfit.sim.rigidbox): its integrator, contact law and simulator
+against analytic results, and a smoke run on E3."""
+
+from __future__ import annotations
+
+import math
+import pickle
+
+import numpy as np
+import pytest
+
+from parcelfit.errors import ParcelfitError
+from parcelfit.runs import TestCase
+from parcelfit.sim import SimStatus, Simulator
+from parcelfit.sim.ensemble import rotation, simulate_ensemble
+from parcelfit.sim.mujoco import load_consignment, load_rig
+from parcelfit.sim.rigidbox import (
+    Motion,
+    Primitives,
+    RigidBoxOptions,
+    RigidBoxSimulator,
+    World,
+    parcel_body,
+    rig_primitives,
+)
+from parcelfit.sim.rigidbox.contact import disc_rectangle_overlap, friction_coefficient, law_array
+from parcelfit.sim.rigidbox.geometry import (
+    BELT,
+    BOX,
+    CAPSULE,
+    CYLINDER,
+    LEAD_IN,
+    METAL,
+    SIDE,
+    box_inertia,
+    primitive,
+    rot_z,
+)
+
+G = 9.81
+DT = 1e-5
+K = 5e5  # N/m
+MU_D, OFFSET = 0.45, 0.1
+
+
+@pytest.fixture(scope="module")
+def bw():
+    return load_consignment("BW")
+
+
+def _plane_world(bw, speed=0.0, spacing=0.01, gravity=G, stick=0.001, slip=0.0015):
+    """BW on a large flat belt (top at z = 0) moving at ``speed`` along x."""
+    body = parcel_body(bw, 0.02, spacing)
+    belt = primitive("belt", BOX, (0, 0, -0.02), rot_z(0), (5, 1, 0.02), BELT, vel=(speed, 0, 0))
+    law = law_array((K, K), (1, 1), (MU_D, MU_D), (OFFSET, OFFSET), bw.mass, body.bottom_area)
+    return World(body, Primitives.of([belt]), law, stick, slip, gravity)
+
+
+def _on_plane(world, **kw):
+    return Motion(world, (0, 0, float(world.body.half[2])), (1, 0, 0, 0), **kw)
+
+
+# -- the body and the contact law --------------------------------------------------------------
+
+
+def test_the_box_has_the_consignment_s_mass_inertia_and_contact_areas(bw):
+    body = parcel_body(bw, 0.02)
+    L, W, H = bw.outer
+    assert body.mass == bw.mass
+    assert np.allclose(body.inertia, box_inertia(bw.mass, bw.outer, bw.content, 0.02))
+    # the packaging's two sheets add (L^2 + W^2) / 12 per unit mass about z
+    cL, cW, _ = bw.content
+    assert body.inertia[2] == pytest.approx(0.06 * (cL**2 + cW**2) / 12 + 0.02 * (L**2 + W**2) / 12)
+    faces = body.area[body.group != SIDE].sum()
+    assert faces == pytest.approx(2 * L * W)
+    assert body.area[body.group == SIDE].sum() == pytest.approx(2 * (L + W) * H)
+    assert body.bottom_area == pytest.approx(L * W)
+    # every tile is a contiguous range whose sphere holds its points
+    for s, e, c, r in zip(
+        body.tile_start, body.tile_end, body.tile_centre, body.tile_radius, strict=True
+    ):
+        assert np.all(np.linalg.norm(body.points[s:e] - c, axis=1) <= r + 1e-12)
+    content = parcel_body(bw, 0.02, bottom_patch="content")
+    assert content.bottom_area == pytest.approx(cL * cW)
+    bottom = content.points[content.group == 0]
+    assert np.all(np.abs(bottom[:, 0]) <= cL / 2 + 1e-12)
+
+
+def test_a_soft_content_and_unknown_options_are_refused():
+    with pytest.raises(ParcelfitError, match="rigid contents only"):
+        parcel_body(load_consignment("PB"), 0.01)
+    with pytest.raises(ParcelfitError, match="bottom_patch"):
+        RigidBoxOptions(bottom_patch="rim")
+    with pytest.raises(ParcelfitError, match="stick_speed < slip_speed"):
+        RigidBoxOptions(stick_speed=0.002, slip_speed=0.001)
+
+
+def test_friction_rises_to_static_at_v_s_and_falls_to_dynamic_at_v_d():
+    mu_s, v_s, v_d = 0.6, 0.001, 0.0015
+    assert friction_coefficient(0.0, 0.45, mu_s, v_s, v_d) == 0.0
+    assert friction_coefficient(0.0005, 0.45, mu_s, v_s, v_d) == pytest.approx(0.3)
+    assert friction_coefficient(0.001, 0.45, mu_s, v_s, v_d) == pytest.approx(mu_s)
+    assert friction_coefficient(0.00125, 0.45, mu_s, v_s, v_d) == pytest.approx(0.525)
+    assert friction_coefficient(0.0015, 0.45, mu_s, v_s, v_d) == pytest.approx(0.45)
+    assert friction_coefficient(3.0, 0.45, mu_s, v_s, v_d) == 0.45
+
+
+def test_disc_rectangle_overlap_is_exact():
+    r = 0.01
+    assert disc_rectangle_overlap(0.0, 0.0, r, 0.1, 0.05) == pytest.approx(math.pi * r**2)
+    assert disc_rectangle_overlap(0.1, 0.0, r, 0.1, 0.05) == pytest.approx(math.pi * r**2 / 2)
+    assert disc_rectangle_overlap(0.1, 0.05, r, 0.1, 0.05) == pytest.approx(math.pi * r**2 / 4)
+    assert disc_rectangle_overlap(0.2, 0.0, r, 0.1, 0.05) == 0.0
+    g = np.linspace(-r, r, 2001)
+    X, Y = np.meshgrid(g, g)
+    inside = np.hypot(X, Y) <= r
+    cell = (g[1] - g[0]) ** 2
+    for ax, ay in [(0.095, 0.047), (0.104, -0.01), (-0.093, 0.052), (0.0, -0.056)]:
+        box = (np.abs(X + ax) <= 0.1) & (np.abs(Y + ay) <= 0.05)
+        numeric = np.sum(inside & box) * cell
+        assert disc_rectangle_overlap(ax, ay, r, 0.1, 0.05) == pytest.approx(numeric, rel=5e-3)
+
+
+def test_the_lead_in_contact_is_the_segment_law_whatever_the_point_spacing(bw):
+    """A parcel's side pressed delta into a vertical lead-in mounted 4 mm above the belt: the
+    force is (K / A_b) h A_seg(delta) over the shared height h, at 10 mm and at 5 mm spacing."""
+    r, delta = 0.01, 0.002
+    forces = []
+    for spacing in (0.01, 0.005):
+        body = parcel_body(bw, 0.02, spacing)
+        L, _, H = bw.outer
+        lead = primitive(
+            "lead", LEAD_IN, (L / 2 + r - delta, 0.0, 0.054), np.eye(3), (r, 0.05, 0), 1
+        )
+        law = law_array((K, 6e5), (1, 1), (0.3, 0.3), (0, 0), bw.mass, body.bottom_area)
+        m = Motion(
+            World(body, Primitives.of([lead]), law, 0.001, 0.0015, 0.0), (0, 0, H / 2), (1, 0, 0, 0)
+        )
+        forces.append(m.F.copy())
+        segment = r**2 * math.acos((r - delta) / r) - (r - delta) * math.sqrt(
+            2 * r * delta - delta**2
+        )
+        expected = 6e5 / body.bottom_area * (H - 0.004) * segment
+        assert m.F[0] == pytest.approx(-expected, rel=1e-9)
+    assert np.allclose(forces[0], forces[1], rtol=1e-12, atol=1e-15)
+
+
+def test_rig_primitives_follow_the_mujoco_scene():
+    e3 = rig_primitives(load_rig("E3"), 1)
+    names = list(e3.names)
+    assert names.count("guide") == 1 and "guide_lead_in" in names
+    assert e3.kind[names.index("guide_lead_in")] == LEAD_IN
+    assert e3.material[names.index("guide")] == METAL
+    main = names.index("main")
+    assert np.allclose(e3.vel[main], (1.56, 0, 0))
+    assert e3.centre[main, 2] + e3.size[main, 2] == pytest.approx(0.0)  # top of the slab
+    assert e3.size[main, 0] == pytest.approx(4.5 / 2 - 0.02)  # shortened by the drum radius
+    tail, head = names.index("main_tail"), names.index("main_head")
+    assert e3.kind[tail] == CYLINDER
+    # the drum's surface: belt speed on top, up at the tail, down at the head
+    top = e3.centre[tail] + (0, 0, 0.02)
+    assert np.allclose(e3.velocity_at(tail, top), (1.56, 0, 0))
+    assert np.allclose(e3.velocity_at(tail, e3.centre[tail] - (0.02, 0, 0)), (0, 0, 1.56))
+    assert np.allclose(e3.velocity_at(head, e3.centre[head] + (0.02, 0, 0)), (0, 0, -1.56))
+    strips = [n for n in names if n.startswith("strips_") and "_" not in n[len("strips_") :]]
+    assert len(strips) == 7
+    fast = rig_primitives(load_rig("E3"), 1, speed_factors={"main": 1.1})
+    assert np.allclose(fast.vel[main], (1.716, 0, 0))
+    e2a = rig_primitives(load_rig("E2a"), 1)
+    assert np.sum(e2a.kind == CAPSULE) == 7 * 8
+
+
+# -- the integrator ------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("duration, tolerance", [(0.1, 1e-6), (2.0, 1e-4)])
+def test_a_spinning_box_in_free_flight_keeps_its_energy_and_angular_momentum(
+    bw, duration, tolerance
+):
+    world = _plane_world(bw, gravity=0.0)
+    # mostly about the intermediate axis: the box tumbles
+    m = Motion(world, (0, 0, 1.0), (1, 0, 0, 0), (0.3, 0.2, 0), angular_velocity=(0.3, 15, 0.5))
+    e0, l0 = m.kinetic_energy, m.angular_momentum.copy()
+    m.advance(DT, round(duration / DT))
+    assert abs(m.kinetic_energy - e0) / e0 < tolerance
+    assert np.linalg.norm(m.angular_momentum - l0) / np.linalg.norm(l0) < tolerance
+    assert np.allclose(m.x, (0.3 * duration, 0.2 * duration, 1.0))
+    if duration > 1:  # it did tumble
+        assert np.min(np.abs(m.angular_velocity)) < 14
+
+
+def test_a_box_dropped_flat_on_a_belt_rests_at_the_static_penetration(bw):
+    world = _plane_world(bw)
+    m = Motion(world, (0, 0, float(world.body.half[2]) + 0.002), (1, 0, 0, 0))
+    m.advance(DT, 30000)
+    penetration = float(world.body.half[2]) - m.x[2]
+    assert penetration == pytest.approx(bw.mass * G / K, rel=1e-3)
+    assert np.linalg.norm(m.v) < 1e-9
+
+
+def test_a_box_on_a_moving_belt_accelerates_at_mu_d_g_to_belt_speed(bw):
+    speed = 1.5
+    m = _on_plane(_plane_world(bw, speed=speed))
+    t, v = [], []
+    while m.steps * DT < 0.5:
+        m.advance(DT, 500)
+        t.append(m.steps * DT)
+        v.append(m.v[0])
+    t, v = np.array(t), np.array(v)
+    sliding = (v > 0.1) & (v < 1.3)
+    assert np.polyfit(t[sliding], v[sliding], 1)[0] == pytest.approx(MU_D * G, rel=1e-3)
+    # within the friction's threshold speed of the belt at the analytic time
+    t_belt = speed / (MU_D * G)
+    assert np.interp(t_belt, t, v) == pytest.approx(speed, abs=0.002)
+    assert v[-1] == pytest.approx(speed, abs=1e-6)
+    assert np.linalg.norm(m.angular_velocity) < 1e-9
+
+
+def test_a_box_sliding_on_a_still_plane_stops_after_v2_over_2_mu_g(bw):
+    v0 = 1.0
+    m = _on_plane(_plane_world(bw), velocity=(v0, 0, 0))
+    m.advance(DT, 50000)
+    assert m.x[0] == pytest.approx(v0**2 / (2 * MU_D * G), rel=1e-3)
+    assert np.linalg.norm(m.v) < 1e-6
+
+
+def test_a_box_spinning_on_a_still_plane_stops_its_spin(bw):
+    """Uniform pressure: friction torque mu g (M / A) integral |r| dA, so the spin stops at
+    t = I_zz w0 / torque."""
+    w0 = 10.0
+    world = _plane_world(bw)
+    L, W, _ = bw.outer
+    g = np.linspace(-0.5, 0.5, 801)[:-1] + 0.5 / 800
+    X, Y = np.meshgrid(g * L, g * W)
+    torque = MU_D * G * bw.mass * np.mean(np.hypot(X, Y))
+    t_stop = world.body.inertia[2] * w0 / torque
+    m = _on_plane(world, angular_velocity=(0, 0, w0))
+    m.advance(DT, round(0.9 * t_stop / DT))
+    assert 0 < m.angular_velocity[2] < 0.2 * w0
+    m.advance(DT, round(0.2 * t_stop / DT))
+    assert abs(m.angular_velocity[2]) < 1e-3
+    assert np.hypot(*m.x[:2]) < 1e-6  # it spun on the spot
+
+
+# -- the simulator on E3 -------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def e3_runs():
+    sim = RigidBoxSimulator()
+    return {name: sim.run({}, TestCase("E3", name, 1)) for name in ("KPBW", "BW")}
+
+
+@pytest.mark.parametrize("name", ["KPBW", "BW"])
+def test_e3_smoke(e3_runs, name):
+    result = e3_runs[name]
+    assert result.status is SimStatus.OK, result.diagnostics
+    t1, t2 = result.diagnostics["barrier_times"]
+    assert t1 is not None and t2 is not None
+    assert 1.0 <= result.run.transit_time <= 2.5
+    traj = result.run.trajectory
+    assert np.allclose(np.diff(traj.t), 1 / 60)
+    rig = load_rig("E3")
+    assert (traj.x[0], traj.y[0]) == pytest.approx(rig.start.position)
+    assert traj.theta[0] == pytest.approx(math.radians(30))
+
+
+def test_same_inputs_give_bit_identical_runs():
+    """Through the strips, the drop to the main belt and the first impact on the lead-in."""
+    sim = RigidBoxSimulator().with_options(duration=0.6).with_placement(4)
+    a, b = (sim.run({}, TestCase("E3", "BW", 1)).run for _ in range(2))
+    for col in ("t", "x", "y", "theta"):
+        assert np.array_equal(getattr(a.trajectory, col), getattr(b.trajectory, col))
+    assert a.trajectory.theta[-1] != a.trajectory.theta[0]
+
+
+def test_halving_the_step_changes_an_e3_rotation_by_less_than_2_degrees(e3_runs):
+    base = e3_runs["BW"]
+    half = RigidBoxSimulator().with_options(timestep=base.diagnostics["timestep"] / 2)
+    fine = half.run({}, TestCase("E3", "BW", 1))
+    assert fine.ok
+    diff = rotation(fine.run.trajectory) - rotation(base.run.trajectory)
+    assert abs(math.degrees(diff)) < 2
+
+
+def test_the_simulator_is_picklable_and_seeds_its_placement():
+    sim = RigidBoxSimulator().with_options(duration=0.05)
+    assert isinstance(sim, Simulator)
+    copy = pickle.loads(pickle.dumps(sim.with_placement(3)))
+    assert copy.options.placement_seed == 3 and copy.options.duration == 0.05
+    members = simulate_ensemble(copy.with_placement, {}, TestCase("E3", "KP", 1), [0, 1])
+    rig = load_rig("E3")
+    for m in members:
+        dx, dy, dh = rig.placement(m.seed)
+        traj = m.run.trajectory
+        assert traj.x[0] == pytest.approx(rig.start.position[0] + dx)
+        assert traj.y[0] == pytest.approx(rig.start.position[1] + dy)
+        assert math.degrees(traj.theta[0]) == pytest.approx(rig.start.heading + dh)
+
+
+def test_the_default_step_resolves_the_stiffest_contact():
+    opt = RigidBoxOptions()
+    dt = opt.step_for(1e6, 0.08)  # 1000 N/mm on BW: omega 3536 rad/s
+    assert dt <= 1e-5 and math.sqrt(1e6 / 0.08) * dt <= 0.1
+    assert (1 / 60) / dt == pytest.approx(round((1 / 60) / dt))
+    assert opt.step_for(1e9, 0.08) < 1e-5  # a stiffer contact takes a finer step
+    assert RigidBoxOptions(timestep=2e-5).step_for(1e9, 0.08) == 2e-5
+
+
+def test_a_study_s_simulator_section_makes_a_rigidbox_simulator(tmp_path):
+    from parcelfit.sim.factory import (
+        SimulatorConfig,
+        SimulatorSection,
+        content_kind,
+        make_simulator,
+    )
+
+    section = SimulatorSection(
+        backend="rigidbox", rig="E3", consignment="KPBW", spacing=0.005, bottom_patch="content",
+        stick_speed=0.002, wall_limit=60,
+    )  # fmt: skip
+    config = section.to_config(tmp_path)
+    sim = make_simulator(config)
+    assert isinstance(sim, RigidBoxSimulator)
+    opt = sim.options
+    assert (opt.spacing, opt.bottom_patch, opt.wall_limit) == (0.005, "content", 60)
+    assert (opt.stick_speed, opt.slip_speed) == (0.002, pytest.approx(0.003))
+    assert content_kind(config) == "rigid"
+    assert (
+        make_simulator(
+            SimulatorSection(backend="rigidbox", rig="E3", consignment="BW").to_config(tmp_path)
+        ).options
+        == RigidBoxOptions()
+    )
+    with pytest.raises(ParcelfitError, match="does not take shell_dof"):
+        SimulatorConfig("rigidbox", rig="E3", consignment="BW", shell_dof="full")
+    with pytest.raises(ParcelfitError, match="bottom_patch is a setting of the rigidbox"):
+        SimulatorConfig("mujoco", rig="E3", consignment="BW", bottom_patch="content")
+    with pytest.raises(Exception, match="must exceed stick_speed"):  # the rigid box's 1 mm/s
+        SimulatorSection(backend="rigidbox", rig="E3", consignment="BW", slip_speed=0.0008)
+    pb = SimulatorSection(backend="rigidbox", rig="E3", consignment="PB").to_config(tmp_path)
+    with pytest.raises(ParcelfitError, match="rigid contents only"):
+        make_simulator(pb)
