@@ -525,7 +525,10 @@ def test_impratio_reaches_the_model_and_is_checked():
 
     rig, cons = load_rig("E3"), load_consignment("KPBW")
     params = resolve(cons.content_kind, si_values={})
-    assert 'impratio="1"' in build_scene(rig, cons, params, 1, SceneOptions()).xml
+    # the penalty law's default stiffens MuJoCo's friction rows (scene.py, PENALTY_IMPRATIO)
+    assert 'impratio="10000"' in build_scene(rig, cons, params, 1, SceneOptions()).xml
+    impedance = SceneOptions(contact_law="impedance")
+    assert 'impratio="1"' in build_scene(rig, cons, params, 1, impedance).xml
     assert 'impratio="10"' in build_scene(rig, cons, params, 1, SceneOptions(impratio=10)).xml
     with pytest.raises(ParcelfitError, match="impratio must be at least 1"):
         SceneOptions(impratio=0.5)
@@ -671,7 +674,9 @@ def test_the_default_step_follows_the_shell_and_a_given_step_wins():
     assert step("PB", SceneOptions()) == pytest.approx(1 / 1200)
     assert step("KPBW", SceneOptions(shell_dof="full")) == pytest.approx(1 / 1200)
     assert step("PB", SceneOptions(timestep=1 / 600)) == pytest.approx(1 / 600)
-    assert step("PB", SceneOptions(belt_friction="coulomb")) == pytest.approx(1 / 2400)
+    assert step("PB", SceneOptions(friction="geom", belt_friction="coulomb")) == pytest.approx(
+        1 / 2400
+    )
     assert SceneOptions().step_for(soft=False) == pytest.approx(1 / 2400)
     with pytest.raises(ParcelfitError, match="timestep must lie in"):
         SceneOptions(timestep=0.1)
@@ -713,10 +718,22 @@ def test_belt_friction_from_a_study_files_simulator_section_and_a_twins_settings
     from parcelfit.synth import TwinSettings, TwinSettingsSection
 
     section = SimulatorSection(
-        backend="mujoco", rig="E3", consignment="KPBW", belt_friction="coulomb"
+        backend="mujoco", rig="E3", consignment="KPBW", friction="geom", belt_friction="coulomb"
     )
     sim = make_simulator(section.to_config(tmp_path))
     assert sim.options.scene.belt_friction == "coulomb"  # type: ignore[attr-defined]
+    assert sim.options.scene.friction == "geom"  # type: ignore[attr-defined]
+    laws = SimulatorSection(
+        backend="mujoco", rig="E3", consignment="KPBW", contact_law="impedance", friction="geom"
+    )
+    scene = make_simulator(laws.to_config(tmp_path)).options.scene  # type: ignore[attr-defined]
+    assert (scene.contact_law, scene.friction) == ("impedance", "geom")
+    with pytest.raises(Exception, match="friction=geom"):
+        make_simulator(
+            SimulatorSection(
+                backend="mujoco", rig="E3", consignment="KPBW", belt_friction="coulomb"
+            ).to_config(tmp_path)
+        )
     default = SimulatorSection(backend="mujoco", rig="E3", consignment="KPBW")
     assert make_simulator(default.to_config(tmp_path)).options.scene.belt_friction == "mujoco"  # type: ignore[attr-defined]
     assert TwinSettings().real_belt_friction == "mujoco"

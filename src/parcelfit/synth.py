@@ -167,6 +167,14 @@ def _placement(rig: Rig, rng: np.random.Generator, s: TwinSettings) -> tuple[flo
     return dx, dy, dh
 
 
+def _friction_options(s: TwinSettings) -> dict[str, str]:
+    """The "real" side's friction as scene options: the default per-contact law, or with
+    ``real_belt_friction`` "coulomb" the former per-surface law with Coulomb belt forces."""
+    if s.real_belt_friction == "coulomb":
+        return {"friction": "geom", "belt_friction": "coulomb"}
+    return {}
+
+
 def _twin_run(job: TwinJob) -> tuple[Run, float]:
     """Simulate one twin run; returns the noisy run and its wall time [s]."""
     s = job.settings
@@ -176,7 +184,7 @@ def _twin_run(job: TwinJob) -> tuple[Run, float]:
     drives = sorted({d for sp in rig.speeds.values() for d in sp})
     scene = SceneOptions(
         timestep=s.step_for(cons.soft),
-        belt_friction=s.real_belt_friction,
+        **_friction_options(s),
         spacing=s.real_spacing,
         soft_shell_spacing=s.real_soft_spacing,
         soft_spacing=s.real_content_spacing or SceneOptions.soft_spacing,
@@ -315,7 +323,7 @@ def make_twin_dataset(
         )
         regions = tuple(r for r in rig.regions if isinstance(r, Box)) or rig.regions
         out_cases.append(CaseData(case, runs, regions, rig.margin))
-    steps = SceneOptions(belt_friction=s.real_belt_friction)  # the default steps it implies
+    steps = SceneOptions(**_friction_options(s))  # the default steps it implies
     path = save_dataset(
         folder,
         name,

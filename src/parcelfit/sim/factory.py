@@ -9,7 +9,9 @@ The section's ``backend`` chooses: ``mujoco`` (a bundled or user rig and consign
 ``shell_cells`` (an interpolated shell's grid of cells, e.g. ``[4, 4, 1]``),
 ``shell_diagonals`` (``radiating`` or ``alternating``: how the shell's cells are split into
 triangles), ``mass_lumping`` (``area`` or ``equal``: how the packaging's mass is spread over its
-vertices, see `SceneOptions`), ``belt_friction`` (``mujoco`` or ``coulomb``, see `SceneOptions`),
+vertices, see `SceneOptions`), ``contact_law`` (``penalty`` or ``impedance``), ``friction``
+(``contact``: per contact, or ``geom``: the former per-surface switch), ``belt_friction``
+(``mujoco`` or ``coulomb``, with ``friction: geom``; see `SceneOptions`),
 ``roller_surface`` (``linear`` or ``turning``: how a flow splitter's rollers move the
 packaging), ``stick_speed`` and ``slip_speed`` [m/s] (how the static friction offsets fade with
 the slip speed, see `SceneOptions`), ``rig_timesteps`` (a time step [s] by rig name) and
@@ -40,6 +42,8 @@ from parcelfit.errors import ParcelfitError
 from parcelfit.schema import Choice, FileModel, Number, Text
 from parcelfit.sim.params import (
     BELT_FRICTION,
+    CONTACT_LAWS,
+    FRICTION_LAWS,
     MASS_LUMPINGS,
     MAX_TIMESTEP,
     MIN_TIMESTEP,
@@ -62,6 +66,8 @@ _MUJOCO_ONLY = (
     "shell_cells",
     "shell_diagonals",
     "mass_lumping",
+    "contact_law",
+    "friction",
     "belt_friction",
     "rig_timesteps",
 )
@@ -78,6 +84,8 @@ _SETTINGS = (
     "shell_cells",
     "shell_diagonals",
     "mass_lumping",
+    "contact_law",
+    "friction",
     "belt_friction",
     "roller_surface",
     "stick_speed",
@@ -144,6 +152,8 @@ class SimulatorConfig(Mapping[str, Any]):
     shell_cells: tuple[int, int, int] | None = None
     shell_diagonals: str | None = None
     mass_lumping: str | None = None
+    contact_law: str | None = None
+    friction: str | None = None
     belt_friction: str | None = None
     roller_surface: str | None = None
     stick_speed: float | None = None
@@ -197,6 +207,8 @@ class SimulatorSection(FileModel):
     mass_lumping: Annotated[
         str | None, Choice(MASS_LUMPINGS, what="spread of the packaging's mass")
     ] = None
+    contact_law: Annotated[str | None, Choice(CONTACT_LAWS, what="contact law")] = None
+    friction: Annotated[str | None, Choice(FRICTION_LAWS, what="friction law")] = None
     belt_friction: Annotated[str | None, Choice(BELT_FRICTION, what="belt friction law")] = None
     roller_surface: Annotated[str | None, Choice(ROLLER_SURFACES, what="roller surface motion")] = (
         None
@@ -266,6 +278,8 @@ def make_simulator(config: SimulatorConfig) -> Simulator:
             if k in config
         }
         for key in (
+            "contact_law",
+            "friction",
             "belt_friction",
             "roller_surface",
             "shell_dof",

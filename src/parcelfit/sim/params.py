@@ -64,6 +64,10 @@ ShellCellsField = Annotated[
 
 
 BELT_FRICTION = ("mujoco", "coulomb")
+# how a contact's normal force follows its penetration, and how friction is decided
+# (`SceneOptions.contact_law`, `SceneOptions.friction`; sim/mujoco/contact.py, friction.py)
+CONTACT_LAWS = ("penalty", "impedance")
+FRICTION_LAWS = ("contact", "geom")
 # how a flow splitter's rollers move the packaging (`SceneOptions.roller_surface`) and how the
 # shell's grid cells are split into triangles (`SceneOptions.shell_diagonals`); a study's
 # simulator section checks against the same lists

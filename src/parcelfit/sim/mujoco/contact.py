@@ -84,7 +84,6 @@ CONTACT_FREQUENCY = 300.0  # omega_c [rad/s], the contact's own angular frequenc
 MIN_ONE_MINUS_D = 1e-4  # MuJoCo's mjMAXIMP = 0.9999
 MAX_ONE_MINUS_D = 0.1  # d >= 0.9, MuJoCo's default impedance
 PENALTY_IMPEDANCE = 1e-4  # MuJoCo's mjMINIMP: the penalty law's d (no added inertia)
-CONTACT_LAWS = ("penalty", "impedance")
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,6 @@ import numpy as np
 from parcelfit.errors import ParcelfitError
 from parcelfit.sim.mujoco.consignment import Consignment
 from parcelfit.sim.mujoco.contact import (
-    CONTACT_LAWS,
     ContactParams,
     contact_params,
     penalty_contact,
@@ -40,7 +39,9 @@ from parcelfit.sim.mujoco.rig import Rig, Surface
 from parcelfit.sim.mujoco.shell import ShellMesh, pillow_shell
 from parcelfit.sim.params import (
     BELT_FRICTION,
+    CONTACT_LAWS,
     DYNAMIC_THRESHOLD,
+    FRICTION_LAWS,
     MASS_LUMPINGS,
     MAX_TIMESTEP,
     MIN_TIMESTEP,
@@ -247,7 +248,7 @@ class SceneOptions:
                 f"slip_speed must exceed stick_speed ({self.stick_speed} m/s) or be None, "
                 f"got {self.slip_speed}"
             )
-        if self.friction not in ("contact", "geom"):
+        if self.friction not in FRICTION_LAWS:
             raise ParcelfitError(
                 f"unknown friction {self.friction!r}", fix="use contact or geom"
             )
