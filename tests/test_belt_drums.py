@@ -1,6 +1,7 @@
 """Belts and strips that run round drums at their ends (``nose_radius`` in a rig file)."""
 
 import math
+from pathlib import Path
 
 import mujoco
 import numpy as np
@@ -9,8 +10,16 @@ import pytest
 from parcelfit.config import load_yaml
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import TestCase
-from parcelfit.sim.mujoco import MujocoSimulator, SceneOptions, SimOptions, load_rig
+from parcelfit.sim.mujoco import (
+    MujocoSimulator,
+    SceneOptions,
+    SimOptions,
+    load_consignment,
+    load_rig,
+)
 from parcelfit.sim.mujoco.rig import parse_rig
+from parcelfit.sim.mujoco.scene import build_scene
+from parcelfit.sim.params import resolve
 
 pytestmark = pytest.mark.mujoco
 
@@ -151,3 +160,32 @@ def test_with_drum_ends_rounds_every_belt_and_strip_set_and_checks_the_radius():
     assert short.with_drum_ends(0.149).surface("strips").nose_radius == 0.149
     with pytest.raises(ParcelfitError, match=r"drum radius 0\.15 m leaves no flat top"):
         short.with_drum_ends(0.15)
+
+
+def test_staggered_strips_end_on_a_line_along_the_belt_and_the_scene_builds_them():
+    """With ``end_heading`` each strip keeps its upstream end and ends on the line at that
+    heading through the set's end centre (E3-staggered: along the main belt, y = -0.4 m); the
+    MuJoCo scene's strip boxes have those lengths; an end line along the strips is refused."""
+    rig = load_rig(str(Path(__file__).parents[1] / "examples/e3-variants/E3-staggered.yaml"))
+    strips = rig.surface("strips")
+    u = strips.unit()
+    square = load_rig("E3").surface("strips").parts()
+    for (_name, centre, length, width), (_, sq_centre, sq_length, _) in zip(
+        strips.parts(), square, strict=True
+    ):
+        head = centre + length / 2 * u
+        tail = centre - length / 2 * u
+        assert head[1] == pytest.approx(-0.4, abs=1e-9)  # on the end line
+        assert tail == pytest.approx(sq_centre - sq_length / 2 * u, abs=1e-9)  # tail kept
+        assert width == pytest.approx(0.03)
+    lengths = [p[2] for p in strips.parts()]
+    assert lengths[3] == pytest.approx(1.0) and max(lengths) == pytest.approx(1.0 + 0.18 * 3**0.5)
+    cons = load_consignment("KPBW")
+    xml = build_scene(rig, cons, resolve("rigid"), 1).xml
+    # box half-length = length / 2 - drum radius (0.02 m)
+    assert f'name="strips_0" type="box" size="{lengths[0] / 2 - 0.02:.9g} 0.015' in xml
+    doc = load_yaml(Path(rig.source))
+    doc["surfaces"][1]["end_heading"] = 30  # along the strips themselves
+    with pytest.raises(ParcelfitError, match="end_heading"):
+        parse_rig(doc, "<test>")
+    assert np.isfinite(lengths).all()

@@ -100,6 +100,9 @@ class EnsembleSummary:
     transit_mean: float
     transit_sem: float
     rank_correlation: float  # Spearman's rho between rotation and transit time
+    # runs that ended ok without crossing both light barriers (the transit statistics leave
+    # them out: a parcel held at a plate until the run's end is slower than every median)
+    no_transit: int = 0
 
 
 def summarise(members: Sequence[Member]) -> EnsembleSummary:
@@ -130,6 +133,7 @@ def summarise(members: Sequence[Member]) -> EnsembleSummary:
         transit_mean=float(np.mean(tt)) if tt.size else nan,
         transit_sem=float(np.std(tt, ddof=1) / math.sqrt(tt.size)) if tt.size > 1 else nan,
         rank_correlation=rho,
+        no_transit=sum(m.rotation is not None and m.transit_time is None for m in members),
     )
 
 
