@@ -244,10 +244,13 @@ def record_result(
     reference: ReferenceSelection,
     w_xy: float = 1.0,
     w_theta: float = 1.0,
+    *,
+    run_file: str | None = None,
 ) -> dict[str, Any]:
     """Write a simulated run next to the store, compute its cost parts, and store the result;
     returns the stored fields (status, cost [-], DTW distances [m], [rad], transit time [s],
-    run file) and ``message``, why it failed (None if it did not say)."""
+    run file) and ``message``, why it failed (None if it did not say). ``run_file``: where the
+    run goes, relative to ``folder`` (default ``runs/KIND-ITERATION-SLOT.csv``)."""
     status = result.status.value
     out: dict[str, Any] = {
         "status": status,
@@ -259,7 +262,7 @@ def record_result(
     }
     details: dict[str, Any] = {k: v for k, v in result.diagnostics.items() if k != "traceback"}
     if result.run is not None:
-        out["run_file"] = f"runs/{row.kind}-{row.iteration:03d}-{row.slot:02d}.csv"
+        out["run_file"] = run_file or f"runs/{row.kind}-{row.iteration:03d}-{row.slot:02d}.csv"
         write_trajectory(result.run.trajectory, folder / out["run_file"])
         out["transit_time"] = result.run.transit_time
     if result.ok and result.run is not None:

@@ -44,6 +44,7 @@ import math
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from functools import partial
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -75,18 +76,26 @@ def simulations_per_evaluation(study: Study) -> int:
     return sum(len(placement_seeds(study, spec)) for spec in study.cases)
 
 
-def check_placements(study: Study, simulator: Simulator) -> None:
-    """Refuse an ensemble of several placements with a simulator that cannot place runs."""
-    placeable = callable(getattr(simulator, "with_placement", None))
-    most = max(len(placement_seeds(study, spec)) for spec in study.cases)
-    if study.cost_kind == "ensemble" and most > 1 and not placeable:
+def require_placements(
+    simulator: Simulator, placements: int, *, file: Path | None, where: str
+) -> None:
+    """Refuse ``placements`` > 1 seeded placements with a simulator that cannot place runs
+    (no ``with_placement``); ``file`` and ``where`` name the key that asked for them."""
+    if placements > 1 and not callable(getattr(simulator, "with_placement", None)):
         raise ParcelfitError(
             f"the {type(simulator).__name__} simulator has no seeded placements "
             "(with_placement), so an ensemble of placements would repeat one run",
-            file=study.path,
-            where="cost.placements",
+            file=file,
+            where=where,
             fix="use placements: 1, or a simulator with seeded placements (mujoco)",
         )
+
+
+def check_placements(study: Study, simulator: Simulator) -> None:
+    """Refuse an ensemble of several placements with a simulator that cannot place runs."""
+    if study.cost_kind == "ensemble":
+        most = max(len(placement_seeds(study, spec)) for spec in study.cases)
+        require_placements(simulator, most, file=study.path, where="cost.placements")
 
 
 def simulate_placed(simulator: Simulator, item: tuple[Task, int | None]) -> SimResult:
@@ -295,6 +304,7 @@ __all__ = [
     "check_placements",
     "evaluation_outcome",
     "placement_seeds",
+    "require_placements",
     "response_change",
     "simulate_items",
     "simulate_placed",

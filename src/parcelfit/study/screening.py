@@ -17,6 +17,7 @@ A screen file (YAML)::
     min_full_factors: 3          # ... and at least this many: fewer survivors are topped up with the
                                  # next-largest effects (a 2- or 4-run design says nothing)
     select: 4                    # parameters recommended for calibration
+    placements: 1                # seeded placements per design row (1-50; 1: the nominal one)
     executor: {kind: local}      # or serial (in this process), or just executor: serial
 
 Responses of every run: DTW_xy [m] and DTW_theta [rad] between the simulated run and the
@@ -27,18 +28,45 @@ Outputs in the screen folder: ``stageN-effects.csv``, ``stageN-pareto-<response>
 ``stageN-design.csv`` (parameters in catalogue units and responses per run) and ``selection.yaml`` (the ranked
 recommendation with reasons, and the parameters with their ranges ready for a study file).
 
+**Placements.** With ``placements: 1`` (the default) every design row is one simulation at the
+rig's nominal placement. On a rig such as E3 a single placement near the spin/slide threshold
+changes branch with any small parameter change, so one run per row can judge the branch
+instead of the parameter. With ``placements: K`` (K > 1) every design row is simulated at the
+seeded placements 1..K, the same seeds for every row (common random numbers, as the
+calibration's ensemble cost, `parcelfit.study.joint`: the placements' scatter leaves the
+differences between rows), and the row's responses are ensemble statistics of its K runs:
+
+* ``dtw_xy``, ``dtw_theta``: the means over the K runs of each run's DTW distance to the
+  reference run;
+* ``transit_time``: the mean over the runs that crossed both light barriers (a run without a
+  transit, a parcel held at a plate, is left out of it; ``transits`` counts those in it);
+* ``spin_share``: the share of the K runs whose net rotation exceeds 90 degrees
+  (`parcelfit.sim.ensemble.rotation`, ``SPIN_ANGLE``), and ``median_rotation`` [rad];
+* ``placements_ok``: how many of the K runs succeeded. A row with a failed run takes that run's
+  status (the first in seed order) and no responses, as a joint evaluation does: its means
+  would be over other placements than the other rows'.
+
+Survivors and the selection are judged on DTW_xy and DTW_theta as with one placement; the
+spin share and the median rotation are analysed too (their effects in ``stageN-effects.csv``,
+their Pareto charts, `StageResult.ensemble_analyses`), to be read beside them, but select
+nothing. A simulator without seeded placements (``with_placement``) is refused for K > 1.
+Each of a row's K simulations is a row of the store (slot = design row x K + seed - 1, the
+store's ``seed`` the placement seed) written the moment it arrives, with its run in
+``runs/screen-STAGE-ROW-pSEED.csv``, so a kill loses only the simulations running then.
+
 The final selection ranks the last stage's parameters by their largest standardised effect, as
 the method asks ("by effect size, not blindly by significance"); the reasons say which effects
-were significant. A stage whose first 8 runs all fail stops at once, quoting the first failure
-(`parcelfit.study.calibration.FailureStreak`); the failed runs of a stage none of whose runs
-succeeded run again on a rerun. A rerun resumes stage by stage and refuses a stage whose stored factors differ
-from the ones it would run now (use a new folder after changing the screen file).
+were significant. A stage whose first 8 simulations all fail stops at once, quoting the first
+failure (`parcelfit.study.calibration.FailureStreak`); the failed runs of a stage none of whose
+runs succeeded run again on a rerun. A rerun resumes stage by stage and refuses a stage whose
+stored factors differ from the ones it would run now, and a folder screened with other
+``placements`` (use a new folder after changing the screen file).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
 from typing import Annotated, Any
@@ -63,8 +91,9 @@ from parcelfit.errors import ParcelfitError, os_error
 from parcelfit.figures import save_figure
 from parcelfit.metrics import select_reference
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
-from parcelfit.runs import TestCase, load_dataset
+from parcelfit.runs import TestCase, load_dataset, read_trajectory
 from parcelfit.schema import FileModel, Number, Pair, Text, Whole, or_default, parse
+from parcelfit.sim.ensemble import SPIN_ANGLE, rotation
 from parcelfit.sim.executors import Task, make_executor
 from parcelfit.sim.factory import SimulatorConfig, SimulatorSection, content_kind, make_simulator
 from parcelfit.sim.params import (
@@ -76,7 +105,8 @@ from parcelfit.sim.params import (
 )
 from parcelfit.study.calibration import FAILURES_IN_A_ROW, FailureStreak, record_result
 from parcelfit.study.folderlock import check_writable, lock_folder
-from parcelfit.study.store import Store
+from parcelfit.study.joint import require_placements, simulate_items
+from parcelfit.study.store import Evaluation, Store
 from parcelfit.study.studyfile import (
     ReferenceSection,
     ScreenExecutorSection,
@@ -85,7 +115,10 @@ from parcelfit.study.studyfile import (
     reference_case,
 )
 
-RESPONSES = ("dtw_xy", "dtw_theta")
+RESPONSES = ("dtw_xy", "dtw_theta")  # the responses the survivors and the selection are judged on
+# analysed too with several placements, shown but not selecting (see the module docstring)
+ENSEMBLE_RESPONSES = ("spin_share", "median_rotation")
+MAX_PLACEMENTS = 50
 _STAGES = ("fractional", "full")
 
 _Range = Annotated[
@@ -165,6 +198,7 @@ class ScreenFile(FileModel):
     max_full_factors: Annotated[int, Whole(ge=2, le=10)] = 6
     min_full_factors: Annotated[int, Whole(ge=1, le=10)] = 3
     select: Annotated[int, Whole(ge=1)] = 4
+    placements: Annotated[int, Whole(ge=1, le=MAX_PLACEMENTS)] = 1
     executor: Annotated[ScreenExecutorSection, or_default(dict)] = Field(
         default_factory=ScreenExecutorSection
     )
@@ -195,6 +229,8 @@ class Screen:
     min_full_factors: int
     select: int
     executor: Mapping[str, Any] = field(default_factory=dict)
+    placements: int = 1  # seeded placements per design row (1: the nominal placement)
+    path: Path | None = None  # the screen file
 
 
 def load_screen(path: str | Path) -> Screen:
@@ -255,6 +291,8 @@ def load_screen(path: str | Path) -> Screen:
         min_full_factors=f.min_full_factors,
         select=f.select,
         executor=MappingProxyType(f.executor.model_dump()),
+        placements=f.placements,
+        path=path,
     )
 
 
@@ -266,12 +304,15 @@ def _user(name: str, si_value: float) -> float:
 
 @dataclass(frozen=True)
 class StageResult:
-    """One stage: the factors, the analyses per response, the survivors."""
+    """One stage: the factors, the analyses per response (those the survivors and the
+    selection are judged on), the survivors, and with several placements the analyses of the
+    ensemble responses (`ENSEMBLE_RESPONSES`, shown, not selecting)."""
 
     kind: str
     factors: list[str]
     analyses: list[EffectAnalysis]
     survivors: list[str]
+    ensemble_analyses: list[EffectAnalysis] = field(default_factory=list)
 
 
 def run_screen(
@@ -286,7 +327,7 @@ def run_screen(
 
     ``executor`` (serial or local) and ``workers`` override the screen file's ``executor``;
     ``progress`` receives a `ProgressEvent` per stage and per finished simulation (``done`` of
-    ``total`` counting the stage's simulations)."""
+    ``total`` counting the stage's simulations: design rows times placements)."""
     out = Path(out)
     check_writable(out, ("screen.sqlite",))
     out.mkdir(parents=True, exist_ok=True)
@@ -301,8 +342,19 @@ def run_screen(
     except BaseException:
         lock.release()
         raise
-    reference = select_reference(load_dataset(screen.dataset)[screen.case])
-    simulator = make_simulator(screen.simulator)
+    n_place = screen.placements
+    # the placement seeds of every design row: 1..K for every row (common random numbers), or
+    # the nominal placement alone (None, stored as seed 0 as before placements existed)
+    seeds: list[int | None] = list(range(1, n_place + 1)) if n_place > 1 else [None]
+    try:
+        reference = select_reference(load_dataset(screen.dataset)[screen.case])
+        simulator = make_simulator(screen.simulator)
+        require_placements(simulator, n_place, file=screen.path, where="placements")
+        _check_stored_placements(store, n_place, out / "screen.sqlite")
+    except BaseException:
+        store.close()
+        lock.release()
+        raise
     runner = make_executor(
         executor or screen.executor.get("kind", "local"),
         workers=workers or screen.executor.get("workers"),
@@ -337,9 +389,14 @@ def run_screen(
                     fix="use a new output folder after changing the screen file",
                 )
             if not rows:
+                # one store row per simulation: design row i at placement k is slot i * K + k - 1
                 batch = [{f: float(v) for f, v in zip(factors, run, strict=True)} for run in values]
                 store.add_pending(
-                    "screen", stage, batch, screen.case.speed_setting, [0] * len(batch)
+                    "screen",
+                    stage,
+                    [p for p in batch for _ in seeds],
+                    screen.case.speed_setting,
+                    [seed or 0 for _ in batch for seed in seeds],
                 )
                 rows = [e for e in store.evaluations("screen") if e.iteration == stage]
             if not any(r.status == "ok" for r in rows):
@@ -350,63 +407,96 @@ def run_screen(
             todo = [r for r in rows if r.status == "pending"]
             say(
                 f"stage {stage + 1} ({kind}, {len(factors)} factors): {len(rows)} runs, {len(todo)} to simulate"
+                if n_place == 1
+                else f"stage {stage + 1} ({kind}, {len(factors)} factors): {len(values)} runs x "
+                f"{n_place} placements = {len(rows)} simulations, {len(todo)} to simulate"
             )
             tasks = [
-                Task({**screen.fixed, **r.params}, screen.case, f"screen-{stage}-{r.slot}")
+                Task({**screen.fixed, **r.params}, screen.case, _run_id(stage, r, n_place))
                 for r in todo
             ]
+            if n_place == 1:
+                arrivals = runner.simulate(simulator, tasks)
+            else:
+                placed = [(t, r.seed) for t, r in zip(tasks, todo, strict=True)]
+                arrivals = simulate_items(runner, simulator, placed)
             # a stage stops early only while none of its runs has succeeded: once one has, its
             # failures are a property of the design, which the analysis copes with (a stage of
             # at most 8 runs is judged whole, below: too few succeeded)
             streak = FailureStreak(FAILURES_IN_A_ROW, out, until_success=True)
             streak.succeeded = any(r.status == "ok" for r in rows)
-            for k, (i, res) in enumerate(runner.simulate(simulator, tasks), start=1):
-                outcome = record_result(store, out, todo[i], res, reference)
-                say(
-                    f"{outcome['status']}: {tasks[i].run_id} ({k} of {len(tasks)} done)",
-                    k,
-                    len(tasks),
-                )
-                streak.add(todo[i].id, outcome["status"], outcome["message"])
+            for k, (i, res) in enumerate(arrivals, start=1):
+                row = todo[i]
+                if n_place == 1:
+                    outcome = record_result(store, out, row, res, reference)
+                    what = tasks[i].run_id
+                else:
+                    if res.ok and res.run is not None:  # for the spin share, kept in details
+                        rot = rotation(res.run.trajectory)
+                        res = replace(res, diagnostics={**res.diagnostics, "rotation": rot})
+                    run_file = f"runs/{tasks[i].run_id}.csv"
+                    outcome = record_result(store, out, row, res, reference, run_file=run_file)
+                    what = (
+                        f"{tasks[i].run_id}, run {row.slot // n_place + 1} of {len(values)} at "
+                        f"placement {row.seed} of {n_place}"
+                    )
+                say(f"{outcome['status']}: {what} ({k} of {len(tasks)} done)", k, len(tasks))
+                streak.add(row.id, outcome["status"], outcome["message"])
             rows = sorted(
                 (e for e in store.evaluations("screen") if e.iteration == stage),
                 key=lambda e: e.slot,
             )
-            frame = pd.DataFrame(
-                [
-                    {
-                        **{f: _user(f, v) for f, v in zip(factors, values[r.slot], strict=True)},
-                        "status": r.status,
-                        "dtw_xy": r.dtw_xy,
-                        "dtw_theta": r.dtw_theta,
-                        "transit_time": r.transit_time,
-                    }
-                    for r in rows
-                ]
-            )
+            points = [
+                {f: _user(f, v) for f, v in zip(factors, values[i], strict=True)}
+                for i in range(len(values))
+            ]
+            if n_place == 1:
+                frame = pd.DataFrame(
+                    [
+                        {
+                            **points[r.slot],
+                            "status": r.status,
+                            "dtw_xy": r.dtw_xy,
+                            "dtw_theta": r.dtw_theta,
+                            "transit_time": r.transit_time,
+                        }
+                        for r in rows
+                    ]
+                )
+            else:
+                frame = pd.DataFrame(
+                    [
+                        {
+                            **points[i],
+                            **_ensemble_responses(rows[i * n_place : (i + 1) * n_place], out),
+                        }
+                        for i in range(len(values))
+                    ]
+                )
             frame.to_csv(out / f"stage{stage + 1}-design.csv", index=False)
             ok = frame["status"].eq("ok").to_numpy()
             if ok.sum() <= len(factors):
                 first = next((r.details.get("message") for r in rows if r.status != "ok"), "")
                 raise ParcelfitError(
-                    f"stage {stage + 1}: only {int(ok.sum())} of {len(rows)} runs succeeded, too few to estimate "
+                    f"stage {stage + 1}: only {int(ok.sum())} of {len(frame)} runs succeeded, too few to estimate "
                     f"{len(factors)} effects (first failure: {first})",
                     file=out / "screen.sqlite",
                     fix="fix the failing simulations (see stageN-design.csv), then rerun",
                 )
             analyses = []
+            extra = []
             run_ok, centre_ok = ok[:n_runs], ok[n_runs:]
-            for resp in RESPONSES:
+            for resp in RESPONSES + (ENSEMBLE_RESPONSES if n_place > 1 else ()):
                 y = frame[resp].to_numpy(dtype=float)
                 sub = design if run_ok.all() else _subset(design, run_ok)
                 centre = y[n_runs:][centre_ok] if screen.centre_points else None
                 a = analyse_effects(
                     sub, factors, y[:n_runs][run_ok], name=resp, alpha=screen.alpha, centre=centre
                 )
-                analyses.append(a)
+                (analyses if resp in RESPONSES else extra).append(a)
                 save_figure(pareto_chart(a), out / f"stage{stage + 1}-pareto-{resp}")
             table = pd.concat(
-                [a.table.assign(response=a.response, method=a.method) for a in analyses]
+                [a.table.assign(response=a.response, method=a.method) for a in analyses + extra]
             )
             table.to_csv(out / f"stage{stage + 1}-effects.csv", index=False)
             significant = select_parameters(analyses, max_parameters=len(factors)).parameters
@@ -415,7 +505,7 @@ def run_screen(
             ).parameters
             top_up = [f for f in by_size if f not in significant]
             survivors = significant + top_up[: max(0, screen.min_full_factors - len(significant))]
-            results.append(StageResult(kind, factors, analyses, survivors))
+            results.append(StageResult(kind, factors, analyses, survivors, extra))
             say(
                 f"stage {stage + 1}: {len(significant)} of {len(factors)} parameters have a significant effect"
                 + (
@@ -446,6 +536,77 @@ def run_screen(
     return results, doc
 
 
+def _check_stored_placements(store: Store, placements: int, db: Path) -> None:
+    """Record the screen's placements in a new store; refuse a store run with other ones (a
+    store from before placements existed holds nominal runs: 1)."""
+    stored = store.get_meta("placements")
+    if stored is None:
+        stored = 1 if store.evaluations("screen") else placements
+        store.set_meta("placements", stored)
+    if stored != placements:
+        raise ParcelfitError(
+            f"the screen was run with placements: {stored}, now it would be run with "
+            f"placements: {placements}",
+            file=db,
+            fix="use a new output folder after changing the screen file",
+        )
+
+
+def _run_id(stage: int, row: Evaluation, placements: int) -> str:
+    """A simulation's run id: screen-STAGE-SLOT (nominal placement), else
+    screen-STAGE-ROW-pSEED (design row ROW at placement seed SEED)."""
+    if placements == 1:
+        return f"screen-{stage}-{row.slot}"
+    return f"screen-{stage:03d}-{row.slot // placements:02d}-p{row.seed}"
+
+
+def _ensemble_responses(runs: list[Evaluation], folder: Path) -> dict[str, Any]:
+    """A design row's responses over its placements (``runs``, in seed order): the means of
+    DTW_xy [m] and DTW_theta [rad], the mean transit time [s] over the runs with a transit
+    and how many had one, the share of spins (net rotation above 90 degrees) and the median
+    rotation [rad], and how many placements succeeded. A row with a failed placement takes
+    that run's status (the first in seed order) and no responses, as a joint evaluation does."""
+    bad = next((r for r in runs if r.status != "ok"), None)
+    out: dict[str, Any] = {
+        "status": "ok" if bad is None else bad.status,
+        "dtw_xy": None,
+        "dtw_theta": None,
+        "transit_time": None,
+        "transits": None,
+        "spin_share": None,
+        "median_rotation": None,
+        "placements_ok": sum(r.status == "ok" for r in runs),
+    }
+    if bad is not None:
+        return out
+    transits = [r.transit_time for r in runs if r.transit_time is not None]
+    rot = np.array([_rotation(r, folder) for r in runs], dtype=float)
+    out.update(
+        dtw_xy=float(np.mean([r.dtw_xy for r in runs])),
+        dtw_theta=float(np.mean([r.dtw_theta for r in runs])),
+        transit_time=float(np.mean(transits)) if transits else None,
+        transits=len(transits),
+        spin_share=float(np.mean(rot > SPIN_ANGLE)),
+        median_rotation=float(np.median(rot)),
+    )
+    return out
+
+
+def _rotation(run: Evaluation, folder: Path) -> float:
+    """A stored run's net rotation [rad]: kept in its details when it arrived, else from its
+    run file."""
+    value = run.details.get("rotation")
+    if value is None:
+        if run.run_file is None:
+            raise ParcelfitError(
+                f"the successful run {run.slot} of stage {run.iteration + 1} has no run file",
+                file=folder / "screen.sqlite",
+                fix="use a new output folder",
+            )
+        value = rotation(read_trajectory(folder / run.run_file))
+    return float(value)
+
+
 def _screening_range(name: str, kind: str, path: Path, where: str) -> Any:
     """The catalogue's screening range of ``name`` for ``kind`` contents (catalogue units); an
     unknown parameter, or one that does not apply, is an error naming the file and key."""
@@ -458,6 +619,4 @@ def _screening_range(name: str, kind: str, path: Path, where: str) -> Any:
 
 
 def _subset(design: Any, keep: np.ndarray) -> Any:
-    from dataclasses import replace
-
     return replace(design, matrix=design.matrix[keep])
