@@ -321,3 +321,21 @@ def test_a_study_ensemble_refuses_such_a_simulator_under_its_own_key(tmp_path):
         check_placements(study, Unplaced())
     assert (err.value.where, err.value.file) == ("cost.placements", str(study.path))
     check_placements(study, AnalyticSimulator())  # one that can place its runs
+
+
+def test_the_screen_command_shows_the_ensemble_responses_beside_the_selection(
+    tmp_path, monkeypatch
+):
+    from typer.testing import CliRunner
+
+    from parcelfit.cli import app
+
+    monkeypatch.setenv("SCREEN_PROBE", str(tmp_path / "probe"))
+    two = {n: DESIGN[n] for n in ("mu_d_BePa", "mu_d_MePa")}
+    path = _screen(tmp_path, parameters=two, placements=2)
+    result = CliRunner().invoke(app, ["screen", str(path), "--out", str(tmp_path / "o")])
+    assert result.exit_code == 0, result.output
+    text = " ".join(result.output.split())
+    assert "spin_share" in text and "median_rotation" in text
+    assert "the selection is made on dtw_xy and dtw_theta" in text
+    assert len(_probed(tmp_path / "probe")) == 4 * 2

@@ -1152,7 +1152,7 @@ def _print_screen(stages: Any, selection: dict[str, Any]) -> None:
         )
         for col in ("response", "term", "effect", "|t|", "p", ""):
             table.add_column(col, justify="right" if col in ("effect", "|t|", "p") else "left")
-        for a in stage.analyses:
+        for a in [*stage.analyses, *stage.ensemble_analyses]:
             for _, r in a.table.head(6).iterrows():
                 table.add_row(
                     a.response,
@@ -1163,6 +1163,11 @@ def _print_screen(stages: Any, selection: dict[str, Any]) -> None:
                     "*" if r["significant"] else "",
                 )
         console.print(table)
+        if stage.ensemble_analyses:
+            console.print(
+                "spin_share and median_rotation (over each run's placements) are shown; "
+                "the selection is made on dtw_xy and dtw_theta"
+            )
     console.print(
         f"[bold]selected for calibration:[/] {', '.join(selection['selected']) or 'none'}"
     )
