@@ -339,3 +339,10 @@ def test_the_screen_command_shows_the_ensemble_responses_beside_the_selection(
     assert "spin_share" in text and "median_rotation" in text
     assert "the selection is made on dtw_xy and dtw_theta" in text
     assert len(_probed(tmp_path / "probe")) == 4 * 2
+
+
+def test_the_ensemble_example_is_the_published_protocol_over_five_placements():
+    screen = load_screen(ROOT / "examples" / "e3-kpbw" / "screen-ensemble.yaml")
+    assert screen.case == TestCase("E3", "KPBW", 2) and screen.placements == 5
+    assert len(screen.parameters) == 16 and screen.stages == ("fractional", "full")
+    assert screen.resolution == 4 and screen.dataset.name == "twin"

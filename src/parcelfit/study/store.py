@@ -8,16 +8,20 @@ Schema (``study.sqlite`` in the study folder; WAL journal, one transaction per w
     the optimiser as it ran, `OptimizerRecord`), ``source`` (`SourceRecord`: the study file,
     dataset, rig and consignment) and ``recommended`` (`RecommendedRecord`: the parameters the
     study validates and reports, with their cost). The others are plain values:
-    ``fingerprint`` (of the study file), ``reference_run`` and ``stop_reason``.
+    ``fingerprint`` (of the study file), ``reference_run`` and ``stop_reason``; a screen's
+    store holds ``placements`` (per design row, which a rerun must match).
 
 ``evaluations``
     ``id`` INTEGER PRIMARY KEY, ``kind`` ('fit' | 'validation' | 'screen'), ``iteration`` (0 =
-    initial design; for screening the stage), ``slot`` (position in its batch),
+    initial design; for screening the stage), ``slot`` (position in its batch; a screen
+    over K > 1 placements: design row x K + placement seed - 1),
     ``speed_setting``, ``params`` (JSON, SI units),
     ``status`` ('pending' | 'ok' | 'failed' | 'unstable' | 'timeout'), ``cost``, ``dtw_xy`` [m],
-    ``dtw_theta`` [rad], ``transit_time`` [s], ``seed``, ``wall_time`` [s], ``asked_at`` and
+    ``dtw_theta`` [rad], ``transit_time`` [s], ``seed`` (a screen's: the placement seed, 0 for the
+    nominal placement), ``wall_time`` [s], ``asked_at`` and
     ``finished_at`` (Unix time [s]), ``run_file`` (trajectory file, relative to the study
-    folder), ``details`` (JSON: validation criteria, diagnostics).
+    folder), ``details`` (JSON: validation criteria, diagnostics; a screen's run at a seeded
+    placement: ``rotation``, its net rotation [rad]).
 
 A batch is written as ``pending`` rows before any of it runs; each result replaces its row in one
 transaction the moment it arrives. A study killed at any point therefore finds on restart every
