@@ -333,6 +333,9 @@ def test_the_screen_command_shows_the_ensemble_responses_beside_the_selection(
     monkeypatch.setenv("SCREEN_PROBE", str(tmp_path / "probe"))
     two = {n: DESIGN[n] for n in ("mu_d_BePa", "mu_d_MePa")}
     path = _screen(tmp_path, parameters=two, placements=2)
+    store = Store(tmp_path / "o" / "screen.sqlite")  # a screen with 5 stopped before simulating:
+    store.set_meta("placements", 5)  # the folder takes another number
+    store.close()
     result = CliRunner().invoke(app, ["screen", str(path), "--out", str(tmp_path / "o")])
     assert result.exit_code == 0, result.output
     text = " ".join(result.output.split())

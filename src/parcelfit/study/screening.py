@@ -537,12 +537,14 @@ def run_screen(
 
 
 def _check_stored_placements(store: Store, placements: int, db: Path) -> None:
-    """Record the screen's placements in a new store; refuse a store run with other ones (a
-    store from before placements existed holds nominal runs: 1)."""
+    """Record the screen's placements in a store without simulations; refuse one whose
+    simulations were run with other placements (a store from before placements existed holds
+    nominal runs: 1)."""
+    if not store.evaluations("screen"):
+        store.set_meta("placements", placements)
+        return
     stored = store.get_meta("placements")
-    if stored is None:
-        stored = 1 if store.evaluations("screen") else placements
-        store.set_meta("placements", stored)
+    stored = 1 if stored is None else stored
     if stored != placements:
         raise ParcelfitError(
             f"the screen was run with placements: {stored}, now it would be run with "
