@@ -510,3 +510,117 @@ def test_numbers_in_exponent_form_are_read_as_numbers(tmp_path):
     spec = tmp_path / "spec.yaml"
     spec.write_text("cases: [E3/PB/1]\nsettings: {tracking_sd: 1e-3}\n")
     assert load_twin_spec(spec).settings.tracking_sd == 1e-3
+
+
+# -- the YAML loader every file goes through (parcelfit.config.load_yaml) ----------------------
+
+
+def _alias_bomb(levels: int = 9) -> str:
+    """``parameters:`` holding nine nested anchors of nine ("billion laughs": 9^9 values)."""
+    lines = ['  a: &a ["lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol"]']
+    for prev, name in zip("abcdefgh", "bcdefghi"[: levels - 1], strict=False):
+        lines.append(f"  {name}: &{name} [{', '.join([f'*{prev}'] * 9)}]")
+    return "parameters:\n" + "\n".join(lines) + "\n"
+
+
+def test_an_alias_bomb_is_refused_at_once_naming_the_line(tmp_path):
+    import time
+
+    doc = {k: v for k, v in STUDY.items() if k != "parameters"}
+    path = tmp_path / "study.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False) + _alias_bomb())
+    t0 = time.perf_counter()
+    with pytest.raises(ParcelfitError) as err:
+        load_study(path)
+    assert time.perf_counter() - t0 < 1
+    e = err.value
+    # lines 11-19 hold a to i; the first alias in f (to e, of 66430 values) passes the limit
+    assert (e.file, e.where) == (str(path), "line 16, column 10")
+    assert e.message == "aliases (*name) expand the document to more than 100000 values"
+    assert e.fix == "write the values out, or repeat fewer of them through aliases"
+
+
+def test_a_few_aliases_are_fine_and_a_recursive_one_is_refused(tmp_path):
+    from parcelfit.config import load_yaml
+
+    path = tmp_path / "a.yaml"
+    path.write_text("r: &r [0.3, 0.6]\ns: *r\nbase: &b {x: 1}\nd: {<<: *b, y: 2}\n")
+    assert load_yaml(path) == {
+        "r": [0.3, 0.6],
+        "s": [0.3, 0.6],
+        "base": {"x": 1},
+        "d": {"x": 1, "y": 2},
+    }
+    path.write_text("a: &x [1, *x]\n")
+    with pytest.raises(ParcelfitError) as err:
+        load_yaml(path)
+    assert (err.value.where, err.value.message) == (
+        "line 1, column 11",
+        "the alias *x refers to a value that contains it",
+    )
+
+
+@pytest.mark.parametrize("kind", list(LOADERS))
+def test_a_key_written_twice_is_refused_naming_both_lines(tmp_path, kind):
+    load, base = LOADERS[kind]
+    path = _write(tmp_path, base)
+    text = path.read_text()
+    first = text.splitlines()[0]  # the first top-level key, written again at the end
+    path.write_text(text + first + "\n")
+    with pytest.raises(ParcelfitError) as err:
+        load(path)
+    key = first.split(":")[0]
+    n = len(text.splitlines()) + 1
+    assert err.value.file == str(path) and err.value.where == f"line {n}, column 1"
+    assert err.value.message == (
+        f"the key {key!r} is written twice (lines 1 and {n}); YAML would keep only the last value"
+    )
+    assert err.value.fix == "delete one of the two, or merge them"
+
+
+def test_a_key_written_twice_inside_a_section_and_as_equal_numbers(tmp_path):
+    from parcelfit.config import load_yaml
+
+    path = tmp_path / "a.yaml"
+    path.write_text("speeds:\n  1: {main: 1}\n  01: {main: 2}\n")
+    with pytest.raises(ParcelfitError, match=r"the key 1 is written twice \(lines 2 and 3\)"):
+        load_yaml(path)
+
+
+@pytest.mark.parametrize(
+    ("text", "where", "message"),
+    [
+        (
+            "a: " + "[" * 60 + "]" * 60 + "\n",
+            "line 1, column 53",  # the 50th bracket: the mapping is the first level
+            "values nested more than 50 levels deep",
+        ),
+        (
+            "d: 2024-13-45\n",
+            "line 1, column 4",
+            "cannot read the value '2024-13-45' (month must be in 1..12)",
+        ),
+        ("n: " + "9" * 5000 + "\n", "line 1, column 4", None),
+    ],
+)
+def test_values_pyyaml_cannot_construct_are_refused_with_the_line(tmp_path, text, where, message):
+    from parcelfit.config import load_yaml
+
+    path = tmp_path / "a.yaml"
+    path.write_text(text)
+    with pytest.raises(ParcelfitError) as err:
+        load_yaml(path)
+    assert err.value.where == where and err.value.file == str(path)
+    if message is not None:
+        assert err.value.message == message
+    assert len(str(err.value)) < 400
+
+
+def test_a_non_utf8_byte_is_named_by_its_offset_in_the_file(tmp_path):
+    from parcelfit.config import load_yaml
+
+    path = tmp_path / "a.yaml"
+    path.write_bytes(b"# " + b"x" * 20000 + b"\nname: caf\xe9\n")
+    with pytest.raises(ParcelfitError) as err:
+        load_yaml(path)
+    assert err.value.message == "not UTF-8 text (byte 20012: b'\\xe9')"

@@ -55,12 +55,12 @@ from pathlib import Path
 from typing import Any
 
 import jinja2
-import yaml
 from markupsafe import Markup
 from matplotlib.figure import Figure
 
 from parcelfit import __version__
 from parcelfit.atomic import write_text_atomic
+from parcelfit.config import load_yaml
 from parcelfit.errors import ParcelfitError
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.runs import Dataset, load_dataset
@@ -200,7 +200,7 @@ def _load_truth(dataset_dir: Path, consignment: str) -> dict[str, float]:
     path = dataset_dir / "truth.yaml"
     if not path.is_file():
         return {}
-    doc = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+    doc = load_yaml(path) or {}
     return {k: float(v) for k, v in (doc.get("truth", {}).get(consignment) or {}).items()}
 
 
@@ -304,7 +304,7 @@ def _screen_section(page: _Page, screen: Path | None) -> None:
     if screen is not None:
         sel_file = screen / "selection.yaml"
         if sel_file.is_file():
-            doc = yaml.safe_load(sel_file.read_text(encoding="utf-8")) or {}
+            doc = load_yaml(sel_file) or {}
             data["selected"] = ", ".join(map(str, doc.get("selected") or [])) or "none"
             data["reasons"] = [(str(k), str(v)) for k, v in (doc.get("reasons") or {}).items()]
         data["charts"] = [
