@@ -624,3 +624,26 @@ def test_a_non_utf8_byte_is_named_by_its_offset_in_the_file(tmp_path):
     with pytest.raises(ParcelfitError) as err:
         load_yaml(path)
     assert err.value.message == "not UTF-8 text (byte 20012: b'\\xe9')"
+
+
+def test_a_refusal_quotes_a_big_value_on_one_short_line(tmp_path):
+    """The message quotes at most 80 characters of what was written, on one line."""
+    big = [0.1 * k for k in range(5000)]
+    where, message, _ = _refused(tmp_path, "study", lambda d: d["parameters"].update(mu_d_BePa=big))
+    assert where == "parameters.mu_d_BePa"
+    assert (
+        message
+        == "expected [low, high] or {low, high, log}, got [0.0, 0.1, 0.2, 0.30000000000000004, 0.4, 0.5, ...]"
+    )
+    text = "many\nlines\u2028" * 1000
+    where, message, _ = _refused(tmp_path, "study", lambda d: d.update(budget=text))
+    assert (where, message) == (
+        "budget",
+        "expected a whole number, got 'many\\nlines\\u2028many\\nlines\\u20...any\\nlines\\u2028many\\nlines\\u2028'",
+    )
+
+
+def test_a_rendered_error_is_one_line_whatever_its_parts_hold():
+    err = ParcelfitError("a\nb" + "x" * 1000, file="f\u2028g.yaml", where="k\r", fix="do\u0085it")
+    assert str(err) == "f\\u2028g.yaml: k\\r: a\\nb" + "x" * 393 + "... Fix: do\\x85it"
+    assert len(str(err).splitlines()) == 1

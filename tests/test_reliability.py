@@ -620,6 +620,21 @@ def _report_out_is_a_folder(tmp_path):
     return ["report", str(tmp_path / "study"), "--out", str(tmp_path / "folder")]
 
 
+def _study_with_text(tmp_path, text, drop=()):
+    """A study file whose keys ``drop`` are replaced by the YAML ``text`` as written."""
+    path = write_study(tmp_path)
+    doc = {k: v for k, v in yaml.safe_load(path.read_text()).items() if k not in drop}
+    path.write_text(yaml.safe_dump(doc) + text)
+    return ["calibrate", str(path), "--out", str(tmp_path / "o")]
+
+
+def _alias_bomb(tmp_path):
+    lines = ["parameters:", "  a: &a [lol, lol, lol, lol, lol, lol, lol, lol, lol]"]
+    for prev, name in zip("abcdefgh", "bcdefghi", strict=True):
+        lines.append(f"  {name}: &{name} [{', '.join([f'*{prev}'] * 9)}]")
+    return _study_with_text(tmp_path, "\n".join(lines) + "\n", drop=("parameters",))
+
+
 def _log_false(tmp_path):
     bounds = {"mu_d_BePa": {"low": 0.3, "high": 0.6, "log": "false"}, "mu_d_MePa": [0.15, 0.35]}
     return _study(tmp_path, parameters=bounds)
@@ -722,6 +737,15 @@ BAD_INPUTS = {
     "screen without a name": (
         lambda p: _screen(p, name=["x"]),
         r"name: expected a non-empty text",
+    ),
+    "alias bomb": (
+        _alias_bomb,
+        r"study\.yaml: line \d+, column \d+: aliases \(\*name\) expand the document to more "
+        r"than 100000 values Fix: write the values out",
+    ),
+    "key written twice": (
+        lambda p: _study_with_text(p, "budget: 12\n"),
+        r"study\.yaml: line 30, column 1: the key 'budget' is written twice \(lines 2 and 30\)",
     ),
     "screen unknown soft_content": (
         lambda p: _screen(p, soft_content=["E_Cox"]),

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, shown
 from parcelfit.runs.trajectory import (
     COLUMNS,
     MIN_SAMPLES,
@@ -87,7 +87,7 @@ def check_trajectory_table(frame: pd.DataFrame, file: str | Path) -> Trajectory:
         bad = np.flatnonzero(~np.isfinite(a))
         if bad.size:
             raise ParcelfitError(
-                f"column {c!r} has a missing, non-numeric or infinite value ({frame[c].iloc[bad[0]]!r})",
+                f"column {c!r} has a missing, non-numeric or infinite value ({shown(frame[c].iloc[bad[0]])})",
                 file=file,
                 where=f"data row {bad[0] + 1}",
                 fix="remove or interpolate that sample",
@@ -142,7 +142,7 @@ def check_trajectory_table(frame: pd.DataFrame, file: str | Path) -> Trajectory:
         bad = np.flatnonzero(~np.isin(text, SOURCES))
         if bad.size:
             raise ParcelfitError(
-                f"column 'source' has {raw.iloc[bad[0]]!r}",
+                f"column 'source' has {shown(raw.iloc[bad[0]])}",
                 file=file,
                 where=f"data row {bad[0] + 1}",
                 fix=f"write {', '.join(SOURCES[:-1])} or {SOURCES[-1]} in every row, or drop the column",
@@ -156,7 +156,7 @@ def check_trajectory_table(frame: pd.DataFrame, file: str | Path) -> Trajectory:
         bad = np.flatnonzero((np.isnan(a) & frame[c].notna().to_numpy()) | np.isinf(a) | (a < 0))
         if bad.size:
             raise ParcelfitError(
-                f"column {c!r} has {frame[c].iloc[bad[0]]!r}",
+                f"column {c!r} has {shown(frame[c].iloc[bad[0]])}",
                 file=file,
                 where=f"data row {bad[0] + 1}",
                 fix="a standard deviation is a number >= 0 (SI units), or empty where there is none",

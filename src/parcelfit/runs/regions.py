@@ -21,7 +21,7 @@ import numpy as np
 from matplotlib.path import Path as MplPath
 
 from parcelfit.config import get_pair
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, shown
 from parcelfit.runs.trajectory import Trajectory
 
 
@@ -91,7 +91,7 @@ def parse_region(
     """Build a region from its YAML form (``{x: [..], y: [..]}`` or ``{polygon: [[x, y], ...]}``)."""
     if not isinstance(spec, Mapping):
         raise ParcelfitError(
-            f"a region must be a mapping, got {spec!r}",
+            f"a region must be a mapping, got {shown(spec)}",
             file=file,
             where=where,
             fix="write {x: [min, max], y: [min, max]} or {polygon: [[x, y], ...]}",

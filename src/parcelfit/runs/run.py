@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, shown
 from parcelfit.runs.trajectory import Trajectory
 
 
@@ -30,7 +30,7 @@ class TestCase:
         parts = text.split("/")
         if len(parts) != 3 or not parts[2].strip().isdigit():
             raise ParcelfitError(
-                f"cannot read test case {text!r}",
+                f"cannot read test case {shown(text)}",
                 fix="write it as RIG/CONSIGNMENT/SETTING, e.g. E3/KPBW/1",
             )
         return cls(parts[0].strip(), parts[1].strip(), int(parts[2]))

@@ -38,7 +38,7 @@ from parcelfit.config import (
     get_str,
     load_config,
 )
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, shown
 from parcelfit.runs import Run, TestCase, read_trajectory
 from parcelfit.sim.lifetime import run_command
 from parcelfit.sim.protocol import SimResult, SimStatus
@@ -105,7 +105,7 @@ def _substitute(text: str, values: Mapping[str, Any], what: str) -> str:
         # a line break (or any control character) in a name would add lines to the file
         if any(unicodedata.category(c) == "Cc" for c in str(value)):
             raise ParcelfitError(
-                f"the value of ${{{key}}} ({str(value)!r}) holds a line break or another control "
+                f"the value of ${{{key}}} ({shown(str(value))}) holds a line break or another control "
                 f"character, which would change {what}",
                 fix="use names without line breaks or control characters",
             )
@@ -150,7 +150,7 @@ class ExternalSimulator:
         (workdir / self.solver.params_file).write_text(
             _substitute(self.solver.template, values, "the parameter template"), encoding="utf-8"
         )
-        args = [_substitute(a, values, f"command argument {a!r}") for a in self.solver.command]
+        args = [_substitute(a, values, f"command argument {shown(a)}") for a in self.solver.command]
         diagnostics: dict[str, object] = {"workdir": str(workdir), "command": args}
         try:
             proc = run_command(args, workdir, self.solver.timeout)

@@ -19,7 +19,7 @@ from typing import Annotated, Any
 from pydantic import AfterValidator
 
 from parcelfit.config import suggest
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, shown
 from parcelfit.schema import Number
 
 RIGID = "rigid"
@@ -328,7 +328,7 @@ def parameter(name: str) -> ParameterSpec:
     if name not in _BY_NAME:
         close = suggest(name, _BY_NAME)
         raise ParcelfitError(
-            f"unknown parameter {name!r}",
+            f"unknown parameter {shown(name)}",
             fix=f"did you mean {close!r}?" if close else f"known: {', '.join(_BY_NAME)}",
         )
     return _BY_NAME[name]
@@ -417,6 +417,6 @@ def parse_assignments(items: Iterable[str]) -> dict[str, float]:
             sep = ""
         if not sep:
             raise ParcelfitError(
-                f"cannot read {item!r}", fix="write NAME=VALUE, e.g. mu_d_BePa=0.4"
+                f"cannot read {shown(item)}", fix="write NAME=VALUE, e.g. mu_d_BePa=0.4"
             )
     return out

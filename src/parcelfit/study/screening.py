@@ -57,7 +57,7 @@ from parcelfit.doe import (
     select_parameters,
     with_centre_points,
 )
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, shown
 from parcelfit.figures import save_figure
 from parcelfit.metrics import select_reference
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
@@ -105,7 +105,7 @@ def _parameters(value: Any) -> Any:
         return {str(n): None for n in value}
     if value is None or isinstance(value, str):
         raise ParcelfitError(
-            f"expected all, a list of names or {{name: [low, high]}}, got {value!r}",
+            f"expected all, a list of names or {{name: [low, high]}}, got {shown(value)}",
             fix="write parameters: all",
         )
     return value
@@ -121,7 +121,7 @@ def _stages(value: Any) -> tuple[Any, ...]:
 def _soft_list(value: Any) -> Any:
     if not isinstance(value, list):
         raise ParcelfitError(
-            f"expected a list of parameter names, got {value!r}",
+            f"expected a list of parameter names, got {shown(value)}",
             fix="write e.g. soft_content: [E_Co, zeta_Co]",
         )
     return [str(n) for n in value]

@@ -77,7 +77,7 @@ from typing import Annotated, Any
 from pydantic import ConfigDict, Field, field_validator, model_validator
 
 from parcelfit.config import load_yaml
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, shown
 from parcelfit.optimize.bo import BOSettings
 from parcelfit.optimize.sampler import SAMPLERS
 from parcelfit.optimize.space import Dimension, Space
@@ -189,7 +189,7 @@ class Bounds(FileModel):
             return {"low": data[0], "high": data[1]}
         if not isinstance(data, Mapping):
             raise ParcelfitError(
-                f"expected [low, high] or {{low, high, log}}, got {data!r}",
+                f"expected [low, high] or {{low, high, log}}, got {shown(data)}",
                 fix="write e.g. mu_d_BePa: [0.3, 0.6]",
             )
         return data

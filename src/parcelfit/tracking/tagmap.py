@@ -36,7 +36,7 @@ import yaml
 from pydantic import BeforeValidator, Field, PlainValidator, field_validator, model_validator
 
 from parcelfit.config import load_yaml
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, shown
 from parcelfit.runs import Barrier
 from parcelfit.schema import Choice, FileModel, Number, Pair, Text, Whole, or_default, parse
 
@@ -123,7 +123,8 @@ def _tag_id(key: Any) -> int:
         tag_id = -1
     if tag_id < 0 or str(tag_id) != str(key).strip():
         raise ParcelfitError(
-            f"tag ids are whole numbers >= 0, got {key!r}", fix="use the tag's id number as the key"
+            f"tag ids are whole numbers >= 0, got {shown(key)}",
+            fix="use the tag's id number as the key",
         )
     return tag_id
 
@@ -135,7 +136,7 @@ def _distortion(value: Any) -> tuple[float, ...]:
         or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
     ):
         raise ParcelfitError(
-            f"expected 4, 5 or 8 distortion coefficients, got {value!r}",
+            f"expected 4, 5 or 8 distortion coefficients, got {shown(value)}",
             fix="write [k1, k2, p1, p2, k3] (OpenCV's order)",
         )
     return tuple(float(v) for v in value)

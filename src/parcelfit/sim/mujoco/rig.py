@@ -61,7 +61,7 @@ import numpy as np
 from pydantic import BeforeValidator, Field, PlainValidator, field_validator, model_validator
 
 from parcelfit.config import load_yaml
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, shown
 from parcelfit.runs import Barrier, Region, parse_region
 from parcelfit.schema import (
     Choice,
@@ -252,7 +252,7 @@ def _speed_settings(value: Any) -> Any:
     for key in require_mapping(value):
         if isinstance(key, bool) or not isinstance(key, int) or key < 1:
             raise ParcelfitError(
-                f"speed setting {key!r} must be an integer >= 1",
+                f"speed setting {shown(key)} must be an integer >= 1",
                 fix="write e.g. `1: {main: 1.56}`",
             )
     if not value:
@@ -420,14 +420,14 @@ class RigFile(FileModel):
             missing = [k for k, d in self.speeds.items() if s.drive not in d]
             if missing:
                 raise ParcelfitError(
-                    f"drive {s.drive!r} has no speed in setting(s) {missing}",
+                    f"drive {shown(s.drive)} has no speed in setting(s) {missing}",
                     where=f"surfaces[{i}].drive",
                     fix=f"add {s.drive} to every speed setting",
                 )
         names = [s.name for s in self.surfaces]
         if self.start.surface not in names:
             raise ParcelfitError(
-                f"start.surface names no surface: {self.start.surface!r}",
+                f"start.surface names no surface: {shown(self.start.surface)}",
                 where="start.surface",
                 fix=f"use one of {', '.join(names)}",
             )
