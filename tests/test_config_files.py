@@ -164,6 +164,122 @@ CASES = {
             "the tpe sampler takes no settings but `sampler`",
         ),
     ),
+    "study initial design of a billion": (
+        "study",
+        lambda d: d.update(initial=1e9, budget=1e9),
+        ("initial", "1000000000 is out of range", "use a whole number in [1, 10000]"),
+    ),
+    "study budget of a billion": (
+        "study",
+        lambda d: d.update(budget=1e9),
+        ("budget", "1000000000 is out of range", "use a whole number in [1, 10000]"),
+    ),
+    "study batch of a million": (
+        "study",
+        lambda d: d.update(batch_size=10**6),
+        ("batch_size", "1000000 is out of range", "use a whole number in [1, 256]"),
+    ),
+    "study validation every": (
+        "study",
+        lambda d: d.update(validation={"speed_setting": 2, "every": 10**6}),
+        ("validation.every", "1000000 is out of range", "use a whole number in [1, 10000]"),
+    ),
+    "study placements": (
+        "study",
+        lambda d: d.update(cost={"kind": "ensemble", "placements": 10**5}),
+        ("cost.placements", "100000 is out of range", "use a whole number in [1, 1000]"),
+    ),
+    "study case placements": (
+        "study",
+        lambda d: (
+            d.pop("reference"),
+            d.update(
+                cost="ensemble",
+                cases=[
+                    {
+                        "dataset": "data",
+                        "rig": "R",
+                        "consignment": "P",
+                        "speed_setting": 1,
+                        "placements": 5000,
+                    }
+                ],
+            ),
+        ),
+        ("cases[0].placements", "5000 is out of range", "use a whole number in [1, 1000]"),
+    ),
+    "study workers": (
+        "study",
+        lambda d: d.update(executor={"kind": "local", "workers": 10**5}),
+        ("executor.workers", "100000 is out of range", "use a whole number in [1, 256]"),
+    ),
+    "study speed setting": (
+        "study",
+        lambda d: d["reference"].update(speed_setting=10**30),
+        (
+            "reference.speed_setting",
+            "1000000000000000000000000000000 is out of range",
+            "use a whole number in [1, 1000]",
+        ),
+    ),
+    "study candidates per ask": (
+        "study",
+        lambda d: d.update(optimizer={"n_samples": 1e9}),
+        (
+            "optimizer.n_samples",
+            "1000000000 is out of range",
+            "use a whole number in [10, 1000000]",
+        ),
+    ),
+    "study optimizer setting of the wrong type": (
+        "study",
+        lambda d: d.update(optimizer={"ucb_lambda": "wide"}),
+        ("optimizer.ucb_lambda", "expected a number, got 'wide'", "write a plain number"),
+    ),
+    "study budget below initial": (
+        "study",
+        lambda d: d.update(initial=16, budget=8),
+        (
+            "budget",
+            "budget 8 is below initial 16: the study would stop before its initial design is "
+            "complete",
+            "raise budget to 16 or more, or lower initial",
+        ),
+    ),
+    "screen select": (
+        "screen",
+        lambda d: d.update(select=10**4),
+        ("select", "10000 is out of range", "use a whole number in [1, 100]"),
+    ),
+    "screen workers": (
+        "screen",
+        lambda d: d.update(executor={"workers": 10**4}),
+        ("executor.workers", "10000 is out of range", "use a whole number in [1, 256]"),
+    ),
+    "twin runs": (
+        "twin",
+        lambda d: d["settings"].update(runs=1e9),
+        ("settings.runs", "1000000000 is out of range", "use a whole number in [1, 1000]"),
+    ),
+    "twin seed": (
+        "twin",
+        lambda d: d.update(seed=2**64),
+        ("seed", "18446744073709551616 is out of range", "use a whole number in [0, 4294967295]"),
+    ),
+    "tags image width": (
+        "tags",
+        lambda d: d["camera"].update(width=10**9),
+        ("camera.width", "1000000000 is out of range", "use a whole number in [0, 100000]"),
+    ),
+    "rig speed setting 10**20": (
+        "rig",
+        lambda d: d["speeds"].update({10**20: {"main": 1, "strip": 1}}),
+        (
+            "speeds",
+            "speed setting 100000000000000000000 must be an integer from 1 to 1000",
+            "write e.g. `1: {main: 1.56}`",
+        ),
+    ),
     "screen executor dask": (
         "screen",
         lambda d: d.update(executor={"kind": "dask"}),
@@ -309,7 +425,11 @@ CASES = {
     "rig speed setting 0": (
         "rig",
         lambda d: d["speeds"].update({0: {"main": 1}}),
-        ("speeds", "speed setting 0 must be an integer >= 1", "write e.g. `1: {main: 1.56}`"),
+        (
+            "speeds",
+            "speed setting 0 must be an integer from 1 to 1000",
+            "write e.g. `1: {main: 1.56}`",
+        ),
     ),
     "rig drive without a speed": (
         "rig",

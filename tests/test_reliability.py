@@ -747,6 +747,35 @@ BAD_INPUTS = {
         lambda p: _study_with_text(p, "budget: 12\n"),
         r"study\.yaml: line 30, column 1: the key 'budget' is written twice \(lines 2 and 30\)",
     ),
+    "initial 1e9": (
+        lambda p: _study(p, initial=1e9),
+        r"study\.yaml: initial: 1000000000 is out of range Fix: use a whole number in \[1, 10000\]",
+    ),
+    "budget below initial": (
+        lambda p: _study(p, initial=8, budget=4),
+        r"study\.yaml: budget: budget 4 is below initial 8: .* Fix: raise budget to 8 or more",
+    ),
+    "calibrate --workers 100000": (
+        lambda p: [*_study(p), "--workers", "100000"],
+        r"^error: --workers 100000 is more than 256 Fix: use --workers 256 or less$",
+    ),
+    "simulate --repeat 1000000": (
+        lambda p: ["simulate", "--repeat", "1000000", "--out", str(p / "o" / "r.csv")],
+        r"^error: --repeat 1000000 is more than 1000 Fix: use --repeat 1000 or less$",
+    ),
+    "precision --placements 5000": (
+        lambda p: ["precision", _study(p)[1], "--placements", "5000", "--out", str(p / "o")],
+        r"5000 placements per case and parameter end, more than 1000",
+    ),
+    "precision --candidate with a superscript setting": (
+        lambda p: ["precision", _study(p)[1], "--candidate", "R/P/\u00b2", "--out", str(p / "o")],
+        r"cannot read test case 'R/P/\u00b2'",
+    ),
+    "dataset speed setting 1e30": (
+        lambda p: _dataset(p, lambda d: d["test_cases"][0].update(speed_setting=10**30)),
+        r"test_cases\[0\]\.speed_setting: speed_setting must be an integer from 1 to 1000, got "
+        r"1000000000000000000000000000000 Fix",
+    ),
     "screen unknown soft_content": (
         lambda p: _screen(p, soft_content=["E_Cox"]),
         r"soft_content\[0\]: unknown parameter 'E_Cox'.*did you mean 'E_Co'",

@@ -210,6 +210,7 @@ def demo(
     if quick and full:
         raise ParcelfitError("--quick and --full exclude each other", fix="choose one")
     _check_executor(executor, ("serial", "local"))
+    _workers_at_most(workers)
     t0 = time.perf_counter()
     d = Demo(
         out,
@@ -258,6 +259,20 @@ def demo(
     minutes = (time.perf_counter() - t0) / 60
     console.print(f"[bold green]report:[/] {escape(str(report.resolve()))}")
     console.print(f"[bold]verdict:[/] {d.verdict()} ({minutes:.1f} min)")
+
+
+def _at_most(value: int | None, option: str, bound: int) -> None:
+    """A clear error for a count option (``--workers``, ``--repeat``, ...) above ``bound``."""
+    if value is not None and value > bound:
+        raise ParcelfitError(
+            f"{option} {value} is more than {bound}", fix=f"use {option} {bound} or less"
+        )
+
+
+def _workers_at_most(workers: int | None) -> None:
+    from parcelfit.sim.executors import MAX_WORKERS
+
+    _at_most(workers, "--workers", MAX_WORKERS)
 
 
 def _check_executor(kind: str | None, kinds: tuple[str, ...]) -> None:
@@ -324,6 +339,7 @@ def synth(
     from parcelfit.synth import load_twin_spec, make_twin_dataset
 
     _check_executor(executor, ("serial", "local"))
+    _workers_at_most(workers)
     tw = load_twin_spec(spec)
     total = len(tw.cases) * tw.settings.runs
     serial = executor == "serial" or (executor is None and workers <= 1)
@@ -487,8 +503,12 @@ def camera_calibrate(
     from parcelfit.tracking.tagmap import save_camera
 
     cols, sep, rows = board.lower().partition("x")
-    if not sep or not cols.isdigit() or not rows.isdigit():
-        raise ParcelfitError(f"cannot read --board {board!r}", fix="write COLUMNSxROWS, e.g. 9x6")
+    if not sep or not all(n.isascii() and n.isdigit() and 2 <= int(n) <= 100 for n in (cols, rows)):
+        raise ParcelfitError(
+            f"cannot read --board {board!r}",
+            fix="write COLUMNSxROWS with 2 to 100 inner corners each, e.g. 9x6",
+        )
+    _at_most(max_frames, "--max-frames", 1000)
     if square <= 0:
         raise ParcelfitError(f"--square must be positive, got {square}", fix="give it in mm")
     with _frame_bar() as bar:
@@ -614,10 +634,14 @@ def simulate(
     With --repeat N, simulate N seeded placements and write each run (OUT with -s<seed> before
     its suffix), a summary table (OUT with -ensemble.csv) and print the ensemble statistics."""
     from parcelfit.runs import TestCase, write_trajectory
+    from parcelfit.sim.ensemble import MAX_PLACEMENTS
     from parcelfit.sim.factory import SimulatorConfig, make_simulator
     from parcelfit.sim.mujoco import MujocoSimulator, load_consignment, load_rig
     from parcelfit.sim.params import parse_assignments
 
+    _at_most(repeat, "--repeat", MAX_PLACEMENTS)
+    _at_most(seed, "--seed", 2**32 - 1)
+    _workers_at_most(workers)
     rig_obj = load_rig(rig)
     cons = load_consignment(consignment)
     params = cons.parameter_values(user_values=parse_assignments(set_ or []))
@@ -878,6 +902,7 @@ def calibrate(
     from parcelfit.study.studyfile import load_study
 
     _check_executor(executor, ("serial", "local", "dask"))
+    _workers_at_most(workers)
     study = load_study(study_file)
     folder = out or study_file.parent / study_file.stem
 
@@ -1037,6 +1062,7 @@ def screen(
     from parcelfit.study.screening import load_screen, run_screen
 
     _check_executor(executor, ("serial", "local"))
+    _workers_at_most(workers)
     spec = load_screen(screen_file)
     folder = out or screen_file.parent / screen_file.stem
     with console.status("screening") as status_line:
@@ -1112,6 +1138,7 @@ def precision(
     from parcelfit.study.precision_check import TABLE_FILE, command_line, run_precision_check
 
     _check_executor(executor, ("serial", "local"))
+    _workers_at_most(workers)
     folder = out or study_file.parent / f"{study_file.stem}-precision"
     with console.status("precision check") as status_line:
         check = run_precision_check(

@@ -389,10 +389,14 @@ def _cases(value: Any) -> Any:
     return value
 
 
+# the most runs a twin dataset makes of one test case (the bundled twin has 10)
+MAX_TWIN_RUNS = 1000
+
+
 class TwinSettingsSection(FileModel):
     """``settings``: `TwinSettings` as written (each >= 0; ``runs`` a whole number >= 1)."""
 
-    runs: Annotated[int, Whole(ge=1)] = TwinSettings.runs
+    runs: Annotated[int, Whole(ge=1, le=MAX_TWIN_RUNS)] = TwinSettings.runs
     friction_cv: Annotated[float, Number(ge=0)] = TwinSettings.friction_cv
     stiffness_cv: Annotated[float, Number(ge=0)] = TwinSettings.stiffness_cv
     placement_sd: Annotated[float | None, Number(unit="m", ge=0)] = TwinSettings.placement_sd
@@ -430,7 +434,7 @@ class TwinSpecFile(FileModel):
     """A twin specification file as written (true parameters in catalogue units)."""
 
     name: Annotated[str, Text()] = "twin"
-    seed: Annotated[int, Whole(ge=0)] = 0
+    seed: Annotated[int, Whole(ge=0, le=2**32 - 1)] = 0
     cases: Annotated[list[Annotated[TestCase, PlainValidator(_test_case)]], BeforeValidator(_cases)]
     truth: Annotated[dict[Any, _Truth], or_default(dict)] = Field(default_factory=dict)
     settings: Annotated[TwinSettingsSection, or_default(dict)] = Field(

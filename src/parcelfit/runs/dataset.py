@@ -36,7 +36,7 @@ from parcelfit.config import check_keys, get_number, get_str, load_yaml, require
 from parcelfit.errors import ParcelfitError, shown
 from parcelfit.runs.io import read_trajectory, write_trajectory
 from parcelfit.runs.regions import Box, Polygon, Region, parse_region
-from parcelfit.runs.run import Run, TestCase
+from parcelfit.runs.run import MAX_SPEED_SETTING, Run, TestCase
 
 DATASET_FILE = "dataset.yaml"
 MAX_TRANSIT_TIME_S = 600.0  # a parcel crosses a test rig in seconds; more is a unit mistake
@@ -144,9 +144,14 @@ def load_dataset(folder: str | Path) -> Dataset:
             where=where,
         )
         setting = entry["speed_setting"]
-        if isinstance(setting, bool) or not isinstance(setting, int) or setting < 1:
+        if (
+            isinstance(setting, bool)
+            or not isinstance(setting, int)
+            or not 1 <= setting <= MAX_SPEED_SETTING
+        ):
             raise ParcelfitError(
-                f"speed_setting must be an integer >= 1, got {shown(setting)}",
+                f"speed_setting must be an integer from 1 to {MAX_SPEED_SETTING}, "
+                f"got {shown(setting)}",
                 file=file,
                 where=f"{where}.speed_setting",
                 fix="write the rig's speed setting number, e.g. speed_setting: 1",

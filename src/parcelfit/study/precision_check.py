@@ -34,6 +34,7 @@ from parcelfit.metrics.transit_adjustment import (
 )
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.runs import TestCase, load_dataset
+from parcelfit.sim.ensemble import MAX_PLACEMENTS
 from parcelfit.sim.executors import Task
 from parcelfit.sim.factory import make_simulator
 from parcelfit.study.calibration import study_executor
@@ -230,6 +231,11 @@ def run_precision_check(
         raise ParcelfitError(
             f"{placements} placement(s): the sensitivity's standard error needs two or more",
             fix="use --placements 2 or more (10 is the default)",
+        )
+    if placements > MAX_PLACEMENTS:
+        raise ParcelfitError(
+            f"{placements} placements per case and parameter end, more than {MAX_PLACEMENTS}",
+            fix=f"use --placements {MAX_PLACEMENTS} or fewer (10 is the default)",
         )
     study = load_study(study_file)
     names = tuple(study.space.names)

@@ -162,7 +162,7 @@ class ScreenFile(FileModel):
     alpha: Annotated[float, Number(ge=1e-6, le=0.5)] = 0.05
     max_full_factors: Annotated[int, Whole(ge=2, le=10)] = 6
     min_full_factors: Annotated[int, Whole(ge=1, le=10)] = 3
-    select: Annotated[int, Whole(ge=1)] = 4
+    select: Annotated[int, Whole(ge=1, le=100)] = 4
     executor: Annotated[ScreenExecutorSection, or_default(dict)] = Field(
         default_factory=ScreenExecutorSection
     )

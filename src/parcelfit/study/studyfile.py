@@ -82,6 +82,7 @@ from parcelfit.optimize.bo import BOSettings
 from parcelfit.optimize.sampler import SAMPLERS
 from parcelfit.optimize.space import Dimension, Space
 from parcelfit.runs import TestCase
+from parcelfit.runs.run import MAX_SPEED_SETTING
 from parcelfit.schema import (
     Choice,
     FileModel,
@@ -93,7 +94,14 @@ from parcelfit.schema import (
     or_default,
     parse,
 )
+from parcelfit.sim.ensemble import MAX_PLACEMENTS
+from parcelfit.sim.executors import MAX_WORKERS
 from parcelfit.sim.factory import SimulatorConfig, SimulatorSection
+
+# the most a study may ask for (each is checked on load, before anything runs): evaluations
+# (``budget``, ``initial``, ``validation.every``), simulations in one batch (``batch_size``)
+MAX_EVALUATIONS = 10_000
+MAX_BATCH_SIZE = 256
 
 # -- the file's sections (file units; shared with screen files) ---------------------------------
 
@@ -104,7 +112,7 @@ class ReferenceSection(FileModel):
     dataset: Annotated[str, Text()]
     rig: Annotated[str | None, Text(nullable=True)] = None
     consignment: Annotated[str | None, Text(nullable=True)] = None
-    speed_setting: Annotated[int, Whole(ge=1)]
+    speed_setting: Annotated[int, Whole(ge=1, le=MAX_SPEED_SETTING)]
 
 
 class CaseSection(FileModel):
@@ -119,9 +127,9 @@ class CaseSection(FileModel):
     dataset: Annotated[str | None, Text(nullable=True)] = None
     rig: Annotated[str | None, Text(nullable=True)] = None
     consignment: Annotated[str | None, Text(nullable=True)] = None
-    speed_setting: Annotated[int, Whole(ge=1)]
+    speed_setting: Annotated[int, Whole(ge=1, le=MAX_SPEED_SETTING)]
     weight: Annotated[float, Number(ge=0)] = 1.0
-    placements: Annotated[int | None, Whole(ge=1, nullable=True)] = None
+    placements: Annotated[int | None, Whole(ge=1, le=MAX_PLACEMENTS, nullable=True)] = None
 
 
 class CostSection(FileModel):
@@ -131,7 +139,7 @@ class CostSection(FileModel):
     adjusted``, adjusted for the belt speeds each run rode at)."""
 
     kind: Annotated[str, Choice(("published", "ensemble"), what="cost")] = "published"
-    placements: Annotated[int, Whole(ge=1)] = 1
+    placements: Annotated[int, Whole(ge=1, le=MAX_PLACEMENTS)] = 1
     transit_weight: Annotated[float, Number(ge=0)] = 1.0
     transit: Annotated[str, Choice(("measured", "adjusted"), what="transit time")] = "measured"
 
@@ -161,7 +169,7 @@ class ScreenExecutorSection(FileModel):
     process); ``executor: KIND`` is short for ``executor: {kind: KIND}``."""
 
     kind: Annotated[str, Choice(("serial", "local"), what="executor")] = "local"
-    workers: Annotated[int | None, Whole(ge=1, nullable=True)] = None
+    workers: Annotated[int | None, Whole(ge=1, le=MAX_WORKERS, nullable=True)] = None
 
     @classmethod
     def prepare(cls, data: Any) -> Any:
@@ -198,8 +206,8 @@ class Bounds(FileModel):
 class ValidationSection(FileModel):
     """``validation``: the validation speed setting (none: no validation) and how often."""
 
-    speed_setting: Annotated[int | None, Whole(ge=1, nullable=True)] = None
-    every: Annotated[int, Whole(ge=1)] = 5
+    speed_setting: Annotated[int | None, Whole(ge=1, le=MAX_SPEED_SETTING, nullable=True)] = None
+    every: Annotated[int, Whole(ge=1, le=MAX_EVALUATIONS)] = 5
     cases: Annotated[list[CaseSection], or_default(list)] = Field(default_factory=list)
 
     @model_validator(mode="after")
@@ -230,6 +238,28 @@ class WeightsSection(FileModel):
 
 
 _GP_KEYS = sorted(set(BOSettings.__dataclass_fields__) - {"n_initial"})
+# the counts among the settings, with their bounds (a million candidates per ask take seconds)
+_SETTING_COUNTS = {
+    "n_samples": Whole(ge=10, le=1_000_000),
+    "n_restarts": Whole(ge=0, le=100),
+    "polish": Whole(ge=0, le=100),
+}
+
+
+def _setting(name: str, value: Any) -> Any:
+    """An optimizer setting checked by its type (that of the `BOSettings` default) and, for a
+    count, its bounds; the choices among texts are checked when the settings are made."""
+    default = BOSettings.__dataclass_fields__[name].default
+    check: Whole | Flag | Number | Text = (
+        _SETTING_COUNTS.get(name)
+        or (Flag() if isinstance(default, bool) else None)
+        or (Number() if isinstance(default, float) else None)
+        or Text()
+    )
+    try:
+        return check.check(value)
+    except ParcelfitError as exc:
+        raise ParcelfitError(exc.message, where=name, fix=exc.fix) from None
 
 
 class OptimizerSection(FileModel):
@@ -245,10 +275,15 @@ class OptimizerSection(FileModel):
             check_keys(data, ["sampler"], fix="the tpe sampler takes no settings but `sampler`")
         return ["sampler", *_GP_KEYS]
 
+    @model_validator(mode="after")
+    def _typed_settings(self) -> OptimizerSection:
+        self.settings  # noqa: B018 - each setting checked now, named where it stands
+        return self
+
     @property
     def settings(self) -> dict[str, Any]:
-        """The BOSettings overrides, as written."""
-        return dict(self.model_extra or {})
+        """The BOSettings overrides, each checked by its type (counts by their bounds)."""
+        return {str(k): _setting(str(k), v) for k, v in (self.model_extra or {}).items()}
 
 
 class StudyFile(FileModel):
@@ -271,10 +306,10 @@ class StudyFile(FileModel):
     optimizer: Annotated[OptimizerSection, or_default(dict)] = Field(
         default_factory=OptimizerSection
     )
-    initial: Annotated[int, Whole(ge=1)] = 16
+    initial: Annotated[int, Whole(ge=1, le=MAX_EVALUATIONS)] = 16
     executor: Annotated[ExecutorSection, or_default(dict)] = Field(default_factory=ExecutorSection)
-    batch_size: Annotated[int, Whole(ge=1)] = 4
-    budget: Annotated[int, Whole(ge=1)] = 80
+    batch_size: Annotated[int, Whole(ge=1, le=MAX_BATCH_SIZE)] = 4
+    budget: Annotated[int, Whole(ge=1, le=MAX_EVALUATIONS)] = 80
     seed: Annotated[int, Whole(ge=0, le=2**32 - 1)] = 0
 
     @field_validator("parameters")
@@ -309,6 +344,17 @@ class StudyFile(FileModel):
                 "every case has weight 0, so every simulation would cost nothing",
                 where="cases",
                 fix="give at least one case a positive weight",
+            )
+        return self
+
+    @model_validator(mode="after")
+    def _budget_holds_the_initial_design(self) -> StudyFile:
+        if self.budget < self.initial:
+            raise ParcelfitError(
+                f"budget {self.budget} is below initial {self.initial}: the study would stop "
+                "before its initial design is complete",
+                where="budget",
+                fix=f"raise budget to {self.initial} or more, or lower initial",
             )
         return self
 

@@ -180,8 +180,8 @@ class CameraSection(FileModel):
     cx: Annotated[float, Number(unit="px", ge=0)]
     cy: Annotated[float, Number(unit="px", ge=0)]
     distortion: Annotated[tuple[float, ...], PlainValidator(_distortion)] = (0.0,) * 5
-    width: Annotated[int, Whole(ge=0)] = 0
-    height: Annotated[int, Whole(ge=0)] = 0
+    width: Annotated[int, Whole(ge=0, le=100_000)] = 0
+    height: Annotated[int, Whole(ge=0, le=100_000)] = 0
 
 
 class BarrierEntry(FileModel):

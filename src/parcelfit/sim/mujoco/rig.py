@@ -63,6 +63,7 @@ from pydantic import BeforeValidator, Field, PlainValidator, field_validator, mo
 from parcelfit.config import load_yaml
 from parcelfit.errors import ParcelfitError, shown
 from parcelfit.runs import Barrier, Region, parse_region
+from parcelfit.runs.run import MAX_SPEED_SETTING
 from parcelfit.schema import (
     Choice,
     FileModel,
@@ -250,9 +251,9 @@ def _drive_name(value: Any) -> str:
 def _speed_settings(value: Any) -> Any:
     """``speeds`` must map whole numbers >= 1 to drives (checked before the drives' speeds)."""
     for key in require_mapping(value):
-        if isinstance(key, bool) or not isinstance(key, int) or key < 1:
+        if isinstance(key, bool) or not isinstance(key, int) or not 1 <= key <= MAX_SPEED_SETTING:
             raise ParcelfitError(
-                f"speed setting {shown(key)} must be an integer >= 1",
+                f"speed setting {shown(key)} must be an integer from 1 to {MAX_SPEED_SETTING}",
                 fix="write e.g. `1: {main: 1.56}`",
             )
     if not value:
