@@ -280,6 +280,72 @@ CASES = {
             "write e.g. `1: {main: 1.56}`",
         ),
     ),
+    "study negative friction": (
+        "study",
+        lambda d: d["parameters"].update(mu_d_BePa=[-0.5, -0.1]),
+        (
+            "parameters.mu_d_BePa",
+            "mu_d_BePa = -0.5 is outside its physical range [0, 2]",
+            "give dynamic friction belt/packaging from 0 to 2 (dimensionless)",
+        ),
+    ),
+    "study friction above 2": (
+        "study",
+        lambda d: d["parameters"].update(mu_d_BePa=[5, 9]),
+        (
+            "parameters.mu_d_BePa",
+            "mu_d_BePa = 5 is outside its physical range [0, 2]",
+            "give dynamic friction belt/packaging from 0 to 2 (dimensionless)",
+        ),
+    ),
+    "study negative modulus": (
+        "study",
+        lambda d: d["parameters"].update(E_Pa={"low": 0.5, "high": 100}),
+        (
+            "parameters.E_Pa",
+            "E_Pa = 0.5 N/mm^2 is outside its physical range [1, 100000] N/mm^2",
+            "give Young's modulus packaging from 1 to 100000 N/mm^2",
+        ),
+    ),
+    "study fixed negative stiffness": (
+        "study",
+        lambda d: d.update(fixed={"k_BePa": -5}),
+        (
+            "fixed.k_BePa",
+            "k_BePa = -5 N/mm is outside its physical range [1, 100000] N/mm",
+            "give contact stiffness belt/packaging from 1 to 100000 N/mm",
+        ),
+    ),
+    "study mujoco negative damping": (
+        "study",
+        lambda d: d.update(
+            simulator={"backend": "mujoco", "rig": "E3", "consignment": "KPBW"},
+            parameters={"zeta_BePa": [-1, 1]},
+        ),
+        (
+            "parameters.zeta_BePa",
+            "zeta_BePa = -1 is outside its physical range [0.01, 5]",
+            "give contact damping ratio belt/packaging from 0.01 to 5 (dimensionless)",
+        ),
+    ),
+    "screen range outside the physical one": (
+        "screen",
+        lambda d: d["parameters"].update(E_Pa=[-100, 100]),
+        (
+            "parameters.E_Pa",
+            "E_Pa = -100 N/mm^2 is outside its physical range [1, 100000] N/mm^2",
+            "give Young's modulus packaging from 1 to 100000 N/mm^2",
+        ),
+    ),
+    "screen fixed outside the physical range": (
+        "screen",
+        lambda d: d.update(fixed={"nu_Pa": 0.7}),
+        (
+            "fixed.nu_Pa",
+            "nu_Pa = 0.7 is outside its physical range [0, 0.49]",
+            "give Poisson's ratio packaging from 0 to 0.49 (dimensionless)",
+        ),
+    ),
     "screen executor dask": (
         "screen",
         lambda d: d.update(executor={"kind": "dask"}),
@@ -767,3 +833,17 @@ def test_a_rendered_error_is_one_line_whatever_its_parts_hold():
     err = ParcelfitError("a\nb" + "x" * 1000, file="f\u2028g.yaml", where="k\r", fix="do\u0085it")
     assert str(err) == "f\\u2028g.yaml: k\\r: a\\nb" + "x" * 393 + "... Fix: do\\x85it"
     assert len(str(err).splitlines()) == 1
+
+
+def test_every_catalogue_parameter_has_a_physical_range_holding_its_screening_ranges():
+    from parcelfit.sim.params import CATALOGUE
+
+    for p in CATALOGUE:
+        lo, hi = p.physical
+        assert 0 <= lo < hi, p.name  # no parameter of the catalogue is negative
+        if p.name.startswith(("k_", "E_", "t_", "m_")):
+            assert lo > 0, p.name  # stiffness, moduli, thickness, mass: positive
+        if p.name.startswith("mu_"):
+            assert hi <= 2, p.name
+        for r in p.ranges.values():
+            assert lo <= r.low < r.high <= hi and r.low <= r.default <= r.high, p.name

@@ -776,6 +776,29 @@ BAD_INPUTS = {
         r"test_cases\[0\]\.speed_setting: speed_setting must be an integer from 1 to 1000, got "
         r"1000000000000000000000000000000 Fix",
     ),
+    "mujoco study with negative friction": (
+        lambda p: _study(
+            p,
+            simulator={"backend": "mujoco", "rig": "E3", "consignment": "KPBW"},
+            parameters={"mu_d_BePa": [-0.5, -0.1]},
+            reference={"dataset": "data", "speed_setting": 1},
+        ),
+        r"study\.yaml: parameters\.mu_d_BePa: mu_d_BePa = -0\.5 is outside its physical range "
+        r"\[0, 2\] Fix",
+    ),
+    "simulate --set a negative friction": (
+        lambda p: ["simulate", "--set", "mu_d_BePa=-1", "--out", str(p / "o" / "r.csv")],
+        r"^error: --set: mu_d_BePa = -1 is outside its physical range \[0, 2\] Fix: give "
+        r"dynamic friction belt/packaging from 0 to 2 \(dimensionless\)$",
+    ),
+    "simulate --set nan": (
+        lambda p: ["simulate", "--set", "mu_d_BePa=nan", "--out", str(p / "o" / "r.csv")],
+        r"^error: --set: 'mu_d_BePa=nan' is not a finite number",
+    ),
+    "precision --at outside the physical range": (
+        lambda p: ["precision", _study(p)[1], "--at", "mu_d_BePa=3", "--out", str(p / "o")],
+        r"^error: --at mu_d_BePa: mu_d_BePa = 3 is outside its physical range \[0, 2\]",
+    ),
     "screen unknown soft_content": (
         lambda p: _screen(p, soft_content=["E_Cox"]),
         r"soft_content\[0\]: unknown parameter 'E_Cox'.*did you mean 'E_Co'",

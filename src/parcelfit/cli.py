@@ -644,7 +644,10 @@ def simulate(
     _workers_at_most(workers)
     rig_obj = load_rig(rig)
     cons = load_consignment(consignment)
-    params = cons.parameter_values(user_values=parse_assignments(set_ or []))
+    try:
+        params = cons.parameter_values(user_values=parse_assignments(set_ or []))
+    except ParcelfitError as exc:  # a value given with --set
+        raise ParcelfitError(exc.message, where="--set", fix=exc.fix) from None
     config = SimulatorConfig(
         "mujoco",
         rig=rig,

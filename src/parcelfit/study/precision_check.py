@@ -240,7 +240,7 @@ def run_precision_check(
     study = load_study(study_file)
     names = tuple(study.space.names)
     dims = {d.name: d for d in study.space.dims}
-    given = fixed_to_si(dict(at or {}), study.simulator.backend, study_file)
+    given = fixed_to_si(dict(at or {}), study.simulator.backend, None, where="--at")
     unknown = sorted(set(given) - set(names))
     if unknown:
         raise ParcelfitError(

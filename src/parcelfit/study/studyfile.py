@@ -432,8 +432,10 @@ class CaseSpec:
 
 
 def _to_si(name: str, value: float, backend: str) -> float:
-    """A parameter value from its catalogue unit to SI; a name outside the catalogue is taken
-    as given, except for the mujoco backend (which knows only the catalogue)."""
+    """A parameter value from its catalogue unit to SI, checked against the catalogue's
+    physical range (whatever the backend: a catalogue name means the catalogue's quantity); a
+    name outside the catalogue is taken as given, except for the mujoco backend (which knows
+    only the catalogue)."""
     from parcelfit.sim.params import CATALOGUE
 
     spec = next((p for p in CATALOGUE if p.name == name), None)
@@ -443,19 +445,22 @@ def _to_si(name: str, value: float, backend: str) -> float:
 
             parameter(name)  # raises with a suggestion
         return float(value)
-    return spec.to_si(float(value))
+    return spec.to_si(spec.check_physical(float(value)))
 
 
-def fixed_to_si(fixed: Mapping[Any, float], backend: str, path: Path) -> dict[str, float]:
-    """A file's ``fixed`` values (catalogue units for MuJoCo) in SI, each error naming its key."""
+def fixed_to_si(
+    fixed: Mapping[Any, float], backend: str, path: Path | None, where: str = "fixed"
+) -> dict[str, float]:
+    """A file's ``fixed`` values (catalogue units for MuJoCo) in SI, each error naming its key
+    (``where.NAME``; ``where`` e.g. ``--at`` for values given on the command line, ``path``
+    then None)."""
     out = {}
     for name, value in fixed.items():
         try:
             out[str(name)] = _to_si(str(name), value, backend)
         except ParcelfitError as exc:
-            raise ParcelfitError(
-                exc.message, file=path, where=f"fixed.{name}", fix=exc.fix
-            ) from None
+            label = f"{where} {name}" if where.startswith("--") else f"{where}.{name}"
+            raise ParcelfitError(exc.message, file=path, where=label, fix=exc.fix) from None
     return out
 
 
