@@ -274,6 +274,28 @@ def test_a_line_break_in_a_name_cannot_add_lines_to_a_solver_parameter_file(tmp_
     assert not list(tmp_path.glob("*/params.txt"))  # nothing was written, nothing ran
 
 
+@pytest.mark.parametrize(
+    "char", ["\u2028", "\u2029", "\u0085", "\u200b", "\u200f", "\u202e", "\u2066", "\ufeff"]
+)
+def test_a_unicode_separator_or_format_character_in_a_name_is_refused(tmp_path, char):
+    """U+2028 passed the control-character check and became a line of the parameter file."""
+    from parcelfit.runs import TestCase
+    from parcelfit.sim import defaults_si
+    from parcelfit.sim.external import ExternalSimulator, load_external_solver
+
+    solver = Path(__file__).parent / "data" / "external" / "solver.yaml"
+    sim = ExternalSimulator(load_external_solver(solver), workroot=tmp_path)
+    case = TestCase(f"E1{char}mu_d_BePa = 9", "KPBW", 1)
+    with pytest.raises(ParcelfitError) as err:
+        sim.run(defaults_si("rigid"), case)
+    assert err.value.message == (
+        f"the value of ${{rig}} ({f'E1{char}mu_d_BePa = 9'!r}) holds a line break or another "
+        f"control or invisible format character (U+{ord(char):04X}), which would change the "
+        "parameter template"
+    )
+    assert not list(tmp_path.glob("*/params.txt"))  # nothing was written, nothing ran
+
+
 @pytest.mark.slow
 def test_a_validation_killed_midway_is_run_again_on_resume(finished, tmp_path):
     study, out = _copy(finished, tmp_path)

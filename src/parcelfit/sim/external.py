@@ -100,14 +100,31 @@ def load_external_solver(path: str | Path) -> ExternalSolver:
     )
 
 
+# characters a name must not hold: control characters (Cc: line feed, carriage return, U+0085,
+# ...), Unicode's line and paragraph separators (Zl U+2028, Zp U+2029), which many programs and
+# languages read as line breaks, and invisible format characters (Cf: U+200B-U+200F,
+# U+202A-U+202E, U+2066-U+2069, U+FEFF, ...), which can hide or reorder what a line shows
+_REFUSED_CATEGORIES = frozenset({"Cc", "Cf", "Zl", "Zp"})
+
+
+def refused_character(text: str) -> str | None:
+    """The first character of ``text`` that could add a line to a file or hide what it says
+    (see `_REFUSED_CATEGORIES`), as ``U+XXXX``; None if there is none."""
+    for c in text:
+        if unicodedata.category(c) in _REFUSED_CATEGORIES:
+            return f"U+{ord(c):04X}"
+    return None
+
+
 def _substitute(text: str, values: Mapping[str, Any], what: str) -> str:
     for key, value in values.items():
         # a line break (or any control character) in a name would add lines to the file
-        if any(unicodedata.category(c) == "Cc" for c in str(value)):
+        found = refused_character(str(value))
+        if found is not None:
             raise ParcelfitError(
-                f"the value of ${{{key}}} ({shown(str(value))}) holds a line break or another control "
-                f"character, which would change {what}",
-                fix="use names without line breaks or control characters",
+                f"the value of ${{{key}}} ({shown(str(value))}) holds a line break or another "
+                f"control or invisible format character ({found}), which would change {what}",
+                fix="use names without line breaks, control or format characters",
             )
     try:
         return string.Template(text).substitute({k: str(v) for k, v in values.items()})
