@@ -579,10 +579,12 @@ def test_losing_the_dask_scheduler_stops_cleanly_and_the_study_resumes(tmp_path)
 # -- bad input: one clear line and exit status 2 ------------------------------------------------
 
 
-def _dataset(tmp_path, edit=None, scale_t=1.0):
+def _dataset(tmp_path, edit=None, scale_t=1.0, edit_run=None):
     from .fake_sim import write_reference_dataset
 
     write_reference_dataset(tmp_path / "data", n_runs=3)
+    if edit_run is not None:  # the first run file
+        edit_run(tmp_path / "data" / "runs" / "R-P-1-0.csv")
     if scale_t != 1.0:  # times written in milliseconds
         for f in (tmp_path / "data" / "runs").glob("*.csv"):
             text = f.read_text().splitlines()
@@ -622,6 +624,12 @@ def _screen(tmp_path, **change):
     }
     (tmp_path / "screen.yaml").write_text(yaml.safe_dump(doc))
     return ["screen", str(tmp_path / "screen.yaml"), "--out", str(tmp_path / "o")]
+
+
+def _twin_spec(tmp_path, **doc):
+    path = tmp_path / "twin.yaml"
+    path.write_text(yaml.safe_dump({"cases": ["E1/BW/1"], **doc}))
+    return ["synth", str(path), "--out", str(tmp_path / "o")]
 
 
 def _not_utf8(tmp_path):
@@ -820,6 +828,29 @@ BAD_INPUTS = {
     "precision --at outside the physical range": (
         lambda p: ["precision", _study(p)[1], "--at", "mu_d_BePa=3", "--out", str(p / "o")],
         r"^error: --at mu_d_BePa: mu_d_BePa = 3 is outside its physical range \[0, 2\]",
+    ),
+    "validation setting the dataset lacks": (
+        lambda p: _study(p, validation={"speed_setting": 7}),
+        r"study\.yaml: validation\.speed_setting: the dataset has no runs of test case R/P/7 "
+        r"\(dataset .*data\) Fix: name a test case the dataset holds",
+    ),
+    "transfer case the dataset lacks": (
+        lambda p: _study(p, transfer=[{"rig": "Q", "consignment": "P", "speed_setting": 1}]),
+        r"study\.yaml: transfer\[0\]: the dataset has no runs of test case Q/P/1",
+    ),
+    "twin spec with an unknown rig": (
+        lambda p: _twin_spec(p, cases=["E9/BW/1"]),
+        r"twin\.yaml: cases\[0\]: unknown rig 'E9' Fix: use one of E1, E2a, E2b, E3",
+    ),
+    "empty run file": (
+        lambda p: _dataset(p, edit_run=lambda f: f.write_bytes(b"")),
+        r"R-P-1-0\.csv: the file is empty \(0 bytes\) Fix: write the run's samples into it",
+    ),
+    "run file not UTF-8": (
+        lambda p: _dataset(
+            p, edit_run=lambda f: f.write_bytes(f.read_bytes() + b"0,caf\xe9,0,0\n")
+        ),
+        r"R-P-1-0\.csv: not UTF-8 text \(byte \d+: b'\\xe9'\) Fix: save the file as UTF-8",
     ),
     "screen unknown soft_content": (
         lambda p: _screen(p, soft_content=["E_Cox"]),

@@ -926,7 +926,9 @@ def calibrate(
 
 def _calibrate_live(run: Callable[[ProgressCallback], Any], name: str, folder: Path) -> Any:
     """Run a calibration (``run(progress)``) with a live status table; then print how it
-    stopped, the recommended parameters and where its figures are."""
+    stopped, the recommended parameters and where its figures are. Until its first event (while
+    the data are read and the reference runs chosen) a spinner stands in for the table, so that
+    an error found then (a test case the dataset lacks, ...) is the only line printed."""
     from rich.live import Live
 
     from parcelfit.study.calibration import STORE_FILE, study_status
@@ -944,9 +946,7 @@ def _calibrate_live(run: Callable[[ProgressCallback], Any], name: str, folder: P
         )
         table.add_column(style="bold")
         table.add_column()
-        if p is None:
-            table.add_row("status", "starting (reference runs, workers)")
-            return table
+        assert p is not None  # the table shows from the first event on
         verdict = {None: "not yet", True: "[green]passed[/]", False: "[red]failed[/]"}[
             p.last_validation
         ]
@@ -957,19 +957,30 @@ def _calibrate_live(run: Callable[[ProgressCallback], Any], name: str, folder: P
         table.add_row("last event", Text(p.message))
         return table
 
-    with Live(render(), console=console, refresh_per_second=4, transient=False) as live:
+    starting = console.status(Text(f"calibration {name}: starting (reference runs, workers)"))
+    starting.start()
+    lives: list[Live] = []
 
-        def update(p: ProgressEvent) -> None:
-            state["p"] = p
-            live.update(render())
-            if not console.is_terminal:  # a log or CI: the table shows only at the end
-                best = "-" if p.best_cost is None else f"{p.best_cost:.4g}"
-                console.print(
-                    Text(f"{p.message} ({p.done}/{p.total} evaluations, best cost {best})"),
-                    highlight=False,
-                )
+    def update(p: ProgressEvent) -> None:
+        state["p"] = p
+        if not lives:
+            starting.stop()
+            lives.append(Live(render(), console=console, refresh_per_second=4, transient=False))
+            lives[0].start()
+        lives[0].update(render())
+        if not console.is_terminal:  # a log or CI: the table shows only at the end
+            best = "-" if p.best_cost is None else f"{p.best_cost:.4g}"
+            console.print(
+                Text(f"{p.message} ({p.done}/{p.total} evaluations, best cost {best})"),
+                highlight=False,
+            )
 
+    try:
         result = run(update)
+    finally:
+        starting.stop()
+        for live in lives:
+            live.stop()
     console.print()
     console.print(
         Text.assemble(

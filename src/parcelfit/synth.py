@@ -443,10 +443,27 @@ class TwinSpecFile(FileModel):
 
 
 def load_twin_spec(path: str | Path) -> TwinSpec:
-    """Read a twin specification YAML (keys: name, seed, cases, truth, settings) and check it;
-    the truth stays in catalogue units (`make_twin_dataset` converts it)."""
+    """Read a twin specification YAML (keys: name, seed, cases, truth, settings) and check it:
+    every case's rig (with its speed setting) and consignment type are bundled, every true value
+    applies to its consignment's contents and lies in its physical range; each error names the
+    file and the key. The truth stays in catalogue units (`make_twin_dataset` converts it)."""
     f = parse(TwinSpecFile, load_yaml(path), file=path)
     truth = {str(cons): dict(values) for cons, values in f.truth.items()}
+    sim = MujocoSimulator()
+    for i, case in enumerate(f.cases):
+        try:
+            sim.rig(case.rig).drive_speeds(case.speed_setting)
+            sim.consignment(case.consignment)
+        except ParcelfitError as exc:
+            raise ParcelfitError(exc.message, file=path, where=f"cases[{i}]", fix=exc.fix) from None
+    for cons, values in truth.items():
+        for name, value in values.items():
+            try:
+                sim.consignment(cons).parameter_values(user_values={name: value})
+            except ParcelfitError as exc:
+                raise ParcelfitError(
+                    exc.message, file=path, where=f"truth.{cons}.{name}", fix=exc.fix
+                ) from None
     return TwinSpec(f.name, tuple(f.cases), truth, TwinSettings(**f.settings.model_dump()), f.seed)
 
 

@@ -334,9 +334,12 @@ class Calibration:
                 try:
                     data = datasets[spec.dataset][spec.case]
                 except (KeyError, ParcelfitError):
+                    named = study.path is not None and spec.where
                     raise ParcelfitError(
-                        f"the dataset has no runs of test case {spec.label}",
-                        file=spec.dataset,
+                        f"the dataset has no runs of test case {spec.label}"
+                        + (f" (dataset {spec.dataset})" if named else ""),
+                        file=study.path if named else spec.dataset,
+                        where=spec.where if named else None,
                         fix="name a test case the dataset holds (parcelfit stats lists them)",
                     ) from None
                 out[spec.label] = select_reference(data)

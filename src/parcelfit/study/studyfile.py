@@ -424,6 +424,7 @@ class CaseSpec:
     dataset: Path
     weight: float = 1.0
     placements: int | None = None  # seeded placements per evaluation (None: the study's)
+    where: str = ""  # the study file's key naming it (``reference``, ``cases[1]``, ...)
 
     @property
     def label(self) -> str:
@@ -550,7 +551,9 @@ def study_cases(
     if f.reference is not None:
         dataset, rig, consignment = reference_case(f.reference, f.simulator, path, folder)
         cases: tuple[CaseSpec, ...] = (
-            CaseSpec(TestCase(rig, consignment, f.reference.speed_setting), dataset),
+            CaseSpec(
+                TestCase(rig, consignment, f.reference.speed_setting), dataset, where="reference"
+            ),
         )
     else:
         first = f.cases[0]
@@ -576,7 +579,11 @@ def study_cases(
     elif f.validation.speed_setting is not None:
         c0 = cases[0].case
         validation = (
-            CaseSpec(TestCase(c0.rig, c0.consignment, f.validation.speed_setting), default),
+            CaseSpec(
+                TestCase(c0.rig, c0.consignment, f.validation.speed_setting),
+                default,
+                where="validation.speed_setting",
+            ),
         )
     else:
         validation = ()
@@ -634,7 +641,9 @@ def _case(
             where=f"{where}.rig",
             fix="name a bundled rig (parcelfit rigs), or leave rig out for the simulator's",
         )
-    return CaseSpec(TestCase(rig, consignment, c.speed_setting), dataset, c.weight, c.placements)
+    return CaseSpec(
+        TestCase(rig, consignment, c.speed_setting), dataset, c.weight, c.placements, where
+    )
 
 
 def reference_case(
