@@ -346,6 +346,38 @@ CASES = {
             "give Poisson's ratio packaging from 0 to 0.49 (dimensionless)",
         ),
     ),
+    "study bound of 400 digits": (
+        "study",
+        lambda d: d["parameters"].update(mu_d_BePa=[0.3, 10**400]),
+        (
+            "parameters.mu_d_BePa.high",
+            "expected a number, got <a whole number of about 401 digits>",
+            "write a plain number",
+        ),
+    ),
+    "rig region with a number for a key": (
+        "rig",
+        lambda d: d["regions"].append({"x": [0, 1], 0: [0, 1]}),
+        (
+            "regions[1]",
+            "unknown region keys ['0', 'x']",
+            "use either x and/or y (a box) or polygon",
+        ),
+    ),
+    "rig polygon point of 400 digits": (
+        "rig",
+        lambda d: d["regions"].append({"polygon": [[0, 0], [1, 0], [10**400, 1]]}),
+        (
+            "regions[1]",
+            "polygon must be a list of at least three [x, y] points in metres",
+            "write polygon: [[0, -0.4], [1, -0.4], [1, 0.4]]",
+        ),
+    ),
+    "tags distortion of 400 digits": (
+        "tags",
+        lambda d: d["camera"].update(distortion=[0, 0, 0, 10**400]),
+        ("camera.distortion", None, "write [k1, k2, p1, p2, k3] (OpenCV's order)"),
+    ),
     "screen executor dask": (
         "screen",
         lambda d: d.update(executor={"kind": "dask"}),

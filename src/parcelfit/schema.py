@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import sys
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -69,6 +70,16 @@ def require_mapping(data: Any) -> Mapping[Any, Any]:
             f"expected a mapping of keys to values, got {type(data).__name__}", fix=_MAPPING_FIX
         )
     return data
+
+
+def is_finite_number(value: Any) -> bool:
+    """``value`` is an int or float (never true/false) that a float holds, finite; a YAML whole
+    number of 400 digits is not (``math.isfinite`` would raise OverflowError on it)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return False
+    if isinstance(value, int):
+        return abs(value) <= sys.float_info.max
+    return math.isfinite(value)
 
 
 class FileModel(BaseModel):
@@ -124,11 +135,7 @@ class Number(_Plain):
     def check(self, value: Any) -> float | None:
         if value is None and self.nullable:
             return None
-        if (
-            isinstance(value, bool)
-            or not isinstance(value, int | float)
-            or not math.isfinite(value)
-        ):
+        if not is_finite_number(value):
             raise ParcelfitError(
                 f"expected a number{f' in {self.unit}' if self.unit else ''}, got {shown(value)}",
                 fix="write a plain number" + (" or null" if self.nullable else ""),
@@ -231,10 +238,7 @@ class Pair(_Plain):
         ok = (
             isinstance(value, list | tuple)
             and len(value) == 2
-            and all(
-                isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
-                for v in value
-            )
+            and all(is_finite_number(v) for v in value)
         )
         if not ok or (self.increasing and not value[0] < value[1]):
             raise ParcelfitError(f"expected {self.what}, got {shown(value)}", fix=self.fix)
@@ -339,6 +343,7 @@ __all__ = [
     "Text",
     "Whole",
     "check_keys",
+    "is_finite_number",
     "keys_in",
     "or_default",
     "parse",

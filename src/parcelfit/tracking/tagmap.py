@@ -38,7 +38,17 @@ from pydantic import BeforeValidator, Field, PlainValidator, field_validator, mo
 from parcelfit.config import load_yaml
 from parcelfit.errors import ParcelfitError, shown
 from parcelfit.runs import Barrier
-from parcelfit.schema import Choice, FileModel, Number, Pair, Text, Whole, or_default, parse
+from parcelfit.schema import (
+    Choice,
+    FileModel,
+    Number,
+    Pair,
+    Text,
+    Whole,
+    is_finite_number,
+    or_default,
+    parse,
+)
 
 FAMILIES = ("tag36h11", "tag25h9", "tag16h5", "tag36h10")
 
@@ -133,7 +143,7 @@ def _distortion(value: Any) -> tuple[float, ...]:
     if (
         not isinstance(value, list)
         or len(value) not in (4, 5, 8)
-        or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
+        or not all(is_finite_number(v) for v in value)
     ):
         raise ParcelfitError(
             f"expected 4, 5 or 8 distortion coefficients, got {shown(value)}",
