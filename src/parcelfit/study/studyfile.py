@@ -38,9 +38,9 @@
     #   (add transit: adjusted to compare transit times at the real runs' mean belt speeds)
     # transfer: [{rig: E1, speed_setting: 1}]   # optional: judged once the study stops
     weights: {xy: 1.0, theta: 1.0}     # optional, equation (3)
-    batch_size: 4                      # optional
-    initial: 16                        # optional, Latin hypercube size
-    budget: 80                         # optional, most fitting evaluations
+    batch_size: 4                      # optional, at most 256
+    initial: 16                        # optional, Latin hypercube size (at most budget)
+    budget: 80                         # optional, most fitting evaluations (<= 10000)
     seed: 0                            # optional
     optimizer: {sampler: gp, ucb_lambda: 2.0}   # optional: gp | published | tpe, BOSettings
     executor: {kind: local, workers: 2}   # optional: local (processes) | serial (this process,
@@ -61,8 +61,10 @@ the belt speeds each run rode at, `parcelfit.metrics.transit_adjustment`).
 on, with the validation criteria and the band test, once the study stops.
 
 Parameter values in the file are in the catalogue's user units (N/mm, N/mm^2, mm, g; see
-``parcelfit params``) for the catalogue's parameters and converted to SI on load; parameters a
-``python`` or ``external`` backend defines itself are taken as given.
+``parcelfit params``) for the catalogue's parameters, checked against the catalogue's physical
+ranges and converted to SI on load; parameters a ``python`` or ``external`` backend defines
+itself are taken as given. Every count has an upper bound (`MAX_EVALUATIONS`, `MAX_BATCH_SIZE`,
+placements, workers, speed settings), checked on load.
 """
 
 from __future__ import annotations
