@@ -522,7 +522,13 @@ CASES: list[Case] = [
         "study",
         "factory module missing",
         study(_set("simulator.factory", "nowhere.sim:make")),
-        ("nowhere.sim", S),
+        (S,),
+    ),
+    Case(
+        "study",
+        "mujoco rig E9",
+        study(_set("simulator", {"backend": "mujoco", "rig": "E9", "consignment": "KPBW"})),
+        ("simulator.rig",),
     ),
     Case(
         "study",
@@ -558,6 +564,12 @@ CASES: list[Case] = [
         "screen", "soft_content unknown", screen(_set("soft_content", ["E_Cox"])), ("soft_content",)
     ),
     Case("screen", "one parameter", screen(_set("parameters", ["mu_d_BePa"])), ("parameters",)),
+    Case(
+        "screen",
+        "mujoco consignment XX",
+        screen(_set("simulator", {"backend": "mujoco", "rig": "E3", "consignment": "XX"})),
+        ("simulator.consignment",),
+    ),
     # -- twin specs (synth) --
     Case("twin spec", "unknown rig E9", twin(_set("cases", ["E9/BW/1"])), ("twin.yaml",)),
     Case(

@@ -378,6 +378,24 @@ CASES = {
         lambda d: d["camera"].update(distortion=[0, 0, 0, 10**400]),
         ("camera.distortion", None, "write [k1, k2, p1, p2, k3] (OpenCV's order)"),
     ),
+    "study mujoco unknown rig": (
+        "study",
+        lambda d: d.update(simulator={"backend": "mujoco", "rig": "E9", "consignment": "KPBW"}),
+        (
+            "simulator.rig",
+            "unknown rig 'E9'",
+            "use one of E1, E2a, E2b, E3 or the path of a .yaml file",
+        ),
+    ),
+    "screen mujoco unknown consignment": (
+        "screen",
+        lambda d: d.update(simulator={"backend": "mujoco", "rig": "E3", "consignment": "XX"}),
+        (
+            "simulator.consignment",
+            "unknown consignment type 'XX'",
+            "use one of BW, KP, KPBW, PB or the path of a .yaml file",
+        ),
+    ),
     "screen executor dask": (
         "screen",
         lambda d: d.update(executor={"kind": "dask"}),

@@ -852,6 +852,10 @@ BAD_INPUTS = {
         ),
         r"R-P-1-0\.csv: not UTF-8 text \(byte \d+: b'\\xe9'\) Fix: save the file as UTF-8",
     ),
+    "python factory that cannot be imported": (
+        lambda p: _study_sim(p, factory="nowhere.sim:make"),
+        r"study\.yaml: simulator: cannot import the simulator factory 'nowhere\.sim:make'",
+    ),
     "screen unknown soft_content": (
         lambda p: _screen(p, soft_content=["E_Cox"]),
         r"soft_content\[0\]: unknown parameter 'E_Cox'.*did you mean 'E_Co'",

@@ -303,7 +303,14 @@ class Calibration:
             store.set_meta("reference_run", reference.reference_id)
             if study.joint or len(study.validation_cases) > 1 or study.transfer:
                 store.set_meta("cases", self._case_summary(references))
-            simulator = make_simulator(study.simulator)
+            try:
+                simulator = make_simulator(study.simulator)
+            except ParcelfitError as exc:  # e.g. a python factory that cannot be imported
+                if exc.file is not None or study.path is None:
+                    raise
+                raise ParcelfitError(
+                    exc.message, file=study.path, where="simulator", fix=exc.fix
+                ) from None
             check_placements(study, simulator)
             recorded = store.read_study()
             if recorded is None or not recorded.optimizer.recorded:

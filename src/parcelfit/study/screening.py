@@ -79,6 +79,7 @@ from parcelfit.study.studyfile import (
     ReferenceSection,
     ScreenExecutorSection,
     _to_si,
+    check_simulator_files,
     fixed_to_si,
     reference_case,
 )
@@ -202,6 +203,7 @@ def load_screen(path: str | Path) -> Screen:
     f = parse(ScreenFile, load_yaml(path), file=path)
     folder = path.parent.resolve()
     sim = f.simulator.to_config(folder)
+    check_simulator_files(sim, path)
     backend = f.simulator.backend
     dataset, rig, cons = reference_case(f.reference, f.simulator, path, folder)
     kind = content_kind(sim)

@@ -451,6 +451,25 @@ def _to_si(name: str, value: float, backend: str) -> float:
     return spec.to_si(spec.check_physical(float(value)))
 
 
+def check_simulator_files(sim: SimulatorConfig, path: Path) -> None:
+    """For the mujoco backend, load the rig and consignment now (a bundled name or a file), so
+    that an unknown name is refused on load naming ``simulator.rig`` (or ``.consignment``) of
+    the file at ``path``; a mistake inside a rig or consignment file names that file."""
+    if sim.backend != "mujoco":
+        return
+    from parcelfit.sim.mujoco import load_consignment, load_rig
+
+    for key, load in (("rig", load_rig), ("consignment", load_consignment)):
+        try:
+            load(sim[key])
+        except ParcelfitError as exc:
+            if exc.file is not None:
+                raise
+            raise ParcelfitError(
+                exc.message, file=path, where=f"simulator.{key}", fix=exc.fix
+            ) from None
+
+
 def fixed_to_si(
     fixed: Mapping[Any, float], backend: str, path: Path | None, where: str = "fixed"
 ) -> dict[str, float]:
@@ -475,6 +494,7 @@ def load_study(path: str | Path) -> Study:
     f = parse(StudyFile, doc, file=path)
     folder = path.parent.resolve()
     sim = f.simulator.to_config(folder)
+    check_simulator_files(sim, path)
     backend = f.simulator.backend
     dims = []
     for name, bounds in f.parameters.items():
