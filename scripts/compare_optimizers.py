@@ -16,13 +16,14 @@ from pathlib import Path
 
 import yaml
 
+from parcelfit.config import load_yaml
 from parcelfit.study.calibration import Calibration
 from parcelfit.study.studyfile import load_study
 
 
 def run_one(study_file: Path, sampler: str, seed: int, out: Path, workers: int) -> tuple:
     """Calibrate with ``sampler`` and ``seed``; (evaluations, validated, last iteration, best cost)."""
-    doc = yaml.safe_load(study_file.read_text())
+    doc = load_yaml(study_file)
     doc["optimizer"] = {**(doc.get("optimizer") or {}), "sampler": sampler}
     doc["seed"] = seed
     doc["reference"]["dataset"] = str((study_file.parent / doc["reference"]["dataset"]).resolve())

@@ -29,8 +29,8 @@ from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
-import yaml
 
+from parcelfit.config import load_yaml
 from parcelfit.metrics.dtw import dtw_distance
 from parcelfit.metrics.reference import select_reference
 from parcelfit.runs import TestCase, Trajectory
@@ -83,7 +83,7 @@ def main() -> None:
     data = folder / "data" if (folder / "data" / "dataset.yaml").is_file() else folder
     dataset = load_dataset(data)
     case = TestCase.parse(args.case)
-    truth_doc = yaml.safe_load((data / "truth.yaml").read_text())
+    truth_doc = load_yaml(data / "truth.yaml")
     truth = {k: float(v) for k, v in truth_doc["truth"][case.consignment].items()}
     case_data = dataset[case]
     ref = select_reference(case_data)

@@ -164,6 +164,238 @@ CASES = {
             "the tpe sampler takes no settings but `sampler`",
         ),
     ),
+    "study initial design of a billion": (
+        "study",
+        lambda d: d.update(initial=1e9, budget=1e9),
+        ("initial", "1000000000 is out of range", "use a whole number in [1, 10000]"),
+    ),
+    "study budget of a billion": (
+        "study",
+        lambda d: d.update(budget=1e9),
+        ("budget", "1000000000 is out of range", "use a whole number in [1, 10000]"),
+    ),
+    "study batch of a million": (
+        "study",
+        lambda d: d.update(batch_size=10**6),
+        ("batch_size", "1000000 is out of range", "use a whole number in [1, 256]"),
+    ),
+    "study validation every": (
+        "study",
+        lambda d: d.update(validation={"speed_setting": 2, "every": 10**6}),
+        ("validation.every", "1000000 is out of range", "use a whole number in [1, 10000]"),
+    ),
+    "study placements": (
+        "study",
+        lambda d: d.update(cost={"kind": "ensemble", "placements": 10**5}),
+        ("cost.placements", "100000 is out of range", "use a whole number in [1, 1000]"),
+    ),
+    "study case placements": (
+        "study",
+        lambda d: (
+            d.pop("reference"),
+            d.update(
+                cost="ensemble",
+                cases=[
+                    {
+                        "dataset": "data",
+                        "rig": "R",
+                        "consignment": "P",
+                        "speed_setting": 1,
+                        "placements": 5000,
+                    }
+                ],
+            ),
+        ),
+        ("cases[0].placements", "5000 is out of range", "use a whole number in [1, 1000]"),
+    ),
+    "study workers": (
+        "study",
+        lambda d: d.update(executor={"kind": "local", "workers": 10**5}),
+        ("executor.workers", "100000 is out of range", "use a whole number in [1, 256]"),
+    ),
+    "study speed setting": (
+        "study",
+        lambda d: d["reference"].update(speed_setting=10**30),
+        (
+            "reference.speed_setting",
+            "1000000000000000000000000000000 is out of range",
+            "use a whole number in [1, 1000]",
+        ),
+    ),
+    "study candidates per ask": (
+        "study",
+        lambda d: d.update(optimizer={"n_samples": 1e9}),
+        (
+            "optimizer.n_samples",
+            "1000000000 is out of range",
+            "use a whole number in [10, 1000000]",
+        ),
+    ),
+    "study optimizer setting of the wrong type": (
+        "study",
+        lambda d: d.update(optimizer={"ucb_lambda": "wide"}),
+        ("optimizer.ucb_lambda", "expected a number, got 'wide'", "write a plain number"),
+    ),
+    "study budget below initial": (
+        "study",
+        lambda d: d.update(initial=16, budget=8),
+        (
+            "budget",
+            "budget 8 is below initial 16: the study would stop before its initial design is "
+            "complete",
+            "raise budget to 16 or more, or lower initial",
+        ),
+    ),
+    "screen select": (
+        "screen",
+        lambda d: d.update(select=10**4),
+        ("select", "10000 is out of range", "use a whole number in [1, 100]"),
+    ),
+    "screen workers": (
+        "screen",
+        lambda d: d.update(executor={"workers": 10**4}),
+        ("executor.workers", "10000 is out of range", "use a whole number in [1, 256]"),
+    ),
+    "twin runs": (
+        "twin",
+        lambda d: d["settings"].update(runs=1e9),
+        ("settings.runs", "1000000000 is out of range", "use a whole number in [1, 1000]"),
+    ),
+    "twin seed": (
+        "twin",
+        lambda d: d.update(seed=2**64),
+        ("seed", "18446744073709551616 is out of range", "use a whole number in [0, 4294967295]"),
+    ),
+    "tags image width": (
+        "tags",
+        lambda d: d["camera"].update(width=10**9),
+        ("camera.width", "1000000000 is out of range", "use a whole number in [0, 100000]"),
+    ),
+    "rig speed setting 10**20": (
+        "rig",
+        lambda d: d["speeds"].update({10**20: {"main": 1, "strip": 1}}),
+        (
+            "speeds",
+            "speed setting 100000000000000000000 must be an integer from 1 to 1000",
+            "write e.g. `1: {main: 1.56}`",
+        ),
+    ),
+    "study negative friction": (
+        "study",
+        lambda d: d["parameters"].update(mu_d_BePa=[-0.5, -0.1]),
+        (
+            "parameters.mu_d_BePa",
+            "mu_d_BePa = -0.5 is outside its physical range [0, 2]",
+            "give dynamic friction belt/packaging from 0 to 2 (dimensionless)",
+        ),
+    ),
+    "study friction above 2": (
+        "study",
+        lambda d: d["parameters"].update(mu_d_BePa=[5, 9]),
+        (
+            "parameters.mu_d_BePa",
+            "mu_d_BePa = 5 is outside its physical range [0, 2]",
+            "give dynamic friction belt/packaging from 0 to 2 (dimensionless)",
+        ),
+    ),
+    "study negative modulus": (
+        "study",
+        lambda d: d["parameters"].update(E_Pa={"low": 0.5, "high": 100}),
+        (
+            "parameters.E_Pa",
+            "E_Pa = 0.5 N/mm^2 is outside its physical range [1, 100000] N/mm^2",
+            "give Young's modulus packaging from 1 to 100000 N/mm^2",
+        ),
+    ),
+    "study fixed negative stiffness": (
+        "study",
+        lambda d: d.update(fixed={"k_BePa": -5}),
+        (
+            "fixed.k_BePa",
+            "k_BePa = -5 N/mm is outside its physical range [1, 100000] N/mm",
+            "give contact stiffness belt/packaging from 1 to 100000 N/mm",
+        ),
+    ),
+    "study mujoco negative damping": (
+        "study",
+        lambda d: d.update(
+            simulator={"backend": "mujoco", "rig": "E3", "consignment": "KPBW"},
+            parameters={"zeta_BePa": [-1, 1]},
+        ),
+        (
+            "parameters.zeta_BePa",
+            "zeta_BePa = -1 is outside its physical range [0.01, 5]",
+            "give contact damping ratio belt/packaging from 0.01 to 5 (dimensionless)",
+        ),
+    ),
+    "screen range outside the physical one": (
+        "screen",
+        lambda d: d["parameters"].update(E_Pa=[-100, 100]),
+        (
+            "parameters.E_Pa",
+            "E_Pa = -100 N/mm^2 is outside its physical range [1, 100000] N/mm^2",
+            "give Young's modulus packaging from 1 to 100000 N/mm^2",
+        ),
+    ),
+    "screen fixed outside the physical range": (
+        "screen",
+        lambda d: d.update(fixed={"nu_Pa": 0.7}),
+        (
+            "fixed.nu_Pa",
+            "nu_Pa = 0.7 is outside its physical range [0, 0.49]",
+            "give Poisson's ratio packaging from 0 to 0.49 (dimensionless)",
+        ),
+    ),
+    "study bound of 400 digits": (
+        "study",
+        lambda d: d["parameters"].update(mu_d_BePa=[0.3, 10**400]),
+        (
+            "parameters.mu_d_BePa.high",
+            "expected a number, got <a whole number of about 401 digits>",
+            "write a plain number",
+        ),
+    ),
+    "rig region with a number for a key": (
+        "rig",
+        lambda d: d["regions"].append({"x": [0, 1], 0: [0, 1]}),
+        (
+            "regions[1]",
+            "unknown region keys ['0', 'x']",
+            "use either x and/or y (a box) or polygon",
+        ),
+    ),
+    "rig polygon point of 400 digits": (
+        "rig",
+        lambda d: d["regions"].append({"polygon": [[0, 0], [1, 0], [10**400, 1]]}),
+        (
+            "regions[1]",
+            "polygon must be a list of at least three [x, y] points in metres",
+            "write polygon: [[0, -0.4], [1, -0.4], [1, 0.4]]",
+        ),
+    ),
+    "tags distortion of 400 digits": (
+        "tags",
+        lambda d: d["camera"].update(distortion=[0, 0, 0, 10**400]),
+        ("camera.distortion", None, "write [k1, k2, p1, p2, k3] (OpenCV's order)"),
+    ),
+    "study mujoco unknown rig": (
+        "study",
+        lambda d: d.update(simulator={"backend": "mujoco", "rig": "E9", "consignment": "KPBW"}),
+        (
+            "simulator.rig",
+            "unknown rig 'E9'",
+            "use one of E1, E2a, E2b, E3 or the path of a .yaml file",
+        ),
+    ),
+    "screen mujoco unknown consignment": (
+        "screen",
+        lambda d: d.update(simulator={"backend": "mujoco", "rig": "E3", "consignment": "XX"}),
+        (
+            "simulator.consignment",
+            "unknown consignment type 'XX'",
+            "use one of BW, KP, KPBW, PB or the path of a .yaml file",
+        ),
+    ),
     "screen executor dask": (
         "screen",
         lambda d: d.update(executor={"kind": "dask"}),
@@ -232,6 +464,39 @@ CASES = {
         "twin",
         lambda d: d["cases"].append("E1-BW-1"),
         ("cases[1]", None, "write RIG/CONSIGNMENT/SETTING"),
+    ),
+    "twin unknown rig": (
+        "twin",
+        lambda d: d["cases"].append("E9/BW/1"),
+        (
+            "cases[1]",
+            "unknown rig 'E9'",
+            "use one of E1, E2a, E2b, E3 or the path of a .yaml file",
+        ),
+    ),
+    "twin speed setting the rig lacks": (
+        "twin",
+        lambda d: d.update(cases=["E1/BW/9"]),
+        ("cases[0]", "rig E1 has no speed setting 9", "use one of [1, 2, 3]"),
+    ),
+    "twin unknown consignment": (
+        "twin",
+        lambda d: d.update(cases=["E1/XX/1"]),
+        ("cases[0]", "unknown consignment type 'XX'", None),
+    ),
+    "twin truth outside the physical range": (
+        "twin",
+        lambda d: d["truth"]["BW"].update(mu_d_BePa=5),
+        (
+            "truth.BW.mu_d_BePa",
+            "mu_d_BePa = 5 is outside its physical range [0, 2]",
+            "give dynamic friction belt/packaging from 0 to 2 (dimensionless)",
+        ),
+    ),
+    "twin truth of another content kind": (
+        "twin",
+        lambda d: d["truth"]["BW"].update(E_Co=0.1),
+        ("truth.BW.E_Co", "parameter E_Co does not apply to rigid contents", None),
     ),
     "tags wrong type": (
         "tags",
@@ -309,7 +574,11 @@ CASES = {
     "rig speed setting 0": (
         "rig",
         lambda d: d["speeds"].update({0: {"main": 1}}),
-        ("speeds", "speed setting 0 must be an integer >= 1", "write e.g. `1: {main: 1.56}`"),
+        (
+            "speeds",
+            "speed setting 0 must be an integer from 1 to 1000",
+            "write e.g. `1: {main: 1.56}`",
+        ),
     ),
     "rig drive without a speed": (
         "rig",
@@ -407,7 +676,7 @@ CASES = {
 def test_a_refusal_names_the_file_the_key_and_the_fix(tmp_path, case):
     kind, edit, (where, message, fix) = CASES[case]
     got = _refused(tmp_path, kind, edit)
-    assert got[0] == where and got[2] == fix
+    assert got[0] == where and (fix is None or got[2] == fix)
     if message is not None:
         assert got[1] == message
 
@@ -510,3 +779,154 @@ def test_numbers_in_exponent_form_are_read_as_numbers(tmp_path):
     spec = tmp_path / "spec.yaml"
     spec.write_text("cases: [E3/PB/1]\nsettings: {tracking_sd: 1e-3}\n")
     assert load_twin_spec(spec).settings.tracking_sd == 1e-3
+
+
+# -- the YAML loader every file goes through (parcelfit.config.load_yaml) ----------------------
+
+
+def _alias_bomb(levels: int = 9) -> str:
+    """``parameters:`` holding nine nested anchors of nine ("billion laughs": 9^9 values)."""
+    lines = ['  a: &a ["lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol"]']
+    for prev, name in zip("abcdefgh", "bcdefghi"[: levels - 1], strict=False):
+        lines.append(f"  {name}: &{name} [{', '.join([f'*{prev}'] * 9)}]")
+    return "parameters:\n" + "\n".join(lines) + "\n"
+
+
+def test_an_alias_bomb_is_refused_at_once_naming_the_line(tmp_path):
+    import time
+
+    doc = {k: v for k, v in STUDY.items() if k != "parameters"}
+    path = tmp_path / "study.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False) + _alias_bomb())
+    t0 = time.perf_counter()
+    with pytest.raises(ParcelfitError) as err:
+        load_study(path)
+    assert time.perf_counter() - t0 < 1
+    e = err.value
+    # lines 11-19 hold a to i; the first alias in f (to e, of 66430 values) passes the limit
+    assert (e.file, e.where) == (str(path), "line 16, column 10")
+    assert e.message == "aliases (*name) expand the document to more than 100000 values"
+    assert e.fix == "write the values out, or repeat fewer of them through aliases"
+
+
+def test_a_few_aliases_are_fine_and_a_recursive_one_is_refused(tmp_path):
+    from parcelfit.config import load_yaml
+
+    path = tmp_path / "a.yaml"
+    path.write_text("r: &r [0.3, 0.6]\ns: *r\nbase: &b {x: 1}\nd: {<<: *b, y: 2}\n")
+    assert load_yaml(path) == {
+        "r": [0.3, 0.6],
+        "s": [0.3, 0.6],
+        "base": {"x": 1},
+        "d": {"x": 1, "y": 2},
+    }
+    path.write_text("a: &x [1, *x]\n")
+    with pytest.raises(ParcelfitError) as err:
+        load_yaml(path)
+    assert (err.value.where, err.value.message) == (
+        "line 1, column 11",
+        "the alias *x refers to a value that contains it",
+    )
+
+
+@pytest.mark.parametrize("kind", list(LOADERS))
+def test_a_key_written_twice_is_refused_naming_both_lines(tmp_path, kind):
+    load, base = LOADERS[kind]
+    path = _write(tmp_path, base)
+    text = path.read_text()
+    first = text.splitlines()[0]  # the first top-level key, written again at the end
+    path.write_text(text + first + "\n")
+    with pytest.raises(ParcelfitError) as err:
+        load(path)
+    key = first.split(":")[0]
+    n = len(text.splitlines()) + 1
+    assert err.value.file == str(path) and err.value.where == f"line {n}, column 1"
+    assert err.value.message == (
+        f"the key {key!r} is written twice (lines 1 and {n}); YAML would keep only the last value"
+    )
+    assert err.value.fix == "delete one of the two, or merge them"
+
+
+def test_a_key_written_twice_inside_a_section_and_as_equal_numbers(tmp_path):
+    from parcelfit.config import load_yaml
+
+    path = tmp_path / "a.yaml"
+    path.write_text("speeds:\n  1: {main: 1}\n  01: {main: 2}\n")
+    with pytest.raises(ParcelfitError, match=r"the key 1 is written twice \(lines 2 and 3\)"):
+        load_yaml(path)
+
+
+@pytest.mark.parametrize(
+    ("text", "where", "message"),
+    [
+        (
+            "a: " + "[" * 60 + "]" * 60 + "\n",
+            "line 1, column 53",  # the 50th bracket: the mapping is the first level
+            "values nested more than 50 levels deep",
+        ),
+        (
+            "d: 2024-13-45\n",
+            "line 1, column 4",
+            "cannot read the value '2024-13-45' (month must be in 1..12)",
+        ),
+        ("n: " + "9" * 5000 + "\n", "line 1, column 4", None),
+    ],
+)
+def test_values_pyyaml_cannot_construct_are_refused_with_the_line(tmp_path, text, where, message):
+    from parcelfit.config import load_yaml
+
+    path = tmp_path / "a.yaml"
+    path.write_text(text)
+    with pytest.raises(ParcelfitError) as err:
+        load_yaml(path)
+    assert err.value.where == where and err.value.file == str(path)
+    if message is not None:
+        assert err.value.message == message
+    assert len(str(err.value)) < 400
+
+
+def test_a_non_utf8_byte_is_named_by_its_offset_in_the_file(tmp_path):
+    from parcelfit.config import load_yaml
+
+    path = tmp_path / "a.yaml"
+    path.write_bytes(b"# " + b"x" * 20000 + b"\nname: caf\xe9\n")
+    with pytest.raises(ParcelfitError) as err:
+        load_yaml(path)
+    assert err.value.message == "not UTF-8 text (byte 20012: b'\\xe9')"
+
+
+def test_a_refusal_quotes_a_big_value_on_one_short_line(tmp_path):
+    """The message quotes at most 80 characters of what was written, on one line."""
+    big = [0.1 * k for k in range(5000)]
+    where, message, _ = _refused(tmp_path, "study", lambda d: d["parameters"].update(mu_d_BePa=big))
+    assert where == "parameters.mu_d_BePa"
+    assert (
+        message
+        == "expected [low, high] or {low, high, log}, got [0.0, 0.1, 0.2, 0.30000000000000004, 0.4, 0.5, ...]"
+    )
+    text = "many\nlines\u2028" * 1000
+    where, message, _ = _refused(tmp_path, "study", lambda d: d.update(budget=text))
+    assert (where, message) == (
+        "budget",
+        "expected a whole number, got 'many\\nlines\\u2028many\\nlines\\u20...any\\nlines\\u2028many\\nlines\\u2028'",
+    )
+
+
+def test_a_rendered_error_is_one_line_whatever_its_parts_hold():
+    err = ParcelfitError("a\nb" + "x" * 1000, file="f\u2028g.yaml", where="k\r", fix="do\u0085it")
+    assert str(err) == "f\\u2028g.yaml: k\\r: a\\nb" + "x" * 393 + "... Fix: do\\x85it"
+    assert len(str(err).splitlines()) == 1
+
+
+def test_every_catalogue_parameter_has_a_physical_range_holding_its_screening_ranges():
+    from parcelfit.sim.params import CATALOGUE
+
+    for p in CATALOGUE:
+        lo, hi = p.physical
+        assert 0 <= lo < hi, p.name  # no parameter of the catalogue is negative
+        if p.name.startswith(("k_", "E_", "t_", "m_")):
+            assert lo > 0, p.name  # stiffness, moduli, thickness, mass: positive
+        if p.name.startswith("mu_"):
+            assert hi <= 2, p.name
+        for r in p.ranges.values():
+            assert lo <= r.low < r.high <= hi and r.low <= r.default <= r.high, p.name

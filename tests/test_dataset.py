@@ -44,7 +44,7 @@ def test_loads_runs_grouped_by_test_case(make_dataset):
         (lambda d: d.update(test_cases=[]), r"test_cases must be a non-empty list"),
         (
             lambda d: d["test_cases"][0].update(speed_setting=0),
-            r"test_cases\[0\]\.speed_setting: .*integer >= 1",
+            r"test_cases\[0\]\.speed_setting: .*integer from 1 to 1000",
         ),
         (
             lambda d: d["test_cases"][0].update(rigg="E3"),

@@ -86,8 +86,48 @@ def test_missing_and_unreadable_files(tmp_path):
         read_trajectory(bad)
     broken = tmp_path / "b.parquet"
     broken.write_bytes(b"not parquet")
-    with pytest.raises(ParcelfitError, match="cannot read the file"):
+    with pytest.raises(ParcelfitError, match=r"b\.parquet: not a readable Parquet file \("):
         read_trajectory(broken)
+
+
+@pytest.mark.parametrize(
+    ("content", "message", "fix"),
+    [
+        (
+            b"",
+            "the file is empty (0 bytes)",
+            "write the run's samples into it (columns t,x,y,theta), or name the right file",
+        ),
+        (
+            b" \n\n",
+            "the file is empty (3 bytes, all white space)",
+            "write the run's samples into it (columns t,x,y,theta), or name the right file",
+        ),
+        (
+            b"t,x,y,theta\n0,0,0,0\n0.1,caf\xe9,0,0\n",
+            "not UTF-8 text (byte 27: b'\\xe9')",  # after 12 + 8 + 7 bytes
+            "save the file as UTF-8 (CSV UTF-8)",
+        ),
+        (
+            b't,x,y,theta\n0,0,0,"0\n',
+            "malformed CSV (Error tokenizing data. C error: EOF inside string starting at row 1)",
+            "write a header line t,x,y,theta and one line of numbers per sample",
+        ),
+    ],
+)
+def test_an_unreadable_run_file_says_what_is_wrong(tmp_path, content, message, fix):
+    path = tmp_path / "run.csv"
+    path.write_bytes(content)
+    with pytest.raises(ParcelfitError) as err:
+        read_trajectory(path)
+    assert (err.value.file, err.value.message, err.value.fix) == (str(path), message, fix)
+
+
+def test_a_csv_with_a_byte_order_mark_is_read(tmp_path):
+    path = tmp_path / "run.csv"
+    write_trajectory(line_trajectory(), path)
+    path.write_bytes(b"\xef\xbb\xbf" + path.read_bytes())  # as Excel's "CSV UTF-8" saves it
+    assert read_trajectory(path).t[0] == line_trajectory().t[0]
 
 
 def test_write_rejects_unknown_suffix(tmp_path):

@@ -416,6 +416,28 @@ def test_no_unicode_line_break_can_add_lines_to_a_solver_parameter_file(tmp_path
     assert not list(tmp_path.glob("*/params.txt"))  # nothing was written, nothing ran
 
 
+@pytest.mark.parametrize(
+    "char", ["\u2028", "\u2029", "\u0085", "\u200b", "\u200f", "\u202e", "\u2066", "\ufeff"]
+)
+def test_a_unicode_separator_or_format_character_in_a_name_is_refused(tmp_path, char):
+    """U+2028 passed the control-character check and became a line of the parameter file."""
+    from parcelfit.runs import TestCase
+    from parcelfit.sim import defaults_si
+    from parcelfit.sim.external import ExternalSimulator, load_external_solver
+
+    solver = Path(__file__).parent / "data" / "external" / "solver.yaml"
+    sim = ExternalSimulator(load_external_solver(solver), workroot=tmp_path)
+    case = TestCase(f"E1{char}mu_d_BePa = 9", "KPBW", 1)
+    with pytest.raises(ParcelfitError) as err:
+        sim.run(defaults_si("rigid"), case)
+    assert err.value.message == (
+        f"the value of ${{rig}} ({f'E1{char}mu_d_BePa = 9'!r}) holds a line break or another "
+        f"control or invisible format character (U+{ord(char):04X}), which would change the "
+        "parameter template"
+    )
+    assert not list(tmp_path.glob("*/params.txt"))  # nothing was written, nothing ran
+
+
 @pytest.mark.slow
 def test_a_validation_killed_midway_is_run_again_on_resume(finished, tmp_path):
     study, out = _copy(finished, tmp_path)
@@ -871,10 +893,12 @@ def test_losing_the_dask_scheduler_stops_cleanly_and_the_study_resumes(tmp_path)
 # -- bad input: one clear line and exit status 2 ------------------------------------------------
 
 
-def _dataset(tmp_path, edit=None, scale_t=1.0):
+def _dataset(tmp_path, edit=None, scale_t=1.0, edit_run=None):
     from .fake_sim import write_reference_dataset
 
     write_reference_dataset(tmp_path / "data", n_runs=3)
+    if edit_run is not None:  # the first run file
+        edit_run(tmp_path / "data" / "runs" / "R-P-1-0.csv")
     if scale_t != 1.0:  # times written in milliseconds
         for f in (tmp_path / "data" / "runs").glob("*.csv"):
             text = f.read_text().splitlines()
@@ -916,6 +940,12 @@ def _screen(tmp_path, **change):
     return ["screen", str(tmp_path / "screen.yaml"), "--out", str(tmp_path / "o")]
 
 
+def _twin_spec(tmp_path, **doc):
+    path = tmp_path / "twin.yaml"
+    path.write_text(yaml.safe_dump({"cases": ["E1/BW/1"], **doc}))
+    return ["synth", str(path), "--out", str(tmp_path / "o")]
+
+
 def _not_utf8(tmp_path):
     (tmp_path / "ds").mkdir()
     (tmp_path / "ds" / "dataset.yaml").write_bytes("name: caf\u00e9\n".encode("latin-1"))
@@ -932,6 +962,21 @@ def _report_out_is_a_folder(tmp_path):
     Store(tmp_path / "study" / "study.sqlite").close()
     (tmp_path / "folder").mkdir()
     return ["report", str(tmp_path / "study"), "--out", str(tmp_path / "folder")]
+
+
+def _study_with_text(tmp_path, text, drop=()):
+    """A study file whose keys ``drop`` are replaced by the YAML ``text`` as written."""
+    path = write_study(tmp_path)
+    doc = {k: v for k, v in yaml.safe_load(path.read_text()).items() if k not in drop}
+    path.write_text(yaml.safe_dump(doc) + text)
+    return ["calibrate", str(path), "--out", str(tmp_path / "o")]
+
+
+def _alias_bomb(tmp_path):
+    lines = ["parameters:", "  a: &a [lol, lol, lol, lol, lol, lol, lol, lol, lol]"]
+    for prev, name in zip("abcdefgh", "bcdefghi", strict=True):
+        lines.append(f"  {name}: &{name} [{', '.join([f'*{prev}'] * 9)}]")
+    return _study_with_text(tmp_path, "\n".join(lines) + "\n", drop=("parameters",))
 
 
 def _log_false(tmp_path):
@@ -1036,6 +1081,94 @@ BAD_INPUTS = {
     "screen without a name": (
         lambda p: _screen(p, name=["x"]),
         r"name: expected a non-empty text",
+    ),
+    "alias bomb": (
+        _alias_bomb,
+        r"study\.yaml: line \d+, column \d+: aliases \(\*name\) expand the document to more "
+        r"than 100000 values Fix: write the values out",
+    ),
+    "key written twice": (
+        lambda p: _study_with_text(p, "budget: 12\n"),
+        r"study\.yaml: line 30, column 1: the key 'budget' is written twice \(lines 2 and 30\)",
+    ),
+    "initial 1e9": (
+        lambda p: _study(p, initial=1e9),
+        r"study\.yaml: initial: 1000000000 is out of range Fix: use a whole number in \[1, 10000\]",
+    ),
+    "budget below initial": (
+        lambda p: _study(p, initial=8, budget=4),
+        r"study\.yaml: budget: budget 4 is below initial 8: .* Fix: raise budget to 8 or more",
+    ),
+    "calibrate --workers 100000": (
+        lambda p: [*_study(p), "--workers", "100000"],
+        r"^error: --workers 100000 is more than 256 Fix: use --workers 256 or less$",
+    ),
+    "simulate --repeat 1000000": (
+        lambda p: ["simulate", "--repeat", "1000000", "--out", str(p / "o" / "r.csv")],
+        r"^error: --repeat 1000000 is more than 1000 Fix: use --repeat 1000 or less$",
+    ),
+    "precision --placements 5000": (
+        lambda p: ["precision", _study(p)[1], "--placements", "5000", "--out", str(p / "o")],
+        r"5000 placements per case and parameter end, more than 1000",
+    ),
+    "precision --candidate with a superscript setting": (
+        lambda p: ["precision", _study(p)[1], "--candidate", "R/P/\u00b2", "--out", str(p / "o")],
+        r"cannot read test case 'R/P/\u00b2'",
+    ),
+    "dataset speed setting 1e30": (
+        lambda p: _dataset(p, lambda d: d["test_cases"][0].update(speed_setting=10**30)),
+        r"test_cases\[0\]\.speed_setting: speed_setting must be an integer from 1 to 1000, got "
+        r"1000000000000000000000000000000 Fix",
+    ),
+    "mujoco study with negative friction": (
+        lambda p: _study(
+            p,
+            simulator={"backend": "mujoco", "rig": "E3", "consignment": "KPBW"},
+            parameters={"mu_d_BePa": [-0.5, -0.1]},
+            reference={"dataset": "data", "speed_setting": 1},
+        ),
+        r"study\.yaml: parameters\.mu_d_BePa: mu_d_BePa = -0\.5 is outside its physical range "
+        r"\[0, 2\] Fix",
+    ),
+    "simulate --set a negative friction": (
+        lambda p: ["simulate", "--set", "mu_d_BePa=-1", "--out", str(p / "o" / "r.csv")],
+        r"^error: --set: mu_d_BePa = -1 is outside its physical range \[0, 2\] Fix: give "
+        r"dynamic friction belt/packaging from 0 to 2 \(dimensionless\)$",
+    ),
+    "simulate --set nan": (
+        lambda p: ["simulate", "--set", "mu_d_BePa=nan", "--out", str(p / "o" / "r.csv")],
+        r"^error: --set: 'mu_d_BePa=nan' is not a finite number",
+    ),
+    "precision --at outside the physical range": (
+        lambda p: ["precision", _study(p)[1], "--at", "mu_d_BePa=3", "--out", str(p / "o")],
+        r"^error: --at mu_d_BePa: mu_d_BePa = 3 is outside its physical range \[0, 2\]",
+    ),
+    "validation setting the dataset lacks": (
+        lambda p: _study(p, validation={"speed_setting": 7}),
+        r"study\.yaml: validation\.speed_setting: the dataset has no runs of test case R/P/7 "
+        r"\(dataset .*data\) Fix: name a test case the dataset holds",
+    ),
+    "transfer case the dataset lacks": (
+        lambda p: _study(p, transfer=[{"rig": "Q", "consignment": "P", "speed_setting": 1}]),
+        r"study\.yaml: transfer\[0\]: the dataset has no runs of test case Q/P/1",
+    ),
+    "twin spec with an unknown rig": (
+        lambda p: _twin_spec(p, cases=["E9/BW/1"]),
+        r"twin\.yaml: cases\[0\]: unknown rig 'E9' Fix: use one of E1, E2a, E2b, E3",
+    ),
+    "empty run file": (
+        lambda p: _dataset(p, edit_run=lambda f: f.write_bytes(b"")),
+        r"R-P-1-0\.csv: the file is empty \(0 bytes\) Fix: write the run's samples into it",
+    ),
+    "run file not UTF-8": (
+        lambda p: _dataset(
+            p, edit_run=lambda f: f.write_bytes(f.read_bytes() + b"0,caf\xe9,0,0\n")
+        ),
+        r"R-P-1-0\.csv: not UTF-8 text \(byte \d+: b'\\xe9'\) Fix: save the file as UTF-8",
+    ),
+    "python factory that cannot be imported": (
+        lambda p: _study_sim(p, factory="nowhere.sim:make"),
+        r"study\.yaml: simulator: cannot import the simulator factory 'nowhere\.sim:make'",
     ),
     "screen unknown soft_content": (
         lambda p: _screen(p, soft_content=["E_Cox"]),

@@ -57,7 +57,7 @@ def _e3_doc():
         ),
         (
             lambda d: d["speeds"].update({0: {"main": 1}}),
-            r"speed setting 0 must be an integer >= 1",
+            r"speed setting 0 must be an integer from 1 to 1000",
         ),
         (
             lambda d: d.update(step_refinement=1.5),

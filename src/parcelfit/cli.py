@@ -272,6 +272,7 @@ def demo(
         raise ParcelfitError("--quick and --full exclude each other", fix="choose one")
     _check_executor(executor, ("serial", "local"))
     _resumes()
+    _workers_at_most(workers)
     t0 = time.perf_counter()
     d = Demo(
         out,
@@ -320,6 +321,20 @@ def demo(
     minutes = (time.perf_counter() - t0) / 60
     console.print(f"[bold green]report:[/] {escape(str(report.resolve()))}")
     console.print(f"[bold]verdict:[/] {d.verdict()} ({minutes:.1f} min)")
+
+
+def _at_most(value: int | None, option: str, bound: int) -> None:
+    """A clear error for a count option (``--workers``, ``--repeat``, ...) above ``bound``."""
+    if value is not None and value > bound:
+        raise ParcelfitError(
+            f"{option} {value} is more than {bound}", fix=f"use {option} {bound} or less"
+        )
+
+
+def _workers_at_most(workers: int | None) -> None:
+    from parcelfit.sim.executors import MAX_WORKERS
+
+    _at_most(workers, "--workers", MAX_WORKERS)
 
 
 def _check_executor(kind: str | None, kinds: tuple[str, ...]) -> None:
@@ -388,6 +403,7 @@ def synth(
     _check_executor(executor, ("serial", "local"))
     _check_paths(out)
     _resumes()
+    _workers_at_most(workers)
     tw = load_twin_spec(spec)
     total = len(tw.cases) * tw.settings.runs
     serial = executor == "serial" or (executor is None and workers <= 1)
@@ -551,8 +567,12 @@ def camera_calibrate(
     from parcelfit.tracking.tagmap import save_camera
 
     cols, sep, rows = board.lower().partition("x")
-    if not sep or not cols.isdigit() or not rows.isdigit():
-        raise ParcelfitError(f"cannot read --board {board!r}", fix="write COLUMNSxROWS, e.g. 9x6")
+    if not sep or not all(n.isascii() and n.isdigit() and 2 <= int(n) <= 100 for n in (cols, rows)):
+        raise ParcelfitError(
+            f"cannot read --board {board!r}",
+            fix="write COLUMNSxROWS with 2 to 100 inner corners each, e.g. 9x6",
+        )
+    _at_most(max_frames, "--max-frames", 1000)
     if square <= 0:
         raise ParcelfitError(f"--square must be positive, got {square}", fix="give it in mm")
     with _frame_bar() as bar:
@@ -678,14 +698,21 @@ def simulate(
     With --repeat N, simulate N seeded placements and write each run (OUT with -s<seed> before
     its suffix), a summary table (OUT with -ensemble.csv) and print the ensemble statistics."""
     from parcelfit.runs import TestCase, write_trajectory
+    from parcelfit.sim.ensemble import MAX_PLACEMENTS
     from parcelfit.sim.factory import SimulatorConfig, make_simulator
     from parcelfit.sim.mujoco import MujocoSimulator, load_consignment, load_rig
     from parcelfit.sim.params import parse_assignments
 
+    _at_most(repeat, "--repeat", MAX_PLACEMENTS)
+    _at_most(seed, "--seed", 2**32 - 1)
+    _workers_at_most(workers)
     _check_paths(out, video)  # before a simulation of minutes
     rig_obj = load_rig(rig)
     cons = load_consignment(consignment)
-    params = cons.parameter_values(user_values=parse_assignments(set_ or []))
+    try:
+        params = cons.parameter_values(user_values=parse_assignments(set_ or []))
+    except ParcelfitError as exc:  # a value given with --set
+        raise ParcelfitError(exc.message, where="--set", fix=exc.fix) from None
     config = SimulatorConfig(
         "mujoco",
         rig=rig,
@@ -958,6 +985,7 @@ def calibrate(
     from parcelfit.study.studyfile import load_study
 
     _check_executor(executor, ("serial", "local", "dask"))
+    _workers_at_most(workers)
     study = load_study(study_file)
     folder = out or study_file.parent / study_file.stem
     _resumes(_stored(folder / "study.sqlite", "fit", "evaluations"))
@@ -983,7 +1011,9 @@ def calibrate(
 
 def _calibrate_live(run: Callable[[ProgressCallback], Any], name: str, folder: Path) -> Any:
     """Run a calibration (``run(progress)``) with a live status table; then print how it
-    stopped, the recommended parameters and where its figures are."""
+    stopped, the recommended parameters and where its figures are. Until its first event (while
+    the data are read and the reference runs chosen) a spinner stands in for the table, so that
+    an error found then (a test case the dataset lacks, ...) is the only line printed."""
     from rich.live import Live
 
     from parcelfit.study.calibration import STORE_FILE, study_status
@@ -1001,9 +1031,7 @@ def _calibrate_live(run: Callable[[ProgressCallback], Any], name: str, folder: P
         )
         table.add_column(style="bold")
         table.add_column()
-        if p is None:
-            table.add_row("status", "starting (reference runs, workers)")
-            return table
+        assert p is not None  # the table shows from the first event on
         verdict = {None: "not yet", True: "[green]passed[/]", False: "[red]failed[/]"}[
             p.last_validation
         ]
@@ -1014,22 +1042,30 @@ def _calibrate_live(run: Callable[[ProgressCallback], Any], name: str, folder: P
         table.add_row("last event", Text(p.message))
         return table
 
-    live = Live(render(), console=console, refresh_per_second=4, transient=False)
+    starting = console.status(Text(f"calibration {name}: starting (reference runs, workers)"))
+    starting.start()
+    lives: list[Live] = []
+
+    def update(p: ProgressEvent) -> None:
+        state["p"] = p
+        if not lives:
+            starting.stop()
+            lives.append(Live(render(), console=console, refresh_per_second=4, transient=False))
+            lives[0].start()
+        lives[0].update(render())
+        if not console.is_terminal:  # a log or CI: the table shows only at the end
+            best = "-" if p.best_cost is None else f"{p.best_cost:.4g}"
+            console.print(
+                Text(f"{p.message} ({p.done}/{p.total} evaluations, best cost {best})"),
+                highlight=False,
+            )
+
     try:
-        with live:
-
-            def update(p: ProgressEvent) -> None:
-                state["p"] = p
-                live.update(render())
-                if not console.is_terminal:  # a log or CI: the table shows only at the end
-                    best = "-" if p.best_cost is None else f"{p.best_cost:.4g}"
-                    console.print(
-                        Text(f"{p.message} ({p.done}/{p.total} evaluations, best cost {best})"),
-                        highlight=False,
-                    )
-
-            result = run(update)
+        result = run(update)
     finally:
+        starting.stop()
+        for live in lives:
+            live.stop()
         # the display stopped; outside a terminal its last line is left open: end it, so that
         # what follows (an error too) starts on a line of its own
         console.print()
@@ -1127,6 +1163,7 @@ def screen(
     from parcelfit.study.screening import load_screen, run_screen
 
     _check_executor(executor, ("serial", "local"))
+    _workers_at_most(workers)
     spec = load_screen(screen_file)
     folder = out or screen_file.parent / screen_file.stem
     _resumes(_stored(folder / "screen.sqlite", "screen", "simulations"))
@@ -1208,6 +1245,7 @@ def precision(
     from parcelfit.study.precision_check import TABLE_FILE, command_line, run_precision_check
 
     _check_executor(executor, ("serial", "local"))
+    _workers_at_most(workers)
     folder = out or study_file.parent / f"{study_file.stem}-precision"
 
     def stored() -> str:

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import sys
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,7 +33,7 @@ from pydantic import BaseModel, BeforeValidator, ConfigDict, GetCoreSchemaHandle
 from pydantic import ValidationError as _ValidationError
 from pydantic_core import core_schema
 
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, shown
 
 M = TypeVar("M", bound="FileModel")
 
@@ -45,6 +46,8 @@ def suggest(name: str, known: Iterable[str]) -> str | None:
     for k in known:
         if k.lower() == str(name).lower():
             return k
+    if len(str(name)) > 100:  # no name is this long; difflib would take long on it
+        return None
     lowered = {k.lower(): k for k in known}
     close = difflib.get_close_matches(str(name).lower(), list(lowered), n=1)
     return lowered[close[0]] if close else None
@@ -57,7 +60,7 @@ def check_keys(data: Mapping[Any, Any], allowed: Iterable[str], *, fix: str | No
         if key not in allowed:
             close = suggest(str(key), allowed)
             hint = f"did you mean {close!r}?" if close else f"known keys: {', '.join(allowed)}"
-            raise ParcelfitError(f"unknown key {key!r}", fix=fix or hint)
+            raise ParcelfitError(f"unknown key {shown(key)}", fix=fix or hint)
 
 
 def require_mapping(data: Any) -> Mapping[Any, Any]:
@@ -67,6 +70,16 @@ def require_mapping(data: Any) -> Mapping[Any, Any]:
             f"expected a mapping of keys to values, got {type(data).__name__}", fix=_MAPPING_FIX
         )
     return data
+
+
+def is_finite_number(value: Any) -> bool:
+    """``value`` is an int or float (never true/false) that a float holds, finite; a YAML whole
+    number of 400 digits is not (``math.isfinite`` would raise OverflowError on it)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return False
+    if isinstance(value, int):
+        return abs(value) <= sys.float_info.max
+    return math.isfinite(value)
 
 
 class FileModel(BaseModel):
@@ -122,13 +135,9 @@ class Number(_Plain):
     def check(self, value: Any) -> float | None:
         if value is None and self.nullable:
             return None
-        if (
-            isinstance(value, bool)
-            or not isinstance(value, int | float)
-            or not math.isfinite(value)
-        ):
+        if not is_finite_number(value):
             raise ParcelfitError(
-                f"expected a number{f' in {self.unit}' if self.unit else ''}, got {value!r}",
+                f"expected a number{f' in {self.unit}' if self.unit else ''}, got {shown(value)}",
                 fix="write a plain number" + (" or null" if self.nullable else ""),
             )
         if (self.ge is not None and value < self.ge) or (self.le is not None and value > self.le):
@@ -155,11 +164,13 @@ class Whole(_Plain):
             value = int(value)
         if isinstance(value, bool) or not isinstance(value, int):
             raise ParcelfitError(
-                f"expected a whole number, got {value!r}", fix="write a whole number such as 4"
+                f"expected a whole number, got {shown(value)}", fix="write a whole number such as 4"
             )
         if (self.ge is not None and value < self.ge) or (self.le is not None and value > self.le):
             bounds = f"at least {self.ge}" if self.le is None else f"in [{self.ge}, {self.le}]"
-            raise ParcelfitError(f"{value} is out of range", fix=f"use a whole number {bounds}")
+            raise ParcelfitError(
+                f"{shown(value)} is out of range", fix=f"use a whole number {bounds}"
+            )
         return value
 
 
@@ -170,7 +181,8 @@ class Flag(_Plain):
     def check(self, value: Any) -> bool:
         if not isinstance(value, bool):
             raise ParcelfitError(
-                f"expected true or false, got {value!r}", fix="write true or false without quotes"
+                f"expected true or false, got {shown(value)}",
+                fix="write true or false without quotes",
             )
         return value
 
@@ -188,7 +200,9 @@ class Text(_Plain):
         if isinstance(value, int) and not isinstance(value, bool):
             value = str(value)
         if not isinstance(value, str) or not value.strip():
-            raise ParcelfitError(f"expected a non-empty text, got {value!r}", fix="write a name")
+            raise ParcelfitError(
+                f"expected a non-empty text, got {shown(value)}", fix="write a name"
+            )
         return value.strip()
 
 
@@ -203,7 +217,7 @@ class Choice(_Plain):
         text = Text().check(value)
         if text not in self.choices:
             raise ParcelfitError(
-                f"unknown {self.what} {text!r}", fix=f"use one of {', '.join(self.choices)}"
+                f"unknown {self.what} {shown(text)}", fix=f"use one of {', '.join(self.choices)}"
             )
         return str(text)
 
@@ -224,13 +238,10 @@ class Pair(_Plain):
         ok = (
             isinstance(value, list | tuple)
             and len(value) == 2
-            and all(
-                isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
-                for v in value
-            )
+            and all(is_finite_number(v) for v in value)
         )
         if not ok or (self.increasing and not value[0] < value[1]):
-            raise ParcelfitError(f"expected {self.what}, got {value!r}", fix=self.fix)
+            raise ParcelfitError(f"expected {self.what}, got {shown(value)}", fix=self.fix)
         return float(value[0]), float(value[1])
 
 
@@ -291,7 +302,7 @@ def to_parcelfit_error(
         )
     if kind in ("list_type", "tuple_type"):
         return ParcelfitError(
-            f"expected a list, got {err['input']!r}",
+            f"expected a list, got {shown(err['input'])}",
             file=file,
             where=_place(loc, data) or "top level",
             fix="write it as a YAML list [a, b, ...]",
@@ -332,6 +343,7 @@ __all__ = [
     "Text",
     "Whole",
     "check_keys",
+    "is_finite_number",
     "keys_in",
     "or_default",
     "parse",

@@ -397,10 +397,14 @@ def _cases(value: Any) -> Any:
     return value
 
 
+# the most runs a twin dataset makes of one test case (the bundled twin has 10)
+MAX_TWIN_RUNS = 1000
+
+
 class TwinSettingsSection(FileModel):
     """``settings``: `TwinSettings` as written (each >= 0; ``runs`` a whole number >= 1)."""
 
-    runs: Annotated[int, Whole(ge=1)] = TwinSettings.runs
+    runs: Annotated[int, Whole(ge=1, le=MAX_TWIN_RUNS)] = TwinSettings.runs
     friction_cv: Annotated[float, Number(ge=0)] = TwinSettings.friction_cv
     stiffness_cv: Annotated[float, Number(ge=0)] = TwinSettings.stiffness_cv
     placement_sd: Annotated[float | None, Number(unit="m", ge=0)] = TwinSettings.placement_sd
@@ -438,7 +442,7 @@ class TwinSpecFile(FileModel):
     """A twin specification file as written (true parameters in catalogue units)."""
 
     name: Annotated[str, Text()] = "twin"
-    seed: Annotated[int, Whole(ge=0)] = 0
+    seed: Annotated[int, Whole(ge=0, le=2**32 - 1)] = 0
     cases: Annotated[list[Annotated[TestCase, PlainValidator(_test_case)]], BeforeValidator(_cases)]
     truth: Annotated[dict[Any, _Truth], or_default(dict)] = Field(default_factory=dict)
     settings: Annotated[TwinSettingsSection, or_default(dict)] = Field(
@@ -447,10 +451,27 @@ class TwinSpecFile(FileModel):
 
 
 def load_twin_spec(path: str | Path) -> TwinSpec:
-    """Read a twin specification YAML (keys: name, seed, cases, truth, settings) and check it;
-    the truth stays in catalogue units (`make_twin_dataset` converts it)."""
+    """Read a twin specification YAML (keys: name, seed, cases, truth, settings) and check it:
+    every case's rig (with its speed setting) and consignment type are bundled, every true value
+    applies to its consignment's contents and lies in its physical range; each error names the
+    file and the key. The truth stays in catalogue units (`make_twin_dataset` converts it)."""
     f = parse(TwinSpecFile, load_yaml(path), file=path)
     truth = {str(cons): dict(values) for cons, values in f.truth.items()}
+    sim = MujocoSimulator()
+    for i, case in enumerate(f.cases):
+        try:
+            sim.rig(case.rig).drive_speeds(case.speed_setting)
+            sim.consignment(case.consignment)
+        except ParcelfitError as exc:
+            raise ParcelfitError(exc.message, file=path, where=f"cases[{i}]", fix=exc.fix) from None
+    for cons, values in truth.items():
+        for name, value in values.items():
+            try:
+                sim.consignment(cons).parameter_values(user_values={name: value})
+            except ParcelfitError as exc:
+                raise ParcelfitError(
+                    exc.message, file=path, where=f"truth.{cons}.{name}", fix=exc.fix
+                ) from None
     return TwinSpec(f.name, tuple(f.cases), truth, TwinSettings(**f.settings.model_dump()), f.seed)
 
 

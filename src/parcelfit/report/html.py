@@ -55,12 +55,12 @@ from pathlib import Path
 from typing import Any
 
 import jinja2
-import yaml
 from markupsafe import Markup
 from matplotlib.figure import Figure
 
 from parcelfit import __version__
 from parcelfit.atomic import write_text_atomic
+from parcelfit.config import load_yaml
 from parcelfit.errors import ParcelfitError
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.runs import Dataset, load_dataset
@@ -257,7 +257,7 @@ def _load_truth(dataset_dir: Path, consignment: str) -> dict[str, float]:
     path = dataset_dir / "truth.yaml"
     if not path.is_file():
         return {}
-    doc = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+    doc = load_yaml(path) or {}
     return {k: float(v) for k, v in (doc.get("truth", {}).get(consignment) or {}).items()}
 
 
@@ -367,7 +367,7 @@ def _screen_section(page: _Page, screen: Path | None) -> None:
         if isinstance(sel_file, Refused):
             data["refused"].append(str(sel_file))
         elif sel_file is not None:
-            doc = yaml.safe_load(sel_file.read_text(encoding="utf-8")) or {}
+            doc = load_yaml(sel_file) or {}
             data["selected"] = ", ".join(map(str, doc.get("selected") or [])) or "none"
             data["reasons"] = [(str(k), str(v)) for k, v in (doc.get("reasons") or {}).items()]
         for png in sorted(screen.glob("stage*-pareto-*.png")):

@@ -33,10 +33,10 @@ import yaml
 
 from parcelfit.atomic import write_text_atomic
 from parcelfit.config import check_keys, get_number, get_str, load_yaml, require_mapping
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, shown
 from parcelfit.runs.io import read_trajectory, write_trajectory
 from parcelfit.runs.regions import Box, Polygon, Region, parse_region
-from parcelfit.runs.run import Run, TestCase
+from parcelfit.runs.run import MAX_SPEED_SETTING, Run, TestCase
 
 DATASET_FILE = "dataset.yaml"
 MAX_TRANSIT_TIME_S = 600.0  # a parcel crosses a test rig in seconds; more is a unit mistake
@@ -144,9 +144,14 @@ def load_dataset(folder: str | Path) -> Dataset:
             where=where,
         )
         setting = entry["speed_setting"]
-        if isinstance(setting, bool) or not isinstance(setting, int) or setting < 1:
+        if (
+            isinstance(setting, bool)
+            or not isinstance(setting, int)
+            or not 1 <= setting <= MAX_SPEED_SETTING
+        ):
             raise ParcelfitError(
-                f"speed_setting must be an integer >= 1, got {setting!r}",
+                f"speed_setting must be an integer from 1 to {MAX_SPEED_SETTING}, "
+                f"got {shown(setting)}",
                 file=file,
                 where=f"{where}.speed_setting",
                 fix="write the rig's speed setting number, e.g. speed_setting: 1",
@@ -194,7 +199,7 @@ def load_dataset(folder: str | Path) -> Dataset:
             run_id = get_str(run_doc, "id", file=file, where=rwhere)
             if run_id in seen_ids:
                 raise ParcelfitError(
-                    f"duplicate run id {run_id!r} (also at {seen_ids[run_id]})",
+                    f"duplicate run id {shown(run_id)} (also at {seen_ids[run_id]})",
                     file=file,
                     where=f"{rwhere}.id",
                     fix="give every run its own id",
@@ -219,14 +224,14 @@ def load_dataset(folder: str | Path) -> Dataset:
             traj_path = _run_file(root, get_str(run_doc, "file", file=file, where=rwhere))
             if traj_path is None:
                 raise ParcelfitError(
-                    f"run file {run_doc['file']!r} lies outside the dataset folder",
+                    f"run file {shown(run_doc['file'])} lies outside the dataset folder",
                     file=file,
                     where=f"{rwhere}.file",
                     fix="copy the file into the dataset folder and give its path relative to it",
                 )
             if traj_path in seen_files:
                 raise ParcelfitError(
-                    f"run file {run_doc['file']!r} is also the file of {seen_files[traj_path]}",
+                    f"run file {shown(run_doc['file'])} is also the file of {seen_files[traj_path]}",
                     file=file,
                     where=f"{rwhere}.file",
                     fix="give every run its own trajectory file",
@@ -234,7 +239,7 @@ def load_dataset(folder: str | Path) -> Dataset:
             seen_files[traj_path] = rwhere
             if not traj_path.is_file():
                 raise ParcelfitError(
-                    f"trajectory file {traj_path.name!r} not found",
+                    f"trajectory file {shown(traj_path.name)} not found",
                     file=file,
                     where=f"{rwhere}.file",
                     fix="give the path relative to the dataset folder",

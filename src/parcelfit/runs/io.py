@@ -9,12 +9,13 @@ none). Nothing else.
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, one_line, shown
 from parcelfit.runs.trajectory import (
     COLUMNS,
     MIN_SAMPLES,
@@ -38,20 +39,56 @@ MAX_HEADING_RAD = 4 * np.pi
 
 
 def read_table(path: Path) -> pd.DataFrame:
-    """Read a CSV or Parquet file into a table, with a clear error if it cannot be read."""
+    """Read a CSV (UTF-8, a byte-order mark allowed) or Parquet file into a table; a file that
+    cannot be read says why (missing, empty, not UTF-8 at byte N, malformed CSV, not Parquet)
+    and the fix."""
     path = Path(path)
     if not path.is_file():
         raise ParcelfitError("file not found", file=path, fix="check the path in dataset.yaml")
+    suffix = path.suffix.lower()
+    if suffix not in SUFFIXES:
+        raise ParcelfitError(
+            f"unknown file type {path.suffix!r}", file=path, fix="use a .csv or .parquet file"
+        )
     try:
-        if path.suffix.lower() == ".csv":
-            return pd.read_csv(path)
-        if path.suffix.lower() == ".parquet":
-            return pd.read_parquet(path)
-    except Exception as exc:
-        raise ParcelfitError(f"cannot read the file ({exc})", file=path) from exc
-    raise ParcelfitError(
-        f"unknown file type {path.suffix!r}", file=path, fix="use a .csv or .parquet file"
-    )
+        data = path.read_bytes()
+    except OSError as exc:
+        raise ParcelfitError(
+            f"cannot read the file ({exc.strerror or exc})",
+            file=path,
+            fix="check that it is a readable file",
+        ) from None
+    if not data.strip():
+        raise ParcelfitError(
+            f"the file is empty ({len(data)} bytes{', all white space' if data else ''})",
+            file=path,
+            fix="write the run's samples into it (columns t,x,y,theta), or name the right file",
+        )
+    if suffix == ".parquet":
+        try:
+            return pd.read_parquet(io.BytesIO(data))
+        except Exception as exc:  # pyarrow's errors have no common base class
+            raise ParcelfitError(
+                f"not a readable Parquet file ({one_line(str(exc))[:120]})",
+                file=path,
+                fix="write the run again as .parquet (parcelfit does), or as a .csv file",
+            ) from None
+    try:
+        text = data.decode("utf-8").removeprefix("\ufeff")
+    except UnicodeDecodeError as exc:
+        raise ParcelfitError(
+            f"not UTF-8 text (byte {exc.start}: {data[exc.start : exc.start + 1]!r})",
+            file=path,
+            fix="save the file as UTF-8 (CSV UTF-8)",
+        ) from None
+    try:
+        return pd.read_csv(io.StringIO(text))
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, ValueError) as exc:
+        raise ParcelfitError(
+            f"malformed CSV ({one_line(str(exc).strip())[:120]})",
+            file=path,
+            fix="write a header line t,x,y,theta and one line of numbers per sample",
+        ) from None
 
 
 def check_trajectory_table(frame: pd.DataFrame, file: str | Path) -> Trajectory:
@@ -87,7 +124,7 @@ def check_trajectory_table(frame: pd.DataFrame, file: str | Path) -> Trajectory:
         bad = np.flatnonzero(~np.isfinite(a))
         if bad.size:
             raise ParcelfitError(
-                f"column {c!r} has a missing, non-numeric or infinite value ({frame[c].iloc[bad[0]]!r})",
+                f"column {c!r} has a missing, non-numeric or infinite value ({shown(frame[c].iloc[bad[0]])})",
                 file=file,
                 where=f"data row {bad[0] + 1}",
                 fix="remove or interpolate that sample",
@@ -142,7 +179,7 @@ def check_trajectory_table(frame: pd.DataFrame, file: str | Path) -> Trajectory:
         bad = np.flatnonzero(~np.isin(text, SOURCES))
         if bad.size:
             raise ParcelfitError(
-                f"column 'source' has {raw.iloc[bad[0]]!r}",
+                f"column 'source' has {shown(raw.iloc[bad[0]])}",
                 file=file,
                 where=f"data row {bad[0] + 1}",
                 fix=f"write {', '.join(SOURCES[:-1])} or {SOURCES[-1]} in every row, or drop the column",
@@ -156,7 +193,7 @@ def check_trajectory_table(frame: pd.DataFrame, file: str | Path) -> Trajectory:
         bad = np.flatnonzero((np.isnan(a) & frame[c].notna().to_numpy()) | np.isinf(a) | (a < 0))
         if bad.size:
             raise ParcelfitError(
-                f"column {c!r} has {frame[c].iloc[bad[0]]!r}",
+                f"column {c!r} has {shown(frame[c].iloc[bad[0]])}",
                 file=file,
                 where=f"data row {bad[0] + 1}",
                 fix="a standard deviation is a number >= 0 (SI units), or empty where there is none",

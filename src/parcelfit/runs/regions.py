@@ -21,8 +21,9 @@ import numpy as np
 from matplotlib.path import Path as MplPath
 
 from parcelfit.config import get_pair
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, shown
 from parcelfit.runs.trajectory import Trajectory
+from parcelfit.schema import is_finite_number
 
 
 @dataclass(frozen=True)
@@ -91,7 +92,7 @@ def parse_region(
     """Build a region from its YAML form (``{x: [..], y: [..]}`` or ``{polygon: [[x, y], ...]}``)."""
     if not isinstance(spec, Mapping):
         raise ParcelfitError(
-            f"a region must be a mapping, got {spec!r}",
+            f"a region must be a mapping, got {shown(spec)}",
             file=file,
             where=where,
             fix="write {x: [min, max], y: [min, max]} or {polygon: [[x, y], ...]}",
@@ -117,7 +118,7 @@ def parse_region(
                 box[f"{axis}min"], box[f"{axis}max"] = lo, hi
         return Box(**box)
     raise ParcelfitError(
-        f"unknown region keys {sorted(keys)}",
+        f"unknown region keys {sorted(map(str, keys))}",
         file=file,
         where=where,
         fix="use either x and/or y (a box) or polygon",
@@ -125,8 +126,8 @@ def parse_region(
 
 
 def _is_numeric_rows(value: Any) -> bool:
-    return isinstance(value, Sequence) and all(
-        isinstance(r, Sequence) and all(isinstance(v, int | float) for v in r) for r in value
+    return isinstance(value, list | tuple) and all(
+        isinstance(r, list | tuple) and all(is_finite_number(v) for v in r) for r in value
     )
 
 

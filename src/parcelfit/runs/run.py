@@ -5,8 +5,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, shown
 from parcelfit.runs.trajectory import Trajectory
+
+# the highest speed setting a test case may name (a rig has a handful; a bigger number is a
+# mistake, and beyond 2^63 it could not even be stored)
+MAX_SPEED_SETTING = 1000
 
 
 @dataclass(frozen=True, order=True)
@@ -28,12 +32,18 @@ class TestCase:
     def parse(cls, text: str) -> TestCase:
         """Parse ``RIG/CONSIGNMENT/SETTING`` (e.g. ``E3/KPBW/1``)."""
         parts = text.split("/")
-        if len(parts) != 3 or not parts[2].strip().isdigit():
+        setting = parts[2].strip() if len(parts) == 3 else ""
+        if not (setting.isascii() and setting.isdigit()) or len(setting) > 9:
             raise ParcelfitError(
-                f"cannot read test case {text!r}",
+                f"cannot read test case {shown(text)}",
                 fix="write it as RIG/CONSIGNMENT/SETTING, e.g. E3/KPBW/1",
             )
-        return cls(parts[0].strip(), parts[1].strip(), int(parts[2]))
+        if not 1 <= int(setting) <= MAX_SPEED_SETTING:
+            raise ParcelfitError(
+                f"test case {shown(text)} names speed setting {int(setting)}",
+                fix=f"use a speed setting from 1 to {MAX_SPEED_SETTING}",
+            )
+        return cls(parts[0].strip(), parts[1].strip(), int(setting))
 
 
 @dataclass(frozen=True, eq=False)

@@ -52,6 +52,10 @@ from scipy import stats
 from parcelfit.runs import Run, TestCase, Trajectory
 from parcelfit.sim.protocol import SimResult, SimStatus
 
+# the most seeded placements of one ensemble (a study's cost, `simulate --repeat`, the precision
+# check); each is a whole simulation
+MAX_PLACEMENTS = 1000
+
 SPIN_ANGLE = math.pi / 2  # rotation [rad] above which a run counts as a spin
 # one colour per bundled consignment type in the ensemble figures (matplotlib colour names)
 TYPE_COLOURS = {"BW": "tab:orange", "KPBW": "tab:blue", "KP": "tab:green", "PB": "tab:red"}

@@ -52,6 +52,8 @@ from parcelfit.sim.protocol import SimResult, SimStatus, Simulator
 T = TypeVar("T")
 R = TypeVar("R")
 EXECUTOR_KINDS = ("serial", "local", "dask")
+# the most local worker processes (each holds a simulator; more than cores only queue)
+MAX_WORKERS = 256
 
 
 @dataclass(frozen=True)
@@ -305,9 +307,14 @@ def serial_executor() -> Executor:
 
 
 def local_executor(workers: int | None = None, max_restarts: int = 3) -> Executor:
-    """Tasks in a pool of ``workers`` local processes (default: one per core); a pool broken by
-    a dying worker is recreated."""
-    n = workers or os.cpu_count() or 1
+    """Tasks in a pool of ``workers`` local processes (default: one per core, at most
+    `MAX_WORKERS`); a pool broken by a dying worker is recreated."""
+    n = workers or min(os.cpu_count() or 1, MAX_WORKERS)
+    if not 1 <= n <= MAX_WORKERS:
+        raise ParcelfitError(
+            f"{n} worker processes asked for, more than {MAX_WORKERS}",
+            fix=f"use from 1 to {MAX_WORKERS} workers",
+        )
 
     def pool() -> cf.Executor:
         return cf.ProcessPoolExecutor(

@@ -43,7 +43,7 @@ from parcelfit.config import (
     get_str,
     load_config,
 )
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, shown
 from parcelfit.runs import Run, TestCase, read_trajectory
 from parcelfit.sim.lifetime import STDERR_FILE, STDOUT_FILE, run_command
 from parcelfit.sim.protocol import SimResult, SimStatus
@@ -105,25 +105,32 @@ def load_external_solver(path: str | Path) -> ExternalSolver:
     )
 
 
-# control characters (Cc: \n, \r, \x0b, \x0c, \x1c-\x1e, U+0085, ...) and the line and
-# paragraph separators (Zl U+2028, Zp U+2029): every character str.splitlines breaks at
-_BREAKING = frozenset({"Cc", "Zl", "Zp"})
+# characters a name must not hold: control characters (Cc: line feed, carriage return, U+0085,
+# ...), Unicode's line and paragraph separators (Zl U+2028, Zp U+2029), which many programs and
+# languages read as line breaks, and invisible format characters (Cf: U+200B-U+200F,
+# U+202A-U+202E, U+2066-U+2069, U+FEFF, ...), which can hide or reorder what a line shows
+_REFUSED_CATEGORIES = frozenset({"Cc", "Cf", "Zl", "Zp"})
 
 
-def _breaks(text: str) -> bool:
-    """Whether ``text`` holds a line break or another control character."""
-    return any(unicodedata.category(c) in _BREAKING for c in text)
+def refused_character(text: str) -> str | None:
+    """The first character of ``text`` that could add a line to a file or hide what it says
+    (see `_REFUSED_CATEGORIES`), as ``U+XXXX``; None if there is none."""
+    for c in text:
+        if unicodedata.category(c) in _REFUSED_CATEGORIES:
+            return f"U+{ord(c):04X}"
+    return None
 
 
 def _substitute(text: str, values: Mapping[str, Any], what: str) -> str:
     for key, value in values.items():
         # a line break (or any control character) in a name would add lines to the file
-        if _breaks(str(key)) or _breaks(str(value)):
-            name = repr(key) if _breaks(str(key)) else key
+        found = refused_character(str(key)) or refused_character(str(value))
+        if found is not None:
+            name = shown(str(key)) if refused_character(str(key)) else key
             raise ParcelfitError(
-                f"the value of ${{{name}}} ({str(value)!r}) holds a line break or another "
-                f"control character, which would change {what}",
-                fix="use names without line breaks or control characters",
+                f"the value of ${{{name}}} ({shown(str(value))}) holds a line break or another "
+                f"control or invisible format character ({found}), which would change {what}",
+                fix="use names without line breaks, control or format characters",
             )
     try:
         out = string.Template(text).substitute({k: str(v) for k, v in values.items()})
@@ -194,7 +201,7 @@ class ExternalSimulator:
         (workdir / self.solver.params_file).write_text(
             _substitute(self.solver.template, values, "the parameter template"), encoding="utf-8"
         )
-        args = [_substitute(a, values, f"command argument {a!r}") for a in self.solver.command]
+        args = [_substitute(a, values, f"command argument {shown(a)}") for a in self.solver.command]
         diagnostics: dict[str, object] = {"workdir": str(workdir), "command": args}
         try:
             proc = run_command(args, workdir, self.solver.timeout)

@@ -38,7 +38,7 @@ from typing import Annotated, Any
 
 from pydantic import model_validator
 
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, shown
 from parcelfit.schema import Choice, FileModel, Number, Text
 from parcelfit.sim.params import (
     BELT_FRICTION,
@@ -168,7 +168,8 @@ class SimulatorConfig(Mapping[str, Any]):
     def __post_init__(self) -> None:
         if self.backend not in BACKENDS:
             raise ParcelfitError(
-                f"unknown simulator backend {self.backend!r}", fix=f"use one of {list(BACKENDS)}"
+                f"unknown simulator backend {shown(self.backend)}",
+                fix=f"use one of {list(BACKENDS)}",
             )
         _check_needs(self.backend, self)
 

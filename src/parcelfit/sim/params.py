@@ -12,6 +12,7 @@ to MuJoCo is stated in ``mapping`` and in ``parcelfit/sim/mujoco/README.md``.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Annotated, Any
@@ -19,7 +20,7 @@ from typing import Annotated, Any
 from pydantic import AfterValidator
 
 from parcelfit.config import suggest
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, shown
 from parcelfit.schema import Number
 
 RIGID = "rigid"
@@ -105,6 +106,21 @@ class ParameterSpec:
         if content_kind not in self.ranges:
             raise ParcelfitError(f"parameter {self.name} does not apply to {content_kind} contents")
         return self.ranges[content_kind]
+
+    def check_physical(self, value: float) -> float:
+        """``value`` (user unit) if it lies in the ``physical`` range, else a `ParcelfitError`
+        naming the parameter, the value and the range (friction, stiffness, modulus, damping
+        ratio, ... each has one: a negative friction or stiffness is no parcel)."""
+        lo, hi = self.physical
+        if not lo <= value <= hi:  # also refuses NaN
+            unit = "" if self.unit == "-" else f" {self.unit}"
+            raise ParcelfitError(
+                f"{self.name} = {value:g}{unit} is outside its physical range "
+                f"[{lo:g}, {hi:g}]{unit}",
+                fix=f"give {self.meaning} from {lo:g} to {hi:g}"
+                + (f" {self.unit}" if unit else " (dimensionless)"),
+            )
+        return value
 
     def to_si(self, value: float) -> float:
         """Convert a value from the user unit to SI."""
@@ -336,7 +352,7 @@ def parameter(name: str) -> ParameterSpec:
     if name not in _BY_NAME:
         close = suggest(name, _BY_NAME)
         raise ParcelfitError(
-            f"unknown parameter {name!r}",
+            f"unknown parameter {shown(name)}",
             fix=f"did you mean {close!r}?" if close else f"known: {', '.join(_BY_NAME)}",
         )
     return _BY_NAME[name]
@@ -401,15 +417,7 @@ def resolve(
                     f"parameter {name} does not apply to {content_kind} contents",
                     fix=f"use one of: {', '.join(sorted(known))}",
                 )
-            user = spec.from_si(value) if in_si else float(value)
-            lo, hi = spec.physical
-            if not lo <= user <= hi:
-                unit = "" if spec.unit == "-" else f" {spec.unit}"
-                raise ParcelfitError(
-                    f"{name} = {user:g}{unit} is outside its physical range [{lo:g}, {hi:g}]{unit}",
-                    fix=f"give {spec.meaning}"
-                    + (f" in {spec.unit}" if unit else " (dimensionless)"),
-                )
+            user = spec.check_physical(spec.from_si(value) if in_si else float(value))
             out[name] = spec.to_si(user)
     return out
 
@@ -423,8 +431,12 @@ def parse_assignments(items: Iterable[str]) -> dict[str, float]:
             out[name.strip()] = float(value)
         except ValueError:
             sep = ""
+        if sep and not math.isfinite(out[name.strip()]):
+            raise ParcelfitError(
+                f"{shown(item)} is not a finite number", fix="write NAME=VALUE, e.g. mu_d_BePa=0.4"
+            )
         if not sep:
             raise ParcelfitError(
-                f"cannot read {item!r}", fix="write NAME=VALUE, e.g. mu_d_BePa=0.4"
+                f"cannot read {shown(item)}", fix="write NAME=VALUE, e.g. mu_d_BePa=0.4"
             )
     return out

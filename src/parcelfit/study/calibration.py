@@ -434,7 +434,14 @@ class Calibration:
             store.set_meta("reference_run", reference.reference_id)
             if study.joint or len(study.validation_cases) > 1 or study.transfer:
                 store.set_meta("cases", self._case_summary(references))
-            simulator = make_simulator(study.simulator)
+            try:
+                simulator = make_simulator(study.simulator)
+            except ParcelfitError as exc:  # e.g. a python factory that cannot be imported
+                if exc.file is not None or study.path is None:
+                    raise
+                raise ParcelfitError(
+                    exc.message, file=study.path, where="simulator", fix=exc.fix
+                ) from None
             check_placements(study, simulator)
             recorded = store.read_study()
             if recorded is None or not recorded.optimizer.recorded:
@@ -465,9 +472,12 @@ class Calibration:
                 try:
                     data = datasets[spec.dataset][spec.case]
                 except (KeyError, ParcelfitError):
+                    named = study.path is not None and spec.where
                     raise ParcelfitError(
-                        f"the dataset has no runs of test case {spec.label}",
-                        file=spec.dataset,
+                        f"the dataset has no runs of test case {spec.label}"
+                        + (f" (dataset {spec.dataset})" if named else ""),
+                        file=study.path if named else spec.dataset,
+                        where=spec.where if named else None,
                         fix="name a test case the dataset holds (parcelfit stats lists them)",
                     ) from None
                 out[spec.label] = select_reference(data)

@@ -36,6 +36,7 @@ from parcelfit.metrics.transit_adjustment import (
 )
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.runs import TestCase, load_dataset
+from parcelfit.sim.ensemble import MAX_PLACEMENTS
 from parcelfit.sim.executors import Task
 from parcelfit.sim.factory import make_simulator
 from parcelfit.study.calibration import study_executor
@@ -233,10 +234,15 @@ def run_precision_check(
             f"{placements} placement(s): the sensitivity's standard error needs two or more",
             fix="use --placements 2 or more (10 is the default)",
         )
+    if placements > MAX_PLACEMENTS:
+        raise ParcelfitError(
+            f"{placements} placements per case and parameter end, more than {MAX_PLACEMENTS}",
+            fix=f"use --placements {MAX_PLACEMENTS} or fewer (10 is the default)",
+        )
     study = load_study(study_file)
     names = tuple(study.space.names)
     dims = {d.name: d for d in study.space.dims}
-    given = fixed_to_si(dict(at or {}), study.simulator.backend, study_file)
+    given = fixed_to_si(dict(at or {}), study.simulator.backend, None, where="--at")
     unknown = sorted(set(given) - set(names))
     if unknown:
         raise ParcelfitError(

@@ -87,7 +87,7 @@ from parcelfit.doe import (
     select_parameters,
     with_centre_points,
 )
-from parcelfit.errors import ParcelfitError, os_error
+from parcelfit.errors import ParcelfitError, os_error, shown
 from parcelfit.figures import save_figure
 from parcelfit.metrics import select_reference
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
@@ -111,6 +111,7 @@ from parcelfit.study.studyfile import (
     ReferenceSection,
     ScreenExecutorSection,
     _to_si,
+    check_simulator_files,
     fixed_to_si,
     reference_case,
 )
@@ -140,7 +141,7 @@ def _parameters(value: Any) -> Any:
         return {str(n): None for n in value}
     if value is None or isinstance(value, str):
         raise ParcelfitError(
-            f"expected all, a list of names or {{name: [low, high]}}, got {value!r}",
+            f"expected all, a list of names or {{name: [low, high]}}, got {shown(value)}",
             fix="write parameters: all",
         )
     return value
@@ -156,7 +157,7 @@ def _stages(value: Any) -> tuple[Any, ...]:
 def _soft_list(value: Any) -> Any:
     if not isinstance(value, list):
         raise ParcelfitError(
-            f"expected a list of parameter names, got {value!r}",
+            f"expected a list of parameter names, got {shown(value)}",
             fix="write e.g. soft_content: [E_Co, zeta_Co]",
         )
     return [str(n) for n in value]
@@ -197,7 +198,7 @@ class ScreenFile(FileModel):
     alpha: Annotated[float, Number(ge=1e-6, le=0.5)] = 0.05
     max_full_factors: Annotated[int, Whole(ge=2, le=10)] = 6
     min_full_factors: Annotated[int, Whole(ge=1, le=10)] = 3
-    select: Annotated[int, Whole(ge=1)] = 4
+    select: Annotated[int, Whole(ge=1, le=100)] = 4
     placements: Annotated[int, Whole(ge=1, le=MAX_PLACEMENTS)] = 1
     executor: Annotated[ScreenExecutorSection, or_default(dict)] = Field(
         default_factory=ScreenExecutorSection
@@ -240,6 +241,7 @@ def load_screen(path: str | Path) -> Screen:
     f = parse(ScreenFile, load_yaml(path), file=path)
     folder = path.parent.resolve()
     sim = f.simulator.to_config(folder)
+    check_simulator_files(sim, path)
     backend = f.simulator.backend
     dataset, rig, cons = reference_case(f.reference, f.simulator, path, folder)
     kind = content_kind(sim)

@@ -38,9 +38,9 @@
     #   (add transit: adjusted to compare transit times at the real runs' mean belt speeds)
     # transfer: [{rig: E1, speed_setting: 1}]   # optional: judged once the study stops
     weights: {xy: 1.0, theta: 1.0}     # optional, equation (3)
-    batch_size: 4                      # optional
-    initial: 16                        # optional, Latin hypercube size
-    budget: 80                         # optional, most fitting evaluations
+    batch_size: 4                      # optional, at most 256
+    initial: 16                        # optional, Latin hypercube size (at most budget)
+    budget: 80                         # optional, most fitting evaluations (<= 10000)
     seed: 0                            # optional
     optimizer: {sampler: gp, ucb_lambda: 2.0}   # optional: gp | published | tpe, BOSettings
     executor: {kind: local, workers: 2}   # optional: local (processes) | serial (this process,
@@ -61,8 +61,10 @@ the belt speeds each run rode at, `parcelfit.metrics.transit_adjustment`).
 on, with the validation criteria and the band test, once the study stops.
 
 Parameter values in the file are in the catalogue's user units (N/mm, N/mm^2, mm, g; see
-``parcelfit params``) for the catalogue's parameters and converted to SI on load; parameters a
-``python`` or ``external`` backend defines itself are taken as given.
+``parcelfit params``) for the catalogue's parameters, checked against the catalogue's physical
+ranges and converted to SI on load; parameters a ``python`` or ``external`` backend defines
+itself are taken as given. Every count has an upper bound (`MAX_EVALUATIONS`, `MAX_BATCH_SIZE`,
+placements, workers, speed settings), checked on load.
 """
 
 from __future__ import annotations
@@ -77,11 +79,12 @@ from typing import Annotated, Any
 from pydantic import ConfigDict, Field, field_validator, model_validator
 
 from parcelfit.config import load_yaml
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, shown
 from parcelfit.optimize.bo import BOSettings
 from parcelfit.optimize.sampler import SAMPLERS
 from parcelfit.optimize.space import Dimension, Space
 from parcelfit.runs import TestCase
+from parcelfit.runs.run import MAX_SPEED_SETTING
 from parcelfit.schema import (
     Choice,
     FileModel,
@@ -93,7 +96,14 @@ from parcelfit.schema import (
     or_default,
     parse,
 )
+from parcelfit.sim.ensemble import MAX_PLACEMENTS
+from parcelfit.sim.executors import MAX_WORKERS
 from parcelfit.sim.factory import SimulatorConfig, SimulatorSection
+
+# the most a study may ask for (each is checked on load, before anything runs): evaluations
+# (``budget``, ``initial``, ``validation.every``), simulations in one batch (``batch_size``)
+MAX_EVALUATIONS = 10_000
+MAX_BATCH_SIZE = 256
 
 # -- the file's sections (file units; shared with screen files) ---------------------------------
 
@@ -104,7 +114,7 @@ class ReferenceSection(FileModel):
     dataset: Annotated[str, Text()]
     rig: Annotated[str | None, Text(nullable=True)] = None
     consignment: Annotated[str | None, Text(nullable=True)] = None
-    speed_setting: Annotated[int, Whole(ge=1)]
+    speed_setting: Annotated[int, Whole(ge=1, le=MAX_SPEED_SETTING)]
 
 
 class CaseSection(FileModel):
@@ -119,9 +129,9 @@ class CaseSection(FileModel):
     dataset: Annotated[str | None, Text(nullable=True)] = None
     rig: Annotated[str | None, Text(nullable=True)] = None
     consignment: Annotated[str | None, Text(nullable=True)] = None
-    speed_setting: Annotated[int, Whole(ge=1)]
+    speed_setting: Annotated[int, Whole(ge=1, le=MAX_SPEED_SETTING)]
     weight: Annotated[float, Number(ge=0)] = 1.0
-    placements: Annotated[int | None, Whole(ge=1, nullable=True)] = None
+    placements: Annotated[int | None, Whole(ge=1, le=MAX_PLACEMENTS, nullable=True)] = None
 
 
 class CostSection(FileModel):
@@ -131,7 +141,7 @@ class CostSection(FileModel):
     adjusted``, adjusted for the belt speeds each run rode at)."""
 
     kind: Annotated[str, Choice(("published", "ensemble"), what="cost")] = "published"
-    placements: Annotated[int, Whole(ge=1)] = 1
+    placements: Annotated[int, Whole(ge=1, le=MAX_PLACEMENTS)] = 1
     transit_weight: Annotated[float, Number(ge=0)] = 1.0
     transit: Annotated[str, Choice(("measured", "adjusted"), what="transit time")] = "measured"
 
@@ -161,7 +171,7 @@ class ScreenExecutorSection(FileModel):
     process); ``executor: KIND`` is short for ``executor: {kind: KIND}``."""
 
     kind: Annotated[str, Choice(("serial", "local"), what="executor")] = "local"
-    workers: Annotated[int | None, Whole(ge=1, nullable=True)] = None
+    workers: Annotated[int | None, Whole(ge=1, le=MAX_WORKERS, nullable=True)] = None
 
     @classmethod
     def prepare(cls, data: Any) -> Any:
@@ -189,7 +199,7 @@ class Bounds(FileModel):
             return {"low": data[0], "high": data[1]}
         if not isinstance(data, Mapping):
             raise ParcelfitError(
-                f"expected [low, high] or {{low, high, log}}, got {data!r}",
+                f"expected [low, high] or {{low, high, log}}, got {shown(data)}",
                 fix="write e.g. mu_d_BePa: [0.3, 0.6]",
             )
         return data
@@ -198,8 +208,8 @@ class Bounds(FileModel):
 class ValidationSection(FileModel):
     """``validation``: the validation speed setting (none: no validation) and how often."""
 
-    speed_setting: Annotated[int | None, Whole(ge=1, nullable=True)] = None
-    every: Annotated[int, Whole(ge=1)] = 5
+    speed_setting: Annotated[int | None, Whole(ge=1, le=MAX_SPEED_SETTING, nullable=True)] = None
+    every: Annotated[int, Whole(ge=1, le=MAX_EVALUATIONS)] = 5
     cases: Annotated[list[CaseSection], or_default(list)] = Field(default_factory=list)
 
     @model_validator(mode="after")
@@ -230,6 +240,28 @@ class WeightsSection(FileModel):
 
 
 _GP_KEYS = sorted(set(BOSettings.__dataclass_fields__) - {"n_initial"})
+# the counts among the settings, with their bounds (a million candidates per ask take seconds)
+_SETTING_COUNTS = {
+    "n_samples": Whole(ge=10, le=1_000_000),
+    "n_restarts": Whole(ge=0, le=100),
+    "polish": Whole(ge=0, le=100),
+}
+
+
+def _setting(name: str, value: Any) -> Any:
+    """An optimizer setting checked by its type (that of the `BOSettings` default) and, for a
+    count, its bounds; the choices among texts are checked when the settings are made."""
+    default = BOSettings.__dataclass_fields__[name].default
+    check: Whole | Flag | Number | Text = (
+        _SETTING_COUNTS.get(name)
+        or (Flag() if isinstance(default, bool) else None)
+        or (Number() if isinstance(default, float) else None)
+        or Text()
+    )
+    try:
+        return check.check(value)
+    except ParcelfitError as exc:
+        raise ParcelfitError(exc.message, where=name, fix=exc.fix) from None
 
 
 class OptimizerSection(FileModel):
@@ -245,10 +277,15 @@ class OptimizerSection(FileModel):
             check_keys(data, ["sampler"], fix="the tpe sampler takes no settings but `sampler`")
         return ["sampler", *_GP_KEYS]
 
+    @model_validator(mode="after")
+    def _typed_settings(self) -> OptimizerSection:
+        self.settings  # noqa: B018 - each setting checked now, named where it stands
+        return self
+
     @property
     def settings(self) -> dict[str, Any]:
-        """The BOSettings overrides, as written."""
-        return dict(self.model_extra or {})
+        """The BOSettings overrides, each checked by its type (counts by their bounds)."""
+        return {str(k): _setting(str(k), v) for k, v in (self.model_extra or {}).items()}
 
 
 class StudyFile(FileModel):
@@ -271,10 +308,10 @@ class StudyFile(FileModel):
     optimizer: Annotated[OptimizerSection, or_default(dict)] = Field(
         default_factory=OptimizerSection
     )
-    initial: Annotated[int, Whole(ge=1)] = 16
+    initial: Annotated[int, Whole(ge=1, le=MAX_EVALUATIONS)] = 16
     executor: Annotated[ExecutorSection, or_default(dict)] = Field(default_factory=ExecutorSection)
-    batch_size: Annotated[int, Whole(ge=1)] = 4
-    budget: Annotated[int, Whole(ge=1)] = 80
+    batch_size: Annotated[int, Whole(ge=1, le=MAX_BATCH_SIZE)] = 4
+    budget: Annotated[int, Whole(ge=1, le=MAX_EVALUATIONS)] = 80
     seed: Annotated[int, Whole(ge=0, le=2**32 - 1)] = 0
 
     @field_validator("parameters")
@@ -309,6 +346,17 @@ class StudyFile(FileModel):
                 "every case has weight 0, so every simulation would cost nothing",
                 where="cases",
                 fix="give at least one case a positive weight",
+            )
+        return self
+
+    @model_validator(mode="after")
+    def _budget_holds_the_initial_design(self) -> StudyFile:
+        if self.budget < self.initial:
+            raise ParcelfitError(
+                f"budget {self.budget} is below initial {self.initial}: the study would stop "
+                "before its initial design is complete",
+                where="budget",
+                fix=f"raise budget to {self.initial} or more, or lower initial",
             )
         return self
 
@@ -378,6 +426,7 @@ class CaseSpec:
     dataset: Path
     weight: float = 1.0
     placements: int | None = None  # seeded placements per evaluation (None: the study's)
+    where: str = ""  # the study file's key naming it (``reference``, ``cases[1]``, ...)
 
     @property
     def label(self) -> str:
@@ -386,8 +435,10 @@ class CaseSpec:
 
 
 def _to_si(name: str, value: float, backend: str) -> float:
-    """A parameter value from its catalogue unit to SI; a name outside the catalogue is taken
-    as given, except for the mujoco and rigidbox backends (which know only the catalogue)."""
+    """A parameter value from its catalogue unit to SI, checked against the catalogue's
+    physical range (whatever the backend: a catalogue name means the catalogue's quantity); a
+    name outside the catalogue is taken as given, except for the mujoco and rigidbox backends
+    (which know only the catalogue)."""
     from parcelfit.sim.params import CATALOGUE
 
     spec = next((p for p in CATALOGUE if p.name == name), None)
@@ -397,19 +448,41 @@ def _to_si(name: str, value: float, backend: str) -> float:
 
             parameter(name)  # raises with a suggestion
         return float(value)
-    return spec.to_si(float(value))
+    return spec.to_si(spec.check_physical(float(value)))
 
 
-def fixed_to_si(fixed: Mapping[Any, float], backend: str, path: Path) -> dict[str, float]:
-    """A file's ``fixed`` values (catalogue units for MuJoCo) in SI, each error naming its key."""
+def check_simulator_files(sim: SimulatorConfig, path: Path) -> None:
+    """For the mujoco backend, load the rig and consignment now (a bundled name or a file), so
+    that an unknown name is refused on load naming ``simulator.rig`` (or ``.consignment``) of
+    the file at ``path``; a mistake inside a rig or consignment file names that file."""
+    if sim.backend != "mujoco":
+        return
+    from parcelfit.sim.mujoco import load_consignment, load_rig
+
+    for key, load in (("rig", load_rig), ("consignment", load_consignment)):
+        try:
+            load(sim[key])
+        except ParcelfitError as exc:
+            if exc.file is not None:
+                raise
+            raise ParcelfitError(
+                exc.message, file=path, where=f"simulator.{key}", fix=exc.fix
+            ) from None
+
+
+def fixed_to_si(
+    fixed: Mapping[Any, float], backend: str, path: Path | None, where: str = "fixed"
+) -> dict[str, float]:
+    """A file's ``fixed`` values (catalogue units for MuJoCo) in SI, each error naming its key
+    (``where.NAME``; ``where`` e.g. ``--at`` for values given on the command line, ``path``
+    then None)."""
     out = {}
     for name, value in fixed.items():
         try:
             out[str(name)] = _to_si(str(name), value, backend)
         except ParcelfitError as exc:
-            raise ParcelfitError(
-                exc.message, file=path, where=f"fixed.{name}", fix=exc.fix
-            ) from None
+            label = f"{where} {name}" if where.startswith("--") else f"{where}.{name}"
+            raise ParcelfitError(exc.message, file=path, where=label, fix=exc.fix) from None
     return out
 
 
@@ -421,6 +494,7 @@ def load_study(path: str | Path) -> Study:
     f = parse(StudyFile, doc, file=path)
     folder = path.parent.resolve()
     sim = f.simulator.to_config(folder)
+    check_simulator_files(sim, path)
     backend = f.simulator.backend
     dims = []
     for name, bounds in f.parameters.items():
@@ -499,7 +573,9 @@ def study_cases(
     if f.reference is not None:
         dataset, rig, consignment = reference_case(f.reference, f.simulator, path, folder)
         cases: tuple[CaseSpec, ...] = (
-            CaseSpec(TestCase(rig, consignment, f.reference.speed_setting), dataset),
+            CaseSpec(
+                TestCase(rig, consignment, f.reference.speed_setting), dataset, where="reference"
+            ),
         )
     else:
         first = f.cases[0]
@@ -525,7 +601,11 @@ def study_cases(
     elif f.validation.speed_setting is not None:
         c0 = cases[0].case
         validation = (
-            CaseSpec(TestCase(c0.rig, c0.consignment, f.validation.speed_setting), default),
+            CaseSpec(
+                TestCase(c0.rig, c0.consignment, f.validation.speed_setting),
+                default,
+                where="validation.speed_setting",
+            ),
         )
     else:
         validation = ()
@@ -583,7 +663,9 @@ def _case(
             where=f"{where}.rig",
             fix="name a bundled rig (parcelfit rigs), or leave rig out for the simulator's",
         )
-    return CaseSpec(TestCase(rig, consignment, c.speed_setting), dataset, c.weight, c.placements)
+    return CaseSpec(
+        TestCase(rig, consignment, c.speed_setting), dataset, c.weight, c.placements, where
+    )
 
 
 def reference_case(

@@ -36,9 +36,19 @@ import yaml
 from pydantic import BeforeValidator, Field, PlainValidator, field_validator, model_validator
 
 from parcelfit.config import load_yaml
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, shown
 from parcelfit.runs import Barrier
-from parcelfit.schema import Choice, FileModel, Number, Pair, Text, Whole, or_default, parse
+from parcelfit.schema import (
+    Choice,
+    FileModel,
+    Number,
+    Pair,
+    Text,
+    Whole,
+    is_finite_number,
+    or_default,
+    parse,
+)
 
 FAMILIES = ("tag36h11", "tag25h9", "tag16h5", "tag36h10")
 
@@ -123,7 +133,8 @@ def _tag_id(key: Any) -> int:
         tag_id = -1
     if tag_id < 0 or str(tag_id) != str(key).strip():
         raise ParcelfitError(
-            f"tag ids are whole numbers >= 0, got {key!r}", fix="use the tag's id number as the key"
+            f"tag ids are whole numbers >= 0, got {shown(key)}",
+            fix="use the tag's id number as the key",
         )
     return tag_id
 
@@ -132,10 +143,10 @@ def _distortion(value: Any) -> tuple[float, ...]:
     if (
         not isinstance(value, list)
         or len(value) not in (4, 5, 8)
-        or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
+        or not all(is_finite_number(v) for v in value)
     ):
         raise ParcelfitError(
-            f"expected 4, 5 or 8 distortion coefficients, got {value!r}",
+            f"expected 4, 5 or 8 distortion coefficients, got {shown(value)}",
             fix="write [k1, k2, p1, p2, k3] (OpenCV's order)",
         )
     return tuple(float(v) for v in value)
@@ -179,8 +190,8 @@ class CameraSection(FileModel):
     cx: Annotated[float, Number(unit="px", ge=0)]
     cy: Annotated[float, Number(unit="px", ge=0)]
     distortion: Annotated[tuple[float, ...], PlainValidator(_distortion)] = (0.0,) * 5
-    width: Annotated[int, Whole(ge=0)] = 0
-    height: Annotated[int, Whole(ge=0)] = 0
+    width: Annotated[int, Whole(ge=0, le=100_000)] = 0
+    height: Annotated[int, Whole(ge=0, le=100_000)] = 0
 
 
 class BarrierEntry(FileModel):

@@ -5,7 +5,7 @@ from __future__ import annotations
 from importlib.resources import files
 from pathlib import Path
 
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, shown
 
 
 def bundled_names(kind: str) -> list[str]:
@@ -22,7 +22,7 @@ def resolve_file(kind: str, name_or_path: str | Path, what: str, key: str | None
     candidate = files("parcelfit.sim.mujoco").joinpath(kind).joinpath(f"{key or name_or_path}.yaml")
     if not candidate.is_file():
         raise ParcelfitError(
-            f"unknown {what} {str(name_or_path)!r}",
+            f"unknown {what} {shown(str(name_or_path))}",
             fix=f"use one of {', '.join(bundled_names(kind))} or the path of a .yaml file",
         )
     return Path(str(candidate))

@@ -47,7 +47,7 @@ from typing import Annotated, Any
 from pydantic import PlainValidator, model_validator
 
 from parcelfit.config import load_yaml
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, shown
 from parcelfit.schema import Choice, FileModel, Number, Text, parse
 from parcelfit.sim.mujoco.bundled import bundled_names, resolve_file
 from parcelfit.sim.params import RIGID, SHELL_DOFS, SOFT, ShellCellsField, resolve
@@ -104,7 +104,7 @@ def _size(value: Any) -> tuple[float, float, float]:
         )
     ):
         raise ParcelfitError(
-            f"expected [length, width, height] in metres (1 mm to 5 m), got {value!r}",
+            f"expected [length, width, height] in metres (1 mm to 5 m), got {shown(value)}",
             fix="write e.g. [0.275, 0.20, 0.02]",
         )
     return float(value[0]), float(value[1]), float(value[2])

@@ -67,8 +67,9 @@ import numpy as np
 from pydantic import BeforeValidator, Field, PlainValidator, field_validator, model_validator
 
 from parcelfit.config import load_yaml
-from parcelfit.errors import ParcelfitError
+from parcelfit.errors import ParcelfitError, shown
 from parcelfit.runs import Barrier, Region, parse_region
+from parcelfit.runs.run import MAX_SPEED_SETTING
 from parcelfit.schema import (
     Choice,
     FileModel,
@@ -290,9 +291,9 @@ def _drive_name(value: Any) -> str:
 def _speed_settings(value: Any) -> Any:
     """``speeds`` must map whole numbers >= 1 to drives (checked before the drives' speeds)."""
     for key in require_mapping(value):
-        if isinstance(key, bool) or not isinstance(key, int) or key < 1:
+        if isinstance(key, bool) or not isinstance(key, int) or not 1 <= key <= MAX_SPEED_SETTING:
             raise ParcelfitError(
-                f"speed setting {key!r} must be an integer >= 1",
+                f"speed setting {shown(key)} must be an integer from 1 to {MAX_SPEED_SETTING}",
                 fix="write e.g. `1: {main: 1.56}`",
             )
     if not value:
@@ -484,14 +485,14 @@ class RigFile(FileModel):
             missing = [k for k, d in self.speeds.items() if s.drive not in d]
             if missing:
                 raise ParcelfitError(
-                    f"drive {s.drive!r} has no speed in setting(s) {missing}",
+                    f"drive {shown(s.drive)} has no speed in setting(s) {missing}",
                     where=f"surfaces[{i}].drive",
                     fix=f"add {s.drive} to every speed setting",
                 )
         names = [s.name for s in self.surfaces]
         if self.start.surface not in names:
             raise ParcelfitError(
-                f"start.surface names no surface: {self.start.surface!r}",
+                f"start.surface names no surface: {shown(self.start.surface)}",
                 where="start.surface",
                 fix=f"use one of {', '.join(names)}",
             )
