@@ -608,7 +608,7 @@ def simulate(
     film_spacing: Annotated[
         float | None,
         typer.Option(
-            help="Film mesh spacing around a soft content [m] (see docs/pb-speed.md).",
+            help="Film mesh spacing around a soft content [m] (see docs/research/pb-speed.md).",
             show_default="0.05 m",
         ),
     ] = None,
@@ -649,7 +649,7 @@ def simulate(
         typer.Option(
             help="How the packaging's (and a soft content's) mass is spread over the bodies that "
             "carry it: area (lumped by area and volume) or equal (MuJoCo's own equal shares, the "
-            "model before 2026-11-28; see docs/mass-lumping.md).",
+            "model before 2026-11-28; see docs/research/mass-lumping.md).",
         ),
     ] = "area",
     wall_limit: Annotated[float, typer.Option(help="Wall-clock limit [s].")] = 600.0,

@@ -50,9 +50,9 @@ CALIBRATED = {  # catalogue units, published ranges
 
 
 # E1 runs at half the default step (its rig file's step_refinement): at 1/2400 s the transfer
-# onto its fast belt arrives 5-8 ms early at setting 3 (docs/transit-convergence.md), which held
+# onto its fast belt arrives 5-8 ms early at setting 3 (docs/research/transit-convergence.md), which held
 # the calibrated belt friction 10-14 % of its range off the truth of twins whose "real" runs are at
-# 1/4800 s, as the bundled twin's are; at 1/4800 s it came within 2 % (docs/twin-benchmark.md).
+# 1/4800 s, as the bundled twin's are; at 1/4800 s it came within 2 % (docs/research/twin-benchmark.md).
 # The smoke run coarsens E1 back to this step [s], the shell's default elsewhere, so that the
 # test suite's demo stays within its time (at 1/4800 s the suite took 624 s on 2 cores)
 SMOKE_E1_TIMESTEP = 1 / 2400

@@ -20,7 +20,7 @@ experiments do (method.md sections 2 and 3):
   100 mm), and MuJoCo's collision tolerance is ``real_ccd_tolerance`` (default None: the
   model's own, `SceneOptions.ccd_tolerance`). A twin is only a test if its "real" side is at
   least as converged as the model: the defaults are the model's own meshes or finer (30 mm is
-  within about 5 mm of the 15 mm reference in docs/convergence.md). The
+  within about 5 mm of the 15 mm reference in docs/research/convergence.md). The
   former default, 20 mm, was the outlier of that study on the earlier E3 layout (22 mm off the
   reference) and biased every calibration against the twin. The time step is ``real_timestep``
   (default None: the model's own default, 1/2400 s around rigid contents and 1/1200 s around a

@@ -31,7 +31,7 @@ parcel's length, width and height (MuJoCo's multi-cell flexes; default one cell)
 rim can bend apart from the face it borders. A type's choice is the cheapest shell that
 reproduces the full shell at a fine step and mesh (the reference) on the E3 ensemble and keeps
 its outcome when refined: BW, KP/BW and KP take a trilinear shell over 4 x 4 x 1 cells
-(docs/multicell-shell.md), PB the full shell around its soft content.
+(docs/research/multicell-shell.md), PB the full shell around its soft content.
 
 The content must fit inside the outer dimensions (length and width strictly smaller, height not
 larger). The packaging's mass is a simulation parameter (m_Pa); the content gets the rest.
