@@ -69,6 +69,7 @@ from parcelfit.runs import (
     write_trajectory,
 )
 from parcelfit.schema import Choice, FileModel, Number, Text, Whole, keys_in, or_default, parse
+from parcelfit.sim.cost import Estimate, estimate, run_seconds
 from parcelfit.sim.executors import make_executor
 from parcelfit.sim.mujoco import Consignment, MujocoSimulator, Rig, SceneOptions, SimOptions
 from parcelfit.sim.params import BELT_FRICTION, CATALOGUE, MAX_TIMESTEP, MIN_TIMESTEP
@@ -454,4 +455,30 @@ def load_twin_spec(path: str | Path) -> TwinSpec:
     return TwinSpec(f.name, tuple(f.cases), truth, TwinSettings(**f.settings.model_dump()), f.seed)
 
 
-__all__ = ["TwinJob", "TwinSettings", "TwinSpec", "load_twin_spec", "make_twin_dataset"]
+def expected_cost(spec: TwinSpec, workers: int) -> Estimate:
+    """How many runs ``spec`` makes and roughly how long on ``workers`` processes: each test
+    case's runs at the "real" step (`parcelfit.sim.cost`)."""
+    from parcelfit.sim.factory import SimulatorConfig
+    from parcelfit.sim.mujoco import load_consignment
+
+    runs = []
+    for case in spec.cases:
+        soft = load_consignment(case.consignment).content_kind == "soft"
+        config = SimulatorConfig(
+            "mujoco",
+            rig=case.rig,
+            consignment=case.consignment,
+            timestep=spec.settings.step_for(soft),
+        )
+        runs.append((spec.settings.runs, run_seconds(config)))
+    return estimate(runs, workers)
+
+
+__all__ = [
+    "TwinJob",
+    "TwinSettings",
+    "TwinSpec",
+    "expected_cost",
+    "load_twin_spec",
+    "make_twin_dataset",
+]
