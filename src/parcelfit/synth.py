@@ -402,32 +402,47 @@ class TwinSettingsSection(FileModel):
     """``settings``: `TwinSettings` as written (each >= 0; ``runs`` a whole number >= 1)."""
 
     runs: Annotated[int, Whole(ge=1)] = TwinSettings.runs
+    """Runs per test case."""
     friction_cv: Annotated[float, Number(ge=0)] = TwinSettings.friction_cv
+    """Relative standard deviation of every friction coefficient between specimens [-]."""
     stiffness_cv: Annotated[float, Number(ge=0)] = TwinSettings.stiffness_cv
+    """Relative standard deviation of every stiffness and Young's modulus between specimens [-]."""
     placement_sd: Annotated[float | None, Number(unit="m", ge=0)] = TwinSettings.placement_sd
+    """Standard deviation of the start position, x and y [m] (default: the rig's start.scatter)."""
     angle_sd: Annotated[float | None, Number(unit="deg", ge=0)] = TwinSettings.angle_sd
+    """Standard deviation of the start heading [deg] (default: the rig's start.scatter)."""
     speed_dev: Annotated[float, Number(ge=0)] = TwinSettings.speed_dev
+    """Largest relative deviation of every drive's speed, drawn uniformly per run [-]."""
     tracking_sd: Annotated[float, Number(unit="m", ge=0)] = TwinSettings.tracking_sd
+    """Standard deviation of the tracking noise on x and y [m]."""
     heading_sd: Annotated[float, Number(unit="rad", ge=0)] = TwinSettings.heading_sd
+    """Standard deviation of the tracking noise on theta [rad]."""
     real_spacing: Annotated[float, Number(unit="m", ge=0.003, le=0.2)] = TwinSettings.real_spacing
+    """Shell mesh spacing of the 'real' runs around rigid contents [m]."""
     real_soft_spacing: Annotated[float, Number(unit="m", ge=0.003, le=0.2)] = (
         TwinSettings.real_soft_spacing
     )
+    """Film mesh spacing of the 'real' runs around a soft content [m]."""
     real_content_spacing: Annotated[float | None, Number(unit="m", ge=0.003, le=0.3)] = (
         TwinSettings.real_content_spacing
     )
+    """Vertex spacing of a soft content in the 'real' runs [m] (default: the model's)."""
     real_ccd_tolerance: Annotated[float | None, Number(unit="m", ge=1e-12, le=1e-3)] = (
         TwinSettings.real_ccd_tolerance
     )
+    """MuJoCo's collision tolerance in the 'real' runs [m] (default: the model's)."""
     real_timestep: Annotated[float | None, Number(unit="s", ge=MIN_TIMESTEP, le=MAX_TIMESTEP)] = (
         TwinSettings.real_timestep
     )
+    """Time step of the 'real' runs [s] (default: the model's)."""
     real_soft_timestep: Annotated[
         float | None, Number(unit="s", ge=MIN_TIMESTEP, le=MAX_TIMESTEP)
     ] = TwinSettings.real_soft_timestep
+    """Time step of the 'real' runs around a soft content [s] (default: real_timestep)."""
     real_belt_friction: Annotated[str, Choice(BELT_FRICTION, what="belt friction law")] = (
         TwinSettings.real_belt_friction
     )
+    """The 'real' runs' friction law on belts, strips and rollers: mujoco or coulomb."""
 
 
 _Truth = Annotated[
@@ -439,12 +454,17 @@ class TwinSpecFile(FileModel):
     """A twin specification file as written (true parameters in catalogue units)."""
 
     name: Annotated[str, Text()] = "twin"
+    """The dataset's name."""
     seed: Annotated[int, Whole(ge=0)] = 0
+    """Seed of every random draw (specimens, placements, speeds, noise)."""
     cases: Annotated[list[Annotated[TestCase, PlainValidator(_test_case)]], BeforeValidator(_cases)]
+    """Test cases as RIG/CONSIGNMENT/SPEED_SETTING, e.g. [E3/KPBW/1, E3/KPBW/2]."""
     truth: Annotated[dict[Any, _Truth], or_default(dict)] = Field(default_factory=dict)
+    """The hidden true parameters by consignment type, in the catalogue's units."""
     settings: Annotated[TwinSettingsSection, or_default(dict)] = Field(
         default_factory=TwinSettingsSection
     )
+    """How real-like the runs are."""
 
 
 def load_twin_spec(path: str | Path) -> TwinSpec:
