@@ -38,8 +38,9 @@ def test_estimate_spreads_runs_over_workers_and_says_so():
 
 def test_the_example_study_counts_its_budget_validations_and_key_frames():
     study = load_study(ROOT / "examples" / "e3-kpbw" / "study.yaml")
-    # budget 60, initial 16, batches of 4: 11 batches, a validation every 5 and after the design
-    assert validation_checks(study) == 1 + 11 // 5
+    # budget 60, initial 16, batches of 4: 11 batches, a validation after the 5th, the 10th
+    # and the last
+    assert validation_checks(study) == 3
     e = calibration_estimate(study, 2)
     assert e.simulations == 60 + 3 + 1
     assert e.seconds == e.simulations * RUN_SECONDS["rigid"] / 2

@@ -454,6 +454,8 @@ def synth(
             workers=workers,
             executor=executor,
             progress=step,
+            rigs=tw.rigs(),
+            consignments=tw.consignments(),
         )
     truth_file = path.parent / "truth.yaml"
     console.print(f"[green]done[/]: {escape(str(path))} and {escape(str(truth_file))}")

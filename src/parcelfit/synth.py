@@ -47,7 +47,7 @@ import hashlib
 import json
 import shutil
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -71,7 +71,15 @@ from parcelfit.runs import (
 from parcelfit.schema import Choice, FileModel, Number, Text, Whole, keys_in, or_default, parse
 from parcelfit.sim.cost import Estimate, estimate, run_seconds
 from parcelfit.sim.executors import make_executor
-from parcelfit.sim.mujoco import Consignment, MujocoSimulator, Rig, SceneOptions, SimOptions
+from parcelfit.sim.mujoco import (
+    Consignment,
+    MujocoSimulator,
+    Rig,
+    SceneOptions,
+    SimOptions,
+    load_consignment,
+    load_rig,
+)
 from parcelfit.sim.params import BELT_FRICTION, CATALOGUE, MAX_TIMESTEP, MIN_TIMESTEP
 
 
@@ -254,8 +262,13 @@ def make_twin_dataset(
     workers: int = 1,
     executor: str | None = None,
     progress: ProgressCallback | None = None,
+    rigs: Sequence[Rig] = (),
+    consignments: Sequence[Consignment] = (),
 ) -> Path:
     """Simulate ``settings.runs`` real-like runs per test case; returns the dataset.yaml path.
+
+    ``rigs`` and ``consignments`` are a user's own (loaded from their files), which the cases
+    may name beside the bundled ones.
 
     ``truth_user`` maps a consignment type to its true parameters in the catalogue's units; the
     others take their defaults. ``executor`` is serial (in this process) or local (``workers``
@@ -268,7 +281,9 @@ def make_twin_dataset(
         raise ParcelfitError("a twin dataset needs at least one run per test case", fix="runs >= 1")
     if executor not in (None, "serial", "local"):
         raise ParcelfitError(f"unknown executor {executor!r} for synth", fix="serial or local")
-    sim = MujocoSimulator()
+    sim = MujocoSimulator(
+        rigs={r.name: r for r in rigs}, consignments={c.name: c for c in consignments}
+    )
     truth_si: dict[str, dict[str, float]] = {}
     jobs: list[TwinJob] = []
     seeds = np.random.SeedSequence(seed).spawn(len(cases) * s.runs)
@@ -380,6 +395,17 @@ class TwinSpec:
     truth: dict[str, dict[str, float]]
     settings: TwinSettings
     seed: int
+    # a user's own rig and consignment files the cases may name, by name (absolute paths)
+    rig_files: dict[str, Path] = field(default_factory=dict)
+    consignment_files: dict[str, Path] = field(default_factory=dict)
+
+    def rigs(self) -> tuple[Rig, ...]:
+        """The user's own rigs, loaded."""
+        return tuple(load_rig(p) for p in self.rig_files.values())
+
+    def consignments(self) -> tuple[Consignment, ...]:
+        """The user's own consignment types, loaded."""
+        return tuple(load_consignment(p) for p in self.consignment_files.values())
 
 
 def _test_case(value: Any) -> TestCase:
@@ -460,6 +486,14 @@ class TwinSpecFile(FileModel):
     cases: Annotated[list[Annotated[TestCase, PlainValidator(_test_case)]], BeforeValidator(_cases)]
     """Test cases as RIG/CONSIGNMENT/SPEED_SETTING, e.g. [E3/KPBW/1, E3/KPBW/2]."""
     truth: Annotated[dict[Any, _Truth], or_default(dict)] = Field(default_factory=dict)
+    rigs: Annotated[list[Annotated[str, Text()]], or_default(list)] = Field(default_factory=list)
+    """Rig files of your own (relative to this file) that the cases may name beside the
+    bundled rigs; a case names a rig by its name, which must equal the file's stem."""
+    consignments: Annotated[list[Annotated[str, Text()]], or_default(list)] = Field(
+        default_factory=list
+    )
+    """Consignment files of your own (relative to this file), named by the cases like the
+    bundled types; a type's name must equal the file's stem."""
     """The hidden true parameters by consignment type, in the catalogue's units."""
     settings: Annotated[TwinSettingsSection, or_default(dict)] = Field(
         default_factory=TwinSettingsSection
@@ -472,23 +506,35 @@ def load_twin_spec(path: str | Path) -> TwinSpec:
     the truth stays in catalogue units (`make_twin_dataset` converts it)."""
     f = parse(TwinSpecFile, load_yaml(path), file=path)
     truth = {str(cons): dict(values) for cons, values in f.truth.items()}
-    return TwinSpec(f.name, tuple(f.cases), truth, TwinSettings(**f.settings.model_dump()), f.seed)
+    folder = Path(path).resolve().parent
+    own: list[dict[str, Path]] = [{}, {}]
+    for k, (files, load) in enumerate(((f.rigs, load_rig), (f.consignments, load_consignment))):
+        for name in files:
+            file = folder / name
+            if not file.is_file():
+                raise ParcelfitError(
+                    f"no such file {name!r}",
+                    file=path,
+                    where="rigs" if k == 0 else "consignments",
+                    fix="give the path of a .yaml file, relative to this file",
+                )
+            own[k][load(file).name] = file
+    settings = TwinSettings(**f.settings.model_dump())
+    return TwinSpec(f.name, tuple(f.cases), truth, settings, f.seed, own[0], own[1])
 
 
 def expected_cost(spec: TwinSpec, workers: int) -> Estimate:
     """How many runs ``spec`` makes and roughly how long on ``workers`` processes: each test
     case's runs at the "real" step (`parcelfit.sim.cost`)."""
     from parcelfit.sim.factory import SimulatorConfig
-    from parcelfit.sim.mujoco import load_consignment
 
     runs = []
     for case in spec.cases:
-        soft = load_consignment(case.consignment).content_kind == "soft"
+        rig = str(spec.rig_files.get(case.rig, case.rig))
+        consignment = str(spec.consignment_files.get(case.consignment, case.consignment))
+        soft = load_consignment(consignment).content_kind == "soft"
         config = SimulatorConfig(
-            "mujoco",
-            rig=case.rig,
-            consignment=case.consignment,
-            timestep=spec.settings.step_for(soft),
+            "mujoco", rig=rig, consignment=consignment, timestep=spec.settings.step_for(soft)
         )
         runs.append((spec.settings.runs, run_seconds(config)))
     return estimate(runs, workers)

@@ -18,7 +18,9 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
+from pathlib import Path
 
+from parcelfit.errors import ParcelfitError
 from parcelfit.sim.factory import SimulatorConfig
 
 # wall seconds of one run on E3 at the default step, one core, by content kind
@@ -37,26 +39,39 @@ def run_seconds(
     config: SimulatorConfig, rig: str | None = None, consignment: str | None = None
 ) -> float | None:
     """Expected wall time [s] of one run of ``config`` on one core, on ``rig`` and
-    ``consignment`` (default: the configuration's); None where no time is known (an
-    external solver)."""
+    ``consignment`` (names, default: the configuration's); None where no time is known (an
+    external solver, a rig or type that cannot be read)."""
     if config.backend == "python":
         return PYTHON_SECONDS
     if config.backend == "external":
         return None
-    from parcelfit.sim.mujoco import load_consignment, load_rig
-
-    rig_name = rig or config.rig or "E3"
-    kind = load_consignment(consignment or config.consignment or "KPBW").content_kind
     if config.backend == "rigidbox":
         return RIGIDBOX_SECONDS
-    loaded = load_rig(rig_name)
+    from parcelfit.sim.mujoco import load_consignment, load_rig
+
+    try:
+        loaded = load_rig(_file_or_name(rig, config.rig or "E3"))
+        kind = load_consignment(_file_or_name(consignment, config.consignment or "KPBW"))
+    except ParcelfitError:
+        return None
     factor = _DURATION.get(loaded.name, 1.0)
     step = (config.rig_timesteps or {}).get(loaded.name) or config.timestep
     if step is None:
         factor *= loaded.step_refinement
     else:
-        factor *= DEFAULT_STEP[kind] / step
-    return RUN_SECONDS[kind] * factor
+        factor *= DEFAULT_STEP[kind.content_kind] / step
+    return RUN_SECONDS[kind.content_kind] * factor
+
+
+def _file_or_name(name: str | None, configured: str) -> str:
+    """The configured rig or consignment (a bundled name or a file) that ``name`` means: the
+    configured file where its stem is ``name``, else ``name`` as a bundled name."""
+    if name is None:
+        return configured
+    path = Path(configured)
+    if path.suffix.lower() in (".yaml", ".yml") and path.stem == name:
+        return configured
+    return name
 
 
 @dataclass(frozen=True)

@@ -20,10 +20,11 @@ def _seconds(study_or_config: object, case: TestCase) -> float | None:
 
 
 def validation_checks(study: Study) -> int:
-    """The most validations a study runs: after the initial design and then every
-    ``validate_every`` iterations until the budget is spent."""
+    """The most validations a study runs: after every ``validate_every``-th optimiser
+    iteration, and once more after the last when that was not one of them."""
     batches = max(0, math.ceil((study.budget - study.initial) / study.batch_size))
-    return 1 + batches // study.validate_every
+    checks = batches // study.validate_every
+    return checks + (1 if batches == 0 or batches % study.validate_every else 0)
 
 
 def calibration_estimate(study: Study, workers: int) -> Estimate:
