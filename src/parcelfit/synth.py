@@ -486,6 +486,7 @@ class TwinSpecFile(FileModel):
     cases: Annotated[list[Annotated[TestCase, PlainValidator(_test_case)]], BeforeValidator(_cases)]
     """Test cases as RIG/CONSIGNMENT/SPEED_SETTING, e.g. [E3/KPBW/1, E3/KPBW/2]."""
     truth: Annotated[dict[Any, _Truth], or_default(dict)] = Field(default_factory=dict)
+    """The hidden true parameters by consignment type, in the catalogue's units."""
     rigs: Annotated[list[Annotated[str, Text()]], or_default(list)] = Field(default_factory=list)
     """Rig files of your own (relative to this file) that the cases may name beside the
     bundled rigs; a case names a rig by its name, which must equal the file's stem."""
@@ -494,7 +495,6 @@ class TwinSpecFile(FileModel):
     )
     """Consignment files of your own (relative to this file), named by the cases like the
     bundled types; a type's name must equal the file's stem."""
-    """The hidden true parameters by consignment type, in the catalogue's units."""
     settings: Annotated[TwinSettingsSection, or_default(dict)] = Field(
         default_factory=TwinSettingsSection
     )
@@ -502,8 +502,9 @@ class TwinSpecFile(FileModel):
 
 
 def load_twin_spec(path: str | Path) -> TwinSpec:
-    """Read a twin specification YAML (keys: name, seed, cases, truth, settings) and check it;
-    the truth stays in catalogue units (`make_twin_dataset` converts it)."""
+    """Read a twin specification YAML (keys: name, seed, cases, truth, rigs, consignments,
+    settings) and check it; the truth stays in catalogue units (`make_twin_dataset` converts
+    it), the rig and consignment files are found relative to the file."""
     f = parse(TwinSpecFile, load_yaml(path), file=path)
     truth = {str(cons): dict(values) for cons, values in f.truth.items()}
     folder = Path(path).resolve().parent
