@@ -36,7 +36,7 @@ same command reuses the twin datasets and finished studies.
 
 With MuJoCo it takes 40-95 min on 2 cores for three truths with the published and one joint
 setup, the twin datasets made once (each 40 simulations; each calibration up to budget x the
-cases' placements simulations; docs/twin-benchmark.md has the measured tables); it runs on
+cases' placements simulations; docs/research/twin-benchmark.md has the measured tables); it runs on
 demand, not in CI. The test suite runs the
 same code on the analytic test simulator with a tiny budget.
 """

@@ -187,7 +187,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE", help="catalogue units")
     ap.add_argument("--scene", nargs="*", default=[], metavar="KEY=VALUE")
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
-    ap.add_argument("--out", type=Path, default=Path("docs"))
+    ap.add_argument("--out", type=Path, default=Path("docs/research"))
     args = ap.parse_args(argv)
     if args.step <= 0 or args.range[1] <= args.range[0]:
         ap.error("--range needs LO < HI and --step a positive number of mm")

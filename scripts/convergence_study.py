@@ -1,4 +1,4 @@
-"""Mesh and time-step convergence of the MuJoCo parcel model (writes docs/convergence.md).
+"""Mesh and time-step convergence of the MuJoCo parcel model (writes docs/research/convergence.md).
 
 For E3 at speed setting 1 (KPBW: rigid content; PB: soft content) the run is repeated at
 several shell mesh spacings and time steps; each run is compared with the finest one by the
@@ -23,7 +23,7 @@ import numpy as np
 from parcelfit.runs import TestCase
 from parcelfit.sim.mujoco import MujocoSimulator, SceneOptions, SimOptions
 
-OUT = Path(__file__).resolve().parents[1] / "docs" / "convergence.md"
+OUT = Path(__file__).resolve().parents[1] / "docs" / "research" / "convergence.md"
 HORIZON = 1.2  # s, compared span
 
 

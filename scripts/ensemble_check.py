@@ -11,7 +11,7 @@ across ensembles of seeded hand placements rather than single runs.
 
 For each rig and speed setting it simulates every consignment type at its default parameters
 for the placement seeds 0..N-1 (the rig's ``start.scatter``), then prints and writes
-(``--out``, default docs/) ``ensemble-check.md`` with the per-type statistics and the published
+(``--out``, default docs/research/) ``ensemble-check.md`` with the per-type statistics and the published
 observations as checks:
 
 * E3: median absolute rotation ordered BW > KP/BW > KP; BW above 90 degrees in at least a
@@ -199,7 +199,7 @@ def main(argv: list[str] | None = None) -> int:
         "--settings", nargs="+", type=int, default=None, help="these speed settings of every rig"
     )
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
-    ap.add_argument("--out", type=Path, default=Path("docs"))
+    ap.add_argument("--out", type=Path, default=Path("docs/research"))
     ap.add_argument(
         "--wall-limit",
         type=float,

@@ -15,7 +15,7 @@ placement against the finest configuration (the reference, listed last), the med
 difference of each run's rotation [deg] and transit time [ms] and the share of placements whose
 outcome (spin/slide) differs. Wall time per run is measured on one core per worker.
 
-Writes ``ensemble-convergence-<rig>.md`` into ``--out`` (default docs/) after every type.
+Writes ``ensemble-convergence-<rig>.md`` into ``--out`` (default docs/research/) after every type.
 """
 
 from __future__ import annotations
@@ -177,7 +177,7 @@ def main(argv: list[str] | None = None) -> int:
         "vertex spacing), finest (the reference) last",
     )
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
-    ap.add_argument("--out", type=Path, default=Path("docs"))
+    ap.add_argument("--out", type=Path, default=Path("docs/research"))
     args = ap.parse_args(argv)
 
     rig = load_rig(args.rig)

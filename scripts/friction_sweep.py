@@ -7,7 +7,7 @@ For each consignment type and each (mu_d_BePa, mu_d_MePa) pair (the other parame
 defaults) it simulates the placement seeds 0..N-1 at speed setting 1 and reports the median
 absolute rotation, the spins (> 90 degrees), the share above 180 degrees, the median transit
 time, Spearman's rho of rotation and transit time, and every run's rotation. Writes
-``friction-sweep-<rig>.md`` into ``--out`` (default docs/) and prints the rows as they finish.
+``friction-sweep-<rig>.md`` into ``--out`` (default docs/research/) and prints the rows as they finish.
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--belt", nargs="+", type=float, default=[0.3, 0.45, 0.6])
     ap.add_argument("--metal", nargs="+", type=float, default=[0.15, 0.35])
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
-    ap.add_argument("--out", type=Path, default=Path("docs"))
+    ap.add_argument("--out", type=Path, default=Path("docs/research"))
     args = ap.parse_args(argv)
 
     rig = load_rig(args.rig)

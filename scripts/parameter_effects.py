@@ -27,7 +27,7 @@ and the K runs at the high end, against the same change between the runs at the 
 standard error of the change (how much another draw of K placements would move it). On a rig
 where single placements near the spin/slide threshold change branch with any small change, this
 is the response a parameter has to move. ``--scene KEY=VALUE`` sets scene options other
-than the defaults (e.g. ``belt_friction=coulomb``). Writes ``docs/parameter-effects.md``
+than the defaults (e.g. ``belt_friction=coulomb``). Writes ``docs/research/parameter-effects.md``
 (``--out``).
 """
 
@@ -187,7 +187,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--placements", type=int, default=1)
     ap.add_argument("--step", type=float, default=0.001, help="relative change for the floor")
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
-    ap.add_argument("--out", type=Path, default=Path("docs"))
+    ap.add_argument("--out", type=Path, default=Path("docs/research"))
     ap.add_argument("--scene", nargs="*", default=[], metavar="KEY=VALUE")
     args = ap.parse_args(argv)
     rig = load_rig(args.rig)

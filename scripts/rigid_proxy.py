@@ -20,7 +20,7 @@ It prints, per rig and option set, the median absolute rotation, the share of pl
 90 and 180 degrees, and the section-11 checks of ``scripts/ensemble_check.py``. Rotation is the
 net change of the unwrapped heading while the parcel is on the rig; a placement whose box falls
 off a surface edge is reported as fallen, not counted as a rotation.
-Measured results and what they mean: docs/e3-geometry.md, "A rigid-box proxy".
+Measured results and what they mean: docs/research/e3-geometry.md, "A rigid-box proxy".
 """
 
 from __future__ import annotations

@@ -111,7 +111,7 @@ READING = [
     "",
     "Coulomb belt friction is a scene option (`belt_friction: coulomb` in a study's simulator "
     "section, `parcelfit simulate --belt-friction coulomb`), not yet the default: its E3 "
-    "ensemble, transit convergence, parameter effects and twin benchmark are in docs/coulomb/.",
+    "ensemble, transit convergence, parameter effects and twin benchmark are in docs/research/coulomb/.",
 ]
 
 
@@ -359,7 +359,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", nargs="+", type=int, default=[1200, 2400, 4800], help="1/N s")
     ap.add_argument("--zetas", nargs="+", type=float, default=[0.3, 1.0, 3.0])
-    ap.add_argument("--out", type=Path, default=Path("docs"))
+    ap.add_argument("--out", type=Path, default=Path("docs/research"))
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     lines = [

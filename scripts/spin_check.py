@@ -51,7 +51,7 @@ def main(argv: list[str] | None = None) -> int:
         metavar="KEY=VALUE",
         help="scene options other than the defaults (e.g. spacing=0.06)",
     )
-    ap.add_argument("--out", type=Path, default=Path("docs"))
+    ap.add_argument("--out", type=Path, default=Path("docs/research"))
     args = ap.parse_args(argv)
     try:
         plates = [None if p == "one" else float(p) for p in args.plates]

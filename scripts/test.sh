@@ -5,7 +5,8 @@
 #    with no extras, then `parcelfit --help` and the README's main job in its quick form
 #    (`parcelfit demo --quick`). An import that only an extra brings in fails here.
 # 2. Only then the test extras into that same environment: the linter, the dependency check
-#    (deptry: every import in src/ is a declared dependency) and the test suite.
+#    (deptry: every import in src/ is a declared dependency), the test suite, and the
+#    documentation site (mkdocs build --strict: a broken link or a missing page fails).
 # Debian's Chromium is installed first where possible (the HTML report is checked in a real
 # headless browser).
 #
@@ -51,3 +52,7 @@ echo "== test extras, lint, dependency check, tests"
 "$py" -m deptry src
 # -n auto: one test process per core (xdist); pass -n 0 to run in this process only
 "$py" -m pytest -n auto "$@"
+
+echo "== documentation site (mkdocs build --strict)"
+NO_MKDOCS_2_WARNING=1 "$py" -m mkdocs build --strict --quiet --site-dir "$work/site"
+echo "mkdocs build --strict: ok"

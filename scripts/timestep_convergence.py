@@ -8,7 +8,7 @@ For each consignment type, placement (seed -1: the nominal pose) and membrane ca
 shell's E_Pa t_Pa as given; otherwise `SceneOptions.membrane_cap` [N/m]), the E3 run at speed
 setting 1 is simulated at time steps 1/600, 1/1200 and 1/2400 s, and each is compared with the
 1/2400 s run of the same variant: transit time difference [ms] and net rotation [deg]. Writes
-``docs/timestep-convergence.md`` (``--out``, or ``timestep-convergence-<set>.md`` with ``--set``).
+``docs/research/timestep-convergence.md`` (``--out``, or ``timestep-convergence-<set>.md`` with ``--set``).
 Default parameters unless ``--set NAME=VALUE`` (catalogue units) says otherwise (E_Pa 1000
 N/mm^2, t_Pa 0.5 mm: membrane stiffness E t = 5e5 N/m).
 """
@@ -62,7 +62,7 @@ def main() -> None:
     ap.add_argument("--caps", nargs="+", type=float, default=[0.0, 3.125e4])
     ap.add_argument("--set", nargs="*", default=[], help="NAME=VALUE in the catalogue's unit")
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
-    ap.add_argument("--out", type=Path, default=Path("docs"))
+    ap.add_argument("--out", type=Path, default=Path("docs/research"))
     args = ap.parse_args()
     given = tuple(args.set)
     jobs = list(itertools.product(args.types, args.seeds, args.caps, STEPS, [given]))

@@ -9,7 +9,7 @@ For each test case (default parameters), placement seed (-1: the nominal pose), 
 is simulated and its transit time compared with the finest step's run of the same case,
 placement and variant. The transit time is the quantity a calibration leans on most (the cost's
 transit term, the validation's first criterion); a step error in it biases the friction
-coefficients that set it. Writes ``docs/transit-convergence.md`` (``--out``).
+coefficients that set it. Writes ``docs/research/transit-convergence.md`` (``--out``).
 """
 
 from __future__ import annotations
@@ -63,7 +63,7 @@ def main() -> None:
     ap.add_argument("--steps", nargs="+", type=int, default=[1200, 2400, 4800], help="N of 1/N s")
     ap.add_argument("--variants", nargs="+", default=["impratio=1", "impratio=10"])
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
-    ap.add_argument("--out", type=Path, default=Path("docs"))
+    ap.add_argument("--out", type=Path, default=Path("docs/research"))
     args = ap.parse_args()
     steps = sorted(set(args.steps))
     jobs = list(itertools.product(args.cases, args.seeds, args.variants, steps))

@@ -102,7 +102,69 @@ def test_help_keeps_units_in_square_brackets_and_shows_the_timestep_readably():
     assert "Time step [s]." in text and "Wall-clock limit [s]." in text
     assert "1/2400 s (rigid contents), 1/1200 s (soft)" in text and "0.00041667" not in text
     result = runner.invoke(app, ["camera-calibrate", "--help"], terminal_width=200)
-    assert "Side of one square [mm]." in " ".join(result.output.split())
+    assert "Side of one square [m], the tag map's unit (e.g. 0.04)." in " ".join(
+        result.output.split()
+    )
+
+
+COMMANDS = sorted(app.registered_commands, key=lambda c: c.name or c.callback.__name__)
+
+
+def _help(command) -> str:
+    name = command.name or command.callback.__name__.replace("_", "-")
+    if name == "track-all-command":
+        name = "track-all"
+    result = runner.invoke(app, [name, "--help"], terminal_width=120)
+    assert result.exit_code == 0, result.output
+    return " ".join(result.output.split())
+
+
+def test_help_shows_no_python_types_no_dates_and_one_workers_default():
+    import re
+
+    for command in COMMANDS:
+        text = _help(command)
+        assert "list[" not in text and "<list" not in text, text
+        assert not re.search(r"20\d\d-\d\d-\d\d", text), text  # no dates in help texts
+        if "--workers" in text:
+            assert "Worker processes simulating in parallel (default: one per core" in text, text
+        if "--executor" in text:
+            assert "--executor [serial|local" in text, text  # the choices are listed
+
+
+def test_help_names_list_options_and_the_demo_default():
+    simulate = " ".join(
+        runner.invoke(app, ["simulate", "--help"], terminal_width=120).output.split()
+    )
+    assert "--set NAME=VALUE" in simulate and "--speed-setting, --setting" in simulate
+    assert "speed_setting in dataset, study and screen files" in simulate
+    precision = " ".join(
+        runner.invoke(app, ["precision", "--help"], terminal_width=120).output.split()
+    )
+    assert (
+        "--candidate RIG/CONSIGNMENT/SPEED_SETTING" in precision and "--at NAME=VALUE" in precision
+    )
+    calibrate = " ".join(
+        runner.invoke(app, ["calibrate", "--help"], terminal_width=120).output.split()
+    )
+    assert "--executor [serial|local|dask]" in calibrate
+    demo = " ".join(runner.invoke(app, ["demo", "--help"], terminal_width=120).output.split())
+    assert "Without a flag: the published 32-run screen" in demo and "about 10 minutes" in demo
+    assert "the file's executor" not in demo
+
+
+def test_camera_calibrate_square_is_in_metres(tmp_path):
+    result = runner.invoke(
+        app, ["camera-calibrate", str(tmp_path / "board.mp4"), "--tags", "t.yaml", "--square", "40"]
+    )
+    assert result.exit_code == 2
+    assert "--square 40 m is not a checkerboard square" in result.output
+    assert "e.g. 0.04 for 40 mm" in " ".join(result.output.split())
+
+
+def test_the_old_setting_flag_still_works(tmp_path):
+    result = runner.invoke(app, ["simulate", "--setting", "9", "--out", str(tmp_path / "r.csv")])
+    assert result.exit_code == 2 and "rig E3 has no speed setting 9" in result.output
 
 
 def test_demo_stages_are_library_calls(tmp_path):

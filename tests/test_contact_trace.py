@@ -1,4 +1,4 @@
-"""scripts/contact_trace.py: which rig geom pushes the parcel, and how hard (docs/belt-drums.md)."""
+"""scripts/contact_trace.py: which rig geom pushes the parcel, and how hard (docs/research/belt-drums.md)."""
 
 import re
 from pathlib import Path
@@ -63,9 +63,9 @@ def test_the_square_end_catch_on_e2a_is_the_outfeed_pushing_the_parcel_back(
         surface.pop("nose_radius", None)
     square = tmp_path / "E2a-square.yaml"
     square.write_text(yaml.safe_dump(doc))
-    # as measured in docs/belt-drums.md: with square ends, the shell's former alternating
+    # as measured in docs/research/belt-drums.md: with square ends, the shell's former alternating
     # diagonals (with the radiating ones the same push leaves the parcel on the square end) and
-    # MuJoCo's equal mass shares (the model before the masses were lumped, docs/mass-lumping.md)
+    # MuJoCo's equal mass shares (the model before the masses were lumped, docs/research/mass-lumping.md)
     # and the contact and friction laws before 2026-12-01 (contact.py, friction.py)
     args = ["--rig", str(square), "--consignment", "KPBW", "--seed", "3", "--top", "1"]
     args += ["--scene", "shell_diagonals=alternating", "mass_lumping=equal"]

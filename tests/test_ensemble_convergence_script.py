@@ -1,4 +1,4 @@
-"""scripts/ensemble_convergence.py: its numerical configurations (docs/pb-speed.md)."""
+"""scripts/ensemble_convergence.py: its numerical configurations (docs/research/pb-speed.md)."""
 
 import pytest
 

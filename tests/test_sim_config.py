@@ -564,7 +564,7 @@ def _deepest_shell_content_contact(scene) -> float:
 def test_ccd_tolerance_is_tight_around_a_soft_content_and_can_be_set():
     """1e-8 m around the polybag's soft content, MuJoCo's default around a rigid one. At
     MuJoCo's own 1e-6 a vertex of the 50 mm film lying right above one of the 100 mm content's
-    is reported 0.2 mm deep in it at rest, where the two just touch (docs/pb-speed.md)."""
+    is reported 0.2 mm deep in it at rest, where the two just touch (docs/research/pb-speed.md)."""
     from parcelfit.sim.mujoco.scene import SceneOptions
 
     def option(name, **given):

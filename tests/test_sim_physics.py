@@ -260,7 +260,7 @@ def test_soft_polybag_runs_briefly():
 @pytest.mark.parametrize("mu", [0.3, 0.6])
 def test_a_sliding_parcel_stops_after_the_coulomb_distance(mu):
     """Kicked to 1 m/s on a still belt-material plate, a BW slides v0^2 / (2 mu g) and stops
-    after v0 / (mu g), as a body with Coulomb friction does (docs/sliding-lift.md)."""
+    after v0 / (mu g), as a body with Coulomb friction does (docs/research/sliding-lift.md)."""
     from parcelfit.sim.mujoco.spin import slide_test
 
     res = slide_test(load_consignment("BW"), v0=1.0, params={"mu_d_BePa": mu})
@@ -277,7 +277,7 @@ def test_a_kicked_parcel_slides_the_coulomb_distance_without_hopping(name):
     step. KP's bottom makes more contacts than MuJoCo keeps (50), and its slide was 37 % too long
     before a contact new in a step took its surface's mean force (friction.py); now 3.6 %. MuJoCo's own
     friction (the former "geom" law) lifts a sliding contact: the default shell touches the plate
-    nowhere in 13-58 % of the sliding steps (docs/sliding-lift.md)."""
+    nowhere in 13-58 % of the sliding steps (docs/research/sliding-lift.md)."""
     from parcelfit.sim.mujoco.spin import slide_test
 
     cons = load_consignment(name)
@@ -370,7 +370,7 @@ def test_a_spinning_parcel_keeps_its_spin_in_free_flight_and_stops_as_a_rigid_bo
     """With the default interpolated shell (trilinear over 4 x 4 x 1 cells) the parcel keeps a
     10 rad/s spin in free flight (no force acts on it) and the belt stops it after about the
     rigid Coulomb turn (BW) or the full shell's turn (KP); a shell with a degree of freedom per
-    vertex at 1/600 s loses most of it (docs/spin-check.md)."""
+    vertex at 1/600 s loses most of it (docs/research/spin-check.md)."""
     from parcelfit.sim.mujoco.spin import spin_test
 
     cons = load_consignment(name)
@@ -388,7 +388,7 @@ def test_a_spinning_parcel_keeps_its_spin_in_free_flight_and_stops_as_a_rigid_bo
     assert down.turn == pytest.approx(down.coulomb_turn, rel=0.15)
     if name == "KP":
         # KP's shell carries its content's weight, no more (it clamped it with 2.4 times that
-        # while its rim's taper overlapped the content; docs/shell-clearance.md)
+        # while its rim's taper overlapped the content; docs/research/shell-clearance.md)
         assert down.content_load == pytest.approx(down.content_weight, rel=0.05)
     full = SceneOptions(shell_dof="full", timestep=1 / 600)  # the former default
     assert spin_test(cons, free=True, options=full).retained < 0.5

@@ -295,7 +295,7 @@ def test_camera_calibration_recovers_the_camera_and_tracking_stays_accurate(vide
             "--board",
             "9x6",
             "--square",
-            "40",
+            "0.04",
         ],
     )
     assert result.exit_code == 0, result.output

@@ -230,15 +230,40 @@ def _print_tests(tests: Any) -> None:
 
 
 WorkersOption = Annotated[
-    int | None, typer.Option(min=1, help="Local worker processes (default: one per core).")
+    int | None,
+    typer.Option(
+        min=1,
+        help="Worker processes simulating in parallel (default: one per core; a file's "
+        "executor.workers where the command reads a file).",
+    ),
 ]
 ExecutorOption = Annotated[
     str | None,
     typer.Option(
-        help="Where simulations run: serial (in this process, one at a time; for debugging) "
-        "or local (processes). Default: the file's executor, else local."
+        metavar="[serial|local]",
+        help="Where simulations run: local (worker processes) or serial (in this process, one "
+        "at a time; for debugging). Default: the file's executor.kind, else local.",
     ),
 ]
+SettingOption = Annotated[
+    int,
+    typer.Option(
+        "--speed-setting",
+        "--setting",
+        min=1,
+        help="Speed setting of the rig (speed_setting in dataset, study and screen files).",
+    ),
+]
+
+
+def _workers(workers: int | None) -> int:
+    """The worker processes a local executor uses: ``workers``, else one per core."""
+    return workers or os.cpu_count() or 1
+
+
+def _say_cost(estimate: Any) -> None:
+    """Print a job's expected cost (`parcelfit.sim.cost.Estimate`) before it starts."""
+    console.print(Text(estimate.text(), style="cyan"), highlight=False)
 
 
 @app.command()
@@ -252,17 +277,29 @@ def demo(
     full: Annotated[
         bool, typer.Option("--full", help="The full published protocol (slower).")
     ] = False,
-    executor: ExecutorOption = None,
-    workers: Annotated[
-        int | None, typer.Option(min=1, help="Worker processes (default: one per core).")
+    executor: Annotated[
+        str | None,
+        typer.Option(
+            metavar="[serial|local]",
+            help="Where simulations run: local (worker processes, the default) or serial (in "
+            "this process, one at a time; for debugging).",
+        ),
     ] = None,
+    workers: WorkersOption = None,
     animation: Annotated[
         bool,
         typer.Option(help="Write an animation of the calibrated run and embed it in the report."),
     ] = True,
 ) -> None:
     """End to end on the bundled SYNTHETIC twin dataset: statistics, reference runs, screening,
-    calibration with validation, and the HTML report. Rerunning resumes."""
+    calibration with validation, and the HTML report. Rerunning resumes.
+
+    Without a flag: the published 32-run screen of all 16 parameters, then a joint calibration
+    of KP/BW on E3 and E1 (at most 60 evaluations, validated on E3 at speed setting 2, a
+    transfer check on E1), about 10 minutes on 2 cores. --quick: an 8-run screen and at most 16
+    evaluations, about 3 minutes. --full: the published protocol (fractional then full
+    factorial screen, at most 80 evaluations), 3 minutes or more: the calibration stops when
+    its validation passes. The expected cost is printed before the simulations start."""
     import time
 
     from parcelfit.demo import STAGES, Demo
@@ -305,6 +342,7 @@ def demo(
     for s in selections.values():
         table.add_row(s.case.label, s.reference_id, str(len(s.run_ids)))
     console.print(table)
+    _say_cost(d.expected_cost(_workers(workers)))
     rule(3, f" (profile {d.profile.name})")
     with console.status("screening") as status_line:
         stages, selection = d.screen(_progress(status_line, "screening: "))
@@ -389,13 +427,12 @@ def synth(
     executor: Annotated[
         str | None,
         typer.Option(
-            help="serial (in this process, for debugging) or local (processes; the default "
-            "for more than one worker)."
+            metavar="[serial|local]",
+            help="Where simulations run: local (worker processes; the default for more than "
+            "one worker) or serial (in this process, one at a time; for debugging).",
         ),
     ] = None,
-    workers: Annotated[
-        int, typer.Option("--workers", min=1, help="Processes simulating in parallel.")
-    ] = max(1, os.cpu_count() or 1),
+    workers: WorkersOption = None,
 ) -> None:
     """Make a SYNTHETIC twin-experiment dataset from hidden true parameters (and truth.yaml)."""
     from parcelfit.synth import load_twin_spec, make_twin_dataset
@@ -403,8 +440,11 @@ def synth(
     _check_executor(executor, ("serial", "local"))
     _check_paths(out)
     _resumes()
+    from parcelfit.synth import expected_cost
+
     _workers_at_most(workers)
     tw = load_twin_spec(spec)
+    workers = _workers(workers)
     total = len(tw.cases) * tw.settings.runs
     serial = executor == "serial" or (executor is None and workers <= 1)
     where = "in this process" if serial else f"on {workers} processes"
@@ -412,6 +452,7 @@ def synth(
         f"[bold]twin dataset[/] {tw.name}: {len(tw.cases)} test cases x {tw.settings.runs} runs "
         f"{where} [yellow](SYNTHETIC)[/]"
     )
+    _say_cost(expected_cost(tw, 1 if serial else workers))
     with Progress(*Progress.get_default_columns(), TimeElapsedColumn(), console=console) as bar:
         task = bar.add_task("simulating twin runs", total=total)
 
@@ -429,6 +470,8 @@ def synth(
             workers=workers,
             executor=executor,
             progress=step,
+            rigs=tw.rigs(),
+            consignments=tw.consignments(),
         )
     truth_file = path.parent / "truth.yaml"
     console.print(f"[green]done[/]: {escape(str(path))} and {escape(str(truth_file))}")
@@ -509,7 +552,11 @@ def track(
 @app.command("track-all")
 def track_all_command(
     folder: Annotated[
-        Path, typer.Argument(help="Folder of videos named RIG-CONS-SETTING-RUN.mp4.")
+        Path,
+        typer.Argument(
+            help="Folder of videos named RIG-CONSIGNMENT-SPEED_SETTING-RUN.mp4 (e.g. "
+            "E3-KPBW-1-01.mp4)."
+        ),
     ],
     tags: Annotated[Path, typer.Option("--tags", help="The tag map (YAML).")],
     out: Annotated[Path, typer.Option("--out", help="Dataset folder.")] = Path("dataset"),
@@ -559,7 +606,9 @@ def camera_calibrate(
     board: Annotated[
         str, typer.Option(help="Inner corners of the board, COLUMNSxROWS (e.g. 9x6).")
     ] = "9x6",
-    square: Annotated[float, typer.Option(help="Side of one square [mm].")] = 40.0,
+    square: Annotated[
+        float, typer.Option(help="Side of one square [m], the tag map's unit (e.g. 0.04).")
+    ] = 0.04,
     max_frames: Annotated[int, typer.Option(min=5, help="Views used at most.")] = 40,
 ) -> None:
     """Fit the camera's intrinsics and lens distortion (OpenCV) and write them into the tag map."""
@@ -574,13 +623,19 @@ def camera_calibrate(
         )
     _at_most(max_frames, "--max-frames", 1000)
     if square <= 0:
-        raise ParcelfitError(f"--square must be positive, got {square}", fix="give it in mm")
+        raise ParcelfitError(f"--square must be positive, got {square}", fix="give it in metres")
+    if square >= 1:
+        raise ParcelfitError(
+            f"--square {square:g} m is not a checkerboard square",
+            fix=f"give the side in metres, like the tag map (e.g. {square / 1000:g} for "
+            f"{square:g} mm)",
+        )
     with _frame_bar() as bar:
         task = bar.add_task("finding the board", total=None)
         result = calibrate_camera(
             video,
             (int(cols), int(rows)),
-            square / 1000.0,  # mm at the edge, metres inside
+            square,
             max_frames=max_frames,
             progress=lambda k, n: bar.update(task, completed=k, total=n or None),
         )
@@ -602,12 +657,19 @@ def simulate(
         str, typer.Option(help="Bundled rig name (E1, E2a, E2b, E3) or a rig .yaml file.")
     ] = "E3",
     consignment: Annotated[
-        str, typer.Option(help="Bundled type (KPBW, PB, KP, BW) or a .yaml file.")
+        str,
+        typer.Option(
+            help="Bundled consignment type (KPBW, PB, KP, BW) or a consignment .yaml file."
+        ),
     ] = "KPBW",
-    setting: Annotated[int, typer.Option(help="Speed setting of the rig.")] = 1,
+    setting: SettingOption = 1,
     set_: Annotated[
         list[str] | None,
-        typer.Option("--set", help="NAME=VALUE in the catalogue's unit (see `parcelfit params`)."),
+        typer.Option(
+            "--set",
+            metavar="NAME=VALUE",
+            help="A parameter in the catalogue's unit (see `parcelfit params`); repeatable.",
+        ),
     ] = None,
     out: Annotated[Path, typer.Option(help="Trajectory file to write (.csv or .parquet).")] = Path(
         "run.csv"
@@ -628,7 +690,7 @@ def simulate(
     film_spacing: Annotated[
         float | None,
         typer.Option(
-            help="Film mesh spacing around a soft content [m] (see docs/pb-speed.md).",
+            help="Film mesh spacing around a soft content [m].",
             show_default="0.05 m",
         ),
     ] = None,
@@ -668,8 +730,8 @@ def simulate(
         str,
         typer.Option(
             help="How the packaging's (and a soft content's) mass is spread over the bodies that "
-            "carry it: area (lumped by area and volume) or equal (MuJoCo's own equal shares, the "
-            "model before 2026-11-28; see docs/mass-lumping.md).",
+            "carry it: area (lumped by area and volume) or equal (MuJoCo's own equal shares, "
+            "the former model).",
         ),
     ] = "area",
     wall_limit: Annotated[float, typer.Option(help="Wall-clock limit [s].")] = 600.0,
@@ -689,9 +751,7 @@ def simulate(
             min=1,
         ),
     ] = 1,
-    workers: Annotated[
-        int, typer.Option(help="Processes for an ensemble (0: all cores).", min=0)
-    ] = 0,
+    workers: WorkersOption = None,
 ) -> None:
     """Simulate one test case with MuJoCo and write the run (t, x, y, theta; SI units).
 
@@ -735,9 +795,7 @@ def simulate(
     if repeat > 1:
         if video is not None:
             raise ParcelfitError("--video works with one run only", fix="leave out --repeat")
-        _simulate_ensemble(
-            sim, params, case, seed or 0, repeat, workers or os.cpu_count() or 1, out
-        )
+        _simulate_ensemble(sim, params, case, seed or 0, repeat, _workers(workers), out)
         return
     sim = sim.with_placement(seed)
     with console.status(f"simulating {case.label}"):
@@ -914,7 +972,10 @@ def rigs() -> None:
 @app.command()
 def params(
     consignment: Annotated[
-        str, typer.Option(help="Consignment type (or .yaml) whose parameters to list.")
+        str,
+        typer.Option(
+            help="Bundled consignment type (or a consignment .yaml file) whose parameters to list."
+        ),
     ] = "KPBW",
 ) -> None:
     """List the simulation parameters with units, screening ranges and defaults."""
@@ -955,12 +1016,18 @@ def calibrate(
     executor: Annotated[
         str | None,
         typer.Option(
-            help="serial (in this process, for debugging), local (processes) or dask "
-            "(default: the study file's, else local)."
+            metavar="[serial|local|dask]",
+            help="Where simulations run: local (worker processes), serial (in this process, "
+            "one at a time; for debugging) or dask (a Dask cluster, see --scheduler). Default: "
+            "the study file's executor.kind, else local.",
         ),
     ] = None,
     scheduler: Annotated[
-        str | None, typer.Option(help="Dask scheduler address, e.g. tcp://HOST:8786.")
+        str | None,
+        typer.Option(
+            help="Dask scheduler address, e.g. tcp://HOST:8786 (the study file's "
+            "executor.scheduler)."
+        ),
     ] = None,
     workers: WorkersOption = None,
     animation: Annotated[
@@ -989,6 +1056,7 @@ def calibrate(
     study = load_study(study_file)
     folder = out or study_file.parent / study_file.stem
     _resumes(_stored(folder / "study.sqlite", "fit", "evaluations"))
+    _say_calibration_cost(study, executor, workers, folder)
 
     def run(progress: ProgressCallback) -> Any:
         calibration = Calibration(
@@ -1007,6 +1075,24 @@ def calibrate(
         return result
 
     _calibrate_live(run, study.name, folder)
+
+
+def _say_calibration_cost(
+    study: Any, executor: str | None, workers: int | None, folder: Path
+) -> None:
+    """The calibration's expected cost (at most its budget), before it starts."""
+    from parcelfit.study.estimate import calibration_estimate
+
+    kind = executor or study.executor.get("kind", "local")
+    n = 1 if kind == "serial" else _workers(workers or study.executor.get("workers"))
+    if kind == "dask":
+        n = 1
+    line = calibration_estimate(study, n).text(
+        "at most: it stops when a validation passes"
+        + ("; divide by the Dask cluster's worker processes" if kind == "dask" else "")
+        + ("; a resumed study runs only what is left" if (folder / "study.sqlite").exists() else "")
+    )
+    console.print(Text(line, style="cyan"), highlight=False)
 
 
 def _calibrate_live(run: Callable[[ProgressCallback], Any], name: str, folder: Path) -> Any:
@@ -1163,10 +1249,19 @@ def screen(
     from parcelfit.study.screening import load_screen, run_screen
 
     _check_executor(executor, ("serial", "local"))
+    from parcelfit.study.estimate import screen_estimate
+
     _workers_at_most(workers)
     spec = load_screen(screen_file)
     folder = out or screen_file.parent / screen_file.stem
     _resumes(_stored(folder / "screen.sqlite", "screen", "simulations"))
+    kind = executor or spec.executor.get("kind", "local")
+    n = 1 if kind == "serial" else _workers(workers or spec.executor.get("workers"))
+    console.print(
+        Text(screen_estimate(spec, n).text("the first stage; later stages follow from it")),
+        style="cyan",
+        highlight=False,
+    )
     with console.status("screening") as status_line:
         stages, selection = run_screen(
             spec,
@@ -1218,11 +1313,18 @@ def precision(
     ] = 10,
     candidate: Annotated[
         list[str] | None,
-        typer.Option(help="A further test case to judge, RIG/TYPE/SETTING (repeatable)."),
+        typer.Option(
+            metavar="RIG/CONSIGNMENT/SPEED_SETTING",
+            help="A further test case to judge, e.g. E1/KPBW/2; repeatable.",
+        ),
     ] = None,
     at: Annotated[
         list[str] | None,
-        typer.Option(help="NAME=VALUE (catalogue units): the point to judge at, else the centre."),
+        typer.Option(
+            metavar="NAME=VALUE",
+            help="A parameter's value (catalogue units) at the point to judge at, else the "
+            "centre of its range; repeatable.",
+        ),
     ] = None,
     adjust_transit: Annotated[
         bool,
@@ -1241,12 +1343,23 @@ def precision(
     """Which parameters can the study's test cases determine, before calibrating (resumable)."""
     from parcelfit.atomic import write_text_atomic
     from parcelfit.sim.params import parse_assignments
+    from parcelfit.study.estimate import precision_estimate
     from parcelfit.study.precision import half_width_text
     from parcelfit.study.precision_check import TABLE_FILE, command_line, run_precision_check
+    from parcelfit.study.studyfile import load_study
 
     _check_executor(executor, ("serial", "local"))
     _workers_at_most(workers)
     folder = out or study_file.parent / f"{study_file.stem}-precision"
+    study = load_study(study_file)
+    kind = executor or study.executor.get("kind", "local")
+    n = 1 if kind == "serial" else _workers(workers or study.executor.get("workers"))
+    estimate = precision_estimate(study, placements, candidate or [], n)
+    console.print(
+        Text(estimate.text("runs kept from an earlier check are not simulated again")),
+        style="cyan",
+        highlight=False,
+    )
 
     def stored() -> str:
         from parcelfit.study.precision_check import STATISTICS_FILE

@@ -33,6 +33,7 @@ import yaml
 from parcelfit.errors import ParcelfitError
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.runs import Dataset, TestCase, load_dataset, read_trajectory, write_trajectory
+from parcelfit.sim.cost import Estimate
 from parcelfit.sim.params import CATALOGUE
 from parcelfit.study.results import write_json
 
@@ -50,9 +51,9 @@ CALIBRATED = {  # catalogue units, published ranges
 
 
 # E1 runs at half the default step (its rig file's step_refinement): at 1/2400 s the transfer
-# onto its fast belt arrives 5-8 ms early at setting 3 (docs/transit-convergence.md), which held
+# onto its fast belt arrives 5-8 ms early at setting 3 (docs/research/transit-convergence.md), which held
 # the calibrated belt friction 10-14 % of its range off the truth of twins whose "real" runs are at
-# 1/4800 s, as the bundled twin's are; at 1/4800 s it came within 2 % (docs/twin-benchmark.md).
+# 1/4800 s, as the bundled twin's are; at 1/4800 s it came within 2 % (docs/research/twin-benchmark.md).
 # The smoke run coarsens E1 back to this step [s], the shell's default elsewhere, so that the
 # test suite's demo stays within its time (at 1/4800 s the suite took 624 s on 2 cores)
 SMOKE_E1_TIMESTEP = 1 / 2400
@@ -358,6 +359,25 @@ class Demo:
             animation=self.animation,
             advice=self.profile.advice,
         ).run()
+
+    def expected_cost(self, workers: int) -> Estimate:
+        """The screening's first stage, the calibration (at most its budget) and the polybag
+        example, on ``workers`` processes (1 with the serial executor): the estimate the demo
+        prints before it simulates (`parcelfit.sim.cost`)."""
+        from parcelfit.sim.cost import run_seconds
+        from parcelfit.study.estimate import calibration_estimate, screen_estimate
+        from parcelfit.study.screening import load_screen
+        from parcelfit.study.studyfile import load_study
+
+        n = 1 if self.executor == "serial" else workers
+        screen_file, study_file = self.files
+        screen = load_screen(screen_file)
+        study = load_study(study_file)
+        parts = [screen_estimate(screen, n), calibration_estimate(study, n)]
+        example = run_seconds(study.simulator, "E3", "PB")
+        seconds = [p.seconds for p in parts]
+        total = None if None in seconds or example is None else sum(seconds) + example
+        return Estimate(sum(p.simulations for p in parts) + 1, total, n)
 
     def stricter_example(self) -> dict[str, Any]:
         """Stage 5: the polybag run that passes the published criteria and fails the band."""

@@ -15,6 +15,10 @@ required key with the line to add.
 
 Units are the file's: a model holds what the file says, the loader converts to SI once.
 
+Every field carries its description as an attribute docstring (the string below it), and each
+value type states its JSON Schema (with the unit of a `Number` as ``x-unit``): `json_schema`
+gives a file kind's schema, from which the reference of the documentation is generated.
+
 The getters of `parcelfit.config` (for the files not yet described by models) check their
 values with the same types, so each message is written once.
 """
@@ -29,8 +33,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
 
-from pydantic import BaseModel, BeforeValidator, ConfigDict, GetCoreSchemaHandler, model_validator
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    GetCoreSchemaHandler,
+    GetJsonSchemaHandler,
+    model_validator,
+)
 from pydantic import ValidationError as _ValidationError
+from pydantic.json_schema import GenerateJsonSchema, JsonSchemaValue
 from pydantic_core import core_schema
 
 from parcelfit.errors import ParcelfitError, shown
@@ -86,7 +98,9 @@ class FileModel(BaseModel):
     """A section of a file (or a whole file): a mapping whose keys are the fields (or their
     aliases); unknown keys are refused with a suggestion, missing required keys named."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, arbitrary_types_allowed=True)
+    model_config = ConfigDict(
+        extra="forbid", frozen=True, arbitrary_types_allowed=True, use_attribute_docstrings=True
+    )
 
     @classmethod
     def prepare(cls, data: Any) -> Any:
@@ -121,6 +135,28 @@ class _Plain:
     ) -> core_schema.CoreSchema:
         return core_schema.no_info_plain_validator_function(self.check)
 
+    def json_schema(self) -> dict[str, Any]:  # pragma: no cover - overridden
+        """The JSON Schema of the values ``check`` accepts."""
+        return {}
+
+    def __get_pydantic_json_schema__(
+        self, schema: core_schema.CoreSchema, handler: GetJsonSchemaHandler
+    ) -> JsonSchemaValue:
+        out = self.json_schema()
+        if getattr(self, "nullable", False):
+            unit = out.pop("x-unit", None)
+            out = {"anyOf": [out, {"type": "null"}]}
+            if unit:
+                out["x-unit"] = unit
+        return out
+
+
+def _bounds(ge: float | None, le: float | None) -> dict[str, float]:
+    return {
+        **({} if ge is None else {"minimum": ge}),
+        **({} if le is None else {"maximum": le}),
+    }
+
 
 @dataclass(frozen=True)
 class Number(_Plain):
@@ -146,6 +182,13 @@ class Number(_Plain):
                 fix="use a value inside that range",
             )
         return float(value)
+
+    def json_schema(self) -> dict[str, Any]:
+        return {
+            "type": "number",
+            **_bounds(self.ge, self.le),
+            **({"x-unit": self.unit} if self.unit else {}),
+        }
 
 
 @dataclass(frozen=True)
@@ -173,6 +216,9 @@ class Whole(_Plain):
             )
         return value
 
+    def json_schema(self) -> dict[str, Any]:
+        return {"type": "integer", **_bounds(self.ge, self.le)}
+
 
 @dataclass(frozen=True)
 class Flag(_Plain):
@@ -185,6 +231,9 @@ class Flag(_Plain):
                 fix="write true or false without quotes",
             )
         return value
+
+    def json_schema(self) -> dict[str, Any]:
+        return {"type": "boolean"}
 
 
 @dataclass(frozen=True)
@@ -205,6 +254,9 @@ class Text(_Plain):
             )
         return value.strip()
 
+    def json_schema(self) -> dict[str, Any]:
+        return {"type": "string", "minLength": 1}
+
 
 @dataclass(frozen=True)
 class Choice(_Plain):
@@ -220,6 +272,9 @@ class Choice(_Plain):
                 f"unknown {self.what} {shown(text)}", fix=f"use one of {', '.join(self.choices)}"
             )
         return str(text)
+
+    def json_schema(self) -> dict[str, Any]:
+        return {"type": "string", "enum": list(self.choices)}
 
 
 @dataclass(frozen=True)
@@ -244,6 +299,9 @@ class Pair(_Plain):
             raise ParcelfitError(f"expected {self.what}, got {shown(value)}", fix=self.fix)
         return float(value[0]), float(value[1])
 
+    def json_schema(self) -> dict[str, Any]:
+        return {"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems": 2}
+
 
 def or_default(default: Callable[[], Any]) -> BeforeValidator:
     """An absent-or-empty section (null, ``{}``, ``[]``) takes ``default()``, as ``x or {}`` did."""
@@ -258,6 +316,27 @@ def keys_in(allowed: Callable[[], Iterable[str]]) -> BeforeValidator:
         return value
 
     return BeforeValidator(check)
+
+
+# -- JSON Schema ------------------------------------------------------------------------------
+
+
+class _FileSchema(GenerateJsonSchema):
+    """pydantic's generator, with values checked by a plain function (no declared input type)
+    described by their field's description alone, and without titles made from field names."""
+
+    def handle_invalid_for_json_schema(
+        self, schema: core_schema.CoreSchema, error_info: str
+    ) -> JsonSchemaValue:
+        return {}
+
+    def field_title_should_be_set(self, schema: Any) -> bool:
+        return False
+
+
+def json_schema(model: type[FileModel]) -> dict[str, Any]:
+    """The JSON Schema (draft 2020-12) of the files ``model`` reads, keys by their YAML names."""
+    return model.model_json_schema(by_alias=True, schema_generator=_FileSchema)
 
 
 # -- pydantic errors to ParcelfitError --------------------------------------------------------
@@ -344,6 +423,7 @@ __all__ = [
     "Whole",
     "check_keys",
     "is_finite_number",
+    "json_schema",
     "keys_in",
     "or_default",
     "parse",

@@ -20,7 +20,7 @@ experiments do (method.md sections 2 and 3):
   100 mm), and MuJoCo's collision tolerance is ``real_ccd_tolerance`` (default None: the
   model's own, `SceneOptions.ccd_tolerance`). A twin is only a test if its "real" side is at
   least as converged as the model: the defaults are the model's own meshes or finer (30 mm is
-  within about 5 mm of the 15 mm reference in docs/convergence.md). The
+  within about 5 mm of the 15 mm reference in docs/research/convergence.md). The
   former default, 20 mm, was the outlier of that study on the earlier E3 layout (22 mm off the
   reference) and biased every calibration against the twin. The time step is ``real_timestep``
   (default None: the model's own default, 1/2400 s around rigid contents and 1/1200 s around a
@@ -47,7 +47,7 @@ import hashlib
 import json
 import shutil
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -69,8 +69,17 @@ from parcelfit.runs import (
     write_trajectory,
 )
 from parcelfit.schema import Choice, FileModel, Number, Text, Whole, keys_in, or_default, parse
+from parcelfit.sim.cost import Estimate, estimate, run_seconds
 from parcelfit.sim.executors import make_executor
-from parcelfit.sim.mujoco import Consignment, MujocoSimulator, Rig, SceneOptions, SimOptions
+from parcelfit.sim.mujoco import (
+    Consignment,
+    MujocoSimulator,
+    Rig,
+    SceneOptions,
+    SimOptions,
+    load_consignment,
+    load_rig,
+)
 from parcelfit.sim.params import BELT_FRICTION, CATALOGUE, MAX_TIMESTEP, MIN_TIMESTEP
 
 
@@ -253,8 +262,13 @@ def make_twin_dataset(
     workers: int = 1,
     executor: str | None = None,
     progress: ProgressCallback | None = None,
+    rigs: Sequence[Rig] = (),
+    consignments: Sequence[Consignment] = (),
 ) -> Path:
     """Simulate ``settings.runs`` real-like runs per test case; returns the dataset.yaml path.
+
+    ``rigs`` and ``consignments`` are a user's own (loaded from their files), which the cases
+    may name beside the bundled ones.
 
     ``truth_user`` maps a consignment type to its true parameters in the catalogue's units; the
     others take their defaults. ``executor`` is serial (in this process) or local (``workers``
@@ -267,7 +281,9 @@ def make_twin_dataset(
         raise ParcelfitError("a twin dataset needs at least one run per test case", fix="runs >= 1")
     if executor not in (None, "serial", "local"):
         raise ParcelfitError(f"unknown executor {executor!r} for synth", fix="serial or local")
-    sim = MujocoSimulator()
+    sim = MujocoSimulator(
+        rigs={r.name: r for r in rigs}, consignments={c.name: c for c in consignments}
+    )
     truth_si: dict[str, dict[str, float]] = {}
     jobs: list[TwinJob] = []
     seeds = np.random.SeedSequence(seed).spawn(len(cases) * s.runs)
@@ -379,6 +395,17 @@ class TwinSpec:
     truth: dict[str, dict[str, float]]
     settings: TwinSettings
     seed: int
+    # a user's own rig and consignment files the cases may name, by name (absolute paths)
+    rig_files: dict[str, Path] = field(default_factory=dict)
+    consignment_files: dict[str, Path] = field(default_factory=dict)
+
+    def rigs(self) -> tuple[Rig, ...]:
+        """The user's own rigs, loaded."""
+        return tuple(load_rig(p) for p in self.rig_files.values())
+
+    def consignments(self) -> tuple[Consignment, ...]:
+        """The user's own consignment types, loaded."""
+        return tuple(load_consignment(p) for p in self.consignment_files.values())
 
 
 def _test_case(value: Any) -> TestCase:
@@ -405,32 +432,47 @@ class TwinSettingsSection(FileModel):
     """``settings``: `TwinSettings` as written (each >= 0; ``runs`` a whole number >= 1)."""
 
     runs: Annotated[int, Whole(ge=1, le=MAX_TWIN_RUNS)] = TwinSettings.runs
+    """Runs per test case."""
     friction_cv: Annotated[float, Number(ge=0)] = TwinSettings.friction_cv
+    """Relative standard deviation of every friction coefficient between specimens [-]."""
     stiffness_cv: Annotated[float, Number(ge=0)] = TwinSettings.stiffness_cv
+    """Relative standard deviation of every stiffness and Young's modulus between specimens [-]."""
     placement_sd: Annotated[float | None, Number(unit="m", ge=0)] = TwinSettings.placement_sd
+    """Standard deviation of the start position, x and y [m] (default: the rig's start.scatter)."""
     angle_sd: Annotated[float | None, Number(unit="deg", ge=0)] = TwinSettings.angle_sd
+    """Standard deviation of the start heading [deg] (default: the rig's start.scatter)."""
     speed_dev: Annotated[float, Number(ge=0)] = TwinSettings.speed_dev
+    """Largest relative deviation of every drive's speed, drawn uniformly per run [-]."""
     tracking_sd: Annotated[float, Number(unit="m", ge=0)] = TwinSettings.tracking_sd
+    """Standard deviation of the tracking noise on x and y [m]."""
     heading_sd: Annotated[float, Number(unit="rad", ge=0)] = TwinSettings.heading_sd
+    """Standard deviation of the tracking noise on theta [rad]."""
     real_spacing: Annotated[float, Number(unit="m", ge=0.003, le=0.2)] = TwinSettings.real_spacing
+    """Shell mesh spacing of the 'real' runs around rigid contents [m]."""
     real_soft_spacing: Annotated[float, Number(unit="m", ge=0.003, le=0.2)] = (
         TwinSettings.real_soft_spacing
     )
+    """Film mesh spacing of the 'real' runs around a soft content [m]."""
     real_content_spacing: Annotated[float | None, Number(unit="m", ge=0.003, le=0.3)] = (
         TwinSettings.real_content_spacing
     )
+    """Vertex spacing of a soft content in the 'real' runs [m] (default: the model's)."""
     real_ccd_tolerance: Annotated[float | None, Number(unit="m", ge=1e-12, le=1e-3)] = (
         TwinSettings.real_ccd_tolerance
     )
+    """MuJoCo's collision tolerance in the 'real' runs [m] (default: the model's)."""
     real_timestep: Annotated[float | None, Number(unit="s", ge=MIN_TIMESTEP, le=MAX_TIMESTEP)] = (
         TwinSettings.real_timestep
     )
+    """Time step of the 'real' runs [s] (default: the model's)."""
     real_soft_timestep: Annotated[
         float | None, Number(unit="s", ge=MIN_TIMESTEP, le=MAX_TIMESTEP)
     ] = TwinSettings.real_soft_timestep
+    """Time step of the 'real' runs around a soft content [s] (default: real_timestep)."""
     real_belt_friction: Annotated[str, Choice(BELT_FRICTION, what="belt friction law")] = (
         TwinSettings.real_belt_friction
     )
+    """The 'real' runs' friction law on belts, strips and rollers: mujoco or coulomb."""
 
 
 _Truth = Annotated[
@@ -442,22 +484,52 @@ class TwinSpecFile(FileModel):
     """A twin specification file as written (true parameters in catalogue units)."""
 
     name: Annotated[str, Text()] = "twin"
+    """The dataset's name."""
     seed: Annotated[int, Whole(ge=0, le=2**32 - 1)] = 0
+    """Seed of every random draw (specimens, placements, speeds, noise)."""
     cases: Annotated[list[Annotated[TestCase, PlainValidator(_test_case)]], BeforeValidator(_cases)]
+    """Test cases as RIG/CONSIGNMENT/SPEED_SETTING, e.g. [E3/KPBW/1, E3/KPBW/2]."""
     truth: Annotated[dict[Any, _Truth], or_default(dict)] = Field(default_factory=dict)
+    """The hidden true parameters by consignment type, in the catalogue's units."""
+    rigs: Annotated[list[Annotated[str, Text()]], or_default(list)] = Field(default_factory=list)
+    """Rig files of your own (relative to this file) that the cases may name beside the
+    bundled rigs; a case names a rig by its name, which must equal the file's stem."""
+    consignments: Annotated[list[Annotated[str, Text()]], or_default(list)] = Field(
+        default_factory=list
+    )
+    """Consignment files of your own (relative to this file), named by the cases like the
+    bundled types; a type's name must equal the file's stem."""
     settings: Annotated[TwinSettingsSection, or_default(dict)] = Field(
         default_factory=TwinSettingsSection
     )
+    """How real-like the runs are."""
 
 
 def load_twin_spec(path: str | Path) -> TwinSpec:
-    """Read a twin specification YAML (keys: name, seed, cases, truth, settings) and check it:
-    every case's rig (with its speed setting) and consignment type are bundled, every true value
-    applies to its consignment's contents and lies in its physical range; each error names the
-    file and the key. The truth stays in catalogue units (`make_twin_dataset` converts it)."""
+    """Read a twin specification YAML (keys: name, seed, cases, truth, rigs, consignments,
+    settings) and check it: every case's rig (with its speed setting) and consignment type are
+    bundled or one of the spec's own files (found relative to it), every true value applies to
+    its consignment's contents and lies in its physical range; each error names the file and the
+    key. The truth stays in catalogue units (`make_twin_dataset` converts it)."""
     f = parse(TwinSpecFile, load_yaml(path), file=path)
     truth = {str(cons): dict(values) for cons, values in f.truth.items()}
-    sim = MujocoSimulator()
+    folder = Path(path).resolve().parent
+    own: list[dict[str, Path]] = [{}, {}]
+    for k, (files, load) in enumerate(((f.rigs, load_rig), (f.consignments, load_consignment))):
+        for name in files:
+            file = folder / name
+            if not file.is_file():
+                raise ParcelfitError(
+                    f"no such file {name!r}",
+                    file=path,
+                    where="rigs" if k == 0 else "consignments",
+                    fix="give the path of a .yaml file, relative to this file",
+                )
+            own[k][load(file).name] = file
+    sim = MujocoSimulator(
+        rigs={name: load_rig(file) for name, file in own[0].items()},
+        consignments={name: load_consignment(file) for name, file in own[1].items()},
+    )
     for i, case in enumerate(f.cases):
         try:
             sim.rig(case.rig).drive_speeds(case.speed_setting)
@@ -472,7 +544,32 @@ def load_twin_spec(path: str | Path) -> TwinSpec:
                 raise ParcelfitError(
                     exc.message, file=path, where=f"truth.{cons}.{name}", fix=exc.fix
                 ) from None
-    return TwinSpec(f.name, tuple(f.cases), truth, TwinSettings(**f.settings.model_dump()), f.seed)
+    settings = TwinSettings(**f.settings.model_dump())
+    return TwinSpec(f.name, tuple(f.cases), truth, settings, f.seed, own[0], own[1])
 
 
-__all__ = ["TwinJob", "TwinSettings", "TwinSpec", "load_twin_spec", "make_twin_dataset"]
+def expected_cost(spec: TwinSpec, workers: int) -> Estimate:
+    """How many runs ``spec`` makes and roughly how long on ``workers`` processes: each test
+    case's runs at the "real" step (`parcelfit.sim.cost`)."""
+    from parcelfit.sim.factory import SimulatorConfig
+
+    runs = []
+    for case in spec.cases:
+        rig = str(spec.rig_files.get(case.rig, case.rig))
+        consignment = str(spec.consignment_files.get(case.consignment, case.consignment))
+        soft = load_consignment(consignment).content_kind == "soft"
+        config = SimulatorConfig(
+            "mujoco", rig=rig, consignment=consignment, timestep=spec.settings.step_for(soft)
+        )
+        runs.append((spec.settings.runs, run_seconds(config)))
+    return estimate(runs, workers)
+
+
+__all__ = [
+    "TwinJob",
+    "TwinSettings",
+    "TwinSpec",
+    "expected_cost",
+    "load_twin_spec",
+    "make_twin_dataset",
+]

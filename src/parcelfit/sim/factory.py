@@ -194,28 +194,54 @@ class SimulatorSection(FileModel):
     [s])."""
 
     backend: Annotated[str, Choice(BACKENDS, what="backend")]
+    """mujoco (the MuJoCo model), rigidbox (the rigid-box reference), external (a solver run as
+    a command) or python (a factory you write)."""
     rig: Annotated[str | None, Text()] = None
+    """mujoco, rigidbox: a bundled rig name (E1, E2a, E2b, E3) or a rig .yaml file relative to
+    this file (its stem must equal its name)."""
     consignment: Annotated[str | None, Text()] = None
+    """mujoco, rigidbox: a bundled consignment type (KPBW, PB, KP, BW) or a consignment .yaml
+    file relative to this file."""
     timestep: Annotated[float | None, Number(unit="s", ge=1e-9)] = None
+    """Time step [s] (default: 1/2400 s around a rigid content, 1/1200 s around a soft one,
+    divided by the rig's step_refinement)."""
     spacing: Annotated[float | None, Number(unit="m", ge=1e-9)] = None
+    """Shell mesh spacing around a rigid content (rigidbox: its contact points' spacing) [m]
+    (default 0.03)."""
     film_spacing: Annotated[float | None, Number(unit="m", ge=1e-9)] = None
+    """Film mesh spacing around a soft content [m] (default 0.05)."""
     membrane_cap: Annotated[float | None, Number(unit="N/m", ge=1e-9)] = None
+    """Largest in-plane stiffness E*t of the packaging shell [N/m] (default: none)."""
     shell_dof: Annotated[str | None, Choice(SHELL_DOFS, what="shell degrees of freedom")] = None
+    """The packaging shell's degrees of freedom: auto (the consignment file's), full, quadratic
+    or trilinear."""
     shell_cells: ShellCellsField | None = None
+    """An interpolated shell's grid of cells along length, width, height, e.g. [4, 4, 1]."""
     shell_diagonals: Annotated[
         str | None, Choice(SHELL_DIAGONALS, what="split of the shell's cells")
     ] = None
+    """How the shell's cells are split into triangles: radiating (default) or alternating."""
     mass_lumping: Annotated[
         str | None, Choice(MASS_LUMPINGS, what="spread of the packaging's mass")
     ] = None
+    """How the packaging's mass is spread: area (lumped by area and volume, default) or equal
+    (MuJoCo's equal shares)."""
     contact_law: Annotated[str | None, Choice(CONTACT_LAWS, what="contact law")] = None
+    """penalty (default: the catalogue's stiffness and damping act as a spring and damper) or
+    impedance (the former law)."""
     friction: Annotated[str | None, Choice(FRICTION_LAWS, what="friction law")] = None
+    """contact (default: each contact's coefficient from its own slip) or geom (the former
+    per-surface switch)."""
     belt_friction: Annotated[str | None, Choice(BELT_FRICTION, what="belt friction law")] = None
+    """With friction: geom, the law on belts, strips and rollers: mujoco or coulomb."""
     roller_surface: Annotated[str | None, Choice(ROLLER_SURFACES, what="roller surface motion")] = (
         None
     )
+    """How a flow splitter's rollers move the packaging: linear (default) or turning."""
     stick_speed: Annotated[float | None, Number(unit="m/s", ge=1e-9)] = None
+    """Slip speed below which the static friction offset acts fully [m/s]."""
     slip_speed: Annotated[float | None, Number(unit="m/s", ge=1e-9)] = None
+    """Slip speed above which only the dynamic friction acts [m/s] (above stick_speed)."""
     rig_timesteps: (
         dict[
             Annotated[str, Text()],
@@ -223,10 +249,15 @@ class SimulatorSection(FileModel):
         ]
         | None
     ) = None
+    """A time step [s] by rig name, e.g. {E1: 0.000208333}."""
     bottom_patch: Annotated[str | None, Choice(BOTTOM_PATCHES, what="bottom contact patch")] = None
+    """rigidbox: where the box touches the belt: outline or content."""
     wall_limit: Annotated[float | None, Number(unit="s", ge=1e-9)] = None
+    """Wall-clock limit of one simulation [s] (default 600)."""
     external: Annotated[str | None, Text()] = None
+    """external: the solver description file (parcelfit.sim.external), relative to this file."""
     factory: Annotated[str | None, Text()] = None
+    """python: package.module:callable returning a Simulator (the file then runs code)."""
 
     @model_validator(mode="after")
     def _backend_needs(self) -> SimulatorSection:

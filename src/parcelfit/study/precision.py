@@ -50,7 +50,7 @@ outcome the placements show at some seeds (a spin), and their sample sd then und
 scatter their mean has. Measured so: the bundled twin's ten E3/KPBW/1 runs all slid (rotation
 sd 0.02 rad) where the placements spun at some seeds (their sd 0.79 rad), and the belt friction came
 out at +-1 % from the rotation alone; with the placements' scatter, +-21 %
-(docs/precision-check.md). Without runs at the point (`sensitivity`'s ``at_point``) the
+(docs/research/precision-check.md). Without runs at the point (`sensitivity`'s ``at_point``) the
 placements' sd is pooled over the parameters' ends (the root mean of the sample variances at
 each end), which overstates the scatter at the point where one end spins far more often.
 The floor of 1e-3 in each unit is a tracked run's resolution (1 ms, 1 mrad, 1 mm) for a

@@ -179,30 +179,47 @@ class ScreenFile(FileModel):
     """A screen file as written (see the module docstring; ranges in catalogue units)."""
 
     name: Annotated[str, Text()]
+    """The screen's name."""
     simulator: SimulatorSection
+    """The simulator and its settings, as in a study file."""
     reference: ReferenceSection
+    """The test case whose reference run the responses compare with, as in a study file."""
     parameters: Annotated[dict[Any, _Range] | None, BeforeValidator(_parameters)] = None
+    """all (the consignment's catalogue candidates), a list of names, or {name: [low, high]} in
+    catalogue units (default: the screening ranges)."""
     fixed: Annotated[dict[Any, Annotated[float, Number()]], or_default(dict)] = Field(
         default_factory=dict
     )
+    """Parameters held at a value other than their default, in catalogue units."""
     stages: Annotated[
         tuple[str, ...], BeforeValidator(_stages), or_default(lambda: list(_STAGES))
     ] = _STAGES  # before-validators run last-written first: the default, then the check
+    """The stages in order: fractional (resolution IV) and/or full (full factorial on the
+    survivors)."""
     soft_content: Annotated[
         tuple[Annotated[str, AfterValidator(_soft_parameter)], ...],
         BeforeValidator(_soft_list),
         or_default(list),
     ] = ()
+    """A soft content's parameters added in a third full-factorial stage (e.g. [E_Co, zeta_Co])."""
     resolution: Annotated[int, Whole(ge=3, le=5)] = 4
+    """Resolution of the fractional design (3 to 5)."""
     centre_points: Annotated[int, Whole(ge=0, le=50)] = 0
+    """Runs with every factor at mid-range added to each stage."""
     alpha: Annotated[float, Number(ge=1e-6, le=0.5)] = 0.05
+    """Significance level of the effects [-]."""
     max_full_factors: Annotated[int, Whole(ge=2, le=10)] = 6
+    """The full factorial keeps at most this many survivors."""
     min_full_factors: Annotated[int, Whole(ge=1, le=10)] = 3
+    """... and at least this many (fewer survivors are topped up by effect size)."""
     select: Annotated[int, Whole(ge=1, le=100)] = 4
+    """Parameters recommended for calibration in selection.yaml."""
     placements: Annotated[int, Whole(ge=1, le=MAX_PLACEMENTS)] = 1
+    """Placements each design row is simulated at (seeds 1..K; 1: the nominal placement)."""
     executor: Annotated[ScreenExecutorSection, or_default(dict)] = Field(
         default_factory=ScreenExecutorSection
     )
+    """Where simulations run: local or serial (the command line wins)."""
 
 
 @dataclass(frozen=True)

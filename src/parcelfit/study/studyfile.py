@@ -112,9 +112,15 @@ class ReferenceSection(FileModel):
     """``reference``: the dataset folder (relative to the file), test case and speed setting."""
 
     dataset: Annotated[str, Text()]
+    """The dataset folder (holding dataset.yaml), relative to this file."""
     rig: Annotated[str | None, Text(nullable=True)] = None
+    """The test case's rig as the dataset names it (default: the simulator's rig; a rig file's
+    stem)."""
     consignment: Annotated[str | None, Text(nullable=True)] = None
+    """The test case's consignment type as the dataset names it (default: the simulator's; a
+    consignment file's stem)."""
     speed_setting: Annotated[int, Whole(ge=1, le=MAX_SPEED_SETTING)]
+    """The speed setting fitted (whole number >= 1, as in the dataset)."""
 
 
 class CaseSection(FileModel):
@@ -127,11 +133,18 @@ class CaseSection(FileModel):
     placements spin at some seeds (E3)."""
 
     dataset: Annotated[str | None, Text(nullable=True)] = None
+    """The dataset folder, relative to this file (default: the first case's)."""
     rig: Annotated[str | None, Text(nullable=True)] = None
+    """The case's rig as the dataset names it (default: the simulator's rig)."""
     consignment: Annotated[str | None, Text(nullable=True)] = None
+    """The case's consignment type as the dataset names it (default: the simulator's)."""
     speed_setting: Annotated[int, Whole(ge=1, le=MAX_SPEED_SETTING)]
+    """The case's speed setting (whole number >= 1)."""
     weight: Annotated[float, Number(ge=0)] = 1.0
+    """Weight of this case's cost in the sum (`cases` only; >= 0) [-]."""
     placements: Annotated[int | None, Whole(ge=1, le=MAX_PLACEMENTS, nullable=True)] = None
+    """Seeded placements of this case per evaluation with the ensemble cost (`cases` only;
+    default: cost.placements)."""
 
 
 class CostSection(FileModel):
@@ -141,9 +154,16 @@ class CostSection(FileModel):
     adjusted``, adjusted for the belt speeds each run rode at)."""
 
     kind: Annotated[str, Choice(("published", "ensemble"), what="cost")] = "published"
+    """published: equation 3 against the reference run; ensemble: seeded placements against all
+    real runs with a transit-time term."""
     placements: Annotated[int, Whole(ge=1, le=MAX_PLACEMENTS)] = 1
+    """Seeded placements per case and evaluation (ensemble cost only; the published cost
+    simulates one)."""
     transit_weight: Annotated[float, Number(ge=0)] = 1.0
+    """Weight w_T of the ensemble cost's transit-time term [-]."""
     transit: Annotated[str, Choice(("measured", "adjusted"), what="transit time")] = "measured"
+    """measured: transit times as measured; adjusted: adjusted for the belt speeds each run rode
+    at (ensemble cost only)."""
 
     @classmethod
     def prepare(cls, data: Any) -> Any:
@@ -171,7 +191,10 @@ class ScreenExecutorSection(FileModel):
     process); ``executor: KIND`` is short for ``executor: {kind: KIND}``."""
 
     kind: Annotated[str, Choice(("serial", "local"), what="executor")] = "local"
+    """Where simulations run: local (worker processes) or serial (in this process, one at a
+    time). `executor: serial` is short for `{kind: serial}`."""
     workers: Annotated[int | None, Whole(ge=1, le=MAX_WORKERS, nullable=True)] = None
+    """Worker processes of the local executor (default: one per core)."""
 
     @classmethod
     def prepare(cls, data: Any) -> Any:
@@ -183,15 +206,21 @@ class ExecutorSection(ScreenExecutorSection):
     or a Dask ``scheduler`` (tcp://...)."""
 
     kind: Annotated[str, Choice(("serial", "local", "dask"), what="executor")] = "local"
+    """Where simulations run: local (worker processes), serial (in this process) or dask (a Dask
+    cluster at `scheduler`)."""
     scheduler: Annotated[str | None, Text()] = None
+    """The Dask scheduler's address, e.g. tcp://HOST:8786 (kind: dask)."""
 
 
 class Bounds(FileModel):
     """One fitted parameter: ``[low, high]`` or ``{low, high, log}`` (catalogue units)."""
 
     low: Annotated[float, Number()]
+    """Lower end of the range, in the catalogue's unit (see `parcelfit params`)."""
     high: Annotated[float, Number()]
+    """Upper end of the range, in the catalogue's unit."""
     log: Annotated[bool, Flag()] = False
+    """Search the range on a log scale."""
 
     @classmethod
     def prepare(cls, data: Any) -> Any:
@@ -209,8 +238,12 @@ class ValidationSection(FileModel):
     """``validation``: the validation speed setting (none: no validation) and how often."""
 
     speed_setting: Annotated[int | None, Whole(ge=1, le=MAX_SPEED_SETTING, nullable=True)] = None
+    """The validation speed setting of a `reference` study (not the fitted one; none: no
+    validation)."""
     every: Annotated[int, Whole(ge=1, le=MAX_EVALUATIONS)] = 5
+    """Validate the recommended parameters every this many iterations."""
     cases: Annotated[list[CaseSection], or_default(list)] = Field(default_factory=list)
+    """The validation test cases of a joint study (all must pass), each as in `cases`."""
 
     @model_validator(mode="after")
     def _one_way(self) -> ValidationSection:
@@ -227,7 +260,9 @@ class WeightsSection(FileModel):
     """``weights`` of equation (3): position and heading terms, >= 0, not both zero."""
 
     xy: Annotated[float, Number(ge=0)] = 1.0
+    """Weight of the position term (DTW_xy) in equation 3 (>= 0) [-]."""
     theta: Annotated[float, Number(ge=0)] = 1.0
+    """Weight of the heading term (DTW_theta) in equation 3 (>= 0) [-]."""
 
     @model_validator(mode="after")
     def _not_both_zero(self) -> WeightsSection:
@@ -270,6 +305,8 @@ class OptimizerSection(FileModel):
 
     model_config = ConfigDict(extra="allow")  # merged with FileModel's
     sampler: Annotated[str, Choice(tuple(SAMPLERS), what="optimizer")] = "gp"
+    """The optimiser: gp (the default batch Bayesian optimisation), published (the published
+    settings) or tpe (Optuna); gp and published take BOSettings keys beside it."""
 
     @classmethod
     def allowed_keys(cls, data: Mapping[Any, Any]) -> list[str]:
@@ -292,27 +329,44 @@ class StudyFile(FileModel):
     """A study file as written (see the module docstring)."""
 
     name: Annotated[str, Text()]
+    """The study's name (shown in outputs and the report)."""
     simulator: SimulatorSection
+    """The simulator and its settings (see the simulator section)."""
     parameters: dict[Any, Bounds]
+    """The parameters to fit, each `[low, high]` or `{low, high, log}` in the catalogue's units
+    (`parcelfit params`)."""
     fixed: Annotated[dict[Any, Annotated[float, Number()]], or_default(dict)] = Field(
         default_factory=dict
     )
+    """Parameters held at a value other than their default, in the catalogue's units."""
     reference: ReferenceSection | None = None
+    """The one fitted test case (the published method); or give `cases`."""
     cases: Annotated[list[CaseSection], or_default(list)] = Field(default_factory=list)
+    """The fitted test cases of a joint study (instead of `reference`)."""
     cost: Annotated[CostSection, or_default(dict)] = Field(default_factory=CostSection)
+    """The cost of a case: published (default) or ensemble."""
     transfer: Annotated[list[CaseSection], or_default(list)] = Field(default_factory=list)
+    """Test cases the calibrated parameters are judged on once the study stops (not fitted)."""
     validation: Annotated[ValidationSection, or_default(dict)] = Field(
         default_factory=ValidationSection
     )
+    """The validation case(s) and how often to validate."""
     weights: Annotated[WeightsSection, or_default(dict)] = Field(default_factory=WeightsSection)
+    """The weights of equation 3's position and heading terms."""
     optimizer: Annotated[OptimizerSection, or_default(dict)] = Field(
         default_factory=OptimizerSection
     )
+    """The optimiser and its settings."""
     initial: Annotated[int, Whole(ge=1, le=MAX_EVALUATIONS)] = 16
+    """Size of the initial design (Latin hypercube) [evaluations]."""
     executor: Annotated[ExecutorSection, or_default(dict)] = Field(default_factory=ExecutorSection)
+    """Where simulations run (the command line's --executor, --workers and --scheduler win)."""
     batch_size: Annotated[int, Whole(ge=1, le=MAX_BATCH_SIZE)] = 4
+    """Evaluations per optimiser batch (run in parallel)."""
     budget: Annotated[int, Whole(ge=1, le=MAX_EVALUATIONS)] = 80
+    """The most fitting evaluations (the study stops earlier when a validation passes)."""
     seed: Annotated[int, Whole(ge=0, le=2**32 - 1)] = 0
+    """Seed of the initial design and the optimiser (0 to 2^32 - 1)."""
 
     @field_validator("parameters")
     @classmethod

@@ -167,18 +167,26 @@ class ReferenceTagEntry(FileModel):
     """One of ``reference_tags``: centre [m], side [m], angle [deg CCW]."""
 
     x: _Metres
+    """The tag centre's x in the rig frame [m]."""
     y: _Metres
+    """The tag centre's y in the rig frame [m]."""
     size: _TagSize
+    """Side of the tag's black square [m]."""
     angle: Annotated[float, Number(unit="deg")] = 0.0
+    """The tag's rotation, counter-clockwise from the rig's x axis [deg]."""
 
 
 class ParcelTagEntry(FileModel):
     """One of ``parcel_tags``: side, height, offset and outline [m]."""
 
     size: _TagSize
+    """Side of the tag's black square [m]."""
     height: Annotated[float, Number(unit="m", ge=0, le=2)] = 0.0
+    """Height of the tag above the belt plane [m] (the parcel's height)."""
     offset: Annotated[tuple[float, float], Pair()] = (0.0, 0.0)
+    """The tag centre relative to the parcel centre, in the parcel's frame [m], [x, y]."""
     outline: Annotated[tuple[float, float] | None, Pair(nullable=True)] = None
+    """The parcel's length and width [m], for light barriers crossed by its outline."""
 
 
 class CameraSection(FileModel):
@@ -186,40 +194,60 @@ class CameraSection(FileModel):
 
     # a focal length is at least a pixel (fx: 0 would divide by zero when mapping)
     fx: Annotated[float, Number(unit="px", ge=1)]
+    """Focal length in x [px]."""
     fy: Annotated[float, Number(unit="px", ge=1)]
+    """Focal length in y [px]."""
     cx: Annotated[float, Number(unit="px", ge=0)]
+    """Principal point x [px]."""
     cy: Annotated[float, Number(unit="px", ge=0)]
+    """Principal point y [px]."""
     distortion: Annotated[tuple[float, ...], PlainValidator(_distortion)] = (0.0,) * 5
+    """OpenCV's distortion coefficients k1, k2, p1, p2, k3 [-]."""
     width: Annotated[int, Whole(ge=0, le=100_000)] = 0
+    """Image width [px] (the video's)."""
     height: Annotated[int, Whole(ge=0, le=100_000)] = 0
+    """Image height [px]."""
 
 
 class BarrierEntry(FileModel):
     """One of ``light_barriers``: its id and the segment's ends [m]."""
 
     id: Annotated[str, Text()]
+    """The light barrier's id."""
     start: Annotated[tuple[float, float], Pair(), Field(alias="from")]
+    """One end of the virtual barrier in the rig frame [m], [x, y] (key `from`)."""
     end: Annotated[tuple[float, float], Pair(), Field(alias="to")]
+    """The other end [m], [x, y] (key `to`)."""
 
 
 class TimingSection(FileModel):
     """``timing``: exposure and rolling-shutter readout [ms], 0 to 100."""
 
     exposure_ms: Annotated[float, Number(ge=0, le=100)] = 0.0
+    """The camera's exposure time [ms] (0 to 100)."""
     readout_ms: Annotated[float, Number(ge=0, le=100)] = 0.0
+    """The rolling shutter's readout time, first to last row [ms] (0 to 100; 0: global shutter)."""
 
 
 class TagMapFile(FileModel):
     """A tag map file as written (see the module docstring)."""
 
     family: Annotated[str, Choice(FAMILIES, what="tag family")] = "tag36h11"
+    """The tag family: tag36h11 (default), tag25h9, tag16h5 or tag36h10."""
     reference_tags: dict[_TagId, ReferenceTagEntry]
+    """Tags fixed on the belt plane z = 0, by id: they define the rig frame in the video (four
+    recommended)."""
     parcel_tags: dict[_TagId, ParcelTagEntry]
+    """Tags on parcels, by id."""
     camera: CameraSection | None = None
+    """The camera's intrinsics and distortion (written by `parcelfit camera-calibrate`)."""
     light_barriers: Annotated[
         list[BarrierEntry], BeforeValidator(_barrier_list), or_default(list)
     ] = Field(default_factory=list)
+    """Virtual light barriers (the transit time is the last crossing minus the first)."""
     timing: Annotated[TimingSection, or_default(dict)] = Field(default_factory=TimingSection)
+    """Exposure and rolling-shutter readout, for the model fit of motion-smeared tags
+    (optional)."""
 
     @field_validator("reference_tags")
     @classmethod

@@ -31,7 +31,7 @@ parcel's length, width and height (MuJoCo's multi-cell flexes; default one cell)
 rim can bend apart from the face it borders. A type's choice is the cheapest shell that
 reproduces the full shell at a fine step and mesh (the reference) on the E3 ensemble and keeps
 its outcome when refined: BW, KP/BW and KP take a trilinear shell over 4 x 4 x 1 cells
-(docs/multicell-shell.md), PB the full shell around its soft content.
+(docs/research/multicell-shell.md), PB the full shell around its soft content.
 
 The content must fit inside the outer dimensions (length and width strictly smaller, height not
 larger). The packaging's mass is a simulation parameter (m_Pa); the content gets the rest.
@@ -121,28 +121,43 @@ class ContentSection(FileModel):
     """``content``: its kind (rigid or soft) and size L, W, H [m]."""
 
     kind: Annotated[str, Choice((RIGID, SOFT), what="content kind")]
+    """rigid (a rounded box) or soft (a volumetric body, e.g. a polybag's limp content)."""
     size: _Size
+    """The content's length, width, height [m], [L, W, H]."""
 
 
 class BulgeSection(FileModel):
     """``bulge``: depth [m] and footprint (fraction of the outer length and width)."""
 
     depth: Annotated[float, Number(unit="m", ge=0.0005, le=0.05)]
+    """How far the bottom bulges below the content's face [m]."""
     footprint: Annotated[float, Number(ge=0.05, le=0.95)]
+    """The bulging patch as a fraction of the outer length and width [-]."""
 
 
 class ConsignmentFile(FileModel):
     """A consignment file as written (see the module docstring): mass [kg], sizes [m]."""
 
     name: Annotated[str, Text()]
+    """The type's name: the name datasets and studies use; it must equal the file's stem."""
     description: Annotated[str, PlainValidator(_description)] = ""
+    """Free text."""
     mass: Annotated[float, Number(unit="kg", ge=0.001, le=100)]
+    """The whole consignment's mass [kg] (the packaging's share is the parameter m_Pa)."""
     outer: _Size
+    """Packed outer length, width, height [m], [L, W, H]."""
     content: ContentSection
+    """The content: its kind and size."""
     bulge: BulgeSection | None = None
+    """A bottom that bulges under a rigid content (optional)."""
     parameters: dict[str, float] | None = None
+    """This type's own parameter defaults, in the catalogue's units (e.g. its packaging's
+    friction)."""
     shell: Annotated[str | None, Choice(TYPE_SHELL_DOFS, what="shell degrees of freedom")] = None
+    """The packaging shell's degrees of freedom: quadratic, trilinear or full (default:
+    quadratic around a rigid content, full around a soft one)."""
     shell_cells: ShellCellsField | None = None
+    """An interpolated shell's grid of cells along length, width, height (default [1, 1, 1])."""
 
     @model_validator(mode="after")
     def _content_fits(self) -> ConsignmentFile:

@@ -3,7 +3,7 @@
 Why by hand: MuJoCo's convex contact model lifts a contact that slides (it can only start slip
 with some motion in the normal direction), so a parcel sliding on part of its bottom loads that
 part several times more than its share, hops, and reaches a faster belt tens of milliseconds
-early (docs/sliding-lift.md). MuJoCo has no friction law outside that solver. With
+early (docs/research/sliding-lift.md). MuJoCo has no friction law outside that solver. With
 ``SceneOptions.belt_friction = "coulomb"`` the belt, strip and roller contacts are frictionless
 in MuJoCo (condim 1) and this module applies, before every step, at each contact point c of
 the packaging with such a surface

@@ -8,7 +8,7 @@ packaging's moment of inertia about the vertical came out up to 30 % above its l
 16 % with the full shell, 25 % with the trilinear shell over 4 x 4 x 1 cells, whose 5 x 5 x 2
 nodes all weighed the same; KP/BW's trilinear 30 %), and the polybag's soft content's 49 %
 above a uniform box's (13 % lumped). `python scripts/mass_lumping.py` prints the table
-(docs/mass-lumping.md).
+(docs/research/mass-lumping.md).
 
 Lumped masses
 -------------

@@ -320,24 +320,44 @@ class SurfaceEntry(FileModel):
     rollers). Lengths in m, ``heading`` and ``swivel`` in degrees."""
 
     name: Annotated[str, Text()]
+    """The surface's name (unique in the rig)."""
     type: Annotated[str, _SURFACE_TYPE]
+    """belt, strips (a set of parallel strip belts) or rollers (a roller matrix)."""
     material: Annotated[str, _MATERIAL]
+    """Which contact parameters apply: belt (_BePa), roller or metal (_MePa)."""
     centre: _Point
+    """Centre of the conveying area in the rig frame [m], [x, y]."""
     length: _Size
+    """Length along the heading [m]."""
     width: _Size
+    """Width across the heading [m]."""
     heading: _Heading
+    """Direction of motion, counter-clockwise from the rig's x axis [deg]."""
     top: _Height
+    """Height of the conveying surface above z = 0 [m]."""
     drive: Annotated[str, Text()]
+    """The drive whose speed it runs at (a key of each speed setting in `speeds`)."""
     count: _Extra = None
+    """strips: number of strips."""
     strip_width: _Extra = None
+    """strips: width of one strip [m]."""
     pitch: _Extra = None
+    """strips: distance between the strips' centre lines [m]."""
     rows: _Extra = None
+    """rollers: rows of rollers."""
     columns: _Extra = None
+    """rollers: columns of rollers."""
     radius: _Extra = None
+    """rollers: roller radius [m]."""
     roller_width: _Extra = None
+    """rollers: width of one roller [m]."""
     swivel: _Extra = None
+    """rollers: swivel angle of the rollers' axes [deg]."""
     nose_radius: Annotated[float, Number(unit="m", ge=0.0, le=MAX_NOSE_RADIUS)] = 0.0
+    """belt, strips: radius of the drums at both ends [m] (0: square ends)."""
     end_heading: Annotated[float | None, Number(unit="deg", ge=-360, le=360)] = None
+    """strips: the strips' downstream ends lie on a line at this heading [deg] (a staggered
+    merge); absent: square ends."""
 
     @classmethod
     def allowed_keys(cls, data: Mapping[Any, Any]) -> list[str]:
@@ -397,38 +417,57 @@ class WallEntry(FileModel):
     """One of ``walls``: a plate ``from`` - ``to`` [m], ``height`` above ``base`` [m]."""
 
     name: Annotated[str, Text()]
+    """The wall's name."""
     material: Annotated[str, _MATERIAL] = "metal"
+    """Which contact parameters apply: metal (default, _MePa), belt or roller."""
     start: Annotated[_Point, Field(alias="from")]
+    """The wall's upstream end in the rig frame [m], [x, y] (key `from`)."""
     end: Annotated[_Point, Field(alias="to")]
+    """The wall's downstream end in the rig frame [m], [x, y] (key `to`)."""
     height: Annotated[float, Number(unit="m", ge=1e-3, le=10)]
+    """Height of the plate [m]."""
     base: _Height = 0.0
+    """Height of its lower edge above z = 0 [m]."""
     thickness: Annotated[float, Number(unit="m", ge=1e-4, le=1)] = 0.003
+    """Thickness of the plate [m]."""
     lead_in: Annotated[float, Number(unit="m", ge=0.0, le=0.2)] = 0.0
+    """Radius of a rounded (rolled) upstream end [m] (0: none)."""
 
 
 class ScatterSection(FileModel):
     """``start.scatter``: standard deviations along and across [m] and of the heading [deg]."""
 
     along: Annotated[float, Number(unit="m", ge=0.0, le=0.5)] = 0.0
+    """Standard deviation of a hand placement along the start surface's heading [m]."""
     across: Annotated[float, Number(unit="m", ge=0.0, le=0.5)] = 0.0
+    """Standard deviation across the heading [m]."""
     heading: Annotated[float, Number(unit="deg", ge=0.0, le=90)] = 0.0
+    """Standard deviation of the heading [deg]."""
 
 
 class StartSection(FileModel):
     """``start``: the parcel's centre [m], heading [deg], the surface below, the scatter."""
 
     position: _Point
+    """The parcel centre's nominal start in the rig frame [m], [x, y]."""
     heading: _Heading
+    """The parcel's nominal heading (its x axis), counter-clockwise from the rig's x axis [deg]."""
     surface: Annotated[str, Text()]
+    """The surface the parcel starts on."""
     scatter: ScatterSection | None = None
+    """The scatter of a hand placement (draws cut off at 2.5 standard deviations); seeded
+    placements draw from it."""
 
 
 class BarrierEntry(FileModel):
     """One of ``light_barriers``: its name and the beam's ends [m]."""
 
     name: Annotated[str, Text()]
+    """The light barrier's name."""
     start: Annotated[_Point, Field(alias="from")]
+    """One end of the beam in the rig frame [m], [x, y] (key `from`)."""
     end: Annotated[_Point, Field(alias="to")]
+    """The other end [m], [x, y] (key `to`)."""
 
 
 class EndSection(FileModel):
@@ -436,16 +475,22 @@ class EndSection(FileModel):
     the last barrier."""
 
     x: _Interval
+    """The run ends when the parcel centre leaves this x interval [m], [low, high]."""
     y: _Interval
+    """... or this y interval [m], [low, high]."""
     duration: Annotated[float, Number(unit="s", ge=0.01, le=600)]
+    """... or after this much simulated time [s]."""
     after_last_barrier: Annotated[float, Number(unit="s", ge=0)] = 0.3
+    """... or this long after the parcel interrupts the second light barrier [s]."""
 
 
 class RigFile(FileModel):
     """A rig file as written (see the module docstring)."""
 
     name: Annotated[str, Text()]
+    """The rig's name: the name datasets and studies use; it must equal the file's stem."""
     description: Annotated[str, PlainValidator(_description)] = ""
+    """Free text."""
     speeds: Annotated[
         dict[
             int,
@@ -456,16 +501,27 @@ class RigFile(FileModel):
         ],
         BeforeValidator(_speed_settings),
     ]
+    """Speed setting (whole number) -> drive name -> surface speed [m/s]."""
     surfaces: Annotated[tuple[SurfaceEntry, ...], or_default(tuple)]
+    """The driven surfaces a parcel rides on."""
     walls: Annotated[tuple[WallEntry, ...], or_default(tuple)] = ()
+    """Vertical plates: guide plates, side walls."""
     start: StartSection
+    """The parcel's start pose and its scatter."""
     light_barriers: Annotated[tuple[BarrierEntry, BarrierEntry], BeforeValidator(_two_barriers)]
+    """Exactly two beams, crossed in this order: the transit time runs from the first to the
+    second."""
     regions: Annotated[
         tuple[Annotated[Region, PlainValidator(_region)], ...], or_default(tuple)
     ] = ()
+    """Regions of interest in the rig frame where runs are compared (boxes {x: [a, b], y: [c,
+    d]} or {polygon: [[x, y], ...]}) [m]."""
     margin: Annotated[float, Number(unit="m", ge=0.0)] = 0.0
+    """Safety margin around the regions [m]."""
     step_refinement: Annotated[int, Whole(ge=1, le=64)] = 1
+    """This rig's runs take steps this many times finer than the default."""
     end: EndSection
+    """When a run ends."""
 
     @field_validator("surfaces")
     @classmethod

@@ -79,16 +79,16 @@ class SceneOptions:
 
     # None: the default of the shell (`step_for`): 1/2400 s for an interpolated shell, where
     # transit times are converged to a few ms (at 1/1200 s E1 setting 3 came out 20-25 ms short,
-    # docs/transit-convergence.md), 1/1200 s for the full shell around a soft content
+    # docs/research/transit-convergence.md), 1/1200 s for the full shell around a soft content
     timestep: float | None = None
     spacing: float = 0.03  # shell grid spacing, rigid contents [m]
     # shell grid spacing around a soft content [m]: 50 mm spins or slides every E3 placement
     # as 30 mm does (20 per setting, with the 100 mm content) at 0.7-0.88 times 40 mm's cost
-    # (docs/pb-speed.md)
+    # (docs/research/pb-speed.md)
     soft_shell_spacing: float = 0.05
     # vertex spacing of a soft content [m]: 100 mm (4 x 3 x 2 vertices for the polybag's) keeps
     # every E3 placement's outcome of 60 mm (20 per setting) at three quarters of the cost; 150 mm
-    # does not (docs/pb-speed.md)
+    # does not (docs/research/pb-speed.md)
     soft_spacing: float = 0.10
     vertex_radius: float = 0.001
     # how a contact's force follows its penetration (contact.py): "penalty" (the spring and
@@ -115,7 +115,7 @@ class SceneOptions:
     # own (1e-6) around a rigid one. At 1e-6 a film vertex lying right above a content vertex
     # (the polybag's 50 mm film over its 100 mm content, at rest) is reported 0.2 mm deep in
     # it, where the geometry has them just touching; at 1e-8 none deeper than 10 um, at no
-    # measurable cost (docs/pb-speed.md). The mailers' scenes keep MuJoCo's default, where the
+    # measurable cost (docs/research/pb-speed.md). The mailers' scenes keep MuJoCo's default, where the
     # same check finds no such error
     ccd_tolerance: float | None = None
     speed_factors: Mapping[str, float] = field(
@@ -152,7 +152,7 @@ class SceneOptions:
     # interpolated shell's nodes weighted by how much of the film they move) or "equal"
     # (MuJoCo's own: every vertex or node the same, the model before 2026-11-28, which put the
     # packaging's moment of inertia up to 30 % and PB's content's 32 % above the lumped values;
-    # lumped_mass.py, docs/mass-lumping.md)
+    # lumped_mass.py, docs/research/mass-lumping.md)
     mass_lumping: str = "area"
     # an interpolated shell's grid of cells along the parcel's length, width and height (MuJoCo's
     # multi-cell flexes: the field is trilinear or quadratic within each cell, so a rim can bend
@@ -162,13 +162,13 @@ class SceneOptions:
     # friction between the packaging and belts, strips and rollers: "mujoco" (MuJoCo's own
     # contact friction) or "coulomb" (those contacts frictionless in MuJoCo and Coulomb friction
     # applied as forces at the contact points before every step, `coulomb.CoulombBelts`):
-    # MuJoCo's friction lifts sliding contacts (docs/sliding-lift.md). The forces are explicit in
+    # MuJoCo's friction lifts sliding contacts (docs/research/sliding-lift.md). The forces are explicit in
     # time: around a soft content (full shell) they need 1/2400 s (`step_for`)
     belt_friction: str = "mujoco"
     # how a flow splitter's roller units move the packaging: "linear" (a surface velocity along
     # the roller's heading everywhere on it, also on its flanks) or "turning" (an angular surface
     # velocity, as a driven roller turns: the conveying speed on top, up and down on its flanks,
-    # like the belts' drums); measured in docs/belt-drums.md, "What it costs"
+    # like the belts' drums); measured in docs/research/belt-drums.md, "What it costs"
     roller_surface: str = "linear"
     # how the static friction offsets (mu_s_MePa, mu_s_BePa) fade with the slip speed v [m/s]:
     # without ``slip_speed``, fully while the contact sticks, exp(-(v / stick_speed)^2) (a few
@@ -189,7 +189,7 @@ class SceneOptions:
     static_threshold: float = STATIC_THRESHOLD
     dynamic_threshold: float = DYNAMIC_THRESHOLD
     # a time step [s] for runs on particular rigs, by rig name (e.g. {"E1": 1/4800}: the transfer
-    # onto E1's fast belt converges more slowly than the rest, docs/transit-convergence.md); it
+    # onto E1's fast belt converges more slowly than the rest, docs/research/transit-convergence.md); it
     # overrides ``timestep`` and the shell's default on those rigs
     rig_timesteps: Mapping[str, float] = field(default_factory=dict)
     start_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)  # dx [m], dy [m], dheading [deg]

@@ -48,7 +48,7 @@ and every corner of the seam is the tip of two triangles per sheet. "alternating
 tip of two triangles or of one depended on the parity of the number of cells, i.e. on the mesh
 spacing; a corner that is one triangle's tip folds away where the other holds. On E3 that
 decided, mesh by mesh, whether a polybag meeting the guide plate's lead-in caught and spun or
-slid (docs/pb-film-mesh-E3.md).
+slid (docs/research/pb-film-mesh-E3.md).
 """
 
 from __future__ import annotations

@@ -27,9 +27,9 @@ and keeps touching the plate all the way. The check reports the model's slide (t
 displacement) beside this estimate, and the share of steps of the slide in which the shell
 touches the plate nowhere: MuJoCo's convex contact model lifts a contact that slides (its
 documented "motion in the normal direction" at the onset of slip), so a sliding parcel hops
-(docs/sliding-lift.md).
+(docs/research/sliding-lift.md).
 
-Measured with these checks (docs/spin-check.md): the packaging shell with a degree of freedom per
+Measured with these checks (docs/research/spin-check.md): the packaging shell with a degree of freedom per
 vertex (`SceneOptions.shell_dof` "full") loses most of its spin in free flight at the default
 time step, which brakes every spin the plate starts; a shell whose vertices follow a quadratic
 field over its box ("quadratic") keeps it.

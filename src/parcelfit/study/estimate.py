@@ -1,0 +1,80 @@
+"""How many simulations a calibration, screening or precision check runs, and for how long:
+the estimate ``parcelfit calibrate``, ``screen``, ``precision`` and ``demo`` print before they
+start (per-run times: `parcelfit.sim.cost`)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+from parcelfit.runs import TestCase
+from parcelfit.sim.cost import Estimate, estimate, run_seconds
+from parcelfit.study.joint import placement_seeds
+from parcelfit.study.screening import Screen
+from parcelfit.study.studyfile import Study
+
+
+def _seconds(study_or_config: object, case: TestCase) -> float | None:
+    config = getattr(study_or_config, "simulator", study_or_config)
+    return run_seconds(config, case.rig, case.consignment)  # type: ignore[arg-type]
+
+
+def validation_checks(study: Study) -> int:
+    """The most validations a study runs: after every ``validate_every``-th optimiser
+    iteration, and once more after the last when that was not one of them."""
+    batches = max(0, math.ceil((study.budget - study.initial) / study.batch_size))
+    checks = batches // study.validate_every
+    return checks + (1 if batches == 0 or batches % study.validate_every else 0)
+
+
+def calibration_estimate(study: Study, workers: int) -> Estimate:
+    """At most ``budget`` evaluations (each simulating every fitted case at its placements),
+    the validations, the transfer check and the key frames."""
+    runs: list[tuple[int, float | None]] = []
+    for spec in study.cases:
+        runs.append((study.budget * len(placement_seeds(study, spec)), _seconds(study, spec.case)))
+    checks = validation_checks(study)
+    validation = list(study.validation_cases)
+    if not validation and study.validation_setting is not None:
+        validation = [None]
+    for spec in validation:
+        case = (
+            TestCase(study.rig, study.consignment, study.validation_setting or 1)
+            if spec is None
+            else spec.case
+        )
+        runs.append((checks, _seconds(study, case)))
+    for spec in study.transfer:
+        runs.append((1, _seconds(study, spec.case)))
+    runs.append((1, _seconds(study, study.cases[0].case)))  # the key frames
+    return estimate(runs, workers)
+
+
+def screen_estimate(screen: Screen, workers: int) -> Estimate:
+    """The first stage of a screening, each design row at the screen's placements (how many
+    runs the later stages take depends on what the first finds)."""
+    from parcelfit.doe.designs import fractional_factorial, full_factorial
+
+    k = len(screen.parameters)
+    kind = screen.stages[0] if screen.stages else "fractional"
+    design = fractional_factorial(k, screen.resolution) if kind == "fractional" else None
+    runs = len(design.matrix) if design is not None else len(full_factorial(k).matrix)
+    rows = runs + screen.centre_points
+    return estimate([(rows * screen.placements, _seconds(screen, screen.case))], workers)
+
+
+def precision_estimate(
+    study: Study, placements: int, candidates: Sequence[str], workers: int
+) -> Estimate:
+    """The precision check: every case (fitted, validation, transfer, candidates) at the point
+    and at both ends of every parameter's range, ``placements`` runs each."""
+    cases = [s.case for s in (*study.cases, *study.validation_cases, *study.transfer)]
+    for label in candidates:
+        case = TestCase.parse(label)
+        if case not in cases:
+            cases.append(case)
+    variants = 1 + 2 * len(study.space.names)
+    return estimate([(variants * placements, _seconds(study, c)) for c in cases], workers)
+
+
+__all__ = ["calibration_estimate", "precision_estimate", "screen_estimate", "validation_checks"]
