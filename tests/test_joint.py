@@ -114,7 +114,7 @@ def test_a_joint_study_file_lists_its_cases(tmp_path):
                     {"rig": "Q", "consignment": "P", "speed_setting": 1, "placements": 0},
                 ]
             },
-            r"cases\[1\]\.placements: 0 is out of range.*at least 1",
+            r"cases\[1\]\.placements: 0 is out of range.*\[1, 1000\]",
         ),
         (
             {

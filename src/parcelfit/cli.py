@@ -266,6 +266,21 @@ def _say_cost(estimate: Any) -> None:
     console.print(Text(estimate.text(), style="cyan"), highlight=False)
 
 
+def _cost_first(line: str, progress: ProgressCallback) -> ProgressCallback:
+    """``progress``, printing the job's expected cost ``line`` at the first event: once its
+    files, data and simulator are read and checked, so that an error found while reading them
+    is the only line a refused job prints."""
+    said: list[bool] = []
+
+    def say(event: ProgressEvent) -> None:
+        if not said:
+            said.append(True)
+            console.print(Text(line, style="cyan"), highlight=False)
+        progress(event)
+
+    return say
+
+
 @app.command()
 def demo(
     out: Annotated[
@@ -1056,7 +1071,7 @@ def calibrate(
     study = load_study(study_file)
     folder = out or study_file.parent / study_file.stem
     _resumes(_stored(folder / "study.sqlite", "fit", "evaluations"))
-    _say_calibration_cost(study, executor, workers, folder)
+    cost = _calibration_cost(study, executor, workers, folder)
 
     def run(progress: ProgressCallback) -> Any:
         calibration = Calibration(
@@ -1074,13 +1089,13 @@ def calibrate(
             console.print(Text(f"the earlier study's outputs are in {calibration.set_aside}"))
         return result
 
-    _calibrate_live(run, study.name, folder)
+    _calibrate_live(run, study.name, folder, cost)
 
 
-def _say_calibration_cost(
+def _calibration_cost(
     study: Any, executor: str | None, workers: int | None, folder: Path
-) -> None:
-    """The calibration's expected cost (at most its budget), before it starts."""
+) -> str:
+    """The calibration's expected cost (at most its budget), said when it starts."""
     from parcelfit.study.estimate import calibration_estimate
 
     kind = executor or study.executor.get("kind", "local")
@@ -1092,10 +1107,12 @@ def _say_calibration_cost(
         + ("; divide by the Dask cluster's worker processes" if kind == "dask" else "")
         + ("; a resumed study runs only what is left" if (folder / "study.sqlite").exists() else "")
     )
-    console.print(Text(line, style="cyan"), highlight=False)
+    return line
 
 
-def _calibrate_live(run: Callable[[ProgressCallback], Any], name: str, folder: Path) -> Any:
+def _calibrate_live(
+    run: Callable[[ProgressCallback], Any], name: str, folder: Path, cost: str | None = None
+) -> Any:
     """Run a calibration (``run(progress)``) with a live status table; then print how it
     stopped, the recommended parameters and where its figures are. Until its first event (while
     the data are read and the reference runs chosen) a spinner stands in for the table, so that
@@ -1136,6 +1153,8 @@ def _calibrate_live(run: Callable[[ProgressCallback], Any], name: str, folder: P
         state["p"] = p
         if not lives:
             starting.stop()
+            if cost is not None:  # said once the study is read and checked, before the table
+                console.print(Text(cost, style="cyan"), highlight=False)
             lives.append(Live(render(), console=console, refresh_per_second=4, transient=False))
             lives[0].start()
         lives[0].update(render())
@@ -1257,18 +1276,14 @@ def screen(
     _resumes(_stored(folder / "screen.sqlite", "screen", "simulations"))
     kind = executor or spec.executor.get("kind", "local")
     n = 1 if kind == "serial" else _workers(workers or spec.executor.get("workers"))
-    console.print(
-        Text(screen_estimate(spec, n).text("the first stage; later stages follow from it")),
-        style="cyan",
-        highlight=False,
-    )
+    cost = screen_estimate(spec, n).text("the first stage; later stages follow from it")
     with console.status("screening") as status_line:
         stages, selection = run_screen(
             spec,
             folder,
             executor=executor,
             workers=workers,
-            progress=_progress(status_line, "screening: "),
+            progress=_cost_first(cost, _progress(status_line, "screening: ")),
         )
     _print_screen(stages, selection)
     console.print(Text(f"results in {folder} (selection.yaml, stageN-effects.csv, Pareto charts)"))
@@ -1354,11 +1369,8 @@ def precision(
     study = load_study(study_file)
     kind = executor or study.executor.get("kind", "local")
     n = 1 if kind == "serial" else _workers(workers or study.executor.get("workers"))
-    estimate = precision_estimate(study, placements, candidate or [], n)
-    console.print(
-        Text(estimate.text("runs kept from an earlier check are not simulated again")),
-        style="cyan",
-        highlight=False,
+    cost = precision_estimate(study, placements, candidate or [], n).text(
+        "runs kept from an earlier check are not simulated again"
     )
 
     def stored() -> str:
@@ -1379,7 +1391,7 @@ def precision(
             adjust_transit=adjust_transit,
             executor=executor,
             workers=workers,
-            progress=_progress(status_line, "precision check: "),
+            progress=_cost_first(cost, _progress(status_line, "precision check: ")),
         )
     command = command_line(
         "parcelfit precision",

@@ -526,20 +526,22 @@ def load_twin_spec(path: str | Path) -> TwinSpec:
                     fix="give the path of a .yaml file, relative to this file",
                 )
             own[k][load(file).name] = file
-    sim = MujocoSimulator(
-        rigs={name: load_rig(file) for name, file in own[0].items()},
-        consignments={name: load_consignment(file) for name, file in own[1].items()},
-    )
+    rigs = {name: load_rig(file) for name, file in own[0].items()}
+    consignments = {name: load_consignment(file) for name, file in own[1].items()}
+
+    def consignment(name: str) -> Consignment:
+        return consignments[name] if name in consignments else load_consignment(name)
+
     for i, case in enumerate(f.cases):
         try:
-            sim.rig(case.rig).drive_speeds(case.speed_setting)
-            sim.consignment(case.consignment)
+            (rigs.get(case.rig) or load_rig(case.rig)).drive_speeds(case.speed_setting)
+            consignment(case.consignment)
         except ParcelfitError as exc:
             raise ParcelfitError(exc.message, file=path, where=f"cases[{i}]", fix=exc.fix) from None
     for cons, values in truth.items():
         for name, value in values.items():
             try:
-                sim.consignment(cons).parameter_values(user_values={name: value})
+                consignment(cons).parameter_values(user_values={name: value})
             except ParcelfitError as exc:
                 raise ParcelfitError(
                     exc.message, file=path, where=f"truth.{cons}.{name}", fix=exc.fix

@@ -514,8 +514,16 @@ def check_simulator_files(sim: SimulatorConfig, path: Path) -> None:
     from parcelfit.sim.mujoco import load_consignment, load_rig
 
     for key, load in (("rig", load_rig), ("consignment", load_consignment)):
+        given = str(sim[key])
+        if given.lower().endswith((".yaml", ".yml")) and not Path(given).is_file():
+            raise ParcelfitError(
+                f"no {key} file {shown(given)}",
+                file=path,
+                where=f"simulator.{key}",
+                fix="give a bundled name or the path of a .yaml file, relative to this file",
+            )
         try:
-            load(sim[key])
+            load(given)
         except ParcelfitError as exc:
             if exc.file is not None:
                 raise
