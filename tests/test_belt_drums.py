@@ -184,6 +184,13 @@ def test_staggered_strips_end_on_a_line_along_the_belt_and_the_scene_builds_them
     xml = build_scene(rig, cons, resolve("rigid"), 1).xml
     # box half-length = length / 2 - drum radius (0.02 m)
     assert f'name="strips_0" type="box" size="{lengths[0] / 2 - 0.02:.9g} 0.015' in xml
+    # the rigid-box reference builds the same strips
+    from parcelfit.sim.rigidbox.geometry import rig_primitives
+
+    prims = rig_primitives(rig, 1)
+    for i, length in enumerate(lengths):
+        box = prims.names.index(f"strips_{i}")
+        assert prims.size[box, 0] == pytest.approx(length / 2 - 0.02)
     doc = load_yaml(Path(rig.source))
     doc["surfaces"][1]["end_heading"] = 30  # along the strips themselves
     with pytest.raises(ParcelfitError, match="end_heading"):

@@ -192,30 +192,17 @@ def rig_primitives(
         u = s.unit()
         n = np.array([-u[1], u[0]])
         mat = _material(s.material)
-        if s.type == "belt":
-            parts = [(s.name, np.array(s.centre), s.width)]
-        elif s.type == "strips":
-            k = int(s.extra["count"])
-            parts = [
-                (
-                    f"{s.name}_{i}",
-                    np.array(s.centre) + (i - (k - 1) / 2) * s.extra["pitch"] * n,
-                    s.extra["strip_width"],
-                )
-                for i in range(k)
-            ]
-        else:
-            parts = []
         r = s.nose_radius
         vel = (speed * u[0], speed * u[1], 0.0)
-        for name, c, width in parts:
+        # the belt, or each strip (with its own length where the strips end on a line)
+        for name, c, length, width in s.parts():
             items.append(
                 primitive(
                     name,
                     BOX,
                     (c[0], c[1], s.top - SLAB),
                     rot_z(s.heading),
-                    (s.length / 2 - r, width / 2, SLAB),
+                    (length / 2 - r, width / 2, SLAB),
                     mat,
                     vel=vel,
                 )
@@ -223,7 +210,7 @@ def rig_primitives(
             if r <= 0:
                 continue
             for end, sign in (("tail", -1), ("head", 1)):
-                p = c + sign * (s.length / 2 - r) * u
+                p = c + sign * (length / 2 - r) * u
                 items.append(
                     primitive(
                         f"{name}_{end}",
