@@ -15,7 +15,7 @@ all the rig's geoms, the content); MuJoCo keeps at most 50 per pair (``mjMAXCONP
 count of 50 means the cap was reached and others may have been dropped. ``--rig`` and
 ``--consignment`` take bundled names or files.
 
-``--bulge`` gives the packaging a bottom that bulges below a rigid content (footprint: the
+``--bulge`` gives the packaging a bottom that bulges below a rigid content (0: a flat one; footprint: the
 patch's fraction of the outline; ``--bulge-depth`` [m], `parcelfit.sim.mujoco.shell`), and
 ``--bottom`` adds to each sample how the bottom sheet lies: the lowest and the mean height [mm]
 of the vertices of its face (the flat patch under the content, or the bulge's patch) and of the
@@ -141,8 +141,8 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--every and --top must be positive and --to after --from")
     try:
         rig, cons = load_rig(args.rig), load_consignment(args.consignment)
-        if args.bulge is not None:
-            cons = replace(cons, bulge=(args.bulge_depth, args.bulge))
+        if args.bulge is not None:  # 0: a flat bottom, whatever the consignment file says
+            cons = replace(cons, bulge=(args.bulge_depth, args.bulge) if args.bulge > 0 else None)
         options = SimOptions(scene=scene_options(args.scene))
         sim = MujocoSimulator(options, {rig.name: rig}, {cons.name: cons}).with_placement(args.seed)
         case = TestCase(rig.name, cons.name, args.setting)

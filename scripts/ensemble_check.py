@@ -222,9 +222,10 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument(
         "--bottom-patch",
-        choices=("outline", "content"),
-        default="outline",
-        help="rigidbox: where the bottom carries contact (the whole outline or the content's)",
+        choices=("consignment", "outline", "content"),
+        default="consignment",
+        help="rigidbox: where the bottom carries contact (the consignment's bulge patch if it "
+        "has one, else the outline; the whole outline; the content's footprint)",
     )
     ap.add_argument("--bulge", nargs="*", default=[], metavar="TYPE=FOOTPRINT")
     ap.add_argument("--bulge-depth", type=float, default=0.004, help="[m]")

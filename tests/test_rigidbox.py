@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import pickle
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -45,7 +46,8 @@ MU_D, OFFSET = 0.45, 0.1
 
 @pytest.fixture(scope="module")
 def bw():
-    return load_consignment("BW")
+    """BW with a flat bottom (the bundled file's bulge removed): the analytic checks' box."""
+    return replace(load_consignment("BW"), bulge=None)
 
 
 def _plane_world(bw, speed=0.0, spacing=0.01, gravity=G, stick=0.001, slip=0.0015):
@@ -82,6 +84,12 @@ def test_the_box_has_the_consignment_s_mass_inertia_and_contact_areas(bw):
         assert np.all(np.linalg.norm(body.points[s:e] - c, axis=1) <= r + 1e-12)
     content = parcel_body(bw, 0.02, bottom_patch="content")
     assert content.bottom_area == pytest.approx(cL * cW)
+    # the default patch follows the consignment: the bundled BW's bulge, half its outline
+    bulged = parcel_body(load_consignment("BW"), 0.02)
+    assert bulged.bottom_area == pytest.approx(0.5 * L * 0.5 * W)
+    assert parcel_body(load_consignment("BW"), 0.02, bottom_patch="outline").bottom_area == (
+        pytest.approx(L * W)
+    )
     bottom = content.points[content.group == 0]
     assert np.all(np.abs(bottom[:, 0]) <= cL / 2 + 1e-12)
 

@@ -500,7 +500,7 @@ def test_consignment_bulge_is_checked_and_moves_the_parcel_up_by_its_depth():
     from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
 
     rig = load_rig("E3")
-    flat = load_consignment("BW")
+    flat = dataclasses.replace(load_consignment("BW"), bulge=None)
     bulged = dataclasses.replace(flat, bulge=(0.004, 0.3))
     params = resolve(flat.content_kind, si_values={})
 

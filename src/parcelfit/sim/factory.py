@@ -42,6 +42,7 @@ from parcelfit.errors import ParcelfitError, shown
 from parcelfit.schema import Choice, FileModel, Number, Text
 from parcelfit.sim.params import (
     BELT_FRICTION,
+    BOTTOM_PATCHES,
     CONTACT_LAWS,
     FRICTION_LAWS,
     MASS_LUMPINGS,
@@ -57,7 +58,6 @@ from parcelfit.sim.params import (
 from parcelfit.sim.protocol import Simulator
 
 BACKENDS = ("mujoco", "rigidbox", "external", "python")
-BOTTOM_PATCHES = ("outline", "content")  # the rigid-box reference's (sim/rigidbox/geometry.py)
 # the MuJoCo scene's settings, which the rigid-box reference does not take
 _MUJOCO_ONLY = (
     "film_spacing",

@@ -69,6 +69,10 @@ BELT_FRICTION = ("mujoco", "coulomb")
 # (`SceneOptions.contact_law`, `SceneOptions.friction`; sim/mujoco/contact.py, friction.py)
 CONTACT_LAWS = ("penalty", "impedance")
 FRICTION_LAWS = ("contact", "geom")
+# where the rigid-box reference's bottom carries contact (sim/rigidbox/geometry.py): the
+# consignment's own bulge patch if it has one, else the whole outline; the outline; the content's
+# footprint
+BOTTOM_PATCHES = ("consignment", "outline", "content")
 # how a flow splitter's rollers move the packaging (`SceneOptions.roller_surface`) and how the
 # shell's grid cells are split into triangles (`SceneOptions.shell_diagonals`); a study's
 # simulator section checks against the same lists

@@ -41,7 +41,9 @@ with the centre of mass at the box centre (body frame: x along L, y along W, z u
   weights), and n_z = max(3, ceil(H / s)) rows at the centres of equal height bands
   (z = -H/2 + (j + 1/2) H / n_z, weight H / n_z along the height): the faces' edges are carried by
   the bottom and top grids, so no point is counted twice when the parcel lies flat.
-* the **bottom contact patch** (option): ``outline``: the bottom grid covers the whole L x W face;
+* the **bottom contact patch** (option): ``consignment`` (default): the consignment's bulge patch
+  (its ``footprint`` times L x W, centred) where it has one, else the whole face; ``outline``: the
+  bottom grid covers the whole L x W face;
   ``content``: the bottom grid covers only the content's footprint cL x cW (centred): the rim
   beyond it carries no bottom contact (a bubble mailer's flexible rim that lifts off). The top
   face always covers L x W.
@@ -61,13 +63,13 @@ import numpy as np
 from parcelfit.errors import ParcelfitError
 from parcelfit.sim.mujoco.consignment import Consignment
 from parcelfit.sim.mujoco.rig import Rig
+from parcelfit.sim.params import BOTTOM_PATCHES
 
 BOX, CYLINDER, CAPSULE, LEAD_IN = 0, 1, 2, 3
 KIND_NAMES = {BOX: "box", CYLINDER: "cylinder", CAPSULE: "capsule", LEAD_IN: "lead-in"}
 BELT, METAL = 0, 1  # material indices: the BePa and MePa parameter sets
 SLAB = 0.02  # half-thickness of belt and strip slabs [m], as the MuJoCo scene's
 BOTTOM, TOP, SIDE = 0, 1, 2  # point groups
-BOTTOM_PATCHES = ("outline", "content")
 ROLLER_SURFACES = ("linear", "turning")
 TILE = 3  # nodes per tile edge
 MIN_SIDE_ROWS = 3
@@ -353,7 +355,7 @@ def parcel_body(
     consignment: Consignment,
     packaging_mass: float,
     spacing: float = 0.01,
-    bottom_patch: str = "outline",
+    bottom_patch: str = "consignment",
 ) -> Body:
     """The rigid box of ``consignment`` (see the module docstring)."""
     if consignment.soft:
@@ -388,7 +390,12 @@ def parcel_body(
         pts = np.column_stack([X.ravel(), Y.ravel(), np.full(X.size, z)])
         blocks.append((pts, np.outer(wx, wy).ravel(), group, _tiles_of_grid(len(x), len(y))))
 
-    bottom = (cL, cW) if bottom_patch == "content" else (L, W)
+    bottom = (L, W)
+    if bottom_patch == "content":
+        bottom = (cL, cW)
+    elif bottom_patch == "consignment" and consignment.bulge is not None:
+        footprint = consignment.bulge[1]
+        bottom = (footprint * L, footprint * W)
     face(bottom, -H / 2, BOTTOM)
     face((L, W), H / 2, TOP)
     nz = max(MIN_SIDE_ROWS, math.ceil(H / spacing - 1e-9))

@@ -30,12 +30,12 @@ from parcelfit.errors import ParcelfitError
 from parcelfit.runs import Run, TestCase, Trajectory
 from parcelfit.sim.mujoco.consignment import Consignment, load_consignment
 from parcelfit.sim.mujoco.rig import Rig, load_rig
+from parcelfit.sim.params import BOTTOM_PATCHES
 from parcelfit.sim.protocol import SimResult, SimStatus
 from parcelfit.sim.rigidbox import integrator as ig
 from parcelfit.sim.rigidbox.contact import law_array
 from parcelfit.sim.rigidbox.engine import GRAVITY, Motion, World, yaw_quaternion
 from parcelfit.sim.rigidbox.geometry import (
-    BOTTOM_PATCHES,
     METAL,
     ROLLER_SURFACES,
     parcel_body,
@@ -64,7 +64,7 @@ class RigidBoxOptions:
 
     timestep: float | None = None
     spacing: float = 0.01
-    bottom_patch: str = "outline"
+    bottom_patch: str = "consignment"
     stick_speed: float = STICK_SPEED
     slip_speed: float = SLIP_SPEED
     speed_factors: Mapping[str, float] = field(default_factory=dict)
