@@ -45,17 +45,17 @@ import math
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from typing import Any
 
 import mujoco
 import numpy as np
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import Run, TestCase, Trajectory
-from parcelfit.sim.mujoco.consignment import Consignment, load_consignment
+from parcelfit.sim.mujoco.bundled import RigBackend
+from parcelfit.sim.mujoco.consignment import Consignment
 from parcelfit.sim.mujoco.friction import Stepper
 from parcelfit.sim.mujoco.mjlog import CountedWarnings
-from parcelfit.sim.mujoco.rig import Barrier, Rig, Surface, load_rig
+from parcelfit.sim.mujoco.rig import Barrier, Rig, Surface
 from parcelfit.sim.mujoco.scene import Scene, SceneOptions, build_scene
 from parcelfit.sim.protocol import SimResult, SimStatus
 
@@ -128,7 +128,7 @@ def _crossing_time(previous: tuple[float, float] | None, t_now: float, margin_no
     return t_prev + (t_now - t_prev) * margin_prev / (margin_prev - margin_now)
 
 
-class MujocoSimulator:
+class MujocoSimulator(RigBackend[SimOptions]):
     """Simulator backend on MuJoCo for bundled or user rigs and consignments (see module doc)."""
 
     def __init__(
@@ -137,29 +137,7 @@ class MujocoSimulator:
         rigs: Mapping[str, Rig] | None = None,
         consignments: Mapping[str, Consignment] | None = None,
     ) -> None:
-        self.options = options or SimOptions()
-        self._rigs = dict(rigs or {})
-        self._consignments = dict(consignments or {})
-
-    def rig(self, name: str) -> Rig:
-        """The rig called ``name`` (given at construction, else bundled)."""
-        if name not in self._rigs:
-            self._rigs[name] = load_rig(name)
-        return self._rigs[name]
-
-    def consignment(self, name: str) -> Consignment:
-        """The consignment type called ``name`` (given at construction, else bundled)."""
-        if name not in self._consignments:
-            self._consignments[name] = load_consignment(name)
-        return self._consignments[name]
-
-    def with_options(self, **changes: Any) -> MujocoSimulator:
-        """The same simulator (rigs and consignments) with `SimOptions` fields changed."""
-        return MujocoSimulator(replace(self.options, **changes), self._rigs, self._consignments)
-
-    def with_placement(self, seed: int | None) -> MujocoSimulator:
-        """The same simulator with placement ``seed`` (None: the nominal start pose)."""
-        return self.with_options(placement_seed=seed)
+        super().__init__(options or SimOptions(), rigs, consignments)
 
     def scene_options(self, rig: Rig) -> SceneOptions:
         """The scene settings of a run on ``rig``: the placement draw added to the start offset

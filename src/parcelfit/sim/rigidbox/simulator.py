@@ -21,15 +21,15 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, field, replace
-from typing import Any
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import Run, TestCase, Trajectory
-from parcelfit.sim.mujoco.consignment import Consignment, load_consignment
-from parcelfit.sim.mujoco.rig import Rig, load_rig
+from parcelfit.sim.mujoco.bundled import RigBackend
+from parcelfit.sim.mujoco.consignment import Consignment
+from parcelfit.sim.mujoco.rig import Rig
 from parcelfit.sim.params import BOTTOM_PATCHES
 from parcelfit.sim.protocol import SimResult, SimStatus
 from parcelfit.sim.rigidbox import integrator as ig
@@ -107,7 +107,7 @@ class RigidBoxOptions:
         return 1.0 / (self.sample_rate * math.ceil(1.0 / (self.sample_rate * limit) - 1e-9))
 
 
-class RigidBoxSimulator:
+class RigidBoxSimulator(RigBackend[RigidBoxOptions]):
     """The rigid-box reference backend for bundled or user rigs and consignments (module doc)."""
 
     def __init__(
@@ -116,29 +116,7 @@ class RigidBoxSimulator:
         rigs: Mapping[str, Rig] | None = None,
         consignments: Mapping[str, Consignment] | None = None,
     ) -> None:
-        self.options = options or RigidBoxOptions()
-        self._rigs = dict(rigs or {})
-        self._consignments = dict(consignments or {})
-
-    def rig(self, name: str) -> Rig:
-        """The rig called ``name`` (given at construction, else bundled)."""
-        if name not in self._rigs:
-            self._rigs[name] = load_rig(name)
-        return self._rigs[name]
-
-    def consignment(self, name: str) -> Consignment:
-        """The consignment type called ``name`` (given at construction, else bundled)."""
-        if name not in self._consignments:
-            self._consignments[name] = load_consignment(name)
-        return self._consignments[name]
-
-    def with_options(self, **changes: Any) -> RigidBoxSimulator:
-        """The same simulator (rigs and consignments) with `RigidBoxOptions` fields changed."""
-        return RigidBoxSimulator(replace(self.options, **changes), self._rigs, self._consignments)
-
-    def with_placement(self, seed: int | None) -> RigidBoxSimulator:
-        """The same simulator with placement ``seed`` (None: the nominal start pose)."""
-        return self.with_options(placement_seed=seed)
+        super().__init__(options or RigidBoxOptions(), rigs, consignments)
 
     def world(self, params: Mapping[str, float], case: TestCase) -> tuple[World, float]:
         """The world of ``case`` with SI ``params`` (defaults filled in) and its time step [s]."""
