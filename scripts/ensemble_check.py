@@ -23,7 +23,7 @@ observations as checks:
 and a figure per rig and setting (``ensemble-<rig>-<setting>.png``): the top view of every
 placement's path and the heading over the travelled distance, like the published Figures 17
 and 19. Runs go over all cores (``--workers``). ``--set`` changes parameters (catalogue units) for
-every type, ``--bulge TYPE=FOOTPRINT`` gives a type's packaging a bulging bottom
+every type, ``--bulge TYPE=FOOTPRINT`` gives a type's packaging a bulging bottom (0: a flat one)
 (``--bulge-depth``, `parcelfit.sim.mujoco.shell`), ``--scene`` sets scene options,
 ``--nose-radius`` the radius [m] of the drums every belt and strip set of the rigs runs round at
 its ends (0: square ends) in place of the rig files' own (`Rig.with_drum_ends`).
@@ -260,7 +260,9 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--scene: {exc}")
     bulges = {k.upper().replace("/", ""): v for k, v in parse_assignments(args.bulge).items()}
     consignments = {
-        t: replace(c, bulge=(args.bulge_depth, bulges[t])) if t in bulges else c
+        t: replace(c, bulge=(args.bulge_depth, bulges[t]) if bulges[t] > 0 else None)
+        if t in bulges
+        else c
         for t, c in ((t, load_consignment(t)) for t in args.types)
     }
     user = parse_assignments(args.set)
