@@ -1092,9 +1092,7 @@ def calibrate(
     _calibrate_live(run, study.name, folder, cost)
 
 
-def _calibration_cost(
-    study: Any, executor: str | None, workers: int | None, folder: Path
-) -> str:
+def _calibration_cost(study: Any, executor: str | None, workers: int | None, folder: Path) -> str:
     """The calibration's expected cost (at most its budget), said when it starts."""
     from parcelfit.study.estimate import calibration_estimate
 

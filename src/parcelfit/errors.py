@@ -10,7 +10,6 @@ import math
 import os
 import reprlib
 from pathlib import Path
-from types import ModuleType
 from typing import Any
 
 # the longest a quoted value (`shown`) and each part of a rendered message may be [characters]
@@ -159,17 +158,14 @@ def os_error(
     return None
 
 
-def require(module: str, *, extra: str, what: str) -> ModuleType:
-    """Import the optional dependency ``module``, or stop with a `ParcelfitError` naming the
-    extra of parcelfit that installs it: ``what`` (e.g. "the dask executor") needs it. Every
-    import of an optional dependency in parcelfit goes through here."""
-    import importlib
+def missing_extra(module: str, exc: ImportError, *, extra: str, what: str) -> ParcelfitError:
+    """The error for an optional dependency ``module`` that cannot be imported: ``what`` (e.g.
+    "the dask executor") needs it, and the extra of parcelfit named ``extra`` installs it.
 
-    try:
-        return importlib.import_module(module)
-    except ImportError as exc:
-        raise ParcelfitError(
-            f"{what} needs the {extra!r} extra ({module} cannot be imported: {exc})",
-            fix=f'pip install "parcelfit[{extra}]" (in a clone of the repository: '
-            f'pip install -e ".[{extra}]")',
-        ) from exc
+    Every import of an optional dependency in parcelfit is written out where it is used (so that
+    deptry sees it) inside ``try: ... except ImportError as exc: raise missing_extra(...)``."""
+    return ParcelfitError(
+        f"{what} needs the {extra!r} extra ({module} cannot be imported: {exc})",
+        fix=f'pip install "parcelfit[{extra}]" (in a clone of the repository: '
+        f'pip install -e ".[{extra}]")',
+    )

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from parcelfit.errors import ParcelfitError, require
+from parcelfit.errors import ParcelfitError, missing_extra
 from parcelfit.optimize.space import Space
 
 
@@ -32,7 +32,10 @@ class OptunaSampler:
         kind: str = "tpe",
         n_startup_trials: int = 10,
     ) -> None:
-        optuna = require("optuna", extra="optuna", what="the tpe optimizer")
+        try:
+            import optuna
+        except ImportError as exc:
+            raise missing_extra("optuna", exc, extra="optuna", what="the tpe optimizer") from exc
         if kind != "tpe":
             raise ParcelfitError(f"unknown Optuna sampler {kind!r}", fix="use tpe")
         optuna.logging.set_verbosity(optuna.logging.WARNING)

@@ -44,7 +44,7 @@ from dataclasses import dataclass, field, replace
 from functools import partial
 from typing import Any, Generic, TypeVar
 
-from parcelfit.errors import ParcelfitError, require
+from parcelfit.errors import ParcelfitError, missing_extra
 from parcelfit.runs import TestCase
 from parcelfit.sim.lifetime import die_with_parent
 from parcelfit.sim.protocol import SimResult, SimStatus, Simulator
@@ -366,7 +366,10 @@ def dask_executor(
     while tasks are waiting is one after ``worker_wait`` [s] (checked every 2 s), the tasks in
     flight unrecorded.
     """
-    Client = require("distributed", extra="dask", what="the dask executor").Client
+    try:
+        from distributed import Client
+    except ImportError as exc:
+        raise missing_extra("distributed", exc, extra="dask", what="the dask executor") from exc
     own = not hasattr(scheduler, "submit")
     address = str(scheduler) if own else str(scheduler.scheduler.address)
     # distributed logs its reconnection attempts and tracebacks of its own when the scheduler

@@ -142,7 +142,9 @@ class Surface:
             if self.end_heading is not None:
                 a = np.radians(self.end_heading)
                 e = np.array([np.cos(a), np.sin(a)])
-                extra = -offset * float(n[0] * e[1] - n[1] * e[0]) / float(u[0] * e[1] - u[1] * e[0])
+                extra = (
+                    -offset * float(n[0] * e[1] - n[1] * e[0]) / float(u[0] * e[1] - u[1] * e[0])
+                )
             out.append(
                 (
                     f"{self.name}_{i}",

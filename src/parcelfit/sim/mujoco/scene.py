@@ -249,9 +249,7 @@ class SceneOptions:
                 f"got {self.slip_speed}"
             )
         if self.friction not in FRICTION_LAWS:
-            raise ParcelfitError(
-                f"unknown friction {self.friction!r}", fix="use contact or geom"
-            )
+            raise ParcelfitError(f"unknown friction {self.friction!r}", fix="use contact or geom")
         if not 0 < self.static_threshold < self.dynamic_threshold:
             raise ParcelfitError(
                 "the friction thresholds must satisfy 0 < static_threshold < dynamic_threshold "
