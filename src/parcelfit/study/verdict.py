@@ -1,0 +1,294 @@
+"""One honest verdict on a calibration: every check on a line of its own, and one overall verdict.
+
+A calibration is judged by three checks and one analysis:
+
+* **published criteria** (method section 8): the recommended parameters, simulated on the
+  validation cases, pass the three published criteria on every case;
+* **band test** (parcelfit's stricter criterion): that simulation stays inside the real runs'
+  band over at least 95 % of the path on every validation case;
+* **transfer check**: the recommended parameters pass the published criteria on every transfer
+  case (cases that took no part in the calibration, usually another rig);
+* **parameters determined** (`parcelfit.study.identify`): which parameters the data fix.
+
+Each check passed, failed or was not run. The overall verdict is ``trustworthy`` only when all
+three checks passed and the parameters were analysed; a failed check makes it ``not
+trustworthy``, else a check not run makes it ``incomplete``: it never reads better than the
+worst of its checks. How many parameters are determined does not change the level (a model
+can pass every check with parameters the data leave open), but the verdict always says it, and
+what an undetermined parameter means (`UNDETERMINED_MEANING`).
+
+`combine` makes the verdict from the checks; `study_verdict` makes the checks from what a
+study stored (its results and test cases). Both are pure: they read no file. The terminal
+(``calibrate``, ``demo``, ``status``), ``status --json`` and the report all show this verdict.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Literal
+
+if TYPE_CHECKING:
+    from parcelfit.study.identify import Identifiability
+    from parcelfit.study.results import StudyResults, ValidationRecord
+
+Outcome = Literal["passed", "failed", "not run"]
+Level = Literal["not trustworthy", "incomplete", "trustworthy"]
+LEVELS: tuple[Level, ...] = ("not trustworthy", "incomplete", "trustworthy")  # worst first
+
+CRITERIA, BAND, TRANSFER = "published criteria", "band test", "transfer check"
+PARAMETERS = "parameters determined"
+UNDETERMINED_MEANING = (
+    "A parameter that is not determined is one the data leave open: every value in its "
+    "interval fits them as well, so a prediction that depends on it carries that range."
+)
+
+
+@dataclass(frozen=True)
+class Check:
+    """One check's outcome and, in words, on which cases and why (``detail``)."""
+
+    name: str
+    outcome: Outcome
+    detail: str = ""
+
+    def line(self) -> str:
+        """E.g. ``transfer check: failed (E1/KPBW/1: DTW_theta)``."""
+        return f"{self.name}: {self.outcome}" + (f" ({self.detail})" if self.detail else "")
+
+    def to_json(self) -> dict[str, Any]:
+        """The JSON form: ``name``, ``outcome`` (passed, failed, not run) and ``detail``."""
+        return {"name": self.name, "outcome": self.outcome, "detail": self.detail}
+
+
+@dataclass(frozen=True)
+class Determined:
+    """Which parameters the data determine: ``analysed`` False when the analysis was not run
+    (``detail`` says why); else the determined names and the others with their kind (lower
+    bound, upper bound, narrowed, undetermined)."""
+
+    analysed: bool
+    determined: tuple[str, ...] = ()
+    open: tuple[tuple[str, str], ...] = ()  # (name, kind) of each parameter not determined
+    detail: str = ""
+
+    @property
+    def total(self) -> int:
+        """How many parameters were analysed."""
+        return len(self.determined) + len(self.open)
+
+    @property
+    def outcome(self) -> str:
+        """``k of n`` determined, or ``not run``."""
+        return f"{len(self.determined)} of {self.total}" if self.analysed else "not run"
+
+    def line(self) -> str:
+        """E.g. ``parameters determined: 1 of 4 (mu_d_BePa; not determined: E_Pa
+        (undetermined), k_MePa (lower bound))``."""
+        if not self.analysed:
+            return f"{PARAMETERS}: not run" + (f" ({self.detail})" if self.detail else "")
+        named = ", ".join(self.determined) or "none"
+        if self.open:
+            named += "; not determined: " + ", ".join(f"{n} ({k})" for n, k in self.open)
+        return f"{PARAMETERS}: {self.outcome} ({named})"
+
+    def to_json(self) -> dict[str, Any]:
+        """The JSON form."""
+        return {
+            "name": PARAMETERS,
+            "outcome": self.outcome,
+            "analysed": self.analysed,
+            "determined": list(self.determined),
+            "not_determined": [{"name": n, "kind": k} for n, k in self.open],
+            "detail": self.detail,
+        }
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """The overall verdict (``level`` and its sentence ``text``) with every check behind it."""
+
+    level: Level
+    text: str
+    criteria: Check
+    band: Check
+    transfer: Check
+    parameters: Determined
+
+    @property
+    def checks(self) -> tuple[Check, Check, Check]:
+        """The three checks that decide the level."""
+        return (self.criteria, self.band, self.transfer)
+
+    @property
+    def trustworthy(self) -> bool:
+        """True only when every check passed and the parameters were analysed."""
+        return self.level == "trustworthy"
+
+    def lines(self) -> list[str]:
+        """The summary for a terminal: one line per check, what an undetermined parameter
+        means (when one is), and the verdict last."""
+        out = [c.line() for c in self.checks] + [self.parameters.line()]
+        if self.parameters.open:
+            out.append(UNDETERMINED_MEANING)
+        return [*out, f"verdict: {self.text}"]
+
+    def to_json(self) -> dict[str, Any]:
+        """The JSON form (``status --json``): ``level``, ``text``, ``checks`` (published
+        criteria, band test, transfer check) and ``parameters``."""
+        return {
+            "level": self.level,
+            "text": self.text,
+            "checks": [c.to_json() for c in self.checks],
+            "parameters": self.parameters.to_json(),
+            "undetermined_means": UNDETERMINED_MEANING if self.parameters.open else None,
+        }
+
+
+def combine(criteria: Check, band: Check, transfer: Check, parameters: Determined) -> Verdict:
+    """The overall verdict of the checks: ``not trustworthy`` when one failed, else
+    ``incomplete`` when one was not run (the parameter analysis too), else ``trustworthy``.
+    The sentence names every check that failed or was not run, and the determined count."""
+    checks = (criteria, band, transfer)
+    failed = [f"{c.name} failed" for c in checks if c.outcome == "failed"]
+    not_run = [f"{c.name} not run" for c in checks if c.outcome == "not run"]
+    if not parameters.analysed:
+        not_run.append("parameter analysis not run")
+    level: Level
+    if failed:
+        level, text = "not trustworthy", "not trustworthy: " + ", ".join(failed + not_run)
+    elif not_run:
+        level, text = "incomplete", "incomplete: " + ", ".join(not_run)
+    else:
+        level, text = "trustworthy", f"trustworthy: {CRITERIA}, {BAND} and {TRANSFER} passed"
+    if parameters.analysed:
+        text += f"; {len(parameters.determined)} of {parameters.total} parameters determined"
+    return Verdict(level, text, criteria, band, transfer, parameters)
+
+
+# -- the checks of a study's stored results ----------------------------------------------------
+
+
+def _failed_criteria(v: ValidationRecord) -> str:
+    """Why a record fails the published criteria, e.g. ``DTW_theta`` or ``the run ended
+    failed``."""
+    r = v.verdict
+    if r is None:
+        return v.message or f"the run ended {v.status}"
+    names = [
+        n
+        for n, ok in (
+            ("transit time", r.transit_time.passed),
+            ("DTW_xy", r.xy.passed),
+            ("DTW_theta", r.theta.passed),
+        )
+        if not ok
+    ]
+    return ", ".join(names) or "failed"
+
+
+def criteria_check(group: Sequence[ValidationRecord], name: str = CRITERIA) -> Check:
+    """The published criteria on every case of one validation (or of the transfer check)."""
+    if not group:
+        return Check(name, "not run", "no validation stored yet")
+    bad = [v for v in group if not v.passed]
+    cases = ", ".join(v.case for v in group)
+    after = group[0].after_iteration
+    when = "" if after is None else f" after iteration {after}"
+    if bad:
+        return Check(name, "failed", "; ".join(f"{v.case}: {_failed_criteria(v)}" for v in bad))
+    return Check(name, "passed", f"{cases}{when}")
+
+
+def band_check(group: Sequence[ValidationRecord]) -> Check:
+    """The stricter band test on every case of the validation shown (not run on a case whose
+    run gave no verdict or that has fewer than two real runs)."""
+    if not group:
+        return Check(BAND, "not run", "no validation stored yet")
+    words, failed, missing, need = [], False, [], 0.0
+    for v in group:
+        env = None if v.verdict is None else v.verdict.envelope
+        if env is None:
+            missing.append(v.case)
+            continue
+        failed |= not env.passed
+        need = max(need, env.min_inside)
+        words.append(
+            f"{v.case}: lateral {env.inside_y * 100:.0f} %, heading {env.inside_theta * 100:.0f} "
+            "% of the path inside"
+        )
+    said = "; ".join(words) + f"; needs {need * 100:.0f} %"
+    if failed:
+        return Check(BAND, "failed", said)
+    if missing:
+        why = "no verdict or fewer than two real runs on " + ", ".join(missing)
+        return Check(BAND, "not run", why)
+    return Check(BAND, "passed", said)
+
+
+def transfer_check(records: Sequence[ValidationRecord], planned: bool, stopped: bool) -> Check:
+    """The published criteria on every transfer case; not run when the study names none, or
+    before it stops (the check runs then)."""
+    if records:
+        return criteria_check(records, TRANSFER)
+    if not planned:
+        return Check(TRANSFER, "not run", "the study names no transfer cases")
+    if not stopped:
+        return Check(TRANSFER, "not run", "it runs when the study stops")
+    return Check(TRANSFER, "not run", "the study stopped without recommended parameters")
+
+
+def determined(ident: Identifiability | None, stopped: bool) -> Determined:
+    """Which parameters the data determine, from the study's analysis (None: not run)."""
+    if ident is None:
+        why = (
+            "too few finished evaluations to analyse"
+            if stopped
+            else "the analysis runs when the study stops"
+        )
+        return Determined(False, detail=why)
+    return Determined(
+        True,
+        tuple(p.name for p in ident.parameters if p.determined),
+        tuple((p.name, p.verdict) for p in ident.parameters if not p.determined),
+    )
+
+
+def study_verdict(
+    results: StudyResults | None,
+    cases: Sequence[Mapping[str, Any]] | None = None,
+    stopped: bool = False,
+) -> Verdict:
+    """The verdict of a study from its stored results (None: none stored), its test cases
+    (the store's ``cases``: a transfer case has role ``transfer``) and whether it stopped. The
+    validation judged is the one the report shows (`StudyResults.shown_validations`)."""
+    group = [] if results is None else results.shown_validations()
+    transfer = () if results is None else results.transfer
+    planned = bool(transfer) or any(c.get("role") == "transfer" for c in cases or ())
+    return combine(
+        criteria_check(group),
+        band_check(group),
+        transfer_check(transfer, planned, stopped),
+        determined(None if results is None else results.identifiability, stopped),
+    )
+
+
+__all__ = [
+    "BAND",
+    "CRITERIA",
+    "LEVELS",
+    "PARAMETERS",
+    "TRANSFER",
+    "UNDETERMINED_MEANING",
+    "Check",
+    "Determined",
+    "Level",
+    "Outcome",
+    "Verdict",
+    "band_check",
+    "combine",
+    "criteria_check",
+    "determined",
+    "study_verdict",
+    "transfer_check",
+]

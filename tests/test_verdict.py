@@ -1,0 +1,144 @@
+"""One honest verdict (`parcelfit.study.verdict`): every check on its own line, and an overall
+verdict that is trustworthy only when every check passed, and otherwise no better than the
+worst of them; the same in the terminal, ``status --json`` and the report."""
+
+import itertools
+import json
+
+import pytest
+
+from parcelfit.metrics.envelope import EnvelopeCheck
+from parcelfit.metrics.validation import MeanDistanceCheck, TransitTimeCheck, Validation
+from parcelfit.study.results import ValidationRecord
+from parcelfit.study.verdict import (
+    LEVELS,
+    UNDETERMINED_MEANING,
+    Check,
+    Determined,
+    band_check,
+    combine,
+    criteria_check,
+    transfer_check,
+)
+
+OUTCOMES = ("passed", "failed", "not run")
+NAMES = ("mu_d_BePa", "mu_d_MePa", "E_Pa", "k_MePa")
+PARAMETERS = {  # not analysed, and 0, 2 and 4 of 4 determined
+    "not analysed": Determined(False, detail="the analysis runs when the study stops"),
+    "0 of 4": Determined(True, (), tuple((n, "undetermined") for n in NAMES)),
+    "2 of 4": Determined(True, NAMES[:2], ((NAMES[2], "lower bound"), (NAMES[3], "narrowed"))),
+    "4 of 4": Determined(True, NAMES),
+}
+
+
+@pytest.mark.parametrize(
+    ("criteria", "band", "transfer", "parameters"),
+    list(itertools.product(OUTCOMES, OUTCOMES, OUTCOMES, PARAMETERS)),
+)
+def test_the_overall_verdict_is_no_better_than_its_worst_check(
+    criteria, band, transfer, parameters
+):
+    checks = (
+        Check("published criteria", criteria, "E3/KPBW/2"),
+        Check("band test", band),
+        Check("transfer check", transfer, "E1/KPBW/1"),
+    )
+    p = PARAMETERS[parameters]
+    verdict = combine(*checks, p)
+    outcomes = (criteria, band, transfer)
+    if "failed" in outcomes:
+        expected = "not trustworthy"
+    elif "not run" in outcomes or not p.analysed:
+        expected = "incomplete"
+    else:
+        expected = "trustworthy"
+    assert verdict.level == expected and verdict.text.startswith(f"{expected}: ")
+    assert verdict.trustworthy == (expected == "trustworthy")
+    # the level is never better than a check's own: a failed check caps it at "not trustworthy",
+    # a check not run at "incomplete"
+    for outcome in outcomes:
+        cap = {"passed": "trustworthy", "failed": "not trustworthy", "not run": "incomplete"}
+        assert LEVELS.index(verdict.level) <= LEVELS.index(cap[outcome])
+    # the sentence names every check that failed or was not run, and only those
+    for c in checks:
+        said = {"failed": f"{c.name} failed", "not run": f"{c.name} not run"}
+        for outcome, words in said.items():
+            assert (words in verdict.text) == (c.outcome == outcome)
+    assert ("parameter analysis not run" in verdict.text) == (not p.analysed)
+    # and the determined count, whatever the level (it does not change the level)
+    count = f"{len(p.determined)} of 4 parameters determined"
+    assert (count in verdict.text) == p.analysed
+    # every check on a line of its own, the parameters named, the verdict last
+    lines = verdict.lines()
+    assert lines[:3] == [c.line() for c in checks]
+    assert (
+        lines[3].startswith("parameters determined: ") and lines[-1] == f"verdict: {verdict.text}"
+    )
+    if p.analysed:
+        assert lines[3].startswith(f"parameters determined: {len(p.determined)} of 4 (")
+        assert all(n in lines[3] for n in NAMES)
+    else:
+        assert lines[3] == "parameters determined: not run (the analysis runs when the study stops)"
+    assert (UNDETERMINED_MEANING in lines) == bool(p.open)
+    doc = verdict.to_json()
+    assert [c["outcome"] for c in doc["checks"]] == list(outcomes)
+    assert doc["level"] == expected and doc["parameters"]["outcome"] == p.outcome
+    assert json.loads(json.dumps(doc)) == doc
+
+
+def test_the_demo_s_case_reads_not_trustworthy():
+    """The quick demo's: published criteria passed, band test and transfer check failed, no
+    parameter determined; it used to end with `verdict: validation passed`."""
+    verdict = combine(
+        Check("published criteria", "passed"),
+        Check("band test", "failed"),
+        Check("transfer check", "failed", "E1/KPBW/1: DTW_theta"),
+        PARAMETERS["0 of 4"],
+    )
+    assert verdict.text == (
+        "not trustworthy: band test failed, transfer check failed; 0 of 4 parameters determined"
+    )
+    assert "transfer check: failed (E1/KPBW/1: DTW_theta)" in verdict.lines()
+
+
+def _record(case, *, theta=True, inside=1.0, envelope=True, after=3, ran=True):
+    """A validation record of ``case`` whose heading criterion and band test pass or not."""
+    if not ran:
+        return ValidationRecord(case, after, {}, "failed", "the parcel fell off", None, None, None)
+    env = EnvelopeCheck(inside, 1.0, 0.01, 0.02, 0.95, inside >= 0.95) if envelope else None
+    verdict = Validation(
+        TransitTimeCheck(2.0, 1.9, 2.1, True),
+        MeanDistanceCheck("xy", 1e-4, (2e-4,), 2e-4, True),
+        MeanDistanceCheck("theta", 3e-2 if not theta else 1e-2, (2e-2,), 2e-2, theta),
+        env,
+    )
+    return ValidationRecord(case, after, {}, "ok", None, 2.0, None, verdict)
+
+
+def test_the_checks_of_stored_validations_say_which_case_failed_and_why():
+    passed = criteria_check([_record("E3/KPBW/2")])
+    assert passed.line() == "published criteria: passed (E3/KPBW/2 after iteration 3)"
+    failed = criteria_check([_record("E3/KPBW/2"), _record("E3/PB/2", theta=False)])
+    assert failed.line() == "published criteria: failed (E3/PB/2: DTW_theta)"
+    broken = criteria_check([_record("E3/KPBW/2", ran=False)])
+    assert broken.line() == "published criteria: failed (E3/KPBW/2: the parcel fell off)"
+    assert criteria_check([]).outcome == "not run"
+    band = band_check([_record("E3/KPBW/2", inside=0.94)])
+    assert band.line() == (
+        "band test: failed (E3/KPBW/2: lateral 94 %, heading 100 % of the path inside; needs 95 %)"
+    )
+    assert band_check([_record("E3/KPBW/2")]).outcome == "passed"
+    # a case without a band (fewer than two real runs, or no verdict): not run, never passed
+    assert band_check([_record("E3/KPBW/2"), _record("D1/x/1", envelope=False)]).outcome == (
+        "not run"
+    )
+    assert band_check([_record("E3/KPBW/2", ran=False)]).outcome == "not run"
+    assert band_check([]).outcome == "not run"
+    # the transfer check: its cases' published criteria, or why it did not run
+    records = [_record("E1/KPBW/1", theta=False, after=None)]
+    assert transfer_check(records, True, True).line() == (
+        "transfer check: failed (E1/KPBW/1: DTW_theta)"
+    )
+    assert transfer_check([], False, True).detail == "the study names no transfer cases"
+    assert transfer_check([], True, False).detail == "it runs when the study stops"
+    assert transfer_check([], True, True).outcome == "not run"
