@@ -102,7 +102,15 @@ def test_demo_quick_end_to_end_on_bundled_data(tmp_path):
     # the joint calibration: both fitted cases, the transfer check, what the data determine
     assert 'id="transfer"' in text and "E1/KPBW/3" in text and "What the data determine" in text
     assert "report:" in output and report.name in output.replace("\n", "")
-    assert "verdict: validation" in output
+    # every check on its own line, then the one verdict
+    for check in (
+        "published criteria: ",
+        "band test: ",
+        "transfer check: ",
+        "parameters determined",
+    ):
+        assert check in output
+    assert "verdict: " in output and "verdict: validation" not in output
     example = json.loads((out / "stricter-criterion.json").read_text())
     assert example["published_passed"] and not example["stricter_passed"]
 

@@ -6,7 +6,9 @@ import itertools
 import json
 
 import pytest
+from typer.testing import CliRunner
 
+from parcelfit.cli import app
 from parcelfit.metrics.envelope import EnvelopeCheck
 from parcelfit.metrics.validation import MeanDistanceCheck, TransitTimeCheck, Validation
 from parcelfit.study.results import ValidationRecord
@@ -20,6 +22,11 @@ from parcelfit.study.verdict import (
     criteria_check,
     transfer_check,
 )
+
+from .fake_sim import write_reference_dataset
+from .helpers import write_study_results, write_study_store
+
+runner = CliRunner()
 
 OUTCOMES = ("passed", "failed", "not run")
 NAMES = ("mu_d_BePa", "mu_d_MePa", "E_Pa", "k_MePa")
@@ -142,3 +149,61 @@ def test_the_checks_of_stored_validations_say_which_case_failed_and_why():
     assert transfer_check([], False, True).detail == "the study names no transfer cases"
     assert transfer_check([], True, False).detail == "it runs when the study stops"
     assert transfer_check([], True, True).outcome == "not run"
+
+
+def _finished_study(tmp_path):
+    """A finished study (no simulation): the fake dataset's R/P, a validation and a transfer
+    check that pass, mu_d_BePa determined and E_Pa not."""
+    write_reference_dataset(tmp_path / "data")
+    study = write_study_store(tmp_path / "study", tmp_path / "data")
+    write_study_results(study, tmp_path / "data")
+    return study
+
+
+def _fail_the_transfer_check(study):
+    path = study / "results.json"
+    doc = json.loads(path.read_text())
+    verdict = doc["transfer"][0]["verdict"]
+    verdict["theta"]["passed"] = verdict["passed"] = False
+    path.write_text(json.dumps(doc))
+
+
+def test_status_json_carries_every_check_and_the_overall_verdict(tmp_path):
+    study = _finished_study(tmp_path)
+    info = json.loads(runner.invoke(app, ["status", str(study), "--json"]).stdout)
+    verdict = info["verdict"]
+    assert [(c["name"], c["outcome"]) for c in verdict["checks"]] == [
+        ("published criteria", "passed"),
+        ("band test", "passed"),
+        ("transfer check", "passed"),
+    ]
+    assert verdict["parameters"]["determined"] == ["mu_d_BePa"]
+    assert verdict["parameters"]["not_determined"] == [{"name": "E_Pa", "kind": "undetermined"}]
+    assert verdict["level"] == "trustworthy" and verdict["undetermined_means"]
+    assert verdict["text"] == (
+        "trustworthy: published criteria, band test and transfer check passed; "
+        "1 of 2 parameters determined"
+    )
+    # the terminal says the same, a line per check
+    text = " ".join(runner.invoke(app, ["status", str(study)]).stdout.split())
+    for line in (
+        "published criteria: passed (R/P/2 after iteration 1)",
+        "transfer check: passed (R/P/2)",
+        "parameters determined: 1 of 2 (mu_d_BePa; not determined: E_Pa (undetermined))",
+        UNDETERMINED_MEANING,
+        f"verdict: {verdict['text']}",
+    ):
+        assert line in text
+    assert text.rstrip().endswith(f"verdict: {verdict['text']}")
+    _fail_the_transfer_check(study)
+    info = json.loads(runner.invoke(app, ["status", str(study), "--json"]).stdout)
+    assert info["verdict"]["level"] == "not trustworthy"
+    assert info["verdict"]["checks"][2]["detail"] == "R/P/2: DTW_theta"
+    # a study without stored results: nothing was judged, nothing is trustworthy
+    (study / "results.json").unlink()
+    verdict = json.loads(runner.invoke(app, ["status", str(study), "--json"]).stdout)["verdict"]
+    assert [c["outcome"] for c in verdict["checks"]] == ["not run"] * 3
+    assert verdict["text"] == (
+        "incomplete: published criteria not run, band test not run, transfer check not run, "
+        "parameter analysis not run"
+    )

@@ -373,7 +373,7 @@ def demo(
         report = d.report(_progress(status_line, "report: "))
     minutes = (time.perf_counter() - t0) / 60
     console.print(f"[bold green]report:[/] {escape(str(report.resolve()))}")
-    console.print(f"[bold]verdict:[/] {d.verdict()} ({minutes:.1f} min)")
+    _print_verdict(out, f" ({minutes:.1f} min)")
 
 
 def _at_most(value: int | None, option: str, bound: int) -> None:
@@ -420,7 +420,7 @@ def report(
     ] = False,
 ) -> None:
     """Write the self-contained HTML report of a calibration study."""
-    from parcelfit.report import build_report, verdict_text
+    from parcelfit.report import build_report
 
     with console.status("report") as status_line:
         path = build_report(
@@ -432,7 +432,7 @@ def report(
             progress=_progress(status_line, "report: "),
         )
     console.print(f"[bold green]report:[/] {escape(str(path.resolve()))}")
-    console.print(f"[bold]verdict:[/] {verdict_text(folder)}")
+    _print_verdict(folder)
 
 
 @app.command()
@@ -1184,6 +1184,7 @@ def _calibrate_live(
     console.print(
         Text(f"figures in {folder / 'figures'} ({len(result.figures) // 2} figures, PNG and SVG)")
     )
+    _print_verdict(folder)
     return result
 
 
@@ -1454,6 +1455,31 @@ def status(
         console.print(Text(f"note: {note}", style="yellow"))
     _print_recommendation(info)
     _print_determined(study_dir)
+    _print_verdict(study_dir)
+
+
+_LEVEL_STYLE = {"trustworthy": "green", "incomplete": "yellow", "not trustworthy": "red"}
+
+
+def _print_verdict(folder: Path, tail: str = "") -> None:
+    """Every check on a line of its own (published criteria, band test, transfer check,
+    parameters determined) and the one overall verdict (`parcelfit.study.verdict`), for a
+    study folder or a folder holding ``calibration/`` (the demo's)."""
+    from parcelfit.study.calibration import STORE_FILE, folder_verdict
+
+    inner = folder / "calibration"
+    verdict = folder_verdict(
+        inner if not (folder / STORE_FILE).is_file() and (inner / STORE_FILE).is_file() else folder
+    )
+    *checks, _ = verdict.lines()
+    for line in checks:
+        console.print(Text(line), highlight=False)
+    console.print(
+        Text.assemble(
+            ("verdict: ", "bold"), (verdict.text, f"bold {_LEVEL_STYLE[verdict.level]}"), tail
+        ),
+        highlight=False,
+    )
 
 
 def _print_determined(folder: Path) -> None:

@@ -3,9 +3,10 @@
 The layer above the optimisers (`parcelfit.optimize`: parameters and costs only) and the
 simulators (`parcelfit.sim`): the study and screen files (`studyfile`, `screening`), the
 evaluation store (`store`) and its folder lock (`folderlock`), the calibration loop and
-``study_status`` (`calibration`), what a study concluded (`results`: ``results.json``) and the
-study figures (`plots`). Constructing a `Calibration` reads and writes nothing; `run` (through
-`Calibration.prepare`) opens the folder, the data and the simulator.
+``study_status`` (`calibration`), what a study concluded (`results`: ``results.json``), its
+one overall verdict (`verdict`) and the study figures (`plots`). Constructing a `Calibration`
+reads and writes nothing; `run` (through `Calibration.prepare`) opens the folder, the data and
+the simulator.
 
 The names below are importable from here; each module is loaded when one of its names is first
 used, so ``import parcelfit.study`` stays cheap.
@@ -20,6 +21,9 @@ _EXPORTS = {
     "Calibration": "calibration",
     "CalibrationResult": "calibration",
     "study_status": "calibration",
+    "folder_verdict": "calibration",
+    "Verdict": "verdict",
+    "study_verdict": "verdict",
     "Study": "studyfile",
     "load_study": "studyfile",
     "Screen": "screening",
@@ -45,19 +49,28 @@ __all__ = [
     "Study",
     "StudyRecord",
     "StudyResults",
+    "Verdict",
+    "folder_verdict",
     "load_screen",
     "load_study",
     "read_results",
     "run_screen",
     "study_status",
+    "study_verdict",
 ]  # the keys of _EXPORTS
 
 if TYPE_CHECKING:
-    from parcelfit.study.calibration import Calibration, CalibrationResult, study_status
+    from parcelfit.study.calibration import (
+        Calibration,
+        CalibrationResult,
+        folder_verdict,
+        study_status,
+    )
     from parcelfit.study.results import StudyResults, read_results
     from parcelfit.study.screening import Screen, StageResult, load_screen, run_screen
     from parcelfit.study.store import STORE_FILE, Evaluation, Store, StudyRecord
     from parcelfit.study.studyfile import Study, load_study
+    from parcelfit.study.verdict import Verdict, study_verdict
 
 
 def __getattr__(name: str) -> Any:

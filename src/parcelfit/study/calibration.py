@@ -93,6 +93,7 @@ from parcelfit.study.store import (
     StudyRecord,
 )
 from parcelfit.study.studyfile import CaseSpec, Study
+from parcelfit.study.verdict import Verdict, study_verdict
 
 FAILURES_IN_A_ROW = 8  # evaluations failing one after the other that stop a study or a screen
 LOST_WORKER_MESSAGES = (
@@ -1210,7 +1211,9 @@ def study_status(folder: str | Path) -> dict[str, Any]:
     single cost), both with ``parts``: the per-case costs of a joint or ensemble study (None
     otherwise), ``cases`` (a joint study's test cases: label, role fit/validation/transfer,
     weight, dataset, reference run and acceptance threshold; None for a one-case study),
-    ``validations`` (each with the iteration it followed, its case, status and verdict), and
+    ``validations`` (each with the iteration it followed, its case, status and verdict),
+    ``verdict`` (the overall verdict with its checks: published criteria, band test, transfer
+    check, parameters determined; `parcelfit.study.verdict`, from the stored results), and
     ``units``: parameter values are SI, in the unit given per parameter.
     """
     from parcelfit.sim.params import si_unit
@@ -1279,5 +1282,27 @@ def study_status(folder: str | Path) -> dict[str, Any]:
             }
             for v in vals
         ],
+        "verdict": _verdict(folder, cases, stop_reason).to_json(),
         "units": {**{n: si_unit(n) for n in names}, "cost": "-"},
     }
+
+
+def _verdict(folder: Path, cases: Any, stop_reason: str | None) -> Verdict:
+    """The verdict of the study's stored results (a damaged results file counts as none)."""
+    try:
+        results = read_results(folder)
+    except ParcelfitError:
+        results = None
+    return study_verdict(results, cases, stop_reason is not None)
+
+
+def folder_verdict(folder: str | Path) -> Verdict:
+    """The overall verdict of a study folder with its checks (`parcelfit.study.verdict`): what
+    ``calibrate``, ``status`` and the report say."""
+    folder = Path(folder)
+    store = Store(folder / STORE_FILE, readonly=True)
+    try:
+        cases, stop_reason = store.get_meta("cases"), store.get_meta("stop_reason")
+    finally:
+        store.close()
+    return _verdict(folder, cases, stop_reason)
