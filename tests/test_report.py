@@ -87,7 +87,13 @@ def test_report_is_one_self_contained_file_with_every_section(demo_folder, monke
     text = path.read_text()
     for anchor in ("stats", "reference", "screening", "calibration", "validation", "frames"):
         assert f'id="{anchor}"' in text
-    assert "SYNTHETIC DATA" in text and "Validation PASSED" in text
+    assert "SYNTHETIC DATA" in text
+    # the verdict box: every check on a line; without a transfer case the verdict is at best
+    # incomplete, never green
+    assert '<li><b>published criteria</b>: <span class="ok">passed</span>' in text
+    assert "<li><b>band test</b>: " in text and '<div class="verdict pass">' not in text
+    assert "(the study names no transfer cases)" in text and "transfer check not run" in text
+    assert "The study stopped: validation passed (by the published criteria" in text
     # figures embedded, every one a real PNG; nothing fetched from elsewhere
     images = _images(text)
     assert len(images) >= 9
@@ -225,7 +231,8 @@ def test_the_report_renders_the_stored_verdict_without_simulating_or_refitting(
     path.write_text(json.dumps(doc))
     _no_analysis(monkeypatch)
     text = build_report(study, out=tmp_path / "r.html").read_text()
-    assert "Validation PASSED" in text and "<td>4.56e-07 m&sup2;</td>" in text
+    assert '<div class="verdict pass"><b>Verdict: trustworthy: ' in text
+    assert "<td>4.56e-07 m&sup2;</td>" in text
     assert "The calibrated parameters, validated after iteration 1," in text
     # the validation and the transfer check (one case) each show the criteria
     assert text.count("<td>1. transit time") == 2 and "stricter (parcelfit)" in text
@@ -234,7 +241,8 @@ def test_the_report_renders_the_stored_verdict_without_simulating_or_refitting(
     assert "<b>Determined by these test cases: mu_d_BePa</b>" in text
     assert "Not determined: E_Pa</span>" in text and "no value: the data cannot tell" in text
     assert (
-        "Determined by the data: mu_d_BePa; <b>not determined</b> (no value reported): E_Pa" in text
+        "<b>parameters determined</b>: 1 of 2: mu_d_BePa; <b>not determined</b> (no value "
+        "reported): E_Pa" in text
     )
     assert re.search(r"<td>mu_d_BePa</td>.*?<span class=\"ok\">determined</span>", text)
     assert "Which further test case would help most to determine E_Pa: <b>R/P/2</b>" in text
@@ -259,7 +267,8 @@ def test_a_study_without_stored_results_says_so_instead_of_recomputing(tmp_path,
     assert "no stored results (results.json)" in text and "nothing is recomputed here" in text
     assert "`parcelfit calibrate` again on the same study file and folder" in text
     assert text.count("Not stored in this study folder") == 4  # references, GP, validation, frames
-    assert "No validation verdict" in text and 'id="calibration"' in text
+    assert '<b>published criteria</b>: <span class="warn">not run</span>' in text
+    assert '<div class="verdict incomplete">' in text and 'id="calibration"' in text
     assert "<td>mu_d_BePa</td><td>-</td><td>0.3 - 0.6</td><td>0.45</td>" in text
     # a damaged results file is named in the page; the rest still renders
     (study / "results.json").write_text("{")

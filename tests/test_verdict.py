@@ -207,3 +207,25 @@ def test_status_json_carries_every_check_and_the_overall_verdict(tmp_path):
         "incomplete: published criteria not run, band test not run, transfer check not run, "
         "parameter analysis not run"
     )
+
+
+def test_the_report_s_verdict_box_is_green_only_when_every_check_passes(tmp_path):
+    from parcelfit.report import build_report
+
+    study = _finished_study(tmp_path)
+    text = build_report(study, out=tmp_path / "r.html", key_frames=False).read_text()
+    assert '<div class="verdict pass"><b>Verdict: trustworthy: ' in text
+    _fail_the_transfer_check(study)
+    text = build_report(study, out=tmp_path / "r.html", key_frames=False).read_text()
+    assert '<div class="verdict pass">' not in text
+    assert '<div class="verdict fail"><b>Verdict: not trustworthy: transfer check failed; ' in text
+    assert '<li><b>transfer check</b>: <span class="bad">failed</span> (R/P/2: DTW_theta)' in text
+    assert '<li><b>published criteria</b>: <span class="ok">passed</span>' in text
+    # a check not run: amber, not green
+    path = study / "results.json"
+    doc = json.loads(path.read_text())
+    doc["transfer"] = []
+    path.write_text(json.dumps(doc))
+    text = build_report(study, out=tmp_path / "r.html", key_frames=False).read_text()
+    assert '<div class="verdict incomplete"><b>Verdict: incomplete: transfer check not run' in text
+    assert "the study names no transfer cases" in text

@@ -73,6 +73,7 @@ from parcelfit.study.results import (
     read_results,
 )
 from parcelfit.study.store import STORE_FILE, SourceRecord, Store, StudyRecord
+from parcelfit.study.verdict import UNDETERMINED_MEANING, Verdict, study_verdict
 
 RECOVERY_TOLERANCE = 0.10  # of the range's width
 BOUNDED = ("lower bound", "upper bound", "narrowed")
@@ -98,12 +99,14 @@ h1{margin-bottom:.2em}h2{border-bottom:2px solid #ddd;padding-bottom:.2em;margin
 .synthetic{background:#fff3cd;border:1px solid #e0b000;padding:.6em 1em;border-radius:6px}
 .verdict{font-size:1.15em;padding:.7em 1em;border-radius:6px;margin:1em 0}
 .pass{background:#e3f6e8;border:1px solid #27ae60}.fail{background:#fdecea;border:1px solid #e74c3c}
+.incomplete{background:#fff8e1;border:1px solid #e0a000}.verdict ul{margin:.3em 0;font-size:.9em}
 table{border-collapse:collapse;margin:.8em 0;font-size:.92em}
 th,td{border:1px solid #ccc;padding:.25em .6em;text-align:right}th{background:#f3f3f3}
 td:first-child,th:first-child{text-align:left}
 img{max-width:100%;height:auto;display:block;margin:.6em 0}
 .grid{display:flex;flex-wrap:wrap;gap:1%}.grid img{max-width:49%}
 .note{color:#555;font-size:.92em}.ok{color:#1e8449;font-weight:600}.bad{color:#c0392b;font-weight:600}
+.warn{color:#9a6700;font-weight:600}
 code{background:#f4f4f4;padding:0 .2em}
 """
 
@@ -801,6 +804,7 @@ def build_report(
         record = store.read_study()
         source = store.read_source() or SourceRecord()
         stop_reason = store.get_meta("stop_reason")
+        cases = store.get_meta("cases")
     finally:
         store.close()
     if record is None:
@@ -853,7 +857,11 @@ def build_report(
         results_error=results_error,
         no_results=NO_RESULTS if results is None else None,
         summary=_summary(
-            [] if results is None else results.shown_validations(), rows, stop_reason, bool(truth)
+            [] if results is None else results.shown_validations(),
+            rows,
+            stop_reason,
+            bool(truth),
+            study_verdict(results, cases, stop_reason is not None),
         ),
         sections=page.sections,
         recovery_tolerance=f"{RECOVERY_TOLERANCE * 100:.0f}",
@@ -890,14 +898,22 @@ def _write_page(target: Path, doc: str) -> None:
         ) from None
 
 
+_BOX = {"trustworthy": "pass", "incomplete": "incomplete", "not trustworthy": "fail"}
+
+
 def _summary(
     shown: ValidationRecord | Sequence[ValidationRecord] | None,
     rows: list[ParameterRow],
     stop_reason: str | None,
     truth: bool,
+    overall: Verdict | None = None,
 ) -> dict[str, Any]:
-    """The verdict box's values: the published and stricter verdicts of the validation shown,
-    the recovery count (synthetic data) and why the study stopped."""
+    """The verdict box's values: the one overall verdict with its checks (`overall`, by
+    default that of no stored results) and the box's colour class (green only when the verdict
+    is trustworthy), the published and stricter verdicts of the validation shown, the recovery
+    count (synthetic data) and why the study stopped."""
+    if overall is None:
+        overall = study_verdict(None, stopped=stop_reason is not None)
     group = [shown] if isinstance(shown, ValidationRecord) else list(shown or [])
     verdicts = [v.verdict for v in group]
     verdict = None
@@ -907,7 +923,10 @@ def _summary(
         if all(v.envelope is not None for v in verdicts):  # type: ignore[union-attr]
             strict = all(v.envelope.passed for v in verdicts)  # type: ignore[union-attr]
     return {
-        "verdict": verdict,
+        "verdict": overall,
+        "box": _BOX[overall.level],
+        "undetermined_means": UNDETERMINED_MEANING,
+        "validation": verdict,
         "strict": strict,
         "truth": truth and bool(rows),
         "recovered": sum((r.error_share or 0) <= RECOVERY_TOLERANCE for r in rows),
@@ -922,18 +941,12 @@ def _summary(
 
 
 def verdict_text(path: str | Path) -> str:
-    """A one-line verdict of a study folder (for the command line)."""
-    from parcelfit.study.calibration import study_status
+    """The one overall verdict of a study folder (or of a folder holding ``calibration/``) in
+    one line, e.g. ``not trustworthy: band test failed, transfer check failed; 0 of 4
+    parameters determined`` (`parcelfit.study.verdict`)."""
+    from parcelfit.study.calibration import folder_verdict
 
-    st = study_status(locate(path).study)
-    vals = st["validations"]
-    if not vals:
-        return "no validation yet"
-    by_iteration: dict[int, list[bool]] = {}
-    for v in vals:  # an iteration's validation passes when every validation case passed
-        by_iteration.setdefault(v["after_iteration"], []).append(bool(v["passed"]))
-    passed = any(all(g) for g in by_iteration.values())
-    return "validation passed" if passed else "validation failed"
+    return folder_verdict(locate(path).study).text
 
 
 __all__ = [
