@@ -209,6 +209,13 @@ def test_a_joint_ensemble_study_stores_the_parts_and_checks_transfer(tmp_path, m
     text = CliRunner().invoke(app, ["status", str(out)]).stdout
     assert "Q/P/1" in text and "R/P/1" in text and "trajectories" in text
     assert "what the data determine:" in text  # each parameter's verdict
+    # the one verdict: the transfer check ran on Q/P/2 and has its own line
+    transfer = status["verdict"]["checks"][2]
+    assert transfer["outcome"] in ("passed", "failed") and "Q/P/2" in transfer["detail"]
+    assert " ".join(f"transfer check: {transfer['outcome']} ({transfer['detail']})".split()) in (
+        " ".join(text.split())
+    )
+    assert status["verdict"]["parameters"]["analysed"]
     # the report: the cases, the transfer section, what the data determine
     from parcelfit.report import build_report
 
