@@ -229,3 +229,21 @@ def test_the_report_s_verdict_box_is_green_only_when_every_check_passes(tmp_path
     text = build_report(study, out=tmp_path / "r.html", key_frames=False).read_text()
     assert '<div class="verdict incomplete"><b>Verdict: incomplete: transfer check not run' in text
     assert "the study names no transfer cases" in text
+
+
+def test_the_last_validation_is_judged_the_recommended_parameters_one():
+    """An earlier validation that passed does not stand in for the last one (of the parameters
+    recommended, which the transfer check simulates too)."""
+    from parcelfit.study.results import new_results
+    from parcelfit.study.verdict import study_verdict
+
+    earlier = [_record("E3/KPBW/2", after=2), _record("E3/PB/2", after=2)]
+    last = [_record("E3/KPBW/2", after=4), _record("E3/PB/2", theta=False, after=4)]
+    verdict = study_verdict(new_results({}, [*earlier, *last]), stopped=True)
+    assert verdict.criteria.line() == "published criteria: failed (E3/PB/2: DTW_theta)"
+    verdict = study_verdict(new_results({}, [*last, *earlier]), stopped=True)
+    assert verdict.criteria.line() == (
+        "published criteria: passed (E3/KPBW/2, E3/PB/2 after iteration 2)"
+    )
+    assert verdict.transfer.detail == "the study names no transfer cases"
+    assert verdict.parameters.detail == "too few finished evaluations to analyse"

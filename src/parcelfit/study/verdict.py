@@ -261,8 +261,13 @@ def study_verdict(
 ) -> Verdict:
     """The verdict of a study from its stored results (None: none stored), its test cases
     (the store's ``cases``: a transfer case has role ``transfer``) and whether it stopped. The
-    validation judged is the one the report shows (`StudyResults.shown_validations`)."""
-    group = [] if results is None else results.shown_validations()
+    validation judged is the last one (every case of it): that of the recommended parameters,
+    which the transfer check simulates too, not an earlier one that passed."""
+    group: list[ValidationRecord] = []
+    for v in () if results is None else results.validations:
+        if group and v.after_iteration != group[-1].after_iteration:
+            group = []
+        group.append(v)
     transfer = () if results is None else results.transfer
     planned = bool(transfer) or any(c.get("role") == "transfer" for c in cases or ())
     return combine(
