@@ -53,7 +53,7 @@ echo "== test extras, lint, dependency check, tests"
 "$py" -m ruff check .
 "$py" -m deptry src
 # -n auto: one test process per core (xdist); pass -n 0 to run in this process only
-"$py" -m pytest -n auto "$@"
+"$py" -m pytest -n auto --durations=25 "$@"
 
 echo "== documentation site (mkdocs build --strict)"
 NO_MKDOCS_2_WARNING=1 "$py" -m mkdocs build --strict --quiet --site-dir "$work/site"

@@ -17,7 +17,15 @@ def test_the_reference_pages_are_what_the_code_gives():
         for rel, text in gen.pages().items()
         if not (gen.OUT / rel).is_file() or (gen.OUT / rel).read_text(encoding="utf-8") != text
     ]
-    assert not stale, f"run python scripts/docs_reference.py: {stale} are out of date"
+    first = ""
+    if stale:  # the first lines that differ, so that a failure elsewhere says what changed
+        import difflib
+
+        rel = stale[0]
+        old = (gen.OUT / rel).read_text(encoding="utf-8") if (gen.OUT / rel).is_file() else ""
+        diff = difflib.unified_diff(old.splitlines(), gen.pages()[rel].splitlines(), lineterm="")
+        first = "\n".join(list(diff)[:30])
+    assert not stale, f"run python scripts/docs_reference.py: {stale} are out of date\n{first}"
 
 
 def test_every_key_of_every_file_has_a_description():

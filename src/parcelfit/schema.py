@@ -186,7 +186,12 @@ class Number(_Plain):
     def json_schema(self) -> dict[str, Any]:
         return {
             "type": "number",
-            **_bounds(self.ge, self.le),
+            # as floats: Number(ge=0) and Number(ge=0.0) are equal, and whichever a model met
+            # first would otherwise decide how the bound is written
+            **_bounds(
+                None if self.ge is None else float(self.ge),
+                None if self.le is None else float(self.le),
+            ),
             **({"x-unit": self.unit} if self.unit else {}),
         }
 

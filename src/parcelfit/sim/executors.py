@@ -290,6 +290,14 @@ def _shutdown(pool: cf.Executor) -> None:
         with contextlib.suppress(Exception):  # gone already
             if process.is_alive():
                 process.terminate()
+    # The pool's manager thread closes its wake-up pipe once it sees the workers gone; if the
+    # interpreter exits first, concurrent.futures' exit hook may write to that pipe as it closes
+    # ("OSError: Bad file descriptor" printed after Ctrl-C, a race CPython 3.11 has): let the
+    # thread finish first (it does within milliseconds of the workers' end).
+    manager = getattr(pool, "_executor_manager_thread", None)
+    if workers and manager is not None and manager is not threading.current_thread():
+        with contextlib.suppress(Exception):
+            manager.join(timeout=5.0)
 
 
 def _local_worker(parent_pid: int) -> None:
