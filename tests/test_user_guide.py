@@ -111,6 +111,7 @@ def _workspace(tmp_path: Path) -> tuple[Path, dict[str, str]]:
 @pytest.mark.mujoco
 def test_every_command_of_the_user_guide_runs(tmp_path):
     work, env = _workspace(tmp_path)
+    said: dict[str, str] = {}  # what each page's blocks printed, one line
     for page in guide_pages():
         for k, text in runnable(page):
             result = subprocess.run(
@@ -125,7 +126,52 @@ def test_every_command_of_the_user_guide_runs(tmp_path):
                 f"{page}, block {k} failed:\n{text}\n--- stdout\n{result.stdout[-3000:]}\n"
                 f"--- stderr\n{result.stderr[-3000:]}"
             )
+            said[page] = said.get(page, "") + " " + " ".join(result.stdout.split())
     # what the pages promise was made
     assert (work / "my-tags.yaml").read_text().count("camera:") == 1
     assert (work / "my-dataset" / "dataset.yaml").is_file()
     assert (work / "examples" / "own-rig" / "study" / "report.html").is_file()
+    _the_own_rig_tutorial_made_its_dataset_study_and_report(
+        work / "examples" / "own-rig", said, env
+    )
+
+
+def _the_own_rig_tutorial_made_its_dataset_study_and_report(
+    own: Path, said: dict[str, str], env: dict[str, str]
+) -> None:
+    """The "Your own rig" page, followed from scratch: a rig and a consignment file that are
+    not bundled, a SYNTHETIC dataset on them in the documented format (`parcelfit synth`), the
+    study with a small budget, `calibrate`, `status` and `report`."""
+    import json
+
+    import pandas as pd
+    import yaml
+
+    from parcelfit.runs import load_dataset
+
+    rig = said["guide/rig.md"]
+    assert "expected cost: 6 simulations on 2 processes" in rig  # synth
+    assert "expected cost: 8 simulations on 2 processes" in rig and "mu_d_BePa" in rig
+    assert "published criteria: " in rig and "verdict: " in rig  # calibrate and report
+    doc = yaml.safe_load((own / "data" / "dataset.yaml").read_text())
+    assert doc["synthetic"] is True
+    assert [(c["rig"], c["consignment"], c["speed_setting"]) for c in doc["test_cases"]] == [
+        ("D1", "envelope", 1),
+        ("D1", "envelope", 2),
+    ]
+    run = doc["test_cases"][0]["runs"][0]
+    frame = pd.read_csv(own / "data" / run["file"])
+    assert list(frame.columns) == ["t", "x", "y", "theta"] and run["transit_time"] > 0
+    assert len(load_dataset(own / "data").runs()) == 6
+    status = subprocess.run(
+        [sys.executable, "-m", "parcelfit", "status", str(own / "study"), "--json"],
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    info = json.loads(status.stdout)
+    assert info["evaluations"] <= 6 and info["pending"] == 0 and info["validations"]
+    assert info["study"]["name"] == "d1-envelope"
+    page = (own / "study" / "report.html").read_text()
+    assert "SYNTHETIC" in page and "D1/envelope/1" in page and "What the data determine" in page
