@@ -561,6 +561,15 @@ def track(
     )
     if not q["parallax_corrected"]:
         console.print(f"[yellow]parallax {q['parallax_note']}[/]")
+    for tag_id, t in result.tags.items():
+        gone = t.quality["discarded_by_smoother"]
+        if gone:
+            kept = t.quality["measured_frames"]
+            console.print(
+                f"[yellow]warning[/]: parcel tag {tag_id}: the smoother discarded {gone} of "
+                f"{gone + kept} measured frames as outliers of the motion model (they are gaps in "
+                "the run file; see discarded_by_smoother in the quality report)"
+            )
     console.print(f"[green]done[/]: {len(files)} files in {out}")
 
 

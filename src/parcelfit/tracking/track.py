@@ -397,14 +397,16 @@ def track_video(
             arr = rolling_shutter_poses(
                 corners[tag_id], t, tag_map.readout, size[1], tag_map.parcel_tags[tag_id].offset
             )
-        gated, sd = 0, None
+        before = np.isfinite(arr[:, 0])  # measured (detected or fitted), before the smoother
+        gated, sd, restarts = 0, None, []
         if opts.smooth:
-            arr, gated, sd = smooth_track(arr, 1 / fps, meas_sd)
+            arr, gated, sd, restarts = smooth_track(arr, 1 / fps, meas_sd)
         measured = np.isfinite(arr[:, 0])
         traj, gaps = fill_gaps(
             t, arr[:, 0], arr[:, 1], arr[:, 2], opts.max_gap, sd, fitted=fitted & measured
         )
-        span = _frames_in_view(measured, centres[tag_id], size)
+        # in view: from the measurements before the smoother (a frame it discarded was seen)
+        span = _frames_in_view(before, centres[tag_id], size)
         crossings: dict[str, float | None] = {}
         transit = None
         if traj is not None and tag_map.barriers:
@@ -418,13 +420,22 @@ def track_video(
             transit,
             crossings,
             {
-                "detected_frames": int(detected.sum()),
+                # the run file's counts: measured = detected + fitted (its source column)
+                "measured_frames": int(measured.sum()),
+                "detected_frames": int((measured & ~fitted).sum()),
                 "fitted_frames": int((fitted & measured).sum()),
                 "fitted_missed_frames": int((fitted & measured & ~detected).sum()),
+                # frames the detector found the tag in, before fits and the smoother
+                "detector_frames": int(detected.sum()),
                 "frames_in_view": span,
-                "missed_at_clip_ends": int(span - _detected_span(measured)),
+                # frames in view at the clip's ends without any measurement (detected or fitted)
+                "missed_at_clip_ends": int(span - _detected_span(before)),
                 "smoothed": opts.smooth,
-                "frames_rejected_by_smoother": gated,
+                # measurements (detected or fitted) the smoother discarded as outliers
+                "discarded_by_smoother": gated,
+                # times [s] where a change of motion (a spin's onset or stop, a catch) restarted
+                # the smoother's motion model
+                "motion_restarts_s": [float(t[j]) for j in restarts],
                 # coverage: frames measured (detected or fitted) of the frames in view
                 "detection_rate": float(measured.sum() / span) if span else 0.0,
                 "gaps": gaps,
@@ -483,12 +494,14 @@ _JERK_DENSITY = (10.0, 10.0, 1e3)
 
 def smooth_track(
     arr: np.ndarray, dt: float, meas_sd: np.ndarray | None = None
-) -> tuple[np.ndarray, int, np.ndarray | None]:
+) -> tuple[np.ndarray, int, np.ndarray | None, list[int]]:
     """Poses (n, 3) [m, m, rad] (NaN where unseen) replaced by their RTS-smoothed values at the
     seen frames (`parcelfit.tracking.smooth`); frames the smoother rejects as outliers become
-    NaN. Returns the poses, how many frames were rejected, and the smoother's posterior standard
+    NaN. Returns the poses, how many frames were rejected, the smoother's posterior standard
     deviations (n, 2): position [m] (root mean square of the x and y sds) and heading [rad],
-    NaN where the pose is NaN (None under 3 seen frames: nothing was smoothed).
+    NaN where the pose is NaN (None under 3 seen frames: nothing was smoothed), and the frames
+    at which a change of motion (a spin's onset or stop, a catch) restarted the motion model in
+    x, y or heading.
 
     ``meas_sd`` (n, 2): each frame's measurement sd, position [m] (per coordinate) and heading
     [rad] (default: `_MEASUREMENT_SD` in every frame, the edge-fitted detection; the model fit
@@ -498,11 +511,12 @@ def smooth_track(
     know a frame's blur or fit only through ``meas_sd``."""
     seen = np.isfinite(arr[:, 0])
     if seen.sum() < 3:
-        return arr, 0, None
+        return arr, 0, None, []
     out = arr.copy()
     out[seen, 2] = np.unwrap(arr[seen, 2])
     keep = seen.copy()
     sds = np.zeros((len(arr), 3))
+    restarts: set[int] = set()
     for j in range(3):
         z = out[:, j]
         r = (
@@ -510,14 +524,15 @@ def smooth_track(
             if meas_sd is None
             else meas_sd[:, 0 if j < 2 else 1] ** 2
         )
-        smoothed, sds[:, j], used = rts_smooth(z, dt, r, _JERK_DENSITY[j])
+        smoothed, sds[:, j], used, restarted = rts_smooth(z, dt, r, _JERK_DENSITY[j])
+        restarts.update(restarted)
         out[seen, j] = smoothed[seen]
         keep &= used | ~seen
     rejected = int((seen & ~keep).sum())
     out[~keep] = np.nan
     sd = np.column_stack([np.sqrt((sds[:, 0] ** 2 + sds[:, 1] ** 2) / 2), sds[:, 2]])
     sd[~keep] = np.nan
-    return out, rejected, sd
+    return out, rejected, sd, sorted(restarts)
 
 
 def _parcel_pose(w: np.ndarray, offset: tuple[float, float]) -> tuple[float, float, float]:
