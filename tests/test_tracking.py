@@ -540,7 +540,7 @@ def test_smoother_restarts_the_motion_at_an_abrupt_spin_onset_or_stop(change):
 
 @pytest.mark.slow  # renders a 30-frame video
 def test_an_abrupt_spin_onset_keeps_every_frame_and_the_report_counts_match_the_run_file(
-    tmp_path,
+    tmp_path, monkeypatch
 ):
     """Issue 56: a parcel caught on a guide plate starts spinning at 720 deg/s within one frame
     (8 ms exposure): the smoother used to discard every frame after the onset."""
@@ -577,6 +577,24 @@ def test_an_abrupt_spin_onset_keeps_every_frame_and_the_report_counts_match_the_
     assert quality["motion_restarts_s"]  # the onset was seen as a change of motion
     assert_report_counts_match_run_file(quality, traj)
     assert "discarded" not in result.output  # nothing discarded: no warning
+    # the old gate (no restart) discards the frames after the onset: the command warns, and
+    # the report's counts still are the run file's
+    import functools
+
+    from parcelfit.tracking import track as track_module
+
+    old_gate = functools.partial(track_module.smooth_track, restart_after=0)
+    monkeypatch.setattr(track_module, "smooth_track", old_gate)
+    result = runner.invoke(
+        app, ["track", str(tmp_path / "onset.mp4"), "--tags", str(tags), "--out", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    quality = json.loads((out / "onset.quality.json").read_text())["parcel_tags"]["7"]
+    assert quality["discarded_by_smoother"] >= 5 and not quality["motion_restarts_s"]
+    assert f"the smoother discarded {quality['discarded_by_smoother']} of" in " ".join(
+        result.output.split()
+    )
+    assert_report_counts_match_run_file(quality, read_trajectory(out / "onset-tag7.csv"))
 
 
 def assert_report_counts_match_run_file(quality, traj):

@@ -42,7 +42,7 @@ from parcelfit.tracking.barriers import barrier_times
 from parcelfit.tracking.detect import TagDetector, _side
 from parcelfit.tracking.fit import fit_smeared_tag, tag_pattern
 from parcelfit.tracking.geometry import PlaneMapper, fit_plane_mapper, tag_pose
-from parcelfit.tracking.smooth import rts_smooth
+from parcelfit.tracking.smooth import RESTART_AFTER, rts_smooth
 from parcelfit.tracking.tagmap import TagMap, tag_corners
 
 
@@ -493,7 +493,10 @@ _JERK_DENSITY = (10.0, 10.0, 1e3)
 
 
 def smooth_track(
-    arr: np.ndarray, dt: float, meas_sd: np.ndarray | None = None
+    arr: np.ndarray,
+    dt: float,
+    meas_sd: np.ndarray | None = None,
+    restart_after: int = RESTART_AFTER,
 ) -> tuple[np.ndarray, int, np.ndarray | None, list[int]]:
     """Poses (n, 3) [m, m, rad] (NaN where unseen) replaced by their RTS-smoothed values at the
     seen frames (`parcelfit.tracking.smooth`); frames the smoother rejects as outliers become
@@ -508,7 +511,8 @@ def smooth_track(
     of a smeared tag gives its own). The sds are those of the smoothed estimate under the model:
     each frame measured with its sd, x, y and theta independent, constant acceleration with white jerk
     (`_JERK_DENSITY`). They grow at the track's ends and next to gaps and rejected frames; they
-    know a frame's blur or fit only through ``meas_sd``."""
+    know a frame's blur or fit only through ``meas_sd``. ``restart_after``: consecutive frames
+    outside the gate that restart the motion model (0: never; `rts_smooth`)."""
     seen = np.isfinite(arr[:, 0])
     if seen.sum() < 3:
         return arr, 0, None, []
@@ -524,7 +528,9 @@ def smooth_track(
             if meas_sd is None
             else meas_sd[:, 0 if j < 2 else 1] ** 2
         )
-        smoothed, sds[:, j], used, restarted = rts_smooth(z, dt, r, _JERK_DENSITY[j])
+        smoothed, sds[:, j], used, restarted = rts_smooth(
+            z, dt, r, _JERK_DENSITY[j], restart_after=restart_after
+        )
         restarts.update(restarted)
         out[seen, j] = smoothed[seen]
         keep &= used | ~seen
