@@ -206,6 +206,9 @@ def test_track_command_writes_runs_and_quality(videos, tmp_path):
     quality = json.loads((out / "plain.quality.json").read_text())
     assert quality["parcel_tags"]["7"]["detection_rate"] == 1.0
     assert quality["parcel_tags"]["7"]["transit_time_s"] > 0
+    # no timing in the tag map: estimated from the 4 ms video's most smeared frames
+    assert quality["timing"]["source"] == "estimated", quality["timing"]
+    assert "camera timing not in the tag map" in " ".join(result.output.split())
 
 
 @pytest.mark.slow
@@ -595,6 +598,23 @@ def test_an_abrupt_spin_onset_keeps_every_frame_and_the_report_counts_match_the_
         result.output.split()
     )
     assert_report_counts_match_run_file(quality, read_trajectory(out / "onset-tag7.csv"))
+    monkeypatch.undo()
+    # without timing in the tag map: estimated from the fit's residual, and as accurate
+    del doc["timing"]
+    tags.write_text(yaml.safe_dump(doc))
+    result = runner.invoke(
+        app, ["track", str(tmp_path / "onset.mp4"), "--tags", str(tags), "--out", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    assert "camera timing not in the tag map: estimated exposure" in " ".join(result.output.split())
+    report = json.loads((out / "onset.quality.json").read_text())
+    assert report["timing"]["source"] == "estimated"
+    assert abs(report["timing"]["exposure_ms"] - 8) <= 1 and report["timing"]["readout_ms"] <= 2
+    traj = read_trajectory(out / "onset-tag7.csv")
+    assert (~traj.filled).sum() >= 0.95 * len(truth["t"])
+    pos, head = errors(traj, truth)
+    assert pos.mean() <= 0.001 and pos.max() <= 0.003 and head.max() <= 1.0
+    assert_report_counts_match_run_file(report["parcel_tags"]["7"], traj)
 
 
 def assert_report_counts_match_run_file(quality, traj):

@@ -561,6 +561,15 @@ def track(
     )
     if not q["parallax_corrected"]:
         console.print(f"[yellow]parallax {q['parallax_note']}[/]")
+    timing = q["timing"]
+    if timing["source"] == "estimated":
+        console.print(
+            f"camera timing not in the tag map: estimated exposure {timing['exposure_ms']:.1f} ms, "
+            f"readout {timing['readout_ms']:.1f} ms from the fit of {timing['frames']} smeared "
+            "frames (state it as timing: in the tag map if you know it)"
+        )
+    elif timing["source"] == "assumed none":
+        console.print(f"camera timing: assumed none ({timing['reason']})")
     for tag_id, t in result.tags.items():
         gone = t.quality["discarded_by_smoother"]
         if gone:
