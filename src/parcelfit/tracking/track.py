@@ -7,7 +7,8 @@ tag's centre and heading at its height, and the parcel centre is
 
     (x, y) = tag centre - R(theta) * offset,     theta = tag heading.
 
-When the tag map states the camera's timing (exposure, rolling-shutter readout), frames in which
+With the camera's timing (exposure, rolling-shutter readout; from the tag map, else estimated
+from the video by `estimate_timing`), frames in which
 a parcel tag was missed, or smeared by more than ``fit_smear_cells`` of its bits, are measured
 again by fitting the tag's pattern, smeared as the camera saw it, to the frame
 (`parcelfit.tracking.fit`, `_SmearFitter`); kept fits are flagged ``fitted`` in the
@@ -16,7 +17,9 @@ one are gaps: gaps of at most ``max_gap`` frames are filled by linear interpolat
 unwrapped first), listed as interpolated and flagged ``filled`` (the others ``detected`` or
 ``fitted``); longer gaps stay missing (their samples are left out) and are listed too. With the
 smoother on (each frame weighted by its own measurement sd), the measured frames carry its
-posterior standard deviations (``position_sd``, ``heading_sd``; see `smooth_track`). The
+posterior standard deviations (``position_sd``, ``heading_sd``; see `smooth_track`); measured
+frames it discards as outliers become gaps and are counted (``discarded_by_smoother``), and a
+change of motion restarts its motion model (``motion_restarts_s``). The
 heading is unwrapped over the run. Decoding runs in a background thread (OpenCV releases the GIL
 while decoding), so decoding and detection overlap on two cores.
 """
