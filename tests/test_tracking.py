@@ -206,6 +206,9 @@ def test_track_command_writes_runs_and_quality(videos, tmp_path):
     quality = json.loads((out / "plain.quality.json").read_text())
     assert quality["parcel_tags"]["7"]["detection_rate"] == 1.0
     assert quality["parcel_tags"]["7"]["transit_time_s"] > 0
+    # no timing in the tag map: estimated from the 4 ms video's most smeared frames
+    assert quality["timing"]["source"] == "estimated", quality["timing"]
+    assert "camera timing not in the tag map" in " ".join(result.output.split())
 
 
 @pytest.mark.slow
@@ -503,12 +506,127 @@ def test_smoother_rejects_a_bad_frame_and_keeps_a_spin():
     z[30] += np.radians(4)  # one bad frame
     z[40:43] = np.nan
     r = np.full(60, np.radians(0.5) ** 2)
-    smoothed, sd, used = rts_smooth(z, 1 / 60, r, 1e3)
+    smoothed, sd, used, restarts = rts_smooth(z, 1 / 60, r, 1e3)
+    assert not restarts
     assert used[29] and used[31] and not used[40:43].any()
     assert np.degrees(np.abs(smoothed - theta)).max() < 1.0  # the 4-degree frame: no spike
     z[30] += np.radians(20)  # a wild frame is rejected outright
     assert not rts_smooth(z, 1 / 60, r, 1e3)[2][30]
     assert np.all(sd > 0)
+
+
+@pytest.mark.parametrize("change", ["onset", "stop"])
+def test_smoother_restarts_the_motion_at_an_abrupt_spin_onset_or_stop(change):
+    """A spin that starts (stops) within one frame: every frame after it is kept (the old gate,
+    once it had rejected one frame, rejected all the rest), the track follows the kink, and a
+    lone bad frame after it is still rejected."""
+    from parcelfit.tracking.smooth import rts_smooth
+
+    n, dt = 60, 1 / 60
+    t = np.arange(n) * dt
+    rate = np.radians(720)
+    after = np.maximum(t - 0.305, 0)
+    theta = rate * after if change == "onset" else rate * (t - after)
+    rng = np.random.default_rng(3)
+    sd = np.radians(0.1)
+    z = theta + rng.normal(0, sd, n)
+    z[45] += np.radians(5)  # one bad frame
+    smoothed, post, used, restarts = rts_smooth(z, dt, np.full(n, sd * sd), 1e3)
+    assert restarts == [19]  # between frames 18 (0.300 s) and 19 (0.317 s)
+    assert used.sum() == n - 1 and not used[45]
+    err = smoothed - theta
+    assert np.degrees(np.abs(err)).max() < 0.4
+    assert 0.3 < np.sqrt(np.mean((err / post) ** 2)) < 2  # honest sds, the kink included
+    # the gate alone (no restart) loses the track from the onset on
+    assert rts_smooth(z, dt, np.full(n, sd * sd), 1e3, restart_after=0)[2].sum() < 25
+
+
+@pytest.mark.slow  # renders a 30-frame video
+def test_an_abrupt_spin_onset_keeps_every_frame_and_the_report_counts_match_the_run_file(
+    tmp_path, monkeypatch
+):
+    """Issue 56: a parcel caught on a guide plate starts spinning at 720 deg/s within one frame
+    (8 ms exposure): the smoother used to discard every frame after the onset."""
+    from parcelfit.tracking.synthetic import changing_path
+
+    path = changing_path(spin_deg_s=(0.0, 720.0), spin_change_s=0.255)
+    scene = conveyor_scene(
+        1328,
+        748,
+        exposure=0.008,
+        blur_samples=20,
+        duration=0.5,
+        parcel_height=0.02,
+        tag_offset=(0.05, 0.0),
+    )
+    truth = truth_of(render_video(tmp_path / "onset.mp4", scene, path, seed=4))
+    doc = scene_tag_map(scene, barriers=BARRIERS)
+    doc["timing"] = {"exposure_ms": 8, "readout_ms": 0}
+    tags = tmp_path / "tags.yaml"
+    tags.write_text(yaml.safe_dump(doc))
+    out = tmp_path / "out"
+    result = runner.invoke(
+        app, ["track", str(tmp_path / "onset.mp4"), "--tags", str(tags), "--out", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    traj = read_trajectory(out / "onset-tag7.csv")
+    measured = ~traj.filled
+    assert measured.sum() >= 0.95 * len(truth["t"])
+    pos, head = errors(traj, truth)
+    assert pos.mean() <= 0.001 and pos.max() <= 0.003 and head.max() <= 1.0
+    dh = np.radians(head[measured]) / traj.heading_sd[measured]
+    assert np.sqrt(np.mean(dh**2)) <= 2  # the stated heading sds are honest at the onset
+    quality = json.loads((out / "onset.quality.json").read_text())["parcel_tags"]["7"]
+    assert quality["motion_restarts_s"]  # the onset was seen as a change of motion
+    assert_report_counts_match_run_file(quality, traj)
+    assert "discarded" not in result.output  # nothing discarded: no warning
+    # the old gate (no restart) discards the frames after the onset: the command warns, and
+    # the report's counts still are the run file's
+    import functools
+
+    from parcelfit.tracking import track as track_module
+
+    old_gate = functools.partial(track_module.smooth_track, restart_after=0)
+    monkeypatch.setattr(track_module, "smooth_track", old_gate)
+    result = runner.invoke(
+        app, ["track", str(tmp_path / "onset.mp4"), "--tags", str(tags), "--out", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    quality = json.loads((out / "onset.quality.json").read_text())["parcel_tags"]["7"]
+    assert quality["discarded_by_smoother"] >= 5 and not quality["motion_restarts_s"]
+    assert f"the smoother discarded {quality['discarded_by_smoother']} of" in " ".join(
+        result.output.split()
+    )
+    assert_report_counts_match_run_file(quality, read_trajectory(out / "onset-tag7.csv"))
+    monkeypatch.undo()
+    # without timing in the tag map: estimated from the fit's residual, and as accurate
+    del doc["timing"]
+    tags.write_text(yaml.safe_dump(doc))
+    result = runner.invoke(
+        app, ["track", str(tmp_path / "onset.mp4"), "--tags", str(tags), "--out", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    assert "camera timing not in the tag map: estimated exposure" in " ".join(result.output.split())
+    report = json.loads((out / "onset.quality.json").read_text())
+    assert report["timing"]["source"] == "estimated"
+    assert abs(report["timing"]["exposure_ms"] - 8) <= 1 and report["timing"]["readout_ms"] <= 2
+    traj = read_trajectory(out / "onset-tag7.csv")
+    assert (~traj.filled).sum() >= 0.95 * len(truth["t"])
+    pos, head = errors(traj, truth)
+    assert pos.mean() <= 0.001 and pos.max() <= 0.003 and head.max() <= 1.0
+    assert_report_counts_match_run_file(report["parcel_tags"]["7"], traj)
+
+
+def assert_report_counts_match_run_file(quality, traj):
+    """The quality report's counts are those of the run file's ``source`` column."""
+    source = np.asarray(traj.source)
+    assert quality["measured_frames"] == int((source != "filled").sum())
+    assert quality["detected_frames"] == int((source == "detected").sum())
+    assert quality["fitted_frames"] == int((source == "fitted").sum())
+    assert quality["interpolated_frames"] == int((source == "filled").sum())
+    assert quality["detection_rate"] == pytest.approx(
+        quality["measured_frames"] / quality["frames_in_view"]
+    )
 
 
 def test_smoother_weighs_each_frame_by_its_own_standard_deviation():
@@ -523,12 +641,12 @@ def test_smoother_weighs_each_frame_by_its_own_standard_deviation():
     arr[20, 0] += 0.002
     sd = np.tile([1e-4, np.radians(0.1)], (n, 1))  # fitted frames
     sd[20] = [3 * 3e-4, 3 * np.radians(0.5)]
-    out, rejected, post = smooth_track(arr, 1 / 60, sd)
+    out, rejected, post, _ = smooth_track(arr, 1 / 60, sd)
     assert rejected == 0
     assert np.degrees(abs(out[20, 2] - truth[20, 2])) < 0.2  # the 4-degree frame: no spike
     assert abs(out[20, 0] - truth[20, 0]) < 2e-4
     # with the same sd in every frame (the old smoother) the spike stays about a degree
-    same, _, _ = smooth_track(arr, 1 / 60)
+    same, _, _, _ = smooth_track(arr, 1 / 60)
     assert np.degrees(abs(same[20, 2] - truth[20, 2])) > 0.5
     # the posterior sds follow the measurement sds: tighter than one fitted frame in the middle
     assert np.all(post[10:35, 0] < 1e-4) and np.all(post[:, 1] > 0)
@@ -542,7 +660,7 @@ def test_smoother_standard_deviation_is_the_gaussian_posterior():
     n, dt, q, r = 24, 1 / 60, 10.0, 9e-8
     z = 0.5 * np.arange(n) * dt + np.random.default_rng(1).normal(0, 3e-4, n)
     z[9:12] = np.nan
-    _, sd, _ = rts_smooth(z, dt, np.full(n, r), q)
+    _, sd, _, _ = rts_smooth(z, dt, np.full(n, r), q)
     f = np.array([[1, dt, dt * dt / 2], [0, 1, dt], [0, 0, 1]])
     qm = q * np.array(
         [

@@ -561,6 +561,24 @@ def track(
     )
     if not q["parallax_corrected"]:
         console.print(f"[yellow]parallax {q['parallax_note']}[/]")
+    timing = q["timing"]
+    if timing["source"] == "estimated":
+        console.print(
+            f"camera timing not in the tag map: estimated exposure {timing['exposure_ms']:.1f} ms, "
+            f"readout {timing['readout_ms']:.1f} ms from the fit of {timing['frames']} smeared "
+            "frames (state it as timing: in the tag map if you know it)"
+        )
+    elif timing["source"] == "assumed none":
+        console.print(f"camera timing: assumed none ({timing['reason']})")
+    for tag_id, t in result.tags.items():
+        gone = t.quality["discarded_by_smoother"]
+        if gone:
+            kept = t.quality["measured_frames"]
+            console.print(
+                f"[yellow]warning[/]: parcel tag {tag_id}: the smoother discarded {gone} of "
+                f"{gone + kept} measured frames as outliers of the motion model (they are gaps in "
+                "the run file; see discarded_by_smoother in the quality report)"
+            )
     console.print(f"[green]done[/]: {len(files)} files in {out}")
 
 

@@ -118,7 +118,7 @@ def track_all(
         entries = [e for e in doc["parcel_tags"].values() if e.get("file")]
         if not entries:
             continue
-        best = max(entries, key=lambda e: e["detected_frames"])  # the parcel's tag
+        best = max(entries, key=lambda e: e.get("measured_frames", e.get("detected_frames", 0)))
         traj = read_trajectory(tracks / best["file"])
         cases.setdefault(case, []).append(Run(run_id, case, traj, best.get("transit_time_s")))
     if cases:

@@ -6,7 +6,9 @@ box top at height h with its tag) moving along a known path, seen by a perspecti
 averaged over the ``exposure``, centred on the frame's time), an optional rolling shutter (image
 row r is exposed around t + (r / height - 0.5) * ``readout``, rendered in ``readout_bands``
 bands of rows), Gaussian sensor noise and H.264 compression (libx264 through PyAV; OpenCV's own
-writer has no H.264). `straight_spin` is a fast spinning parcel path (1.6 m/s, up to 720 deg/s).
+writer has no H.264). `straight_spin` is a fast spinning parcel path (1.6 m/s, up to 720 deg/s);
+`changing_path` one whose spin, sideways speed or speed changes abruptly (onsets, stops, catches,
+decelerations).
 
 Each tag is drawn by warping OpenCV's bitmap of it (``cv2.aruco.generateImageMarker``: the black
 square, data and black border) with a white quiet zone one bit wide, from its bitmap corners to
@@ -361,6 +363,38 @@ def straight_spin(speed: float = 1.6, spin_deg_s: float = 720.0, start: float = 
         x = start + speed * t
         y = -0.03 + 0.04 * t
         theta = math.radians(15) + math.radians(spin_deg_s) * t
+        return x, y, theta
+
+    return path
+
+
+def changing_path(
+    speed: float = 1.6,
+    start: float = -0.62,
+    *,
+    spin_deg_s: tuple[float, float] = (0.0, 0.0),
+    spin_change_s: float = math.inf,
+    sideways: tuple[float, float] = (0.04, 0.04),
+    sideways_change_s: float = math.inf,
+    decel: float = 0.0,
+    decel_from_s: float = math.inf,
+) -> Path2D:
+    """A parcel path whose motion changes abruptly (within no time at all), for the smoother:
+    ``speed`` [m/s] along x from ``start`` [m], 30 mm across; the spin [deg/s] jumps from
+    ``spin_deg_s[0]`` to ``spin_deg_s[1]`` at ``spin_change_s`` [s] (an onset when the first is
+    0, a stop when the second is), the sideways speed [m/s] from ``sideways[0]`` to
+    ``sideways[1]`` at ``sideways_change_s`` (a catch on a guide plate: to 0), and from
+    ``decel_from_s`` the parcel slows along x at ``decel`` [m/s^2] until it stands."""
+    w0, w1 = (math.radians(w) for w in spin_deg_s)
+    v0, v1 = sideways
+    stop = speed / decel if decel > 0 else math.inf
+
+    def path(t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        t = np.asarray(t, dtype=float)
+        tau = np.clip(t - decel_from_s, 0.0, stop)
+        x = start + speed * np.minimum(t, decel_from_s) + speed * tau - 0.5 * decel * tau * tau
+        y = -0.03 + v0 * t + (v1 - v0) * np.maximum(t - sideways_change_s, 0.0)
+        theta = math.radians(15) + w0 * t + (w1 - w0) * np.maximum(t - spin_change_s, 0.0)
         return x, y, theta
 
     return path

@@ -114,6 +114,7 @@ class TagMap:
     source: Path | None = field(default=None, compare=False)
     exposure: float = 0.0  # s
     readout: float = 0.0  # s, rolling shutter: first to last image row
+    timing_given: bool = False  # the file has a ``timing`` block (else it is estimated)
 
 
 def tag_corners(x: float, y: float, size: float, angle: float) -> np.ndarray:
@@ -301,6 +302,7 @@ def load_tag_map(path: str | Path) -> TagMap:
         path,
         f.timing.exposure_ms * 1e-3,
         f.timing.readout_ms * 1e-3,
+        "timing" in f.model_fields_set,
     )
 
 

@@ -7,7 +7,8 @@ tag's centre and heading at its height, and the parcel centre is
 
     (x, y) = tag centre - R(theta) * offset,     theta = tag heading.
 
-When the tag map states the camera's timing (exposure, rolling-shutter readout), frames in which
+With the camera's timing (exposure, rolling-shutter readout; from the tag map, else estimated
+from the video by `estimate_timing`), frames in which
 a parcel tag was missed, or smeared by more than ``fit_smear_cells`` of its bits, are measured
 again by fitting the tag's pattern, smeared as the camera saw it, to the frame
 (`parcelfit.tracking.fit`, `_SmearFitter`); kept fits are flagged ``fitted`` in the
@@ -16,7 +17,9 @@ one are gaps: gaps of at most ``max_gap`` frames are filled by linear interpolat
 unwrapped first), listed as interpolated and flagged ``filled`` (the others ``detected`` or
 ``fitted``); longer gaps stay missing (their samples are left out) and are listed too. With the
 smoother on (each frame weighted by its own measurement sd), the measured frames carry its
-posterior standard deviations (``position_sd``, ``heading_sd``; see `smooth_track`). The
+posterior standard deviations (``position_sd``, ``heading_sd``; see `smooth_track`); measured
+frames it discards as outliers become gaps and are counted (``discarded_by_smoother``), and a
+change of motion restarts its motion model (``motion_restarts_s``). The
 heading is unwrapped over the run. Decoding runs in a background thread (OpenCV releases the GIL
 while decoding), so decoding and detection overlap on two cores.
 """
@@ -40,9 +43,9 @@ from parcelfit.runs import Trajectory
 from parcelfit.runs.io import MAX_SAMPLE_INTERVAL_S, MIN_SAMPLE_INTERVAL_S
 from parcelfit.tracking.barriers import barrier_times
 from parcelfit.tracking.detect import TagDetector, _side
-from parcelfit.tracking.fit import fit_smeared_tag, tag_pattern
+from parcelfit.tracking.fit import SmearFit, fit_smeared_tag, tag_pattern
 from parcelfit.tracking.geometry import PlaneMapper, fit_plane_mapper, tag_pose
-from parcelfit.tracking.smooth import rts_smooth
+from parcelfit.tracking.smooth import RESTART_AFTER, rts_smooth
 from parcelfit.tracking.tagmap import TagMap, tag_corners
 
 
@@ -61,6 +64,7 @@ class TrackOptions:
     fit: bool = True  # model-based fit of the smeared tag (`fit.py`) where detection fails or blurs
     fit_smear_cells: float = 0.5  # detected frames fitted too above this smear [tag bits]
     fit_max_rms: float = 0.12  # a fit is kept when its residual rms is below this [contrast]
+    estimate_timing: bool = True  # no timing in the tag map: estimated (`estimate_timing`)
 
 
 @dataclass
@@ -300,7 +304,10 @@ def track_video(
     other_ids: set[int] = set()
     centres: dict[int, dict[int, tuple[float, float, float]]] = {i: {} for i in parcel_ids}
     corners: dict[int, dict[int, tuple[np.ndarray, np.ndarray]]] = {i: {} for i in parcel_ids}
-    fitting = opts.fit and (tag_map.exposure > 0 or tag_map.readout > 0)
+    # the camera's timing: from the tag map, else estimated after reading (`estimate_timing`)
+    exposure, readout = tag_map.exposure, tag_map.readout
+    estimating = opts.fit and opts.estimate_timing and not tag_map.timing_given
+    fitting = opts.fit and tag_map.timing_given and (exposure > 0 or readout > 0)
     fitters = {i: _SmearFitter(tag_map, i, corners[i], 1 / fps, size[1], opts) for i in parcel_ids}
     last_seen: dict[int, list[tuple[int, np.ndarray]]] = {i: [] for i in parcel_ids}
     started = time.perf_counter()
@@ -318,7 +325,7 @@ def track_video(
                 reused += 1
             other_ids |= set(found) - expected - set(parcel_ids)
             for tag_id in parcel_ids:
-                if fitting and mapper is not None:
+                if (fitting or estimating) and mapper is not None:
                     crop = _cut(grey, found.get(tag_id), last_seen[tag_id], k, opts.max_gap)
                     if crop is not None:
                         fitters[tag_id].crops[k] = _Crop(*crop, mapper)
@@ -364,6 +371,24 @@ def track_video(
             "wrongly shifts every trajectory)",
         )
     t = np.arange(frames) / fps
+    if tag_map.timing_given:
+        timing: dict[str, Any] = {"source": "tag map"}
+    elif estimating:
+        timing = estimate_timing(list(fitters.values()), fps)
+        exposure, readout = timing.pop("exposure"), timing.pop("readout")
+        fitting = exposure > 0 or readout > 0
+        for fitter in fitters.values():
+            fitter.exposure, fitter.readout = exposure, readout
+            if not fitting:
+                fitter.crops.clear()
+    else:
+        timing = {
+            "source": "assumed none",
+            "reason": "not in the tag map, and not estimated (the smear fit or the timing "
+            "estimate is switched off): no model fit of smeared tags, no rolling-shutter "
+            "correction",
+        }
+    timing = {"exposure_ms": exposure * 1e3, "readout_ms": readout * 1e3, **timing}
     tags = {}
     fit_seconds, fit_count, fit_residuals = 0.0, 0, []
     for tag_id in parcel_ids:
@@ -393,18 +418,20 @@ def track_video(
                 w = tag_corners(tx, ty, tag.size, th)
                 corners[tag_id][k_fit] = (w, np.full(4, size[1] / 2))  # at the frame time
                 centres[tag_id][k_fit] = (*px.mean(axis=0), _side(px))
-        if tag_map.readout > 0:
+        if readout > 0:
             arr = rolling_shutter_poses(
-                corners[tag_id], t, tag_map.readout, size[1], tag_map.parcel_tags[tag_id].offset
+                corners[tag_id], t, readout, size[1], tag_map.parcel_tags[tag_id].offset
             )
-        gated, sd = 0, None
+        before = np.isfinite(arr[:, 0])  # measured (detected or fitted), before the smoother
+        gated, sd, restarts = 0, None, []
         if opts.smooth:
-            arr, gated, sd = smooth_track(arr, 1 / fps, meas_sd)
+            arr, gated, sd, restarts = smooth_track(arr, 1 / fps, meas_sd)
         measured = np.isfinite(arr[:, 0])
         traj, gaps = fill_gaps(
             t, arr[:, 0], arr[:, 1], arr[:, 2], opts.max_gap, sd, fitted=fitted & measured
         )
-        span = _frames_in_view(measured, centres[tag_id], size)
+        # in view: from the measurements before the smoother (a frame it discarded was seen)
+        span = _frames_in_view(before, centres[tag_id], size)
         crossings: dict[str, float | None] = {}
         transit = None
         if traj is not None and tag_map.barriers:
@@ -418,13 +445,22 @@ def track_video(
             transit,
             crossings,
             {
-                "detected_frames": int(detected.sum()),
+                # the run file's counts: measured = detected + fitted (its source column)
+                "measured_frames": int(measured.sum()),
+                "detected_frames": int((measured & ~fitted).sum()),
                 "fitted_frames": int((fitted & measured).sum()),
                 "fitted_missed_frames": int((fitted & measured & ~detected).sum()),
+                # frames the detector found the tag in, before fits and the smoother
+                "detector_frames": int(detected.sum()),
                 "frames_in_view": span,
-                "missed_at_clip_ends": int(span - _detected_span(measured)),
+                # frames in view at the clip's ends without any measurement (detected or fitted)
+                "missed_at_clip_ends": int(span - _detected_span(before)),
                 "smoothed": opts.smooth,
-                "frames_rejected_by_smoother": gated,
+                # measurements (detected or fitted) the smoother discarded as outliers
+                "discarded_by_smoother": gated,
+                # times [s] where a change of motion (a spin's onset or stop, a catch) restarted
+                # the smoother's motion model
+                "motion_restarts_s": [float(t[j]) for j in restarts],
                 # coverage: frames measured (detected or fitted) of the frames in view
                 "detection_rate": float(measured.sum() / span) if span else 0.0,
                 "gaps": gaps,
@@ -455,6 +491,9 @@ def track_video(
             "full_frame_searches": detector.full_frame_searches,
         },
         "max_gap_filled_frames": opts.max_gap,
+        # the camera timing the smear fit and the rolling-shutter correction used: from the
+        # tag map, estimated (`estimate_timing`) or assumed none (no fit, no correction)
+        "timing": timing,
         "smear_fit": {
             "on": fitting,
             "frames_tried": fit_count,
@@ -482,27 +521,34 @@ _JERK_DENSITY = (10.0, 10.0, 1e3)
 
 
 def smooth_track(
-    arr: np.ndarray, dt: float, meas_sd: np.ndarray | None = None
-) -> tuple[np.ndarray, int, np.ndarray | None]:
+    arr: np.ndarray,
+    dt: float,
+    meas_sd: np.ndarray | None = None,
+    restart_after: int = RESTART_AFTER,
+) -> tuple[np.ndarray, int, np.ndarray | None, list[int]]:
     """Poses (n, 3) [m, m, rad] (NaN where unseen) replaced by their RTS-smoothed values at the
     seen frames (`parcelfit.tracking.smooth`); frames the smoother rejects as outliers become
-    NaN. Returns the poses, how many frames were rejected, and the smoother's posterior standard
+    NaN. Returns the poses, how many frames were rejected, the smoother's posterior standard
     deviations (n, 2): position [m] (root mean square of the x and y sds) and heading [rad],
-    NaN where the pose is NaN (None under 3 seen frames: nothing was smoothed).
+    NaN where the pose is NaN (None under 3 seen frames: nothing was smoothed), and the frames
+    at which a change of motion (a spin's onset or stop, a catch) restarted the motion model in
+    x, y or heading.
 
     ``meas_sd`` (n, 2): each frame's measurement sd, position [m] (per coordinate) and heading
     [rad] (default: `_MEASUREMENT_SD` in every frame, the edge-fitted detection; the model fit
     of a smeared tag gives its own). The sds are those of the smoothed estimate under the model:
     each frame measured with its sd, x, y and theta independent, constant acceleration with white jerk
     (`_JERK_DENSITY`). They grow at the track's ends and next to gaps and rejected frames; they
-    know a frame's blur or fit only through ``meas_sd``."""
+    know a frame's blur or fit only through ``meas_sd``. ``restart_after``: consecutive frames
+    outside the gate that restart the motion model (0: never; `rts_smooth`)."""
     seen = np.isfinite(arr[:, 0])
     if seen.sum() < 3:
-        return arr, 0, None
+        return arr, 0, None, []
     out = arr.copy()
     out[seen, 2] = np.unwrap(arr[seen, 2])
     keep = seen.copy()
     sds = np.zeros((len(arr), 3))
+    restarts: set[int] = set()
     for j in range(3):
         z = out[:, j]
         r = (
@@ -510,14 +556,17 @@ def smooth_track(
             if meas_sd is None
             else meas_sd[:, 0 if j < 2 else 1] ** 2
         )
-        smoothed, sds[:, j], used = rts_smooth(z, dt, r, _JERK_DENSITY[j])
+        smoothed, sds[:, j], used, restarted = rts_smooth(
+            z, dt, r, _JERK_DENSITY[j], restart_after=restart_after
+        )
+        restarts.update(restarted)
         out[seen, j] = smoothed[seen]
         keep &= used | ~seen
     rejected = int((seen & ~keep).sum())
     out[~keep] = np.nan
     sd = np.column_stack([np.sqrt((sds[:, 0] ** 2 + sds[:, 1] ** 2) / 2), sds[:, 2]])
     sd[~keep] = np.nan
-    return out, rejected, sd
+    return out, rejected, sd, sorted(restarts)
 
 
 def _parcel_pose(w: np.ndarray, offset: tuple[float, float]) -> tuple[float, float, float]:
@@ -658,6 +707,81 @@ _FIT_SD_FACTOR = 4.0
 _FIT_SD_FLOOR = (5e-5, math.radians(0.05))
 
 
+_TIMING_FRAMES = 8  # the most smeared detected frames the timing is estimated on
+_TIMING_FAILED_RMS = 0.5  # the residual counted for a frame whose fit fails [contrast]
+
+
+def estimate_timing(fitters: list[_SmearFitter], fps: float) -> dict[str, Any]:
+    """The camera's exposure and rolling-shutter readout [s], when the tag map does not state
+    them, from the parcel tags' most smeared detected frames (up to `_TIMING_FRAMES`, by
+    `_SmearFitter.smear_rate`): the timing whose model fit leaves the smallest mean residual
+    (`fit.py`; a wrong exposure smears, a wrong readout shears the modelled tag differently
+    from the filmed one). Searched between 0 and one frame interval T: exposure on a grid of
+    T / 8 steps (readout 0), then the readout on T / 4 steps, then each refined twice by half
+    the step (the better of the two neighbours). Returns a dict: ``exposure``, ``readout``
+    [s], ``frames`` used, ``residual_rms`` (mean, best timing), ``source`` ("estimated"), or
+    ``source`` "assumed none" when no frame smears by ``fit_smear_cells`` bits even at an
+    exposure of a whole frame interval (then the timing cannot matter, nor be measured)."""
+    frame = 1 / fps
+    ranked = sorted(
+        (
+            (fitter.smear_rate(k), i, k)
+            for i, fitter in enumerate(fitters)
+            for k in fitter.crops
+            if k in fitter.detections
+        ),
+        reverse=True,
+    )
+    chosen = []
+    for rate, i, k in ranked[:_TIMING_FRAMES]:
+        fitter = fitters[i]
+        if rate * frame >= fitter.opts.fit_smear_cells:
+            chosen.append((fitter, k))
+    if not chosen:
+        return {
+            "exposure": 0.0,
+            "readout": 0.0,
+            "source": "assumed none",
+            "reason": "no parcel tag moved fast enough to smear by "
+            f"{fitters[0].opts.fit_smear_cells:g} bit even over a whole frame interval, so "
+            "the timing cannot matter (nor be measured)",
+        }
+    memo: dict[tuple[float, float], float] = {}
+
+    def cost(exposure: float, readout: float) -> float:
+        key = (round(exposure, 7), round(readout, 7))
+        if key not in memo:
+            rms = []
+            for fitter, k in chosen:
+                tried = fitter.attempt(k, fitter.crops[k], key[0], key[1], always=True)
+                fit = None if tried is None else tried[0]
+                rms.append(_TIMING_FAILED_RMS if fit is None else min(fit.rms, _TIMING_FAILED_RMS))
+            memo[key] = float(np.mean(rms))
+        return memo[key]
+
+    def best_on(grid: np.ndarray, other: float, exposure_axis: bool) -> float:
+        pairs = [(v, other) if exposure_axis else (other, v) for v in grid]
+        return float(grid[int(np.argmin([cost(*p) for p in pairs]))])
+
+    def refine(value: float, step: float, other: float, exposure_axis: bool) -> float:
+        for h in (step / 2, step / 4):
+            grid = np.clip(np.array([value - h, value, value + h]), 0.0, frame)
+            value = best_on(grid, other, exposure_axis)
+        return value
+
+    exposure = best_on(np.linspace(0, frame, 9), 0.0, True)
+    readout = best_on(np.linspace(0, frame, 5), exposure, False)
+    exposure = refine(exposure, frame / 8, readout, True)
+    readout = refine(readout, frame / 4, exposure, False)
+    return {
+        "exposure": exposure,
+        "readout": readout,
+        "frames": len(chosen),
+        "residual_rms": cost(exposure, readout),
+        "source": "estimated",
+    }
+
+
 class _SmearFitter:
     """The model fit (`fit_smeared_tag`) of one parcel tag in the frames it was missed and in
     the frames it was detected but smeared by more than ``opts.fit_smear_cells`` bits, in frame
@@ -711,30 +835,59 @@ class _SmearFitter:
             self._fit(k, crop)
             self.seconds += time.perf_counter() - t0
 
-    def _fit(self, k: int, crop: _Crop) -> None:
-        tag, opts = self.tag, self.opts
+    def _motion(self, k: int) -> tuple[float, float, float, np.ndarray] | None:
+        """The parcel's pose (x, y [m], heading [rad]) at frame k from the quadratic through its
+        measured frames within `reach`, and the tag centre's velocity [m/s] and turn rate
+        [rad/s]; None under two measured frames near k."""
         near_poses = [(j, self._pose(j)) for j in range(k - self.reach, k + self.reach + 1)]
         near = [(j, p) for j, p in near_poses if p is not None]
         if len(near) < 2:
-            return
+            return None
         tk = np.array([j - k for j, _ in near]) * self.dt
         poses = np.array([p for _, p in near])
         poses[:, 2] = np.unwrap(poses[:, 2])
         deg = 2 if len(near) >= 3 and np.ptp(tk) > 2 * self.dt else 1
         coef = [np.polyfit(tk, poses[:, j], deg) for j in range(3)]
-        px_, py_, th = (c[-1] for c in coef)
-        vx, vy, w = (c[-2] for c in coef)
-        dx, dy = tag.offset
+        px_, py_, th = (float(c[-1]) for c in coef)
+        vx, vy, w = (float(c[-2]) for c in coef)
+        ox, oy = self._offset(th)
+        return px_, py_, th, np.array([vx - w * oy, vy + w * ox, w])
+
+    def _offset(self, th: float) -> tuple[float, float]:
+        """The tag's offset from the parcel centre in the rig frame at heading ``th``."""
+        dx, dy = self.tag.offset
         c_, s_ = math.cos(th), math.sin(th)
-        ox, oy = c_ * dx - s_ * dy, s_ * dx + c_ * dy  # the tag's offset in the rig frame
-        rates = np.array([vx - w * oy, vy + w * ox, w])  # the tag centre's velocity, turn rate
+        return c_ * dx - s_ * dy, s_ * dx + c_ * dy
+
+    def smear_rate(self, k: int) -> float:
+        """How fast the tag smears at frame k: tag bits per second of exposure (its centre's
+        speed plus its corners' turn); 0 when its motion is unknown."""
+        motion = self._motion(k)
+        if motion is None:
+            return 0.0
+        rates = motion[3]
+        speed = math.hypot(*rates[:2]) + abs(rates[2]) * self.tag.size / math.sqrt(2)
+        return speed / (self.tag.size / self.pattern.bits)
+
+    def attempt(
+        self, k: int, crop: _Crop, exposure: float, readout: float, always: bool = False
+    ) -> tuple[SmearFit | None, np.ndarray, bool] | None:
+        """The fit of frame k with the given timing [s]: (fit or None, its start, whether k was
+        detected); None when not tried (no motion known; a detected frame smeared under
+        ``opts.fit_smear_cells`` bits, unless ``always``)."""
+        tag, opts = self.tag, self.opts
+        motion = self._motion(k)
+        if motion is None:
+            return None
+        px_, py_, th, rates = motion
+        ox, oy = self._offset(th)
         detected = k in self.detections
         if detected:
             start = np.array(_parcel_pose(self.detections[k][0], (0.0, 0.0)))
             start[2] = th + math.remainder(start[2] - th, 2 * math.pi)
-            smear = (math.hypot(*rates[:2]) + abs(w) * tag.size / math.sqrt(2)) * self.exposure
-            if smear < opts.fit_smear_cells * tag.size / self.pattern.bits:
-                return
+            smear = (math.hypot(*rates[:2]) + abs(rates[2]) * tag.size / math.sqrt(2)) * exposure
+            if not always and smear < opts.fit_smear_cells * tag.size / self.pattern.bits:
+                return None
         else:
             start = np.array([px_ + ox, py_ + oy, th])
         mapper = crop.mapper
@@ -754,10 +907,19 @@ class _SmearFitter:
             steps,
             rates,
             self.pattern,
-            self.exposure,
-            self.readout,
+            exposure,
+            readout,
             self.height,
         )
+        return fit, start, detected
+
+    def _fit(self, k: int, crop: _Crop) -> None:
+        tag, opts = self.tag, self.opts
+        tried = self.attempt(k, crop, self.exposure, self.readout)
+        if tried is None:
+            return
+        fit, start, detected = tried
+        dx, dy = tag.offset
         if fit is None or not fit.rms <= opts.fit_max_rms:
             self.unsupported.update({k} if detected else set())
             return
