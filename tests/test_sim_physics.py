@@ -334,6 +334,10 @@ def test_the_friction_falls_from_static_to_dynamic_between_the_thresholds():
         ContactFriction(model, {}, static_threshold=0.002, dynamic_threshold=0.001)
     with pytest.raises(ParcelfitError, match="friction thresholds"):
         SceneOptions(static_threshold=0.0)
+    # a pyramid's rows carry the friction coefficient before the law could set it
+    with pytest.raises(ParcelfitError, match="elliptic cone only"):
+        SceneOptions(cone="pyramidal")
+    assert SceneOptions(cone="pyramidal", friction="geom").cone == "pyramidal"
 
 
 def test_the_former_coulomb_belt_forces_slide_the_coulomb_distance_without_hopping():

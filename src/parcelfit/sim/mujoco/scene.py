@@ -262,6 +262,13 @@ class SceneOptions:
             )
         if self.cone not in ("elliptic", "pyramidal"):
             raise ParcelfitError(f"cone must be elliptic or pyramidal, got {self.cone!r}")
+        if self.cone == "pyramidal" and self.friction == "contact":
+            # MuJoCo builds a pyramid's rows with the friction coefficient in them before the
+            # per-contact law could set it: the law would silently not act
+            raise ParcelfitError(
+                "the per-contact friction works with the elliptic cone only",
+                fix="set cone=elliptic, or friction=geom to use the pyramidal cone",
+            )
         if not (float(self.noslip_iterations).is_integer() and 0 <= self.noslip_iterations <= 1000):
             raise ParcelfitError(
                 f"noslip_iterations must be a whole number from 0 to 1000, got {self.noslip_iterations}"
