@@ -121,6 +121,7 @@ def test_an_unknown_roller_surface_is_refused():
 
 
 @pytest.mark.slow
+@pytest.mark.longest
 def test_on_e2a_the_mailer_crosses_onto_the_outfeed_without_catching_on_any_shell_grid():
     # placement 3 of KP/BW on E2a setting 1: with square belt ends its front caught on the
     # outfeed belt's edge and it turned 13 degrees over 4 x 4 x 1 cells (26-28 degrees at other

@@ -247,6 +247,7 @@ def test_a_slip_speed_lets_the_static_offset_act_on_slow_sliding_and_fade_by_it(
         SceneOptions(stick_speed=0)
 
 
+@pytest.mark.longest
 def test_simulate_repeat_writes_an_ensemble_reproducible_per_seed(tmp_path):
     runner = CliRunner()
     out = tmp_path / "run.csv"

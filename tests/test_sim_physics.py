@@ -227,6 +227,7 @@ def test_heavier_and_lighter_parcels_with_same_friction_behave_alike(e1_runs):
         assert dxy < 0.02 and dth < math.radians(5)
 
 
+@pytest.mark.longest
 def test_same_inputs_same_result_and_small_continuous_friction_effect():
     sim = MujocoSimulator(SimOptions(duration=1.0))
     case = TestCase("E1", "KPBW", 3)

@@ -109,6 +109,7 @@ def _workspace(tmp_path: Path) -> tuple[Path, dict[str, str]]:
 
 @pytest.mark.slow
 @pytest.mark.mujoco
+@pytest.mark.longest
 def test_every_command_of_the_user_guide_runs(tmp_path):
     work, env = _workspace(tmp_path)
     said: dict[str, str] = {}  # what each page's blocks printed, one line

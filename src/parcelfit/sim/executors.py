@@ -282,6 +282,7 @@ def _shutdown(pool: cf.Executor) -> None:
     `parcelfit.sim.lifetime`), so that a simulation still running (the pool is closed early:
     an error, Ctrl-C) does not keep this process from exiting until it ends."""
     workers = list((getattr(pool, "_processes", None) or {}).values())
+    manager = getattr(pool, "_executor_manager_thread", None)  # shutdown() forgets it
     try:
         pool.shutdown(wait=False, cancel_futures=True)
     except TypeError:  # Dask's executor cancels on shutdown(wait=False) and has no such option
@@ -294,7 +295,6 @@ def _shutdown(pool: cf.Executor) -> None:
     # interpreter exits first, concurrent.futures' exit hook may write to that pipe as it closes
     # ("OSError: Bad file descriptor" printed after Ctrl-C, a race CPython 3.11 has): let the
     # thread finish first (it does within milliseconds of the workers' end).
-    manager = getattr(pool, "_executor_manager_thread", None)
     if workers and manager is not None and manager is not threading.current_thread():
         with contextlib.suppress(Exception):
             manager.join(timeout=5.0)
