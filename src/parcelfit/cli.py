@@ -1535,6 +1535,97 @@ def _verdict_word(v: dict[str, Any]) -> str:
     return "passed" if v["passed"] else "failed"
 
 
+@app.command()
+def predict(
+    study_dir: Annotated[
+        Path, typer.Argument(help="A finished calibration's folder (or the demo's folder).")
+    ],
+    rig: Annotated[
+        str, typer.Option(help="Bundled rig name (E1, E2a, E2b, E3) or a rig .yaml file.")
+    ],
+    consignment: Annotated[
+        str,
+        typer.Option(
+            help="Bundled consignment type (KPBW, PB, KP, BW) or a consignment .yaml file."
+        ),
+    ],
+    setting: SettingOption = 1,
+    sets: Annotated[
+        int, typer.Option(min=1, help="Parameter sets drawn from the plausible set.")
+    ] = 20,
+    placements: Annotated[
+        int, typer.Option(min=1, help="Seeded placements simulated per parameter set.")
+    ] = 10,
+    seed: Annotated[
+        int, typer.Option(min=0, help="Seed of the drawn sets and the placements.")
+    ] = 0,
+    out: Annotated[
+        Path | None,
+        typer.Option(help="Output folder (default: predict-RIG-TYPE-SETTING in the study folder)."),
+    ] = None,
+    table_format: Annotated[
+        str, typer.Option("--format", metavar="[csv|parquet]", help="Table file format.")
+    ] = "csv",
+    executor: Annotated[
+        str,
+        typer.Option(
+            metavar="[serial|local|dask]",
+            help="Where simulations run: local (worker processes), serial or dask.",
+        ),
+    ] = "local",
+    scheduler: Annotated[
+        str | None, typer.Option(help="Dask scheduler address, e.g. tcp://HOST:8786.")
+    ] = None,
+    workers: WorkersOption = None,
+) -> None:
+    """Predict a design from a calibration: parameter sets the data cannot rule out times seeded
+    placements; the predictive distributions of transit time, rotation, exit position and
+    heading, how much of their spread the parameters cause, and what each undetermined
+    parameter moves. Rerunning the same command resumes."""
+    from parcelfit.report.prediction import PAGE_FILE, terminal_table, write_prediction_page
+    from parcelfit.study.predict import PREDICT_STORE
+    from parcelfit.study.predict import predict as run_prediction
+
+    _check_executor(executor, ("serial", "local", "dask"))
+    _workers_at_most(workers)
+    _check_paths(out)
+    _resumes() if out is None else _resumes(_stored(out / PREDICT_STORE, "screen", "simulations"))
+    # the bar appears with the first simulation, not before the inputs are checked
+    bar = Progress(*Progress.get_default_columns(), TimeElapsedColumn(), console=console)
+    task = bar.add_task("predict", total=None)
+
+    def show(event: ProgressEvent) -> None:
+        bar.start()
+        bar.update(task, description=event.message, completed=event.done, total=event.total)
+
+    try:
+        prediction = run_prediction(
+            study_dir,
+            rig,
+            consignment,
+            setting,
+            sets=sets,
+            placements=placements,
+            seed=seed,
+            out=out,
+            executor=executor,
+            workers=workers,
+            scheduler=scheduler,
+            table_format=table_format,
+            progress=show,
+        )
+    finally:
+        bar.stop()
+    assert prediction.out is not None
+    page = write_prediction_page(prediction, prediction.out / PAGE_FILE)
+    console.print(terminal_table(prediction))
+    for line in prediction.notes:
+        console.print(Text(f"note: {line}", style="yellow"), highlight=False)
+    for line in prediction.sentences:
+        console.print(Text(line), highlight=False)
+    console.print(Text(f"wrote {prediction.out} (tables, prediction.json) and {page}"))
+
+
 def main() -> None:
     """Entry point of the ``parcelfit`` console script."""
     app()

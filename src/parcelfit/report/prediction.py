@@ -1,0 +1,140 @@
+"""The HTML page of a prediction (`parcelfit.study.predict`): ``prediction.html`` in its output
+folder, one self-contained file like the study report (`parcelfit.report.html`: the same
+Jinja2 environment with autoescaping, style sheet and Content-Security-Policy; the figure
+embedded as PNG data).
+
+It shows the design and the study, the predictive distribution of each quantity (median, 5-95 %
+band, histogram of the runs), the share of the spread due to the parameters versus the
+placements, how far each parameter moves each prediction, and the sentences naming what the
+undetermined parameters move. It renders the prediction it is given and computes nothing of
+its own.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from markupsafe import Markup
+from matplotlib.figure import Figure
+from rich.markup import escape
+from rich.table import Table
+
+from parcelfit import __version__
+from parcelfit.report.html import _CSS, _TEMPLATES, CONTENT_SECURITY_POLICY, _write_page
+from parcelfit.report.html import figure_html as _figure_html
+from parcelfit.study.predict import (
+    QUANTITIES,
+    Prediction,
+    quantity_words,
+    shown_value,
+)
+
+PAGE_FILE = "prediction.html"
+
+
+def _share(value: float) -> str:
+    return "-" if not math.isfinite(value) else f"{value * 100:.0f} %"
+
+
+def _histograms(prediction: Prediction) -> Figure:
+    """One histogram per quantity over the runs, with the median and the 5-95 % band."""
+    fig = Figure(figsize=(10, 6), layout="constrained")
+    axes = fig.subplots(2, 2).ravel()
+    by = {s.quantity: s for s in prediction.summaries}
+    for ax, q in zip(axes, QUANTITIES, strict=True):
+        values = prediction.runs[q].to_numpy(float)
+        values = values[np.isfinite(values)]
+        s = by[q]
+        ax.set_title(quantity_words(q))
+        if not values.size:
+            ax.text(0.5, 0.5, "no run has this quantity", ha="center", transform=ax.transAxes)
+            continue
+        factor = {"transit_time": 1e3, "exit_y": 1e3}.get(q, 180 / math.pi)
+        unit = {"transit_time": "ms", "exit_y": "mm"}.get(q, "deg")
+        ax.hist(values * factor, bins=min(40, max(5, values.size // 5)), color="tab:blue")
+        for v, style in ((s.median, "-"), (s.q05, "--"), (s.q95, "--")):
+            ax.axvline(v * factor, color="k", linestyle=style, linewidth=1)
+        ax.set_xlabel(f"{quantity_words(q)} [{unit}]")
+        ax.set_ylabel("runs")
+    return fig
+
+
+def prediction_view(prediction: Prediction) -> dict[str, Any]:
+    """The values the page shows (text, escaped by the template)."""
+    rows = []
+    for s in prediction.summaries:
+        d = s.decomposition
+        rows.append(
+            {
+                "quantity": quantity_words(s.quantity),
+                "runs": s.runs,
+                "median": shown_value(s.quantity, s.median),
+                "band": f"{shown_value(s.quantity, s.q05)} to {shown_value(s.quantity, s.q95)}",
+                "parameters": _share(d.parameter_share),
+                "placements": _share(d.placement_share),
+            }
+        )
+    effects = []
+    for e in prediction.effects:
+        effects.append(
+            {
+                "parameter": e.parameter,
+                "verdict": e.verdict,
+                "quantity": quantity_words(e.quantity),
+                "effect": "-"
+                if not math.isfinite(e.effect)
+                else f"{shown_value(e.quantity, e.effect)} +- {shown_value(e.quantity, e.se, 2)}",
+                "resolved": e.resolved,
+            }
+        )
+    return {"summary": rows, "effects": effects}
+
+
+def terminal_table(prediction: Prediction) -> Table:
+    """The terminal summary of a prediction (Rich): one row per quantity."""
+    view = prediction_view(prediction)
+    d = prediction.design
+    table = Table(
+        title=f"{d.label}: {len(prediction.sets)} plausible parameter sets x "
+        f"{len(prediction.seeds)} placements",
+        title_justify="left",
+    )
+    for col in ("quantity", "runs", "median", "5-95 % band", "from parameters", "from placements"):
+        table.add_column(escape(col), justify="left" if col == "quantity" else "right")
+    for r in view["summary"]:
+        table.add_row(
+            r["quantity"], str(r["runs"]), r["median"], r["band"], r["parameters"], r["placements"]
+        )
+    return table
+
+
+def write_prediction_page(prediction: Prediction, path: str | Path) -> Path:
+    """Write the prediction's HTML page to ``path``; returns it."""
+    target = Path(path)
+    fig = _histograms(prediction)
+    d = prediction.design
+    doc = _TEMPLATES.get_template("prediction.html.j2").render(
+        csp=CONTENT_SECURITY_POLICY,
+        css=Markup(_CSS),
+        title=f"parcelfit prediction: {d.label}",
+        version=__version__,
+        generated=time.strftime("%Y-%m-%d %H:%M"),
+        study=prediction.study,
+        design=d.label,
+        sets=len(prediction.sets),
+        placements=len(prediction.seeds),
+        runs=len(prediction.runs),
+        view=prediction_view(prediction),
+        sentences=prediction.sentences,
+        notes=prediction.notes,
+        figure=_figure_html(fig, "predictive distributions"),
+    )
+    _write_page(target, doc)
+    return target
+
+
+__all__ = ["PAGE_FILE", "prediction_view", "terminal_table", "write_prediction_page"]

@@ -1,0 +1,178 @@
+"""`parcelfit predict` on the analytic test simulator: the variance decomposition on a
+constructed case, the effects regression, resume, determinism with the seed and clear errors."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from parcelfit.cli import app
+from parcelfit.study.predict import PREDICT_STORE, decompose, effects_of
+from parcelfit.study.store import Store
+
+from .predict_helpers import write_finished_study, write_rig_q
+
+runner = CliRunner()
+
+
+def test_decomposition_splits_an_additive_case_exactly():
+    rng = np.random.default_rng(0)
+    a = rng.normal(0, 2.0, 7)  # the parameter sets' part
+    b = rng.normal(0, 0.5, 5)  # the placements' part, the same placements for every set
+    d = decompose(a[:, None] + b[None, :] + 10.0)
+    assert d.between == pytest.approx(np.var(a), rel=1e-12)
+    assert d.within == pytest.approx(np.var(b), rel=1e-12)
+    assert d.total == pytest.approx(np.var(a) + np.var(b), rel=1e-12)
+    assert d.parameter_share + d.placement_share == pytest.approx(1.0)
+    assert (d.runs, d.sets) == (35, 7)
+
+
+def test_decomposition_with_missing_runs_is_the_law_of_total_variance():
+    q = np.array([[1.0, 2.0, np.nan], [4.0, 6.0, 8.0], [np.nan, np.nan, np.nan]])
+    d = decompose(q)
+    values = np.array([1.0, 2.0, 4.0, 6.0, 8.0])
+    assert d.total == pytest.approx(np.var(values))
+    # set means 1.5 (2 runs) and 6 (3 runs) about the grand mean 4.2
+    assert d.between == pytest.approx((2 * (1.5 - 4.2) ** 2 + 3 * (6 - 4.2) ** 2) / 5)
+    assert d.within == pytest.approx((0.25 + 0.25 + 4 + 0 + 4) / 5)
+    assert (d.runs, d.sets) == (5, 2)
+    assert math.isnan(decompose(np.full((2, 2), np.nan)).total)
+
+
+def test_effects_are_the_change_over_the_plausible_interval():
+    rng = np.random.default_rng(1)
+    X = np.column_stack([rng.uniform(0.4, 0.5, 30), rng.uniform(2e8, 1.6e9, 30)])
+    means = 3.0 + 0.8 * (X[:, 0] - 0.4) / 0.1 + rng.normal(0, 0.01, 30)  # E_Pa moves nothing
+    eff, se = effects_of(means, X, [(0.4, 0.5), (2e8, 1.6e9)])
+    assert eff[0] == pytest.approx(0.8, abs=4 * se[0]) and se[0] < 0.02
+    assert abs(eff[1]) < 4 * se[1]
+    few, few_se = effects_of(means[:3], X[:3], [(0.4, 0.5), (2e8, 1.6e9)])
+    assert np.isnan(few).all() and np.isnan(few_se).all()
+
+
+def _predict(folder: Path, out: Path, *extra: str):
+    return runner.invoke(
+        app,
+        [
+            "predict",
+            str(folder),
+            "--rig",
+            str(folder.parent / "Q.yaml"),
+            "--consignment",
+            "KPBW",
+            "--setting",
+            "1",
+            "--sets",
+            "8",
+            "--placements",
+            "4",
+            "--executor",
+            "serial",
+            "--out",
+            str(out),
+            *extra,
+        ],
+    )
+
+
+def _tables(out: Path) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
+    runs = pd.read_csv(out / "runs.csv").drop(columns="wall_time")
+    return runs, pd.read_csv(out / "summary.csv"), pd.read_csv(out / "effects.csv")
+
+
+@pytest.fixture
+def study(tmp_path: Path) -> Path:
+    folder = write_finished_study(tmp_path)
+    write_rig_q(tmp_path)
+    return folder
+
+
+def test_predict_names_what_the_undetermined_parameter_moves(study, tmp_path):
+    result = _predict(study, tmp_path / "p")
+    assert result.exit_code == 0, result.output
+    runs, summary, effects = _tables(tmp_path / "p")
+    assert len(runs) == 32 and (runs["status"] == "ok").all()
+    assert runs.groupby("set")["seed"].apply(tuple).nunique() == 1  # the same placements
+    row = summary.set_index("quantity").loc["exit_heading"]
+    assert row["q05"] < row["median"] < row["q95"]
+    assert row["variance"] == pytest.approx(row["between_sets"] + row["within_sets"])
+    # rig Q turns the parcel by 2 (E_Pa / GPa - 0.9) rad (tests/fake_sim.py): over E_Pa's
+    # interval of 1.4 GPa the exit heading moves by 2.8 (1 - exp(-3 t_end)) rad
+    e = effects.set_index(["parameter", "quantity"]).loc[("E_Pa", "exit_heading")]
+    assert e["effect"] == pytest.approx(2.8 * (1 - math.exp(-3 * 1.4833)), rel=0.02)
+    assert bool(e["resolved"])
+    assert "E_Pa is undetermined and moves the exit heading by" in " ".join(result.output.split())
+    doc = json.loads((tmp_path / "p" / "prediction.json").read_text())
+    assert doc["sentences"][0].startswith("E_Pa is undetermined and moves the exit heading by")
+    assert len(doc["sentences"]) == 1  # only E_Pa is not determined
+    page = (tmp_path / "p" / "prediction.html").read_text()
+    assert "Q/KPBW/1" in page and "<script" not in page
+
+
+def test_resume_gives_the_same_tables(study, tmp_path):
+    assert _predict(study, tmp_path / "p").exit_code == 0
+    first = _tables(tmp_path / "p")
+    store = Store(tmp_path / "p" / PREDICT_STORE)
+    rows = store.evaluations("screen")
+    kept = {e.id: e.finished_at for e in rows[:20]}
+    store.reopen([e.id for e in rows[20:]])  # as if the run had stopped after 20 simulations
+    store.close()
+    (tmp_path / "p" / "runs.csv").unlink()
+    assert _predict(study, tmp_path / "p").exit_code == 0
+    store = Store(tmp_path / "p" / PREDICT_STORE, readonly=True)
+    again = store.evaluations("screen")
+    store.close()
+    assert all(e.status == "ok" for e in again)
+    assert {e.id: e.finished_at for e in again[:20]} == kept  # not simulated again
+    for a, b in zip(first, _tables(tmp_path / "p"), strict=True):
+        pd.testing.assert_frame_equal(a, b)
+
+
+def test_the_seed_decides(study, tmp_path):
+    for name, seed in (("a", "3"), ("b", "3"), ("c", "4")):
+        assert _predict(study, tmp_path / name, "--seed", seed).exit_code == 0
+    a, b, c = (_tables(tmp_path / n)[0] for n in "abc")
+    pd.testing.assert_frame_equal(a, b)
+    assert not a["E_Pa"].equals(c["E_Pa"]) and not a["seed"].equals(c["seed"])
+    # other inputs in the same folder are refused, not mixed
+    other = _predict(study, tmp_path / "a", "--seed", "5")
+    assert other.exit_code == 2 and "a prediction with other inputs" in other.output
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--rig", "E9"], "--rig: unknown rig 'E9'"),
+        (["--consignment", "XY"], "--consignment: unknown consignment type 'XY'"),
+        (["--setting", "3"], "--setting: rig E3 has no speed setting 3"),
+        (["--rig", "missing.yaml"], "missing.yaml"),
+    ],
+)
+def test_bad_design_exits_2_with_a_clear_message(study, tmp_path, args, message):
+    base = {"--rig": "E3", "--consignment": "KPBW", "--setting": "1"}
+    base.update(dict(zip(args[::2], args[1::2], strict=True)))
+    argv = ["predict", str(study), *[x for kv in base.items() for x in kv]]
+    result = runner.invoke(app, [*argv, "--out", str(tmp_path / "p"), "--executor", "serial"])
+    assert result.exit_code == 2
+    assert message in " ".join(result.output.split()) and "Traceback" not in result.output
+    assert not (tmp_path / "p").exists()
+
+
+def test_a_folder_without_a_finished_study_exits_2(study, tmp_path):
+    argv = ["--rig", "E3", "--consignment", "KPBW", "--out", str(tmp_path / "p")]
+    missing = runner.invoke(app, ["predict", str(tmp_path / "nowhere"), *argv])
+    assert missing.exit_code == 2 and "no such study folder" in missing.output
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    none = runner.invoke(app, ["predict", str(empty), *argv])
+    assert none.exit_code == 2 and "no calibration study here" in none.output
+    (study / "results.json").unlink()
+    unfinished = runner.invoke(app, ["predict", str(study), *argv])
+    assert unfinished.exit_code == 2
+    assert "no stored analysis of what its data determine" in " ".join(unfinished.output.split())
