@@ -1626,6 +1626,100 @@ def predict(
     console.print(Text(f"wrote {prediction.out} (tables, prediction.json) and {page}"))
 
 
+@app.command()
+def design(
+    study_dir: Annotated[
+        Path, typer.Argument(help="A finished calibration's folder (or the demo's folder).")
+    ],
+    candidate: Annotated[
+        list[str] | None,
+        typer.Option(
+            metavar="RIG/TYPE/SETTING",
+            help="A candidate test case (repeatable; default: every bundled rig x setting x "
+            "consignment type).",
+        ),
+    ] = None,
+    rig: Annotated[
+        list[str] | None,
+        typer.Option(
+            metavar="RIG.yaml",
+            help="A rig file whose settings x every bundled type are candidates too, e.g. a "
+            "bench test of examples/bench/ (repeatable).",
+        ),
+    ] = None,
+    sets: Annotated[
+        int, typer.Option(min=2, help="Parameter sets drawn from the plausible set.")
+    ] = 10,
+    placements: Annotated[
+        int, typer.Option(min=1, help="Seeded placements simulated per set and candidate.")
+    ] = 5,
+    runs: Annotated[
+        int, typer.Option(min=1, help="Real runs the expected interval widths assume.")
+    ] = 10,
+    seed: Annotated[
+        int, typer.Option(min=0, help="Seed of the drawn sets and the placements.")
+    ] = 0,
+    out: Annotated[
+        Path | None, typer.Option(help="Output folder (default: design in the study folder).")
+    ] = None,
+    table_format: Annotated[
+        str, typer.Option("--format", metavar="[csv|parquet]", help="Table file format.")
+    ] = "csv",
+    executor: Annotated[
+        str,
+        typer.Option(
+            metavar="[serial|local|dask]",
+            help="Where simulations run: local (worker processes), serial or dask.",
+        ),
+    ] = "local",
+    scheduler: Annotated[
+        str | None, typer.Option(help="Dask scheduler address, e.g. tcp://HOST:8786.")
+    ] = None,
+    workers: WorkersOption = None,
+) -> None:
+    """Rank candidate experiments by how much each would narrow the intervals of the
+    parameters the calibration leaves open: the expected interval after --runs real runs and
+    the runs each needs. Rerunning the same command resumes."""
+    from parcelfit.report.prediction import design_tables
+    from parcelfit.study.design import DESIGN_STORE, rank_experiments
+
+    _check_executor(executor, ("serial", "local", "dask"))
+    _workers_at_most(workers)
+    _check_paths(out)
+    _resumes() if out is None else _resumes(_stored(out / DESIGN_STORE, "screen", "simulations"))
+    bar = Progress(*Progress.get_default_columns(), TimeElapsedColumn(), console=console)
+    task = bar.add_task("design", total=None)
+
+    def show(event: ProgressEvent) -> None:
+        bar.start()
+        bar.update(task, description=event.message, completed=event.done, total=event.total)
+
+    try:
+        result = rank_experiments(
+            study_dir,
+            candidates=candidate or (),
+            rig_files=rig or (),
+            sets=sets,
+            placements=placements,
+            runs=runs,
+            seed=seed,
+            out=out,
+            executor=executor,
+            workers=workers,
+            scheduler=scheduler,
+            table_format=table_format,
+            progress=show,
+        )
+    finally:
+        bar.stop()
+    if not result.parameters:
+        console.print("every calibrated parameter is determined: no further experiment needed")
+        return
+    for table in design_tables(result):
+        console.print(table)
+    console.print(Text(f"wrote {result.out} (candidates, ranking, design.json)"))
+
+
 def main() -> None:
     """Entry point of the ``parcelfit`` console script."""
     app()

@@ -26,6 +26,7 @@ from rich.table import Table
 from parcelfit import __version__
 from parcelfit.report.html import _CSS, _TEMPLATES, CONTENT_SECURITY_POLICY, _write_page
 from parcelfit.report.html import figure_html as _figure_html
+from parcelfit.study.design import DesignResult
 from parcelfit.study.predict import (
     QUANTITIES,
     Prediction,
@@ -112,6 +113,53 @@ def terminal_table(prediction: Prediction) -> Table:
     return table
 
 
+def design_tables(result: DesignResult, top: int = 5) -> list[Table]:
+    """The terminal summary of an experiment design (Rich): per open parameter its ``top``
+    candidates, then the overall ranking's ``top``."""
+    tables = []
+    cands = result.candidates_table()
+    for p in result.parameters:
+        mine = cands[cands["parameter"] == p].head(top)
+        if not len(mine):
+            continue
+        first = mine.iloc[0]
+        t = Table(
+            title=f"{p} ({first['verdict']}): the experiments that narrow it most after "
+            f"{result.runs} real runs",
+            title_justify="left",
+        )
+        for col in ("rank", "candidate", "signal/noise", "via", "interval left", "runs needed"):
+            t.add_column(escape(col), justify="left" if col in ("candidate", "via") else "right")
+        for r in mine.itertuples(index=False):
+            t.add_row(
+                str(r.rank),
+                r.candidate,
+                f"{r.snr:.1f}",
+                "-"
+                if r.quantity is None or r.quantity != r.quantity
+                else quantity_words(r.quantity),
+                f"{r.expected_share * 100:.0f} %",
+                "-"
+                if r.runs_needed is None or r.runs_needed != r.runs_needed
+                else str(int(r.runs_needed)),
+            )
+        tables.append(t)
+    ranking = result.ranking_table().head(top)
+    t = Table(title="Overall: mean interval left over the open parameters", title_justify="left")
+    for col in ("rank", "candidate", "interval left", "narrows most", "determines"):
+        t.add_column(escape(col), justify="right" if col in ("rank", "interval left") else "left")
+    for r in ranking.itertuples(index=False):
+        t.add_row(
+            str(r.rank),
+            r.candidate,
+            f"{r.mean_share * 100:.0f} %",
+            r.narrows_most or "-",
+            r.determines or "-",
+        )
+    tables.append(t)
+    return tables
+
+
 def write_prediction_page(prediction: Prediction, path: str | Path) -> Path:
     """Write the prediction's HTML page to ``path``; returns it."""
     target = Path(path)
@@ -137,4 +185,10 @@ def write_prediction_page(prediction: Prediction, path: str | Path) -> Path:
     return target
 
 
-__all__ = ["PAGE_FILE", "prediction_view", "terminal_table", "write_prediction_page"]
+__all__ = [
+    "PAGE_FILE",
+    "design_tables",
+    "prediction_view",
+    "terminal_table",
+    "write_prediction_page",
+]

@@ -779,14 +779,9 @@ def _simulate(
         )
         for e in pending
     ]
-    if make is not None:
-        pool: Executor = make()
-    else:
-        n = min(workers or os.cpu_count() or 1, len(items)) if executor == "local" else workers
-        pool = make_executor(executor, workers=n, scheduler=scheduler)
-    with pool:
+    with open_executor(executor, workers, scheduler, len(items), make) as pool:
         for i, result in simulate_items(pool, simulator, items):
-            _finish(store, pending[i].id, result)
+            finish_run(store, pending[i].id, result)
             done += 1
             progress(
                 ProgressEvent(
@@ -798,7 +793,25 @@ def _simulate(
             )
 
 
-def _finish(store: Store, row: int, result: SimResult) -> None:
+def open_executor(
+    kind: str,
+    workers: int | None,
+    scheduler: str | None,
+    items: int,
+    make: Callable[[], Executor] | None = None,
+) -> Executor:
+    """The executor for ``items`` simulations: ``make()`` when given (tests), else the one
+    named ``kind`` (a local pool of ``workers`` processes, one per core by default, never more
+    than ``items``)."""
+    if make is not None:
+        return make()
+    n = min(workers or os.cpu_count() or 1, max(items, 1)) if kind == "local" else workers
+    return make_executor(kind, workers=n, scheduler=scheduler)
+
+
+def finish_run(store: Store, row: int, result: SimResult) -> None:
+    """Record one simulation's result in its pending row: status, transit time [s], wall time
+    [s] and the other quantities (`run_values`) in ``details``."""
     values = run_values(result.run if result.ok else None)
     details: dict[str, Any] = {k: v for k, v in values.items() if k != "transit_time"}
     message = result.diagnostics.get("message")
@@ -879,7 +892,9 @@ __all__ = [
     "draw_sets",
     "effects_of",
     "find_study",
+    "finish_run",
     "load_inputs",
+    "open_executor",
     "placement_seeds",
     "predict",
     "quantity_unit",

@@ -1,0 +1,514 @@
+"""Which experiment to run next: ``parcelfit design`` ranks candidate test cases by how much
+each would narrow the intervals of the parameters a calibration leaves open.
+
+**Candidates.** Every bundled rig x its speed settings x every bundled consignment type (or the
+ones named with ``--candidate RIG/TYPE/SETTING``), plus rig files given with ``--rig`` (each of
+their settings x every bundled type): for instance the bench tests in ``examples/bench/``, a
+belt step (a parcel carried from a slow belt onto a fast one: how fast it takes up the speed
+is set by the packaging-belt friction) and a plate impact (a belt carries the parcel into a
+metal plate across it: how it slides off is set by the packaging-steel friction and the
+contact).
+
+**What a candidate would tell.** Each candidate is simulated at the same N parameter sets
+drawn from the study's plausible set (`parcelfit.study.predict.draw_sets`) times the same K
+seeded placements, and summarised by the quantities of `parcelfit.study.predict` (transit
+time, rotation, exit position and heading). For quantity q:
+
+* its sensitivity J_qp to parameter p is the change of q's per-set mean over p's plausible
+  interval, from the least-squares fit of the per-set means on all parameters scaled to their
+  intervals (`parcelfit.study.predict.effects_of`); an effect smaller than twice its standard
+  error counts as zero;
+* its run-to-run scatter is s_q^2 = W_q + f_q^2: W_q the mean within-set variance over the
+  placements (`parcelfit.study.predict.decompose`) and f_q a measurement floor (`FLOOR`: the
+  band test's tolerances, 3 mm and 1 degree, for the exit position and the angles, 2 ms for
+  the transit time, assumed), so that a quantity the placements do not scatter is not taken
+  as exact. The specimens' own scatter (two real parcels of one type differ) is not simulated:
+  real runs scatter more, and the widths below are optimistic; the ranking is what they are
+  for.
+
+The signal-to-noise of p on the candidate is max_q |J_qp| / s_q: how many run-to-run standard
+deviations the outcome moves as p crosses its plausible interval.
+
+**Expected interval after n real runs** (a linear-Gaussian experimental design). In interval
+units (each parameter's plausible interval mapped to [0, 1]), n real runs of the candidate
+measure each quantity's mean with variance s_q^2 / n; with the uniform prior over the interval
+(variance 1/12, precision 12), the posterior covariance of the parameters is
+
+    C(n) = ( n J^T S^-1 J + 12 I )^-1,   S = diag(s_q^2),
+
+and the expected interval of p after the runs, as a share of its current interval, is the
+ratio of the posterior to the prior standard deviation, w_p(n) = sqrt(12 C_pp(n)) (1: no
+narrowing; the current interval is taken as the prior's, so a 90 % interval shrinks in the
+same ratio). A candidate that moves two parameters alike cannot tell them apart, and C says so
+(the inverse of a nearly singular information). The runs a candidate needs for p are the
+smallest n (up to `MAX_RUNS`) at which w_p(n) times the current interval is at most 20 % of
+p's range, the width `parcelfit.study.identify` calls determined (none: not within
+`MAX_RUNS`).
+
+**Ranking.** Per parameter, the candidates by the expected width after ``--runs`` real runs
+(ties by the signal-to-noise); overall, by the mean expected width share over the parameters
+the data leave open.
+
+**Resumable** like a prediction: every simulation is recorded in ``design.sqlite`` in the output
+folder (rows of kind ``screen``; slot = candidate x N x K + set x K + placement), the inputs in
+its meta record ``design``; rerunning the same command runs only what is pending.
+
+Outputs (docs/data.md, Experiment design): ``candidates.csv`` (one row per candidate and open
+parameter) and ``ranking.csv`` (one row per candidate) (or ``.parquet``), and
+``design.json``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from parcelfit.atomic import write_text_atomic
+from parcelfit.errors import ParcelfitError, shown
+from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
+from parcelfit.sim.ensemble import MAX_PLACEMENTS
+from parcelfit.sim.executors import Executor, Task
+from parcelfit.study.folderlock import check_writable, lock_folder
+from parcelfit.study.identify import DETERMINED_WIDTH, Identifiability
+from parcelfit.study.joint import require_placements, simulate_items
+from parcelfit.study.predict import (
+    MAX_SETS,
+    QUANTITIES,
+    TABLE_FORMATS,
+    Design,
+    check_design,
+    decompose,
+    design_simulator,
+    draw_sets,
+    effects_of,
+    finish_run,
+    load_inputs,
+    open_executor,
+    placement_seeds,
+)
+from parcelfit.study.store import Store
+
+DESIGN_STORE = "design.sqlite"
+DESIGN_FILE = "design.json"
+MAX_RUNS = 100  # the most real runs a candidate is asked for
+PRIOR_PRECISION = 12.0  # of a uniform distribution on [0, 1]
+RESOLVED = 2.0  # an effect smaller than this many standard errors counts as zero
+# run-to-run measurement floor per quantity (SI): the band test's 3 mm and 1 degree, 2 ms
+FLOOR = {
+    "transit_time": 0.002,
+    "rotation": math.radians(1.0),
+    "exit_y": 0.003,
+    "exit_heading": math.radians(1.0),
+}
+
+
+def candidate_designs(only: Sequence[str] = (), rig_files: Sequence[str] = ()) -> list[Design]:
+    """The candidates (module docstring): ``only`` (``RIG/TYPE/SETTING`` labels) or else every
+    bundled rig x setting x bundled type, then every setting of each rig file x every bundled
+    type. Each is checked (`parcelfit.study.predict.check_design`)."""
+    from parcelfit.sim.mujoco import bundled_consignment_names, bundled_rig_names, load_rig
+
+    types = bundled_consignment_names()
+    out: list[Design] = []
+    if only:
+        for label in only:
+            parts = label.split("/")
+            if len(parts) != 3 or not parts[2].isdigit():
+                raise ParcelfitError(
+                    f"--candidate {shown(label)} is not RIG/TYPE/SETTING",
+                    fix="write e.g. E1/KPBW/2",
+                )
+            out.append(check_design(parts[0], parts[1], int(parts[2])))
+    else:
+        for rig in bundled_rig_names():
+            for setting in sorted(load_rig(rig).speeds):
+                out += [check_design(rig, t, setting) for t in types]
+    for path in rig_files:
+        if not str(path).lower().endswith((".yaml", ".yml")):
+            raise ParcelfitError(
+                f"--rig {shown(str(path))} is not a rig .yaml file",
+                fix="give a rig file (bundled rigs are candidates already)",
+            )
+        try:
+            settings = sorted(load_rig(str(Path(path).resolve())).speeds)
+        except ParcelfitError as exc:
+            raise ParcelfitError(
+                exc.message, file=exc.file or str(path), where="--rig", fix=exc.fix
+            ) from None
+        for setting in settings:
+            out += [check_design(str(path), t, setting) for t in types]
+    labels = [d.label for d in out]
+    if len(set(labels)) != len(labels):
+        raise ParcelfitError(
+            "a candidate is named twice (a rig file with a bundled rig's name?)",
+            fix="give each candidate once; rename a rig file that shares a bundled rig's name",
+        )
+    return out
+
+
+def expected_width(J: np.ndarray, scatter: np.ndarray, runs: int) -> np.ndarray:
+    """w_p(n) of the module docstring for every parameter: ``J`` (quantities x parameters, the
+    changes over the intervals), ``scatter`` s_q (per quantity, same units), ``runs`` n; a
+    share of the current interval (the posterior over the prior standard deviation, at most
+    1)."""
+    J = np.asarray(J, float)
+    d = J.shape[1]
+    info = runs * (J / np.asarray(scatter, float)[:, None]).T @ (J / np.asarray(scatter)[:, None])
+    cov = np.linalg.inv(info + PRIOR_PRECISION * np.eye(d))
+    return np.minimum(1.0, np.sqrt(PRIOR_PRECISION * np.maximum(np.diag(cov), 0.0)))
+
+
+def runs_needed(J: np.ndarray, scatter: np.ndarray, target: np.ndarray) -> list[int | None]:
+    """Per parameter, the fewest real runs (1 to `MAX_RUNS`) after which the expected width
+    share is at most ``target`` (a share of the current interval); None when never."""
+    out: list[int | None] = [None] * J.shape[1]
+    for n in range(1, MAX_RUNS + 1):
+        w = expected_width(J, scatter, n)
+        for p in range(J.shape[1]):
+            if out[p] is None and w[p] <= target[p]:
+                out[p] = n
+        if all(v is not None for v in out):
+            break
+    return out
+
+
+@dataclass(frozen=True)
+class CandidateScore:
+    """What one candidate would tell about one open parameter (module docstring): the
+    signal-to-noise and the quantity it comes from, the expected width after the asked runs
+    (share of the current interval and SI) and the runs needed to determine it."""
+
+    candidate: Design
+    parameter: str
+    verdict: str
+    interval: tuple[float, float]
+    snr: float
+    quantity: str | None
+    share: float
+    width: float
+    runs_needed: int | None
+    simulations_ok: int
+
+
+@dataclass(frozen=True, eq=False)
+class DesignResult:
+    """A finished ranking: the open parameters, the candidates' scores, the runs assumed and
+    where it was written."""
+
+    parameters: list[str]
+    scores: list[CandidateScore]
+    runs: int
+    sets: int
+    placements: int
+    out: Path | None = None
+
+    def candidates_table(self) -> pd.DataFrame:
+        """One row per candidate and open parameter, ranked per parameter (docs/data.md)."""
+        rows = []
+        for p in self.parameters:
+            mine = sorted(
+                (s for s in self.scores if s.parameter == p), key=lambda s: (s.share, -s.snr)
+            )
+            for rank, s in enumerate(mine, 1):
+                d = s.candidate
+                rows.append(
+                    {
+                        "parameter": p,
+                        "rank": rank,
+                        "candidate": d.label,
+                        "rig": d.rig_name,
+                        "consignment": d.consignment_name,
+                        "setting": d.setting,
+                        "verdict": s.verdict,
+                        "interval_low": s.interval[0],
+                        "interval_high": s.interval[1],
+                        "snr": s.snr,
+                        "quantity": s.quantity,
+                        "expected_share": s.share,
+                        "expected_width": s.width,
+                        "runs_needed": s.runs_needed,
+                        "simulations_ok": s.simulations_ok,
+                    }
+                )
+        df = pd.DataFrame(rows)
+        if len(df):
+            df["runs_needed"] = df["runs_needed"].astype("Int64")
+        return df
+
+    def ranking_table(self) -> pd.DataFrame:
+        """One row per candidate, by the mean expected width share over the open parameters
+        (docs/data.md)."""
+        by: dict[str, list[CandidateScore]] = {}
+        for s in self.scores:
+            by.setdefault(s.candidate.label, []).append(s)
+        rows = []
+        for label, mine in by.items():
+            best = min(mine, key=lambda s: s.share)
+            rows.append(
+                {
+                    "candidate": label,
+                    "mean_share": float(np.mean([s.share for s in mine])),
+                    "narrows_most": best.parameter if best.share < 1 else None,
+                    "determines": ", ".join(
+                        s.parameter
+                        for s in mine
+                        if s.runs_needed is not None and s.runs_needed <= self.runs
+                    ),
+                }
+            )
+        df = pd.DataFrame(rows, columns=["candidate", "mean_share", "narrows_most", "determines"])
+        df = df.sort_values(["mean_share", "candidate"], kind="stable").reset_index(drop=True)
+        df.insert(0, "rank", range(1, len(df) + 1))
+        return df
+
+    def best(self, parameter: str) -> CandidateScore | None:
+        """The first-ranked candidate for ``parameter`` (None without candidates)."""
+        mine = [s for s in self.scores if s.parameter == parameter]
+        return min(mine, key=lambda s: (s.share, -s.snr)) if mine else None
+
+
+def score_candidate(
+    design: Design,
+    ident: Identifiability,
+    sets: Sequence[dict[str, float]],
+    grids: dict[str, np.ndarray],
+    runs: int,
+) -> list[CandidateScore]:
+    """The scores of one candidate from its simulated quantities ``grids`` (quantity -> n sets
+    x K placements, NaN where a run has none), for every parameter the data do not determine."""
+    names = ident.names
+    intervals = [p.interval for p in ident.parameters]
+    X = np.array([[s[n] for n in names] for s in sets], float)
+    J = np.zeros((len(QUANTITIES), len(names)))
+    scatter = np.ones(len(QUANTITIES))
+    for k, q in enumerate(QUANTITIES):
+        grid = grids[q]
+        dec = decompose(grid)
+        floor = FLOOR[q]
+        within = dec.within if math.isfinite(dec.within) else 0.0
+        scatter[k] = math.sqrt(within + floor**2)
+        with np.errstate(invalid="ignore"):
+            means = (
+                np.nanmean(grid, axis=1) if np.isfinite(grid).any() else np.full(len(grid), np.nan)
+            )
+        eff, se = effects_of(means, X, intervals)
+        ok = np.isfinite(eff) & (np.abs(eff) >= RESOLVED * np.where(np.isfinite(se), se, np.inf))
+        J[k] = np.where(ok, eff, 0.0)
+    shares = expected_width(J, scatter, runs)
+    target = np.array(
+        [
+            DETERMINED_WIDTH * (p.high - p.low) / max(p.interval[1] - p.interval[0], 1e-300)
+            for p in ident.parameters
+        ]
+    )
+    needed = runs_needed(J, scatter, target)
+    snr = np.abs(J) / scatter[:, None]
+    n_ok = int(np.isfinite(grids["rotation"]).sum())
+    out = []
+    for j, p in enumerate(ident.parameters):
+        if p.determined:
+            continue
+        best_q = int(np.argmax(snr[:, j]))
+        out.append(
+            CandidateScore(
+                design,
+                p.name,
+                p.verdict,
+                p.interval,
+                float(snr[best_q, j]),
+                QUANTITIES[best_q] if snr[best_q, j] > 0 else None,
+                float(shares[j]),
+                float(shares[j] * (p.interval[1] - p.interval[0])),
+                needed[j],
+                n_ok,
+            )
+        )
+    return out
+
+
+def rank_experiments(
+    folder: str | Path,
+    *,
+    candidates: Sequence[str] = (),
+    rig_files: Sequence[str] = (),
+    sets: int = 10,
+    placements: int = 5,
+    runs: int = 10,
+    seed: int = 0,
+    out: str | Path | None = None,
+    executor: str = "local",
+    workers: int | None = None,
+    scheduler: str | None = None,
+    table_format: str = "csv",
+    progress: ProgressCallback | None = None,
+    make: Callable[[], Executor] | None = None,
+) -> DesignResult:
+    """Rank the candidate experiments for the calibration in ``folder`` (module docstring):
+    each simulated at ``sets`` plausible parameter sets x ``placements`` seeded placements in
+    ``executor``, scored for ``runs`` real runs, recorded in ``out``/design.sqlite (resumable,
+    default ``design`` in the study folder) and written there. Seeded."""
+    progress = progress or ignore_progress
+    if not 2 <= sets <= MAX_SETS:
+        raise ParcelfitError(f"--sets {sets}: give from 2 to {MAX_SETS} parameter sets")
+    if not 1 <= placements <= MAX_PLACEMENTS:
+        raise ParcelfitError(f"--placements {placements}: give from 1 to {MAX_PLACEMENTS}")
+    if not 1 <= runs <= MAX_RUNS:
+        raise ParcelfitError(f"--runs {runs}: give from 1 to {MAX_RUNS} real runs")
+    if table_format not in TABLE_FORMATS:
+        raise ParcelfitError(
+            f"unknown table format {shown(table_format)}", fix=f"use one of {list(TABLE_FORMATS)}"
+        )
+    inputs = load_inputs(folder)
+    ident = inputs.identifiability
+    designs = candidate_designs(candidates, rig_files)
+    open_ = [p.name for p in ident.parameters if not p.determined]
+    out_dir = Path(out) if out is not None else inputs.folder / "design"
+    if not open_:
+        return DesignResult([], [], runs, sets, placements, out_dir)
+    simulators = [design_simulator(inputs.study, d) for d in designs]
+    for sim in simulators:
+        require_placements(sim, placements, file=None, where="--placements")
+    placed = callable(getattr(simulators[0], "with_placement", None))
+    drawn = draw_sets(ident, sets, seed)
+    seeds = placement_seeds(placements, seed) if placed else [0]
+    full = [{**inputs.study.fixed, **s} for s in drawn]
+    check_writable(out_dir, (DESIGN_STORE,))
+    out_dir.mkdir(parents=True, exist_ok=True)
+    lock = lock_folder(out_dir, "an experiment design")
+    try:
+        store = Store(out_dir / DESIGN_STORE)
+        try:
+            record = {
+                "study": str(inputs.folder.resolve()),
+                "candidates": [[d.rig, d.consignment, d.setting] for d in designs],
+                "seed": seed,
+                "sets": drawn,
+                "placements": seeds,
+            }
+            known = store.get_meta("design")
+            if known is None:
+                store.set_meta("design", record)
+                for c, d in enumerate(designs):
+                    store.add_pending(
+                        "screen",
+                        c,
+                        [full[i] for i in range(len(full)) for _ in seeds],
+                        d.setting,
+                        [s for _ in full for s in seeds],
+                    )
+            elif json.loads(json.dumps(known)) != json.loads(json.dumps(record)):
+                raise ParcelfitError(
+                    "this folder holds an experiment design with other inputs (study, "
+                    "candidates, --sets, --placements or --seed)",
+                    file=out_dir,
+                    fix="give another --out, or the same inputs to resume it",
+                )
+            rows = store.evaluations("screen")
+            total = len(rows)
+            done = sum(e.status != "pending" for e in rows)
+            progress(
+                ProgressEvent(
+                    "design", f"{done} of {total} simulations stored", done=done, total=total
+                )
+            )
+            todo = [e for e in rows if e.status == "pending"]
+            if todo:
+                with open_executor(executor, workers, scheduler, len(todo), make) as pool:
+                    for c, (d, sim) in enumerate(zip(designs, simulators, strict=True)):
+                        mine = [e for e in todo if e.iteration == c]
+                        items = [
+                            (
+                                Task(
+                                    e.params,
+                                    d.case,
+                                    f"design-{c}-set{e.slot // len(seeds)}-p{e.seed}",
+                                ),
+                                e.seed if placed else None,
+                            )
+                            for e in mine
+                        ]
+                        for i, result in simulate_items(pool, sim, items):
+                            finish_run(store, mine[i].id, result)
+                            done += 1
+                            progress(
+                                ProgressEvent(
+                                    "design",
+                                    f"{d.label}: {done} of {total} simulations",
+                                    done=done,
+                                    total=total,
+                                )
+                            )
+            rows = store.evaluations("screen")
+        finally:
+            store.close()
+        scores: list[CandidateScore] = []
+        for c, d in enumerate(designs):
+            grids = {q: np.full((len(full), len(seeds)), np.nan) for q in QUANTITIES}
+            for e in rows:
+                if e.iteration != c or e.status != "ok":
+                    continue
+                i, j = divmod(e.slot, len(seeds))
+                values = {**(e.details or {}), "transit_time": e.transit_time}
+                for q in QUANTITIES:
+                    v = values.get(q)
+                    if v is not None and math.isfinite(float(v)):
+                        grids[q][i, j] = float(v)
+            scores += score_candidate(d, ident, drawn, grids, runs)
+        result = DesignResult(open_, scores, runs, sets, placements, out_dir)
+        write_design(result, out_dir, table_format)
+    finally:
+        lock.release()
+    return result
+
+
+def write_design(result: DesignResult, out: Path, table_format: str = "csv") -> list[Path]:
+    """Write ``candidates`` and ``ranking`` (.csv or .parquet) and ``design.json`` into
+    ``out``; returns their paths."""
+    paths = []
+    tables = (("candidates", result.candidates_table()), ("ranking", result.ranking_table()))
+    for name, df in tables:
+        path = out / f"{name}.{table_format}"
+        if table_format == "parquet":
+            df.to_parquet(path, index=False)
+        else:
+            df.to_csv(path, index=False)
+        paths.append(path)
+
+    def records(df: pd.DataFrame) -> list[dict[str, Any]]:
+        return json.loads(df.to_json(orient="records"))
+
+    doc = {
+        "parameters": result.parameters,
+        "runs": result.runs,
+        "sets": result.sets,
+        "placements": result.placements,
+        "candidates": records(tables[0][1]),
+        "ranking": records(tables[1][1]),
+    }
+    path = out / DESIGN_FILE
+    write_text_atomic(path, json.dumps(doc))
+    paths.append(path)
+    return paths
+
+
+__all__ = [
+    "DESIGN_FILE",
+    "DESIGN_STORE",
+    "FLOOR",
+    "MAX_RUNS",
+    "CandidateScore",
+    "DesignResult",
+    "candidate_designs",
+    "expected_width",
+    "rank_experiments",
+    "runs_needed",
+    "score_candidate",
+    "write_design",
+]

@@ -1,0 +1,94 @@
+"""`parcelfit design` on the analytic test simulator: the expected widths of the linear design,
+and a candidate built to depend strongly on a parameter ranks first for it."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from parcelfit.cli import app
+from parcelfit.study.design import expected_width, runs_needed
+
+from .predict_helpers import write_finished_study, write_rig_q
+
+runner = CliRunner()
+
+
+def test_expected_width_of_one_parameter_is_the_posterior_over_the_prior_sd():
+    J = np.array([[0.3], [0.0]])  # quantity 1 moves by 0.3 over the interval, quantity 2 not
+    scatter = np.array([0.1, 1.0])
+    for n in (1, 4, 25):
+        w = expected_width(J, scatter, n)
+        assert w[0] == pytest.approx(math.sqrt(12 / (n * 9 + 12)))
+    assert expected_width(np.zeros((2, 1)), scatter, 10)[0] == pytest.approx(1.0)
+    # a share of 0.2: 12 / (9 n + 12) <= 0.04 from n = 32
+    assert runs_needed(J, scatter, np.array([0.2])) == [32]
+    assert runs_needed(J * 1e-3, scatter, np.array([0.2])) == [None]
+
+
+def test_a_candidate_that_moves_two_parameters_alike_tells_neither():
+    scatter = np.array([0.01])
+    alike = expected_width(np.array([[1.0, 1.0]]), scatter, 10)
+    apart = expected_width(np.array([[1.0, 1.0], [1.0, -1.0]]), np.array([0.01, 0.01]), 10)
+    assert (alike > 0.7).all()  # only their sum is measured
+    assert (apart < 0.01).all()
+
+
+def test_the_candidate_built_to_depend_on_a_parameter_ranks_first_for_it(tmp_path):
+    study = write_finished_study(tmp_path)
+    q = write_rig_q(tmp_path)  # the analytic simulator turns the parcel by E_Pa on rig Q only
+    out = tmp_path / "d"
+    argv = [
+        "design",
+        str(study),
+        "--candidate",
+        "E3/KPBW/1",
+        "--candidate",
+        "E1/PB/2",
+        "--rig",
+        str(q),
+        "--sets",
+        "8",
+        "--placements",
+        "3",
+        "--executor",
+        "serial",
+        "--out",
+        str(out),
+    ]
+    result = runner.invoke(app, argv)
+    assert result.exit_code == 0, result.output
+    cands = pd.read_csv(out / "candidates.csv")
+    assert set(cands["parameter"]) == {"E_Pa"}  # the only parameter not determined
+    assert len(cands) == 2 + 8  # two bundled candidates, rig Q's 2 settings x 4 types
+    first = cands[cands["rank"] == 1].iloc[0]
+    assert first["rig"] == "Q" and first["quantity"] == "exit_heading"
+    assert first["runs_needed"] == 1
+    on_r = cands[cands["rig"] != "Q"]
+    # on rig R E_Pa turns the parcel by 1e-4 rad per GPa and second: far below the 1 degree floor
+    assert (on_r["expected_share"] > 0.999).all() and on_r["runs_needed"].isna().all()
+    ranking = pd.read_csv(out / "ranking.csv")
+    assert ranking.iloc[0]["candidate"].startswith("Q/")
+    assert "E_Pa (undetermined): the experiments that narrow it most" in result.output
+    again = runner.invoke(app, argv)  # resumes: nothing left to simulate, the same tables
+    assert again.exit_code == 0
+    pd.testing.assert_frame_equal(pd.read_csv(out / "candidates.csv"), cands)
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--candidate", "E3-KPBW-1"], "--candidate 'E3-KPBW-1' is not RIG/TYPE/SETTING"),
+        (["--candidate", "E3/KPBW/7"], "rig E3 has no speed setting 7"),
+        (["--rig", "E3"], "--rig 'E3' is not a rig .yaml file"),
+    ],
+)
+def test_bad_candidates_exit_2(tmp_path, args, message):
+    study = write_finished_study(tmp_path)
+    result = runner.invoke(app, ["design", str(study), *args, "--out", str(tmp_path / "d")])
+    assert result.exit_code == 2
+    assert message in " ".join(result.output.split()) and "Traceback" not in result.output
