@@ -42,29 +42,15 @@ def test_the_candidate_built_to_depend_on_a_parameter_ranks_first_for_it(tmp_pat
     study = write_finished_study(tmp_path)
     q = write_rig_q(tmp_path)  # the analytic simulator turns the parcel by E_Pa on rig Q only
     out = tmp_path / "d"
-    argv = [
-        "design",
-        str(study),
-        "--candidate",
-        "E3/KPBW/1",
-        "--candidate",
-        "E1/PB/2",
-        "--rig",
-        str(q),
-        "--sets",
-        "8",
-        "--placements",
-        "3",
-        "--executor",
-        "serial",
-        "--out",
-        str(out),
-    ]
+    argv = ["design", str(study), "--rig", str(q), "--sets", "8", "--placements", "3"]
+    for label in ("E3/KPBW/1", "E1/PB/2", "Q/KPBW/1", "Q/BW/2"):
+        argv += ["--candidate", label]
+    argv += ["--executor", "serial", "--out", str(out)]
     result = runner.invoke(app, argv)
     assert result.exit_code == 0, result.output
     cands = pd.read_csv(out / "candidates.csv")
     assert set(cands["parameter"]) == {"E_Pa"}  # the only parameter not determined
-    assert len(cands) == 2 + 8  # two bundled candidates, rig Q's 2 settings x 4 types
+    assert len(cands) == 4
     first = cands[cands["rank"] == 1].iloc[0]
     assert first["rig"] == "Q" and first["quantity"] == "exit_heading"
     assert first["runs_needed"] == 1
@@ -92,3 +78,20 @@ def test_bad_candidates_exit_2(tmp_path, args, message):
     result = runner.invoke(app, ["design", str(study), *args, "--out", str(tmp_path / "d")])
     assert result.exit_code == 2
     assert message in " ".join(result.output.split()) and "Traceback" not in result.output
+
+
+def test_the_bench_tests_are_candidates_with_every_bundled_type():
+    from parcelfit.sim.mujoco import bundled_consignment_names, bundled_rig_names, load_rig
+    from parcelfit.study.design import candidate_designs
+
+    from .helpers import ROOT
+
+    bench = [str(ROOT / "examples" / "bench" / f"{name}.yaml") for name in ("B1", "B2")]
+    assert [sorted(load_rig(p).speeds) for p in bench] == [[1, 2], [1, 2]]
+    types = len(bundled_consignment_names())
+    every = candidate_designs((), bench)
+    settings = sum(len(load_rig(r).speeds) for r in bundled_rig_names())
+    assert len(every) == (settings + 2 * 2) * types  # the bundled rigs' settings and the two
+    named = candidate_designs(["E3/KPBW/1", "B1/KP/2"], bench)  # a --rig file by its name
+    assert [d.label for d in named] == ["E3/KPBW/1", "B1/KP/2"]
+    assert named[1].rig == bench[0]

@@ -1535,6 +1535,23 @@ def _verdict_word(v: dict[str, Any]) -> str:
     return "passed" if v["passed"] else "failed"
 
 
+def _progress_bar(job: str) -> tuple[Progress, ProgressCallback]:
+    """A progress bar and the callback that drives it: on a terminal the bar appears with the
+    first event (not before the inputs are checked); when the output goes to a log or CI, one
+    line per event (`_progress`'s convention). Stop the bar when the job ends."""
+    bar = Progress(*Progress.get_default_columns(), TimeElapsedColumn(), console=console)
+    task = bar.add_task(job, total=None)
+
+    def show(event: ProgressEvent) -> None:
+        if not console.is_terminal:
+            console.print(Text(event.message), highlight=False)
+            return
+        bar.start()
+        bar.update(task, description=event.message, completed=event.done, total=event.total)
+
+    return bar, show
+
+
 @app.command()
 def predict(
     study_dir: Annotated[
@@ -1591,13 +1608,7 @@ def predict(
     _check_paths(out)
     _resumes() if out is None else _resumes(_stored(out / PREDICT_STORE, "screen", "simulations"))
     # the bar appears with the first simulation, not before the inputs are checked
-    bar = Progress(*Progress.get_default_columns(), TimeElapsedColumn(), console=console)
-    task = bar.add_task("predict", total=None)
-
-    def show(event: ProgressEvent) -> None:
-        bar.start()
-        bar.update(task, description=event.message, completed=event.done, total=event.total)
-
+    bar, show = _progress_bar("predict")
     try:
         prediction = run_prediction(
             study_dir,
@@ -1613,6 +1624,7 @@ def predict(
             scheduler=scheduler,
             table_format=table_format,
             progress=show,
+            on_cost=lambda line: console.print(Text(line, style="cyan"), highlight=False),
         )
     finally:
         bar.stop()
@@ -1687,13 +1699,7 @@ def design(
     _workers_at_most(workers)
     _check_paths(out)
     _resumes() if out is None else _resumes(_stored(out / DESIGN_STORE, "screen", "simulations"))
-    bar = Progress(*Progress.get_default_columns(), TimeElapsedColumn(), console=console)
-    task = bar.add_task("design", total=None)
-
-    def show(event: ProgressEvent) -> None:
-        bar.start()
-        bar.update(task, description=event.message, completed=event.done, total=event.total)
-
+    bar, show = _progress_bar("design")
     try:
         result = rank_experiments(
             study_dir,
@@ -1709,6 +1715,7 @@ def design(
             scheduler=scheduler,
             table_format=table_format,
             progress=show,
+            on_cost=lambda line: console.print(Text(line, style="cyan"), highlight=False),
         )
     finally:
         bar.stop()

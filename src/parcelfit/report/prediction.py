@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pandas as pd
 from markupsafe import Markup
 from matplotlib.figure import Figure
 from rich.markup import escape
@@ -135,13 +136,9 @@ def design_tables(result: DesignResult, top: int = 5) -> list[Table]:
                 str(r.rank),
                 r.candidate,
                 f"{r.snr:.1f}",
-                "-"
-                if r.quantity is None or r.quantity != r.quantity
-                else quantity_words(r.quantity),
+                "-" if pd.isna(r.quantity) else quantity_words(r.quantity),
                 f"{r.expected_share * 100:.0f} %",
-                "-"
-                if r.runs_needed is None or r.runs_needed != r.runs_needed
-                else str(int(r.runs_needed)),
+                "-" if pd.isna(r.runs_needed) else str(int(r.runs_needed)),
             )
         tables.append(t)
     ranking = result.ranking_table().head(top)
@@ -153,8 +150,8 @@ def design_tables(result: DesignResult, top: int = 5) -> list[Table]:
             str(r.rank),
             r.candidate,
             f"{r.mean_share * 100:.0f} %",
-            r.narrows_most or "-",
-            r.determines or "-",
+            "-" if pd.isna(r.narrows_most) else str(r.narrows_most),
+            str(r.determines) or "-",
         )
     tables.append(t)
     return tables

@@ -1,13 +1,14 @@
 """Which experiment to run next: ``parcelfit design`` ranks candidate test cases by how much
 each would narrow the intervals of the parameters a calibration leaves open.
 
-**Candidates.** Every bundled rig x its speed settings x every bundled consignment type (or the
-ones named with ``--candidate RIG/TYPE/SETTING``), plus rig files given with ``--rig`` (each of
-their settings x every bundled type): for instance the bench tests in ``examples/bench/``, a
-belt step (a parcel carried from a slow belt onto a fast one: how fast it takes up the speed
-is set by the packaging-belt friction) and a plate impact (a belt carries the parcel into a
-metal plate across it: how it slides off is set by the packaging-steel friction and the
-contact).
+**Candidates.** Every rig x its speed settings x every consignment type: the rigs are the
+bundled ones, the study's own rig file (a MuJoCo or rigid-box study's) and the rig files given
+with ``--rig``, the types the bundled ones and the study's own consignment file. Or only the
+candidates named with ``--candidate RIG/TYPE/SETTING`` (bundled names or those files' names).
+Rig files for ``--rig`` are for instance the bench tests in ``examples/bench/``: a belt step
+(a parcel carried from a slow belt onto a fast one: how fast it takes up the speed is set by
+the packaging-belt friction) and a plate impact (a belt carries the parcel into a metal plate
+across it: how it slides off is set by the packaging-steel friction and the contact).
 
 **What a candidate would tell.** Each candidate is simulated at the same N parameter sets
 drawn from the study's plausible set (`parcelfit.study.predict.draw_sets`) times the same K
@@ -84,6 +85,7 @@ from parcelfit.study.predict import (
     TABLE_FORMATS,
     Design,
     check_design,
+    cost_line,
     decompose,
     design_simulator,
     draw_sets,
@@ -98,6 +100,7 @@ from parcelfit.study.store import Store
 DESIGN_STORE = "design.sqlite"
 DESIGN_FILE = "design.json"
 MAX_RUNS = 100  # the most real runs a candidate is asked for
+NARROWS = 0.99  # an expected interval share below this counts as narrowing the parameter
 PRIOR_PRECISION = 12.0  # of a uniform distribution on [0, 1]
 RESOLVED = 2.0  # an effect smaller than this many standard errors counts as zero
 # run-to-run measurement floor per quantity (SI): the band test's 3 mm and 1 degree, 2 ms
@@ -109,27 +112,33 @@ FLOOR = {
 }
 
 
-def candidate_designs(only: Sequence[str] = (), rig_files: Sequence[str] = ()) -> list[Design]:
-    """The candidates (module docstring): ``only`` (``RIG/TYPE/SETTING`` labels) or else every
-    bundled rig x setting x bundled type, then every setting of each rig file x every bundled
-    type. Each is checked (`parcelfit.study.predict.check_design`)."""
-    from parcelfit.sim.mujoco import bundled_consignment_names, bundled_rig_names, load_rig
+def candidate_designs(
+    only: Sequence[str] = (),
+    rig_files: Sequence[str] = (),
+    own_rig: str | None = None,
+    own_type: str | None = None,
+) -> list[Design]:
+    """The candidates (module docstring): every rig x setting x type, the rigs being the
+    bundled ones, ``own_rig`` (the study's own rig file) and ``rig_files``, the types the
+    bundled ones and ``own_type`` (the study's own consignment file); or, with ``only``
+    (``RIG/TYPE/SETTING`` labels, each rig and type a bundled name or the name of one of those
+    files), just those. Each is checked (`parcelfit.study.predict.check_design`)."""
+    from parcelfit.sim.mujoco import (
+        bundled_consignment_names,
+        bundled_rig_names,
+        load_consignment,
+        load_rig,
+    )
 
-    types = bundled_consignment_names()
-    out: list[Design] = []
-    if only:
-        for label in only:
-            parts = label.split("/")
-            if len(parts) != 3 or not parts[2].isdigit():
-                raise ParcelfitError(
-                    f"--candidate {shown(label)} is not RIG/TYPE/SETTING",
-                    fix="write e.g. E1/KPBW/2",
-                )
-            out.append(check_design(parts[0], parts[1], int(parts[2])))
-    else:
-        for rig in bundled_rig_names():
-            for setting in sorted(load_rig(rig).speeds):
-                out += [check_design(rig, t, setting) for t in types]
+    types = list(bundled_consignment_names())
+    rigs = list(bundled_rig_names())
+    files: dict[str, str] = {}  # the files' names -> paths
+    if own_type is not None and own_type.lower().endswith((".yaml", ".yml")):
+        files[load_consignment(own_type).name] = own_type
+        types.append(own_type)
+    if own_rig is not None and own_rig.lower().endswith((".yaml", ".yml")):
+        files[load_rig(own_rig).name] = own_rig
+        rigs.append(own_rig)
     for path in rig_files:
         if not str(path).lower().endswith((".yaml", ".yml")):
             raise ParcelfitError(
@@ -137,19 +146,37 @@ def candidate_designs(only: Sequence[str] = (), rig_files: Sequence[str] = ()) -
                 fix="give a rig file (bundled rigs are candidates already)",
             )
         try:
-            settings = sorted(load_rig(str(Path(path).resolve())).speeds)
+            name = load_rig(str(Path(path).resolve())).name
         except ParcelfitError as exc:
             raise ParcelfitError(
                 exc.message, file=exc.file or str(path), where="--rig", fix=exc.fix
             ) from None
-        for setting in settings:
-            out += [check_design(str(path), t, setting) for t in types]
+        if name in files or name in bundled_rig_names():
+            raise ParcelfitError(
+                f"--rig {shown(str(path))}: a rig named {name} is a candidate already",
+                fix="give each rig once; rename a rig file that shares another rig's name",
+            )
+        files[name] = str(Path(path).resolve())
+        rigs.append(files[name])
+    out: list[Design] = []
+    if only:
+        for label in only:
+            parts = label.split("/")
+            if len(parts) != 3 or not parts[2].isdigit():
+                raise ParcelfitError(
+                    f"--candidate {shown(label)} is not RIG/TYPE/SETTING",
+                    fix="write e.g. E1/KPBW/2 (names: bundled ones, the study's own files' or "
+                    "those of the --rig files)",
+                )
+            rig, kind = (files.get(x, x) for x in parts[:2])
+            out.append(check_design(rig, kind, int(parts[2])))
+    else:
+        for rig in rigs:
+            for setting in sorted(load_rig(rig).speeds):
+                out += [check_design(rig, t, setting) for t in types]
     labels = [d.label for d in out]
     if len(set(labels)) != len(labels):
-        raise ParcelfitError(
-            "a candidate is named twice (a rig file with a bundled rig's name?)",
-            fix="give each candidate once; rename a rig file that shares a bundled rig's name",
-        )
+        raise ParcelfitError("a candidate is named twice", fix="give each candidate once")
     return out
 
 
@@ -255,7 +282,7 @@ class DesignResult:
                 {
                     "candidate": label,
                     "mean_share": float(np.mean([s.share for s in mine])),
-                    "narrows_most": best.parameter if best.share < 1 else None,
+                    "narrows_most": best.parameter if best.share < NARROWS else None,
                     "determines": ", ".join(
                         s.parameter
                         for s in mine
@@ -349,11 +376,13 @@ def rank_experiments(
     table_format: str = "csv",
     progress: ProgressCallback | None = None,
     make: Callable[[], Executor] | None = None,
+    on_cost: Callable[[str], None] | None = None,
 ) -> DesignResult:
     """Rank the candidate experiments for the calibration in ``folder`` (module docstring):
     each simulated at ``sets`` plausible parameter sets x ``placements`` seeded placements in
     ``executor``, scored for ``runs`` real runs, recorded in ``out``/design.sqlite (resumable,
-    default ``design`` in the study folder) and written there. Seeded."""
+    default ``design`` in the study folder) and written there; ``on_cost`` receives the
+    expected cost of the simulations still to run before they start. Seeded."""
     progress = progress or ignore_progress
     if not 2 <= sets <= MAX_SETS:
         raise ParcelfitError(f"--sets {sets}: give from 2 to {MAX_SETS} parameter sets")
@@ -367,7 +396,14 @@ def rank_experiments(
         )
     inputs = load_inputs(folder)
     ident = inputs.identifiability
-    designs = candidate_designs(candidates, rig_files)
+    config = inputs.study.simulator
+    mine = config.backend in ("mujoco", "rigidbox")
+    designs = candidate_designs(
+        candidates,
+        rig_files,
+        config.rig if mine else None,
+        config.consignment if mine else None,
+    )
     open_ = [p.name for p in ident.parameters if not p.determined]
     out_dir = Path(out) if out is not None else inputs.folder / "design"
     if not open_:
@@ -395,7 +431,16 @@ def rank_experiments(
             known = store.get_meta("design")
             if known is None:
                 store.set_meta("design", record)
-                for c, d in enumerate(designs):
+            elif json.loads(json.dumps(known)) != json.loads(json.dumps(record)):
+                raise ParcelfitError(
+                    "this folder holds an experiment design with other inputs (study, "
+                    "candidates, --sets, --placements or --seed)",
+                    file=out_dir,
+                    fix="give another --out, or the same inputs to resume it",
+                )
+            have = {e.iteration for e in store.evaluations("screen")}
+            for c, d in enumerate(designs):
+                if c not in have:  # one transaction per candidate: all its rows or none
                     store.add_pending(
                         "screen",
                         c,
@@ -403,12 +448,9 @@ def rank_experiments(
                         d.setting,
                         [s for _ in full for s in seeds],
                     )
-            elif json.loads(json.dumps(known)) != json.loads(json.dumps(record)):
-                raise ParcelfitError(
-                    "this folder holds an experiment design with other inputs (study, "
-                    "candidates, --sets, --placements or --seed)",
-                    file=out_dir,
-                    fix="give another --out, or the same inputs to resume it",
+            if on_cost is not None:
+                on_cost(
+                    cost_line(inputs.study, designs, store, executor, workers, make is not None)
                 )
             rows = store.evaluations("screen")
             total = len(rows)

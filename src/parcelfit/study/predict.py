@@ -548,8 +548,6 @@ def sentence(e: Effect) -> str:
 
 
 def summarise_prediction(
-    design: Design,
-    study: str,
     ident: Identifiability,
     sets: Sequence[Mapping[str, float]],
     seeds: Sequence[int],
@@ -646,13 +644,16 @@ def predict(
     table_format: str = "csv",
     progress: ProgressCallback | None = None,
     make: Callable[[], Executor] | None = None,
+    on_cost: Callable[[str], None] | None = None,
 ) -> Prediction:
     """Predict ``rig`` x ``consignment`` x ``setting`` from the calibration in ``folder``:
     ``sets`` parameter sets of its plausible set times ``placements`` seeded placements,
     simulated in ``executor`` (serial, local with ``workers`` processes, dask at
     ``scheduler``), recorded in ``out``/predict.sqlite (resumable), summarised and written
-    (module docstring). ``progress`` receives one event per finished simulation; ``make``
-    (tests) replaces the executor factory. Seeded: the same inputs give the same tables."""
+    (module docstring). ``progress`` receives one event per finished simulation; ``on_cost``
+    the expected cost of the simulations still to run (one line, `parcelfit.sim.cost`), before
+    they start; ``make`` (tests) replaces the executor factory. Seeded: the same inputs give
+    the same tables."""
     progress = progress or ignore_progress
     if not 1 <= sets <= MAX_SETS:
         raise ParcelfitError(f"--sets {sets}: give from 1 to {MAX_SETS} parameter sets")
@@ -680,6 +681,14 @@ def predict(
             known = store.get_meta("predict")
             if known is None:
                 store.set_meta("predict", record)
+            elif json.loads(json.dumps(known)) != json.loads(json.dumps(record)):
+                raise ParcelfitError(
+                    "this folder holds a prediction with other inputs (study, design, --sets, "
+                    "--placements or --seed)",
+                    file=out_dir,
+                    fix="give another --out, or the same inputs to resume it",
+                )
+            if not store.evaluations("screen"):  # one transaction: all rows or none
                 items = [(s, j) for s in range(len(full)) for j in range(len(seeds))]
                 store.add_pending(
                     "screen",
@@ -688,12 +697,9 @@ def predict(
                     design.setting,
                     [seeds[j] for _, j in items],
                 )
-            elif json.loads(json.dumps(known)) != json.loads(json.dumps(record)):
-                raise ParcelfitError(
-                    "this folder holds a prediction with other inputs (study, design, --sets, "
-                    "--placements or --seed)",
-                    file=out_dir,
-                    fix="give another --out, or the same inputs to resume it",
+            if on_cost is not None:
+                on_cost(
+                    cost_line(inputs.study, [design], store, executor, workers, make is not None)
                 )
             _simulate(
                 store,
@@ -711,7 +717,7 @@ def predict(
         finally:
             store.close()
         summaries, effects, sentences = summarise_prediction(
-            design, inputs.study.name, inputs.identifiability, drawn, seeds, runs
+            inputs.identifiability, drawn, seeds, runs
         )
         notes = []
         if not inputs.identifiability.reached:
@@ -791,6 +797,31 @@ def _simulate(
                     total=total,
                 )
             )
+
+
+def cost_line(
+    study: Study,
+    designs: Sequence[Design],
+    store: Store,
+    executor: str,
+    workers: int | None,
+    custom: bool = False,
+) -> str:
+    """The expected cost of the store's pending simulations (rows of kind ``screen``; with
+    several designs, ``iteration`` is the design's index) on the executor's processes, as one
+    line (`parcelfit.sim.cost.Estimate.text`)."""
+    from parcelfit.sim.cost import estimate, run_seconds
+
+    pending = [e for e in store.evaluations("screen") if e.status == "pending"]
+    runs = []
+    for c, d in enumerate(designs):
+        n = sum(1 for e in pending if len(designs) == 1 or e.iteration == c)
+        runs.append((n, run_seconds(study.simulator, d.rig, d.consignment)))
+    total = sum(n for n, _ in runs)
+    local = executor == "local" and not custom
+    processes = min(workers or os.cpu_count() or 1, max(total, 1)) if local else 1
+    note = "" if total else "nothing left to simulate"
+    return estimate(runs, processes).text(note)
 
 
 def open_executor(
@@ -886,6 +917,7 @@ __all__ = [
     "QuantitySummary",
     "StudyInputs",
     "check_design",
+    "cost_line",
     "decompose",
     "default_out",
     "design_simulator",
