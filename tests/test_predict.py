@@ -135,10 +135,12 @@ def test_resume_gives_the_same_tables(study, tmp_path):
 
 
 def test_the_seed_decides(study, tmp_path):
-    for name, seed in (("a", "3"), ("b", "3"), ("c", "4")):
-        assert _predict(study, tmp_path / name, "--seed", seed).exit_code == 0
-    a, b, c = (_tables(tmp_path / n)[0] for n in "abc")
-    pd.testing.assert_frame_equal(a, b)
+    for name, seed, form in (("a", "3", "csv"), ("b", "3", "parquet"), ("c", "4", "csv")):
+        assert _predict(study, tmp_path / name, "--seed", seed, "--format", form).exit_code == 0
+    a, c = (_tables(tmp_path / n)[0] for n in "ac")
+    b = pd.read_parquet(tmp_path / "b" / "runs.parquet").drop(columns="wall_time")
+    pd.testing.assert_frame_equal(b, a, check_dtype=False)  # the same seed, another format
+    assert not (tmp_path / "b" / "runs.csv").exists()
     assert not a["E_Pa"].equals(c["E_Pa"]) and not a["seed"].equals(c["seed"])
     # other inputs in the same folder are refused, not mixed
     other = _predict(study, tmp_path / "a", "--seed", "5")
