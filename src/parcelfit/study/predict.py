@@ -45,9 +45,10 @@ they do in use (so a parameter correlated with another in S is credited only wit
 part), and its standard error is the regression's. A one-at-a-time sweep was not chosen: it
 costs 2 x K more simulations per parameter and moves the parameter from one calibrated set that
 may lie outside S at the interval's ends. An effect counts as resolved when it is at least
-twice its standard error (with N sets and d parameters the regression needs N > d + 1; with
-the default 20 sets and 4 parameters the standard error is about half the placement noise of a
-set mean). For each calibrated parameter the data do not determine, the quantity it moves most
+twice its standard error (with N sets and d parameters the regression needs N > d + 1; for
+parameters spread evenly over their intervals and uncorrelated, the standard error is about
+s sqrt(12 / N), s the scatter of the set means about the fit: 0.77 s with the default 20
+sets). For each calibrated parameter the data do not determine, the quantity it moves most
 (as a share of that quantity's 5-95 % band) is named in one sentence, e.g. "E_Pa is
 undetermined and moves the transit time by 40 ms here: run `parcelfit design` to find the
 experiment that fixes it".
