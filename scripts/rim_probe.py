@@ -19,6 +19,9 @@ over 5 x 5 x 1 (KP/BW's cell boundaries then lie on its content's ends) and 8 x 
 quadratic over one cell. Run (prints a Markdown table; one to a few minutes per shell on one core):
 
     python scripts/rim_probe.py --consignment KPBW --shells full default trilinear-5x5x1
+    python scripts/rim_probe.py --consignment KPBW --param k_CoPa --values 100 1000
+
+(``--param`` varies another parameter over ``--values``, in the catalogue's unit.)
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ import numpy as np
 from parcelfit.sim.mujoco import load_consignment
 from parcelfit.sim.mujoco.indentation import plate_rig
 from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
+from parcelfit.sim.params import catalogue_unit, parameter
 
 SHELLS = {
     "full": SceneOptions(shell_dof="full", timestep=1 / 4800),
@@ -43,12 +47,17 @@ SHELLS = {
 
 
 def rim_compliance(
-    consignment: str, e_pa: float, options: SceneOptions, forces: tuple[float, float], settle: float
+    consignment: str,
+    name: str,
+    value: float,
+    options: SceneOptions,
+    forces: tuple[float, float],
+    settle: float,
 ) -> tuple[float, float]:
     """The rim's compliance [m/N] between the two lifting ``forces`` [N] and the seam end's lift
-    [m] at the larger one."""
+    [m] at the larger one, with parameter ``name`` at ``value`` (the catalogue's unit)."""
     cons = load_consignment(consignment)
-    full = cons.parameter_values(si_values={"E_Pa": e_pa * 1e6})
+    full = cons.parameter_values(si_values={name: parameter(name).to_si(value)})
     scene = build_scene(plate_rig("metal"), cons, full, 1, options)
     model = scene.model()
     data = mujoco.MjData(model)
@@ -88,30 +97,34 @@ def rim_compliance(
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--consignment", default="KPBW")
-    ap.add_argument("--e-pa", type=float, nargs=2, default=(200.0, 1600.0), help="N/mm^2")
+    ap.add_argument("--param", default="E_Pa", help="the parameter varied")
+    ap.add_argument(
+        "--values", type=float, nargs=2, default=(200.0, 1600.0), help="in the catalogue's unit"
+    )
     ap.add_argument("--forces", type=float, nargs=2, default=(0.05, 0.15), help="N")
     ap.add_argument("--settle", type=float, default=0.6, help="s per load")
     ap.add_argument(
         "--shells", nargs="+", default=["full", "default", "quadratic-1x1x1"], choices=list(SHELLS)
     )
     args = ap.parse_args()
-    lo, hi = args.e_pa
+    lo, hi = args.values
+    name, unit = args.param, catalogue_unit(args.param)
     print(
         f"Rim compliance of {args.consignment}, lifted at the seam by {args.forces[0]:g} -> "
-        f"{args.forces[1]:g} N (`python scripts/rim_probe.py --consignment {args.consignment}`)\n"
+        f"{args.forces[1]:g} N, {name} at {lo:g} and {hi:g} {unit}\n"
     )
     print(
-        f"| shell | c at E_Pa {lo:g} [mm/N] | c at E_Pa {hi:g} [mm/N] | ratio (plate: {hi / lo:g}) "
-        f"| lift at {args.forces[1]:g} N, E_Pa {lo:g} / {hi:g} [mm] | time [s] |"
+        f"| shell | c at {name} {lo:g} [mm/N] | c at {name} {hi:g} [mm/N] | ratio (a plate "
+        f"under E_Pa: {hi / lo:g}) | lift at {args.forces[1]:g} N, {lo:g} / {hi:g} [mm] | time [s] |"
     )
     print("|---|---|---|---|---|---|")
-    for name in args.shells:
-        options = SHELLS[name]
+    for shell in args.shells:
+        options = SHELLS[shell]
         t0 = time.perf_counter()
-        c_lo, z_lo = rim_compliance(args.consignment, lo, options, args.forces, args.settle)
-        c_hi, z_hi = rim_compliance(args.consignment, hi, options, args.forces, args.settle)
+        c_lo, z_lo = rim_compliance(args.consignment, name, lo, options, args.forces, args.settle)
+        c_hi, z_hi = rim_compliance(args.consignment, name, hi, options, args.forces, args.settle)
         print(
-            f"| {name} | {c_lo * 1e3:.3g} | {c_hi * 1e3:.3g} | {c_lo / c_hi:.2f} | "
+            f"| {shell} | {c_lo * 1e3:.3g} | {c_hi * 1e3:.3g} | {c_lo / c_hi:.2f} | "
             f"{z_lo * 1e3:.3g} / {z_hi * 1e3:.3g} | {time.perf_counter() - t0:.0f} |",
             flush=True,
         )
