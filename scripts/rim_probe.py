@@ -42,6 +42,8 @@ SHELLS = {
     "default": SceneOptions(),
     "trilinear-5x5x1": SceneOptions(shell_dof="trilinear", shell_cells=(5, 5, 1)),
     "trilinear-8x8x1": SceneOptions(shell_dof="trilinear", shell_cells=(8, 8, 1)),
+    "trilinear-4x4x2": SceneOptions(shell_dof="trilinear", shell_cells=(4, 4, 2)),
+    "trilinear-5x5x2": SceneOptions(shell_dof="trilinear", shell_cells=(5, 5, 2)),
     "quadratic-1x1x1": SceneOptions(shell_dof="quadratic", shell_cells=(1, 1, 1)),
 }
 
