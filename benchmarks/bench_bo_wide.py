@@ -67,7 +67,9 @@ def six_hump_camel(x: np.ndarray) -> float:
 
 
 _H3_A = np.array([[3.0, 10, 30], [0.1, 10, 35], [3.0, 10, 30], [0.1, 10, 35]])
-_H3_P = 1e-4 * np.array([[3689, 1170, 2673], [4699, 4387, 7470], [1091, 8732, 5547], [381, 5743, 8828]])
+_H3_P = 1e-4 * np.array(
+    [[3689, 1170, 2673], [4699, 4387, 7470], [1091, 8732, 5547], [381, 5743, 8828]]
+)
 _H6_A = np.array(
     [
         [10, 3, 17, 3.5, 1.7, 8],
@@ -200,7 +202,13 @@ _RO3, _RO4, _RO6 = _rough(3, 2030), _rough(4, 2024), _rough(6, 2026)
 _U3, _U6 = [(0.0, 1.0)] * 3, [(0.0, 1.0)] * 6
 PROBLEMS: dict[str, Problem] = {
     "Branin": ("smooth", [(-5.0, 10.0), (0.0, 15.0)], branin, branin, 0.397887),
-    "SixHumpCamel": ("smooth", [(-3.0, 3.0), (-2.0, 2.0)], six_hump_camel, six_hump_camel, -1.031628),
+    "SixHumpCamel": (
+        "smooth",
+        [(-3.0, 3.0), (-2.0, 2.0)],
+        six_hump_camel,
+        six_hump_camel,
+        -1.031628,
+    ),
     "Hartmann3": ("smooth", _U3, hartmann3, hartmann3, -3.86278),
     "Hartmann6": ("smooth", _U6, hartmann6, hartmann6, -3.32237),
     "Rosenbrock4": ("smooth", [(-2.048, 2.048)] * 4, rosenbrock, rosenbrock, 0.0),
@@ -323,7 +331,12 @@ def ask_time(sampler: str, n_obs: int = 200, dims: int = 4, repeats: int = 3) ->
         times.append(time.process_time() - t0)
         for p in batch:
             opt.tell(p, cost(p))
-    return {"sampler": sampler, "n_obs": n_obs, "dims": dims, "ask4_cpu_s": statistics.median(times)}
+    return {
+        "sampler": sampler,
+        "n_obs": n_obs,
+        "dims": dims,
+        "ask4_cpu_s": statistics.median(times),
+    }
 
 
 # -- output -------------------------------------------------------------------------------------
@@ -338,28 +351,43 @@ def _read(path: Path) -> list[dict[str, str]]:
 
 
 def summary(rows: list[dict[str, str]], samplers: list[str]) -> str:
-    """The per-half tables (see the module docstring) as Markdown."""
+    """The per-half tables (see the module docstring) as Markdown. Per problem only the seeds
+    that every sampler has finished count, so that the samplers are compared on the same seeds."""
     out = []
     for half in ("heldout", "tuning"):
-        probs = [p for p in PROBLEMS if HALVES[p] == half]
-        seeds: dict[tuple[str, str], list[float]] = {}
+        regret: dict[tuple[str, str, int], float] = {}
+        cpu: dict[str, list[float]] = {s: [] for s in samplers}
         for r in rows:
-            if r["half"] == half:
-                seeds.setdefault((r["problem"], r["sampler"]), []).append(float(r["final_regret"]))
-        probs = [p for p in probs if all((p, s) in seeds for s in samplers)]
+            if r["half"] == half and r["sampler"] in samplers:
+                regret[r["problem"], r["sampler"], int(r["seed"])] = float(r["final_regret"])
+        common = {
+            p: sorted(
+                set.intersection(*({k[2] for k in regret if k[:2] == (p, s)} for s in samplers))
+            )
+            for p in PROBLEMS
+            if HALVES[p] == half
+        }
+        probs = [p for p, seeds in common.items() if seeds]
         if not probs:
             continue
-        n_seeds = sorted({len(seeds[p, s]) for p in probs for s in samplers})
+        for r in rows:
+            if (
+                r["half"] == half
+                and r["sampler"] in samplers
+                and int(r["seed"]) in common.get(r["problem"], [])
+            ):
+                cpu[r["sampler"]].append(float(r["cpu_s"]))
+        n_seeds = sorted({len(common[p]) for p in probs})
         out.append(
-            f"\n### {half} half: median final regret ({len(probs)} problems with every sampler, "
-            f"seeds per problem and sampler: {', '.join(map(str, n_seeds))})\n"
+            f"\n### {half} half: median final regret ({len(probs)} problems; seeds per problem, "
+            f"the same for every sampler: {', '.join(map(str, n_seeds))})\n"
         )
-        out.append("| problem | " + " | ".join(samplers) + " |")
-        out.append("|---" * (len(samplers) + 1) + "|")
+        out.append("| problem | seeds | " + " | ".join(samplers) + " |")
+        out.append("|---" * (len(samplers) + 2) + "|")
         good = dict.fromkeys(samplers, 0)
         lowest = dict.fromkeys(samplers, 0)
         for p in probs:
-            med = {s: statistics.median(seeds[p, s]) for s in samplers}
+            med = {s: statistics.median(regret[p, s, k] for k in common[p]) for s in samplers}
             lo = min(med.values())
             cells = []
             for s in samplers:
@@ -367,16 +395,34 @@ def summary(rows: list[dict[str, str]], samplers: list[str]) -> str:
                 good[s] += ok
                 lowest[s] += med[s] == lo
                 cells.append(f"**{med[s]:.3g}**" if ok else f"{med[s]:.3g}")
-            out.append(f"| {p} | " + " | ".join(cells) + " |")
+            out.append(f"| {p} | {len(common[p])} | " + " | ".join(cells) + " |")
+        n = len(probs)
         out.append(
-            "| lowest or within 10 % | "
-            + " | ".join(f"{good[s]}/{len(probs)} ({good[s] / len(probs):.0%})" for s in samplers)
+            "| lowest or within 10 % | | "
+            + " | ".join(f"{good[s]}/{n} ({good[s] / n:.0%})" for s in samplers)
             + " |"
         )
+        out.append("| lowest | | " + " | ".join(f"{lowest[s]}/{n}" for s in samplers) + " |")
         out.append(
-            "| lowest | " + " | ".join(f"{lowest[s]}/{len(probs)}" for s in samplers) + " |"
+            "| median CPU s per run | | "
+            + " | ".join(f"{statistics.median(cpu[s]):.1f}" for s in samplers)
+            + " |"
         )
     return "\n".join(out)
+
+
+def timing_table(path: Path) -> str:
+    """The ask(4) CPU seconds of ``<out>/timing.csv`` as Markdown."""
+    rows = _read(path)
+    if not rows:
+        return ""
+    lines = ["\n### CPU s of ask(4) after 200 observations in 4-D, one thread (median of 3)\n"]
+    lines.append("| sampler | CPU s |")
+    lines.append("|---|---|")
+    for r in rows:
+        value = r["ask4_cpu_s"] and f"{float(r['ask4_cpu_s']):.3g}"
+        lines.append(f"| {r['sampler']} | {value or r['error']} |")
+    return "\n".join(lines)
 
 
 def main() -> None:
@@ -446,7 +492,7 @@ def main() -> None:
                         f"{r['cpu_s']:.1f} CPU s",
                         flush=True,
                     )
-    text = summary(_read(results), samplers)
+    text = summary(_read(results), samplers) + "\n" + timing_table(args.out / "timing.csv")
     (args.out / "summary.md").write_text(text + "\n")
     print(text)
 
