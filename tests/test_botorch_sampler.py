@@ -34,6 +34,7 @@ def _run(name, batches, n_initial=4, fail_above=None, **options):
     return sampler, told
 
 
+@pytest.mark.slow
 def test_botorch_batches_are_deterministic_and_a_replay_asks_the_same():
     pytest.importorskip("botorch")
     first, told = _run("botorch", 4, fail_above=0.95, **FAST)  # two model-based batches
@@ -53,6 +54,7 @@ def test_botorch_batches_are_deterministic_and_a_replay_asks_the_same():
     assert other.ask() != batch  # the seed matters
 
 
+@pytest.mark.slow
 def test_botorch_finds_a_quadratics_minimum():
     pytest.importorskip("botorch")
     sampler, told = _run("botorch", 10, n_initial=6, num_restarts=4, raw_samples=128)
@@ -65,6 +67,7 @@ def test_botorch_finds_a_quadratics_minimum():
     assert rec_cost == _cost(rec_params) and rec_cost < 5e-3
 
 
+@pytest.mark.slow
 def test_optuna_gp_batches_are_deterministic_and_a_replay_asks_the_same():
     pytest.importorskip("optuna")
     pytest.importorskip("torch")
