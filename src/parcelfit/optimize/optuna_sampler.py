@@ -1,12 +1,15 @@
-"""Optuna's samplers (TPE) behind the `Sampler` interface, through Optuna's own ask/tell.
+"""Optuna's samplers (TPE, GPSampler) behind the `Sampler` interface, through Optuna's own
+ask/tell.
 
 Optuna's in-memory study holds the trials only while the process runs; the calibration store
 stays the record. Points told without having been asked (a resumed study replaying its store)
 are added as finished trials. Determinism: before every ask the sampler is rebuilt with a seed
 derived from (seed, number of told points, number of pending points), so the same history gives
 the same batch whether it was lived or replayed. Pending points are Optuna's running trials,
-which TPE's ``constant_liar`` keeps the next asks away from. Failed evaluations are told as
-failed trials, which TPE leaves out.
+which TPE's ``constant_liar`` keeps the next asks away from and GPSampler conditions its
+q-batch log expected improvement on. Failed evaluations are told as failed trials, which both
+leave out. GPSampler (``kind="gp"``, ``sampler: optuna-gp`` in a study file) needs PyTorch
+(the ``botorch`` extra installs it).
 """
 
 from __future__ import annotations
@@ -22,7 +25,8 @@ from parcelfit.optimize.space import Space
 
 
 class OptunaSampler:
-    """Optuna's TPE (``kind="tpe"``) as a batch ask/tell optimiser that minimises a cost."""
+    """Optuna's TPE (``kind="tpe"``) or GPSampler (``kind="gp"``) as a batch ask/tell optimiser
+    that minimises a cost; ``n_startup_trials`` random points come first."""
 
     def __init__(
         self,
@@ -36,8 +40,16 @@ class OptunaSampler:
             import optuna
         except ImportError as exc:
             raise missing_extra("optuna", exc, extra="optuna", what="the tpe optimizer") from exc
-        if kind != "tpe":
-            raise ParcelfitError(f"unknown Optuna sampler {kind!r}", fix="use tpe")
+        if kind not in ("tpe", "gp"):
+            raise ParcelfitError(f"unknown Optuna sampler {kind!r}", fix="use tpe or gp")
+        if kind == "gp":
+            try:
+                import torch  # noqa: F401 - Optuna's GPSampler imports it when it first samples
+            except ImportError as exc:
+                raise missing_extra(
+                    "torch", exc, extra="botorch", what="the optuna-gp optimizer"
+                ) from exc
+        self.kind = kind
         optuna.logging.set_verbosity(optuna.logging.WARNING)
         self._optuna = optuna
         self.space = space
@@ -63,11 +75,17 @@ class OptunaSampler:
         out = []
         for _ in range(n):
             seed = np.random.SeedSequence([self.seed, len(self._told), len(self._pending)])
-            self._study.sampler = self._optuna.samplers.TPESampler(
-                seed=int(seed.generate_state(1)[0]),
-                constant_liar=True,
-                n_startup_trials=self.n_startup_trials,
-            )
+            state = int(seed.generate_state(1)[0])
+            if self.kind == "gp":
+                self._study.sampler = self._optuna.samplers.GPSampler(
+                    seed=state,
+                    n_startup_trials=self.n_startup_trials,
+                    warn_independent_sampling=False,
+                )
+            else:
+                self._study.sampler = self._optuna.samplers.TPESampler(
+                    seed=state, constant_liar=True, n_startup_trials=self.n_startup_trials
+                )
             trial = self._study.ask(self._dists)
             params = {k: float(trial.params[k]) for k in self.space.names}
             self._pending.append((trial, params))
@@ -106,5 +124,5 @@ class OptunaSampler:
         return dict(p), float(c)  # type: ignore[arg-type]
 
     def recommend(self) -> tuple[dict[str, float], float] | None:
-        """The best observed parameters (TPE has no surrogate mean to average with)."""
+        """The best observed parameters (as Optuna's ``best_trial``)."""
         return self.best()

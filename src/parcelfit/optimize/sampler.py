@@ -16,7 +16,7 @@ from parcelfit.errors import ParcelfitError
 from parcelfit.optimize.bo import BatchBO, BOSettings
 from parcelfit.optimize.space import Space
 
-SAMPLERS = ("gp", "published", "tpe")
+SAMPLERS = ("gp", "published", "tpe", "optuna-gp", "botorch")
 
 
 @runtime_checkable
@@ -60,7 +60,8 @@ def make_sampler(
     options: Mapping[str, Any] | None = None,
 ) -> Sampler:
     """The optimiser called ``name``: "gp" (our GP batch BO, ``settings``), "published" (the
-    configuration of method.md section 7) or "tpe" (Optuna's TPE through its ask/tell)."""
+    configuration of method.md section 7), "tpe" or "optuna-gp" (Optuna's TPE or GPSampler
+    through its ask/tell) or "botorch" (BoTorch's SingleTaskGP with qLogNEI)."""
     if name == "gp":
         return BatchBO(space, batch_size=batch_size, seed=seed, settings=settings or BOSettings())
     if name == "published":
@@ -74,4 +75,14 @@ def make_sampler(
         from parcelfit.optimize.optuna_sampler import OptunaSampler
 
         return OptunaSampler(space, batch_size=batch_size, seed=seed, **dict(options or {}))
+    if name == "optuna-gp":
+        from parcelfit.optimize.optuna_sampler import OptunaSampler
+
+        opts = {"n_startup_trials": n_initial, **dict(options or {})}
+        return OptunaSampler(space, batch_size=batch_size, seed=seed, kind="gp", **opts)
+    if name == "botorch":
+        from parcelfit.optimize.botorch_sampler import BoTorchSampler
+
+        opts = {"n_initial": n_initial, **dict(options or {})}
+        return BoTorchSampler(space, batch_size=batch_size, seed=seed, **opts)
     raise ParcelfitError(f"unknown optimizer {name!r}", fix=f"use one of {', '.join(SAMPLERS)}")

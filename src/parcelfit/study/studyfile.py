@@ -42,7 +42,7 @@
     initial: 16                        # optional, Latin hypercube size (at most budget)
     budget: 80                         # optional, most fitting evaluations (<= 10000)
     seed: 0                            # optional
-    optimizer: {sampler: gp, ucb_lambda: 2.0}   # optional: gp | published | tpe, BOSettings
+    optimizer: {sampler: gp, ucb_lambda: 2.0}   # optional: gp | published | tpe | optuna-gp | botorch, BOSettings
     executor: {kind: local, workers: 2}   # optional: local (processes) | serial (this process,
                                        # for debugging; also executor: serial) | dask (scheduler: tcp://...)
 
@@ -306,12 +306,13 @@ class OptimizerSection(FileModel):
     model_config = ConfigDict(extra="allow")  # merged with FileModel's
     sampler: Annotated[str, Choice(tuple(SAMPLERS), what="optimizer")] = "gp"
     """The optimiser: gp (the default batch Bayesian optimisation), published (the published
-    settings) or tpe (Optuna); gp and published take BOSettings keys beside it."""
+    settings), tpe or optuna-gp (Optuna) or botorch (BoTorch); gp and published take BOSettings
+    keys beside it."""
 
     @classmethod
     def allowed_keys(cls, data: Mapping[Any, Any]) -> list[str]:
-        if data.get("sampler") == "tpe":
-            check_keys(data, ["sampler"], fix="the tpe sampler takes no settings but `sampler`")
+        if (name := data.get("sampler")) in ("tpe", "optuna-gp", "botorch"):
+            check_keys(data, ["sampler"], fix=f"the {name} sampler takes no settings but `sampler`")
         return ["sampler", *_GP_KEYS]
 
     @model_validator(mode="after")
@@ -452,7 +453,7 @@ class Study:
     budget: int
     seed: int
     bo: BOSettings
-    sampler: str = "gp"  # gp | published | tpe (see optimize.sampler)
+    sampler: str = "gp"  # gp | published | tpe | optuna-gp | botorch (see optimize.sampler)
     executor: Mapping[str, Any] = field(default_factory=dict)
     fingerprint: str = ""
     path: Path | None = None  # the study file
