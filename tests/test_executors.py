@@ -101,3 +101,187 @@ def test_a_calibration_runs_in_process_with_the_serial_executor(tmp_path):
     assert result.evaluations == 12 and result.stop_reason == "budget spent"
     by_status = study_status(tmp_path / "out")["by_status"]
     assert sum(by_status.values()) == 12 and "failed" not in by_status
+
+
+# -- Ctrl-C and closing a pool: nothing waits without a bound ------------------------------------
+
+
+def test_ctrl_c_delivered_to_another_thread_stops_the_wait_for_results():
+    """The kernel hands a Ctrl-C (SIGINT) to any thread of the process that does not block it;
+    the main thread, waiting for results, must act on it without waiting for the running task
+    (a pool's manager and feeder threads are such other threads)."""
+    import signal
+    import threading
+    import time
+
+    if threading.current_thread() is not threading.main_thread():
+        pytest.skip("signal handlers run in the main thread only")
+    release = threading.Event()
+
+    def task(_):  # a simulation of minutes
+        release.wait(20)
+        return 1
+
+    def bystander():  # another thread of this process receives the Ctrl-C
+        time.sleep(0.3)  # the main thread waits for the task's result by now
+        signal.pthread_kill(threading.get_ident(), signal.SIGINT)
+
+    ex = Executor(ThreadPoolExecutor(1))
+    other = threading.Thread(target=bystander, daemon=True)
+    t0 = time.monotonic()
+    try:
+        other.start()
+        with pytest.raises(KeyboardInterrupt):
+            for _ in ex.map(task, [0]):
+                pass
+        waited = time.monotonic() - t0
+    finally:
+        release.set()
+        other.join()
+        ex.close()
+    assert waited < 10  # not the task's 20 s
+
+
+def test_ctrl_c_is_held_off_while_a_worker_starts_and_delivered_after():
+    import signal
+    import threading
+
+    from parcelfit.sim.executors import _ctrl_c_held
+
+    if threading.current_thread() is not threading.main_thread():
+        pytest.skip("signal handlers run in the main thread only")
+    handler = signal.getsignal(signal.SIGINT)
+    reached = []
+    with pytest.raises(KeyboardInterrupt), _ctrl_c_held():
+        signal.raise_signal(signal.SIGINT)  # Ctrl-C while the worker is being started
+        reached.append(True)  # the start is not cut short
+    assert reached == [True]
+    assert signal.getsignal(signal.SIGINT) is handler
+
+
+def _abs(x):
+    return abs(x)
+
+
+def test_ctrl_c_while_a_local_worker_starts_does_not_reach_it(capfd):
+    """Ctrl-C goes to the terminal's whole process group, workers too; one still starting
+    (seconds of imports) must not die of it with a traceback (the pool would break)."""
+    import contextlib
+    import os
+    import signal
+    import threading
+    import time
+
+    import psutil
+
+    from parcelfit.sim.executors import local_executor
+
+    me = psutil.Process()
+    before = {c.pid for c in me.children()}
+    handler = signal.getsignal(signal.SIGINT)
+    hit: list[int] = []
+    stop = threading.Event()
+
+    def interrupt_new_workers() -> None:  # SIGINT to each new worker the moment it runs Python
+        while not stop.is_set():
+            for child in me.children():
+                if child.pid in before or child.pid in hit:
+                    continue
+                with contextlib.suppress(psutil.Error):
+                    if "spawn_main" in " ".join(child.cmdline()):
+                        os.kill(child.pid, signal.SIGINT)
+                        hit.append(child.pid)
+            time.sleep(0.005)
+
+    ex = local_executor(1)
+    interrupter = threading.Thread(target=interrupt_new_workers, daemon=True)
+    try:
+        interrupter.start()
+        out = [o for _, o in ex.map(_abs, [-3])]
+    finally:
+        stop.set()
+        interrupter.join()
+        ex.close()
+    assert hit  # the worker was interrupted while it started
+    assert [o.value for o in out] == [3] and ex.restarts == 0
+    assert "Traceback" not in capfd.readouterr().err
+    assert signal.getsignal(signal.SIGINT) is handler
+
+
+def _deaf_to_sigterm(pid_file):
+    """Stands for a worker inside a long C call (a simulation step), where the Python handler
+    of SIGTERM cannot run: it ignores SIGTERM, says its pid and runs for a minute."""
+    import os
+    import signal
+    import time
+    from pathlib import Path
+
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    Path(pid_file).write_text(str(os.getpid()))
+    time.sleep(60)
+    return 0
+
+
+def test_closing_a_local_pool_ends_a_worker_that_does_not_end_on_sigterm(tmp_path, monkeypatch):
+    import contextlib
+    import os
+    import signal
+    import threading
+    import time
+
+    import psutil
+
+    import parcelfit.sim.executors as executors
+
+    monkeypatch.setattr(executors, "_STOP_GRACE_S", 0.5)
+    ex = executors.local_executor(1, max_restarts=0)
+    pid_file = tmp_path / "pid"
+    out: list = []
+    runner = threading.Thread(
+        target=lambda: out.extend(ex.map(_deaf_to_sigterm, [str(pid_file)])), daemon=True
+    )
+    runner.start()
+    deadline = time.monotonic() + 60
+    while not pid_file.exists() and time.monotonic() < deadline:
+        time.sleep(0.02)
+    pid = int(pid_file.read_text())
+    try:
+        ex.close()
+        with contextlib.suppress(psutil.NoSuchProcess, psutil.TimeoutExpired):
+            psutil.Process(pid).wait(timeout=10)
+        alive = psutil.pid_exists(pid) and psutil.Process(pid).status() != psutil.STATUS_ZOMBIE
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
+        runner.join(30)
+    assert not alive
+    (outcome,) = [o for _, o in out]  # the task is reported, not retried in a new pool
+    assert outcome.value is None and "died" in outcome.error
+
+
+def test_closing_a_pool_frees_its_manager_thread_from_a_half_sent_result():
+    """A worker ended in the middle of sending its result leaves a message's length and part of
+    it in the result pipe: the pool's manager thread waits for the rest, for ever, and the
+    interpreter would wait for the thread when it exits. Closing the executor frees it."""
+    import contextlib
+    import os
+    import struct
+
+    from parcelfit.sim.executors import local_executor
+
+    ex = local_executor(1)
+    manager = None
+    try:
+        assert [o.value for _, o in ex.map(_abs, [-2])] == [2]
+        pool = ex._pool
+        manager = pool._executor_manager_thread
+        writer = pool._result_queue._writer
+        os.write(writer.fileno(), struct.pack("!i", 1 << 20) + b"\x80")  # 1 MiB announced
+        ex.close()
+        stuck = manager.is_alive()
+    finally:
+        if manager is not None and manager.is_alive():  # free it, whatever the outcome
+            with contextlib.suppress(OSError):
+                writer.close()
+            manager.join(10)
+    assert not stuck

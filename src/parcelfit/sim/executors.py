@@ -18,6 +18,12 @@ a caller can store each result the moment it exists; `Executor.simulate` does th
 simulation `Task` objects and turns anything that went wrong into a ``failed`` `SimResult`
 (the loop never stops on one simulation).
 
+Ctrl-C never waits on a simulation or on the pool: the wait for results wakes every
+`_TICK_S` seconds, so an interrupt the kernel hands to another thread of this process is acted
+on too; a local worker holds Ctrl-C off while it starts and ignores it afterwards; closing an
+executor ends the workers first (SIGTERM, then SIGKILL after `_STOP_GRACE_S` for one that does
+not end) and never waits more than `_STOP_WAIT_S` for the pool's lock or its manager thread.
+
 A worker that dies (a segfault, an out-of-memory kill) breaks a process pool: the pool is
 recreated and the tasks it was running are started again, up to ``max_restarts`` times each
 (``worker_restarts`` in their diagnostics); only then is a task failed. Dask retries a task
@@ -33,6 +39,7 @@ import contextlib
 import inspect
 import logging
 import multiprocessing
+import multiprocessing.connection
 import os
 import signal
 import threading
@@ -54,6 +61,12 @@ R = TypeVar("R")
 EXECUTOR_KINDS = ("serial", "local", "dask")
 # the most local worker processes (each holds a simulator; more than cores only queue)
 MAX_WORKERS = 256
+# The longest [s] the wait for results blocks at a time. A lock wait is interrupted only by a
+# signal delivered to the waiting thread; Ctrl-C delivered to another thread of this process
+# (the kernel may pick any thread that does not block it) is acted on when the wait returns.
+_TICK_S = 0.5
+_STOP_GRACE_S = 2.0  # [s] a worker gets after SIGTERM (to end its solvers) before SIGKILL
+_STOP_WAIT_S = 5.0  # [s] the most closing a pool waits for its lock or for its manager thread
 
 
 @dataclass(frozen=True)
@@ -171,17 +184,21 @@ class Executor:
             queue = deque(todo)
             again: list[int] = []
             broken = self._submit(fn, items, queue, futures, self.window or len(todo))
+            asked = time.monotonic()  # when a result last arrived, or `idle` was last asked
             while futures:
                 finished, _ = cf.wait(
                     futures,
-                    timeout=None if self._idle is None else self.poll,
+                    timeout=_TICK_S if self._idle is None else min(self.poll, _TICK_S),
                     return_when=cf.FIRST_COMPLETED,
                 )
-                if not finished:  # nothing for `poll` seconds: is anyone still working?
-                    stop = self._idle() if self._idle is not None else None
-                    if stop is not None:
-                        raise stop
+                if not finished:
+                    if self._idle is not None and time.monotonic() >= asked + self.poll:
+                        asked = time.monotonic()  # nothing for `poll` seconds: anyone working?
+                        stop = self._idle()
+                        if stop is not None:
+                            raise stop
                     continue
+                asked = time.monotonic()
                 for fut in sorted(finished, key=futures.__getitem__):
                     i = futures.pop(fut)
                     outcome = self._outcome(fut, deaths, i)
@@ -277,35 +294,117 @@ class Executor:
 
 
 def _shutdown(pool: cf.Executor) -> None:
-    """Shut ``pool`` down without waiting, cancelling what has not started; the worker
-    processes of a local pool are ended too (SIGTERM: each kills its external solvers, see
-    `parcelfit.sim.lifetime`), so that a simulation still running (the pool is closed early:
-    an error, Ctrl-C) does not keep this process from exiting until it ends."""
+    """Shut ``pool`` down, cancelling what has not started, in a way that cannot block: the
+    worker processes of a local pool are ended first (SIGTERM: each kills its external solvers,
+    see `parcelfit.sim.lifetime`; SIGKILL for one still there after `_STOP_GRACE_S` s, e.g. a
+    worker inside a long C call, where its SIGTERM handler cannot run), so that a simulation
+    still running (the pool is closed early: an error, Ctrl-C) does not keep this process from
+    exiting; ``shutdown()`` is given at most `_STOP_WAIT_S` s (it takes the pool's lock).
+
+    Then the pool's manager thread is let finish (it does within milliseconds of the workers'
+    end), for at most `_STOP_WAIT_S` s: if the interpreter exits first, concurrent.futures' exit
+    hook writes to the thread's wake-up pipe as the thread closes it ("OSError: Bad file
+    descriptor" after Ctrl-C), or joins the thread without a time limit. A thread still
+    reading a result that a worker ended in the middle of sending is freed by closing this
+    process's end of the result pipe (it then reads the pipe's end instead of waiting)."""
     workers = list((getattr(pool, "_processes", None) or {}).values())
-    manager = getattr(pool, "_executor_manager_thread", None)  # shutdown() forgets it
+    manager = getattr(pool, "_executor_manager_thread", None)  # shutdown() forgets these
+    results = getattr(pool, "_result_queue", None)
+    for process in workers:
+        with contextlib.suppress(Exception):  # gone already
+            process.terminate()
+    _within(_STOP_WAIT_S, partial(_shutdown_now, pool))
+    _end(workers)
+    if manager is None or manager is threading.current_thread() or not workers:
+        return
+    manager.join(timeout=1.0)
+    if manager.is_alive() and results is not None:
+        with contextlib.suppress(Exception):
+            results._writer.close()
+    manager.join(timeout=_STOP_WAIT_S)
+
+
+def _shutdown_now(pool: cf.Executor) -> None:
     try:
         pool.shutdown(wait=False, cancel_futures=True)
     except TypeError:  # Dask's executor cancels on shutdown(wait=False) and has no such option
         pool.shutdown(wait=False)
+
+
+def _within(seconds: float, fn: Callable[[], object]) -> bool:
+    """Run ``fn()`` in a daemon thread and wait for it at most ``seconds`` [s]; True if it
+    returned (an exception it raises is dropped: this is for cleaning up)."""
+    done = threading.Event()
+
+    def run() -> None:
+        try:
+            with contextlib.suppress(Exception):  # a lost Dask scheduler cannot cancel anything
+                fn()
+        finally:
+            done.set()
+
+    threading.Thread(target=run, name="parcelfit-pool-shutdown", daemon=True).start()
+    return done.wait(seconds)
+
+
+def _end(workers: Sequence[Any]) -> None:
+    """Wait up to `_STOP_GRACE_S` [s] for SIGTERMed worker processes to end; SIGKILL the rest."""
+    sentinels: dict[Any, Any] = {}
     for process in workers:
-        with contextlib.suppress(Exception):  # gone already
-            if process.is_alive():
-                process.terminate()
-    # The pool's manager thread closes its wake-up pipe once it sees the workers gone; if the
-    # interpreter exits first, concurrent.futures' exit hook may write to that pipe as it closes
-    # ("OSError: Bad file descriptor" printed after Ctrl-C, a race CPython 3.11 has): let the
-    # thread finish first (it does within milliseconds of the workers' end).
-    if workers and manager is not None and manager is not threading.current_thread():
+        with contextlib.suppress(Exception):  # closed already
+            sentinels[process.sentinel] = process
+    deadline = time.monotonic() + _STOP_GRACE_S
+    while sentinels and (left := deadline - time.monotonic()) > 0:
+        for ready in multiprocessing.connection.wait(list(sentinels), timeout=left):
+            sentinels.pop(ready, None)
+    for process in sentinels.values():
         with contextlib.suppress(Exception):
-            manager.join(timeout=5.0)
+            process.kill()
+    if sentinels:
+        multiprocessing.connection.wait(list(sentinels), timeout=1.0)
+
+
+@contextlib.contextmanager
+def _ctrl_c_held() -> Iterator[None]:
+    """Hold Ctrl-C (SIGINT) off while a worker process starts: the worker inherits the blocked
+    signal and ignores it from its initializer on (`_local_worker`), so a Ctrl-C during its
+    start (seconds of imports) cannot end it with a traceback; in the main thread an interrupt
+    arriving meanwhile is delivered after the worker is registered with its pool (never one
+    started but unknown to the pool, which nothing would stop)."""
+    if not hasattr(signal, "pthread_sigmask"):  # Windows: no signal masks
+        yield
+        return
+    main = threading.current_thread() is threading.main_thread()
+    caught: list[bool] = []
+    previous = signal.signal(signal.SIGINT, lambda *_: caught.append(True)) if main else None
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+        if main:
+            signal.signal(signal.SIGINT, signal.SIG_DFL if previous is None else previous)
+            if caught:
+                signal.raise_signal(signal.SIGINT)
+
+
+class _LocalPool(cf.ProcessPoolExecutor):
+    """The local process pool: each worker is started with Ctrl-C held off (`_ctrl_c_held`)."""
+
+    def _spawn_process(self) -> None:
+        with _ctrl_c_held():
+            super()._spawn_process()
 
 
 def _local_worker(parent_pid: int) -> None:
     """Initializer of a local worker process: Ctrl-C (SIGINT, sent to the terminal's whole
-    process group) is left to the parent, which stops the workers itself; and the worker dies
-    with its parent (`parcelfit.sim.lifetime.die_with_parent`)."""
+    process group) is left to the parent, which stops the workers itself (it was held off
+    while the worker started: `_ctrl_c_held`); and the worker dies with its parent
+    (`parcelfit.sim.lifetime.die_with_parent`)."""
     if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # discards a Ctrl-C held off until now
+        if hasattr(signal, "pthread_sigmask"):
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
     die_with_parent(parent_pid)
 
 
@@ -325,7 +424,7 @@ def local_executor(workers: int | None = None, max_restarts: int = 3) -> Executo
         )
 
     def pool() -> cf.Executor:
-        return cf.ProcessPoolExecutor(
+        return _LocalPool(
             max_workers=n,
             mp_context=multiprocessing.get_context("spawn"),
             initializer=_local_worker,
