@@ -8,7 +8,7 @@ import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Any, NoReturn
+from typing import TYPE_CHECKING, Annotated, Any, NoReturn
 
 import typer
 from rich.console import Console
@@ -21,6 +21,9 @@ from typer.core import TyperGroup
 from parcelfit import __version__
 from parcelfit.errors import ParcelfitError, os_error
 from parcelfit.progress import ProgressCallback, ProgressEvent
+
+if TYPE_CHECKING:
+    from parcelfit.study.status import StudyStatus, ValidationStatus
 
 
 class _Commands(TyperGroup):
@@ -1135,8 +1138,9 @@ def _calibrate_live(
     an error found then (a test case the dataset lacks, ...) is the only line printed."""
     from rich.live import Live
 
-    from parcelfit.study.calibration import STORE_FILE, study_status
     from parcelfit.study.folderlock import check_writable
+    from parcelfit.study.status import study_status
+    from parcelfit.study.store import STORE_FILE
 
     check_writable(folder, (STORE_FILE,))  # before the live display starts
     state: dict[str, ProgressEvent | None] = {"p": None}
@@ -1217,29 +1221,29 @@ def _iterations_text(last: int | None) -> str:
     )
 
 
-def _print_recommendation(info: dict[str, Any]) -> None:
+def _print_recommendation(info: StudyStatus) -> None:
     """The study's recommended parameters (what it validates and reports), or while it runs the
     lowest-cost ones so far; the same for `calibrate` and `status`."""
-    rec, low = info["recommended"], info["lowest_cost"]
+    rec, low = info.recommended, info.lowest_cost
     if rec is not None:
-        at = "" if rec["iteration"] is None else f", evaluated in iteration {rec['iteration']}"
-        _print_params(rec["params"], f"recommended parameters (cost {rec['cost']:.4g}{at})")
-        if low is not None and low["params"] != rec["params"]:
+        at = "" if rec.iteration is None else f", evaluated in iteration {rec.iteration}"
+        _print_params(rec.params, f"recommended parameters (cost {rec.cost:.4g}{at})")
+        if low is not None and low.params != rec.params:
             console.print(
-                f"the lowest single cost was {low['cost']:.4g} (iteration {low['iteration']}); "
+                f"the lowest single cost was {low.cost:.4g} (iteration {low.iteration}); "
                 "the recommendation is the evaluated point with the lowest GP mean cost "
                 "(optimizer: {recommend: posterior_mean}, the default)",
                 markup=False,
             )
     elif low is not None:
         _print_params(
-            low["params"],
-            f"lowest-cost parameters so far (cost {low['cost']:.4g}, iteration "
-            f"{low['iteration']}); the study recommends its parameters when it stops",
+            low.params,
+            f"lowest-cost parameters so far (cost {low.cost:.4g}, iteration "
+            f"{low.iteration}); the study recommends its parameters when it stops",
         )
-    shown = rec if rec is not None else low
-    if shown is not None and shown.get("parts"):
-        _print_parts(shown["parts"])
+    shown = info.shown
+    if shown is not None and shown.parts:
+        _print_parts(shown.parts)
 
 
 def _print_parts(parts: list[dict[str, Any]]) -> None:
@@ -1440,32 +1444,32 @@ def status(
     as_json: Annotated[bool, typer.Option("--json", help="Print machine-readable JSON.")] = False,
 ) -> None:
     """Show the state of a running or finished calibration study."""
-    from parcelfit.study.calibration import study_status
+    from parcelfit.study.status import study_status
 
     info = study_status(study_dir)
     if as_json:
-        sys.stdout.write(json.dumps(info, indent=1) + "\n")
+        sys.stdout.write(json.dumps(info.to_json(), indent=1) + "\n")
         return
-    record = info["study"] or {}
+    record = info.study or {}
     name = record.get("name", "?")
-    if info["synthetic"]:
+    if info.synthetic:
         from parcelfit.analysis import SYNTHETIC_NOTE
 
-        console.print(Text(f"dataset {info['dataset']} ({SYNTHETIC_NOTE})", style="yellow"))
-    counts = ", ".join(f"{n} {s}" for s, n in info["by_status"].items())
+        console.print(Text(f"dataset {info.dataset} ({SYNTHETIC_NOTE})", style="yellow"))
+    counts = ", ".join(f"{n} {s}" for s, n in info.by_status.items())
     console.print(
         Text.assemble(
             (str(name), "bold"),
-            f": {info['evaluations']} evaluations" + (f" ({counts})" if counts else ""),
-            f", {_iterations_text(info['last_iteration'])}",
-            f", reference run {info['reference_run']}",
-            f", stopped: {info['stop_reason'] or 'not yet'}",
+            f": {info.evaluations} evaluations" + (f" ({counts})" if counts else ""),
+            f", {_iterations_text(info.last_iteration)}",
+            f", reference run {info.reference_run}",
+            f", stopped: {info.stop_reason or 'not yet'}",
         )
     )
-    for v in info["validations"]:
-        on = f" on {v['case']}" if v.get("case") else ""
+    for v in info.validations:
+        on = f" on {v.case}" if v.case else ""
         console.print(
-            f"  validation after iteration {v['after_iteration']}{on}: {_verdict_word(v)}",
+            f"  validation after iteration {v.after_iteration}{on}: {_verdict_word(v)}",
             markup=False,
         )
     note = (record.get("optimizer") or {}).get("note")
@@ -1483,7 +1487,8 @@ def _print_verdict(folder: Path, tail: str = "") -> None:
     """Every check on a line of its own (published criteria, band test, transfer check,
     parameters determined) and the one overall verdict (`parcelfit.study.verdict`), for a
     study folder or a folder holding ``calibration/`` (the demo's)."""
-    from parcelfit.study.calibration import STORE_FILE, folder_verdict
+    from parcelfit.study.status import folder_verdict
+    from parcelfit.study.store import STORE_FILE
 
     inner = folder / "calibration"
     verdict = folder_verdict(
@@ -1527,12 +1532,12 @@ def _print_determined(folder: Path) -> None:
     console.print(Text("what the data determine: " + "; ".join(words)), markup=False)
 
 
-def _verdict_word(v: dict[str, Any]) -> str:
-    if v["status"] == "pending":
+def _verdict_word(v: ValidationStatus) -> str:
+    if v.status == "pending":
         return "pending (running, or interrupted: resumes with calibrate)"
-    if v["status"] != "ok":
-        return f"failed (the simulation ended {v['status']})"
-    return "passed" if v["passed"] else "failed"
+    if v.status != "ok":
+        return f"failed (the simulation ended {v.status})"
+    return "passed" if v.passed else "failed"
 
 
 def main() -> None:

@@ -51,7 +51,6 @@ from parcelfit.optimize.sampler import Sampler, make_sampler
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.runs import (
     TestCase,
-    is_synthetic,
     load_dataset,
     read_trajectory,
     write_trajectory,
@@ -93,7 +92,6 @@ from parcelfit.study.store import (
     StudyRecord,
 )
 from parcelfit.study.studyfile import CaseSpec, Study
-from parcelfit.study.verdict import Verdict, study_verdict
 
 FAILURES_IN_A_ROW = 8  # evaluations failing one after the other that stop a study or a screen
 LOST_WORKER_MESSAGES = (
@@ -1186,123 +1184,3 @@ def _cost_se(row: Evaluation) -> float | None:
     if not parts or any(p.get("se") is None for p in parts):
         return None
     return math.sqrt(sum((p["weight"] * p["se"]) ** 2 for p in parts))
-
-
-def record_summary(record: StudyRecord) -> dict[str, Any]:
-    """A study record as JSON (bounds SI), its optimiser as ``optimizer``: ``sampler``,
-    ``settings`` (BOSettings fields, None without a GP), ``recorded`` (False for a store of an
-    earlier version: the defaults stand in) and ``note`` (None, or what stands in)."""
-    doc = record.to_json()
-    del doc["sampler"], doc["bo_settings"]
-    doc["optimizer"] = {**record.optimizer.to_json(), "note": record.optimizer.note}
-    return doc
-
-
-def study_status(folder: str | Path) -> dict[str, Any]:
-    """A summary of a study folder (running or finished), JSON-ready.
-
-    Keys: ``study`` (its description, `record_summary`), ``dataset`` and ``synthetic`` (True for SYNTHETIC data,
-    None when the dataset is not found), ``reference_run``, ``stop_reason`` (None while
-    running), ``evaluations``, ``pending``, ``by_status`` (evaluations per status),
-    ``last_iteration`` (iterations are numbered one way everywhere: 0 is the initial design,
-    k >= 1 the k-th batch the optimiser chose; None before the first), ``recommended`` (the
-    parameters the study validates and reports, with their cost and the iteration they were
-    evaluated in; set when the study stops), ``lowest_cost`` (the evaluation with the lowest
-    single cost), both with ``parts``: the per-case costs of a joint or ensemble study (None
-    otherwise), ``cases`` (a joint study's test cases: label, role fit/validation/transfer,
-    weight, dataset, reference run and acceptance threshold; None for a one-case study),
-    ``validations`` (each with the iteration it followed, its case, status and verdict),
-    ``verdict`` (the overall verdict with its checks: published criteria, band test, transfer
-    check, parameters determined; `parcelfit.study.verdict`, from the stored results), and
-    ``units``: parameter values are SI, in the unit given per parameter.
-    """
-    from parcelfit.sim.params import si_unit
-
-    folder = Path(folder)
-    path = folder / STORE_FILE
-    if not path.is_file():
-        inner = folder / "calibration" / STORE_FILE
-        raise ParcelfitError(
-            f"no {STORE_FILE} here"
-            + ("; the study is in the calibration/ subfolder" if inner.is_file() else ""),
-            file=folder,
-            fix=f"point at {inner.parent}"
-            if inner.is_file()
-            else "point at a study's output folder",
-        )
-    store = Store(path, readonly=True)
-    try:
-        fits = store.evaluations("fit")
-        vals = store.evaluations("validation")
-        record, source = store.read_study(), store.read_source() or SourceRecord()
-        reference_run, stop_reason = store.get_meta("reference_run"), store.get_meta("stop_reason")
-        cases = store.get_meta("cases")
-        recommended = store.read_recommended()
-    finally:
-        store.close()
-    ok = [e for e in fits if e.status == "ok" and e.cost is not None and math.isfinite(e.cost)]
-    lowest = min(ok, key=lambda e: e.cost) if ok else None  # type: ignore[arg-type, return-value]
-    names = list(record.parameters if record else (lowest.params if lowest else []))
-    return {
-        "study": None if record is None else record_summary(record),
-        "dataset": source.dataset,
-        "synthetic": is_synthetic(source.dataset) if source.dataset else None,
-        "reference_run": reference_run,
-        "stop_reason": stop_reason,
-        "evaluations": len(fits),
-        "pending": sum(e.status == "pending" for e in fits),
-        "by_status": {
-            s: sum(e.status == s for e in fits) for s in sorted({e.status for e in fits})
-        },
-        "last_iteration": max((e.iteration for e in fits), default=None),
-        "recommended": None
-        if recommended is None
-        else {
-            **recommended.to_json(),
-            "iteration": next((e.iteration for e in fits if e.params == recommended.params), None),
-            "parts": next(
-                (e.details.get("cases") for e in fits if e.params == recommended.params), None
-            ),
-        },
-        "lowest_cost": None
-        if lowest is None
-        else {
-            "params": lowest.params,
-            "cost": lowest.cost,
-            "iteration": lowest.iteration,
-            "parts": lowest.details.get("cases"),
-        },
-        "cases": cases,
-        "validations": [
-            {
-                "after_iteration": v.iteration,
-                "case": v.details.get("case"),
-                "status": v.status,
-                "passed": v.details.get("passed"),
-            }
-            for v in vals
-        ],
-        "verdict": _verdict(folder, cases, stop_reason).to_json(),
-        "units": {**{n: si_unit(n) for n in names}, "cost": "-"},
-    }
-
-
-def _verdict(folder: Path, cases: Any, stop_reason: str | None) -> Verdict:
-    """The verdict of the study's stored results (a damaged results file counts as none)."""
-    try:
-        results = read_results(folder)
-    except ParcelfitError:
-        results = None
-    return study_verdict(results, cases, stop_reason is not None)
-
-
-def folder_verdict(folder: str | Path) -> Verdict:
-    """The overall verdict of a study folder with its checks (`parcelfit.study.verdict`): what
-    ``calibrate``, ``status`` and the report say."""
-    folder = Path(folder)
-    store = Store(folder / STORE_FILE, readonly=True)
-    try:
-        cases, stop_reason = store.get_meta("cases"), store.get_meta("stop_reason")
-    finally:
-        store.close()
-    return _verdict(folder, cases, stop_reason)
