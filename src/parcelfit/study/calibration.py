@@ -59,12 +59,7 @@ from parcelfit.study.folderlock import (
     set_aside_outputs,
 )
 from parcelfit.study.joint import check_placements, simulations_per_evaluation
-from parcelfit.study.loop import (
-    FAILURES_IN_A_ROW,
-    LOST_WORKER_MESSAGES,
-    FailureStreak,
-    study_executor,
-)
+from parcelfit.study.loop import AskTellLoop, study_executor
 from parcelfit.study.objective import (
     Objective,
     case_summary,
@@ -73,7 +68,6 @@ from parcelfit.study.objective import (
 )
 from parcelfit.study.store import (
     STORE_FILE,
-    Evaluation,
     OptimizerRecord,
     RecommendedRecord,
     SourceRecord,
@@ -184,11 +178,6 @@ class Calibration:
         self.progress = progress or ignore_progress
         self._opened: _Opened | None = None
         self._closed = False
-        self._streak = FailureStreak(
-            min(FAILURES_IN_A_ROW, study.budget),
-            self.folder,
-            "evaluations" if study.joint else "simulations",
-        )
 
     @cached_property
     def bo(self) -> Sampler:
@@ -379,25 +368,16 @@ class Calibration:
         study, finish = self.study, self.finish
         if self.set_aside is not None:
             self._report(-1, 0, f"restarted: the earlier study is in {self.set_aside.name}/")
-        # evaluations an earlier version stored as failed because their worker or the Dask
-        # scheduler was lost (not because the simulation failed) are run again
-        lost = [
-            r.id
-            for r in self.store.evaluations()
-            if r.status == "failed"
-            and str(r.details.get("message", "")).startswith(LOST_WORKER_MESSAGES)
-        ]
-        fits = self.store.evaluations("fit")
-        if not any(r.status == "ok" for r in fits):
-            # nothing has succeeded yet: what failed is run again (a set-up problem that
-            # stopped the study, see FailureStreak, may have been fixed since)
-            lost += [r.id for r in fits if r.status != "pending" and r.id not in lost]
-        if lost:
-            self.store.reopen(lost)
-        rows = self.store.evaluations("fit")
-        for r in rows:  # replay: the optimiser learns every finished evaluation again
-            if r.status != "pending":
-                self.bo.tell(r.params, r.cost if r.status == "ok" else None)
+        loop = AskTellLoop(
+            study,
+            self.bo,
+            self.store,
+            self._open().objective.evaluate,
+            self._report,
+            self.folder,
+            per_evaluation=simulations_per_evaluation(study) if study.joint else 1,
+        )
+        pending = loop.replay()  # the optimiser learns every finished evaluation again
         stored = self.store.evaluations("validation")
         validated = {v.iteration for v in stored}
         already_passed = False
@@ -407,19 +387,21 @@ class Calibration:
                 continue
             finish.last_validation = all(bool(v.details.get("passed")) for v in group)
             already_passed = already_passed or finish.last_validation
-        pending = [r for r in rows if r.status == "pending"]
         if already_passed and not pending:
             return self._result("validation passed")
-        iteration = max((r.iteration for r in rows), default=-1)
         if (self._executor_args[0] or study.executor.get("kind")) == "dask":
-            self._report(iteration, 0, "connecting to the Dask scheduler, waiting for a worker")
+            self._report(
+                loop.iteration, 0, "connecting to the Dask scheduler, waiting for a worker"
+            )
         executor = study_executor(study, *self._executor_args)
         try:
             if already_passed:
                 # a finished study whose record lost fitting runs (a lost worker): complete the
                 # record, no new iterations
-                self._report(iteration, len(pending), f"resuming {len(pending)} lost simulations")
-                self._run_rows(pending, executor)
+                self._report(
+                    loop.iteration, len(pending), f"resuming {len(pending)} lost simulations"
+                )
+                loop.evaluate(pending, executor)
                 finish.last_validation = True
                 return self._result("validation passed")
             # a validation interrupted by a kill is run again before anything else
@@ -437,64 +419,30 @@ class Calibration:
             while True:
                 if pending:
                     self._report(
-                        iteration, len(pending), f"resuming {len(pending)} pending simulations"
+                        loop.iteration, len(pending), f"resuming {len(pending)} pending simulations"
                     )
-                    self._run_rows(pending, executor)
+                    loop.evaluate(pending, executor)
                     pending = []
-                elif (done := len(self.store.evaluations("fit"))) < study.budget:
-                    iteration += 1
-                    n = min(
-                        study.initial if iteration == 0 else study.batch_size, study.budget - done
-                    )
-                    batch = self.bo.ask(n)
-                    seeds = [study.seed * 100003 + done + k for k in range(n)]
-                    self.store.add_pending("fit", iteration, batch, study.fit_setting, seeds)
-                    new_rows = [
-                        r for r in self.store.evaluations("fit") if r.iteration == iteration
-                    ]
-                    what = (
-                        "initial design (iteration 0)"
-                        if iteration == 0
-                        else f"iteration {iteration}"
-                    )
-                    per = simulations_per_evaluation(study) if study.joint else 1
-                    count = (
-                        f"{n} evaluations ({n * per} simulations)"
-                        if study.joint
-                        else f"{n} simulations"
-                    )
-                    self._report(iteration, n, f"{what}: {count}")
-                    self._run_rows(new_rows, executor)
-                else:
+                elif not loop.step(executor):
                     break
-                due = (
+                iteration = loop.iteration
+                if (
                     iteration >= 1
                     and iteration % study.validate_every == 0
                     and iteration not in validated
-                )
-                if due:
+                ):
                     validated.add(iteration)
                     if self._validate(iteration, executor):
                         return self._result("validation passed")
             if (
                 finish.validation_cases()
-                and iteration not in validated
-                and self._validate(iteration, executor)
+                and loop.iteration not in validated
+                and self._validate(loop.iteration, executor)
             ):
                 return self._result("validation passed")
             return self._result("budget spent")
         finally:
             executor.close()
-
-    def _run_rows(self, rows: list[Evaluation], executor: Executor) -> None:
-        """Evaluate stored fitting rows (`parcelfit.study.objective`), telling the optimiser
-        each as it is stored; a streak of failures stops the study (`FailureStreak`)."""
-        remaining = len(rows)
-        for done in self._open().objective.evaluate(rows, executor):
-            self.bo.tell(done.row.params, done.cost if done.status == "ok" else None)
-            remaining -= 1
-            self._report(done.row.iteration, remaining, f"{done.status}: {done.label}")
-            self._streak.add(done.row.id, done.status, done.message)
 
     def _validate(self, iteration: int, executor: Executor) -> bool | None:
         """Validate the recommended parameters after ``iteration`` (`Finish.validate`)."""

@@ -1,5 +1,12 @@
-"""The loop of a study: stored evaluations through an executor, one after the other, until a
-stop rule says so.
+"""The ask/tell loop of a study over an executor and the store (method.md section 7).
+
+`AskTellLoop` is the optimiser's side of a calibration: on resume it tells the sampler every
+finished evaluation the store holds (in the order they were asked, so that a stored study
+replays to the same next batch) and returns the pending ones; each step asks the sampler for a
+batch, stores it as pending before anything is simulated, evaluates it through the objective
+(`parcelfit.study.objective`) and tells the sampler each result the moment it is stored. What
+happens between steps (validations, when to stop before the budget) is the caller's
+(`parcelfit.study.calibration`).
 
 `FailureStreak` is the stop rule every loop shares: `FAILURES_IN_A_ROW` evaluations failing
 one after the other stop a calibration, a screening stage or a precision check with a
@@ -11,11 +18,17 @@ the Dask scheduler was lost (not the simulation): a resumed study runs them agai
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from parcelfit.errors import ParcelfitError
+from parcelfit.optimize.sampler import Sampler
 from parcelfit.sim.executors import Executor, make_executor
+from parcelfit.study.objective import Evaluated
+from parcelfit.study.store import Evaluation, Store
 from parcelfit.study.studyfile import Study
+
+Report = Callable[[int, int, str], None]  # (iteration, running, message): a progress line
 
 FAILURES_IN_A_ROW = 8  # evaluations failing one after the other that stop a study or a screen
 LOST_WORKER_MESSAGES = (
@@ -84,3 +97,94 @@ def study_executor(
         workers=workers or study.executor.get("workers"),
         scheduler=scheduler or study.executor.get("scheduler"),
     )
+
+
+class AskTellLoop:
+    """The ask/tell loop of a study's fitting evaluations (see the module doc).
+
+    ``evaluate`` simulates and stores pending rows, yielding each as stored
+    (`parcelfit.study.objective.Objective.evaluate`); ``report`` receives a progress line. The
+    initial design (iteration 0) is ``study.initial`` evaluations, every later iteration
+    ``study.batch_size``, until ``study.budget`` evaluations are stored. `FAILURES_IN_A_ROW`
+    failing one after the other stop it (`FailureStreak`, whose message names ``folder``)."""
+
+    def __init__(
+        self,
+        study: Study,
+        sampler: Sampler,
+        store: Store,
+        evaluate: Callable[[list[Evaluation], Executor], Iterator[Evaluated]],
+        report: Report,
+        folder: Path,
+        *,
+        per_evaluation: int = 1,
+    ) -> None:
+        self.study = study
+        self.sampler = sampler
+        self.store = store
+        self._evaluate = evaluate
+        self._report = report
+        self.per_evaluation = per_evaluation  # simulations of one evaluation (joint studies)
+        self.iteration = -1  # the last iteration stored (-1 before the initial design)
+        self.streak = FailureStreak(
+            min(FAILURES_IN_A_ROW, study.budget),
+            folder,
+            "evaluations" if study.joint else "simulations",
+        )
+
+    def replay(self) -> list[Evaluation]:
+        """Resume: make pending again what an earlier run lost (a lost worker or scheduler,
+        not a failed simulation; every failure while nothing has succeeded yet, as its cause
+        may have been fixed), tell the sampler every finished fitting evaluation in the order
+        it was asked, and return the pending ones."""
+        lost = [
+            r.id
+            for r in self.store.evaluations()
+            if r.status == "failed"
+            and str(r.details.get("message", "")).startswith(LOST_WORKER_MESSAGES)
+        ]
+        fits = self.store.evaluations("fit")
+        if not any(r.status == "ok" for r in fits):
+            lost += [r.id for r in fits if r.status != "pending" and r.id not in lost]
+        if lost:
+            self.store.reopen(lost)
+        rows = self.store.evaluations("fit")
+        for r in rows:
+            if r.status != "pending":
+                self.sampler.tell(r.params, r.cost if r.status == "ok" else None)
+        self.iteration = max((r.iteration for r in rows), default=-1)
+        return [r for r in rows if r.status == "pending"]
+
+    def evaluate(self, rows: list[Evaluation], executor: Executor) -> None:
+        """Evaluate stored pending rows, telling the sampler each as it is stored (a failure
+        as None) and counting failures in a row."""
+        remaining = len(rows)
+        for done in self._evaluate(rows, executor):
+            self.sampler.tell(done.row.params, done.cost if done.status == "ok" else None)
+            remaining -= 1
+            self._report(done.row.iteration, remaining, f"{done.status}: {done.label}")
+            self.streak.add(done.row.id, done.status, done.message)
+
+    def step(self, executor: Executor) -> bool:
+        """Ask the next iteration's batch (the initial design first), store it as pending,
+        evaluate it; False, doing nothing, when the budget is spent."""
+        study = self.study
+        done = len(self.store.evaluations("fit"))
+        if done >= study.budget:
+            return False
+        self.iteration += 1
+        iteration = self.iteration
+        n = min(study.initial if iteration == 0 else study.batch_size, study.budget - done)
+        batch = self.sampler.ask(n)
+        seeds = [study.seed * 100003 + done + k for k in range(n)]
+        self.store.add_pending("fit", iteration, batch, study.fit_setting, seeds)
+        rows = [r for r in self.store.evaluations("fit") if r.iteration == iteration]
+        what = "initial design (iteration 0)" if iteration == 0 else f"iteration {iteration}"
+        count = (
+            f"{n} evaluations ({n * self.per_evaluation} simulations)"
+            if study.joint
+            else f"{n} simulations"
+        )
+        self._report(iteration, n, f"{what}: {count}")
+        self.evaluate(rows, executor)
+        return True
