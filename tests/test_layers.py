@@ -19,7 +19,7 @@ LAYERS = [
     {"metrics", "stats", "doe"},
     {"tracking", "sim", "optimize"},
     {"study"},
-    {"analysis", "synth", "demo", "report"},
+    {"analysis", "synth", "simulate", "demo", "report"},
     {"cli", "__main__"},
 ]
 RANK = {unit: k for k, layer in enumerate(LAYERS) for unit in layer}

@@ -23,6 +23,7 @@ from parcelfit.errors import ParcelfitError, os_error
 from parcelfit.progress import ProgressCallback, ProgressEvent
 
 if TYPE_CHECKING:
+    from parcelfit.simulate import CaseSimulation
     from parcelfit.study.status import StudyStatus, ValidationStatus
 
 
@@ -517,23 +518,20 @@ def track(
 ) -> None:
     """Track the AprilTags of a video: one run file (t, x, y, theta) per parcel tag and a quality
     report (detection rate, gaps, reprojection error, transit time)."""
-    from parcelfit.tracking import load_tag_map, read_sensor_log, track_video, write_video_track
+    from parcelfit.tracking import load_tag_map, track_one, write_video_track
     from parcelfit.tracking.track import TrackOptions
 
     tag_map = load_tag_map(tags)
     with _frame_bar() as bar:
         task = bar.add_task(f"tracking {video.name}", total=None)
-        result = track_video(
+        result = track_one(
             video,
             tag_map,
             TrackOptions(max_gap=max_gap),
+            sensor_log=sensor_log,
+            sensors=sensors,
             progress=lambda k, n: bar.update(task, completed=k, total=n or None),
         )
-    if sensor_log is not None:
-        start, _, end = sensors.partition(",")
-        transit = read_sensor_log(sensor_log, start.strip(), end.strip())
-        for t in result.tags.values():
-            t.transit_time = transit
     files = write_video_track(result, out)
     q = result.quality
     table = Table(
@@ -793,49 +791,38 @@ def simulate(
 
     With --repeat N, simulate N seeded placements and write each run (OUT with -s<seed> before
     its suffix), a summary table (OUT with -ensemble.csv) and print the ensemble statistics."""
-    from parcelfit.runs import TestCase, write_trajectory
+    from parcelfit.runs import write_trajectory
     from parcelfit.sim.ensemble import MAX_PLACEMENTS
-    from parcelfit.sim.factory import SimulatorConfig, make_simulator
-    from parcelfit.sim.mujoco import MujocoSimulator, load_consignment, load_rig
-    from parcelfit.sim.params import parse_assignments
+    from parcelfit.simulate import case_simulation
 
     _at_most(repeat, "--repeat", MAX_PLACEMENTS)
     _at_most(seed, "--seed", 2**32 - 1)
     _workers_at_most(workers)
     _check_paths(out, video)  # before a simulation of minutes
-    rig_obj = load_rig(rig)
-    cons = load_consignment(consignment)
-    try:
-        params = cons.parameter_values(user_values=parse_assignments(set_ or []))
-    except ParcelfitError as exc:  # a value given with --set
-        raise ParcelfitError(exc.message, where="--set", fix=exc.fix) from None
-    config = SimulatorConfig(
-        "mujoco",
-        rig=rig,
-        consignment=consignment,
+    run = case_simulation(
+        rig,
+        consignment,
+        setting,
+        set_ or [],
+        record_vertices=video is not None,
         timestep=timestep,
         spacing=spacing,
         film_spacing=film_spacing,
         membrane_cap=membrane_cap,
         shell_dof=shell_dof,
-        shell_cells=None if shell_cells is None else _shell_cells(shell_cells),
+        shell_cells=shell_cells,
         belt_friction=belt_friction,
         mass_lumping=mass_lumping,
         wall_limit=wall_limit,
     )
-    sim = make_simulator(config)
-    assert isinstance(sim, MujocoSimulator)
-    sim = sim.with_options(record_vertices=video is not None)
-    case = TestCase(rig_obj.name, cons.name, setting)
-    rig_obj.drive_speeds(setting)  # a clear error for an unknown setting before simulating
+    case = run.case
     if repeat > 1:
         if video is not None:
             raise ParcelfitError("--video works with one run only", fix="leave out --repeat")
-        _simulate_ensemble(sim, params, case, seed or 0, repeat, _workers(workers), out)
+        _simulate_ensemble(run, seed or 0, repeat, _workers(workers), out)
         return
-    sim = sim.with_placement(seed)
     with console.status(f"simulating {case.label}"):
-        result, frames = sim.run_with_frames(params, case)
+        result, frames = run.simulator.with_placement(seed).run_with_frames(run.params, case)
     d = result.diagnostics
     colour = "green" if result.ok else "red"
     console.print(
@@ -852,22 +839,9 @@ def simulate(
         from parcelfit.sim.mujoco.render import animate_run
 
         with console.status("rendering the animation"):
-            console.print(Text(f"wrote {animate_run(rig_obj, frames, video, title=case.label)}"))
+            console.print(Text(f"wrote {animate_run(run.rig, frames, video, title=case.label)}"))
     if not result.ok:
         raise typer.Exit(code=1)
-
-
-def _shell_cells(text: str) -> tuple[int, int, int]:
-    """``--shell-cells`` text (``4,4,1``) as three whole numbers, checked."""
-    from parcelfit.sim.params import shell_cells
-
-    try:
-        numbers = [float(part) for part in text.split(",")]
-    except ValueError:
-        raise ParcelfitError(
-            f"--shell-cells {text!r} is not three numbers", fix="write e.g. 4,4,1"
-        ) from None
-    return shell_cells(numbers)
 
 
 def _shell_text(dof: str, cells: tuple[int, int, int]) -> str:
@@ -877,56 +851,20 @@ def _shell_text(dof: str, cells: tuple[int, int, int]) -> str:
     return f"{dof}, {cells[0]} x {cells[1]} x {cells[2]} cells"
 
 
-def _simulate_ensemble(
-    sim: Any, params: dict[str, float], case: Any, first: int, n: int, workers: int, out: Path
-) -> None:
-    """Simulate ``n`` placements from seed ``first``, write runs and a summary (see simulate).
-    The placements run in the project's executor (`parcelfit.sim.executors`: spawned worker
-    processes that die with this one, as MuJoCo and numba are not fork-safe; in this process
-    for one worker); each run is written the moment it arrives."""
+def _simulate_ensemble(run: CaseSimulation, first: int, n: int, workers: int, out: Path) -> None:
+    """Simulate ``n`` placements from seed ``first`` (`parcelfit.simulate.simulate_placements`)
+    with a progress bar; print their table and summary."""
     import math
 
-    import pandas as pd
     from rich.markup import escape
 
-    from parcelfit.runs import write_trajectory
-    from parcelfit.sim.ensemble import member_of, summarise
-    from parcelfit.sim.executors import Task, local_executor, serial_executor
-    from parcelfit.study.joint import simulate_items
+    from parcelfit.simulate import simulate_placements
 
-    seeds = list(range(first, first + n))
-    rows: list[dict[str, Any]] = []
-    members: list[Any] = []
-    items = [(Task(params, case, f"{out.stem}-s{seed}"), seed) for seed in seeds]
-    executor = local_executor(min(workers, n)) if workers > 1 else serial_executor()
-    with (
-        executor,
-        Progress(*Progress.get_default_columns(), TimeElapsedColumn(), console=console) as progress,
-    ):
-        task = progress.add_task(f"{case.label}: {n} placements", total=n)
-        for i, result in simulate_items(executor, sim, items):
-            m = member_of(seeds[i], result)
-            if m.run is not None:
-                write_trajectory(
-                    m.run.trajectory, out.with_name(f"{out.stem}-s{m.seed}{out.suffix}")
-                )
-            members.append(m)
-            rows.append(
-                {
-                    "seed": m.seed,
-                    "status": m.status.value,
-                    "transit_time_s": m.transit_time,
-                    "rotation_deg": None if m.rotation is None else math.degrees(m.rotation),
-                    "outcome": m.outcome,
-                    "wall_time_s": m.wall_time,
-                }
-            )
-            progress.advance(task)
-    members.sort(key=lambda m: m.seed)
-    rows.sort(key=lambda r: r["seed"])
-    table_path = out.with_name(f"{out.stem}-ensemble.csv")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    pd.DataFrame(rows).to_csv(table_path, index=False)
+    case = run.case
+    with Progress(*Progress.get_default_columns(), TimeElapsedColumn(), console=console) as bar:
+        task = bar.add_task(f"{case.label}: {n} placements", total=n)
+        done = simulate_placements(run, first, n, workers, out, lambda: bar.advance(task))
+    rows, st, table_path = done.rows, done.summary, done.table
     table = Table(title=f"{case.label}: {n} placements (seeds {first}-{first + n - 1})")
     for col in ("seed", "status", "transit time [s]", "rotation [deg]", "outcome"):
         table.add_column(escape(col), justify="right" if col != "status" else "left")
@@ -939,7 +877,6 @@ def _simulate_ensemble(
             r["outcome"],
         )
     console.print(table)
-    st = summarise(members)
     console.print(
         f"rotation [deg]: median {math.degrees(st.rotation_median):.1f} "
         f"(quartiles {math.degrees(st.rotation_q25):.1f}-{math.degrees(st.rotation_q75):.1f}, "
