@@ -46,7 +46,7 @@ from filelock import FileLock
 
 from parcelfit.errors import ParcelfitError, os_error
 from parcelfit.metrics import ReferenceSelection
-from parcelfit.optimize.sampler import Sampler, make_sampler
+from parcelfit.optimize.sampler import Sampler
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.sim.executors import Executor
 from parcelfit.sim.factory import make_simulator
@@ -129,7 +129,9 @@ class Calibration:
     """One study folder: its store, references, optimiser and executor (see the module doc).
 
     ``executor`` (serial, local or dask), ``scheduler`` and ``workers`` override the study
-    file's ``executor``; ``progress`` receives a `ProgressEvent` after every result. When the
+    file's ``executor``; ``sampler``, an optimiser object (`parcelfit.optimize.sampler.Sampler`),
+    replaces the one the study file names (a resumed study needs the same one); ``progress``
+    receives a `ProgressEvent` after every result. When the
     study stops it writes its results (``results.json``, `parcelfit.study.results`: the
     references, validations and surrogate the report renders) and, with ``figures``, the study
     figures (`parcelfit.study.plots.study_figures`) and, with ``key_frames`` too, the
@@ -164,8 +166,10 @@ class Calibration:
         animation: bool = False,
         advice: bool = True,
         restart: bool = False,
+        sampler: Sampler | None = None,
     ) -> None:
         self.study = study
+        self._sampler = sampler
         self.advice = advice
         self.restart = restart
         self.set_aside: Path | None = None  # where a restart moved the earlier outputs
@@ -181,16 +185,9 @@ class Calibration:
 
     @cached_property
     def bo(self) -> Sampler:
-        """The study's optimiser (made on first use; `run` tells it the stored evaluations)."""
-        study = self.study
-        return make_sampler(
-            study.sampler,
-            study.space,
-            batch_size=study.batch_size,
-            seed=study.seed,
-            settings=study.bo,
-            n_initial=study.initial,
-        )
+        """The study's optimiser: the ``sampler`` given, else the one its study file names
+        (`Study.new_sampler`); `run` tells it the stored evaluations."""
+        return self._sampler or self.study.new_sampler()
 
     def prepare(self) -> None:
         """Open the study: create and lock the folder (until `close`), set an earlier study
