@@ -1022,6 +1022,8 @@ def calibrate(
     """Calibrate by batch Bayesian optimisation; rerunning the same command resumes the study
     (a finished study only has its results, figures and key frames written again)."""
     from parcelfit.study.calibration import Calibration
+    from parcelfit.study.estimate import calibration_cost_line
+    from parcelfit.study.store import STORE_FILE
     from parcelfit.study.studyfile import load_study
 
     _check_executor(executor, ("serial", "local", "dask"))
@@ -1029,7 +1031,7 @@ def calibrate(
     study = load_study(study_file)
     folder = out or study_file.parent / study_file.stem
     _resumes(_stored(folder / "study.sqlite", "fit", "evaluations"))
-    cost = _calibration_cost(study, executor, workers, folder)
+    cost = calibration_cost_line(study, executor, workers, (folder / STORE_FILE).exists())
 
     def run(progress: ProgressCallback) -> Any:
         calibration = Calibration(
@@ -1048,22 +1050,6 @@ def calibrate(
         return result
 
     _calibrate_live(run, study.name, folder, cost)
-
-
-def _calibration_cost(study: Any, executor: str | None, workers: int | None, folder: Path) -> str:
-    """The calibration's expected cost (at most its budget), said when it starts."""
-    from parcelfit.study.estimate import calibration_estimate
-
-    kind = executor or study.executor.get("kind", "local")
-    n = 1 if kind == "serial" else _workers(workers or study.executor.get("workers"))
-    if kind == "dask":
-        n = 1
-    line = calibration_estimate(study, n).text(
-        "at most: it stops when a validation passes"
-        + ("; divide by the Dask cluster's worker processes" if kind == "dask" else "")
-        + ("; a resumed study runs only what is left" if (folder / "study.sqlite").exists() else "")
-    )
-    return line
 
 
 def _calibrate_live(
