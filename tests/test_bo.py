@@ -201,6 +201,29 @@ def test_a_study_file_chooses_its_optimizer(tmp_path, sampler):
     assert (again.evaluations, again.best_params) == (12, first.best_params)
 
 
+def test_the_sampler_is_an_object_chosen_once_from_the_registry(tmp_path):
+    from parcelfit.optimize.bo import BatchBO
+    from parcelfit.optimize.sampler import SAMPLERS, make_sampler
+    from parcelfit.study.calibration import Calibration
+    from parcelfit.study.studyfile import load_study
+
+    from .test_calibration import write_study
+
+    assert set(SAMPLERS) == {"gp", "published", "tpe"}
+    study = load_study(write_study(tmp_path, optimizer={"sampler": "published"}))
+    made = study.new_sampler()
+    assert isinstance(made, BatchBO) and made.settings == study.bo
+    # the same batch as the name resolved by make_sampler, from the same seed and history
+    named = make_sampler("published", study.space, batch_size=4, seed=study.seed, settings=study.bo)
+    assert made.ask() == named.ask()
+    own = make_sampler("tpe", study.space, batch_size=4, seed=1)
+    calibration = Calibration(study, tmp_path / "out", sampler=own)
+    assert calibration.bo is own  # an object given replaces the study file's
+    assert isinstance(Calibration(study, tmp_path / "out").bo, BatchBO)
+    with pytest.raises(ParcelfitError, match=r"unknown optimizer 'mango'.*gp, published, tpe"):
+        make_sampler("mango", study.space)
+
+
 def test_bad_optimizer_sections_name_file_key_and_fix(tmp_path):
     from parcelfit.study.studyfile import load_study
 

@@ -8,7 +8,8 @@ import time
 import pytest
 
 from parcelfit import ParcelfitError
-from parcelfit.study.calibration import Calibration, study_status
+from parcelfit.study.calibration import Calibration
+from parcelfit.study.status import study_status
 from parcelfit.study.studyfile import load_study
 
 from .fake_sim import TRUTH
@@ -28,8 +29,8 @@ def test_calibration_recovers_the_truth_and_validates(tmp_path):
         assert abs(result.best_params[name] - TRUTH[name]) < 0.15 * (high - low)
     assert seen and seen[-1].last_validation is True
     info = study_status(tmp_path / "out")
-    assert info["evaluations"] == result.evaluations and info["pending"] == 0
-    assert info["validations"][-1]["passed"] is True
+    assert info.evaluations == result.evaluations and info.pending == 0
+    assert info.validations[-1].passed is True
     assert (tmp_path / "out" / "runs" / "fit-000-00.csv").is_file()
     from parcelfit.study.plots import study_figures
 
@@ -55,7 +56,7 @@ def test_failed_simulations_are_recorded_and_do_not_stop_the_loop(tmp_path):
     result = Calibration(study, tmp_path / "out").run()
     info = study_status(tmp_path / "out")
     assert result.evaluations == 16 and result.stop_reason == "budget spent"
-    assert info["by_status"].get("unstable", 0) > 0 and info["by_status"]["ok"] > 0
+    assert info.by_status.get("unstable", 0) > 0 and info.by_status["ok"] > 0
 
 
 @pytest.mark.slow

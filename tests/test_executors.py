@@ -91,7 +91,8 @@ def test_executor_kinds_and_the_study_file_shorthand(tmp_path):
 
 @pytest.mark.slow
 def test_a_calibration_runs_in_process_with_the_serial_executor(tmp_path):
-    from parcelfit.study.calibration import Calibration, study_status
+    from parcelfit.study.calibration import Calibration
+    from parcelfit.study.status import study_status
     from parcelfit.study.studyfile import load_study
 
     from .helpers import write_study
@@ -99,7 +100,7 @@ def test_a_calibration_runs_in_process_with_the_serial_executor(tmp_path):
     study = load_study(write_study(tmp_path, budget=12, validation={}, executor="serial"))
     result = Calibration(study, tmp_path / "out").run()
     assert result.evaluations == 12 and result.stop_reason == "budget spent"
-    by_status = study_status(tmp_path / "out")["by_status"]
+    by_status = study_status(tmp_path / "out").by_status
     assert sum(by_status.values()) == 12 and "failed" not in by_status
 
 

@@ -7,8 +7,9 @@ import pytest
 import yaml
 
 from parcelfit import ParcelfitError
-from parcelfit.study.calibration import Calibration, study_status
+from parcelfit.study.calibration import Calibration
 from parcelfit.study.results import read_results
+from parcelfit.study.status import study_status
 from parcelfit.study.studyfile import load_study
 
 from .fake_sim import write_reference_dataset
@@ -165,7 +166,7 @@ def test_a_case_with_its_own_placements_is_simulated_that_often(tmp_path):
     out = tmp_path / "out"
     Calibration(study, out, figures=False).run()
     status = study_status(out)
-    parts = status["recommended"]["parts"]
+    parts = status.recommended.parts
     assert [p["seeds"] for p in parts] == [[1, 2, 3], [1]]
     runs = sorted(f.name for f in (out / "runs").glob("fit-*.csv"))
     assert len(runs) == 4 * 4  # four evaluations of 3 + 1 simulations
@@ -182,11 +183,11 @@ def test_a_joint_ensemble_study_stores_the_parts_and_checks_transfer(tmp_path, m
     result = Calibration(study, out, figures=False).run()
     assert result.evaluations == 8
     status = study_status(out)
-    assert [c["case"] for c in status["cases"]] == ["R/P/1", "Q/P/1", "R/P/2", "Q/P/2"]
-    assert [c["role"] for c in status["cases"]] == ["fit", "fit", "validation", "transfer"]
-    parts = status["recommended"]["parts"]
+    assert [c["case"] for c in status.cases] == ["R/P/1", "Q/P/1", "R/P/2", "Q/P/2"]
+    assert [c["role"] for c in status.cases] == ["fit", "fit", "validation", "transfer"]
+    parts = status.recommended.parts
     assert [p["case"] for p in parts] == ["R/P/1", "Q/P/1"] and len(parts[0]["seeds"]) == 3
-    assert status["recommended"]["cost"] == pytest.approx(
+    assert status.recommended.cost == pytest.approx(
         parts[0]["cost"] + 0.5 * parts[1]["cost"], rel=1e-12
     )
     for p in parts:  # each part: trajectory term + transit term, with its standard error
@@ -196,9 +197,9 @@ def test_a_joint_ensemble_study_stores_the_parts_and_checks_transfer(tmp_path, m
     assert [v.case for v in results.transfer] == ["Q/P/2"]
     assert results.transfer[0].verdict is not None
     assert results.identifiability is not None and results.identifiability.evaluations == 8
-    eps = sum(c["weight"] * c["threshold"] for c in status["cases"] if c["role"] == "fit")
+    eps = sum(c["weight"] * c["threshold"] for c in status.cases if c["role"] == "fit")
     assert results.identifiability.threshold == pytest.approx(eps, rel=1e-12)
-    assert status["validations"] and all(v["after_iteration"] >= 1 for v in status["validations"])
+    assert status.validations and all(v.after_iteration >= 1 for v in status.validations)
     # the advice, when a parameter stays open, weighs the validation and transfer cases
     assert results.advice is None or set(results.advice.changes) == {"R/P/2", "Q/P/2"}
     # `parcelfit status` shows the parts case by case
@@ -210,12 +211,12 @@ def test_a_joint_ensemble_study_stores_the_parts_and_checks_transfer(tmp_path, m
     assert "Q/P/1" in text and "R/P/1" in text and "trajectories" in text
     assert "what the data determine:" in text  # each parameter's verdict
     # the one verdict: the transfer check ran on Q/P/2 and has its own line
-    transfer = status["verdict"]["checks"][2]
+    transfer = status.verdict["checks"][2]
     assert transfer["outcome"] in ("passed", "failed") and "Q/P/2" in transfer["detail"]
     assert " ".join(f"transfer check: {transfer['outcome']} ({transfer['detail']})".split()) in (
         " ".join(text.split())
     )
-    assert status["verdict"]["parameters"]["analysed"]
+    assert status.verdict["parameters"]["analysed"]
     # the report: the cases, the transfer section, what the data determine
     from parcelfit.report import build_report
 
@@ -271,7 +272,7 @@ def test_an_ensemble_on_adjusted_transit_times_adjusts_real_and_simulated_runs_a
     out = tmp_path / "out"
     Calibration(study, out, figures=False).run()
     data = load_dataset(tmp_path / "data")
-    parts = study_status(out)["recommended"]["parts"]
+    parts = study_status(out).recommended.parts
     for part, spec in zip(parts, study.cases, strict=True):
         runs = data[spec.case].runs
         reference = adjusted_reference(select_reference(data[spec.case]), runs)
@@ -286,7 +287,7 @@ def test_an_ensemble_on_adjusted_transit_times_adjusts_real_and_simulated_runs_a
             speeds = ridden_speeds(read_trajectory(out / f))
             assert adjusted == pytest.approx(adjustment.adjust(raw, speeds), abs=1e-12)
     # the validation case keeps its measured times (the published criteria judge it)
-    assert "adjusted_transit_times" not in json.dumps(study_status(out)["validations"])
+    assert "adjusted_transit_times" not in json.dumps(study_status(out).to_json()["validations"])
     # `parcelfit status` says the transit term is on adjusted times
     from typer.testing import CliRunner
 

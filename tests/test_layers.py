@@ -19,14 +19,11 @@ LAYERS = [
     {"metrics", "stats", "doe"},
     {"tracking", "sim", "optimize"},
     {"study"},
-    {"analysis", "synth", "demo", "report"},
+    {"analysis", "synth", "simulate", "demo", "report"},
     {"cli", "__main__"},
 ]
 RANK = {unit: k for k, layer in enumerate(LAYERS) for unit in layer}
 SHARED = {0, 5, 6}
-# the study layer's former places, kept as aliases of the moved modules (and the same names
-# from parcelfit.optimize, through its module __getattr__): the only upward imports
-ALIASES = {"calibration", "screening", "study", "store", "results", "plots"}
 
 
 def _unit(module: str) -> str:
@@ -69,16 +66,13 @@ def test_imports_point_to_the_same_layer_or_below():
                 continue
             if RANK[to] == RANK[unit] and RANK[unit] in SHARED:
                 continue
-            in_optimize = path.parent == PACKAGE / "optimize"
-            if in_optimize and path.stem in {*ALIASES, "__init__"} and to == "study":
-                continue
             wrong.append(f"{path.relative_to(PACKAGE)} imports {target}")
     assert not wrong
 
 
-def test_optimize_imports_nothing_of_sim():
+def test_optimize_imports_nothing_of_sim_or_study():
     for path in sorted((PACKAGE / "optimize").glob("*.py")):
-        assert [t for t in _imports(path) if _unit(t) == "sim"] == [], path.name
+        assert [t for t in _imports(path) if _unit(t) in ("sim", "study")] == [], path.name
     # and nothing reaches it indirectly: importing the optimisers loads no simulator or study
     code = (
         "import sys\n"
@@ -93,17 +87,3 @@ def test_optimize_imports_nothing_of_sim():
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env
     ).stdout
     assert out.strip() == "[]"
-
-
-def test_the_study_layers_former_paths_still_import():
-    import parcelfit.optimize
-    import parcelfit.optimize.calibration
-    import parcelfit.study.calibration
-    from parcelfit.optimize.study import load_study
-    from parcelfit.study import Calibration, study_status
-    from parcelfit.study.studyfile import load_study as moved
-
-    assert parcelfit.optimize.calibration is parcelfit.study.calibration
-    assert load_study is moved and parcelfit.optimize.load_study is moved
-    assert parcelfit.optimize.Calibration is Calibration
-    assert parcelfit.optimize.study_status is study_status

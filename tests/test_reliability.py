@@ -20,7 +20,8 @@ from parcelfit.errors import short_path
 from parcelfit.report import build_report
 from parcelfit.report.browser import chromium, inspect_page
 from parcelfit.report.html import CONTENT_SECURITY_POLICY
-from parcelfit.study.calibration import Calibration, study_status
+from parcelfit.study.calibration import Calibration
+from parcelfit.study.status import study_status
 from parcelfit.study.store import Store
 from parcelfit.study.studyfile import load_study
 
@@ -243,7 +244,7 @@ def finished(tmp_path_factory):
     )
     Calibration(load_study(study), root / "out").run()
     info = study_status(root / "out")
-    assert info["evaluations"] >= 6 and info["validations"], info  # what the tests below need
+    assert info.evaluations >= 6 and info.validations, info  # what the tests below need
     return root
 
 
@@ -286,7 +287,7 @@ def test_status_and_report_open_the_store_read_only(finished, tmp_path):
     n = _fits(out)
     info = study_status(out)
     build_report(out, out=tmp_path / "r.html", key_frames=False)
-    assert info["evaluations"] == n and db.read_bytes() == before
+    assert info.evaluations == n and db.read_bytes() == before
     ro = Store(db, readonly=True)
     with pytest.raises(ParcelfitError, match="read-only"):
         ro.set_meta("x", 1)
@@ -454,9 +455,9 @@ def test_a_validation_killed_midway_is_run_again_on_resume(finished, tmp_path):
     con.close()
     again = Calibration(study, out).run()
     info = study_status(out)
-    assert again.evaluations == first["evaluations"] == _fits(out)  # no extra fitting runs
-    assert info["validations"] == first["validations"]  # simulated again, same verdict
-    assert info["validations"][-1]["status"] == "ok" and info["stop_reason"] is not None
+    assert again.evaluations == first.evaluations == _fits(out)  # no extra fitting runs
+    assert info.validations == first.validations  # simulated again, same verdict
+    assert info.validations[-1].status == "ok" and info.stop_reason is not None
 
 
 @pytest.mark.slow
@@ -505,7 +506,7 @@ def test_a_worker_killed_during_a_calibration_leaves_no_failed_evaluation(tmp_pa
     result = Calibration(study, tmp_path / "out").run()
     assert (tmp_path / "crashed").exists()  # one simulation killed its worker
     info = study_status(tmp_path / "out")
-    assert result.evaluations == 8 and info["by_status"] == {"ok": 8}
+    assert result.evaluations == 8 and info.by_status == {"ok": 8}
     store = Store(tmp_path / "out" / "study.sqlite", readonly=True)
     restarted = [e for e in store.evaluations("fit") if e.details.get("worker_restarts")]
     store.close()
@@ -875,7 +876,7 @@ def test_losing_the_dask_scheduler_stops_cleanly_and_the_study_resumes(tmp_path)
             with contextlib.suppress(ProcessLookupError):
                 os.killpg(p.pid, signal.SIGKILL)
     info = study_status(out)
-    assert set(info["by_status"]) <= {"ok", "pending"}  # nothing stored as failed
+    assert set(info.by_status) <= {"ok", "pending"}  # nothing stored as failed
     before = finished_fits(out / "study.sqlite")
     done = subprocess.run(
         [*calibrate, "--executor", "local", "--workers", "2"],
@@ -1204,9 +1205,9 @@ def test_evaluations_once_stored_failed_by_a_lost_worker_run_again(finished, tmp
         (lost,),
     )
     con.close()
-    assert study_status(out)["by_status"] == {"failed": 2, "ok": n - 2}
+    assert study_status(out).by_status == {"failed": 2, "ok": n - 2}
     Calibration(study, out).run()
-    assert study_status(out)["by_status"] == {"ok": n}
+    assert study_status(out).by_status == {"ok": n}
 
 
 @pytest.mark.slow
@@ -1257,15 +1258,15 @@ def test_a_study_whose_every_simulation_fails_stops_after_8_and_quotes_the_first
         "failed is run again while nothing has succeeded yet)"
     ]
     info = study_status(out)
-    assert info["by_status"] == {"failed": 8} and info["stop_reason"] is None
+    assert info.by_status == {"failed": 8} and info.stop_reason is None
     assert not (out / "results.json").exists()
     # the set-up fixed, the same command runs the 8 failed simulations again and goes on
     monkeypatch.setenv("FAKE_SIM_FIXED", "1")
     result = runner.invoke(app, ["calibrate", str(study), "--out", str(out)])
     assert result.exit_code == 0, result.output
     info = study_status(out)
-    assert info["evaluations"] == 12 and "failed" not in info["by_status"]
-    assert info["stop_reason"] == "budget spent"
+    assert info.evaluations == 12 and "failed" not in info.by_status
+    assert info.stop_reason == "budget spent"
 
 
 def test_a_small_study_whose_every_simulation_fails_stops_at_its_budget(tmp_path):
@@ -1280,7 +1281,7 @@ def test_a_small_study_whose_every_simulation_fails_stops_at_its_budget(tmp_path
     )
     with pytest.raises(ParcelfitError, match=r"^\S+: 5 simulations in a row failed"):
         Calibration(load_study(study), tmp_path / "o").run()
-    assert study_status(tmp_path / "o")["by_status"] == {"failed": 5}
+    assert study_status(tmp_path / "o").by_status == {"failed": 5}
 
 
 def test_a_screen_whose_every_simulation_fails_stops_after_8_and_resumes_once_fixed(
@@ -1404,7 +1405,7 @@ def test_a_full_disk_while_storing_a_result_is_one_line_and_loses_nothing(
     ]
     monkeypatch.setattr(Store, "__init__", opened)
     info = study_status(out)
-    assert info["by_status"] == {"ok": 5, "pending": 3}  # the sixth result rolled back
+    assert info.by_status == {"ok": 5, "pending": 3}  # the sixth result rolled back
     kept = finished_fits(out / "study.sqlite")
     result = runner.invoke(app, ["calibrate", str(study), "--out", str(out)])  # space freed
     assert result.exit_code == 0, result.output
@@ -1442,11 +1443,11 @@ def test_a_full_disk_while_writing_a_run_file_is_one_line_and_loses_nothing(tmp_
         f"fit-000-0{k}.csv" for k in range(5)
     ]  # no half-written file
     monkeypatch.setattr(pd.DataFrame, "to_csv", to_csv)
-    assert study_status(out)["by_status"] == {"ok": 5, "pending": 3}
+    assert study_status(out).by_status == {"ok": 5, "pending": 3}
     result = runner.invoke(app, ["calibrate", str(study), "--out", str(out)])
     assert result.exit_code == 0, result.output
     info = study_status(out)
-    assert info["evaluations"] == 12 and not {"pending", "failed"} & set(info["by_status"])
+    assert info.evaluations == 12 and not {"pending", "failed"} & set(info.by_status)
     assert all((out / "runs" / f"fit-000-0{k}.csv").stat().st_size > 100 for k in range(8))
 
 
@@ -1485,12 +1486,12 @@ def test_a_study_folder_without_its_store_is_refused_until_restart(tmp_path):
     said = "".join(result.output.split())  # unwrapped
     assert "".join(f"the earlier study's outputs are in {earlier}".split()) in said
     assert _snapshot(earlier) == first  # moved as they were
-    assert study_status(out)["evaluations"] == 8  # a new study, run in full
+    assert study_status(out).evaluations == 8  # a new study, run in full
     # --restart on a folder with its store sets the store aside as well
     again = runner.invoke(app, [*args, "--restart"])
     assert again.exit_code == 0, again.output
     assert len(list(out.glob("earlier-*/study.sqlite"))) == 1
-    assert study_status(out)["evaluations"] == 8
+    assert study_status(out).evaluations == 8
 
 
 @pytest.mark.slow

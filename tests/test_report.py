@@ -105,7 +105,7 @@ def test_report_is_one_self_contained_file_with_every_section(demo_folder, monke
     # within 10 %, mu_d_BePa may lie just outside)
     from parcelfit.study import study_status
 
-    rec = study_status(demo_folder / "calibration")["recommended"]["params"]
+    rec = study_status(demo_folder / "calibration").recommended.params
     ranges = {"mu_d_BePa": (0.3, 0.6), "mu_d_MePa": (0.15, 0.35)}
     count = sum(abs(rec[k] - TRUTH[k]) <= 0.1 * (hi - lo) for k, (lo, hi) in ranges.items())
     assert count >= 1 and "truth (hidden)" in text

@@ -8,7 +8,7 @@ import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Any, NoReturn
+from typing import TYPE_CHECKING, Annotated, Any, NoReturn
 
 import typer
 from rich.console import Console
@@ -21,6 +21,10 @@ from typer.core import TyperGroup
 from parcelfit import __version__
 from parcelfit.errors import ParcelfitError, os_error
 from parcelfit.progress import ProgressCallback, ProgressEvent
+
+if TYPE_CHECKING:
+    from parcelfit.simulate import CaseSimulation
+    from parcelfit.study.status import StudyStatus, ValidationStatus
 
 
 class _Commands(TyperGroup):
@@ -514,23 +518,20 @@ def track(
 ) -> None:
     """Track the AprilTags of a video: one run file (t, x, y, theta) per parcel tag and a quality
     report (detection rate, gaps, reprojection error, transit time)."""
-    from parcelfit.tracking import load_tag_map, read_sensor_log, track_video, write_video_track
+    from parcelfit.tracking import load_tag_map, track_one, write_video_track
     from parcelfit.tracking.track import TrackOptions
 
     tag_map = load_tag_map(tags)
     with _frame_bar() as bar:
         task = bar.add_task(f"tracking {video.name}", total=None)
-        result = track_video(
+        result = track_one(
             video,
             tag_map,
             TrackOptions(max_gap=max_gap),
+            sensor_log=sensor_log,
+            sensors=sensors,
             progress=lambda k, n: bar.update(task, completed=k, total=n or None),
         )
-    if sensor_log is not None:
-        start, _, end = sensors.partition(",")
-        transit = read_sensor_log(sensor_log, start.strip(), end.strip())
-        for t in result.tags.values():
-            t.transit_time = transit
     files = write_video_track(result, out)
     q = result.quality
     table = Table(
@@ -790,49 +791,38 @@ def simulate(
 
     With --repeat N, simulate N seeded placements and write each run (OUT with -s<seed> before
     its suffix), a summary table (OUT with -ensemble.csv) and print the ensemble statistics."""
-    from parcelfit.runs import TestCase, write_trajectory
+    from parcelfit.runs import write_trajectory
     from parcelfit.sim.ensemble import MAX_PLACEMENTS
-    from parcelfit.sim.factory import SimulatorConfig, make_simulator
-    from parcelfit.sim.mujoco import MujocoSimulator, load_consignment, load_rig
-    from parcelfit.sim.params import parse_assignments
+    from parcelfit.simulate import case_simulation
 
     _at_most(repeat, "--repeat", MAX_PLACEMENTS)
     _at_most(seed, "--seed", 2**32 - 1)
     _workers_at_most(workers)
     _check_paths(out, video)  # before a simulation of minutes
-    rig_obj = load_rig(rig)
-    cons = load_consignment(consignment)
-    try:
-        params = cons.parameter_values(user_values=parse_assignments(set_ or []))
-    except ParcelfitError as exc:  # a value given with --set
-        raise ParcelfitError(exc.message, where="--set", fix=exc.fix) from None
-    config = SimulatorConfig(
-        "mujoco",
-        rig=rig,
-        consignment=consignment,
+    run = case_simulation(
+        rig,
+        consignment,
+        setting,
+        set_ or [],
+        record_vertices=video is not None,
         timestep=timestep,
         spacing=spacing,
         film_spacing=film_spacing,
         membrane_cap=membrane_cap,
         shell_dof=shell_dof,
-        shell_cells=None if shell_cells is None else _shell_cells(shell_cells),
+        shell_cells=shell_cells,
         belt_friction=belt_friction,
         mass_lumping=mass_lumping,
         wall_limit=wall_limit,
     )
-    sim = make_simulator(config)
-    assert isinstance(sim, MujocoSimulator)
-    sim = sim.with_options(record_vertices=video is not None)
-    case = TestCase(rig_obj.name, cons.name, setting)
-    rig_obj.drive_speeds(setting)  # a clear error for an unknown setting before simulating
+    case = run.case
     if repeat > 1:
         if video is not None:
             raise ParcelfitError("--video works with one run only", fix="leave out --repeat")
-        _simulate_ensemble(sim, params, case, seed or 0, repeat, _workers(workers), out)
+        _simulate_ensemble(run, seed or 0, repeat, _workers(workers), out)
         return
-    sim = sim.with_placement(seed)
     with console.status(f"simulating {case.label}"):
-        result, frames = sim.run_with_frames(params, case)
+        result, frames = run.simulator.with_placement(seed).run_with_frames(run.params, case)
     d = result.diagnostics
     colour = "green" if result.ok else "red"
     console.print(
@@ -849,22 +839,9 @@ def simulate(
         from parcelfit.sim.mujoco.render import animate_run
 
         with console.status("rendering the animation"):
-            console.print(Text(f"wrote {animate_run(rig_obj, frames, video, title=case.label)}"))
+            console.print(Text(f"wrote {animate_run(run.rig, frames, video, title=case.label)}"))
     if not result.ok:
         raise typer.Exit(code=1)
-
-
-def _shell_cells(text: str) -> tuple[int, int, int]:
-    """``--shell-cells`` text (``4,4,1``) as three whole numbers, checked."""
-    from parcelfit.sim.params import shell_cells
-
-    try:
-        numbers = [float(part) for part in text.split(",")]
-    except ValueError:
-        raise ParcelfitError(
-            f"--shell-cells {text!r} is not three numbers", fix="write e.g. 4,4,1"
-        ) from None
-    return shell_cells(numbers)
 
 
 def _shell_text(dof: str, cells: tuple[int, int, int]) -> str:
@@ -874,56 +851,20 @@ def _shell_text(dof: str, cells: tuple[int, int, int]) -> str:
     return f"{dof}, {cells[0]} x {cells[1]} x {cells[2]} cells"
 
 
-def _simulate_ensemble(
-    sim: Any, params: dict[str, float], case: Any, first: int, n: int, workers: int, out: Path
-) -> None:
-    """Simulate ``n`` placements from seed ``first``, write runs and a summary (see simulate).
-    The placements run in the project's executor (`parcelfit.sim.executors`: spawned worker
-    processes that die with this one, as MuJoCo and numba are not fork-safe; in this process
-    for one worker); each run is written the moment it arrives."""
+def _simulate_ensemble(run: CaseSimulation, first: int, n: int, workers: int, out: Path) -> None:
+    """Simulate ``n`` placements from seed ``first`` (`parcelfit.simulate.simulate_placements`)
+    with a progress bar; print their table and summary."""
     import math
 
-    import pandas as pd
     from rich.markup import escape
 
-    from parcelfit.runs import write_trajectory
-    from parcelfit.sim.ensemble import member_of, summarise
-    from parcelfit.sim.executors import Task, local_executor, serial_executor
-    from parcelfit.study.joint import simulate_items
+    from parcelfit.simulate import simulate_placements
 
-    seeds = list(range(first, first + n))
-    rows: list[dict[str, Any]] = []
-    members: list[Any] = []
-    items = [(Task(params, case, f"{out.stem}-s{seed}"), seed) for seed in seeds]
-    executor = local_executor(min(workers, n)) if workers > 1 else serial_executor()
-    with (
-        executor,
-        Progress(*Progress.get_default_columns(), TimeElapsedColumn(), console=console) as progress,
-    ):
-        task = progress.add_task(f"{case.label}: {n} placements", total=n)
-        for i, result in simulate_items(executor, sim, items):
-            m = member_of(seeds[i], result)
-            if m.run is not None:
-                write_trajectory(
-                    m.run.trajectory, out.with_name(f"{out.stem}-s{m.seed}{out.suffix}")
-                )
-            members.append(m)
-            rows.append(
-                {
-                    "seed": m.seed,
-                    "status": m.status.value,
-                    "transit_time_s": m.transit_time,
-                    "rotation_deg": None if m.rotation is None else math.degrees(m.rotation),
-                    "outcome": m.outcome,
-                    "wall_time_s": m.wall_time,
-                }
-            )
-            progress.advance(task)
-    members.sort(key=lambda m: m.seed)
-    rows.sort(key=lambda r: r["seed"])
-    table_path = out.with_name(f"{out.stem}-ensemble.csv")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    pd.DataFrame(rows).to_csv(table_path, index=False)
+    case = run.case
+    with Progress(*Progress.get_default_columns(), TimeElapsedColumn(), console=console) as bar:
+        task = bar.add_task(f"{case.label}: {n} placements", total=n)
+        done = simulate_placements(run, first, n, workers, out, lambda: bar.advance(task))
+    rows, st, table_path = done.rows, done.summary, done.table
     table = Table(title=f"{case.label}: {n} placements (seeds {first}-{first + n - 1})")
     for col in ("seed", "status", "transit time [s]", "rotation [deg]", "outcome"):
         table.add_column(escape(col), justify="right" if col != "status" else "left")
@@ -936,7 +877,6 @@ def _simulate_ensemble(
             r["outcome"],
         )
     console.print(table)
-    st = summarise(members)
     console.print(
         f"rotation [deg]: median {math.degrees(st.rotation_median):.1f} "
         f"(quartiles {math.degrees(st.rotation_q25):.1f}-{math.degrees(st.rotation_q75):.1f}, "
@@ -1082,6 +1022,8 @@ def calibrate(
     """Calibrate by batch Bayesian optimisation; rerunning the same command resumes the study
     (a finished study only has its results, figures and key frames written again)."""
     from parcelfit.study.calibration import Calibration
+    from parcelfit.study.estimate import calibration_cost_line
+    from parcelfit.study.store import STORE_FILE
     from parcelfit.study.studyfile import load_study
 
     _check_executor(executor, ("serial", "local", "dask"))
@@ -1089,7 +1031,7 @@ def calibrate(
     study = load_study(study_file)
     folder = out or study_file.parent / study_file.stem
     _resumes(_stored(folder / "study.sqlite", "fit", "evaluations"))
-    cost = _calibration_cost(study, executor, workers, folder)
+    cost = calibration_cost_line(study, executor, workers, (folder / STORE_FILE).exists())
 
     def run(progress: ProgressCallback) -> Any:
         calibration = Calibration(
@@ -1110,22 +1052,6 @@ def calibrate(
     _calibrate_live(run, study.name, folder, cost)
 
 
-def _calibration_cost(study: Any, executor: str | None, workers: int | None, folder: Path) -> str:
-    """The calibration's expected cost (at most its budget), said when it starts."""
-    from parcelfit.study.estimate import calibration_estimate
-
-    kind = executor or study.executor.get("kind", "local")
-    n = 1 if kind == "serial" else _workers(workers or study.executor.get("workers"))
-    if kind == "dask":
-        n = 1
-    line = calibration_estimate(study, n).text(
-        "at most: it stops when a validation passes"
-        + ("; divide by the Dask cluster's worker processes" if kind == "dask" else "")
-        + ("; a resumed study runs only what is left" if (folder / "study.sqlite").exists() else "")
-    )
-    return line
-
-
 def _calibrate_live(
     run: Callable[[ProgressCallback], Any], name: str, folder: Path, cost: str | None = None
 ) -> Any:
@@ -1135,8 +1061,9 @@ def _calibrate_live(
     an error found then (a test case the dataset lacks, ...) is the only line printed."""
     from rich.live import Live
 
-    from parcelfit.study.calibration import STORE_FILE, study_status
     from parcelfit.study.folderlock import check_writable
+    from parcelfit.study.status import study_status
+    from parcelfit.study.store import STORE_FILE
 
     check_writable(folder, (STORE_FILE,))  # before the live display starts
     state: dict[str, ProgressEvent | None] = {"p": None}
@@ -1217,29 +1144,29 @@ def _iterations_text(last: int | None) -> str:
     )
 
 
-def _print_recommendation(info: dict[str, Any]) -> None:
+def _print_recommendation(info: StudyStatus) -> None:
     """The study's recommended parameters (what it validates and reports), or while it runs the
     lowest-cost ones so far; the same for `calibrate` and `status`."""
-    rec, low = info["recommended"], info["lowest_cost"]
+    rec, low = info.recommended, info.lowest_cost
     if rec is not None:
-        at = "" if rec["iteration"] is None else f", evaluated in iteration {rec['iteration']}"
-        _print_params(rec["params"], f"recommended parameters (cost {rec['cost']:.4g}{at})")
-        if low is not None and low["params"] != rec["params"]:
+        at = "" if rec.iteration is None else f", evaluated in iteration {rec.iteration}"
+        _print_params(rec.params, f"recommended parameters (cost {rec.cost:.4g}{at})")
+        if low is not None and low.params != rec.params:
             console.print(
-                f"the lowest single cost was {low['cost']:.4g} (iteration {low['iteration']}); "
+                f"the lowest single cost was {low.cost:.4g} (iteration {low.iteration}); "
                 "the recommendation is the evaluated point with the lowest GP mean cost "
                 "(optimizer: {recommend: posterior_mean}, the default)",
                 markup=False,
             )
     elif low is not None:
         _print_params(
-            low["params"],
-            f"lowest-cost parameters so far (cost {low['cost']:.4g}, iteration "
-            f"{low['iteration']}); the study recommends its parameters when it stops",
+            low.params,
+            f"lowest-cost parameters so far (cost {low.cost:.4g}, iteration "
+            f"{low.iteration}); the study recommends its parameters when it stops",
         )
-    shown = rec if rec is not None else low
-    if shown is not None and shown.get("parts"):
-        _print_parts(shown["parts"])
+    shown = info.shown
+    if shown is not None and shown.parts:
+        _print_parts(shown.parts)
 
 
 def _print_parts(parts: list[dict[str, Any]]) -> None:
@@ -1440,32 +1367,32 @@ def status(
     as_json: Annotated[bool, typer.Option("--json", help="Print machine-readable JSON.")] = False,
 ) -> None:
     """Show the state of a running or finished calibration study."""
-    from parcelfit.study.calibration import study_status
+    from parcelfit.study.status import study_status
 
     info = study_status(study_dir)
     if as_json:
-        sys.stdout.write(json.dumps(info, indent=1) + "\n")
+        sys.stdout.write(json.dumps(info.to_json(), indent=1) + "\n")
         return
-    record = info["study"] or {}
+    record = info.study or {}
     name = record.get("name", "?")
-    if info["synthetic"]:
+    if info.synthetic:
         from parcelfit.analysis import SYNTHETIC_NOTE
 
-        console.print(Text(f"dataset {info['dataset']} ({SYNTHETIC_NOTE})", style="yellow"))
-    counts = ", ".join(f"{n} {s}" for s, n in info["by_status"].items())
+        console.print(Text(f"dataset {info.dataset} ({SYNTHETIC_NOTE})", style="yellow"))
+    counts = ", ".join(f"{n} {s}" for s, n in info.by_status.items())
     console.print(
         Text.assemble(
             (str(name), "bold"),
-            f": {info['evaluations']} evaluations" + (f" ({counts})" if counts else ""),
-            f", {_iterations_text(info['last_iteration'])}",
-            f", reference run {info['reference_run']}",
-            f", stopped: {info['stop_reason'] or 'not yet'}",
+            f": {info.evaluations} evaluations" + (f" ({counts})" if counts else ""),
+            f", {_iterations_text(info.last_iteration)}",
+            f", reference run {info.reference_run}",
+            f", stopped: {info.stop_reason or 'not yet'}",
         )
     )
-    for v in info["validations"]:
-        on = f" on {v['case']}" if v.get("case") else ""
+    for v in info.validations:
+        on = f" on {v.case}" if v.case else ""
         console.print(
-            f"  validation after iteration {v['after_iteration']}{on}: {_verdict_word(v)}",
+            f"  validation after iteration {v.after_iteration}{on}: {_verdict_word(v)}",
             markup=False,
         )
     note = (record.get("optimizer") or {}).get("note")
@@ -1483,7 +1410,8 @@ def _print_verdict(folder: Path, tail: str = "") -> None:
     """Every check on a line of its own (published criteria, band test, transfer check,
     parameters determined) and the one overall verdict (`parcelfit.study.verdict`), for a
     study folder or a folder holding ``calibration/`` (the demo's)."""
-    from parcelfit.study.calibration import STORE_FILE, folder_verdict
+    from parcelfit.study.status import folder_verdict
+    from parcelfit.study.store import STORE_FILE
 
     inner = folder / "calibration"
     verdict = folder_verdict(
@@ -1527,12 +1455,12 @@ def _print_determined(folder: Path) -> None:
     console.print(Text("what the data determine: " + "; ".join(words)), markup=False)
 
 
-def _verdict_word(v: dict[str, Any]) -> str:
-    if v["status"] == "pending":
+def _verdict_word(v: ValidationStatus) -> str:
+    if v.status == "pending":
         return "pending (running, or interrupted: resumes with calibrate)"
-    if v["status"] != "ok":
-        return f"failed (the simulation ended {v['status']})"
-    return "passed" if v["passed"] else "failed"
+    if v.status != "ok":
+        return f"failed (the simulation ended {v.status})"
+    return "passed" if v.passed else "failed"
 
 
 def _progress_bar(job: str) -> tuple[Progress, ProgressCallback]:

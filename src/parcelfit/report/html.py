@@ -72,6 +72,7 @@ from parcelfit.study.results import (
     ValidationRecord,
     read_results,
 )
+from parcelfit.study.status import folder_verdict, study_status
 from parcelfit.study.store import STORE_FILE, SourceRecord, Store, StudyRecord
 from parcelfit.study.verdict import UNDETERMINED_MEANING, Verdict, study_verdict
 
@@ -571,7 +572,6 @@ def _calibration_section(
     truth: dict[str, float],
     synthetic: bool,
 ) -> tuple[dict[str, float] | None, list[ParameterRow]]:
-    from parcelfit.study.calibration import study_status
     from parcelfit.study.plots import dependence_figure, history, traces
 
     title = page.start("Calibration")
@@ -582,9 +582,9 @@ def _calibration_section(
     finally:
         store.close()
     done = [e for e in fits if e.finished_at is not None]
-    last = status["last_iteration"]
+    last = status.last_iteration
     data: dict[str, Any] = {
-        "evaluations": status["evaluations"],
+        "evaluations": status.evaluations,
         "iterations": _iteration_span(last) if last else None,
         "batch_size": record.batch_size,
         "validations": len(vals),
@@ -595,16 +595,17 @@ def _calibration_section(
         )
         / 60,
         "sim_min": sum(e.wall_time or 0.0 for e in fits + vals) / 60,
-        "stopped": status.get("stop_reason") or "not finished",
+        "stopped": status.stop_reason or "not finished",
         "history": figure_html(history(fits, vals), "cost history"),
         "best": None,
     }
-    best = status["lowest_cost"]
-    if best is not None and status["recommended"] is not None:  # what the study validated
-        best = {**status["recommended"], "lowest_cost": best["cost"]}
-    if best is None:
+    low, rec = status.lowest_cost, status.recommended
+    if low is None:
         page.add("calibration", title, "calibration", data)
         return None, []
+    best = low.to_json()
+    if rec is not None:  # what the study validated
+        best = {**rec.to_json(), "lowest_cost": low.cost}
     curves = None
     if results is not None and results.surrogate is not None:
         curves = results.surrogate.curves
@@ -617,7 +618,7 @@ def _calibration_section(
         surrogate=_surrogate_note(results),
         identifiability=_identifiability_view(results, rows, truth, synthetic),
         cases=[] if results is None else list(results.cases),
-        parts=status["recommended"]["parts"] if status["recommended"] else None,
+        parts=None if rec is None else rec.parts,
         dependence=None
         if not curves
         else figure_html(dependence_figure(list(curves)), "partial dependence"),
@@ -944,8 +945,6 @@ def verdict_text(path: str | Path) -> str:
     """The one overall verdict of a study folder (or of a folder holding ``calibration/``) in
     one line, e.g. ``not trustworthy: band test failed, transfer check failed; 0 of 4
     parameters determined`` (`parcelfit.study.verdict`)."""
-    from parcelfit.study.calibration import folder_verdict
-
     return folder_verdict(locate(path).study).text
 
 

@@ -2,11 +2,11 @@
 
 The layer above the optimisers (`parcelfit.optimize`: parameters and costs only) and the
 simulators (`parcelfit.sim`): the study and screen files (`studyfile`, `screening`), the
-evaluation store (`store`) and its folder lock (`folderlock`), the calibration loop and
-``study_status`` (`calibration`), what a study concluded (`results`: ``results.json``), its
-one overall verdict (`verdict`) and the study figures (`plots`). Constructing a `Calibration`
-reads and writes nothing; `run` (through `Calibration.prepare`) opens the folder, the data and
-the simulator.
+evaluation store (`store`) and its folder lock (`folderlock`), the calibration loop
+(`calibration`), a study folder's state (`status`: ``study_status``), what a study concluded
+(`results`: ``results.json``), its one overall verdict (`verdict`) and the study figures
+(`plots`). Constructing a `Calibration` reads and writes nothing; `run` (through
+`Calibration.prepare`) opens the folder, the data and the simulator.
 
 The names below are importable from here; each module is loaded when one of its names is first
 used, so ``import parcelfit.study`` stays cheap.
@@ -20,8 +20,9 @@ from typing import TYPE_CHECKING, Any
 _EXPORTS = {
     "Calibration": "calibration",
     "CalibrationResult": "calibration",
-    "study_status": "calibration",
-    "folder_verdict": "calibration",
+    "StudyStatus": "status",
+    "study_status": "status",
+    "folder_verdict": "status",
     "Verdict": "verdict",
     "study_verdict": "verdict",
     "Study": "studyfile",
@@ -49,6 +50,7 @@ __all__ = [
     "Study",
     "StudyRecord",
     "StudyResults",
+    "StudyStatus",
     "Verdict",
     "folder_verdict",
     "load_screen",
@@ -60,14 +62,10 @@ __all__ = [
 ]  # the keys of _EXPORTS
 
 if TYPE_CHECKING:
-    from parcelfit.study.calibration import (
-        Calibration,
-        CalibrationResult,
-        folder_verdict,
-        study_status,
-    )
+    from parcelfit.study.calibration import Calibration, CalibrationResult
     from parcelfit.study.results import StudyResults, read_results
     from parcelfit.study.screening import Screen, StageResult, load_screen, run_screen
+    from parcelfit.study.status import StudyStatus, folder_verdict, study_status
     from parcelfit.study.store import STORE_FILE, Evaluation, Store, StudyRecord
     from parcelfit.study.studyfile import Study, load_study
     from parcelfit.study.verdict import Verdict, study_verdict

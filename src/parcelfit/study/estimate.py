@@ -5,6 +5,7 @@ start (per-run times: `parcelfit.sim.cost`)."""
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Sequence
 
 from parcelfit.runs import TestCase
@@ -48,6 +49,23 @@ def calibration_estimate(study: Study, workers: int) -> Estimate:
         runs.append((1, _seconds(study, spec.case)))
     runs.append((1, _seconds(study, study.cases[0].case)))  # the key frames
     return estimate(runs, workers)
+
+
+def calibration_cost_line(
+    study: Study, executor: str | None, workers: int | None, resumed: bool
+) -> str:
+    """The line ``calibrate`` prints before it starts: the calibration's expected cost (at most
+    its budget) on the ``executor`` and ``workers`` the command line (first) or the study file
+    asks for (local, one process per core, by default); ``resumed`` says only what is left
+    runs. A Dask cluster's workers are unknown here: its line is for one."""
+    kind = executor or study.executor.get("kind", "local")
+    n = 1 if kind in ("serial", "dask") else workers or study.executor.get("workers")
+    n = n or os.cpu_count() or 1
+    return calibration_estimate(study, n).text(
+        "at most: it stops when a validation passes"
+        + ("; divide by the Dask cluster's worker processes" if kind == "dask" else "")
+        + ("; a resumed study runs only what is left" if resumed else "")
+    )
 
 
 def screen_estimate(screen: Screen, workers: int) -> Estimate:

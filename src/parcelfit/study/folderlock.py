@@ -10,11 +10,13 @@ lock, so they work while a study runs.
 from __future__ import annotations
 
 import os
+import time
 from pathlib import Path
 
 from filelock import FileLock, Timeout
 
 from parcelfit.errors import ParcelfitError, os_error
+from parcelfit.study.store import STORE_FILE
 
 LOCK_FILE = ".parcelfit.lock"
 
@@ -63,3 +65,55 @@ def lock_folder(folder: Path, what: str) -> FileLock:
             fix="make the folder writable, or run in a writable folder",
         ) from None
     return lock
+
+
+STUDY_OUTPUTS = ("runs", "results.json", "figures", "report.html")  # beside the store
+
+
+def _outputs(folder: Path) -> list[str]:
+    """The outputs of a study that ``folder`` holds (a folder counts when not empty)."""
+    return [
+        name
+        for name in STUDY_OUTPUTS
+        if (folder / name).is_file()
+        or ((folder / name).is_dir() and any((folder / name).iterdir()))
+    ]
+
+
+def refuse_orphaned_outputs(folder: Path) -> None:
+    """Refuse to start a new study in a folder that holds an earlier study's outputs (run
+    files, results, figures) without its store (``study.sqlite`` deleted or moved): the new
+    study would overwrite them."""
+    if (folder / STORE_FILE).exists():
+        return
+    found = _outputs(folder)
+    if found:
+        names = ", ".join(f"{n}/" if (folder / n).is_dir() else n for n in found)
+        raise ParcelfitError(
+            f"this folder holds an earlier study's outputs ({names}) but no {STORE_FILE}, so a "
+            "new study would overwrite them",
+            file=folder,
+            fix=f"restore {STORE_FILE} to resume that study, use a new output folder, or "
+            "rerun with --restart to move them into earlier-TIME/ in the folder and start afresh",
+        )
+
+
+def set_aside_outputs(folder: Path) -> Path | None:
+    """Move a study's store and outputs out of the way, into ``folder/earlier-YYYYmmdd-HHMMSS``
+    (the UTC time; a new name if taken), so that a new study starts afresh; returns that
+    folder (None when there was nothing to move). Call with the folder locked."""
+    names = [
+        n for n in (STORE_FILE, f"{STORE_FILE}-wal", f"{STORE_FILE}-shm") if (folder / n).exists()
+    ] + _outputs(folder)
+    if not names:
+        return None
+    stamp = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
+    target = folder / f"earlier-{stamp}"
+    k = 1
+    while target.exists():
+        k += 1
+        target = folder / f"earlier-{stamp}-{k}"
+    target.mkdir()
+    for name in names:  # the store's WAL files with it: they hold its latest transactions
+        os.replace(folder / name, target / name)
+    return target

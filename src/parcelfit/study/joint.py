@@ -191,7 +191,7 @@ def evaluation_outcome(
         msg = bad.result.diagnostics.get("message")
         details["message"] = msg or f"the simulation ended {out['status']}"  # as a worker said
         details["failed_run"] = {"case": bad.spec.label, "placement": bad.seed}  # it, so a lost
-        # worker's message is recognised on resume (calibration.LOST_WORKER_MESSAGES)
+        # worker's message is recognised on resume (loop.LOST_WORKER_MESSAGES)
         out["details"] = details
         return out
     total = 0.0

@@ -39,8 +39,8 @@ from parcelfit.runs import TestCase, load_dataset
 from parcelfit.sim.ensemble import MAX_PLACEMENTS
 from parcelfit.sim.executors import Task
 from parcelfit.sim.factory import make_simulator
-from parcelfit.study.calibration import study_executor
 from parcelfit.study.joint import simulate_items
+from parcelfit.study.loop import study_executor
 from parcelfit.study.precision import (
     STATISTICS,
     WITHIN,

@@ -57,7 +57,7 @@ store's ``seed`` the placement seed) written the moment it arrives, with its run
 The final selection ranks the last stage's parameters by their largest standardised effect, as
 the method asks ("by effect size, not blindly by significance"); the reasons say which effects
 were significant. A stage whose first 8 simulations all fail stops at once, quoting the first
-failure (`parcelfit.study.calibration.FailureStreak`); the failed runs of a stage none of whose
+failure (`parcelfit.study.loop.FailureStreak`); the failed runs of a stage none of whose
 runs succeeded run again on a rerun. A rerun resumes stage by stage and refuses a stage whose
 stored factors differ from the ones it would run now, and a folder screened with other
 ``placements`` (use a new folder after changing the screen file).
@@ -103,9 +103,10 @@ from parcelfit.sim.params import (
     parameters_for,
     to_catalogue_units,
 )
-from parcelfit.study.calibration import FAILURES_IN_A_ROW, FailureStreak, record_result
 from parcelfit.study.folderlock import check_writable, lock_folder
 from parcelfit.study.joint import require_placements, simulate_items
+from parcelfit.study.loop import FAILURES_IN_A_ROW, FailureStreak
+from parcelfit.study.objective import record_result
 from parcelfit.study.store import Evaluation, Store
 from parcelfit.study.studyfile import (
     ReferenceSection,

@@ -81,7 +81,7 @@ from pydantic import ConfigDict, Field, field_validator, model_validator
 from parcelfit.config import load_yaml
 from parcelfit.errors import ParcelfitError, shown
 from parcelfit.optimize.bo import BOSettings
-from parcelfit.optimize.sampler import SAMPLERS
+from parcelfit.optimize.sampler import SAMPLER_SETTINGS, SAMPLERS, Sampler
 from parcelfit.optimize.space import Dimension, Space
 from parcelfit.runs import TestCase
 from parcelfit.runs.run import MAX_SPEED_SETTING
@@ -311,7 +311,8 @@ class OptimizerSection(FileModel):
 
     @classmethod
     def allowed_keys(cls, data: Mapping[Any, Any]) -> list[str]:
-        if (name := data.get("sampler")) in ("tpe", "optuna-gp", "botorch"):
+        name = data.get("sampler", "gp")
+        if name in SAMPLERS and name not in SAMPLER_SETTINGS:
             check_keys(data, ["sampler"], fix=f"the {name} sampler takes no settings but `sampler`")
         return ["sampler", *_GP_KEYS]
 
@@ -471,6 +472,19 @@ class Study:
         (several cases, or the ensemble cost)."""
         return len(self.cases) > 1 or self.cost_kind != "published"
 
+    def new_sampler(self) -> Sampler:
+        """A fresh optimiser of this study: the factory its ``sampler`` names in
+        `parcelfit.optimize.sampler.SAMPLERS`, over its space, with its batch size, seed,
+        settings and initial design."""
+        return SAMPLERS[self.sampler](
+            self.space,
+            batch_size=self.batch_size,
+            seed=self.seed,
+            settings=self.bo,
+            n_initial=self.initial,
+            options={},
+        )
+
 
 @dataclass(frozen=True)
 class CaseSpec:
@@ -585,7 +599,7 @@ def load_study(path: str | Path) -> Study:
     first = cases[0]
     dataset, rig, consignment = first.dataset, first.case.rig, first.case.consignment
     try:
-        make = BOSettings.published if f.optimizer.sampler == "published" else BOSettings
+        make = SAMPLER_SETTINGS.get(f.optimizer.sampler, BOSettings)
         bo = make(n_initial=f.initial, **f.optimizer.settings)
     except (ParcelfitError, TypeError) as exc:
         raise ParcelfitError(

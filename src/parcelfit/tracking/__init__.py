@@ -7,7 +7,7 @@ test videos with a known trajectory).
 """
 
 from parcelfit.tracking.barriers import barrier_times, crossing_time, read_sensor_log
-from parcelfit.tracking.batch import track_all, write_video_track
+from parcelfit.tracking.batch import track_all, track_one, write_video_track
 from parcelfit.tracking.tagmap import Camera, TagMap, load_tag_map
 from parcelfit.tracking.track import TrackOptions, VideoTrack, track_video
 
@@ -21,6 +21,7 @@ __all__ = [
     "load_tag_map",
     "read_sensor_log",
     "track_all",
+    "track_one",
     "track_video",
     "write_video_track",
 ]

@@ -1,4 +1,5 @@
-"""Writing tracked runs, and tracking a folder of videos into one dataset (resumable).
+"""Tracking one video with its light-barrier log, writing tracked runs, and tracking a folder of
+videos into one dataset (resumable).
 
 One video: ``<out>/<stem>-tag<ID>.csv`` per parcel tag (columns t [s], x [m], y [m], theta [rad],
 the parcel centre and the heading of its x axis; source: detected, fitted or filled; position_sd [m],
@@ -24,11 +25,33 @@ from typing import Any
 from parcelfit.atomic import write_text_atomic
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import CaseData, Run, TestCase, read_trajectory, save_dataset, write_trajectory
+from parcelfit.tracking.barriers import read_sensor_log
 from parcelfit.tracking.tagmap import TagMap
 from parcelfit.tracking.track import TrackOptions, VideoTrack, track_video
 
 VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv", ".m4v")
 _NAME = re.compile(r"^(?P<rig>[^-]+)-(?P<cons>[^-]+)-(?P<setting>\d+)-(?P<run>[^.]+)$")
+
+
+def track_one(
+    video: str | Path,
+    tag_map: TagMap,
+    options: TrackOptions | None = None,
+    *,
+    sensor_log: str | Path | None = None,
+    sensors: str = "1,2",
+    progress: Callable[[int, int], None] | None = None,
+) -> VideoTrack:
+    """Track one video (`track_video`); with a light-barrier ``sensor_log`` (columns timestamp
+    [s], sensor) every parcel tag's transit time [s] is the log's, from the first event of the
+    start sensor to the next of the end sensor (``sensors``: ``START,END``)."""
+    result = track_video(video, tag_map, options, progress=progress)
+    if sensor_log is not None:
+        start, _, end = sensors.partition(",")
+        transit = read_sensor_log(sensor_log, start.strip(), end.strip())
+        for t in result.tags.values():
+            t.transit_time = transit
+    return result
 
 
 def write_video_track(result: VideoTrack, out: str | Path) -> list[Path]:

@@ -51,7 +51,7 @@ import numpy as np
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import Run, TestCase, Trajectory
-from parcelfit.sim.mujoco.bundled import RigBackend
+from parcelfit.sim.mujoco.backend import RigBackend
 from parcelfit.sim.mujoco.consignment import Consignment
 from parcelfit.sim.mujoco.friction import Stepper
 from parcelfit.sim.mujoco.mjlog import CountedWarnings

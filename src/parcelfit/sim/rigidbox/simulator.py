@@ -27,7 +27,7 @@ import numpy as np
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import Run, TestCase, Trajectory
-from parcelfit.sim.mujoco.bundled import RigBackend
+from parcelfit.sim.mujoco.backend import RigBackend
 from parcelfit.sim.mujoco.consignment import Consignment
 from parcelfit.sim.mujoco.rig import Rig
 from parcelfit.sim.params import BOTTOM_PATCHES

@@ -1,6 +1,0 @@
-"""Moved to `parcelfit.study.plots`; this path stays for existing imports (the same module object)."""
-
-import importlib
-import sys
-
-sys.modules[__name__] = importlib.import_module("parcelfit.study.plots")
