@@ -209,7 +209,7 @@ def test_the_sampler_is_an_object_chosen_once_from_the_registry(tmp_path):
 
     from .test_calibration import write_study
 
-    assert set(SAMPLERS) == {"gp", "published", "tpe"}
+    assert set(SAMPLERS) == {"gp", "published", "tpe", "optuna-gp", "botorch"}
     study = load_study(write_study(tmp_path, optimizer={"sampler": "published"}))
     made = study.new_sampler()
     assert isinstance(made, BatchBO) and made.settings == study.bo
@@ -220,7 +220,7 @@ def test_the_sampler_is_an_object_chosen_once_from_the_registry(tmp_path):
     calibration = Calibration(study, tmp_path / "out", sampler=own)
     assert calibration.bo is own  # an object given replaces the study file's
     assert isinstance(Calibration(study, tmp_path / "out").bo, BatchBO)
-    with pytest.raises(ParcelfitError, match=r"unknown optimizer 'mango'.*gp, published, tpe"):
+    with pytest.raises(ParcelfitError, match=r"unknown optimizer 'mango'.*gp, published, tpe, optuna-gp, botorch"):
         make_sampler("mango", study.space)
 
 
