@@ -34,13 +34,24 @@ def test_twin_placements_scatter_like_the_rigs_hand_placement_unless_told_otherw
     assert np.std(fixed, axis=0) == pytest.approx([0.005, 0.005, 1.5], rel=0.05)
 
 
+QUICK = TwinSettings(runs=3, real_spacing=0.05, real_timestep=QUICK_STEP)
+BW_TRUTH = {"BW": {"mu_d_BePa": 0.5}}
+
+
+@pytest.fixture(scope="module")
+def twin(tmp_path_factory):
+    """Three twin runs of E1/BW/1 (seed 4), made once: (folder, dataset path). One test checks
+    their scatter and that they are made again alike, another that a resumed dataset is them."""
+    folder = tmp_path_factory.mktemp("twin")
+    path = make_twin_dataset(folder, [TestCase("E1", "BW", 1)], BW_TRUTH, settings=QUICK, seed=4)
+    return folder, path
+
+
 @pytest.mark.slow
 @pytest.mark.mujoco
-def test_twin_dataset_scatters_like_real_runs_and_keeps_the_truth(tmp_path):
-    settings = TwinSettings(runs=3, real_spacing=0.05, real_timestep=QUICK_STEP)
-    path = make_twin_dataset(
-        tmp_path, [TestCase("E1", "BW", 1)], {"BW": {"mu_d_BePa": 0.5}}, settings=settings, seed=4
-    )
+def test_twin_dataset_scatters_like_real_runs_and_keeps_the_truth(twin, tmp_path):
+    folder, path = twin
+    settings = QUICK
     ds = load_dataset(path)
     assert ds.synthetic and "SYNTHETIC" in ds.description
     runs = ds["E1/BW/1"].runs
@@ -48,13 +59,13 @@ def test_twin_dataset_scatters_like_real_runs_and_keeps_the_truth(tmp_path):
     starts = np.array([[r.trajectory.x[0], r.trajectory.y[0]] for r in runs])
     assert np.ptp(starts[:, 1]) > 1e-4  # placement jitter and tracking noise
     assert len({round(r.transit_time, 4) for r in runs}) == 3  # specimens and belt speeds differ
-    truth = yaml.safe_load((tmp_path / "truth.yaml").read_text())
+    truth = yaml.safe_load((folder / "truth.yaml").read_text())
     assert truth["synthetic"] and truth["truth"]["BW"]["mu_d_BePa"] == 0.5
     assert truth["settings"]["runs"] == 3 and truth["units"]["E_Pa"] == "N/mm^2"
     again = make_twin_dataset(
         tmp_path / "again",
         [TestCase("E1", "BW", 1)],
-        {"BW": {"mu_d_BePa": 0.5}},
+        BW_TRUTH,
         settings=settings,
         seed=4,
     )
@@ -116,12 +127,12 @@ def test_synth_spec_errors_name_the_key(tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.mujoco
-def test_an_interrupted_twin_dataset_resumes_from_its_cache(tmp_path, monkeypatch):
+def test_an_interrupted_twin_dataset_resumes_from_its_cache(twin, tmp_path, monkeypatch):
     import pytest
 
     import parcelfit.synth as synth
 
-    settings = TwinSettings(runs=3, real_spacing=0.05, real_timestep=QUICK_STEP)
+    settings = QUICK
     real = synth._twin_run
     calls = []
 
@@ -133,7 +144,9 @@ def test_an_interrupted_twin_dataset_resumes_from_its_cache(tmp_path, monkeypatc
 
     monkeypatch.setattr(synth, "_twin_run", dies_on_the_third)
     with pytest.raises(KeyboardInterrupt):
-        make_twin_dataset(tmp_path / "d", [TestCase("E1", "BW", 1)], {}, settings=settings, seed=5)
+        make_twin_dataset(
+            tmp_path / "d", [TestCase("E1", "BW", 1)], BW_TRUTH, settings=settings, seed=4
+        )
     assert len(list((tmp_path / "d" / ".twin-runs").glob("*.csv"))) == 2
     calls.clear()
     monkeypatch.setattr(synth, "_twin_run", real)
@@ -141,17 +154,15 @@ def test_an_interrupted_twin_dataset_resumes_from_its_cache(tmp_path, monkeypatc
     path = make_twin_dataset(
         tmp_path / "d",
         [TestCase("E1", "BW", 1)],
-        {},
+        BW_TRUTH,
         settings=settings,
-        seed=5,
+        seed=4,
         progress=seen.append,
     )
     assert sum("from the cache" in e.message for e in seen) == 2 and len(seen) == 3
     assert [(e.job, e.done, e.total) for e in seen] == [("synth", k, 3) for k in (1, 2, 3)]
     assert not (tmp_path / "d" / ".twin-runs").exists()
-    fresh = make_twin_dataset(
-        tmp_path / "e", [TestCase("E1", "BW", 1)], {}, settings=settings, seed=5
-    )
+    _, fresh = twin  # the same dataset made in one go
     a, b = load_dataset(path)["E1/BW/1"].runs, load_dataset(fresh)["E1/BW/1"].runs
     assert all(
         np.allclose(x.trajectory.xy, y.trajectory.xy, atol=1e-9) for x, y in zip(a, b, strict=True)

@@ -294,7 +294,8 @@ class Executor:
 
 
 def _shutdown(pool: cf.Executor) -> None:
-    """Shut ``pool`` down, cancelling what has not started, in a way that cannot block: the
+    """Shut ``pool`` down, cancelling what has not started, in bounded time (14 s at the very
+    most, tens of milliseconds as a rule, whatever the pool's lock, threads and workers do): the
     worker processes of a local pool are ended first (SIGTERM: each kills its external solvers,
     see `parcelfit.sim.lifetime`; SIGKILL for one still there after `_STOP_GRACE_S` s, e.g. a
     worker inside a long C call, where its SIGTERM handler cannot run), so that a simulation
