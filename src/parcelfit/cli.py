@@ -233,6 +233,19 @@ def _print_tests(tests: Any) -> None:
     console.print(table)
 
 
+TableFormatOption = Annotated[
+    str, typer.Option("--format", metavar="[csv|parquet]", help="Table file format.")
+]
+AnyExecutorOption = Annotated[
+    str,
+    typer.Option(
+        metavar="[serial|local|dask]",
+        help="Where simulations run: local (worker processes), serial or dask.",
+    ),
+]
+SchedulerOption = Annotated[
+    str | None, typer.Option(help="Dask scheduler address, e.g. tcp://HOST:8786.")
+]
 WorkersOption = Annotated[
     int | None,
     typer.Option(
@@ -1508,19 +1521,9 @@ def predict(
         Path | None,
         typer.Option(help="Output folder (default: predict-RIG-TYPE-SETTING in the study folder)."),
     ] = None,
-    table_format: Annotated[
-        str, typer.Option("--format", metavar="[csv|parquet]", help="Table file format.")
-    ] = "csv",
-    executor: Annotated[
-        str,
-        typer.Option(
-            metavar="[serial|local|dask]",
-            help="Where simulations run: local (worker processes), serial or dask.",
-        ),
-    ] = "local",
-    scheduler: Annotated[
-        str | None, typer.Option(help="Dask scheduler address, e.g. tcp://HOST:8786.")
-    ] = None,
+    table_format: TableFormatOption = "csv",
+    executor: AnyExecutorOption = "local",
+    scheduler: SchedulerOption = None,
     workers: WorkersOption = None,
 ) -> None:
     """Predict a design from a calibration: parameter sets the data cannot rule out times seeded
@@ -1602,19 +1605,9 @@ def design(
     out: Annotated[
         Path | None, typer.Option(help="Output folder (default: design in the study folder).")
     ] = None,
-    table_format: Annotated[
-        str, typer.Option("--format", metavar="[csv|parquet]", help="Table file format.")
-    ] = "csv",
-    executor: Annotated[
-        str,
-        typer.Option(
-            metavar="[serial|local|dask]",
-            help="Where simulations run: local (worker processes), serial or dask.",
-        ),
-    ] = "local",
-    scheduler: Annotated[
-        str | None, typer.Option(help="Dask scheduler address, e.g. tcp://HOST:8786.")
-    ] = None,
+    table_format: TableFormatOption = "csv",
+    executor: AnyExecutorOption = "local",
+    scheduler: SchedulerOption = None,
     workers: WorkersOption = None,
 ) -> None:
     """Rank candidate experiments by how much each would narrow the intervals of the
