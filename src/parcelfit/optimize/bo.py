@@ -140,6 +140,16 @@ class Observation:
     cost: float | None
 
 
+def settle_told(u: np.ndarray, pending: list[np.ndarray], initial: list[np.ndarray]) -> None:
+    """Remove a told point ``u`` (unit cube) from ``pending``, or, if it was told without being
+    asked (replayed from a store), from the ``initial`` design queue; in place."""
+    for queue in (pending, initial):
+        for i, p in enumerate(queue):
+            if np.allclose(p, u, atol=1e-12):
+                del queue[i]
+                return
+
+
 @dataclass
 class BatchBO:
     """Ask/tell batch Bayesian optimiser (see the module docstring). Minimises the cost."""
@@ -179,15 +189,7 @@ class BatchBO:
     def tell(self, params: Mapping[str, float], cost: float | None) -> None:
         """Report the cost of an evaluated parameter set (None or non-finite: failed)."""
         u = self.space.to_unit(params)
-        for i, p in enumerate(self.pending):
-            if np.allclose(p, u, atol=1e-12):
-                del self.pending[i]
-                break
-        else:  # told without being asked (e.g. replayed from a store): drop it from the LHS queue
-            for i, p in enumerate(self._initial):
-                if np.allclose(p, u, atol=1e-12):
-                    del self._initial[i]
-                    break
+        settle_told(u, self.pending, self._initial)
         ok = cost is not None and math.isfinite(cost)
         self.observations.append(Observation(u, dict(params), float(cost) if ok else None))
 

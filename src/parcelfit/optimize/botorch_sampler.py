@@ -35,6 +35,7 @@ import numpy as np
 from scipy.stats import qmc
 
 from parcelfit.errors import ParcelfitError, missing_extra
+from parcelfit.optimize.bo import settle_told
 from parcelfit.optimize.space import Space
 
 
@@ -121,15 +122,7 @@ class BoTorchSampler:
     def tell(self, params: Mapping[str, float], cost: float | None) -> None:
         """Report an evaluated parameter set's cost (None or non-finite: failed)."""
         u = self.space.to_unit(params)
-        for i, p in enumerate(self._pending):
-            if np.allclose(p, u, atol=1e-12):
-                del self._pending[i]
-                break
-        else:  # told without being asked (replayed from a store): drop it from the design queue
-            for i, p in enumerate(self._initial):
-                if np.allclose(p, u, atol=1e-12):
-                    del self._initial[i]
-                    break
+        settle_told(u, self._pending, self._initial)
         ok = cost is not None and math.isfinite(cost)
         self._told.append((u, dict(params), float(cost) if ok else None))  # type: ignore[arg-type]
 
