@@ -106,21 +106,25 @@ def main() -> None:
     args = ap.parse_args()
 
     from parcelfit.runs import load_dataset
-    from parcelfit.study.predict import predict, run_values
+    from parcelfit.study.predict import load_inputs, predict, run_values
+    from parcelfit.study.run_scatter import estimate_run_scatter, real_run_band
 
     args.out.mkdir(parents=True, exist_ok=True)
     rig_q = write_rig_q(args.out)
     inside = {q: 0 for q in QUANTITIES}
+    inside_real = {q: 0 for q in QUANTITIES}
     total = {q: 0 for q in QUANTITIES}
     rows = []
     t0 = time.perf_counter()
     print(
         f"{'truth':<7}{'case':<6}{'quantity':<14}{'q05':>10}{'q95':>10}{'inside':>8}"
-        f"{'parameters share':>18}"
+        f"{'run q05':>10}{'run q95':>10}{'inside':>8}{'parameters share':>18}"
     )
     for k in range(args.truths):
         data, folder = calibrate(k, args.budget, args.out)
         dataset = load_dataset(data)
+        inputs = load_inputs(folder)
+        scatter = estimate_run_scatter(inputs.folder, inputs.study)
         for setting in (1, 2):
             p = predict(
                 folder,
@@ -144,7 +148,10 @@ def main() -> None:
                     continue
                 values = [v[s.quantity] for v in real if v[s.quantity] is not None]
                 n_in = sum(s.q05 <= v <= s.q95 for v in values)
+                lo, hi = real_run_band(p.runs[s.quantity].tolist(), s.quantity, scatter, k)
+                n_real = sum(lo <= v <= hi for v in values)
                 inside[s.quantity] += n_in
+                inside_real[s.quantity] += n_real
                 total[s.quantity] += len(values)
                 share = s.decomposition.parameter_share
                 rows.append(
@@ -155,22 +162,36 @@ def main() -> None:
                         "q05": s.q05,
                         "q95": s.q95,
                         "inside": n_in,
+                        "run_q05": lo,
+                        "run_q95": hi,
+                        "inside_run_band": n_real,
                         "runs": len(values),
                         "parameter_share": share,
                     }
                 )
                 print(
                     f"{k + 1:<7}{'Q/' + str(setting):<6}{s.quantity:<14}{s.q05:>10.4g}"
-                    f"{s.q95:>10.4g}{f'{n_in}/{len(values)}':>8}{share:>18.2f}",
+                    f"{s.q95:>10.4g}{f'{n_in}/{len(values)}':>8}{lo:>10.4g}{hi:>10.4g}"
+                    f"{f'{n_real}/{len(values)}':>8}{share:>18.2f}",
                     flush=True,
                 )
     (args.out / "results.json").write_text(json.dumps(rows, indent=1))
     all_in, all_n = sum(inside.values()), sum(total.values())
-    print(f"\ncoverage of the 90 % band over {args.truths} truths (unseen cases Q/1 and Q/2):")
+    real_in = sum(inside_real.values())
+    print(
+        f"\ncoverage of the 90 % bands over {args.truths} truths (unseen cases Q/1 and Q/2): "
+        "the model's band, and the band of a real run (with the real runs' own scatter, "
+        "parcelfit.study.run_scatter)"
+    )
     for q in QUANTITIES:
-        print(f"  {q:<14}{inside[q]}/{total[q]} = {inside[q] / max(total[q], 1):.0%}")
+        n = max(total[q], 1)
+        print(
+            f"  {q:<14}{inside[q]}/{total[q]} = {inside[q] / n:.0%}"
+            f"   {inside_real[q]}/{total[q]} = {inside_real[q] / n:.0%}"
+        )
     print(
         f"  {'all':<14}{all_in}/{all_n} = {all_in / max(all_n, 1):.0%}"
+        f"   {real_in}/{all_n} = {real_in / max(all_n, 1):.0%}"
         f"   ({(time.perf_counter() - t0) / 60:.1f} min)"
     )
 

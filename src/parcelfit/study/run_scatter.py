@@ -1,0 +1,185 @@
+"""The real runs' own scatter: what a band for a real run adds to the model's band.
+
+A prediction's runs differ by parameter set and placement (`parcelfit.study.predict`). Real runs
+of one test case differ further: each is its own specimen (its friction and stiffness scatter
+about its type's values) and tracking and light barriers measure with noise. Neither is a
+parameter the calibration sets nor a placement the rig file describes, so where the data
+determine the parameters the model's band is narrower than the spread of real runs
+(docs/research/predict-coverage.md: 60-75 % of unseen twin runs inside a 90 % band).
+
+**Estimate** from the calibration's fitted cases, per quantity q of a run (transit time T [s],
+rotation [rad], exit x and y [m], exit heading [rad]; `parcelfit.study.predict.run_values`) and
+fitted case c:
+
+    V_real(c)  = sample variance (divisor n - 1) of q over the case's real runs
+    V_model(c) = sample variance of q over the simulations of c in the recommended evaluation
+                 (its placements; 0 with one simulation per evaluation)
+    E(c)       = max(0, V_real(c) - V_model(c))
+    s_q^2      = mean of E(c) over the fitted cases with at least two real runs
+
+The transit time is taken relative to each case's mean real transit time (V divided by its
+square), as a specimen's friction and the timing noise move it in proportion. With one
+simulation per evaluation (the published cost) the placements' scatter is in E(c) as well as in
+the prediction's own placements: the band is then wider than needed (on the safe side).
+
+**Band for a real run.** Each predicted run value v_i is joined by D seeded draws
+v_i + s_q z_ik (transit time: v_i (1 + s_q z_ik)), z ~ N(0, 1), and the 5th and 95th
+percentiles are taken over all draws; for the rotation, an absolute angle, |v_i + s_q z_ik|.
+Hand-written because it is a few lines of NumPy over the stored runs, not a model a library
+fits.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from parcelfit.runs import Run, TestCase, Trajectory, load_dataset, read_trajectory
+from parcelfit.sim.ensemble import rotation
+from parcelfit.study.store import STORE_FILE, Evaluation, Store
+from parcelfit.study.studyfile import Study
+
+QUANTITIES = ("transit_time", "rotation", "exit_x", "exit_y", "exit_heading")
+RELATIVE = frozenset({"transit_time"})  # scatter as a share of the value
+DRAWS = 200  # draws per predicted run for the band of a real run
+
+
+@dataclass(frozen=True)
+class RunScatter:
+    """The real runs' scatter beyond the model's, per quantity: ``sd`` (SI, or a share of the
+    value for the transit time; 0 when the model's placements already hold the real spread,
+    absent when no fitted case has two real runs with the quantity), the cases it was estimated
+    from and the simulations per case of the recommended evaluation."""
+
+    sd: Mapping[str, float]
+    cases: tuple[str, ...]
+    simulations: int
+
+    def to_json(self) -> dict[str, object]:
+        """The stored form (prediction.json)."""
+        return {"sd": dict(self.sd), "cases": list(self.cases), "simulations": self.simulations}
+
+
+def quantities(tr: Trajectory, transit_time: float | None) -> dict[str, float | None]:
+    """The quantities of one run (SI): transit time [s], rotation [rad], exit x, y [m] and
+    heading [rad] (the unwrapped heading at the run's last sample)."""
+    theta = np.unwrap(np.asarray(tr.theta, float))
+    return {
+        "transit_time": None if transit_time is None else float(transit_time),
+        "rotation": rotation(tr),
+        "exit_x": float(np.asarray(tr.x, float)[-1]),
+        "exit_y": float(np.asarray(tr.y, float)[-1]),
+        "exit_heading": float(theta[-1]),
+    }
+
+
+def excess_variance(
+    real: Sequence[float], model: Sequence[float], relative: bool = False
+) -> float | None:
+    """E = max(0, V_real - V_model) (module docstring) of one quantity of one case; relative:
+    both divided by the square of the real runs' mean. None with fewer than two real values."""
+    r = np.asarray([v for v in real if v is not None and math.isfinite(v)], float)
+    m = np.asarray([v for v in model if v is not None and math.isfinite(v)], float)
+    if r.size < 2:
+        return None
+    v_real = float(r.var(ddof=1))
+    v_model = float(m.var(ddof=1)) if m.size >= 2 else 0.0
+    excess = max(0.0, v_real - v_model)
+    if relative:
+        mean = float(r.mean())
+        return excess / mean**2 if mean != 0 else None
+    return excess
+
+
+def _recommended_evaluation(store: Store) -> Evaluation | None:
+    """The fit evaluation of the recommended parameters (the lowest-cost ok one without a
+    recommendation, or when none matches)."""
+    fits = [e for e in store.evaluations("fit") if e.status == "ok" and e.cost is not None]
+    if not fits:
+        return None
+    rec = store.read_recommended()
+    if rec is not None:
+        for e in fits:
+            if all(
+                k in e.params and math.isclose(e.params[k], v, rel_tol=1e-9, abs_tol=1e-12)
+                for k, v in rec.params.items()
+            ):
+                return e
+    return min(fits, key=lambda e: e.cost)  # type: ignore[arg-type, return-value]
+
+
+def _model_values(folder: Path, evaluation: Evaluation, case: TestCase) -> list[dict]:
+    """The quantities of each simulation of ``case`` in ``evaluation`` (read from its run
+    files in the study folder)."""
+    out = []
+    parts = evaluation.details.get("cases") if evaluation.details else None
+    if parts:
+        for part in parts:
+            if part.get("case") != case.label:
+                continue
+            for f, t in zip(
+                part.get("run_files") or [], part.get("transit_times") or [], strict=False
+            ):
+                if f and (folder / f).is_file():
+                    out.append(quantities(read_trajectory(folder / f), t))
+    elif evaluation.run_file and (folder / evaluation.run_file).is_file():
+        out.append(
+            quantities(read_trajectory(folder / evaluation.run_file), evaluation.transit_time)
+        )
+    return out
+
+
+def estimate_run_scatter(folder: Path, study: Study) -> RunScatter | None:
+    """The real runs' scatter beyond the model's (module docstring) from the finished
+    calibration in ``folder`` and its ``study``; None when the store has no ok fit."""
+    store = Store(folder / STORE_FILE, readonly=True)
+    try:
+        evaluation = _recommended_evaluation(store)
+    finally:
+        store.close()
+    if evaluation is None:
+        return None
+    datasets: dict[Path, object] = {}
+    pooled: dict[str, list[float]] = {q: [] for q in QUANTITIES}
+    used, sims = [], 0
+    for spec in study.cases:
+        if spec.dataset not in datasets:
+            datasets[spec.dataset] = load_dataset(spec.dataset)
+        runs: Sequence[Run] = datasets[spec.dataset][spec.case].runs  # type: ignore[index]
+        real = [quantities(r.trajectory, r.transit_time) for r in runs]
+        model = _model_values(folder, evaluation, spec.case)
+        sims = max(sims, len(model))
+        any_used = False
+        for q in QUANTITIES:
+            e = excess_variance([v[q] for v in real], [v[q] for v in model], relative=q in RELATIVE)
+            if e is not None:
+                pooled[q].append(e)
+                any_used = True
+        if any_used:
+            used.append(spec.label)
+    sd = {q: math.sqrt(float(np.mean(v))) for q, v in pooled.items() if v}
+    return RunScatter(sd, tuple(used), sims)
+
+
+def real_run_band(
+    values: Sequence[float], quantity: str, scatter: RunScatter | None, seed: int
+) -> tuple[float, float]:
+    """The 5-95 % band of a real run (module docstring) around the predicted run values of
+    ``quantity`` (SI); the model's own band when no scatter is known for it."""
+    v = np.asarray([x for x in values if x is not None and math.isfinite(x)], float)
+    if v.size == 0:
+        return math.nan, math.nan
+    s = None if scatter is None else scatter.sd.get(quantity)
+    if not s:
+        return float(np.percentile(v, 5)), float(np.percentile(v, 95))
+    z = np.random.default_rng([seed, 0x5C, QUANTITIES.index(quantity)]).standard_normal(
+        (v.size, DRAWS)
+    )
+    draws = v[:, None] * (1 + s * z) if quantity in RELATIVE else v[:, None] + s * z
+    if quantity == "rotation":
+        draws = np.abs(draws)
+    return float(np.percentile(draws, 5)), float(np.percentile(draws, 95))

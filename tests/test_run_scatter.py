@@ -1,0 +1,66 @@
+"""The real runs' own scatter (`parcelfit.study.run_scatter`): the excess variance, the band of a
+real run, and the estimate from a finished calibration on the analytic test simulator."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from parcelfit.runs import TestCase, load_dataset
+from parcelfit.study.calibration import Calibration
+from parcelfit.study.run_scatter import (
+    RunScatter,
+    estimate_run_scatter,
+    excess_variance,
+    quantities,
+    real_run_band,
+)
+from parcelfit.study.studyfile import load_study
+
+from .helpers import write_study
+
+
+def test_the_excess_is_the_real_variance_beyond_the_model_s():
+    assert excess_variance([1.0, 2.0, 3.0], [2.0, 2.5]) == pytest.approx(1.0 - 0.125)
+    assert excess_variance([1.0, 2.0, 3.0], [0.0, 10.0]) == 0.0  # the model spreads more
+    assert excess_variance([1.0, 2.0, 3.0], [5.0]) == pytest.approx(1.0)  # one simulation
+    assert excess_variance([2.0, 4.0], [], relative=True) == pytest.approx(2.0 / 9.0)
+    assert excess_variance([1.0], [1.0, 2.0]) is None  # one real run says nothing
+
+
+def test_the_band_of_a_real_run_widens_the_model_s_by_the_scatter():
+    scatter = RunScatter({"transit_time": 0.1, "exit_y": 0.01, "rotation": 1.0}, ("R/P/1",), 2)
+    lo, hi = real_run_band([2.0] * 50, "transit_time", scatter, seed=0)  # relative
+    assert lo == pytest.approx(2.0 * (1 - 1.645 * 0.1), rel=0.02)
+    assert hi == pytest.approx(2.0 * (1 + 1.645 * 0.1), rel=0.02)
+    lo, hi = real_run_band([0.5] * 50, "exit_y", scatter, seed=0)  # absolute
+    assert (lo, hi) == (
+        pytest.approx(0.5 - 0.01645, abs=5e-4),
+        pytest.approx(0.5 + 0.01645, abs=5e-4),
+    )
+    lo, hi = real_run_band([0.0] * 50, "rotation", scatter, seed=0)  # |N(0, 1)|: folded
+    assert lo == pytest.approx(0.063, abs=0.01) and hi == pytest.approx(1.96, abs=0.05)
+    values = list(np.linspace(0.0, 1.0, 101))
+    assert real_run_band(values, "exit_heading", scatter, seed=0) == pytest.approx((0.05, 0.95))
+    assert real_run_band(values, "exit_y", scatter, 3) == real_run_band(
+        values, "exit_y", scatter, 3
+    )
+    assert all(math.isnan(x) for x in real_run_band([], "exit_y", scatter, 0))
+
+
+def test_the_estimate_from_a_calibration_with_one_run_per_evaluation(tmp_path):
+    path = write_study(tmp_path, budget=8, validation={"speed_setting": None}, executor="serial")
+    Calibration(load_study(path), tmp_path / "study", figures=False, key_frames=False).run()
+    scatter = estimate_run_scatter(tmp_path / "study", load_study(path))
+    assert scatter is not None and scatter.cases == ("R/P/1",) and scatter.simulations == 1
+    runs = load_dataset(tmp_path / "data")[TestCase("R", "P", 1)].runs
+    real = [quantities(r.trajectory, r.transit_time) for r in runs]
+    t = np.array([v["transit_time"] for v in real])
+    y = np.array([v["exit_y"] for v in real])
+    # one simulation per evaluation: the model's variance is 0, the excess all the real runs'
+    assert scatter.sd["transit_time"] == pytest.approx(t.std(ddof=1) / t.mean(), rel=1e-12)
+    assert scatter.sd["exit_y"] == pytest.approx(y.std(ddof=1), rel=1e-12)
+    # the twin's transit times carry 1 % noise (tests/fake_sim.py)
+    assert 0.004 < scatter.sd["transit_time"] < 0.02
