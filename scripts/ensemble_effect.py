@@ -9,7 +9,8 @@ Each side may be several tables (e.g. placements 0-5 and 6-19 run apart: ``--low
 ensemble statistics over the matched placements (`parcelfit.sim.ensemble.ensemble_shift`: the
 median rotation, the median transit time and the share of spins, each with its paired bootstrap
 standard error and the ratio), and the mean of the paired differences of rotation and transit
-time with their standard errors (the placements' own scatter removed by the pairing).
+time with their standard errors (the placements' own scatter removed by the pairing), their
+median and the sign test of how many placements went up.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from scipy import stats
 
 from parcelfit.sim.ensemble import Member, ensemble_shift
 from parcelfit.sim.protocol import SimStatus
@@ -85,10 +87,12 @@ def main() -> None:
         )
         if d.size >= 2:
             se = d.std(ddof=1) / math.sqrt(d.size)
+            up, n = int(np.sum(d > 0)), int(np.sum(d != 0))
+            p_sign = stats.binomtest(up, n).pvalue if n else math.nan
             print(
                 f"mean paired change of {name}: {d.mean():.2f} (SE {se:.2f}, ratio "
                 f"{abs(d.mean()) / se if se > 0 else math.inf:.1f}); median {np.median(d):.2f};"
-                f" {int(np.sum(d > 0))} of {d.size} up"
+                f" {up} of {n} up, {n - up} down (sign test p = {p_sign:.2g})"
             )
     n_spin = [sum(m.outcome == "spin" for m in e) for e in (a, b)]
     print(f"spins: {n_spin[0]} of {len(a)} (low), {n_spin[1]} of {len(b)} (high)")
