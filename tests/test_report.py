@@ -200,7 +200,7 @@ def test_the_browser_check_sees_a_broken_image(tmp_path):
 
 
 def test_parameter_rows_report_values_only_for_determined_parameters():
-    from parcelfit.report.html import ParameterRow
+    from parcelfit.report.calibration import ParameterRow
 
     row = ParameterRow("mu_d_BePa", "-", 0.3, 0.6, 0.41, 0.4, (0.38, 0.42), "determined", 0.40)
     assert row.determined and row.covers_truth and row.error_share == pytest.approx(1 / 30)
