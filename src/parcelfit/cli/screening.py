@@ -14,7 +14,6 @@ from parcelfit.cli.options import (
     ExecutorOption,
     WorkersOption,
     check_executor,
-    worker_count,
     workers_at_most,
 )
 from parcelfit.cli.output import console, cost_first, resumes, status_progress, stored_count
@@ -32,15 +31,13 @@ def screen(
     from parcelfit.study.screening import load_screen, run_screen
 
     check_executor(executor, ("serial", "local"))
-    from parcelfit.study.estimate import screen_estimate
+    from parcelfit.study.estimate import screen_cost_line
 
     workers_at_most(workers)
     spec = load_screen(screen_file)
     folder = out or screen_file.parent / screen_file.stem
     resumes(stored_count(folder / "screen.sqlite", "screen", "simulations"))
-    kind = executor or spec.executor.get("kind", "local")
-    n = 1 if kind == "serial" else worker_count(workers or spec.executor.get("workers"))
-    cost = screen_estimate(spec, n).text("the first stage; later stages follow from it")
+    cost = screen_cost_line(spec, executor, workers)
     with console.status("screening") as status_line:
         stages, selection = run_screen(
             spec,
@@ -120,7 +117,7 @@ def precision(
 ) -> None:
     """Which parameters can the study's test cases determine, before calibrating (resumable)."""
     from parcelfit.sim.params import parse_assignments
-    from parcelfit.study.estimate import precision_estimate
+    from parcelfit.study.estimate import precision_cost_line
     from parcelfit.study.precision import half_width_text
     from parcelfit.study.precision_check import command_line, run_precision_check, stored_runs
     from parcelfit.study.studyfile import load_study
@@ -129,11 +126,7 @@ def precision(
     workers_at_most(workers)
     folder = out or study_file.parent / f"{study_file.stem}-precision"
     study = load_study(study_file)
-    kind = executor or study.executor.get("kind", "local")
-    n = 1 if kind == "serial" else worker_count(workers or study.executor.get("workers"))
-    cost = precision_estimate(study, placements, candidate or [], n).text(
-        "runs kept from an earlier check are not simulated again"
-    )
+    cost = precision_cost_line(study, placements, candidate or [], executor, workers)
 
     resumes(lambda: f"{stored_runs(folder)} simulations stored")
     with console.status("precision check") as status_line:
