@@ -12,8 +12,6 @@ import typer
 from parcelfit.errors import ParcelfitError
 
 DatasetArg = Annotated[Path, typer.Argument(help="Dataset folder (holding dataset.yaml).")]
-
-
 TableFormatOption = Annotated[
     str, typer.Option("--format", metavar="[csv|parquet]", help="Table file format.")
 ]

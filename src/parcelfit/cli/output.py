@@ -60,7 +60,8 @@ def resumes(stored: Callable[[], str | None] = lambda: None) -> None:
 
 
 def stored_count(db: Path, kind: str, what: str) -> Callable[[], str]:
-    """How many finished evaluations of ``kind`` the store ``db`` holds, as "N what stored"."""
+    """For `resumes`: a callable saying how many finished evaluations of ``kind`` the store
+    ``db`` holds, as "N what stored" (read when the command is interrupted)."""
 
     def count() -> str:
         from parcelfit.study.store import finished_count
@@ -79,8 +80,6 @@ def fail(exc: ParcelfitError) -> NoReturn:
 
 
 console = Console()
-
-
 err_console = Console(stderr=True)
 
 
