@@ -1237,6 +1237,7 @@ def _error_lines(result) -> list[str]:
     return [line for line in result.stderr.splitlines() if line.strip()]
 
 
+@pytest.mark.slow
 def test_a_study_whose_every_simulation_fails_stops_after_8_and_quotes_the_first(
     tmp_path, monkeypatch
 ):
