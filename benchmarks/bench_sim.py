@@ -34,7 +34,7 @@ from parcelfit.runs import TestCase
 from parcelfit.sim.mujoco import MujocoSimulator, SceneOptions, SimOptions, load_rig
 from parcelfit.sim.mujoco.friction import Stepper
 from parcelfit.sim.mujoco.mjlog import CountedWarnings
-from parcelfit.sim.mujoco.scene import parse_scene_options
+from parcelfit.sim.mujoco.options import parse_scene_options
 from parcelfit.sim.mujoco.simulator import _set_velocity
 
 PUBLISHED_SECONDS = 5 * 3600.0

@@ -48,8 +48,8 @@ from parcelfit.sim.mujoco import (
     load_consignment,
     load_rig,
 )
+from parcelfit.sim.mujoco.options import scene_options
 from parcelfit.sim.mujoco.rig import SCATTER_CUT
-from parcelfit.sim.mujoco.scene import scene_options
 from parcelfit.sim.params import parameter, parse_assignments
 
 MIN_COVERED = 0.95  # a convention's row needs this share of every type's scatter swept

@@ -39,7 +39,7 @@ from parcelfit.errors import ParcelfitError
 from parcelfit.runs import TestCase
 from parcelfit.sim.mujoco import MujocoSimulator, SimOptions, load_consignment, load_rig
 from parcelfit.sim.mujoco.friction import Stepper
-from parcelfit.sim.mujoco.scene import scene_options
+from parcelfit.sim.mujoco.options import scene_options
 
 CAP = 50  # MuJoCo's mjMAXCONPAIR: contacts kept per colliding pair (geom-flex, body-flex)
 

@@ -32,7 +32,7 @@ def _files() -> list[tuple[str, str, type[FileModel], str]]:
     from parcelfit.sim.mujoco.consignment import ConsignmentFile
     from parcelfit.sim.mujoco.rig import RigFile
     from parcelfit.study.screening import ScreenFile
-    from parcelfit.study.studyfile import StudyFile
+    from parcelfit.study.studyschema import StudyFile
     from parcelfit.synth import TwinSpecFile
     from parcelfit.tracking.tagmap import TagMapFile
 

@@ -64,8 +64,8 @@ from parcelfit.sim.mujoco import (
     load_consignment,
     load_rig,
 )
+from parcelfit.sim.mujoco.options import scene_options
 from parcelfit.sim.mujoco.rig import Rig
-from parcelfit.sim.mujoco.scene import scene_options
 from parcelfit.sim.params import parameter, parse_assignments
 from parcelfit.sim.rigidbox import RigidBoxOptions, RigidBoxSimulator
 

@@ -34,7 +34,7 @@ import numpy as np
 from parcelfit.runs import TestCase
 from parcelfit.sim.ensemble import Member, simulate_ensemble, summarise
 from parcelfit.sim.mujoco import MujocoSimulator, load_rig
-from parcelfit.sim.mujoco.scene import SceneOptions
+from parcelfit.sim.mujoco.options import SceneOptions
 from parcelfit.sim.mujoco.simulator import SimOptions
 
 DEFAULT_CONFIGS = ("40:600", "30:600", "20:600", "30:1200", "15:600", "15:1200")

@@ -25,7 +25,7 @@ from parcelfit.errors import ParcelfitError
 from parcelfit.runs import TestCase
 from parcelfit.sim.mujoco import MujocoSimulator, SimOptions, load_consignment
 from parcelfit.sim.mujoco.lumped_mass import mass_bodies
-from parcelfit.sim.mujoco.scene import SceneOptions
+from parcelfit.sim.mujoco.options import SceneOptions
 
 G_CM2 = 1e7  # kg m^2 -> g cm^2
 

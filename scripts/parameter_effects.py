@@ -53,7 +53,7 @@ from parcelfit.sim.mujoco import (
     load_consignment,
     load_rig,
 )
-from parcelfit.sim.mujoco.scene import scene_options
+from parcelfit.sim.mujoco.options import scene_options
 from parcelfit.sim.params import CATALOGUE
 
 PUBLISHED_E3 = ("k_CoPa", "k_MePa", "mu_d_BePa", "mu_d_MePa", "mu_s_MePa", "E_Pa")

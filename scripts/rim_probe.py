@@ -34,7 +34,8 @@ import numpy as np
 
 from parcelfit.sim.mujoco import load_consignment
 from parcelfit.sim.mujoco.indentation import plate_rig
-from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
+from parcelfit.sim.mujoco.options import SceneOptions
+from parcelfit.sim.mujoco.scene import build_scene
 from parcelfit.sim.params import catalogue_unit, parameter
 
 SHELLS = {

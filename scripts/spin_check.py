@@ -28,7 +28,7 @@ from pathlib import Path
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.sim.mujoco import load_consignment
-from parcelfit.sim.mujoco.scene import scene_options
+from parcelfit.sim.mujoco.options import scene_options
 from parcelfit.sim.mujoco.spin import spin_test
 
 

@@ -26,7 +26,7 @@ import numpy as np
 
 from parcelfit.runs import TestCase
 from parcelfit.sim.mujoco import MujocoSimulator, SceneOptions, SimOptions
-from parcelfit.sim.mujoco.scene import parse_scene_options
+from parcelfit.sim.mujoco.options import parse_scene_options
 
 DEFAULT_CASES = (
     "E1/KPBW/1",

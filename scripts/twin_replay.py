@@ -36,8 +36,8 @@ from parcelfit.metrics.reference import select_reference
 from parcelfit.runs import TestCase, Trajectory
 from parcelfit.runs.dataset import load_dataset
 from parcelfit.sim.ensemble import rotation
+from parcelfit.sim.mujoco.options import SceneOptions
 from parcelfit.sim.mujoco.rig import load_rig
-from parcelfit.sim.mujoco.scene import SceneOptions
 from parcelfit.sim.mujoco.simulator import MujocoSimulator, SimOptions
 from parcelfit.sim.params import parameter
 

@@ -185,6 +185,7 @@ def test_tpe_sampler_asks_batches_and_replays_its_history():
     assert tpe.best()[1] == min(c for _, c in tpe._told if c is not None)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sampler", ["published", "tpe"])
 def test_a_study_file_chooses_its_optimizer(tmp_path, sampler):
     from parcelfit.study.calibration import Calibration

@@ -159,6 +159,7 @@ def test_validation_records_the_envelope_beside_the_published_verdict(tmp_path):
     assert 0.0 <= env["inside_y"] <= 1.0
 
 
+@pytest.mark.slow
 def test_figures_refit_the_surrogate_with_the_study_s_own_optimizer_settings(tmp_path):
     from parcelfit.optimize.bo import BOSettings
     from parcelfit.study.plots import study_optimizer
@@ -253,6 +254,7 @@ def test_study_results_round_trip_through_results_json(tmp_path):
         read_results(tmp_path)
 
 
+@pytest.mark.slow
 def test_rerunning_a_finished_study_writes_its_missing_results_without_simulating(
     tmp_path, monkeypatch
 ):

@@ -155,18 +155,18 @@ def test_progress_updates_the_spinner_on_a_terminal_and_prints_lines_elsewhere(
 
     from rich.console import Console
 
-    from parcelfit import cli
+    from parcelfit.cli import output
     from parcelfit.progress import ProgressEvent
 
     out = io.StringIO()
-    monkeypatch.setattr(cli, "console", Console(file=out, force_terminal=terminal, width=100))
+    monkeypatch.setattr(output, "console", Console(file=out, force_terminal=terminal, width=100))
     shown = []
 
     class Spinner:
         def update(self, text):
             shown.append(text)
 
-    say = cli._progress(Spinner(), "screening: ")
+    say = output.status_progress(Spinner(), "screening: ")
     say(ProgressEvent("screening", "ok: screen-0-1 (1 of 2 done)", 1, 2))
     say(ProgressEvent("screening", "ok: screen-0-0 (2 of 2 done)", 2, 2))
     printed = ["screening: ok: screen-0-1 (1 of 2 done)", "screening: ok: screen-0-0 (2 of 2 done)"]

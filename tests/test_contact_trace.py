@@ -31,6 +31,7 @@ def test_bad_arguments_are_refused(trace, capsys):
     assert "smaller than the content" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_the_bottom_sheet_of_a_bulged_mailer_lies_on_its_patch(trace, capsys):
     # a short run on the strips: the bulge's patch carries BW, its rim stays up by most of the
     # bulge's depth (4 mm) and the content above it; a flat bottom's rim lies as low as its face

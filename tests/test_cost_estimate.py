@@ -1,6 +1,7 @@
 """The expected cost long commands print before they start (parcelfit.sim.cost,
 parcelfit.study.estimate)."""
 
+import pytest
 from typer.testing import CliRunner
 
 from parcelfit.cli import app
@@ -49,6 +50,7 @@ def test_the_example_study_counts_its_budget_validations_and_key_frames():
     assert p.simulations == 9 * 10 * 3
 
 
+@pytest.mark.slow
 def test_precision_prints_its_expected_cost_before_it_starts(tmp_path):
     study = write_study(tmp_path)
     out = tmp_path / "p"

@@ -151,6 +151,7 @@ def test_joint_study_file_errors_name_file_key_and_fix(tmp_path, change, pattern
     assert "study.yaml" in str(info.value)
 
 
+@pytest.mark.slow
 def test_a_case_with_its_own_placements_is_simulated_that_often(tmp_path):
     from parcelfit.study.joint import placement_seeds, simulations_per_evaluation
 
@@ -259,6 +260,7 @@ def test_the_advice_names_the_rig_where_an_undetermined_parameter_matters(tmp_pa
     assert doc["advice"]["best"] == "Q/P/1"
 
 
+@pytest.mark.slow
 def test_an_ensemble_on_adjusted_transit_times_adjusts_real_and_simulated_runs_alike(tmp_path):
     from parcelfit.metrics import select_reference
     from parcelfit.metrics.reference import adjusted_reference

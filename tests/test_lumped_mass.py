@@ -19,7 +19,7 @@ from parcelfit.sim.mujoco.lumped_mass import (
     lumped_masses,
     mass_bodies,
 )
-from parcelfit.sim.mujoco.scene import SceneOptions
+from parcelfit.sim.mujoco.options import SceneOptions
 
 from .helpers import load_file_module
 

@@ -13,7 +13,8 @@ import pytest
 from typer.testing import CliRunner
 
 from parcelfit.cli import app
-from parcelfit.study.predict import PREDICT_STORE, decompose, effects_of
+from parcelfit.study.predict import PREDICT_STORE
+from parcelfit.study.spread import decompose, effects_of
 from parcelfit.study.store import Store
 
 from .predict_helpers import write_finished_study, write_rig_q

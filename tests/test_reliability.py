@@ -19,7 +19,7 @@ from parcelfit.cli import app
 from parcelfit.errors import short_path
 from parcelfit.report import build_report
 from parcelfit.report.browser import chromium, inspect_page
-from parcelfit.report.html import CONTENT_SECURITY_POLICY
+from parcelfit.report.page import CONTENT_SECURITY_POLICY
 from parcelfit.study.calibration import Calibration
 from parcelfit.study.status import study_status
 from parcelfit.study.store import Store
@@ -162,7 +162,8 @@ def test_key_frames_are_embedded_only_from_inside_the_study_folder(
 ):
     import base64
 
-    from parcelfit.report.html import _frames_section, _Page
+    from parcelfit.report.html import _frames_section
+    from parcelfit.report.page import Page
     from parcelfit.study.results import read_results
 
     study, secret = _study_with_outside_files(tmp_path)
@@ -170,7 +171,7 @@ def test_key_frames_are_embedded_only_from_inside_the_study_folder(
     _store_key_frames(study, stored, stored)
     results = read_results(study)
     opened = _spy_on_reads(monkeypatch)
-    page = _Page(lambda event: None)
+    page = Page(lambda event: None)
     _frames_section(page, study, results, animation=True)
     data = page.sections[0].data
     assert secret.resolve() not in opened  # never read, not even its first bytes
@@ -1236,6 +1237,7 @@ def _error_lines(result) -> list[str]:
     return [line for line in result.stderr.splitlines() if line.strip()]
 
 
+@pytest.mark.slow
 def test_a_study_whose_every_simulation_fails_stops_after_8_and_quotes_the_first(
     tmp_path, monkeypatch
 ):

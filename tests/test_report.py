@@ -200,7 +200,7 @@ def test_the_browser_check_sees_a_broken_image(tmp_path):
 
 
 def test_parameter_rows_report_values_only_for_determined_parameters():
-    from parcelfit.report.html import ParameterRow
+    from parcelfit.report.calibration import ParameterRow
 
     row = ParameterRow("mu_d_BePa", "-", 0.3, 0.6, 0.41, 0.4, (0.38, 0.42), "determined", 0.40)
     assert row.determined and row.covers_truth and row.error_share == pytest.approx(1 / 30)
@@ -221,6 +221,7 @@ def test_parameter_rows_report_values_only_for_determined_parameters():
     assert summary["bounded"] == "k_MePa (at least 400)" and summary["open"] == "E_Pa"
 
 
+@pytest.mark.slow
 def test_the_report_renders_the_stored_verdict_without_simulating_or_refitting(
     tmp_path, monkeypatch
 ):
@@ -281,6 +282,7 @@ def test_a_study_without_stored_results_says_so_instead_of_recomputing(tmp_path,
     assert "results file is unreadable" in text and 'id="calibration"' in text
 
 
+@pytest.mark.slow
 def test_the_report_s_surrogate_has_the_study_s_optimizer_settings(tmp_path, monkeypatch):
     from parcelfit.optimize.bo import BOSettings
     from parcelfit.study import plots

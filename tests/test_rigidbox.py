@@ -259,6 +259,7 @@ def e3_runs():
     return {name: sim.run({}, TestCase("E3", name, 1)) for name in ("KPBW", "BW")}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["KPBW", "BW"])
 def test_e3_smoke(e3_runs, name):
     result = e3_runs[name]
@@ -282,6 +283,7 @@ def test_same_inputs_give_bit_identical_runs():
     assert a.trajectory.theta[-1] != a.trajectory.theta[0]
 
 
+@pytest.mark.slow
 def test_halving_the_step_changes_an_e3_rotation_by_less_than_2_degrees(e3_runs):
     base = e3_runs["BW"]
     half = RigidBoxSimulator().with_options(timestep=base.diagnostics["timestep"] / 2)

@@ -143,7 +143,8 @@ def test_a_type_may_choose_its_shell_and_a_scene_still_overrides_it():
     shell). Bad choices: `test_bad_consignment_files`."""
     import mujoco
 
-    from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
+    from parcelfit.sim.mujoco.options import SceneOptions
+    from parcelfit.sim.mujoco.scene import build_scene
 
     types = {n: load_consignment(n) for n in ("BW", "KPBW", "KP", "PB")}
     assert {n: (c.shell, c.shell_cells) for n, c in types.items()} == {
@@ -287,7 +288,8 @@ def test_contact_frequency_can_follow_the_stiffness():
     contact_frequency * sqrt(K / K_ref), as a body on a spring does; the static stiffness stays
     K, the default keeps one frequency for every stiffness, and the scene's metal contact carries
     it (k_MePa 100 against 400 N/mm: half the frequency)."""
-    from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
+    from parcelfit.sim.mujoco.options import SceneOptions
+    from parcelfit.sim.mujoco.scene import build_scene
 
     plain, scaled = SceneOptions(), SceneOptions(contact_frequency_stiffness=4e5)
     assert plain.frequency_for(1e5) == plain.frequency_for(1e6) == 300.0
@@ -381,7 +383,8 @@ def test_membrane_cap_keeps_the_bending_stiffness_and_caps_the_stretch():
     cap, and without one, the shell's scene is unchanged (default runs stay as they were)."""
     import re
 
-    from parcelfit.sim.mujoco.scene import SceneOptions, build_scene, equivalent_plate
+    from parcelfit.sim.mujoco.options import SceneOptions
+    from parcelfit.sim.mujoco.scene import build_scene, equivalent_plate
 
     young, h = equivalent_plate(1e9, 5e-4, 3.125e4)
     assert young * h == pytest.approx(3.125e4, rel=1e-12)
@@ -497,7 +500,8 @@ def test_consignment_bulge_is_checked_and_moves_the_parcel_up_by_its_depth():
     with pytest.raises(ParcelfitError, match="a bulge needs a rigid content"):
         parse_consignment(soft, "c.yaml")
 
-    from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
+    from parcelfit.sim.mujoco.options import SceneOptions
+    from parcelfit.sim.mujoco.scene import build_scene
 
     rig = load_rig("E3")
     flat = dataclasses.replace(load_consignment("BW"), bulge=None)
@@ -521,7 +525,8 @@ def test_consignment_bulge_is_checked_and_moves_the_parcel_up_by_its_depth():
 
 
 def test_impratio_reaches_the_model_and_is_checked():
-    from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
+    from parcelfit.sim.mujoco.options import SceneOptions
+    from parcelfit.sim.mujoco.scene import build_scene
 
     rig, cons = load_rig("E3"), load_consignment("KPBW")
     params = resolve(cons.content_kind, si_values={})
@@ -565,7 +570,7 @@ def test_ccd_tolerance_is_tight_around_a_soft_content_and_can_be_set():
     """1e-8 m around the polybag's soft content, MuJoCo's default around a rigid one. At
     MuJoCo's own 1e-6 a vertex of the 50 mm film lying right above one of the 100 mm content's
     is reported 0.2 mm deep in it at rest, where the two just touch (docs/research/pb-speed.md)."""
-    from parcelfit.sim.mujoco.scene import SceneOptions
+    from parcelfit.sim.mujoco.options import SceneOptions
 
     def option(name, **given):
         return _scene_at_rest(name, SceneOptions(**given)).model().opt.ccd_tolerance
@@ -592,7 +597,7 @@ def test_the_shell_touches_its_content_nowhere_at_rest(name, dof):
     first step and clamps it."""
     import numpy as np
 
-    from parcelfit.sim.mujoco.scene import SceneOptions
+    from parcelfit.sim.mujoco.options import SceneOptions
 
     scene = _scene_at_rest(name, SceneOptions(shell_dof=dof))
     assert _deepest_shell_content_contact(scene) > -1e-5  # [m]; unwidened: KP 0.57, PB 0.35 mm
@@ -635,7 +640,8 @@ def test_an_interpolated_shells_nodes_span_the_parcels_own_box():
     import mujoco
     import numpy as np
 
-    from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
+    from parcelfit.sim.mujoco.options import SceneOptions
+    from parcelfit.sim.mujoco.scene import build_scene
 
     rig, cons = load_rig("E3"), load_consignment("KPBW")
     params = resolve(cons.content_kind, si_values={})
@@ -660,7 +666,8 @@ def test_the_default_step_follows_the_shell_and_a_given_step_wins():
     shell) or for a full shell asked for explicitly; a given ``timestep`` overrides both."""
     import re
 
-    from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
+    from parcelfit.sim.mujoco.options import SceneOptions
+    from parcelfit.sim.mujoco.scene import build_scene
 
     def step(cons_name: str, options: SceneOptions) -> float:
         cons = load_consignment(cons_name)
@@ -685,7 +692,7 @@ def test_the_default_step_follows_the_shell_and_a_given_step_wins():
 def test_scene_options_read_from_key_value_texts():
     """``KEY=VALUE`` texts (the scripts' ``--scene``) become `SceneOptions` arguments: numbers
     and fractions as floats, other values as text; a text without ``=`` is refused."""
-    from parcelfit.sim.mujoco.scene import SceneOptions, parse_scene_options
+    from parcelfit.sim.mujoco.options import SceneOptions, parse_scene_options
 
     given = parse_scene_options(["timestep=1/2400", "shell_dof=full", " impratio = 10 "])
     assert given == {"timestep": 1 / 2400, "shell_dof": "full", "impratio": 10.0}
@@ -699,7 +706,7 @@ def test_scene_options_read_from_key_value_texts():
 
 
 def test_scene_options_from_texts_refuse_an_unknown_key_and_a_bad_value():
-    from parcelfit.sim.mujoco.scene import SceneOptions, scene_options
+    from parcelfit.sim.mujoco.options import SceneOptions, scene_options
 
     opt = scene_options(["spacing=0.06", "timestep=1/4800"])
     assert opt == SceneOptions(spacing=0.06, timestep=1 / 4800)
@@ -877,7 +884,7 @@ def test_radiating_diagonals_make_the_shell_mirror_symmetric_at_every_spacing(sp
     triangle per sheet (shell.py, "Diagonals")."""
     import numpy as np
 
-    from parcelfit.sim.mujoco.scene import SceneOptions
+    from parcelfit.sim.mujoco.options import SceneOptions
     from parcelfit.sim.mujoco.shell import pillow_shell
 
     def shell(diagonals):

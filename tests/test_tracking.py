@@ -315,6 +315,7 @@ def test_camera_calibration_recovers_the_camera_and_tracking_stays_accurate(vide
     assert bad.exit_code == 2 and "found in only" in bad.output
 
 
+@pytest.mark.slow
 def test_bad_tag_maps_and_videos_stop_with_exit_2(videos, tmp_path):
     video = str(videos["root"] / "plain.mp4")
     # a reference tag placed 35 cm from where it is: refused, not a trajectory 35 cm off
@@ -339,6 +340,7 @@ def test_bad_tag_maps_and_videos_stop_with_exit_2(videos, tmp_path):
     assert result.exit_code == 2 and "no parcel tag (9) was found" in result.output
 
 
+@pytest.mark.slow  # the first fast test to use the rendered videos would render them
 def test_timing_block_is_read_in_seconds_and_checked(videos, tmp_path):
     doc = tag_map_doc(videos["scene"])
     doc["timing"] = {"exposure_ms": 4, "readout_ms": 15}
@@ -408,6 +410,7 @@ def test_exposure_renders_the_mean_of_the_sub_frames_and_the_spin_turns_at_its_r
     assert np.abs(frame - subs[0]).max() > 50  # the parcel moved 9.6 mm during the exposure
 
 
+@pytest.mark.slow
 def test_motion_blur_and_spin_4ms(tmp_path):
     from parcelfit.tracking.synthetic import straight_spin
 

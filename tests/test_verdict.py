@@ -209,6 +209,7 @@ def test_status_json_carries_every_check_and_the_overall_verdict(tmp_path):
     )
 
 
+@pytest.mark.slow
 def test_the_report_s_verdict_box_is_green_only_when_every_check_passes(tmp_path):
     from parcelfit.report import build_report
 

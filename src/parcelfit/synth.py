@@ -29,7 +29,7 @@ experiments do (method.md sections 2 and 3):
   (the bundled twin and ``benchmarks/bench_twin.py`` use half the model's) lets the twin expose
   the model's remaining step error to a calibration. ``real_belt_friction`` (``mujoco``,
   default, or ``coulomb``) is the twin's law of friction on belts, strips and rollers
-  (`parcelfit.sim.mujoco.scene.SceneOptions.belt_friction`). The remaining model-form
+  (`parcelfit.sim.mujoco.options.SceneOptions.belt_friction`). The remaining model-form
   differences are the specimen, placement, speed and tracking variations above.
 
 The truth (parameters in the catalogue's units, and every setting above) is written beside the

@@ -20,7 +20,8 @@ study, source and recommended records) and ``results.json`` (`parcelfit.study.re
 schema in docs/data.md: the reference runs it used, every validation's verdict and curves, the
 GP surrogate's partial dependence refitted with the optimiser settings the store records, the
 key frames it drew). `build_report` reads those files, turns them into plain values and
-embedded figures (one `Section` per heading, built by a ``_NAME_section`` function here; figures
+embedded figures (one `Section` per heading, built by a ``_NAME_section`` function here, the
+calibration's in `parcelfit.report.calibration`, on the frame of `parcelfit.report.page`; figures
 drawn by `parcelfit.report.figures` and `parcelfit.study.plots`), and the Jinja2 templates
 render the page (``templates/report.html.j2`` and one ``templates/sections/NAME.html.j2`` per
 section). The templates escape every value (autoescaping); only the ``<img>`` tags made here are
@@ -44,152 +45,50 @@ bound or interval), or undetermined (no value is reported).
 
 from __future__ import annotations
 
-import base64
-import io
 import json
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import jinja2
 from markupsafe import Markup
-from matplotlib.figure import Figure
 
 from parcelfit import __version__
-from parcelfit.atomic import write_text_atomic
 from parcelfit.config import load_yaml
 from parcelfit.errors import ParcelfitError
-from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
+from parcelfit.progress import ProgressCallback, ignore_progress
+from parcelfit.report.calibration import (
+    BOUNDED,
+    RECOVERY_TOLERANCE,
+    ParameterRow,
+    calibration_section,
+)
+from parcelfit.report.page import (
+    CONTENT_SECURITY_POLICY,
+    CSS,
+    NO_RESULTS,
+    NOT_STORED,
+    TEMPLATES,
+    Page,
+    Refused,
+    embeddable,
+    figure_html,
+    inside,
+    png_html,
+    write_page,
+)
 from parcelfit.runs import Dataset, load_dataset
-from parcelfit.sim.params import catalogue_unit, to_catalogue_units
-from parcelfit.study.identify import VERDICTS, Identifiability
 from parcelfit.study.results import (
     ReferenceRecord,
     StudyResults,
     ValidationRecord,
     read_results,
 )
-from parcelfit.study.status import folder_verdict, study_status
+from parcelfit.study.status import folder_verdict
 from parcelfit.study.store import STORE_FILE, SourceRecord, Store, StudyRecord
 from parcelfit.study.verdict import UNDETERMINED_MEANING, Verdict, study_verdict
-
-RECOVERY_TOLERANCE = 0.10  # of the range's width
-BOUNDED = ("lower bound", "upper bound", "narrowed")
-
-# The report promises to be script-free and to fetch nothing: the page forbids every script,
-# frame, font and connection, and allows only embedded (data:) images and its own inline styles.
-CONTENT_SECURITY_POLICY = (
-    "default-src 'none'; img-src data:; style-src 'unsafe-inline'; base-uri 'none'; "
-    "form-action 'none'"
-)
-_TEMPLATES = jinja2.Environment(
-    loader=jinja2.PackageLoader("parcelfit.report", "templates"),
-    autoescape=True,
-    undefined=jinja2.StrictUndefined,
-    trim_blocks=True,
-    lstrip_blocks=True,
-)
-
-_CSS = """
-body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;max-width:1100px;margin:2em auto;
-padding:0 1em;color:#222;line-height:1.45}
-h1{margin-bottom:.2em}h2{border-bottom:2px solid #ddd;padding-bottom:.2em;margin-top:2em}
-.synthetic{background:#fff3cd;border:1px solid #e0b000;padding:.6em 1em;border-radius:6px}
-.verdict{font-size:1.15em;padding:.7em 1em;border-radius:6px;margin:1em 0}
-.pass{background:#e3f6e8;border:1px solid #27ae60}.fail{background:#fdecea;border:1px solid #e74c3c}
-.incomplete{background:#fff8e1;border:1px solid #e0a000}.verdict ul{margin:.3em 0;font-size:.9em}
-table{border-collapse:collapse;margin:.8em 0;font-size:.92em}
-th,td{border:1px solid #ccc;padding:.25em .6em;text-align:right}th{background:#f3f3f3}
-td:first-child,th:first-child{text-align:left}
-img{max-width:100%;height:auto;display:block;margin:.6em 0}
-.grid{display:flex;flex-wrap:wrap;gap:1%}.grid img{max-width:49%}
-.note{color:#555;font-size:.92em}.ok{color:#1e8449;font-weight:600}.bad{color:#c0392b;font-weight:600}
-.warn{color:#9a6700;font-weight:600}
-code{background:#f4f4f4;padding:0 .2em}
-"""
-
-# what a missing stored result means, and how to write it (said once, at the top of the page)
-NO_RESULTS = (
-    "This study folder has no stored results (results.json): it was written by a parcelfit "
-    "before the calibration stored them, or the study stopped before it validated. The "
-    "sections that need them say so; nothing is recomputed here. Run `parcelfit calibrate` "
-    "again on the same study file and folder to write them: a finished study then only writes "
-    "its results, figures and key frames (no evaluation is simulated again)."
-)
-_NOT_STORED = "Not stored in this study folder (see the note at the top of the page)."
-
-
-def figure_html(fig: Figure, alt: str, dpi: int = 100) -> Markup:
-    """A matplotlib figure as an embedded PNG ``<img>``."""
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi)
-    return png_html(buf.getvalue(), alt)
-
-
-def png_html(data: bytes, alt: str, mime: str = "image/png") -> Markup:
-    """Image bytes (PNG unless ``mime`` says otherwise) as an embedded ``<img>``."""
-    b64 = base64.b64encode(data).decode("ascii")
-    return Markup('<img src="data:{};base64,{}" alt="{}">').format(mime, b64, alt)
-
-
-# The files the report embeds or reads are named by stored data (``results.json``'s key frames)
-# or found by name in the folders it is given; a study folder may come from someone else. A file
-# is read only when its resolved path (symbolic links followed) lies inside the resolved folder,
-# so neither ``../../secret.txt``, an absolute path nor a link leading out is ever opened; the
-# page says which file it refused. Embedded images must also be what they claim (PNG, GIF) and
-# at most `MAX_EMBED_BYTES`.
-MAX_EMBED_BYTES = 64 * 1024 * 1024
-_MAGIC = {"image/png": (b"\x89PNG\r\n\x1a\n",), "image/gif": (b"GIF87a", b"GIF89a")}
-
-
-@dataclass(frozen=True)
-class Refused:
-    """Why a file named by stored data or found in a folder was not read."""
-
-    name: str
-    reason: str
-
-    def __str__(self) -> str:
-        return f"{self.name} is not embedded: {self.reason}."
-
-
-def inside(folder: Path, name: object, what: str = "the study folder") -> Path | Refused | None:
-    """The file ``name`` (relative to ``folder``, as stored) resolved, when it lies inside the
-    resolved ``folder`` and is a regular file; `Refused` (saying why) when it leads out of it
-    or is not a file name; None when it does not exist. Never opens the file."""
-    shown = str(name)
-    if not isinstance(name, str) or not name or "\0" in name:
-        return Refused(shown, "not a file name")
-    try:
-        base = folder.resolve(strict=True)
-        path = (folder / name).resolve()
-        if not path.is_relative_to(base):
-            return Refused(shown, f"outside {what}")
-        return path if path.is_file() else None
-    except (OSError, RuntimeError, ValueError):  # a loop of links, an unreadable folder
-        return Refused(shown, "not readable")
-
-
-def _embeddable(folder: Path, name: object, mime: str, what: str) -> bytes | Refused | None:
-    """The bytes of a file that `inside` accepts and that is a ``mime`` image (PNG or GIF) of
-    at most `MAX_EMBED_BYTES`; `Refused` or None (missing) otherwise."""
-    path = inside(folder, name, what)
-    if not isinstance(path, Path):
-        return path
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(8)
-            if not head.startswith(_MAGIC[mime]):
-                return Refused(str(name), f"not a {mime.split('/')[1].upper()} image")
-            if fh.seek(0, io.SEEK_END) > MAX_EMBED_BYTES:
-                return Refused(str(name), f"larger than {MAX_EMBED_BYTES >> 20} MiB")
-            fh.seek(0)
-            return fh.read()
-    except OSError:
-        return Refused(str(name), "not readable")
 
 
 @dataclass(frozen=True)
@@ -229,34 +128,6 @@ def locate(folder: str | Path, screen: str | Path | None = None) -> StudyFolders
     return StudyFolders(study, root, screen_dir)
 
 
-@dataclass(frozen=True)
-class Section:
-    """One heading of the page: its template (``templates/sections/KIND.html.j2``), title,
-    anchor and the values the template shows."""
-
-    kind: str
-    title: str
-    anchor: str
-    data: Any
-
-
-@dataclass
-class _Page:
-    """The sections in page order; announces each as it is made."""
-
-    progress: ProgressCallback
-    sections: list[Section] = field(default_factory=list)
-
-    def start(self, title: str) -> str:
-        """Announce a section as its making starts; returns its title."""
-        self.progress(ProgressEvent("report", title))
-        return title
-
-    def add(self, kind: str, title: str, anchor: str, data: Any) -> None:
-        """Append a made section."""
-        self.sections.append(Section(kind, title, anchor, data))
-
-
 def _load_truth(dataset_dir: Path, consignment: str) -> dict[str, float]:
     path = dataset_dir / "truth.yaml"
     if not path.is_file():
@@ -268,7 +139,7 @@ def _load_truth(dataset_dir: Path, consignment: str) -> dict[str, float]:
 # -- transit-time statistics (a description of the dataset) -------------------------------------
 
 
-def _statistics_section(page: _Page, ds: Dataset) -> None:
+def _statistics_section(page: Page, ds: Dataset) -> None:
     from parcelfit.analysis import dataset_title
     from parcelfit.stats.plots import transit_time_boxplots
     from parcelfit.stats.transit import compare_transit_times, transit_time_table
@@ -327,7 +198,7 @@ def _dataset_references(root: Path, ds: Dataset | None) -> list[ReferenceRow] | 
 
 
 def _reference_section(
-    page: _Page, results: StudyResults | None, root: Path, ds: Dataset | None
+    page: Page, results: StudyResults | None, root: Path, ds: Dataset | None
 ) -> None:
     from parcelfit.report.figures import distance_heatmaps
 
@@ -344,7 +215,7 @@ def _reference_section(
     data = {
         "rows": rows,
         "all_cases": everything is not None,
-        "missing": None if results is not None else _NOT_STORED,
+        "missing": None if results is not None else NOT_STORED,
         "refused": [str(refused)] if isinstance(refused, Refused) else [],
         "figures": [
             figure_html(distance_heatmaps(r), f"distance matrices {r.case}") for r in stored
@@ -356,7 +227,7 @@ def _reference_section(
 # -- screening ---------------------------------------------------------------------------------
 
 
-def _screen_section(page: _Page, screen: Path | None) -> None:
+def _screen_section(page: Page, screen: Path | None) -> None:
     title = page.start("Screening")
     data: dict[str, Any] = {
         "found": screen is not None,
@@ -375,257 +246,12 @@ def _screen_section(page: _Page, screen: Path | None) -> None:
             data["selected"] = ", ".join(map(str, doc.get("selected") or [])) or "none"
             data["reasons"] = [(str(k), str(v)) for k, v in (doc.get("reasons") or {}).items()]
         for png in sorted(screen.glob("stage*-pareto-*.png")):
-            chart = _embeddable(screen, png.name, "image/png", where)
+            chart = embeddable(screen, png.name, "image/png", where)
             if isinstance(chart, bytes):
                 data["charts"].append(png_html(chart, png.stem))
             elif chart is not None:
                 data["refused"].append(str(chart))
     page.add("screening", title, "screening", data)
-
-
-# -- calibration -------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class ParameterRow:
-    """One calibrated parameter in catalogue units: its range, the optimiser's recommended
-    value, the hidden truth (synthetic data) and what the evaluations determine about it
-    (`parcelfit.study.identify`: the interval, the verdict and, for a determined parameter,
-    the reported value; None where no analysis is stored)."""
-
-    name: str
-    unit: str
-    low: float
-    high: float
-    best: float
-    truth: float | None
-    interval: tuple[float, float] | None = None
-    verdict: str | None = None
-    estimate: float | None = None  # the reported value: determined parameters only
-
-    @property
-    def determined(self) -> bool | None:
-        """Do the data fix this parameter (None: no analysis stored)?"""
-        return None if self.verdict is None else self.verdict == "determined"
-
-    @property
-    def error_share(self) -> float | None:
-        """|calibrated - truth| as a share of the range's width."""
-        if self.truth is None:
-            return None
-        return abs(self.best - self.truth) / (self.high - self.low)
-
-    @property
-    def recovered(self) -> bool | None:
-        """Is the calibrated value within ``RECOVERY_TOLERANCE`` of the range from the truth?"""
-        err = self.error_share
-        return None if err is None else err <= RECOVERY_TOLERANCE
-
-    @property
-    def covers_truth(self) -> bool | None:
-        """Does the interval contain the hidden truth (None without both)?"""
-        if self.truth is None or self.interval is None:
-            return None
-        return self.interval[0] <= self.truth <= self.interval[1]
-
-    @property
-    def bound_text(self) -> str:
-        """The verdict in words with its numbers, e.g. ``at least 0.41``."""
-        if self.interval is None or self.verdict is None:
-            return "-"
-        a, b = self.interval
-        if self.verdict == "determined":
-            return f"{(a + b) / 2 if self.estimate is None else self.estimate:.4g} +- {(b - a) / 2:.2g}"
-        return {
-            "lower bound": f"at least {a:.4g}",
-            "upper bound": f"at most {b:.4g}",
-            "narrowed": f"between {a:.4g} and {b:.4g}",
-            "undetermined": "no value: the data cannot tell",
-        }.get(self.verdict, "-")
-
-
-def parameter_rows(
-    record: StudyRecord,
-    best: dict[str, float],
-    truth: dict[str, float],
-    ident: Identifiability | None,
-) -> list[ParameterRow]:
-    """The calibrated parameters' table rows (catalogue units), with the stored identifiability
-    analysis ``ident`` (None: not stored)."""
-    by_name = {p.name: p for p in ident.parameters} if ident is not None else {}
-    rows = []
-    for name, (lo, hi) in zip(record.parameters, record.bounds, strict=True):
-        p = by_name.get(name)
-
-        def cat(v: float, name: str = name) -> float:
-            return float(to_catalogue_units(name, v))
-
-        rows.append(
-            ParameterRow(
-                name,
-                catalogue_unit(name),
-                cat(lo),
-                cat(hi),
-                cat(best[name]),
-                truth.get(name),
-                None if p is None else (cat(p.interval[0]), cat(p.interval[1])),
-                None if p is None else p.verdict,
-                None if p is None or p.estimate is None else cat(p.estimate),
-            )
-        )
-    return rows
-
-
-def _iteration_span(last: int) -> str:
-    """Iterations 1 to ``last`` (0 is the initial design, numbered as everywhere else)."""
-    return "iteration 1" if last == 1 else f"iterations 1-{last}"
-
-
-def _surrogate_note(results: StudyResults | None) -> dict[str, Any]:
-    """What the template says about the surrogate the identifiability test read."""
-    if results is None:
-        return {"missing": _NOT_STORED}
-    sur = results.surrogate
-    if sur is None:
-        return {"missing": "The stored results hold no surrogate (no study record)."}
-    opt = sur.optimizer
-    settings = ", ".join(
-        f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}"
-        for k, v in (opt.settings or {}).items()
-    )
-    return {
-        "missing": None,
-        "evaluations": sur.evaluations,
-        "sampler": opt.sampler,
-        "settings": settings,
-        "note": opt.note,
-        "fitted": sur.curves is not None,
-    }
-
-
-def _identifiability_view(
-    results: StudyResults | None,
-    rows: list[ParameterRow],
-    truth: dict[str, float],
-    synthetic: bool,
-) -> dict[str, Any]:
-    """What the template says about what the evaluations determine (`parcelfit.study.identify`),
-    with the pairwise figure and the advice."""
-    from parcelfit.study.plots import pairwise_figure
-
-    ident = None if results is None else results.identifiability
-    if results is None:
-        return {"missing": _NOT_STORED}
-    if ident is None:
-        return {
-            "missing": "The stored results hold no identifiability analysis (fewer than three "
-            "successful evaluations, or results written by an earlier parcelfit: rerun "
-            "`parcelfit calibrate` on the study to write it without simulating again)."
-        }
-    by = {v: [r for r in rows if r.verdict == v] for v in VERDICTS}
-    advice = results.advice
-    return {
-        "missing": None,
-        "determined": ", ".join(r.name for r in by["determined"]),
-        "bounded": [(r.name, r.bound_text) for r in rows if r.verdict in BOUNDED],
-        "undetermined": ", ".join(r.name for r in by["undetermined"]),
-        "evaluations": ident.evaluations,
-        "threshold": ident.threshold,
-        "threshold_source": ident.threshold_source,
-        "noise_sd": ident.noise_sd,
-        "level": f"{ident.level * 100:.0f}",
-        "reached": ident.reached,
-        "best_acceptance": ident.best_acceptance,
-        "converged": ident.converged,
-        "correlations": [(a, b, f"{r:+.2f}") for a, b, r in ident.strongest_correlations()],
-        "missed": ", ".join(r.name for r in rows if synthetic and r.covers_truth is False),
-        "figure": figure_html(
-            pairwise_figure(ident, _truth_si(truth) if synthetic else None),
-            "pairwise plot of the values not excluded",
-        ),
-        "advice": None
-        if advice is None
-        else {
-            "best": advice.best,
-            "rows": [
-                (case, ", ".join(f"{p} {v:.3g}" for p, v in ch.items()) or "-", sum(ch.values()))
-                for case, ch in advice.changes.items()
-            ],
-            "parameters": ", ".join(advice.parameters),
-        },
-    }
-
-
-def _truth_si(truth: dict[str, float]) -> dict[str, float]:
-    """The hidden truth (catalogue units, as truth.yaml holds it) in SI."""
-    from parcelfit.sim.params import CATALOGUE
-
-    units = {p.name: p for p in CATALOGUE}
-    return {n: units[n].to_si(v) if n in units else v for n, v in truth.items()}
-
-
-def _calibration_section(
-    page: _Page,
-    folder: Path,
-    record: StudyRecord,
-    results: StudyResults | None,
-    truth: dict[str, float],
-    synthetic: bool,
-) -> tuple[dict[str, float] | None, list[ParameterRow]]:
-    from parcelfit.study.plots import dependence_figure, history, traces
-
-    title = page.start("Calibration")
-    status = study_status(folder)
-    store = Store(folder / STORE_FILE, readonly=True)
-    try:
-        fits, vals = store.evaluations("fit"), store.evaluations("validation")
-    finally:
-        store.close()
-    done = [e for e in fits if e.finished_at is not None]
-    last = status.last_iteration
-    data: dict[str, Any] = {
-        "evaluations": status.evaluations,
-        "iterations": _iteration_span(last) if last else None,
-        "batch_size": record.batch_size,
-        "validations": len(vals),
-        "span_min": (
-            max(e.finished_at for e in done) - min(e.asked_at for e in fits)  # type: ignore[type-var]
-            if done
-            else 0.0
-        )
-        / 60,
-        "sim_min": sum(e.wall_time or 0.0 for e in fits + vals) / 60,
-        "stopped": status.stop_reason or "not finished",
-        "history": figure_html(history(fits, vals), "cost history"),
-        "best": None,
-    }
-    low, rec = status.lowest_cost, status.recommended
-    if low is None:
-        page.add("calibration", title, "calibration", data)
-        return None, []
-    best = low.to_json()
-    if rec is not None:  # what the study validated
-        best = {**rec.to_json(), "lowest_cost": low.cost}
-    curves = None
-    if results is not None and results.surrogate is not None:
-        curves = results.surrogate.curves
-    ident = None if results is None else results.identifiability
-    rows = parameter_rows(record, best["params"], truth, ident)
-    data.update(
-        best=best,
-        truth=bool(truth),
-        rows=rows,
-        surrogate=_surrogate_note(results),
-        identifiability=_identifiability_view(results, rows, truth, synthetic),
-        cases=[] if results is None else list(results.cases),
-        parts=None if rec is None else rec.parts,
-        dependence=None
-        if not curves
-        else figure_html(dependence_figure(list(curves)), "partial dependence"),
-        traces=figure_html(traces(fits, list(record.parameters)), "parameter traces"),
-    )
-    page.add("calibration", title, "calibration", data)
-    return best["params"], rows
 
 
 # -- validation --------------------------------------------------------------------------------
@@ -661,14 +287,14 @@ def _validation_view(
 
 
 def _validation_section(
-    page: _Page, results: StudyResults | None, record: StudyRecord
+    page: Page, results: StudyResults | None, record: StudyRecord
 ) -> ValidationRecord | None:
     title = page.start("Validation")
     data: dict[str, Any] = {"missing": None, "shown": None, "views": []}
     group = [] if results is None else results.shown_validations()
     shown = group[0] if group else None
     if results is None:
-        data["missing"] = _NOT_STORED if record.validation_setting is not None else None
+        data["missing"] = NOT_STORED if record.validation_setting is not None else None
     elif shown is not None:
         data["shown"] = shown
         data["several"] = len(group) > 1
@@ -684,7 +310,7 @@ def _validation_section(
     return shown
 
 
-def _transfer_section(page: _Page, results: StudyResults | None) -> None:
+def _transfer_section(page: Page, results: StudyResults | None) -> None:
     """The transfer check (only for a study that has one)."""
     if results is None or not results.transfer:
         return
@@ -708,7 +334,7 @@ def _transfer_section(page: _Page, results: StudyResults | None) -> None:
     page.add("transfer", title, "transfer", data)
 
 
-def _stricter_example_section(page: _Page, root: Path) -> None:
+def _stricter_example_section(page: Page, root: Path) -> None:
     path = inside(root, "stricter-criterion.json", "its folder")
     if path is None:
         return
@@ -742,13 +368,13 @@ def _stricter_example_section(page: _Page, root: Path) -> None:
 
 
 def _frames_section(
-    page: _Page, folder: Path, results: StudyResults | None, animation: bool
+    page: Page, folder: Path, results: StudyResults | None, animation: bool
 ) -> None:
     title = page.start("The simulated run")
     data: dict[str, Any] = {"note": None, "image": None, "animation": None, "no_animation": None}
     kf = None if results is None else results.key_frames
     if results is None:
-        data["note"] = _NOT_STORED
+        data["note"] = NOT_STORED
     elif kf is None:
         data["note"] = (
             "No key frames are stored: the calibration draws them when it stops (with its figures)."
@@ -756,7 +382,7 @@ def _frames_section(
     else:
         data["note"] = kf.note
         if kf.image is not None:
-            image = _embeddable(folder, kf.image, "image/png", "the study folder")
+            image = embeddable(folder, kf.image, "image/png", "the study folder")
             if isinstance(image, bytes):
                 data["image"] = png_html(image, "key frames")
             elif image is None:
@@ -767,7 +393,7 @@ def _frames_section(
             gif = (
                 None
                 if kf.animation is None
-                else _embeddable(folder, kf.animation, "image/gif", "the study folder")
+                else embeddable(folder, kf.animation, "image/gif", "the study folder")
             )
             if isinstance(gif, bytes):
                 data["animation"] = png_html(gif, "animation of the simulated run", "image/gif")
@@ -819,7 +445,7 @@ def build_report(
         results_error = None
     except ParcelfitError as exc:  # a damaged file: the page says so, the rest still renders
         results, results_error = None, str(exc)
-    page = _Page(progress or ignore_progress)
+    page = Page(progress or ignore_progress)
     ds: Dataset | None = None
     dataset_dir = Path(source.dataset) if source.dataset else None
     if dataset_dir is not None and (dataset_dir / "dataset.yaml").is_file():
@@ -830,7 +456,7 @@ def build_report(
         _statistics_section(page, ds)
     _reference_section(page, results, places.root, ds)
     _screen_section(page, places.screen)
-    best, rows = _calibration_section(
+    best, rows = calibration_section(
         page, places.study, record, results, truth, bool(ds and ds.synthetic)
     )
     _validation_section(page, results, record)
@@ -838,9 +464,9 @@ def build_report(
     _stricter_example_section(page, places.root)
     if key_frames and best is not None:
         _frames_section(page, places.study, results, animation)
-    doc = _TEMPLATES.get_template("report.html.j2").render(
+    doc = TEMPLATES.get_template("report.html.j2").render(
         csp=CONTENT_SECURITY_POLICY,
-        css=Markup(_CSS),
+        css=Markup(CSS),
         title=f"parcelfit report: {record.name}",
         version=__version__,
         generated=time.strftime("%Y-%m-%d %H:%M"),
@@ -867,7 +493,7 @@ def build_report(
         sections=page.sections,
         recovery_tolerance=f"{RECOVERY_TOLERANCE * 100:.0f}",
     )
-    _write_page(target, doc)
+    write_page(target, doc)
     return target
 
 
@@ -884,19 +510,6 @@ def _report_target(path: Path) -> Path:
             "the report's folder is a file", file=path.parent, fix="choose another --out"
         )
     return path
-
-
-def _write_page(target: Path, doc: str) -> None:
-    """Write the page atomically (a temporary file renamed); nothing is left behind on failure."""
-    try:
-        target.parent.mkdir(parents=True, exist_ok=True)
-        write_text_atomic(target, doc)
-    except OSError as exc:
-        raise ParcelfitError(
-            f"cannot write the report ({exc.strerror or exc})",
-            file=target,
-            fix="choose a writable --out",
-        ) from None
 
 
 _BOX = {"trustworthy": "pass", "incomplete": "incomplete", "not trustworthy": "fail"}
@@ -949,11 +562,7 @@ def verdict_text(path: str | Path) -> str:
 
 
 __all__ = [
-    "Section",
     "build_report",
-    "figure_html",
     "locate",
-    "parameter_rows",
-    "png_html",
     "verdict_text",
 ]

@@ -25,8 +25,8 @@ from rich.markup import escape
 from rich.table import Table
 
 from parcelfit import __version__
-from parcelfit.report.html import _CSS, _TEMPLATES, CONTENT_SECURITY_POLICY, _write_page
-from parcelfit.report.html import figure_html as _figure_html
+from parcelfit.report.page import CONTENT_SECURITY_POLICY, CSS, TEMPLATES, write_page
+from parcelfit.report.page import figure_html as _figure_html
 from parcelfit.study.design import DesignResult
 from parcelfit.study.predict import (
     QUANTITIES,
@@ -162,9 +162,9 @@ def write_prediction_page(prediction: Prediction, path: str | Path) -> Path:
     target = Path(path)
     fig = _histograms(prediction)
     d = prediction.design
-    doc = _TEMPLATES.get_template("prediction.html.j2").render(
+    doc = TEMPLATES.get_template("prediction.html.j2").render(
         csp=CONTENT_SECURITY_POLICY,
-        css=Markup(_CSS),
+        css=Markup(CSS),
         title=f"parcelfit prediction: {d.label}",
         version=__version__,
         generated=time.strftime("%Y-%m-%d %H:%M"),
@@ -178,7 +178,7 @@ def write_prediction_page(prediction: Prediction, path: str | Path) -> Path:
         notes=prediction.notes,
         figure=_figure_html(fig, "predictive distributions"),
     )
-    _write_page(target, doc)
+    write_page(target, doc)
     return target
 
 

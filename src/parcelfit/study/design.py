@@ -11,16 +11,16 @@ the packaging-belt friction) and a plate impact (a belt carries the parcel into 
 across it: how it slides off is set by the packaging-steel friction and the contact).
 
 **What a candidate would tell.** Each candidate is simulated at the same N parameter sets
-drawn from the study's plausible set (`parcelfit.study.predict.draw_sets`) times the same K
+drawn from the study's plausible set (`parcelfit.study.plausible.draw_sets`) times the same K
 seeded placements, and summarised by the quantities of `parcelfit.study.predict` (transit
 time, rotation, exit position and heading). For quantity q:
 
 * its sensitivity J_qp to parameter p is the change of q's per-set mean over p's plausible
   interval, from the least-squares fit of the per-set means on all parameters scaled to their
-  intervals (`parcelfit.study.predict.effects_of`); an effect smaller than twice its standard
+  intervals (`parcelfit.study.spread.effects_of`); an effect smaller than twice its standard
   error counts as zero;
 * its run-to-run scatter is s_q^2 = W_q + f_q^2: W_q the mean within-set variance over the
-  placements (`parcelfit.study.predict.decompose`) and f_q a measurement floor (`FLOOR`: the
+  placements (`parcelfit.study.spread.decompose`) and f_q a measurement floor (`FLOOR`: the
   band test's tolerances, 3 mm and 1 degree, for the exit position and the angles, 2 ms for
   the transit time, assumed), so that a quantity the placements do not scatter is not taken
   as exact. The specimens' own scatter (two real parcels of one type differ) is not simulated:
@@ -79,22 +79,23 @@ from parcelfit.sim.executors import Executor, Task
 from parcelfit.study.folderlock import check_writable, lock_folder
 from parcelfit.study.identify import DETERMINED_WIDTH, Identifiability
 from parcelfit.study.joint import require_placements, simulate_items
+from parcelfit.study.plausible import (
+    Design,
+    check_design,
+    design_simulator,
+    draw_sets,
+    load_inputs,
+    placement_seeds,
+)
 from parcelfit.study.predict import (
     MAX_SETS,
     QUANTITIES,
     TABLE_FORMATS,
-    Design,
-    check_design,
     cost_line,
-    decompose,
-    design_simulator,
-    draw_sets,
-    effects_of,
     finish_run,
-    load_inputs,
     open_executor,
-    placement_seeds,
 )
+from parcelfit.study.spread import decompose, effects_of
 from parcelfit.study.store import Store
 
 DESIGN_STORE = "design.sqlite"
@@ -122,7 +123,7 @@ def candidate_designs(
     bundled ones, ``own_rig`` (the study's own rig file) and ``rig_files``, the types the
     bundled ones and ``own_type`` (the study's own consignment file); or, with ``only``
     (``RIG/TYPE/SETTING`` labels, each rig and type a bundled name or the name of one of those
-    files), just those. Each is checked (`parcelfit.study.predict.check_design`)."""
+    files), just those. Each is checked (`parcelfit.study.plausible.check_design`)."""
     from parcelfit.sim.mujoco import (
         bundled_consignment_names,
         bundled_rig_names,

@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 from parcelfit.runs import TestCase
 from parcelfit.sim.cost import Estimate, estimate, run_seconds
@@ -26,6 +27,20 @@ def validation_checks(study: Study) -> int:
     batches = max(0, math.ceil((study.budget - study.initial) / study.batch_size))
     checks = batches // study.validate_every
     return checks + (1 if batches == 0 or batches % study.validate_every else 0)
+
+
+def _processes(
+    executor: str | None,
+    workers: int | None,
+    section: Mapping[str, Any],
+    single: tuple[str, ...] = ("serial",),
+) -> tuple[str, int]:
+    """The executor a job runs on and its parallel processes: the command line's ``executor``
+    and ``workers`` first, then the file's ``executor`` ``section`` (local, one process per
+    core, by default); one process for the kinds in ``single``."""
+    kind = executor or section.get("kind", "local")
+    n = 1 if kind in single else workers or section.get("workers") or os.cpu_count() or 1
+    return kind, n
 
 
 def calibration_estimate(study: Study, workers: int) -> Estimate:
@@ -58,9 +73,7 @@ def calibration_cost_line(
     its budget) on the ``executor`` and ``workers`` the command line (first) or the study file
     asks for (local, one process per core, by default); ``resumed`` says only what is left
     runs. A Dask cluster's workers are unknown here: its line is for one."""
-    kind = executor or study.executor.get("kind", "local")
-    n = 1 if kind in ("serial", "dask") else workers or study.executor.get("workers")
-    n = n or os.cpu_count() or 1
+    kind, n = _processes(executor, workers, study.executor, single=("serial", "dask"))
     return calibration_estimate(study, n).text(
         "at most: it stops when a validation passes"
         + ("; divide by the Dask cluster's worker processes" if kind == "dask" else "")
@@ -95,4 +108,34 @@ def precision_estimate(
     return estimate([(variants * placements, _seconds(study, c)) for c in cases], workers)
 
 
-__all__ = ["calibration_estimate", "precision_estimate", "screen_estimate", "validation_checks"]
+def screen_cost_line(screen: Screen, executor: str | None, workers: int | None) -> str:
+    """The line ``screen`` prints before it starts: the first stage's expected cost on the
+    ``executor`` and ``workers`` the command line (first) or the screen file asks for."""
+    _, n = _processes(executor, workers, screen.executor)
+    return screen_estimate(screen, n).text("the first stage; later stages follow from it")
+
+
+def precision_cost_line(
+    study: Study,
+    placements: int,
+    candidates: Sequence[str],
+    executor: str | None,
+    workers: int | None,
+) -> str:
+    """The line ``precision`` prints before it starts: the check's expected cost on the
+    ``executor`` and ``workers`` the command line (first) or the study file asks for."""
+    _, n = _processes(executor, workers, study.executor)
+    return precision_estimate(study, placements, candidates, n).text(
+        "runs kept from an earlier check are not simulated again"
+    )
+
+
+__all__ = [
+    "calibration_cost_line",
+    "calibration_estimate",
+    "precision_cost_line",
+    "precision_estimate",
+    "screen_cost_line",
+    "screen_estimate",
+    "validation_checks",
+]

@@ -105,6 +105,12 @@ class PrecisionCheck:
             groups.append(("fitted + every candidate", list(sens.values())))
         return [(title, best_subsets(group, SUBSET_SIZE, top)) for title, group in groups]
 
+    def write_tables(self, folder: Path, command: str, workers: int | None) -> Path:
+        """Write `markdown` into ``folder``/`TABLE_FILE` (atomically); return the file."""
+        path = folder / TABLE_FILE
+        write_text_atomic(path, self.markdown(command, workers))
+        return path
+
     def markdown(self, command: str, workers: int | None) -> str:
         """The tables of the check, headed by the ``command`` that wrote them."""
         lines = [
@@ -389,6 +395,12 @@ def run_precision_check(
     )
 
 
+def stored_runs(folder: Path) -> int:
+    """How many simulations a check in ``folder`` has kept (`STATISTICS_FILE`; 0 if none)."""
+    cache = folder / STATISTICS_FILE
+    return len(json.loads(cache.read_text(encoding="utf-8"))["runs"]) if cache.is_file() else 0
+
+
 def command_line(
     program: str,
     study_file: Path,
@@ -420,4 +432,5 @@ __all__ = [
     "PrecisionCheck",
     "command_line",
     "run_precision_check",
+    "stored_runs",
 ]

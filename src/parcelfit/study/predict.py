@@ -19,37 +19,10 @@ run:
 5-95 % band (the 5th and 95th percentiles) of q over the runs that ended ok (and, for T,
 crossed both light barriers).
 
-**Parameters versus placements** (a two-way decomposition, the law of total variance). With
-q_ij the run of set i at placement j, n_i the runs of set i that have q, N = sum_i n_i, the
-set means m_i = (1/n_i) sum_j q_ij and the grand mean m = (1/N) sum_ij q_ij:
-
-    V = (1/N) sum_ij (q_ij - m)^2                      total variance
-    B = (1/N) sum_i n_i (m_i - m)^2                    variance of the per-set means
-    W = (1/N) sum_i sum_j (q_ij - m_i)^2               mean within-set variance
-    V = B + W,   parameter share = B / V,   placement share = W / V.
-
-With every run ok (n_i = K) B is the variance of the per-set means and W the mean of the
-within-set variances (both with divisor n, resp. K). Because every set sees the same K
-placements, a quantity that is a sum of a parameter part and a placement part,
-q_ij = a_i + b_j, splits exactly: B = var(a), W = var(b). An interaction of parameters and
-placements counts as placement spread (W); B also holds 1/K of the placements' scatter of each
-set mean when the parts do not add, so with few placements the parameter share is an upper
-estimate.
-
-**How far each parameter moves a prediction** (from the draws, no further simulation): the
-per-set means m_i of q are regressed (ordinary least squares, with an intercept) on all
-calibrated parameters at once, each scaled to its plausible interval, z = (p - a) / (b - a)
-for the interval [a, b]. The coefficient of a parameter is then the change of the predicted
-mean over its plausible interval with the other parameters varying over the plausible set as
-they do in use (so a parameter correlated with another in S is credited only with its own
-part), and its standard error is the regression's. A one-at-a-time sweep was not chosen: it
-costs 2 x K more simulations per parameter and moves the parameter from one calibrated set that
-may lie outside S at the interval's ends. An effect counts as resolved when it is at least
-twice its standard error (with N sets and d parameters the regression needs N > d + 1; for
-parameters spread evenly over their intervals and uncorrelated, the standard error is about
-s sqrt(12 / N), s the scatter of the set means about the fit: 0.77 s with the default 20
-sets). For each calibrated parameter the data do not determine, the quantity it moves most
-(as a share of that quantity's 5-95 % band) is named in one sentence, e.g. "E_Pa is
+**Parameters versus placements** and **how far each parameter moves a prediction**: the
+decomposition of the spread and the effects of `parcelfit.study.spread` (its docstring gives
+the formulas). For each calibrated parameter the data do not determine, the quantity it moves
+most (as a share of that quantity's 5-95 % band) is named in one sentence, e.g. "E_Pa is
 undetermined and moves the transit time by 40 ms here: run `parcelfit design` to find the
 experiment that fixes it".
 
@@ -83,23 +56,29 @@ import pandas as pd
 from parcelfit.atomic import write_text_atomic
 from parcelfit.errors import ParcelfitError, shown
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
-from parcelfit.runs import Run, TestCase
+from parcelfit.runs import Run
 from parcelfit.sim.ensemble import MAX_PLACEMENTS, rotation
 from parcelfit.sim.executors import Executor, Task, make_executor
-from parcelfit.sim.factory import SimulatorConfig, make_simulator
 from parcelfit.sim.protocol import SimResult, Simulator
 from parcelfit.study.folderlock import check_writable, lock_folder
 from parcelfit.study.identify import Identifiability
 from parcelfit.study.joint import require_placements, simulate_items
-from parcelfit.study.results import read_results
-from parcelfit.study.store import STORE_FILE, Store
-from parcelfit.study.studyfile import Study, load_study
+from parcelfit.study.plausible import (
+    Design,
+    check_design,
+    design_simulator,
+    draw_sets,
+    load_inputs,
+    placement_seeds,
+)
+from parcelfit.study.spread import RESOLVED, Decomposition, Effect, decompose, effects_of
+from parcelfit.study.store import Store
+from parcelfit.study.studyfile import Study
 
 PREDICT_STORE = "predict.sqlite"
 PREDICTION_FILE = "prediction.json"
 TABLE_FORMATS = ("csv", "parquet")
 MAX_SETS = 1000  # parameter sets of one prediction (each simulated at every placement)
-RESOLVED = 2.0  # an effect is resolved when it is at least this many standard errors
 QUANTITIES = ("transit_time", "rotation", "exit_y", "exit_heading")
 # per quantity: words, SI unit, the unit a person reads and its factor from SI
 _SHOW = {
@@ -141,270 +120,7 @@ def _magnitude(value: float) -> int:
     return 0 if value == 0 else math.floor(math.log10(abs(value)))
 
 
-# -- the inputs ----------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True, eq=False)
-class StudyInputs:
-    """What a prediction takes from a finished calibration: its folder, the study (simulator,
-    fixed parameters) and the stored identifiability analysis (the sample of S)."""
-
-    folder: Path
-    study: Study
-    identifiability: Identifiability
-
-
-def find_study(folder: str | Path) -> Path:
-    """The study folder in ``folder`` (holding ``study.sqlite``) or in ``folder/calibration``
-    (as ``parcelfit demo`` writes); a clear error when there is none."""
-    folder = Path(folder)
-    if not folder.exists():
-        raise ParcelfitError(
-            "no such study folder", file=folder, fix="give the folder `parcelfit calibrate` wrote"
-        )
-    for candidate in (folder, folder / "calibration"):
-        if (candidate / STORE_FILE).is_file():
-            return candidate
-    raise ParcelfitError(
-        f"no calibration study here (no {STORE_FILE}, nor calibration/{STORE_FILE})",
-        file=folder,
-        fix="point at the folder `parcelfit calibrate` or `parcelfit demo` wrote",
-    )
-
-
-def load_inputs(folder: str | Path) -> StudyInputs:
-    """Read a finished calibration: its study file (found through the store's source record)
-    and its identifiability analysis (``results.json``). Refused with a clear message when the
-    folder holds no study, the study file has gone or the study has no analysis yet."""
-    study_dir = find_study(folder)
-    store = Store(study_dir / STORE_FILE, readonly=True)
-    try:
-        source = store.read_source()
-    finally:
-        store.close()
-    if source is None or not source.study_file:
-        raise ParcelfitError(
-            "the study's store does not say which study file it was made from",
-            file=study_dir,
-            fix="rerun `parcelfit calibrate` on the study file and this folder (it resumes)",
-        )
-    path = Path(source.study_file)
-    if not path.is_file():
-        raise ParcelfitError(
-            "the study file this study was made from is not there any more (it names the "
-            "simulator to predict with)",
-            file=path,
-            fix="put the study file back where it was",
-        )
-    study = load_study(path)
-    results = read_results(study_dir)
-    ident = None if results is None else results.identifiability
-    if ident is None:
-        raise ParcelfitError(
-            "the study has no stored analysis of what its data determine (the plausible "
-            "parameter sets a prediction draws from)",
-            file=study_dir,
-            fix="let the calibration finish (rerun `parcelfit calibrate` on the same study file "
-            "and folder: a finished study writes its results without simulating again)",
-        )
-    return StudyInputs(study_dir, study, ident)
-
-
-@dataclass(frozen=True)
-class Design:
-    """The design to predict: ``rig`` and ``consignment`` as given (bundled names or
-    ``.yaml`` files, made absolute), their names and the speed setting."""
-
-    rig: str
-    consignment: str
-    rig_name: str
-    consignment_name: str
-    setting: int
-
-    @property
-    def case(self) -> TestCase:
-        """The test case the simulator is asked to run."""
-        return TestCase(self.rig_name, self.consignment_name, self.setting)
-
-    @property
-    def label(self) -> str:
-        """The design's label, e.g. ``E1/KPBW/2``."""
-        return self.case.label
-
-
-def _given(value: str) -> str:
-    """A rig or consignment as given: a ``.yaml`` file made absolute, a name as it is."""
-    if value.lower().endswith((".yaml", ".yml")):
-        return str(Path(value).resolve())
-    return value
-
-
-def check_design(rig: str, consignment: str, setting: int) -> Design:
-    """The design ``rig`` x ``consignment`` x ``setting`` checked before anything runs: the rig
-    (a bundled name, see `parcelfit rigs`, or a rig file) and consignment type must load and
-    the rig must have the speed setting; each error says which and what to use."""
-    from parcelfit.sim.mujoco import (
-        bundled_consignment_names,
-        bundled_rig_names,
-        load_consignment,
-        load_rig,
-    )
-
-    try:
-        rig_obj = load_rig(_given(rig))
-    except ParcelfitError as exc:
-        raise ParcelfitError(
-            exc.message,
-            file=exc.file,
-            where="--rig",
-            fix=exc.fix
-            if exc.file
-            else f"use a bundled rig ({', '.join(bundled_rig_names())}; `parcelfit rigs` lists "
-            "them) or a rig .yaml file",
-        ) from None
-    try:
-        cons = load_consignment(_given(consignment))
-    except ParcelfitError as exc:
-        raise ParcelfitError(
-            exc.message,
-            file=exc.file,
-            where="--consignment",
-            fix=exc.fix
-            if exc.file
-            else f"use a bundled type ({', '.join(bundled_consignment_names())}) or a "
-            "consignment .yaml file",
-        ) from None
-    if setting not in rig_obj.speeds:
-        raise ParcelfitError(
-            f"rig {rig_obj.name} has no speed setting {setting}",
-            where="--setting",
-            fix=f"use one of {sorted(rig_obj.speeds)} (`parcelfit rigs` lists them)",
-        )
-    return Design(_given(rig), _given(consignment), rig_obj.name, cons.name, setting)
-
-
-def design_simulator(study: Study, design: Design) -> Simulator:
-    """The study's simulator set up for ``design``: a MuJoCo or rigid-box configuration with
-    the design's rig and consignment in place of the study's (every other setting kept); a
-    python or external simulator as it is (it is given the design's test case)."""
-    config: SimulatorConfig = study.simulator
-    if config.backend in ("mujoco", "rigidbox"):
-        config = SimulatorConfig(
-            **{**dict(config), "rig": design.rig, "consignment": design.consignment},
-            folder=config.folder,
-        )
-    return make_simulator(config)
-
-
-def draw_sets(ident: Identifiability, n: int, seed: int) -> list[dict[str, float]]:
-    """``n`` parameter sets (SI) drawn from the stored sample of the plausible set: rows
-    chosen at random (seeded), without replacement while the sample has ``n`` rows."""
-    sample = np.asarray(ident.sample, float)
-    if not len(sample):
-        raise ParcelfitError("the study's stored sample of plausible parameter sets is empty")
-    rng = np.random.default_rng([seed, 0x9D])
-    rows = rng.choice(len(sample), n, replace=n > len(sample))
-    return [{name: float(sample[r, j]) for j, name in enumerate(ident.names)} for r in sorted(rows)]
-
-
-def placement_seeds(k: int, seed: int) -> list[int]:
-    """``k`` distinct placement seeds drawn from ``seed`` (ascending)."""
-    rng = np.random.default_rng([seed, 0x51])
-    return sorted(int(s) for s in rng.choice(2**31 - 1, k, replace=False) + 1)
-
-
 # -- the statistics ------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Decomposition:
-    """The two-way split of the module docstring: total variance V, between-set B and
-    within-set W (units of the quantity squared), runs N and sets counted."""
-
-    total: float
-    between: float
-    within: float
-    runs: int
-    sets: int
-
-    @property
-    def parameter_share(self) -> float:
-        """B / V (NaN when V is 0 or nothing was measured)."""
-        return self.between / self.total if self.total > 0 else math.nan
-
-    @property
-    def placement_share(self) -> float:
-        """W / V (NaN when V is 0 or nothing was measured)."""
-        return self.within / self.total if self.total > 0 else math.nan
-
-
-def decompose(values: np.ndarray) -> Decomposition:
-    """The decomposition of ``values`` (n sets x K placements; NaN where a run has no value)
-    into the variance of the per-set means and the mean within-set variance (module
-    docstring)."""
-    q = np.asarray(values, float)
-    ok = np.isfinite(q)
-    n_i = ok.sum(axis=1)
-    N = int(n_i.sum())
-    if N == 0:
-        return Decomposition(math.nan, math.nan, math.nan, 0, 0)
-    grand = float(q[ok].mean())
-    have = n_i > 0
-    means = np.where(have, np.nansum(np.where(ok, q, 0.0), axis=1) / np.maximum(n_i, 1), np.nan)
-    between = float(np.sum(n_i[have] * (means[have] - grand) ** 2) / N)
-    dev = np.where(ok, q - means[:, None], 0.0)
-    within = float(np.sum(dev[have] ** 2) / N)
-    total = float(np.sum((q[ok] - grand) ** 2) / N)
-    return Decomposition(total, between, within, N, int(have.sum()))
-
-
-@dataclass(frozen=True)
-class Effect:
-    """How far one parameter moves one quantity's predicted mean over the parameter's
-    plausible interval [low, high] (SI), with its standard error (module docstring); NaN when
-    the regression has too few sets."""
-
-    parameter: str
-    verdict: str
-    quantity: str
-    low: float
-    high: float
-    effect: float
-    se: float
-
-    @property
-    def resolved(self) -> bool:
-        """True when the effect is at least `RESOLVED` standard errors."""
-        return math.isfinite(self.effect) and abs(self.effect) >= RESOLVED * self.se
-
-
-def effects_of(
-    means: np.ndarray, X: np.ndarray, intervals: Sequence[tuple[float, float]]
-) -> tuple[np.ndarray, np.ndarray]:
-    """OLS of the per-set means (n,) on the parameters X (n, d; SI) scaled to their
-    ``intervals``: each parameter's effect over its interval and its standard error (NaN
-    where the regression cannot be made: fewer than d + 2 sets with a mean)."""
-    means = np.asarray(means, float)
-    X = np.asarray(X, float)
-    d = X.shape[1]
-    nan = np.full(d, math.nan)
-    ok = np.isfinite(means)
-    if ok.sum() < d + 2:
-        return nan, nan.copy()
-    lo = np.array([a for a, _ in intervals], float)
-    width = np.array([b - a for a, b in intervals], float)
-    Z = (X[ok] - lo) / np.where(width > 0, width, 1.0)
-    A = np.column_stack([np.ones(int(ok.sum())), Z])
-    y = means[ok]
-    coef, *_ = np.linalg.lstsq(A, y, rcond=None)
-    dof = len(y) - A.shape[1]
-    resid = y - A @ coef
-    s2 = float(resid @ resid) / dof
-    cov = s2 * np.linalg.pinv(A.T @ A)
-    se = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    effect, se = coef[1:], se[1:]
-    flat = width <= 0  # a parameter the sample holds at one value moves nothing
-    return np.where(flat, 0.0, effect), np.where(flat, 0.0, se)
 
 
 @dataclass(frozen=True)
@@ -911,24 +627,12 @@ __all__ = [
     "PREDICTION_FILE",
     "PREDICT_STORE",
     "QUANTITIES",
-    "Decomposition",
-    "Design",
-    "Effect",
     "Prediction",
     "QuantitySummary",
-    "StudyInputs",
-    "check_design",
     "cost_line",
-    "decompose",
     "default_out",
-    "design_simulator",
-    "draw_sets",
-    "effects_of",
-    "find_study",
     "finish_run",
-    "load_inputs",
     "open_executor",
-    "placement_seeds",
     "predict",
     "quantity_unit",
     "quantity_words",

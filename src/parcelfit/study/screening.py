@@ -109,13 +109,12 @@ from parcelfit.study.loop import FAILURES_IN_A_ROW, FailureStreak
 from parcelfit.study.objective import record_result
 from parcelfit.study.store import Evaluation, Store
 from parcelfit.study.studyfile import (
-    ReferenceSection,
-    ScreenExecutorSection,
     _to_si,
     check_simulator_files,
     fixed_to_si,
     reference_case,
 )
+from parcelfit.study.studyschema import ReferenceSection, ScreenExecutorSection
 
 RESPONSES = ("dtw_xy", "dtw_theta")  # the responses the survivors and the selection are judged on
 # analysed too with several placements, shown but not selecting (see the module docstring)

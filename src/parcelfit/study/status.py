@@ -184,8 +184,12 @@ def _verdict(folder: Path, cases: Any, stop_reason: str | None) -> Verdict:
 
 def folder_verdict(folder: str | Path) -> Verdict:
     """The overall verdict of a study folder with its checks (`parcelfit.study.verdict`): what
-    ``calibrate``, ``status`` and the report say."""
+    ``calibrate``, ``status`` and the report say. ``folder`` is a study folder or a folder
+    holding ``calibration/`` (the demo's)."""
     folder = Path(folder)
+    inner = folder / "calibration"
+    if not (folder / STORE_FILE).is_file() and (inner / STORE_FILE).is_file():
+        folder = inner
     store = Store(folder / STORE_FILE, readonly=True)
     try:
         cases, stop_reason = store.get_meta("cases"), store.get_meta("stop_reason")

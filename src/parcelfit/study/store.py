@@ -518,3 +518,16 @@ class Store:
                 )
             )
         return out
+
+
+def finished_count(path: str | Path, kind: str) -> int:
+    """How many evaluations of ``kind`` the store at ``path`` holds finished (not pending); 0
+    where there is no store yet. Opens the store read-only: safe beside a running study."""
+    path = Path(path)
+    if not path.is_file():
+        return 0
+    store = Store(path, readonly=True)
+    try:
+        return sum(e.status != "pending" for e in store.evaluations(kind))
+    finally:
+        store.close()

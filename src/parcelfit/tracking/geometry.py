@@ -21,6 +21,7 @@ frame's geometry is known.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -126,3 +127,15 @@ def tag_pose(mapper: PlaneMapper, corners: np.ndarray, height: float) -> tuple[f
     centre = w.mean(axis=0)
     edge = (w[1] - w[0]) + (w[2] - w[3])
     return float(centre[0]), float(centre[1]), float(np.arctan2(edge[1], edge[0]))
+
+
+def parcel_pose(w: np.ndarray, offset: tuple[float, float]) -> tuple[float, float, float]:
+    """Parcel centre (x, y) [m] and heading [rad] from a tag's four rig-frame corners ``w`` (4, 2)
+    [m]: the heading as `tag_pose` takes it, the centre ``offset`` [m] (in the tag's frame) back
+    from the tag's centre."""
+    centre = w.mean(axis=0)
+    edge = (w[1] - w[0]) + (w[2] - w[3])
+    th = float(np.arctan2(edge[1], edge[0]))
+    c, s = math.cos(th), math.sin(th)
+    dx, dy = offset
+    return float(centre[0] - (c * dx - s * dy)), float(centre[1] - (s * dx + c * dy)), th

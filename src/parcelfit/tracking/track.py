@@ -11,7 +11,7 @@ With the camera's timing (exposure, rolling-shutter readout; from the tag map, e
 from the video by `estimate_timing`), frames in which
 a parcel tag was missed, or smeared by more than ``fit_smear_cells`` of its bits, are measured
 again by fitting the tag's pattern, smeared as the camera saw it, to the frame
-(`parcelfit.tracking.fit`, `_SmearFitter`); kept fits are flagged ``fitted`` in the
+(`parcelfit.tracking.fit`, `parcelfit.tracking.smear`); kept fits are flagged ``fitted`` in the
 trajectory's ``source``. Frames where a parcel tag has no measurement between its first and last
 one are gaps: gaps of at most ``max_gap`` frames are filled by linear interpolation (theta
 unwrapped first), listed as interpolated and flagged ``filled`` (the others ``detected`` or
@@ -43,8 +43,8 @@ from parcelfit.runs import Trajectory
 from parcelfit.runs.io import MAX_SAMPLE_INTERVAL_S, MIN_SAMPLE_INTERVAL_S
 from parcelfit.tracking.barriers import barrier_times
 from parcelfit.tracking.detect import TagDetector, _side
-from parcelfit.tracking.fit import SmearFit, fit_smeared_tag, tag_pattern
-from parcelfit.tracking.geometry import PlaneMapper, fit_plane_mapper, tag_pose
+from parcelfit.tracking.geometry import PlaneMapper, fit_plane_mapper, parcel_pose, tag_pose
+from parcelfit.tracking.smear import Crop, SmearFitter, cut_around_tag, estimate_timing
 from parcelfit.tracking.smooth import RESTART_AFTER, rts_smooth
 from parcelfit.tracking.tagmap import TagMap, tag_corners
 
@@ -308,7 +308,12 @@ def track_video(
     exposure, readout = tag_map.exposure, tag_map.readout
     estimating = opts.fit and opts.estimate_timing and not tag_map.timing_given
     fitting = opts.fit and tag_map.timing_given and (exposure > 0 or readout > 0)
-    fitters = {i: _SmearFitter(tag_map, i, corners[i], 1 / fps, size[1], opts) for i in parcel_ids}
+    fitters = {
+        i: SmearFitter(
+            tag_map, i, corners[i], 1 / fps, size[1], opts.fit_smear_cells, opts.fit_max_rms
+        )
+        for i in parcel_ids
+    }
     last_seen: dict[int, list[tuple[int, np.ndarray]]] = {i: [] for i in parcel_ids}
     started = time.perf_counter()
     k = 0
@@ -326,9 +331,9 @@ def track_video(
             other_ids |= set(found) - expected - set(parcel_ids)
             for tag_id in parcel_ids:
                 if (fitting or estimating) and mapper is not None:
-                    crop = _cut(grey, found.get(tag_id), last_seen[tag_id], k, opts.max_gap)
+                    crop = cut_around_tag(grey, found.get(tag_id), last_seen[tag_id], k, opts.max_gap)
                     if crop is not None:
-                        fitters[tag_id].crops[k] = _Crop(*crop, mapper)
+                        fitters[tag_id].crops[k] = Crop(*crop, mapper)
                     if tag_id in found:
                         last_seen[tag_id] = [*last_seen[tag_id][-1:], (k, found[tag_id])]
                 if mapper is None or tag_id not in found:
@@ -346,7 +351,7 @@ def track_video(
                 rows[tag_id].append((tx - (c * dx - s * dy), ty - (s * dx + c * dy), th))
             if fitting:
                 for fitter in fitters.values():
-                    fitter.run(k - _SmearFitter.reach)
+                    fitter.run(k - SmearFitter.reach)
             if progress:
                 progress(k + 1, total)
     finally:
@@ -569,16 +574,6 @@ def smooth_track(
     return out, rejected, sd, sorted(restarts)
 
 
-def _parcel_pose(w: np.ndarray, offset: tuple[float, float]) -> tuple[float, float, float]:
-    """Parcel centre and heading from a tag's four rig-frame corners (as `tag_pose`)."""
-    centre = w.mean(axis=0)
-    edge = (w[1] - w[0]) + (w[2] - w[3])
-    th = float(np.arctan2(edge[1], edge[0]))
-    c, s = math.cos(th), math.sin(th)
-    dx, dy = offset
-    return float(centre[0] - (c * dx - s * dy)), float(centre[1] - (s * dx + c * dy)), th
-
-
 def rolling_shutter_poses(
     corners: dict[int, tuple[np.ndarray, np.ndarray]],
     t: np.ndarray,
@@ -609,7 +604,7 @@ def rolling_shutter_poses(
             centre[k] = w.mean(axis=0)
             edge = (w[1] - w[0]) + (w[2] - w[3])
             head[k] = math.atan2(edge[1], edge[0])
-            out[k] = _parcel_pose(w, offset)
+            out[k] = parcel_pose(w, offset)
         if len(keys) < 2:
             break
         ks = np.array(keys)
@@ -648,299 +643,3 @@ def _frames_in_view(
     start = 0 if inside(first) else first
     end = len(detected) - 1 if inside(last) else last
     return end - start + 1
-
-
-@dataclass(frozen=True)
-class _Crop:
-    """A cut of one frame around a parcel tag, kept for the model fit (`_SmearFitter`)."""
-
-    patch: np.ndarray  # grey, shrunk by ``shrink``
-    origin: tuple[int, int]  # full-frame px of the cut's top-left
-    shrink: int
-    mapper: PlaneMapper  # the frame's geometry
-
-
-_FIT_SIDE_PX = 24  # cuts are shrunk so that the tag spans at most about twice this many pixels
-
-
-def _cut(
-    grey: np.ndarray,
-    found: np.ndarray | None,
-    last: list[tuple[int, np.ndarray]],
-    k: int,
-    max_gap: int,
-) -> tuple[np.ndarray, tuple[int, int], int] | None:
-    """A cut of frame ``k`` around the tag: around its detected corners ``found``, or, when it
-    was missed, around where its last two detections ``last`` (frame, corners) move it (for up
-    to 2 * ``max_gap`` frames after the last one). Returns (patch, origin (x, y), shrink)."""
-    if found is not None:
-        corners, grow = found, 0.0
-    elif last and k - last[-1][0] <= 2 * max_gap:
-        k1, c1 = last[-1]
-        step = (
-            (c1.mean(axis=0) - last[0][1].mean(axis=0)) / (k1 - last[0][0]) if len(last) > 1 else 0
-        )
-        corners, grow = c1 + step * (k - k1), 0.25 * (k - k1)
-    else:
-        return None
-    side = _side(corners)
-    d = max(1, math.floor(side / _FIT_SIDE_PX))
-    margin = side * (0.75 + grow)
-    h, w = grey.shape
-    x0 = max(0, int(corners[:, 0].min() - margin))
-    y0 = max(0, int(corners[:, 1].min() - margin))
-    x0, y0 = x0 - x0 % d, y0 - y0 % d
-    x1 = min(w, math.ceil(corners[:, 0].max() + margin))
-    y1 = min(h, math.ceil(corners[:, 1].max() + margin))
-    x1, y1 = x0 + (x1 - x0) // d * d, y0 + (y1 - y0) // d * d
-    if x1 - x0 < 8 * d or y1 - y0 < 8 * d:
-        return None
-    patch = grey[y0:y1, x0:x1]
-    if d > 1:
-        patch = cv2.resize(patch, ((x1 - x0) // d, (y1 - y0) // d), interpolation=cv2.INTER_AREA)
-    return patch.copy(), (x0, y0), d
-
-
-# the fit's formal standard deviations assume independent pixel noise; on the rendered H.264
-# videos its errors were up to 4 times larger, hence the factor, and never below the floors
-_FIT_SD_FACTOR = 4.0
-_FIT_SD_FLOOR = (5e-5, math.radians(0.05))
-
-
-_TIMING_FRAMES = 8  # the most smeared detected frames the timing is estimated on
-_TIMING_FAILED_RMS = 0.5  # the residual counted for a frame whose fit fails [contrast]
-
-
-def estimate_timing(fitters: list[_SmearFitter], fps: float) -> dict[str, Any]:
-    """The camera's exposure and rolling-shutter readout [s], when the tag map does not state
-    them, from the parcel tags' most smeared detected frames (up to `_TIMING_FRAMES`, by
-    `_SmearFitter.smear_rate`): the timing whose model fit leaves the smallest mean residual
-    (`fit.py`; a wrong exposure smears, a wrong readout shears the modelled tag differently
-    from the filmed one). Searched between 0 and one frame interval T: exposure on a grid of
-    T / 8 steps (readout 0), then the readout on T / 4 steps, then each refined twice by half
-    the step (the better of the two neighbours). Returns a dict: ``exposure``, ``readout``
-    [s], ``frames`` used, ``residual_rms`` (mean, best timing), ``source`` ("estimated"), or
-    ``source`` "assumed none" when no frame smears by ``fit_smear_cells`` bits even at an
-    exposure of a whole frame interval (then the timing cannot matter, nor be measured)."""
-    frame = 1 / fps
-    ranked = sorted(
-        (
-            (fitter.smear_rate(k), i, k)
-            for i, fitter in enumerate(fitters)
-            for k in fitter.crops
-            if k in fitter.detections
-        ),
-        reverse=True,
-    )
-    chosen = []
-    for rate, i, k in ranked[:_TIMING_FRAMES]:
-        fitter = fitters[i]
-        if rate * frame >= fitter.opts.fit_smear_cells:
-            chosen.append((fitter, k))
-    if not chosen:
-        return {
-            "exposure": 0.0,
-            "readout": 0.0,
-            "source": "assumed none",
-            "reason": "no parcel tag moved fast enough to smear by "
-            f"{fitters[0].opts.fit_smear_cells:g} bit even over a whole frame interval, so "
-            "the timing cannot matter (nor be measured)",
-        }
-    memo: dict[tuple[float, float], float] = {}
-
-    def cost(exposure: float, readout: float) -> float:
-        key = (round(exposure, 7), round(readout, 7))
-        if key not in memo:
-            rms = []
-            for fitter, k in chosen:
-                tried = fitter.attempt(k, fitter.crops[k], key[0], key[1], always=True)
-                fit = None if tried is None else tried[0]
-                rms.append(_TIMING_FAILED_RMS if fit is None else min(fit.rms, _TIMING_FAILED_RMS))
-            memo[key] = float(np.mean(rms))
-        return memo[key]
-
-    def best_on(grid: np.ndarray, other: float, exposure_axis: bool) -> float:
-        pairs = [(v, other) if exposure_axis else (other, v) for v in grid]
-        return float(grid[int(np.argmin([cost(*p) for p in pairs]))])
-
-    def refine(value: float, step: float, other: float, exposure_axis: bool) -> float:
-        for h in (step / 2, step / 4):
-            grid = np.clip(np.array([value - h, value, value + h]), 0.0, frame)
-            value = best_on(grid, other, exposure_axis)
-        return value
-
-    exposure = best_on(np.linspace(0, frame, 9), 0.0, True)
-    readout = best_on(np.linspace(0, frame, 5), exposure, False)
-    exposure = refine(exposure, frame / 8, readout, True)
-    readout = refine(readout, frame / 4, exposure, False)
-    return {
-        "exposure": exposure,
-        "readout": readout,
-        "frames": len(chosen),
-        "residual_rms": cost(exposure, readout),
-        "source": "estimated",
-    }
-
-
-class _SmearFitter:
-    """The model fit (`fit_smeared_tag`) of one parcel tag in the frames it was missed and in
-    the frames it was detected but smeared by more than ``opts.fit_smear_cells`` bits, in frame
-    order, run while the video is read (`run`, a few frames behind the detection, so that the
-    fits use the main thread while the decoding thread reads on). The parcel's pose (centre x,
-    y [m], heading [rad]) and motion at frame k come from a quadratic in time through its
-    detections and fits within 4 frames (constant acceleration and turn-rate change), the
-    tag's from the parcel's through its offset; a detected frame starts from its detection, a
-    missed one from the prediction. A fit is kept when its residual is below
-    ``opts.fit_max_rms``, it stays within half a tag and 15 degrees of its start, and its
-    standard deviations are below 1 mm and 1 degree. ``fits``: per fitted frame, the tag's
-    pose, the sds of its centre [m] and heading [rad], and its image corners [px];
-    ``unsupported``: detected frames whose smear called for a fit that was not kept."""
-
-    reach = 4  # frames either side in the motion model
-
-    def __init__(
-        self,
-        tag_map: TagMap,
-        tag_id: int,
-        detections: dict[int, tuple[np.ndarray, np.ndarray]],
-        dt: float,
-        height: int,
-        opts: TrackOptions,
-    ) -> None:
-        self.tag = tag_map.parcel_tags[tag_id]
-        self.pattern = tag_pattern(tag_map.family, tag_id)
-        self.exposure, self.readout = tag_map.exposure, tag_map.readout
-        self.detections = detections  # frame -> (rig corners, image rows), filled while reading
-        self.dt, self.height, self.opts = dt, height, opts
-        self.crops: dict[int, _Crop] = {}
-        self.fits: dict[int, tuple[np.ndarray, float, float, np.ndarray]] = {}
-        self.unsupported: set[int] = set()
-        self.tried, self.seconds = 0, 0.0
-        self.residuals: list[float] = []  # kept fits' residual rms [fraction of the contrast]
-        self._known: dict[int, np.ndarray] = {}  # frame -> the parcel's pose
-
-    def _pose(self, k: int) -> np.ndarray | None:
-        if k not in self._known and k in self.detections:
-            # the motion model runs on the parcel centre (a near-straight path) and heading,
-            # not on the tag centre, which circles the parcel centre when the parcel spins
-            self._known[k] = np.array(_parcel_pose(self.detections[k][0], self.tag.offset))
-        return self._known.get(k)
-
-    def run(self, until: int) -> None:
-        """Fit the kept cuts of frames up to ``until`` (then dropped)."""
-        for k in sorted(c for c in self.crops if c <= until):
-            crop = self.crops.pop(k)
-            t0 = time.perf_counter()
-            self.tried += 1
-            self._fit(k, crop)
-            self.seconds += time.perf_counter() - t0
-
-    def _motion(self, k: int) -> tuple[float, float, float, np.ndarray] | None:
-        """The parcel's pose (x, y [m], heading [rad]) at frame k from the quadratic through its
-        measured frames within `reach`, and the tag centre's velocity [m/s] and turn rate
-        [rad/s]; None under two measured frames near k."""
-        near_poses = [(j, self._pose(j)) for j in range(k - self.reach, k + self.reach + 1)]
-        near = [(j, p) for j, p in near_poses if p is not None]
-        if len(near) < 2:
-            return None
-        tk = np.array([j - k for j, _ in near]) * self.dt
-        poses = np.array([p for _, p in near])
-        poses[:, 2] = np.unwrap(poses[:, 2])
-        deg = 2 if len(near) >= 3 and np.ptp(tk) > 2 * self.dt else 1
-        coef = [np.polyfit(tk, poses[:, j], deg) for j in range(3)]
-        px_, py_, th = (float(c[-1]) for c in coef)
-        vx, vy, w = (float(c[-2]) for c in coef)
-        ox, oy = self._offset(th)
-        return px_, py_, th, np.array([vx - w * oy, vy + w * ox, w])
-
-    def _offset(self, th: float) -> tuple[float, float]:
-        """The tag's offset from the parcel centre in the rig frame at heading ``th``."""
-        dx, dy = self.tag.offset
-        c_, s_ = math.cos(th), math.sin(th)
-        return c_ * dx - s_ * dy, s_ * dx + c_ * dy
-
-    def smear_rate(self, k: int) -> float:
-        """How fast the tag smears at frame k: tag bits per second of exposure (its centre's
-        speed plus its corners' turn); 0 when its motion is unknown."""
-        motion = self._motion(k)
-        if motion is None:
-            return 0.0
-        rates = motion[3]
-        speed = math.hypot(*rates[:2]) + abs(rates[2]) * self.tag.size / math.sqrt(2)
-        return speed / (self.tag.size / self.pattern.bits)
-
-    def attempt(
-        self, k: int, crop: _Crop, exposure: float, readout: float, always: bool = False
-    ) -> tuple[SmearFit | None, np.ndarray, bool] | None:
-        """The fit of frame k with the given timing [s]: (fit or None, its start, whether k was
-        detected); None when not tried (no motion known; a detected frame smeared under
-        ``opts.fit_smear_cells`` bits, unless ``always``)."""
-        tag, opts = self.tag, self.opts
-        motion = self._motion(k)
-        if motion is None:
-            return None
-        px_, py_, th, rates = motion
-        ox, oy = self._offset(th)
-        detected = k in self.detections
-        if detected:
-            start = np.array(_parcel_pose(self.detections[k][0], (0.0, 0.0)))
-            start[2] = th + math.remainder(start[2] - th, 2 * math.pi)
-            smear = (math.hypot(*rates[:2]) + abs(rates[2]) * tag.size / math.sqrt(2)) * exposure
-            if not always and smear < opts.fit_smear_cells * tag.size / self.pattern.bits:
-                return None
-        else:
-            start = np.array([px_ + ox, py_ + oy, th])
-        mapper = crop.mapper
-
-        def corners_of(p: np.ndarray, m: PlaneMapper = mapper) -> np.ndarray:
-            return m.to_image(tag_corners(p[0], p[1], tag.size, p[2]), tag.height)
-
-        side_px = _side(corners_of(start))
-        step_m = 0.1 * tag.size / side_px
-        steps = np.array([step_m, step_m, 0.1 / (side_px / math.sqrt(2))])
-        fit = fit_smeared_tag(
-            crop.patch,
-            crop.origin,
-            crop.shrink,
-            corners_of,
-            start,
-            steps,
-            rates,
-            self.pattern,
-            exposure,
-            readout,
-            self.height,
-        )
-        return fit, start, detected
-
-    def _fit(self, k: int, crop: _Crop) -> None:
-        tag, opts = self.tag, self.opts
-        tried = self.attempt(k, crop, self.exposure, self.readout)
-        if tried is None:
-            return
-        fit, start, detected = tried
-        dx, dy = tag.offset
-        if fit is None or not fit.rms <= opts.fit_max_rms:
-            self.unsupported.update({k} if detected else set())
-            return
-        moved = fit.params - start
-        sd_pos = math.sqrt(max(fit.cov[0, 0] + fit.cov[1, 1], 0.0) / 2)
-        sd_head = math.sqrt(max(fit.cov[2, 2], 0.0))
-        if (
-            math.hypot(*moved[:2]) > tag.size / 2
-            or abs(moved[2]) > math.radians(15)
-            or sd_pos > 1e-3
-            or sd_head > math.radians(1)
-        ):
-            self.unsupported.update({k} if detected else set())
-            return
-        self.residuals.append(fit.rms)
-        tx, ty, th = fit.params
-        c_, s_ = math.cos(th), math.sin(th)
-        self._known[k] = np.array([tx - (c_ * dx - s_ * dy), ty - (s_ * dx + c_ * dy), th])
-        self.fits[k] = (
-            fit.params,
-            math.hypot(_FIT_SD_FACTOR * sd_pos, _FIT_SD_FLOOR[0]),
-            math.hypot(_FIT_SD_FACTOR * sd_head, _FIT_SD_FLOOR[1]),
-            fit.corners,
-        )

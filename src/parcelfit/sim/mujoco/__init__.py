@@ -7,8 +7,9 @@ from parcelfit.sim.mujoco.consignment import (
     load_consignment,
 )
 from parcelfit.sim.mujoco.mjlog import install_default_handler
+from parcelfit.sim.mujoco.options import SceneOptions
 from parcelfit.sim.mujoco.rig import Rig, bundled_rig_names, load_rig
-from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
+from parcelfit.sim.mujoco.scene import build_scene
 from parcelfit.sim.mujoco.simulator import Frames, MujocoSimulator, SimOptions
 
 install_default_handler()  # MuJoCo's warnings go to logging, never into MUJOCO_LOG.TXT

@@ -55,7 +55,8 @@ from parcelfit.sim.mujoco.coulomb import CoulombBelts
 from parcelfit.sim.params import DYNAMIC_THRESHOLD, STATIC_THRESHOLD
 
 if TYPE_CHECKING:
-    from parcelfit.sim.mujoco.scene import Scene, SceneOptions
+    from parcelfit.sim.mujoco.options import SceneOptions
+    from parcelfit.sim.mujoco.scene import Scene
 
 # the coefficient a contact sliding by hand keeps in MuJoCo's cone: an elliptic cone of exactly 0
 # is degenerate (MuJoCo's solve then drops the contact's normal force as well)

@@ -23,8 +23,9 @@ import numpy as np
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.sim.mujoco.consignment import Consignment
+from parcelfit.sim.mujoco.options import SceneOptions
 from parcelfit.sim.mujoco.rig import Rig, parse_rig
-from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
+from parcelfit.sim.mujoco.scene import build_scene
 
 
 @dataclass(frozen=True)

@@ -55,8 +55,9 @@ from parcelfit.sim.mujoco.backend import RigBackend
 from parcelfit.sim.mujoco.consignment import Consignment
 from parcelfit.sim.mujoco.friction import Stepper
 from parcelfit.sim.mujoco.mjlog import CountedWarnings
+from parcelfit.sim.mujoco.options import SceneOptions
 from parcelfit.sim.mujoco.rig import Barrier, Rig, Surface
-from parcelfit.sim.mujoco.scene import Scene, SceneOptions, build_scene
+from parcelfit.sim.mujoco.scene import Scene, build_scene
 from parcelfit.sim.protocol import SimResult, SimStatus
 
 MAX_SPEED = 20.0  # m/s

@@ -49,7 +49,8 @@ from parcelfit.sim.mujoco.consignment import Consignment
 from parcelfit.sim.mujoco.friction import Stepper
 from parcelfit.sim.mujoco.indentation import plate_geoms, plate_rig
 from parcelfit.sim.mujoco.mjlog import CountedWarnings
-from parcelfit.sim.mujoco.scene import SceneOptions, build_scene
+from parcelfit.sim.mujoco.options import SceneOptions
+from parcelfit.sim.mujoco.scene import build_scene
 from parcelfit.sim.mujoco.simulator import add_rigid_velocity
 
 

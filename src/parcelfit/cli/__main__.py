@@ -1,0 +1,3 @@
+from parcelfit.cli import main
+
+main()

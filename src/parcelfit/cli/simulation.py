@@ -1,0 +1,375 @@
+"""The simulation commands: one test case (or an ensemble of its placements), the bundled rigs,
+consignment types and parameters, and twin datasets."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated
+
+import typer
+from rich.markup import escape
+from rich.progress import Progress, TimeElapsedColumn
+from rich.table import Table
+from rich.text import Text
+
+from parcelfit.cli.options import (
+    SettingOption,
+    WorkersOption,
+    at_most,
+    check_executor,
+    check_paths,
+    worker_count,
+    workers_at_most,
+)
+from parcelfit.cli.output import console, resumes, say_cost
+from parcelfit.errors import ParcelfitError
+from parcelfit.progress import ProgressEvent
+
+if TYPE_CHECKING:
+    from parcelfit.simulate import CaseSimulation
+
+
+def simulate(
+    rig: Annotated[
+        str, typer.Option(help="Bundled rig name (E1, E2a, E2b, E3) or a rig .yaml file.")
+    ] = "E3",
+    consignment: Annotated[
+        str,
+        typer.Option(
+            help="Bundled consignment type (KPBW, PB, KP, BW) or a consignment .yaml file."
+        ),
+    ] = "KPBW",
+    setting: SettingOption = 1,
+    set_: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--set",
+            metavar="NAME=VALUE",
+            help="A parameter in the catalogue's unit (see `parcelfit params`); repeatable.",
+        ),
+    ] = None,
+    out: Annotated[Path, typer.Option(help="Trajectory file to write (.csv or .parquet).")] = Path(
+        "run.csv"
+    ),
+    video: Annotated[
+        Path | None,
+        typer.Option(help="Also write a top-view animation (.gif, or .mp4 with ffmpeg)."),
+    ] = None,
+    timestep: Annotated[
+        float | None,
+        typer.Option(
+            help="Time step [s].", show_default="1/2400 s (rigid contents), 1/1200 s (soft)"
+        ),
+    ] = None,
+    spacing: Annotated[
+        float, typer.Option(help="Shell mesh spacing for rigid contents [m].")
+    ] = 0.03,
+    film_spacing: Annotated[
+        float | None,
+        typer.Option(
+            help="Film mesh spacing around a soft content [m].",
+            show_default="0.05 m",
+        ),
+    ] = None,
+    membrane_cap: Annotated[
+        float | None,
+        typer.Option(
+            help="Largest in-plane stiffness E*t of the packaging shell [N/m]: the shell keeps "
+            "its bending stiffness (see the simulator's README, Resolution).",
+        ),
+    ] = None,
+    belt_friction: Annotated[
+        str,
+        typer.Option(
+            help="Friction law on belts, strips and rollers: mujoco (MuJoCo's contacts) or "
+            "coulomb (Coulomb forces at the contact points; see the simulator's README, Sliding).",
+        ),
+    ] = "mujoco",
+    shell_dof: Annotated[
+        str,
+        typer.Option(
+            help="The packaging shell's degrees of freedom: auto (the consignment file's "
+            "shell if it names one, e.g. trilinear over 4 x 4 x 1 cells for the bundled "
+            "rigid-content types; else quadratic around a rigid content, full around a soft "
+            "one), full (one per vertex; give a fine --timestep, "
+            "e.g. 0.000208333 for 1/4800 s), quadratic or trilinear (see the simulator's "
+            "README, Spin).",
+        ),
+    ] = "auto",
+    shell_cells: Annotated[
+        str | None,
+        typer.Option(
+            help="An interpolated shell's grid of cells along the parcel's length, width and "
+            "height, e.g. 4,4,1 (default: the consignment file's with its own shell, else one).",
+        ),
+    ] = None,
+    mass_lumping: Annotated[
+        str,
+        typer.Option(
+            help="How the packaging's (and a soft content's) mass is spread over the bodies that "
+            "carry it: area (lumped by area and volume) or equal (MuJoCo's own equal shares, "
+            "the former model).",
+        ),
+    ] = "area",
+    wall_limit: Annotated[float, typer.Option(help="Wall-clock limit [s].")] = 600.0,
+    seed: Annotated[
+        int | None,
+        typer.Option(
+            help="Placement seed: draw the start pose from the rig's hand-placement scatter "
+            "(default: the nominal pose; with --repeat, 0).",
+            min=0,
+        ),
+    ] = None,
+    repeat: Annotated[
+        int,
+        typer.Option(
+            help="Simulate an ensemble of this many placements (seeds SEED, SEED+1, ...) and "
+            "summarise transit times and rotations.",
+            min=1,
+        ),
+    ] = 1,
+    workers: WorkersOption = None,
+) -> None:
+    """Simulate one test case with MuJoCo and write the run (t, x, y, theta; SI units).
+
+    With --repeat N, simulate N seeded placements and write each run (OUT with -s<seed> before
+    its suffix), a summary table (OUT with -ensemble.csv) and print the ensemble statistics."""
+    from parcelfit.runs import write_trajectory
+    from parcelfit.sim.ensemble import MAX_PLACEMENTS
+    from parcelfit.simulate import case_simulation
+
+    at_most(repeat, "--repeat", MAX_PLACEMENTS)
+    at_most(seed, "--seed", 2**32 - 1)
+    workers_at_most(workers)
+    check_paths(out, video)  # before a simulation of minutes
+    run = case_simulation(
+        rig,
+        consignment,
+        setting,
+        set_ or [],
+        record_vertices=video is not None,
+        timestep=timestep,
+        spacing=spacing,
+        film_spacing=film_spacing,
+        membrane_cap=membrane_cap,
+        shell_dof=shell_dof,
+        shell_cells=shell_cells,
+        belt_friction=belt_friction,
+        mass_lumping=mass_lumping,
+        wall_limit=wall_limit,
+    )
+    case = run.case
+    if repeat > 1:
+        if video is not None:
+            raise ParcelfitError("--video works with one run only", fix="leave out --repeat")
+        _simulate_ensemble(run, seed or 0, repeat, worker_count(workers), out)
+        return
+    with console.status(f"simulating {case.label}"):
+        result, frames = run.simulator.with_placement(seed).run_with_frames(run.params, case)
+    d = result.diagnostics
+    colour = "green" if result.ok else "red"
+    console.print(
+        f"[{colour}]{result.status.value}[/]: {d.get('message')}; {d.get('simulated_time', 0):.3f} s "
+        f"simulated in {result.wall_time:.2f} s wall ({d.get('steps_per_second', 0):.0f} steps/s)"
+    )
+    if result.run is not None:
+        tt = result.run.transit_time
+        console.print(
+            f"transit time: {'not measured (a light barrier was not crossed)' if tt is None else f'{tt:.4f} s'}"
+        )
+        console.print(Text(f"wrote {write_trajectory(result.run.trajectory, out)}"))
+    if video is not None and frames is not None:
+        from parcelfit.sim.mujoco.render import animate_run
+
+        with console.status("rendering the animation"):
+            console.print(Text(f"wrote {animate_run(run.rig, frames, video, title=case.label)}"))
+    if not result.ok:
+        raise typer.Exit(code=1)
+
+
+def _shell_text(dof: str, cells: tuple[int, int, int]) -> str:
+    """A shell for a table: its degrees of freedom and, if more than one, its cells."""
+    if cells == (1, 1, 1):
+        return dof
+    return f"{dof}, {cells[0]} x {cells[1]} x {cells[2]} cells"
+
+
+def _simulate_ensemble(run: CaseSimulation, first: int, n: int, workers: int, out: Path) -> None:
+    """Simulate ``n`` placements from seed ``first`` (`parcelfit.simulate.simulate_placements`)
+    with a progress bar; print their table and summary."""
+    import math
+
+    from parcelfit.simulate import simulate_placements
+
+    case = run.case
+    with Progress(*Progress.get_default_columns(), TimeElapsedColumn(), console=console) as bar:
+        task = bar.add_task(f"{case.label}: {n} placements", total=n)
+        done = simulate_placements(run, first, n, workers, out, lambda: bar.advance(task))
+    rows, st, table_path = done.rows, done.summary, done.table
+    table = Table(title=f"{case.label}: {n} placements (seeds {first}-{first + n - 1})")
+    for col in ("seed", "status", "transit time [s]", "rotation [deg]", "outcome"):
+        table.add_column(escape(col), justify="right" if col != "status" else "left")
+    for r in rows:
+        table.add_row(
+            str(r["seed"]),
+            r["status"],
+            "-" if r["transit_time_s"] is None else f"{r['transit_time_s']:.3f}",
+            "-" if r["rotation_deg"] is None else f"{r['rotation_deg']:.1f}",
+            r["outcome"],
+        )
+    console.print(table)
+    console.print(
+        f"rotation [deg]: median {math.degrees(st.rotation_median):.1f} "
+        f"(quartiles {math.degrees(st.rotation_q25):.1f}-{math.degrees(st.rotation_q75):.1f}, "
+        f"max {math.degrees(st.rotation_max):.1f}); > 90 deg in {st.share_over_90:.0%}, "
+        f"> 180 deg in {st.share_over_180:.0%}; {st.spins} spins, {st.slides} slides",
+        markup=False,
+    )
+    console.print(
+        f"transit time [s]: median {st.transit_median:.3f}, mean {st.transit_mean:.3f} "
+        f"+- {st.transit_sem:.3f} (standard error); rank correlation with rotation "
+        f"{st.rank_correlation:.2f}",
+        markup=False,
+    )
+    console.print(f"wrote {n} runs and {table_path}", markup=False)
+    if st.n_ok < st.n:
+        raise typer.Exit(code=1)
+
+
+def rigs() -> None:
+    """List the bundled test rigs with their speed settings."""
+    from parcelfit.sim.mujoco import bundled_rig_names, load_rig
+
+    table = Table(title="Bundled rigs (parcelfit simulate --rig NAME)", title_justify="left")
+    for col in ("rig", "surfaces", "speed settings [m/s]", "light barriers"):
+        table.add_column(escape(col))  # units in [] are text, not Rich markup
+    for name in bundled_rig_names():
+        r = load_rig(name)
+        speeds = "; ".join(
+            f"{k}: " + ", ".join(f"{d} {v:g}" for d, v in r.speeds[k].items())
+            for k in sorted(r.speeds)
+        )
+        table.add_row(
+            name,
+            ", ".join(f"{s.name} ({s.type})" for s in r.surfaces),
+            speeds,
+            " -> ".join(b.name for b in r.barriers),
+        )
+    console.print(table)
+    from parcelfit.sim.mujoco import SceneOptions, bundled_consignment_names, load_consignment
+
+    table = Table(title="Bundled consignment types (--consignment NAME)", title_justify="left")
+    for col in (
+        "type",
+        "mass [g]",
+        "outer L x W x H [mm]",
+        "content",
+        "content L x W x H [mm]",
+        "packaging shell",
+    ):
+        table.add_column(escape(col))
+    default_scene = SceneOptions()
+    for name in bundled_consignment_names():
+        c = load_consignment(name)
+        table.add_row(
+            name,
+            f"{c.mass * 1e3:g}",
+            " x ".join(f"{v * 1e3:g}" for v in c.outer),
+            c.content_kind,
+            " x ".join(f"{v * 1e3:g}" for v in c.content),
+            _shell_text(*default_scene.shell_of(c)),
+        )
+    console.print(table)
+
+
+def params(
+    consignment: Annotated[
+        str,
+        typer.Option(
+            help="Bundled consignment type (or a consignment .yaml file) whose parameters to list."
+        ),
+    ] = "KPBW",
+) -> None:
+    """List the simulation parameters with units, screening ranges and defaults."""
+    from parcelfit.sim.mujoco import load_consignment
+    from parcelfit.sim.params import parameters_for
+
+    cons = load_consignment(consignment)
+    specs = parameters_for(cons.content_kind)
+    own = dict(cons.parameters)
+    table = Table(
+        title=f"{len(specs)} parameters for {cons.name} ({cons.content_kind} content); "
+        "* = published screening range"
+        + ("; ^ = this type's own default (its consignment file)" if own else ""),
+        title_justify="left",
+    )
+    for col in ("name", "meaning", "unit", "low", "high", "default"):
+        table.add_column(col, justify="right" if col in ("low", "high", "default") else "left")
+    for p in specs:
+        r = p.range_for(cons.content_kind)
+        table.add_row(
+            p.name + (" *" if p.published else ""),
+            p.meaning,
+            p.unit,
+            f"{r.low:g}",
+            f"{r.high:g}",
+            f"{own[p.name]:g} ^" if p.name in own else f"{r.default:g}",
+        )
+    console.print(table)
+
+
+def synth(
+    spec: Annotated[Path, typer.Argument(help="Twin specification YAML (cases, truth, settings).")],
+    out: Annotated[Path, typer.Option("--out", help="Folder for the dataset.")] = Path("twin"),
+    executor: Annotated[
+        str | None,
+        typer.Option(
+            metavar="[serial|local]",
+            help="Where simulations run: local (worker processes; the default for more than "
+            "one worker) or serial (in this process, one at a time; for debugging).",
+        ),
+    ] = None,
+    workers: WorkersOption = None,
+) -> None:
+    """Make a SYNTHETIC twin-experiment dataset from hidden true parameters (and truth.yaml)."""
+    from parcelfit.synth import load_twin_spec, make_twin_dataset
+
+    check_executor(executor, ("serial", "local"))
+    check_paths(out)
+    resumes()
+    from parcelfit.synth import expected_cost
+
+    workers_at_most(workers)
+    tw = load_twin_spec(spec)
+    workers = worker_count(workers)
+    total = len(tw.cases) * tw.settings.runs
+    serial = executor == "serial" or (executor is None and workers <= 1)
+    where = "in this process" if serial else f"on {workers} processes"
+    console.print(
+        f"[bold]twin dataset[/] {tw.name}: {len(tw.cases)} test cases x {tw.settings.runs} runs "
+        f"{where} [yellow](SYNTHETIC)[/]"
+    )
+    say_cost(expected_cost(tw, 1 if serial else workers))
+    with Progress(*Progress.get_default_columns(), TimeElapsedColumn(), console=console) as bar:
+        task = bar.add_task("simulating twin runs", total=total)
+
+        def step(event: ProgressEvent) -> None:
+            bar.update(task, completed=event.done)
+            bar.console.print(Text(f"  {event.message}"), highlight=False)
+
+        path = make_twin_dataset(
+            out,
+            tw.cases,
+            tw.truth,
+            settings=tw.settings,
+            seed=tw.seed,
+            name=tw.name,
+            workers=workers,
+            executor=executor,
+            progress=step,
+            rigs=tw.rigs(),
+            consignments=tw.consignments(),
+        )
+    truth_file = path.parent / "truth.yaml"
+    console.print(f"[green]done[/]: {escape(str(path))} and {escape(str(truth_file))}")
+

@@ -1,0 +1,146 @@
+"""How the spread of a prediction splits between the parameters and the placements, and how far
+each parameter moves it: a quantity q simulated at n parameter sets drawn from a calibration's
+plausible set S times the same K seeded placements (`parcelfit.study.predict`,
+`parcelfit.study.design`).
+
+**Parameters versus placements** (a two-way decomposition, the law of total variance). With
+q_ij the run of set i at placement j, n_i the runs of set i that have q, N = sum_i n_i, the
+set means m_i = (1/n_i) sum_j q_ij and the grand mean m = (1/N) sum_ij q_ij:
+
+    V = (1/N) sum_ij (q_ij - m)^2                      total variance
+    B = (1/N) sum_i n_i (m_i - m)^2                    variance of the per-set means
+    W = (1/N) sum_i sum_j (q_ij - m_i)^2               mean within-set variance
+    V = B + W,   parameter share = B / V,   placement share = W / V.
+
+With every run ok (n_i = K) B is the variance of the per-set means and W the mean of the
+within-set variances (both with divisor n, resp. K). Because every set sees the same K
+placements, a quantity that is a sum of a parameter part and a placement part,
+q_ij = a_i + b_j, splits exactly: B = var(a), W = var(b). An interaction of parameters and
+placements counts as placement spread (W); B also holds 1/K of the placements' scatter of each
+set mean when the parts do not add, so with few placements the parameter share is an upper
+estimate.
+
+**How far each parameter moves a prediction** (from the draws, no further simulation): the
+per-set means m_i of q are regressed (ordinary least squares, with an intercept) on all
+calibrated parameters at once, each scaled to its plausible interval, z = (p - a) / (b - a)
+for the interval [a, b]. The coefficient of a parameter is then the change of the predicted
+mean over its plausible interval with the other parameters varying over the plausible set as
+they do in use (so a parameter correlated with another in S is credited only with its own
+part), and its standard error is the regression's. A one-at-a-time sweep was not chosen: it
+costs 2 x K more simulations per parameter and moves the parameter from one calibrated set that
+may lie outside S at the interval's ends. An effect counts as resolved when it is at least
+twice its standard error (with N sets and d parameters the regression needs N > d + 1; for
+parameters spread evenly over their intervals and uncorrelated, the standard error is about
+s sqrt(12 / N), s the scatter of the set means about the fit: 0.77 s with the default 20
+sets).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+RESOLVED = 2.0  # an effect is resolved when it is at least this many standard errors
+
+
+@dataclass(frozen=True)
+class Decomposition:
+    """The two-way split of the module docstring: total variance V, between-set B and
+    within-set W (units of the quantity squared), runs N and sets counted."""
+
+    total: float
+    between: float
+    within: float
+    runs: int
+    sets: int
+
+    @property
+    def parameter_share(self) -> float:
+        """B / V (NaN when V is 0 or nothing was measured)."""
+        return self.between / self.total if self.total > 0 else math.nan
+
+    @property
+    def placement_share(self) -> float:
+        """W / V (NaN when V is 0 or nothing was measured)."""
+        return self.within / self.total if self.total > 0 else math.nan
+
+
+def decompose(values: np.ndarray) -> Decomposition:
+    """The decomposition of ``values`` (n sets x K placements; NaN where a run has no value)
+    into the variance of the per-set means and the mean within-set variance (module
+    docstring)."""
+    q = np.asarray(values, float)
+    ok = np.isfinite(q)
+    n_i = ok.sum(axis=1)
+    N = int(n_i.sum())
+    if N == 0:
+        return Decomposition(math.nan, math.nan, math.nan, 0, 0)
+    grand = float(q[ok].mean())
+    have = n_i > 0
+    means = np.where(have, np.nansum(np.where(ok, q, 0.0), axis=1) / np.maximum(n_i, 1), np.nan)
+    between = float(np.sum(n_i[have] * (means[have] - grand) ** 2) / N)
+    dev = np.where(ok, q - means[:, None], 0.0)
+    within = float(np.sum(dev[have] ** 2) / N)
+    total = float(np.sum((q[ok] - grand) ** 2) / N)
+    return Decomposition(total, between, within, N, int(have.sum()))
+
+
+@dataclass(frozen=True)
+class Effect:
+    """How far one parameter moves one quantity's predicted mean over the parameter's
+    plausible interval [low, high] (SI), with its standard error (module docstring); NaN when
+    the regression has too few sets."""
+
+    parameter: str
+    verdict: str
+    quantity: str
+    low: float
+    high: float
+    effect: float
+    se: float
+
+    @property
+    def resolved(self) -> bool:
+        """True when the effect is at least `RESOLVED` standard errors."""
+        return math.isfinite(self.effect) and abs(self.effect) >= RESOLVED * self.se
+
+
+def effects_of(
+    means: np.ndarray, X: np.ndarray, intervals: Sequence[tuple[float, float]]
+) -> tuple[np.ndarray, np.ndarray]:
+    """OLS of the per-set means (n,) on the parameters X (n, d; SI) scaled to their
+    ``intervals``: each parameter's effect over its interval and its standard error (NaN
+    where the regression cannot be made: fewer than d + 2 sets with a mean)."""
+    means = np.asarray(means, float)
+    X = np.asarray(X, float)
+    d = X.shape[1]
+    nan = np.full(d, math.nan)
+    ok = np.isfinite(means)
+    if ok.sum() < d + 2:
+        return nan, nan.copy()
+    lo = np.array([a for a, _ in intervals], float)
+    width = np.array([b - a for a, b in intervals], float)
+    Z = (X[ok] - lo) / np.where(width > 0, width, 1.0)
+    A = np.column_stack([np.ones(int(ok.sum())), Z])
+    y = means[ok]
+    coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+    dof = len(y) - A.shape[1]
+    resid = y - A @ coef
+    s2 = float(resid @ resid) / dof
+    cov = s2 * np.linalg.pinv(A.T @ A)
+    se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    effect, se = coef[1:], se[1:]
+    flat = width <= 0  # a parameter the sample holds at one value moves nothing
+    return np.where(flat, 0.0, effect), np.where(flat, 0.0, se)
+
+
+__all__ = [
+    "RESOLVED",
+    "Decomposition",
+    "Effect",
+    "decompose",
+    "effects_of",
+]
