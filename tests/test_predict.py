@@ -103,6 +103,8 @@ def test_predict_names_what_the_undetermined_parameter_moves(study, tmp_path):
     row = summary.set_index("quantity").loc["exit_heading"]
     assert row["q05"] < row["median"] < row["q95"]
     assert row["variance"] == pytest.approx(row["between_sets"] + row["within_sets"])
+    # a study without fitted runs tells nothing of the real runs' own scatter
+    assert (row["run_q05"], row["run_q95"]) == (row["q05"], row["q95"])
     # rig Q turns the parcel by 2 (E_Pa / GPa - 0.9) rad (tests/fake_sim.py): over E_Pa's
     # interval of 1.4 GPa the exit heading moves by 2.8 (1 - exp(-3 t_end)) rad
     e = effects.set_index(["parameter", "quantity"]).loc[("E_Pa", "exit_heading")]

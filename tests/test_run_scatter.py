@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from parcelfit.runs import TestCase, load_dataset
@@ -64,3 +65,39 @@ def test_the_estimate_from_a_calibration_with_one_run_per_evaluation(tmp_path):
     assert scatter.sd["exit_y"] == pytest.approx(y.std(ddof=1), rel=1e-12)
     # the twin's transit times carry 1 % noise (tests/fake_sim.py)
     assert 0.004 < scatter.sd["transit_time"] < 0.02
+
+
+def test_a_prediction_s_band_of_a_real_run_holds_the_model_s_band():
+    from parcelfit.study.identify import Identifiability, ParameterInterval
+    from parcelfit.study.predict import summarise_prediction
+
+    rng = np.random.default_rng(2)
+    sets = [{"mu_d_BePa": float(v)} for v in rng.uniform(0.3, 0.5, 6)]
+    rows = [
+        {
+            "set": i,
+            "placement": j,
+            "transit_time": 1.5 + s["mu_d_BePa"] + 0.001 * j,
+            "rotation": 0.2,
+            "exit_y": 0.01 * j,
+            "exit_heading": 0.2,
+        }
+        for i, s in enumerate(sets)
+        for j in range(4)
+    ]
+    ident = Identifiability(
+        (ParameterInterval("mu_d_BePa", 0.3, 0.5, (0.3, 0.5), 0.4, "determined", 1.0),),
+        np.eye(1),
+        np.zeros((1, 1)),
+        1.0,
+        "by hand",
+        10,
+        0.1,
+    )
+    scatter = RunScatter({"transit_time": 0.02}, ("R/P/1",), 2)
+    summaries, _, _ = summarise_prediction(ident, sets, [0, 1, 2, 3], pd.DataFrame(rows), scatter)
+    by = {s.quantity: s for s in summaries}
+    t = by["transit_time"]
+    assert t.run_q05 < t.q05 and t.run_q95 > t.q95  # widened by the scatter
+    y = by["exit_y"]  # no scatter known for it: the model's band
+    assert (y.run_q05, y.run_q95) == (y.q05, y.q95)

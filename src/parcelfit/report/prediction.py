@@ -60,6 +60,9 @@ def _histograms(prediction: Prediction) -> Figure:
         ax.hist(values * factor, bins=min(40, max(5, values.size // 5)), color="tab:blue")
         for v, style in ((s.median, "-"), (s.q05, "--"), (s.q95, "--")):
             ax.axvline(v * factor, color="k", linestyle=style, linewidth=1)
+        for v in (s.run_q05, s.run_q95):  # the band of a real run
+            if math.isfinite(v):
+                ax.axvline(v * factor, color="tab:red", linestyle=":", linewidth=1)
         ax.set_xlabel(f"{quantity_words(q)} [{unit}]")
         ax.set_ylabel("runs")
     return fig
@@ -76,6 +79,9 @@ def prediction_view(prediction: Prediction) -> dict[str, Any]:
                 "runs": s.runs,
                 "median": shown_value(s.quantity, s.median),
                 "band": f"{shown_value(s.quantity, s.q05)} to {shown_value(s.quantity, s.q95)}",
+                "run_band": "-"
+                if not math.isfinite(s.run_q05)
+                else f"{shown_value(s.quantity, s.run_q05)} to {shown_value(s.quantity, s.run_q95)}",
                 "parameters": _share(d.parameter_share),
                 "placements": _share(d.placement_share),
             }
@@ -93,7 +99,16 @@ def prediction_view(prediction: Prediction) -> dict[str, Any]:
                 "resolved": e.resolved,
             }
         )
-    return {"summary": rows, "effects": effects}
+    scatter = prediction.scatter
+    return {
+        "summary": rows,
+        "effects": effects,
+        "scatter": "the calibration holds no fitted run to estimate it from: the band of a real "
+        "run is the model's"
+        if scatter is None or not scatter.sd
+        else f"estimated from the real runs of {', '.join(scatter.cases)} beyond the spread of "
+        f"{scatter.simulations} simulation(s) per case at the recommended parameters",
+    }
 
 
 def terminal_table(prediction: Prediction) -> Table:
@@ -105,11 +120,25 @@ def terminal_table(prediction: Prediction) -> Table:
         f"{len(prediction.seeds)} placements",
         title_justify="left",
     )
-    for col in ("quantity", "runs", "median", "5-95 % band", "from parameters", "from placements"):
+    for col in (
+        "quantity",
+        "runs",
+        "median",
+        "5-95 % band",
+        "band of a real run",
+        "from parameters",
+        "from placements",
+    ):
         table.add_column(escape(col), justify="left" if col == "quantity" else "right")
     for r in view["summary"]:
         table.add_row(
-            r["quantity"], str(r["runs"]), r["median"], r["band"], r["parameters"], r["placements"]
+            r["quantity"],
+            str(r["runs"]),
+            r["median"],
+            r["band"],
+            r["run_band"],
+            r["parameters"],
+            r["placements"],
         )
     return table
 

@@ -17,7 +17,9 @@ run:
 
 **Predictive distribution.** The runs of all sets and placements pooled: the median and the
 5-95 % band (the 5th and 95th percentiles) of q over the runs that ended ok (and, for T,
-crossed both light barriers).
+crossed both light barriers): the model's band. Real runs scatter further, specimen by
+specimen and by their measurement noise; the **band of a real run** adds that scatter,
+estimated from the calibration's fitted cases (`parcelfit.study.run_scatter`, formulas there).
 
 **Parameters versus placements** and **how far each parameter moves a prediction**: the
 decomposition of the spread and the effects of `parcelfit.study.spread` (its docstring gives
@@ -57,7 +59,7 @@ from parcelfit.atomic import write_text_atomic
 from parcelfit.errors import ParcelfitError, shown
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.runs import Run
-from parcelfit.sim.ensemble import MAX_PLACEMENTS, rotation
+from parcelfit.sim.ensemble import MAX_PLACEMENTS
 from parcelfit.sim.executors import Executor, Task, make_executor
 from parcelfit.sim.protocol import SimResult, Simulator
 from parcelfit.study.folderlock import check_writable, lock_folder
@@ -71,6 +73,8 @@ from parcelfit.study.plausible import (
     load_inputs,
     placement_seeds,
 )
+from parcelfit.study.run_scatter import QUANTITIES as RUN_QUANTITIES
+from parcelfit.study.run_scatter import RunScatter, estimate_run_scatter, quantities, real_run_band
 from parcelfit.study.spread import RESOLVED, Decomposition, Effect, decompose, effects_of
 from parcelfit.study.store import Store
 from parcelfit.study.studyfile import Study
@@ -126,7 +130,9 @@ def _magnitude(value: float) -> int:
 @dataclass(frozen=True)
 class QuantitySummary:
     """The predictive distribution of one quantity (SI): runs with a value, median, the 5-95 %
-    band and the decomposition of its spread."""
+    band of the model's runs, the decomposition of its spread, and the 5-95 % band of a real
+    run (with the real runs' own scatter, `parcelfit.study.run_scatter`; the model's band when
+    that is not known)."""
 
     quantity: str
     runs: int
@@ -134,6 +140,8 @@ class QuantitySummary:
     q05: float
     q95: float
     decomposition: Decomposition
+    run_q05: float = math.nan
+    run_q95: float = math.nan
 
 
 @dataclass(frozen=True, eq=False)
@@ -152,6 +160,7 @@ class Prediction:
     sentences: list[str]
     notes: list[str] = field(default_factory=list)
     out: Path | None = None
+    scatter: RunScatter | None = None
 
     def summary_table(self) -> pd.DataFrame:
         """One row per quantity (docs/data.md, Predictions)."""
@@ -166,6 +175,8 @@ class Prediction:
                     "median": s.median,
                     "q05": s.q05,
                     "q95": s.q95,
+                    "run_q05": s.run_q05,
+                    "run_q95": s.run_q95,
                     "variance": d.total,
                     "between_sets": d.between,
                     "within_sets": d.within,
@@ -231,6 +242,7 @@ class Prediction:
             "placements": len(self.seeds),
             "seeds": self.seeds,
             "summary": records(self.summary_table()),
+            "run_scatter": None if self.scatter is None else self.scatter.to_json(),
             "effects": records(self.effects_table()),
             "sentences": self.sentences,
             "notes": self.notes,
@@ -242,16 +254,8 @@ def run_values(run: Run | None) -> dict[str, float | None]:
     """The quantities of one run (SI; None where it has none): transit time, rotation, exit
     x, y and heading (module docstring)."""
     if run is None:
-        return {k: None for k in ("transit_time", "rotation", "exit_x", "exit_y", "exit_heading")}
-    tr = run.trajectory
-    theta = np.unwrap(np.asarray(tr.theta, float))
-    return {
-        "transit_time": None if run.transit_time is None else float(run.transit_time),
-        "rotation": rotation(tr),
-        "exit_x": float(np.asarray(tr.x, float)[-1]),
-        "exit_y": float(np.asarray(tr.y, float)[-1]),
-        "exit_heading": float(theta[-1]),
-    }
+        return {k: None for k in RUN_QUANTITIES}
+    return quantities(run.trajectory, run.transit_time)
 
 
 def sentence(e: Effect) -> str:
@@ -269,8 +273,11 @@ def summarise_prediction(
     sets: Sequence[Mapping[str, float]],
     seeds: Sequence[int],
     runs: pd.DataFrame,
+    scatter: RunScatter | None = None,
+    seed: int = 0,
 ) -> tuple[list[QuantitySummary], list[Effect], list[str]]:
-    """The summaries, effects and sentences of a runs table (module docstring)."""
+    """The summaries, effects and sentences of a runs table (module docstring); ``scatter``
+    (the real runs' own, seeded by ``seed``) widens each quantity's band to a real run's."""
     n, k = len(sets), len(seeds)
     summaries, effects = [], []
     names = ident.names
@@ -287,7 +294,10 @@ def summarise_prediction(
             med, q05, q95 = (float(np.percentile(vals, p)) for p in (50, 5, 95))
         else:
             med = q05 = q95 = math.nan
-        summaries.append(QuantitySummary(q, int(vals.size), med, q05, q95, decompose(grid)))
+        run_q05, run_q95 = real_run_band(vals.tolist(), q, scatter, seed)
+        summaries.append(
+            QuantitySummary(q, int(vals.size), med, q05, q95, decompose(grid), run_q05, run_q95)
+        )
         with np.errstate(invalid="ignore"):
             means = np.nanmean(np.where(np.isfinite(grid), grid, np.nan), axis=1)
         eff, se = effects_of(means, X, intervals)
@@ -433,8 +443,9 @@ def predict(
             runs = _runs_table(store, drawn, len(seeds), inputs.identifiability.names)
         finally:
             store.close()
+        scatter = estimate_run_scatter(inputs.folder, inputs.study)
         summaries, effects, sentences = summarise_prediction(
-            inputs.identifiability, drawn, seeds, runs
+            inputs.identifiability, drawn, seeds, runs, scatter, seed
         )
         notes = []
         if not inputs.identifiability.reached:
@@ -456,6 +467,7 @@ def predict(
             sentences,
             notes,
             out_dir,
+            scatter,
         )
         write_prediction(prediction, out_dir, table_format)
     finally:
