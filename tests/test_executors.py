@@ -218,7 +218,9 @@ def _deaf_to_sigterm(pid_file):
     from pathlib import Path
 
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
-    Path(pid_file).write_text(str(os.getpid()))
+    tmp = Path(f"{pid_file}.tmp")  # written whole, then renamed: the test never reads it empty
+    tmp.write_text(str(os.getpid()))
+    os.replace(tmp, pid_file)
     time.sleep(60)
     return 0
 
