@@ -46,17 +46,6 @@ def truth_for(k: int) -> dict[str, float]:
     return bench_twin.truth_values([float(f) for f in fractions], PARAMETERS)
 
 
-def write_rig_q(folder: Path) -> Path:
-    """A rig file named Q (the bundled E3 under another name; the analytic simulator reads
-    only the name)."""
-    from parcelfit.sim.mujoco.bundled import resolve_file
-
-    text = resolve_file("rigs", "E3", "rig").read_text(encoding="utf-8")
-    path = folder / "Q.yaml"
-    path.write_text(text.replace("name: E3", "name: Q", 1), encoding="utf-8")
-    return path
-
-
 def calibrate(k: int, budget: int, out: Path) -> tuple[Path, Path]:
     """Truth ``k``'s twin dataset and its calibration on rig R (folders)."""
     from tests.fake_sim import write_reference_dataset
@@ -104,6 +93,8 @@ def main() -> None:
     ap.add_argument("--budget", type=int, default=24, help="evaluations per calibration")
     ap.add_argument("--out", type=Path, default=Path("bench-predict-coverage"))
     args = ap.parse_args()
+
+    from tests.predict_helpers import write_rig_q
 
     from parcelfit.runs import load_dataset
     from parcelfit.study.predict import load_inputs, predict, run_values
