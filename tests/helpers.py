@@ -82,6 +82,7 @@ def write_study_store(folder: Path, dataset: Path | None) -> Path:
     """A finished study's store written by hand, no simulation: the initial design (iteration 0:
     one ok, one failed), iteration 1 (two ok), a passed validation after iteration 1, and a
     recommended point that is not the one with the lowest cost. Values are SI."""
+    from parcelfit.study.details import EvaluationDetails
     from parcelfit.study.store import RecommendedRecord, Store
 
     folder.mkdir(parents=True, exist_ok=True)
@@ -115,7 +116,7 @@ def write_study_store(folder: Path, dataset: Path | None) -> Path:
     ):
         store.finish(row, status=status, cost=cost)
     (val,) = store.add_pending("validation", 1, [points[3]], 2, [0])
-    store.finish(val, status="ok", details={"passed": True})
+    store.finish(val, status="ok", details=EvaluationDetails(passed=True))
     store.write_recommended(RecommendedRecord(points[3], 0.3))
     store.set_meta("stop_reason", "validation passed")
     store.close()

@@ -154,9 +154,16 @@ def test_validation_records_the_envelope_beside_the_published_verdict(tmp_path):
     )
     Calibration(study, tmp_path / "out").run()
     v = Store(tmp_path / "out" / "study.sqlite").evaluations("validation")[-1]
-    env = v.details["envelope"]
-    assert set(env) == {"inside_y", "inside_theta", "worst_y_m", "worst_theta_rad", "passed"}
-    assert 0.0 <= env["inside_y"] <= 1.0
+    env = v.details.envelope
+    assert env is not None
+    assert set(env.to_json()) == {
+        "inside_y",
+        "inside_theta",
+        "worst_y_m",
+        "worst_theta_rad",
+        "passed",
+    }
+    assert env.inside_y is not None and 0.0 <= env.inside_y <= 1.0
 
 
 @pytest.mark.slow

@@ -168,13 +168,13 @@ def test_a_case_with_its_own_placements_is_simulated_that_often(tmp_path):
     Calibration(study, out, figures=False).run()
     status = study_status(out)
     parts = status.recommended.parts
-    assert [p["seeds"] for p in parts] == [[1, 2, 3], [1]]
+    assert [p.seeds for p in parts] == [[1, 2, 3], [1]]
     runs = sorted(f.name for f in (out / "runs").glob("fit-*.csv"))
     assert len(runs) == 4 * 4  # four evaluations of 3 + 1 simulations
     assert sum(name.endswith("-c1-p1.csv") for name in runs) == 4
     assert not any("-c1-p2" in name for name in runs)
     # with one placement the standard error is the real runs' part alone, still stated
-    assert parts[0]["se"] > 0 and parts[1]["se"] > 0
+    assert parts[0].se > 0 and parts[1].se > 0
 
 
 @pytest.mark.slow
@@ -187,13 +187,13 @@ def test_a_joint_ensemble_study_stores_the_parts_and_checks_transfer(tmp_path, m
     assert [c["case"] for c in status.cases] == ["R/P/1", "Q/P/1", "R/P/2", "Q/P/2"]
     assert [c["role"] for c in status.cases] == ["fit", "fit", "validation", "transfer"]
     parts = status.recommended.parts
-    assert [p["case"] for p in parts] == ["R/P/1", "Q/P/1"] and len(parts[0]["seeds"]) == 3
+    assert [p.case for p in parts] == ["R/P/1", "Q/P/1"] and len(parts[0].seeds) == 3
     assert status.recommended.cost == pytest.approx(
-        parts[0]["cost"] + 0.5 * parts[1]["cost"], rel=1e-12
+        parts[0].cost + 0.5 * parts[1].cost, rel=1e-12
     )
     for p in parts:  # each part: trajectory term + transit term, with its standard error
-        assert p["cost"] == pytest.approx(p["trajectory_term"] + p["transit_term"], rel=1e-12)
-        assert p["se"] > 0 and all((out / f).is_file() for f in p["run_files"])
+        assert p.cost == pytest.approx(p.trajectory_term + p.transit_term, rel=1e-12)
+        assert p.se > 0 and all((out / f).is_file() for f in p.run_files)
     results = read_results(out)
     assert [v.case for v in results.transfer] == ["Q/P/2"]
     assert results.transfer[0].verdict is not None
@@ -284,7 +284,7 @@ def test_an_ensemble_on_adjusted_transit_times_adjusts_real_and_simulated_runs_a
         assert reference.transit_times == tuple(adjustment.adjust_run(r) for r in runs)
         # ... and every simulated run with the same coefficients and mean speeds
         for raw, adjusted, f in zip(
-            part["transit_times"], part["adjusted_transit_times"], part["run_files"], strict=True
+            part.transit_times, part.adjusted_transit_times, part.run_files, strict=True
         ):
             speeds = ridden_speeds(read_trajectory(out / f))
             assert adjusted == pytest.approx(adjustment.adjust(raw, speeds), abs=1e-12)

@@ -509,7 +509,7 @@ def test_a_worker_killed_during_a_calibration_leaves_no_failed_evaluation(tmp_pa
     info = study_status(tmp_path / "out")
     assert result.evaluations == 8 and info.by_status == {"ok": 8}
     store = Store(tmp_path / "out" / "study.sqlite", readonly=True)
-    restarted = [e for e in store.evaluations("fit") if e.details.get("worker_restarts")]
+    restarted = [e for e in store.evaluations("fit") if e.details.worker_restarts]
     store.close()
     assert len(restarted) >= 1
 

@@ -21,6 +21,7 @@ from parcelfit.errors import ParcelfitError
 from parcelfit.progress import ProgressCallback, ProgressEvent
 
 if TYPE_CHECKING:
+    from parcelfit.study.details import CaseCost
     from parcelfit.study.status import StudyStatus, ValidationStatus
 
 
@@ -213,21 +214,21 @@ def _print_recommendation(info: StudyStatus) -> None:
         _print_parts(shown.parts)
 
 
-def _print_parts(parts: list[dict[str, Any]]) -> None:
+def _print_parts(parts: list[CaseCost]) -> None:
     """The per-case parts of a joint or ensemble evaluation's cost."""
     table = Table(title=Text("its cost, case by case"), title_justify="left")
     for col in ("case", "weight", "cost", "parts"):
         table.add_column(col, justify="left" if col in ("case", "parts") else "right")
     for p in parts:
-        if "trajectory_term" in p:
-            se = "" if p.get("se") is None else f" (se {p['se']:.3g})"
-            tt = "-" if p.get("transit_term") is None else f"{p['transit_term']:.3g}"
-            adjusted = " (adjusted times)" if "adjusted_transit_times" in p else ""
-            what = f"trajectories {p['trajectory_term']:.3g}{se}, transit {tt}{adjusted}"
-            what += f", {len(p.get('seeds') or [])} placements"
+        if p.trajectory_term is not None:
+            se = "" if p.se is None else f" (se {p.se:.3g})"
+            tt = "-" if p.transit_term is None else f"{p.transit_term:.3g}"
+            adjusted = " (adjusted times)" if p.adjusted_transit_times is not None else ""
+            what = f"trajectories {p.trajectory_term:.3g}{se}, transit {tt}{adjusted}"
+            what += f", {len(p.seeds)} placements"
         else:
-            what = f"DTW_xy {p['dtw_xy']:.3g} m, DTW_theta {p['dtw_theta']:.3g} rad"
-        table.add_row(str(p["case"]), f"{p['weight']:g}", f"{p['cost']:.4g}", what)
+            what = f"DTW_xy {p.dtw_xy:.3g} m, DTW_theta {p.dtw_theta:.3g} rad"
+        table.add_row(p.case, f"{p.weight:g}", f"{p.cost:.4g}", what)
     console.print(table)
 
 

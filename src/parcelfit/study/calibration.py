@@ -382,7 +382,7 @@ class Calibration:
             group = [v for v in stored if v.iteration == it]
             if any(v.status == "pending" for v in group):
                 continue
-            finish.last_validation = all(bool(v.details.get("passed")) for v in group)
+            finish.last_validation = all(bool(v.details.passed) for v in group)
             already_passed = already_passed or finish.last_validation
         if already_passed and not pending:
             return self._result("validation passed")
@@ -410,7 +410,7 @@ class Calibration:
                     finish.run_validation(v.id, v.iteration, v.params, executor, v.slot)
                     group = finish.validation_rows(v.iteration)
                     if all(r.status != "pending" for r in group) and all(
-                        bool(r.details.get("passed")) for r in group
+                        bool(r.details.passed) for r in group
                     ):
                         return self._result("validation passed")
             while True:

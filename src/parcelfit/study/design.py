@@ -498,7 +498,7 @@ def rank_experiments(
                 if e.iteration != c or e.status != "ok":
                     continue
                 i, j = divmod(e.slot, len(seeds))
-                values = {**(e.details or {}), "transit_time": e.transit_time}
+                values = {**e.details.quantities, "transit_time": e.transit_time}
                 for q in QUANTITIES:
                     v = values.get(q)
                     if v is not None and math.isfinite(float(v)):

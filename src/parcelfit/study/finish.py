@@ -48,10 +48,10 @@ Report = Callable[[int, int, str], None]  # (iteration, running, message): a pro
 def _cost_se(row: Evaluation) -> float | None:
     """The standard error of a joint ensemble evaluation's cost (its cases' trajectory-term
     standard errors, weighted, in quadrature); None when a case states none."""
-    parts = row.details.get("cases") or []
-    if not parts or any(p.get("se") is None for p in parts):
+    parts = row.details.cases or []
+    if not parts or any(p.se is None for p in parts):
         return None
-    return math.sqrt(sum((p["weight"] * p["se"]) ** 2 for p in parts))
+    return math.sqrt(sum((p.weight * p.se) ** 2 for p in parts))  # type: ignore[operator]
 
 
 class Finish:
@@ -156,9 +156,7 @@ class Finish:
             after_iteration=iteration,
             run_file=run_file,
         )
-        details = record.details()
-        if len(cases) > 1:
-            details["case"] = spec.label
+        details = record.details(spec.label if len(cases) > 1 else None)
         self.store.finish(
             row_id,
             status=result.status.value,
@@ -224,7 +222,7 @@ class Finish:
                     traj,
                     row.transit_time,
                     status=row.status,
-                    message=row.details.get("message"),
+                    message=row.details.message,
                     params=row.params,
                     after_iteration=row.iteration,
                     run_file=row.run_file,

@@ -56,6 +56,7 @@ from parcelfit.metrics.ensemble import ensemble_cost, ensemble_real_costs
 from parcelfit.runs import Trajectory
 from parcelfit.sim.executors import Executor, Task, simulate_task
 from parcelfit.sim.protocol import SimResult, SimStatus, Simulator
+from parcelfit.study.details import CaseCost, EvaluationDetails, FailedRun
 from parcelfit.study.identify import Advice
 from parcelfit.study.studyfile import CaseSpec, Study
 
@@ -134,7 +135,7 @@ def case_cost(
     runs: Sequence[CaseRun],
     reference: ReferenceSelection,
     study: Study,
-) -> dict[str, Any]:
+) -> CaseCost:
     """The cost part of one case (its runs all succeeded): ``cost`` (unweighted), ``weight``
     and the parts of the chosen cost (DTW distances [m], [rad] and transit time [s] for the
     published one; trajectory and transit terms, standard error for the ensemble)."""
@@ -165,7 +166,7 @@ def case_cost(
     else:
         c = calibration_cost(trajs[0], reference, study.w_xy, study.w_theta)
         out.update(cost=c.value, dtw_xy=c.dtw_xy, dtw_theta=c.dtw_theta)
-    return out
+    return CaseCost.model_validate(out)
 
 
 def evaluation_outcome(
@@ -185,30 +186,30 @@ def evaluation_outcome(
         "run_file": runs[0].run_file if runs else None,
         "wall_time": wall,
     }
-    details: dict[str, Any] = {"cases": []}
+    parts: list[CaseCost] = []
     if bad is not None:
         out["status"] = bad.result.status.value
         msg = bad.result.diagnostics.get("message")
-        details["message"] = msg or f"the simulation ended {out['status']}"  # as a worker said
-        details["failed_run"] = {"case": bad.spec.label, "placement": bad.seed}  # it, so a lost
-        # worker's message is recognised on resume (loop.LOST_WORKER_MESSAGES)
-        out["details"] = details
+        out["details"] = EvaluationDetails(
+            cases=parts,
+            message=str(msg or f"the simulation ended {out['status']}"),  # as a worker said
+            failed_run=FailedRun(case=bad.spec.label, placement=bad.seed),  # it, so a lost
+        )  # worker's message is recognised on resume (loop.LOST_WORKER_MESSAGES)
         return out
     total = 0.0
     try:
         for spec in study.cases:
             mine = [r for r in runs if r.spec.case == spec.case]
             part = case_cost(spec, mine, references[spec.label], study)
-            details["cases"].append(part)
-            total += spec.weight * part["cost"]
+            parts.append(part)
+            total += spec.weight * part.cost
     except ParcelfitError as exc:
         out["status"] = "failed"
-        details["message"] = f"cost not computable: {exc}"
-        out["details"] = details
+        out["details"] = EvaluationDetails(cases=parts, message=f"cost not computable: {exc}")
         return out
     first = runs[0].result.run
     out.update(cost=total, transit_time=None if first is None else first.transit_time)
-    out["details"] = details
+    out["details"] = EvaluationDetails(cases=parts)
     return out
 
 

@@ -140,8 +140,7 @@ class AskTellLoop:
         lost = [
             r.id
             for r in self.store.evaluations()
-            if r.status == "failed"
-            and str(r.details.get("message", "")).startswith(LOST_WORKER_MESSAGES)
+            if r.status == "failed" and (r.details.message or "").startswith(LOST_WORKER_MESSAGES)
         ]
         fits = self.store.evaluations("fit")
         if not any(r.status == "ok" for r in fits):

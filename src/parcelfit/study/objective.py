@@ -25,6 +25,7 @@ from parcelfit.metrics.reference import adjusted_reference
 from parcelfit.runs import TestCase, load_dataset, write_trajectory
 from parcelfit.sim.executors import Executor, Task
 from parcelfit.sim.protocol import SimResult, Simulator
+from parcelfit.study.details import EvaluationDetails
 from parcelfit.study.joint import (
     CaseRun,
     case_threshold,
@@ -61,7 +62,9 @@ def record_result(
         "transit_time": None,
         "run_file": None,
     }
-    details: dict[str, Any] = {k: v for k, v in result.diagnostics.items() if k != "traceback"}
+    details = EvaluationDetails.from_json(
+        {k: v for k, v in result.diagnostics.items() if k != "traceback"}
+    )
     if result.run is not None:
         out["run_file"] = run_file or f"runs/{row.kind}-{row.iteration:03d}-{row.slot:02d}.csv"
         write_trajectory(result.run.trajectory, folder / out["run_file"])
@@ -71,9 +74,10 @@ def record_result(
             c = calibration_cost(result.run.trajectory, reference, w_xy, w_theta)
             out.update(cost=c.value, dtw_xy=c.dtw_xy, dtw_theta=c.dtw_theta)
         except ParcelfitError as exc:
-            out["status"], details["message"] = "failed", f"cost not computable: {exc}"
+            out["status"] = "failed"
+            details = details.with_message(f"cost not computable: {exc}")
     store.finish(row.id, wall_time=result.wall_time, details=details, **out)
-    return {**out, "message": details.get("message")}
+    return {**out, "message": details.message}
 
 
 def study_cases(study: Study) -> tuple[TestCase, TestCase | None]:
@@ -233,6 +237,6 @@ class Objective:
                 row,
                 out["status"],
                 out["cost"],
-                out["details"].get("message"),
+                out["details"].message,
                 f"fit-{row.iteration:03d}-{row.slot:02d} ({per_row} simulations)",
             )

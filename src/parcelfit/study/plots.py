@@ -63,7 +63,7 @@ def history(fits: list[Evaluation], validations: list[Evaluation]) -> Figure:
     for v in validations:
         if v.status == "pending":
             continue
-        passed = bool(v.details.get("passed"))
+        passed = bool(v.details.passed)
         ax.axvline(v.iteration, color="#27ae60" if passed else "#e74c3c", ls="--", lw=1)
         ax.text(
             v.iteration,

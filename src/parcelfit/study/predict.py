@@ -62,6 +62,7 @@ from parcelfit.runs import Run
 from parcelfit.sim.ensemble import MAX_PLACEMENTS
 from parcelfit.sim.executors import Executor, Task, make_executor
 from parcelfit.sim.protocol import SimResult, Simulator
+from parcelfit.study.details import EvaluationDetails
 from parcelfit.study.folderlock import check_writable, lock_folder
 from parcelfit.study.identify import Identifiability
 from parcelfit.study.joint import require_placements, simulate_items
@@ -573,10 +574,10 @@ def finish_run(store: Store, row: int, result: SimResult) -> None:
     """Record one simulation's result in its pending row: status, transit time [s], wall time
     [s] and the other quantities (`run_values`) in ``details``."""
     values = run_values(result.run if result.ok else None)
-    details: dict[str, Any] = {k: v for k, v in values.items() if k != "transit_time"}
+    details = EvaluationDetails.from_json({k: v for k, v in values.items() if k != "transit_time"})
     message = result.diagnostics.get("message")
     if not result.ok and message:
-        details["message"] = str(message)
+        details = details.with_message(str(message))
     store.finish(
         row,
         status=result.status.value,
@@ -593,17 +594,13 @@ def _runs_table(
     rows = []
     for e in sorted(store.evaluations("screen"), key=lambda e: e.slot):
         s, j = divmod(e.slot, k)
-        d = e.details or {}
         row: dict[str, Any] = {"set": s, "placement": j, "seed": e.seed}
         row.update({name: float(sets[s][name]) for name in names})
         row.update(
             {
                 "status": e.status,
                 "transit_time": e.transit_time,
-                "rotation": d.get("rotation"),
-                "exit_x": d.get("exit_x"),
-                "exit_y": d.get("exit_y"),
-                "exit_heading": d.get("exit_heading"),
+                **e.details.quantities,
                 "wall_time": e.wall_time,
             }
         )

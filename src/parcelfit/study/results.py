@@ -46,6 +46,12 @@ from parcelfit.metrics import (
 )
 from parcelfit.metrics.envelope import EnvelopeCheck, envelope_band
 from parcelfit.runs import Trajectory
+from parcelfit.study.details import (
+    EnvelopeCriterion,
+    EvaluationDetails,
+    MeanCriterion,
+    TransitCriterion,
+)
 from parcelfit.study.identify import Advice, Identifiability
 from parcelfit.study.store import OptimizerRecord
 
@@ -182,6 +188,15 @@ class BandRecord:
         return cls(*(_array(doc[k]) for k in keys))
 
 
+def _mean_criterion(check: MeanDistanceCheck) -> MeanCriterion:
+    """Criterion 2 or 3 as stored in a validation row's details."""
+    return MeanCriterion(
+        simulated_mean=check.simulated_mean,
+        largest_real_mean=check.largest_real_mean,
+        passed=bool(check.passed),
+    )
+
+
 def _verdict_json(v: Validation) -> dict[str, Any]:
     return {
         "passed": v.passed,
@@ -237,33 +252,34 @@ class ValidationRecord:
         """True when the published criteria hold."""
         return self.verdict is not None and self.verdict.passed
 
-    def details(self) -> dict[str, Any]:
+    def details(self, case: str | None = None) -> EvaluationDetails:
         """The verdict as the store's ``details`` of the validation row (message, passed, the
-        three criteria and the band test in SI)."""
-        out: dict[str, Any] = {"message": self.message, "passed": self.passed}
+        three criteria and the band test in SI; ``case``: the test case's label in a joint
+        study)."""
+        out = EvaluationDetails(message=self.message, passed=self.passed)
         v = self.verdict
         if v is not None:
-            out.update(
-                transit_time={
-                    k: getattr(v.transit_time, k) for k in ("simulated", "low", "high", "passed")
-                },
-                xy={k: getattr(v.xy, k) for k in ("simulated_mean", "largest_real_mean", "passed")},
-                theta={
-                    k: getattr(v.theta, k)
-                    for k in ("simulated_mean", "largest_real_mean", "passed")
-                },
+            t = v.transit_time
+            out = EvaluationDetails(
+                message=self.message,
+                passed=self.passed,
+                transit=TransitCriterion(
+                    simulated=t.simulated, low=t.low, high=t.high, passed=bool(t.passed)
+                ),
+                xy=_mean_criterion(v.xy),
+                theta=_mean_criterion(v.theta),
                 # the stricter band test, reported beside the published verdict
                 envelope=None
                 if v.envelope is None
-                else {
-                    "inside_y": v.envelope.inside_y,
-                    "inside_theta": v.envelope.inside_theta,
-                    "worst_y_m": v.envelope.worst_y,
-                    "worst_theta_rad": v.envelope.worst_theta,
-                    "passed": v.envelope.passed,
-                },
+                else EnvelopeCriterion(
+                    inside_y=v.envelope.inside_y,
+                    inside_theta=v.envelope.inside_theta,
+                    worst_y_m=v.envelope.worst_y,
+                    worst_theta_rad=v.envelope.worst_theta,
+                    passed=bool(v.envelope.passed),
+                ),
             )
-        return out
+        return out if case is None else out.model_copy(update={"case": case})
 
     def to_json(self) -> dict[str, Any]:
         """The stored form."""

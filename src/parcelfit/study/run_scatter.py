@@ -116,14 +116,12 @@ def _model_values(folder: Path, evaluation: Evaluation, case: TestCase) -> list[
     """The quantities of each simulation of ``case`` in ``evaluation`` (read from its run
     files in the study folder)."""
     out = []
-    parts = evaluation.details.get("cases") if evaluation.details else None
+    parts = evaluation.details.cases
     if parts:
         for part in parts:
-            if part.get("case") != case.label:
+            if part.case != case.label:
                 continue
-            for f, t in zip(
-                part.get("run_files") or [], part.get("transit_times") or [], strict=False
-            ):
+            for f, t in zip(part.run_files, part.transit_times, strict=False):
                 if f and (folder / f).is_file():
                     out.append(quantities(read_trajectory(folder / f), t))
     elif evaluation.run_file and (folder / evaluation.run_file).is_file():

@@ -495,7 +495,7 @@ def run_screen(
             frame.to_csv(out / f"stage{stage + 1}-design.csv", index=False)
             ok = frame["status"].eq("ok").to_numpy()
             if ok.sum() <= len(factors):
-                first = next((r.details.get("message") for r in rows if r.status != "ok"), "")
+                first = next((r.details.message for r in rows if r.status != "ok"), "")
                 raise ParcelfitError(
                     f"stage {stage + 1}: only {int(ok.sum())} of {len(frame)} runs succeeded, too few to estimate "
                     f"{len(factors)} effects (first failure: {first})",
@@ -616,7 +616,7 @@ def _ensemble_responses(runs: list[Evaluation], folder: Path) -> dict[str, Any]:
 def _rotation(run: Evaluation, folder: Path) -> float:
     """A stored run's net rotation [rad]: kept in its details when it arrived, else from its
     run file."""
-    value = run.details.get("rotation")
+    value = run.details.rotation
     if value is None:
         if run.run_file is None:
             raise ParcelfitError(

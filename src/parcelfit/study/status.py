@@ -13,10 +13,11 @@ import math
 from pathlib import Path
 from typing import Any
 
-from pydantic import BaseModel, ConfigDict
+from pydantic import BaseModel, ConfigDict, field_serializer
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import is_synthetic
+from parcelfit.study.details import CaseCost
 from parcelfit.study.results import read_results
 from parcelfit.study.store import STORE_FILE, SourceRecord, Store, StudyRecord
 from parcelfit.study.verdict import Verdict, study_verdict
@@ -40,7 +41,12 @@ class PointStatus(_Record):
     params: dict[str, float]
     cost: float
     iteration: int | None
-    parts: list[dict[str, Any]] | None
+    parts: list[CaseCost] | None
+
+    @field_serializer("parts")
+    def _parts_json(self, parts: list[CaseCost] | None) -> list[dict[str, Any]] | None:
+        """The parts in their stored form (the keys of the chosen cost only)."""
+        return None if parts is None else [p.to_json() for p in parts]
 
 
 class ValidationStatus(_Record):
@@ -146,9 +152,7 @@ def study_status(folder: str | Path) -> StudyStatus:
             params=recommended.params,
             cost=recommended.cost,
             iteration=next((e.iteration for e in fits if e.params == recommended.params), None),
-            parts=next(
-                (e.details.get("cases") for e in fits if e.params == recommended.params), None
-            ),
+            parts=next((e.details.cases for e in fits if e.params == recommended.params), None),
         ),
         lowest_cost=None
         if lowest is None or lowest.cost is None
@@ -156,15 +160,15 @@ def study_status(folder: str | Path) -> StudyStatus:
             params=lowest.params,
             cost=lowest.cost,
             iteration=lowest.iteration,
-            parts=lowest.details.get("cases"),
+            parts=lowest.details.cases,
         ),
         cases=cases,
         validations=[
             ValidationStatus(
                 after_iteration=v.iteration,
-                case=v.details.get("case"),
+                case=v.details.case,
                 status=v.status,
-                passed=v.details.get("passed"),
+                passed=v.details.passed,
             )
             for v in vals
         ],

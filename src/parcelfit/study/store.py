@@ -55,6 +55,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from parcelfit.errors import ParcelfitError, os_error
+from parcelfit.study.details import EvaluationDetails
 
 STORE_FILE = "study.sqlite"  # a calibration study's store, in its folder
 
@@ -96,7 +97,7 @@ class Evaluation:
     asked_at: float
     finished_at: float | None
     run_file: str | None
-    details: dict[str, Any]
+    details: EvaluationDetails
 
 
 # -- typed meta records ------------------------------------------------------------------------
@@ -454,7 +455,7 @@ class Store:
         transit_time: float | None = None,
         wall_time: float | None = None,
         run_file: str | None = None,
-        details: Mapping[str, Any] | None = None,
+        details: EvaluationDetails | None = None,
     ) -> None:
         """Record the result of a pending evaluation (one transaction)."""
         if status == "pending":
@@ -472,7 +473,7 @@ class Store:
                     wall_time,
                     time.time(),
                     run_file,
-                    json.dumps(dict(details or {}), default=str),
+                    (details or EvaluationDetails()).dumps(),
                     row_id,
                 ),
             )
@@ -514,7 +515,7 @@ class Store:
                     asked_at=r[13],
                     finished_at=r[14],
                     run_file=r[15],
-                    details=json.loads(r[16]) if r[16] else {},
+                    details=EvaluationDetails.parse(r[16], self.path),
                 )
             )
         return out
