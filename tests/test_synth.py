@@ -2,8 +2,9 @@ import numpy as np
 import pytest
 import yaml
 
-from parcelfit.runs import TestCase, load_dataset
+from parcelfit.runs import Run, TestCase, Trajectory, load_dataset
 from parcelfit.sim.mujoco import load_rig
+from parcelfit.study.store import Store, finished_count
 from parcelfit.synth import TwinSettings, _placement, make_twin_dataset
 
 # These tests check how twin datasets are made (scatter, determinism, cache), not the physics:
@@ -148,6 +149,8 @@ def test_an_interrupted_twin_dataset_resumes_from_its_cache(twin, tmp_path, monk
             tmp_path / "d", [TestCase("E1", "BW", 1)], BW_TRUTH, settings=settings, seed=4
         )
     assert len(list((tmp_path / "d" / ".twin-runs").glob("*.csv"))) == 2
+    # kept as a study keeps its evaluations: two finished rows in the twin's store
+    assert finished_count(tmp_path / "d" / ".twin-runs" / "twin.sqlite", "twin") == 2
     calls.clear()
     monkeypatch.setattr(synth, "_twin_run", real)
     seen = []
@@ -167,6 +170,57 @@ def test_an_interrupted_twin_dataset_resumes_from_its_cache(twin, tmp_path, monk
     assert all(
         np.allclose(x.trajectory.xy, y.trajectory.xy, atol=1e-9) for x, y in zip(a, b, strict=True)
     )
+
+
+def _straight_run(job):
+    """A twin run without physics (the parcel rides straight along x at 1 m/s): (run, wall)."""
+    t = np.linspace(0.0, 1.0, 11)
+    trajectory = Trajectory(t=t, x=t, y=0.0 * t, theta=0.0 * t)
+    return Run(job.run_id, job.case, trajectory, 1.0 + job.seed.spawn_key[0] / 100), 0.1
+
+
+def test_runs_kept_by_an_earlier_version_as_files_are_taken_over(tmp_path, monkeypatch):
+    """An interrupted generation whose runs an earlier parcelfit kept as a CSV and a JSON per
+    run (no store) resumes without simulating them again."""
+    import parcelfit.synth as synth
+
+    calls = []
+
+    def dies_on_the_third(job):
+        calls.append(job.run_id)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return _straight_run(job)
+
+    monkeypatch.setattr(synth, "_twin_run", dies_on_the_third)
+    case = TestCase("E1", "BW", 1)
+    with pytest.raises(KeyboardInterrupt):
+        make_twin_dataset(tmp_path / "d", [case], BW_TRUTH, settings=QUICK, seed=4)
+    kept = tmp_path / "d" / ".twin-runs"
+    store = Store(kept / "twin.sqlite")
+    rows = store.evaluations("twin")
+    store.close()
+    assert [(r.slot, r.status) for r in rows] == [(0, "ok"), (1, "ok")]
+    for r in rows:  # the earlier form: RUNID-KEY.csv beside RUNID-KEY.json, no store
+        (kept / r.run_file).with_suffix(".json").write_text(f'{{"transit_time": {r.transit_time}}}')
+    for f in kept.glob("twin.sqlite*"):
+        f.unlink()
+    calls.clear()
+    monkeypatch.setattr(
+        synth, "_twin_run", lambda job: calls.append(job.run_id) or _straight_run(job)
+    )
+    seen = []
+    path = make_twin_dataset(
+        tmp_path / "d", [case], BW_TRUTH, settings=QUICK, seed=4, progress=seen.append
+    )
+    assert calls == ["E1-BW-1-03"]
+    assert [e.message.split(": ")[1] for e in seen[:2]] == [
+        "from the cache (1/3)",
+        "from the cache (2/3)",
+    ]
+    runs = load_dataset(path)["E1/BW/1"].runs
+    assert [r.transit_time for r in runs] == pytest.approx([1.0, 1.01, 1.02], abs=1e-12)
+    assert not kept.exists()
 
 
 def test_the_twins_real_runs_take_their_own_time_step(tmp_path, monkeypatch):

@@ -37,8 +37,12 @@ dataset as ``truth.yaml``; the dataset is marked ``synthetic: true``.
 
 The runs are `TwinJob` objects simulated through the same executors as calibration and
 screening (`parcelfit.sim.executors`: serial in this process, or local processes). Every
-finished run is stored at once in ``<folder>/.twin-runs/`` (keyed by its job), so an interrupted
-generation resumes where it stopped; the folder is removed when the dataset is complete.
+finished run is kept at once in ``<folder>/.twin-runs/``: its trajectory beside an evaluation
+store (`parcelfit.study.store`, ``twin.sqlite``, kind ``twin``, one row per job: the true
+parameters, the transit time [s], the wall time [s] and the run
+file, named by run id and a hash of everything the run depends on), so an interrupted
+generation resumes where it stopped, as a study does; the folder is removed when the dataset
+is complete. (Runs kept by an earlier parcelfit as a CSV and a JSON per run are taken over.)
 """
 
 from __future__ import annotations
@@ -81,6 +85,7 @@ from parcelfit.sim.mujoco import (
     load_rig,
 )
 from parcelfit.sim.params import BELT_FRICTION, CATALOGUE, MAX_TIMESTEP, MIN_TIMESTEP
+from parcelfit.study.store import Store
 
 
 @dataclass(frozen=True)
@@ -220,34 +225,64 @@ def _twin_run(job: TwinJob) -> tuple[Run, float]:
     return Run(job.run_id, job.case, noisy, res.run.transit_time), res.wall_time
 
 
-class _RunCache:
-    """Finished twin runs in ``folder`` (a CSV and a JSON per run, named by run id and job
-    key), written the moment each run exists, so a crash or Ctrl-C loses nothing."""
+TWIN_STORE = "twin.sqlite"  # the store of a twin dataset's finished runs, in .twin-runs/
 
-    def __init__(self, folder: Path) -> None:
+
+class _TwinRuns:
+    """The finished twin runs of ``jobs`` in ``folder``: an evaluation store (kind ``twin``,
+    slot = the job's index) and a trajectory per run, ``RUNID-KEY.csv``, written before its
+    row is finished, so a crash or Ctrl-C loses nothing."""
+
+    def __init__(self, folder: Path, jobs: Sequence[TwinJob]) -> None:
         self.folder = folder
+        self.jobs = jobs
         folder.mkdir(parents=True, exist_ok=True)
+        self.store = Store(folder / TWIN_STORE)
+        self.rows = {e.slot: e for e in self.store.evaluations("twin")}
 
-    def _base(self, job: TwinJob) -> Path:
-        return self.folder / f"{job.run_id}-{job.key}"
+    @staticmethod
+    def _file(job: TwinJob) -> str:
+        return f"{job.run_id}-{job.key}.csv"
 
-    def get(self, job: TwinJob) -> Run | None:
-        """The cached run of ``job``, or None."""
-        base = self._base(job)
-        csv, meta = base.with_suffix(".csv"), base.with_suffix(".json")
-        if not (meta.is_file() and csv.is_file()):
-            return None
-        transit = json.loads(meta.read_text())["transit_time"]
-        return Run(job.run_id, job.case, read_trajectory(csv), transit)
+    def get(self, i: int) -> Run | None:
+        """The kept run of job ``i``, or None (a row of another job, with other settings,
+        does not count)."""
+        job, row = self.jobs[i], self.rows.get(i)
+        path = self.folder / self._file(job)
+        if row is not None and row.status == "ok" and row.run_file == path.name and path.is_file():
+            return Run(job.run_id, job.case, read_trajectory(path), row.transit_time)
+        legacy = self.folder / f"{job.run_id}-{job.key}.json"  # kept by an earlier parcelfit
+        if legacy.is_file() and path.is_file():
+            transit = json.loads(legacy.read_text())["transit_time"]
+            run = Run(job.run_id, job.case, read_trajectory(path), transit)
+            self._finish(i, run, None)
+            return run
+        return None
 
-    def put(self, job: TwinJob, run: Run) -> None:
-        """Store a finished run (the trajectory first, then the JSON that marks it complete)."""
-        base = self._base(job)
-        write_trajectory(run.trajectory, base.with_suffix(".csv"))
-        base.with_suffix(".json").write_text(json.dumps({"transit_time": run.transit_time}))
+    def _finish(self, i: int, run: Run, wall: float | None) -> None:
+        job, row = self.jobs[i], self.rows.get(i)
+        if row is None:
+            (row_id,) = self.store.add_pending(
+                "twin", 0, [dict(job.truth)], job.case.speed_setting, [None], first_slot=i
+            )
+        else:
+            row_id = row.id
+        self.store.finish(
+            row_id,
+            status="ok",
+            transit_time=run.transit_time,
+            wall_time=wall,
+            run_file=self._file(job),
+        )
+
+    def put(self, i: int, run: Run, wall: float) -> None:
+        """Keep the finished run of job ``i`` (the trajectory first, then its row)."""
+        write_trajectory(run.trajectory, self.folder / self._file(self.jobs[i]))
+        self._finish(i, run, wall)
 
     def remove(self) -> None:
-        """Delete the cache (the dataset is complete)."""
+        """Delete the runs and their store (the dataset is complete)."""
+        self.store.close()
         shutil.rmtree(self.folder, ignore_errors=True)
 
 
@@ -303,7 +338,7 @@ def make_twin_dataset(
             )
     say = progress or ignore_progress
     results: dict[str, Run] = {}
-    cache = _RunCache(Path(folder) / ".twin-runs")
+    kept = _TwinRuns(Path(folder) / ".twin-runs", jobs)
 
     def done(run: Run, how: str) -> None:
         results[run.id] = run
@@ -314,21 +349,21 @@ def make_twin_dataset(
         )
 
     todo = []
-    for job in jobs:
-        cached = cache.get(job)
-        if cached is None:
-            todo.append(job)
+    for i in range(len(jobs)):
+        stored = kept.get(i)
+        if stored is None:
+            todo.append(i)
         else:
-            done(cached, "from the cache")
+            done(stored, "from the cache")
     kind = executor or ("local" if workers > 1 else "serial")
     with make_executor(kind, workers=workers) as pool:
-        for i, out in pool.map(_twin_run, todo):
+        for k, out in pool.map(_twin_run, [jobs[i] for i in todo]):
             if isinstance(out.exception, ParcelfitError):
                 raise out.exception  # the twin run itself failed (unstable, timed out)
             if out.value is None:
-                raise ParcelfitError(f"twin run {todo[i].run_id} could not run: {out.error}")
+                raise ParcelfitError(f"twin run {jobs[todo[k]].run_id} could not run: {out.error}")
             run, wall = out.value
-            cache.put(todo[i], run)
+            kept.put(todo[k], run, wall)
             done(run, f"{wall:.1f} s")
     out_cases = []
     for case in cases:
@@ -382,7 +417,7 @@ def make_twin_dataset(
     (Path(folder) / "truth.yaml").write_text(
         yaml.safe_dump(truth_doc, sort_keys=False), encoding="utf-8"
     )
-    cache.remove()  # the dataset is complete
+    kept.remove()  # the dataset is complete
     return path
 
 

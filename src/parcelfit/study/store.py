@@ -12,9 +12,10 @@ Schema (``study.sqlite`` in the study folder; WAL journal, one transaction per w
     store holds ``placements`` (per design row, which a rerun must match).
 
 ``evaluations``
-    ``id`` INTEGER PRIMARY KEY, ``kind`` ('fit' | 'validation' | 'screen'), ``iteration`` (0 =
+    ``id`` INTEGER PRIMARY KEY, ``kind`` ('fit' | 'validation' | 'screen'; in the stores of a
+    twin dataset and of a precision check 'twin' | 'precision'), ``iteration`` (0 =
     initial design; for screening the stage), ``slot`` (position in its batch; a screen
-    over K > 1 placements: design row x K + placement seed - 1),
+    over K > 1 placements: design row x K + placement seed - 1; a twin run: its job's index),
     ``speed_setting``, ``params`` (JSON, SI units),
     ``status`` ('pending' | 'ok' | 'failed' | 'unstable' | 'timeout'), ``cost``, ``dtw_xy`` [m],
     ``dtw_theta`` [rad], ``transit_time`` [s], ``seed`` (a screen's: the placement seed, 0 for the
@@ -63,7 +64,7 @@ _SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 CREATE TABLE IF NOT EXISTS evaluations (
     id INTEGER PRIMARY KEY,
-    kind TEXT NOT NULL CHECK (kind IN ('fit', 'validation', 'screen')),
+    kind TEXT NOT NULL CHECK (kind IN ('fit', 'validation', 'screen', 'twin', 'precision')),
     iteration INTEGER NOT NULL,
     slot INTEGER NOT NULL,
     speed_setting INTEGER NOT NULL,
@@ -429,13 +430,16 @@ class Store:
         iteration: int,
         batch: Sequence[Mapping[str, float]],
         speed_setting: int,
-        seeds: Sequence[int],
+        seeds: Sequence[int | None],
+        *,
+        first_slot: int = 0,
     ) -> list[int]:
-        """Record a batch as pending (one transaction); returns the row ids in batch order."""
+        """Record a batch as pending (one transaction), in the slots from ``first_slot`` on;
+        returns the row ids in batch order."""
         now = time.time()
         ids = []
         with self._transaction() as db:
-            for slot, (params, seed) in enumerate(zip(batch, seeds, strict=True)):
+            for slot, (params, seed) in enumerate(zip(batch, seeds, strict=True), first_slot):
                 cur = db.execute(
                     "INSERT INTO evaluations (kind, iteration, slot, speed_setting, params, status, seed, asked_at) "
                     "VALUES (?, ?, ?, ?, ?, 'pending', ?, ?)",
