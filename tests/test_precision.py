@@ -26,6 +26,8 @@ from parcelfit.study.precision import (
     sensitivity,
 )
 from parcelfit.study.precision_check import PrecisionCheck, run_precision_check
+from parcelfit.study.store import Store
+from parcelfit.study.studyfile import load_study
 
 from .fake_sim import write_reference_dataset
 
@@ -268,8 +270,17 @@ def test_the_check_says_which_case_determines_which_parameter_and_resumes(tmp_pa
     check = run_precision_check(study, tmp_path / "out", placements=3, executor="serial")
     # 2 cases x (3 parameters x 2 ends + the point) x 3 placements
     assert check.simulations == check.simulated_now == 2 * (3 * 2 + 1) * 3
-    stored = json.loads((tmp_path / "out" / "statistics.json").read_text())["runs"]
-    assert sum("-point-" in k for k in stored) == 2 * 3
+    store = Store(tmp_path / "out" / "precision.sqlite", readonly=True)
+    stored = store.evaluations("precision")
+    store.close()
+    assert len(stored) == check.simulations and all(e.status == "ok" for e in stored)
+    assert len({(e.details.case, json.dumps(e.params), e.seed) for e in stored}) == len(stored)
+    bounds = {d.name: (d.low, d.high) for d in load_study(study).space.dims}
+    at_point = [
+        e for e in stored if all(v not in bounds[n] for n, v in e.params.items() if n in bounds)
+    ]
+    assert len(at_point) == 2 * 3
+    assert all(e.details.lateral_drift is not None and e.transit_time for e in stored)
     rows = dict(check.rows())
     e = check.names.index("E_Pa")
     alone = rows["R/P/1 (fitted)"]
@@ -282,6 +293,36 @@ def test_the_check_says_which_case_determines_which_parameter_and_resumes(tmp_pa
     again = run_precision_check(study, tmp_path / "out", placements=3, executor="serial")
     assert again.simulated_now == 0 and again.simulations == check.simulations
     for (t1, p1), (t2, p2) in zip(check.rows(), again.rows(), strict=True):
+        assert t1 == t2 and np.array_equal(p1.joint, p2.joint)
+    # the runs kept by an earlier parcelfit in statistics.json (run id: statistics and ridden
+    # speeds) are taken over: nothing is simulated again, the same answer
+    legacy = {}
+    for e in stored:
+        tag = next(
+            (
+                f"{n}-{end}"
+                for n, (lo, hi) in bounds.items()
+                for end, v in (("low", lo), ("high", hi))
+                if e.params[n] == v
+            ),
+            "point",
+        )
+        d = e.details
+        legacy[f"precision-{d.case}-{tag}-{e.seed}"] = [
+            e.transit_time,
+            d.region_rotation,
+            d.lateral_drift,
+            d.start_speed,
+            d.end_speed,
+        ]
+    store = Store(tmp_path / "out" / "precision.sqlite", readonly=True)
+    setup = store.get_meta("setup")
+    store.close()
+    (tmp_path / "old").mkdir()
+    (tmp_path / "old" / "statistics.json").write_text(json.dumps({"setup": setup, "runs": legacy}))
+    old = run_precision_check(study, tmp_path / "old", placements=3, executor="serial")
+    assert old.simulated_now == 0 and old.simulations == check.simulations
+    for (t1, p1), (t2, p2) in zip(check.rows(), old.rows(), strict=True):
         assert t1 == t2 and np.array_equal(p1.joint, p2.joint)
     # adjusting the transit times for the belt speeds reuses every stored run (the cache keeps
     # the ridden speeds) and says per case what the adjustment did
@@ -298,14 +339,14 @@ def test_the_check_says_which_case_determines_which_parameter_and_resumes(tmp_pa
     # overwritten; the same ranges in another folder simulate afresh
     at = {"mu_d_BePa": 0.4, "mu_d_MePa": 0.25, "E_Pa": 1000}
     run_precision_check(study, tmp_path / "at", placements=2, at=at, executor="serial")
-    kept = (tmp_path / "at" / "statistics.json").read_bytes()
+    kept = (tmp_path / "at" / "precision.sqlite").read_bytes()
     doc = yaml.safe_load(study.read_text())
     doc["parameters"]["E_Pa"] = [400, 1600]
     study.write_text(yaml.safe_dump(doc))
     with pytest.raises(ParcelfitError, match="another point, range or simulator") as refused:
         run_precision_check(study, tmp_path / "at", placements=2, at=at, executor="serial")
     assert "another --out folder" in str(refused.value)
-    assert (tmp_path / "at" / "statistics.json").read_bytes() == kept
+    assert (tmp_path / "at" / "precision.sqlite").read_bytes() == kept
     moved = run_precision_check(study, tmp_path / "at2", placements=2, at=at, executor="serial")
     assert moved.simulated_now == moved.simulations
     # the same study and data in another folder (another checkout) reuse the runs: the key

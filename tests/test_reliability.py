@@ -137,7 +137,6 @@ def _study_with_outside_files(tmp_path):
 
 
 def _store_key_frames(study, image, animation):
-    import json
 
     doc = json.loads((study / "results.json").read_text())
     doc["key_frames"].update(image=image, animation=animation)
@@ -1530,8 +1529,13 @@ def test_a_killed_precision_check_keeps_every_finished_simulation(tmp_path):
         proc.wait()
     started = log.read_text().split()
     assert len(started) == 5
-    kept = json.loads((out / "statistics.json").read_text())["runs"]
-    assert sorted(kept) == sorted(started[:4])  # each finished one kept, not one of 20 lost
+    store = Store(out / "precision.sqlite", readonly=True)
+    rows = store.evaluations("precision")
+    store.close()
+    # each finished one kept, not one of 20 lost; the one running still pending
+    assert sum(e.status == "ok" for e in rows) == 4
+    assert sum(e.status == "pending" for e in rows) == len(rows) - 4 == 2 * 7 * 2 - 4
+    assert [e.status for e in rows[:5]] == ["ok"] * 4 + ["pending"]
     resumed = run_precision_check(study, out, placements=2, executor="serial")
     assert resumed.simulated_now == resumed.simulations - 4  # the four are reused
 
@@ -1710,28 +1714,30 @@ def test_a_dask_cluster_left_without_workers_is_reported_not_waited_on(capfd):
 
 
 def test_a_full_disk_during_a_precision_check_keeps_what_it_saved(tmp_path, monkeypatch):
-    import errno
-
-    import parcelfit.study.precision_check as check
 
     from .test_precision import _two_rig_study
 
     study, out = _two_rig_study(tmp_path), tmp_path / "o"
-    write, saved = check.write_text_atomic, []
+    opened = Store.__init__
 
-    def filling(path, text):
-        if len(saved) == 3:
-            raise OSError(errno.ENOSPC, "No space left on device")
-        saved.append(path)
-        return write(path, text)
+    def filling(self, path, **kw):
+        opened(self, path, **kw)
+        if not self.readonly:
+            self._db = _FillingDisk(self._db, 3, "commit")
 
-    monkeypatch.setattr(check, "write_text_atomic", filling)
+    monkeypatch.setattr(Store, "__init__", filling)
     args = ["precision", str(study), "--placements", "2", "--executor", "serial"]
     result = runner.invoke(app, [*args, "--out", str(out)])
     assert result.exit_code == 2, (result.output, result.exception)
     assert _error_lines(result) == [
-        f"error: {short_path(out / 'statistics.json')}: disk full while writing "
-        "statistics.json; nothing stored is lost Fix: free space on its disk, then rerun the "
+        f"error: {short_path(out / 'precision.sqlite')}: disk full while writing "
+        "precision.sqlite; nothing stored is lost Fix: free space on its disk, then rerun the "
         "same command: it resumes"
     ]
-    assert len(json.loads((out / "statistics.json").read_text())["runs"]) == 3
+    monkeypatch.setattr(Store, "__init__", opened)
+    store = Store(out / "precision.sqlite", readonly=True)
+    assert sum(e.status == "ok" for e in store.evaluations("precision")) == 3
+    store.close()
+    result = runner.invoke(app, [*args, "--out", str(out)])  # space freed
+    assert result.exit_code == 0, result.output
+    assert "(3 kept)" in result.output

@@ -215,7 +215,7 @@ def test_details_stored_by_earlier_versions_read_typed_and_write_back_unchanged(
     }
     assert empty == EvaluationDetails() and empty.message is None and empty.to_json() == {}
     # written back (as a resumed study rewrites a row), each reads as it was stored
-    for e, doc in zip(store.evaluations("fit"), _OLD_DETAILS, strict=True):
+    for e in store.evaluations("fit"):
         store.finish(e.id, status="ok", details=e.details)
     for e, doc in zip(store.evaluations("fit"), _OLD_DETAILS, strict=True):
         assert json.dumps(e.details.to_json(), sort_keys=True) == json.dumps(doc, sort_keys=True)

@@ -9,7 +9,9 @@ the fields of its kind and leaves the others unset:
 - a validation: its ``case``, ``passed`` and the three published criteria and the band test
   (`TransitCriterion`, `MeanCriterion`, `EnvelopeCriterion`);
 - a run of a screen, prediction or design: its quantities (``rotation``, ``exit_x``,
-  ``exit_y``, ``exit_heading``) and, when it failed, the ``message``.
+  ``exit_y``, ``exit_heading``) and, when it failed, the ``message``;
+- a run of a precision check: its ``case`` and statistics (the transit time is the row's own
+  column) and the ridden speeds a transit-time adjustment needs.
 
 The stored form (`EvaluationDetails.to_json`) is the JSON the store has always held: the
 fields set, under their stored names (``transit_time``, ``xy`` and ``theta`` for the
@@ -130,6 +132,13 @@ class EvaluationDetails(_Stored):
     exit_x: float | None = Field(None, description="the run's last x position [m]")
     exit_y: float | None = Field(None, description="the run's last y position [m]")
     exit_heading: float | None = Field(None, description="its unwrapped last heading [rad]")
+    # runs of a precision check (`parcelfit.study.precision_check`); ``case`` names their case
+    region_rotation: float | None = Field(
+        None, description="net rotation over the case's regions of interest [rad]"
+    )
+    lateral_drift: float | None = Field(None, description="lateral drift over the regions [m]")
+    start_speed: float | None = Field(None, description="speed over its first window [m/s]")
+    end_speed: float | None = Field(None, description="speed over its last window [m/s]")
 
     @classmethod
     def from_json(cls, doc: Mapping[str, Any] | None) -> EvaluationDetails:

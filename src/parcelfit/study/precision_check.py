@@ -7,27 +7,31 @@ and transfer cases and any named in ``candidates``, real runs from the first cas
 simulated with the parameter at the low and at the high end of its range, every other parameter
 at the centre of its range or at the values ``at`` gives (catalogue units), over K seeded
 placements (seeds 1..K, the same at both ends); the same K placements at the point itself give
-the placements' scatter there. Each run's statistics are written to
-``statistics.json`` in the output folder the moment it arrives (the file rewritten through a
-temporary one, `parcelfit.atomic.write_text_atomic`), so a killed or interrupted check keeps
-every finished simulation and resumes with the others, and a rerun with more candidates
-simulates only the new cases; a folder holding the runs of a check at
-another point, range or simulator is refused, never overwritten. The table goes to
-``precision-check.md``.
+the placements' scatter there. Every simulation is kept in an evaluation store in the output
+folder (``precision.sqlite``, `parcelfit.study.store`, kind ``precision``: its parameter
+values, placement seed and case, written pending before the simulations start and finished the
+moment each arrives, with its statistics and the ridden speeds), so a killed or interrupted
+check keeps every finished simulation and resumes with the others, as a study does, and a
+rerun with more candidates simulates only the new cases; a folder holding the runs of a check
+at another point, range or simulator is refused, never overwritten. (A ``statistics.json``
+kept by an earlier parcelfit is taken over.) The table goes to ``precision-check.md``.
 """
 
 from __future__ import annotations
 
 import json
+import math
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from itertools import groupby
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from parcelfit.atomic import write_text_atomic
-from parcelfit.errors import ParcelfitError, os_error
+from parcelfit.errors import ParcelfitError
 from parcelfit.metrics.comparison import Comparison
 from parcelfit.metrics.transit_adjustment import (
     TransitAdjustment,
@@ -39,6 +43,7 @@ from parcelfit.runs import TestCase, load_dataset
 from parcelfit.sim.ensemble import MAX_PLACEMENTS
 from parcelfit.sim.executors import Task
 from parcelfit.sim.factory import make_simulator
+from parcelfit.study.details import EvaluationDetails
 from parcelfit.study.joint import simulate_items
 from parcelfit.study.loop import study_executor
 from parcelfit.study.precision import (
@@ -53,11 +58,13 @@ from parcelfit.study.precision import (
     run_statistics,
     sensitivity,
 )
-from parcelfit.study.studyfile import CaseSpec, fixed_to_si, load_study
+from parcelfit.study.store import Evaluation, Store, finished_count
+from parcelfit.study.studyfile import CaseSpec, Study, fixed_to_si, load_study
 
-STATISTICS_FILE = "statistics.json"
-# what statistics.json holds per run: the raw statistics, then the ridden speeds (an adjustment
-# of the transit time is applied when the table is made, so one cache serves both)
+PRECISION_STORE = "precision.sqlite"  # a check's simulations, in its output folder
+STATISTICS_FILE = "statistics.json"  # where an earlier parcelfit kept them
+# what is kept per run: the raw statistics, then the ridden speeds (an adjustment of the
+# transit time is applied when the table is made, so one store serves both)
 CACHED = "transit s, rotation rad, lateral drift m, v_start m/s, v_end m/s"
 TABLE_FILE = "precision-check.md"
 SUBSET_SIZE = 4  # the method's "at most four parameters go into calibration" (method.md 6)
@@ -218,6 +225,123 @@ class PrecisionCheck:
         return "\n".join(lines) + "\n"
 
 
+def _key(label: str, values: Mapping[str, float], seed: int | None) -> str:
+    """What identifies a run of a check: its case, parameter values (SI) and placement seed."""
+    return json.dumps([label, dict(sorted(values.items())), seed])
+
+
+def _statistics(row: Evaluation) -> list[float] | None:
+    """A kept run's statistics and ridden speeds (`CACHED`), None without statistics."""
+    d = row.details
+    if row.status != "ok" or row.transit_time is None or d.lateral_drift is None:
+        return None
+    values = (row.transit_time, d.region_rotation, d.lateral_drift, d.start_speed, d.end_speed)
+    return [math.nan if v is None else float(v) for v in values]
+
+
+Wanted = Mapping[str, tuple[CaseSpec, dict[str, float], int]]  # run id: case, values, seed
+
+
+class _CheckRuns:
+    """The simulations of one check in its store (module docstring): ``statistics`` of those
+    finished by run id (None for a run without statistics), `pending` the others. A store or
+    an earlier ``statistics.json`` of a check with another ``setup`` is refused."""
+
+    def __init__(self, out: Path, setup: Mapping[str, Any], wanted: Wanted) -> None:
+        self.wanted = wanted
+        path, legacy = out / PRECISION_STORE, out / STATISTICS_FILE
+        old: Mapping[str, list[float] | None] = {}
+        if not path.is_file() and legacy.is_file():  # kept by an earlier parcelfit
+            doc = json.loads(legacy.read_text(encoding="utf-8"))
+            _same_setup(doc.get("setup"), setup, legacy)
+            old = doc["runs"]
+        self.store = Store(path)
+        try:
+            _same_setup(self.store.get_meta("setup"), setup, path)
+            self.store.set_meta("setup", setup)
+            by_key = {_key(s.label, v, seed): run_id for run_id, (s, v, seed) in wanted.items()}
+            self.rows: dict[str, Evaluation] = {}
+            for e in self.store.evaluations("precision"):
+                run_id = by_key.get(_key(e.details.case or "", e.params, e.seed))
+                if run_id is not None:
+                    self.rows[run_id] = e
+            self._add([r for r in wanted if r not in self.rows])
+            self.statistics = {
+                r: _statistics(e) for r, e in self.rows.items() if e.status != "pending"
+            }
+            for run_id, stats in old.items():
+                if run_id in wanted and run_id not in self.statistics:
+                    self.finish(run_id, "ok" if stats else "failed", stats, None)
+        except BaseException:
+            self.store.close()
+            raise
+
+    def _add(self, missing: Sequence[str]) -> None:
+        """Record the ``missing`` runs as pending, one batch (iteration) per check run, each
+        case's runs in slots of their own."""
+        if not missing:
+            return
+        iteration = 1 + max((e.iteration for e in self.rows.values()), default=-1)
+        slot = 0
+        for _, group in groupby(missing, key=lambda r: self.wanted[r][0].label):
+            ids = list(group)
+            spec = self.wanted[ids[0]][0]
+            self.store.add_pending(
+                "precision",
+                iteration,
+                [self.wanted[r][1] for r in ids],
+                spec.case.speed_setting,
+                [self.wanted[r][2] for r in ids],
+                first_slot=slot,
+            )
+            slot += len(ids)
+        added = [e for e in self.store.evaluations("precision") if e.iteration == iteration]
+        self.rows.update(zip(missing, sorted(added, key=lambda e: e.slot), strict=True))
+
+    def pending(self) -> list[tuple[str, CaseSpec, dict[str, float], int]]:
+        """The runs still to simulate: run id, case, parameter values (SI), placement seed."""
+        return [(r, *self.wanted[r]) for r in self.wanted if r not in self.statistics]
+
+    def finish(
+        self,
+        run_id: str,
+        status: str,
+        stats: Sequence[float] | None,
+        message: object,
+        wall_time: float | None = None,
+    ) -> None:
+        """Keep the outcome of run ``run_id``: its status, statistics and ridden speeds
+        (`CACHED`; None without statistics) and why it failed."""
+        doc: dict[str, Any] = {"case": self.wanted[run_id][0].label}
+        if stats is not None:
+            doc.update(
+                region_rotation=stats[1],
+                lateral_drift=stats[2],
+                start_speed=stats[3],
+                end_speed=stats[4],
+            )
+        if message:
+            doc["message"] = str(message)
+        self.store.finish(
+            self.rows[run_id].id,
+            status=status,
+            transit_time=None if stats is None else stats[0],
+            wall_time=wall_time,
+            details=EvaluationDetails.from_json(doc),
+        )
+        self.statistics[run_id] = None if stats is None else [float(v) for v in stats]
+
+
+def _same_setup(saved: Any, setup: Mapping[str, Any], where: Path) -> None:
+    """Refuse a folder whose kept runs are another check's (hours of them, perhaps)."""
+    if saved is not None and saved != setup:
+        raise ParcelfitError(
+            f"{where} holds the runs of a check at another point, range or simulator",
+            file=where,
+            fix="give another --out folder, or delete the file to simulate afresh",
+        )
+
+
 def run_precision_check(
     study_file: Path,
     out: Path,
@@ -282,7 +406,6 @@ def run_precision_check(
         ]
 
     out.mkdir(parents=True, exist_ok=True)
-    cache_file = out / STATISTICS_FILE
     bounds = {n: [dims[n].low, dims[n].high] for n in names}
     setup = json.loads(
         json.dumps(
@@ -296,21 +419,8 @@ def run_precision_check(
             }
         )
     )
-    cache: dict[str, list[float] | None] = {}
-    if cache_file.exists():
-        saved = json.loads(cache_file.read_text(encoding="utf-8"))
-        if saved.get("setup") != setup:
-            # never overwrite another check's simulations (hours of them, perhaps)
-            raise ParcelfitError(
-                f"{cache_file} holds the runs of a check at another point, range or simulator",
-                file=cache_file,
-                fix="give another --out folder, or delete the file to simulate afresh",
-            )
-        cache = saved["runs"]
-
-    keys = []
-    items = []
-    owners = []
+    keys: list[tuple[str, str, str, str]] = []
+    wanted: dict[str, tuple[CaseSpec, dict[str, float], int]] = {}
     # (parameter, end, values, run-id tag): the point itself, for the placements' scatter there,
     # then each parameter at each end of its range
     variants = [("", "point", dict(point), "point")] + [
@@ -323,9 +433,44 @@ def run_precision_check(
             for seed in range(1, placements + 1):
                 run_id = f"precision-{spec.label}-{tag}-{seed}"
                 keys.append((spec.label, name, end, run_id))
-                if run_id not in cache:
-                    items.append((Task(dict(values), spec.case, run_id), seed))
-                    owners.append((spec.label, run_id))
+                wanted[run_id] = (spec, dict(values), seed)
+    runs = _CheckRuns(out, setup, wanted)
+    try:
+        return _simulate_and_judge(
+            runs,
+            study,
+            study_file,
+            keys,
+            comparisons,
+            adjustments,
+            real,
+            placements,
+            progress,
+            (executor, workers),
+            (names, fitted, extra, given),
+        )
+    finally:
+        runs.store.close()
+
+
+def _simulate_and_judge(
+    runs: _CheckRuns,
+    study: Study,
+    study_file: Path,
+    keys: Sequence[tuple[str, str, str, str]],
+    comparisons: Mapping[str, Comparison],
+    adjustments: Mapping[str, TransitAdjustment],
+    real: Mapping[str, list[np.ndarray | None]],
+    placements: int,
+    progress: ProgressCallback,
+    where: tuple[str | None, int | None],
+    what: tuple[tuple[str, ...], list[CaseSpec], list[CaseSpec], Mapping[str, float]],
+) -> PrecisionCheck:
+    """Simulate the runs ``runs`` does not hold yet (``where``: executor and workers), then
+    judge every case from its kept statistics."""
+    names, fitted, extra, given = what
+    todo = runs.pending()
+    items = [(Task(dict(values), spec.case, run_id), seed) for run_id, spec, values, seed in todo]
     simulator = make_simulator(study.simulator)
     if items and not callable(getattr(simulator, "with_placement", None)):
         raise ParcelfitError(
@@ -335,35 +480,31 @@ def run_precision_check(
             fix="use a simulator with seeded placements (mujoco)",
         )
 
-    def save() -> None:
-        try:
-            write_text_atomic(cache_file, json.dumps({"setup": setup, "runs": cache}))
-        except OSError as exc:  # a full disk: the file keeps the runs saved before
-            raise os_error(exc, cache_file, resumes=True) or exc from None
-
     start = time.perf_counter()
     total = len(items)
     progress(
         ProgressEvent("precision", f"{total} simulations ({len(keys) - total} kept)", 0, total)
     )
     if items:
-        with study_executor(study, executor, None, workers) as pool:
+        with study_executor(study, where[0], None, where[1]) as pool:
             for done, (i, result) in enumerate(simulate_items(pool, simulator, items), 1):
-                label, run_id = owners[i]
+                run_id, spec = todo[i][0], todo[i][1]
                 stats = None
                 if result.ok and result.run is not None:
-                    stats = run_statistics(result.run, comparisons[label])
+                    stats = run_statistics(result.run, comparisons[spec.label])
                     if stats is not None:  # raw statistics and the speeds an adjustment needs
                         stats = [*stats, *ridden_speeds(result.run.trajectory)]
-                cache[run_id] = None if stats is None else [float(v) for v in stats]
-                save()  # every run as it arrives: a kill loses only the runs still going
+                message = result.diagnostics.get("message")
+                # every run as it arrives: a kill loses only the runs still going
+                status, wall = result.status.value, result.wall_time
+                runs.finish(run_id, status, stats, None if result.ok else message, wall)
                 message = f"{done}/{total} simulations ({time.perf_counter() - start:.0f} s)"
                 progress(ProgressEvent("precision", message, done, total))
     wall = time.perf_counter() - start
 
     per_end: dict[tuple[str, str, str], list[np.ndarray | None]] = {}
     for label, name, end, run_id in keys:
-        v = cache[run_id]
+        v = runs.statistics[run_id]
         stats = None
         if v is not None:
             stats = np.array(v[:3])
@@ -379,7 +520,7 @@ def run_precision_check(
             real[spec.label],
             per_end[(spec.label, "", "point")],
         )
-        for spec in specs
+        for spec in (*fitted, *extra)
     }
     return PrecisionCheck(
         names,
@@ -396,9 +537,11 @@ def run_precision_check(
 
 
 def stored_runs(folder: Path) -> int:
-    """How many simulations a check in ``folder`` has kept (`STATISTICS_FILE`; 0 if none)."""
-    cache = folder / STATISTICS_FILE
-    return len(json.loads(cache.read_text(encoding="utf-8"))["runs"]) if cache.is_file() else 0
+    """How many simulations a check in ``folder`` has kept (0 if none)."""
+    legacy = folder / STATISTICS_FILE
+    if not (folder / PRECISION_STORE).is_file() and legacy.is_file():
+        return len(json.loads(legacy.read_text(encoding="utf-8"))["runs"])
+    return finished_count(folder / PRECISION_STORE, "precision")
 
 
 def command_line(
