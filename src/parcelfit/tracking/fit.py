@@ -47,6 +47,7 @@ from parcelfit.tracking.detect import dictionary
 _CELL_PX = 64  # pattern pixels per tag bit (cv2.remap interpolates in 1/32 pixel steps)
 _STEP_PX = 0.1  # finite-difference step of the fit [px at the corners]
 _MAX_NFEV = 20  # function evaluations per round
+CLUSTER_BITS = 1.0  # side of the pixel blocks whose residuals the covariance sums [tag bits]
 
 
 @dataclass(frozen=True)
@@ -83,6 +84,7 @@ class SmearFit:
 
     params: np.ndarray
     cov: np.ndarray
+    cov_iid: np.ndarray
     corners: np.ndarray
     rms: float
     contrast: float
@@ -295,13 +297,27 @@ def fit_smeared_tag(
     assert result is not None
     res, a = solve(p, mask)
     s2 = float(res @ res) / max(1, len(res) - k)
+    jac = np.asarray(result.jac)
     try:
-        cov = s2 * np.linalg.inv(result.jac.T @ result.jac)
+        bread = np.linalg.inv(jac.T @ jac)
     except np.linalg.LinAlgError:
         return None
+    # cluster-robust (sandwich) covariance: the residuals of neighbouring pixels are not
+    # independent (compression blocks, the smear model's own error along a tag's edges), so
+    # they are summed per block of CLUSTER_BITS x CLUSTER_BITS tag bits before squaring
+    cell = max(1.0, CLUSTER_BITS * side / pattern.bits)
+    px_, py_ = gx.ravel()[mask], gy.ravel()[mask]
+    block = (px_ // cell).astype(np.int64) * 100003 + (py_ // cell).astype(np.int64)
+    _, group = np.unique(block, return_inverse=True)
+    scores = np.zeros((int(group.max()) + 1, k))
+    np.add.at(scores, group, jac * res[:, None])
+    n_groups = len(scores)
+    meat = scores.T @ scores * (n_groups / max(1, n_groups - 1))
+    cov = bread @ meat @ bread
     return SmearFit(
         params=p,
         cov=cov,
+        cov_iid=s2 * bread,
         corners=np.asarray(corners_of(p), float),
         rms=math.sqrt(s2) / max(abs(a), 1e-9),
         contrast=abs(a),
