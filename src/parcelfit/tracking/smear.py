@@ -118,7 +118,8 @@ def estimate_timing(fitters: list[SmearFitter], fps: float) -> dict[str, Any]:
     (`fit.py`; a wrong exposure smears, a wrong readout shears the modelled tag differently
     from the filmed one). Searched between 0 and one frame interval T: exposure on a grid of
     T / 8 steps (readout 0), then the readout on T / 4 steps, then each refined twice by half
-    the step (the better of the two neighbours). Returns a dict: ``exposure``, ``readout``
+    the step (the better of the two neighbours) and once more to the vertex of the parabola
+    through the best point and its neighbours (inside the interval only). Returns a dict: ``exposure``, ``readout``
     [s], ``frames`` used, ``residual_rms`` (mean, best timing), ``source`` ("estimated"), or
     ``source`` "assumed none" when no frame smears by ``fit_smear_cells`` bits even at an
     exposure of a whole frame interval (then the timing cannot matter, nor be measured)."""
@@ -167,6 +168,15 @@ def estimate_timing(fitters: list[SmearFitter], fps: float) -> dict[str, Any]:
         for h in (step / 2, step / 4):
             grid = np.clip(np.array([value - h, value, value + h]), 0.0, frame)
             value = best_on(grid, other, exposure_axis)
+        if 0 < value - h and value + h < frame:
+            # the vertex of the parabola through the best point and its two neighbours
+            pairs = [
+                (v, other) if exposure_axis else (other, v) for v in (value - h, value, value + h)
+            ]
+            c = [cost(*pair) for pair in pairs]
+            curv = c[0] - 2 * c[1] + c[2]
+            if curv > 0:
+                value += float(np.clip(h * (c[0] - c[2]) / (2 * curv), -h, h))
         return value
 
     exposure = best_on(np.linspace(0, frame, 9), 0.0, True)
