@@ -168,7 +168,7 @@ def estimate_timing(fitters: list[SmearFitter], fps: float) -> dict[str, Any]:
         for h in (step / 2, step / 4):
             grid = np.clip(np.array([value - h, value, value + h]), 0.0, frame)
             value = best_on(grid, other, exposure_axis)
-        if 0 < value - h and value + h < frame:
+        if value - h > 0 and value + h < frame:
             # the vertex of the parabola through the best point and its two neighbours
             pairs = [
                 (v, other) if exposure_axis else (other, v) for v in (value - h, value, value + h)
