@@ -590,9 +590,11 @@ def smooth_scaled(
     parcel centre, turn rate [rad/s]; NaN where not fitted): rate_var is the error that costs,
     (smoothed rate - model rate)^2 reach^2 (`RATE_SD_FACTOR` times), the smoothed rates from a
     first pass; large next to an abrupt change of motion, which the model's quadratic rounds
-    off. lambda (position, heading) >= 1 is the mean normalised squared residual of the fitted
-    frames after a second pass (lambda = 1), so fits whose own sds are too small for the scatter
-    the smoother sees are widened, never narrowed. A timing off by its sd shifts every fit by
+    off. lambda (position, heading) >= 1 makes the fitted frames' mean normalised squared
+    residual (`rts_smooth`'s ``nis``) about 1: from lambda = 1, lambda <- max(1, lambda x that
+    mean), smoothed again, up to `LAMBDA_PASSES` times (until it changes by under 5 %); so
+    fits whose own sds are too small for the scatter the smoother sees are widened, never
+    narrowed. A timing off by its sd shifts every fit by
     the smoothed rate times ``timing_lag`` [s] (the readout's sd times the centre row's lag):
     a bias common to neighbouring frames, which smoothing does not average away, so its
     variance is added to the smoothed one. Returns `smooth_track`'s results and lambda."""
@@ -605,26 +607,30 @@ def smooth_scaled(
         [(miss[:, 0] ** 2 + miss[:, 1] ** 2) / 2, miss[:, 2] ** 2]
     )
     nis = np.full((n, 3, 2), np.nan)
-    result = smooth_track(arr, dt, np.sqrt(base_var + fit_var + rate_var), nis=nis)
-    scale = [1.0, 1.0]
-    for j, cols in enumerate(([0, 1], [2])):
-        vals = nis[fitted][:, cols, NIS_KIND]
-        vals = vals[np.isfinite(vals)]
-        if len(vals) >= 3:
-            scale[j] = max(1.0, float(np.mean(vals)))
-    if scale != [1.0, 1.0]:
-        var = base_var + np.array(scale) * fit_var + rate_var
-        result = smooth_track(arr, dt, np.sqrt(var))
+    scale = np.ones(2)
+    for i in range(LAMBDA_PASSES + 1):
+        var = base_var + scale * fit_var + rate_var
+        result = smooth_track(arr, dt, np.sqrt(var), nis=nis)
+        grown = scale.copy()
+        for j, cols in enumerate(([0, 1], [2])):
+            vals = nis[fitted][:, cols, NIS_KIND]
+            vals = vals[np.isfinite(vals)]
+            if len(vals) >= 3:
+                grown[j] = max(1.0, scale[j] * float(np.mean(vals)))
+        if i == LAMBDA_PASSES or np.allclose(grown, scale, rtol=0.05):
+            break
+        scale = grown
     out, gated, sd, restarts = result
     if sd is not None:
         bias = rates * timing_lag[:, None]
         sd = np.sqrt(
             sd**2 + np.column_stack([(bias[:, 0] ** 2 + bias[:, 1] ** 2) / 2, bias[:, 2] ** 2])
         )
-    return out, gated, sd, restarts, scale
+    return out, gated, sd, restarts, [float(v) for v in scale]
 
 
 RATE_SD_FACTOR = 1.0
+LAMBDA_PASSES = 4
 NIS_KIND = 1  # 0: the filter's innovations, 1: the smoother's residuals
 
 
