@@ -20,9 +20,13 @@ dt_r = (r / height - 0.5) * readout the rolling-shutter delay of its row r (a, b
 linearly each time). Only pixels whose every sample falls on the tag or its quiet zone are
 compared (the surface around a tag is unknown). p is found by `scipy.optimize.least_squares`;
 S and the compared pixels are then rebuilt about the fitted pose (the heading turns the motion
-in the pattern's frame) and p fitted again. The covariance s^2 (J'J)^-1 (s^2 the residual
-variance) gives the parameters' standard deviations. The fitted pose is where the tag was at
-the frame time itself (the readout is modelled), so it needs no rolling-shutter correction.
+in the pattern's frame) and p fitted again. The parameters' covariance is cluster-robust,
+(J'J)^-1 (sum_g J_g' e_g e_g' J_g) (J'J)^-1 G / (G - 1) over the G blocks of `CLUSTER_BITS`
+tag bits a side (J_g, e_g: the Jacobian rows and residuals of block g's pixels): neighbouring
+pixels' residuals are not independent (H.264 blocks, the smear model's own error along an
+edge), as the independent-pixel s^2 (J'J)^-1 (s^2 the residual variance) assumes. The fitted
+pose is where the tag was at the frame time itself (the readout is modelled), so it needs no
+rolling-shutter correction.
 Approximations: M over the exposure is taken about the frame-time pose for every row (the
 tag turns by at most w x readout / 2 between, about 5 degrees at 720 deg/s and 15 ms, which
 turns its smear, not its position).
@@ -78,9 +82,9 @@ def tag_pattern(family: str, tag_id: int) -> TagPattern:
 @dataclass(frozen=True)
 class SmearFit:
     """A fitted tag: ``params`` (the pose, in the units of the caller's ``corners_of``) and
-    their covariance ``cov``; ``corners`` (4, 2) [px, full frame] at the frame time; ``rms``:
-    residual rms as a fraction of the tag's black-to-white contrast; ``contrast`` [grey levels];
-    ``pixels`` compared."""
+    their covariance ``cov`` (cluster-robust; ``cov_iid``: assuming independent pixels);
+    ``corners`` (4, 2) [px, full frame] at the frame time; ``rms``: residual rms as a fraction
+    of the tag's black-to-white contrast; ``contrast`` [grey levels]; ``pixels`` compared."""
 
     params: np.ndarray
     cov: np.ndarray

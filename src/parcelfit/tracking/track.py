@@ -17,7 +17,8 @@ one are gaps: gaps of at most ``max_gap`` frames are filled by linear interpolat
 unwrapped first), listed as interpolated and flagged ``filled`` (the others ``detected`` or
 ``fitted``); longer gaps stay missing (their samples are left out) and are listed too. With the
 smoother on (each frame weighted by its own measurement sd), the measured frames carry its
-posterior standard deviations (``position_sd``, ``heading_sd``; see `smooth_track`); measured
+posterior standard deviations (``position_sd``, ``heading_sd``; see `smooth_track`, and
+`smooth_scaled` for a fitted frame's sd and the camera timing's share); measured
 frames it discards as outliers become gaps and are counted (``discarded_by_smoother``), and a
 change of motion restarts its motion model (``motion_restarts_s``). The
 heading is unwrapped over the run. Decoding runs in a background thread (OpenCV releases the GIL
@@ -27,10 +28,8 @@ while decoding), so decoding and detection overlap on two cores.
 from __future__ import annotations
 
 import math
-import queue
-import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -58,6 +57,7 @@ from parcelfit.tracking.smear import (
 )
 from parcelfit.tracking.smooth import RESTART_AFTER, rts_smooth
 from parcelfit.tracking.tagmap import TagMap, tag_corners
+from parcelfit.tracking.video import frames_of, open_video
 
 
 @dataclass(frozen=True)
@@ -99,86 +99,6 @@ class VideoTrack:
     size: tuple[int, int]
     tags: dict[int, TagTrack]
     quality: dict[str, Any] = field(default_factory=dict)
-
-
-# the smallest frame side [px] that can show a tag: OpenCV still decodes a 36h11 tag 8 px wide
-# (one pixel a bit), which needs its white border around it; smaller frames are refused before
-# any OpenCV call sees them (a 1 x 1 px frame shrunk for the detector has no pixel left)
-MIN_FRAME_PX = 16
-
-
-def open_video(path: str | Path) -> cv2.VideoCapture:
-    """Open a video, or raise a clear error naming the file: missing, not a file, not
-    decodable (a damaged or empty file), no frame, or frames under `MIN_FRAME_PX` pixels a side."""
-    path = Path(path)
-    if not path.is_file():
-        raise ParcelfitError(
-            "video not found" if not path.exists() else "not a video file",
-            file=path,
-            fix="check the path",
-        )
-    try:
-        cap = cv2.VideoCapture(str(path))
-    except cv2.error as exc:  # some backends raise instead of returning a closed capture
-        raise ParcelfitError(
-            f"cannot decode this video ({exc.__class__.__name__})",
-            file=path,
-            fix="convert it to H.264/HEVC MP4 with ffmpeg",
-        ) from None
-    if not cap.isOpened():
-        raise ParcelfitError(
-            "cannot decode this video", file=path, fix="convert it to H.264/HEVC MP4 with ffmpeg"
-        )
-    ok, frame = cap.read()
-    if not ok or frame is None or frame.size == 0:
-        cap.release()
-        raise ParcelfitError(
-            "the video has no frame that can be decoded (0 frames or a damaged file)",
-            file=path,
-            fix="check the file; convert it to H.264/HEVC MP4 with ffmpeg",
-        )
-    h, w = frame.shape[:2]
-    if min(w, h) < MIN_FRAME_PX:
-        cap.release()
-        raise ParcelfitError(
-            f"the video's frames are {w} x {h} px, too small to show a tag "
-            f"(at least {MIN_FRAME_PX} px a side)",
-            file=path,
-            fix="track the camera's original recording, not a thumbnail or a cropped copy",
-        )
-    cap.set(cv2.CAP_PROP_POS_FRAMES, 0)
-    return cap
-
-
-def frames_of(cap: cv2.VideoCapture, prefetch: int = 4) -> Iterator[np.ndarray]:
-    """Grey frames of an open video, decoded in a background thread."""
-    q: queue.Queue[np.ndarray | None] = queue.Queue(maxsize=prefetch)
-    stop = threading.Event()
-
-    def reader() -> None:
-        try:
-            while not stop.is_set():
-                ok, frame = cap.read()
-                if not ok:
-                    break
-                grey = frame if frame.ndim == 2 else cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
-                q.put(grey)
-        finally:
-            q.put(None)
-
-    thread = threading.Thread(target=reader, daemon=True)
-    thread.start()
-    try:
-        while (item := q.get()) is not None:
-            yield item
-    finally:
-        stop.set()
-        while thread.is_alive():
-            try:
-                q.get_nowait()
-            except queue.Empty:
-                time.sleep(0.001)
-        thread.join()
 
 
 def _runs_of(mask: np.ndarray) -> list[tuple[int, int]]:
