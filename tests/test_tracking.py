@@ -630,6 +630,10 @@ def assert_report_counts_match_run_file(quality, traj):
     assert quality["detection_rate"] == pytest.approx(
         quality["measured_frames"] / quality["frames_in_view"]
     )
+    # the stated sds: the report's medians are the run file's, lambda never narrows a fit
+    assert quality["position_sd_median"] == pytest.approx(np.nanmedian(traj.position_sd), rel=1e-6)
+    assert quality["heading_sd_median"] == pytest.approx(np.nanmedian(traj.heading_sd), rel=1e-6)
+    assert all(v >= 1.0 for v in quality["fit_variance_scale"])
 
 
 def test_smoother_weighs_each_frame_by_its_own_standard_deviation():
@@ -734,3 +738,143 @@ def test_the_detector_finds_nothing_in_frames_too_small_for_a_tag():
             assert detector.detect(np.zeros(shape, np.uint8)) == {}
     with pytest.raises(ParcelfitError, match="8-bit frame"):
         TagDetector().detect(np.zeros((32, 32), np.float32))
+
+
+def test_fit_covariance_counts_correlated_pixel_noise():
+    """The fit's covariance is cluster-robust: noise shared by blocks of pixels (compression
+    blocks) widens it, where the independent-pixel covariance would not notice."""
+    import math
+
+    from parcelfit.tracking.fit import fit_smeared_tag, tag_pattern
+    from parcelfit.tracking.synthetic import Renderer, straight_spin
+    from parcelfit.tracking.tagmap import tag_corners
+
+    path = straight_spin(1.6, 360.0)
+    scene = conveyor_scene(
+        1328,
+        748,
+        exposure=0.004,
+        blur_samples=12,
+        parcel_height=0.02,
+        tag_offset=(0.05, 0.0),
+        distortion=(0, 0, 0, 0, 0),
+    )
+    renderer = Renderer(scene)
+    grey = renderer.frame(path, 0.3, np.random.default_rng(1)).astype(float)
+    x, y, th = (float(v[0]) for v in path(np.array([0.3])))
+    w = math.radians(360.0)
+    truth = np.array([x + 0.05 * math.cos(th), y + 0.05 * math.sin(th), th])
+    rates = np.array([1.6 - w * 0.05 * math.sin(th), 0.04 + w * 0.05 * math.cos(th), w])
+
+    def corners_of(p):
+        return renderer.project(tag_corners(p[0], p[1], 0.06, p[2]), 0.02)
+
+    px = corners_of(truth)
+    x0, y0 = (int(v) for v in px.min(axis=0) - 40)
+    x1, y1 = (int(v) for v in px.max(axis=0) + 40)
+    side = float(np.linalg.norm(px[1] - px[0]))
+    steps = np.array([0.1 * 0.06 / side, 0.1 * 0.06 / side, 0.1 / (side / math.sqrt(2))])
+    pattern = tag_pattern("tag36h11", 7)
+    sds = {}
+    for blocks in (False, True):
+        patch = grey[y0:y1, x0:x1].copy()
+        if blocks:  # 8 x 8 px blocks each offset by its own grey level, sd 8
+            rng = np.random.default_rng(3)
+            offsets = rng.normal(0, 8, (patch.shape[0] // 8 + 1, patch.shape[1] // 8 + 1))
+            patch += np.kron(offsets, np.ones((8, 8)))[: patch.shape[0], : patch.shape[1]]
+        patch = np.clip(patch, 0, 255).astype(np.uint8)
+        fit = fit_smeared_tag(
+            patch, (x0, y0), 1, corners_of, truth, steps, rates, pattern, 0.004, 0.0, 748
+        )
+        assert fit is not None
+        sds[blocks] = (math.sqrt(fit.cov[0, 0]), math.sqrt(fit.cov_iid[0, 0]))
+    robust_ratio = sds[True][0] / sds[False][0]
+    iid_ratio = sds[True][1] / sds[False][1]
+    assert robust_ratio > 1.5 * iid_ratio
+
+
+def _noisy_track(n=45, spin_deg_s=720.0, sd=(5e-5, 5e-4)):
+    t = np.arange(n) / 60
+    truth = np.column_stack([-0.6 + 1.6 * t, -0.03 + 0.04 * t, np.radians(spin_deg_s) * t])
+    rng = np.random.default_rng(5)
+    return t, truth, truth + rng.normal(0, 1, (n, 3)) * [sd[0], sd[0], sd[1]]
+
+
+def _smooth_fitted(arr, fit_sd, reach=None, rates=None, timing_lag=None):
+    from parcelfit.tracking.track import smooth_scaled
+
+    n = len(arr)
+    base = np.full((n, 2), 1e-14)
+    fit_var = np.tile(np.square(fit_sd), (n, 1))
+    return smooth_scaled(
+        arr,
+        1 / 60,
+        base,
+        fit_var,
+        np.full((n, 3), np.nan) if rates is None else rates,
+        np.zeros(n) if reach is None else reach,
+        np.zeros(n) if timing_lag is None else timing_lag,
+    )
+
+
+def test_fits_that_state_too_small_sds_are_widened_never_narrowed():
+    """lambda >= 1: fits whose sds are 3 times too small are widened until error / sd is
+    honest (the smoother's own jerk absorbs part of the noise, so lambda stays under 9);
+    honest fits and fits whose sds are 3 times too large keep theirs (lambda 1)."""
+    from parcelfit.tracking.track import smooth_track
+
+    _, truth, arr = _noisy_track()
+    honest = np.array([5e-5, 5e-4])
+    for factor in (1 / 3, 1.0, 3.0):
+        out, gated, sd, _, scale = _smooth_fitted(arr, factor * honest)
+        assert gated == 0
+        if factor < 1:
+            assert all(3.0 <= v <= 9.0 for v in scale), scale
+            pos = np.hypot(*(out[:, :2] - truth[:, :2]).T) / (np.sqrt(2) * sd[:, 0])
+            head = np.abs(out[:, 2] - truth[:, 2]) / sd[:, 1]
+            for z in (pos, head):
+                assert 0.5 <= np.sqrt(np.mean(z**2)) <= 2
+            # without lambda the same fits' sds are over 2 times too small
+            plain = smooth_track(arr, 1 / 60, np.tile(factor * honest, (len(arr), 1)))[2]
+            assert np.sqrt(np.mean((np.abs(out[:, 2] - truth[:, 2]) / plain[:, 1]) ** 2)) > 2
+        else:
+            assert scale == [1.0, 1.0]
+
+
+def test_fitted_sds_grow_with_the_motion_rates_and_the_timing_uncertainty():
+    """A fit sees the tag at its centre row's time and moves it to the frame time with its
+    motion model's rates: where those rates miss the smoothed ones, or the readout is unsure,
+    the sd grows with the rate; with no lag nothing is added."""
+    n = 45
+    honest = np.array([5e-5, 5e-4])
+    heading_sd = {}
+    for spin in (0.0, 720.0):
+        _, _, arr = _noisy_track(n, spin)
+        base = _smooth_fitted(arr, honest)[2]
+        unsure = _smooth_fitted(arr, honest, timing_lag=np.full(n, 0.2 * 5e-4))[2]
+        heading_sd[spin] = unsure[:, 1].mean()
+        assert np.all(unsure >= base * (1 - 1e-9))
+        # the timing's share: the smoothed rate times the lag's uncertainty, in quadrature
+        w = np.radians(spin)
+        assert unsure[n // 2, 1] == pytest.approx(
+            np.hypot(base[n // 2, 1], w * 0.2 * 5e-4), rel=0.05
+        )
+    assert heading_sd[720.0] > 2 * heading_sd[0.0]
+    # a motion model whose turn rate misses the track's by 200 deg/s in frames 20-24, seen
+    # 3 ms from the frame time: those frames count less and their sds grow
+    _, _, arr = _noisy_track(n, 720.0)
+    rates = np.tile([1.6, 0.04, np.radians(720.0)], (n, 1))
+    rates[20:25, 2] += np.radians(200)
+    reach = np.full(n, 0.003)
+    plain = _smooth_fitted(arr, honest, reach=reach, rates=np.tile(rates[0], (n, 1)))[2]
+    missed = _smooth_fitted(arr, honest, reach=reach, rates=rates)[2]
+    assert np.all(missed[20:25, 1] > 1.5 * plain[20:25, 1])
+    assert missed[5, 1] == pytest.approx(plain[5, 1], rel=0.05)
+
+
+def test_timing_uncertainty_is_half_the_estimate_grid_or_the_camera_figure():
+    from parcelfit.tracking.smear import timing_uncertainty
+
+    assert timing_uncertainty(0.008, 0.015, 60.0, True) == pytest.approx((1 / 3840, 1 / 1920))
+    exposure_sd, readout_sd = timing_uncertainty(0.008, 0.015, 60.0, False)
+    assert readout_sd > exposure_sd > timing_uncertainty(0.0, 0.0, 60.0, False)[0] > 0

@@ -18,7 +18,7 @@ import numpy as np
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.tracking.tagmap import Camera
-from parcelfit.tracking.track import open_video
+from parcelfit.tracking.video import open_video
 
 
 @dataclass(frozen=True)

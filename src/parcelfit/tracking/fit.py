@@ -20,9 +20,13 @@ dt_r = (r / height - 0.5) * readout the rolling-shutter delay of its row r (a, b
 linearly each time). Only pixels whose every sample falls on the tag or its quiet zone are
 compared (the surface around a tag is unknown). p is found by `scipy.optimize.least_squares`;
 S and the compared pixels are then rebuilt about the fitted pose (the heading turns the motion
-in the pattern's frame) and p fitted again. The covariance s^2 (J'J)^-1 (s^2 the residual
-variance) gives the parameters' standard deviations. The fitted pose is where the tag was at
-the frame time itself (the readout is modelled), so it needs no rolling-shutter correction.
+in the pattern's frame) and p fitted again. The parameters' covariance is cluster-robust,
+(J'J)^-1 (sum_g J_g' e_g e_g' J_g) (J'J)^-1 G / (G - 1) over the G blocks of `CLUSTER_BITS`
+tag bits a side (J_g, e_g: the Jacobian rows and residuals of block g's pixels): neighbouring
+pixels' residuals are not independent (H.264 blocks, the smear model's own error along an
+edge), as the independent-pixel s^2 (J'J)^-1 (s^2 the residual variance) assumes. The fitted
+pose is where the tag was at the frame time itself (the readout is modelled), so it needs no
+rolling-shutter correction.
 Approximations: M over the exposure is taken about the frame-time pose for every row (the
 tag turns by at most w x readout / 2 between, about 5 degrees at 720 deg/s and 15 ms, which
 turns its smear, not its position).
@@ -47,6 +51,7 @@ from parcelfit.tracking.detect import dictionary
 _CELL_PX = 64  # pattern pixels per tag bit (cv2.remap interpolates in 1/32 pixel steps)
 _STEP_PX = 0.1  # finite-difference step of the fit [px at the corners]
 _MAX_NFEV = 20  # function evaluations per round
+CLUSTER_BITS = 1.0  # side of the pixel blocks whose residuals the covariance sums [tag bits]
 
 
 @dataclass(frozen=True)
@@ -77,12 +82,13 @@ def tag_pattern(family: str, tag_id: int) -> TagPattern:
 @dataclass(frozen=True)
 class SmearFit:
     """A fitted tag: ``params`` (the pose, in the units of the caller's ``corners_of``) and
-    their covariance ``cov``; ``corners`` (4, 2) [px, full frame] at the frame time; ``rms``:
-    residual rms as a fraction of the tag's black-to-white contrast; ``contrast`` [grey levels];
-    ``pixels`` compared."""
+    their covariance ``cov`` (cluster-robust; ``cov_iid``: assuming independent pixels);
+    ``corners`` (4, 2) [px, full frame] at the frame time; ``rms``: residual rms as a fraction
+    of the tag's black-to-white contrast; ``contrast`` [grey levels]; ``pixels`` compared."""
 
     params: np.ndarray
     cov: np.ndarray
+    cov_iid: np.ndarray
     corners: np.ndarray
     rms: float
     contrast: float
@@ -295,13 +301,27 @@ def fit_smeared_tag(
     assert result is not None
     res, a = solve(p, mask)
     s2 = float(res @ res) / max(1, len(res) - k)
+    jac = np.asarray(result.jac)
     try:
-        cov = s2 * np.linalg.inv(result.jac.T @ result.jac)
+        bread = np.linalg.inv(jac.T @ jac)
     except np.linalg.LinAlgError:
         return None
+    # cluster-robust (sandwich) covariance: the residuals of neighbouring pixels are not
+    # independent (compression blocks, the smear model's own error along a tag's edges), so
+    # they are summed per block of CLUSTER_BITS x CLUSTER_BITS tag bits before squaring
+    cell = max(1.0, CLUSTER_BITS * side / pattern.bits)
+    px_, py_ = gx.ravel()[mask], gy.ravel()[mask]
+    block = (px_ // cell).astype(np.int64) * 100003 + (py_ // cell).astype(np.int64)
+    _, group = np.unique(block, return_inverse=True)
+    scores = np.zeros((int(group.max()) + 1, k))
+    np.add.at(scores, group, jac * res[:, None])
+    n_groups = len(scores)
+    meat = scores.T @ scores * (n_groups / max(1, n_groups - 1))
+    cov = bread @ meat @ bread
     return SmearFit(
         params=p,
         cov=cov,
+        cov_iid=s2 * bread,
         corners=np.asarray(corners_of(p), float),
         rms=math.sqrt(s2) / max(abs(a), 1e-9),
         contrast=abs(a),

@@ -139,3 +139,49 @@ def parcel_pose(w: np.ndarray, offset: tuple[float, float]) -> tuple[float, floa
     c, s = math.cos(th), math.sin(th)
     dx, dy = offset
     return float(centre[0] - (c * dx - s * dy)), float(centre[1] - (s * dx + c * dy)), th
+
+
+def rolling_shutter_poses(
+    corners: dict[int, tuple[np.ndarray, np.ndarray]],
+    t: np.ndarray,
+    readout: float,
+    height: int,
+    offset: tuple[float, float],
+    iterations: int = 2,
+) -> np.ndarray:
+    """Parcel poses (n, 3) [m, m, rad] at the frame times ``t`` [s] from tag corners seen by a
+    rolling shutter (NaN where unseen). ``corners[k]`` holds frame k's rig-frame corners (4, 2)
+    [m] and their image rows [px]. A corner in row r was exposed at
+
+        t_i = t_k + (r / height - 0.5) * readout,
+
+    so it is moved back to t_k with the tag's rigid motion, p_i <- p_i - (v + w x (p_i - c)) dt_i,
+    v the tag centre's velocity [m/s] and w its turn rate [rad/s], estimated by central
+    differences over the detected frames from the previous iteration's poses."""
+    n = len(t)
+    out = np.full((n, 3), np.nan)
+    dts = {k: (rows / height - 0.5) * readout for k, (_, rows) in corners.items()}
+    pts = {k: w.copy() for k, (w, _) in corners.items()}
+    keys = sorted(corners)
+    for _ in range(iterations + 1):
+        centre = np.full((n, 2), np.nan)
+        head = np.full(n, np.nan)
+        for k in keys:
+            w = pts[k]
+            centre[k] = w.mean(axis=0)
+            edge = (w[1] - w[0]) + (w[2] - w[3])
+            head[k] = math.atan2(edge[1], edge[0])
+            out[k] = parcel_pose(w, offset)
+        if len(keys) < 2:
+            break
+        ks = np.array(keys)
+        head_u = np.unwrap(head[ks])
+        vel = np.column_stack([np.gradient(centre[ks, j], t[ks]) for j in (0, 1)])
+        turn = np.gradient(head_u, t[ks])
+        for i, k in enumerate(keys):
+            w0, dt = corners[k][0], dts[k]
+            c = w0.mean(axis=0)
+            rel = w0 - c
+            moved = vel[i] + turn[i] * np.column_stack([-rel[:, 1], rel[:, 0]])
+            pts[k] = w0 - moved * dt[:, None]
+    return out

@@ -75,10 +75,36 @@ def cut_around_tag(
     return patch.copy(), (x0, y0), d
 
 
-# the fit's formal standard deviations assume independent pixel noise; on the rendered H.264
-# videos its errors were up to 4 times larger, hence the factor, and never below the floors
-_FIT_SD_FACTOR = 4.0
-_FIT_SD_FLOOR = (5e-5, math.radians(0.05))
+@dataclass(frozen=True)
+class FitPose:
+    """One kept fit of a parcel tag: the tag's ``pose`` (x, y [m], heading [rad]) at the frame
+    time, the fit's own standard deviations of its centre (per coordinate) [m] and heading
+    [rad] (`SmearFit.cov`, cluster-robust), its image ``corners`` (4, 2) [px], the parcel
+    centre's ``rates`` (vx, vy [m/s], turn rate [rad/s]) the fit's motion model assumed, and
+    ``lag``: its centre row's rolling-shutter delay as a fraction of the readout (-0.5 to 0.5),
+    the time at which the fit sees the tag, extrapolated to the frame time with ``rates``."""
+
+    pose: np.ndarray
+    sd_position: float
+    sd_heading: float
+    corners: np.ndarray
+    rates: np.ndarray
+    lag: float
+
+
+def timing_uncertainty(
+    exposure: float, readout: float, fps: float, estimated: bool
+) -> tuple[float, float]:
+    """The sds [s] of the exposure and readout used: stated in the tag map, a camera's figure
+    (`TIMING_GIVEN_SD`: 2 % plus 0.1 ms); estimated (`estimate_timing`), half its last grid
+    steps (T / 64 and T / 32 for the frame interval T)."""
+    if estimated:
+        return 1 / fps / 64, 1 / fps / 32
+    rel, add = TIMING_GIVEN_SD
+    return math.hypot(rel * exposure, add), math.hypot(rel * readout, add)
+
+
+TIMING_GIVEN_SD = (0.02, 1e-4)
 
 
 _TIMING_FRAMES = 8  # the most smeared detected frames the timing is estimated on
@@ -92,7 +118,8 @@ def estimate_timing(fitters: list[SmearFitter], fps: float) -> dict[str, Any]:
     (`fit.py`; a wrong exposure smears, a wrong readout shears the modelled tag differently
     from the filmed one). Searched between 0 and one frame interval T: exposure on a grid of
     T / 8 steps (readout 0), then the readout on T / 4 steps, then each refined twice by half
-    the step (the better of the two neighbours). Returns a dict: ``exposure``, ``readout``
+    the step (the better of the two neighbours) and once more to the vertex of the parabola
+    through the best point and its neighbours (inside the interval only). Returns a dict: ``exposure``, ``readout``
     [s], ``frames`` used, ``residual_rms`` (mean, best timing), ``source`` ("estimated"), or
     ``source`` "assumed none" when no frame smears by ``fit_smear_cells`` bits even at an
     exposure of a whole frame interval (then the timing cannot matter, nor be measured)."""
@@ -141,6 +168,15 @@ def estimate_timing(fitters: list[SmearFitter], fps: float) -> dict[str, Any]:
         for h in (step / 2, step / 4):
             grid = np.clip(np.array([value - h, value, value + h]), 0.0, frame)
             value = best_on(grid, other, exposure_axis)
+        if value - h > 0 and value + h < frame:
+            # the vertex of the parabola through the best point and its two neighbours
+            pairs = [
+                (v, other) if exposure_axis else (other, v) for v in (value - h, value, value + h)
+            ]
+            c = [cost(*pair) for pair in pairs]
+            curv = c[0] - 2 * c[1] + c[2]
+            if curv > 0:
+                value += float(np.clip(h * (c[0] - c[2]) / (2 * curv), -h, h))
         return value
 
     exposure = best_on(np.linspace(0, frame, 9), 0.0, True)
@@ -191,7 +227,7 @@ class SmearFitter:
         # [contrast] (`TrackOptions.fit_smear_cells`, `fit_max_rms`)
         self.smear_cells, self.max_rms = smear_cells, max_rms
         self.crops: dict[int, Crop] = {}
-        self.fits: dict[int, tuple[np.ndarray, float, float, np.ndarray]] = {}
+        self.fits: dict[int, FitPose] = {}
         self.unsupported: set[int] = set()
         self.tried, self.seconds = 0, 0.0
         self.residuals: list[float] = []  # kept fits' residual rms [fraction of the contrast]
@@ -221,7 +257,9 @@ class SmearFitter:
         near = [(j, p) for j, p in near_poses if p is not None]
         if len(near) < 2:
             return None
-        tk = np.array([j - k for j, _ in near]) * self.dt
+        # each pose at its own time from frame k's: a fit's at its frame time, a detection's
+        # its centre row's rolling-shutter delay later
+        tk = np.array([(j - k) * self.dt + self._lag(j) for j, _ in near])
         poses = np.array([p for _, p in near])
         poses[:, 2] = np.unwrap(poses[:, 2])
         deg = 2 if len(near) >= 3 and np.ptp(tk) > 2 * self.dt else 1
@@ -230,6 +268,14 @@ class SmearFitter:
         vx, vy, w = (float(c[-2]) for c in coef)
         ox, oy = self._offset(th)
         return px_, py_, th, np.array([vx - w * oy, vy + w * ox, w])
+
+    def _lag(self, k: int) -> float:
+        """The time [s] after frame k's time at which its pose was seen: a detection's centre
+        row's rolling-shutter delay, 0 for a fit (at the frame time) or an unseen frame."""
+        if k in self.fits or k not in self.detections or not self.readout:
+            return 0.0
+        rows = self.detections[k][1]
+        return (float(np.mean(rows)) / self.height - 0.5) * self.readout
 
     def _offset(self, th: float) -> tuple[float, float]:
         """The tag's offset from the parcel centre in the rig frame at heading ``th``."""
@@ -315,10 +361,16 @@ class SmearFitter:
         self.residuals.append(fit.rms)
         tx, ty, th = fit.params
         c_, s_ = math.cos(th), math.sin(th)
-        self._known[k] = np.array([tx - (c_ * dx - s_ * dy), ty - (s_ * dx + c_ * dy), th])
-        self.fits[k] = (
-            fit.params,
-            math.hypot(_FIT_SD_FACTOR * sd_pos, _FIT_SD_FLOOR[0]),
-            math.hypot(_FIT_SD_FACTOR * sd_head, _FIT_SD_FLOOR[1]),
-            fit.corners,
+        motion = self._motion(k)
+        rates = np.zeros(3) if motion is None else motion[3].copy()
+        ox, oy = self._offset(th)
+        rates[:2] -= rates[2] * np.array([-oy, ox])  # the parcel centre's velocity
+        self.fits[k] = FitPose(
+            pose=fit.params,
+            sd_position=sd_pos,
+            sd_heading=sd_head,
+            corners=fit.corners,
+            rates=rates,
+            lag=float(np.mean(fit.corners[:, 1])) / self.height - 0.5,
         )
+        self._known[k] = np.array([tx - (c_ * dx - s_ * dy), ty - (s_ * dx + c_ * dy), th])

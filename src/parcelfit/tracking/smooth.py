@@ -49,12 +49,18 @@ def rts_smooth(
     q: float,
     gate: float = 5.0,
     restart_after: int = RESTART_AFTER,
+    nis: np.ndarray | None = None,
+    rates: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[int]]:
     """Smoothed positions, their standard deviations, the frames used (not gated, not NaN) and
     the frames where the motion was restarted (a change of motion, module docstring) of the
     series ``z`` (one coordinate, NaN where unseen) sampled every ``dt`` [s], with measurement
     variances ``r`` and jerk spectral density ``q``; ``restart_after`` consecutive measured
-    frames outside the gate restart the motion (0: never)."""
+    frames outside the gate restart the motion (0: never). ``nis`` (n, 2), when given, receives
+    each used frame's normalised squared innovation (filter: (z - H s-)^2 / (H P- H' + r)) and
+    normalised squared residual (smoother: (z - p)^2 / (r - P), p and P smoothed), NaN
+    elsewhere: about 1 each when the variances ``r`` are right. ``rates`` (n,), when given,
+    receives the smoothed rate of change (units/s)."""
     n = len(z)
     f = np.array([[1, dt, dt * dt / 2], [0, 1, dt], [0, 0, 1]])
     qm = q * np.array(
@@ -109,4 +115,11 @@ def rts_smooth(
         c = ps[k] @ f.T @ np.linalg.inv(pp[k + 1])
         xs[k] = xs[k] + c @ (xs[k + 1] - xp[k + 1])
         ps[k] = ps[k] + c @ (ps[k + 1] - pp[k + 1]) @ c.T
+    if rates is not None:
+        rates[:] = xs[:, 1]
+    if nis is not None:
+        nis[:] = np.nan
+        u = np.flatnonzero(used)
+        nis[u, 0] = (z[u] - xp[u, 0]) ** 2 / (pp[u, 0, 0] + r[u])
+        nis[u, 1] = (z[u] - xs[u, 0]) ** 2 / np.maximum(r[u] - ps[u, 0, 0], 1e-3 * r[u])
     return xs[:, 0], np.sqrt(np.maximum(ps[:, 0, 0], 0)), used, restarts

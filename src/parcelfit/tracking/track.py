@@ -17,7 +17,8 @@ one are gaps: gaps of at most ``max_gap`` frames are filled by linear interpolat
 unwrapped first), listed as interpolated and flagged ``filled`` (the others ``detected`` or
 ``fitted``); longer gaps stay missing (their samples are left out) and are listed too. With the
 smoother on (each frame weighted by its own measurement sd), the measured frames carry its
-posterior standard deviations (``position_sd``, ``heading_sd``; see `smooth_track`); measured
+posterior standard deviations (``position_sd``, ``heading_sd``; see `smooth_track`, and
+`smooth_scaled` for a fitted frame's sd and the camera timing's share); measured
 frames it discards as outliers become gaps and are counted (``discarded_by_smoother``), and a
 change of motion restarts its motion model (``motion_restarts_s``). The
 heading is unwrapped over the run. Decoding runs in a background thread (OpenCV releases the GIL
@@ -27,10 +28,8 @@ while decoding), so decoding and detection overlap on two cores.
 from __future__ import annotations
 
 import math
-import queue
-import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -43,10 +42,22 @@ from parcelfit.runs import Trajectory
 from parcelfit.runs.io import MAX_SAMPLE_INTERVAL_S, MIN_SAMPLE_INTERVAL_S
 from parcelfit.tracking.barriers import barrier_times
 from parcelfit.tracking.detect import TagDetector, _side
-from parcelfit.tracking.geometry import PlaneMapper, fit_plane_mapper, parcel_pose, tag_pose
-from parcelfit.tracking.smear import Crop, SmearFitter, cut_around_tag, estimate_timing
+from parcelfit.tracking.geometry import (
+    PlaneMapper,
+    fit_plane_mapper,
+    rolling_shutter_poses,
+    tag_pose,
+)
+from parcelfit.tracking.smear import (
+    Crop,
+    SmearFitter,
+    cut_around_tag,
+    estimate_timing,
+    timing_uncertainty,
+)
 from parcelfit.tracking.smooth import RESTART_AFTER, rts_smooth
 from parcelfit.tracking.tagmap import TagMap, tag_corners
+from parcelfit.tracking.video import frames_of, open_video
 
 
 @dataclass(frozen=True)
@@ -88,86 +99,6 @@ class VideoTrack:
     size: tuple[int, int]
     tags: dict[int, TagTrack]
     quality: dict[str, Any] = field(default_factory=dict)
-
-
-# the smallest frame side [px] that can show a tag: OpenCV still decodes a 36h11 tag 8 px wide
-# (one pixel a bit), which needs its white border around it; smaller frames are refused before
-# any OpenCV call sees them (a 1 x 1 px frame shrunk for the detector has no pixel left)
-MIN_FRAME_PX = 16
-
-
-def open_video(path: str | Path) -> cv2.VideoCapture:
-    """Open a video, or raise a clear error naming the file: missing, not a file, not
-    decodable (a damaged or empty file), no frame, or frames under `MIN_FRAME_PX` pixels a side."""
-    path = Path(path)
-    if not path.is_file():
-        raise ParcelfitError(
-            "video not found" if not path.exists() else "not a video file",
-            file=path,
-            fix="check the path",
-        )
-    try:
-        cap = cv2.VideoCapture(str(path))
-    except cv2.error as exc:  # some backends raise instead of returning a closed capture
-        raise ParcelfitError(
-            f"cannot decode this video ({exc.__class__.__name__})",
-            file=path,
-            fix="convert it to H.264/HEVC MP4 with ffmpeg",
-        ) from None
-    if not cap.isOpened():
-        raise ParcelfitError(
-            "cannot decode this video", file=path, fix="convert it to H.264/HEVC MP4 with ffmpeg"
-        )
-    ok, frame = cap.read()
-    if not ok or frame is None or frame.size == 0:
-        cap.release()
-        raise ParcelfitError(
-            "the video has no frame that can be decoded (0 frames or a damaged file)",
-            file=path,
-            fix="check the file; convert it to H.264/HEVC MP4 with ffmpeg",
-        )
-    h, w = frame.shape[:2]
-    if min(w, h) < MIN_FRAME_PX:
-        cap.release()
-        raise ParcelfitError(
-            f"the video's frames are {w} x {h} px, too small to show a tag "
-            f"(at least {MIN_FRAME_PX} px a side)",
-            file=path,
-            fix="track the camera's original recording, not a thumbnail or a cropped copy",
-        )
-    cap.set(cv2.CAP_PROP_POS_FRAMES, 0)
-    return cap
-
-
-def frames_of(cap: cv2.VideoCapture, prefetch: int = 4) -> Iterator[np.ndarray]:
-    """Grey frames of an open video, decoded in a background thread."""
-    q: queue.Queue[np.ndarray | None] = queue.Queue(maxsize=prefetch)
-    stop = threading.Event()
-
-    def reader() -> None:
-        try:
-            while not stop.is_set():
-                ok, frame = cap.read()
-                if not ok:
-                    break
-                grey = frame if frame.ndim == 2 else cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
-                q.put(grey)
-        finally:
-            q.put(None)
-
-    thread = threading.Thread(target=reader, daemon=True)
-    thread.start()
-    try:
-        while (item := q.get()) is not None:
-            yield item
-    finally:
-        stop.set()
-        while thread.is_alive():
-            try:
-                q.get_nowait()
-            except queue.Empty:
-                time.sleep(0.001)
-        thread.join()
 
 
 def _runs_of(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -331,7 +262,9 @@ def track_video(
             other_ids |= set(found) - expected - set(parcel_ids)
             for tag_id in parcel_ids:
                 if (fitting or estimating) and mapper is not None:
-                    crop = cut_around_tag(grey, found.get(tag_id), last_seen[tag_id], k, opts.max_gap)
+                    crop = cut_around_tag(
+                        grey, found.get(tag_id), last_seen[tag_id], k, opts.max_gap
+                    )
                     if crop is not None:
                         fitters[tag_id].crops[k] = Crop(*crop, mapper)
                     if tag_id in found:
@@ -393,13 +326,26 @@ def track_video(
             "estimate is switched off): no model fit of smeared tags, no rolling-shutter "
             "correction",
         }
-    timing = {"exposure_ms": exposure * 1e3, "readout_ms": readout * 1e3, **timing}
+    timing_sd = timing_uncertainty(exposure, readout, fps, timing["source"] == "estimated")
+    timing = {
+        "exposure_ms": exposure * 1e3,
+        "readout_ms": readout * 1e3,
+        # the timing's uncertainty the fitted frames' sds include (`FitPose.timing_sd`)
+        "sd_ms": [v * 1e3 for v in timing_sd],
+        **timing,
+    }
     tags = {}
     fit_seconds, fit_count, fit_residuals = 0.0, 0, []
     for tag_id in parcel_ids:
         arr = np.array(rows[tag_id], dtype=float).reshape(-1, 3)
         detected = np.isfinite(arr[:, 0])
-        meas_sd = np.tile(_MEASUREMENT_SD[1:], (len(arr), 1))
+        # each frame's measurement variance: base (a detection's; a fit's floor) plus the
+        # fit's own, which the smoother's residuals may widen; a fit's motion rates and the
+        # time its rates were extrapolated over (`smooth_scaled`)
+        base_var = np.tile(np.square(_MEASUREMENT_SD[1:]), (len(arr), 1))
+        fit_var = np.zeros((len(arr), 2))
+        model_rates = np.full((len(arr), 3), np.nan)
+        lags = np.zeros(len(arr))
         fitted = np.zeros(len(arr), bool)
         if fitting:
             fitter = fitters[tag_id]
@@ -407,30 +353,41 @@ def track_video(
             fit_seconds += fitter.seconds
             fit_count += fitter.tried
             fit_residuals += fitter.residuals
-            fits = fitter.fits
             # smeared frames the fit did not support: their detection is trusted 3 times less
             for k_bad in fitter.unsupported:
-                meas_sd[k_bad] *= 3
+                base_var[k_bad] *= 9
             tag = tag_map.parcel_tags[tag_id]
-            for k_fit, (pose, sd_pos, sd_head, px) in fits.items():
-                tx, ty, th = pose
+            arm = math.hypot(*tag.offset)
+            for k_fit, fp in fitter.fits.items():
+                tx, ty, th = fp.pose
                 dx, dy = tag.offset
                 c, s_ = math.cos(th), math.sin(th)
                 arr[k_fit] = (tx - (c * dx - s_ * dy), ty - (s_ * dx + c * dy), th)
-                # the parcel centre's sd: the tag centre's and the heading's share through the offset
-                meas_sd[k_fit] = (math.hypot(sd_pos, math.hypot(dx, dy) * sd_head), sd_head)
+                # the parcel centre's sd: the tag centre's and the heading's share through the
+                # offset
+                fit_var[k_fit] = (fp.sd_position**2 + (arm * fp.sd_heading) ** 2, fp.sd_heading**2)
+                base_var[k_fit] = np.square(_FIT_SD_FLOOR)
+                model_rates[k_fit], lags[k_fit] = fp.rates, fp.lag
                 fitted[k_fit] = True
                 w = tag_corners(tx, ty, tag.size, th)
                 corners[tag_id][k_fit] = (w, np.full(4, size[1] / 2))  # at the frame time
-                centres[tag_id][k_fit] = (*px.mean(axis=0), _side(px))
+                centres[tag_id][k_fit] = (*fp.corners.mean(axis=0), _side(fp.corners))
         if readout > 0:
             arr = rolling_shutter_poses(
                 corners[tag_id], t, readout, size[1], tag_map.parcel_tags[tag_id].offset
             )
         before = np.isfinite(arr[:, 0])  # measured (detected or fitted), before the smoother
-        gated, sd, restarts = 0, None, []
+        gated, sd, restarts, scale = 0, None, [], [1.0, 1.0]
         if opts.smooth:
-            arr, gated, sd, restarts = smooth_track(arr, 1 / fps, meas_sd)
+            arr, gated, sd, restarts, scale = smooth_scaled(
+                arr,
+                1 / fps,
+                base_var,
+                fit_var,
+                model_rates,
+                np.abs(lags) * readout,
+                np.abs(lags) * timing_sd[1],
+            )
         measured = np.isfinite(arr[:, 0])
         traj, gaps = fill_gaps(
             t, arr[:, 0], arr[:, 1], arr[:, 2], opts.max_gap, sd, fitted=fitted & measured
@@ -466,6 +423,12 @@ def track_video(
                 # times [s] where a change of motion (a spin's onset or stop, a catch) restarted
                 # the smoother's motion model
                 "motion_restarts_s": [float(t[j]) for j in restarts],
+                # lambda (position, heading): the factor the fits' own variances were widened
+                # by to match the smoother's residuals (`smooth_scaled`), and the medians of the
+                # run file's position_sd [m] and heading_sd [rad] over its measured frames
+                "fit_variance_scale": scale,
+                "position_sd_median": _median(None if traj is None else traj.position_sd),
+                "heading_sd_median": _median(None if traj is None else traj.heading_sd),
                 # coverage: frames measured (detected or fitted) of the frames in view
                 "detection_rate": float(measured.sum() / span) if span else 0.0,
                 "gaps": gaps,
@@ -525,11 +488,79 @@ _MEASUREMENT_SD = (3e-4, 3e-4, math.radians(0.5))
 _JERK_DENSITY = (10.0, 10.0, 1e3)
 
 
+# the smallest measurement sd of a fitted frame: 0.02 mm and 0.012 degrees (added in quadrature)
+_FIT_SD_FLOOR = (2e-5, math.radians(0.012))
+
+
+def smooth_scaled(
+    arr: np.ndarray,
+    dt: float,
+    base_var: np.ndarray,
+    fit_var: np.ndarray,
+    model_rates: np.ndarray,
+    reach: np.ndarray,
+    timing_lag: np.ndarray,
+) -> tuple[np.ndarray, int, np.ndarray | None, list[int], list[float]]:
+    """`smooth_track` with honest standard deviations for the fitted frames. Arrays are per
+    frame; variances (n, 2) are per position coordinate [m^2] and heading [rad^2].
+
+    Each frame's measurement variance is base_var + lambda fit_var + rate_var. A fit sees the
+    tag ``reach`` [s] from the frame time (its centre row's rolling-shutter delay) and moves it
+    to the frame time with its motion model's rates ``model_rates`` (n, 3) (vx, vy [m/s] of the
+    parcel centre, turn rate [rad/s]; NaN where not fitted): rate_var is the error that costs,
+    (smoothed rate - model rate)^2 reach^2 (`RATE_SD_FACTOR` times), the smoothed rates from a
+    first pass; large next to an abrupt change of motion, which the model's quadratic rounds
+    off. lambda (position, heading) >= 1 makes the fitted frames' mean normalised squared
+    residual (`rts_smooth`'s ``nis``) about 1: from lambda = 1, lambda <- max(1, lambda x that
+    mean), smoothed again, up to `LAMBDA_PASSES` times (until it changes by under 5 %); so
+    fits whose own sds are too small for the scatter the smoother sees are widened, never
+    narrowed. A timing off by its sd shifts every fit by
+    the smoothed rate times ``timing_lag`` [s] (the readout's sd times the centre row's lag):
+    a bias common to neighbouring frames, which smoothing does not average away, so its
+    variance is added to the smoothed one. Returns `smooth_track`'s results and lambda."""
+    n = len(arr)
+    rates = np.zeros((n, 3))
+    smooth_track(arr, dt, np.sqrt(base_var + fit_var), rates=rates)
+    fitted = fit_var[:, 0] > 0
+    miss = np.nan_to_num(model_rates - rates) * reach[:, None]
+    rate_var = RATE_SD_FACTOR**2 * np.column_stack(
+        [(miss[:, 0] ** 2 + miss[:, 1] ** 2) / 2, miss[:, 2] ** 2]
+    )
+    nis = np.full((n, 3, 2), np.nan)
+    scale = np.ones(2)
+    for i in range(LAMBDA_PASSES + 1):
+        var = base_var + scale * fit_var + rate_var
+        result = smooth_track(arr, dt, np.sqrt(var), nis=nis)
+        grown = scale.copy()
+        for j, cols in enumerate(([0, 1], [2])):
+            vals = nis[fitted][:, cols, NIS_KIND]
+            vals = vals[np.isfinite(vals)]
+            if len(vals) >= 3:
+                grown[j] = max(1.0, scale[j] * float(np.mean(vals)))
+        if i == LAMBDA_PASSES or np.allclose(grown, scale, rtol=0.05):
+            break
+        scale = grown
+    out, gated, sd, restarts = result
+    if sd is not None:
+        bias = rates * timing_lag[:, None]
+        sd = np.sqrt(
+            sd**2 + np.column_stack([(bias[:, 0] ** 2 + bias[:, 1] ** 2) / 2, bias[:, 2] ** 2])
+        )
+    return out, gated, sd, restarts, [float(v) for v in scale]
+
+
+RATE_SD_FACTOR = 1.0
+LAMBDA_PASSES = 4
+NIS_KIND = 1  # 0: the filter's innovations, 1: the smoother's residuals
+
+
 def smooth_track(
     arr: np.ndarray,
     dt: float,
     meas_sd: np.ndarray | None = None,
     restart_after: int = RESTART_AFTER,
+    nis: np.ndarray | None = None,
+    rates: np.ndarray | None = None,
 ) -> tuple[np.ndarray, int, np.ndarray | None, list[int]]:
     """Poses (n, 3) [m, m, rad] (NaN where unseen) replaced by their RTS-smoothed values at the
     seen frames (`parcelfit.tracking.smooth`); frames the smoother rejects as outliers become
@@ -562,7 +593,13 @@ def smooth_track(
             else meas_sd[:, 0 if j < 2 else 1] ** 2
         )
         smoothed, sds[:, j], used, restarted = rts_smooth(
-            z, dt, r, _JERK_DENSITY[j], restart_after=restart_after
+            z,
+            dt,
+            r,
+            _JERK_DENSITY[j],
+            restart_after=restart_after,
+            nis=None if nis is None else nis[:, j],
+            rates=None if rates is None else rates[:, j],
         )
         restarts.update(restarted)
         out[seen, j] = smoothed[seen]
@@ -574,50 +611,11 @@ def smooth_track(
     return out, rejected, sd, sorted(restarts)
 
 
-def rolling_shutter_poses(
-    corners: dict[int, tuple[np.ndarray, np.ndarray]],
-    t: np.ndarray,
-    readout: float,
-    height: int,
-    offset: tuple[float, float],
-    iterations: int = 2,
-) -> np.ndarray:
-    """Parcel poses (n, 3) [m, m, rad] at the frame times ``t`` [s] from tag corners seen by a
-    rolling shutter (NaN where unseen). ``corners[k]`` holds frame k's rig-frame corners (4, 2)
-    [m] and their image rows [px]. A corner in row r was exposed at
-
-        t_i = t_k + (r / height - 0.5) * readout,
-
-    so it is moved back to t_k with the tag's rigid motion, p_i <- p_i - (v + w x (p_i - c)) dt_i,
-    v the tag centre's velocity [m/s] and w its turn rate [rad/s], estimated by central
-    differences over the detected frames from the previous iteration's poses."""
-    n = len(t)
-    out = np.full((n, 3), np.nan)
-    dts = {k: (rows / height - 0.5) * readout for k, (_, rows) in corners.items()}
-    pts = {k: w.copy() for k, (w, _) in corners.items()}
-    keys = sorted(corners)
-    for _ in range(iterations + 1):
-        centre = np.full((n, 2), np.nan)
-        head = np.full(n, np.nan)
-        for k in keys:
-            w = pts[k]
-            centre[k] = w.mean(axis=0)
-            edge = (w[1] - w[0]) + (w[2] - w[3])
-            head[k] = math.atan2(edge[1], edge[0])
-            out[k] = parcel_pose(w, offset)
-        if len(keys) < 2:
-            break
-        ks = np.array(keys)
-        head_u = np.unwrap(head[ks])
-        vel = np.column_stack([np.gradient(centre[ks, j], t[ks]) for j in (0, 1)])
-        turn = np.gradient(head_u, t[ks])
-        for i, k in enumerate(keys):
-            w0, dt = corners[k][0], dts[k]
-            c = w0.mean(axis=0)
-            rel = w0 - c
-            moved = vel[i] + turn[i] * np.column_stack([-rel[:, 1], rel[:, 0]])
-            pts[k] = w0 - moved * dt[:, None]
-    return out
+def _median(values: np.ndarray | None) -> float | None:
+    """The median of the finite values, None when there are none."""
+    if values is None or not np.isfinite(values).any():
+        return None
+    return float(np.nanmedian(values))
 
 
 def _detected_span(detected: np.ndarray) -> int:
