@@ -216,7 +216,7 @@ def assess(folder: Path, truth_si: Mapping[str, float]) -> dict[str, Any]:
     # evaluation stores no parts, so the count is read from those that have them), or one run
     per_eval = max(
         (
-            sum(len(part.get("seeds") or [None]) for part in f.details.get("cases") or [{}])
+            sum(len(part.seeds) or 1 for part in f.details.cases) if f.details.cases else 1
             for f in fits
         ),
         default=1,
@@ -229,7 +229,7 @@ def assess(folder: Path, truth_si: Mapping[str, float]) -> dict[str, Any]:
     transfer = [] if results is None else list(results.transfer)
     by_iter: dict[int, list[bool]] = {}
     for v in vals:
-        by_iter.setdefault(v.iteration, []).append(bool(v.details.get("passed")))
+        by_iter.setdefault(v.iteration, []).append(bool(v.details.passed))
     return {
         "within": sum(e <= TOLERANCE for e in err.values()),
         "errors": err,

@@ -35,8 +35,13 @@ def trajectory(
 ) -> tuple[Trajectory, float]:
     """Analytic run on rig R: x = v t, y = 0.4 (mu_B - 0.3) t^2, theta = 3 (mu_M - 0.15)
     (1 - exp(-2 t)) + 1e-4 (E_Pa / 1 GPa) t. Rig Q (a second rig) turns the parcel by E_Pa as
-    well: theta + 2 (E_Pa / 1 GPa - 0.9) (1 - exp(-3 t)). ``placement`` (dy [m], dtheta [rad],
-    relative transit-time change) shifts the start as a seeded placement does."""
+    well: theta + 2 (E_Pa / 1 GPa - 0.9) (1 - exp(-3 t)). Two bench tests (the rig files
+    examples/bench/B1.yaml and B2.yaml by their names): on B1 (belt step) the transit time
+    follows mu_d_BePa three times as strongly as on R, nothing else; on B2 (plate impact) the
+    turn follows k_MePa, theta + 0.5 (k_MePa / 1000 N/mm - 0.55) (1 - exp(-4 t)), and the
+    lateral position E_Pa, y + 0.005 (E_Pa / 1 GPa - 0.9) t. Every other rig name runs as R.
+    ``placement`` (dy [m], dtheta [rad], relative transit-time change) shifts the start as a
+    seeded placement does."""
     t = np.arange(0.0, t_end, 1 / 60)
     v = SPEEDS[setting]
     dy, dth, dt = placement
@@ -47,7 +52,12 @@ def trajectory(
     theta = 3.0 * (p["mu_d_MePa"] - 0.15) * (1 - np.exp(-2 * t)) + 1e-4 * e * t + dth
     if rig == "Q":
         theta = theta + 2.0 * (e - 0.9) * (1 - np.exp(-3 * t))
-    transit = 1.0 / v * (1 + 0.2 * (p["mu_d_BePa"] - 0.45)) * (1 + dt)
+    if rig == "B2":
+        k = p.get("k_MePa", 6.11e5) / 1e6
+        theta = theta + 0.5 * (k - 0.55) * (1 - np.exp(-4 * t))
+        y = y + 0.005 * (e - 0.9) * t
+    slope = 0.6 if rig == "B1" else 0.2
+    transit = 1.0 / v * (1 + slope * (p["mu_d_BePa"] - 0.45)) * (1 + dt)
     return Trajectory(t=t, x=v * t, y=y, theta=theta), transit
 
 
@@ -173,8 +183,9 @@ def make() -> AnalyticSimulator:
 
 
 def write_reference_dataset(folder, n_runs: int = 8, seed: int = 0, rigs=("R",), truth=None):
-    """Runs of the truth (default `TRUTH`, E_Pa 1 GPa) with specimen-to-specimen variation,
-    placement scatter and tracking noise, at speed settings 1 and 2 of each rig."""
+    """Runs of the truth (default `TRUTH`, E_Pa 1 GPa; any other parameter it names, such as
+    k_MePa, scatters alike) with specimen-to-specimen variation, placement scatter and
+    tracking noise, at speed settings 1 and 2 of each rig."""
     rng = np.random.default_rng(seed)
     truth = {**TRUTH, **(truth or {})}
     cases = []
@@ -188,6 +199,8 @@ def write_reference_dataset(folder, n_runs: int = 8, seed: int = 0, rigs=("R",),
             }
             if "E_Pa" in truth:
                 p["E_Pa"] = truth["E_Pa"] * (1 + rng.normal(0, 0.03))
+            for name in sorted(set(truth) - {"mu_d_BePa", "mu_d_MePa", "E_Pa"}):
+                p[name] = truth[name] * (1 + rng.normal(0, 0.03))
             start = placement(int(rng.integers(1 << 30))) if rig != "R" else (0.0, 0.0, 0.0)
             traj, transit = trajectory(p, setting, rig=rig, placement=start)
             noisy = Trajectory(
