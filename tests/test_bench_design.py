@@ -1,0 +1,58 @@
+"""The design benchmark's measures (benchmarks/bench_design.py) and the analytic simulator's
+bench tests it ranks."""
+
+import numpy as np
+import pytest
+
+from .fake_sim import trajectory
+from .helpers import load_file_module
+
+
+def _bench():
+    return load_file_module("benchmarks/bench_design.py")
+
+
+def test_open_width_sums_the_open_intervals_as_shares_of_their_ranges():
+    bench = _bench()
+    ranges = {"a": (0.0, 2.0), "b": (100.0, 200.0), "c": (0.0, 1.0)}
+    intervals = {"a": [0.5, 1.0], "b": [90.0, 150.0], "c": [0.0, 1.0]}
+    # a: 0.25; b clipped to its range: 0.5; c is determined and not counted
+    assert bench.open_width(intervals, ranges, ["a", "b"]) == pytest.approx(0.75)
+    assert bench.open_width({}, ranges, ["a", "c"]) == pytest.approx(2.0)  # no interval: open
+    assert bench.open_width(intervals, ranges, []) == 0.0
+
+
+def test_helped_most_takes_the_smallest_measure_then_more_parameters_within():
+    bench = _bench()
+    rows = {
+        "Q/KPBW/1": {"open_width": 2.5, "open_error": 0.30, "within": 2},
+        "B2/KPBW/1": {"open_width": 2.5004, "open_error": 0.10, "within": 3},
+        "B1/KPBW/1": {"open_width": 2.9, "open_error": 0.05, "within": 2},
+    }
+    assert bench.helped_most(rows) == "B2/KPBW/1"  # a tie to 0.001: more within 10 %
+    assert bench.helped_most(rows, "open_error") == "B1/KPBW/1"
+
+
+def test_the_truths_are_seeded_and_inside_the_ranges():
+    bench = _bench()
+    a, b = bench.truth_for(0), bench.truth_for(0)
+    assert a == b and a != bench.truth_for(1)
+    for name, (lo, hi) in bench.PARAMETERS.items():
+        assert lo + 0.2 * (hi - lo) - 1e-6 <= a[name] <= lo + 0.8 * (hi - lo) + 1e-6
+
+
+def test_each_bench_test_of_the_analytic_simulator_answers_to_its_parameter():
+    p = {"mu_d_BePa": 0.45, "mu_d_MePa": 0.25, "E_Pa": 9e8, "k_MePa": 5.5e5}
+    base = {rig: trajectory(p, 1, rig=rig) for rig in ("R", "B1", "B2")}
+    stiff = {rig: trajectory({**p, "k_MePa": 1e6}, 1, rig=rig) for rig in ("R", "B2")}
+    # B2: the turn follows k_MePa, 0.5 x 0.45 (1 - exp(-4 t)); R does not see it
+    t = stiff["B2"][0].t
+    turn = stiff["B2"][0].theta - base["B2"][0].theta
+    np.testing.assert_allclose(turn, 0.225 * (1 - np.exp(-4 * t)), atol=1e-12)
+    np.testing.assert_array_equal(stiff["R"][0].theta, base["R"][0].theta)
+    # B2: the lateral position follows E_Pa, 0.005 (E / 1 GPa - 0.9) t
+    soft = trajectory({**p, "E_Pa": 1.9e9}, 1, rig="B2")[0]
+    np.testing.assert_allclose(soft.y - base["B2"][0].y, 0.005 * t, atol=1e-12)
+    # B1: the transit time follows mu_d_BePa three times as strongly as on R
+    fast = {rig: trajectory({**p, "mu_d_BePa": 0.55}, 1, rig=rig)[1] for rig in ("R", "B1")}
+    assert fast["B1"] - base["B1"][1] == pytest.approx(3 * (fast["R"] - base["R"][1]))
