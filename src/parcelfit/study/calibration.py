@@ -247,7 +247,7 @@ class Calibration:
             references = select_references(study)
             store.set_meta("reference_run", references[self.fit_case.label].reference_id)
             if study.joint or len(study.validation_cases) > 1 or study.transfer:
-                store.set_meta("cases", case_summary(study, references))
+                store.write_cases(case_summary(study, references))
             try:
                 simulator = make_simulator(study.simulator)
             except ParcelfitError as exc:  # e.g. a python factory that cannot be imported
