@@ -184,8 +184,19 @@ def test_a_joint_ensemble_study_stores_the_parts_and_checks_transfer(tmp_path, m
     result = Calibration(study, out, figures=False).run()
     assert result.evaluations == 8
     status = study_status(out)
-    assert [c["case"] for c in status.cases] == ["R/P/1", "Q/P/1", "R/P/2", "Q/P/2"]
-    assert [c["role"] for c in status.cases] == ["fit", "fit", "validation", "transfer"]
+    assert [c.case for c in status.cases] == ["R/P/1", "Q/P/1", "R/P/2", "Q/P/2"]
+    assert [c.role for c in status.cases] == ["fit", "fit", "validation", "transfer"]
+    # `status --json` writes the cases in their stored form, every key of the store's record
+    import sqlite3
+
+    con = sqlite3.connect(out / "study.sqlite")
+    (stored,) = con.execute("SELECT value FROM meta WHERE key = 'cases'").fetchone()
+    con.close()
+    stored = json.loads(stored)
+    assert status.to_json()["cases"] == stored
+    assert set(stored[0]) == {
+        "case", "role", "weight", "dataset", "reference_run", "threshold", "transit"
+    }
     parts = status.recommended.parts
     assert [p.case for p in parts] == ["R/P/1", "Q/P/1"] and len(parts[0].seeds) == 3
     assert status.recommended.cost == pytest.approx(
@@ -198,7 +209,7 @@ def test_a_joint_ensemble_study_stores_the_parts_and_checks_transfer(tmp_path, m
     assert [v.case for v in results.transfer] == ["Q/P/2"]
     assert results.transfer[0].verdict is not None
     assert results.identifiability is not None and results.identifiability.evaluations == 8
-    eps = sum(c["weight"] * c["threshold"] for c in status.cases if c["role"] == "fit")
+    eps = sum(c.weight * c.threshold for c in status.cases if c.role == "fit")
     assert results.identifiability.threshold == pytest.approx(eps, rel=1e-12)
     assert status.validations and all(v.after_iteration >= 1 for v in status.validations)
     # the advice, when a parameter stays open, weighs the validation and transfer cases

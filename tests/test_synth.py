@@ -237,14 +237,14 @@ def test_the_twins_real_runs_take_their_own_time_step(tmp_path, monkeypatch):
     seen = []
 
     class Recording:
-        def __init__(self, options, consignments, **_):
-            soft = next(iter(consignments.values())).content_kind == "soft"
+        def __init__(self, options, rigs, consignments):
+            soft = consignments[0].content_kind == "soft"
             seen.append(options.scene.step_for(soft=soft, rig=load_rig("E1")))
 
         def run(self, params, case, run_id=None):
             raise RuntimeError("stop here")
 
-    monkeypatch.setattr(synth, "MujocoSimulator", Recording)
+    monkeypatch.setattr(synth, "mujoco_simulator", Recording)
     for settings, consignment, step in (
         (TwinSettings(), "BW", 1 / 4800),
         (TwinSettings(), "PB", 1 / 2400),
@@ -286,13 +286,13 @@ def test_the_twins_real_runs_take_their_own_content_mesh(tmp_path, monkeypatch):
     seen = []
 
     class Recording:
-        def __init__(self, options, consignments, **_):
+        def __init__(self, options, rigs, consignments):
             seen.append((options.scene.soft_spacing, options.scene.ccd_tolerance))
 
         def run(self, params, case, run_id=None):
             raise RuntimeError("stop here")
 
-    monkeypatch.setattr(synth, "MujocoSimulator", Recording)
+    monkeypatch.setattr(synth, "mujoco_simulator", Recording)
     for settings, expected in (
         (TwinSettings(), (SceneOptions().soft_spacing, None)),
         (TwinSettings(real_content_spacing=0.03, real_ccd_tolerance=1e-6), (0.03, 1e-6)),

@@ -50,10 +50,10 @@ from __future__ import annotations
 import hashlib
 import json
 import shutil
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, TypeVar
 
 import numpy as np
 import yaml
@@ -75,9 +75,9 @@ from parcelfit.runs import (
 from parcelfit.schema import Choice, FileModel, Number, Text, Whole, keys_in, or_default, parse
 from parcelfit.sim.cost import Estimate, estimate, run_seconds
 from parcelfit.sim.executors import make_executor
+from parcelfit.sim.factory import mujoco_simulator
 from parcelfit.sim.mujoco import (
     Consignment,
-    MujocoSimulator,
     Rig,
     SceneOptions,
     SimOptions,
@@ -206,9 +206,7 @@ def _twin_run(job: TwinJob) -> tuple[Run, float]:
         speed_factors={d: 1 + rng.uniform(-s.speed_dev, s.speed_dev) for d in drives},
         start_offset=_placement(rig, rng, s),
     )
-    twin = MujocoSimulator(
-        SimOptions(scene=scene), rigs={rig.name: rig}, consignments={cons.name: cons}
-    )
+    twin = mujoco_simulator(SimOptions(scene=scene), [rig], [cons])
     res = twin.run(params, job.case, run_id=job.run_id)
     if not res.ok or res.run is None:
         raise ParcelfitError(
@@ -286,6 +284,21 @@ class _TwinRuns:
         shutil.rmtree(self.folder, ignore_errors=True)
 
 
+_T = TypeVar("_T")
+
+
+def _named(given: dict[str, _T], load: Callable[[str], _T]) -> Callable[[str], _T]:
+    """A rig or consignment type by name: one of ``given`` (the user's own), else the bundled
+    one, loaded once."""
+
+    def get(name: str) -> _T:
+        if name not in given:
+            given[name] = load(name)
+        return given[name]
+
+    return get
+
+
 def make_twin_dataset(
     folder: str | Path,
     cases: Sequence[TestCase],
@@ -316,19 +329,18 @@ def make_twin_dataset(
         raise ParcelfitError("a twin dataset needs at least one run per test case", fix="runs >= 1")
     if executor not in (None, "serial", "local"):
         raise ParcelfitError(f"unknown executor {executor!r} for synth", fix="serial or local")
-    sim = MujocoSimulator(
-        rigs={r.name: r for r in rigs}, consignments={c.name: c for c in consignments}
-    )
+    rig_named = _named({r.name: r for r in rigs}, load_rig)
+    consignment_named = _named({c.name: c for c in consignments}, load_consignment)
     truth_si: dict[str, dict[str, float]] = {}
     jobs: list[TwinJob] = []
     seeds = np.random.SeedSequence(seed).spawn(len(cases) * s.runs)
     for i, case in enumerate(cases):
-        cons = sim.consignment(case.consignment)
+        cons = consignment_named(case.consignment)
         if case.consignment not in truth_si:
             truth_si[case.consignment] = cons.parameter_values(
                 user_values=truth_user.get(case.consignment, {})
             )
-        rig = sim.rig(case.rig)
+        rig = rig_named(case.rig)
         for k in range(s.runs):
             run_id = f"{case.rig}-{case.consignment}-{case.speed_setting}-{k + 1:02d}"
             jobs.append(
@@ -367,7 +379,7 @@ def make_twin_dataset(
             done(run, f"{wall:.1f} s")
     out_cases = []
     for case in cases:
-        rig = sim.rig(case.rig)
+        rig = rig_named(case.rig)
         runs = tuple(
             results[f"{case.rig}-{case.consignment}-{case.speed_setting}-{k + 1:02d}"]
             for k in range(s.runs)
@@ -394,7 +406,7 @@ def make_twin_dataset(
                     if s.step_for(False) is None and s.step_for(True) is None
                     else ""
                 )
-                + _refined_rigs(s, [sim.rig(c.rig) for c in cases])
+                + _refined_rigs(s, [rig_named(c.rig) for c in cases])
                 + "."
             )
             + (

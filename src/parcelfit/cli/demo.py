@@ -12,9 +12,16 @@ from rich.table import Table
 
 from parcelfit.cli.data import print_dataset
 from parcelfit.cli.options import WorkersOption, check_executor, worker_count, workers_at_most
-from parcelfit.cli.output import console, resumes, say_cost, status_progress
+from parcelfit.cli.output import (
+    CalibrationDisplay,
+    console,
+    print_outcome,
+    print_verdict,
+    resumes,
+    say_cost,
+    status_progress,
+)
 from parcelfit.cli.screening import print_screen
-from parcelfit.cli.study import calibrate_live, print_verdict
 from parcelfit.errors import ParcelfitError
 
 
@@ -54,6 +61,10 @@ def demo(
     import time
 
     from parcelfit.demo import STAGES, Demo
+    from parcelfit.study.folderlock import check_writable
+    from parcelfit.study.outcome import CalibrationStart, calibration_outcome
+    from parcelfit.study.status import folder_verdict
+    from parcelfit.study.store import STORE_FILE
     from parcelfit.study.studyfile import load_study
 
     if quick and full:
@@ -99,7 +110,12 @@ def demo(
         stages, selection = d.screen(status_progress(status_line, "screening: "))
     print_screen(stages, selection)
     rule(4)
-    calibrate_live(d.calibration, load_study(d.files[1]).name, out / "calibration")
+    folder = out / "calibration"
+    check_writable(folder, (STORE_FILE,))  # before the live display starts
+    with CalibrationDisplay(console) as display:
+        display.started(CalibrationStart(load_study(d.files[1]).name, folder, None))
+        result = d.calibration(display.update)
+    print_outcome(console, calibration_outcome(result))
     rule(5)
     with console.status("simulating the polybag example"):
         example = d.stricter_example()
@@ -109,5 +125,5 @@ def demo(
         report = d.report(status_progress(status_line, "report: "))
     minutes = (time.perf_counter() - t0) / 60
     console.print(f"[bold green]report:[/] {escape(str(report.resolve()))}")
-    print_verdict(out, f" ({minutes:.1f} min)")
+    print_verdict(console, folder_verdict(out), f" ({minutes:.1f} min)")
 

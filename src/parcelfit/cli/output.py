@@ -7,16 +7,28 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn
 
 import typer
 from rich.console import Console
 from rich.progress import Progress, TimeElapsedColumn
+from rich.table import Table
 from rich.text import Text
 from typer.core import TyperGroup
 
 from parcelfit.errors import ParcelfitError, os_error
 from parcelfit.progress import ProgressCallback, ProgressEvent
+
+if TYPE_CHECKING:
+    from parcelfit.study.details import CaseCost
+    from parcelfit.study.outcome import (
+        CalibrationOutcome,
+        CalibrationStart,
+        Determination,
+        ShownValue,
+        StudySummary,
+    )
+    from parcelfit.study.verdict import Verdict
 
 
 class Commands(TyperGroup):
@@ -137,3 +149,209 @@ def progress_bar(job: str) -> tuple[Progress, ProgressCallback]:
 def frame_bar() -> Progress:
     return Progress(*Progress.get_default_columns(), TimeElapsedColumn(), console=console)
 
+
+
+# -- a calibration: its live table and what it concluded ---------------------------------------
+
+
+class CalibrationDisplay:
+    """The live status table of a calibration, as a context: ``started`` (a `CalibrationStart`)
+    shows a spinner until the first progress event (while the data are read and the reference
+    runs chosen), which prints the expected cost and brings up the table; ``update`` is the
+    calibration's progress callback. Outside a terminal (a log, CI) every event is also one
+    line and the table shows at the end. Leaving the context stops the display and, once it
+    started, ends its line, so that an error found before (a test case the dataset lacks, ...)
+    is the only line printed, and what follows starts on a line of its own."""
+
+    def __init__(self, console: Console) -> None:
+        self.console = console
+        self._start: CalibrationStart | None = None
+        self._spinner: Any = None
+        self._live: Any = None
+        self._event: ProgressEvent | None = None
+
+    def __enter__(self) -> CalibrationDisplay:
+        return self
+
+    def started(self, start: CalibrationStart) -> None:
+        """Show the spinner of the calibration ``start`` names (`CalibrationStart`)."""
+        self._start = start
+        self._spinner = self.console.status(
+            Text(f"calibration {start.name}: starting (reference runs, workers)")
+        )
+        self._spinner.start()
+
+    def update(self, event: ProgressEvent) -> None:
+        """Show ``event`` (the progress callback)."""
+        from rich.live import Live
+
+        self._event = event
+        assert self._start is not None  # `started` comes first
+        if self._live is None:
+            self._spinner.stop()
+            if self._start.cost is not None:  # said once the study is read and checked
+                self.console.print(Text(self._start.cost, style="cyan"), highlight=False)
+            self._live = Live(
+                self._table(), console=self.console, refresh_per_second=4, transient=False
+            )
+            self._live.start()
+        self._live.update(self._table())
+        if not self.console.is_terminal:  # a log or CI: the table shows only at the end
+            best = "-" if event.best_cost is None else f"{event.best_cost:.4g}"
+            self.console.print(
+                Text(f"{event.message} ({event.done}/{event.total} evaluations, best cost {best})"),
+                highlight=False,
+            )
+
+    def _table(self) -> Table:
+        p, start = self._event, self._start
+        assert p is not None and start is not None  # the table shows from the first event on
+        table = Table(
+            title=Text(f"calibration {start.name} -> {start.folder}"),
+            title_justify="left",
+            show_header=False,
+        )
+        table.add_column(style="bold")
+        table.add_column()
+        verdict = {None: "not yet", True: "[green]passed[/]", False: "[red]failed[/]"}[
+            p.last_validation
+        ]
+        table.add_row("iteration", f"{p.iteration} (0 = initial design)")
+        table.add_row("evaluations", f"{p.done} done, {p.running} running, budget {p.total}")
+        table.add_row("best cost", "-" if p.best_cost is None else f"{p.best_cost:.4g}")
+        table.add_row("last validation", verdict)
+        table.add_row("last event", Text(p.message))
+        return table
+
+    def __exit__(self, *exc: object) -> None:
+        if self._spinner is None:
+            return
+        self._spinner.stop()
+        if self._live is not None:
+            self._live.stop()
+        # outside a terminal the display's last line is left open: end it
+        self.console.print()
+
+
+def print_outcome(console: Console, outcome: CalibrationOutcome) -> None:
+    """What a calibration concluded (`parcelfit.study.outcome.CalibrationOutcome`): how it
+    stopped, the recommended parameters, what the data determine, where its figures are and
+    the verdict."""
+    if outcome.set_aside is not None:
+        console.print(Text(f"the earlier study's outputs are in {outcome.set_aside}"))
+    console.print(
+        Text.assemble(
+            (outcome.stop_reason, "bold"),
+            f" after {outcome.evaluations} evaluations: "
+            f"{iterations_text(outcome.last_iteration)}; study folder {outcome.folder}",
+        )
+    )
+    print_summary(console, outcome.summary)
+    figures = outcome.folder / "figures"
+    console.print(Text(f"figures in {figures} ({outcome.figures} figures, PNG and SVG)"))
+    print_verdict(console, outcome.summary.verdict)
+
+
+def iterations_text(last: int | None) -> str:
+    """The iterations done, in the one numbering (0 = initial design, k >= 1 optimiser batches)."""
+    if last is None:
+        return "no iteration yet"
+    if last == 0:
+        return "the initial design (iteration 0)"
+    return "the initial design (iteration 0) and " + (
+        "iteration 1" if last == 1 else f"iterations 1-{last}"
+    )
+
+
+def print_summary(console: Console, summary: StudySummary) -> None:
+    """A study's recommended parameters (what it validates and reports), or while it runs the
+    lowest-cost ones so far, their cost case by case (joint and ensemble studies) and what
+    the data determine (`parcelfit.study.outcome.StudySummary`); for `calibrate` and
+    `status`."""
+    rec, low = summary.status.recommended, summary.status.lowest_cost
+    if rec is not None:
+        at = "" if rec.iteration is None else f", evaluated in iteration {rec.iteration}"
+        _print_values(
+            console, summary.recommended, f"recommended parameters (cost {rec.cost:.4g}{at})"
+        )
+        if low is not None and low.params != rec.params:
+            console.print(
+                f"the lowest single cost was {low.cost:.4g} (iteration {low.iteration}); "
+                "the recommendation is the evaluated point with the lowest GP mean cost "
+                "(optimizer: {recommend: posterior_mean}, the default)",
+                markup=False,
+            )
+    elif low is not None:
+        _print_values(
+            console,
+            summary.lowest_cost,
+            f"lowest-cost parameters so far (cost {low.cost:.4g}, iteration "
+            f"{low.iteration}); the study recommends its parameters when it stops",
+        )
+    shown = summary.status.shown
+    if shown is not None and shown.parts:
+        _print_parts(console, shown.parts)
+    if summary.determined is not None:
+        _print_determined(console, summary.determined)
+
+
+def _print_values(console: Console, values: list[ShownValue] | None, title: str) -> None:
+    table = Table(title=Text(title), title_justify="left")
+    table.add_column("parameter")
+    table.add_column("value", justify="right")
+    table.add_column("unit")
+    for v in values or ():
+        table.add_row(v.name, f"{v.value:.5g}", v.unit)
+    console.print(table)
+
+
+def _print_parts(console: Console, parts: list[CaseCost]) -> None:
+    """The per-case parts of a joint or ensemble evaluation's cost (`CaseCost`)."""
+    table = Table(title=Text("its cost, case by case"), title_justify="left")
+    for col in ("case", "weight", "cost", "parts"):
+        table.add_column(col, justify="left" if col in ("case", "parts") else "right")
+    for p in parts:
+        if p.trajectory_term is not None:
+            se = "" if p.se is None else f" (se {p.se:.3g})"
+            tt = "-" if p.transit_term is None else f"{p.transit_term:.3g}"
+            adjusted = " (adjusted times)" if p.adjusted_transit_times is not None else ""
+            what = f"trajectories {p.trajectory_term:.3g}{se}, transit {tt}{adjusted}"
+            what += f", {len(p.seeds)} placements"
+        else:
+            what = f"DTW_xy {p.dtw_xy:.3g} m, DTW_theta {p.dtw_theta:.3g} rad"
+        table.add_row(p.case, f"{p.weight:g}", f"{p.cost:.4g}", what)
+    console.print(table)
+
+
+def _print_determined(console: Console, determined: list[Determination]) -> None:
+    """Which parameters the data determine: an undetermined parameter's value above is one
+    of many equally good ones."""
+    words = []
+    for p in determined:
+        unit = f" {p.unit}" if p.unit else ""
+        lo, hi = p.low, p.high
+        if p.determined:
+            words.append(f"{p.name} determined: {(lo + hi) / 2:.4g} +- {(hi - lo) / 2:.2g}{unit}")
+        elif p.verdict == "undetermined":
+            words.append(f"{p.name} NOT determined (its value above is as good as any in range)")
+        else:
+            words.append(f"{p.name} {p.verdict}: {lo:.4g} - {hi:.4g}{unit}")
+    console.print(Text("what the data determine: " + "; ".join(words)), markup=False)
+
+
+_LEVEL_STYLE = {"trustworthy": "green", "incomplete": "yellow", "not trustworthy": "red"}
+
+
+def print_verdict(console: Console, verdict: Verdict, tail: str = "") -> None:
+    """Every check of a study's overall verdict on a line of its own (published criteria,
+    band test, transfer check, parameters determined) and the verdict
+    (`parcelfit.study.verdict.Verdict`), followed by ``tail``."""
+    *checks, _ = verdict.lines()
+    for line in checks:
+        console.print(Text(line), highlight=False)
+    console.print(
+        Text.assemble(
+            ("verdict: ", "bold"), (verdict.text, f"bold {_LEVEL_STYLE[verdict.level]}"), tail
+        ),
+        highlight=False,
+    )

@@ -431,7 +431,7 @@ def build_report(
         record = store.read_study()
         source = store.read_source() or SourceRecord()
         stop_reason = store.get_meta("stop_reason")
-        cases = store.get_meta("cases")
+        cases = store.read_cases()
     finally:
         store.close()
     if record is None:
@@ -474,9 +474,7 @@ def build_report(
         rig=rig,
         consignment=cons,
         fitted=[
-            str(c["case"])
-            for c in (results.cases if results is not None else ())
-            if c.get("role") == "fit"
+            c.case for c in (results.cases if results is not None else ()) if c.role == "fit"
         ],
         synthetic=bool(ds is not None and ds.synthetic),
         description="" if ds is None else ds.description,

@@ -31,10 +31,10 @@ screening, ``parcelfit simulate``, the demo) goes through `make_simulator`.
 from __future__ import annotations
 
 import importlib
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 from pydantic import model_validator
 
@@ -56,6 +56,9 @@ from parcelfit.sim.params import (
     ShellCellsField,
 )
 from parcelfit.sim.protocol import Simulator
+
+if TYPE_CHECKING:
+    from parcelfit.sim.mujoco import Consignment, Rig, SimOptions
 
 BACKENDS = ("mujoco", "rigidbox", "external", "python")
 # the MuJoCo scene's settings, which the rigid-box reference does not take
@@ -373,6 +376,21 @@ def make_simulator(config: SimulatorConfig) -> Simulator:
     return factory()
 
 
+def mujoco_simulator(
+    options: SimOptions, rigs: Sequence[Rig], consignments: Sequence[Consignment]
+) -> Simulator:
+    """A MuJoCo simulator of rigs and consignment types already loaded, its options given in
+    full: a twin dataset's "real" runs (`parcelfit.synth`), each with its own belt speeds,
+    start offset and mesh. A study's simulator comes from its file's section (`make_simulator`)."""
+    from parcelfit.sim.mujoco import MujocoSimulator
+
+    return MujocoSimulator(
+        options,
+        rigs={r.name: r for r in rigs},
+        consignments={c.name: c for c in consignments},
+    )
+
+
 def content_kind(config: SimulatorConfig) -> str:
     """The content kind (``rigid`` or ``soft``, the catalogue's ranges) of the consignment
     ``config`` simulates: the consignment file's (mujoco, rigidbox); backends without one count
@@ -390,4 +408,5 @@ __all__ = [
     "SimulatorSection",
     "content_kind",
     "make_simulator",
+    "mujoco_simulator",
 ]

@@ -51,6 +51,7 @@ from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.sim.executors import Executor
 from parcelfit.sim.factory import make_simulator
 from parcelfit.sim.protocol import Simulator
+from parcelfit.study.estimate import calibration_cost_line
 from parcelfit.study.finish import Finish
 from parcelfit.study.folderlock import (
     check_writable,
@@ -183,6 +184,13 @@ class Calibration:
         self._opened: _Opened | None = None
         self._closed = False
 
+    def cost_line(self) -> str:
+        """The line said before the study starts: its expected cost on its executor and workers
+        (`parcelfit.study.estimate.calibration_cost_line`), noting a resumed study."""
+        executor, _, workers = self._executor_args
+        resumed = (self.folder / STORE_FILE).exists()
+        return calibration_cost_line(self.study, executor, workers, resumed)
+
     @cached_property
     def bo(self) -> Sampler:
         """The study's optimiser: the ``sampler`` given, else the one its study file names
@@ -239,7 +247,7 @@ class Calibration:
             references = select_references(study)
             store.set_meta("reference_run", references[self.fit_case.label].reference_id)
             if study.joint or len(study.validation_cases) > 1 or study.transfer:
-                store.set_meta("cases", case_summary(study, references))
+                store.write_cases(case_summary(study, references))
             try:
                 simulator = make_simulator(study.simulator)
             except ParcelfitError as exc:  # e.g. a python factory that cannot be imported

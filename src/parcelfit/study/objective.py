@@ -34,7 +34,7 @@ from parcelfit.study.joint import (
     simulate_items,
     simulations_per_evaluation,
 )
-from parcelfit.study.store import Evaluation, Store
+from parcelfit.study.store import CaseRecord, Evaluation, Store
 from parcelfit.study.studyfile import CaseSpec, Study
 
 
@@ -125,7 +125,7 @@ def select_references(study: Study) -> dict[str, ReferenceSelection]:
 
 def case_summary(
     study: Study, references: Mapping[str, ReferenceSelection]
-) -> list[dict[str, Any]]:
+) -> list[CaseRecord]:
     """The study's cases for the store and results: label, role, weight, dataset, reference
     run and the acceptance threshold of the fitted ones."""
     out = []
@@ -137,17 +137,17 @@ def case_summary(
         for spec in specs:
             ref = references[spec.label]
             out.append(
-                {
-                    "case": spec.label,
-                    "role": role,
-                    "weight": spec.weight,
-                    "dataset": str(spec.dataset),
-                    "reference_run": ref.reference_id,
-                    "threshold": case_threshold(ref, study) if role == "fit" else None,
-                    "transit": None
+                CaseRecord(
+                    case=spec.label,
+                    role=role,
+                    weight=spec.weight,
+                    dataset=str(spec.dataset),
+                    reference_run=ref.reference_id,
+                    threshold=case_threshold(ref, study) if role == "fit" else None,
+                    transit=None
                     if ref.transit_adjustment is None
                     else ref.transit_adjustment.describe(),
-                }
+                )
             )
     return out
 

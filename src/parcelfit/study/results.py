@@ -53,7 +53,7 @@ from parcelfit.study.details import (
     TransitCriterion,
 )
 from parcelfit.study.identify import Advice, Identifiability
-from parcelfit.study.store import OptimizerRecord
+from parcelfit.study.store import CaseRecord, OptimizerRecord
 
 RESULTS_FILE = "results.json"
 FORMAT = "parcelfit-study-results"
@@ -485,7 +485,7 @@ class StudyResults:
     identifiability: Identifiability | None = None
     transfer: tuple[ValidationRecord, ...] = ()
     advice: Advice | None = None
-    cases: tuple[dict[str, Any], ...] = ()  # the study's test cases: case, role, weight
+    cases: tuple[CaseRecord, ...] = ()  # the study's test cases
 
     def shown_validation(self) -> ValidationRecord | None:
         """The validation a report shows: the last that passed, else the last one (of a study
@@ -525,7 +525,7 @@ class StudyResults:
             else self.identifiability.to_json(),
             "transfer": [v.to_json() for v in self.transfer],
             "advice": None if self.advice is None else self.advice.to_json(),
-            "cases": [dict(c) for c in self.cases],
+            "cases": [c.to_json() for c in self.cases],
         }
 
     @classmethod
@@ -546,7 +546,7 @@ class StudyResults:
             else Identifiability.from_json(doc["identifiability"]),
             transfer=tuple(ValidationRecord.from_json(v) for v in doc.get("transfer") or ()),
             advice=None if doc.get("advice") is None else Advice.from_json(doc["advice"]),
-            cases=tuple(dict(c) for c in doc.get("cases") or ()),
+            cases=tuple(CaseRecord.from_json(c) for c in doc.get("cases") or ()),
         )
 
 
@@ -561,7 +561,7 @@ def new_results(
     identifiability: Identifiability | None = None,
     transfer: Sequence[ValidationRecord] = (),
     advice: Advice | None = None,
-    cases: Sequence[Mapping[str, Any]] = (),
+    cases: Sequence[CaseRecord | Mapping[str, Any]] = (),
 ) -> StudyResults:
     """Results stamped with this moment and this parcelfit version."""
     return StudyResults(
@@ -576,7 +576,7 @@ def new_results(
         identifiability,
         tuple(transfer),
         advice,
-        tuple(dict(c) for c in cases),
+        tuple(c if isinstance(c, CaseRecord) else CaseRecord.from_json(c) for c in cases),
     )
 
 

@@ -19,7 +19,7 @@ from parcelfit.errors import ParcelfitError
 from parcelfit.runs import is_synthetic
 from parcelfit.study.details import CaseCost
 from parcelfit.study.results import read_results
-from parcelfit.study.store import STORE_FILE, SourceRecord, Store, StudyRecord
+from parcelfit.study.store import STORE_FILE, CaseRecord, SourceRecord, Store, StudyRecord
 from parcelfit.study.verdict import Verdict, study_verdict
 
 
@@ -83,10 +83,15 @@ class StudyStatus(_Record):
     last_iteration: int | None
     recommended: PointStatus | None
     lowest_cost: PointStatus | None
-    cases: list[dict[str, Any]] | None
+    cases: list[CaseRecord] | None
     validations: list[ValidationStatus]
     verdict: dict[str, Any]
     units: dict[str, str]
+
+    @field_serializer("cases")
+    def _cases_json(self, cases: list[CaseRecord] | None) -> list[dict[str, Any]] | None:
+        """The cases in their stored form."""
+        return None if cases is None else [c.to_json() for c in cases]
 
     @property
     def shown(self) -> PointStatus | None:
@@ -129,7 +134,7 @@ def study_status(folder: str | Path) -> StudyStatus:
         vals = store.evaluations("validation")
         record, source = store.read_study(), store.read_source() or SourceRecord()
         reference_run, stop_reason = store.get_meta("reference_run"), store.get_meta("stop_reason")
-        cases = store.get_meta("cases")
+        cases = store.read_cases()
         recommended = store.read_recommended()
     finally:
         store.close()
@@ -177,7 +182,7 @@ def study_status(folder: str | Path) -> StudyStatus:
     )
 
 
-def _verdict(folder: Path, cases: Any, stop_reason: str | None) -> Verdict:
+def _verdict(folder: Path, cases: list[CaseRecord] | None, stop_reason: str | None) -> Verdict:
     """The verdict of the study's stored results (a damaged results file counts as none)."""
     try:
         results = read_results(folder)
@@ -196,7 +201,7 @@ def folder_verdict(folder: str | Path) -> Verdict:
         folder = inner
     store = Store(folder / STORE_FILE, readonly=True)
     try:
-        cases, stop_reason = store.get_meta("cases"), store.get_meta("stop_reason")
+        cases, stop_reason = store.read_cases(), store.get_meta("stop_reason")
     finally:
         store.close()
     return _verdict(folder, cases, stop_reason)

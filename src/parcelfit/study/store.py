@@ -55,6 +55,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
 
+from pydantic import BaseModel, ConfigDict
+
 from parcelfit.errors import ParcelfitError, os_error
 from parcelfit.study.details import EvaluationDetails
 
@@ -246,7 +248,34 @@ def _full(exc: sqlite3.Error) -> bool:
     )
 
 
-_RECORDS = ("study", "source", "recommended")  # meta keys read and written as records only
+class CaseRecord(BaseModel):
+    """One test case of a study as the store and the results keep it: its label ``case``,
+    ``role`` (fit, validation or transfer), ``weight`` in the cost, ``dataset`` folder,
+    ``reference_run``, the acceptance ``threshold`` of a fitted case [-] and ``transit`` (what
+    the transit-time adjustment did, in words); None where not recorded. Its stored form keeps
+    exactly the keys it was given (a store of an earlier version lacks ``transit``)."""
+
+    model_config = ConfigDict(frozen=True, extra="ignore")
+
+    case: str
+    role: str
+    weight: float = 1.0
+    dataset: str | None = None
+    reference_run: str | None = None
+    threshold: float | None = None
+    transit: str | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        """The stored form: the keys it was read or made with."""
+        return self.model_dump(exclude_unset=True)
+
+    @classmethod
+    def from_json(cls, doc: Mapping[str, Any]) -> CaseRecord:
+        """Read the stored form (`to_json`)."""
+        return cls.model_validate(dict(doc))
+
+
+_RECORDS = ("study", "source", "recommended", "cases")  # meta keys read and written as records only
 _R = TypeVar("_R")
 
 
@@ -422,6 +451,14 @@ class Store:
     def write_recommended(self, record: RecommendedRecord) -> None:
         """Store the recommended parameters."""
         self._write_meta("recommended", record.to_json())
+
+    def read_cases(self) -> list[CaseRecord] | None:
+        """The study's test cases (None before a calibration wrote them)."""
+        return self._record("cases", lambda doc: [CaseRecord.from_json(c) for c in doc])
+
+    def write_cases(self, cases: Sequence[CaseRecord]) -> None:
+        """Store the study's test cases."""
+        self._write_meta("cases", [c.to_json() for c in cases])
 
     # -- evaluations ------------------------------------------------------------------------
     def add_pending(

@@ -24,13 +24,14 @@ study stored (its results and test cases). Both are pure: they read no file. The
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal
 
 if TYPE_CHECKING:
     from parcelfit.study.identify import Identifiability
     from parcelfit.study.results import StudyResults, ValidationRecord
+    from parcelfit.study.store import CaseRecord
 
 Outcome = Literal["passed", "failed", "not run"]
 Level = Literal["not trustworthy", "incomplete", "trustworthy"]
@@ -256,7 +257,7 @@ def determined(ident: Identifiability | None, stopped: bool) -> Determined:
 
 def study_verdict(
     results: StudyResults | None,
-    cases: Sequence[Mapping[str, Any]] | None = None,
+    cases: Sequence[CaseRecord] | None = None,
     stopped: bool = False,
 ) -> Verdict:
     """The verdict of a study from its stored results (None: none stored), its test cases
@@ -269,7 +270,7 @@ def study_verdict(
             group = []
         group.append(v)
     transfer = () if results is None else results.transfer
-    planned = bool(transfer) or any(c.get("role") == "transfer" for c in cases or ())
+    planned = bool(transfer) or any(c.role == "transfer" for c in cases or ())
     return combine(
         criteria_check(group),
         band_check(group),
