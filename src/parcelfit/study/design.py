@@ -64,7 +64,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -76,6 +76,7 @@ from parcelfit.errors import ParcelfitError, shown
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.sim.ensemble import MAX_PLACEMENTS
 from parcelfit.sim.executors import Executor, Task
+from parcelfit.sim.factory import make_simulator
 from parcelfit.study.folderlock import check_writable, lock_folder
 from parcelfit.study.identify import DETERMINED_WIDTH, Identifiability
 from parcelfit.study.joint import require_placements, simulate_items
@@ -97,6 +98,7 @@ from parcelfit.study.predict import (
 )
 from parcelfit.study.spread import decompose, effects_of
 from parcelfit.study.store import Store
+from parcelfit.study.studyfile import Study
 
 DESIGN_STORE = "design.sqlite"
 DESIGN_FILE = "design.json"
@@ -181,29 +183,76 @@ def candidate_designs(
     return out
 
 
-def expected_width(J: np.ndarray, scatter: np.ndarray, runs: int) -> np.ndarray:
+def information(J: np.ndarray, scatter: np.ndarray) -> np.ndarray:
+    """The information of one real run (module docstring): J^T S^-1 J, ``J`` (quantities x
+    parameters, the changes over the intervals), ``scatter`` s_q (per quantity, same units);
+    parameters x parameters, in interval units."""
+    Js = np.asarray(J, float) / np.asarray(scatter, float)[:, None]
+    return Js.T @ Js
+
+
+def shares_of(gained: np.ndarray, known: np.ndarray | None = None) -> np.ndarray:
+    """Per parameter the expected interval as a share of today's (at most 1): the posterior
+    standard deviation with the information ``known`` (what the fitted cases tell; None:
+    nothing) plus ``gained`` (the new runs'), over that with ``known`` alone; both with the
+    uniform prior over today's intervals (precision 12 in interval units)."""
+    gained = np.asarray(gained, float)
+    d = gained.shape[0]
+    base = PRIOR_PRECISION * np.eye(d) + (0.0 if known is None else np.asarray(known, float))
+    before = np.diag(np.linalg.inv(base))
+    after = np.diag(np.linalg.inv(base + gained))
+    ratio = np.maximum(after, 0.0) / np.maximum(before, 1e-300)
+    return np.minimum(1.0, np.sqrt(ratio))
+
+
+def expected_width(
+    J: np.ndarray, scatter: np.ndarray, runs: int, known: np.ndarray | None = None
+) -> np.ndarray:
     """w_p(n) of the module docstring for every parameter: ``J`` (quantities x parameters, the
-    changes over the intervals), ``scatter`` s_q (per quantity, same units), ``runs`` n; a
-    share of the current interval (the posterior over the prior standard deviation, at most
-    1)."""
-    J = np.asarray(J, float)
-    d = J.shape[1]
-    info = runs * (J / np.asarray(scatter, float)[:, None]).T @ (J / np.asarray(scatter)[:, None])
-    cov = np.linalg.inv(info + PRIOR_PRECISION * np.eye(d))
-    return np.minimum(1.0, np.sqrt(PRIOR_PRECISION * np.maximum(np.diag(cov), 0.0)))
+    changes over the intervals), ``scatter`` s_q (per quantity, same units), ``runs`` n,
+    ``known`` the information the fitted cases hold (None: nothing); a share of the current
+    interval (at most 1)."""
+    return shares_of(runs * information(J, scatter), known)
 
 
-def runs_needed(J: np.ndarray, scatter: np.ndarray, target: np.ndarray) -> list[int | None]:
+def runs_needed(
+    J: np.ndarray, scatter: np.ndarray, target: np.ndarray, known: np.ndarray | None = None
+) -> list[int | None]:
     """Per parameter, the fewest real runs (1 to `MAX_RUNS`) after which the expected width
-    share is at most ``target`` (a share of the current interval); None when never."""
+    share (with the information ``known`` of the fitted cases) is at most ``target`` (a share
+    of the current interval); None when never."""
     out: list[int | None] = [None] * J.shape[1]
+    one = information(J, scatter)
     for n in range(1, MAX_RUNS + 1):
-        w = expected_width(J, scatter, n)
+        w = shares_of(n * one, known)
         for p in range(J.shape[1]):
             if out[p] is None and w[p] <= target[p]:
                 out[p] = n
         if all(v is not None for v in out):
             break
+    return out
+
+
+def greedy_sequence(
+    infos: Sequence[np.ndarray], known: np.ndarray | None, runs: int, open_: Sequence[int]
+) -> list[tuple[int, float]]:
+    """The candidates in the greedy order of the module docstring: ``infos`` their one-run
+    informations, ``known`` the fitted cases', ``runs`` real runs each, ``open_`` the indices
+    of the open parameters; each step takes the candidate whose runs, added to those of the
+    ones taken before, leave the smallest mean share over the open parameters (ties: the
+    earlier candidate). Returns (candidate index, that mean share) in order."""
+    if not infos:
+        return []
+    idx = list(open_)
+    taken = np.zeros_like(np.asarray(infos[0], float))
+    left = list(range(len(infos)))
+    out: list[tuple[int, float]] = []
+    while left:
+        means = [float(np.mean(shares_of(taken + runs * infos[c], known)[idx])) for c in left]
+        k = int(np.argmin(np.round(means, 12)))
+        out.append((left[k], means[k]))
+        taken = taken + runs * infos[left[k]]
+        left.pop(k)
     return out
 
 
@@ -227,8 +276,9 @@ class CandidateScore:
 
 @dataclass(frozen=True, eq=False)
 class DesignResult:
-    """A finished ranking: the open parameters, the candidates' scores, the runs assumed and
-    where it was written."""
+    """A finished ranking: the open parameters, the candidates' scores, the runs assumed,
+    where it was written, the greedy order (candidate label, mean share with the ones before;
+    empty: by the mean share alone) and the fitted cases taken into account (labels)."""
 
     parameters: list[str]
     scores: list[CandidateScore]
@@ -236,6 +286,8 @@ class DesignResult:
     sets: int
     placements: int
     out: Path | None = None
+    sequence: list[tuple[str, float]] = field(default_factory=list)
+    fitted: list[str] = field(default_factory=list)
 
     def candidates_table(self) -> pd.DataFrame:
         """One row per candidate and open parameter, ranked per parameter (docs/data.md)."""
@@ -271,8 +323,8 @@ class DesignResult:
         return df
 
     def ranking_table(self) -> pd.DataFrame:
-        """One row per candidate, by the mean expected width share over the open parameters
-        (docs/data.md)."""
+        """One row per candidate in the greedy order of the module docstring (without one: by
+        the mean expected width share over the open parameters) (docs/data.md)."""
         by: dict[str, list[CandidateScore]] = {}
         for s in self.scores:
             by.setdefault(s.candidate.label, []).append(s)
@@ -291,8 +343,16 @@ class DesignResult:
                     ),
                 }
             )
-        df = pd.DataFrame(rows, columns=["candidate", "mean_share", "narrows_most", "determines"])
-        df = df.sort_values(["mean_share", "candidate"], kind="stable").reset_index(drop=True)
+        cols = ["candidate", "mean_share", "narrows_most", "determines"]
+        df = pd.DataFrame(rows, columns=cols)
+        if self.sequence:
+            order = {label: i for i, (label, _) in enumerate(self.sequence)}
+            df["with_above"] = df["candidate"].map(dict(self.sequence)).astype(float)
+            df = df.sort_values("candidate", key=lambda c: c.map(order), kind="stable")
+        else:
+            df["with_above"] = df["mean_share"]
+            df = df.sort_values(["mean_share", "candidate"], kind="stable")
+        df = df.reset_index(drop=True)
         df.insert(0, "rank", range(1, len(df) + 1))
         return df
 
@@ -302,15 +362,13 @@ class DesignResult:
         return min(mine, key=lambda s: (s.share, -s.snr)) if mine else None
 
 
-def score_candidate(
-    design: Design,
-    ident: Identifiability,
-    sets: Sequence[dict[str, float]],
-    grids: dict[str, np.ndarray],
-    runs: int,
-) -> list[CandidateScore]:
-    """The scores of one candidate from its simulated quantities ``grids`` (quantity -> n sets
-    x K placements, NaN where a run has none), for every parameter the data do not determine."""
+def sensitivity(
+    ident: Identifiability, sets: Sequence[dict[str, float]], grids: dict[str, np.ndarray]
+) -> tuple[np.ndarray, np.ndarray]:
+    """One case's sensitivities J (quantities x parameters: the change of each quantity's
+    per-set mean over each parameter's current interval, zero where unresolved) and
+    run-to-run scatter s_q (module docstring), from its simulated quantities ``grids``
+    (quantity -> n sets x K placements, NaN where a run has none) at ``sets``."""
     names = ident.names
     intervals = [p.interval for p in ident.parameters]
     X = np.array([[s[n] for n in names] for s in sets], float)
@@ -329,14 +387,29 @@ def score_candidate(
         eff, se = effects_of(means, X, intervals)
         ok = np.isfinite(eff) & (np.abs(eff) >= RESOLVED * np.where(np.isfinite(se), se, np.inf))
         J[k] = np.where(ok, eff, 0.0)
-    shares = expected_width(J, scatter, runs)
+    return J, scatter
+
+
+def score_candidate(
+    design: Design,
+    ident: Identifiability,
+    sets: Sequence[dict[str, float]],
+    grids: dict[str, np.ndarray],
+    runs: int,
+    known: np.ndarray | None = None,
+) -> list[CandidateScore]:
+    """The scores of one candidate from its simulated quantities ``grids`` (quantity -> n sets
+    x K placements, NaN where a run has none), for every parameter the data do not determine,
+    given the information ``known`` the fitted cases hold (None: nothing)."""
+    J, scatter = sensitivity(ident, sets, grids)
+    shares = expected_width(J, scatter, runs, known)
     target = np.array(
         [
             DETERMINED_WIDTH * (p.high - p.low) / max(p.interval[1] - p.interval[0], 1e-300)
             for p in ident.parameters
         ]
     )
-    needed = runs_needed(J, scatter, target)
+    needed = runs_needed(J, scatter, target, known)
     snr = np.abs(J) / scatter[:, None]
     n_ok = int(np.isfinite(grids["rotation"]).sum())
     out = []
@@ -409,7 +482,10 @@ def rank_experiments(
     out_dir = Path(out) if out is not None else inputs.folder / "design"
     if not open_:
         return DesignResult([], [], runs, sets, placements, out_dir)
-    simulators = [design_simulator(inputs.study, d) for d in designs]
+    fitted = fitted_cases(inputs.study)
+    cases = designs + [d for d, _ in fitted]  # the fitted cases simulated after the candidates
+    own = make_simulator(config) if fitted else None
+    simulators = [design_simulator(inputs.study, d) for d in designs] + [own for _ in fitted]
     for sim in simulators:
         require_placements(sim, placements, file=None, where="--placements")
     placed = callable(getattr(simulators[0], "with_placement", None))
@@ -425,6 +501,7 @@ def rank_experiments(
             record = {
                 "study": str(inputs.folder.resolve()),
                 "candidates": [[d.rig, d.consignment, d.setting] for d in designs],
+                "fitted": [[d.rig, d.consignment, d.setting, n] for d, n in fitted],
                 "seed": seed,
                 "sets": drawn,
                 "placements": seeds,
@@ -435,12 +512,13 @@ def rank_experiments(
             elif json.loads(json.dumps(known)) != json.loads(json.dumps(record)):
                 raise ParcelfitError(
                     "this folder holds an experiment design with other inputs (study, "
-                    "candidates, --sets, --placements or --seed)",
+                    "candidates, --sets, --placements or --seed; or one made by an earlier "
+                    "version, which did not simulate the fitted cases)",
                     file=out_dir,
                     fix="give another --out, or the same inputs to resume it",
                 )
             have = {e.iteration for e in store.evaluations("screen")}
-            for c, d in enumerate(designs):
+            for c, d in enumerate(cases):
                 if c not in have:  # one transaction per candidate: all its rows or none
                     store.add_pending(
                         "screen",
@@ -450,9 +528,7 @@ def rank_experiments(
                         [s for _ in full for s in seeds],
                     )
             if on_cost is not None:
-                on_cost(
-                    cost_line(inputs.study, designs, store, executor, workers, make is not None)
-                )
+                on_cost(cost_line(inputs.study, cases, store, executor, workers, make is not None))
             rows = store.evaluations("screen")
             total = len(rows)
             done = sum(e.status != "pending" for e in rows)
@@ -464,7 +540,7 @@ def rank_experiments(
             todo = [e for e in rows if e.status == "pending"]
             if todo:
                 with open_executor(executor, workers, scheduler, len(todo), make) as pool:
-                    for c, (d, sim) in enumerate(zip(designs, simulators, strict=True)):
+                    for c, (d, sim) in enumerate(zip(cases, simulators, strict=True)):
                         mine = [e for e in todo if e.iteration == c]
                         items = [
                             (
@@ -491,24 +567,62 @@ def rank_experiments(
             rows = store.evaluations("screen")
         finally:
             store.close()
+        grids = [_grids(rows, c, len(full), len(seeds)) for c in range(len(cases))]
+        sens = [sensitivity(ident, drawn, g) for g in grids]
+        known = sum(
+            (n * information(*sens[len(designs) + f]) for f, (_, n) in enumerate(fitted)),
+            np.zeros((len(ident.names),) * 2),
+        )
         scores: list[CandidateScore] = []
         for c, d in enumerate(designs):
-            grids = {q: np.full((len(full), len(seeds)), np.nan) for q in QUANTITIES}
-            for e in rows:
-                if e.iteration != c or e.status != "ok":
-                    continue
-                i, j = divmod(e.slot, len(seeds))
-                values = {**e.details.quantities, "transit_time": e.transit_time}
-                for q in QUANTITIES:
-                    v = values.get(q)
-                    if v is not None and math.isfinite(float(v)):
-                        grids[q][i, j] = float(v)
-            scores += score_candidate(d, ident, drawn, grids, runs)
-        result = DesignResult(open_, scores, runs, sets, placements, out_dir)
+            scores += score_candidate(d, ident, drawn, grids[c], runs, known)
+        open_idx = [j for j, p in enumerate(ident.parameters) if not p.determined]
+        infos = [information(*sens[c]) for c in range(len(designs))]
+        sequence = [
+            (designs[c].label, share) for c, share in greedy_sequence(infos, known, runs, open_idx)
+        ]
+        result = DesignResult(
+            open_, scores, runs, sets, placements, out_dir, sequence, [d.label for d, _ in fitted]
+        )
         write_design(result, out_dir, table_format)
     finally:
         lock.release()
     return result
+
+
+def _grids(rows: Sequence[Any], c: int, n_sets: int, n_seeds: int) -> dict[str, np.ndarray]:
+    """Case ``c``'s simulated quantities from the store's ``rows``: quantity -> sets x
+    placements (NaN where a run failed or has none)."""
+    grids = {q: np.full((n_sets, n_seeds), np.nan) for q in QUANTITIES}
+    for e in rows:
+        if e.iteration != c or e.status != "ok":
+            continue
+        i, j = divmod(e.slot, n_seeds)
+        values = {**e.details.quantities, "transit_time": e.transit_time}
+        for q in QUANTITIES:
+            v = values.get(q)
+            if v is not None and math.isfinite(float(v)):
+                grids[q][i, j] = float(v)
+    return grids
+
+
+def fitted_cases(study: Study) -> list[tuple[Design, int]]:
+    """The study's fitted test cases as designs (run by the study's own simulator) with the
+    real runs each was fitted on: all of its dataset's runs with the ensemble cost, the one
+    reference run with the published cost."""
+    from parcelfit.runs.dataset import load_dataset
+
+    out = []
+    for spec in study.cases:
+        c = spec.case
+        n = 1
+        if study.cost_kind == "ensemble":
+            try:
+                n = max(1, len(load_dataset(spec.dataset)[c].runs))
+            except ParcelfitError:
+                n = 1
+        out.append((Design(c.rig, c.consignment, c.rig, c.consignment, c.speed_setting), n))
+    return out
 
 
 def write_design(result: DesignResult, out: Path, table_format: str = "csv") -> list[Path]:
@@ -532,6 +646,7 @@ def write_design(result: DesignResult, out: Path, table_format: str = "csv") -> 
         "runs": result.runs,
         "sets": result.sets,
         "placements": result.placements,
+        "fitted": result.fitted,
         "candidates": records(tables[0][1]),
         "ranking": records(tables[1][1]),
     }
@@ -550,8 +665,13 @@ __all__ = [
     "DesignResult",
     "candidate_designs",
     "expected_width",
+    "fitted_cases",
+    "greedy_sequence",
+    "information",
     "rank_experiments",
     "runs_needed",
     "score_candidate",
+    "sensitivity",
+    "shares_of",
     "write_design",
 ]
