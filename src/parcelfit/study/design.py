@@ -18,7 +18,8 @@ time, rotation, exit position and heading). For quantity q:
 * its sensitivity J_qp to parameter p is the change of q's per-set mean over p's plausible
   interval, from the least-squares fit of the per-set means on all parameters scaled to their
   intervals (`parcelfit.study.spread.effects_of`); an effect smaller than twice its standard
-  error counts as zero;
+  error counts as zero (with few sets a parameter can borrow another's effect where a
+  quantity bends: more sets, fewer such false effects);
 * its run-to-run scatter is s_q^2 = W_q + f_q^2: W_q the mean within-set variance over the
   placements (`parcelfit.study.spread.decompose`) and f_q a measurement floor (`FLOOR`: the
   band test's tolerances, 3 mm and 1 degree, for the exit position and the angles, 2 ms for
@@ -30,25 +31,33 @@ time, rotation, exit position and heading). For quantity q:
 The signal-to-noise of p on the candidate is max_q |J_qp| / s_q: how many run-to-run standard
 deviations the outcome moves as p crosses its plausible interval.
 
+**What the fitted cases tell.** The study's fitted test cases are simulated at the same sets
+and placements and give their own J_f and s_f: they hold the information
+F = sum_f n_f J_f^T S_f^-1 J_f (n_f: the real runs each was fitted on: its dataset's runs with
+the ensemble cost, the reference run with the published cost). A candidate on which an open
+parameter and a parameter the fitted cases fix act alike thus tells the open one.
+
 **Expected interval after n real runs** (a linear-Gaussian experimental design). In interval
 units (each parameter's plausible interval mapped to [0, 1]), n real runs of the candidate
 measure each quantity's mean with variance s_q^2 / n; with the uniform prior over the interval
-(variance 1/12, precision 12), the posterior covariance of the parameters is
+(variance 1/12, precision 12) and the fitted cases' F, the posterior covariance is
 
-    C(n) = ( n J^T S^-1 J + 12 I )^-1,   S = diag(s_q^2),
+    C(n) = ( n J^T S^-1 J + F + 12 I )^-1,   S = diag(s_q^2),
 
-and the expected interval of p after the runs, as a share of its current interval, is the
-ratio of the posterior to the prior standard deviation, w_p(n) = sqrt(12 C_pp(n)) (1: no
-narrowing; the current interval is taken as the prior's, so a 90 % interval shrinks in the
-same ratio). A candidate that moves two parameters alike cannot tell them apart, and C says so
-(the inverse of a nearly singular information). The runs a candidate needs for p are the
-smallest n (up to `MAX_RUNS`) at which w_p(n) times the current interval is at most 20 % of
-p's range, the width `parcelfit.study.identify` calls determined (none: not within
-`MAX_RUNS`).
+and the expected interval of p after the runs, as a share of its current interval, is
+w_p(n) = sqrt(C_pp(n) / C_pp(0)) (1: no narrowing). Today's interval is wider than F alone
+says (the plausible set allows for the misfit of real runs), so the share is what the
+candidate adds to what the fitted cases tell, applied to today's interval. A candidate that
+moves two parameters alike cannot tell them apart unless F fixes one, and C says so. The runs
+a candidate needs for p are the smallest n (up to `MAX_RUNS`) at which w_p(n) times the
+current interval is at most 20 % of p's range, the width `parcelfit.study.identify` calls
+determined (none: not within `MAX_RUNS`).
 
 **Ranking.** Per parameter, the candidates by the expected width after ``--runs`` real runs
-(ties by the signal-to-noise); overall, by the mean expected width share over the parameters
-the data leave open.
+(ties by the signal-to-noise). Overall, greedily: first the candidate with the smallest mean
+share over the open parameters, then each time the one whose runs, added to those of the
+candidates above it, leave the smallest mean share (``with_above``), so that the second
+experiment is the best one given the first, not the first rig at another setting.
 
 **Resumable** like a prediction: every simulation is recorded in ``design.sqlite`` in the output
 folder (rows of kind ``screen``; slot = candidate x N x K + set x K + placement), the inputs in
