@@ -17,9 +17,12 @@ time, rotation, exit position and heading). For quantity q:
 
 * its sensitivity J_qp to parameter p is the change of q's per-set mean over p's plausible
   interval, from the least-squares fit of the per-set means on all parameters scaled to their
-  intervals (`parcelfit.study.spread.effects_of`); an effect smaller than twice its standard
-  error counts as zero (with few sets a parameter can borrow another's effect where a
-  quantity bends: more sets, fewer such false effects);
+  intervals (`parcelfit.study.spread.effects_of`); an effect counts only when its t value
+  reaches Student's two-sided quantile for a 5 % chance that any of the case's quantities x
+  parameters shows an effect it does not have (Bonferroni; `resolved_t`: 3.5 standard errors
+  with 20 sets and 4 parameters, 5.3 with 10), else it counts as zero. Where a quantity bends
+  over the interval, the linear fit lends one parameter's effect to another at random; twice
+  the standard error let such false effects through;
 * its run-to-run scatter is s_q^2 = W_q + f_q^2: W_q the mean within-set variance over the
   placements (`parcelfit.study.spread.decompose`) and f_q a measurement floor (`FLOOR`: the
   band test's tolerances, 3 mm and 1 degree, for the exit position and the angles, 2 ms for
@@ -88,6 +91,16 @@ from parcelfit.sim.executors import Executor, Task
 from parcelfit.sim.factory import make_simulator
 from parcelfit.study.folderlock import check_writable, lock_folder
 from parcelfit.study.identify import DETERMINED_WIDTH, Identifiability
+from parcelfit.study.information import (
+    MAX_RUNS,
+    PRIOR_PRECISION,
+    expected_width,
+    greedy_sequence,
+    information,
+    resolved_t,
+    runs_needed,
+    shares_of,
+)
 from parcelfit.study.joint import require_placements, simulate_items
 from parcelfit.study.plausible import (
     Design,
@@ -111,10 +124,7 @@ from parcelfit.study.studyfile import Study
 
 DESIGN_STORE = "design.sqlite"
 DESIGN_FILE = "design.json"
-MAX_RUNS = 100  # the most real runs a candidate is asked for
 NARROWS = 0.99  # an expected interval share below this counts as narrowing the parameter
-PRIOR_PRECISION = 12.0  # of a uniform distribution on [0, 1]
-RESOLVED = 2.0  # an effect smaller than this many standard errors counts as zero
 # run-to-run measurement floor per quantity (SI): the band test's 3 mm and 1 degree, 2 ms
 FLOOR = {
     "transit_time": 0.002,
@@ -189,79 +199,6 @@ def candidate_designs(
     labels = [d.label for d in out]
     if len(set(labels)) != len(labels):
         raise ParcelfitError("a candidate is named twice", fix="give each candidate once")
-    return out
-
-
-def information(J: np.ndarray, scatter: np.ndarray) -> np.ndarray:
-    """The information of one real run (module docstring): J^T S^-1 J, ``J`` (quantities x
-    parameters, the changes over the intervals), ``scatter`` s_q (per quantity, same units);
-    parameters x parameters, in interval units."""
-    Js = np.asarray(J, float) / np.asarray(scatter, float)[:, None]
-    return Js.T @ Js
-
-
-def shares_of(gained: np.ndarray, known: np.ndarray | None = None) -> np.ndarray:
-    """Per parameter the expected interval as a share of today's (at most 1): the posterior
-    standard deviation with the information ``known`` (what the fitted cases tell; None:
-    nothing) plus ``gained`` (the new runs'), over that with ``known`` alone; both with the
-    uniform prior over today's intervals (precision 12 in interval units)."""
-    gained = np.asarray(gained, float)
-    d = gained.shape[0]
-    base = PRIOR_PRECISION * np.eye(d) + (0.0 if known is None else np.asarray(known, float))
-    before = np.diag(np.linalg.inv(base))
-    after = np.diag(np.linalg.inv(base + gained))
-    ratio = np.maximum(after, 0.0) / np.maximum(before, 1e-300)
-    return np.minimum(1.0, np.sqrt(ratio))
-
-
-def expected_width(
-    J: np.ndarray, scatter: np.ndarray, runs: int, known: np.ndarray | None = None
-) -> np.ndarray:
-    """w_p(n) of the module docstring for every parameter: ``J`` (quantities x parameters, the
-    changes over the intervals), ``scatter`` s_q (per quantity, same units), ``runs`` n,
-    ``known`` the information the fitted cases hold (None: nothing); a share of the current
-    interval (at most 1)."""
-    return shares_of(runs * information(J, scatter), known)
-
-
-def runs_needed(
-    J: np.ndarray, scatter: np.ndarray, target: np.ndarray, known: np.ndarray | None = None
-) -> list[int | None]:
-    """Per parameter, the fewest real runs (1 to `MAX_RUNS`) after which the expected width
-    share (with the information ``known`` of the fitted cases) is at most ``target`` (a share
-    of the current interval); None when never."""
-    out: list[int | None] = [None] * J.shape[1]
-    one = information(J, scatter)
-    for n in range(1, MAX_RUNS + 1):
-        w = shares_of(n * one, known)
-        for p in range(J.shape[1]):
-            if out[p] is None and w[p] <= target[p]:
-                out[p] = n
-        if all(v is not None for v in out):
-            break
-    return out
-
-
-def greedy_sequence(
-    infos: Sequence[np.ndarray], known: np.ndarray | None, runs: int, open_: Sequence[int]
-) -> list[tuple[int, float]]:
-    """The candidates in the greedy order of the module docstring: ``infos`` their one-run
-    informations, ``known`` the fitted cases', ``runs`` real runs each, ``open_`` the indices
-    of the open parameters; each step takes the candidate whose runs, added to those of the
-    ones taken before, leave the smallest mean share over the open parameters (ties: the
-    earlier candidate). Returns (candidate index, that mean share) in order."""
-    if not infos:
-        return []
-    idx = list(open_)
-    taken = np.zeros_like(np.asarray(infos[0], float))
-    left = list(range(len(infos)))
-    out: list[tuple[int, float]] = []
-    while left:
-        means = [float(np.mean(shares_of(taken + runs * infos[c], known)[idx])) for c in left]
-        k = int(np.argmin(np.round(means, 12)))
-        out.append((left[k], means[k]))
-        taken = taken + runs * infos[left[k]]
-        left.pop(k)
     return out
 
 
@@ -383,6 +320,7 @@ def sensitivity(
     X = np.array([[s[n] for n in names] for s in sets], float)
     J = np.zeros((len(QUANTITIES), len(names)))
     scatter = np.ones(len(QUANTITIES))
+    resolved = resolved_t(len(sets), len(names))
     for k, q in enumerate(QUANTITIES):
         grid = grids[q]
         dec = decompose(grid)
@@ -394,7 +332,7 @@ def sensitivity(
                 np.nanmean(grid, axis=1) if np.isfinite(grid).any() else np.full(len(grid), np.nan)
             )
         eff, se = effects_of(means, X, intervals)
-        ok = np.isfinite(eff) & (np.abs(eff) >= RESOLVED * np.where(np.isfinite(se), se, np.inf))
+        ok = np.isfinite(eff) & (np.abs(eff) >= resolved * np.where(np.isfinite(se), se, np.inf))
         J[k] = np.where(ok, eff, 0.0)
     return J, scatter
 
@@ -448,7 +386,7 @@ def rank_experiments(
     *,
     candidates: Sequence[str] = (),
     rig_files: Sequence[str] = (),
-    sets: int = 10,
+    sets: int = 20,
     placements: int = 5,
     runs: int = 10,
     seed: int = 0,
@@ -670,6 +608,7 @@ __all__ = [
     "DESIGN_STORE",
     "FLOOR",
     "MAX_RUNS",
+    "PRIOR_PRECISION",
     "CandidateScore",
     "DesignResult",
     "candidate_designs",
@@ -678,6 +617,7 @@ __all__ = [
     "greedy_sequence",
     "information",
     "rank_experiments",
+    "resolved_t",
     "runs_needed",
     "score_candidate",
     "sensitivity",
