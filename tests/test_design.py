@@ -137,3 +137,15 @@ def test_the_greedy_second_choice_is_not_the_first_rig_at_another_setting():
     pair = shares_of(10 * (a2 + b))
     assert order[1][1] == pytest.approx(float(np.mean(pair)))
     assert pair[1] == pytest.approx(math.sqrt(12 / (12 + 10 * 16))) and pair[2] == 1.0
+
+
+def test_an_effect_counts_at_the_family_wise_t_quantile():
+    from scipy.stats import t
+
+    from parcelfit.study.design import resolved_t
+
+    # 4 quantities x 4 parameters share a 5 % chance of a false effect: t at 1 - 0.05 / 32
+    assert resolved_t(20, 4) == pytest.approx(t.ppf(1 - 0.05 / 32, 15))
+    assert resolved_t(20, 4) == pytest.approx(3.515, abs=1e-3)
+    assert resolved_t(10, 4) == pytest.approx(5.33, abs=0.01)
+    assert resolved_t(10, 4) > resolved_t(20, 4) > resolved_t(50, 4) > 3.0
