@@ -1,6 +1,6 @@
 """Does `parcelfit design` rank first the experiment that helps the calibration most?
 
-    python benchmarks/bench_design.py [--truths 3] [--budget 64] [--sets 10] [--placements 5]
+    python benchmarks/bench_design.py [--truths 3] [--budget 64] [--sets 20] [--placements 5]
         [--out bench-design]
 
 Run from the repository's root. The simulator is the analytic test simulator of the test suite
@@ -268,7 +268,7 @@ def main() -> None:
     )
     ap.add_argument("--truths", type=int, default=3)
     ap.add_argument("--budget", type=int, default=64, help="evaluations per calibration")
-    ap.add_argument("--sets", type=int, default=10, help="design's plausible parameter sets")
+    ap.add_argument("--sets", type=int, default=20, help="design's plausible parameter sets")
     ap.add_argument("--placements", type=int, default=5, help="design's placements per set")
     ap.add_argument("--out", type=Path, default=Path("bench-design"))
     args = ap.parse_args()

@@ -3,6 +3,7 @@ and a candidate built to depend strongly on a parameter ranks first for it."""
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -59,6 +60,10 @@ def test_the_candidate_built_to_depend_on_a_parameter_ranks_first_for_it(tmp_pat
     assert (on_r["expected_share"] > 0.999).all() and on_r["runs_needed"].isna().all()
     ranking = pd.read_csv(out / "ranking.csv")
     assert ranking.iloc[0]["candidate"].startswith("Q/")
+    # the fitted case is simulated too; after one Q candidate the other Q adds little
+    assert json.loads((out / "design.json").read_text())["fitted"] == ["R/P/1"]
+    assert ranking.iloc[0]["with_above"] == ranking.iloc[0]["mean_share"]
+    assert ranking.iloc[1]["with_above"] <= ranking.iloc[0]["with_above"]
     assert "E_Pa (undetermined): the experiments that narrow it most" in result.output
     again = runner.invoke(app, argv)  # resumes: nothing left to simulate, the same tables
     assert again.exit_code == 0
@@ -95,3 +100,52 @@ def test_the_bench_tests_are_candidates_with_every_bundled_type():
     named = candidate_designs(["E3/KPBW/1", "B1/KP/2"], bench)  # a --rig file by its name
     assert [d.label for d in named] == ["E3/KPBW/1", "B1/KP/2"]
     assert named[1].rig == bench[0]
+
+
+def test_a_candidate_that_informs_only_jointly_with_a_fitted_case_ranks_above_one_that_adds_nothing():
+    from parcelfit.study.design import greedy_sequence, information, shares_of
+
+    # parameters (p0, p1), both open; the fitted case measures p0 sharply (10 runs)
+    known = 10 * information(np.array([[1.0, 0.0]]), np.array([0.01]))
+    joint = information(np.array([[1.0, 1.0]]), np.array([0.01]))  # moves p0 and p1 alike
+    same = information(np.array([[0.0, 0.0]]), np.array([0.01]))  # moves nothing
+    alone = shares_of(10 * joint)  # on its own it cannot tell p0 from p1
+    assert (alone > 0.7).all()
+    given = shares_of(10 * joint, known)  # with the fitted case p1 is read off the sum
+    # p1's sd: sqrt(2e-5) (p0 + p1 and p0 each to 1e-5) over the prior's sqrt(1 / 12)
+    assert given[1] == pytest.approx(math.sqrt(12 * 2e-5), rel=1e-3)
+    assert given[0] > 0.999  # p0 is known already: nothing gained
+    assert shares_of(10 * same, known) == pytest.approx([1.0, 1.0])
+    order = greedy_sequence([same, joint], known, 10, [0, 1])
+    assert [c for c, _ in order] == [1, 0]
+    assert order[0][1] == pytest.approx(float(np.mean(given)))
+    assert order[1][1] == pytest.approx(order[0][1])  # nothing added by the second
+
+
+def test_the_greedy_second_choice_is_not_the_first_rig_at_another_setting():
+    from parcelfit.study.design import greedy_sequence, information, shares_of
+
+    s = np.array([0.1])
+    a1 = information(np.array([[1.0, 0.0, 0.0]]), s)  # rig A, setting 1: p0
+    a2 = information(np.array([[1.1, 0.0, 0.0]]), s)  # rig A, setting 2: p0 again, a bit more
+    b = information(np.array([[0.0, 0.4, 0.0]]), s)  # rig B: p1, weaker
+    one = [float(np.mean(shares_of(10 * i))) for i in (a1, a2, b)]
+    assert one[1] < one[0] < one[2]  # one by one: A2, A1, then B
+    order = greedy_sequence([a1, a2, b], None, 10, [0, 1, 2])
+    assert [c for c, _ in order] == [1, 2, 0]  # A2, then B (a new parameter), then A1
+    assert order[0][1] == pytest.approx(one[1])
+    pair = shares_of(10 * (a2 + b))
+    assert order[1][1] == pytest.approx(float(np.mean(pair)))
+    assert pair[1] == pytest.approx(math.sqrt(12 / (12 + 10 * 16))) and pair[2] == 1.0
+
+
+def test_an_effect_counts_at_the_family_wise_t_quantile():
+    from scipy.stats import t
+
+    from parcelfit.study.design import resolved_t
+
+    # 4 quantities x 4 parameters share a 5 % chance of a false effect: t at 1 - 0.05 / 32
+    assert resolved_t(20, 4) == pytest.approx(t.ppf(1 - 0.05 / 32, 15))
+    assert resolved_t(20, 4) == pytest.approx(3.515, abs=1e-3)
+    assert resolved_t(10, 4) == pytest.approx(5.33, abs=0.01)
+    assert resolved_t(10, 4) > resolved_t(20, 4) > resolved_t(50, 4) > 3.0

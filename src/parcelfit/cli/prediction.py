@@ -119,7 +119,7 @@ def design(
     ] = None,
     sets: Annotated[
         int, typer.Option(min=2, help="Parameter sets drawn from the plausible set.")
-    ] = 10,
+    ] = 20,
     placements: Annotated[
         int, typer.Option(min=1, help="Seeded placements simulated per set and candidate.")
     ] = 5,

@@ -171,14 +171,23 @@ def design_tables(result: DesignResult, top: int = 5) -> list[Table]:
             )
         tables.append(t)
     ranking = result.ranking_table().head(top)
-    t = Table(title="Overall: mean interval left over the open parameters", title_justify="left")
-    for col in ("rank", "candidate", "interval left", "narrows most", "determines"):
-        t.add_column(escape(col), justify="right" if col in ("rank", "interval left") else "left")
+    t = Table(
+        title="Overall: mean interval left over the open parameters; each candidate chosen "
+        "given the ones above",
+        title_justify="left",
+    )
+    cols = ("rank", "candidate", "interval left", "with the ones above", "narrows most")
+    for col in (*cols, "determines"):
+        t.add_column(
+            escape(col),
+            justify="right" if col in ("rank", "interval left", "with the ones above") else "left",
+        )
     for r in ranking.itertuples(index=False):
         t.add_row(
             str(r.rank),
             r.candidate,
             f"{r.mean_share * 100:.0f} %",
+            f"{r.with_above * 100:.0f} %",
             "-" if pd.isna(r.narrows_most) else str(r.narrows_most),
             str(r.determines) or "-",
         )

@@ -17,8 +17,12 @@ time, rotation, exit position and heading). For quantity q:
 
 * its sensitivity J_qp to parameter p is the change of q's per-set mean over p's plausible
   interval, from the least-squares fit of the per-set means on all parameters scaled to their
-  intervals (`parcelfit.study.spread.effects_of`); an effect smaller than twice its standard
-  error counts as zero;
+  intervals (`parcelfit.study.spread.effects_of`); an effect counts only when its t value
+  reaches Student's two-sided quantile for a 5 % chance that any of the case's quantities x
+  parameters shows an effect it does not have (Bonferroni; `resolved_t`: 3.5 standard errors
+  with 20 sets and 4 parameters, 5.3 with 10), else it counts as zero. Where a quantity bends
+  over the interval, the linear fit lends one parameter's effect to another at random; twice
+  the standard error let such false effects through;
 * its run-to-run scatter is s_q^2 = W_q + f_q^2: W_q the mean within-set variance over the
   placements (`parcelfit.study.spread.decompose`) and f_q a measurement floor (`FLOOR`: the
   band test's tolerances, 3 mm and 1 degree, for the exit position and the angles, 2 ms for
@@ -30,25 +34,33 @@ time, rotation, exit position and heading). For quantity q:
 The signal-to-noise of p on the candidate is max_q |J_qp| / s_q: how many run-to-run standard
 deviations the outcome moves as p crosses its plausible interval.
 
+**What the fitted cases tell.** The study's fitted test cases are simulated at the same sets
+and placements and give their own J_f and s_f: they hold the information
+F = sum_f n_f J_f^T S_f^-1 J_f (n_f: the real runs each was fitted on: its dataset's runs with
+the ensemble cost, the reference run with the published cost). A candidate on which an open
+parameter and a parameter the fitted cases fix act alike thus tells the open one.
+
 **Expected interval after n real runs** (a linear-Gaussian experimental design). In interval
 units (each parameter's plausible interval mapped to [0, 1]), n real runs of the candidate
 measure each quantity's mean with variance s_q^2 / n; with the uniform prior over the interval
-(variance 1/12, precision 12), the posterior covariance of the parameters is
+(variance 1/12, precision 12) and the fitted cases' F, the posterior covariance is
 
-    C(n) = ( n J^T S^-1 J + 12 I )^-1,   S = diag(s_q^2),
+    C(n) = ( n J^T S^-1 J + F + 12 I )^-1,   S = diag(s_q^2),
 
-and the expected interval of p after the runs, as a share of its current interval, is the
-ratio of the posterior to the prior standard deviation, w_p(n) = sqrt(12 C_pp(n)) (1: no
-narrowing; the current interval is taken as the prior's, so a 90 % interval shrinks in the
-same ratio). A candidate that moves two parameters alike cannot tell them apart, and C says so
-(the inverse of a nearly singular information). The runs a candidate needs for p are the
-smallest n (up to `MAX_RUNS`) at which w_p(n) times the current interval is at most 20 % of
-p's range, the width `parcelfit.study.identify` calls determined (none: not within
-`MAX_RUNS`).
+and the expected interval of p after the runs, as a share of its current interval, is
+w_p(n) = sqrt(C_pp(n) / C_pp(0)) (1: no narrowing). Today's interval is wider than F alone
+says (the plausible set allows for the misfit of real runs), so the share is what the
+candidate adds to what the fitted cases tell, applied to today's interval. A candidate that
+moves two parameters alike cannot tell them apart unless F fixes one, and C says so. The runs
+a candidate needs for p are the smallest n (up to `MAX_RUNS`) at which w_p(n) times the
+current interval is at most 20 % of p's range, the width `parcelfit.study.identify` calls
+determined (none: not within `MAX_RUNS`).
 
 **Ranking.** Per parameter, the candidates by the expected width after ``--runs`` real runs
-(ties by the signal-to-noise); overall, by the mean expected width share over the parameters
-the data leave open.
+(ties by the signal-to-noise). Overall, greedily: first the candidate with the smallest mean
+share over the open parameters, then each time the one whose runs, added to those of the
+candidates above it, leave the smallest mean share (``with_above``), so that the second
+experiment is the best one given the first, not the first rig at another setting.
 
 **Resumable** like a prediction: every simulation is recorded in ``design.sqlite`` in the output
 folder (rows of kind ``screen``; slot = candidate x N x K + set x K + placement), the inputs in
@@ -64,7 +76,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -76,8 +88,19 @@ from parcelfit.errors import ParcelfitError, shown
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.sim.ensemble import MAX_PLACEMENTS
 from parcelfit.sim.executors import Executor, Task
+from parcelfit.sim.factory import make_simulator
 from parcelfit.study.folderlock import check_writable, lock_folder
 from parcelfit.study.identify import DETERMINED_WIDTH, Identifiability
+from parcelfit.study.information import (
+    MAX_RUNS,
+    PRIOR_PRECISION,
+    expected_width,
+    greedy_sequence,
+    information,
+    resolved_t,
+    runs_needed,
+    shares_of,
+)
 from parcelfit.study.joint import require_placements, simulate_items
 from parcelfit.study.plausible import (
     Design,
@@ -97,13 +120,11 @@ from parcelfit.study.predict import (
 )
 from parcelfit.study.spread import decompose, effects_of
 from parcelfit.study.store import Store
+from parcelfit.study.studyfile import Study
 
 DESIGN_STORE = "design.sqlite"
 DESIGN_FILE = "design.json"
-MAX_RUNS = 100  # the most real runs a candidate is asked for
 NARROWS = 0.99  # an expected interval share below this counts as narrowing the parameter
-PRIOR_PRECISION = 12.0  # of a uniform distribution on [0, 1]
-RESOLVED = 2.0  # an effect smaller than this many standard errors counts as zero
 # run-to-run measurement floor per quantity (SI): the band test's 3 mm and 1 degree, 2 ms
 FLOOR = {
     "transit_time": 0.002,
@@ -181,32 +202,6 @@ def candidate_designs(
     return out
 
 
-def expected_width(J: np.ndarray, scatter: np.ndarray, runs: int) -> np.ndarray:
-    """w_p(n) of the module docstring for every parameter: ``J`` (quantities x parameters, the
-    changes over the intervals), ``scatter`` s_q (per quantity, same units), ``runs`` n; a
-    share of the current interval (the posterior over the prior standard deviation, at most
-    1)."""
-    J = np.asarray(J, float)
-    d = J.shape[1]
-    info = runs * (J / np.asarray(scatter, float)[:, None]).T @ (J / np.asarray(scatter)[:, None])
-    cov = np.linalg.inv(info + PRIOR_PRECISION * np.eye(d))
-    return np.minimum(1.0, np.sqrt(PRIOR_PRECISION * np.maximum(np.diag(cov), 0.0)))
-
-
-def runs_needed(J: np.ndarray, scatter: np.ndarray, target: np.ndarray) -> list[int | None]:
-    """Per parameter, the fewest real runs (1 to `MAX_RUNS`) after which the expected width
-    share is at most ``target`` (a share of the current interval); None when never."""
-    out: list[int | None] = [None] * J.shape[1]
-    for n in range(1, MAX_RUNS + 1):
-        w = expected_width(J, scatter, n)
-        for p in range(J.shape[1]):
-            if out[p] is None and w[p] <= target[p]:
-                out[p] = n
-        if all(v is not None for v in out):
-            break
-    return out
-
-
 @dataclass(frozen=True)
 class CandidateScore:
     """What one candidate would tell about one open parameter (module docstring): the
@@ -227,8 +222,9 @@ class CandidateScore:
 
 @dataclass(frozen=True, eq=False)
 class DesignResult:
-    """A finished ranking: the open parameters, the candidates' scores, the runs assumed and
-    where it was written."""
+    """A finished ranking: the open parameters, the candidates' scores, the runs assumed,
+    where it was written, the greedy order (candidate label, mean share with the ones before;
+    empty: by the mean share alone) and the fitted cases taken into account (labels)."""
 
     parameters: list[str]
     scores: list[CandidateScore]
@@ -236,6 +232,8 @@ class DesignResult:
     sets: int
     placements: int
     out: Path | None = None
+    sequence: list[tuple[str, float]] = field(default_factory=list)
+    fitted: list[str] = field(default_factory=list)
 
     def candidates_table(self) -> pd.DataFrame:
         """One row per candidate and open parameter, ranked per parameter (docs/data.md)."""
@@ -271,8 +269,8 @@ class DesignResult:
         return df
 
     def ranking_table(self) -> pd.DataFrame:
-        """One row per candidate, by the mean expected width share over the open parameters
-        (docs/data.md)."""
+        """One row per candidate in the greedy order of the module docstring (without one: by
+        the mean expected width share over the open parameters) (docs/data.md)."""
         by: dict[str, list[CandidateScore]] = {}
         for s in self.scores:
             by.setdefault(s.candidate.label, []).append(s)
@@ -291,8 +289,16 @@ class DesignResult:
                     ),
                 }
             )
-        df = pd.DataFrame(rows, columns=["candidate", "mean_share", "narrows_most", "determines"])
-        df = df.sort_values(["mean_share", "candidate"], kind="stable").reset_index(drop=True)
+        cols = ["candidate", "mean_share", "narrows_most", "determines"]
+        df = pd.DataFrame(rows, columns=cols)
+        if self.sequence:
+            order = {label: i for i, (label, _) in enumerate(self.sequence)}
+            df["with_above"] = df["candidate"].map(dict(self.sequence)).astype(float)
+            df = df.sort_values("candidate", key=lambda c: c.map(order), kind="stable")
+        else:
+            df["with_above"] = df["mean_share"]
+            df = df.sort_values(["mean_share", "candidate"], kind="stable")
+        df = df.reset_index(drop=True)
         df.insert(0, "rank", range(1, len(df) + 1))
         return df
 
@@ -302,20 +308,19 @@ class DesignResult:
         return min(mine, key=lambda s: (s.share, -s.snr)) if mine else None
 
 
-def score_candidate(
-    design: Design,
-    ident: Identifiability,
-    sets: Sequence[dict[str, float]],
-    grids: dict[str, np.ndarray],
-    runs: int,
-) -> list[CandidateScore]:
-    """The scores of one candidate from its simulated quantities ``grids`` (quantity -> n sets
-    x K placements, NaN where a run has none), for every parameter the data do not determine."""
+def sensitivity(
+    ident: Identifiability, sets: Sequence[dict[str, float]], grids: dict[str, np.ndarray]
+) -> tuple[np.ndarray, np.ndarray]:
+    """One case's sensitivities J (quantities x parameters: the change of each quantity's
+    per-set mean over each parameter's current interval, zero where unresolved) and
+    run-to-run scatter s_q (module docstring), from its simulated quantities ``grids``
+    (quantity -> n sets x K placements, NaN where a run has none) at ``sets``."""
     names = ident.names
     intervals = [p.interval for p in ident.parameters]
     X = np.array([[s[n] for n in names] for s in sets], float)
     J = np.zeros((len(QUANTITIES), len(names)))
     scatter = np.ones(len(QUANTITIES))
+    resolved = resolved_t(len(sets), len(names))
     for k, q in enumerate(QUANTITIES):
         grid = grids[q]
         dec = decompose(grid)
@@ -327,16 +332,31 @@ def score_candidate(
                 np.nanmean(grid, axis=1) if np.isfinite(grid).any() else np.full(len(grid), np.nan)
             )
         eff, se = effects_of(means, X, intervals)
-        ok = np.isfinite(eff) & (np.abs(eff) >= RESOLVED * np.where(np.isfinite(se), se, np.inf))
+        ok = np.isfinite(eff) & (np.abs(eff) >= resolved * np.where(np.isfinite(se), se, np.inf))
         J[k] = np.where(ok, eff, 0.0)
-    shares = expected_width(J, scatter, runs)
+    return J, scatter
+
+
+def score_candidate(
+    design: Design,
+    ident: Identifiability,
+    sets: Sequence[dict[str, float]],
+    grids: dict[str, np.ndarray],
+    runs: int,
+    known: np.ndarray | None = None,
+) -> list[CandidateScore]:
+    """The scores of one candidate from its simulated quantities ``grids`` (quantity -> n sets
+    x K placements, NaN where a run has none), for every parameter the data do not determine,
+    given the information ``known`` the fitted cases hold (None: nothing)."""
+    J, scatter = sensitivity(ident, sets, grids)
+    shares = expected_width(J, scatter, runs, known)
     target = np.array(
         [
             DETERMINED_WIDTH * (p.high - p.low) / max(p.interval[1] - p.interval[0], 1e-300)
             for p in ident.parameters
         ]
     )
-    needed = runs_needed(J, scatter, target)
+    needed = runs_needed(J, scatter, target, known)
     snr = np.abs(J) / scatter[:, None]
     n_ok = int(np.isfinite(grids["rotation"]).sum())
     out = []
@@ -366,7 +386,7 @@ def rank_experiments(
     *,
     candidates: Sequence[str] = (),
     rig_files: Sequence[str] = (),
-    sets: int = 10,
+    sets: int = 20,
     placements: int = 5,
     runs: int = 10,
     seed: int = 0,
@@ -409,7 +429,10 @@ def rank_experiments(
     out_dir = Path(out) if out is not None else inputs.folder / "design"
     if not open_:
         return DesignResult([], [], runs, sets, placements, out_dir)
-    simulators = [design_simulator(inputs.study, d) for d in designs]
+    fitted = fitted_cases(inputs.study)
+    cases = designs + [d for d, _ in fitted]  # the fitted cases simulated after the candidates
+    own = make_simulator(config) if fitted else None
+    simulators = [design_simulator(inputs.study, d) for d in designs] + [own for _ in fitted]
     for sim in simulators:
         require_placements(sim, placements, file=None, where="--placements")
     placed = callable(getattr(simulators[0], "with_placement", None))
@@ -425,6 +448,7 @@ def rank_experiments(
             record = {
                 "study": str(inputs.folder.resolve()),
                 "candidates": [[d.rig, d.consignment, d.setting] for d in designs],
+                "fitted": [[d.rig, d.consignment, d.setting, n] for d, n in fitted],
                 "seed": seed,
                 "sets": drawn,
                 "placements": seeds,
@@ -435,12 +459,13 @@ def rank_experiments(
             elif json.loads(json.dumps(known)) != json.loads(json.dumps(record)):
                 raise ParcelfitError(
                     "this folder holds an experiment design with other inputs (study, "
-                    "candidates, --sets, --placements or --seed)",
+                    "candidates, --sets, --placements or --seed; or one made by an earlier "
+                    "version, which did not simulate the fitted cases)",
                     file=out_dir,
                     fix="give another --out, or the same inputs to resume it",
                 )
             have = {e.iteration for e in store.evaluations("screen")}
-            for c, d in enumerate(designs):
+            for c, d in enumerate(cases):
                 if c not in have:  # one transaction per candidate: all its rows or none
                     store.add_pending(
                         "screen",
@@ -450,9 +475,7 @@ def rank_experiments(
                         [s for _ in full for s in seeds],
                     )
             if on_cost is not None:
-                on_cost(
-                    cost_line(inputs.study, designs, store, executor, workers, make is not None)
-                )
+                on_cost(cost_line(inputs.study, cases, store, executor, workers, make is not None))
             rows = store.evaluations("screen")
             total = len(rows)
             done = sum(e.status != "pending" for e in rows)
@@ -464,7 +487,7 @@ def rank_experiments(
             todo = [e for e in rows if e.status == "pending"]
             if todo:
                 with open_executor(executor, workers, scheduler, len(todo), make) as pool:
-                    for c, (d, sim) in enumerate(zip(designs, simulators, strict=True)):
+                    for c, (d, sim) in enumerate(zip(cases, simulators, strict=True)):
                         mine = [e for e in todo if e.iteration == c]
                         items = [
                             (
@@ -491,24 +514,62 @@ def rank_experiments(
             rows = store.evaluations("screen")
         finally:
             store.close()
+        grids = [_grids(rows, c, len(full), len(seeds)) for c in range(len(cases))]
+        sens = [sensitivity(ident, drawn, g) for g in grids]
+        known = sum(
+            (n * information(*sens[len(designs) + f]) for f, (_, n) in enumerate(fitted)),
+            np.zeros((len(ident.names),) * 2),
+        )
         scores: list[CandidateScore] = []
         for c, d in enumerate(designs):
-            grids = {q: np.full((len(full), len(seeds)), np.nan) for q in QUANTITIES}
-            for e in rows:
-                if e.iteration != c or e.status != "ok":
-                    continue
-                i, j = divmod(e.slot, len(seeds))
-                values = {**e.details.quantities, "transit_time": e.transit_time}
-                for q in QUANTITIES:
-                    v = values.get(q)
-                    if v is not None and math.isfinite(float(v)):
-                        grids[q][i, j] = float(v)
-            scores += score_candidate(d, ident, drawn, grids, runs)
-        result = DesignResult(open_, scores, runs, sets, placements, out_dir)
+            scores += score_candidate(d, ident, drawn, grids[c], runs, known)
+        open_idx = [j for j, p in enumerate(ident.parameters) if not p.determined]
+        infos = [information(*sens[c]) for c in range(len(designs))]
+        sequence = [
+            (designs[c].label, share) for c, share in greedy_sequence(infos, known, runs, open_idx)
+        ]
+        result = DesignResult(
+            open_, scores, runs, sets, placements, out_dir, sequence, [d.label for d, _ in fitted]
+        )
         write_design(result, out_dir, table_format)
     finally:
         lock.release()
     return result
+
+
+def _grids(rows: Sequence[Any], c: int, n_sets: int, n_seeds: int) -> dict[str, np.ndarray]:
+    """Case ``c``'s simulated quantities from the store's ``rows``: quantity -> sets x
+    placements (NaN where a run failed or has none)."""
+    grids = {q: np.full((n_sets, n_seeds), np.nan) for q in QUANTITIES}
+    for e in rows:
+        if e.iteration != c or e.status != "ok":
+            continue
+        i, j = divmod(e.slot, n_seeds)
+        values = {**e.details.quantities, "transit_time": e.transit_time}
+        for q in QUANTITIES:
+            v = values.get(q)
+            if v is not None and math.isfinite(float(v)):
+                grids[q][i, j] = float(v)
+    return grids
+
+
+def fitted_cases(study: Study) -> list[tuple[Design, int]]:
+    """The study's fitted test cases as designs (run by the study's own simulator) with the
+    real runs each was fitted on: all of its dataset's runs with the ensemble cost, the one
+    reference run with the published cost."""
+    from parcelfit.runs.dataset import load_dataset
+
+    out = []
+    for spec in study.cases:
+        c = spec.case
+        n = 1
+        if study.cost_kind == "ensemble":
+            try:
+                n = max(1, len(load_dataset(spec.dataset)[c].runs))
+            except ParcelfitError:
+                n = 1
+        out.append((Design(c.rig, c.consignment, c.rig, c.consignment, c.speed_setting), n))
+    return out
 
 
 def write_design(result: DesignResult, out: Path, table_format: str = "csv") -> list[Path]:
@@ -532,6 +593,7 @@ def write_design(result: DesignResult, out: Path, table_format: str = "csv") -> 
         "runs": result.runs,
         "sets": result.sets,
         "placements": result.placements,
+        "fitted": result.fitted,
         "candidates": records(tables[0][1]),
         "ranking": records(tables[1][1]),
     }
@@ -546,12 +608,19 @@ __all__ = [
     "DESIGN_STORE",
     "FLOOR",
     "MAX_RUNS",
+    "PRIOR_PRECISION",
     "CandidateScore",
     "DesignResult",
     "candidate_designs",
     "expected_width",
+    "fitted_cases",
+    "greedy_sequence",
+    "information",
     "rank_experiments",
+    "resolved_t",
     "runs_needed",
     "score_candidate",
+    "sensitivity",
+    "shares_of",
     "write_design",
 ]

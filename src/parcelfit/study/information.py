@@ -1,0 +1,114 @@
+"""The linear-Gaussian experimental design behind ``parcelfit design``
+(`parcelfit.study.design`, whose docstring states the formulas): the information of real runs
+of a case, the expected interval shares it leaves, the runs needed, the greedy order of
+candidates and the t value an effect must reach to count. Parameters are in interval units
+(each parameter's current interval mapped to [0, 1])."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from parcelfit.study.predict import QUANTITIES
+
+MAX_RUNS = 100  # the most real runs a candidate is asked for
+PRIOR_PRECISION = 12.0  # of a uniform distribution on [0, 1]
+FALSE_EFFECTS = 0.05  # the chance that a case shows any effect it does not have (t-test)
+
+
+def information(J: np.ndarray, scatter: np.ndarray) -> np.ndarray:
+    """The information of one real run (module docstring): J^T S^-1 J, ``J`` (quantities x
+    parameters, the changes over the intervals), ``scatter`` s_q (per quantity, same units);
+    parameters x parameters, in interval units."""
+    Js = np.asarray(J, float) / np.asarray(scatter, float)[:, None]
+    return Js.T @ Js
+
+
+def shares_of(gained: np.ndarray, known: np.ndarray | None = None) -> np.ndarray:
+    """Per parameter the expected interval as a share of today's (at most 1): the posterior
+    standard deviation with the information ``known`` (what the fitted cases tell; None:
+    nothing) plus ``gained`` (the new runs'), over that with ``known`` alone; both with the
+    uniform prior over today's intervals (precision 12 in interval units)."""
+    gained = np.asarray(gained, float)
+    d = gained.shape[0]
+    base = PRIOR_PRECISION * np.eye(d) + (0.0 if known is None else np.asarray(known, float))
+    before = np.diag(np.linalg.inv(base))
+    after = np.diag(np.linalg.inv(base + gained))
+    ratio = np.maximum(after, 0.0) / np.maximum(before, 1e-300)
+    return np.minimum(1.0, np.sqrt(ratio))
+
+
+def expected_width(
+    J: np.ndarray, scatter: np.ndarray, runs: int, known: np.ndarray | None = None
+) -> np.ndarray:
+    """w_p(n) of the module docstring for every parameter: ``J`` (quantities x parameters, the
+    changes over the intervals), ``scatter`` s_q (per quantity, same units), ``runs`` n,
+    ``known`` the information the fitted cases hold (None: nothing); a share of the current
+    interval (at most 1)."""
+    return shares_of(runs * information(J, scatter), known)
+
+
+def runs_needed(
+    J: np.ndarray, scatter: np.ndarray, target: np.ndarray, known: np.ndarray | None = None
+) -> list[int | None]:
+    """Per parameter, the fewest real runs (1 to `MAX_RUNS`) after which the expected width
+    share (with the information ``known`` of the fitted cases) is at most ``target`` (a share
+    of the current interval); None when never."""
+    out: list[int | None] = [None] * J.shape[1]
+    one = information(J, scatter)
+    for n in range(1, MAX_RUNS + 1):
+        w = shares_of(n * one, known)
+        for p in range(J.shape[1]):
+            if out[p] is None and w[p] <= target[p]:
+                out[p] = n
+        if all(v is not None for v in out):
+            break
+    return out
+
+
+def greedy_sequence(
+    infos: Sequence[np.ndarray], known: np.ndarray | None, runs: int, open_: Sequence[int]
+) -> list[tuple[int, float]]:
+    """The candidates in the greedy order of the module docstring: ``infos`` their one-run
+    informations, ``known`` the fitted cases', ``runs`` real runs each, ``open_`` the indices
+    of the open parameters; each step takes the candidate whose runs, added to those of the
+    ones taken before, leave the smallest mean share over the open parameters (ties: the
+    earlier candidate). Returns (candidate index, that mean share) in order."""
+    if not infos:
+        return []
+    idx = list(open_)
+    taken = np.zeros_like(np.asarray(infos[0], float))
+    left = list(range(len(infos)))
+    out: list[tuple[int, float]] = []
+    while left:
+        means = [float(np.mean(shares_of(taken + runs * infos[c], known)[idx])) for c in left]
+        k = int(np.argmin(np.round(means, 12)))
+        out.append((left[k], means[k]))
+        taken = taken + runs * infos[left[k]]
+        left.pop(k)
+    return out
+
+
+def resolved_t(n_sets: int, n_parameters: int) -> float:
+    """The t value an effect must reach to count (module docstring): the two-sided quantile of
+    Student's t (n_sets - n_parameters - 1 degrees of freedom) at `FALSE_EFFECTS` shared
+    over every quantity and parameter of a case (Bonferroni)."""
+    from scipy.stats import t
+
+    tests = len(QUANTITIES) * n_parameters
+    dof = max(n_sets - n_parameters - 1, 1)
+    return float(t.ppf(1.0 - FALSE_EFFECTS / (2 * tests), dof))
+
+
+__all__ = [
+    "FALSE_EFFECTS",
+    "MAX_RUNS",
+    "PRIOR_PRECISION",
+    "expected_width",
+    "greedy_sequence",
+    "information",
+    "resolved_t",
+    "runs_needed",
+    "shares_of",
+]
