@@ -98,3 +98,16 @@ def test_the_screen_stores_and_writes_what_it_did(tmp_path, monkeypatch, case):
             rtol=1e-10,
         )
     assert (out / "selection.yaml").read_text() == (GOLDEN / case / "selection.yaml").read_text()
+
+
+def test_a_fixed_design_asks_its_rows_in_order_and_is_done_when_all_are_told():
+    from parcelfit.study.loop import FixedDesign
+
+    design = FixedDesign([{"a": float(i)} for i in range(5)])
+    assert design.ask(2) == [{"a": 0.0}, {"a": 1.0}]
+    assert design.ask() == [{"a": 2.0}, {"a": 3.0}, {"a": 4.0}] and design.ask() == []
+    for i in range(4):
+        design.tell({"a": float(i)}, None if i == 1 else 1.0)
+    assert not design.done and design.n_told == 4
+    design.tell({"a": 4.0}, 2.0)
+    assert design.done
