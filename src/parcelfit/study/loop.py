@@ -9,7 +9,7 @@ happens between steps (validations, when to stop before the budget) is the calle
 (`parcelfit.study.calibration`).
 
 `FailureStreak` is the stop rule every loop shares: `FAILURES_IN_A_ROW` evaluations failing
-one after the other stop a calibration, a screening stage or a precision check with a
+one after the other stop a calibration or a screening stage with a
 `ParcelfitError` quoting the first failure, instead of spending the budget on a set-up that
 cannot work. `LOST_WORKER_MESSAGES` are the failures an earlier version stored when a worker or
 the Dask scheduler was lost (not the simulation): a resumed study runs them again.
