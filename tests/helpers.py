@@ -117,7 +117,7 @@ def write_study_store(folder: Path, dataset: Path | None) -> Path:
         store.finish(row, status=status, cost=cost)
     (val,) = store.add_pending("validation", 1, [points[3]], 2, [0])
     store.finish(val, status="ok", details=EvaluationDetails(passed=True))
-    store.write_recommended(RecommendedRecord(points[3], 0.3))
+    store.write_recommended(RecommendedRecord(params=points[3], cost=0.3))
     store.set_meta("stop_reason", "validation passed")
     store.close()
     return folder
@@ -172,7 +172,9 @@ def write_study_results(folder: Path, dataset: Path, optimizer=None) -> None:
             "E_Pa", np.linspace(200, 1600, 31), np.full(31, 0.5), np.full(31, 0.05), False
         ),
     )
-    optimizer = optimizer or OptimizerRecord("published", asdict(BOSettings.published()))
+    optimizer = optimizer or OptimizerRecord(
+        sampler="published", settings=asdict(BOSettings.published())
+    )
     write_results(
         folder,
         new_results(

@@ -219,7 +219,7 @@ def test_study_results_round_trip_through_results_json(tmp_path):
     failed = validation_record(sel, None, None, status="unstable", message="blew up")
     assert val.verdict is not None and val.band is not None and failed.verdict is None
     curve = DependenceCurve("E_Pa", np.linspace(200, 1600, 5), np.arange(5.0), np.ones(5), True)
-    opt = OptimizerRecord("published", {"batch": "kmeans"})
+    opt = OptimizerRecord(sampler="published", settings={"batch": "kmeans"})
     written = new_results(
         {"validation": ReferenceRecord.from_selection(sel)},
         [failed, val],
