@@ -167,9 +167,19 @@ def write_study_results(folder: Path, dataset: Path, optimizer=None) -> None:
     )
     xs = np.linspace(0.3, 0.6, 31)
     curves = (
-        DependenceCurve("mu_d_BePa", xs, (xs - 0.45) ** 2 * 100, np.full(31, 0.05), False),
         DependenceCurve(
-            "E_Pa", np.linspace(200, 1600, 31), np.full(31, 0.5), np.full(31, 0.05), False
+            name="mu_d_BePa",
+            values=xs,
+            cost=(xs - 0.45) ** 2 * 100,
+            sd=np.full(31, 0.05),
+            log=False,
+        ),
+        DependenceCurve(
+            name="E_Pa",
+            values=np.linspace(200, 1600, 31),
+            cost=np.full(31, 0.5),
+            sd=np.full(31, 0.05),
+            log=False,
         ),
     )
     optimizer = optimizer or OptimizerRecord(
@@ -186,7 +196,9 @@ def write_study_results(folder: Path, dataset: Path, optimizer=None) -> None:
             stop_reason="validation passed",
             surrogate=SurrogateRecord(optimizer, 3, curves),
             key_frames=KeyFramesRecord(
-                "R/P/2", params, note="Key frames are drawn for the MuJoCo backend only."
+                case="R/P/2",
+                params=params,
+                note="Key frames are drawn for the MuJoCo backend only.",
             ),
             identifiability=Identifiability(
                 (
