@@ -9,6 +9,8 @@ import math
 from pathlib import Path
 from typing import Any
 
+import pytest
+
 from parcelfit.study.precision_check import PrecisionCheck, run_precision_check
 from parcelfit.study.store import Store
 
@@ -71,3 +73,39 @@ def test_the_check_stores_and_judges_what_it_did(tmp_path):
     for g, w in zip(got["stored"], want["stored"], strict=True):
         assert _close(g, w), (g, w)
     assert _close(got["precision"], want["precision"])
+
+
+def test_a_check_whose_every_simulation_fails_stops_after_8_and_resumes_once_fixed(
+    tmp_path, monkeypatch
+):
+    """The study loop's failure streak: 8 simulations failing in a row before the first
+    success stop the check, quoting the first; the set-up fixed, a rerun simulates the failed
+    ones again and the rest."""
+    import yaml
+
+    from parcelfit.errors import ParcelfitError
+
+    study = _two_rig_study(tmp_path)
+    doc = yaml.safe_load(study.read_text())
+    doc["simulator"]["factory"] = "tests.fake_sim:make_broken"
+    study.write_text(yaml.safe_dump(doc))
+    out = tmp_path / "out"
+    with pytest.raises(ParcelfitError) as err:
+        run_precision_check(study, out, placements=2, executor="serial")
+    assert err.value.message.startswith(
+        "8 simulations in a row failed, so the run stopped early; the first: failed: "
+        "RuntimeError: solver licence expired"
+    )
+    assert err.value.file == str(out)
+    store = Store(out / "precision.sqlite", readonly=True)
+    statuses = [e.status for e in store.evaluations("precision")]
+    store.close()
+    assert len(statuses) == 28 and statuses.count("failed") == 8 and statuses.count("ok") == 0
+    monkeypatch.setenv("FAKE_SIM_FIXED", "1")
+    check = run_precision_check(study, out, placements=2, executor="serial")
+    assert check.simulated_now == check.simulations == 28
+    store = Store(out / "precision.sqlite", readonly=True)
+    statuses = [e.status for e in store.evaluations("precision")]
+    store.close()
+    # the 8 failed runs again, the 20 never tried (as new rows: a pending row keeps no case)
+    assert statuses.count("ok") == 28 and "failed" not in statuses

@@ -251,39 +251,34 @@ class FixedDesign:
 
 
 class DesignLoop:
-    """The ask/tell loop of a fixed design over the store (see the module doc): the rows of
-    ``kind`` at ``iteration`` (a screening stage), asked from ``sampler`` and stored with
-    speed setting ``setting`` and the store seeds ``seeds`` (one per row). ``evaluate``
-    simulates and stores pending rows, yielding each as stored; ``report`` receives a progress
-    line with ``done`` of ``total``. `FAILURES_IN_A_ROW` failing one after the other before the
-    stage's first success stop it (`FailureStreak`, whose message names ``folder``)."""
+    """The ask/tell loop of a fixed design over the store (see the module doc). ``rows``
+    returns the design's stored rows in the design's order (a screening stage: the store rows
+    of its iteration; a precision check: the rows matched to its runs); ``add``, given the
+    whole design as `FixedDesign` asks it, stores it as pending when none of it is stored yet
+    (None: the caller stores it). ``evaluate`` simulates and stores pending rows, yielding each
+    as stored; ``report`` receives each with its arrival number and how many were pending
+    (``done``, ``total``, the evaluation). `FAILURES_IN_A_ROW` failing one after the other
+    before the design's first success stop it (`FailureStreak`, whose message names
+    ``folder``)."""
 
     def __init__(
         self,
         sampler: FixedDesign,
-        store: Store,
-        kind: str,
-        iteration: int,
+        rows: Callable[[], list[Evaluation]],
+        add: Callable[[list[dict[str, float]]], object] | None,
         evaluate: Callable[[list[Evaluation]], Iterator[Evaluated]],
-        report: Callable[[str, int | None, int | None], None],
+        report: Callable[[int, int, Evaluated], None],
         folder: Path,
         *,
-        setting: int,
-        seeds: Sequence[int | None],
+        reopen: Callable[[list[int]], object],
     ) -> None:
         self.sampler = sampler
-        self.store = store
-        self.kind = kind
-        self.iteration = iteration
+        self.rows = rows
+        self._add = add
         self._evaluate = evaluate
         self._report = report
+        self._reopen = reopen
         self.folder = folder
-        self.setting = setting
-        self.seeds = list(seeds)
-
-    def rows(self) -> list[Evaluation]:
-        """The stored rows of the design, in the order they were asked."""
-        return [e for e in self.store.evaluations(self.kind) if e.iteration == self.iteration]
 
     def replay(self) -> list[Evaluation]:
         """Store the design as pending if none of it is stored yet; run again what failed
@@ -291,11 +286,11 @@ class DesignLoop:
         have been fixed since); tell the sampler every finished row; return the pending ones."""
         rows = self.rows()
         batch = self.sampler.ask()
-        if not rows:
-            self.store.add_pending(self.kind, self.iteration, batch, self.setting, self.seeds)
+        if not rows and self._add is not None:
+            self._add(batch)
             rows = self.rows()
         if not any(r.status == "ok" for r in rows):
-            self.store.reopen([r.id for r in rows if r.status != "pending"])
+            self._reopen([r.id for r in rows if r.status != "pending"])
             rows = self.rows()
         for r in rows:
             if r.status != "pending":
@@ -304,17 +299,15 @@ class DesignLoop:
 
     def evaluate(self, rows: list[Evaluation]) -> bool:
         """Evaluate the pending ``rows``, telling the sampler each as it is stored and
-        reporting ``(done of total done)``; True when the whole design is told. Only a streak
-        before the design's first success stops it: once one has succeeded, its failures are
-        a property of the design."""
+        reporting it; True when the whole design is told. Only a streak before the design's
+        first success stops it: once one has succeeded, its failures are a property of the
+        design."""
         streak = FailureStreak(FAILURES_IN_A_ROW, self.folder, until_success=True)
         streak.succeeded = any(r.status == "ok" for r in self.rows())
         tell_each(
             self._evaluate(rows),
             self.sampler,
             streak,
-            lambda k, done: self._report(
-                f"{done.status}: {done.label} ({k} of {len(rows)} done)", k, len(rows)
-            ),
+            lambda k, done: self._report(k, len(rows), done),
         )
         return self.sampler.done

@@ -403,11 +403,17 @@ def run_screen(
             )
             # one store row per simulation: design row i at placement k is slot i * K + k - 1
             batch = [{f: float(v) for f, v in zip(factors, run, strict=True)} for run in values]
+            stage_seeds = [seed or 0 for _ in batch for seed in seeds]
             loop = DesignLoop(
                 FixedDesign([p for p in batch for _ in seeds]),
-                store,
-                "screen",
-                stage,
+                partial(_stage_rows, store, stage),
+                partial(
+                    store.add_pending,
+                    "screen",
+                    stage,
+                    speed_setting=screen.case.speed_setting,
+                    seeds=stage_seeds,
+                ),
                 partial(
                     _simulate,
                     stage=stage,
@@ -419,10 +425,9 @@ def run_screen(
                     reference=reference,
                     n_rows=len(values),
                 ),
-                say,
+                lambda k, n, done: say(f"{done.status}: {done.label} ({k} of {n} done)", k, n),
                 out,
-                setting=screen.case.speed_setting,
-                seeds=[seed or 0 for _ in batch for seed in seeds],
+                reopen=store.reopen,
             )
             rows = loop.rows()
             if rows and sorted(rows[0].params) != sorted(factors):
@@ -532,6 +537,11 @@ def run_screen(
     }
     (out / "selection.yaml").write_text(yaml.safe_dump(doc, sort_keys=False), encoding="utf-8")
     return results, doc
+
+
+def _stage_rows(store: Store, stage: int) -> list[Evaluation]:
+    """The store rows of screening stage ``stage``, in the order they were asked."""
+    return [e for e in store.evaluations("screen") if e.iteration == stage]
 
 
 def _simulate(
