@@ -9,16 +9,18 @@ happens between steps (validations, when to stop before the budget) is the calle
 (`parcelfit.study.calibration`).
 
 `FailureStreak` is the stop rule every loop shares: `FAILURES_IN_A_ROW` evaluations failing
-one after the other stop a calibration or a screening stage with a
+one after the other stop a calibration (or, before their first success, a screening stage
+or a precision check) with a
 `ParcelfitError` quoting the first failure, instead of spending the budget on a set-up that
 cannot work. `LOST_WORKER_MESSAGES` are the failures an earlier version stored when a worker or
 the Dask scheduler was lost (not the simulation): a resumed study runs them again.
 `study_executor` makes the executor a study file (or the command line, first) asks for.
 
-`DesignLoop` is the same loop over a fixed design (a screening stage): its sampler is a
-`FixedDesign`, which asks the design's rows in order and is done when all of them are told. On
-a rerun it stores the design as pending only if the stage has no rows yet, runs again what
-failed while nothing of the stage has succeeded, and tells the sampler what is finished;
+`DesignLoop` is the same loop over a fixed design (a screening stage, the runs of a precision
+check): its sampler is a `FixedDesign`, which asks the design's rows in order and is done when
+all of them are told. On a rerun it stores the design as pending only if none of it is stored
+yet, runs again what failed while nothing of it has succeeded, and tells the sampler what is
+finished;
 evaluating, it tells the sampler each result as stored, reports ``done of total`` and stops on
 a streak of failures before the stage's first success. Both loops tell results through
 `tell_each`.

@@ -14,7 +14,10 @@ moment each arrives, with its statistics and the ridden speeds), so a killed or 
 check keeps every finished simulation and resumes with the others, as a study does, and a
 rerun with more candidates simulates only the new cases; a folder holding the runs of a check
 at another point, range or simulator is refused, never overwritten. (A ``statistics.json``
-kept by an earlier parcelfit is taken over.) The table goes to ``precision-check.md``.
+kept by an earlier parcelfit is taken over.) The simulations run through the study loop
+(`parcelfit.study.loop.DesignLoop`): 8 failing one after the other before the first success
+stop the check, quoting the first failure, and what failed runs again on a rerun while nothing
+has succeeded. The table goes to ``precision-check.md``.
 """
 
 from __future__ import annotations
