@@ -27,6 +27,7 @@ import math
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from itertools import groupby
 from pathlib import Path
 from typing import Any
@@ -299,6 +300,7 @@ class _CheckRuns:
                 spec.case.speed_setting,
                 [self.wanted[r][2] for r in ids],
                 first_slot=slot,
+                details=EvaluationDetails(case=spec.label),  # so a resumed check finds them
             )
             slot += len(ids)
         added = [e for e in self.store.evaluations("precision") if e.iteration == iteration]
@@ -325,7 +327,7 @@ class _CheckRuns:
             simulate,
             report,
             folder,
-            reopen=self.store.reopen,
+            reopen=partial(self.store.reopen, keep_case=True),
         )
         self._run_of = {e.id: r for r, e in self.rows.items()}
         todo = loop.replay()

@@ -470,17 +470,29 @@ class Store:
         seeds: Sequence[int | None],
         *,
         first_slot: int = 0,
+        details: EvaluationDetails | None = None,
     ) -> list[int]:
-        """Record a batch as pending (one transaction), in the slots from ``first_slot`` on;
+        """Record a batch as pending (one transaction), in the slots from ``first_slot`` on,
+        each with ``details`` if given (what identifies it before it is run: its test case);
         returns the row ids in batch order."""
         now = time.time()
         ids = []
+        stored = None if details is None else details.dumps()
         with self._transaction() as db:
             for slot, (params, seed) in enumerate(zip(batch, seeds, strict=True), first_slot):
                 cur = db.execute(
-                    "INSERT INTO evaluations (kind, iteration, slot, speed_setting, params, status, seed, asked_at) "
-                    "VALUES (?, ?, ?, ?, ?, 'pending', ?, ?)",
-                    (kind, iteration, slot, speed_setting, json.dumps(dict(params)), seed, now),
+                    "INSERT INTO evaluations (kind, iteration, slot, speed_setting, params, status, "
+                    "seed, asked_at, details) VALUES (?, ?, ?, ?, ?, 'pending', ?, ?, ?)",
+                    (
+                        kind,
+                        iteration,
+                        slot,
+                        speed_setting,
+                        json.dumps(dict(params)),
+                        seed,
+                        now,
+                        stored,
+                    ),
                 )
                 ids.append(int(cur.lastrowid))  # type: ignore[arg-type]
         return ids
@@ -521,15 +533,23 @@ class Store:
             if cur.rowcount != 1:
                 raise ParcelfitError(f"no evaluation with id {row_id} in {self.path}")
 
-    def reopen(self, row_ids: Sequence[int]) -> None:
-        """Make finished evaluations pending again (one transaction), so they run on resume."""
+    def reopen(self, row_ids: Sequence[int], *, keep_case: bool = False) -> None:
+        """Make finished evaluations pending again (one transaction), so they run on resume;
+        with ``keep_case`` their details keep their test case (and nothing else)."""
         with self._transaction() as db:
             for row_id in row_ids:
+                details = None
+                if keep_case:
+                    row = db.execute(
+                        "SELECT details FROM evaluations WHERE id = ?", (row_id,)
+                    ).fetchone()
+                    case = EvaluationDetails.parse(row[0] if row else None, self.path).case
+                    details = None if case is None else EvaluationDetails(case=case).dumps()
                 db.execute(
                     "UPDATE evaluations SET status = 'pending', cost = NULL, dtw_xy = NULL, "
                     "dtw_theta = NULL, transit_time = NULL, wall_time = NULL, finished_at = NULL, "
-                    "run_file = NULL, details = NULL WHERE id = ?",
-                    (row_id,),
+                    "run_file = NULL, details = ? WHERE id = ?",
+                    (details, row_id),
                 )
 
     def evaluations(self, kind: str | None = None) -> list[Evaluation]:
