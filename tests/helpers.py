@@ -194,7 +194,7 @@ def write_study_results(folder: Path, dataset: Path, optimizer=None) -> None:
             },
             [record],
             stop_reason="validation passed",
-            surrogate=SurrogateRecord(optimizer, 3, curves),
+            surrogate=SurrogateRecord(optimizer=optimizer, evaluations=3, curves=curves),
             key_frames=KeyFramesRecord(
                 case="R/P/2",
                 params=params,
@@ -215,6 +215,11 @@ def write_study_results(folder: Path, dataset: Path, optimizer=None) -> None:
                 0.1,
             ),
             transfer=[replace(record, after_iteration=None)],
-            advice=Advice({"R/P/2": {"E_Pa": 0.02}}, "R/P/2", ("E_Pa",), params),
+            advice=Advice(
+                changes={"R/P/2": {"E_Pa": 0.02}},
+                best="R/P/2",
+                parameters=("E_Pa",),
+                params=params,
+            ),
         ),
     )

@@ -226,7 +226,7 @@ def test_study_results_round_trip_through_results_json(tmp_path):
         {"validation": ReferenceRecord.from_selection(sel)},
         [failed, val],
         stop_reason="validation passed",
-        surrogate=SurrogateRecord(opt, 12, (curve,)),
+        surrogate=SurrogateRecord(optimizer=opt, evaluations=12, curves=(curve,)),
         key_frames=KeyFramesRecord(case="R/P/2", params={"mu_d_BePa": 0.5}, note="MuJoCo only"),
         figures=["figures/history.png"],
         identifiability=Identifiability(
@@ -239,7 +239,12 @@ def test_study_results_round_trip_through_results_json(tmp_path):
             0.1,
         ),
         transfer=[val],
-        advice=Advice({"R/P/2": {"E_Pa": 0.3}}, "R/P/2", ("E_Pa",), {"E_Pa": 9e8}),
+        advice=Advice(
+            changes={"R/P/2": {"E_Pa": 0.3}},
+            best="R/P/2",
+            parameters=("E_Pa",),
+            params={"E_Pa": 9e8},
+        ),
         cases=[{"case": "R/P/2", "role": "validation", "weight": 1.0}],
     )
     assert read_results(tmp_path) is None  # none written yet

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from parcelfit.study.identify import Advice
 from parcelfit.study.results import (
     BandRecord,
     DependenceCurve,
@@ -40,6 +41,7 @@ def test_a_results_file_reads_back_and_writes_the_same_bytes():
         (OptimizerRecord, lambda d: d["surrogate"]["optimizer"]),
         (DependenceCurve, lambda d: d["surrogate"]["curves"][0]),
         (BandRecord, lambda d: d["validations"][0]["band"]),
+        (Advice, lambda d: d["advice"]),
     ],
 )
 def test_a_results_record_reads_back_and_writes_the_same(kind, part):
@@ -66,3 +68,5 @@ def test_records_read_what_earlier_versions_left_out():
     best = RecommendedRecord.from_json({"params": {"E_Pa": 9e8}, "cost": 1})
     assert best.cost == 1.0 and isinstance(best.cost, float)
     assert json.dumps(best.to_json()) == '{"params": {"E_Pa": 900000000.0}, "cost": 1.0}'
+    advice = Advice.from_json({"changes": {"R/P/2": {"E_Pa": 1}}, "best": None})
+    assert (advice.parameters, advice.params, advice.changes) == ((), {}, {"R/P/2": {"E_Pa": 1.0}})

@@ -14,7 +14,6 @@ study simulates nothing again.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -241,7 +240,9 @@ class Finish:
         bo = surrogate_optimizer(record, self.store.evaluations("fit"))
         curves = dependence_curves(bo)
         return SurrogateRecord(
-            record.optimizer, bo.n_told, None if curves is None else tuple(curves)
+            optimizer=record.optimizer,
+            evaluations=bo.n_told,
+            curves=None if curves is None else tuple(curves),
         )
 
     def identifiability(self) -> Identifiability | None:
@@ -443,7 +444,7 @@ class Finish:
             self.study.w_xy,
             self.study.w_theta,
         )
-        advice = dataclasses.replace(advice, params={k: float(v) for k, v in params.items()})
+        advice = advice.model_copy(update={"params": {k: float(v) for k, v in params.items()}})
         self.store.set_meta(
             "advice",
             {"advice": advice.to_json(), "intervals": {k: list(v) for k, v in open_.items()}},

@@ -398,8 +398,7 @@ class DependenceCurve(_ArrayRecord):
         return float(np.max(self.cost) - np.min(self.cost))
 
 
-@dataclass(frozen=True, eq=False)
-class SurrogateRecord:
+class SurrogateRecord(_ArrayRecord):
     """The optimiser's GP surrogate behind the partial dependence plot: the settings it was refitted
     with (the store's record; `OptimizerRecord.note` says when defaults stood in), how many
     finished fitting evaluations it learnt, and its partial dependence curves (None before two
@@ -408,24 +407,6 @@ class SurrogateRecord:
     optimizer: OptimizerRecord
     evaluations: int
     curves: tuple[DependenceCurve, ...] | None
-
-    def to_json(self) -> dict[str, Any]:
-        """The stored form."""
-        return {
-            "optimizer": self.optimizer.to_json(),
-            "evaluations": self.evaluations,
-            "curves": None if self.curves is None else [c.to_json() for c in self.curves],
-        }
-
-    @classmethod
-    def from_json(cls, doc: Mapping[str, Any]) -> SurrogateRecord:
-        """Read the stored form."""
-        curves = doc.get("curves")
-        return cls(
-            OptimizerRecord.from_json(doc["optimizer"]),
-            int(doc["evaluations"]),
-            None if curves is None else tuple(DependenceCurve.from_json(c) for c in curves),
-        )
 
 
 class KeyFramesRecord(BaseModel):
