@@ -117,7 +117,7 @@ def write_study_store(folder: Path, dataset: Path | None) -> Path:
         store.finish(row, status=status, cost=cost)
     (val,) = store.add_pending("validation", 1, [points[3]], 2, [0])
     store.finish(val, status="ok", details=EvaluationDetails(passed=True))
-    store.write_recommended(RecommendedRecord(points[3], 0.3))
+    store.write_recommended(RecommendedRecord(params=points[3], cost=0.3))
     store.set_meta("stop_reason", "validation passed")
     store.close()
     return folder
@@ -167,12 +167,24 @@ def write_study_results(folder: Path, dataset: Path, optimizer=None) -> None:
     )
     xs = np.linspace(0.3, 0.6, 31)
     curves = (
-        DependenceCurve("mu_d_BePa", xs, (xs - 0.45) ** 2 * 100, np.full(31, 0.05), False),
         DependenceCurve(
-            "E_Pa", np.linspace(200, 1600, 31), np.full(31, 0.5), np.full(31, 0.05), False
+            name="mu_d_BePa",
+            values=xs,
+            cost=(xs - 0.45) ** 2 * 100,
+            sd=np.full(31, 0.05),
+            log=False,
+        ),
+        DependenceCurve(
+            name="E_Pa",
+            values=np.linspace(200, 1600, 31),
+            cost=np.full(31, 0.5),
+            sd=np.full(31, 0.05),
+            log=False,
         ),
     )
-    optimizer = optimizer or OptimizerRecord("published", asdict(BOSettings.published()))
+    optimizer = optimizer or OptimizerRecord(
+        sampler="published", settings=asdict(BOSettings.published())
+    )
     write_results(
         folder,
         new_results(
@@ -182,9 +194,11 @@ def write_study_results(folder: Path, dataset: Path, optimizer=None) -> None:
             },
             [record],
             stop_reason="validation passed",
-            surrogate=SurrogateRecord(optimizer, 3, curves),
+            surrogate=SurrogateRecord(optimizer=optimizer, evaluations=3, curves=curves),
             key_frames=KeyFramesRecord(
-                "R/P/2", params, note="Key frames are drawn for the MuJoCo backend only."
+                case="R/P/2",
+                params=params,
+                note="Key frames are drawn for the MuJoCo backend only.",
             ),
             identifiability=Identifiability(
                 (
@@ -201,6 +215,11 @@ def write_study_results(folder: Path, dataset: Path, optimizer=None) -> None:
                 0.1,
             ),
             transfer=[replace(record, after_iteration=None)],
-            advice=Advice({"R/P/2": {"E_Pa": 0.02}}, "R/P/2", ("E_Pa",), params),
+            advice=Advice(
+                changes={"R/P/2": {"E_Pa": 0.02}},
+                best="R/P/2",
+                parameters=("E_Pa",),
+                params=params,
+            ),
         ),
     )

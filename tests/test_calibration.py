@@ -218,14 +218,16 @@ def test_study_results_round_trip_through_results_json(tmp_path):
     val = validation_record(sel, traj, transit, params={"mu_d_BePa": 0.5}, after_iteration=3)
     failed = validation_record(sel, None, None, status="unstable", message="blew up")
     assert val.verdict is not None and val.band is not None and failed.verdict is None
-    curve = DependenceCurve("E_Pa", np.linspace(200, 1600, 5), np.arange(5.0), np.ones(5), True)
-    opt = OptimizerRecord("published", {"batch": "kmeans"})
+    curve = DependenceCurve(
+        name="E_Pa", values=np.linspace(200, 1600, 5), cost=np.arange(5.0), sd=np.ones(5), log=True
+    )
+    opt = OptimizerRecord(sampler="published", settings={"batch": "kmeans"})
     written = new_results(
         {"validation": ReferenceRecord.from_selection(sel)},
         [failed, val],
         stop_reason="validation passed",
-        surrogate=SurrogateRecord(opt, 12, (curve,)),
-        key_frames=KeyFramesRecord("R/P/2", {"mu_d_BePa": 0.5}, note="MuJoCo only"),
+        surrogate=SurrogateRecord(optimizer=opt, evaluations=12, curves=(curve,)),
+        key_frames=KeyFramesRecord(case="R/P/2", params={"mu_d_BePa": 0.5}, note="MuJoCo only"),
         figures=["figures/history.png"],
         identifiability=Identifiability(
             (ParameterInterval("E_Pa", 2e8, 1.6e9, (3e8, 1.5e9), 9e8, "narrowed", 1.01),),
@@ -237,7 +239,12 @@ def test_study_results_round_trip_through_results_json(tmp_path):
             0.1,
         ),
         transfer=[val],
-        advice=Advice({"R/P/2": {"E_Pa": 0.3}}, "R/P/2", ("E_Pa",), {"E_Pa": 9e8}),
+        advice=Advice(
+            changes={"R/P/2": {"E_Pa": 0.3}},
+            best="R/P/2",
+            parameters=("E_Pa",),
+            params={"E_Pa": 9e8},
+        ),
         cases=[{"case": "R/P/2", "role": "validation", "weight": 1.0}],
     )
     assert read_results(tmp_path) is None  # none written yet

@@ -83,10 +83,14 @@ def test_the_meta_records_round_trip_by_type(tmp_path):
         seed=5,
         fit_setting=1,
         validation_setting=2,
-        optimizer=OptimizerRecord("published", {"batch": "kmeans", "noise": "fixed"}),
+        optimizer=OptimizerRecord(
+            sampler="published", settings={"batch": "kmeans", "noise": "fixed"}
+        ),
     )
-    source = SourceRecord("/s/study.yaml", "/s/data", "E3", "KPBW")
-    best = RecommendedRecord({"mu_d_BePa": 0.45, "E_Pa": 9e8}, 0.25)
+    source = SourceRecord(
+        study_file="/s/study.yaml", dataset="/s/data", rig="E3", consignment="KPBW"
+    )
+    best = RecommendedRecord(params={"mu_d_BePa": 0.45, "E_Pa": 9e8}, cost=0.25)
     store = Store(tmp_path / "study.sqlite")
     assert store.read_study() is None and store.read_recommended() is None
     store.write_study(study)

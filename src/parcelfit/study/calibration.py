@@ -108,7 +108,8 @@ def study_record(study: Study, sampler: Sampler) -> StudyRecord:
         fit_setting=study.fit_setting,
         validation_setting=study.validation_setting,
         optimizer=OptimizerRecord(
-            study.sampler, None if settings is None else dataclasses.asdict(settings)
+            sampler=study.sampler,
+            settings=None if settings is None else dataclasses.asdict(settings),
         ),
     )
 
@@ -459,7 +460,7 @@ class Calibration:
         fits = self.store.evaluations("fit")
         self.store.set_meta("stop_reason", reason)
         if best is not None:
-            self.store.write_recommended(RecommendedRecord(best[0], best[1]))
+            self.store.write_recommended(RecommendedRecord(params=best[0], cost=best[1]))
         return CalibrationResult(
             best_params=None if best is None else best[0],
             best_cost=None if best is None else best[1],

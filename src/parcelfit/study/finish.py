@@ -14,10 +14,8 @@ study simulates nothing again.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import replace
 from pathlib import Path
 
 from parcelfit.errors import ParcelfitError
@@ -242,7 +240,9 @@ class Finish:
         bo = surrogate_optimizer(record, self.store.evaluations("fit"))
         curves = dependence_curves(bo)
         return SurrogateRecord(
-            record.optimizer, bo.n_told, None if curves is None else tuple(curves)
+            optimizer=record.optimizer,
+            evaluations=bo.n_told,
+            curves=None if curves is None else tuple(curves),
         )
 
     def identifiability(self) -> Identifiability | None:
@@ -444,7 +444,7 @@ class Finish:
             self.study.w_xy,
             self.study.w_theta,
         )
-        advice = dataclasses.replace(advice, params={k: float(v) for k, v in params.items()})
+        advice = advice.model_copy(update={"params": {k: float(v) for k, v in params.items()}})
         self.store.set_meta(
             "advice",
             {"advice": advice.to_json(), "intervals": {k: list(v) for k, v in open_.items()}},
@@ -460,9 +460,11 @@ class Finish:
         from parcelfit.sim.mujoco import MujocoSimulator
 
         case = self.val_case or self.fit_case
-        record = KeyFramesRecord(case.label, dict(params))
+        record = KeyFramesRecord(case=case.label, params=dict(params))
         if not isinstance(self.simulator, MujocoSimulator):
-            return replace(record, note="Key frames are drawn for the MuJoCo backend only."), []
+            return record.model_copy(
+                update={"note": "Key frames are drawn for the MuJoCo backend only."}
+            ), []
         stem = self.folder / "figures" / "key-frames"
         gif = self.folder / "figures" / "run.gif"
         earlier = self._earlier_results()
@@ -486,17 +488,17 @@ class Finish:
                 animation=gif if self.animation else None,
             )
         except Exception as exc:  # a figure must not cost the study its results
-            return replace(record, note=f"The key-frame run failed: {exc}"), []
+            return record.model_copy(update={"note": f"The key-frame run failed: {exc}"}), []
         if drawn.figure is None:
-            return replace(record, note=f"The key-frame run ended {drawn.status}."), []
+            return record.model_copy(
+                update={"note": f"The key-frame run ended {drawn.status}."}
+            ), []
         paths = save_figure(drawn.figure, stem)
-        return replace(
-            record,
-            image=paths[0].relative_to(self.folder).as_posix(),
-            animation=None
-            if drawn.animation is None
-            else drawn.animation.relative_to(self.folder).as_posix(),
-        ), paths
+        image = paths[0].relative_to(self.folder).as_posix()
+        animation = (
+            None if drawn.animation is None else drawn.animation.relative_to(self.folder).as_posix()
+        )
+        return record.model_copy(update={"image": image, "animation": animation}), paths
 
     def _earlier_results(self) -> StudyResults | None:
         """The results an earlier run of this folder wrote (None if none or unreadable)."""

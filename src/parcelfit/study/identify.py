@@ -82,11 +82,12 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from functools import cached_property
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
+from pydantic import BaseModel, BeforeValidator, ConfigDict
 from scipy.linalg import solve_triangular
 from scipy.spatial.distance import cdist
 from scipy.special import log_ndtr
@@ -247,35 +248,27 @@ class Identifiability:
         )
 
 
-@dataclass(frozen=True)
-class Advice:
+class Advice(BaseModel):
     """Which candidate case responds most to the undetermined parameters: per case the change
     Delta_k (`parcelfit.study.joint`) per parameter, and the best case (None if none could be
     simulated)."""
 
+    model_config = ConfigDict(frozen=True)
+
     changes: dict[str, dict[str, float]]  # case label -> parameter -> Delta
-    best: str | None
-    parameters: tuple[str, ...]
-    params: dict[str, float] = field(default_factory=dict)  # the calibrated set simulated (SI)
+    best: str | None = None
+    parameters: Annotated[tuple[str, ...], BeforeValidator(lambda v: v or ())] = ()
+    # the calibrated set simulated (SI)
+    params: Annotated[dict[str, float], BeforeValidator(lambda v: v or {})] = {}
 
     def to_json(self) -> dict[str, Any]:
         """The stored form."""
-        return {
-            "changes": self.changes,
-            "best": self.best,
-            "parameters": list(self.parameters),
-            "params": dict(self.params),
-        }
+        return self.model_dump()
 
     @classmethod
     def from_json(cls, doc: Mapping[str, Any]) -> Advice:
-        """Read the stored form."""
-        return cls(
-            {str(c): {str(p): float(v) for p, v in d.items()} for c, d in doc["changes"].items()},
-            doc.get("best"),
-            tuple(doc.get("parameters") or ()),
-            {str(k): float(v) for k, v in (doc.get("params") or {}).items()},
-        )
+        """Read the stored form (missing parameters or params: none)."""
+        return cls.model_validate(dict(doc))
 
 
 def verdict(low: float, high: float, interval: tuple[float, float]) -> str:

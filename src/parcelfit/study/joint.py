@@ -294,7 +294,7 @@ def advise(
         changes[spec.label] = per
     scored = {c: sum(v.values()) for c, v in changes.items() if v}
     best = max(scored, key=lambda c: scored[c]) if scored else None
-    return Advice(changes, best, tuple(intervals))
+    return Advice(changes=changes, best=best, parameters=tuple(intervals))
 
 
 __all__ = [

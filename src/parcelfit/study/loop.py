@@ -9,17 +9,28 @@ happens between steps (validations, when to stop before the budget) is the calle
 (`parcelfit.study.calibration`).
 
 `FailureStreak` is the stop rule every loop shares: `FAILURES_IN_A_ROW` evaluations failing
-one after the other stop a calibration, a screening stage or a precision check with a
+one after the other stop a calibration (or, before their first success, a screening stage
+or a precision check) with a
 `ParcelfitError` quoting the first failure, instead of spending the budget on a set-up that
 cannot work. `LOST_WORKER_MESSAGES` are the failures an earlier version stored when a worker or
 the Dask scheduler was lost (not the simulation): a resumed study runs them again.
 `study_executor` makes the executor a study file (or the command line, first) asks for.
+
+`DesignLoop` is the same loop over a fixed design (a screening stage, the runs of a precision
+check): its sampler is a `FixedDesign`, which asks the design's rows in order and is done when
+all of them are told. On a rerun it stores the design as pending only if none of it is stored
+yet, runs again what failed while nothing of it has succeeded, and tells the sampler what is
+finished;
+evaluating, it tells the sampler each result as stored, reports ``done of total`` and stops on
+a streak of failures before the stage's first success. Both loops tell results through
+`tell_each`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
+from typing import Protocol
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.optimize.sampler import Sampler
@@ -83,6 +94,29 @@ class FailureStreak:
                 fix="fix the cause the first failure names, then rerun the same command to "
                 "resume (what failed is run again while nothing has succeeded yet)",
             )
+
+
+class Teller(Protocol):
+    """What a loop tells results to: a `Sampler` or a `FixedDesign`."""
+
+    def tell(self, params: Mapping[str, float], cost: float | None) -> None:
+        """Report an evaluated parameter set's cost (None: failed)."""
+        ...
+
+
+def tell_each(
+    evaluated: Iterable[Evaluated],
+    sampler: Teller,
+    streak: FailureStreak,
+    report: Callable[[int, Evaluated], None],
+) -> None:
+    """Tell ``sampler`` each evaluation the moment it is stored (a failure as None), pass it
+    to ``report`` with its 1-based arrival number, then count it in ``streak`` (which raises
+    when too many failed in a row)."""
+    for k, done in enumerate(evaluated, start=1):
+        sampler.tell(done.row.params, done.cost if done.status == "ok" else None)
+        report(k, done)
+        streak.add(done.row.id, done.status, done.message)
 
 
 def study_executor(
@@ -157,12 +191,14 @@ class AskTellLoop:
     def evaluate(self, rows: list[Evaluation], executor: Executor) -> None:
         """Evaluate stored pending rows, telling the sampler each as it is stored (a failure
         as None) and counting failures in a row."""
-        remaining = len(rows)
-        for done in self._evaluate(rows, executor):
-            self.sampler.tell(done.row.params, done.cost if done.status == "ok" else None)
-            remaining -= 1
-            self._report(done.row.iteration, remaining, f"{done.status}: {done.label}")
-            self.streak.add(done.row.id, done.status, done.message)
+        tell_each(
+            self._evaluate(rows, executor),
+            self.sampler,
+            self.streak,
+            lambda k, done: self._report(
+                done.row.iteration, len(rows) - k, f"{done.status}: {done.label}"
+            ),
+        )
 
     def step(self, executor: Executor) -> bool:
         """Ask the next iteration's batch (the initial design first), store it as pending,
@@ -187,3 +223,93 @@ class AskTellLoop:
         self._report(iteration, n, f"{what}: {count}")
         self.evaluate(rows, executor)
         return True
+
+
+class FixedDesign:
+    """A sampler over a fixed design (a screening stage's rows, in catalogue order): `ask`
+    hands out the next rows in order, `tell` counts what is finished; it learns nothing from
+    the costs. `done` when every row was told."""
+
+    def __init__(self, points: Sequence[Mapping[str, float]]) -> None:
+        self.points = [dict(p) for p in points]
+        self.asked = 0
+        self.n_told = 0
+
+    def ask(self, n: int | None = None) -> list[dict[str, float]]:
+        """The next ``n`` rows of the design (default: all the rest)."""
+        end = len(self.points) if n is None else min(len(self.points), self.asked + n)
+        batch = self.points[self.asked : end]
+        self.asked = end
+        return batch
+
+    def tell(self, params: Mapping[str, float], cost: float | None) -> None:
+        """Count one finished row (``cost`` None: failed)."""
+        self.n_told += 1
+
+    @property
+    def done(self) -> bool:
+        """Whether every row of the design was told."""
+        return self.n_told >= len(self.points)
+
+
+class DesignLoop:
+    """The ask/tell loop of a fixed design over the store (see the module doc). ``rows``
+    returns the design's stored rows in the design's order (a screening stage: the store rows
+    of its iteration; a precision check: the rows matched to its runs); ``add``, given the
+    whole design as `FixedDesign` asks it, stores it as pending when none of it is stored yet
+    (None: the caller stores it). ``evaluate`` simulates and stores pending rows, yielding each
+    as stored; ``report`` receives each with its arrival number and how many were pending
+    (``done``, ``total``, the evaluation). `FAILURES_IN_A_ROW` failing one after the other
+    before the design's first success stop it (`FailureStreak`, whose message names
+    ``folder``)."""
+
+    def __init__(
+        self,
+        sampler: FixedDesign,
+        rows: Callable[[], list[Evaluation]],
+        add: Callable[[list[dict[str, float]]], object] | None,
+        evaluate: Callable[[list[Evaluation]], Iterator[Evaluated]],
+        report: Callable[[int, int, Evaluated], None],
+        folder: Path,
+        *,
+        reopen: Callable[[list[int]], object],
+    ) -> None:
+        self.sampler = sampler
+        self.rows = rows
+        self._add = add
+        self._evaluate = evaluate
+        self._report = report
+        self._reopen = reopen
+        self.folder = folder
+
+    def replay(self) -> list[Evaluation]:
+        """Store the design as pending if none of it is stored yet; run again what failed
+        while nothing of it has succeeded (a set-up problem that stopped an earlier run may
+        have been fixed since); tell the sampler every finished row; return the pending ones."""
+        rows = self.rows()
+        batch = self.sampler.ask()
+        if not rows and self._add is not None:
+            self._add(batch)
+            rows = self.rows()
+        if not any(r.status == "ok" for r in rows):
+            self._reopen([r.id for r in rows if r.status != "pending"])
+            rows = self.rows()
+        for r in rows:
+            if r.status != "pending":
+                self.sampler.tell(r.params, r.cost if r.status == "ok" else None)
+        return [r for r in rows if r.status == "pending"]
+
+    def evaluate(self, rows: list[Evaluation]) -> bool:
+        """Evaluate the pending ``rows``, telling the sampler each as it is stored and
+        reporting it; True when the whole design is told. Only a streak before the design's
+        first success stops it: once one has succeeded, its failures are a property of the
+        design."""
+        streak = FailureStreak(FAILURES_IN_A_ROW, self.folder, until_success=True)
+        streak.succeeded = any(r.status == "ok" for r in self.rows())
+        tell_each(
+            self._evaluate(rows),
+            self.sampler,
+            streak,
+            lambda k, done: self._report(k, len(rows), done),
+        )
+        return self.sampler.done

@@ -148,12 +148,12 @@ def dependence_curves(
         )
         curves.append(
             DependenceCurve(
-                dim.name,
-                np.asarray(to_catalogue_units(dim.name, xs)),
-                mu_c,
-                sd_c,
-                dim.log,
-                transformed,
+                name=dim.name,
+                values=np.asarray(to_catalogue_units(dim.name, xs)),
+                cost=mu_c,
+                sd=sd_c,
+                log=dim.log,
+                transformed=transformed,
             )
         )
     return curves

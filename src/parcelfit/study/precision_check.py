@@ -14,7 +14,10 @@ moment each arrives, with its statistics and the ridden speeds), so a killed or 
 check keeps every finished simulation and resumes with the others, as a study does, and a
 rerun with more candidates simulates only the new cases; a folder holding the runs of a check
 at another point, range or simulator is refused, never overwritten. (A ``statistics.json``
-kept by an earlier parcelfit is taken over.) The table goes to ``precision-check.md``.
+kept by an earlier parcelfit is taken over.) The simulations run through the study loop
+(`parcelfit.study.loop.DesignLoop`): 8 failing one after the other before the first success
+stop the check, quoting the first failure, and what failed runs again on a rerun while nothing
+has succeeded. The table goes to ``precision-check.md``.
 """
 
 from __future__ import annotations
@@ -22,8 +25,9 @@ from __future__ import annotations
 import json
 import math
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from itertools import groupby
 from pathlib import Path
 from typing import Any
@@ -45,7 +49,8 @@ from parcelfit.sim.executors import Task
 from parcelfit.sim.factory import make_simulator
 from parcelfit.study.details import EvaluationDetails
 from parcelfit.study.joint import simulate_items
-from parcelfit.study.loop import study_executor
+from parcelfit.study.loop import DesignLoop, FixedDesign, study_executor
+from parcelfit.study.objective import Evaluated
 from parcelfit.study.precision import (
     STATISTICS,
     WITHIN,
@@ -249,6 +254,8 @@ class _CheckRuns:
 
     def __init__(self, out: Path, setup: Mapping[str, Any], wanted: Wanted) -> None:
         self.wanted = wanted
+        self.folder = out
+        self._run_of: dict[int, str] = {}  # store row id: run id
         path, legacy = out / PRECISION_STORE, out / STATISTICS_FILE
         old: Mapping[str, list[float] | None] = {}
         if not path.is_file() and legacy.is_file():  # kept by an earlier parcelfit
@@ -293,14 +300,47 @@ class _CheckRuns:
                 spec.case.speed_setting,
                 [self.wanted[r][2] for r in ids],
                 first_slot=slot,
+                details=EvaluationDetails(case=spec.label),  # so a resumed check finds them
             )
             slot += len(ids)
         added = [e for e in self.store.evaluations("precision") if e.iteration == iteration]
         self.rows.update(zip(missing, sorted(added, key=lambda e: e.slot), strict=True))
 
-    def pending(self) -> list[tuple[str, CaseSpec, dict[str, float], int]]:
-        """The runs still to simulate: run id, case, parameter values (SI), placement seed."""
-        return [(r, *self.wanted[r]) for r in self.wanted if r not in self.statistics]
+    def current(self) -> list[Evaluation]:
+        """The store rows of the wanted runs as stored now, in the order of ``wanted``."""
+        by_id = {e.id: e for e in self.store.evaluations("precision")}
+        return [by_id[self.rows[r].id] for r in self.wanted]
+
+    def loop(
+        self,
+        simulate: Callable[[list[Evaluation]], Iterator[Evaluated]],
+        report: Callable[[int, int, Evaluated], None],
+        folder: Path,
+    ) -> tuple[DesignLoop, list[Evaluation]]:
+        """The check's runs as a fixed design over the study loop (`DesignLoop`: what failed
+        runs again while none has succeeded, a streak of failures before the first success
+        stops it), and the rows still to simulate, in the order of ``wanted``."""
+        loop = DesignLoop(
+            FixedDesign([values for _, values, _ in self.wanted.values()]),
+            self.current,
+            None,  # every wanted run is stored (pending) when the runs are opened
+            simulate,
+            report,
+            folder,
+            reopen=partial(self.store.reopen, keep_case=True),
+        )
+        self._run_of = {e.id: r for r, e in self.rows.items()}
+        todo = loop.replay()
+        self.statistics = {
+            r: _statistics(e)
+            for r, e in zip(self.wanted, self.current(), strict=True)
+            if e.status != "pending"
+        }
+        return loop, todo
+
+    def run_id(self, row: Evaluation) -> str:
+        """The run id of a store row of the check."""
+        return self._run_of[row.id]
 
     def finish(
         self,
@@ -469,10 +509,36 @@ def _simulate_and_judge(
     """Simulate the runs ``runs`` does not hold yet (``where``: executor and workers), then
     judge every case from its kept statistics."""
     names, fitted, extra, given = what
-    todo = runs.pending()
-    items = [(Task(dict(values), spec.case, run_id), seed) for run_id, spec, values, seed in todo]
+
+    def simulate(rows: list[Evaluation]) -> Iterator[Evaluated]:
+        """Simulate the pending ``rows`` at their placements, keep each as it arrives (a kill
+        loses only the runs still going) and yield it."""
+        ids = [runs.run_id(r) for r in rows]
+        items = [
+            (Task(dict(runs.wanted[i][1]), runs.wanted[i][0].case, i), runs.wanted[i][2])
+            for i in ids
+        ]
+        with study_executor(study, where[0], None, where[1]) as pool:
+            for i, result in simulate_items(pool, simulator, items):
+                run_id, spec = ids[i], runs.wanted[ids[i]][0]
+                stats = None
+                if result.ok and result.run is not None:
+                    stats = run_statistics(result.run, comparisons[spec.label])
+                    if stats is not None:  # raw statistics and the speeds an adjustment needs
+                        stats = [*stats, *ridden_speeds(result.run.trajectory)]
+                message = None if result.ok else result.diagnostics.get("message")
+                status, wall = result.status.value, result.wall_time
+                runs.finish(run_id, status, stats, message, wall)
+                said = None if message is None else str(message)
+                yield Evaluated(rows[i], status, None, said, run_id)
+
+    def report(done: int, total: int, _: Evaluated) -> None:
+        message = f"{done}/{total} simulations ({time.perf_counter() - start:.0f} s)"
+        progress(ProgressEvent("precision", message, done, total))
+
+    loop, todo = runs.loop(simulate, report, runs.folder)
     simulator = make_simulator(study.simulator)
-    if items and not callable(getattr(simulator, "with_placement", None)):
+    if todo and not callable(getattr(simulator, "with_placement", None)):
         raise ParcelfitError(
             f"the {type(simulator).__name__} simulator has no seeded placements "
             "(with_placement), so every placement would repeat one run",
@@ -480,26 +546,13 @@ def _simulate_and_judge(
             fix="use a simulator with seeded placements (mujoco)",
         )
 
-    start = time.perf_counter()
-    total = len(items)
+    total = len(todo)
     progress(
         ProgressEvent("precision", f"{total} simulations ({len(keys) - total} kept)", 0, total)
     )
-    if items:
-        with study_executor(study, where[0], None, where[1]) as pool:
-            for done, (i, result) in enumerate(simulate_items(pool, simulator, items), 1):
-                run_id, spec = todo[i][0], todo[i][1]
-                stats = None
-                if result.ok and result.run is not None:
-                    stats = run_statistics(result.run, comparisons[spec.label])
-                    if stats is not None:  # raw statistics and the speeds an adjustment needs
-                        stats = [*stats, *ridden_speeds(result.run.trajectory)]
-                message = result.diagnostics.get("message")
-                # every run as it arrives: a kill loses only the runs still going
-                status, wall = result.status.value, result.wall_time
-                runs.finish(run_id, status, stats, None if result.ok else message, wall)
-                message = f"{done}/{total} simulations ({time.perf_counter() - start:.0f} s)"
-                progress(ProgressEvent("precision", message, done, total))
+    start = time.perf_counter()
+    if todo:
+        loop.evaluate(todo)
     wall = time.perf_counter() - start
 
     per_end: dict[tuple[str, str, str], list[np.ndarray | None]] = {}

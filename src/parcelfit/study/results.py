@@ -30,9 +30,10 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Self
 
 import numpy as np
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, PlainSerializer, PlainValidator
 
 from parcelfit import __version__
 from parcelfit.atomic import write_text_atomic
@@ -67,6 +68,29 @@ def _list(a: np.ndarray | Sequence[float]) -> Any:
 
 def _array(v: Any) -> np.ndarray:
     return np.asarray(v, dtype=float)
+
+
+# an array of floats, stored as (nested) lists of floats
+FloatArray = Annotated[np.ndarray, PlainValidator(_array), PlainSerializer(_list)]
+
+
+class _ArrayRecord(BaseModel):
+    """A stored record holding arrays: read and written by pydantic under its stored keys;
+    equal only to itself (arrays have no single truth value)."""
+
+    model_config = ConfigDict(frozen=True, populate_by_name=True, arbitrary_types_allowed=True)
+
+    __eq__ = object.__eq__
+    __hash__ = object.__hash__
+
+    def to_json(self) -> dict[str, Any]:
+        """The stored form."""
+        return self.model_dump(by_alias=True)
+
+    @classmethod
+    def from_json(cls, doc: Mapping[str, Any]) -> Self:
+        """Read the stored form."""
+        return cls.model_validate(dict(doc))
 
 
 @dataclass(frozen=True, eq=False)
@@ -160,32 +184,15 @@ class ReferenceRecord:
         )
 
 
-@dataclass(frozen=True, eq=False)
-class BandRecord:
+class BandRecord(_ArrayRecord):
     """The stricter criterion's band along the travelled distance: ``grid`` x [m], the lateral
     band ``y_low``..``y_high`` [m] and the heading band ``theta_low``..``theta_high`` [rad]."""
 
-    grid: np.ndarray
-    y_low: np.ndarray
-    y_high: np.ndarray
-    theta_low: np.ndarray
-    theta_high: np.ndarray
-
-    def to_json(self) -> dict[str, Any]:
-        """The stored form."""
-        return {
-            "x_m": _list(self.grid),
-            "y_low_m": _list(self.y_low),
-            "y_high_m": _list(self.y_high),
-            "theta_low_rad": _list(self.theta_low),
-            "theta_high_rad": _list(self.theta_high),
-        }
-
-    @classmethod
-    def from_json(cls, doc: Mapping[str, Any]) -> BandRecord:
-        """Read the stored form."""
-        keys = ("x_m", "y_low_m", "y_high_m", "theta_low_rad", "theta_high_rad")
-        return cls(*(_array(doc[k]) for k in keys))
+    grid: FloatArray = Field(alias="x_m")
+    y_low: FloatArray = Field(alias="y_low_m")
+    y_high: FloatArray = Field(alias="y_high_m")
+    theta_low: FloatArray = Field(alias="theta_low_rad")
+    theta_high: FloatArray = Field(alias="theta_high_rad")
 
 
 def _mean_criterion(check: MeanDistanceCheck) -> MeanCriterion:
@@ -361,22 +368,27 @@ def validation_record(
                 for xy, th in zip(reference.xy_series, reference.theta_series, strict=True)
             ]
             b = envelope_band(prepared, real)
-            band = BandRecord(b.grid, b.y_low, b.y_high, b.theta_low, b.theta_high)
+            band = BandRecord(
+                grid=b.grid,
+                y_low=b.y_low,
+                y_high=b.y_high,
+                theta_low=b.theta_low,
+                theta_high=b.theta_high,
+            )
     except ParcelfitError as exc:
         return replace(base, message=f"validation not computable: {exc}")
     return replace(base, verdict=verdict, sim_xy=prepared.xy, sim_theta=prepared.theta, band=band)
 
 
-@dataclass(frozen=True, eq=False)
-class DependenceCurve:
+class DependenceCurve(_ArrayRecord):
     """The GP's partial dependence of the cost on one parameter: ``values`` in catalogue units,
     the predicted ``cost`` averaged over the other parameters and its averaged predictive
     standard deviation ``sd``; ``transformed``: cost after the optimiser's output transform."""
 
     name: str
-    values: np.ndarray
-    cost: np.ndarray
-    sd: np.ndarray
+    values: FloatArray
+    cost: FloatArray
+    sd: FloatArray
     log: bool
     transformed: bool = False
 
@@ -385,32 +397,8 @@ class DependenceCurve:
         """How much the predicted cost changes across the parameter's range."""
         return float(np.max(self.cost) - np.min(self.cost))
 
-    def to_json(self) -> dict[str, Any]:
-        """The stored form."""
-        return {
-            "name": self.name,
-            "values": _list(self.values),
-            "cost": _list(self.cost),
-            "sd": _list(self.sd),
-            "log": self.log,
-            "transformed": self.transformed,
-        }
 
-    @classmethod
-    def from_json(cls, doc: Mapping[str, Any]) -> DependenceCurve:
-        """Read the stored form."""
-        return cls(
-            str(doc["name"]),
-            _array(doc["values"]),
-            _array(doc["cost"]),
-            _array(doc["sd"]),
-            bool(doc["log"]),
-            bool(doc.get("transformed", False)),
-        )
-
-
-@dataclass(frozen=True, eq=False)
-class SurrogateRecord:
+class SurrogateRecord(_ArrayRecord):
     """The optimiser's GP surrogate behind the partial dependence plot: the settings it was refitted
     with (the store's record; `OptimizerRecord.note` says when defaults stood in), how many
     finished fitting evaluations it learnt, and its partial dependence curves (None before two
@@ -420,51 +408,28 @@ class SurrogateRecord:
     evaluations: int
     curves: tuple[DependenceCurve, ...] | None
 
-    def to_json(self) -> dict[str, Any]:
-        """The stored form."""
-        return {
-            "optimizer": self.optimizer.to_json(),
-            "evaluations": self.evaluations,
-            "curves": None if self.curves is None else [c.to_json() for c in self.curves],
-        }
 
-    @classmethod
-    def from_json(cls, doc: Mapping[str, Any]) -> SurrogateRecord:
-        """Read the stored form."""
-        curves = doc.get("curves")
-        return cls(
-            OptimizerRecord.from_json(doc["optimizer"]),
-            int(doc["evaluations"]),
-            None if curves is None else tuple(DependenceCurve.from_json(c) for c in curves),
-        )
-
-
-@dataclass(frozen=True)
-class KeyFramesRecord:
+class KeyFramesRecord(BaseModel):
     """The calibrated run drawn at a few instants: its test case, parameters (SI, fitted ones),
     the figure and animation written (paths relative to the study folder, None if not), and
     why there is no figure (``note``)."""
 
+    model_config = ConfigDict(frozen=True)
+
     case: str
-    params: dict[str, float]
+    params: Annotated[dict[str, float], BeforeValidator(lambda v: v or {})]
     image: str | None = None
     animation: str | None = None
     note: str | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The stored form."""
-        return asdict(self)
+        return self.model_dump()
 
     @classmethod
     def from_json(cls, doc: Mapping[str, Any]) -> KeyFramesRecord:
-        """Read the stored form."""
-        return cls(
-            str(doc["case"]),
-            {str(k): float(v) for k, v in (doc.get("params") or {}).items()},
-            doc.get("image"),
-            doc.get("animation"),
-            doc.get("note"),
-        )
+        """Read the stored form (missing or empty ``params``: none)."""
+        return cls.model_validate({"params": None, **doc})
 
 
 @dataclass(frozen=True, eq=False)

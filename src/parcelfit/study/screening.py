@@ -65,8 +65,9 @@ stored factors differ from the ones it would run now, and a folder screened with
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
 from types import MappingProxyType
 from typing import Annotated, Any
@@ -89,12 +90,12 @@ from parcelfit.doe import (
 )
 from parcelfit.errors import ParcelfitError, os_error, shown
 from parcelfit.figures import save_figure
-from parcelfit.metrics import select_reference
+from parcelfit.metrics import ReferenceSelection, select_reference
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.runs import TestCase, load_dataset, read_trajectory
 from parcelfit.schema import FileModel, Number, Pair, Text, Whole, or_default, parse
 from parcelfit.sim.ensemble import SPIN_ANGLE, rotation
-from parcelfit.sim.executors import Task, make_executor
+from parcelfit.sim.executors import Executor, Task, make_executor
 from parcelfit.sim.factory import SimulatorConfig, SimulatorSection, content_kind, make_simulator
 from parcelfit.sim.params import (
     SOFT,
@@ -105,8 +106,8 @@ from parcelfit.sim.params import (
 )
 from parcelfit.study.folderlock import check_writable, lock_folder
 from parcelfit.study.joint import require_placements, simulate_items
-from parcelfit.study.loop import FAILURES_IN_A_ROW, FailureStreak
-from parcelfit.study.objective import record_result
+from parcelfit.study.loop import DesignLoop, FixedDesign
+from parcelfit.study.objective import Evaluated, record_result
 from parcelfit.study.store import Evaluation, Store
 from parcelfit.study.studyfile import (
     _to_si,
@@ -400,67 +401,50 @@ def run_screen(
                 with_centre_points(design.matrix, screen.centre_points),
                 [screen.ranges[f] for f in factors],
             )
-            rows = [e for e in store.evaluations("screen") if e.iteration == stage]
+            # one store row per simulation: design row i at placement k is slot i * K + k - 1
+            batch = [{f: float(v) for f, v in zip(factors, run, strict=True)} for run in values]
+            stage_seeds = [seed or 0 for _ in batch for seed in seeds]
+            loop = DesignLoop(
+                FixedDesign([p for p in batch for _ in seeds]),
+                partial(_stage_rows, store, stage),
+                partial(
+                    store.add_pending,
+                    "screen",
+                    stage,
+                    speed_setting=screen.case.speed_setting,
+                    seeds=stage_seeds,
+                ),
+                partial(
+                    _simulate,
+                    stage=stage,
+                    screen=screen,
+                    store=store,
+                    out=out,
+                    simulator=simulator,
+                    runner=runner,
+                    reference=reference,
+                    n_rows=len(values),
+                ),
+                lambda k, n, done: say(f"{done.status}: {done.label} ({k} of {n} done)", k, n),
+                out,
+                reopen=store.reopen,
+            )
+            rows = loop.rows()
             if rows and sorted(rows[0].params) != sorted(factors):
                 raise ParcelfitError(
                     f"stage {stage + 1} was run over {sorted(rows[0].params)}, now it would be over {sorted(factors)}",
                     file=out / "screen.sqlite",
                     fix="use a new output folder after changing the screen file",
                 )
-            if not rows:
-                # one store row per simulation: design row i at placement k is slot i * K + k - 1
-                batch = [{f: float(v) for f, v in zip(factors, run, strict=True)} for run in values]
-                store.add_pending(
-                    "screen",
-                    stage,
-                    [p for p in batch for _ in seeds],
-                    screen.case.speed_setting,
-                    [seed or 0 for _ in batch for seed in seeds],
-                )
-                rows = [e for e in store.evaluations("screen") if e.iteration == stage]
-            if not any(r.status == "ok" for r in rows):
-                # nothing of the stage has succeeded: what failed is run again (a set-up problem
-                # that stopped the screen, see FailureStreak, may have been fixed since)
-                store.reopen([r.id for r in rows if r.status != "pending"])
-                rows = [e for e in store.evaluations("screen") if e.iteration == stage]
-            todo = [r for r in rows if r.status == "pending"]
+            todo = loop.replay()
+            n_sims = len(values) * n_place
             say(
-                f"stage {stage + 1} ({kind}, {len(factors)} factors): {len(rows)} runs, {len(todo)} to simulate"
+                f"stage {stage + 1} ({kind}, {len(factors)} factors): {n_sims} runs, {len(todo)} to simulate"
                 if n_place == 1
                 else f"stage {stage + 1} ({kind}, {len(factors)} factors): {len(values)} runs x "
-                f"{n_place} placements = {len(rows)} simulations, {len(todo)} to simulate"
+                f"{n_place} placements = {n_sims} simulations, {len(todo)} to simulate"
             )
-            tasks = [
-                Task({**screen.fixed, **r.params}, screen.case, _run_id(stage, r, n_place))
-                for r in todo
-            ]
-            if n_place == 1:
-                arrivals = runner.simulate(simulator, tasks)
-            else:
-                placed = [(t, r.seed) for t, r in zip(tasks, todo, strict=True)]
-                arrivals = simulate_items(runner, simulator, placed)
-            # a stage stops early only while none of its runs has succeeded: once one has, its
-            # failures are a property of the design, which the analysis copes with (a stage of
-            # at most 8 runs is judged whole, below: too few succeeded)
-            streak = FailureStreak(FAILURES_IN_A_ROW, out, until_success=True)
-            streak.succeeded = any(r.status == "ok" for r in rows)
-            for k, (i, res) in enumerate(arrivals, start=1):
-                row = todo[i]
-                if n_place == 1:
-                    outcome = record_result(store, out, row, res, reference)
-                    what = tasks[i].run_id
-                else:
-                    if res.ok and res.run is not None:  # for the spin share, kept in details
-                        rot = rotation(res.run.trajectory)
-                        res = replace(res, diagnostics={**res.diagnostics, "rotation": rot})
-                    run_file = f"runs/{tasks[i].run_id}.csv"
-                    outcome = record_result(store, out, row, res, reference, run_file=run_file)
-                    what = (
-                        f"{tasks[i].run_id}, run {row.slot // n_place + 1} of {len(values)} at "
-                        f"placement {row.seed} of {n_place}"
-                    )
-                say(f"{outcome['status']}: {what} ({k} of {len(tasks)} done)", k, len(tasks))
-                streak.add(row.id, outcome["status"], outcome["message"])
+            loop.evaluate(todo)
             rows = sorted(
                 (e for e in store.evaluations("screen") if e.iteration == stage),
                 key=lambda e: e.slot,
@@ -553,6 +537,52 @@ def run_screen(
     }
     (out / "selection.yaml").write_text(yaml.safe_dump(doc, sort_keys=False), encoding="utf-8")
     return results, doc
+
+
+def _stage_rows(store: Store, stage: int) -> list[Evaluation]:
+    """The store rows of screening stage ``stage``, in the order they were asked."""
+    return [e for e in store.evaluations("screen") if e.iteration == stage]
+
+
+def _simulate(
+    todo: list[Evaluation],
+    stage: int,
+    screen: Screen,
+    store: Store,
+    out: Path,
+    simulator: Any,
+    runner: Executor,
+    reference: ReferenceSelection,
+    n_rows: int,
+) -> Iterator[Evaluated]:
+    """Simulate a stage's pending store rows through ``runner`` (each at its placement seed
+    with several placements), store each result as it arrives (`record_result`), and yield it
+    with a progress label; ``n_rows`` is the number of design rows of the stage."""
+    n_place = screen.placements
+    tasks = [
+        Task({**screen.fixed, **r.params}, screen.case, _run_id(stage, r, n_place)) for r in todo
+    ]
+    if n_place == 1:
+        arrivals = runner.simulate(simulator, tasks)
+    else:
+        placed = [(t, r.seed) for t, r in zip(tasks, todo, strict=True)]
+        arrivals = simulate_items(runner, simulator, placed)
+    for i, res in arrivals:
+        row = todo[i]
+        if n_place == 1:
+            outcome = record_result(store, out, row, res, reference)
+            what = tasks[i].run_id
+        else:
+            if res.ok and res.run is not None:  # for the spin share, kept in details
+                rot = rotation(res.run.trajectory)
+                res = replace(res, diagnostics={**res.diagnostics, "rotation": rot})
+            run_file = f"runs/{tasks[i].run_id}.csv"
+            outcome = record_result(store, out, row, res, reference, run_file=run_file)
+            what = (
+                f"{tasks[i].run_id}, run {row.slot // n_place + 1} of {n_rows} at "
+                f"placement {row.seed} of {n_place}"
+            )
+        yield Evaluated(row, outcome["status"], outcome["cost"], outcome["message"], what)
 
 
 def _check_stored_placements(store: Store, placements: int, db: Path) -> None:

@@ -111,11 +111,12 @@ def _number(doc: Mapping[str, Any], key: str, default: Any) -> Any:
     return default if value is None else value
 
 
-@dataclass(frozen=True)
-class OptimizerRecord:
+class OptimizerRecord(BaseModel):
     """The optimiser a study ran: the sampler's name (gp, published, tpe) and, for a GP sampler,
     its `BOSettings` fields as used (None for a sampler without a GP). ``recorded`` is False
     when the store predates the record: the values are then the defaults (the default GP)."""
+
+    model_config = ConfigDict(frozen=True)
 
     sampler: str = "gp"
     settings: dict[str, Any] | None = None
@@ -123,12 +124,12 @@ class OptimizerRecord:
 
     def to_json(self) -> dict[str, Any]:
         """As JSON (the study record stores the fields under its own keys, see `StudyRecord`)."""
-        return {"sampler": self.sampler, "settings": self.settings, "recorded": self.recorded}
+        return self.model_dump()
 
     @classmethod
     def from_json(cls, doc: Mapping[str, Any]) -> OptimizerRecord:
         """Read `to_json`'s form."""
-        return cls(str(doc["sampler"]), doc.get("settings"), bool(doc["recorded"]))
+        return cls.model_validate(dict(doc))
 
     @property
     def note(self) -> str | None:
@@ -182,7 +183,9 @@ class StudyRecord:
         no ``sampler``: the optimiser was not recorded)."""
         names = tuple(str(n) for n in doc.get("parameters") or ())
         if "sampler" in doc:
-            optimizer = OptimizerRecord(str(doc["sampler"]), doc.get("bo_settings"), True)
+            optimizer = OptimizerRecord(
+                sampler=str(doc["sampler"]), settings=doc.get("bo_settings"), recorded=True
+            )
         else:
             optimizer = OptimizerRecord(recorded=False)
         setting = doc.get("validation_setting")
@@ -199,10 +202,11 @@ class StudyRecord:
         )
 
 
-@dataclass(frozen=True)
-class SourceRecord:
+class SourceRecord(BaseModel):
     """Where a study came from, so a report can find its file and data again (absolute paths
     as strings, None where unknown)."""
+
+    model_config = ConfigDict(frozen=True, extra="ignore")
 
     study_file: str | None = None
     dataset: str | None = None
@@ -210,35 +214,31 @@ class SourceRecord:
     consignment: str | None = None
 
     def to_json(self) -> dict[str, Any]:
-        """The stored form."""
-        return {
-            "study_file": self.study_file,
-            "dataset": self.dataset,
-            "rig": self.rig,
-            "consignment": self.consignment,
-        }
+        """The stored form: every field, None where unknown."""
+        return self.model_dump()
 
     @classmethod
     def from_json(cls, doc: Mapping[str, Any]) -> SourceRecord:
         """Read a stored record (missing keys: None)."""
-        return cls(*(doc.get(k) for k in ("study_file", "dataset", "rig", "consignment")))
+        return cls.model_validate(dict(doc))
 
 
-@dataclass(frozen=True)
-class RecommendedRecord:
+class RecommendedRecord(BaseModel):
     """The parameters a study validates and reports (SI, fitted ones only) and their cost."""
+
+    model_config = ConfigDict(frozen=True, extra="ignore")
 
     params: dict[str, float]
     cost: float
 
     def to_json(self) -> dict[str, Any]:
         """The stored form."""
-        return {"params": dict(self.params), "cost": self.cost}
+        return self.model_dump()
 
     @classmethod
     def from_json(cls, doc: Mapping[str, Any]) -> RecommendedRecord:
         """Read a stored record."""
-        return cls({str(k): float(v) for k, v in doc["params"].items()}, float(doc["cost"]))
+        return cls.model_validate(dict(doc))
 
 
 def _full(exc: sqlite3.Error) -> bool:
@@ -470,17 +470,29 @@ class Store:
         seeds: Sequence[int | None],
         *,
         first_slot: int = 0,
+        details: EvaluationDetails | None = None,
     ) -> list[int]:
-        """Record a batch as pending (one transaction), in the slots from ``first_slot`` on;
+        """Record a batch as pending (one transaction), in the slots from ``first_slot`` on,
+        each with ``details`` if given (what identifies it before it is run: its test case);
         returns the row ids in batch order."""
         now = time.time()
         ids = []
+        stored = None if details is None else details.dumps()
         with self._transaction() as db:
             for slot, (params, seed) in enumerate(zip(batch, seeds, strict=True), first_slot):
                 cur = db.execute(
-                    "INSERT INTO evaluations (kind, iteration, slot, speed_setting, params, status, seed, asked_at) "
-                    "VALUES (?, ?, ?, ?, ?, 'pending', ?, ?)",
-                    (kind, iteration, slot, speed_setting, json.dumps(dict(params)), seed, now),
+                    "INSERT INTO evaluations (kind, iteration, slot, speed_setting, params, status, "
+                    "seed, asked_at, details) VALUES (?, ?, ?, ?, ?, 'pending', ?, ?, ?)",
+                    (
+                        kind,
+                        iteration,
+                        slot,
+                        speed_setting,
+                        json.dumps(dict(params)),
+                        seed,
+                        now,
+                        stored,
+                    ),
                 )
                 ids.append(int(cur.lastrowid))  # type: ignore[arg-type]
         return ids
@@ -521,15 +533,23 @@ class Store:
             if cur.rowcount != 1:
                 raise ParcelfitError(f"no evaluation with id {row_id} in {self.path}")
 
-    def reopen(self, row_ids: Sequence[int]) -> None:
-        """Make finished evaluations pending again (one transaction), so they run on resume."""
+    def reopen(self, row_ids: Sequence[int], *, keep_case: bool = False) -> None:
+        """Make finished evaluations pending again (one transaction), so they run on resume;
+        with ``keep_case`` their details keep their test case (and nothing else)."""
         with self._transaction() as db:
             for row_id in row_ids:
+                details = None
+                if keep_case:
+                    row = db.execute(
+                        "SELECT details FROM evaluations WHERE id = ?", (row_id,)
+                    ).fetchone()
+                    case = EvaluationDetails.parse(row[0] if row else None, self.path).case
+                    details = None if case is None else EvaluationDetails(case=case).dumps()
                 db.execute(
                     "UPDATE evaluations SET status = 'pending', cost = NULL, dtw_xy = NULL, "
                     "dtw_theta = NULL, transit_time = NULL, wall_time = NULL, finished_at = NULL, "
-                    "run_file = NULL, details = NULL WHERE id = ?",
-                    (row_id,),
+                    "run_file = NULL, details = ? WHERE id = ?",
+                    (details, row_id),
                 )
 
     def evaluations(self, kind: str | None = None) -> list[Evaluation]:

@@ -1,0 +1,72 @@
+"""Stored records read back and write the same bytes: tests/data/records holds a
+``results.json`` and store meta records as an earlier parcelfit wrote them (before the records
+became pydantic models)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from parcelfit.study.identify import Advice
+from parcelfit.study.results import (
+    BandRecord,
+    DependenceCurve,
+    KeyFramesRecord,
+    StudyResults,
+    SurrogateRecord,
+)
+from parcelfit.study.store import OptimizerRecord, RecommendedRecord, SourceRecord
+
+DATA = Path(__file__).parent / "data" / "records"
+RESULTS = (DATA / "results.json").read_text()
+META = json.loads((DATA / "meta.json").read_text())
+
+
+def same(kind, doc) -> None:
+    """``doc`` read as ``kind`` writes the same JSON text."""
+    assert json.dumps(kind.from_json(doc).to_json()) == json.dumps(doc)
+
+
+def test_a_results_file_reads_back_and_writes_the_same_bytes():
+    assert json.dumps(StudyResults.from_json(json.loads(RESULTS)).to_json()) == RESULTS
+
+
+@pytest.mark.parametrize(
+    ("kind", "part"),
+    [
+        (KeyFramesRecord, lambda d: d["key_frames"]),
+        (SurrogateRecord, lambda d: d["surrogate"]),
+        (OptimizerRecord, lambda d: d["surrogate"]["optimizer"]),
+        (DependenceCurve, lambda d: d["surrogate"]["curves"][0]),
+        (BandRecord, lambda d: d["validations"][0]["band"]),
+        (Advice, lambda d: d["advice"]),
+    ],
+)
+def test_a_results_record_reads_back_and_writes_the_same(kind, part):
+    same(kind, part(json.loads(RESULTS)))
+
+
+@pytest.mark.parametrize(
+    ("kind", "key"),
+    [
+        (SourceRecord, "source"),
+        (SourceRecord, "source_partial"),
+        (RecommendedRecord, "recommended"),
+        (OptimizerRecord, "optimizer"),
+    ],
+)
+def test_a_store_record_reads_back_and_writes_the_same(kind, key):
+    same(kind, META[key])
+
+
+def test_records_read_what_earlier_versions_left_out():
+    assert SourceRecord.from_json({}) == SourceRecord()
+    frames = KeyFramesRecord.from_json({"case": "R/P/2", "params": None})
+    assert (frames.params, frames.image, frames.note) == ({}, None, None)
+    best = RecommendedRecord.from_json({"params": {"E_Pa": 9e8}, "cost": 1})
+    assert best.cost == 1.0 and isinstance(best.cost, float)
+    assert json.dumps(best.to_json()) == '{"params": {"E_Pa": 900000000.0}, "cost": 1.0}'
+    advice = Advice.from_json({"changes": {"R/P/2": {"E_Pa": 1}}, "best": None})
+    assert (advice.parameters, advice.params, advice.changes) == ((), {}, {"R/P/2": {"E_Pa": 1.0}})
