@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import signal
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -46,6 +47,68 @@ def make_dataset(tmp_path: Path) -> Callable[..., Path]:
         return root
 
     return build
+
+
+def _sigint_ignored() -> bool | None:
+    """Whether the kernel ignores SIGINT in this process (Linux's /proc; None elsewhere): also
+    when a C library set it, which `signal.getsignal` does not see."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as fh:
+            line = next(line for line in fh if line.startswith("SigIgn:"))
+    except (OSError, StopIteration):
+        return None
+    return bool(int(line.split()[1], 16) >> (signal.SIGINT - 1) & 1)
+
+
+def _sigint_state() -> tuple[object, frozenset[int], bool | None]:
+    """This thread's Ctrl-C handler, its blocked signals and whether the kernel ignores SIGINT."""
+    mask = (
+        signal.pthread_sigmask(signal.SIG_BLOCK, []) if hasattr(signal, "pthread_sigmask") else ()
+    )
+    return signal.getsignal(signal.SIGINT), frozenset(mask), _sigint_ignored()
+
+
+@pytest.fixture(autouse=True)
+def _ctrl_c_left_as_found() -> Iterator[None]:
+    """Fail a test that leaves Ctrl-C (SIGINT) handled otherwise, ignored, or signals blocked in
+    the test process: later tests there would be deaf to Ctrl-C. The state is restored for them."""
+    before = _sigint_state()
+    yield
+    after = _sigint_state()
+    if after == before:
+        return
+    if before[0] is not None:
+        signal.signal(signal.SIGINT, before[0])  # type: ignore[arg-type]
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_SETMASK, before[1])
+    pytest.fail(
+        f"the test left SIGINT's handler {after[0]!r} (was {before[0]!r}), blocked signals "
+        f"{sorted(map(int, after[1]))} (were {sorted(map(int, before[1]))}) and SIGINT ignored "
+        f"by the kernel: {after[2]} (was {before[2]})"
+    )
+
+
+@pytest.fixture
+def ctrl_c() -> Iterator[None]:
+    """Ctrl-C (SIGINT) raises KeyboardInterrupt in this process during the test, and reaches the
+    commands it starts, also when the test run itself was started with SIGINT ignored (a job put
+    in the background by a non-interactive shell, nohup): an ignored signal stays ignored in
+    every process started from there, and Python keeps it so. A handled one is reset to the
+    default in a started command."""
+    previous = signal.getsignal(signal.SIGINT)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        if previous is not None:  # None: a handler not set from Python, which cannot be put back
+            signal.signal(signal.SIGINT, previous)  # type: ignore[arg-type]
+
+
+def pytest_report_header() -> str | None:
+    """Say so when this test process started with Ctrl-C ignored (the `ctrl_c` fixture)."""
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN or _sigint_ignored():
+        return "SIGINT is ignored in this process: the Ctrl-C tests enable it for themselves"
+    return None
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:

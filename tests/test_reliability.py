@@ -1584,7 +1584,7 @@ def test_an_error_during_the_live_display_starts_on_a_line_of_its_own(tmp_path):
 
 
 @pytest.mark.slow
-def test_ctrl_c_stops_the_workers_quietly_and_says_how_to_resume(tmp_path):
+def test_ctrl_c_stops_the_workers_quietly_and_says_how_to_resume(tmp_path, ctrl_c):
     import signal
     import subprocess
     import sys
