@@ -89,6 +89,21 @@ def _ctrl_c_left_as_found() -> Iterator[None]:
 
 
 @pytest.fixture
+def no_study_figures(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Calibrations in this test draw no study figures (PNG and SVG: seconds of matplotlib per
+    calibration), as `Calibration(..., figures=False)` does, also for the `parcelfit calibrate`
+    command run in this process: for tests of what a study stores, refuses or resumes."""
+    from parcelfit.study.finish import Finish
+
+    real = Finish.__init__
+
+    def without_figures(self: Finish, *args: object, **kwargs: object) -> None:
+        real(self, *args, **{**kwargs, "figures": False})  # type: ignore[arg-type]
+
+    monkeypatch.setattr(Finish, "__init__", without_figures)
+
+
+@pytest.fixture
 def ctrl_c() -> Iterator[None]:
     """Ctrl-C (SIGINT) raises KeyboardInterrupt in this process during the test, and reaches the
     commands it starts, also when the test run itself was started with SIGINT ignored (a job put

@@ -20,7 +20,7 @@ from .helpers import ROOT, finished_fits, write_study
 def test_calibration_recovers_the_truth_and_validates(tmp_path):
     study = load_study(write_study(tmp_path))
     seen = []
-    result = Calibration(study, tmp_path / "out", progress=seen.append).run()
+    result = Calibration(study, tmp_path / "out", progress=seen.append, figures=False).run()
     assert result.stop_reason == "validation passed" and result.validated
     # validation passes after iteration 4 (24 evaluations), before the optimiser has homed in:
     # the recommended mu_d_BePa is then 12 % of its range from the truth with the default
@@ -39,7 +39,7 @@ def test_calibration_recovers_the_truth_and_validates(tmp_path):
         f"{n}.{ext}" for n in ("history", "traces", "partial_dependence") for ext in ("png", "svg")
     )
     # a finished study resumed does nothing more
-    again = Calibration(study, tmp_path / "out").run()
+    again = Calibration(study, tmp_path / "out", figures=False).run()
     assert again.evaluations == result.evaluations and again.stop_reason == "validation passed"
 
 
@@ -53,7 +53,7 @@ def test_failed_simulations_are_recorded_and_do_not_stop_the_loop(tmp_path):
             budget=16,
         )
     )
-    result = Calibration(study, tmp_path / "out").run()
+    result = Calibration(study, tmp_path / "out", figures=False).run()
     info = study_status(tmp_path / "out")
     assert result.evaluations == 16 and result.stop_reason == "budget spent"
     assert info.by_status.get("unstable", 0) > 0 and info.by_status["ok"] > 0
@@ -62,7 +62,7 @@ def test_failed_simulations_are_recorded_and_do_not_stop_the_loop(tmp_path):
 @pytest.mark.slow
 def test_a_changed_study_file_is_refused_for_the_same_folder(tmp_path):
     path = write_study(tmp_path, budget=8, validation={})
-    Calibration(load_study(path), tmp_path / "out").run()
+    Calibration(load_study(path), tmp_path / "out", figures=False).run()
     write_study(tmp_path, budget=12, validation={})
     calibration = Calibration(load_study(path), tmp_path / "out")  # opens nothing yet
     with pytest.raises(ParcelfitError, match="different study file"):
@@ -152,7 +152,7 @@ def test_validation_records_the_envelope_beside_the_published_verdict(tmp_path):
     study = load_study(
         write_study(tmp_path, budget=12, validation={"speed_setting": 2, "every": 1})
     )
-    Calibration(study, tmp_path / "out").run()
+    Calibration(study, tmp_path / "out", figures=False).run()
     v = Store(tmp_path / "out" / "study.sqlite").evaluations("validation")[-1]
     env = v.details.envelope
     assert env is not None
@@ -285,14 +285,14 @@ def test_rerunning_a_finished_study_writes_its_missing_results_without_simulatin
         )
     )
     out = tmp_path / "out"
-    Calibration(study, out).run()
+    Calibration(study, out, figures=False).run()
     first = read_results(out)
     assert first.stop_reason is not None and first.validations and first.surrogate.curves
     # a folder as an earlier parcelfit left it: no results.json
     (out / "results.json").unlink()
     log = tmp_path / "sims.log"
     monkeypatch.setenv("FAKE_SIM_LOG", str(log))
-    Calibration(study, out).run()
+    Calibration(study, out, figures=False).run()
     assert not log.exists()  # nothing simulated again
     again = read_results(out)
     assert again.surrogate.to_json() == first.surrogate.to_json()
@@ -303,7 +303,7 @@ def test_rerunning_a_finished_study_writes_its_missing_results_without_simulatin
         assert a.verdict is not None and a.sim_xy is not None and a.band is not None
         assert a.to_json() == b.to_json()
     # with its results file in place, a resumed study keeps the records as they were
-    Calibration(study, out).run()
+    Calibration(study, out, figures=False).run()
     kept = read_results(out)
     assert [v.to_json() for v in kept.validations] == [v.to_json() for v in again.validations]
 

@@ -98,7 +98,7 @@ def test_a_calibration_runs_in_process_with_the_serial_executor(tmp_path):
     from .helpers import write_study
 
     study = load_study(write_study(tmp_path, budget=12, validation={}, executor="serial"))
-    result = Calibration(study, tmp_path / "out").run()
+    result = Calibration(study, tmp_path / "out", figures=False).run()
     assert result.evaluations == 12 and result.stop_reason == "budget spent"
     by_status = study_status(tmp_path / "out").by_status
     assert sum(by_status.values()) == 12 and "failed" not in by_status

@@ -199,9 +199,7 @@ def test_a_joint_ensemble_study_stores_the_parts_and_checks_transfer(tmp_path, m
     }
     parts = status.recommended.parts
     assert [p.case for p in parts] == ["R/P/1", "Q/P/1"] and len(parts[0].seeds) == 3
-    assert status.recommended.cost == pytest.approx(
-        parts[0].cost + 0.5 * parts[1].cost, rel=1e-12
-    )
+    assert status.recommended.cost == pytest.approx(parts[0].cost + 0.5 * parts[1].cost, rel=1e-12)
     for p in parts:  # each part: trajectory term + transit term, with its standard error
         assert p.cost == pytest.approx(p.trajectory_term + p.transit_term, rel=1e-12)
         assert p.se > 0 and all((out / f).is_file() for f in p.run_files)

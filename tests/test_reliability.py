@@ -62,7 +62,7 @@ def _hostile_study(tmp_path):
         for run in case["runs"]:
             run["id"] = HOSTILE["run"] + run["id"]
     ds_file.write_text(yaml.safe_dump(doc))
-    Calibration(load_study(study_file), tmp_path / "out").run()
+    Calibration(load_study(study_file), tmp_path / "out", figures=False).run()
     return tmp_path / "out"
 
 
@@ -242,7 +242,7 @@ def finished(tmp_path_factory):
     study = write_study(
         root, initial=4, batch_size=2, budget=8, validation={"speed_setting": 2, "every": 1}
     )
-    Calibration(load_study(study), root / "out").run()
+    Calibration(load_study(study), root / "out", figures=False).run()
     info = study_status(root / "out")
     assert info.evaluations >= 6 and info.validations, info  # what the tests below need
     return root
@@ -272,7 +272,7 @@ def test_an_empty_store_is_damaged_not_a_new_study(finished, tmp_path):
     stamps = [p.stat().st_mtime_ns for p in runs]
     (out / "study.sqlite").write_bytes(b"")  # truncated to 0 bytes
     with pytest.raises(ParcelfitError, match=r"empty \(0 bytes\)"):
-        Calibration(study, out).run()
+        Calibration(study, out, figures=False).run()
     result = runner.invoke(app, ["status", str(out)])
     assert result.exit_code == 2 and "empty (0 bytes)" in result.output
     assert (out / "study.sqlite").stat().st_size == 0  # nothing written into it
@@ -319,12 +319,12 @@ def test_a_foreign_sqlite_file_is_not_read_as_a_study(tmp_path):
 def test_a_second_calibration_on_the_same_folder_is_refused(finished, tmp_path):
     study, out = _copy(finished, tmp_path)
     n = _fits(out)
-    first = Calibration(study, out)
+    first = Calibration(study, out, figures=False)
     first.prepare()  # opens and locks the folder
     with pytest.raises(ParcelfitError, match="another parcelfit process is running a calibration"):
-        Calibration(study, out).run()
+        Calibration(study, out, figures=False).run()
     first.run()  # releases the folder when it ends
-    again = Calibration(study, out).run()
+    again = Calibration(study, out, figures=False).run()
     assert again.evaluations == n  # the finished study is not run a second time
 
 
@@ -453,7 +453,7 @@ def test_a_validation_killed_midway_is_run_again_on_resume(finished, tmp_path):
     )
     con.execute("DELETE FROM meta WHERE key = 'stop_reason'")
     con.close()
-    again = Calibration(study, out).run()
+    again = Calibration(study, out, figures=False).run()
     info = study_status(out)
     assert again.evaluations == first.evaluations == _fits(out)  # no extra fitting runs
     assert info.validations == first.validations  # simulated again, same verdict
@@ -503,7 +503,7 @@ def test_a_dying_local_worker_costs_time_not_results(tmp_path):
 def test_a_worker_killed_during_a_calibration_leaves_no_failed_evaluation(tmp_path, monkeypatch):
     monkeypatch.setenv("FAKE_SIM_CRASH_ONCE", str(tmp_path / "crashed"))
     study = load_study(write_study(tmp_path, budget=8, validation={}))
-    result = Calibration(study, tmp_path / "out").run()
+    result = Calibration(study, tmp_path / "out", figures=False).run()
     assert (tmp_path / "crashed").exists()  # one simulation killed its worker
     info = study_status(tmp_path / "out")
     assert result.evaluations == 8 and info.by_status == {"ok": 8}
@@ -1206,7 +1206,7 @@ def test_evaluations_once_stored_failed_by_a_lost_worker_run_again(finished, tmp
     )
     con.close()
     assert study_status(out).by_status == {"failed": 2, "ok": n - 2}
-    Calibration(study, out).run()
+    Calibration(study, out, figures=False).run()
     assert study_status(out).by_status == {"ok": n}
 
 
@@ -1238,7 +1238,7 @@ def _error_lines(result) -> list[str]:
 
 @pytest.mark.slow
 def test_a_study_whose_every_simulation_fails_stops_after_8_and_quotes_the_first(
-    tmp_path, monkeypatch
+    tmp_path, monkeypatch, no_study_figures
 ):
     study = write_study(
         tmp_path,
@@ -1385,7 +1385,7 @@ class _FillingDisk:
 @pytest.mark.slow
 @pytest.mark.parametrize("where", ["update", "commit"])
 def test_a_full_disk_while_storing_a_result_is_one_line_and_loses_nothing(
-    tmp_path, monkeypatch, where
+    tmp_path, monkeypatch, where, no_study_figures
 ):
     study = write_study(tmp_path, executor={"kind": "serial"}, budget=12, validation={})
     out = tmp_path / "o"
@@ -1415,7 +1415,9 @@ def test_a_full_disk_while_storing_a_result_is_one_line_and_loses_nothing(
 
 
 @pytest.mark.slow
-def test_a_full_disk_while_writing_a_run_file_is_one_line_and_loses_nothing(tmp_path, monkeypatch):
+def test_a_full_disk_while_writing_a_run_file_is_one_line_and_loses_nothing(
+    tmp_path, monkeypatch, no_study_figures
+):
     import errno
 
     import pandas as pd
