@@ -790,7 +790,7 @@ def _free_port() -> int:
 
 
 @pytest.mark.slow
-def test_losing_the_dask_scheduler_stops_cleanly_and_the_study_resumes(tmp_path):
+def test_losing_the_dask_scheduler_stops_cleanly_and_the_study_resumes(tmp_path, no_study_figures):
     pytest.importorskip("distributed")
     import random
     import signal
@@ -878,15 +878,8 @@ def test_losing_the_dask_scheduler_stops_cleanly_and_the_study_resumes(tmp_path)
     info = study_status(out)
     assert set(info.by_status) <= {"ok", "pending"}  # nothing stored as failed
     before = finished_fits(out / "study.sqlite")
-    done = subprocess.run(
-        [*calibrate, "--executor", "local", "--workers", "2"],
-        cwd=ROOT,
-        env={**env, "FAKE_SIM_DELAY": "0"},
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert done.returncode == 0, done.stderr[-2000:]
+    done = runner.invoke(app, [*calibrate[3:], "--executor", "local", "--workers", "2"])
+    assert done.exit_code == 0, done.output
     after = finished_fits(out / "study.sqlite")
     assert len(after) == 16 and all(after[k] == v for k, v in before.items())
 
@@ -1586,7 +1579,9 @@ def test_an_error_during_the_live_display_starts_on_a_line_of_its_own(tmp_path):
 
 
 @pytest.mark.slow
-def test_ctrl_c_stops_the_workers_quietly_and_says_how_to_resume(tmp_path, ctrl_c):
+def test_ctrl_c_stops_the_workers_quietly_and_says_how_to_resume(
+    tmp_path, ctrl_c, no_study_figures
+):
     import signal
     import subprocess
     import sys
@@ -1626,7 +1621,7 @@ def test_ctrl_c_stops_the_workers_quietly_and_says_how_to_resume(tmp_path, ctrl_
         workers = [c.pid for c in psutil.Process(proc.pid).children(recursive=True)]
         t0 = time.time()
         os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C: the whole foreground process group
-        stdout, stderr = proc.communicate(timeout=60)
+        stdout, stderr = proc.communicate(timeout=100)
         waited = time.time() - t0
     finally:
         with contextlib.suppress(ProcessLookupError):
@@ -1637,12 +1632,14 @@ def test_ctrl_c_stops_the_workers_quietly_and_says_how_to_resume(tmp_path, ctrl_
         f"interrupted: {stored} evaluations stored; rerun the same command to resume"
     ]
     assert "Traceback" not in stdout + stderr
-    assert waited < 20  # the simulation running (120 s) was stopped, not waited for
+    # the simulation running (120 s) was stopped, not waited for (a bound with room for a busy
+    # machine: stopping takes a second or two)
+    assert waited < 60
     assert not _gone(workers, timeout=10)
     kept = finished_fits(out / "study.sqlite")
     hang.unlink()
-    done = subprocess.run(calibrate, cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0, done.stderr[-2000:]
+    done = runner.invoke(app, calibrate[3:])  # the same command, in this process
+    assert done.exit_code == 0, done.output
     after = finished_fits(out / "study.sqlite")
     assert len(after) == 12 and all(after[k] == v for k, v in kept.items())
 
