@@ -25,7 +25,7 @@ NEED_BROWSER = os.environ.get("CI") == "true"  # in CI the browser must be there
 def demo_folder(tmp_path_factory):
     """A folder like the demo's: calibration/ and screen/ over the analytic simulator."""
     root = tmp_path_factory.mktemp("demo")
-    study_file = write_study(root)
+    study_file = write_study(root, executor={"kind": "serial"})  # no worker processes to start
     (root / "data" / "truth.yaml").write_text(
         yaml.safe_dump({"synthetic": True, "truth": {"P": TRUTH}})
     )
@@ -36,7 +36,7 @@ def demo_folder(tmp_path_factory):
         "reference": {"dataset": "data", "rig": "R", "consignment": "P", "speed_setting": 1},
         "parameters": {"mu_d_BePa": [0.3, 0.58], "mu_d_MePa": [0.15, 0.35], "E_Pa": [200, 1600]},
         "stages": ["full"],
-        "executor": {"kind": "local", "workers": 2},
+        "executor": {"kind": "serial"},
     }
     (root / "screen.yaml").write_text(yaml.safe_dump(screen))
     run_screen(load_screen(root / "screen.yaml"), root / "screen")
