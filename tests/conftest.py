@@ -104,6 +104,32 @@ def no_study_figures(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 @pytest.fixture
+def no_report_figures(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The report's figures are made but not drawn: each is embedded as a one-pixel PNG
+    (drawing one takes about 0.4 s); for tests of the page's text. The report's own tests draw
+    them."""
+    import io
+
+    from PIL import Image
+
+    from parcelfit.report import calibration, html, page, prediction
+
+    buf = io.BytesIO()
+    Image.new("L", (1, 1)).save(buf, format="PNG")
+
+    def placeholder(fig: object, alt: str, dpi: int = 100) -> object:
+        return page.png_html(buf.getvalue(), alt)
+
+    for module, name in (
+        (page, "figure_html"),
+        (calibration, "figure_html"),
+        (html, "figure_html"),
+        (prediction, "_figure_html"),
+    ):
+        monkeypatch.setattr(module, name, placeholder)
+
+
+@pytest.fixture
 def ctrl_c() -> Iterator[None]:
     """Ctrl-C (SIGINT) raises KeyboardInterrupt in this process during the test, and reaches the
     commands it starts, also when the test run itself was started with SIGINT ignored (a job put

@@ -68,7 +68,7 @@ def _hostile_study(tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.browser
-def test_hostile_names_are_text_in_the_report(tmp_path):
+def test_hostile_names_are_text_in_the_report(tmp_path, no_report_figures):
     page = build_report(_hostile_study(tmp_path), out=tmp_path / "r.html", key_frames=False)
     text = page.read_text()
     assert "<script" not in text.lower() and "<img src=x" not in text
@@ -187,7 +187,9 @@ def test_key_frames_are_embedded_only_from_inside_the_study_folder(
 
 
 @pytest.mark.slow  # draws the whole report (~10 s)
-def test_the_report_reads_no_file_outside_the_study_and_screening_folders(tmp_path, monkeypatch):
+def test_the_report_reads_no_file_outside_the_study_and_screening_folders(
+    tmp_path, monkeypatch, no_report_figures
+):
     import base64
 
     study, secret = _study_with_outside_files(tmp_path)
@@ -280,7 +282,7 @@ def test_an_empty_store_is_damaged_not_a_new_study(finished, tmp_path):
 
 
 @pytest.mark.slow
-def test_status_and_report_open_the_store_read_only(finished, tmp_path):
+def test_status_and_report_open_the_store_read_only(finished, tmp_path, no_report_figures):
     _, out = _copy(finished, tmp_path)
     db = out / "study.sqlite"
     before = db.read_bytes()

@@ -133,7 +133,7 @@ def test_report_is_one_self_contained_file_with_every_section(demo_folder, monke
 
 
 @pytest.mark.slow
-def test_the_report_of_a_study_folder_goes_inside_it(demo_folder):
+def test_the_report_of_a_study_folder_goes_inside_it(demo_folder, no_report_figures):
     study = demo_folder / "calibration"
     path = build_report(study, key_frames=False)
     assert path == study / "report.html" and path.is_file()
@@ -149,7 +149,7 @@ def test_report_names_a_missing_study(tmp_path):
 
 
 @pytest.mark.slow
-def test_report_command_prints_the_path_and_verdict(demo_folder, tmp_path):
+def test_report_command_prints_the_path_and_verdict(demo_folder, tmp_path, no_report_figures):
     out = tmp_path / "r.html"
     result = runner.invoke(app, ["report", str(demo_folder / "calibration"), "--out", str(out)])
     assert result.exit_code == 0, result.output
