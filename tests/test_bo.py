@@ -194,7 +194,9 @@ def test_a_study_file_chooses_its_optimizer(tmp_path, sampler):
     from .test_calibration import write_study
 
     opts = {"sampler": sampler} | ({} if sampler == "tpe" else {"n_samples": 500})
-    study = load_study(write_study(tmp_path, optimizer=opts, budget=12, initial=8))
+    study = load_study(
+        write_study(tmp_path, optimizer=opts, budget=12, initial=8, executor={"kind": "serial"})
+    )
     assert study.sampler == sampler
     first = Calibration(study, tmp_path / "out", figures=False).run()
     assert first.evaluations == 12 and first.best_cost is not None

@@ -18,7 +18,7 @@ from .helpers import ROOT, finished_fits, write_study
 
 @pytest.mark.slow
 def test_calibration_recovers_the_truth_and_validates(tmp_path):
-    study = load_study(write_study(tmp_path))
+    study = load_study(write_study(tmp_path, executor={"kind": "serial"}))
     seen = []
     result = Calibration(study, tmp_path / "out", progress=seen.append, figures=False).run()
     assert result.stop_reason == "validation passed" and result.validated
@@ -51,6 +51,7 @@ def test_failed_simulations_are_recorded_and_do_not_stop_the_loop(tmp_path):
             parameters={"mu_d_BePa": [0.45, 0.7], "mu_d_MePa": [0.15, 0.35]},
             validation={},
             budget=16,
+            executor={"kind": "serial"},
         )
     )
     result = Calibration(study, tmp_path / "out", figures=False).run()
@@ -61,9 +62,9 @@ def test_failed_simulations_are_recorded_and_do_not_stop_the_loop(tmp_path):
 
 @pytest.mark.slow
 def test_a_changed_study_file_is_refused_for_the_same_folder(tmp_path):
-    path = write_study(tmp_path, budget=8, validation={})
+    path = write_study(tmp_path, budget=8, validation={}, executor={"kind": "serial"})
     Calibration(load_study(path), tmp_path / "out", figures=False).run()
-    write_study(tmp_path, budget=12, validation={})
+    write_study(tmp_path, budget=12, validation={}, executor={"kind": "serial"})
     calibration = Calibration(load_study(path), tmp_path / "out")  # opens nothing yet
     with pytest.raises(ParcelfitError, match="different study file"):
         calibration.run()
@@ -157,7 +158,12 @@ def test_validation_records_the_envelope_beside_the_published_verdict(tmp_path):
     from parcelfit.study.store import Store
 
     study = load_study(
-        write_study(tmp_path, budget=12, validation={"speed_setting": 2, "every": 1})
+        write_study(
+            tmp_path,
+            budget=12,
+            validation={"speed_setting": 2, "every": 1},
+            executor={"kind": "serial"},
+        )
     )
     Calibration(study, tmp_path / "out", figures=False).run()
     v = Store(tmp_path / "out" / "study.sqlite").evaluations("validation")[-1]
@@ -185,6 +191,7 @@ def test_figures_refit_the_surrogate_with_the_study_s_own_optimizer_settings(tmp
         initial=4,
         batch_size=2,
         budget=4,
+        executor={"kind": "serial"},
     )
     calibration = Calibration(load_study(study), tmp_path / "out")
     used = calibration.bo.settings

@@ -54,6 +54,7 @@ def _hostile_study(tmp_path):
         initial=4,
         batch_size=2,
         budget=6,
+        executor={"kind": "serial"},
     )
     ds_file = tmp_path / "data" / "dataset.yaml"
     doc = yaml.safe_load(ds_file.read_text())
@@ -242,7 +243,12 @@ def finished(tmp_path_factory):
     after every iteration; how many it ran depends on when validation passed)."""
     root = tmp_path_factory.mktemp("finished")
     study = write_study(
-        root, initial=4, batch_size=2, budget=8, validation={"speed_setting": 2, "every": 1}
+        root,
+        initial=4,
+        batch_size=2,
+        budget=8,
+        validation={"speed_setting": 2, "every": 1},
+        executor={"kind": "serial"},
     )
     Calibration(load_study(study), root / "out", figures=False).run()
     info = study_status(root / "out")
@@ -844,10 +850,10 @@ def test_losing_the_dask_scheduler_stops_cleanly_and_the_study_resumes(tmp_path,
                 *dask[:2],
                 "distributed.cli.dask_worker",
                 address,
-                "--nworkers",
-                "2",
-                "--nthreads",
+                "--nworkers",  # one worker process (and its nanny) running two tasks at a time
                 "1",
+                "--nthreads",
+                "2",
                 "--no-dashboard",
             ]
         )
@@ -1459,13 +1465,15 @@ def _snapshot(folder: Path) -> dict[str, bytes]:
 
 
 @pytest.mark.slow
-def test_a_study_folder_without_its_store_is_refused_until_restart(tmp_path):
+def test_a_study_folder_without_its_store_is_refused_until_restart(tmp_path, request):
     study = write_study(tmp_path, executor={"kind": "serial"}, budget=8, validation={})
     out = tmp_path / "o"
     args = ["calibrate", str(study), "--out", str(out)]
     assert runner.invoke(app, args).exit_code == 0
     first = _snapshot(out)
     assert "results.json" in first and any(n.startswith("runs/") for n in first)
+    assert any(n.startswith("figures/") for n in first)
+    request.getfixturevalue("no_study_figures")  # the studies run from here on draw none
     (out / "study.sqlite").unlink()  # deleted by hand, the outputs left
     del first["study.sqlite"]
     result = runner.invoke(app, args)
