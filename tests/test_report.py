@@ -223,7 +223,7 @@ def test_parameter_rows_report_values_only_for_determined_parameters():
 
 @pytest.mark.slow
 def test_the_report_renders_the_stored_verdict_without_simulating_or_refitting(
-    tmp_path, monkeypatch
+    tmp_path, monkeypatch, no_report_figures
 ):
     import json
 
