@@ -194,11 +194,15 @@ def test_a_study_file_chooses_its_optimizer(tmp_path, sampler):
     from .test_calibration import write_study
 
     opts = {"sampler": sampler} | ({} if sampler == "tpe" else {"n_samples": 500})
-    study = load_study(write_study(tmp_path, optimizer=opts, budget=12, initial=8))
+    study = load_study(
+        write_study(tmp_path, optimizer=opts, budget=12, initial=8, executor={"kind": "serial"})
+    )
     assert study.sampler == sampler
-    first = Calibration(study, tmp_path / "out").run()
+    first = Calibration(study, tmp_path / "out", figures=False).run()
     assert first.evaluations == 12 and first.best_cost is not None
-    again = Calibration(study, tmp_path / "out").run()  # resumed from the store: nothing new
+    again = Calibration(
+        study, tmp_path / "out", figures=False
+    ).run()  # resumed from the store: nothing new
     assert (again.evaluations, again.best_params) == (12, first.best_params)
 
 
@@ -221,7 +225,9 @@ def test_the_sampler_is_an_object_chosen_once_from_the_registry(tmp_path):
     calibration = Calibration(study, tmp_path / "out", sampler=own)
     assert calibration.bo is own  # an object given replaces the study file's
     assert isinstance(Calibration(study, tmp_path / "out").bo, BatchBO)
-    with pytest.raises(ParcelfitError, match=r"unknown optimizer 'mango'.*gp, published, tpe, optuna-gp, botorch"):
+    with pytest.raises(
+        ParcelfitError, match=r"unknown optimizer 'mango'.*gp, published, tpe, optuna-gp, botorch"
+    ):
         make_sampler("mango", study.space)
 
 

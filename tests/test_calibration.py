@@ -18,9 +18,9 @@ from .helpers import ROOT, finished_fits, write_study
 
 @pytest.mark.slow
 def test_calibration_recovers_the_truth_and_validates(tmp_path):
-    study = load_study(write_study(tmp_path))
+    study = load_study(write_study(tmp_path, executor={"kind": "serial"}))
     seen = []
-    result = Calibration(study, tmp_path / "out", progress=seen.append).run()
+    result = Calibration(study, tmp_path / "out", progress=seen.append, figures=False).run()
     assert result.stop_reason == "validation passed" and result.validated
     # validation passes after iteration 4 (24 evaluations), before the optimiser has homed in:
     # the recommended mu_d_BePa is then 12 % of its range from the truth with the default
@@ -39,7 +39,7 @@ def test_calibration_recovers_the_truth_and_validates(tmp_path):
         f"{n}.{ext}" for n in ("history", "traces", "partial_dependence") for ext in ("png", "svg")
     )
     # a finished study resumed does nothing more
-    again = Calibration(study, tmp_path / "out").run()
+    again = Calibration(study, tmp_path / "out", figures=False).run()
     assert again.evaluations == result.evaluations and again.stop_reason == "validation passed"
 
 
@@ -51,9 +51,10 @@ def test_failed_simulations_are_recorded_and_do_not_stop_the_loop(tmp_path):
             parameters={"mu_d_BePa": [0.45, 0.7], "mu_d_MePa": [0.15, 0.35]},
             validation={},
             budget=16,
+            executor={"kind": "serial"},
         )
     )
-    result = Calibration(study, tmp_path / "out").run()
+    result = Calibration(study, tmp_path / "out", figures=False).run()
     info = study_status(tmp_path / "out")
     assert result.evaluations == 16 and result.stop_reason == "budget spent"
     assert info.by_status.get("unstable", 0) > 0 and info.by_status["ok"] > 0
@@ -61,9 +62,9 @@ def test_failed_simulations_are_recorded_and_do_not_stop_the_loop(tmp_path):
 
 @pytest.mark.slow
 def test_a_changed_study_file_is_refused_for_the_same_folder(tmp_path):
-    path = write_study(tmp_path, budget=8, validation={})
-    Calibration(load_study(path), tmp_path / "out").run()
-    write_study(tmp_path, budget=12, validation={})
+    path = write_study(tmp_path, budget=8, validation={}, executor={"kind": "serial"})
+    Calibration(load_study(path), tmp_path / "out", figures=False).run()
+    write_study(tmp_path, budget=12, validation={}, executor={"kind": "serial"})
     calibration = Calibration(load_study(path), tmp_path / "out")  # opens nothing yet
     with pytest.raises(ParcelfitError, match="different study file"):
         calibration.run()
@@ -89,7 +90,13 @@ def test_bad_study_files(tmp_path, change, pattern):
 
 
 @pytest.mark.slow
-def test_sigkill_at_any_moment_then_rerun_resumes_without_losing_or_repeating(tmp_path):
+def test_sigkill_at_any_moment_then_rerun_resumes_without_losing_or_repeating(
+    tmp_path, monkeypatch, no_study_figures
+):
+    from typer.testing import CliRunner
+
+    from parcelfit.cli import app
+
     study = write_study(tmp_path, budget=24, validation={})
     out = tmp_path / "out"
     log = tmp_path / "simulated.log"
@@ -129,8 +136,9 @@ def test_sigkill_at_any_moment_then_rerun_resumes_without_losing_or_repeating(tm
     proc.wait()
     before = finished_fits(out / "study.sqlite")
     assert 10 <= len(before) < 24
-    done = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0, done.stderr[-2000:]
+    monkeypatch.setenv("FAKE_SIM_LOG", str(log))  # the workers of the rerun log there too
+    done = CliRunner().invoke(app, cmd[3:])  # the same command, in this process
+    assert done.exit_code == 0, done.output
     after = finished_fits(out / "study.sqlite")
     assert len(after) == 24
     assert all(after[k] == v for k, v in before.items())  # nothing finished was lost or redone
@@ -150,9 +158,14 @@ def test_validation_records_the_envelope_beside_the_published_verdict(tmp_path):
     from parcelfit.study.store import Store
 
     study = load_study(
-        write_study(tmp_path, budget=12, validation={"speed_setting": 2, "every": 1})
+        write_study(
+            tmp_path,
+            budget=12,
+            validation={"speed_setting": 2, "every": 1},
+            executor={"kind": "serial"},
+        )
     )
-    Calibration(study, tmp_path / "out").run()
+    Calibration(study, tmp_path / "out", figures=False).run()
     v = Store(tmp_path / "out" / "study.sqlite").evaluations("validation")[-1]
     env = v.details.envelope
     assert env is not None
@@ -178,6 +191,7 @@ def test_figures_refit_the_surrogate_with_the_study_s_own_optimizer_settings(tmp
         initial=4,
         batch_size=2,
         budget=4,
+        executor={"kind": "serial"},
     )
     calibration = Calibration(load_study(study), tmp_path / "out")
     used = calibration.bo.settings
@@ -285,14 +299,14 @@ def test_rerunning_a_finished_study_writes_its_missing_results_without_simulatin
         )
     )
     out = tmp_path / "out"
-    Calibration(study, out).run()
+    Calibration(study, out, figures=False).run()
     first = read_results(out)
     assert first.stop_reason is not None and first.validations and first.surrogate.curves
     # a folder as an earlier parcelfit left it: no results.json
     (out / "results.json").unlink()
     log = tmp_path / "sims.log"
     monkeypatch.setenv("FAKE_SIM_LOG", str(log))
-    Calibration(study, out).run()
+    Calibration(study, out, figures=False).run()
     assert not log.exists()  # nothing simulated again
     again = read_results(out)
     assert again.surrogate.to_json() == first.surrogate.to_json()
@@ -303,7 +317,7 @@ def test_rerunning_a_finished_study_writes_its_missing_results_without_simulatin
         assert a.verdict is not None and a.sim_xy is not None and a.band is not None
         assert a.to_json() == b.to_json()
     # with its results file in place, a resumed study keeps the records as they were
-    Calibration(study, out).run()
+    Calibration(study, out, figures=False).run()
     kept = read_results(out)
     assert [v.to_json() for v in kept.validations] == [v.to_json() for v in again.validations]
 

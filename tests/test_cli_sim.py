@@ -27,6 +27,11 @@ def test_simulate_writes_run_and_animation(tmp_path):
             str(out),
             "--video",
             str(gif),
+            # the command's files, not the physics: a coarse step and mesh keep it quick
+            "--timestep",
+            "0.00083333",
+            "--spacing",
+            "0.05",
         ],
     )
     assert result.exit_code == 0, result.output

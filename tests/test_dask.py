@@ -59,7 +59,11 @@ def test_calibration_through_a_scheduler_address(cluster, tmp_path):
     study = load_study(write_study(tmp_path, budget=12, validation={}))
     t0 = time.time()
     result = Calibration(
-        study, tmp_path / "out", executor="dask", scheduler=cluster.scheduler_address
+        study,
+        tmp_path / "out",
+        executor="dask",
+        scheduler=cluster.scheduler_address,
+        figures=False,
     ).run()
     assert result.evaluations == 12 and result.best_cost is not None
     assert time.time() - t0 < 120

@@ -98,7 +98,7 @@ def test_a_calibration_runs_in_process_with_the_serial_executor(tmp_path):
     from .helpers import write_study
 
     study = load_study(write_study(tmp_path, budget=12, validation={}, executor="serial"))
-    result = Calibration(study, tmp_path / "out").run()
+    result = Calibration(study, tmp_path / "out", figures=False).run()
     assert result.evaluations == 12 and result.stop_reason == "budget spent"
     by_status = study_status(tmp_path / "out").by_status
     assert sum(by_status.values()) == 12 and "failed" not in by_status
@@ -107,7 +107,7 @@ def test_a_calibration_runs_in_process_with_the_serial_executor(tmp_path):
 # -- Ctrl-C and closing a pool: nothing waits without a bound ------------------------------------
 
 
-def test_ctrl_c_delivered_to_another_thread_stops_the_wait_for_results():
+def test_ctrl_c_delivered_to_another_thread_stops_the_wait_for_results(ctrl_c):
     """The kernel hands a Ctrl-C (SIGINT) to any thread of the process that does not block it;
     the main thread, waiting for results, must act on it without waiting for the running task
     (a pool's manager and feeder threads are such other threads)."""
@@ -143,7 +143,7 @@ def test_ctrl_c_delivered_to_another_thread_stops_the_wait_for_results():
     assert waited < 10  # not the task's 20 s
 
 
-def test_ctrl_c_is_held_off_while_a_worker_starts_and_delivered_after():
+def test_ctrl_c_is_held_off_while_a_worker_starts_and_delivered_after(ctrl_c):
     import signal
     import threading
 
@@ -164,7 +164,7 @@ def _abs(x):
     return abs(x)
 
 
-def test_ctrl_c_while_a_local_worker_starts_does_not_reach_it(capfd):
+def test_ctrl_c_while_a_local_worker_starts_does_not_reach_it(capfd, ctrl_c):
     """Ctrl-C goes to the terminal's whole process group, workers too; one still starting
     (seconds of imports) must not die of it with a traceback (the pool would break)."""
     import contextlib

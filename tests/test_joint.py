@@ -178,7 +178,9 @@ def test_a_case_with_its_own_placements_is_simulated_that_often(tmp_path):
 
 
 @pytest.mark.slow
-def test_a_joint_ensemble_study_stores_the_parts_and_checks_transfer(tmp_path, monkeypatch):
+def test_a_joint_ensemble_study_stores_the_parts_and_checks_transfer(
+    tmp_path, monkeypatch, no_report_figures
+):
     study = load_study(_joint_study(tmp_path))
     out = tmp_path / "out"
     result = Calibration(study, out, figures=False).run()
@@ -199,9 +201,7 @@ def test_a_joint_ensemble_study_stores_the_parts_and_checks_transfer(tmp_path, m
     }
     parts = status.recommended.parts
     assert [p.case for p in parts] == ["R/P/1", "Q/P/1"] and len(parts[0].seeds) == 3
-    assert status.recommended.cost == pytest.approx(
-        parts[0].cost + 0.5 * parts[1].cost, rel=1e-12
-    )
+    assert status.recommended.cost == pytest.approx(parts[0].cost + 0.5 * parts[1].cost, rel=1e-12)
     for p in parts:  # each part: trajectory term + transit term, with its standard error
         assert p.cost == pytest.approx(p.trajectory_term + p.transit_term, rel=1e-12)
         assert p.se > 0 and all((out / f).is_file() for f in p.run_files)
@@ -272,7 +272,9 @@ def test_the_advice_names_the_rig_where_an_undetermined_parameter_matters(tmp_pa
 
 
 @pytest.mark.slow
-def test_an_ensemble_on_adjusted_transit_times_adjusts_real_and_simulated_runs_alike(tmp_path):
+def test_an_ensemble_on_adjusted_transit_times_adjusts_real_and_simulated_runs_alike(
+    tmp_path, no_report_figures
+):
     from parcelfit.metrics import select_reference
     from parcelfit.metrics.reference import adjusted_reference
     from parcelfit.metrics.transit_adjustment import ridden_speeds

@@ -54,6 +54,7 @@ def _hostile_study(tmp_path):
         initial=4,
         batch_size=2,
         budget=6,
+        executor={"kind": "serial"},
     )
     ds_file = tmp_path / "data" / "dataset.yaml"
     doc = yaml.safe_load(ds_file.read_text())
@@ -62,13 +63,13 @@ def _hostile_study(tmp_path):
         for run in case["runs"]:
             run["id"] = HOSTILE["run"] + run["id"]
     ds_file.write_text(yaml.safe_dump(doc))
-    Calibration(load_study(study_file), tmp_path / "out").run()
+    Calibration(load_study(study_file), tmp_path / "out", figures=False).run()
     return tmp_path / "out"
 
 
 @pytest.mark.slow
 @pytest.mark.browser
-def test_hostile_names_are_text_in_the_report(tmp_path):
+def test_hostile_names_are_text_in_the_report(tmp_path, no_report_figures):
     page = build_report(_hostile_study(tmp_path), out=tmp_path / "r.html", key_frames=False)
     text = page.read_text()
     assert "<script" not in text.lower() and "<img src=x" not in text
@@ -187,7 +188,9 @@ def test_key_frames_are_embedded_only_from_inside_the_study_folder(
 
 
 @pytest.mark.slow  # draws the whole report (~10 s)
-def test_the_report_reads_no_file_outside_the_study_and_screening_folders(tmp_path, monkeypatch):
+def test_the_report_reads_no_file_outside_the_study_and_screening_folders(
+    tmp_path, monkeypatch, no_report_figures
+):
     import base64
 
     study, secret = _study_with_outside_files(tmp_path)
@@ -240,9 +243,14 @@ def finished(tmp_path_factory):
     after every iteration; how many it ran depends on when validation passed)."""
     root = tmp_path_factory.mktemp("finished")
     study = write_study(
-        root, initial=4, batch_size=2, budget=8, validation={"speed_setting": 2, "every": 1}
+        root,
+        initial=4,
+        batch_size=2,
+        budget=8,
+        validation={"speed_setting": 2, "every": 1},
+        executor={"kind": "serial"},
     )
-    Calibration(load_study(study), root / "out").run()
+    Calibration(load_study(study), root / "out", figures=False).run()
     info = study_status(root / "out")
     assert info.evaluations >= 6 and info.validations, info  # what the tests below need
     return root
@@ -272,7 +280,7 @@ def test_an_empty_store_is_damaged_not_a_new_study(finished, tmp_path):
     stamps = [p.stat().st_mtime_ns for p in runs]
     (out / "study.sqlite").write_bytes(b"")  # truncated to 0 bytes
     with pytest.raises(ParcelfitError, match=r"empty \(0 bytes\)"):
-        Calibration(study, out).run()
+        Calibration(study, out, figures=False).run()
     result = runner.invoke(app, ["status", str(out)])
     assert result.exit_code == 2 and "empty (0 bytes)" in result.output
     assert (out / "study.sqlite").stat().st_size == 0  # nothing written into it
@@ -280,7 +288,7 @@ def test_an_empty_store_is_damaged_not_a_new_study(finished, tmp_path):
 
 
 @pytest.mark.slow
-def test_status_and_report_open_the_store_read_only(finished, tmp_path):
+def test_status_and_report_open_the_store_read_only(finished, tmp_path, no_report_figures):
     _, out = _copy(finished, tmp_path)
     db = out / "study.sqlite"
     before = db.read_bytes()
@@ -319,12 +327,12 @@ def test_a_foreign_sqlite_file_is_not_read_as_a_study(tmp_path):
 def test_a_second_calibration_on_the_same_folder_is_refused(finished, tmp_path):
     study, out = _copy(finished, tmp_path)
     n = _fits(out)
-    first = Calibration(study, out)
+    first = Calibration(study, out, figures=False)
     first.prepare()  # opens and locks the folder
     with pytest.raises(ParcelfitError, match="another parcelfit process is running a calibration"):
-        Calibration(study, out).run()
+        Calibration(study, out, figures=False).run()
     first.run()  # releases the folder when it ends
-    again = Calibration(study, out).run()
+    again = Calibration(study, out, figures=False).run()
     assert again.evaluations == n  # the finished study is not run a second time
 
 
@@ -453,7 +461,7 @@ def test_a_validation_killed_midway_is_run_again_on_resume(finished, tmp_path):
     )
     con.execute("DELETE FROM meta WHERE key = 'stop_reason'")
     con.close()
-    again = Calibration(study, out).run()
+    again = Calibration(study, out, figures=False).run()
     info = study_status(out)
     assert again.evaluations == first.evaluations == _fits(out)  # no extra fitting runs
     assert info.validations == first.validations  # simulated again, same verdict
@@ -503,7 +511,7 @@ def test_a_dying_local_worker_costs_time_not_results(tmp_path):
 def test_a_worker_killed_during_a_calibration_leaves_no_failed_evaluation(tmp_path, monkeypatch):
     monkeypatch.setenv("FAKE_SIM_CRASH_ONCE", str(tmp_path / "crashed"))
     study = load_study(write_study(tmp_path, budget=8, validation={}))
-    result = Calibration(study, tmp_path / "out").run()
+    result = Calibration(study, tmp_path / "out", figures=False).run()
     assert (tmp_path / "crashed").exists()  # one simulation killed its worker
     info = study_status(tmp_path / "out")
     assert result.evaluations == 8 and info.by_status == {"ok": 8}
@@ -665,14 +673,14 @@ def test_a_solver_whose_child_escapes_its_session_times_out_on_time_leaving_noth
     from parcelfit.runs import TestCase
     from parcelfit.sim import SimStatus, defaults_si
 
-    sim = _escaper(tmp_path, "hang", how, timeout=3)
+    sim = _escaper(tmp_path, "hang", how, timeout=2)
     t0 = time.perf_counter()
     result = sim.run(defaults_si("rigid"), TestCase("E1", "KPBW", 1))
     elapsed = time.perf_counter() - t0
     pids = [int(p) for p in (Path(result.diagnostics["workdir"]) / "pids").read_text().split()]
     assert result.status is SimStatus.TIMEOUT
-    assert result.diagnostics["message"] == "killed after the timeout of 3 s"
-    assert 3.0 <= elapsed < 4.0  # was 61 s with a child sleeping 60 s, for ever with this one
+    assert result.diagnostics["message"] == "killed after the timeout of 2 s"
+    assert 2.0 <= elapsed < 3.0  # was 61 s with a child sleeping 60 s, for ever with this one
     assert [p for p in pids if _running(p)] == []  # the solver and its escaped child: gone
 
 
@@ -790,7 +798,7 @@ def _free_port() -> int:
 
 
 @pytest.mark.slow
-def test_losing_the_dask_scheduler_stops_cleanly_and_the_study_resumes(tmp_path):
+def test_losing_the_dask_scheduler_stops_cleanly_and_the_study_resumes(tmp_path, no_study_figures):
     pytest.importorskip("distributed")
     import random
     import signal
@@ -842,10 +850,10 @@ def test_losing_the_dask_scheduler_stops_cleanly_and_the_study_resumes(tmp_path)
                 *dask[:2],
                 "distributed.cli.dask_worker",
                 address,
-                "--nworkers",
-                "2",
-                "--nthreads",
+                "--nworkers",  # one worker process (and its nanny) running two tasks at a time
                 "1",
+                "--nthreads",
+                "2",
                 "--no-dashboard",
             ]
         )
@@ -878,15 +886,8 @@ def test_losing_the_dask_scheduler_stops_cleanly_and_the_study_resumes(tmp_path)
     info = study_status(out)
     assert set(info.by_status) <= {"ok", "pending"}  # nothing stored as failed
     before = finished_fits(out / "study.sqlite")
-    done = subprocess.run(
-        [*calibrate, "--executor", "local", "--workers", "2"],
-        cwd=ROOT,
-        env={**env, "FAKE_SIM_DELAY": "0"},
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert done.returncode == 0, done.stderr[-2000:]
+    done = runner.invoke(app, [*calibrate[3:], "--executor", "local", "--workers", "2"])
+    assert done.exit_code == 0, done.output
     after = finished_fits(out / "study.sqlite")
     assert len(after) == 16 and all(after[k] == v for k, v in before.items())
 
@@ -1206,7 +1207,7 @@ def test_evaluations_once_stored_failed_by_a_lost_worker_run_again(finished, tmp
     )
     con.close()
     assert study_status(out).by_status == {"failed": 2, "ok": n - 2}
-    Calibration(study, out).run()
+    Calibration(study, out, figures=False).run()
     assert study_status(out).by_status == {"ok": n}
 
 
@@ -1238,7 +1239,7 @@ def _error_lines(result) -> list[str]:
 
 @pytest.mark.slow
 def test_a_study_whose_every_simulation_fails_stops_after_8_and_quotes_the_first(
-    tmp_path, monkeypatch
+    tmp_path, monkeypatch, no_study_figures
 ):
     study = write_study(
         tmp_path,
@@ -1385,7 +1386,7 @@ class _FillingDisk:
 @pytest.mark.slow
 @pytest.mark.parametrize("where", ["update", "commit"])
 def test_a_full_disk_while_storing_a_result_is_one_line_and_loses_nothing(
-    tmp_path, monkeypatch, where
+    tmp_path, monkeypatch, where, no_study_figures
 ):
     study = write_study(tmp_path, executor={"kind": "serial"}, budget=12, validation={})
     out = tmp_path / "o"
@@ -1415,7 +1416,9 @@ def test_a_full_disk_while_storing_a_result_is_one_line_and_loses_nothing(
 
 
 @pytest.mark.slow
-def test_a_full_disk_while_writing_a_run_file_is_one_line_and_loses_nothing(tmp_path, monkeypatch):
+def test_a_full_disk_while_writing_a_run_file_is_one_line_and_loses_nothing(
+    tmp_path, monkeypatch, no_study_figures
+):
     import errno
 
     import pandas as pd
@@ -1462,13 +1465,15 @@ def _snapshot(folder: Path) -> dict[str, bytes]:
 
 
 @pytest.mark.slow
-def test_a_study_folder_without_its_store_is_refused_until_restart(tmp_path):
+def test_a_study_folder_without_its_store_is_refused_until_restart(tmp_path, request):
     study = write_study(tmp_path, executor={"kind": "serial"}, budget=8, validation={})
     out = tmp_path / "o"
     args = ["calibrate", str(study), "--out", str(out)]
     assert runner.invoke(app, args).exit_code == 0
     first = _snapshot(out)
     assert "results.json" in first and any(n.startswith("runs/") for n in first)
+    assert any(n.startswith("figures/") for n in first)
+    request.getfixturevalue("no_study_figures")  # the studies run from here on draw none
     (out / "study.sqlite").unlink()  # deleted by hand, the outputs left
     del first["study.sqlite"]
     result = runner.invoke(app, args)
@@ -1584,7 +1589,9 @@ def test_an_error_during_the_live_display_starts_on_a_line_of_its_own(tmp_path):
 
 
 @pytest.mark.slow
-def test_ctrl_c_stops_the_workers_quietly_and_says_how_to_resume(tmp_path):
+def test_ctrl_c_stops_the_workers_quietly_and_says_how_to_resume(
+    tmp_path, ctrl_c, no_study_figures
+):
     import signal
     import subprocess
     import sys
@@ -1624,7 +1631,7 @@ def test_ctrl_c_stops_the_workers_quietly_and_says_how_to_resume(tmp_path):
         workers = [c.pid for c in psutil.Process(proc.pid).children(recursive=True)]
         t0 = time.time()
         os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C: the whole foreground process group
-        stdout, stderr = proc.communicate(timeout=60)
+        stdout, stderr = proc.communicate(timeout=100)
         waited = time.time() - t0
     finally:
         with contextlib.suppress(ProcessLookupError):
@@ -1635,12 +1642,14 @@ def test_ctrl_c_stops_the_workers_quietly_and_says_how_to_resume(tmp_path):
         f"interrupted: {stored} evaluations stored; rerun the same command to resume"
     ]
     assert "Traceback" not in stdout + stderr
-    assert waited < 20  # the simulation running (120 s) was stopped, not waited for
+    # the simulation running (120 s) was stopped, not waited for (a bound with room for a busy
+    # machine: stopping takes a second or two)
+    assert waited < 60
     assert not _gone(workers, timeout=10)
     kept = finished_fits(out / "study.sqlite")
     hang.unlink()
-    done = subprocess.run(calibrate, cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0, done.stderr[-2000:]
+    done = runner.invoke(app, calibrate[3:])  # the same command, in this process
+    assert done.exit_code == 0, done.output
     after = finished_fits(out / "study.sqlite")
     assert len(after) == 12 and all(after[k] == v for k, v in kept.items())
 

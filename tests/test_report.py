@@ -25,7 +25,7 @@ NEED_BROWSER = os.environ.get("CI") == "true"  # in CI the browser must be there
 def demo_folder(tmp_path_factory):
     """A folder like the demo's: calibration/ and screen/ over the analytic simulator."""
     root = tmp_path_factory.mktemp("demo")
-    study_file = write_study(root)
+    study_file = write_study(root, executor={"kind": "serial"})  # no worker processes to start
     (root / "data" / "truth.yaml").write_text(
         yaml.safe_dump({"synthetic": True, "truth": {"P": TRUTH}})
     )
@@ -36,7 +36,7 @@ def demo_folder(tmp_path_factory):
         "reference": {"dataset": "data", "rig": "R", "consignment": "P", "speed_setting": 1},
         "parameters": {"mu_d_BePa": [0.3, 0.58], "mu_d_MePa": [0.15, 0.35], "E_Pa": [200, 1600]},
         "stages": ["full"],
-        "executor": {"kind": "local", "workers": 2},
+        "executor": {"kind": "serial"},
     }
     (root / "screen.yaml").write_text(yaml.safe_dump(screen))
     run_screen(load_screen(root / "screen.yaml"), root / "screen")
@@ -133,7 +133,7 @@ def test_report_is_one_self_contained_file_with_every_section(demo_folder, monke
 
 
 @pytest.mark.slow
-def test_the_report_of_a_study_folder_goes_inside_it(demo_folder):
+def test_the_report_of_a_study_folder_goes_inside_it(demo_folder, no_report_figures):
     study = demo_folder / "calibration"
     path = build_report(study, key_frames=False)
     assert path == study / "report.html" and path.is_file()
@@ -149,7 +149,7 @@ def test_report_names_a_missing_study(tmp_path):
 
 
 @pytest.mark.slow
-def test_report_command_prints_the_path_and_verdict(demo_folder, tmp_path):
+def test_report_command_prints_the_path_and_verdict(demo_folder, tmp_path, no_report_figures):
     out = tmp_path / "r.html"
     result = runner.invoke(app, ["report", str(demo_folder / "calibration"), "--out", str(out)])
     assert result.exit_code == 0, result.output
@@ -223,7 +223,7 @@ def test_parameter_rows_report_values_only_for_determined_parameters():
 
 @pytest.mark.slow
 def test_the_report_renders_the_stored_verdict_without_simulating_or_refitting(
-    tmp_path, monkeypatch
+    tmp_path, monkeypatch, no_report_figures
 ):
     import json
 

@@ -162,7 +162,7 @@ def test_one_placement_writes_todays_design_effects_and_selection(tmp_path):
 def test_three_placements_simulate_every_row_at_seeds_1_to_3_and_average(tmp_path, monkeypatch):
     probe = tmp_path / "probe"
     monkeypatch.setenv("SCREEN_PROBE", str(probe))
-    path = _screen(tmp_path, executor={"kind": "local", "workers": 2})
+    path = _screen(tmp_path, executor={"kind": "serial"})  # no worker processes to start
     events = []
     out = tmp_path / "out"
     (stage,), selection = run_screen(load_screen(path), out, progress=events.append)

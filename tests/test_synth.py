@@ -41,8 +41,7 @@ BW_TRUTH = {"BW": {"mu_d_BePa": 0.5}}
 
 @pytest.fixture(scope="module")
 def twin(tmp_path_factory):
-    """Three twin runs of E1/BW/1 (seed 4), made once: (folder, dataset path). One test checks
-    their scatter and that they are made again alike, another that a resumed dataset is them."""
+    """Three twin runs of E1/BW/1 (seed 4): (folder, dataset path)."""
     folder = tmp_path_factory.mktemp("twin")
     path = make_twin_dataset(folder, [TestCase("E1", "BW", 1)], BW_TRUTH, settings=QUICK, seed=4)
     return folder, path
@@ -126,15 +125,22 @@ def test_synth_spec_errors_name_the_key(tmp_path):
         load_twin_spec(spec)
 
 
-@pytest.mark.slow
-@pytest.mark.mujoco
-def test_an_interrupted_twin_dataset_resumes_from_its_cache(twin, tmp_path, monkeypatch):
-    import pytest
+def _noisy_run(job):
+    """A twin run without physics whose samples use every digit (seeded noise on a straight
+    ride along x at 1 m/s): (run, wall)."""
+    rng = np.random.default_rng(job.seed)
+    t = np.arange(90) / 60
+    noise = rng.normal(0.0, 1e-3, (3, t.size))
+    trajectory = Trajectory(t=t, x=t + noise[0], y=noise[1], theta=10 * noise[2])
+    return Run(job.run_id, job.case, trajectory, 1.0 + rng.uniform(0.0, 0.1)), 0.1
 
+
+def test_an_interrupted_twin_dataset_resumes_from_its_cache(tmp_path, monkeypatch):
+    """The cache's bookkeeping, on twin runs without physics (`_noisy_run`)."""
     import parcelfit.synth as synth
 
     settings = QUICK
-    real = synth._twin_run
+    real = _noisy_run
     calls = []
 
     def dies_on_the_third(job):
@@ -165,7 +171,9 @@ def test_an_interrupted_twin_dataset_resumes_from_its_cache(twin, tmp_path, monk
     assert sum("from the cache" in e.message for e in seen) == 2 and len(seen) == 3
     assert [(e.job, e.done, e.total) for e in seen] == [("synth", k, 3) for k in (1, 2, 3)]
     assert not (tmp_path / "d" / ".twin-runs").exists()
-    _, fresh = twin  # the same dataset made in one go
+    fresh = make_twin_dataset(  # the same dataset made in one go
+        tmp_path / "fresh", [TestCase("E1", "BW", 1)], BW_TRUTH, settings=settings, seed=4
+    )
     a, b = load_dataset(path)["E1/BW/1"].runs, load_dataset(fresh)["E1/BW/1"].runs
     assert all(
         np.allclose(x.trajectory.xy, y.trajectory.xy, atol=1e-9) for x, y in zip(a, b, strict=True)
