@@ -202,9 +202,23 @@ def write_study_results(folder: Path, dataset: Path, optimizer=None) -> None:
             ),
             identifiability=Identifiability(
                 (
-                    ParameterInterval("mu_d_BePa", 0.3, 0.6, (0.43, 0.47), 0.45, "determined", 1.0),
                     ParameterInterval(
-                        "E_Pa", 2e8, 1.6e9, (2.1e8, 1.59e9), 9e8, "undetermined", 1.0
+                        name="mu_d_BePa",
+                        low=0.3,
+                        high=0.6,
+                        interval=(0.43, 0.47),
+                        median=0.45,
+                        verdict="determined",
+                        rhat=1.0,
+                    ),
+                    ParameterInterval(
+                        name="E_Pa",
+                        low=2e8,
+                        high=1.6e9,
+                        interval=(2.1e8, 1.59e9),
+                        median=9e8,
+                        verdict="undetermined",
+                        rhat=1.0,
                     ),
                 ),
                 np.array([[1.0, 0.1], [0.1, 1.0]]),

@@ -34,12 +34,13 @@ def write_finished_study(tmp_path: Path, rows: int = 400) -> Path:
     sample = np.column_stack([rng.uniform(lo, hi, rows) for lo, hi in BOUNDS.values()])
     params = tuple(
         ParameterInterval(
-            name,
-            *ranges[name],
-            BOUNDS[name],
-            float(np.mean(BOUNDS[name])),
-            verdict(*ranges[name], BOUNDS[name]),
-            1.0,
+            name=name,
+            low=ranges[name][0],
+            high=ranges[name][1],
+            interval=BOUNDS[name],
+            median=float(np.mean(BOUNDS[name])),
+            verdict=verdict(*ranges[name], BOUNDS[name]),
+            rhat=1.0,
         )
         for name in BOUNDS
     )

@@ -244,7 +244,17 @@ def test_study_results_round_trip_through_results_json(tmp_path):
         key_frames=KeyFramesRecord(case="R/P/2", params={"mu_d_BePa": 0.5}, note="MuJoCo only"),
         figures=["figures/history.png"],
         identifiability=Identifiability(
-            (ParameterInterval("E_Pa", 2e8, 1.6e9, (3e8, 1.5e9), 9e8, "narrowed", 1.01),),
+            (
+                ParameterInterval(
+                    name="E_Pa",
+                    low=2e8,
+                    high=1.6e9,
+                    interval=(3e8, 1.5e9),
+                    median=9e8,
+                    verdict="narrowed",
+                    rhat=1.01,
+                ),
+            ),
             np.eye(1),
             np.linspace(3e8, 1.5e9, 7)[:, None],
             0.9,

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from parcelfit.study.identify import Advice
+from parcelfit.study.identify import Advice, ParameterInterval
 from parcelfit.study.results import (
     BandRecord,
     DependenceCurve,
@@ -42,6 +42,8 @@ def test_a_results_file_reads_back_and_writes_the_same_bytes():
         (DependenceCurve, lambda d: d["surrogate"]["curves"][0]),
         (BandRecord, lambda d: d["validations"][0]["band"]),
         (Advice, lambda d: d["advice"]),
+        (ParameterInterval, lambda d: d["identifiability"]["parameters"][0]),
+        (ParameterInterval, lambda d: d["identifiability"]["parameters"][1]),
     ],
 )
 def test_a_results_record_reads_back_and_writes_the_same(kind, part):
@@ -70,3 +72,13 @@ def test_records_read_what_earlier_versions_left_out():
     assert json.dumps(best.to_json()) == '{"params": {"E_Pa": 900000000.0}, "cost": 1.0}'
     advice = Advice.from_json({"changes": {"R/P/2": {"E_Pa": 1}}, "best": None})
     assert (advice.parameters, advice.params, advice.changes) == ((), {}, {"R/P/2": {"E_Pa": 1.0}})
+
+
+def test_a_parameter_interval_reads_integers_as_floats():
+    doc = {"name": "E_Pa", "low": 2, "high": 16, "interval": [3, 15], "median": 9}
+    iv = ParameterInterval.from_json({**doc, "verdict": "narrowed", "rhat": 1})
+    assert iv.interval == (3.0, 15.0) and isinstance(iv.interval[0], float)
+    assert json.dumps(iv.to_json()) == (
+        '{"name": "E_Pa", "low": 2.0, "high": 16.0, "interval": [3.0, 15.0], "median": 9.0, '
+        '"verdict": "narrowed", "rhat": 1.0}'
+    )

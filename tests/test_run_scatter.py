@@ -86,7 +86,17 @@ def test_a_prediction_s_band_of_a_real_run_holds_the_model_s_band():
         for j in range(4)
     ]
     ident = Identifiability(
-        (ParameterInterval("mu_d_BePa", 0.3, 0.5, (0.3, 0.5), 0.4, "determined", 1.0),),
+        (
+            ParameterInterval(
+                name="mu_d_BePa",
+                low=0.3,
+                high=0.5,
+                interval=(0.3, 0.5),
+                median=0.4,
+                verdict="determined",
+                rhat=1.0,
+            ),
+        ),
         np.eye(1),
         np.zeros((1, 1)),
         1.0,

@@ -110,10 +110,11 @@ N_KEEP_FOR_PLOT = 2000  # points of the plausible set stored for the pairwise pl
 VERDICTS = ("determined", "lower bound", "upper bound", "narrowed", "undetermined")
 
 
-@dataclass(frozen=True)
-class ParameterInterval:
+class ParameterInterval(BaseModel):
     """One parameter's verdict: its range and interval [low, high] (SI), the median over the
     plausible set's sample, the verdict (one of `VERDICTS`) and R-hat of its chains."""
+
+    model_config = ConfigDict(frozen=True)
 
     name: str
     low: float
@@ -145,29 +146,12 @@ class ParameterInterval:
 
     def to_json(self) -> dict[str, Any]:
         """The stored form (SI)."""
-        return {
-            "name": self.name,
-            "low": self.low,
-            "high": self.high,
-            "interval": list(self.interval),
-            "median": self.median,
-            "verdict": self.verdict,
-            "rhat": self.rhat,
-        }
+        return self.model_dump()
 
     @classmethod
     def from_json(cls, doc: Mapping[str, Any]) -> ParameterInterval:
         """Read the stored form."""
-        lo, hi = doc["interval"]
-        return cls(
-            str(doc["name"]),
-            float(doc["low"]),
-            float(doc["high"]),
-            (float(lo), float(hi)),
-            float(doc["median"]),
-            str(doc["verdict"]),
-            float(doc["rhat"]),
-        )
+        return cls.model_validate(dict(doc))
 
 
 @dataclass(frozen=True, eq=False)
@@ -476,13 +460,13 @@ def identify(
         )
         params.append(
             ParameterInterval(
-                dim.name,
-                dim.low,
-                dim.high,
-                interval,
-                float(np.median(values[:, j])),
-                verdict(dim.low, dim.high, interval),
-                float(rhat[j]),
+                name=dim.name,
+                low=dim.low,
+                high=dim.high,
+                interval=interval,
+                median=float(np.median(values[:, j])),
+                verdict=verdict(dim.low, dim.high, interval),
+                rhat=float(rhat[j]),
             )
         )
     with np.errstate(invalid="ignore", divide="ignore"):
