@@ -201,7 +201,7 @@ def write_study_results(folder: Path, dataset: Path, optimizer=None) -> None:
                 note="Key frames are drawn for the MuJoCo backend only.",
             ),
             identifiability=Identifiability(
-                (
+                parameters=(
                     ParameterInterval(
                         name="mu_d_BePa",
                         low=0.3,
@@ -221,12 +221,14 @@ def write_study_results(folder: Path, dataset: Path, optimizer=None) -> None:
                         rhat=1.0,
                     ),
                 ),
-                np.array([[1.0, 0.1], [0.1, 1.0]]),
-                np.column_stack([np.linspace(0.43, 0.47, 50), np.linspace(2.1e8, 1.59e9, 50)]),
-                1.2,
-                "largest equation (3) of a real run: 1.2 (R/P/1)",
-                3,
-                0.1,
+                correlation=np.array([[1.0, 0.1], [0.1, 1.0]]),
+                sample=np.column_stack(
+                    [np.linspace(0.43, 0.47, 50), np.linspace(2.1e8, 1.59e9, 50)]
+                ),
+                threshold=1.2,
+                threshold_source="largest equation (3) of a real run: 1.2 (R/P/1)",
+                evaluations=3,
+                noise_sd=0.1,
             ),
             transfer=[replace(record, after_iteration=None)],
             advice=Advice(

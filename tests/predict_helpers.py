@@ -44,7 +44,15 @@ def write_finished_study(tmp_path: Path, rows: int = 400) -> Path:
         )
         for name in BOUNDS
     )
-    ident = Identifiability(params, np.eye(3), sample, 1.0, "by hand", 40, 0.1)
+    ident = Identifiability(
+        parameters=params,
+        correlation=np.eye(3),
+        sample=sample,
+        threshold=1.0,
+        threshold_source="by hand",
+        evaluations=40,
+        noise_sd=0.1,
+    )
     write_results(folder, new_results({}, [], stop_reason="budget", identifiability=ident))
     return folder
 

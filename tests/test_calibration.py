@@ -244,7 +244,7 @@ def test_study_results_round_trip_through_results_json(tmp_path):
         key_frames=KeyFramesRecord(case="R/P/2", params={"mu_d_BePa": 0.5}, note="MuJoCo only"),
         figures=["figures/history.png"],
         identifiability=Identifiability(
-            (
+            parameters=(
                 ParameterInterval(
                     name="E_Pa",
                     low=2e8,
@@ -255,12 +255,12 @@ def test_study_results_round_trip_through_results_json(tmp_path):
                     rhat=1.01,
                 ),
             ),
-            np.eye(1),
-            np.linspace(3e8, 1.5e9, 7)[:, None],
-            0.9,
-            "largest equation (3) of a real run",
-            12,
-            0.1,
+            correlation=np.eye(1),
+            sample=np.linspace(3e8, 1.5e9, 7)[:, None],
+            threshold=0.9,
+            threshold_source="largest equation (3) of a real run",
+            evaluations=12,
+            noise_sd=0.1,
         ),
         transfer=[val],
         advice=Advice(

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from parcelfit.study.identify import Advice, ParameterInterval
+from parcelfit.study.identify import Advice, Identifiability, ParameterInterval
 from parcelfit.study.results import (
     BandRecord,
     DependenceCurve,
@@ -42,6 +42,7 @@ def test_a_results_file_reads_back_and_writes_the_same_bytes():
         (DependenceCurve, lambda d: d["surrogate"]["curves"][0]),
         (BandRecord, lambda d: d["validations"][0]["band"]),
         (Advice, lambda d: d["advice"]),
+        (Identifiability, lambda d: d["identifiability"]),
         (ParameterInterval, lambda d: d["identifiability"]["parameters"][0]),
         (ParameterInterval, lambda d: d["identifiability"]["parameters"][1]),
     ],
@@ -82,3 +83,12 @@ def test_a_parameter_interval_reads_integers_as_floats():
         '{"name": "E_Pa", "low": 2.0, "high": 16.0, "interval": [3.0, 15.0], "median": 9.0, '
         '"verdict": "narrowed", "rhat": 1.0}'
     )
+
+
+def test_identifiability_reads_an_empty_sample_and_earlier_defaults():
+    doc = json.loads(RESULTS)["identifiability"]
+    old = {k: v for k, v in doc.items() if k not in ("level", "reached", "best_acceptance")}
+    ident = Identifiability.from_json({**old, "sample": []})
+    assert ident.sample.shape == (0, 2) and ident.correlation.shape == (2, 2)
+    assert (ident.level, ident.reached, ident.best_acceptance) == (0.95, True, 1.0)
+    assert json.dumps(ident.to_json()["sample"]) == "[]"

@@ -86,7 +86,7 @@ def test_a_prediction_s_band_of_a_real_run_holds_the_model_s_band():
         for j in range(4)
     ]
     ident = Identifiability(
-        (
+        parameters=(
             ParameterInterval(
                 name="mu_d_BePa",
                 low=0.3,
@@ -97,12 +97,12 @@ def test_a_prediction_s_band_of_a_real_run_holds_the_model_s_band():
                 rhat=1.0,
             ),
         ),
-        np.eye(1),
-        np.zeros((1, 1)),
-        1.0,
-        "by hand",
-        10,
-        0.1,
+        correlation=np.eye(1),
+        sample=np.zeros((1, 1)),
+        threshold=1.0,
+        threshold_source="by hand",
+        evaluations=10,
+        noise_sd=0.1,
     )
     scatter = RunScatter({"transit_time": 0.02}, ("R/P/1",), 2)
     summaries, _, _ = summarise_prediction(ident, sets, [0, 1, 2, 3], pd.DataFrame(rows), scatter)

@@ -98,6 +98,7 @@ from sklearn.gaussian_process.kernels import ConstantKernel, Matern, WhiteKernel
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.optimize.space import Space
+from parcelfit.study.records import ArrayRecord, FloatArray
 
 ALPHA = 0.05  # a value is excluded when the surrogate is 95 % sure it costs more than epsilon
 N_SOBOL = 8192  # quasi-random points that seed and complete the sample of the plausible set
@@ -154,8 +155,7 @@ class ParameterInterval(BaseModel):
         return cls.model_validate(dict(doc))
 
 
-@dataclass(frozen=True, eq=False)
-class Identifiability:
+class Identifiability(ArrayRecord):
     """What the evaluations say about each parameter (see the module docstring): the intervals,
     the correlation matrix of the plausible set (order of ``parameters``), a thinned sample of
     it in SI (``sample``: (m, d)), the threshold epsilon and where it came from, how many
@@ -164,8 +164,8 @@ class Identifiability:
     real runs' scatter (``reached``) and the largest acceptance L seen."""
 
     parameters: tuple[ParameterInterval, ...]
-    correlation: np.ndarray
-    sample: np.ndarray
+    correlation: FloatArray
+    sample: FloatArray
     threshold: float
     threshold_source: str
     evaluations: int
@@ -199,36 +199,16 @@ class Identifiability:
                     out.append((self.parameters[i].name, self.parameters[j].name, r))
         return sorted(out, key=lambda t: -abs(t[2]))
 
-    def to_json(self) -> dict[str, Any]:
-        """The stored form (SI)."""
-        return {
-            "parameters": [p.to_json() for p in self.parameters],
-            "correlation": np.asarray(self.correlation, float).tolist(),
-            "sample": np.asarray(self.sample, float).tolist(),
-            "threshold": self.threshold,
-            "threshold_source": self.threshold_source,
-            "evaluations": self.evaluations,
-            "noise_sd": self.noise_sd,
-            "level": self.level,
-            "reached": self.reached,
-            "best_acceptance": self.best_acceptance,
-        }
-
     @classmethod
     def from_json(cls, doc: Mapping[str, Any]) -> Identifiability:
-        """Read the stored form."""
+        """Read the stored form (SI; missing level, reached, best_acceptance: the defaults)."""
         d = len(doc["parameters"])
-        return cls(
-            tuple(ParameterInterval.from_json(p) for p in doc["parameters"]),
-            np.asarray(doc["correlation"], float).reshape(d, d),
-            np.asarray(doc["sample"], float).reshape(-1, d),
-            float(doc["threshold"]),
-            str(doc["threshold_source"]),
-            int(doc["evaluations"]),
-            float(doc["noise_sd"]),
-            float(doc.get("level", 1.0 - ALPHA)),
-            bool(doc.get("reached", True)),
-            float(doc.get("best_acceptance", 1.0)),
+        return cls.model_validate(
+            {
+                **doc,
+                "correlation": np.asarray(doc["correlation"], float).reshape(d, d),
+                "sample": np.asarray(doc["sample"], float).reshape(-1, d),
+            }
         )
 
 
@@ -475,16 +455,16 @@ def identify(
     np.fill_diagonal(corr, 1.0)
     thin = np.random.default_rng([seed, 0x7A]).permutation(len(values))[:N_KEEP_FOR_PLOT]
     return Identifiability(
-        tuple(params),
-        corr,
-        values[np.sort(thin)],
-        float(threshold),
-        threshold_source,
-        len(ok),
-        math.sqrt(model.noise_var),
-        1.0 - alpha,
-        reached,
-        best,
+        parameters=tuple(params),
+        correlation=corr,
+        sample=values[np.sort(thin)],
+        threshold=float(threshold),
+        threshold_source=threshold_source,
+        evaluations=len(ok),
+        noise_sd=math.sqrt(model.noise_var),
+        level=1.0 - alpha,
+        reached=reached,
+        best_acceptance=best,
     )
 
 

@@ -30,10 +30,10 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import Annotated, Any, Self
+from typing import Annotated, Any
 
 import numpy as np
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, PlainSerializer, PlainValidator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field
 
 from parcelfit import __version__
 from parcelfit.atomic import write_text_atomic
@@ -54,6 +54,7 @@ from parcelfit.study.details import (
     TransitCriterion,
 )
 from parcelfit.study.identify import Advice, Identifiability
+from parcelfit.study.records import ArrayRecord, FloatArray, float_array, float_list
 from parcelfit.study.store import CaseRecord, OptimizerRecord
 
 RESULTS_FILE = "results.json"
@@ -61,36 +62,8 @@ FORMAT = "parcelfit-study-results"
 VERSION = 1
 
 
-def _list(a: np.ndarray | Sequence[float]) -> Any:
-    """An array as (nested) lists of floats, for JSON."""
-    return np.asarray(a, dtype=float).tolist()
-
-
-def _array(v: Any) -> np.ndarray:
-    return np.asarray(v, dtype=float)
-
-
-# an array of floats, stored as (nested) lists of floats
-FloatArray = Annotated[np.ndarray, PlainValidator(_array), PlainSerializer(_list)]
-
-
-class _ArrayRecord(BaseModel):
-    """A stored record holding arrays: read and written by pydantic under its stored keys;
-    equal only to itself (arrays have no single truth value)."""
-
-    model_config = ConfigDict(frozen=True, populate_by_name=True, arbitrary_types_allowed=True)
-
-    __eq__ = object.__eq__
-    __hash__ = object.__hash__
-
-    def to_json(self) -> dict[str, Any]:
-        """The stored form."""
-        return self.model_dump(by_alias=True)
-
-    @classmethod
-    def from_json(cls, doc: Mapping[str, Any]) -> Self:
-        """Read the stored form."""
-        return cls.model_validate(dict(doc))
+_list = float_list
+_array = float_array
 
 
 @dataclass(frozen=True, eq=False)
@@ -184,7 +157,7 @@ class ReferenceRecord:
         )
 
 
-class BandRecord(_ArrayRecord):
+class BandRecord(ArrayRecord):
     """The stricter criterion's band along the travelled distance: ``grid`` x [m], the lateral
     band ``y_low``..``y_high`` [m] and the heading band ``theta_low``..``theta_high`` [rad]."""
 
@@ -380,7 +353,7 @@ def validation_record(
     return replace(base, verdict=verdict, sim_xy=prepared.xy, sim_theta=prepared.theta, band=band)
 
 
-class DependenceCurve(_ArrayRecord):
+class DependenceCurve(ArrayRecord):
     """The GP's partial dependence of the cost on one parameter: ``values`` in catalogue units,
     the predicted ``cost`` averaged over the other parameters and its averaged predictive
     standard deviation ``sd``; ``transformed``: cost after the optimiser's output transform."""
@@ -398,7 +371,7 @@ class DependenceCurve(_ArrayRecord):
         return float(np.max(self.cost) - np.min(self.cost))
 
 
-class SurrogateRecord(_ArrayRecord):
+class SurrogateRecord(ArrayRecord):
     """The optimiser's GP surrogate behind the partial dependence plot: the settings it was refitted
     with (the store's record; `OptimizerRecord.note` says when defaults stood in), how many
     finished fitting evaluations it learnt, and its partial dependence curves (None before two
