@@ -14,6 +14,7 @@ from parcelfit.study.results import (
     BandRecord,
     DependenceCurve,
     KeyFramesRecord,
+    ReferenceRecord,
     StudyResults,
     SurrogateRecord,
 )
@@ -42,6 +43,8 @@ def test_a_results_file_reads_back_and_writes_the_same_bytes():
         (DependenceCurve, lambda d: d["surrogate"]["curves"][0]),
         (BandRecord, lambda d: d["validations"][0]["band"]),
         (Advice, lambda d: d["advice"]),
+        (ReferenceRecord, lambda d: d["references"]["fit"]),
+        (ReferenceRecord, lambda d: d["references"]["validation"]),
         (Identifiability, lambda d: d["identifiability"]),
         (ParameterInterval, lambda d: d["identifiability"]["parameters"][0]),
         (ParameterInterval, lambda d: d["identifiability"]["parameters"][1]),
@@ -92,3 +95,14 @@ def test_identifiability_reads_an_empty_sample_and_earlier_defaults():
     assert ident.sample.shape == (0, 2) and ident.correlation.shape == (2, 2)
     assert (ident.level, ident.reached, ident.best_acceptance) == (0.95, True, 1.0)
     assert json.dumps(ident.to_json()["sample"]) == "[]"
+
+
+def test_a_reference_record_reads_integers_as_floats_and_keeps_missing_times():
+    doc = json.loads(RESULTS)["references"]["fit"]
+    n = len(doc["run_ids"])
+    ref = ReferenceRecord.from_json({**doc, "transit_times_s": [None, *range(1, n)]})
+    assert ref.transit_times == (None, *(float(t) for t in range(1, n)))
+    assert json.dumps(ref.to_json()["transit_times_s"]) == json.dumps([None, *map(float, range(1, n))])
+    assert ref.reference_id == doc["reference_run"] == doc["run_ids"][doc["index"]]
+    assert ref.xy_series[0].shape == (len(doc["prepared_runs"][0]["x_m"]), 2)
+    assert list(ref.to_json()) == list(doc)

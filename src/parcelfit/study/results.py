@@ -33,7 +33,15 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import numpy as np
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    SerializerFunctionWrapHandler,
+    model_serializer,
+    model_validator,
+)
 
 from parcelfit import __version__
 from parcelfit.atomic import write_text_atomic
@@ -66,27 +74,27 @@ _list = float_list
 _array = float_array
 
 
-@dataclass(frozen=True, eq=False)
-class ReferenceRecord:
+class ReferenceRecord(ArrayRecord):
     """A test case's reference run as the study chose it (method section 4): the run ids, the
     chosen index, the real transit times [s], the squared distance matrices (``d_time`` [s^2],
     ``d_xy`` [m^2], ``d_theta`` [rad^2], ``d_combined`` normalised), their largest entries, and
-    the prepared real runs (``xy_series``: (n, 2) arrays [m], ``theta_series`` [rad])."""
+    the prepared real runs (``xy_series``: (n, 2) arrays [m], ``theta_series`` [rad]; stored
+    as ``prepared_runs``, after ``reference_run``, the chosen run's id, which is not read)."""
 
     case: str
     run_ids: tuple[str, ...]
     index: int
-    transit_times: tuple[float | None, ...]
-    uses_time: bool
-    d_time: np.ndarray
-    d_xy: np.ndarray
-    d_theta: np.ndarray
-    d_combined: np.ndarray
-    max_time: float
-    max_xy: float
-    max_theta: float
-    xy_series: tuple[np.ndarray, ...]
-    theta_series: tuple[np.ndarray, ...]
+    transit_times: tuple[float | None, ...] = Field(alias="transit_times_s")
+    uses_time: bool = Field(alias="uses_transit_time")
+    d_time: FloatArray = Field(alias="d_time_s2")
+    d_xy: FloatArray = Field(alias="d_xy_m2")
+    d_theta: FloatArray = Field(alias="d_theta_rad2")
+    d_combined: FloatArray
+    max_time: float = Field(alias="max_d_time_s2")
+    max_xy: float = Field(alias="max_d_xy_m2")
+    max_theta: float = Field(alias="max_d_theta_rad2")
+    xy_series: tuple[FloatArray, ...] = Field(exclude=True)
+    theta_series: tuple[FloatArray, ...] = Field(exclude=True)
 
     @property
     def reference_id(self) -> str:
@@ -113,48 +121,32 @@ class ReferenceRecord:
             theta_series=tuple(sel.theta_series),
         )
 
-    def to_json(self) -> dict[str, Any]:
-        """The stored form."""
-        return {
-            "case": self.case,
-            "run_ids": list(self.run_ids),
-            "reference_run": self.reference_id,
-            "index": self.index,
-            "transit_times_s": list(self.transit_times),
-            "uses_transit_time": self.uses_time,
-            "d_time_s2": _list(self.d_time),
-            "d_xy_m2": _list(self.d_xy),
-            "d_theta_rad2": _list(self.d_theta),
-            "d_combined": _list(self.d_combined),
-            "max_d_time_s2": self.max_time,
-            "max_d_xy_m2": self.max_xy,
-            "max_d_theta_rad2": self.max_theta,
-            "prepared_runs": [
-                {"x_m": _list(xy[:, 0]), "y_m": _list(xy[:, 1]), "theta_rad": _list(th)}
-                for xy, th in zip(self.xy_series, self.theta_series, strict=True)
-            ],
-        }
-
+    @model_validator(mode="before")
     @classmethod
-    def from_json(cls, doc: Mapping[str, Any]) -> ReferenceRecord:
-        """Read the stored form."""
-        runs = doc["prepared_runs"]
-        return cls(
-            case=str(doc["case"]),
-            run_ids=tuple(str(r) for r in doc["run_ids"]),
-            index=int(doc["index"]),
-            transit_times=tuple(None if t is None else float(t) for t in doc["transit_times_s"]),
-            uses_time=bool(doc["uses_transit_time"]),
-            d_time=_array(doc["d_time_s2"]),
-            d_xy=_array(doc["d_xy_m2"]),
-            d_theta=_array(doc["d_theta_rad2"]),
-            d_combined=_array(doc["d_combined"]),
-            max_time=float(doc["max_d_time_s2"]),
-            max_xy=float(doc["max_d_xy_m2"]),
-            max_theta=float(doc["max_d_theta_rad2"]),
-            xy_series=tuple(np.column_stack([_array(r["x_m"]), _array(r["y_m"])]) for r in runs),
-            theta_series=tuple(_array(r["theta_rad"]) for r in runs),
-        )
+    def _read_prepared_runs(cls, doc: Any) -> Any:
+        """The stored ``prepared_runs`` (``x_m``, ``y_m``, ``theta_rad`` each) as the series."""
+        if isinstance(doc, Mapping) and "prepared_runs" in doc:
+            runs = doc["prepared_runs"]
+            doc = {k: v for k, v in doc.items() if k != "prepared_runs"}
+            doc["xy_series"] = tuple(
+                np.column_stack([_array(r["x_m"]), _array(r["y_m"])]) for r in runs
+            )
+            doc["theta_series"] = tuple(_array(r["theta_rad"]) for r in runs)
+        return doc
+
+    @model_serializer(mode="wrap")
+    def _write_stored_form(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        """The fields, the chosen run's id after the run ids, and the prepared runs last."""
+        out: dict[str, Any] = {}
+        for key, value in handler(self).items():
+            out[key] = value
+            if key == "run_ids":
+                out["reference_run"] = self.reference_id
+        out["prepared_runs"] = [
+            {"x_m": _list(xy[:, 0]), "y_m": _list(xy[:, 1]), "theta_rad": _list(th)}
+            for xy, th in zip(self.xy_series, self.theta_series, strict=True)
+        ]
+        return out
 
 
 class BandRecord(ArrayRecord):
