@@ -139,7 +139,7 @@ def write_study_results(folder: Path, dataset: Path, optimizer=None) -> None:
     the reference runs of the fake dataset's R/P/1 and R/P/2, a validation after iteration 1 of
     the analytic run at the truth, a surrogate (sharp along mu_d_BePa, flat along E_Pa) said to
     be fitted with ``optimizer`` (default: the published configuration), no key frames."""
-    from dataclasses import asdict, replace
+    from dataclasses import asdict
 
     from parcelfit.metrics import select_reference
     from parcelfit.optimize.bo import BOSettings
@@ -230,7 +230,7 @@ def write_study_results(folder: Path, dataset: Path, optimizer=None) -> None:
                 evaluations=3,
                 noise_sd=0.1,
             ),
-            transfer=[replace(record, after_iteration=None)],
+            transfer=[record.model_copy(update={"after_iteration": None})],
             advice=Advice(
                 changes={"R/P/2": {"E_Pa": 0.02}},
                 best="R/P/2",

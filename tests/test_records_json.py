@@ -17,6 +17,7 @@ from parcelfit.study.results import (
     ReferenceRecord,
     StudyResults,
     SurrogateRecord,
+    ValidationRecord,
 )
 from parcelfit.study.store import OptimizerRecord, RecommendedRecord, SourceRecord
 
@@ -45,6 +46,8 @@ def test_a_results_file_reads_back_and_writes_the_same_bytes():
         (Advice, lambda d: d["advice"]),
         (ReferenceRecord, lambda d: d["references"]["fit"]),
         (ReferenceRecord, lambda d: d["references"]["validation"]),
+        (ValidationRecord, lambda d: d["validations"][0]),
+        (ValidationRecord, lambda d: d["transfer"][0]),
         (Identifiability, lambda d: d["identifiability"]),
         (ParameterInterval, lambda d: d["identifiability"]["parameters"][0]),
         (ParameterInterval, lambda d: d["identifiability"]["parameters"][1]),
@@ -102,7 +105,25 @@ def test_a_reference_record_reads_integers_as_floats_and_keeps_missing_times():
     n = len(doc["run_ids"])
     ref = ReferenceRecord.from_json({**doc, "transit_times_s": [None, *range(1, n)]})
     assert ref.transit_times == (None, *(float(t) for t in range(1, n)))
-    assert json.dumps(ref.to_json()["transit_times_s"]) == json.dumps([None, *map(float, range(1, n))])
+    assert json.dumps(ref.to_json()["transit_times_s"]) == json.dumps(
+        [None, *map(float, range(1, n))]
+    )
     assert ref.reference_id == doc["reference_run"] == doc["run_ids"][doc["index"]]
     assert ref.xy_series[0].shape == (len(doc["prepared_runs"][0]["x_m"]), 2)
     assert list(ref.to_json()) == list(doc)
+
+
+def test_a_validation_record_reads_a_failed_run_with_only_its_case_and_status():
+    failed = ValidationRecord.from_json({"case": "R/P/2", "status": "failed", "params": None})
+    assert (failed.verdict, failed.sim_xy, failed.band, failed.passed) == (None, None, None, False)
+    assert json.dumps(failed.to_json()) == (
+        '{"case": "R/P/2", "after_iteration": null, "params": {}, "status": "failed", '
+        '"message": null, "transit_time_s": null, "run_file": null, "verdict": null, '
+        '"simulated": null, "band": null}'
+    )
+    doc = json.loads(RESULTS)["validations"][0]
+    ok = ValidationRecord.from_json({**doc, "after_iteration": 3.0, "transit_time_s": 1})
+    assert (
+        ok.after_iteration == 3 and ok.transit_time == 1.0 and ok.passed == doc["verdict"]["passed"]
+    )
+    assert ok.sim_xy.shape == (len(doc["simulated"]["x_m"]), 2)

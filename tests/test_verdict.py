@@ -111,7 +111,12 @@ def test_the_demo_s_case_reads_not_trustworthy():
 def _record(case, *, theta=True, inside=1.0, envelope=True, after=3, ran=True):
     """A validation record of ``case`` whose heading criterion and band test pass or not."""
     if not ran:
-        return ValidationRecord(case, after, {}, "failed", "the parcel fell off", None, None, None)
+        return ValidationRecord(
+            case=case,
+            after_iteration=after,
+            status="failed",
+            message="the parcel fell off",
+        )
     env = EnvelopeCheck(inside, 1.0, 0.01, 0.02, 0.95, inside >= 0.95) if envelope else None
     verdict = Validation(
         TransitTimeCheck(2.0, 1.9, 2.1, True),
@@ -119,7 +124,9 @@ def _record(case, *, theta=True, inside=1.0, envelope=True, after=3, ran=True):
         MeanDistanceCheck("theta", 3e-2 if not theta else 1e-2, (2e-2,), 2e-2, theta),
         env,
     )
-    return ValidationRecord(case, after, {}, "ok", None, 2.0, None, verdict)
+    return ValidationRecord(
+        case=case, after_iteration=after, status="ok", transit_time=2.0, verdict=verdict
+    )
 
 
 def test_the_checks_of_stored_validations_say_which_case_failed_and_why():

@@ -28,7 +28,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -38,6 +38,8 @@ from pydantic import (
     BeforeValidator,
     ConfigDict,
     Field,
+    PlainSerializer,
+    PlainValidator,
     SerializerFunctionWrapHandler,
     model_serializer,
     model_validator,
@@ -198,8 +200,16 @@ def _verdict_from_json(doc: Mapping[str, Any]) -> Validation:
     )
 
 
-@dataclass(frozen=True, eq=False)
-class ValidationRecord:
+def _read_verdict(v: Any) -> Validation | None:
+    """A stored verdict (or one already read) as a `Validation`; None stays None."""
+    return v if v is None or isinstance(v, Validation) else _verdict_from_json(v)
+
+
+def _write_verdict(v: Validation | None) -> dict[str, Any] | None:
+    return None if v is None else _verdict_json(v)
+
+
+class ValidationRecord(ArrayRecord):
     """One validation (method section 8): the test case, the iteration it followed (None for a
     run that is not a study's), the parameters simulated (SI), the simulation's status and
     message, its transit time [s] and run file (relative to the folder holding the record),
@@ -208,15 +218,19 @@ class ValidationRecord:
     stricter criterion's band (None with fewer than two real runs)."""
 
     case: str
-    after_iteration: int | None
-    params: dict[str, float]
+    after_iteration: int | None = None
+    params: Annotated[dict[str, float], BeforeValidator(lambda v: v or {})] = Field(
+        default_factory=dict
+    )
     status: str
-    message: str | None
-    transit_time: float | None
-    run_file: str | None
-    verdict: Validation | None
-    sim_xy: np.ndarray | None = None
-    sim_theta: np.ndarray | None = None
+    message: str | None = None
+    transit_time: float | None = Field(None, alias="transit_time_s")
+    run_file: str | None = None
+    verdict: Annotated[
+        Validation | None, PlainValidator(_read_verdict), PlainSerializer(_write_verdict)
+    ] = None
+    sim_xy: FloatArray | None = Field(None, exclude=True)
+    sim_theta: FloatArray | None = Field(None, exclude=True)
     band: BandRecord | None = None
 
     @property
@@ -253,48 +267,35 @@ class ValidationRecord:
             )
         return out if case is None else out.model_copy(update={"case": case})
 
-    def to_json(self) -> dict[str, Any]:
-        """The stored form."""
-        return {
-            "case": self.case,
-            "after_iteration": self.after_iteration,
-            "params": dict(self.params),
-            "status": self.status,
-            "message": self.message,
-            "transit_time_s": self.transit_time,
-            "run_file": self.run_file,
-            "verdict": None if self.verdict is None else _verdict_json(self.verdict),
-            "simulated": None
-            if self.sim_xy is None or self.sim_theta is None
-            else {
-                "x_m": _list(self.sim_xy[:, 0]),
-                "y_m": _list(self.sim_xy[:, 1]),
-                "theta_rad": _list(self.sim_theta),
-            },
-            "band": None if self.band is None else self.band.to_json(),
-        }
-
+    @model_validator(mode="before")
     @classmethod
-    def from_json(cls, doc: Mapping[str, Any]) -> ValidationRecord:
-        """Read the stored form."""
-        sim, band, verdict = doc.get("simulated"), doc.get("band"), doc.get("verdict")
-        after = doc.get("after_iteration")
-        transit = doc.get("transit_time_s")
-        return cls(
-            case=str(doc["case"]),
-            after_iteration=None if after is None else int(after),
-            params={str(k): float(v) for k, v in (doc.get("params") or {}).items()},
-            status=str(doc["status"]),
-            message=doc.get("message"),
-            transit_time=None if transit is None else float(transit),
-            run_file=doc.get("run_file"),
-            verdict=None if verdict is None else _verdict_from_json(verdict),
-            sim_xy=None
-            if sim is None
-            else np.column_stack([_array(sim["x_m"]), _array(sim["y_m"])]),
-            sim_theta=None if sim is None else _array(sim["theta_rad"]),
-            band=None if band is None else BandRecord.from_json(band),
-        )
+    def _read_simulated(cls, doc: Any) -> Any:
+        """The stored ``simulated`` run (``x_m``, ``y_m``, ``theta_rad``) as the curves."""
+        if isinstance(doc, Mapping) and "simulated" in doc:
+            sim = doc["simulated"]
+            doc = {k: v for k, v in doc.items() if k != "simulated"}
+            if sim is not None:
+                doc["sim_xy"] = np.column_stack([_array(sim["x_m"]), _array(sim["y_m"])])
+                doc["sim_theta"] = _array(sim["theta_rad"])
+        return doc
+
+    @model_serializer(mode="wrap")
+    def _write_stored_form(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        """The fields, with the simulated run (None without one) before the band."""
+        out: dict[str, Any] = {}
+        for key, value in handler(self).items():
+            if key == "band":
+                out["simulated"] = (
+                    None
+                    if self.sim_xy is None or self.sim_theta is None
+                    else {
+                        "x_m": _list(self.sim_xy[:, 0]),
+                        "y_m": _list(self.sim_xy[:, 1]),
+                        "theta_rad": _list(self.sim_theta),
+                    }
+                )
+            out[key] = value
+        return out
 
 
 def validation_record(
@@ -341,8 +342,15 @@ def validation_record(
                 theta_high=b.theta_high,
             )
     except ParcelfitError as exc:
-        return replace(base, message=f"validation not computable: {exc}")
-    return replace(base, verdict=verdict, sim_xy=prepared.xy, sim_theta=prepared.theta, band=band)
+        return base.model_copy(update={"message": f"validation not computable: {exc}"})
+    return base.model_copy(
+        update={
+            "verdict": verdict,
+            "sim_xy": _array(prepared.xy),
+            "sim_theta": _array(prepared.theta),
+            "band": band,
+        }
+    )
 
 
 class DependenceCurve(ArrayRecord):
