@@ -127,3 +127,28 @@ def test_a_validation_record_reads_a_failed_run_with_only_its_case_and_status():
         ok.after_iteration == 3 and ok.transit_time == 1.0 and ok.passed == doc["verdict"]["passed"]
     )
     assert ok.sim_xy.shape == (len(doc["simulated"]["x_m"]), 2)
+
+
+def test_a_results_file_of_an_earlier_version_reads_and_keeps_each_cases_keys():
+    doc = json.loads(RESULTS)
+    for key in ("stop_reason", "transfer", "advice", "identifiability", "surrogate"):
+        del doc[key]
+    doc["figures"] = None
+    doc["key_frames"] = {"case": "R/P/2"}
+    doc["cases"] = [
+        {"case": "R/P/2", "role": "fit"},
+        {"case": "R/P/1", "role": "validation", "weight": 2},
+    ]
+    old = StudyResults.from_json(doc)
+    assert (old.stop_reason, old.transfer, old.figures, old.advice) == (None, (), (), None)
+    assert old.key_frames.params == {} and old.surrogate is None and old.identifiability is None
+    out = old.to_json()
+    assert list(out) == list(json.loads(RESULTS))
+    assert out["cases"] == [
+        {"case": "R/P/2", "role": "fit"},
+        {"case": "R/P/1", "role": "validation", "weight": 2.0},
+    ]
+    assert json.dumps(out["key_frames"]) == (
+        '{"case": "R/P/2", "params": {}, "image": null, "animation": null, "note": null}'
+    )
+    assert json.dumps(out["references"]) == json.dumps(json.loads(RESULTS)["references"])

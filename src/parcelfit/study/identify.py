@@ -87,7 +87,7 @@ from functools import cached_property
 from typing import Annotated, Any
 
 import numpy as np
-from pydantic import BaseModel, BeforeValidator, ConfigDict
+from pydantic import BaseModel, BeforeValidator, ConfigDict, model_validator
 from scipy.linalg import solve_triangular
 from scipy.spatial.distance import cdist
 from scipy.special import log_ndtr
@@ -199,17 +199,19 @@ class Identifiability(ArrayRecord):
                     out.append((self.parameters[i].name, self.parameters[j].name, r))
         return sorted(out, key=lambda t: -abs(t[2]))
 
+    @model_validator(mode="before")
     @classmethod
-    def from_json(cls, doc: Mapping[str, Any]) -> Identifiability:
-        """Read the stored form (SI; missing level, reached, best_acceptance: the defaults)."""
-        d = len(doc["parameters"])
-        return cls.model_validate(
-            {
+    def _read_shapes(cls, doc: Any) -> Any:
+        """The stored (nested list) correlation as (d, d) and sample as (m, d), also when empty;
+        missing level, reached, best_acceptance: the defaults."""
+        if isinstance(doc, Mapping) and not isinstance(doc.get("sample"), np.ndarray):
+            d = len(doc["parameters"])
+            doc = {
                 **doc,
                 "correlation": np.asarray(doc["correlation"], float).reshape(d, d),
                 "sample": np.asarray(doc["sample"], float).reshape(-1, d),
             }
-        )
+        return doc
 
 
 class Advice(BaseModel):

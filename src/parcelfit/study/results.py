@@ -28,7 +28,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -405,25 +405,44 @@ class KeyFramesRecord(BaseModel):
         return cls.model_validate({"params": None, **doc})
 
 
-@dataclass(frozen=True, eq=False)
-class StudyResults:
+def _read_key_frames(v: Any) -> Any:
+    """A stored key-frames record through `KeyFramesRecord.from_json` (missing params: none)."""
+    return KeyFramesRecord.from_json(v) if isinstance(v, Mapping) else v
+
+
+def _write_cases(cases: tuple[CaseRecord, ...]) -> list[dict[str, Any]]:
+    """The cases as each was read or made (`CaseRecord.to_json`)."""
+    return [c.to_json() for c in cases]
+
+
+_none_empty = BeforeValidator(lambda v: v or ())  # a missing or null list: none
+
+
+class StudyResults(ArrayRecord):
     """Everything ``results.json`` holds (see the module docstring): when and by which parcelfit
     version it was written (Unix time [s]), why the study stopped (None: written while it ran),
     the reference runs by role (``fit``, ``validation``), the validations in order, the
-    surrogate, the key frames and the figures (paths relative to the study folder)."""
+    surrogate, the key frames and the figures (paths relative to the study folder). Its stored
+    form begins with the file's ``format`` and ``version``."""
 
-    written_at: float
     parcelfit: str
-    stop_reason: str | None
+    written_at: float
+    stop_reason: str | None = None
     references: dict[str, ReferenceRecord]
     validations: tuple[ValidationRecord, ...]
     surrogate: SurrogateRecord | None = None
-    key_frames: KeyFramesRecord | None = None
-    figures: tuple[str, ...] = ()
+    key_frames: Annotated[KeyFramesRecord | None, BeforeValidator(_read_key_frames)] = None
+    figures: Annotated[tuple[str, ...], _none_empty] = ()
     identifiability: Identifiability | None = None
-    transfer: tuple[ValidationRecord, ...] = ()
+    transfer: Annotated[tuple[ValidationRecord, ...], _none_empty] = ()
     advice: Advice | None = None
-    cases: tuple[CaseRecord, ...] = ()  # the study's test cases
+    # the study's test cases
+    cases: Annotated[tuple[CaseRecord, ...], _none_empty, PlainSerializer(_write_cases)] = ()
+
+    @model_serializer(mode="wrap")
+    def _write_stored_form(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        """The file's format and version, then the fields."""
+        return {"format": FORMAT, "version": VERSION, **handler(self)}
 
     def shown_validation(self) -> ValidationRecord | None:
         """The validation a report shows: the last that passed, else the last one (of a study
@@ -445,48 +464,6 @@ class StudyResults:
         """The stored reference record of a test case (by label), None if not stored."""
         return next((r for r in self.references.values() if r.case == case), None)
 
-    def to_json(self) -> dict[str, Any]:
-        """The stored form."""
-        return {
-            "format": FORMAT,
-            "version": VERSION,
-            "parcelfit": self.parcelfit,
-            "written_at": self.written_at,
-            "stop_reason": self.stop_reason,
-            "references": {k: r.to_json() for k, r in self.references.items()},
-            "validations": [v.to_json() for v in self.validations],
-            "surrogate": None if self.surrogate is None else self.surrogate.to_json(),
-            "key_frames": None if self.key_frames is None else self.key_frames.to_json(),
-            "figures": list(self.figures),
-            "identifiability": None
-            if self.identifiability is None
-            else self.identifiability.to_json(),
-            "transfer": [v.to_json() for v in self.transfer],
-            "advice": None if self.advice is None else self.advice.to_json(),
-            "cases": [c.to_json() for c in self.cases],
-        }
-
-    @classmethod
-    def from_json(cls, doc: Mapping[str, Any]) -> StudyResults:
-        """Read the stored form."""
-        sur, kf = doc.get("surrogate"), doc.get("key_frames")
-        return cls(
-            written_at=float(doc["written_at"]),
-            parcelfit=str(doc["parcelfit"]),
-            stop_reason=doc.get("stop_reason"),
-            references={k: ReferenceRecord.from_json(r) for k, r in doc["references"].items()},
-            validations=tuple(ValidationRecord.from_json(v) for v in doc["validations"]),
-            surrogate=None if sur is None else SurrogateRecord.from_json(sur),
-            key_frames=None if kf is None else KeyFramesRecord.from_json(kf),
-            figures=tuple(str(f) for f in doc.get("figures") or ()),
-            identifiability=None
-            if doc.get("identifiability") is None
-            else Identifiability.from_json(doc["identifiability"]),
-            transfer=tuple(ValidationRecord.from_json(v) for v in doc.get("transfer") or ()),
-            advice=None if doc.get("advice") is None else Advice.from_json(doc["advice"]),
-            cases=tuple(CaseRecord.from_json(c) for c in doc.get("cases") or ()),
-        )
-
 
 def new_results(
     references: Mapping[str, ReferenceRecord],
@@ -503,18 +480,18 @@ def new_results(
 ) -> StudyResults:
     """Results stamped with this moment and this parcelfit version."""
     return StudyResults(
-        time.time(),
-        __version__,
-        stop_reason,
-        dict(references),
-        tuple(validations),
-        surrogate,
-        key_frames,
-        tuple(figures),
-        identifiability,
-        tuple(transfer),
-        advice,
-        tuple(c if isinstance(c, CaseRecord) else CaseRecord.from_json(c) for c in cases),
+        written_at=time.time(),
+        parcelfit=__version__,
+        stop_reason=stop_reason,
+        references=dict(references),
+        validations=tuple(validations),
+        surrogate=surrogate,
+        key_frames=key_frames,
+        figures=tuple(figures),
+        identifiability=identifiability,
+        transfer=tuple(transfer),
+        advice=advice,
+        cases=tuple(c if isinstance(c, CaseRecord) else CaseRecord.from_json(c) for c in cases),
     )
 
 
