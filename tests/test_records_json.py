@@ -19,11 +19,14 @@ from parcelfit.study.results import (
     SurrogateRecord,
     ValidationRecord,
 )
-from parcelfit.study.store import OptimizerRecord, RecommendedRecord, SourceRecord
+from parcelfit.study.store import OptimizerRecord, RecommendedRecord, SourceRecord, StudyRecord
 
 DATA = Path(__file__).parent / "data" / "records"
 RESULTS = (DATA / "results.json").read_text()
 META = json.loads((DATA / "meta.json").read_text())
+# study records as written before they became pydantic models, and what that code read from and
+# wrote for records of earlier versions (no sampler, missing or null keys, an empty name)
+STUDY = json.loads((DATA / "study.json").read_text())
 
 
 def same(kind, doc) -> None:
@@ -152,3 +155,17 @@ def test_a_results_file_of_an_earlier_version_reads_and_keeps_each_cases_keys():
         '{"case": "R/P/2", "params": {}, "image": null, "animation": null, "note": null}'
     )
     assert json.dumps(out["references"]) == json.dumps(json.loads(RESULTS)["references"])
+
+
+@pytest.mark.parametrize("doc", STUDY["written"])
+def test_a_study_record_reads_back_and_writes_the_same(doc):
+    same(StudyRecord, doc)
+    assert StudyRecord.from_json(doc).optimizer.recorded
+
+
+@pytest.mark.parametrize("old", STUDY["earlier"])
+def test_a_study_record_of_an_earlier_store_reads_as_before(old):
+    record = StudyRecord.from_json(old["stored"])
+    assert json.dumps(record.to_json()) == json.dumps(old["written"])
+    assert record.optimizer == OptimizerRecord(recorded=False)
+    assert StudyRecord.from_json(old["written"]).optimizer.recorded

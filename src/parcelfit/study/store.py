@@ -51,11 +51,18 @@ import time
 import urllib.parse
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager, suppress
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
 
-from pydantic import BaseModel, ConfigDict
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    SerializerFunctionWrapHandler,
+    model_serializer,
+    model_validator,
+)
 
 from parcelfit.errors import ParcelfitError, os_error
 from parcelfit.study.details import EvaluationDetails
@@ -147,10 +154,12 @@ class OptimizerRecord(BaseModel):
         return None
 
 
-@dataclass(frozen=True)
-class StudyRecord:
+class StudyRecord(BaseModel):
     """What a study is: its name, fitted parameters with bounds (SI) and log flags, batch size,
-    seed, fitting and validation speed settings, and the optimiser as it ran."""
+    seed, fitting and validation speed settings, and the optimiser as it ran (stored as
+    ``sampler`` and ``bo_settings`` after the other fields)."""
+
+    model_config = ConfigDict(frozen=True)
 
     name: str
     parameters: tuple[str, ...]
@@ -160,27 +169,15 @@ class StudyRecord:
     seed: int = 0
     fit_setting: int = 1
     validation_setting: int | None = None
-    optimizer: OptimizerRecord = field(default_factory=lambda: OptimizerRecord(recorded=False))
+    optimizer: OptimizerRecord = Field(default_factory=lambda: OptimizerRecord(recorded=False))
 
-    def to_json(self) -> dict[str, Any]:
-        """The stored form (JSON-ready; bounds in SI)."""
-        return {
-            "name": self.name,
-            "parameters": list(self.parameters),
-            "bounds": [list(b) for b in self.bounds],
-            "log": list(self.log),
-            "batch_size": self.batch_size,
-            "seed": self.seed,
-            "fit_setting": self.fit_setting,
-            "validation_setting": self.validation_setting,
-            "sampler": self.optimizer.sampler,
-            "bo_settings": self.optimizer.settings,
-        }
-
+    @model_validator(mode="before")
     @classmethod
-    def from_json(cls, doc: Mapping[str, Any]) -> StudyRecord:
-        """Read a stored record, tolerating those of earlier versions (missing keys: defaults;
-        no ``sampler``: the optimiser was not recorded)."""
+    def _read_stored_form(cls, doc: Any) -> Any:
+        """The stored form, tolerating records of earlier versions (missing or null keys:
+        defaults; no name: "?"; no ``sampler``: the optimiser was not recorded)."""
+        if not isinstance(doc, Mapping) or "optimizer" in doc:
+            return doc
         names = tuple(str(n) for n in doc.get("parameters") or ())
         if "sampler" in doc:
             optimizer = OptimizerRecord(
@@ -188,18 +185,33 @@ class StudyRecord:
             )
         else:
             optimizer = OptimizerRecord(recorded=False)
-        setting = doc.get("validation_setting")
-        return cls(
-            name=str(doc.get("name") or "?"),
-            parameters=names,
-            bounds=tuple((float(lo), float(hi)) for lo, hi in doc.get("bounds") or ()),
-            log=tuple(bool(v) for v in doc.get("log") or [False] * len(names)),
-            batch_size=int(_number(doc, "batch_size", 4)),
-            seed=int(_number(doc, "seed", 0)),
-            fit_setting=int(_number(doc, "fit_setting", 1)),
-            validation_setting=None if setting is None else int(setting),
-            optimizer=optimizer,
-        )
+        return {
+            "name": str(doc.get("name") or "?"),
+            "parameters": names,
+            "bounds": doc.get("bounds") or (),
+            "log": doc.get("log") or [False] * len(names),
+            "batch_size": _number(doc, "batch_size", 4),
+            "seed": _number(doc, "seed", 0),
+            "fit_setting": _number(doc, "fit_setting", 1),
+            "validation_setting": doc.get("validation_setting"),
+            "optimizer": optimizer,
+        }
+
+    @model_serializer(mode="wrap")
+    def _write_stored_form(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        """The fields, the optimiser's as ``sampler`` and ``bo_settings``."""
+        out = handler(self)
+        out.pop("optimizer", None)
+        return {**out, "sampler": self.optimizer.sampler, "bo_settings": self.optimizer.settings}
+
+    def to_json(self) -> dict[str, Any]:
+        """The stored form (JSON-ready; bounds in SI)."""
+        return self.model_dump()
+
+    @classmethod
+    def from_json(cls, doc: Mapping[str, Any]) -> StudyRecord:
+        """Read a stored record, tolerating those of earlier versions."""
+        return cls.model_validate(dict(doc))
 
 
 class SourceRecord(BaseModel):
