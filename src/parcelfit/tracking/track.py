@@ -519,9 +519,14 @@ def smooth_scaled(
     a bias common to neighbouring frames, which smoothing does not average away, so its
     variance is added to the smoothed one. Returns `smooth_track`'s results and lambda."""
     n = len(arr)
+    fitted = fit_var[:, 0] > 0
+    if not fitted.any() and np.isnan(model_rates).all() and not np.any(timing_lag):
+        # nothing fitted: no lambda, no rate miss and no timing bias, so the first pass is the
+        # result (the passes below would repeat it)
+        out, gated, sd, restarts = smooth_track(arr, dt, np.sqrt(base_var + fit_var))
+        return out, gated, sd, restarts, [1.0, 1.0]
     rates = np.zeros((n, 3))
     smooth_track(arr, dt, np.sqrt(base_var + fit_var), rates=rates)
-    fitted = fit_var[:, 0] > 0
     miss = np.nan_to_num(model_rates - rates) * reach[:, None]
     rate_var = RATE_SD_FACTOR**2 * np.column_stack(
         [(miss[:, 0] ** 2 + miss[:, 1] ** 2) / 2, miss[:, 2] ** 2]
