@@ -1,0 +1,186 @@
+"""Calibrate, design and predict with MuJoCo on the bundled twin: the wall time of each stage,
+and whether the prediction's 90 % band holds the twin runs of cases the calibration never saw.
+
+    python benchmarks/bench_predict_twin.py [--study examples/e3-kpbw/study.yaml]
+        [--unseen E1/KPBW/1,E1/KPBW/2,E1/KPBW/3] [--candidates E3/KPBW/2,E1/KPBW/1,...]
+        [--sets 10] [--placements 4] [--design-sets 10] [--design-placements 3]
+        [--workers 2] [--out bench-predict-twin]
+
+Run from the repository's root. The three stages a user runs, as library calls, each into its
+own folder under ``--out`` (a rerun resumes every stage and times only what was left):
+
+1. the calibration of ``--study`` (default: the E3 KP/BW study of the examples, fitted on E3
+   at speed setting 1 and validated at setting 2 against the bundled SYNTHETIC twin);
+2. ``design`` over ``--candidates`` (``--design-sets`` x ``--design-placements`` each);
+3. ``predict`` of every ``--unseen`` case (``--sets`` x ``--placements`` each): rig/type/setting
+   cases of the twin dataset the calibration did not use (default: E1 with KP/BW at its three
+   speed settings).
+
+Then per unseen case and quantity (transit time, rotation, exit position, exit heading) the
+5-95 % band of the model's runs and of a real run (with the real runs' own scatter,
+``parcelfit.study.run_scatter``), and how many of the twin's runs of that case lie inside each;
+the coverage over all; the wall time per stage and in all. One truth (the twin's), so the
+coverage is of one calibration: a calibrated band holds about 90 % of the runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+QUANTITIES = ("transit_time", "rotation", "exit_y", "exit_heading")
+DEFAULT_CANDIDATES = "E3/KPBW/2,E1/KPBW/1,E1/KPBW/3,E3/BW/1"
+
+
+def _case(label: str) -> tuple[str, str, int]:
+    """'RIG/TYPE/SETTING' -> (rig, type, setting)."""
+    rig, kind, setting = label.split("/")
+    return rig, kind, int(setting)
+
+
+def main() -> None:
+    """Run the three stages and print the coverage table and the timing."""
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument("--study", type=Path, default=Path("examples/e3-kpbw/study.yaml"))
+    ap.add_argument("--unseen", default="E1/KPBW/1,E1/KPBW/2,E1/KPBW/3")
+    ap.add_argument("--candidates", default=DEFAULT_CANDIDATES)
+    ap.add_argument("--sets", type=int, default=10)
+    ap.add_argument("--placements", type=int, default=4)
+    ap.add_argument("--design-sets", type=int, default=10)
+    ap.add_argument("--design-placements", type=int, default=3)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", type=Path, default=Path("bench-predict-twin"))
+    args = ap.parse_args()
+
+    from parcelfit.runs import load_dataset
+    from parcelfit.study.calibration import Calibration
+    from parcelfit.study.design import rank_experiments
+    from parcelfit.study.predict import predict, run_values
+    from parcelfit.study.run_scatter import real_run_band
+    from parcelfit.study.studyfile import load_study
+
+    args.out.mkdir(parents=True, exist_ok=True)
+    study = load_study(args.study)
+    folder = args.out / "calibration"
+    seconds: dict[str, float] = {}
+
+    t = time.perf_counter()
+    result = Calibration(study, folder, workers=args.workers).run()
+    seconds["calibrate"] = time.perf_counter() - t
+    print(
+        f"calibrate: {result.evaluations} evaluations, validated {result.validated}, "
+        f"{seconds['calibrate'] / 60:.1f} min",
+        flush=True,
+    )
+
+    t = time.perf_counter()
+    ranking = rank_experiments(
+        folder,
+        candidates=args.candidates.split(","),
+        sets=args.design_sets,
+        placements=args.design_placements,
+        seed=args.seed,
+        out=args.out / "design",
+        workers=args.workers,
+    )
+    seconds["design"] = time.perf_counter() - t
+    order = [label for label, _ in ranking.sequence]
+    print(
+        f"design: open {ranking.parameters or 'none'}; ranking {order or 'none'}; "
+        f"{seconds['design'] / 60:.1f} min",
+        flush=True,
+    )
+
+    dataset = load_dataset(study.dataset)
+    rows = []
+    inside = {q: [0, 0, 0] for q in QUANTITIES}  # model band, real-run band, runs
+    seconds["predict"] = 0.0
+    print(
+        f"{'case':<12}{'quantity':<14}{'q05':>10}{'q95':>10}{'inside':>8}"
+        f"{'run q05':>10}{'run q95':>10}{'inside':>8}{'parameters share':>18}"
+    )
+    for label in args.unseen.split(","):
+        rig, kind, setting = _case(label)
+        t = time.perf_counter()
+        p = predict(
+            folder,
+            rig,
+            kind,
+            setting,
+            sets=args.sets,
+            placements=args.placements,
+            seed=args.seed,
+            out=args.out / f"predict-{rig}-{kind}-{setting}",
+            workers=args.workers,
+        )
+        seconds["predict"] += time.perf_counter() - t
+        real = [
+            run_values(r)
+            for c in dataset.cases.values()
+            if (c.case.rig, c.case.consignment, c.case.speed_setting) == (rig, kind, setting)
+            for r in c.runs
+        ]
+        if not real:
+            raise SystemExit(f"the twin dataset has no runs of {label}")
+        for s in p.summaries:
+            if s.quantity not in QUANTITIES:
+                continue
+            values = [v[s.quantity] for v in real if v[s.quantity] is not None]
+            n_in = sum(s.q05 <= v <= s.q95 for v in values)
+            lo, hi = real_run_band(p.runs[s.quantity].tolist(), s.quantity, p.scatter, args.seed)
+            n_run = sum(lo <= v <= hi for v in values)
+            counts = inside[s.quantity]
+            counts[0] += n_in
+            counts[1] += n_run
+            counts[2] += len(values)
+            share = s.decomposition.parameter_share
+            rows.append(
+                {
+                    "case": label,
+                    "quantity": s.quantity,
+                    "q05": s.q05,
+                    "q95": s.q95,
+                    "inside": n_in,
+                    "run_q05": lo,
+                    "run_q95": hi,
+                    "inside_run_band": n_run,
+                    "runs": len(values),
+                    "parameter_share": share,
+                }
+            )
+            print(
+                f"{label:<12}{s.quantity:<14}{s.q05:>10.4g}{s.q95:>10.4g}"
+                f"{f'{n_in}/{len(values)}':>8}{lo:>10.4g}{hi:>10.4g}"
+                f"{f'{n_run}/{len(values)}':>8}{share:>18.2f}",
+                flush=True,
+            )
+    total = sum(seconds.values())
+    (args.out / "results.json").write_text(
+        json.dumps({"rows": rows, "seconds": seconds, "design_order": order}, indent=1)
+    )
+    print("\ncoverage of the 90 % bands (the model's band, the band of a real run):")
+    all_model = sum(c[0] for c in inside.values())
+    all_run = sum(c[1] for c in inside.values())
+    all_n = sum(c[2] for c in inside.values())
+    for q, (n_in, n_run, n) in inside.items():
+        print(
+            f"  {q:<14}{n_in}/{n} = {n_in / max(n, 1):.0%}   {n_run}/{n} = {n_run / max(n, 1):.0%}"
+        )
+    print(
+        f"  {'all':<14}{all_model}/{all_n} = {all_model / max(all_n, 1):.0%}"
+        f"   {all_run}/{all_n} = {all_run / max(all_n, 1):.0%}"
+    )
+    print(
+        "wall time: "
+        + ", ".join(f"{k} {v / 60:.1f} min" for k, v in seconds.items())
+        + f"; in all {total / 60:.1f} min on {args.workers} processes"
+    )
+
+
+if __name__ == "__main__":
+    main()
