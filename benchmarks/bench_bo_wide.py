@@ -261,9 +261,31 @@ def _sampler(name: str, bounds: list[tuple[float, float]], seed: int):
 
     space = Space.from_bounds({f"x{i}": b for i, b in enumerate(bounds)})
     options = {"n_startup_trials": N_INITIAL} if name == "tpe" else None
+    base, settings = _variant(name)
     return make_sampler(
-        name, space, batch_size=BATCH, seed=seed, n_initial=N_INITIAL, options=options
+        base,
+        space,
+        batch_size=BATCH,
+        seed=seed,
+        n_initial=N_INITIAL,
+        settings=settings,
+        options=options,
     )
+
+
+def _variant(name: str):
+    """``gp:key=value:...`` -> ("gp", the default's `BOSettings` with those keys changed), as
+    a study file's optimizer keys are read; any other name -> (name, None)."""
+    from parcelfit.optimize import BOSettings
+    from parcelfit.optimize.sampler import SAMPLER_SETTINGS
+
+    base, *pairs = name.split(":")
+    if not pairs:
+        return base, None
+    kinds = {"int": int, "float": float, "bool": lambda v: v == "true", "str": str}
+    fields = {f.name: f.type for f in BOSettings.__dataclass_fields__.values()}
+    kw = {k: kinds[fields[k]](v) for k, v in (pair.split("=") for pair in pairs)}
+    return base, SAMPLER_SETTINGS[base](n_initial=N_INITIAL, **kw)
 
 
 def _one_thread() -> None:

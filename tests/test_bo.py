@@ -153,11 +153,12 @@ def test_log_expected_improvement_is_accurate_far_into_the_tail():
 
 
 def test_fitted_noise_stays_within_its_bounds_and_small_on_a_smooth_function():
-    from parcelfit.optimize.bo import NOISE_HIGH, NOISE_LOW
+    from parcelfit.optimize.bo import NOISE_LOW
 
-    bo, _ = _run(1, 5, BOSettings(n_samples=500, n_restarts=0, polish=1))
+    settings = BOSettings(n_samples=500, n_restarts=0, polish=1)
+    bo, _ = _run(1, 5, settings)
     gp = bo.surrogate()
-    assert NOISE_LOW <= gp.alpha <= NOISE_HIGH
+    assert NOISE_LOW <= gp.alpha <= settings.noise_max == 0.35**2
     assert gp.alpha < 0.01  # a smooth quadratic: far below the published 0.35^2
 
 

@@ -61,9 +61,11 @@ class BOSettings:
     nu: float = 2.5  # Matern smoothness
     alpha: float = 0.35**2  # noise variance on the standardised cost (noise: fixed)
     noise: str = (
-        "fit"  # "fit": noise variance by marginal likelihood in [1e-6, 0.35^2]; "fixed": alpha
+        "fit"  # "fit": noise variance by marginal likelihood in [1e-6, noise_max]; "fixed": alpha
     )
     n_restarts: int = 1  # optimiser restarts of the GP's hyperparameters
+    noise_max: float = 0.35**2  # upper bound of the fitted noise variance (noise: fit)
+    amplitude_max: float = 1e2  # upper bound of the fitted signal variance (amplitude: true)
     # "none", "log", "power" (Box-Cox, lambda fitted to the costs' marginal distribution) or
     # "auto" (of none and power, the one whose warped GP explains the costs best; see _fit)
     transform: str = "auto"
@@ -86,6 +88,8 @@ class BOSettings:
             or not 0 < self.top_fraction <= 1
             or not 0 <= self.local_fraction <= 1
             or self.alpha <= 0
+            or self.noise_max <= NOISE_LOW
+            or self.amplitude_max <= 1e-2
             or self.polish < 0
             or self.noise not in ("fit", "fixed")
             or self.transform not in TRANSFORMS
@@ -324,9 +328,9 @@ class BatchBO:
             nu=s.nu,
         )
         if s.amplitude:
-            kernel = ConstantKernel(1.0, (1e-2, 1e2)) * kernel
+            kernel = ConstantKernel(1.0, (1e-2, s.amplitude_max)) * kernel
         if s.noise == "fit":
-            kernel = kernel + WhiteKernel(0.01, (NOISE_LOW, NOISE_HIGH))
+            kernel = kernel + WhiteKernel(min(0.01, s.noise_max), (NOISE_LOW, s.noise_max))
         gp = GaussianProcessRegressor(
             kernel=kernel,
             alpha=s.alpha if s.noise == "fixed" else 1e-10,
@@ -426,7 +430,7 @@ class BatchBO:
         return batch
 
 
-NOISE_LOW, NOISE_HIGH = 1e-6, 0.35**2  # bounds of the fitted noise variance (standardised cost)
+NOISE_LOW = 1e-6  # lower bound of the fitted noise variance (standardised cost)
 
 
 def _conditioned(kernel: Any, alpha: Any, X: np.ndarray, y: np.ndarray) -> GaussianProcessRegressor:
