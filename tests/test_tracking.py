@@ -241,6 +241,34 @@ def test_track_all_builds_a_dataset_resumes_and_reports_bad_videos(videos, tmp_p
     assert len(load_dataset(out)["E3/KPBW/1"].runs) == 2
 
 
+@pytest.mark.slow
+def test_track_all_takes_transit_times_from_the_light_barrier_logs(videos, tmp_path):
+    folder = tmp_path / "videos"
+    folder.mkdir()
+    shutil.copy(videos["root"] / "plain.mp4", folder / "E3-KPBW-1-01.mp4")
+    shutil.copy(videos["root"] / "plain.mp4", folder / "E3-KPBW-1-02.mp4")
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    (logs / "E3-KPBW-1-01.csv").write_text("timestamp,sensor\n10.0,7\n10.25,3\n11.875,9\n")
+    tags = write_tag_map(tmp_path / "tags.yaml", videos["scene"])
+    out = tmp_path / "dataset"
+    result = runner.invoke(
+        app,
+        [
+            *("track-all", str(folder), "--tags", str(tags), "--out", str(out)),
+            *("--sensor-logs", str(logs), "--sensors", "3,9"),
+        ],
+    )
+    assert result.exit_code == 1, result.output  # the second video has no log
+    summary = json.loads((out / "track-all.json").read_text())
+    assert summary["done"] == ["E3-KPBW-1-01.mp4"]
+    assert "no light-barrier log E3-KPBW-1-02.csv" in summary["failed"]["E3-KPBW-1-02.mp4"]
+    (run,) = load_dataset(out)["E3/KPBW/1"].runs
+    assert run.transit_time == pytest.approx(1.625, abs=1e-12)  # 11.875 - 10.25, not the video's
+    with pytest.raises(ParcelfitError, match="not a folder"):
+        track_all(folder, load_tag_map(tags), out, sensor_logs=tmp_path / "missing")
+
+
 @pytest.mark.slow  # renders the videos fixture
 def test_tag_map_errors_name_the_key(tmp_path, videos):
     path = tmp_path / "tags.yaml"

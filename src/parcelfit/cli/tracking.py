@@ -108,6 +108,16 @@ def track_all_command(
     max_gap: Annotated[
         int, typer.Option(min=0, help="Longest gap filled by interpolation [frames].")
     ] = 5,
+    sensor_logs: Annotated[
+        Path | None,
+        typer.Option(
+            help="Folder of light-barrier log CSVs (timestamp, sensor), one per video with the "
+            "video's name and .csv: the transit times are the logs'."
+        ),
+    ] = None,
+    sensors: Annotated[
+        str, typer.Option(help="Start and end sensor ids in the logs, START,END.")
+    ] = "1,2",
 ) -> None:
     """Track a folder of videos into one dataset (resumable: finished videos are skipped; a bad
     video is reported and the others go on)."""
@@ -127,6 +137,8 @@ def track_all_command(
             tag_map,
             out,
             options=TrackOptions(max_gap=max_gap),
+            sensor_logs=sensor_logs,
+            sensors=sensors,
             on_video=on_video,
             on_frame=lambda k, n: bar.update(task, completed=k, total=n or None),
         )
@@ -193,4 +205,3 @@ def camera_calibrate(
         console.print("[yellow]RMS above 1 px: use more, sharper views covering the whole image[/]")
     save_camera(tags, cam)
     console.print(f"[green]written[/] into {tags} (camera:)")
-

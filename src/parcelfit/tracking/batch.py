@@ -96,14 +96,24 @@ def track_all(
     *,
     options: TrackOptions | None = None,
     name: str | None = None,
+    sensor_logs: str | Path | None = None,
+    sensors: str = "1,2",
     on_video: Callable[[Path, str], None] | None = None,
     on_frame: Callable[[int, int], None] | None = None,
 ) -> dict[str, Any]:
     """Track every video of ``folder`` into a dataset in ``out``; returns the summary written to
-    ``track-all.json`` (done, skipped, failed with reasons)."""
+    ``track-all.json`` (done, skipped, failed with reasons). With ``sensor_logs``, a folder of
+    light-barrier logs named like the videos (``E3-KPBW-1-07.csv`` beside
+    ``E3-KPBW-1-07.mp4``), every run's transit time [s] is its log's (`track_one`); a video
+    without its log fails with that reason."""
     folder, out = Path(folder), Path(out)
     if not folder.is_dir():
         raise ParcelfitError("not a folder", file=folder, fix="point at the folder of videos")
+    logs = None if sensor_logs is None else Path(sensor_logs)
+    if logs is not None and not logs.is_dir():
+        raise ParcelfitError(
+            "not a folder", file=logs, fix="point --sensor-logs at the folder of the logs"
+        )
     videos = sorted(p for p in folder.iterdir() if p.suffix.lower() in VIDEO_SUFFIXES)
     if not videos:
         raise ParcelfitError(
@@ -120,7 +130,16 @@ def track_all(
         say(video, "tracking")
         try:
             case_of(video)
-            result = track_video(video, tag_map, options, on_frame)
+            log = None if logs is None else logs / f"{video.stem}.csv"
+            if log is not None and not log.is_file():
+                raise ParcelfitError(
+                    f"no light-barrier log {log.name} in {logs.name}/",
+                    file=video,
+                    fix="name each log like its video, with .csv",
+                )
+            result = track_one(
+                video, tag_map, options, sensor_log=log, sensors=sensors, progress=on_frame
+            )
             if not any(t.trajectory is not None for t in result.tags.values()):
                 raise ParcelfitError(
                     f"no parcel tag ({', '.join(map(str, sorted(tag_map.parcel_tags)))}) was found",
