@@ -61,7 +61,6 @@ def main() -> None:
     from parcelfit.study.calibration import Calibration
     from parcelfit.study.design import rank_experiments
     from parcelfit.study.predict import predict, run_values
-    from parcelfit.study.run_scatter import real_run_band
     from parcelfit.study.studyfile import load_study
 
     args.out.mkdir(parents=True, exist_ok=True)
@@ -132,7 +131,7 @@ def main() -> None:
                 continue
             values = [v[s.quantity] for v in real if v[s.quantity] is not None]
             n_in = sum(s.q05 <= v <= s.q95 for v in values)
-            lo, hi = real_run_band(p.runs[s.quantity].tolist(), s.quantity, p.scatter, args.seed)
+            lo, hi = s.run_q05, s.run_q95  # the band of a real run, as predict reports it
             n_run = sum(lo <= v <= hi for v in values)
             counts = inside[s.quantity]
             counts[0] += n_in
