@@ -138,6 +138,9 @@ def test_published_preset_is_method_section_7():
     assert len(bo.observations) == 24 and bo.best()[1] < min(o.cost for o in bo.observations[:16])
     with pytest.raises(ParcelfitError, match="invalid BO settings"):
         BOSettings(batch="penalty")
+    for bad in ({"noise_max": 1e-7}, {"amplitude_max": 1e-3}):  # bounds below their lower ones
+        with pytest.raises(ParcelfitError, match="invalid BO settings"):
+            BOSettings(**bad)
 
 
 def test_log_expected_improvement_is_accurate_far_into_the_tail():
@@ -160,6 +163,25 @@ def test_fitted_noise_stays_within_its_bounds_and_small_on_a_smooth_function():
     gp = bo.surrogate()
     assert NOISE_LOW <= gp.alpha <= settings.noise_max == 0.35**2
     assert gp.alpha < 0.01  # a smooth quadratic: far below the published 0.35^2
+
+
+def test_the_fitted_noise_keeps_to_its_upper_bound():
+    rng = np.random.default_rng(3)
+    noisy = [
+        ({"a": a, "b": b, "c": c}, _quadratic({"a": a, "b": b, "c": c}) + rng.normal(0, 0.3))
+        for a, b, c in rng.random((30, 3))
+    ]
+    alphas = {}
+    for bound in (0.35**2, 0.01):
+        bo = BatchBO(
+            Space.from_bounds({"a": (0, 1), "b": (0, 1), "c": (0, 1)}),
+            seed=0,
+            settings=BOSettings(n_restarts=0, transform="none", noise_max=bound),
+        )
+        for p, cost in noisy:
+            bo.tell(p, cost)
+        alphas[bound] = bo.surrogate().alpha
+    assert alphas[0.01] <= 0.01 + 1e-12 < alphas[0.35**2]  # the noise wants more than 0.01
 
 
 def test_tpe_sampler_asks_batches_and_replays_its_history():
