@@ -17,6 +17,7 @@ from parcelfit.study.run_scatter import (
     excess_variance,
     quantities,
     real_run_band,
+    scatter_note,
 )
 from parcelfit.study.studyfile import load_study
 
@@ -65,6 +66,11 @@ def test_the_estimate_from_a_calibration_with_one_run_per_evaluation(tmp_path):
     assert scatter.sd["exit_y"] == pytest.approx(y.std(ddof=1), rel=1e-12)
     # the twin's transit times carry 1 % noise (tests/fake_sim.py)
     assert 0.004 < scatter.sd["transit_time"] < 0.02
+    # such a scatter holds the placements' too, and the prediction says so
+    note = scatter_note(scatter)
+    assert note is not None and "one simulation per evaluation" in note
+    assert scatter_note(RunScatter(scatter.sd, scatter.cases, 2)) is None
+    assert scatter_note(None) is None
 
 
 def test_a_prediction_s_band_of_a_real_run_holds_the_model_s_band():

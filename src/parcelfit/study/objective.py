@@ -123,9 +123,7 @@ def select_references(study: Study) -> dict[str, ReferenceSelection]:
     return out
 
 
-def case_summary(
-    study: Study, references: Mapping[str, ReferenceSelection]
-) -> list[CaseRecord]:
+def case_summary(study: Study, references: Mapping[str, ReferenceSelection]) -> list[CaseRecord]:
     """The study's cases for the store and results: label, role, weight, dataset, reference
     run and the acceptance threshold of the fitted ones."""
     out = []

@@ -75,7 +75,13 @@ from parcelfit.study.plausible import (
     placement_seeds,
 )
 from parcelfit.study.run_scatter import QUANTITIES as RUN_QUANTITIES
-from parcelfit.study.run_scatter import RunScatter, estimate_run_scatter, quantities, real_run_band
+from parcelfit.study.run_scatter import (
+    RunScatter,
+    estimate_run_scatter,
+    quantities,
+    real_run_band,
+    scatter_note,
+)
 from parcelfit.study.spread import RESOLVED, Decomposition, Effect, decompose, effects_of
 from parcelfit.study.store import Store
 from parcelfit.study.studyfile import Study
@@ -454,6 +460,9 @@ def predict(
                 "no parameter set of the calibration reached the real runs' scatter: the sets "
                 "are drawn from the whole parameter box, not from a plausible set"
             )
+        note = scatter_note(scatter)
+        if note is not None:
+            notes.append(note)
         failed = int((runs["status"] != "ok").sum())
         if failed:
             notes.append(f"{failed} of {len(runs)} simulations did not end ok and are left out")

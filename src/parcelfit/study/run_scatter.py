@@ -20,7 +20,9 @@ fitted case c:
 The transit time is taken relative to each case's mean real transit time (V divided by its
 square), as a specimen's friction and the timing noise move it in proportion. With one
 simulation per evaluation (the published cost) the placements' scatter is in E(c) as well as in
-the prediction's own placements: the band is then wider than needed (on the safe side).
+the prediction's own placements: the band is then wider than needed, and for the rotation, an
+absolute angle, it can miss calm runs entirely when the fitted rig's runs spun or slid and the
+predicted rig's do not; the prediction then says so (`scatter_note`).
 
 **Band for a real run.** Each predicted run value v_i is joined by D seeded draws
 v_i + s_q z_ik (transit time: v_i (1 + s_q z_ik)), z ~ N(0, 1), and the 5th and 95th
@@ -161,6 +163,21 @@ def estimate_run_scatter(folder: Path, study: Study) -> RunScatter | None:
             used.append(spec.label)
     sd = {q: math.sqrt(float(np.mean(v))) for q, v in pooled.items() if v}
     return RunScatter(sd, tuple(used), sims)
+
+
+def scatter_note(scatter: RunScatter | None) -> str | None:
+    """A warning for the prediction's notes when ``scatter`` came from one simulation per
+    evaluation (module docstring): it then holds the fitted cases' placement scatter too."""
+    if scatter is None or scatter.simulations >= 2 or not scatter.sd:
+        return None
+    return (
+        "the band of a real run takes the real runs' scatter from a calibration with one "
+        "simulation per evaluation, so it holds the fitted cases' placement scatter too; on "
+        "another rig that can be far wider than the rig's own (on the twin data, E3's spins and "
+        "slides made the bands of calm E1 runs hold 100 % of transit times but the rotation's "
+        "band miss them: docs/research/predict-coverage.md). Calibrate with cost: {kind: "
+        "ensemble, placements: 4} for a band that tells them apart"
+    )
 
 
 def real_run_band(

@@ -34,6 +34,7 @@ from parcelfit.sim.factory import SimulatorSection
 MAX_EVALUATIONS = 10_000
 MAX_BATCH_SIZE = 256
 
+
 class ReferenceSection(FileModel):
     """``reference``: the dataset folder (relative to the file), test case and speed setting."""
 
