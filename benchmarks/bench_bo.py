@@ -221,24 +221,21 @@ for _name, _settings in ABLATIONS.items():
     METHODS[_name] = lambda b, f, s, n, _st=_settings: run_parcelfit(b, f, s, n, _st)
 
 
-def _variant(method: str):
-    """``gp:key=value:...`` (the default with changed `BOSettings`) or ``pub:key=value:...``
-    (the published preset with changes), e.g. ``gp:transform=none`` or ``pub:noise=fit``."""
+def variant_settings(method: str, **base_keys: object) -> BOSettings:
+    """The `BOSettings` of ``gp:key=value:...`` (the default with changed settings) or
+    ``pub:key=value:...`` / ``published:key=value:...`` (the published preset with changes),
+    e.g. ``gp:transform=none`` or ``pub:noise=fit``; ``base_keys`` go in first."""
     base, *pairs = method.split(":")
-    make = {"gp": BOSettings, "pub": BOSettings.published}[base]
+    make = {"gp": BOSettings, "pub": BOSettings.published, "published": BOSettings.published}
     fields = {f.name: f.type for f in BOSettings.__dataclass_fields__.values()}
-    kw: dict[str, object] = {}
-    for pair in pairs:
-        key, value = pair.split("=")
-        kind = fields[key]
-        kw[key] = (
-            (value == "true")
-            if kind == "bool"
-            else int(value)
-            if kind == "int"
-            else (float(value) if kind == "float" else value)
-        )
-    settings = make(**kw)
+    kinds = {"int": int, "float": float, "bool": lambda v: v == "true", "str": str}
+    kw = {k: kinds[fields[k]](v) for k, v in (pair.split("=") for pair in pairs)}
+    return make[base](**{**base_keys, **kw})
+
+
+def _variant(method: str):
+    """A method running ``variant_settings(method)``."""
+    settings = variant_settings(method)
     return lambda b, f, s, n: run_parcelfit(b, f, s, n, settings)
 
 

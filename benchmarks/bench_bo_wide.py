@@ -276,16 +276,12 @@ def _sampler(name: str, bounds: list[tuple[float, float]], seed: int):
 def _variant(name: str):
     """``gp:key=value:...`` -> ("gp", the default's `BOSettings` with those keys changed), as
     a study file's optimizer keys are read; any other name -> (name, None)."""
-    from parcelfit.optimize import BOSettings
-    from parcelfit.optimize.sampler import SAMPLER_SETTINGS
+    from bench_bo import variant_settings
 
-    base, *pairs = name.split(":")
-    if not pairs:
+    base = name.split(":")[0]
+    if base == name:
         return base, None
-    kinds = {"int": int, "float": float, "bool": lambda v: v == "true", "str": str}
-    fields = {f.name: f.type for f in BOSettings.__dataclass_fields__.values()}
-    kw = {k: kinds[fields[k]](v) for k, v in (pair.split("=") for pair in pairs)}
-    return base, SAMPLER_SETTINGS[base](n_initial=N_INITIAL, **kw)
+    return base, variant_settings(name, n_initial=N_INITIAL)
 
 
 def _one_thread() -> None:
