@@ -40,6 +40,36 @@ PARAMETERS = {"mu_d_BePa": [0.3, 0.55], "mu_d_MePa": [0.15, 0.35], "E_Pa": [200.
 QUANTITIES = ("transit_time", "rotation", "exit_heading")
 
 
+def coverage_row(summary, real: list[dict], band: tuple[float, float]) -> dict[str, object]:
+    """One quantity's coverage: how many of the ``real`` runs' values lie inside the model's
+    5-95 % band (``summary``, a `QuantitySummary`) and inside ``band`` (a real run's)."""
+    q = summary.quantity
+    values = [v[q] for v in real if v[q] is not None]
+    lo, hi = band
+    return {
+        "quantity": q,
+        "q05": summary.q05,
+        "q95": summary.q95,
+        "inside": sum(summary.q05 <= v <= summary.q95 for v in values),
+        "run_q05": lo,
+        "run_q95": hi,
+        "inside_run_band": sum(lo <= v <= hi for v in values),
+        "runs": len(values),
+        "parameter_share": summary.decomposition.parameter_share,
+    }
+
+
+def row_text(row: dict[str, object]) -> str:
+    """The columns of a coverage row after its case (quantity, bands, counts, share)."""
+    n = row["runs"]
+    inside, inside_run = f"{row['inside']}/{n}", f"{row['inside_run_band']}/{n}"
+    return (
+        f"{row['quantity']:<14}{row['q05']:>10.4g}{row['q95']:>10.4g}"
+        f"{inside:>8}{row['run_q05']:>10.4g}{row['run_q95']:>10.4g}"
+        f"{inside_run:>8}{row['parameter_share']:>18.2f}"
+    )
+
+
 def truth_for(k: int) -> dict[str, float]:
     """Truth ``k``: catalogue values at seeded fractions 0.2-0.8 of the ranges."""
     fractions = np.random.default_rng([k, 53]).uniform(0.2, 0.8, len(PARAMETERS))
@@ -137,35 +167,13 @@ def main() -> None:
             for s in p.summaries:
                 if s.quantity not in QUANTITIES:
                     continue
-                values = [v[s.quantity] for v in real if v[s.quantity] is not None]
-                n_in = sum(s.q05 <= v <= s.q95 for v in values)
-                lo, hi = real_run_band(p.runs[s.quantity].tolist(), s.quantity, scatter, k)
-                n_real = sum(lo <= v <= hi for v in values)
-                inside[s.quantity] += n_in
-                inside_real[s.quantity] += n_real
-                total[s.quantity] += len(values)
-                share = s.decomposition.parameter_share
-                rows.append(
-                    {
-                        "truth": k + 1,
-                        "case": f"Q/{setting}",
-                        "quantity": s.quantity,
-                        "q05": s.q05,
-                        "q95": s.q95,
-                        "inside": n_in,
-                        "run_q05": lo,
-                        "run_q95": hi,
-                        "inside_run_band": n_real,
-                        "runs": len(values),
-                        "parameter_share": share,
-                    }
-                )
-                print(
-                    f"{k + 1:<7}{'Q/' + str(setting):<6}{s.quantity:<14}{s.q05:>10.4g}"
-                    f"{s.q95:>10.4g}{f'{n_in}/{len(values)}':>8}{lo:>10.4g}{hi:>10.4g}"
-                    f"{f'{n_real}/{len(values)}':>8}{share:>18.2f}",
-                    flush=True,
-                )
+                band = real_run_band(p.runs[s.quantity].tolist(), s.quantity, scatter, k)
+                row = coverage_row(s, real, band)
+                inside[s.quantity] += row["inside"]
+                inside_real[s.quantity] += row["inside_run_band"]
+                total[s.quantity] += row["runs"]
+                rows.append({"truth": k + 1, "case": f"Q/{setting}", **row})
+                print(f"{k + 1:<7}{'Q/' + str(setting):<6}{row_text(row)}", flush=True)
     (args.out / "results.json").write_text(json.dumps(rows, indent=1))
     all_in, all_n = sum(inside.values()), sum(total.values())
     real_in = sum(inside_real.values())

@@ -27,8 +27,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from bench_predict_coverage import coverage_row, row_text
 
 QUANTITIES = ("transit_time", "rotation", "exit_y", "exit_heading")
 DEFAULT_CANDIDATES = "E3/KPBW/2,E1/KPBW/1,E1/KPBW/3,E3/BW/1"
@@ -129,35 +134,14 @@ def main() -> None:
         for s in p.summaries:
             if s.quantity not in QUANTITIES:
                 continue
-            values = [v[s.quantity] for v in real if v[s.quantity] is not None]
-            n_in = sum(s.q05 <= v <= s.q95 for v in values)
-            lo, hi = s.run_q05, s.run_q95  # the band of a real run, as predict reports it
-            n_run = sum(lo <= v <= hi for v in values)
+            # the band of a real run, as predict reports it
+            row = coverage_row(s, real, (s.run_q05, s.run_q95))
             counts = inside[s.quantity]
-            counts[0] += n_in
-            counts[1] += n_run
-            counts[2] += len(values)
-            share = s.decomposition.parameter_share
-            rows.append(
-                {
-                    "case": label,
-                    "quantity": s.quantity,
-                    "q05": s.q05,
-                    "q95": s.q95,
-                    "inside": n_in,
-                    "run_q05": lo,
-                    "run_q95": hi,
-                    "inside_run_band": n_run,
-                    "runs": len(values),
-                    "parameter_share": share,
-                }
-            )
-            print(
-                f"{label:<12}{s.quantity:<14}{s.q05:>10.4g}{s.q95:>10.4g}"
-                f"{f'{n_in}/{len(values)}':>8}{lo:>10.4g}{hi:>10.4g}"
-                f"{f'{n_run}/{len(values)}':>8}{share:>18.2f}",
-                flush=True,
-            )
+            counts[0] += row["inside"]
+            counts[1] += row["inside_run_band"]
+            counts[2] += row["runs"]
+            rows.append({"case": label, **row})
+            print(f"{label:<12}{row_text(row)}", flush=True)
     total = sum(seconds.values())
     (args.out / "results.json").write_text(
         json.dumps({"rows": rows, "seconds": seconds, "design_order": order}, indent=1)
