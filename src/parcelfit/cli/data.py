@@ -107,4 +107,3 @@ def _print_tests(tests: Any) -> None:
             significance_stars(r["p_adjusted"]),
         )
     console.print(table)
-

@@ -126,4 +126,3 @@ def demo(
     minutes = (time.perf_counter() - t0) / 60
     console.print(f"[bold green]report:[/] {escape(str(report.resolve()))}")
     print_verdict(console, folder_verdict(out), f" ({minutes:.1f} min)")
-

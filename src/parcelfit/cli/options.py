@@ -95,4 +95,3 @@ def check_paths(*paths: Path | None) -> None:
     for path in paths:
         if path is not None:
             path.exists()  # raises OSError (ENAMETOOLONG) for a path too long
-

@@ -150,7 +150,6 @@ def frame_bar() -> Progress:
     return Progress(*Progress.get_default_columns(), TimeElapsedColumn(), console=console)
 
 
-
 # -- a calibration: its live table and what it concluded ---------------------------------------
 
 

@@ -162,4 +162,3 @@ def precision(
         best = found[0]
         console.print(Text(f"best {len(best.names)} to calibrate on {title}: {best.widths_text()}"))
     console.print(Text(f"tables in {tables}"))
-

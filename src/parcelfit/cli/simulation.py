@@ -372,4 +372,3 @@ def synth(
         )
     truth_file = path.parent / "truth.yaml"
     console.print(f"[green]done[/]: {escape(str(path))} and {escape(str(truth_file))}")
-

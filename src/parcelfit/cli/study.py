@@ -177,4 +177,3 @@ def report(
         )
     console.print(f"[bold green]report:[/] {escape(str(path.resolve()))}")
     print_verdict(console, folder_verdict(folder))
-

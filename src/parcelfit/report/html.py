@@ -473,9 +473,7 @@ def build_report(
         folder=places.study.name,
         rig=rig,
         consignment=cons,
-        fitted=[
-            c.case for c in (results.cases if results is not None else ()) if c.role == "fit"
-        ],
+        fitted=[c.case for c in (results.cases if results is not None else ()) if c.role == "fit"],
         synthetic=bool(ds is not None and ds.synthetic),
         description="" if ds is None else ds.description,
         dataset_missing=ds is None,
