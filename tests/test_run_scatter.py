@@ -22,6 +22,7 @@ from parcelfit.study.run_scatter import (
 from parcelfit.study.studyfile import load_study
 
 from .helpers import write_study
+from .predict_helpers import write_rig_q
 
 
 def test_the_excess_is_the_real_variance_beyond_the_model_s():
@@ -68,7 +69,7 @@ def test_the_estimate_from_a_calibration_with_one_run_per_evaluation(tmp_path):
     assert 0.004 < scatter.sd["transit_time"] < 0.02
     # such a scatter holds the placements' too, and the prediction says so
     note = scatter_note(scatter)
-    assert note is not None and "one simulation per evaluation" in note
+    assert note is not None and "one simulation per fitted case" in note
     assert scatter_note(RunScatter(scatter.sd, scatter.cases, 2)) is None
     assert scatter_note(None) is None
 
@@ -117,3 +118,49 @@ def test_a_prediction_s_band_of_a_real_run_holds_the_model_s_band():
     assert t.run_q05 < t.q05 and t.run_q95 > t.q95  # widened by the scatter
     y = by["exit_y"]  # no scatter known for it: the model's band
     assert (y.run_q05, y.run_q95) == (y.q05, y.q95)
+
+
+def test_predict_simulates_the_recommended_parameters_for_the_scatter(tmp_path):
+    from parcelfit.study.predict import SCATTER_RUNS, predict
+    from parcelfit.study.store import Store
+
+    path = write_study(tmp_path, budget=8, validation={"speed_setting": None}, executor="serial")
+    Calibration(load_study(path), tmp_path / "study", figures=False, key_frames=False).run()
+    out, rig = tmp_path / "pred", str(write_rig_q(tmp_path))
+    p = predict(tmp_path / "study", rig, "KPBW", 1, sets=2, placements=3, executor="serial", out=out)
+    # the prediction's own runs: sets x placements; the scatter's apart, on the fitted case
+    assert len(p.runs) == 2 * 3
+    assert p.scatter is not None and p.scatter.simulations == SCATTER_RUNS
+    assert p.scatter.cases == ("R/P/1",)
+    store = Store(out / "predict.sqlite", readonly=True)
+    try:
+        rows = [e for e in store.evaluations("screen") if e.iteration == 1]
+    finally:
+        store.close()
+    assert len(rows) == SCATTER_RUNS and len({e.seed for e in rows}) == SCATTER_RUNS
+    assert all(e.status == "ok" and e.speed_setting == 1 for e in rows)
+    study_store = Store(tmp_path / "study" / "study.sqlite", readonly=True)
+    try:
+        recommended = study_store.read_recommended()
+    finally:
+        study_store.close()
+    assert recommended is not None and recommended.params
+    for e in rows:
+        assert {k: e.params[k] for k in recommended.params} == pytest.approx(recommended.params)
+    # the placements' scatter is now the model's: the excess is what the real runs add beyond
+    real = [quantities(r.trajectory, r.transit_time) for r in _runs(tmp_path)]
+    y_real = np.var([v["exit_y"] for v in real], ddof=1)
+    y_model = np.var([e.details.quantities["exit_y"] for e in rows], ddof=1)
+    assert p.scatter.sd["exit_y"] == pytest.approx(math.sqrt(max(0.0, y_real - y_model)))
+    # the analytic simulator cannot run its drives off their mean speed, and the note says so
+    assert any("--speed-deviation is ignored" in n for n in p.notes)
+    # a rerun resumes: nothing left to simulate, the same tables
+    again = predict(
+        tmp_path / "study", rig, "KPBW", 1, sets=2, placements=3, executor="serial", out=out
+    )
+    assert again.scatter == p.scatter
+    pd.testing.assert_frame_equal(again.runs, p.runs)
+
+
+def _runs(tmp_path):
+    return load_dataset(tmp_path / "data")[TestCase("R", "P", 1)].runs

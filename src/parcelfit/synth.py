@@ -195,7 +195,6 @@ def _twin_run(job: TwinJob) -> tuple[Run, float]:
     rng = np.random.default_rng(job.seed)
     rig, cons = job.rig, job.consignment
     params = _specimen(job.truth, rng, s)
-    drives = sorted({d for sp in rig.speeds.values() for d in sp})
     scene = SceneOptions(
         timestep=s.step_for(cons.soft),
         **_friction_options(s),
@@ -203,7 +202,7 @@ def _twin_run(job: TwinJob) -> tuple[Run, float]:
         soft_shell_spacing=s.real_soft_spacing,
         soft_spacing=s.real_content_spacing or SceneOptions.soft_spacing,
         ccd_tolerance=s.real_ccd_tolerance,
-        speed_factors={d: 1 + rng.uniform(-s.speed_dev, s.speed_dev) for d in drives},
+        speed_factors=rig.draw_speed_factors(rng, s.speed_dev),
         start_offset=_placement(rig, rng, s),
     )
     twin = mujoco_simulator(SimOptions(scene=scene), [rig], [cons])

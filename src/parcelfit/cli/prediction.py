@@ -45,6 +45,16 @@ def predict(
     seed: Annotated[
         int, typer.Option(min=0, help="Seed of the drawn sets and the placements.")
     ] = 0,
+    speed_deviation: Annotated[
+        float,
+        typer.Option(
+            min=0.0,
+            max=0.99,
+            help="Short-term deviation of every drive from its mean speed, as a fraction: each "
+            "placement draws its drives' speeds from mean x (1 +- this), uniformly. 0: drives "
+            "at their mean speeds.",
+        ),
+    ] = 0.03,
     out: Annotated[
         Path | None,
         typer.Option(help="Output folder (default: predict-RIG-TYPE-SETTING in the study folder)."),
@@ -65,7 +75,9 @@ def predict(
     check_executor(executor, ("serial", "local", "dask"))
     workers_at_most(workers)
     check_paths(out)
-    resumes() if out is None else resumes(stored_count(out / PREDICT_STORE, "screen", "simulations"))
+    resumes() if out is None else resumes(
+        stored_count(out / PREDICT_STORE, "screen", "simulations")
+    )
     # the bar appears with the first simulation, not before the inputs are checked
     bar, show = progress_bar("predict")
     try:
@@ -77,6 +89,7 @@ def predict(
             sets=sets,
             placements=placements,
             seed=seed,
+            speed_deviation=speed_deviation,
             out=out,
             executor=executor,
             workers=workers,
@@ -173,4 +186,3 @@ def design(
     for table in design_tables(result):
         console.print(table)
     console.print(Text(f"wrote {result.out} (candidates, ranking, design.json)"))
-

@@ -99,20 +99,39 @@ def check_placements(study: Study, simulator: Simulator) -> None:
         require_placements(simulator, most, file=study.path, where="cost.placements")
 
 
-def simulate_placed(simulator: Simulator, item: tuple[Task, int | None]) -> SimResult:
-    """Simulate a task with the placement seed (None: the nominal placement)."""
+def varies_drives(simulator: Simulator) -> bool:
+    """Whether ``simulator`` can run its rig's drives off their mean speeds (the MuJoCo model
+    and the rigid-box reference can; a python or external simulator cannot)."""
+    return callable(getattr(simulator, "with_speed_factors", None))
+
+
+def simulate_placed(
+    simulator: Simulator, item: tuple[Task, int | None], speed_deviation: float = 0.0
+) -> SimResult:
+    """Simulate a task with the placement seed (None: the nominal placement); with a
+    ``speed_deviation`` [-] > 0 the seed also draws each drive's short-term speed factor
+    (`parcelfit.sim.mujoco.rig.Rig.speed_factors`), where the simulator can vary them."""
     task, seed = item
     if seed is not None:
         simulator = simulator.with_placement(seed)  # type: ignore[attr-defined]
+        if speed_deviation > 0 and varies_drives(simulator):
+            rig = simulator.rig(task.case.rig)  # type: ignore[attr-defined]
+            factors = rig.speed_factors(seed, speed_deviation)
+            simulator = simulator.with_speed_factors(factors)  # type: ignore[attr-defined]
     return simulate_task(simulator, task)
 
 
 def simulate_items(
-    executor: Executor, simulator: Simulator, items: Sequence[tuple[Task, int | None]]
+    executor: Executor,
+    simulator: Simulator,
+    items: Sequence[tuple[Task, int | None]],
+    speed_deviation: float = 0.0,
 ) -> Iterator[tuple[int, SimResult]]:
-    """Simulate ``(task, placement seed)`` items; yield ``(index, SimResult)`` as they arrive
-    (a task that could not run is a ``failed`` result, as `Executor.simulate` gives)."""
-    for i, out in executor.map(partial(simulate_placed, simulator), items):
+    """Simulate ``(task, placement seed)`` items (`simulate_placed`, with ``speed_deviation``);
+    yield ``(index, SimResult)`` as they arrive (a task that could not run is a ``failed``
+    result, as `Executor.simulate` gives)."""
+    run = partial(simulate_placed, simulator, speed_deviation=speed_deviation)
+    for i, out in executor.map(run, items):
         result = out.value
         if result is None:
             result = SimResult(None, SimStatus.FAILED, 0.0, {"message": out.error})
@@ -311,4 +330,5 @@ __all__ = [
     "simulate_placed",
     "simulations_per_evaluation",
     "threshold",
+    "varies_drives",
 ]

@@ -58,14 +58,15 @@ import pandas as pd
 from parcelfit.atomic import write_text_atomic
 from parcelfit.errors import ParcelfitError, shown
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
-from parcelfit.runs import Run
+from parcelfit.runs import Run, TestCase
 from parcelfit.sim.ensemble import MAX_PLACEMENTS
 from parcelfit.sim.executors import Executor, Task, make_executor
+from parcelfit.sim.factory import make_simulator
 from parcelfit.sim.protocol import SimResult, Simulator
 from parcelfit.study.details import EvaluationDetails
 from parcelfit.study.folderlock import check_writable, lock_folder
 from parcelfit.study.identify import Identifiability
-from parcelfit.study.joint import require_placements, simulate_items
+from parcelfit.study.joint import require_placements, simulate_items, varies_drives
 from parcelfit.study.plausible import (
     Design,
     check_design,
@@ -80,16 +81,19 @@ from parcelfit.study.run_scatter import (
     estimate_run_scatter,
     quantities,
     real_run_band,
+    recommended_evaluation,
     scatter_note,
 )
 from parcelfit.study.spread import RESOLVED, Decomposition, Effect, decompose, effects_of
-from parcelfit.study.store import Store
-from parcelfit.study.studyfile import Study
+from parcelfit.study.store import STORE_FILE, Store
+from parcelfit.study.studyfile import CaseSpec, Study
 
 PREDICT_STORE = "predict.sqlite"
 PREDICTION_FILE = "prediction.json"
 TABLE_FORMATS = ("csv", "parquet")
 MAX_SETS = 1000  # parameter sets of one prediction (each simulated at every placement)
+SPEED_DEVIATION = 0.03  # method.md: real belt speeds deviate up to 3 % short-term from their mean
+SCATTER_RUNS = 10  # simulations of the recommended parameters per fitted case (run_scatter)
 QUANTITIES = ("transit_time", "rotation", "exit_y", "exit_heading")
 # per quantity: words, SI unit, the unit a person reads and its factor from SI
 _SHOW = {
@@ -345,6 +349,7 @@ def _inputs_record(
     sets: Sequence[Mapping[str, float]],
     seeds: Sequence[int],
     seed: int,
+    speed_deviation: float,
 ) -> dict[str, Any]:
     return {
         "study": str(study_dir.resolve()),
@@ -354,6 +359,7 @@ def _inputs_record(
         "seed": seed,
         "sets": [dict(s) for s in sets],
         "placements": list(seeds),
+        "speed_deviation": speed_deviation,
     }
 
 
@@ -371,6 +377,7 @@ def predict(
     sets: int = 20,
     placements: int = 10,
     seed: int = 0,
+    speed_deviation: float = SPEED_DEVIATION,
     out: str | Path | None = None,
     executor: str = "local",
     workers: int | None = None,
@@ -381,7 +388,8 @@ def predict(
     on_cost: Callable[[str], None] | None = None,
 ) -> Prediction:
     """Predict ``rig`` x ``consignment`` x ``setting`` from the calibration in ``folder``:
-    ``sets`` parameter sets of its plausible set times ``placements`` seeded placements,
+    ``sets`` parameter sets of its plausible set times ``placements`` seeded placements (each
+    with its drives ``speed_deviation`` [-] off their mean speeds, seeded the same way),
     simulated in ``executor`` (serial, local with ``workers`` processes, dask at
     ``scheduler``), recorded in ``out``/predict.sqlite (resumable), summarised and written
     (module docstring). ``progress`` receives one event per finished simulation; ``on_cost``
@@ -397,12 +405,20 @@ def predict(
         raise ParcelfitError(
             f"unknown table format {shown(table_format)}", fix=f"use one of {list(TABLE_FORMATS)}"
         )
+    if not (math.isfinite(speed_deviation) and 0 <= speed_deviation < 1):
+        raise ParcelfitError(
+            f"--speed-deviation {speed_deviation:g}: give a fraction from 0 to below 1",
+            fix=f"e.g. {SPEED_DEVIATION:g} for drives within 3 % of their mean speed",
+        )
     inputs = load_inputs(folder)
     design = check_design(rig, consignment, setting)
     simulator = design_simulator(inputs.study, design)
     require_placements(simulator, placements, file=None, where="--placements")
     drawn = draw_sets(inputs.identifiability, sets, seed)
-    seeds = placement_seeds(placements, seed) if placements > 1 or _placed(simulator) else [0]
+    placed = _placed(simulator)
+    seeds = placement_seeds(placements, seed) if placements > 1 or placed else [0]
+    deviation = speed_deviation if placed and varies_drives(simulator) else 0.0
+    fitted = _scatter_jobs(inputs.folder, inputs.study, seed, deviation)
     full = [{**inputs.study.fixed, **s} for s in drawn]
     out_dir = Path(out) if out is not None else default_out(inputs.folder, design)
     check_writable(out_dir, (PREDICT_STORE,))
@@ -411,7 +427,7 @@ def predict(
     try:
         store = Store(out_dir / PREDICT_STORE)
         try:
-            record = _inputs_record(inputs.folder, design, drawn, seeds, seed)
+            record = _inputs_record(inputs.folder, design, drawn, seeds, seed, deviation)
             known = store.get_meta("predict")
             if known is None:
                 store.set_meta("predict", record)
@@ -431,26 +447,56 @@ def predict(
                     design.setting,
                     [seeds[j] for _, j in items],
                 )
+            if fitted is not None and not any(e.iteration > 0 for e in _rows(store, None)):
+                for c, (spec, params, scatter_seeds) in enumerate(fitted.cases, start=1):
+                    store.add_pending(
+                        "screen",
+                        c,
+                        [params] * len(scatter_seeds),
+                        spec.case.speed_setting,
+                        scatter_seeds,
+                    )
             if on_cost is not None:
                 on_cost(
-                    cost_line(inputs.study, [design], store, executor, workers, make is not None)
+                    cost_line(
+                        inputs.study,
+                        [design],
+                        store,
+                        executor,
+                        workers,
+                        make is not None,
+                        extra=[] if fitted is None else [s.case for s, _, _ in fitted.cases],
+                    )
                 )
             _simulate(
                 store,
                 simulator,
                 design,
                 seeds,
-                placed=_placed(simulator) or placements > 1,
+                placed=placed or placements > 1,
+                speed_deviation=deviation,
                 executor=executor,
                 workers=workers,
                 scheduler=scheduler,
                 make=make,
                 progress=progress,
             )
+            model_values = None
+            if fitted is not None:
+                model_values = _simulate_scatter(
+                    store,
+                    fitted,
+                    speed_deviation=deviation,
+                    executor=executor,
+                    workers=workers,
+                    scheduler=scheduler,
+                    make=make,
+                    progress=progress,
+                )
             runs = _runs_table(store, drawn, len(seeds), inputs.identifiability.names)
         finally:
             store.close()
-        scatter = estimate_run_scatter(inputs.folder, inputs.study)
+        scatter = estimate_run_scatter(inputs.folder, inputs.study, model_values)
         summaries, effects, sentences = summarise_prediction(
             inputs.identifiability, drawn, seeds, runs, scatter, seed
         )
@@ -463,6 +509,11 @@ def predict(
         note = scatter_note(scatter)
         if note is not None:
             notes.append(note)
+        if speed_deviation > 0 and deviation == 0:
+            notes.append(
+                "this simulator cannot run its drives off their mean speeds, so the runs hold "
+                "no short-term speed deviation (--speed-deviation is ignored)"
+            )
         failed = int((runs["status"] != "ok").sum())
         if failed:
             notes.append(f"{failed} of {len(runs)} simulations did not end ok and are left out")
@@ -489,6 +540,104 @@ def _placed(simulator: Simulator) -> bool:
     return callable(getattr(simulator, "with_placement", None))
 
 
+def _rows(store: Store, iteration: int | None) -> list[Any]:
+    """The store's simulations of the prediction (``iteration`` 0), of the scatter runs of one
+    study case (its index from 1) or all (None)."""
+    rows = store.evaluations("screen")
+    return rows if iteration is None else [e for e in rows if e.iteration == iteration]
+
+
+@dataclass(frozen=True)
+class ScatterJobs:
+    """The simulations behind the real runs' scatter (`parcelfit.study.run_scatter`): the
+    study's simulator, whether it takes placements, and per study case with real runs (fitted,
+    then validation) the recommended parameters (SI, fixed ones included) and the seeds."""
+
+    simulator: Simulator
+    placed: bool
+    cases: list[tuple[CaseSpec, dict[str, float], list[int]]]
+
+
+def _scatter_jobs(folder: Path, study: Study, seed: int, deviation: float) -> ScatterJobs | None:
+    """The recommended parameters at `SCATTER_RUNS` seeded placements (drives ``deviation``
+    off their mean) on every fitted and validation case of ``study``; None when the calibration
+    in ``folder`` has no ok fit."""
+    store = Store(folder / STORE_FILE, readonly=True)
+    try:
+        evaluation = recommended_evaluation(store)
+    finally:
+        store.close()
+    if evaluation is None:
+        return None
+    simulator = make_simulator(study.simulator)
+    placed = _placed(simulator)
+    seeds = placement_seeds(SCATTER_RUNS, seed) if placed else [0]
+    params = {**study.fixed, **evaluation.params}
+    specs: dict[str, CaseSpec] = {}
+    for spec in (*study.cases, *study.validation_cases):
+        specs.setdefault(spec.label, spec)
+    return ScatterJobs(simulator, placed, [(c, params, seeds) for c in specs.values()])
+
+
+def _simulate_scatter(
+    store: Store,
+    jobs: ScatterJobs,
+    *,
+    speed_deviation: float,
+    executor: str,
+    workers: int | None,
+    scheduler: str | None,
+    make: Callable[[], Executor] | None,
+    progress: ProgressCallback,
+) -> dict[str, list[dict[str, float | None]]]:
+    """Run the scatter simulations still pending (each recorded the moment it arrives);
+    returns per case label the quantities of its finished runs (`run_values`)."""
+    rows = [e for e in _rows(store, None) if e.iteration > 0]
+    pending = [e for e in rows if e.status == "pending"]
+    total, done = len(rows), len(rows) - len(pending)
+    if pending:
+        progress(
+            ProgressEvent(
+                "predict",
+                f"the real runs' scatter: {done} of {total} simulations of the recommended "
+                "parameters on the study's cases stored",
+                done=done,
+                total=total,
+            )
+        )
+        items = [
+            (
+                Task(
+                    e.params,
+                    jobs.cases[e.iteration - 1][0].case,
+                    f"scatter-case{e.iteration}-p{e.seed}",
+                ),
+                e.seed if jobs.placed else None,
+            )
+            for e in pending
+        ]
+        with open_executor(executor, workers, scheduler, len(items), make) as pool:
+            for i, result in simulate_items(pool, jobs.simulator, items, speed_deviation):
+                finish_run(store, pending[i].id, result)
+                done += 1
+                progress(
+                    ProgressEvent(
+                        "predict",
+                        f"the real runs' scatter: {done} of {total} simulations",
+                        done=done,
+                        total=total,
+                    )
+                )
+    out: dict[str, list[dict[str, float | None]]] = {}
+    for c, (spec, _, _) in enumerate(jobs.cases, start=1):
+        out[spec.label] = [
+            {"transit_time": e.transit_time, **e.details.quantities}
+            for e in _rows(store, c)
+            if e.status == "ok"
+        ]
+    return out
+
+
 def _simulate(
     store: Store,
     simulator: Simulator,
@@ -496,14 +645,15 @@ def _simulate(
     seeds: Sequence[int],
     *,
     placed: bool,
+    speed_deviation: float,
     executor: str,
     workers: int | None,
     scheduler: str | None,
     make: Callable[[], Executor] | None,
     progress: ProgressCallback,
 ) -> None:
-    """Run the store's pending simulations, each recorded the moment it arrives."""
-    rows = store.evaluations("screen")
+    """Run the prediction's pending simulations, each recorded the moment it arrives."""
+    rows = _rows(store, 0)
     pending = [e for e in rows if e.status == "pending"]
     total, done = len(rows), len(rows) - len(pending)
     progress(
@@ -525,7 +675,7 @@ def _simulate(
         for e in pending
     ]
     with open_executor(executor, workers, scheduler, len(items), make) as pool:
-        for i, result in simulate_items(pool, simulator, items):
+        for i, result in simulate_items(pool, simulator, items, speed_deviation):
             finish_run(store, pending[i].id, result)
             done += 1
             progress(
@@ -545,17 +695,22 @@ def cost_line(
     executor: str,
     workers: int | None,
     custom: bool = False,
+    extra: Sequence[TestCase] = (),
 ) -> str:
     """The expected cost of the store's pending simulations (rows of kind ``screen``; with
-    several designs, ``iteration`` is the design's index) on the executor's processes, as one
-    line (`parcelfit.sim.cost.Estimate.text`)."""
+    several designs, ``iteration`` is the design's index; with ``extra`` test cases, one
+    design's runs are iteration 0 and those of extra case i iteration i + 1) on the executor's
+    processes, as one line (`parcelfit.sim.cost.Estimate.text`)."""
     from parcelfit.sim.cost import estimate, run_seconds
 
     pending = [e for e in store.evaluations("screen") if e.status == "pending"]
     runs = []
     for c, d in enumerate(designs):
-        n = sum(1 for e in pending if len(designs) == 1 or e.iteration == c)
+        n = sum(1 for e in pending if (len(designs) == 1 and not extra) or e.iteration == c)
         runs.append((n, run_seconds(study.simulator, d.rig, d.consignment)))
+    for c, case in enumerate(extra, start=1):
+        n = sum(1 for e in pending if e.iteration == c)
+        runs.append((n, run_seconds(study.simulator, case.rig, case.consignment)))
     total = sum(n for n, _ in runs)
     local = executor == "local" and not custom
     processes = min(workers or os.cpu_count() or 1, max(total, 1)) if local else 1
@@ -601,7 +756,7 @@ def _runs_table(
 ) -> pd.DataFrame:
     """One row per simulation (docs/data.md, Predictions), in set and placement order."""
     rows = []
-    for e in sorted(store.evaluations("screen"), key=lambda e: e.slot):
+    for e in sorted(_rows(store, 0), key=lambda e: e.slot):
         s, j = divmod(e.slot, k)
         row: dict[str, Any] = {"set": s, "placement": j, "seed": e.seed}
         row.update({name: float(sets[s][name]) for name in names})

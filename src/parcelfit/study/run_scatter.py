@@ -7,22 +7,28 @@ parameter the calibration sets nor a placement the rig file describes, so where 
 determine the parameters the model's band is narrower than the spread of real runs
 (docs/research/predict-coverage.md: 60-75 % of unseen twin runs inside a 90 % band).
 
-**Estimate** from the calibration's fitted cases, per quantity q of a run (transit time T [s],
-rotation [rad], exit x and y [m], exit heading [rad]; `parcelfit.study.predict.run_values`) and
-fitted case c:
+**Estimate** from the calibration's cases with real runs, per quantity q of a run (transit
+time T [s], rotation [rad], exit x and y [m], exit heading [rad];
+`parcelfit.study.predict.run_values`) and case c:
 
     V_real(c)  = sample variance (divisor n - 1) of q over the case's real runs
-    V_model(c) = sample variance of q over the simulations of c in the recommended evaluation
-                 (its placements; 0 with one simulation per evaluation)
+    V_model(c) = sample variance of q over the model's runs of c at the recommended parameters:
+                 `parcelfit predict` simulates them at 10 seeded placements per fitted and
+                 validation case, each with its drives off their mean speeds as the
+                 prediction's own runs; without them (`estimate_run_scatter` not given the
+                 model's runs) the simulations of c in the recommended evaluation, 0 with one
     E(c)       = max(0, V_real(c) - V_model(c))
-    s_q^2      = mean of E(c) over the fitted cases with at least two real runs
+    s_q^2      = mean of E(c) over the cases with at least two real runs
 
 The transit time is taken relative to each case's mean real transit time (V divided by its
 square), as a specimen's friction and the timing noise move it in proportion. With one
-simulation per evaluation (the published cost) the placements' scatter is in E(c) as well as in
-the prediction's own placements: the band is then wider than needed, and for the rotation, an
-absolute angle, it can miss calm runs entirely when the fitted rig's runs spun or slid and the
-predicted rig's do not; the prediction then says so (`scatter_note`).
+simulation per case (a simulator without placements) the placements' scatter is in E(c) as
+well as in the prediction's own placements: the band is then wider than needed, and for the
+rotation, an absolute angle, it can miss calm runs entirely when the fitted rig's runs spun or
+slid and the predicted rig's do not; the prediction then says so (`scatter_note`). Where the
+fitted cases' runs split between modes (E3's parcels spin or slide), V_real and V_model are
+both dominated by the split and ten runs each cannot resolve a small excess under it: E is
+then mostly 0 and the band of a real run is the model's (docs/research/predict-coverage.md).
 
 **Band for a real run.** Each predicted run value v_i is joined by D seeded draws
 v_i + s_q z_ik (transit time: v_i (1 + s_q z_ik)), z ~ N(0, 1), and the 5th and 95th
@@ -97,7 +103,7 @@ def excess_variance(
     return excess
 
 
-def _recommended_evaluation(store: Store) -> Evaluation | None:
+def recommended_evaluation(store: Store) -> Evaluation | None:
     """The fit evaluation of the recommended parameters (the lowest-cost ok one without a
     recommendation, or when none matches)."""
     fits = [e for e in store.evaluations("fit") if e.status == "ok" and e.cost is not None]
@@ -133,29 +139,48 @@ def _model_values(folder: Path, evaluation: Evaluation, case: TestCase) -> list[
     return out
 
 
-def estimate_run_scatter(folder: Path, study: Study) -> RunScatter | None:
+def estimate_run_scatter(
+    folder: Path,
+    study: Study,
+    model: Mapping[str, Sequence[Mapping[str, float | None]]] | None = None,
+) -> RunScatter | None:
     """The real runs' scatter beyond the model's (module docstring) from the finished
-    calibration in ``folder`` and its ``study``; None when the store has no ok fit."""
+    calibration in ``folder`` and its ``study``: against ``model`` (case label -> the
+    quantities of the model's runs of that case at the recommended parameters) where given,
+    else against the recommended evaluation's own simulations of the fitted cases; None when
+    the store has no ok fit."""
     store = Store(folder / STORE_FILE, readonly=True)
     try:
-        evaluation = _recommended_evaluation(store)
+        evaluation = recommended_evaluation(store)
     finally:
         store.close()
     if evaluation is None:
         return None
     datasets: dict[Path, object] = {}
     pooled: dict[str, list[float]] = {q: [] for q in QUANTITIES}
-    used, sims = [], 0
-    for spec in study.cases:
+    used: list[str] = []
+    sims = 0
+    specs = study.cases
+    if model is not None:
+        specs = tuple({s.label: s for s in (*study.validation_cases, *study.cases)}.values())
+        specs = tuple(s for s in specs if s.label in model)
+    for spec in specs:
         if spec.dataset not in datasets:
             datasets[spec.dataset] = load_dataset(spec.dataset)
         runs: Sequence[Run] = datasets[spec.dataset][spec.case].runs  # type: ignore[index]
         real = [quantities(r.trajectory, r.transit_time) for r in runs]
-        model = _model_values(folder, evaluation, spec.case)
-        sims = max(sims, len(model))
+        if model is None:
+            values: Sequence[Mapping[str, float | None]] = _model_values(
+                folder, evaluation, spec.case
+            )
+        else:
+            values = model[spec.label]
+        sims = max(sims, len(values))
         any_used = False
         for q in QUANTITIES:
-            e = excess_variance([v[q] for v in real], [v[q] for v in model], relative=q in RELATIVE)
+            e = excess_variance(
+                [v[q] for v in real], [v.get(q) for v in values], relative=q in RELATIVE
+            )
             if e is not None:
                 pooled[q].append(e)
                 any_used = True
@@ -166,17 +191,16 @@ def estimate_run_scatter(folder: Path, study: Study) -> RunScatter | None:
 
 
 def scatter_note(scatter: RunScatter | None) -> str | None:
-    """A warning for the prediction's notes when ``scatter`` came from one simulation per
-    evaluation (module docstring): it then holds the fitted cases' placement scatter too."""
+    """A warning for the prediction's notes when ``scatter`` came from one simulation per case
+    (module docstring): it then holds the fitted cases' placement scatter too."""
     if scatter is None or scatter.simulations >= 2 or not scatter.sd:
         return None
     return (
-        "the band of a real run takes the real runs' scatter from a calibration with one "
-        "simulation per evaluation, so it holds the fitted cases' placement scatter too; on "
-        "another rig that can be far wider than the rig's own (on the twin data, E3's spins and "
-        "slides made the bands of calm E1 runs hold 100 % of transit times but the rotation's "
-        "band miss them: docs/research/predict-coverage.md). Calibrate with cost: {kind: "
-        "ensemble, placements: 4} for a band that tells them apart"
+        "the band of a real run takes the real runs' scatter against one simulation per "
+        "fitted case (the simulator takes no placements), so it holds the fitted cases' "
+        "placement scatter too; on another rig that can be far wider than the rig's own (on "
+        "the twin data, E3's spins and slides made the bands of calm E1 runs hold 100 % of "
+        "transit times but the rotation's band miss them: docs/research/predict-coverage.md)"
     )
 
 

@@ -47,3 +47,8 @@ class RigBackend(Generic[OptionsT]):
     def with_placement(self, seed: int | None) -> Self:
         """The same backend with placement ``seed`` (None: the nominal start pose)."""
         return self.with_options(placement_seed=seed)
+
+    def with_speed_factors(self, factors: Mapping[str, float]) -> Self:
+        """The same backend with each drive's speed times its factor [-] (drive -> factor; a
+        drive not listed runs at its rig's speed)."""
+        raise NotImplementedError  # each backend keeps the factors in its own options

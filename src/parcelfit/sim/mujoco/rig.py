@@ -95,6 +95,7 @@ _NOSED = ("belt", "strips")  # surface types that may have rounded ends (``nose_
 MAX_NOSE_RADIUS = 0.2  # [m]
 PLACEMENT_STREAM = 0x51ACE  # keeps placement draws apart from other seeded streams
 SCATTER_CUT = 2.5  # placement draws are cut off at this many standard deviations
+SPEED_STREAM = 0x5BEED  # keeps drive-speed draws apart from the placement draws of one seed
 
 
 @dataclass(frozen=True)
@@ -229,6 +230,21 @@ class Rig:
             for sd in self.start.scatter
         )
         return (*self.start_shift(along, across), heading)
+
+    def drives(self) -> list[str]:
+        """The names of the rig's drives (every key of every speed setting), sorted."""
+        return sorted({d for sp in self.speeds.values() for d in sp})
+
+    def speed_factors(self, seed: int, deviation: float) -> dict[str, float]:
+        """Drive -> speed factor [-] of run ``seed``: each drive's short-term deviation from its
+        mean speed, 1 + U(-deviation, deviation) (method.md: real belt speeds deviate up to 3 %
+        short-term), drawn as `draw_speed_factors` draws it with the seed's own stream."""
+        return self.draw_speed_factors(np.random.default_rng([SPEED_STREAM, seed]), deviation)
+
+    def draw_speed_factors(self, rng: np.random.Generator, deviation: float) -> dict[str, float]:
+        """Drive -> 1 + U(-deviation, deviation) [-] drawn with ``rng``, one per drive in sorted
+        order (a twin's "real" runs draw from the same distribution with their own stream)."""
+        return {d: 1 + float(rng.uniform(-deviation, deviation)) for d in self.drives()}
 
     def start_shift(self, along: float, across: float) -> tuple[float, float]:
         """The rig-frame offset (dx, dy) [m] of a start moved ``along`` and ``across`` [m] its

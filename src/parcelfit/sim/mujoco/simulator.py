@@ -140,6 +140,11 @@ class MujocoSimulator(RigBackend[SimOptions]):
     ) -> None:
         super().__init__(options or SimOptions(), rigs, consignments)
 
+    def with_speed_factors(self, factors: Mapping[str, float]) -> MujocoSimulator:
+        """The same simulator with each drive's speed times its factor [-] (the scene's
+        ``speed_factors``)."""
+        return self.with_options(scene=replace(self.options.scene, speed_factors=dict(factors)))
+
     def scene_options(self, rig: Rig) -> SceneOptions:
         """The scene settings of a run on ``rig``: the placement draw added to the start offset
         (the step on the rig follows from them, `SceneOptions.step_for`)."""

@@ -118,6 +118,10 @@ class RigidBoxSimulator(RigBackend[RigidBoxOptions]):
     ) -> None:
         super().__init__(options or RigidBoxOptions(), rigs, consignments)
 
+    def with_speed_factors(self, factors: Mapping[str, float]) -> RigidBoxSimulator:
+        """The same reference with each drive's speed times its factor [-]."""
+        return self.with_options(speed_factors=dict(factors))
+
     def world(self, params: Mapping[str, float], case: TestCase) -> tuple[World, float]:
         """The world of ``case`` with SI ``params`` (defaults filled in) and its time step [s]."""
         opt = self.options
