@@ -127,7 +127,9 @@ def test_predict_simulates_the_recommended_parameters_for_the_scatter(tmp_path):
     path = write_study(tmp_path, budget=8, validation={"speed_setting": None}, executor="serial")
     Calibration(load_study(path), tmp_path / "study", figures=False, key_frames=False).run()
     out, rig = tmp_path / "pred", str(write_rig_q(tmp_path))
-    p = predict(tmp_path / "study", rig, "KPBW", 1, sets=2, placements=3, executor="serial", out=out)
+    p = predict(
+        tmp_path / "study", rig, "KPBW", 1, sets=2, placements=3, executor="serial", out=out
+    )
     # the prediction's own runs: sets x placements; the scatter's apart, on the fitted case
     assert len(p.runs) == 2 * 3
     assert p.scatter is not None and p.scatter.simulations == SCATTER_RUNS

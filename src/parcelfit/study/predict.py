@@ -28,13 +28,23 @@ most (as a share of that quantity's 5-95 % band) is named in one sentence, e.g. 
 undetermined and moves the transit time by 40 ms here: run `parcelfit design` to find the
 experiment that fixes it".
 
+**Drives.** A placement is also the moment the run happens: each drive of the rig runs at its
+mean speed times 1 + U(-D, D), drawn from the placement seed (`Rig.speed_factors`; method.md:
+real belt speeds deviate up to 3 % short-term, D = 0.03 by default), so a placement's runs share
+their drive speeds across sets as they share the start pose.
+
+**The real runs' scatter** is estimated against the recommended parameters simulated at
+`SCATTER_RUNS` seeded placements (drives as above) on every fitted and validation case of the
+study (`parcelfit.study.run_scatter`).
+
 **Resumable.** The simulations are recorded in their own store, ``predict.sqlite`` in the
-output folder (`parcelfit.study.store`, rows of kind ``screen``: slot = set x K + placement
-index, ``seed`` the placement seed, ``transit_time`` [s], ``details`` the rotation, exit
-position and heading), all written as pending before any runs and each finished in one
-transaction the moment it arrives; rerunning the same command runs only what is still pending.
-The inputs (study, design, N, K, seed, the drawn sets and the placement seeds) are stored in
-the meta record ``predict``: a folder holding a prediction with other inputs is refused.
+output folder (`parcelfit.study.store`, rows of kind ``screen``: iteration 0 the prediction's,
+slot = set x K + placement index; iteration i >= 1 the scatter runs of the study's i-th case;
+``seed`` the placement seed, ``transit_time`` [s], ``details`` the rotation, exit position and
+heading), all written as pending before any runs and each finished in one transaction the
+moment it arrives; rerunning the same command runs only what is still pending. The inputs
+(study, design, N, K, seed, the drawn sets, the placement seeds and D) are stored in the meta
+record ``predict``: a folder holding a prediction with other inputs is refused.
 
 Outputs in the output folder (schemas in docs/data.md, Predictions): ``runs.csv`` (one row per
 simulation), ``summary.csv`` (one row per quantity), ``effects.csv`` (one row per parameter and

@@ -162,7 +162,7 @@ def estimate_run_scatter(
     sims = 0
     specs = study.cases
     if model is not None:
-        specs = tuple({s.label: s for s in (*study.validation_cases, *study.cases)}.values())
+        specs = tuple({s.label: s for s in (*study.cases, *study.validation_cases)}.values())
         specs = tuple(s for s in specs if s.label in model)
     for spec in specs:
         if spec.dataset not in datasets:
