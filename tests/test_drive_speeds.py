@@ -66,3 +66,20 @@ def test_the_mujoco_model_and_the_reference_take_the_factors():
     assert MujocoSimulator().with_speed_factors(f).options.scene.speed_factors == f
     assert RigidBoxSimulator().with_speed_factors(f).options.speed_factors == f
     assert varies_drives(MujocoSimulator()) and varies_drives(RigidBoxSimulator())
+
+
+@pytest.mark.parametrize("value", [-0.01, 1.0, float("nan")])
+def test_a_speed_deviation_out_of_range_is_refused_before_anything_runs(tmp_path, value):
+    from parcelfit.errors import ParcelfitError
+    from parcelfit.study.design import rank_experiments
+    from parcelfit.study.predict import predict
+
+    from .predict_helpers import write_finished_study, write_rig_q
+
+    folder = write_finished_study(tmp_path)
+    rig = str(write_rig_q(tmp_path))
+    with pytest.raises(ParcelfitError, match="--speed-deviation"):
+        predict(folder, rig, "KPBW", 1, speed_deviation=value, out=tmp_path / "p")
+    with pytest.raises(ParcelfitError, match="--speed-deviation"):
+        rank_experiments(folder, candidates=["E1/KPBW/1"], speed_deviation=value)
+    assert not (tmp_path / "p").exists()

@@ -51,6 +51,18 @@ ExecutorOption = Annotated[
 ]
 
 
+SpeedDeviationOption = Annotated[
+    float,
+    typer.Option(
+        min=0.0,
+        max=0.99,
+        help="Short-term deviation of every drive from its mean speed, as a fraction: each "
+        "placement draws its drives' speeds from mean x (1 +- this), uniformly. 0: drives at "
+        "their mean speeds.",
+    ),
+]
+
+
 SettingOption = Annotated[
     int,
     typer.Option(

@@ -13,6 +13,7 @@ from parcelfit.cli.options import (
     AnyExecutorOption,
     SchedulerOption,
     SettingOption,
+    SpeedDeviationOption,
     TableFormatOption,
     WorkersOption,
     check_executor,
@@ -45,16 +46,7 @@ def predict(
     seed: Annotated[
         int, typer.Option(min=0, help="Seed of the drawn sets and the placements.")
     ] = 0,
-    speed_deviation: Annotated[
-        float,
-        typer.Option(
-            min=0.0,
-            max=0.99,
-            help="Short-term deviation of every drive from its mean speed, as a fraction: each "
-            "placement draws its drives' speeds from mean x (1 +- this), uniformly. 0: drives "
-            "at their mean speeds.",
-        ),
-    ] = 0.03,
+    speed_deviation: SpeedDeviationOption = 0.03,
     out: Annotated[
         Path | None,
         typer.Option(help="Output folder (default: predict-RIG-TYPE-SETTING in the study folder)."),
@@ -142,6 +134,7 @@ def design(
     seed: Annotated[
         int, typer.Option(min=0, help="Seed of the drawn sets and the placements.")
     ] = 0,
+    speed_deviation: SpeedDeviationOption = 0.03,
     out: Annotated[
         Path | None, typer.Option(help="Output folder (default: design in the study folder).")
     ] = None,
@@ -170,6 +163,7 @@ def design(
             placements=placements,
             runs=runs,
             seed=seed,
+            speed_deviation=speed_deviation,
             out=out,
             executor=executor,
             workers=workers,

@@ -27,9 +27,10 @@ time, rotation, exit position and heading). For quantity q:
   placements (`parcelfit.study.spread.decompose`) and f_q a measurement floor (`FLOOR`: the
   band test's tolerances, 3 mm and 1 degree, for the exit position and the angles, 2 ms for
   the transit time, assumed), so that a quantity the placements do not scatter is not taken
-  as exact. The specimens' own scatter (two real parcels of one type differ) is not simulated:
-  real runs scatter more, and the widths below are optimistic; the ranking is what they are
-  for.
+  as exact. Each placement runs the rig's drives off their mean speeds as `parcelfit predict`
+  does (``speed_deviation``, default 3 %). The specimens' own scatter (two real parcels of one
+  type differ) is not simulated: real runs scatter more, and the widths below are optimistic;
+  the ranking is what they are for.
 
 The signal-to-noise of p on the candidate is max_q |J_qp| / s_q: how many run-to-run standard
 deviations the outcome moves as p crosses its plausible interval.
@@ -101,7 +102,12 @@ from parcelfit.study.information import (
     runs_needed,
     shares_of,
 )
-from parcelfit.study.joint import require_placements, simulate_items
+from parcelfit.study.joint import (
+    SPEED_DEVIATION,
+    require_placements,
+    simulate_items,
+    varies_drives,
+)
 from parcelfit.study.plausible import (
     Design,
     check_design,
@@ -390,6 +396,7 @@ def rank_experiments(
     placements: int = 5,
     runs: int = 10,
     seed: int = 0,
+    speed_deviation: float = SPEED_DEVIATION,
     out: str | Path | None = None,
     executor: str = "local",
     workers: int | None = None,
@@ -400,10 +407,11 @@ def rank_experiments(
     on_cost: Callable[[str], None] | None = None,
 ) -> DesignResult:
     """Rank the candidate experiments for the calibration in ``folder`` (module docstring):
-    each simulated at ``sets`` plausible parameter sets x ``placements`` seeded placements in
-    ``executor``, scored for ``runs`` real runs, recorded in ``out``/design.sqlite (resumable,
-    default ``design`` in the study folder) and written there; ``on_cost`` receives the
-    expected cost of the simulations still to run before they start. Seeded."""
+    each simulated at ``sets`` plausible parameter sets x ``placements`` seeded placements (each
+    with its drives ``speed_deviation`` [-] off their mean speeds) in ``executor``, scored for
+    ``runs`` real runs, recorded in ``out``/design.sqlite (resumable, default ``design`` in the
+    study folder) and written there; ``on_cost`` receives the expected cost of the simulations
+    still to run before they start. Seeded."""
     progress = progress or ignore_progress
     if not 2 <= sets <= MAX_SETS:
         raise ParcelfitError(f"--sets {sets}: give from 2 to {MAX_SETS} parameter sets")
@@ -411,6 +419,11 @@ def rank_experiments(
         raise ParcelfitError(f"--placements {placements}: give from 1 to {MAX_PLACEMENTS}")
     if not 1 <= runs <= MAX_RUNS:
         raise ParcelfitError(f"--runs {runs}: give from 1 to {MAX_RUNS} real runs")
+    if not (math.isfinite(speed_deviation) and 0 <= speed_deviation < 1):
+        raise ParcelfitError(
+            f"--speed-deviation {speed_deviation:g}: give a fraction from 0 to below 1",
+            fix=f"e.g. {SPEED_DEVIATION:g} for drives within 3 % of their mean speed",
+        )
     if table_format not in TABLE_FORMATS:
         raise ParcelfitError(
             f"unknown table format {shown(table_format)}", fix=f"use one of {list(TABLE_FORMATS)}"
@@ -436,6 +449,8 @@ def rank_experiments(
     for sim in simulators:
         require_placements(sim, placements, file=None, where="--placements")
     placed = callable(getattr(simulators[0], "with_placement", None))
+    varied = placed and all(varies_drives(s) for s in simulators)
+    deviation = speed_deviation if varied else 0.0
     drawn = draw_sets(ident, sets, seed)
     seeds = placement_seeds(placements, seed) if placed else [0]
     full = [{**inputs.study.fixed, **s} for s in drawn]
@@ -452,6 +467,7 @@ def rank_experiments(
                 "seed": seed,
                 "sets": drawn,
                 "placements": seeds,
+                "speed_deviation": deviation,
             }
             known = store.get_meta("design")
             if known is None:
@@ -500,7 +516,7 @@ def rank_experiments(
                             )
                             for e in mine
                         ]
-                        for i, result in simulate_items(pool, sim, items):
+                        for i, result in simulate_items(pool, sim, items, deviation):
                             finish_run(store, mine[i].id, result)
                             done += 1
                             progress(

@@ -99,6 +99,9 @@ def check_placements(study: Study, simulator: Simulator) -> None:
         require_placements(simulator, most, file=study.path, where="cost.placements")
 
 
+SPEED_DEVIATION = 0.03  # method.md: real belt speeds deviate up to 3 % short-term from their mean
+
+
 def varies_drives(simulator: Simulator) -> bool:
     """Whether ``simulator`` can run its rig's drives off their mean speeds (the MuJoCo model
     and the rigid-box reference can; a python or external simulator cannot)."""
@@ -317,6 +320,7 @@ def advise(
 
 
 __all__ = [
+    "SPEED_DEVIATION",
     "CaseRun",
     "advise",
     "case_cost",

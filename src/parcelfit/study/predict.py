@@ -76,7 +76,12 @@ from parcelfit.sim.protocol import SimResult, Simulator
 from parcelfit.study.details import EvaluationDetails
 from parcelfit.study.folderlock import check_writable, lock_folder
 from parcelfit.study.identify import Identifiability
-from parcelfit.study.joint import require_placements, simulate_items, varies_drives
+from parcelfit.study.joint import (
+    SPEED_DEVIATION,
+    require_placements,
+    simulate_items,
+    varies_drives,
+)
 from parcelfit.study.plausible import (
     Design,
     check_design,
@@ -102,7 +107,6 @@ PREDICT_STORE = "predict.sqlite"
 PREDICTION_FILE = "prediction.json"
 TABLE_FORMATS = ("csv", "parquet")
 MAX_SETS = 1000  # parameter sets of one prediction (each simulated at every placement)
-SPEED_DEVIATION = 0.03  # method.md: real belt speeds deviate up to 3 % short-term from their mean
 SCATTER_RUNS = 10  # simulations of the recommended parameters per fitted case (run_scatter)
 QUANTITIES = ("transit_time", "rotation", "exit_y", "exit_heading")
 # per quantity: words, SI unit, the unit a person reads and its factor from SI
