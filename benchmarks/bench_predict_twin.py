@@ -40,9 +40,89 @@ DEFAULT_CANDIDATES = "E3/KPBW/2,E1/KPBW/1,E1/KPBW/3,E3/BW/1"
 
 
 def _case(label: str) -> tuple[str, str, int]:
-    """'RIG/TYPE/SETTING' -> (rig, type, setting)."""
-    rig, kind, setting = label.split("/")
+    """'RIG/TYPE/SETTING' -> (rig, type, setting); RIG may be a rig file's path."""
+    rig, kind, setting = label.rsplit("/", 2)
     return rig, kind, int(setting)
+
+
+def predict_cases(
+    folder: Path,
+    dataset_dir: Path,
+    unseen: list[str],
+    *,
+    sets: int,
+    placements: int,
+    seed: int,
+    out: Path,
+    workers: int,
+) -> tuple[list[dict], dict[str, list[int]], float]:
+    """``predict`` every ``unseen`` case (RIG/TYPE/SETTING, RIG a bundled name or a rig file)
+    from the calibration in ``folder`` and count the runs of ``dataset_dir`` inside each band;
+    prints a row per case and quantity. Returns the rows, per quantity [inside the model's
+    band, inside the band of a real run, runs], and the wall time [s]."""
+    from parcelfit.runs import load_dataset
+    from parcelfit.study.predict import predict, run_values
+
+    dataset = load_dataset(dataset_dir)
+    rows = []
+    inside = {q: [0, 0, 0] for q in QUANTITIES}
+    seconds = 0.0
+    print(
+        f"{'case':<12}{'quantity':<14}{'q05':>10}{'q95':>10}{'inside':>8}"
+        f"{'run q05':>10}{'run q95':>10}{'inside':>8}{'parameters share':>18}"
+    )
+    for label in unseen:
+        rig, kind, setting = _case(label)
+        name = Path(rig).stem
+        t = time.perf_counter()
+        p = predict(
+            folder,
+            rig,
+            kind,
+            setting,
+            sets=sets,
+            placements=placements,
+            seed=seed,
+            out=out / f"predict-{name}-{kind}-{setting}",
+            workers=workers,
+        )
+        seconds += time.perf_counter() - t
+        real = [
+            run_values(r)
+            for c in dataset.cases.values()
+            if (c.case.rig, c.case.consignment, c.case.speed_setting) == (name, kind, setting)
+            for r in c.runs
+        ]
+        if not real:
+            raise SystemExit(f"the twin dataset has no runs of {label}")
+        for s in p.summaries:
+            if s.quantity not in QUANTITIES:
+                continue
+            # the band of a real run, as predict reports it
+            row = coverage_row(s, real, (s.run_q05, s.run_q95))
+            counts = inside[s.quantity]
+            counts[0] += row["inside"]
+            counts[1] += row["inside_run_band"]
+            counts[2] += row["runs"]
+            rows.append({"case": f"{name}/{kind}/{setting}", **row})
+            print(f"{name + '/' + kind + '/' + str(setting):<12}{row_text(row)}", flush=True)
+    return rows, inside, seconds
+
+
+def print_coverage(inside: dict[str, list[int]]) -> None:
+    """The coverage per quantity and over all (model's band, band of a real run)."""
+    print("\ncoverage of the 90 % bands (the model's band, the band of a real run):")
+    all_model = sum(c[0] for c in inside.values())
+    all_run = sum(c[1] for c in inside.values())
+    all_n = sum(c[2] for c in inside.values())
+    for q, (n_in, n_run, n) in inside.items():
+        print(
+            f"  {q:<14}{n_in}/{n} = {n_in / max(n, 1):.0%}   {n_run}/{n} = {n_run / max(n, 1):.0%}"
+        )
+    print(
+        f"  {'all':<14}{all_model}/{all_n} = {all_model / max(all_n, 1):.0%}"
+        f"   {all_run}/{all_n} = {all_run / max(all_n, 1):.0%}"
+    )
 
 
 def main() -> None:
@@ -62,10 +142,8 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("bench-predict-twin"))
     args = ap.parse_args()
 
-    from parcelfit.runs import load_dataset
     from parcelfit.study.calibration import Calibration
     from parcelfit.study.design import rank_experiments
-    from parcelfit.study.predict import predict, run_values
     from parcelfit.study.studyfile import load_study
 
     args.out.mkdir(parents=True, exist_ok=True)
@@ -100,64 +178,21 @@ def main() -> None:
         flush=True,
     )
 
-    dataset = load_dataset(study.dataset)
-    rows = []
-    inside = {q: [0, 0, 0] for q in QUANTITIES}  # model band, real-run band, runs
-    seconds["predict"] = 0.0
-    print(
-        f"{'case':<12}{'quantity':<14}{'q05':>10}{'q95':>10}{'inside':>8}"
-        f"{'run q05':>10}{'run q95':>10}{'inside':>8}{'parameters share':>18}"
+    rows, inside, seconds["predict"] = predict_cases(
+        folder,
+        study.dataset,
+        args.unseen.split(","),
+        sets=args.sets,
+        placements=args.placements,
+        seed=args.seed,
+        out=args.out,
+        workers=args.workers,
     )
-    for label in args.unseen.split(","):
-        rig, kind, setting = _case(label)
-        t = time.perf_counter()
-        p = predict(
-            folder,
-            rig,
-            kind,
-            setting,
-            sets=args.sets,
-            placements=args.placements,
-            seed=args.seed,
-            out=args.out / f"predict-{rig}-{kind}-{setting}",
-            workers=args.workers,
-        )
-        seconds["predict"] += time.perf_counter() - t
-        real = [
-            run_values(r)
-            for c in dataset.cases.values()
-            if (c.case.rig, c.case.consignment, c.case.speed_setting) == (rig, kind, setting)
-            for r in c.runs
-        ]
-        if not real:
-            raise SystemExit(f"the twin dataset has no runs of {label}")
-        for s in p.summaries:
-            if s.quantity not in QUANTITIES:
-                continue
-            # the band of a real run, as predict reports it
-            row = coverage_row(s, real, (s.run_q05, s.run_q95))
-            counts = inside[s.quantity]
-            counts[0] += row["inside"]
-            counts[1] += row["inside_run_band"]
-            counts[2] += row["runs"]
-            rows.append({"case": label, **row})
-            print(f"{label:<12}{row_text(row)}", flush=True)
     total = sum(seconds.values())
     (args.out / "results.json").write_text(
         json.dumps({"rows": rows, "seconds": seconds, "design_order": order}, indent=1)
     )
-    print("\ncoverage of the 90 % bands (the model's band, the band of a real run):")
-    all_model = sum(c[0] for c in inside.values())
-    all_run = sum(c[1] for c in inside.values())
-    all_n = sum(c[2] for c in inside.values())
-    for q, (n_in, n_run, n) in inside.items():
-        print(
-            f"  {q:<14}{n_in}/{n} = {n_in / max(n, 1):.0%}   {n_run}/{n} = {n_run / max(n, 1):.0%}"
-        )
-    print(
-        f"  {'all':<14}{all_model}/{all_n} = {all_model / max(all_n, 1):.0%}"
-        f"   {all_run}/{all_n} = {all_run / max(all_n, 1):.0%}"
-    )
+    print_coverage(inside)
     print(
         "wall time: "
         + ", ".join(f"{k} {v / 60:.1f} min" for k, v in seconds.items())
