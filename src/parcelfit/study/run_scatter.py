@@ -11,8 +11,10 @@ determine the parameters the model's band is narrower than the spread of real ru
 time T [s], rotation [rad], exit x and y [m], exit heading [rad];
 `parcelfit.study.predict.run_values`) and case c:
 
-    V_real(c)  = sample variance (divisor n - 1) of q over the case's real runs
-    V_model(c) = sample variance of q over the model's runs of c at the recommended parameters:
+    V_real(c)  = robust variance of q over the case's real runs: (1.4826 MAD)^2, MAD the median
+                 absolute deviation from the median (scipy.stats.median_abs_deviation, scale
+                 "normal": the variance itself for normal scatter)
+    V_model(c) = robust variance of q over the model's runs of c at the recommended parameters:
                  `parcelfit predict` simulates them at 10 seeded placements per fitted and
                  validation case, each with its drives off their mean speeds as the
                  prediction's own runs; without them (`estimate_run_scatter` not given the
@@ -25,10 +27,15 @@ square), as a specimen's friction and the timing noise move it in proportion. Wi
 simulation per case (a simulator without placements) the placements' scatter is in E(c) as
 well as in the prediction's own placements: the band is then wider than needed, and for the
 rotation, an absolute angle, it can miss calm runs entirely when the fitted rig's runs spun or
-slid and the predicted rig's do not; the prediction then says so (`scatter_note`). Where the
-fitted cases' runs split between modes (E3's parcels spin or slide), V_real and V_model are
-both dominated by the split and ten runs each cannot resolve a small excess under it: E is
-then mostly 0 and the band of a real run is the model's (docs/research/predict-coverage.md).
+slid and the predicted rig's do not; the prediction then says so (`scatter_note`).
+
+**Why robust.** Where a case's runs split between outcomes (on E3 a parcel spins or slides on
+the guide plate), the sample variance is the split's: a model whose share of spins differs
+from the real runs' then shows a large "excess" that is a misfit of the outcome, not a run's
+own scatter, and carried to a calm rig it made the bands absurd (on the twin data of another
+truth, E1's rotation band 0.02-0.63 rad for runs of 0.01-0.05 rad). The MAD's variance is the
+scatter within the outcome most runs share, which is what a specimen and the measurement add
+(docs/research/predict-coverage.md).
 
 **Band for a real run.** Each predicted run value v_i is joined by D seeded draws
 v_i + s_q z_ik (transit time: v_i (1 + s_q z_ik)), z ~ N(0, 1), and the 5th and 95th
@@ -45,6 +52,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from scipy.stats import median_abs_deviation
 
 from parcelfit.runs import Run, TestCase, Trajectory, load_dataset, read_trajectory
 from parcelfit.sim.ensemble import rotation
@@ -85,17 +93,24 @@ def quantities(tr: Trajectory, transit_time: float | None) -> dict[str, float | 
     }
 
 
+def robust_variance(values: np.ndarray) -> float:
+    """(1.4826 MAD)^2 of ``values`` (their unit squared): the variance for normal scatter, the
+    majority's own where the values split between outcomes."""
+    return float(median_abs_deviation(values, scale="normal")) ** 2
+
+
 def excess_variance(
     real: Sequence[float], model: Sequence[float], relative: bool = False
 ) -> float | None:
-    """E = max(0, V_real - V_model) (module docstring) of one quantity of one case; relative:
-    both divided by the square of the real runs' mean. None with fewer than two real values."""
+    """E = max(0, V_real - V_model) (module docstring: robust variances) of one quantity of one
+    case; relative: both divided by the square of the real runs' mean. None with fewer than two
+    real values."""
     r = np.asarray([v for v in real if v is not None and math.isfinite(v)], float)
     m = np.asarray([v for v in model if v is not None and math.isfinite(v)], float)
     if r.size < 2:
         return None
-    v_real = float(r.var(ddof=1))
-    v_model = float(m.var(ddof=1)) if m.size >= 2 else 0.0
+    v_real = robust_variance(r)
+    v_model = robust_variance(m) if m.size >= 2 else 0.0
     excess = max(0.0, v_real - v_model)
     if relative:
         mean = float(r.mean())
