@@ -475,7 +475,7 @@ def rank_experiments(
             elif json.loads(json.dumps(known)) != json.loads(json.dumps(record)):
                 raise ParcelfitError(
                     "this folder holds an experiment design with other inputs (study, "
-                    "candidates, --sets, --placements or --seed; or one made by an earlier "
+                    "candidates, --sets, --placements, --seed or --speed-deviation; or one made by an earlier "
                     "version, which did not simulate the fitted cases)",
                     file=out_dir,
                     fix="give another --out, or the same inputs to resume it",
