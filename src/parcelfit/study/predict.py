@@ -606,42 +606,26 @@ def _simulate_scatter(
 ) -> dict[str, list[dict[str, float | None]]]:
     """Run the scatter simulations still pending (each recorded the moment it arrives);
     returns per case label the quantities of its finished runs (`run_values`)."""
-    rows = [e for e in _rows(store, None) if e.iteration > 0]
-    pending = [e for e in rows if e.status == "pending"]
-    total, done = len(rows), len(rows) - len(pending)
-    if pending:
-        progress(
-            ProgressEvent(
-                "predict",
-                f"the real runs' scatter: {done} of {total} simulations of the recommended "
-                "parameters on the study's cases stored",
-                done=done,
-                total=total,
-            )
-        )
-        items = [
-            (
-                Task(
-                    e.params,
-                    jobs.cases[e.iteration - 1][0].case,
-                    f"scatter-case{e.iteration}-p{e.seed}",
-                ),
-                e.seed if jobs.placed else None,
-            )
-            for e in pending
-        ]
-        with open_executor(executor, workers, scheduler, len(items), make) as pool:
-            for i, result in simulate_items(pool, jobs.simulator, items, speed_deviation):
-                finish_run(store, pending[i].id, result)
-                done += 1
-                progress(
-                    ProgressEvent(
-                        "predict",
-                        f"the real runs' scatter: {done} of {total} simulations",
-                        done=done,
-                        total=total,
-                    )
-                )
+    _run_rows(
+        store,
+        [e for e in _rows(store, None) if e.iteration > 0],
+        lambda e: (
+            Task(
+                e.params,
+                jobs.cases[e.iteration - 1][0].case,
+                f"scatter-case{e.iteration}-p{e.seed}",
+            ),
+            e.seed if jobs.placed else None,
+        ),
+        jobs.simulator,
+        "the real runs' scatter (the recommended parameters on the study's cases)",
+        speed_deviation=speed_deviation,
+        executor=executor,
+        workers=workers,
+        scheduler=scheduler,
+        make=make,
+        progress=progress,
+    )
     out: dict[str, list[dict[str, float | None]]] = {}
     for c, (spec, _, _) in enumerate(jobs.cases, start=1):
         out[spec.label] = [
@@ -667,37 +651,61 @@ def _simulate(
     progress: ProgressCallback,
 ) -> None:
     """Run the prediction's pending simulations, each recorded the moment it arrives."""
-    rows = _rows(store, 0)
+    k = len(seeds)
+    _run_rows(
+        store,
+        _rows(store, 0),
+        lambda e: (
+            Task(e.params, design.case, f"predict-set{e.slot // k}-p{e.seed}"),
+            e.seed if placed else None,
+        ),
+        simulator,
+        design.label,
+        speed_deviation=speed_deviation,
+        executor=executor,
+        workers=workers,
+        scheduler=scheduler,
+        make=make,
+        progress=progress,
+    )
+
+
+def _run_rows(
+    store: Store,
+    rows: Sequence[Any],
+    item: Callable[[Any], tuple[Task, int | None]],
+    simulator: Simulator,
+    what: str,
+    *,
+    speed_deviation: float,
+    executor: str,
+    workers: int | None,
+    scheduler: str | None,
+    make: Callable[[], Executor] | None,
+    progress: ProgressCallback,
+) -> None:
+    """Run the pending ones of ``rows`` on ``simulator`` (``item`` gives each its task and
+    placement seed), each recorded the moment it arrives; ``what`` names them in the progress."""
     pending = [e for e in rows if e.status == "pending"]
     total, done = len(rows), len(rows) - len(pending)
     progress(
         ProgressEvent(
             "predict",
-            f"{design.label}: {done} of {total} simulations stored, {len(pending)} to run",
+            f"{what}: {done} of {total} simulations stored, {len(pending)} to run",
             done=done,
             total=total,
         )
     )
     if not pending:
         return
-    k = len(seeds)
-    items = [
-        (
-            Task(e.params, design.case, f"predict-set{e.slot // k}-p{e.seed}"),
-            e.seed if placed else None,
-        )
-        for e in pending
-    ]
+    items = [item(e) for e in pending]
     with open_executor(executor, workers, scheduler, len(items), make) as pool:
         for i, result in simulate_items(pool, simulator, items, speed_deviation):
             finish_run(store, pending[i].id, result)
             done += 1
             progress(
                 ProgressEvent(
-                    "predict",
-                    f"{design.label}: {done} of {total} simulations",
-                    done=done,
-                    total=total,
+                    "predict", f"{what}: {done} of {total} simulations", done=done, total=total
                 )
             )
 
