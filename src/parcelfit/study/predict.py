@@ -19,7 +19,8 @@ run:
 5-95 % band (the 5th and 95th percentiles) of q over the runs that ended ok (and, for T,
 crossed both light barriers): the model's band. Real runs scatter further, specimen by
 specimen and by their measurement noise; the **band of a real run** adds that scatter,
-estimated from the calibration's fitted cases (`parcelfit.study.run_scatter`, formulas there).
+estimated from the calibration's fitted and validation cases (`parcelfit.study.run_scatter`,
+formulas there).
 
 **Parameters versus placements** and **how far each parameter moves a prediction**: the
 decomposition of the spread and the effects of `parcelfit.study.spread` (its docstring gives
@@ -107,7 +108,7 @@ PREDICT_STORE = "predict.sqlite"
 PREDICTION_FILE = "prediction.json"
 TABLE_FORMATS = ("csv", "parquet")
 MAX_SETS = 1000  # parameter sets of one prediction (each simulated at every placement)
-SCATTER_RUNS = 10  # simulations of the recommended parameters per fitted case (run_scatter)
+SCATTER_RUNS = 10  # runs of the recommended parameters per fitted and validation case (run_scatter)
 QUANTITIES = ("transit_time", "rotation", "exit_y", "exit_heading")
 # per quantity: words, SI unit, the unit a person reads and its factor from SI
 _SHOW = {
@@ -432,7 +433,7 @@ def predict(
     placed = _placed(simulator)
     seeds = placement_seeds(placements, seed) if placements > 1 or placed else [0]
     deviation = speed_deviation if placed and varies_drives(simulator) else 0.0
-    fitted = _scatter_jobs(inputs.folder, inputs.study, seed, deviation)
+    scatter_jobs = _scatter_jobs(inputs.folder, inputs.study, seed)
     full = [{**inputs.study.fixed, **s} for s in drawn]
     out_dir = Path(out) if out is not None else default_out(inputs.folder, design)
     check_writable(out_dir, (PREDICT_STORE,))
@@ -461,8 +462,8 @@ def predict(
                     design.setting,
                     [seeds[j] for _, j in items],
                 )
-            if fitted is not None and not any(e.iteration > 0 for e in _rows(store, None)):
-                for c, (spec, params, scatter_seeds) in enumerate(fitted.cases, start=1):
+            if scatter_jobs is not None and not any(e.iteration > 0 for e in _rows(store, None)):
+                for c, (spec, params, scatter_seeds) in enumerate(scatter_jobs.cases, start=1):
                     store.add_pending(
                         "screen",
                         c,
@@ -479,7 +480,9 @@ def predict(
                         executor,
                         workers,
                         make is not None,
-                        extra=[] if fitted is None else [s.case for s, _, _ in fitted.cases],
+                        extra=[]
+                        if scatter_jobs is None
+                        else [s.case for s, _, _ in scatter_jobs.cases],
                     )
                 )
             _simulate(
@@ -496,10 +499,10 @@ def predict(
                 progress=progress,
             )
             model_values = None
-            if fitted is not None:
+            if scatter_jobs is not None:
                 model_values = _simulate_scatter(
                     store,
-                    fitted,
+                    scatter_jobs,
                     speed_deviation=deviation,
                     executor=executor,
                     workers=workers,
@@ -572,10 +575,9 @@ class ScatterJobs:
     cases: list[tuple[CaseSpec, dict[str, float], list[int]]]
 
 
-def _scatter_jobs(folder: Path, study: Study, seed: int, deviation: float) -> ScatterJobs | None:
-    """The recommended parameters at `SCATTER_RUNS` seeded placements (drives ``deviation``
-    off their mean) on every fitted and validation case of ``study``; None when the calibration
-    in ``folder`` has no ok fit."""
+def _scatter_jobs(folder: Path, study: Study, seed: int) -> ScatterJobs | None:
+    """The recommended parameters at `SCATTER_RUNS` seeded placements on every fitted and
+    validation case of ``study``; None when the calibration in ``folder`` has no ok fit."""
     store = Store(folder / STORE_FILE, readonly=True)
     try:
         evaluation = recommended_evaluation(store)
