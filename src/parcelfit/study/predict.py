@@ -60,6 +60,7 @@ import math
 import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -97,11 +98,11 @@ from parcelfit.study.run_scatter import (
     estimate_run_scatter,
     quantities,
     real_run_band,
-    recommended_evaluation,
     scatter_note,
+    stored_recommendation,
 )
 from parcelfit.study.spread import RESOLVED, Decomposition, Effect, decompose, effects_of
-from parcelfit.study.store import STORE_FILE, Store
+from parcelfit.study.store import Store
 from parcelfit.study.studyfile import CaseSpec, Study
 
 PREDICT_STORE = "predict.sqlite"
@@ -485,12 +486,9 @@ def predict(
                         else [s.case for s, _, _ in scatter_jobs.cases],
                     )
                 )
-            _simulate(
+            run = partial(
+                _run_rows,
                 store,
-                simulator,
-                design,
-                seeds,
-                placed=placed or placements > 1,
                 speed_deviation=deviation,
                 executor=executor,
                 workers=workers,
@@ -498,18 +496,33 @@ def predict(
                 make=make,
                 progress=progress,
             )
+            k, pose = len(seeds), placed or placements > 1
+            run(
+                _rows(store, 0),
+                lambda e: (
+                    Task(e.params, design.case, f"predict-set{e.slot // k}-p{e.seed}"),
+                    e.seed if pose else None,
+                ),
+                simulator,
+                design.label,
+            )
             model_values = None
             if scatter_jobs is not None:
-                model_values = _simulate_scatter(
-                    store,
-                    scatter_jobs,
-                    speed_deviation=deviation,
-                    executor=executor,
-                    workers=workers,
-                    scheduler=scheduler,
-                    make=make,
-                    progress=progress,
+                jobs = scatter_jobs
+                run(
+                    [e for e in _rows(store, None) if e.iteration > 0],
+                    lambda e: (
+                        Task(
+                            e.params,
+                            jobs.cases[e.iteration - 1][0].case,
+                            f"scatter-case{e.iteration}-p{e.seed}",
+                        ),
+                        e.seed if jobs.placed else None,
+                    ),
+                    jobs.simulator,
+                    "the real runs' scatter (the recommended parameters on the study's cases)",
                 )
+                model_values = _scatter_values(store, jobs)
             runs = _runs_table(store, drawn, len(seeds), inputs.identifiability.names)
         finally:
             store.close()
@@ -578,11 +591,7 @@ class ScatterJobs:
 def _scatter_jobs(folder: Path, study: Study, seed: int) -> ScatterJobs | None:
     """The recommended parameters at `SCATTER_RUNS` seeded placements on every fitted and
     validation case of ``study``; None when the calibration in ``folder`` has no ok fit."""
-    store = Store(folder / STORE_FILE, readonly=True)
-    try:
-        evaluation = recommended_evaluation(store)
-    finally:
-        store.close()
+    evaluation = stored_recommendation(folder)
     if evaluation is None:
         return None
     simulator = make_simulator(study.simulator)
@@ -595,81 +604,16 @@ def _scatter_jobs(folder: Path, study: Study, seed: int) -> ScatterJobs | None:
     return ScatterJobs(simulator, placed, [(c, params, seeds) for c in specs.values()])
 
 
-def _simulate_scatter(
-    store: Store,
-    jobs: ScatterJobs,
-    *,
-    speed_deviation: float,
-    executor: str,
-    workers: int | None,
-    scheduler: str | None,
-    make: Callable[[], Executor] | None,
-    progress: ProgressCallback,
-) -> dict[str, list[dict[str, float | None]]]:
-    """Run the scatter simulations still pending (each recorded the moment it arrives);
-    returns per case label the quantities of its finished runs (`run_values`)."""
-    _run_rows(
-        store,
-        [e for e in _rows(store, None) if e.iteration > 0],
-        lambda e: (
-            Task(
-                e.params,
-                jobs.cases[e.iteration - 1][0].case,
-                f"scatter-case{e.iteration}-p{e.seed}",
-            ),
-            e.seed if jobs.placed else None,
-        ),
-        jobs.simulator,
-        "the real runs' scatter (the recommended parameters on the study's cases)",
-        speed_deviation=speed_deviation,
-        executor=executor,
-        workers=workers,
-        scheduler=scheduler,
-        make=make,
-        progress=progress,
-    )
-    out: dict[str, list[dict[str, float | None]]] = {}
-    for c, (spec, _, _) in enumerate(jobs.cases, start=1):
-        out[spec.label] = [
+def _scatter_values(store: Store, jobs: ScatterJobs) -> dict[str, list[dict[str, float | None]]]:
+    """Per case label of ``jobs``, the quantities of its finished scatter runs (`run_values`)."""
+    return {
+        spec.label: [
             {"transit_time": e.transit_time, **e.details.quantities}
             for e in _rows(store, c)
             if e.status == "ok"
         ]
-    return out
-
-
-def _simulate(
-    store: Store,
-    simulator: Simulator,
-    design: Design,
-    seeds: Sequence[int],
-    *,
-    placed: bool,
-    speed_deviation: float,
-    executor: str,
-    workers: int | None,
-    scheduler: str | None,
-    make: Callable[[], Executor] | None,
-    progress: ProgressCallback,
-) -> None:
-    """Run the prediction's pending simulations, each recorded the moment it arrives."""
-    k = len(seeds)
-    _run_rows(
-        store,
-        _rows(store, 0),
-        lambda e: (
-            Task(e.params, design.case, f"predict-set{e.slot // k}-p{e.seed}"),
-            e.seed if placed else None,
-        ),
-        simulator,
-        design.label,
-        speed_deviation=speed_deviation,
-        executor=executor,
-        workers=workers,
-        scheduler=scheduler,
-        make=make,
-        progress=progress,
-    )
+        for c, (spec, _, _) in enumerate(jobs.cases, start=1)
+    }
 
 
 def _run_rows(

@@ -135,6 +135,15 @@ def recommended_evaluation(store: Store) -> Evaluation | None:
     return min(fits, key=lambda e: e.cost)  # type: ignore[arg-type, return-value]
 
 
+def stored_recommendation(folder: Path) -> Evaluation | None:
+    """`recommended_evaluation` of the study store in ``folder`` (opened read-only)."""
+    store = Store(folder / STORE_FILE, readonly=True)
+    try:
+        return recommended_evaluation(store)
+    finally:
+        store.close()
+
+
 def _model_values(folder: Path, evaluation: Evaluation, case: TestCase) -> list[dict]:
     """The quantities of each simulation of ``case`` in ``evaluation`` (read from its run
     files in the study folder)."""
@@ -164,11 +173,7 @@ def estimate_run_scatter(
     quantities of the model's runs of that case at the recommended parameters) where given,
     else against the recommended evaluation's own simulations of the fitted cases; None when
     the store has no ok fit."""
-    store = Store(folder / STORE_FILE, readonly=True)
-    try:
-        evaluation = recommended_evaluation(store)
-    finally:
-        store.close()
+    evaluation = stored_recommendation(folder)
     if evaluation is None:
         return None
     datasets: dict[Path, object] = {}
