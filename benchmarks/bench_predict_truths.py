@@ -58,7 +58,7 @@ def truth_for(k: int, seed: int, ranges: dict[str, list[float]]) -> dict[str, fl
 
 def make_twin(folder: Path, truth: dict[str, float], cases: list[str], seed: int, workers: int):
     """The twin dataset of ``cases`` at ``truth`` in ``folder`` (resumes); its dataset folder."""
-    from parcelfit.synth import load_twin_spec, make_twin_dataset
+    from parcelfit.synth import load_twin_spec
 
     base = yaml.safe_load(SPEC.read_text(encoding="utf-8"))
     rigs, labels = [], []
@@ -82,16 +82,7 @@ def make_twin(folder: Path, truth: dict[str, float], cases: list[str], seed: int
     tw = load_twin_spec(path)
     data = folder / "data"
     if not (data / "dataset.yaml").is_file():
-        make_twin_dataset(
-            data,
-            tw.cases,
-            tw.truth,
-            settings=tw.settings,
-            seed=tw.seed,
-            name=tw.name,
-            workers=workers,
-            rigs=tw.rigs(),
-        )
+        tw.make(data, workers=workers)
     return data
 
 

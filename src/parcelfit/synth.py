@@ -453,6 +453,30 @@ class TwinSpec:
         """The user's own consignment types, loaded."""
         return tuple(load_consignment(p) for p in self.consignment_files.values())
 
+    def make(
+        self,
+        folder: str | Path,
+        *,
+        workers: int = 1,
+        executor: str | None = None,
+        progress: ProgressCallback | None = None,
+    ) -> Path:
+        """`make_twin_dataset` of this specification into ``folder`` (resumes); the
+        dataset.yaml path."""
+        return make_twin_dataset(
+            folder,
+            self.cases,
+            self.truth,
+            settings=self.settings,
+            seed=self.seed,
+            name=self.name,
+            workers=workers,
+            executor=executor,
+            progress=progress,
+            rigs=self.rigs(),
+            consignments=self.consignments(),
+        )
+
 
 def _test_case(value: Any) -> TestCase:
     try:

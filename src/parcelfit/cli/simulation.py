@@ -332,7 +332,7 @@ def synth(
     workers: WorkersOption = None,
 ) -> None:
     """Make a SYNTHETIC twin-experiment dataset from hidden true parameters (and truth.yaml)."""
-    from parcelfit.synth import load_twin_spec, make_twin_dataset
+    from parcelfit.synth import load_twin_spec
 
     check_executor(executor, ("serial", "local"))
     check_paths(out)
@@ -357,18 +357,6 @@ def synth(
             bar.update(task, completed=event.done)
             bar.console.print(Text(f"  {event.message}"), highlight=False)
 
-        path = make_twin_dataset(
-            out,
-            tw.cases,
-            tw.truth,
-            settings=tw.settings,
-            seed=tw.seed,
-            name=tw.name,
-            workers=workers,
-            executor=executor,
-            progress=step,
-            rigs=tw.rigs(),
-            consignments=tw.consignments(),
-        )
+        path = tw.make(out, workers=workers, executor=executor, progress=step)
     truth_file = path.parent / "truth.yaml"
     console.print(f"[green]done[/]: {escape(str(path))} and {escape(str(truth_file))}")

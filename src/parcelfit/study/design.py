@@ -104,6 +104,7 @@ from parcelfit.study.information import (
 )
 from parcelfit.study.joint import (
     SPEED_DEVIATION,
+    check_speed_deviation,
     require_placements,
     simulate_items,
     varies_drives,
@@ -419,11 +420,7 @@ def rank_experiments(
         raise ParcelfitError(f"--placements {placements}: give from 1 to {MAX_PLACEMENTS}")
     if not 1 <= runs <= MAX_RUNS:
         raise ParcelfitError(f"--runs {runs}: give from 1 to {MAX_RUNS} real runs")
-    if not (math.isfinite(speed_deviation) and 0 <= speed_deviation < 1):
-        raise ParcelfitError(
-            f"--speed-deviation {speed_deviation:g}: give a fraction from 0 to below 1",
-            fix=f"e.g. {SPEED_DEVIATION:g} for drives within 3 % of their mean speed",
-        )
+    check_speed_deviation(speed_deviation)
     if table_format not in TABLE_FORMATS:
         raise ParcelfitError(
             f"unknown table format {shown(table_format)}", fix=f"use one of {list(TABLE_FORMATS)}"

@@ -102,6 +102,17 @@ def check_placements(study: Study, simulator: Simulator) -> None:
 SPEED_DEVIATION = 0.03  # method.md: real belt speeds deviate up to 3 % short-term from their mean
 
 
+def check_speed_deviation(value: float) -> float:
+    """``value`` [-] if it is a fraction from 0 to below 1, else a `ParcelfitError` naming
+    ``--speed-deviation``."""
+    if not (math.isfinite(value) and 0 <= value < 1):
+        raise ParcelfitError(
+            f"--speed-deviation {value:g}: give a fraction from 0 to below 1",
+            fix=f"e.g. {SPEED_DEVIATION:g} for drives within 3 % of their mean speed",
+        )
+    return value
+
+
 def varies_drives(simulator: Simulator) -> bool:
     """Whether ``simulator`` can run its rig's drives off their mean speeds (the MuJoCo model
     and the rigid-box reference can; a python or external simulator cannot)."""
@@ -326,6 +337,7 @@ __all__ = [
     "case_cost",
     "case_threshold",
     "check_placements",
+    "check_speed_deviation",
     "evaluation_outcome",
     "placement_seeds",
     "require_placements",

@@ -80,6 +80,7 @@ from parcelfit.study.folderlock import check_writable, lock_folder
 from parcelfit.study.identify import Identifiability
 from parcelfit.study.joint import (
     SPEED_DEVIATION,
+    check_speed_deviation,
     require_placements,
     simulate_items,
     varies_drives,
@@ -421,11 +422,7 @@ def predict(
         raise ParcelfitError(
             f"unknown table format {shown(table_format)}", fix=f"use one of {list(TABLE_FORMATS)}"
         )
-    if not (math.isfinite(speed_deviation) and 0 <= speed_deviation < 1):
-        raise ParcelfitError(
-            f"--speed-deviation {speed_deviation:g}: give a fraction from 0 to below 1",
-            fix=f"e.g. {SPEED_DEVIATION:g} for drives within 3 % of their mean speed",
-        )
+    check_speed_deviation(speed_deviation)
     inputs = load_inputs(folder)
     design = check_design(rig, consignment, setting)
     simulator = design_simulator(inputs.study, design)
