@@ -11,6 +11,12 @@ median rotation, the median transit time and the share of spins, each with its p
 standard error and the ratio), and the mean of the paired differences of rotation and transit
 time with their standard errors (the placements' own scatter removed by the pairing), their
 median and the sign test of how many placements went up.
+
+With ``--dataset DIR --case RIG/TYPE/SETTING`` it also prints the change of the mean calibration
+cost (method.md eq. 3) of the ensemble's runs against the case's reference run (chosen from the
+dataset's runs as a study chooses it), and of its two DTW distances, with their paired bootstrap
+standard errors: the ensemble statistic "mean DTW to the reference run". The runs are read from
+the trajectory files `simulate --repeat` wrote beside each table (``OUT-s<seed>.csv``).
 """
 
 from __future__ import annotations
@@ -23,7 +29,11 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from parcelfit.sim.ensemble import Member, ensemble_shift
+from parcelfit.metrics.cost import calibration_cost
+from parcelfit.metrics.reference import select_reference
+from parcelfit.runs.dataset import load_dataset
+from parcelfit.runs.io import read_trajectory
+from parcelfit.sim.ensemble import Member, ensemble_shift, paired_difference
 from parcelfit.sim.protocol import SimStatus
 
 
@@ -45,6 +55,43 @@ def members(paths: list[Path]) -> list[Member]:
     return [by_seed[s] for s in sorted(by_seed)]
 
 
+def reference_costs(paths: list[Path], dataset: Path, case: str) -> dict[int, np.ndarray]:
+    """Per placement seed, (cost, DTW_xy [m], DTW_theta [rad]) of its run against the reference
+    run of ``case`` in ``dataset`` (later tables overriding a seed); failed runs left out."""
+    reference = select_reference(load_dataset(dataset)[case])
+    out: dict[int, np.ndarray] = {}
+    for path in paths:
+        for r in pd.read_csv(path).itertuples(index=False):
+            if r.status != "ok":
+                continue
+            run = Path(str(path).replace("-ensemble.csv", f"-s{int(r.seed)}.csv"))
+            c = calibration_cost(read_trajectory(run), reference)
+            out[int(r.seed)] = np.array([c.value, c.dtw_xy, c.dtw_theta])
+    return out
+
+
+def print_reference_shift(low: dict[int, np.ndarray], high: dict[int, np.ndarray], seed: int):
+    """The change of the mean cost and DTW distances to the reference run, high - low, over the
+    placements both ran, with paired bootstrap standard errors."""
+    seeds = sorted(set(low) & set(high))
+    a = np.array([low[s] for s in seeds])
+    b = np.array([high[s] for s in seeds])
+    print(f"against the reference run, {len(seeds)} matched placements:")
+    for j, (name, scale) in enumerate(
+        (
+            ("mean cost (eq. 3) [-]", 1.0),
+            ("mean DTW_xy [mm]", 1e3),
+            ("mean DTW_theta [deg]", 180 / math.pi),
+        )
+    ):
+        change, se = paired_difference(a[:, j] * scale, b[:, j] * scale, np.mean, seed)
+        ratio = abs(change) / se if se > 0 else math.inf
+        print(
+            f"{name:<24}{change:>10.3f}{se:>9.3f}{ratio:>8.1f}   (low {a[:, j].mean() * scale:.3f},"
+            f" SE of the low mean {a[:, j].std(ddof=1) * scale / math.sqrt(len(a)):.3f})"
+        )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -52,7 +99,11 @@ def main() -> None:
     ap.add_argument("--low", nargs="+", type=Path, required=True)
     ap.add_argument("--high", nargs="+", type=Path, required=True)
     ap.add_argument("--seed", type=int, default=0, help="seed of the bootstrap")
+    ap.add_argument("--dataset", type=Path, help="dataset folder holding the reference run")
+    ap.add_argument("--case", help="test case of the reference run, e.g. E3/KPBW/1")
     args = ap.parse_args()
+    if (args.dataset is None) != (args.case is None):
+        ap.error("--dataset and --case go together")
     a, b = members(args.low), members(args.high)
     shift = ensemble_shift(a, b, seed=args.seed)
     print(f"matched placements: {shift.n_pairs}")
@@ -96,6 +147,12 @@ def main() -> None:
             )
     n_spin = [sum(m.outcome == "spin" for m in e) for e in (a, b)]
     print(f"spins: {n_spin[0]} of {len(a)} (low), {n_spin[1]} of {len(b)} (high)")
+    if args.dataset is not None:
+        print_reference_shift(
+            reference_costs(args.low, args.dataset, args.case),
+            reference_costs(args.high, args.dataset, args.case),
+            args.seed,
+        )
 
 
 if __name__ == "__main__":

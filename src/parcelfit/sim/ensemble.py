@@ -156,11 +156,12 @@ class EnsembleShift:
     spin_share_se: float
 
 
-def _paired_difference(
+def paired_difference(
     a: np.ndarray, b: np.ndarray, statistic: Callable[[np.ndarray], float], seed: int
 ) -> tuple[float, float]:
-    """statistic(b) - statistic(a) over the pairs where both are finite, and its paired
-    bootstrap standard error."""
+    """statistic(b) - statistic(a) over the pairs (a_i, b_i) where both are finite, and its
+    paired bootstrap standard error (2000 resamples seeded by ``seed``); in the units of the
+    statistic."""
     ok = np.isfinite(a) & np.isfinite(b)
     a, b = a[ok], b[ok]
     if a.size < 2:
@@ -194,9 +195,9 @@ def ensemble_shift(a: Sequence[Member], b: Sequence[Member], seed: int = 0) -> E
     tt_a, tt_b = column("transit_time", 0), column("transit_time", 1)
     spin_a = np.where(np.isfinite(rot_a), rot_a > SPIN_ANGLE, np.nan)
     spin_b = np.where(np.isfinite(rot_b), rot_b > SPIN_ANGLE, np.nan)
-    rot = _paired_difference(rot_a, rot_b, np.median, seed)
-    tt = _paired_difference(tt_a, tt_b, np.median, seed)
-    spin = _paired_difference(spin_a, spin_b, np.mean, seed)
+    rot = paired_difference(rot_a, rot_b, np.median, seed)
+    tt = paired_difference(tt_a, tt_b, np.median, seed)
+    spin = paired_difference(spin_a, spin_b, np.mean, seed)
     n_pairs = int(np.sum(np.isfinite(rot_a) & np.isfinite(rot_b)))
     return EnsembleShift(n_pairs, *rot, *tt, *spin)
 
