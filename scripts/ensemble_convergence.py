@@ -5,9 +5,12 @@ catch or a spin must be a converged physical outcome, not a mesh artefact).
     python scripts/ensemble_convergence.py --types KPBW --placements 10 \
         --configs 30:600 20:600 15:1200
     python scripts/ensemble_convergence.py --rig E3
+    python scripts/ensemble_convergence.py --types PB --configs 50:1200:100:tolerance=1e-6 \
+        50:1200:100
 
 For every numerical configuration (shell mesh spacing [mm] : steps per second; the spacing of
-the packaging around a rigid content and of the polybag's film alike) it simulates
+the packaging around a rigid content and of the polybag's film alike; optionally a soft
+content's vertex spacing [mm] and other scene options as KEY=VALUE) it simulates
 each consignment type at its default parameters for the placement seeds 0..N-1 (the rig's
 ``start.scatter``) and reports the ensemble statistics the published observations are judged by:
 median absolute rotation, share of spins (> 90 degrees), median transit time, and, paired by
@@ -34,7 +37,7 @@ import numpy as np
 from parcelfit.runs import TestCase
 from parcelfit.sim.ensemble import Member, simulate_ensemble, summarise
 from parcelfit.sim.mujoco import MujocoSimulator, load_rig
-from parcelfit.sim.mujoco.options import SceneOptions
+from parcelfit.sim.mujoco.options import SceneOptions, parse_scene_options
 from parcelfit.sim.mujoco.simulator import SimOptions
 
 DEFAULT_CONFIGS = ("40:600", "30:600", "20:600", "30:1200", "15:600", "15:1200")
@@ -48,20 +51,27 @@ class Config:
     spacing: float
     timestep: float
     content_spacing: float | None = None
+    scene: tuple[str, ...] = ()  # other scene options, KEY=VALUE (e.g. tolerance=1e-6)
 
     @classmethod
     def parse(cls, text: str) -> Config:
         parts = text.split(":")
+        scene = tuple(p for p in parts if "=" in p)
+        parts = [p for p in parts if "=" not in p]
         if len(parts) not in (2, 3):
-            raise ValueError(f"{text!r}: expected spacing_mm:steps_per_second[:content_spacing_mm]")
+            raise ValueError(
+                f"{text!r}: expected spacing_mm:steps_per_second[:content_spacing_mm][:KEY=VALUE]"
+            )
         content = float(parts[2]) / 1e3 if len(parts) == 3 else None
-        return cls(float(parts[0]) / 1e3, 1.0 / float(parts[1]), content)
+        return cls(float(parts[0]) / 1e3, 1.0 / float(parts[1]), content, scene)
 
     @property
     def label(self) -> str:
         text = f"{self.spacing * 1e3:g} mm, 1/{round(1 / self.timestep)} s"
         if self.content_spacing is not None:
             text += f", content {self.content_spacing * 1e3:g} mm"
+        if self.scene:
+            text += ", " + ", ".join(self.scene)
         return text
 
 
@@ -79,6 +89,7 @@ class _Factory:
             spacing=self.config.spacing,
             soft_shell_spacing=self.config.spacing,
             soft_spacing=self.config.content_spacing or SceneOptions.soft_spacing,
+            **parse_scene_options(self.config.scene),  # type: ignore[arg-type]
         )
         sim = MujocoSimulator(SimOptions(scene=scene), rigs={rig.name: rig})
         return sim.with_placement(seed)
