@@ -360,3 +360,52 @@ def test_polish_moves_kmeans_picks_uphill_on_the_acquisition():
     a0 = polished._acquisition(fit.gp, fit.y_best, start)
     a1 = polished._acquisition(fit.gp, fit.y_best, after)
     assert np.all(a1 >= a0)
+
+
+def _noisy_cost(p):
+    # a bowl with noise seeded by the point: what the parcel cost's run-to-run scatter looks like
+    rng = np.random.default_rng(abs(hash((round(p["a"], 12), round(p["b"], 12)))) % 2**32)
+    return (p["a"] - 0.3) ** 2 + (p["b"] - 0.7) ** 2 + float(rng.normal(0, 0.03))
+
+
+def test_noisy_ei_is_the_monte_carlo_mean_of_the_improvement_over_the_drawn_incumbent():
+    from parcelfit.optimize.nei import NoisyEI
+
+    settings = BOSettings(acquisition="lognei", n_initial=24, n_restarts=0, transform="none")
+    _, fit = _fitted(_noisy_cost, settings)
+    gp = fit.gp
+    assert gp.alpha > 1e-4  # the noise was fitted, so the incumbent is uncertain
+    U = np.array([[0.3, 0.7], [0.5, 0.5], [0.9, 0.1]])
+    nei = NoisyEI(gp, seed=3)
+    # brute force: joint draws of the latent function at every evaluated point and at U
+    X = gp.X_train_
+    draws = gp.sample_y(np.vstack([X, U]), n_samples=40000, random_state=1)
+    best = draws[: len(X)].max(axis=0)
+    brute = np.maximum(draws[len(X) :] - best[None, :], 0.0).mean(axis=1)
+    assert np.exp(nei(U)) == pytest.approx(brute, rel=0.08, abs=1e-4)
+    assert np.array_equal(nei(U), NoisyEI(gp, seed=3)(U))  # the draws are seeded
+
+
+def test_noisy_ei_becomes_ei_over_the_best_observation_when_there_is_no_noise():
+    from parcelfit.optimize.nei import NoisyEI, log_h
+
+    settings = BOSettings(acquisition="lognei", n_initial=8, n_restarts=0, transform="none")
+    _, fit = _fitted(_quadratic_2d, settings, n=8)
+    gp = fit.gp
+    assert gp.alpha < 1e-4
+    U = np.random.default_rng(0).random((50, 2))
+    mu, sd = gp.predict(U, return_std=True)
+    log_ei = np.log(sd) + log_h((mu - gp.y_train_.max()) / sd)
+    close = log_ei > np.log(1e-4)  # where the improvement is not negligible
+    assert close.sum() > 10
+    assert NoisyEI(gp, seed=0)(U)[close] == pytest.approx(log_ei[close], abs=0.05)
+
+
+def test_a_lognei_study_asks_distinct_points_and_replays_exactly():
+    settings = BOSettings(acquisition="lognei", n_samples=500, n_restarts=0, polish=1)
+    bo, asked = _run(2, 6, settings)
+    _, asked_again = _run(2, 6, settings)
+    assert asked == asked_again
+    last = np.array([[p["a"], p["b"], p["c"]] for p in asked[-1]])
+    assert min(np.linalg.norm(last[i] - last[j]) for i in range(4) for j in range(i)) > 1e-3
+    assert bo.best()[1] < min(o.cost for o in bo.observations[:16])

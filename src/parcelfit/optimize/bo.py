@@ -6,8 +6,9 @@ Two configurations of one `BatchBO` (`BOSettings`):
   with Matern 5/2, one length scale per input and the noise variance fitted by marginal
   likelihood within [1e-6, 0.35^2] of the standardised cost; the cost left as it is or Box-Cox
   transformed (lambda fitted, scikit-learn ``PowerTransformer``), whichever gives the costs the
-  higher warped-GP likelihood; the acquisition log expected improvement over the highest
-  posterior mean at an evaluated point, maximised over Monte Carlo candidates and polished by
+  higher warped-GP likelihood; the acquisition log noisy expected improvement (expected
+  improvement averaged over draws of the latent cost at the evaluated points, whose best is the
+  incumbent; nei.py), maximised over Monte Carlo candidates and polished by
   L-BFGS-B from the best of them; the batch chosen by kriging believer (pick one point, believe
   it at its predicted mean, refit with the kernel fixed, pick the next); the recommendation is
   the evaluated point with the lowest GP mean cost;
@@ -35,16 +36,18 @@ from typing import Any, NamedTuple
 import numpy as np
 from scipy.linalg import solve_triangular
 from scipy.optimize import minimize
-from scipy.special import ndtr
 from scipy.stats import qmc
 from sklearn.cluster import KMeans
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.gaussian_process import GaussianProcessRegressor
-from sklearn.gaussian_process.kernels import ConstantKernel, Matern, Product, WhiteKernel
+from sklearn.gaussian_process.kernels import ConstantKernel, Matern, WhiteKernel
 from sklearn.preprocessing import PowerTransformer
 from threadpoolctl import threadpool_limits
 
 from parcelfit.errors import ParcelfitError
+from parcelfit.optimize.kernel import cross_kernel, prior_variance
+from parcelfit.optimize.nei import NoisyEI
+from parcelfit.optimize.nei import log_h as _log_h
 from parcelfit.optimize.space import Space
 
 
@@ -69,7 +72,10 @@ class BOSettings:
     # "none", "log", "power" (Box-Cox, lambda fitted to the costs' marginal distribution) or
     # "auto" (of none and power, the one whose warped GP explains the costs best; see _fit)
     transform: str = "auto"
-    acquisition: str = "logei"  # "ucb" or "logei" (log expected improvement)
+    # "lognei" (log noisy expected improvement: EI averaged over draws of the latent function at
+    # the evaluated points, nei.py; the default since 2026-12-03, docs/optimizer.md), "logei"
+    # (log expected improvement over ``incumbent``) or "ucb"
+    acquisition: str = "lognei"
     polish: int = 2  # L-BFGS-B polishing starts from the best candidates (0: sampled only)
     batch: str = "believer"  # "believer" (kriging believer, sequential) or "kmeans" (published)
     ard: bool = True  # one length scale per input (False: one shared length scale)
@@ -77,8 +83,8 @@ class BOSettings:
     # on the standardised cost, as scikit-learn's GP in the published work, Mango's surrogate)
     amplitude: bool = True
     recommend: str = "posterior_mean"  # or "best_observed" (published); see BatchBO.recommend
-    # the incumbent y* of expected improvement: "observed" (best observed y) or "mean" (highest
-    # posterior mean at an evaluated point, the usual choice for noisy or rough costs)
+    # the incumbent y* of expected improvement (acquisition: logei): "observed" (best observed y)
+    # or "mean" (highest posterior mean at an evaluated point, the usual choice for noisy costs)
     incumbent: str = "mean"
 
     def __post_init__(self) -> None:
@@ -93,7 +99,7 @@ class BOSettings:
             or self.polish < 0
             or self.noise not in ("fit", "fixed")
             or self.transform not in TRANSFORMS
-            or self.acquisition not in ("ucb", "logei")
+            or self.acquisition not in ("ucb", "logei", "lognei")
             or self.batch not in ("believer", "kmeans")
             or self.recommend not in ("posterior_mean", "best_observed")
             or self.incumbent not in ("observed", "mean")
@@ -174,6 +180,7 @@ class BatchBO:
         self._initial = list(lhs.random(self.settings.n_initial))
         self.observations: list[Observation] = []
         self.pending: list[np.ndarray] = []
+        self._nei: tuple[GaussianProcessRegressor, NoisyEI] | None = None
 
     # -- public API -------------------------------------------------------------------------
     def ask(self, n: int | None = None) -> list[dict[str, float]]:
@@ -359,7 +366,13 @@ class BatchBO:
     def _acquisition(
         self, gp: GaussianProcessRegressor, y_best: float, U: np.ndarray
     ) -> np.ndarray:
-        """UCB or log EI of the standardised negative cost at the rows of U (higher is better)."""
+        """UCB, log EI or log NEI of the standardised negative cost at the rows of U (higher is
+        better); log NEI ignores ``y_best`` (its incumbent is drawn with the latent function)."""
+        if self.settings.acquisition == "lognei":
+            if self._nei is None or self._nei[0] is not gp:  # one NoisyEI per fitted GP
+                seed = int(np.random.default_rng([self.seed, len(gp.X_train_)]).integers(2**31))
+                self._nei = (gp, NoisyEI(gp, seed))
+            return self._nei[1](U)
         mu, sigma = _predict(gp, U)
         if self.settings.acquisition == "ucb":
             return mu + self.settings.ucb_lambda * sigma
@@ -442,49 +455,10 @@ def _conditioned(kernel: Any, alpha: Any, X: np.ndarray, y: np.ndarray) -> Gauss
 
 
 def _predict(gp: GaussianProcessRegressor, U: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Posterior mean and sd at the rows of U, as ``gp.predict(U, return_std=True)``.
-
-    Written out for the kernels sigma_f^2 Matern_5/2 and Matern_5/2 that `BatchBO` fits:
-    scikit-learn's predict
-    spends most of its time on input checks, which dominate the many one-point calls of the
-    L-BFGS-B polish. Other kernels fall back to scikit-learn.
-    """
-    k = gp.kernel_
-    if isinstance(k, Product) and isinstance(k.k1, ConstantKernel):
-        amplitude, matern = float(k.k1.constant_value), k.k2
-    else:
-        amplitude, matern = 1.0, k
-    if not (isinstance(matern, Matern) and matern.nu == 2.5):
-        return gp.predict(U, return_std=True)
-    r = np.sqrt(
-        np.maximum(
-            (((U[:, None, :] - gp.X_train_[None, :, :]) / matern.length_scale) ** 2).sum(-1), 0.0
-        )
-    )
-    K = amplitude * (1.0 + SQRT_5 * r + 5.0 / 3.0 * r**2) * np.exp(-SQRT_5 * r)
+    """Posterior mean and sd at the rows of U, as ``gp.predict(U, return_std=True)``, with the
+    fast kernel of `kernel.py` (the many one-point calls of the L-BFGS-B polish)."""
+    K = cross_kernel(gp, U, gp.X_train_)
     mu = K @ gp.alpha_
     V = solve_triangular(gp.L_, K.T, lower=True, check_finite=False)
-    var = amplitude - np.einsum("ij,ij->j", V, V)
+    var = prior_variance(gp, U) - np.einsum("ij,ij->j", V, V)
     return mu, np.sqrt(np.maximum(var, 0.0))
-
-
-SQRT_5 = math.sqrt(5.0)
-
-
-def _log_h(z: np.ndarray) -> np.ndarray:
-    """log(z Phi(z) + phi(z)), the log of expected improvement over sigma, stable for z << 0.
-
-    Written here because SciPy has log Phi (log_ndtr) but not this function; for z < -6 the
-    asymptotic form h(z) = phi(z) / z^2 (1 - 3 / z^2 + ...) is used (relative error < 1 %).
-    """
-    z = np.asarray(z, dtype=float)
-    out = np.empty_like(z)
-    far = z < -6.0
-    zn = z[~far]
-    out[~far] = np.log(np.maximum(zn * ndtr(zn) + np.exp(-0.5 * zn**2) / SQRT_2PI, 1e-300))
-    zf = z[far]
-    out[far] = -0.5 * zf**2 - math.log(SQRT_2PI) - 2.0 * np.log(-zf) + np.log1p(-3.0 / zf**2)
-    return out
-
-
-SQRT_2PI = math.sqrt(2.0 * math.pi)
