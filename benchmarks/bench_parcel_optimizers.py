@@ -3,6 +3,9 @@
     python benchmarks/bench_parcel_optimizers.py [--samplers gp,published,tpe,optuna-gp]
         [--seeds 5] [--budget 40] [--out bench-parcel-optimizers]
 
+A sampler may carry study-file optimizer keys (`BOSettings` fields for gp and published), e.g.
+``gp:acquisition=lognei``.
+
 Run from the repository's root: the simulator is the analytic test simulator of the test suite
 (``tests/fake_sim.py``: the drift follows mu_d_BePa, the turn mu_d_MePa, and on a second rig
 the turn follows E_Pa too), so the benchmark measures the optimisers and not the physics. For
@@ -32,6 +35,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # tests.fake_sim
@@ -72,7 +76,14 @@ def one(sampler: str, seed: int, budget: int, out: Path, validate: bool = True) 
     }
     if validate:
         keys["validation"] = {"every": 1, "cases": [{"rig": "R", "speed_setting": 2}]}
-    setup = bench_twin.Setup(sampler, keys, suffix="" if validate else "-budget")
+    # "gp:acquisition=lognei": the sampler with study-file `BOSettings` keys changed
+    name, *pairs = sampler.split(":")
+    optimizer: dict = {"sampler": name}
+    for pair in pairs:
+        key, value = pair.split("=")
+        optimizer[key] = yaml.safe_load(value)
+    label = sampler.replace(":", "-").replace("=", "-")
+    setup = bench_twin.Setup(label, keys, suffix="" if validate else "-budget")
     path = bench_twin.write_study_file(
         out / f"seed{seed}",
         setup,
@@ -84,7 +95,7 @@ def one(sampler: str, seed: int, budget: int, out: Path, validate: bool = True) 
             "initial": 8,
             "batch_size": 4,
             "budget": budget,
-            "optimizer": {"sampler": sampler},
+            "optimizer": optimizer,
             "executor": "serial",
         },
     )
