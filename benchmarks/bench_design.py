@@ -1,7 +1,7 @@
 """Does `parcelfit design` rank first the experiment that helps the calibration most?
 
     python benchmarks/bench_design.py [--truths 3] [--budget 64] [--sets 20] [--placements 5]
-        [--out bench-design]
+        [--replicates 1] [--out bench-design]
 
 Run from the repository's root. The simulator is the analytic test simulator of the test suite
 (``tests/fake_sim.py``), not MuJoCo: on rig R the drift and the transit time follow mu_d_BePa
@@ -28,7 +28,18 @@ time; and the summed widths of the intervals of the parameters calibration (a) l
 a share of their ranges (`open_width`), and the summed errors of those parameters' estimates,
 as shares of their ranges (the open error). The candidate that helps most is the one with the
 smallest open width after (c), or the smallest open error (ties by more parameters within
-10 %; `helped_most`); the benchmark names both. Design's folder is ``design-s<sets>-p<placements>``
+10 %; `helped_most`); the benchmark names both.
+
+One calibration per candidate leaves the parameters it cannot inform wherever its optimiser
+happened to end, so "smallest open error" is partly that luck. ``--replicates N`` repeats every
+candidate's calibration (c) with N optimiser seeds (replicate 0 is the calibration above) and
+measures each candidate by its mean open error over them, with the standard error of that mean
+(``--replicate-data``: each replicate also calibrates on its own draw of the twin's runs, seeded
+apart, so that the mean is over the real runs' scatter as well, which is what design's expected
+share averages over);
+a candidate **ties** with the best when its mean is within two standard errors of the difference
+(sqrt(se_best^2 + se^2)) of the best mean, and design's first choice counts as the one that helped
+most when it is the best or ties with it (`tied_best`). Design's folder is ``design-s<sets>-p<placements>``
 in the truth's folder, so other ``--sets`` or ``--placements`` reuse the calibrations. Prints a
 table per truth and the overall verdicts; writes ``results.json`` in ``--out``. Everything
 resumes: rerunning the same command reuses the datasets, calibrations and designs.
@@ -113,6 +124,23 @@ def helped_most(rows: Mapping[str, Mapping[str, Any]], by: str = "open_width") -
     (to 0.001) by more parameters within 10 %, then by the label; ``rows`` maps a label to its
     figures (`measure`)."""
     return min(rows, key=lambda c: (round(rows[c][by], 3), -rows[c]["within"], c))
+
+
+def tied_best(
+    errors: Mapping[str, Sequence[float]], z: float = 2.0
+) -> tuple[str, list[str], dict[str, tuple[float, float]]]:
+    """The candidate with the smallest mean open error over its replicates, every candidate
+    whose mean lies within ``z`` standard errors of the difference from it (the best included),
+    and per candidate (mean, standard error of the mean; 0 with one replicate)."""
+    stats = {}
+    for c, e in errors.items():
+        a = np.asarray(e, float)
+        se = float(a.std(ddof=1) / np.sqrt(a.size)) if a.size > 1 else 0.0
+        stats[c] = (float(a.mean()), se)
+    best = min(stats, key=lambda c: (round(stats[c][0], 3), c))
+    mb, sb = stats[best]
+    ties = [c for c, (m, se) in stats.items() if m - mb <= z * float(np.hypot(sb, se))]
+    return best, ties, stats
 
 
 def calibrate(
@@ -201,10 +229,28 @@ def run_truth(k: int, args: argparse.Namespace, rig_files: Sequence[Path]) -> di
     ranking = design.ranking_table()
     order = list(ranking["candidate"])
     shares = dict(zip(ranking["candidate"], ranking["mean_share"], strict=True))
+    replicate_errors: dict[str, list[float]] = {}
     for label in CANDIDATES:
         name = "R+" + label.replace("/", "-")
         study, minutes = calibrate(folder, name, data, (label,), args.budget, k)
         rows[label] = measure(study, minutes, truth_si, open_)
+        replicate_errors[label] = [rows[label]["open_error"]]
+        for r in range(1, args.replicates):  # other optimiser seeds, their own folders
+            replicate_data, tag = data, f"r{r}"
+            if args.replicate_data:  # and another draw of the twin's runs
+                replicate_data, tag = folder / f"data-r{r}", f"d{r}"
+                if not (replicate_data / "dataset.yaml").is_file():
+                    write_reference_dataset(
+                        replicate_data,
+                        n_runs=RUNS,
+                        rigs=RIGS,
+                        truth=truth_si,
+                        seed=700 + k + 1000 * r,
+                    )
+            study, minutes = calibrate(
+                folder, f"{name}-{tag}", replicate_data, (label,), args.budget, k + 1000 * r
+            )
+            replicate_errors[label].append(measure(study, minutes, truth_si, open_)["open_error"])
     top = tuple(order[:2]) if order else ()
     if top:
         name = "R+top2-" + "+".join(c.replace("/", "-") for c in top)
@@ -212,7 +258,13 @@ def run_truth(k: int, args: argparse.Namespace, rig_files: Sequence[Path]) -> di
         rows["top two"] = measure(study, minutes, truth_si, open_)
     cands = {c: rows[c] for c in CANDIDATES}
     best, best_error = helped_most(cands), helped_most(cands, "open_error")
+    mean_best, ties, replicate_stats = tied_best(replicate_errors)
     return {
+        "replicates": args.replicates,
+        "replicate_data": args.replicate_data,
+        "mean_open_error": replicate_stats,
+        "helped_most_mean": mean_best,
+        "tied_best": ties,
         "truth": truth,
         "open": open_,
         "ranking": order,
@@ -260,6 +312,20 @@ def print_truth(k: int, res: dict[str, Any]) -> None:
         f"most: {res['helped_most']} (*: smallest open width), {res['helped_most_error']} "
         "(+: smallest open error)"
     )
+    if res["replicates"] > 1:
+        stats = res["mean_open_error"]
+        print(
+            f"mean open error over {res['replicates']} optimiser seeds"
+            f"{' and twin datasets' if res['replicate_data'] else ''} (SE): "
+            + ", ".join(
+                f"{c} {m:.3f} ({se:.3f})"
+                for c, (m, se) in sorted(stats.items(), key=lambda x: x[1])
+            )
+        )
+        print(
+            f"helped most by the mean: {res['helped_most_mean']}; tied with it within two "
+            f"standard errors: {', '.join(res['tied_best'])}"
+        )
 
 
 def main() -> None:
@@ -270,8 +336,18 @@ def main() -> None:
     ap.add_argument("--budget", type=int, default=64, help="evaluations per calibration")
     ap.add_argument("--sets", type=int, default=20, help="design's plausible parameter sets")
     ap.add_argument("--placements", type=int, default=5, help="design's placements per set")
+    ap.add_argument(
+        "--replicates", type=int, default=1, help="optimiser seeds per candidate's calibration"
+    )
+    ap.add_argument(
+        "--replicate-data",
+        action="store_true",
+        help="each replicate also draws its own twin dataset (the real runs' scatter)",
+    )
     ap.add_argument("--out", type=Path, default=Path("bench-design"))
     args = ap.parse_args()
+    if args.replicates < 1:
+        ap.error("--replicates must be at least 1")
 
     from tests.predict_helpers import write_rig_q
 
@@ -295,6 +371,16 @@ def main() -> None:
     designed = [r["rows"].get("top two") for r in results]
     three = sum(d is not None and d["within"] >= 3 for d in designed)
     covered = all(d is not None and d["covered"] == len(PARAMETERS) for d in designed)
+    if args.replicates > 1:
+        tied = ", ".join(
+            f"truth {i + 1} {'yes' if r['design_first'] in r['tied_best'] else 'no'}"
+            for i, r in enumerate(results)
+        )
+        print(
+            f"\ndesign's first choice helped most by the mean open error over {args.replicates}"
+            f" optimiser seeds{' and twin datasets' if args.replicate_data else ''} (or ties with"
+            f" the best within two standard errors): {tied}"
+        )
     print(
         "\ndesign's first choice is the candidate that helped most: by the open width "
         f"{said('helped_most')}; by the open error {said('helped_most_error')}"
