@@ -384,6 +384,16 @@ def test_noisy_ei_is_the_monte_carlo_mean_of_the_improvement_over_the_drawn_incu
     brute = np.maximum(draws[len(X) :] - best[None, :], 0.0).mean(axis=1)
     assert np.exp(nei(U)) == pytest.approx(brute, rel=0.08, abs=1e-4)
     assert np.array_equal(nei(U), NoisyEI(gp, seed=3)(U))  # the draws are seeded
+    # near the evaluated points and anywhere, wherever the improvement is not negligible
+    rng = np.random.default_rng(5)
+    V = np.vstack([X + 0.02 * rng.standard_normal(X.shape), rng.random((200, 2))]).clip(0, 1)
+    draws = gp.sample_y(np.vstack([X, V]), n_samples=40000, random_state=2)
+    brute = np.maximum(draws[len(X) :] - draws[: len(X)].max(axis=0)[None, :], 0.0).mean(axis=1)
+    big = brute > 1e-3
+    assert big.sum() >= 10
+    assert np.exp(nei(V[big])) == pytest.approx(brute[big], rel=0.25)  # 128 draws: +-20 %
+    # at a baseline point the latent value never beats its own draw's incumbent: NEI ~ 0 there
+    assert np.exp(nei(nei.P)).max() < 1e-2 * np.exp(nei(V)).max()
 
 
 def test_noisy_ei_becomes_ei_over_the_best_observation_when_there_is_no_noise():

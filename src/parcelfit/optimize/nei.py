@@ -26,8 +26,9 @@ default's log EI).
 P is pruned as BoTorch prunes its baseline: draws of the latent function at all evaluated
 points are taken first, and P keeps the points that are the maximum in at least one draw (at
 most ``MAX_BASELINE``, the most frequent first). The per-draw incumbent stays the maximum over
-all evaluated points; f(x) is conditioned on the draw at P only (exact when P holds every
-winner, which it does unless more than ``MAX_BASELINE`` points win a draw).
+all evaluated points; f(x) is conditioned on the draw at P only. When P holds every winner
+(unless more than ``MAX_BASELINE`` points win a draw) the incumbent depends on f_P alone, so the
+estimate is unbiased, though not equal draw by draw to conditioning on every point.
 
 Written here rather than taken from BoTorch because the default sampler's GP is scikit-learn's
 (the `botorch` sampler uses BoTorch's own qLogNEI with its own GP); the posterior covariances are
@@ -37,10 +38,11 @@ formed from the fitted scikit-learn GP's kernel and Cholesky factor.
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 from scipy.linalg import cholesky, solve_triangular
-from scipy.special import ndtr, ndtri
+from scipy.special import erfcx, ndtr, ndtri
 from scipy.stats import qmc
 from sklearn.gaussian_process import GaussianProcessRegressor
 
@@ -55,16 +57,22 @@ SQRT_2PI = math.sqrt(2.0 * math.pi)
 def log_h(z: np.ndarray) -> np.ndarray:
     """log(z Phi(z) + phi(z)), the log of expected improvement over sigma, stable for z << 0.
 
-    Written here because SciPy has log Phi (log_ndtr) but not this function; for z < -6 the
-    asymptotic form h(z) = phi(z) / z^2 (1 - 3 / z^2 + ...) is used (relative error < 1 %).
+    Written here because SciPy has log Phi (log_ndtr) but not this function. For z < -1,
+    with Phi(z) = erfc(|z| / sqrt 2) / 2 = exp(-z^2 / 2) erfcx(|z| / sqrt 2) / 2,
+    h(z) = phi(z) (1 - |z| sqrt(pi / 2) erfcx(|z| / sqrt 2)), so
+    log h(z) = log phi(z) + log1mexp(log |z| + log erfcx(|z| / sqrt 2) + log(pi / 2) / 2), where
+    log1mexp(a) = log(1 - e^a) for a < 0 (BoTorch's form): accurate and smooth across its range
+    (an asymptotic series below z = -6 used before was 1 % off at the switch, and jumped there).
     """
     z = np.asarray(z, dtype=float)
     out = np.empty_like(z)
-    far = z < -6.0
+    far = z < -1.0
     zn = z[~far]
-    out[~far] = np.log(np.maximum(zn * ndtr(zn) + np.exp(-0.5 * zn**2) / SQRT_2PI, 1e-300))
-    zf = z[far]
-    out[far] = -0.5 * zf**2 - math.log(SQRT_2PI) - 2.0 * np.log(-zf) + np.log1p(-3.0 / zf**2)
+    out[~far] = np.log(zn * ndtr(zn) + np.exp(-0.5 * zn**2) / SQRT_2PI)
+    a = -z[far]
+    inner = np.log(a) + np.log(erfcx(a / math.sqrt(2.0))) + 0.5 * math.log(math.pi / 2.0)
+    log1mexp = np.where(inner > -math.log(2.0), np.log(-np.expm1(inner)), np.log1p(-np.exp(inner)))
+    out[far] = -0.5 * a**2 - math.log(SQRT_2PI) + log1mexp
     return out
 
 
@@ -81,14 +89,16 @@ class NoisyEI:
         scale = float(prior_variance(gp, X[:1])[0]) or 1.0
         cov_all = self._posterior_cov(X, X)
         draws_all = _normal_draws(n, seed)
-        chol_all = _cholesky(cov_all, JITTER * scale)
+        chol_all, jitter = _cholesky(cov_all, JITTER * scale)
         mu_all = gp.predict(X)
         f_all = mu_all[None, :] + draws_all @ chol_all.T  # (S, n) latent draws
         winners, counts = np.unique(np.argmax(f_all, axis=1), return_counts=True)
         keep = winners[np.argsort(-counts, kind="stable")][:MAX_BASELINE]
         keep = np.sort(keep)
         self.P = X[keep]
-        self.chol = _cholesky(cov_all[np.ix_(keep, keep)], JITTER * scale)
+        # the baseline's block with the jitter the draws were made with: C C^T is then exactly
+        # the covariance of the draws f_P, so that z_s below is standard normal
+        self.chol, _ = _cholesky(cov_all[np.ix_(keep, keep)], jitter)
         # z_s = C^-1 (f_P - mu_P) for the baseline's own draws (a sub-vector of the joint draws)
         self.z = solve_triangular(
             self.chol, (f_all[:, keep] - mu_all[keep]).T, lower=True, check_finite=False
@@ -135,13 +145,21 @@ def _normal_draws(dim: int, seed: int) -> np.ndarray:
     return ndtri(np.clip(u, 1e-10, 1 - 1e-10))
 
 
-def _cholesky(cov: np.ndarray, jitter: float) -> np.ndarray:
-    """The lower Cholesky factor of ``cov`` + jitter I, the jitter raised tenfold until it works
-    (posterior covariances at nearby evaluated points are near singular)."""
+def _cholesky(cov: np.ndarray, jitter: float) -> tuple[np.ndarray, float]:
+    """The lower Cholesky factor of ``cov`` + j I and the j used: ``jitter``, raised tenfold
+    until the factorisation works (posterior covariances at nearby evaluated points are near
+    singular); after eight tries the diagonal alone, with a warning."""
     eye = np.eye(len(cov))
     for k in range(8):
+        j = jitter * 10**k
         try:
-            return cholesky(cov + jitter * 10**k * eye, lower=True, check_finite=False)
+            return cholesky(cov + j * eye, lower=True, check_finite=False), j
         except np.linalg.LinAlgError:
             continue
-    return np.diag(np.sqrt(np.maximum(np.diag(cov), 0.0)) + math.sqrt(jitter))
+    warnings.warn(
+        "noisy EI: the posterior covariance at the evaluated points would not factorise; "
+        "its correlations are dropped",
+        RuntimeWarning,
+        stacklevel=2,
+    )
+    return np.diag(np.sqrt(np.maximum(np.diag(cov), 0.0) + j)), j
