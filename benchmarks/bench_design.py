@@ -126,6 +126,16 @@ def helped_most(rows: Mapping[str, Mapping[str, Any]], by: str = "open_width") -
     return min(rows, key=lambda c: (round(rows[c][by], 3), -rows[c]["within"], c))
 
 
+def twin_dataset(folder: Path, truth_si: Mapping[str, float], seed: int) -> Path:
+    """The twin dataset of every rig in ``RIGS`` at ``truth_si`` (SI), ``RUNS`` runs per case,
+    drawn with ``seed``, in ``folder`` (written once, then reused); ``folder``."""
+    from tests.fake_sim import write_reference_dataset
+
+    if not (folder / "dataset.yaml").is_file():
+        write_reference_dataset(folder, n_runs=RUNS, rigs=RIGS, truth=truth_si, seed=seed)
+    return folder
+
+
 def tied_best(
     errors: Mapping[str, Sequence[float]], z: float = 2.0
 ) -> tuple[str, list[str], dict[str, tuple[float, float]]]:
@@ -199,16 +209,12 @@ def measure(
 
 def run_truth(k: int, args: argparse.Namespace, rig_files: Sequence[Path]) -> dict[str, Any]:
     """Steps a-d of the module docstring for truth ``k``; returns its figures."""
-    from tests.fake_sim import write_reference_dataset
-
     from parcelfit.study.design import rank_experiments
 
     folder = args.out / f"truth{k + 1}"
     truth = truth_for(k)
     truth_si = to_si(truth)
-    data = folder / "data"
-    if not (data / "dataset.yaml").is_file():
-        write_reference_dataset(data, n_runs=RUNS, rigs=RIGS, truth=truth_si, seed=700 + k)
+    data = twin_dataset(folder / "data", truth_si, seed=700 + k)
     base, minutes = calibrate(folder, "R", data, (), args.budget, k)
     verdicts = bench_twin.assess(base, truth_si)["verdicts"]
     open_ = [n for n in PARAMETERS if verdicts.get(n) != "determined"]
@@ -238,15 +244,8 @@ def run_truth(k: int, args: argparse.Namespace, rig_files: Sequence[Path]) -> di
         for r in range(1, args.replicates):  # other optimiser seeds, their own folders
             replicate_data, tag = data, f"r{r}"
             if args.replicate_data:  # and another draw of the twin's runs
-                replicate_data, tag = folder / f"data-r{r}", f"d{r}"
-                if not (replicate_data / "dataset.yaml").is_file():
-                    write_reference_dataset(
-                        replicate_data,
-                        n_runs=RUNS,
-                        rigs=RIGS,
-                        truth=truth_si,
-                        seed=700 + k + 1000 * r,
-                    )
+                replicate_data = twin_dataset(folder / f"data-r{r}", truth_si, 700 + k + 1000 * r)
+                tag = f"d{r}"
             study, minutes = calibrate(
                 folder, f"{name}-{tag}", replicate_data, (label,), args.budget, k + 1000 * r
             )
