@@ -35,7 +35,6 @@ from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
 import numpy as np
-from scipy.linalg import solve_triangular
 from scipy.optimize import minimize
 from scipy.stats import qmc
 from sklearn.cluster import KMeans
@@ -46,7 +45,7 @@ from sklearn.preprocessing import PowerTransformer
 from threadpoolctl import threadpool_limits
 
 from parcelfit.errors import ParcelfitError
-from parcelfit.optimize.kernel import cross_kernel, prior_variance
+from parcelfit.optimize.kernel import cross_kernel, posterior
 from parcelfit.optimize.nei import NoisyEI
 from parcelfit.optimize.nei import log_h as _log_h
 from parcelfit.optimize.space import Space
@@ -458,8 +457,5 @@ def _conditioned(kernel: Any, alpha: Any, X: np.ndarray, y: np.ndarray) -> Gauss
 def _predict(gp: GaussianProcessRegressor, U: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Posterior mean and sd at the rows of U, as ``gp.predict(U, return_std=True)``, with the
     fast kernel of `kernel.py` (the many one-point calls of the L-BFGS-B polish)."""
-    K = cross_kernel(gp, U, gp.X_train_)
-    mu = K @ gp.alpha_
-    V = solve_triangular(gp.L_, K.T, lower=True, check_finite=False)
-    var = prior_variance(gp, U) - np.einsum("ij,ij->j", V, V)
+    mu, var, _ = posterior(gp, U, cross_kernel(gp, U, gp.X_train_))
     return mu, np.sqrt(np.maximum(var, 0.0))

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.linalg import solve_triangular
 from sklearn.gaussian_process import GaussianProcessRegressor
 from sklearn.gaussian_process.kernels import ConstantKernel, Matern, Product
 
@@ -34,6 +35,18 @@ def prior_variance(gp: GaussianProcessRegressor, A: np.ndarray) -> np.ndarray:
     """The fitted kernel's variance k(a, a) at the rows of A."""
     split = _matern_parts(gp)
     return np.full(len(A), split[0]) if split is not None else gp.kernel_.diag(A)
+
+
+def posterior(
+    gp: GaussianProcessRegressor, U: np.ndarray, K_UX: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Posterior mean and variance of the latent function at the rows of U, given
+    K_UX = k(U, X_train), and V = L^-1 K_UX^T (L the Cholesky factor of K + noise I), which the
+    posterior covariance with other points needs: mu = K_UX alpha, var = k(u, u) - |V_u|^2."""
+    V = solve_triangular(gp.L_, K_UX.T, lower=True, check_finite=False)
+    mu = K_UX @ gp.alpha_
+    var = prior_variance(gp, U) - np.einsum("ij,ij->j", V, V)
+    return mu, var, V
 
 
 def _matern_parts(gp: GaussianProcessRegressor) -> tuple[float, np.ndarray] | None:

@@ -46,7 +46,7 @@ from scipy.special import erfcx, ndtr, ndtri
 from scipy.stats import qmc
 from sklearn.gaussian_process import GaussianProcessRegressor
 
-from parcelfit.optimize.kernel import cross_kernel, prior_variance
+from parcelfit.optimize.kernel import cross_kernel, posterior, prior_variance
 
 N_SAMPLES = 128  # draws of the latent function at the baseline (a power of 2 for Sobol)
 MAX_BASELINE = 32  # evaluated points kept as the baseline after pruning
@@ -87,7 +87,10 @@ class NoisyEI:
         X = np.asarray(gp.X_train_)
         n = len(X)
         scale = float(prior_variance(gp, X[:1])[0]) or 1.0
-        cov_all = self._posterior_cov(X, X)
+        # the posterior covariance at the evaluated points, k(X, X) - V^T V with V = L^-1 k(X, X)
+        K_XX = cross_kernel(gp, X, X)
+        V_X = solve_triangular(gp.L_, K_XX, lower=True, check_finite=False)
+        cov_all = K_XX - V_X.T @ V_X
         draws_all = _normal_draws(n, seed)
         chol_all, jitter = _cholesky(cov_all, JITTER * scale)
         mu_all = gp.predict(X)
@@ -109,23 +112,13 @@ class NoisyEI:
         )  # L^-1 k(X, P), for the posterior cross-covariance
         self._XP = np.vstack([X, self.P])
 
-    def _posterior_cov(self, A: np.ndarray, B: np.ndarray) -> np.ndarray:
-        """Posterior covariance of the latent function between the rows of A and of B."""
-        gp = self.gp
-        X = gp.X_train_
-        VA = solve_triangular(gp.L_, cross_kernel(gp, X, A), lower=True, check_finite=False)
-        VB = VA if B is A else solve_triangular(gp.L_, cross_kernel(gp, X, B), lower=True)
-        return cross_kernel(gp, A, B) - VA.T @ VB
-
     def __call__(self, U: np.ndarray) -> np.ndarray:
         """log NEI at the rows of U (unit cube); higher is better."""
         gp = self.gp
         X = gp.X_train_
         K = cross_kernel(gp, U, self._XP)  # k(U, X) and k(U, P) in one call
         K_UX, K_UP = K[:, : len(X)], K[:, len(X) :]
-        V = solve_triangular(gp.L_, K_UX.T, lower=True, check_finite=False)  # (n, m)
-        mu = K_UX @ gp.alpha_
-        var = prior_variance(gp, U) - np.einsum("ij,ij->j", V, V)
+        mu, var, V = posterior(gp, U, K_UX)  # V: (n, m)
         cross = K_UP - V.T @ self._L_cross  # S_UP, (m, |P|)
         W = solve_triangular(self.chol, cross.T, lower=True, check_finite=False).T  # (m, |P|)
         cond_var = np.maximum(var - np.einsum("ij,ij->i", W, W), 1e-24)
