@@ -10,7 +10,9 @@ ensemble statistics over the matched placements (`parcelfit.sim.ensemble.ensembl
 median rotation, the median transit time and the share of spins, each with its paired bootstrap
 standard error and the ratio), and the mean of the paired differences of rotation and transit
 time with their standard errors (the placements' own scatter removed by the pairing), their
-median and the sign test of how many placements went up.
+median and the sign test of how many placements went up; the same over the placements that
+slide at both ends (a catch on the guide plate, a spin, is a branch; a slide's change is the
+parameter's effect on the path).
 
 With ``--dataset DIR --case RIG/TYPE/SETTING`` it also prints the change of the mean calibration
 cost (method.md eq. 3) of the ensemble's runs against the case's reference run (chosen from the
@@ -92,6 +94,34 @@ def print_reference_shift(low: dict[int, np.ndarray], high: dict[int, np.ndarray
         )
 
 
+def print_paired_changes(pairs: list[tuple[Member, Member]], label: str) -> None:
+    """The mean paired change high - low of rotation [deg] and transit time [ms] over
+    ``pairs`` of placements, its standard error, median and sign test."""
+    for name, attr, scale in (
+        ("rotation [deg]", "rotation", math.degrees(1)),
+        ("transit [ms]", "transit_time", 1e3),
+    ):
+        d = (
+            np.array(
+                [
+                    getattr(y, attr) - getattr(x, attr)
+                    for x, y in pairs
+                    if getattr(x, attr) is not None and getattr(y, attr) is not None
+                ]
+            )
+            * scale
+        )
+        if d.size >= 2:
+            se = d.std(ddof=1) / math.sqrt(d.size)
+            up, n = int(np.sum(d > 0)), int(np.sum(d != 0))
+            p_sign = stats.binomtest(up, n).pvalue if n else math.nan
+            print(
+                f"mean paired change of {name}{label}: {d.mean():.2f} (SE {se:.2f}, ratio "
+                f"{abs(d.mean()) / se if se > 0 else math.inf:.1f}); median {np.median(d):.2f};"
+                f" {up} of {n} up, {n - up} down (sign test p = {p_sign:.2g})"
+            )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -122,29 +152,9 @@ def main() -> None:
         print(f"{name:<24}{change:>10.2f}{se:>9.2f}{ratio:>8.1f}")
     by_seed = {m.seed: m for m in b}
     pairs = [(m, by_seed[m.seed]) for m in a if m.seed in by_seed]
-    for name, attr, scale in (
-        ("rotation [deg]", "rotation", math.degrees(1)),
-        ("transit [ms]", "transit_time", 1e3),
-    ):
-        d = (
-            np.array(
-                [
-                    getattr(y, attr) - getattr(x, attr)
-                    for x, y in pairs
-                    if getattr(x, attr) is not None and getattr(y, attr) is not None
-                ]
-            )
-            * scale
-        )
-        if d.size >= 2:
-            se = d.std(ddof=1) / math.sqrt(d.size)
-            up, n = int(np.sum(d > 0)), int(np.sum(d != 0))
-            p_sign = stats.binomtest(up, n).pvalue if n else math.nan
-            print(
-                f"mean paired change of {name}: {d.mean():.2f} (SE {se:.2f}, ratio "
-                f"{abs(d.mean()) / se if se > 0 else math.inf:.1f}); median {np.median(d):.2f};"
-                f" {up} of {n} up, {n - up} down (sign test p = {p_sign:.2g})"
-            )
+    slides = [(x, y) for x, y in pairs if x.outcome == "slide" and y.outcome == "slide"]
+    for label, chosen in (("", pairs), (f" over the {len(slides)} slides at both ends", slides)):
+        print_paired_changes(chosen, label)
     n_spin = [sum(m.outcome == "spin" for m in e) for e in (a, b)]
     print(f"spins: {n_spin[0]} of {len(a)} (low), {n_spin[1]} of {len(b)} (high)")
     if args.dataset is not None:

@@ -15,11 +15,14 @@ its own degrees of freedom) is the reference the interpolated shells are judged 
 
 The shells: "full" (each vertex its own degrees of freedom, at 1/4800 s), "default" (the
 consignment's own: trilinear over 4 x 4 x 1 cells for the bundled rigid-content types), trilinear
-over 5 x 5 x 1 (KP/BW's cell boundaries then lie on its content's ends) and 8 x 8 x 1 cells, and
-quadratic over one cell. Run (prints a Markdown table; one to a few minutes per shell on one core):
+over 5 x 5 x 1 (KP/BW's cell boundaries then lie on its content's ends) and 8 x 8 x 1 cells,
+quadratic over one cell, and trilinear over 5 x 5 x 1 cells with braces across its rim cells
+(`parcelfit.sim.mujoco.rim_brace`: the ideal wedge, s = 1, and s = 0.067). Run (prints a
+Markdown table; one to a few minutes per shell on one core):
 
     python scripts/rim_probe.py --consignment KPBW --shells full default trilinear-5x5x1
     python scripts/rim_probe.py --consignment KPBW --param k_CoPa --values 100 1000
+    python scripts/rim_probe.py --consignment KPBW --shells braced-5x5x1 braced-5x5x1-s1
 
 (``--param`` varies another parameter over ``--values``, in the catalogue's unit.)
 """
@@ -46,6 +49,10 @@ SHELLS = {
     "trilinear-4x4x2": SceneOptions(shell_dof="trilinear", shell_cells=(4, 4, 2)),
     "trilinear-5x5x2": SceneOptions(shell_dof="trilinear", shell_cells=(5, 5, 2)),
     "quadratic-1x1x1": SceneOptions(shell_dof="quadratic", shell_cells=(1, 1, 1)),
+    # braces across the rim cells (sim/mujoco/rim_brace.py): the ideal wedge, and the share of
+    # it that matches the full shell's rim
+    "braced-5x5x1-s1": SceneOptions(shell_dof="trilinear", shell_cells=(5, 5, 1), rim_brace=1.0),
+    "braced-5x5x1": SceneOptions(shell_dof="trilinear", shell_cells=(5, 5, 1), rim_brace=0.067),
 }
 
 

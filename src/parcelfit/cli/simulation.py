@@ -103,6 +103,16 @@ def simulate(
             "height, e.g. 4,4,1 (default: the consignment file's with its own shell, else one).",
         ),
     ] = None,
+    rim_brace: Annotated[
+        float | None,
+        typer.Option(
+            help="Braces across an interpolated shell's rim cells, as a share of an ideal "
+            "wedge's stiffness (0: none; e.g. 0.067 with --shell-cells 5,5,1 for KPBW; default: "
+            "the consignment file's; see the simulator's README, Rim).",
+            min=0,
+            max=10,
+        ),
+    ] = None,
     mass_lumping: Annotated[
         str,
         typer.Option(
@@ -154,6 +164,7 @@ def simulate(
         membrane_cap=membrane_cap,
         shell_dof=shell_dof,
         shell_cells=shell_cells,
+        rim_brace=rim_brace,
         belt_friction=belt_friction,
         mass_lumping=mass_lumping,
         wall_limit=wall_limit,

@@ -67,6 +67,7 @@ _MUJOCO_ONLY = (
     "membrane_cap",
     "shell_dof",
     "shell_cells",
+    "rim_brace",
     "shell_diagonals",
     "mass_lumping",
     "contact_law",
@@ -85,6 +86,7 @@ _SETTINGS = (
     "membrane_cap",
     "shell_dof",
     "shell_cells",
+    "rim_brace",
     "shell_diagonals",
     "mass_lumping",
     "contact_law",
@@ -153,6 +155,7 @@ class SimulatorConfig(Mapping[str, Any]):
     membrane_cap: float | None = None
     shell_dof: str | None = None
     shell_cells: tuple[int, int, int] | None = None
+    rim_brace: float | None = None
     shell_diagonals: str | None = None
     mass_lumping: str | None = None
     contact_law: str | None = None
@@ -220,6 +223,9 @@ class SimulatorSection(FileModel):
     or trilinear."""
     shell_cells: ShellCellsField | None = None
     """An interpolated shell's grid of cells along length, width, height, e.g. [4, 4, 1]."""
+    rim_brace: Annotated[float | None, Number(unit="", ge=0, le=10)] = None
+    """Braces across an interpolated shell's rim cells, as a share of an ideal wedge's stiffness
+    (default 0: none; needs cells whose boundaries fall on the content's ends)."""
     shell_diagonals: Annotated[
         str | None, Choice(SHELL_DIAGONALS, what="split of the shell's cells")
     ] = None
@@ -307,6 +313,7 @@ def make_simulator(config: SimulatorConfig) -> Simulator:
                 "spacing",
                 "film_spacing",
                 "membrane_cap",
+                "rim_brace",
                 "stick_speed",
                 "slip_speed",
             )

@@ -11,6 +11,7 @@ A consignment file (YAML, SI units)::
     parameters: {mu_d_BePa: 0.30}    # optional: this type's own defaults (catalogue units)
     shell: trilinear                 # optional: the packaging shell's degrees of freedom
     shell_cells: [4, 4, 1]           # optional: its grid of cells (length, width, height)
+    rim_brace: 0.067                 # optional: braces across the rim cells (share of a wedge's)
 
 ``bulge`` (optional, rigid contents): a bubble mailer's bottom that bulges below the content's
 face by ``depth`` [m] over a centred patch of ``footprint`` times the outer length and width
@@ -31,7 +32,10 @@ parcel's length, width and height (MuJoCo's multi-cell flexes; default one cell)
 rim can bend apart from the face it borders. A type's choice is the cheapest shell that
 reproduces the full shell at a fine step and mesh (the reference) on the E3 ensemble and keeps
 its outcome when refined: BW, KP/BW and KP take a trilinear shell over 4 x 4 x 1 cells
-(docs/research/multicell-shell.md), PB the full shell around its soft content.
+(docs/research/multicell-shell.md), PB the full shell around its soft content. ``rim_brace``
+(optional, with an interpolated ``shell`` whose cells' boundaries fall on the content's ends):
+braces across the rim cells, as a share of the stiffness of an ideal wedge of the packaging's
+sheets (`parcelfit.sim.mujoco.rim_brace`; default 0, none).
 
 The content must fit inside the outer dimensions (length and width strictly smaller, height not
 larger). The packaging's mass is a simulation parameter (m_Pa); the content gets the rest.
@@ -76,6 +80,8 @@ class Consignment:
     # the grid of cells of that shell along the length, width and height (see the module
     # docstring); one cell unless the file says otherwise
     shell_cells: tuple[int, int, int] = (1, 1, 1)
+    # braces across that shell's rim cells (see the module docstring); 0: none
+    rim_brace: float = 0.0
 
     @property
     def soft(self) -> bool:
@@ -158,6 +164,9 @@ class ConsignmentFile(FileModel):
     quadratic around a rigid content, full around a soft one)."""
     shell_cells: ShellCellsField | None = None
     """An interpolated shell's grid of cells along length, width, height (default [1, 1, 1])."""
+    rim_brace: Annotated[float | None, Number(ge=0, le=10)] = None
+    """Braces across the interpolated shell's rim cells, as a share of an ideal wedge's
+    stiffness (default 0: none)."""
 
     @model_validator(mode="after")
     def _content_fits(self) -> ConsignmentFile:
@@ -184,12 +193,13 @@ class ConsignmentFile(FileModel):
 
     @model_validator(mode="after")
     def _cells_fit_the_shell(self) -> ConsignmentFile:
-        if self.shell_cells is not None and self.shell not in ("trilinear", "quadratic"):
-            raise ParcelfitError(
-                "shell_cells needs an interpolated shell",
-                where="shell_cells",
-                fix="add `shell: trilinear` (or quadratic), or remove shell_cells",
-            )
+        for key in ("shell_cells", "rim_brace"):
+            if getattr(self, key) is not None and self.shell not in ("trilinear", "quadratic"):
+                raise ParcelfitError(
+                    f"{key} needs an interpolated shell",
+                    where=key,
+                    fix=f"add `shell: trilinear` (or quadratic), or remove {key}",
+                )
         return self
 
     @model_validator(mode="after")
@@ -218,6 +228,7 @@ def parse_consignment(doc: Any, file: str) -> Consignment:
         parameters=tuple((f.parameters or {}).items()),
         shell=f.shell,
         shell_cells=f.shell_cells or (1, 1, 1),
+        rim_brace=f.rim_brace or 0.0,
     )
 
 

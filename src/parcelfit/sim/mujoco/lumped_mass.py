@@ -46,6 +46,7 @@ bodies' subtree masses) follows.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import mujoco
@@ -186,18 +187,24 @@ def lumped_masses(model: mujoco.MjModel) -> list[FlexMasses]:
     return out
 
 
-def compile_model(xml: str, lumping: str = "area") -> mujoco.MjModel:
+def compile_model(
+    xml: str,
+    lumping: str = "area",
+    edit: Callable[[mujoco.MjSpec, mujoco.MjModel], object] | None = None,
+) -> mujoco.MjModel:
     """The MuJoCo model of scene ``xml``, its flexes' masses lumped as ``lumping`` says:
-    "area" (module docstring) or "equal" (MuJoCo's own equal shares)."""
+    "area" (module docstring) or "equal" (MuJoCo's own equal shares); ``edit(spec, model)``, if
+    given, changes the specification before it is compiled again (``model``: as first compiled)."""
     if lumping not in MASS_LUMPINGS:
         raise ValueError(f"unknown mass lumping {lumping!r}: use one of {list(MASS_LUMPINGS)}")
     model = mujoco.MjModel.from_xml_string(xml)
-    if lumping == "equal" or model.nflex == 0:
+    flexes = [] if lumping == "equal" or model.nflex == 0 else lumped_masses(model)
+    flexes = [flex for flex in flexes if flex.lumped]
+    if not flexes and edit is None:
         return model
     spec = mujoco.MjSpec.from_string(xml)
-    flexes = [flex for flex in lumped_masses(model) if flex.lumped]
-    if not flexes:
-        return model
+    if edit is not None:
+        edit(spec, model)
     for flex in flexes:
         for name, mass in flex.masses.items():
             body = spec.body(name)

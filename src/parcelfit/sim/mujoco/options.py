@@ -131,6 +131,12 @@ class SceneOptions:
     # apart from the face it borders); None: the consignment's own (`Consignment.shell_cells`)
     # where the shell is its own choice, else one cell
     shell_cells: tuple[int, int, int] | None = None
+    # braces across an interpolated shell's rim cells, as a share s of the stiffness of an ideal
+    # wedge of the packaging's sheets (`rim_brace`: MuJoCo's interpolated shell is elastic on its
+    # node box's faces, whose rim is a rectangle that shears freely); 0: none. Needs cells whose
+    # boundaries fall on the content's ends (KP/BW: 5 x 5 x 1). None: the consignment's own
+    # (`Consignment.rim_brace`) where its own shell and cells are used, else none
+    rim_brace: float | None = None
     # friction between the packaging and belts, strips and rollers: "mujoco" (MuJoCo's own
     # contact friction) or "coulomb" (those contacts frictionless in MuJoCo and Coulomb friction
     # applied as forces at the contact points before every step, `coulomb.CoulombBelts`):
@@ -252,6 +258,10 @@ class SceneOptions:
             raise ParcelfitError(
                 f"ccd_tolerance must be positive [m] or None, got {self.ccd_tolerance}"
             )
+        if self.rim_brace is not None and not 0 <= self.rim_brace <= 10:
+            raise ParcelfitError(
+                f"rim_brace must lie in [0, 10] (a share of the ideal wedge), got {self.rim_brace}"
+            )
         if self.membrane_cap is not None and not self.membrane_cap > 0:
             raise ParcelfitError(
                 f"membrane_cap must be positive [N/m] or None, got {self.membrane_cap}"
@@ -303,6 +313,17 @@ class SceneOptions:
         if self.shell_dof == "auto" and consignment.shell is not None:
             return dof, consignment.shell_cells
         return dof, (1, 1, 1)
+
+    def rim_brace_of(self, consignment: Consignment) -> float:
+        """The share of an ideal wedge's stiffness the braces across the rim cells of
+        ``consignment``'s shell take (`rim_brace`): ``rim_brace`` if set, else the type's own
+        where its own shell and cells are used, else 0 (none)."""
+        if self.rim_brace is not None:
+            return self.rim_brace
+        own = self.shell_dof == "auto" and consignment.shell is not None
+        if own and self.shell_cells in (None, consignment.shell_cells):
+            return consignment.rim_brace
+        return 0.0
 
     def ccd_tolerance_for(self, soft: bool) -> float | None:
         """MuJoCo's convex-collision tolerance [m] for a scene with a soft (True) or rigid

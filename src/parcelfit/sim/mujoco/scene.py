@@ -36,6 +36,7 @@ from parcelfit.sim.mujoco.contact import (
 from parcelfit.sim.mujoco.lumped_mass import compile_model, element_vertex_masses
 from parcelfit.sim.mujoco.options import SceneOptions
 from parcelfit.sim.mujoco.rig import Rig, Surface
+from parcelfit.sim.mujoco.rim_brace import RimBrace, add_rim_braces
 from parcelfit.sim.mujoco.shell import ShellMesh, pillow_shell
 
 SLAB = 0.02  # half-thickness of belt and strip boxes [m]
@@ -83,11 +84,17 @@ class Scene:
     n_shell_vertices: int
     content_flex: bool
     mass_lumping: str  # how the flexes' masses are spread (`SceneOptions.mass_lumping`)
+    rim_brace: RimBrace | None = None  # braces across the shell's rim cells (`rim_brace`)
 
     def model(self) -> mujoco.MjModel:
         """The compiled MuJoCo model of this scene, its flexes' masses lumped as the scene says
-        (`parcelfit.sim.mujoco.lumped_mass.compile_model`)."""
-        return compile_model(self.xml, self.mass_lumping)
+        (`parcelfit.sim.mujoco.lumped_mass.compile_model`), its rims braced if it says so."""
+        brace = self.rim_brace
+        if brace is None:
+            return compile_model(self.xml, self.mass_lumping)
+        return compile_model(
+            self.xml, self.mass_lumping, lambda spec, model: add_rim_braces(spec, model, brace)
+        )
 
 
 def _quat(yaw_deg: float, roll_deg: float = 0.0) -> str:
@@ -345,6 +352,7 @@ def build_scene(
     beta_pa = 2 * p["zeta_Pa"] / bending_omega(young_pa, p["nu_Pa"], t_pa, rho_pa, L)
     points = " ".join(_f(v) for v in shell.points.ravel())
     shell_dof, cells = opt.shell_of(consignment)
+    brace = opt.rim_brace_of(consignment)
     dof = "" if shell_dof == "full" else f' dof="{shell_dof}"'
     if cells != (1, 1, 1):
         dof += f' cellcount="{cells[0]} {cells[1]} {cells[2]}"'
@@ -407,4 +415,7 @@ def build_scene(
         n_shell_vertices=nv,
         content_flex=soft,
         mass_lumping=opt.mass_lumping,
+        rim_brace=None
+        if brace == 0
+        else RimBrace(brace, young_pa * t_pa, (cL, cW, cH), (L, W), beta_pa),
     )
