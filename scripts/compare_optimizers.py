@@ -5,7 +5,10 @@
 
 Runs the study once per optimiser (``optimizer: {sampler: ...}``) and seed into its own folder
 under ``--out`` (an existing folder is resumed, not redone) and prints, per optimiser, the
-fitting simulations until validation passed (or the budget), the iteration and the best cost.
+fitting simulations until validation passed (or the budget), the iteration, the best cost, the
+band test (`parcelfit.study.verdict`) and, where the study's dataset holds the hidden truth of a
+twin (``truth.yaml``), the error of each validated parameter as a share of its range, with the
+median over seeds.
 """
 
 from __future__ import annotations
@@ -17,8 +20,40 @@ from pathlib import Path
 import yaml
 
 from parcelfit.config import load_yaml
+from parcelfit.sim.params import CATALOGUE
 from parcelfit.study.calibration import Calibration
+from parcelfit.study.results import read_results
+from parcelfit.study.status import folder_verdict
 from parcelfit.study.studyfile import load_study
+
+
+def truth_si(study_file: Path) -> dict[str, dict[str, float]]:
+    """The twin's hidden truth (SI) per consignment type, from ``truth.yaml`` beside the study's
+    dataset; empty when there is none (real data)."""
+    doc = load_yaml(study_file)
+    path = (study_file.parent / doc["reference"]["dataset"]).resolve() / "truth.yaml"
+    if not path.is_file():
+        return {}
+    units = {p.name: p for p in CATALOGUE}
+    return {
+        kind: {n: units[n].to_si(float(v)) for n, v in values.items() if n in units}
+        for kind, values in (load_yaml(path).get("truth") or {}).items()
+    }
+
+
+def errors(folder: Path, truth: dict[str, dict[str, float]]) -> dict[str, float]:
+    """The shown validation's parameters against the truth (SI) of its case's consignment
+    type, each as a share of its range."""
+    results = read_results(folder)
+    shown = results.shown_validation() if results is not None else None
+    if shown is None or results is None or results.identifiability is None:
+        return {}
+    values = truth.get(shown.case.split("/")[1], {})
+    return {
+        p.name: abs(shown.params[p.name] - values[p.name]) / (p.high - p.low)
+        for p in results.identifiability.parameters
+        if p.name in values and p.name in shown.params
+    }
 
 
 def run_one(study_file: Path, sampler: str, seed: int, out: Path, workers: int) -> tuple:
@@ -48,15 +83,31 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("compare-optimizers"))
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args()
-    print(f"{'optimizer':<11}{'seed':>5}{'simulations':>13}{'validated':>11}{'best cost':>11}")
+    truth = truth_si(args.study)
+    print(
+        f"{'optimizer':<11}{'seed':>5}{'simulations':>13}{'validated':>11}{'best cost':>11}"
+        f"{'band test':>11}  errors [% of range]"
+    )
     for sampler in args.samplers.split(","):
-        counts = []
+        counts, errs = [], []
         for seed in range(1, args.seeds + 1):
             n, ok, _, cost = run_one(args.study, sampler, seed, args.out, args.workers)
+            folder = args.out / f"{sampler}-seed{seed}"
+            band = next(c.outcome for c in folder_verdict(folder).checks if c.name == "band test")
+            err = errors(folder, truth)
             counts.append(n)
-            print(f"{sampler:<11}{seed:>5}{n:>13}{ok!s:>11}{cost:>11.4f}", flush=True)
+            errs.append(err)
+            shown = " / ".join(f"{name} {100 * e:.0f}" for name, e in err.items())
+            print(
+                f"{sampler:<11}{seed:>5}{n:>13}{ok!s:>11}{cost:>11.4f}{band:>11}  {shown}",
+                flush=True,
+            )
         if len(counts) > 1:
-            print(f"{sampler:<11}{'med':>5}{statistics.median(counts):>13g}")
+            med = " / ".join(
+                f"{name} {100 * statistics.median(e[name] for e in errs if name in e):.0f}"
+                for name in errs[0]
+            )
+            print(f"{sampler:<11}{'med':>5}{statistics.median(counts):>13g}{'':>33}  {med}")
 
 
 if __name__ == "__main__":
