@@ -63,6 +63,11 @@ def reference_costs(paths: list[Path], dataset: Path, case: str) -> dict[int, np
     reference = select_reference(load_dataset(dataset)[case])
     out: dict[int, np.ndarray] = {}
     for path in paths:
+        if not str(path).endswith("-ensemble.csv"):
+            raise SystemExit(
+                f"{path}: --dataset needs the table `simulate --repeat` wrote (OUT-ensemble.csv),"
+                " with its runs OUT-s<seed>.csv beside it"
+            )
         for r in pd.read_csv(path).itertuples(index=False):
             if r.status != "ok":
                 continue
