@@ -20,35 +20,30 @@ from pathlib import Path
 import yaml
 
 from parcelfit.config import load_yaml
-from parcelfit.sim.params import CATALOGUE
+from parcelfit.runs import TestCase, read_truth
+from parcelfit.sim.params import parameter
 from parcelfit.study.calibration import Calibration
 from parcelfit.study.results import read_results
 from parcelfit.study.status import folder_verdict
 from parcelfit.study.studyfile import load_study
 
 
-def truth_si(study_file: Path) -> dict[str, dict[str, float]]:
-    """The twin's hidden truth (SI) per consignment type, from ``truth.yaml`` beside the study's
-    dataset; empty when there is none (real data)."""
+def truth_si(study_file: Path, consignment: str) -> dict[str, float]:
+    """The twin's hidden truth (SI) of ``consignment``, from the study's dataset (empty for real
+    data)."""
     doc = load_yaml(study_file)
-    path = (study_file.parent / doc["reference"]["dataset"]).resolve() / "truth.yaml"
-    if not path.is_file():
-        return {}
-    units = {p.name: p for p in CATALOGUE}
-    return {
-        kind: {n: units[n].to_si(float(v)) for n, v in values.items() if n in units}
-        for kind, values in (load_yaml(path).get("truth") or {}).items()
-    }
+    folder = (study_file.parent / doc["reference"]["dataset"]).resolve()
+    return {n: parameter(n).to_si(v) for n, v in read_truth(folder, consignment).items()}
 
 
-def errors(folder: Path, truth: dict[str, dict[str, float]]) -> dict[str, float]:
-    """The shown validation's parameters against the truth (SI) of its case's consignment
-    type, each as a share of its range."""
+def errors(folder: Path, study_file: Path) -> dict[str, float]:
+    """The shown validation's parameters against the twin's truth (SI) of its case's
+    consignment type, each as a share of its range."""
     results = read_results(folder)
     shown = results.shown_validation() if results is not None else None
     if shown is None or results is None or results.identifiability is None:
         return {}
-    values = truth.get(shown.case.split("/")[1], {})
+    values = truth_si(study_file, TestCase.parse(shown.case).consignment)
     return {
         p.name: abs(shown.params[p.name] - values[p.name]) / (p.high - p.low)
         for p in results.identifiability.parameters
@@ -83,7 +78,6 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("compare-optimizers"))
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args()
-    truth = truth_si(args.study)
     print(
         f"{'optimizer':<11}{'seed':>5}{'simulations':>13}{'validated':>11}{'best cost':>11}"
         f"{'band test':>11}  errors [% of range]"
@@ -94,7 +88,7 @@ def main() -> None:
             n, ok, _, cost = run_one(args.study, sampler, seed, args.out, args.workers)
             folder = args.out / f"{sampler}-seed{seed}"
             band = next(c.outcome for c in folder_verdict(folder).checks if c.name == "band test")
-            err = errors(folder, truth)
+            err = errors(folder, args.study)
             counts.append(n)
             errs.append(err)
             shown = " / ".join(f"{name} {100 * e:.0f}" for name, e in err.items())

@@ -30,10 +30,9 @@ from pathlib import Path
 
 import numpy as np
 
-from parcelfit.config import load_yaml
 from parcelfit.metrics.dtw import dtw_distance
 from parcelfit.metrics.reference import select_reference
-from parcelfit.runs import TestCase, Trajectory
+from parcelfit.runs import TestCase, Trajectory, read_truth
 from parcelfit.runs.dataset import load_dataset
 from parcelfit.sim.ensemble import rotation
 from parcelfit.sim.mujoco.options import SceneOptions
@@ -83,8 +82,9 @@ def main() -> None:
     data = folder / "data" if (folder / "data" / "dataset.yaml").is_file() else folder
     dataset = load_dataset(data)
     case = TestCase.parse(args.case)
-    truth_doc = load_yaml(data / "truth.yaml")
-    truth = {k: float(v) for k, v in truth_doc["truth"][case.consignment].items()}
+    truth = read_truth(data, case.consignment)
+    if not truth:
+        raise SystemExit(f"{data}: no hidden truth of {case.consignment} (truth.yaml): not a twin")
     case_data = dataset[case]
     ref = select_reference(case_data)
     real_t = np.array([r.transit_time for r in case_data.runs], dtype=float)

@@ -79,7 +79,7 @@ from parcelfit.report.page import (
     png_html,
     write_page,
 )
-from parcelfit.runs import Dataset, load_dataset
+from parcelfit.runs import Dataset, load_dataset, read_truth
 from parcelfit.study.results import (
     ReferenceRecord,
     StudyResults,
@@ -126,14 +126,6 @@ def locate(folder: str | Path, screen: str | Path | None = None) -> StudyFolders
         candidates = [root / "screen", study.parent / "screen"]
         screen_dir = next((c for c in candidates if (c / "stage1-effects.csv").is_file()), None)
     return StudyFolders(study, root, screen_dir)
-
-
-def _load_truth(dataset_dir: Path, consignment: str) -> dict[str, float]:
-    path = dataset_dir / "truth.yaml"
-    if not path.is_file():
-        return {}
-    doc = load_yaml(path) or {}
-    return {k: float(v) for k, v in (doc.get("truth", {}).get(consignment) or {}).items()}
 
 
 # -- transit-time statistics (a description of the dataset) -------------------------------------
@@ -451,7 +443,7 @@ def build_report(
     if dataset_dir is not None and (dataset_dir / "dataset.yaml").is_file():
         ds = load_dataset(dataset_dir)
     rig, cons = source.rig, source.consignment
-    truth = _load_truth(dataset_dir, cons) if (dataset_dir and cons and ds and ds.synthetic) else {}
+    truth = read_truth(dataset_dir, cons) if (dataset_dir and cons and ds and ds.synthetic) else {}
     if ds is not None:
         _statistics_section(page, ds)
     _reference_section(page, results, places.root, ds)

@@ -97,6 +97,17 @@ def is_synthetic(folder: str | Path) -> bool | None:
     return isinstance(doc, dict) and doc.get("synthetic") is True
 
 
+def read_truth(folder: str | Path, consignment: str) -> dict[str, float]:
+    """The hidden true parameters of ``consignment`` (catalogue units) of a synthetic twin
+    dataset, from the ``truth.yaml`` its maker wrote beside ``dataset.yaml``; empty when there
+    is none (real data, or a type the twin does not hold)."""
+    path = Path(folder) / "truth.yaml"
+    if not path.is_file():
+        return {}
+    doc = load_yaml(path) or {}
+    return {k: float(v) for k, v in (doc.get("truth", {}).get(consignment) or {}).items()}
+
+
 def load_dataset(folder: str | Path) -> Dataset:
     """Load and check a dataset folder (or the path of its ``dataset.yaml``)."""
     folder = Path(folder)
