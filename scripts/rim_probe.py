@@ -14,8 +14,9 @@ apart from its content (a coarse interpolation) gives a ratio near 1. The full s
 its own degrees of freedom) is the reference the interpolated shells are judged by.
 
 The shells: "full" (each vertex its own degrees of freedom, at 1/4800 s), "default" (the
-consignment's own: trilinear over 4 x 4 x 1 cells for the bundled rigid-content types), trilinear
-over 5 x 5 x 1 (KP/BW's cell boundaries then lie on its content's ends) and 8 x 8 x 1 cells,
+consignment's own: trilinear over 4 x 4 x 1 cells for BW and KP, 5 x 5 x 1 for KP/BW since
+2026-12-03), trilinear over 4 x 4 x 1 (KP/BW's former default), 5 x 5 x 1 (KP/BW's cell
+boundaries then lie on its content's ends) and 8 x 8 x 1 cells,
 quadratic over one cell, and trilinear over 5 x 5 x 1 cells with braces across its rim cells
 (`parcelfit.sim.mujoco.rim_brace`: the ideal wedge, s = 1, and s = 0.067). Run (prints a
 Markdown table; one to a few minutes per shell on one core):
@@ -44,6 +45,7 @@ from parcelfit.sim.params import catalogue_unit, parameter
 SHELLS = {
     "full": SceneOptions(shell_dof="full", timestep=1 / 4800),
     "default": SceneOptions(),
+    "trilinear-4x4x1": SceneOptions(shell_dof="trilinear", shell_cells=(4, 4, 1)),
     "trilinear-5x5x1": SceneOptions(shell_dof="trilinear", shell_cells=(5, 5, 1)),
     "trilinear-8x8x1": SceneOptions(shell_dof="trilinear", shell_cells=(8, 8, 1)),
     "trilinear-4x4x2": SceneOptions(shell_dof="trilinear", shell_cells=(4, 4, 2)),

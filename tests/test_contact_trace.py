@@ -67,9 +67,10 @@ def test_the_square_end_catch_on_e2a_is_the_outfeed_pushing_the_parcel_back(
     # as measured in docs/research/belt-drums.md: with square ends, the shell's former alternating
     # diagonals (with the radiating ones the same push leaves the parcel on the square end) and
     # MuJoCo's equal mass shares (the model before the masses were lumped, docs/research/mass-lumping.md)
-    # and the contact and friction laws before 2026-12-01 (contact.py, friction.py)
+    # and the contact and friction laws before 2026-12-01 (contact.py, friction.py), with KP/BW's
+    # shell over 4 x 4 x 1 cells (its default until 2026-12-03)
     args = ["--rig", str(square), "--consignment", "KPBW", "--seed", "3", "--top", "1"]
-    args += ["--scene", "shell_diagonals=alternating", "mass_lumping=equal"]
+    args += ["--scene", "shell_diagonals=alternating", "mass_lumping=equal", "shell_cells=4,4,1"]
     args += ["contact_law=impedance", "friction=geom"]
     assert trace.main([*args, "--from", "1.79", "--to", "1.801"]) == 0
     out = capsys.readouterr().out

@@ -149,7 +149,7 @@ def test_a_type_may_choose_its_shell_and_a_scene_still_overrides_it():
     types = {n: load_consignment(n) for n in ("BW", "KPBW", "KP", "PB")}
     assert {n: (c.shell, c.shell_cells) for n, c in types.items()} == {
         "BW": ("trilinear", (4, 4, 1)),
-        "KPBW": ("trilinear", (4, 4, 1)),
+        "KPBW": ("trilinear", (5, 5, 1)),
         "KP": ("trilinear", (4, 4, 1)),
         "PB": (None, (1, 1, 1)),
     }

@@ -198,8 +198,8 @@ def _e1_runs():
     return out
 
 
-def _max_deviation(a, b):
-    n = min(len(a), len(b))
+def _max_deviation(a, b, upto=None):
+    n = min(len(a), len(b), upto or len(a))
     return (
         np.max(np.hypot(a.x[:n] - b.x[:n], a.y[:n] - b.y[:n])),
         np.max(np.abs(a.theta[:n] - b.theta[:n])),
@@ -218,17 +218,26 @@ def test_e1_parcel_reaches_belt_2_speed_and_heavier_and_lighter_parcels_behave_a
     assert _speed(traj)[late][-10:].mean() == pytest.approx(1.57, rel=0.02)
     assert res.run.transit_time is not None
     # Coulomb friction scales with the normal force: with stiffnesses scaled like the mass the
-    # motion is the same; with fixed stiffnesses only sag and penetration differ, a little
+    # motion is the same, to rounding; with fixed stiffnesses only sag and penetration differ, a
+    # little. The transfer onto belt 2 (x = 0) amplifies differences: with KP/BW's 5 x 5 x 1
+    # shell the rounding of the half-mass run (1e-12 m before it) grows there to 1.2 mm and 3.2
+    # degrees at this placement, as a 0.1 % change of a friction coefficient moves E1's exit
+    # heading by up to about 2 degrees; so the law is checked to rounding before the transfer,
+    # and the whole run within that floor
     for factor in (0.5, 2.0):
-        dxy, dth = _max_deviation(
-            e1_runs[True, 1.0].run.trajectory, e1_runs[True, factor].run.trajectory
-        )
-        assert dxy < 1e-3 and dth < math.radians(0.1)
+        a, b = e1_runs[True, 1.0].run.trajectory, e1_runs[True, factor].run.trajectory
+        before = int(np.searchsorted(a.x, -0.1))  # x increases along E1; belt 2 from x = 0
+        assert 10 < before < len(a.x) // 2
+        dxy, dth = _max_deviation(a, b, upto=before)
+        assert dxy < 1e-8 and dth < 1e-8
+        dxy, dth = _max_deviation(a, b)
+        assert dxy < 3e-3 and dth < math.radians(5)
         dxy, dth = _max_deviation(
             e1_runs[False, 1.0].run.trajectory, e1_runs[False, factor].run.trajectory
         )
-        # 3.7 degrees measured with the quadratic shell (its spin is no longer damped away)
-        assert dxy < 0.02 and dth < math.radians(5)
+        # 3.7 degrees measured with the quadratic shell (its spin is no longer damped away), 5.3
+        # with KP/BW's 5 x 5 x 1 shell, whose transfer turns the rounding alone into 3.2 (above)
+        assert dxy < 0.02 and dth < math.radians(8)
 
 
 @pytest.mark.longest
