@@ -178,7 +178,9 @@ def test_each_sample_holds_the_positions_of_its_own_time(timestep):
 def _e1_runs():
     """E1 at speed setting 3 (belt 2 at 1.57 m/s), the KPBW parcel at half, single and double
     mass; "scaled" also scales the contact stiffnesses and Young's modulus with the mass. At
-    single mass the scaled parameters are the defaults, so both are one run (five runs)."""
+    single mass the scaled parameters are the defaults, so both are one run (five runs). The
+    scaled runs stop at 0.9 s, past x = -0.1 m (reached at 0.82 s) and before the transfer onto
+    belt 2, which amplifies rounding (below)."""
     base = MujocoSimulator().consignment("KPBW")
     defaults = resolve("rigid")
     out = {}
@@ -193,7 +195,8 @@ def _e1_runs():
                 params.update(
                     {k: defaults[k] * factor for k in ("k_BePa", "k_CoPa", "k_MePa", "E_Pa")}
                 )
-            sim = MujocoSimulator(consignments={cons.name: cons})
+            options = SimOptions(duration=0.9 if scaled else None)
+            sim = MujocoSimulator(options, consignments={cons.name: cons})
             out[scaled, factor] = sim.run(params, TestCase("E1", cons.name, 3))
     return out
 
@@ -222,16 +225,14 @@ def test_e1_parcel_reaches_belt_2_speed_and_heavier_and_lighter_parcels_behave_a
     # little. The transfer onto belt 2 (x = 0) amplifies differences: with KP/BW's 5 x 5 x 1
     # shell the rounding of the half-mass run (1e-12 m before it) grows there to 1.2 mm and 3.2
     # degrees at this placement, as a 0.1 % change of a friction coefficient moves E1's exit
-    # heading by up to about 2 degrees; so the law is checked to rounding before the transfer,
-    # and the whole run within that floor
+    # heading by up to about 2 degrees; so the law is checked to rounding before the transfer
+    # (the scaled runs stop there)
     for factor in (0.5, 2.0):
         a, b = e1_runs[True, 1.0].run.trajectory, e1_runs[True, factor].run.trajectory
         before = int(np.searchsorted(a.x, -0.1))  # x increases along E1; belt 2 from x = 0
-        assert 10 < before < len(a.x) // 2
+        assert 10 < before < len(b.x) and b.x[-1] < 0.0 < a.x[-1]
         dxy, dth = _max_deviation(a, b, upto=before)
         assert dxy < 1e-8 and dth < 1e-8
-        dxy, dth = _max_deviation(a, b)
-        assert dxy < 3e-3 and dth < math.radians(5)
         dxy, dth = _max_deviation(
             e1_runs[False, 1.0].run.trajectory, e1_runs[False, factor].run.trajectory
         )
