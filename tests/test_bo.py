@@ -396,6 +396,46 @@ def test_noisy_ei_is_the_monte_carlo_mean_of_the_improvement_over_the_drawn_incu
     assert np.exp(nei(nei.P)).max() < 1e-2 * np.exp(nei(V)).max()
 
 
+def test_noisy_ei_with_pending_points_is_the_monte_carlo_gain_of_the_whole_batch():
+    from parcelfit.optimize.nei import NoisyEI
+
+    settings = BOSettings(acquisition="lognei", n_initial=24, n_restarts=0, transform="none")
+    _, fit = _fitted(_noisy_cost, settings)
+    gp = fit.gp
+    X = gp.X_train_
+    B = np.array([[0.32, 0.68], [0.6, 0.4]])  # chosen earlier in the batch, not yet observed
+    U = np.array([[0.3, 0.7], [0.5, 0.5], [0.9, 0.1], [0.33, 0.67]])
+    nei = NoisyEI(gp, seed=3, pending=B)
+    # brute force: the batch's gain E[max(f(x), f_B, y*) - y*] over joint draws at X, B and U,
+    # less B's own gain E[max(f_B, y*) - y*]
+    draws = gp.sample_y(np.vstack([X, B, U]), n_samples=40000, random_state=1)
+    best = draws[: len(X)].max(axis=0)
+    batch = np.maximum(draws[len(X) : len(X) + 2].max(axis=0), best)
+    brute = (np.maximum(draws[len(X) + 2 :], batch[None, :]) - best[None, :]).mean(axis=1)
+    # the acquisition is what x adds to B's own gain, which does not depend on x
+    added = np.exp(nei(U))
+    brute_added = brute - (batch - best).mean()
+    assert brute_added[[0, 3]].min() > 5e-4 and brute_added[[1, 2]].max() < 1e-4
+    assert added[[0, 3]] == pytest.approx(brute_added[[0, 3]], rel=0.25)  # 128 draws
+    assert np.abs(added[[1, 2]]).max() < 1e-4
+    # next to a point of B a candidate adds a ninth of what it would alone
+    alone = np.exp(NoisyEI(gp, seed=3)(U))
+    assert alone[3] == alone.max() and added[3] < 0.2 * alone[3]
+    assert np.array_equal(nei(U), NoisyEI(gp, seed=3, pending=B)(U))  # seeded
+
+
+def test_a_joint_batch_asks_distinct_points_replays_and_needs_noisy_ei():
+    settings = BOSettings(acquisition="lognei", batch="joint", n_samples=500, n_restarts=0)
+    bo, asked = _run(2, 6, settings)
+    _, asked_again = _run(2, 6, settings)
+    assert asked == asked_again
+    last = np.array([[p["a"], p["b"], p["c"]] for p in asked[-1]])
+    assert min(np.linalg.norm(last[i] - last[j]) for i in range(4) for j in range(i)) > 1e-3
+    assert bo.best()[1] < min(o.cost for o in bo.observations[:16])
+    with pytest.raises(ParcelfitError, match="invalid BO settings"):
+        BOSettings(acquisition="logei", batch="joint")
+
+
 def test_noisy_ei_becomes_ei_over_the_best_observation_when_there_is_no_noise():
     from parcelfit.optimize.nei import NoisyEI, log_h
 

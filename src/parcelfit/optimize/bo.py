@@ -77,7 +77,10 @@ class BOSettings:
     # (log expected improvement over ``incumbent``) or "ucb"
     acquisition: str = "lognei"
     polish: int = 2  # L-BFGS-B polishing starts from the best candidates (0: sampled only)
-    batch: str = "believer"  # "believer" (kriging believer, sequential) or "kmeans" (published)
+    # "believer" (kriging believer, sequential), "kmeans" (published) or "joint" (acquisition
+    # lognei only: each point by noisy EI given the batch so far and the pending points, whose
+    # latent values are drawn jointly with the evaluated points', nei.py; nothing is believed)
+    batch: str = "believer"
     ard: bool = True  # one length scale per input (False: one shared length scale)
     # a fitted signal variance sigma_f^2 times the Matern kernel (False: the Matern kernel alone
     # on the standardised cost, as scikit-learn's GP in the published work, Mango's surrogate)
@@ -100,7 +103,8 @@ class BOSettings:
             or self.noise not in ("fit", "fixed")
             or self.transform not in TRANSFORMS
             or self.acquisition not in ("ucb", "logei", "lognei")
-            or self.batch not in ("believer", "kmeans")
+            or self.batch not in ("believer", "kmeans", "joint")
+            or (self.batch == "joint" and self.acquisition != "lognei")
             or self.recommend not in ("posterior_mean", "best_observed")
             or self.incumbent not in ("observed", "mean")
         ):
@@ -410,12 +414,25 @@ class BatchBO:
         rng = np.random.default_rng(
             [self.seed, len(self.observations), len(self.pending) + len(extra_pending)]
         )
-        fitted = self._fit(rng, [*self.pending, *extra_pending])
+        joint = self.settings.batch == "joint"
+        pending = [*self.pending, *extra_pending]
+        fitted = self._fit(rng, [] if joint else pending)
         d = len(self.space)
         if fitted is None:  # fewer than two successes: keep exploring with random points
             return list(rng.random((n, d)))
         gp, y_best = fitted.gp, fitted.y_best
         cand = self._candidates(rng, d)
+        if joint:  # pending points drawn with the evaluated ones, not believed (nei.py)
+            picks: list[np.ndarray] = []
+            for _ in range(n):
+                B = np.array([*pending, *picks]) if pending or picks else None
+                seed = np.random.default_rng(
+                    [self.seed, len(gp.X_train_), len(pending) + len(picks)]
+                )
+                self._nei = (gp, NoisyEI(gp, int(seed.integers(2**31)), B))
+                u, _ = self._best_point(gp, y_best, cand)
+                picks.append(u)
+            return picks
         if self.settings.batch == "believer" or n == 1:
             batch: list[np.ndarray] = []
             X, y = gp.X_train_, gp.y_train_

@@ -30,6 +30,22 @@ all evaluated points; f(x) is conditioned on the draw at P only. When P holds ev
 (unless more than ``MAX_BASELINE`` points win a draw) the incumbent depends on f_P alone, so the
 estimate is unbiased, though not equal draw by draw to conditioning on every point.
 
+Pending points (``batch: joint``). A batch is chosen one point at a time; the points B already
+chosen (this batch's, and those asked before but not yet told) are not observed, so their
+latent values are drawn jointly with the evaluated points' from the same posterior (no
+believed values enter the GP). With b_s = max_j f_B,j and y*_s the draw's incumbent, the
+candidate adds to the batch what it improves beyond both:
+
+    qNEI(x | B) = E_s [ (b_s - y*_s)^+ ] + E_s [ EI(x | f_{P u B}; max(y*_s, b_s)) ],
+
+the value of the batch B u {x} (max(f(x), b, y*) - y*) averaged over the draws, as BoTorch's
+qNoisyExpectedImprovement is with pending points, with the expectation over f(x) in closed
+form. The first term does not depend on x (the same draws for every candidate), so the
+acquisition is the second alone: what x adds to the batch. Kept, the constant would flatten
+log qNEI wherever x adds little, and the L-BFGS-B polish would stop at its first step. f(x) is
+conditioned on the draws at P and at every point of B (B is never pruned), so a candidate near
+a point of B gains little where that point's draw is already high.
+
 Written here rather than taken from BoTorch because the default sampler's GP is scikit-learn's
 (the `botorch` sampler uses BoTorch's own qLogNEI with its own GP); the posterior covariances are
 formed from the fitted scikit-learn GP's kernel and Cholesky factor.
@@ -82,23 +98,28 @@ class NoisyEI:
     ``seed`` fixes the draws; built once per fitted GP and evaluated many times (the Monte Carlo
     candidates and the L-BFGS-B polish)."""
 
-    def __init__(self, gp: GaussianProcessRegressor, seed: int) -> None:
+    def __init__(
+        self, gp: GaussianProcessRegressor, seed: int, pending: np.ndarray | None = None
+    ) -> None:
         self.gp = gp
         X = np.asarray(gp.X_train_)
         n = len(X)
+        B = np.empty((0, X.shape[1])) if pending is None else np.asarray(pending, dtype=float)
         scale = float(prior_variance(gp, X[:1])[0]) or 1.0
-        # the posterior covariance at the evaluated points, k(X, X) - V^T V with V = L^-1 k(X, X)
-        K_XX = cross_kernel(gp, X, X)
-        V_X = solve_triangular(gp.L_, K_XX, lower=True, check_finite=False)
-        cov_all = K_XX - V_X.T @ V_X
-        draws_all = _normal_draws(n, seed)
+        # the posterior covariance at the evaluated and pending points, k(Z, Z) - V^T V with
+        # Z = [X; B] and V = L^-1 k(X, Z)
+        Z = np.vstack([X, B])
+        K_XZ = cross_kernel(gp, X, Z)
+        V_Z = solve_triangular(gp.L_, K_XZ, lower=True, check_finite=False)
+        cov_all = cross_kernel(gp, Z, Z) - V_Z.T @ V_Z
+        draws_all = _normal_draws(len(Z), seed)
         chol_all, jitter = _cholesky(cov_all, JITTER * scale)
-        mu_all = gp.predict(X)
-        f_all = mu_all[None, :] + draws_all @ chol_all.T  # (S, n) latent draws
-        winners, counts = np.unique(np.argmax(f_all, axis=1), return_counts=True)
+        mu_all = gp.predict(Z)
+        f_all = mu_all[None, :] + draws_all @ chol_all.T  # (S, n + |B|) latent draws
+        winners, counts = np.unique(np.argmax(f_all[:, :n], axis=1), return_counts=True)
         keep = winners[np.argsort(-counts, kind="stable")][:MAX_BASELINE]
-        keep = np.sort(keep)
-        self.P = X[keep]
+        keep = np.concatenate([np.sort(keep), np.arange(n, len(Z))])  # B is never pruned
+        self.P = Z[keep]
         # the baseline's block with the jitter the draws were made with: C C^T is then exactly
         # the covariance of the draws f_P, so that z_s below is standard normal
         self.chol, _ = _cholesky(cov_all[np.ix_(keep, keep)], jitter)
@@ -106,7 +127,8 @@ class NoisyEI:
         self.z = solve_triangular(
             self.chol, (f_all[:, keep] - mu_all[keep]).T, lower=True, check_finite=False
         )  # (|P|, S)
-        self.best = f_all.max(axis=1)  # (S,) each draw's incumbent, over every evaluated point
+        # (S,) each draw's incumbent: the best of the evaluated points and of B
+        self.best = f_all.max(axis=1)
         self._L_cross = solve_triangular(
             gp.L_, cross_kernel(gp, X, self.P), lower=True, check_finite=False
         )  # L^-1 k(X, P), for the posterior cross-covariance

@@ -4,14 +4,14 @@ A MuJoCo run's wall time on one core is taken from measurements (`benchmarks/ben
 ``parcelfit simulate`` on a 2-core machine): a run on E3 at the default time step takes about
 `RUN_SECONDS` ``["rigid"]`` seconds around a rigid content over the shell of 4 x 4 x 1 cells
 (BW, KP; 50 nodes), in proportion to the shell's nodes over a finer grid (KP/BW's 5 x 5 x 1
-cells, 72 nodes: about 11.5 s against 12.1 s measured), and `RUN_SECONDS` ``["soft"]`` around the polybag's soft one. A rig that refines the step
-(``step_refinement`` in its file: E1 and E2a, 2) costs that many times more, and a rig whose
-runs last longer than E3's costs more in proportion; an explicit ``timestep`` scales by the
-default step over it. The
-rigid-box reference and the analytic test simulator are counted as fast; an external
-solver's time is unknown. Machines differ by a factor of two or more, and a calibration that
-passes its validation stops before its budget: an estimate says how many simulations a job
-will run at most and roughly how long that takes, not when it ends.
+cells, 72 nodes: about 11.5 s against 12.1 s measured), and `RUN_SECONDS` ``["soft"]`` around
+the polybag's soft one. A rig that refines the step (``step_refinement`` in its file: E1 and
+E2a, 2) costs that many times more, and a rig whose runs last longer than E3's costs more in
+proportion; an explicit ``timestep`` scales by the default step over it. The rigid-box
+reference and the analytic test simulator are counted as fast; an external solver's time is
+unknown. Machines differ by a factor of two or more, and a calibration that passes its
+validation stops before its budget: an estimate says how many simulations a job will run at
+most and roughly how long that takes, not when it ends.
 """
 
 from __future__ import annotations
