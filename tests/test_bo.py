@@ -434,6 +434,27 @@ def test_a_joint_batch_asks_distinct_points_replays_and_needs_noisy_ei():
     assert bo.best()[1] < min(o.cost for o in bo.observations[:16])
     with pytest.raises(ParcelfitError, match="invalid BO settings"):
         BOSettings(acquisition="logei", batch="joint")
+    with pytest.raises(ParcelfitError, match="invalid BO settings"):
+        BOSettings(nei_samples=100)  # Sobol draws: a power of 2
+
+
+def test_more_noisy_ei_draws_come_closer_to_the_exact_expectation():
+    from parcelfit.optimize.nei import NoisyEI
+
+    settings = BOSettings(acquisition="lognei", n_initial=24, n_restarts=0, transform="none")
+    _, fit = _fitted(_noisy_cost, settings)
+    gp = fit.gp
+    U = np.random.default_rng(4).random((300, 2))
+    exact = NoisyEI(gp, seed=0, n_samples=8192)(U)  # log NEI
+    big = exact > exact.max() - np.log(1000.0)  # where the improvement is not negligible
+    assert big.sum() >= 20
+    errors = []
+    for n in (32, 512):
+        err = [
+            np.median(np.abs(NoisyEI(gp, seed=s, n_samples=n)(U[big]) - exact[big])) for s in (1, 2)
+        ]
+        errors.append(np.mean(err))
+    assert errors[1] < 0.3 * errors[0] and errors[1] < 0.03  # measured 0.10 and 0.016
 
 
 def test_noisy_ei_becomes_ei_over_the_best_observation_when_there_is_no_noise():

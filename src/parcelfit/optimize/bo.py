@@ -81,6 +81,7 @@ class BOSettings:
     # lognei only: each point by noisy EI given the batch so far and the pending points, whose
     # latent values are drawn jointly with the evaluated points', nei.py; nothing is believed)
     batch: str = "believer"
+    nei_samples: int = 128  # draws of the latent function (lognei), a power of 2 (Sobol)
     ard: bool = True  # one length scale per input (False: one shared length scale)
     # a fitted signal variance sigma_f^2 times the Matern kernel (False: the Matern kernel alone
     # on the standardised cost, as scikit-learn's GP in the published work, Mango's surrogate)
@@ -104,6 +105,8 @@ class BOSettings:
             or self.transform not in TRANSFORMS
             or self.acquisition not in ("ucb", "logei", "lognei")
             or self.batch not in ("believer", "kmeans", "joint")
+            or self.nei_samples < 2
+            or self.nei_samples & (self.nei_samples - 1)
             or (self.batch == "joint" and self.acquisition != "lognei")
             or self.recommend not in ("posterior_mean", "best_observed")
             or self.incumbent not in ("observed", "mean")
@@ -375,7 +378,7 @@ class BatchBO:
         if self.settings.acquisition == "lognei":
             if self._nei is None or self._nei[0] is not gp:  # one NoisyEI per fitted GP
                 seed = int(np.random.default_rng([self.seed, len(gp.X_train_)]).integers(2**31))
-                self._nei = (gp, NoisyEI(gp, seed))
+                self._nei = (gp, NoisyEI(gp, seed, None, self.settings.nei_samples))
             return self._nei[1](U)
         mu, sigma = _predict(gp, U)
         if self.settings.acquisition == "ucb":
@@ -429,7 +432,10 @@ class BatchBO:
                 seed = np.random.default_rng(
                     [self.seed, len(gp.X_train_), len(pending) + len(picks)]
                 )
-                self._nei = (gp, NoisyEI(gp, int(seed.integers(2**31)), B))
+                self._nei = (
+                    gp,
+                    NoisyEI(gp, int(seed.integers(2**31)), B, self.settings.nei_samples),
+                )
                 u, _ = self._best_point(gp, y_best, cand)
                 picks.append(u)
             return picks

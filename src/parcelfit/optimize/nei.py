@@ -15,7 +15,7 @@ where, given a draw f_P of the latent function at P, f(x) is normal with
     m = mu(x) + S_xP S_PP^-1 (f_P - mu_P),   s^2 = sigma^2(x) - S_xP S_PP^-1 S_Px,
 
 mu and S the GP's posterior mean and covariance, and h(z) = z Phi(z) + phi(z). The expectation
-is a sample average over ``N_SAMPLES`` scrambled-Sobol normal draws z_s of f_P = mu_P + C z_s
+is a sample average over ``N_SAMPLES`` (or ``n_samples``) scrambled-Sobol normal draws z_s of f_P = mu_P + C z_s
 (C C^T = S_PP, C lower triangular), fixed for one fitted GP so that the acquisition is a smooth
 deterministic function of x (sample average approximation). With C^-1 (f_P - mu_P) = z_s and
 W = (C^-1 S_Px)^T, the conditional mean is m_s = mu(x) + W z_s and s^2 = sigma^2(x) - |W|^2, so
@@ -99,7 +99,11 @@ class NoisyEI:
     candidates and the L-BFGS-B polish)."""
 
     def __init__(
-        self, gp: GaussianProcessRegressor, seed: int, pending: np.ndarray | None = None
+        self,
+        gp: GaussianProcessRegressor,
+        seed: int,
+        pending: np.ndarray | None = None,
+        n_samples: int = N_SAMPLES,
     ) -> None:
         self.gp = gp
         X = np.asarray(gp.X_train_)
@@ -112,7 +116,7 @@ class NoisyEI:
         K_XZ = cross_kernel(gp, X, Z)
         V_Z = solve_triangular(gp.L_, K_XZ, lower=True, check_finite=False)
         cov_all = cross_kernel(gp, Z, Z) - V_Z.T @ V_Z
-        draws_all = _normal_draws(len(Z), seed)
+        draws_all = _normal_draws(len(Z), seed, n_samples)
         chol_all, jitter = _cholesky(cov_all, JITTER * scale)
         mu_all = gp.predict(Z)
         f_all = mu_all[None, :] + draws_all @ chol_all.T  # (S, n + |B|) latent draws
@@ -153,10 +157,10 @@ class NoisyEI:
         return top + np.log(np.exp(log_ei - top[:, None]).mean(axis=1))
 
 
-def _normal_draws(dim: int, seed: int) -> np.ndarray:
-    """``N_SAMPLES`` x ``dim`` standard normal draws by scrambled Sobol points (seeded)."""
+def _normal_draws(dim: int, seed: int, n: int = N_SAMPLES) -> np.ndarray:
+    """``n`` x ``dim`` standard normal draws by scrambled Sobol points (seeded)."""
     sobol = qmc.Sobol(d=dim, scramble=True, seed=np.random.default_rng([seed, 0x4E1]))
-    u = sobol.random(N_SAMPLES)
+    u = sobol.random(n)
     return ndtri(np.clip(u, 1e-10, 1 - 1e-10))
 
 

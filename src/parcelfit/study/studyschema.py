@@ -207,6 +207,7 @@ _SETTING_COUNTS = {
     "n_samples": Whole(ge=10, le=1_000_000),
     "n_restarts": Whole(ge=0, le=100),
     "polish": Whole(ge=0, le=100),
+    "nei_samples": Whole(ge=2, le=65536),  # a power of 2, checked when the settings are made
 }
 
 

@@ -31,8 +31,9 @@ rigid content, full around a soft one. ``shell_cells`` (optional, with an interp
 parcel's length, width and height (MuJoCo's multi-cell flexes; default one cell), so that a
 rim can bend apart from the face it borders. A type's choice is the cheapest shell that
 reproduces the full shell at a fine step and mesh (the reference) on the E3 ensemble and keeps
-its outcome when refined: BW, KP/BW and KP take a trilinear shell over 4 x 4 x 1 cells
-(docs/research/multicell-shell.md), PB the full shell around its soft content. ``rim_brace``
+its outcome when refined: BW and KP take a trilinear shell over 4 x 4 x 1 cells
+(docs/research/multicell-shell.md), KP/BW over 5 x 5 x 1, whose cells' boundaries lie on its
+content's ends (docs/research/rim-brace/), PB the full shell around its soft content. ``rim_brace``
 (optional, with an interpolated ``shell`` whose cells' boundaries fall on the content's ends):
 braces across the rim cells, as a share of the stiffness of an ideal wedge of the packaging's
 sheets (`parcelfit.sim.mujoco.rim_brace`; default 0, none).
