@@ -16,14 +16,20 @@ runner = CliRunner()
 
 
 def test_per_run_seconds_follow_the_content_the_rig_and_the_step():
-    e3 = run_seconds(SimulatorConfig("mujoco", rig="E3", consignment="KP"))
-    assert e3 == RUN_SECONDS["rigid"]  # over 4 x 4 x 1 cells (5 x 5 x 2 nodes)
+    e3 = run_seconds(SimulatorConfig("mujoco", rig="E3", consignment="BW"))
+    assert e3 == RUN_SECONDS["rigid"]  # over 4 x 4 x 1 cells (5 x 5 x 2 nodes), 30 mm mesh
+    # KP's contact points 22.5 mm apart: 30 / 22.5 times; a coarser mesh is not cheaper
+    kp = run_seconds(SimulatorConfig("mujoco", rig="E3", consignment="KP"))
+    assert kp == pytest.approx(e3 * 0.03 / 0.0225, rel=1e-12)
+    kp30 = SimulatorConfig("mujoco", rig="E3", consignment="KP", spacing=0.03)
+    assert run_seconds(kp30) == e3
+    assert run_seconds(SimulatorConfig("mujoco", rig="E3", consignment="KP", spacing=0.06)) == e3
     # KP/BW's 5 x 5 x 1 cells: in proportion to the nodes, 72 against 50 (12.1 s measured)
     kpbw = run_seconds(SimulatorConfig("mujoco", rig="E3", consignment="KPBW"))
     assert kpbw == pytest.approx(RUN_SECONDS["rigid"] * 72 / 50, rel=1e-12)
     cells4 = SimulatorConfig("mujoco", rig="E3", consignment="KPBW", shell_cells=(4, 4, 1))
     assert run_seconds(cells4) == e3
-    coarse = SimulatorConfig("mujoco", rig="E3", consignment="KP", shell_cells=(2, 2, 1))
+    coarse = SimulatorConfig("mujoco", rig="E3", consignment="BW", shell_cells=(2, 2, 1))
     assert run_seconds(coarse) == e3  # not counted as cheaper
     # E1 halves the step (step_refinement 2) and runs longer than E3
     e1 = run_seconds(SimulatorConfig("mujoco", rig="E1", consignment="KPBW"))

@@ -368,7 +368,15 @@ def test_make_simulator_builds_what_the_configuration_says(tmp_path):
     assert content_kind(config) == "soft"
     sim = make_simulator(config)
     assert isinstance(sim, MujocoSimulator)
-    assert (sim.options.scene.timestep, sim.options.scene.spacing) == (0.002, 0.03)
+    assert (sim.options.scene.timestep, sim.options.scene.spacing) == (0.002, None)
+    # no spacing given: each type's own mesh (KP's 22.5 mm), else 30 mm; a soft content's film
+    scene = sim.options.scene
+    assert [scene.spacing_of(load_consignment(n)) for n in ("KP", "KPBW", "PB")] == [
+        0.0225,
+        0.03,
+        scene.soft_shell_spacing,
+    ]
+    assert dataclasses.replace(scene, spacing=0.05).spacing_of(load_consignment("KP")) == 0.05
     assert sim.options.wall_limit == 30 and sim.rig("mine").name == "mine"
     recorder = sim.with_options(record_vertices=True)
     assert recorder.options == dataclasses.replace(sim.options, record_vertices=True)

@@ -15,7 +15,8 @@ experiments do (method.md sections 2 and 3):
 * belt speeds: every drive x (1 + U(-speed_dev, speed_dev)) (real belts deviate up to 3 %);
 * tracking noise: N(0, tracking_sd) [m] on x and y, N(0, heading_sd) [rad] on theta;
 * resolution: the "real" runs use the shell mesh ``real_spacing`` (default 30 mm) for rigid
-  contents and ``real_soft_spacing`` (default 40 mm, finer than the model's 50 mm) around a soft
+  contents, or the type's own mesh where that is finer (KP's 22.5 mm, its consignment file's
+  ``mesh_spacing``), and ``real_soft_spacing`` (default 40 mm, finer than the model's 50 mm) around a soft
   content, whose own vertices lie ``real_content_spacing`` apart (default None: the model's own,
   100 mm), and MuJoCo's collision tolerance is ``real_ccd_tolerance`` (default None: the
   model's own, `SceneOptions.ccd_tolerance`). A twin is only a test if its "real" side is at
@@ -198,7 +199,9 @@ def _twin_run(job: TwinJob) -> tuple[Run, float]:
     scene = SceneOptions(
         timestep=s.step_for(cons.soft),
         **_friction_options(s),
-        spacing=s.real_spacing,
+        # never coarser than the model's own mesh for the type (a twin tests the model only
+        # where its "real" side is at least as converged)
+        spacing=min(s.real_spacing, SceneOptions().spacing_of(cons)),
         soft_shell_spacing=s.real_soft_spacing,
         soft_spacing=s.real_content_spacing or SceneOptions.soft_spacing,
         ccd_tolerance=s.real_ccd_tolerance,
@@ -394,7 +397,8 @@ def make_twin_dataset(
         description=(
             f"SYNTHETIC twin-experiment data, not measured: simulated with parcelfit's MuJoCo model from hidden "
             f"true parameters (truth.yaml), {s.runs} specimens per test case with friction, stiffness, placement, "
-            f"belt-speed and tracking variation; shell mesh {s.real_spacing * 1e3:g} mm (rigid contents), "
+            f"belt-speed and tracking variation; shell mesh {s.real_spacing * 1e3:g} mm (rigid contents, or the "
+            f"type's own where finer), "
             f"{s.real_soft_spacing * 1e3:g} mm (soft contents, their own vertices "
             f"{(s.real_content_spacing or steps.soft_spacing) * 1e3:g} mm apart), time step "
             + (

@@ -62,8 +62,12 @@ def simulate(
         ),
     ] = None,
     spacing: Annotated[
-        float, typer.Option(help="Shell mesh spacing for rigid contents [m].")
-    ] = 0.03,
+        float | None,
+        typer.Option(
+            help="Shell mesh spacing for rigid contents [m].",
+            show_default="the type's own (mesh_spacing), else 0.03 m",
+        ),
+    ] = None,
     film_spacing: Annotated[
         float | None,
         typer.Option(

@@ -45,6 +45,12 @@ def _check_step(step: float, what: str) -> None:
         )
 
 
+# the shell's mesh spacing around a rigid content where neither the scene nor the type sets one
+# [m]: BW and KP/BW keep their E3 outcomes on a 22.5 mm mesh (docs/research/rim-brace/,
+# docs/research/e3-contact-law/convergence/); KP takes 22.5 mm (docs/research/kp-mesh.md)
+DEFAULT_SPACING = 0.03
+
+
 @dataclass(frozen=True)
 class SceneOptions:
     """Numerical settings of a scene (not calibrated): step [s], mesh spacing [m], etc."""
@@ -53,7 +59,9 @@ class SceneOptions:
     # transit times are converged to a few ms (at 1/1200 s E1 setting 3 came out 20-25 ms short,
     # docs/research/transit-convergence.md), 1/1200 s for the full shell around a soft content
     timestep: float | None = None
-    spacing: float = 0.03  # shell grid spacing, rigid contents [m]
+    # shell grid spacing around a rigid content [m]; None: the type's own (`mesh_spacing` of its
+    # consignment file) or else DEFAULT_SPACING (`spacing_of`)
+    spacing: float | None = None
     # shell grid spacing around a soft content [m]: 50 mm spins or slides every E3 placement
     # as 30 mm does (20 per setting, with the 100 mm content) at 0.7-0.88 times 40 mm's cost
     # (docs/research/pb-speed.md)
@@ -266,7 +274,7 @@ class SceneOptions:
             raise ParcelfitError(
                 f"membrane_cap must be positive [N/m] or None, got {self.membrane_cap}"
             )
-        if not 0.003 <= self.spacing <= 0.2:
+        if self.spacing is not None and not 0.003 <= self.spacing <= 0.2:
             raise ParcelfitError(
                 f"mesh spacing must lie in [3, 200] mm, got {self.spacing * 1e3:g} mm"
             )
@@ -313,6 +321,16 @@ class SceneOptions:
         if self.shell_dof == "auto" and consignment.shell is not None:
             return dof, consignment.shell_cells
         return dof, (1, 1, 1)
+
+    def spacing_of(self, consignment: Consignment) -> float:
+        """The shell's mesh spacing [m] for ``consignment``: around a soft content
+        ``soft_shell_spacing``; around a rigid one ``spacing`` if set, else the type's own
+        (``mesh_spacing``), else `DEFAULT_SPACING`."""
+        if consignment.soft:
+            return self.soft_shell_spacing
+        if self.spacing is not None:
+            return self.spacing
+        return consignment.mesh_spacing or DEFAULT_SPACING
 
     def rim_brace_of(self, consignment: Consignment) -> float:
         """The share of an ideal wedge's stiffness the braces across the rim cells of

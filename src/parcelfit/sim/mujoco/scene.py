@@ -248,7 +248,7 @@ def build_scene(
         (L, W),
         (cL, cW),
         half_height,
-        opt.soft_shell_spacing if soft else opt.spacing,
+        opt.spacing_of(consignment),
         consignment.bulge,
         content_half_height=cH / 2,
         contact=r + content_radius,  # where a shell element touches the content
