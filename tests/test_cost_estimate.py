@@ -18,12 +18,8 @@ runner = CliRunner()
 def test_per_run_seconds_follow_the_content_the_rig_and_the_step():
     e3 = run_seconds(SimulatorConfig("mujoco", rig="E3", consignment="BW"))
     assert e3 == RUN_SECONDS["rigid"]  # over 4 x 4 x 1 cells (5 x 5 x 2 nodes), 30 mm mesh
-    # KP's contact points 22.5 mm apart: 30 / 22.5 times; a coarser mesh is not cheaper
-    kp = run_seconds(SimulatorConfig("mujoco", rig="E3", consignment="KP"))
-    assert kp == pytest.approx(e3 * 0.03 / 0.0225, rel=1e-12)
-    kp30 = SimulatorConfig("mujoco", rig="E3", consignment="KP", spacing=0.03)
-    assert run_seconds(kp30) == e3
-    assert run_seconds(SimulatorConfig("mujoco", rig="E3", consignment="KP", spacing=0.06)) == e3
+    # the mesh is not counted (KP's 22.5 mm cost 1.01 times 30 mm in bench_sim.py)
+    assert run_seconds(SimulatorConfig("mujoco", rig="E3", consignment="KP")) == e3
     # KP/BW's 5 x 5 x 1 cells: in proportion to the nodes, 72 against 50 (12.1 s measured)
     kpbw = run_seconds(SimulatorConfig("mujoco", rig="E3", consignment="KPBW"))
     assert kpbw == pytest.approx(RUN_SECONDS["rigid"] * 72 / 50, rel=1e-12)

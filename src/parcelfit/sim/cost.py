@@ -3,9 +3,8 @@
 A MuJoCo run's wall time on one core is taken from measurements (`benchmarks/bench_sim.py` and
 ``parcelfit simulate`` on a 2-core machine): a run on E3 at the default time step takes about
 `RUN_SECONDS` ``["rigid"]`` seconds around a rigid content over the shell of 4 x 4 x 1 cells
-(BW; 50 nodes) with contact points 30 mm apart, in proportion to the shell's nodes over a finer
-grid (KP/BW's 5 x 5 x 1 cells, 72 nodes: about 11.5 s against 12.1 s measured) and to 30 mm over
-a finer mesh's spacing (KP's 22.5 mm), and `RUN_SECONDS` ``["soft"]`` around
+(BW, KP; 50 nodes), in proportion to the shell's nodes over a finer grid (KP/BW's 5 x 5 x 1
+cells, 72 nodes: about 11.5 s against 12.1 s measured), and `RUN_SECONDS` ``["soft"]`` around
 the polybag's soft one. A rig that refines the step (``step_refinement`` in its file: E1 and
 E2a, 2) costs that many times more, and a rig whose runs last longer than E3's costs more in
 proportion; an explicit ``timestep`` scales by the default step over it. The rigid-box
@@ -50,7 +49,6 @@ def run_seconds(
     if config.backend == "rigidbox":
         return RIGIDBOX_SECONDS
     from parcelfit.sim.mujoco import load_consignment, load_rig
-    from parcelfit.sim.mujoco.options import DEFAULT_SPACING
 
     try:
         loaded = load_rig(_file_or_name(rig, config.rig or "E3"))
@@ -69,10 +67,8 @@ def run_seconds(
         # a coarser grid is not counted as cheaper (the contacts and the rig cost the same)
         cells = config.shell_cells or kind.shell_cells
         factor *= max(1.0, _shell_nodes(cells) / _shell_nodes((4, 4, 1)))
-        # a finer mesh of contact points than 30 mm: in proportion to 30 mm over its spacing
-        # (KP's 22.5 mm: 1.33; 1.4 measured, 16.6 s against 11.6 s in two-process ensembles)
-        spacing = config.spacing or kind.mesh_spacing or DEFAULT_SPACING
-        factor *= max(1.0, DEFAULT_SPACING / spacing)
+        # the mesh of contact points is not counted: KP's 22.5 mm took 1.01 times its former
+        # 30 mm (`python benchmarks/bench_sim.py --types KP --peer spacing=0.03`)
     return RUN_SECONDS[kind.content_kind] * factor
 
 
