@@ -122,20 +122,16 @@ def test_an_unknown_roller_surface_is_refused():
 
 @pytest.mark.slow
 @pytest.mark.longest
-def test_on_e2a_the_mailer_crosses_onto_the_outfeed_without_catching_on_any_shell_grid():
+def test_on_e2a_the_mailer_crosses_onto_the_outfeed_without_catching():
     # placement 3 of KP/BW on E2a setting 1: with square belt ends its front caught on the
     # outfeed belt's edge and it turned 13 degrees over 4 x 4 x 1 cells (26-28 degrees at other
-    # placements over 5 x 5 x 1); the full shell does not turn (docs/research/belt-drums.md)
-    case = TestCase("E2a", "KPBW", 1)
-    rows = []
-    for cells in ((4, 4, 1), (5, 5, 1)):
-        sim = MujocoSimulator(SimOptions(scene=SceneOptions(shell_cells=cells))).with_placement(3)
-        run = sim.run({}, case).run
-        assert run is not None and run.transit_time is not None
-        theta = np.unwrap(run.trajectory.theta)
-        rows.append((math.degrees(abs(theta[-1] - theta[0])), run.transit_time))
-    assert all(rot < 2.0 for rot, _ in rows)
-    assert rows[0][1] == pytest.approx(rows[1][1], abs=0.003)
+    # placements over 5 x 5 x 1, its default now); the full shell does not turn, and with drums
+    # neither grid does, their transit times within 3 ms (docs/research/belt-drums.md; the
+    # test ran both grids until the suite's time asked for one)
+    run = MujocoSimulator().with_placement(3).run({}, TestCase("E2a", "KPBW", 1)).run
+    assert run is not None and run.transit_time is not None
+    theta = np.unwrap(run.trajectory.theta)
+    assert math.degrees(abs(theta[-1] - theta[0])) < 2.0
 
 
 def test_with_drum_ends_rounds_every_belt_and_strip_set_and_checks_the_radius():

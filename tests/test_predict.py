@@ -148,6 +148,10 @@ def test_the_seed_decides(study, tmp_path):
     # other inputs in the same folder are refused, not mixed
     other = _predict(study, tmp_path / "a", "--seed", "5")
     assert other.exit_code == 2 and "a prediction with other inputs" in other.output
+    fewer = _predict(study, tmp_path / "a", "--seed", "3", "--scatter-runs", "3")
+    assert fewer.exit_code == 2 and "a prediction with other inputs" in fewer.output
+    one = _predict(study, tmp_path / "d", "--scatter-runs", "1")
+    assert one.exit_code == 2 and "--scatter-runs" in one.output
 
 
 @pytest.mark.parametrize(

@@ -275,12 +275,12 @@ def test_every_under_converged_step_is_counted_and_the_default_leaves_none():
     flags every step; the diagnostics count the steps. At the default iteration cap the
     polybag's 3-D content is solved to tolerance on every step; at the former cap of 50 it was
     under-converged on every step."""
-    sim = MujocoSimulator(SimOptions(duration=0.2))
+    sim = MujocoSimulator(SimOptions(duration=0.1))  # 120 steps around the soft content
     rigid = sim.run({}, TestCase("E3", "KPBW", 1)).diagnostics
     assert rigid["under_converged_steps"] == 0
     soft = sim.run({}, TestCase("E3", "PB", 1)).diagnostics
     assert soft["steps"] >= 100 and soft["under_converged_steps"] == 0
-    capped = MujocoSimulator(SimOptions(scene=SceneOptions(iterations=50), duration=0.2))
+    capped = MujocoSimulator(SimOptions(scene=SceneOptions(iterations=50), duration=0.1))
     low = capped.run({}, TestCase("E3", "PB", 1)).diagnostics
     assert low["steps"] - 2 <= low["under_converged_steps"] <= low["steps"] + 2
     assert low["mujoco_warnings"] >= 1

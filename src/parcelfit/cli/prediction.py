@@ -47,6 +47,14 @@ def predict(
         int, typer.Option(min=0, help="Seed of the drawn sets and the placements.")
     ] = 0,
     speed_deviation: SpeedDeviationOption = 0.03,
+    scatter_runs: Annotated[
+        int,
+        typer.Option(
+            min=2,
+            help="Runs of the recommended parameters per fitted and validation case, for the "
+            "real runs' scatter.",
+        ),
+    ] = 10,
     out: Annotated[
         Path | None,
         typer.Option(help="Output folder (default: predict-RIG-TYPE-SETTING in the study folder)."),
@@ -82,6 +90,7 @@ def predict(
             placements=placements,
             seed=seed,
             speed_deviation=speed_deviation,
+            scatter_runs=scatter_runs,
             out=out,
             executor=executor,
             workers=workers,

@@ -35,8 +35,8 @@ real belt speeds deviate up to 3 % short-term, D = 0.03 by default), so a placem
 their drive speeds across sets as they share the start pose.
 
 **The real runs' scatter** is estimated against the recommended parameters simulated at
-`SCATTER_RUNS` seeded placements (drives as above) on every fitted and validation case of the
-study (`parcelfit.study.run_scatter`).
+`SCATTER_RUNS` (or ``scatter_runs``) seeded placements (drives as above) on every fitted and
+validation case of the study (`parcelfit.study.run_scatter`).
 
 **Resumable.** The simulations are recorded in their own store, ``predict.sqlite`` in the
 output folder (`parcelfit.study.store`, rows of kind ``screen``: iteration 0 the prediction's,
@@ -367,8 +367,13 @@ def _inputs_record(
     seeds: Sequence[int],
     seed: int,
     speed_deviation: float,
+    scatter_runs: int = SCATTER_RUNS,
 ) -> dict[str, Any]:
+    # the scatter's run count only where it is not the default, so that a prediction made
+    # before the option existed resumes
+    extra = {} if scatter_runs == SCATTER_RUNS else {"scatter_runs": scatter_runs}
     return {
+        **extra,
         "study": str(study_dir.resolve()),
         "rig": design.rig,
         "consignment": design.consignment,
@@ -395,6 +400,7 @@ def predict(
     placements: int = 10,
     seed: int = 0,
     speed_deviation: float = SPEED_DEVIATION,
+    scatter_runs: int = SCATTER_RUNS,
     out: str | Path | None = None,
     executor: str = "local",
     workers: int | None = None,
@@ -406,7 +412,8 @@ def predict(
 ) -> Prediction:
     """Predict ``rig`` x ``consignment`` x ``setting`` from the calibration in ``folder``:
     ``sets`` parameter sets of its plausible set times ``placements`` seeded placements (each
-    with its drives ``speed_deviation`` [-] off their mean speeds, seeded the same way),
+    with its drives ``speed_deviation`` [-] off their mean speeds, seeded the same way) and the
+    recommended parameters at ``scatter_runs`` placements per fitted and validation case,
     simulated in ``executor`` (serial, local with ``workers`` processes, dask at
     ``scheduler``), recorded in ``out``/predict.sqlite (resumable), summarised and written
     (module docstring). ``progress`` receives one event per finished simulation; ``on_cost``
@@ -423,6 +430,10 @@ def predict(
             f"unknown table format {shown(table_format)}", fix=f"use one of {list(TABLE_FORMATS)}"
         )
     check_speed_deviation(speed_deviation)
+    if not 2 <= scatter_runs <= MAX_PLACEMENTS:
+        raise ParcelfitError(
+            f"--scatter-runs {scatter_runs}: give from 2 to {MAX_PLACEMENTS} runs per case"
+        )
     inputs = load_inputs(folder)
     design = check_design(rig, consignment, setting)
     simulator = design_simulator(inputs.study, design)
@@ -431,7 +442,7 @@ def predict(
     placed = _placed(simulator)
     seeds = placement_seeds(placements, seed) if placements > 1 or placed else [0]
     deviation = speed_deviation if placed and varies_drives(simulator) else 0.0
-    scatter_jobs = _scatter_jobs(inputs.folder, inputs.study, seed)
+    scatter_jobs = _scatter_jobs(inputs.folder, inputs.study, seed, scatter_runs)
     full = [{**inputs.study.fixed, **s} for s in drawn]
     out_dir = Path(out) if out is not None else default_out(inputs.folder, design)
     check_writable(out_dir, (PREDICT_STORE,))
@@ -440,7 +451,9 @@ def predict(
     try:
         store = Store(out_dir / PREDICT_STORE)
         try:
-            record = _inputs_record(inputs.folder, design, drawn, seeds, seed, deviation)
+            record = _inputs_record(
+                inputs.folder, design, drawn, seeds, seed, deviation, scatter_runs
+            )
             known = store.get_meta("predict")
             if known is None:
                 store.set_meta("predict", record)
@@ -585,15 +598,17 @@ class ScatterJobs:
     cases: list[tuple[CaseSpec, dict[str, float], list[int]]]
 
 
-def _scatter_jobs(folder: Path, study: Study, seed: int) -> ScatterJobs | None:
-    """The recommended parameters at `SCATTER_RUNS` seeded placements on every fitted and
-    validation case of ``study``; None when the calibration in ``folder`` has no ok fit."""
+def _scatter_jobs(
+    folder: Path, study: Study, seed: int, runs: int = SCATTER_RUNS
+) -> ScatterJobs | None:
+    """The recommended parameters at ``runs`` seeded placements on every fitted and validation
+    case of ``study``; None when the calibration in ``folder`` has no ok fit."""
     evaluation = stored_recommendation(folder)
     if evaluation is None:
         return None
     simulator = make_simulator(study.simulator)
     placed = _placed(simulator)
-    seeds = placement_seeds(SCATTER_RUNS, seed) if placed else [0]
+    seeds = placement_seeds(runs, seed) if placed else [0]
     params = {**study.fixed, **evaluation.params}
     specs: dict[str, CaseSpec] = {}
     for spec in (*study.cases, *study.validation_cases):
