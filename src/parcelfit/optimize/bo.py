@@ -18,11 +18,13 @@ Two configurations of one `BatchBO` (`BOSettings`):
   batch, recommendation the lowest observed cost.
 
 Common to both: the GP models the standardised negative (transformed) cost; pending points
-(asked, not yet told) enter as kriging-believer fantasies so asking again does not repeat them;
+(asked, not yet told) enter as kriging-believer fantasies (``batch: joint``: as noisy EI's jointly
+drawn pending points) so asking again does not repeat them;
 failed evaluations are told with ``cost=None`` and kept with the worst finite cost seen so far
 (the store keeps the raw failure); every random draw of ask() uses numpy's generator seeded with
 (seed, number of observations, number of pending points), and noisy EI's draws with (seed,
-number of points the GP was conditioned on, believed ones included), so the same history gives
+number of points the GP was conditioned on, believed ones included; with ``batch: joint`` the
+number of evaluated and of pending points), so the same history gives
 the same batch, which is what makes a resumed study replay exactly.
 """
 
