@@ -48,7 +48,7 @@ def run_seconds(
         return None
     if config.backend == "rigidbox":
         return RIGIDBOX_SECONDS
-    from parcelfit.sim.mujoco import load_consignment, load_rig
+    from parcelfit.sim.mujoco import SceneOptions, load_consignment, load_rig
 
     try:
         loaded = load_rig(_file_or_name(rig, config.rig or "E3"))
@@ -65,7 +65,8 @@ def run_seconds(
         # an interpolated shell's nodes over a 4 x 4 x 1 grid's: 12.1 s against 8.3 s measured
         # for 5 x 5 x 1 against 4 x 4 x 1 cells (`benchmarks/bench_sim.py`), 72 against 50 nodes;
         # a coarser grid is not counted as cheaper (the contacts and the rig cost the same)
-        cells = config.shell_cells or kind.shell_cells
+        scene = SceneOptions(shell_dof=config.shell_dof or "auto", shell_cells=config.shell_cells)
+        _, cells = scene.shell_of(kind)  # the grid the scene builds for this type
         factor *= max(1.0, _shell_nodes(cells) / _shell_nodes((4, 4, 1)))
         # the mesh of contact points is not counted: KP's 22.5 mm took 1.01 times its former
         # 30 mm (`python benchmarks/bench_sim.py --types KP --peer spacing=0.03`)
