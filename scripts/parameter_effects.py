@@ -240,6 +240,7 @@ def main(argv: list[str] | None = None) -> int:
         f"Written by `python scripts/parameter_effects.py --rig {args.rig} --consignment "
         f"{args.consignment} --setting {args.setting} --placements {args.placements} --step "
         f"{args.step:g}"
+        + (f" --params {' '.join(args.params)}" if list(args.params) != list(PUBLISHED_E3) else "")
         + (f" --scene {' '.join(args.scene)}" if args.scene else "")
         + f" --out {args.out}`: {len(runs)} simulations ({failed} not ok) in {wall:.0f} s on "
         f"{args.workers} processes. Effect: the response between the runs at the two ends of "
