@@ -387,6 +387,67 @@ CASES = {
             "use one of E1, E2a, E2b, E3 or the path of a .yaml file",
         ),
     ),
+    "study mujoco case on an unknown rig": (
+        "study",
+        lambda d: d.update(
+            simulator={"backend": "mujoco", "rig": "E3", "consignment": "KPBW"},
+            reference=None,
+            cases=[{"dataset": "data", "speed_setting": 1}, {"rig": "B9", "speed_setting": 1}],
+        ),
+        (
+            "cases[1].rig",
+            "no rig named 'B9': a case's rig is a bundled rig, the simulator's rig or one of "
+            "simulator.rigs",
+            "name one of ['E1', 'E2a', 'E2b', 'E3'], or add the rig's file to simulator.rigs",
+        ),
+    ),
+    "study mujoco case naming a rig file": (
+        "study",
+        lambda d: d.update(
+            simulator={"backend": "mujoco", "rig": "E3", "consignment": "KPBW"},
+            reference=None,
+            cases=[{"dataset": "data", "rig": "B1.yaml", "speed_setting": 1}],
+        ),
+        (
+            "cases[0].rig",
+            None,
+            "add the file to simulator.rigs and name its rig here, or "
+            "leave rig out for the simulator's",
+        ),
+    ),
+    "study mujoco reference on an unknown rig": (
+        "study",
+        lambda d: d.update(simulator={"backend": "mujoco", "rig": "E3", "consignment": "KPBW"}),
+        (
+            "reference.rig",
+            "no rig named 'R': the reference's rig is a bundled rig, the simulator's rig or one "
+            "of simulator.rigs",
+            "name one of ['E1', 'E2a', 'E2b', 'E3'], or add the rig's file to simulator.rigs",
+        ),
+    ),
+    "study mujoco missing rigs file": (
+        "study",
+        lambda d: d.update(
+            simulator={
+                "backend": "mujoco",
+                "rig": "E3",
+                "consignment": "KPBW",
+                "rigs": ["B7.yaml"],
+            },
+            parameters={"mu_d_BePa": [0.3, 0.6]},
+            reference={"dataset": "data", "speed_setting": 1},
+        ),
+        (
+            "simulator.rigs[0]",
+            None,
+            "give the path of a rig .yaml file, relative to this file (bundled rigs need no entry)",
+        ),
+    ),
+    "study python backend with rigs": (
+        "study",
+        lambda d: d["simulator"].update(rigs=["B1.yaml"]),
+        ("simulator.rigs", "the python backend does not take rigs", None),
+    ),
     "screen mujoco unknown consignment": (
         "screen",
         lambda d: d.update(simulator={"backend": "mujoco", "rig": "E3", "consignment": "XX"}),

@@ -934,3 +934,71 @@ def test_radiating_diagonals_make_the_shell_mirror_symmetric_at_every_spacing(sp
         shell("crossed")
     with pytest.raises(ParcelfitError, match="unknown shell_diagonals 'crossed'"):
         SceneOptions(shell_diagonals="crossed")
+
+
+def test_a_study_may_fit_cases_on_several_rig_files_of_its_own(tmp_path):
+    """``simulator.rigs``: bench tests beside the bundled rigs and the simulator's own rig, as
+    `parcelfit design` may recommend two; their rigs are known to the study's simulator and to a
+    design on one of them, and a name given twice is refused naming the entry."""
+    import shutil
+    from pathlib import Path
+
+    import yaml
+
+    from parcelfit.sim.factory import make_simulator
+    from parcelfit.study.plausible import check_design, design_simulator
+    from parcelfit.study.studyfile import load_study
+
+    bench = Path(__file__).resolve().parent.parent / "examples" / "bench"
+    (tmp_path / "rigs").mkdir()
+    for name in ("B1", "B2"):
+        shutil.copy(bench / f"{name}.yaml", tmp_path / "rigs" / f"{name}.yaml")
+    doc = {
+        "name": "bench",
+        "simulator": {
+            "backend": "mujoco",
+            "rig": "E3",
+            "consignment": "KPBW",
+            "rigs": ["rigs/B1.yaml", "rigs/B2.yaml"],
+        },
+        "parameters": {"mu_d_BePa": [0.3, 0.6]},
+        "cases": [
+            {"dataset": "data", "speed_setting": 1},
+            {"rig": "B1", "speed_setting": 1},
+            {"rig": "B2", "speed_setting": 2},
+        ],
+    }
+    path = tmp_path / "study.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    study = load_study(path)
+    assert [c.case.label for c in study.cases] == ["E3/KPBW/1", "B1/KPBW/1", "B2/KPBW/2"]
+    assert study.simulator["rigs"] == tuple(
+        str((tmp_path / "rigs" / f"{n}.yaml").resolve()) for n in ("B1", "B2")
+    )
+    sim = make_simulator(study.simulator)
+    assert [sim.rig(n).name for n in ("E3", "B1", "B2")] == ["E3", "B1", "B2"]
+    assert sim.rig("B2").speeds[2] == {"belt": 2.0}
+    # a design on one of the study's own rig files runs with the other still known
+    on_b1 = design_simulator(study, check_design(str(tmp_path / "rigs" / "B1.yaml"), "KPBW", 1))
+    assert on_b1.rig("B1").name == "B1" and on_b1.rig("B2").name == "B2"
+    # the same rig twice, or a file that names a bundled rig, is refused at load
+    doc["simulator"]["rigs"] = ["rigs/B1.yaml", "rigs/B1.yaml"]
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    with pytest.raises(ParcelfitError, match="a rig named B1 is known already") as err:
+        load_study(path)
+    assert err.value.where == "simulator.rigs[1]"
+    e3 = load_yaml(Path(parcelfit_rigs_folder(), "E3.yaml"))
+    (tmp_path / "rigs" / "E3.yaml").write_text(yaml.safe_dump(e3))
+    doc["simulator"]["rigs"] = ["rigs/E3.yaml"]
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    with pytest.raises(ParcelfitError, match="a rig named E3 is known already"):
+        load_study(path)
+
+
+def parcelfit_rigs_folder():
+    """The folder of the bundled rig files."""
+    from pathlib import Path
+
+    import parcelfit.sim.mujoco
+
+    return Path(parcelfit.sim.mujoco.__file__).parent / "rigs"

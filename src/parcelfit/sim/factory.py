@@ -79,6 +79,7 @@ RIGIDBOX_STICK_SPEED = 0.001  # m/s, the rigid-box reference's default (RecurDyn
 _SETTINGS = (
     "backend",
     "rig",
+    "rigs",
     "consignment",
     "timestep",
     "spacing",
@@ -119,6 +120,12 @@ def _check_needs(backend: str, settings: Any) -> None:
     for key in _NEEDS[backend]:
         if getattr(settings, key) is None:
             raise ParcelfitError(f"the {backend} backend needs {key!r}", fix=f"add `{key}:`")
+    if settings.rigs is not None and backend not in ("mujoco", "rigidbox"):
+        raise ParcelfitError(
+            f"the {backend} backend does not take rigs",
+            where="rigs",
+            fix="remove it (rig files of the mujoco and rigidbox backends)",
+        )
     if backend == "rigidbox":
         given = [k for k in _MUJOCO_ONLY if getattr(settings, k) is not None]
         if given:
@@ -133,11 +140,12 @@ def _check_needs(backend: str, settings: Any) -> None:
 @dataclass(frozen=True)
 class SimulatorConfig(Mapping[str, Any]):
     """A simulator's configuration (SI): ``backend`` and what it needs (mujoco: ``rig`` and
-    ``consignment``, bundled names or ``.yaml`` paths, optional ``timestep`` [s], ``spacing``
+    ``consignment``, bundled names or ``.yaml`` paths, optional ``rigs`` (more rig files whose
+    rigs the test cases may name), ``timestep`` [s], ``spacing``
     and ``film_spacing`` [m], ``membrane_cap`` [N/m], ``shell_dof``, ``shell_cells``,
     ``shell_diagonals``, ``mass_lumping``, ``belt_friction``, ``roller_surface``, ``stick_speed`` and
     ``slip_speed`` [m/s], ``rig_timesteps`` (rig name -> time step [s]); rigidbox: ``rig`` and
-    ``consignment``, optional ``timestep``, ``spacing``, ``bottom_patch``, ``stick_speed``,
+    ``consignment``, optional ``rigs``, ``timestep``, ``spacing``, ``bottom_patch``, ``stick_speed``,
     ``slip_speed``, ``roller_surface``; external: the solver description file ``external``;
     python: ``factory``),
     optional ``wall_limit`` [s] per simulation, and ``folder``: the folder of the file it came
@@ -148,6 +156,7 @@ class SimulatorConfig(Mapping[str, Any]):
 
     backend: str
     rig: str | None = None
+    rigs: tuple[str, ...] | None = None
     consignment: str | None = None
     timestep: float | None = None
     spacing: float | None = None
@@ -205,6 +214,9 @@ class SimulatorSection(FileModel):
     rig: Annotated[str | None, Text()] = None
     """mujoco, rigidbox: a bundled rig name (E1, E2a, E2b, E3) or a rig .yaml file relative to
     this file (its stem must equal its name)."""
+    rigs: list[Annotated[str, Text()]] | None = None
+    """mujoco, rigidbox: more rig .yaml files, relative to this file, whose rigs the test cases
+    may name (by the rig's name), e.g. the bench tests `parcelfit design` recommended."""
     consignment: Annotated[str | None, Text()] = None
     """mujoco, rigidbox: a bundled consignment type (KPBW, PB, KP, BW) or a consignment .yaml
     file relative to this file."""
@@ -289,6 +301,8 @@ class SimulatorSection(FileModel):
         for key in ("rig", "consignment", "external"):
             if key in given and given[key].lower().endswith((".yaml", ".yml")):
                 given[key] = str((folder / given[key]).resolve())
+        if "rigs" in given:
+            given["rigs"] = tuple(str((folder / r).resolve()) for r in given["rigs"])
         return SimulatorConfig(**given, folder=folder)
 
 
@@ -300,11 +314,9 @@ def make_simulator(config: SimulatorConfig) -> Simulator:
             SceneOptions,
             SimOptions,
             load_consignment,
-            load_rig,
         )
 
         assert config.rig is not None and config.consignment is not None  # checked on creation
-        rig = load_rig(config.rig)
         cons = load_consignment(config.consignment)
         numerics: dict[str, Any] = {
             _SCENE_NAMES.get(k, k): float(config[k])
@@ -337,13 +349,12 @@ def make_simulator(config: SimulatorConfig) -> Simulator:
             scene=SceneOptions(**numerics),
             wall_limit=DEFAULT_WALL_LIMIT if config.wall_limit is None else config.wall_limit,
         )
-        return MujocoSimulator(options, rigs={rig.name: rig}, consignments={cons.name: cons})
+        return MujocoSimulator(options, rigs=_rigs(config), consignments={cons.name: cons})
     if config.backend == "rigidbox":
-        from parcelfit.sim.mujoco import load_consignment, load_rig
+        from parcelfit.sim.mujoco import load_consignment
         from parcelfit.sim.rigidbox import RigidBoxOptions, RigidBoxSimulator
 
         assert config.rig is not None and config.consignment is not None  # checked on creation
-        rig = load_rig(config.rig)
         cons = load_consignment(config.consignment)
         if cons.soft:
             raise ParcelfitError(
@@ -365,7 +376,7 @@ def make_simulator(config: SimulatorConfig) -> Simulator:
             **given,
             wall_limit=DEFAULT_WALL_LIMIT if config.wall_limit is None else config.wall_limit,
         )
-        return RigidBoxSimulator(box, rigs={rig.name: rig}, consignments={cons.name: cons})
+        return RigidBoxSimulator(box, rigs=_rigs(config), consignments={cons.name: cons})
     if config.backend == "external":
         from parcelfit.sim.external import ExternalSimulator, load_external_solver
 
@@ -381,6 +392,29 @@ def make_simulator(config: SimulatorConfig) -> Simulator:
             fix="give it as package.module:callable, importable from here",
         ) from exc
     return factory()
+
+
+def _rigs(config: SimulatorConfig) -> dict[str, Rig]:
+    """The rigs of ``config`` by name: its ``rig`` and its ``rigs`` files (bundled rigs the
+    simulators load by themselves); a name given twice is refused, naming the file."""
+    from parcelfit.sim.mujoco import load_rig
+
+    assert config.rig is not None  # checked on creation
+    rig = load_rig(config.rig)
+    out = {rig.name: rig}
+    for path in config.rigs or ():
+        if Path(path).resolve() == Path(config.rig).resolve():
+            continue  # the same file as ``rig`` (a design on one of the study's rigs)
+        extra = load_rig(path)
+        if extra.name in out:
+            raise ParcelfitError(
+                f"two rigs are named {extra.name}",
+                file=path,
+                where="simulator.rigs",
+                fix="give each rig file once, with a name of its own",
+            )
+        out[extra.name] = extra
+    return out
 
 
 def mujoco_simulator(

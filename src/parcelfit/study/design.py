@@ -429,9 +429,12 @@ def rank_experiments(
     ident = inputs.identifiability
     config = inputs.study.simulator
     mine = config.backend in ("mujoco", "rigidbox")
+    # the study's own further rig files (simulator.rigs) are candidates too
+    given = {Path(r).resolve() for r in rig_files}
+    own_files = [r for r in (config.rigs or ()) if mine and Path(r).resolve() not in given]
     designs = candidate_designs(
         candidates,
-        rig_files,
+        [*rig_files, *own_files],
         config.rig if mine else None,
         config.consignment if mine else None,
     )

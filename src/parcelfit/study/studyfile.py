@@ -187,6 +187,8 @@ def check_simulator_files(sim: SimulatorConfig, path: Path) -> None:
     """For the mujoco backend, load the rig and consignment now (a bundled name or a file), so
     that an unknown name is refused on load naming ``simulator.rig`` (or ``.consignment``) of
     the file at ``path``; a mistake inside a rig or consignment file names that file."""
+    if sim.backend in ("mujoco", "rigidbox"):
+        _check_rig_files(sim, path)
     if sim.backend != "mujoco":
         return
     from parcelfit.sim.mujoco import load_consignment, load_rig
@@ -208,6 +210,39 @@ def check_simulator_files(sim: SimulatorConfig, path: Path) -> None:
             raise ParcelfitError(
                 exc.message, file=path, where=f"simulator.{key}", fix=exc.fix
             ) from None
+
+
+def _check_rig_files(sim: SimulatorConfig, path: Path) -> None:
+    """Load ``simulator.rigs`` now: a missing or broken file, or a name given twice (also the
+    simulator's rig's or a bundled rig's), is refused naming the entry."""
+    from parcelfit.sim.mujoco import bundled_rig_names, load_rig
+
+    names = set(bundled_rig_names()) | {_name(sim.rig, path, "simulator.rig")}
+    for i, given in enumerate(sim.rigs or ()):
+        where = f"simulator.rigs[{i}]"
+        if not given.lower().endswith((".yaml", ".yml")) or not Path(given).is_file():
+            raise ParcelfitError(
+                f"no rig file {shown(given)}",
+                file=path,
+                where=where,
+                fix="give the path of a rig .yaml file, relative to this file (bundled rigs "
+                "need no entry)",
+            )
+        try:
+            rig = load_rig(given)
+        except ParcelfitError as exc:
+            if exc.file is not None:
+                raise
+            raise ParcelfitError(exc.message, file=path, where=where, fix=exc.fix) from None
+        if rig.name in names:
+            raise ParcelfitError(
+                f"a rig named {rig.name} is known already (a bundled rig, the simulator's rig "
+                "or an earlier entry)",
+                file=path,
+                where=where,
+                fix="give each rig once; rename a rig file that shares another rig's name",
+            )
+        names.add(rig.name)
 
 
 def fixed_to_si(
@@ -396,16 +431,43 @@ def _case(
     dataset = (folder / c.dataset).resolve() if c.dataset is not None else default.resolve()
     rig = c.rig or _name(sim.rig, path, f"{where}.rig")
     consignment = c.consignment or _name(sim.consignment, path, f"{where}.consignment")
-    if sim.backend in ("mujoco", "rigidbox") and rig.lower().endswith((".yaml", ".yml")):
-        raise ParcelfitError(
-            "a case's rig is a bundled rig's name, or the simulator's own rig file",
-            file=path,
-            where=f"{where}.rig",
-            fix="name a bundled rig (parcelfit rigs), or leave rig out for the simulator's",
-        )
+    if sim.backend in ("mujoco", "rigidbox"):
+        if rig.lower().endswith((".yaml", ".yml")):
+            raise ParcelfitError(
+                "a case's rig is a rig's name (a bundled rig's, or that of the simulator's "
+                "rig file or of a file in simulator.rigs), not a file",
+                file=path,
+                where=f"{where}.rig",
+                fix="add the file to simulator.rigs and name its rig here, or leave rig out "
+                "for the simulator's",
+            )
+        known = _known_rigs(sim, path)
+        if rig not in known:
+            raise ParcelfitError(
+                f"no rig named {shown(rig)}: a case's rig is a bundled rig, the simulator's rig or "
+                "one of simulator.rigs",
+                file=path,
+                where=f"{where}.rig",
+                fix=f"name one of {sorted(known)}, or add the rig's file to simulator.rigs",
+            )
     return CaseSpec(
         TestCase(rig, consignment, c.speed_setting), dataset, c.weight, c.placements, where
     )
+
+
+def _known_rigs(sim: SimulatorSection, path: Path) -> set[str]:
+    """The rig names a case may use with the mujoco and rigidbox backends: the bundled rigs,
+    the simulator's rig and the rigs of ``simulator.rigs`` (files relative to ``path``'s
+    folder; one that does not load is reported by `check_simulator_files`)."""
+    from parcelfit.sim.mujoco import bundled_rig_names, load_rig
+
+    names = set(bundled_rig_names()) | {_name(sim.rig, path, "simulator.rig")}
+    for given in sim.rigs or ():
+        try:
+            names.add(load_rig(str((path.parent / given).resolve())).name)
+        except ParcelfitError:
+            names.add(Path(given).stem)
+    return names
 
 
 def reference_case(
@@ -415,6 +477,14 @@ def reference_case(
     the simulator's (a ``.yaml`` file gives its stem)."""
     dataset = (folder / ref.dataset).resolve()
     rig = ref.rig or _name(sim.rig, path, "reference.rig")
+    if sim.backend in ("mujoco", "rigidbox") and rig not in (known := _known_rigs(sim, path)):
+        raise ParcelfitError(
+            f"no rig named {shown(rig)}: the reference's rig is a bundled rig, the simulator's "
+            "rig or one of simulator.rigs",
+            file=path,
+            where="reference.rig",
+            fix=f"name one of {sorted(known)}, or add the rig's file to simulator.rigs",
+        )
     consignment = ref.consignment or _name(sim.consignment, path, "reference.consignment")
     return dataset, rig, consignment
 
