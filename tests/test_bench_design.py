@@ -56,3 +56,47 @@ def test_each_bench_test_of_the_analytic_simulator_answers_to_its_parameter():
     # B1: the transit time follows mu_d_BePa three times as strongly as on R
     fast = {rig: trajectory({**p, "mu_d_BePa": 0.55}, 1, rig=rig)[1] for rig in ("R", "B1")}
     assert fast["B1"] - base["B1"][1] == pytest.approx(3 * (fast["R"] - base["R"][1]))
+
+
+def test_the_mujoco_design_benchmark_judges_only_the_designed_calibrations():
+    bench = load_file_module("benchmarks/bench_design_mujoco.py")
+
+    def row(within, covered, errors):
+        names = ["mu_d_BePa", "mu_d_MePa", "E_Pa", "k_MePa"]
+        return {
+            "within": within,
+            "parameters": 4,
+            "covered": covered,
+            "errors": dict(zip(names, errors, strict=True)),
+            "verdicts": {"mu_d_BePa": "determined", "E_Pa": "undetermined"},
+            "evaluations": 40,
+            "simulations": 170,
+            "minutes": 21.5,
+            "validated": True,
+            "transfer": "1/1",
+        }
+
+    results = {
+        "truth1": {
+            "designed": ["B2/KPBW/1", "B1/KPBW/2"],
+            "rows": {
+                "published cases": row(4, 4, [0.01, 0.02, 0.03, 0.04]),  # not counted
+                "with the designed": row(3, 4, [0.01, 0.02, 0.05, 0.3]),
+            },
+        },
+        "truth2": {
+            "designed": ["E1/KPBW/2"],
+            "rows": {"with the designed": row(1, 3, [0.2, 0.3, 0.4, 0.5])},
+        },
+        "truth3": {"designed": [], "rows": {"published cases": row(2, 4, [0, 0, 0.5, 0.5])}},
+    }
+    assert bench.verdicts(results) == [
+        "with the two designed experiments, at least 3 of 4 parameters within 10 %: 1 of 2 "
+        "truths (asked: at least 2 of 3)",
+        "every interval of the designed calibrations contains its truth: no",
+    ]
+    lines = bench.table(results).splitlines()
+    assert len(lines) == 2 + 4
+    assert lines[3].startswith(
+        "| truth1 | + B2/KPBW/1 + B1/KPBW/2 | 3/4 | 0.010 / 0.020 / 0.050 / 0.300 | mu_d_BePa | 4/4 | 40 | 170 | 21.5 | passed | 1/1 |"
+    )
