@@ -259,9 +259,9 @@ def load_screen(path: str | Path) -> Screen:
     f = parse(ScreenFile, load_yaml(path), file=path)
     folder = path.parent.resolve()
     sim = f.simulator.to_config(folder)
-    check_simulator_files(sim, path)
+    rigs = check_simulator_files(sim, path)
     backend = f.simulator.backend
-    dataset, rig, cons = reference_case(f.reference, f.simulator, path, folder)
+    dataset, rig, cons = reference_case(f.reference, f.simulator, path, folder, rigs)
     kind = content_kind(sim)
     spec = f.parameters
     if spec is None:  # the consignment's candidates; its content's own are the soft_content stage

@@ -183,14 +183,16 @@ def _to_si(name: str, value: float, backend: str) -> float:
     return spec.to_si(spec.check_physical(float(value)))
 
 
-def check_simulator_files(sim: SimulatorConfig, path: Path) -> None:
+def check_simulator_files(sim: SimulatorConfig, path: Path) -> set[str] | None:
     """For the mujoco backend, load the rig and consignment now (a bundled name or a file), so
     that an unknown name is refused on load naming ``simulator.rig`` (or ``.consignment``) of
-    the file at ``path``; a mistake inside a rig or consignment file names that file."""
-    if sim.backend in ("mujoco", "rigidbox"):
-        _check_rig_files(sim, path)
+    the file at ``path``; a mistake inside a rig or consignment file names that file. Returns
+    the rig names the file's cases may use (mujoco and rigidbox, `_rig_names`; None: any)."""
+    if sim.backend not in ("mujoco", "rigidbox"):
+        return None
+    names = _rig_names(sim, path)
     if sim.backend != "mujoco":
-        return
+        return names
     from parcelfit.sim.mujoco import load_consignment, load_rig
 
     for key, load in (("rig", load_rig), ("consignment", load_consignment)):
@@ -210,11 +212,14 @@ def check_simulator_files(sim: SimulatorConfig, path: Path) -> None:
             raise ParcelfitError(
                 exc.message, file=path, where=f"simulator.{key}", fix=exc.fix
             ) from None
+    return names
 
 
-def _check_rig_files(sim: SimulatorConfig, path: Path) -> None:
-    """Load ``simulator.rigs`` now: a missing or broken file, or a name given twice (also the
-    simulator's rig's or a bundled rig's), is refused naming the entry."""
+def _rig_names(sim: SimulatorConfig, path: Path) -> set[str]:
+    """The rig names a case may use with the mujoco and rigidbox backends: the bundled rigs,
+    the simulator's rig and the rigs of ``simulator.rigs``, loaded now: a missing or broken
+    file, or a name given twice (also the simulator's rig's or a bundled rig's), is refused
+    naming the entry."""
     from parcelfit.sim.mujoco import bundled_rig_names, load_rig
 
     names = set(bundled_rig_names()) | {_name(sim.rig, path, "simulator.rig")}
@@ -243,6 +248,7 @@ def _check_rig_files(sim: SimulatorConfig, path: Path) -> None:
                 fix="give each rig once; rename a rig file that shares another rig's name",
             )
         names.add(rig.name)
+    return names
 
 
 def fixed_to_si(
@@ -269,7 +275,7 @@ def load_study(path: str | Path) -> Study:
     f = parse(StudyFile, doc, file=path)
     folder = path.parent.resolve()
     sim = f.simulator.to_config(folder)
-    check_simulator_files(sim, path)
+    rigs = check_simulator_files(sim, path)
     backend = f.simulator.backend
     dims = []
     for name, bounds in f.parameters.items():
@@ -293,7 +299,7 @@ def load_study(path: str | Path) -> Study:
             where="fixed",
             fix="remove them from one of the two",
         )
-    cases, validation_cases, transfer = study_cases(f, path, folder)
+    cases, validation_cases, transfer = study_cases(f, path, folder, rigs)
     first = cases[0]
     dataset, rig, consignment = first.dataset, first.case.rig, first.case.consignment
     try:
@@ -340,13 +346,14 @@ def load_study(path: str | Path) -> Study:
 
 
 def study_cases(
-    f: StudyFile, path: Path, folder: Path
+    f: StudyFile, path: Path, folder: Path, rigs: set[str] | None
 ) -> tuple[tuple[CaseSpec, ...], tuple[CaseSpec, ...], tuple[CaseSpec, ...]]:
-    """The fitted, validation and transfer cases of a study file (datasets absolute). A
-    ``reference`` study has one fitted case and at most one validation case, at
-    ``validation.speed_setting`` of the same rig and consignment."""
+    """The fitted, validation and transfer cases of a study file (datasets absolute); ``rigs``
+    the rig names they may use (`check_simulator_files`; None: any). A ``reference`` study has
+    one fitted case and at most one validation case, at ``validation.speed_setting`` of the
+    same rig and consignment."""
     if f.reference is not None:
-        dataset, rig, consignment = reference_case(f.reference, f.simulator, path, folder)
+        dataset, rig, consignment = reference_case(f.reference, f.simulator, path, folder, rigs)
         cases: tuple[CaseSpec, ...] = (
             CaseSpec(
                 TestCase(rig, consignment, f.reference.speed_setting), dataset, where="reference"
@@ -362,14 +369,15 @@ def study_cases(
                 fix="add dataset: FOLDER (relative to the study file)",
             )
         cases = tuple(
-            _case(c, f.simulator, path, folder, folder / first.dataset, f"cases[{i}]")
+            _case(c, f.simulator, path, folder, folder / first.dataset, f"cases[{i}]", rigs)
             for i, c in enumerate(f.cases)
         )
     default = cases[0].dataset
     if f.validation.cases:
         validation = tuple(
             replace(
-                _case(c, f.simulator, path, folder, default, f"validation.cases[{i}]"), weight=1.0
+                _case(c, f.simulator, path, folder, default, f"validation.cases[{i}]", rigs),
+                weight=1.0,
             )
             for i, c in enumerate(f.validation.cases)
         )
@@ -385,7 +393,7 @@ def study_cases(
     else:
         validation = ()
     transfer = tuple(
-        replace(_case(c, f.simulator, path, folder, default, f"transfer[{i}]"), weight=1.0)
+        replace(_case(c, f.simulator, path, folder, default, f"transfer[{i}]", rigs), weight=1.0)
         for i, c in enumerate(f.transfer)
     )
     for i, c in enumerate(cases):
@@ -425,13 +433,20 @@ def study_cases(
 
 
 def _case(
-    c: CaseSection, sim: SimulatorSection, path: Path, folder: Path, default: Path, where: str
+    c: CaseSection,
+    sim: SimulatorSection,
+    path: Path,
+    folder: Path,
+    default: Path,
+    where: str,
+    rigs: set[str] | None,
 ) -> CaseSpec:
-    """One case section as a `CaseSpec` (names default to the simulator's)."""
+    """One case section as a `CaseSpec` (names default to the simulator's); its rig must be
+    one of ``rigs`` (None: any)."""
     dataset = (folder / c.dataset).resolve() if c.dataset is not None else default.resolve()
     rig = c.rig or _name(sim.rig, path, f"{where}.rig")
     consignment = c.consignment or _name(sim.consignment, path, f"{where}.consignment")
-    if sim.backend in ("mujoco", "rigidbox"):
+    if rigs is not None:
         if rig.lower().endswith((".yaml", ".yml")):
             raise ParcelfitError(
                 "a case's rig is a rig's name (a bundled rig's, or that of the simulator's "
@@ -441,49 +456,34 @@ def _case(
                 fix="add the file to simulator.rigs and name its rig here, or leave rig out "
                 "for the simulator's",
             )
-        known = _known_rigs(sim, path)
-        if rig not in known:
+        if rig not in rigs:
             raise ParcelfitError(
                 f"no rig named {shown(rig)}: a case's rig is a bundled rig, the simulator's rig or "
                 "one of simulator.rigs",
                 file=path,
                 where=f"{where}.rig",
-                fix=f"name one of {sorted(known)}, or add the rig's file to simulator.rigs",
+                fix=f"name one of {sorted(rigs)}, or add the rig's file to simulator.rigs",
             )
     return CaseSpec(
         TestCase(rig, consignment, c.speed_setting), dataset, c.weight, c.placements, where
     )
 
 
-def _known_rigs(sim: SimulatorSection, path: Path) -> set[str]:
-    """The rig names a case may use with the mujoco and rigidbox backends: the bundled rigs,
-    the simulator's rig and the rigs of ``simulator.rigs`` (files relative to ``path``'s
-    folder; one that does not load is reported by `check_simulator_files`)."""
-    from parcelfit.sim.mujoco import bundled_rig_names, load_rig
-
-    names = set(bundled_rig_names()) | {_name(sim.rig, path, "simulator.rig")}
-    for given in sim.rigs or ():
-        try:
-            names.add(load_rig(str((path.parent / given).resolve())).name)
-        except ParcelfitError:
-            names.add(Path(given).stem)
-    return names
-
-
 def reference_case(
-    ref: ReferenceSection, sim: SimulatorSection, path: Path, folder: Path
+    ref: ReferenceSection, sim: SimulatorSection, path: Path, folder: Path, rigs: set[str] | None
 ) -> tuple[Path, str, str]:
     """The reference dataset folder (absolute), rig and consignment names; the names default to
-    the simulator's (a ``.yaml`` file gives its stem)."""
+    the simulator's (a ``.yaml`` file gives its stem), the rig must be one of ``rigs`` (None:
+    any)."""
     dataset = (folder / ref.dataset).resolve()
     rig = ref.rig or _name(sim.rig, path, "reference.rig")
-    if sim.backend in ("mujoco", "rigidbox") and rig not in (known := _known_rigs(sim, path)):
+    if rigs is not None and rig not in rigs:
         raise ParcelfitError(
             f"no rig named {shown(rig)}: the reference's rig is a bundled rig, the simulator's "
             "rig or one of simulator.rigs",
             file=path,
             where="reference.rig",
-            fix=f"name one of {sorted(known)}, or add the rig's file to simulator.rigs",
+            fix=f"name one of {sorted(rigs)}, or add the rig's file to simulator.rigs",
         )
     consignment = ref.consignment or _name(sim.consignment, path, "reference.consignment")
     return dataset, rig, consignment
