@@ -159,8 +159,6 @@ def calibrate(
     """Calibrate rig R (settings 1 and 2) plus ``extra_cases`` (candidate labels, their rig and
     setting) on ``dataset``; returns the study folder and the wall time [min] of the run that
     did the work (stored, so a resumed benchmark reports it)."""
-    from parcelfit.study.calibration import Calibration
-    from parcelfit.study.studyfile import load_study
 
     cases: list[dict[str, Any]] = [
         {"dataset": "{dataset}", "rig": "R", "speed_setting": 1},
@@ -180,12 +178,7 @@ def calibrate(
         extra={"initial": 8, "batch_size": 4, "budget": budget, "executor": "serial"},
     )
     study = folder / name
-    timing = study / "wall_time.json"
-    t0 = time.perf_counter()
-    Calibration(load_study(path), study, figures=False, key_frames=False).run()
-    if not timing.is_file():
-        timing.write_text(json.dumps({"minutes": (time.perf_counter() - t0) / 60}))
-    return study, json.loads(timing.read_text())["minutes"]
+    return study, bench_twin.calibrate_timed(path, study)
 
 
 def measure(

@@ -72,19 +72,12 @@ def calibrate(
 ) -> tuple[Path, float]:
     """Run (or resume) the study ``name`` of ``keys`` on ``dataset`` in ``folder/name``;
     returns the study folder and the wall time [min] of the run that did the work."""
-    from parcelfit.study.calibration import Calibration
-    from parcelfit.study.studyfile import load_study
 
     path = bench_twin.write_study_file(
         folder, bench_twin.Setup(name, keys), simulator, bench_twin.PARAMETERS, dataset, seed=seed
     )
     study = folder / name
-    timing = study / "wall_time.json"
-    t0 = time.perf_counter()
-    Calibration(load_study(path), study, workers=workers, figures=False, key_frames=False).run()
-    if not timing.is_file():
-        timing.write_text(json.dumps({"minutes": (time.perf_counter() - t0) / 60}))
-    return study, json.loads(timing.read_text())["minutes"]
+    return study, bench_twin.calibrate_timed(path, study, workers=workers)
 
 
 def twin(

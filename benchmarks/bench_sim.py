@@ -102,7 +102,9 @@ def main() -> None:
         for _ in range(args.repeats):
             for which, out in ((sim, walls), (peer_sim, peer_walls)):
                 res = which.run({}, TestCase("E3", cons, 1))
-                assert res.ok and abs(res.diagnostics["simulated_time"] - 2.0) < 0.01, res.diagnostics
+                assert res.ok and abs(res.diagnostics["simulated_time"] - 2.0) < 0.01, (
+                    res.diagnostics
+                )
                 out.append(res.wall_time)
                 if which is sim:
                     rates.append(res.diagnostics["steps_per_second"])
@@ -131,7 +133,9 @@ def _profile(sim: MujocoSimulator, cons: str) -> str:
         model = scene.model()
         data = mujoco.MjData(model)
         _set_velocity(model, data, np.asarray(scene.start_velocity))
-        stepper = Stepper(model, data, scene, sim.consignment(cons).parameter_values(), sim.options.scene)
+        stepper = Stepper(
+            model, data, scene, sim.consignment(cons).parameter_values(), sim.options.scene
+        )
         n = round(2.0 / model.opt.timestep)
         for _ in range(n):
             stepper.step()

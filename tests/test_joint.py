@@ -197,7 +197,13 @@ def test_a_joint_ensemble_study_stores_the_parts_and_checks_transfer(
     stored = json.loads(stored)
     assert status.to_json()["cases"] == stored
     assert set(stored[0]) == {
-        "case", "role", "weight", "dataset", "reference_run", "threshold", "transit"
+        "case",
+        "role",
+        "weight",
+        "dataset",
+        "reference_run",
+        "threshold",
+        "transit",
     }
     parts = status.recommended.parts
     assert [p.case for p in parts] == ["R/P/1", "Q/P/1"] and len(parts[0].seeds) == 3
