@@ -995,6 +995,52 @@ def test_a_study_may_fit_cases_on_several_rig_files_of_its_own(tmp_path):
         load_study(path)
 
 
+def test_a_rig_or_consignment_file_whose_name_is_not_its_stem_is_refused_by_a_study(tmp_path):
+    """A study names its simulator's rig and consignment by the file's stem and the simulator by
+    the file's ``name:``: a copy of B1 saved as B9.yaml, still saying ``name: B1``, would let a
+    case name B9 that the simulator cannot find, so the study refuses it on load."""
+    import shutil
+    from pathlib import Path
+
+    import yaml
+
+    from parcelfit.study.studyfile import load_study
+
+    bench = Path(__file__).resolve().parent.parent / "examples" / "bench"
+    shutil.copy(bench / "B1.yaml", tmp_path / "B9.yaml")
+    doc = {
+        "name": "renamed",
+        "simulator": {"backend": "mujoco", "rig": "B9.yaml", "consignment": "KPBW"},
+        "parameters": {"mu_d_BePa": [0.3, 0.6]},
+        "cases": [{"dataset": "data", "speed_setting": 1}],
+    }
+    path = tmp_path / "study.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    with pytest.raises(ParcelfitError, match=r"the rig file B9\.yaml says name: B1") as err:
+        load_study(path)
+    assert err.value.where == "simulator.rig"
+    assert err.value.fix == (
+        "make the rig file's name equal its file name without .yaml (B9), or rename the file "
+        "to B1.yaml"
+    )
+    # the same among simulator.rigs, and for the consignment file
+    doc["simulator"].update(rig="E3", rigs=["B9.yaml"])
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    with pytest.raises(ParcelfitError, match=r"the rig file B9\.yaml says name: B1") as err:
+        load_study(path)
+    assert err.value.where == "simulator.rigs[0]"
+    kpbw = Path(parcelfit_rigs_folder().parent, "consignments", "KPBW.yaml")
+    shutil.copy(kpbw, tmp_path / "mailer.yaml")
+    doc["simulator"] = {"backend": "mujoco", "rig": "E3", "consignment": "mailer.yaml"}
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    with pytest.raises(ParcelfitError, match=r"the consignment file mailer\.yaml says name: KPBW"):
+        load_study(path)
+    # renamed inside as well, it loads
+    text = (tmp_path / "mailer.yaml").read_text()
+    (tmp_path / "mailer.yaml").write_text(text.replace("name: KPBW", "name: mailer", 1))
+    assert load_study(path).cases[0].case.consignment == "mailer"
+
+
 def parcelfit_rigs_folder():
     """The folder of the bundled rig files."""
     from pathlib import Path

@@ -1,5 +1,6 @@
 import json
 import shutil
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -11,6 +12,7 @@ from typer.testing import CliRunner
 from parcelfit import ParcelfitError
 from parcelfit.cli import app
 from parcelfit.runs import Trajectory, load_dataset, read_trajectory
+from parcelfit.sim.mujoco import load_rig
 from parcelfit.tracking import (
     crossing_time,
     load_tag_map,
@@ -234,6 +236,11 @@ def test_track_all_builds_a_dataset_resumes_and_reports_bad_videos(videos, tmp_p
     runs = ds["E3/KPBW/1"].runs
     assert [r.id for r in runs] == ["E3-KPBW-1-01", "E3-KPBW-1-02"]
     assert runs[0].transit_time is not None
+    # a bundled rig's regions of interest and margin go with its test case
+    e3 = load_rig("E3")
+    assert e3.regions and ds["E3/KPBW/1"].regions == e3.regions
+    assert ds["E3/KPBW/1"].margin == e3.margin
+    assert summary["whole_track"] == []
     # rerun: finished videos are skipped, the dataset is the same
     summary = track_all(folder, load_tag_map(tags), out)
     assert sorted(summary["skipped"]) == ["E3-KPBW-1-01.mp4", "E3-KPBW-1-02.mp4"]
@@ -245,13 +252,35 @@ def test_track_all_builds_a_dataset_resumes_and_reports_bad_videos(videos, tmp_p
 def test_track_all_takes_transit_times_from_the_light_barrier_logs(videos, tmp_path):
     folder = tmp_path / "videos"
     folder.mkdir()
-    shutil.copy(videos["root"] / "plain.mp4", folder / "E3-KPBW-1-01.mp4")
-    shutil.copy(videos["root"] / "plain.mp4", folder / "E3-KPBW-1-02.mp4")
+    shutil.copy(videos["root"] / "plain.mp4", folder / "D1-KPBW-1-01.mp4")
+    shutil.copy(videos["root"] / "plain.mp4", folder / "D1-KPBW-1-02.mp4")
     logs = tmp_path / "logs"
     logs.mkdir()
-    (logs / "E3-KPBW-1-01.csv").write_text("timestamp,sensor\n10.0,7\n10.25,3\n11.875,9\n")
+    (logs / "D1-KPBW-1-01.csv").write_text("timestamp,sensor\n10.0,7\n10.25,3\n11.875,9\n")
     tags = write_tag_map(tmp_path / "tags.yaml", videos["scene"])
     out = tmp_path / "dataset"
+    own_rig = Path(__file__).resolve().parent.parent / "examples" / "own-rig" / "D1.yaml"
+    result = runner.invoke(
+        app,
+        [
+            *("track-all", str(folder), "--tags", str(tags), "--out", str(out)),
+            *("--sensor-logs", str(logs), "--sensors", "3,9", "--rig", str(own_rig)),
+        ],
+    )
+    assert result.exit_code == 1, result.output  # the second video has no log
+    summary = json.loads((out / "track-all.json").read_text())
+    assert summary["done"] == ["D1-KPBW-1-01.mp4"]
+    assert "no light-barrier log D1-KPBW-1-02.csv" in summary["failed"]["D1-KPBW-1-02.mp4"]
+    case = load_dataset(out)["D1/KPBW/1"]
+    (run,) = case.runs
+    assert run.transit_time == pytest.approx(1.625, abs=1e-12)  # 11.875 - 10.25, not the video's
+    # the rig file's regions of interest and margin go with its test case
+    d1 = load_rig(own_rig)
+    assert d1.regions and case.regions == d1.regions and case.margin == d1.margin
+    # without the rig file the runs are compared over the whole track, and the summary says so
+    summary = track_all(folder, load_tag_map(tags), out, sensor_logs=logs, sensors="3,9")
+    assert summary["whole_track"] == ["D1"]
+    assert load_dataset(out)["D1/KPBW/1"].regions == ()
     result = runner.invoke(
         app,
         [
@@ -259,12 +288,7 @@ def test_track_all_takes_transit_times_from_the_light_barrier_logs(videos, tmp_p
             *("--sensor-logs", str(logs), "--sensors", "3,9"),
         ],
     )
-    assert result.exit_code == 1, result.output  # the second video has no log
-    summary = json.loads((out / "track-all.json").read_text())
-    assert summary["done"] == ["E3-KPBW-1-01.mp4"]
-    assert "no light-barrier log E3-KPBW-1-02.csv" in summary["failed"]["E3-KPBW-1-02.mp4"]
-    (run,) = load_dataset(out)["E3/KPBW/1"].runs
-    assert run.transit_time == pytest.approx(1.625, abs=1e-12)  # 11.875 - 10.25, not the video's
+    assert "no rig file for D1" in " ".join(result.output.split())
     with pytest.raises(ParcelfitError, match="not a folder"):
         track_all(folder, load_tag_map(tags), out, sensor_logs=tmp_path / "missing")
 

@@ -119,16 +119,17 @@ def design(
         list[str] | None,
         typer.Option(
             metavar="RIG/TYPE/SETTING",
-            help="A candidate test case (repeatable; default: every bundled rig x setting x "
-            "consignment type).",
+            help="A candidate test case (repeatable; default: every rig x setting x type, the "
+            "rigs being the bundled ones, the study's rig files and --rig's, the types the "
+            "bundled ones and the study's consignment file).",
         ),
     ] = None,
     rig: Annotated[
         list[str] | None,
         typer.Option(
             metavar="RIG.yaml",
-            help="A rig file whose settings x every bundled type are candidates too, e.g. a "
-            "bench test of examples/bench/ (repeatable).",
+            help="A rig file whose settings x every type are candidates too, e.g. a bench "
+            "test of examples/bench/ (repeatable).",
         ),
     ] = None,
     sets: Annotated[

@@ -118,13 +118,36 @@ def track_all_command(
     sensors: Annotated[
         str, typer.Option(help="Start and end sensor ids in the logs, START,END.")
     ] = "1,2",
+    rig: Annotated[
+        list[Path] | None,
+        typer.Option(
+            "--rig",
+            metavar="RIG.yaml",
+            help="A rig file of your own (repeatable): the test cases of its rig take its "
+            "regions of interest and margin, where runs are compared. Bundled rigs (E1, E2a, "
+            "E2b, E3) are found by name.",
+        ),
+    ] = None,
 ) -> None:
     """Track a folder of videos into one dataset (resumable: finished videos are skipped; a bad
     video is reported and the others go on)."""
+    from parcelfit.sim.mujoco import bundled_rig_names, load_rig
     from parcelfit.tracking import load_tag_map, track_all
     from parcelfit.tracking.track import TrackOptions
 
     tag_map = load_tag_map(tags)
+    rigs = {name: load_rig(name) for name in bundled_rig_names()}
+    given: set[str] = set()
+    for file in rig or ():
+        loaded = load_rig(file)
+        if loaded.name in given:
+            raise ParcelfitError(
+                f"two rig files name the rig {loaded.name}",
+                file=file,
+                fix="give each rig's file once",
+            )
+        given.add(loaded.name)
+        rigs[loaded.name] = loaded  # the user's file before a bundled rig of that name
     with frame_bar() as bar:
         task = bar.add_task("frames", total=None)
 
@@ -141,6 +164,7 @@ def track_all_command(
             sensors=sensors,
             on_video=on_video,
             on_frame=lambda k, n: bar.update(task, completed=k, total=n or None),
+            regions={name: (r.regions, r.margin) for name, r in rigs.items()},
         )
     console.print(
         f"{len(summary['done'])} tracked, {len(summary['skipped'])} already done, "
@@ -148,6 +172,12 @@ def track_all_command(
     )
     for name, reason in summary["failed"].items():
         console.print(f"[red]failed[/] {name}: {reason}", highlight=False)
+    for name in summary["whole_track"]:
+        console.print(
+            f"[yellow]no rig file for {name}[/]: its runs are compared over the whole track; "
+            f"give --rig {name}.yaml for its regions of interest",
+            highlight=False,
+        )
     if summary["dataset"]:
         console.print(f"[green]dataset[/]: {summary['dataset']}")
     if summary["failed"]:

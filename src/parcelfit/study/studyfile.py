@@ -205,14 +205,29 @@ def check_simulator_files(sim: SimulatorConfig, path: Path) -> set[str] | None:
                 fix="give a bundled name or the path of a .yaml file, relative to this file",
             )
         try:
-            load(given)
+            loaded = load(given)
         except ParcelfitError as exc:
             if exc.file is not None:
                 raise
             raise ParcelfitError(
                 exc.message, file=path, where=f"simulator.{key}", fix=exc.fix
             ) from None
+        _check_stem(loaded.name, given, path, f"simulator.{key}", key)
     return names
+
+
+def _check_stem(name: str, given: str, path: Path, where: str, kind: str) -> None:
+    """Refuse a rig or consignment file whose ``name:`` is not its file's stem: the study's
+    cases and datasets name it by the stem, the simulator by ``name:``, and the two must agree
+    for a case to find its rig."""
+    if given.lower().endswith((".yaml", ".yml")) and Path(given).stem != name:
+        raise ParcelfitError(
+            f"the {kind} file {Path(given).name} says name: {name}",
+            file=path,
+            where=where,
+            fix=f"make the {kind} file's name equal its file name without .yaml "
+            f"({Path(given).stem}), or rename the file to {name}.yaml",
+        )
 
 
 def _rig_names(sim: SimulatorConfig, path: Path) -> set[str]:
@@ -239,6 +254,7 @@ def _rig_names(sim: SimulatorConfig, path: Path) -> set[str]:
             if exc.file is not None:
                 raise
             raise ParcelfitError(exc.message, file=path, where=where, fix=exc.fix) from None
+        _check_stem(rig.name, given, path, where, "rig")
         if rig.name in names:
             raise ParcelfitError(
                 f"a rig named {rig.name} is known already (a bundled rig, the simulator's rig "

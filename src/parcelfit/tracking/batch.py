@@ -11,20 +11,29 @@ becomes run ``RIG-CONSIGNMENT-SETTING-RUN`` of test case RIG/CONSIGNMENT/SETTING
 result goes to ``<out>/tracks/`` as above; a finished video is skipped when the command runs
 again; a video that fails (unreadable, no reference tags, wrong family, no parcel tag) is listed
 in ``<out>/track-all.json`` with the reason and the others go on. At the end ``<out>/dataset.yaml``
-and ``<out>/runs/`` are written from every finished video.
+and ``<out>/runs/`` are written from every finished video; each test case carries its rig's
+regions of interest and margin when the caller gives them (the CLI: from the rig files).
 """
 
 from __future__ import annotations
 
 import json
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
 from parcelfit.atomic import write_text_atomic
 from parcelfit.errors import ParcelfitError
-from parcelfit.runs import CaseData, Run, TestCase, read_trajectory, save_dataset, write_trajectory
+from parcelfit.runs import (
+    CaseData,
+    Region,
+    Run,
+    TestCase,
+    read_trajectory,
+    save_dataset,
+    write_trajectory,
+)
 from parcelfit.tracking.barriers import read_sensor_log
 from parcelfit.tracking.tagmap import TagMap
 from parcelfit.tracking.track import TrackOptions, VideoTrack, track_video
@@ -100,12 +109,18 @@ def track_all(
     sensors: str = "1,2",
     on_video: Callable[[Path, str], None] | None = None,
     on_frame: Callable[[int, int], None] | None = None,
+    regions: Mapping[str, tuple[tuple[Region, ...], float]] | None = None,
 ) -> dict[str, Any]:
     """Track every video of ``folder`` into a dataset in ``out``; returns the summary written to
     ``track-all.json`` (done, skipped, failed with reasons). With ``sensor_logs``, a folder of
     light-barrier logs named like the videos (``E3-KPBW-1-07.csv`` beside
     ``E3-KPBW-1-07.mp4``), every run's transit time [s] is its log's (`track_one`); a video
-    without its log fails with that reason."""
+    without its log fails with that reason.
+
+    Each test case takes its rig's regions of interest and margin [m] (where runs are
+    compared) from ``regions`` (rig name -> (regions, margin), e.g. from the rig files). The
+    rigs not in it are listed under ``whole_track`` in the summary: their runs are compared over
+    the whole track."""
     folder, out = Path(folder), Path(out)
     if not folder.is_dir():
         raise ParcelfitError("not a folder", file=folder, fix="point at the folder of videos")
@@ -163,11 +178,13 @@ def track_all(
         best = max(entries, key=lambda e: e.get("measured_frames", e.get("detected_frames", 0)))
         traj = read_trajectory(tracks / best["file"])
         cases.setdefault(case, []).append(Run(run_id, case, traj, best.get("transit_time_s")))
+    regions = regions or {}
+    summary["whole_track"] = sorted({c.rig for c in cases if c.rig not in regions})
     if cases:
         save_dataset(
             out,
             name or folder.name,
-            [CaseData(c, tuple(cases[c])) for c in sorted(cases)],
+            [CaseData(c, tuple(cases[c]), *regions.get(c.rig, ((), 0.0))) for c in sorted(cases)],
             description=f"tracked from the videos in {folder.name}/ with parcelfit track-all",
         )
     summary["dataset"] = str(out / "dataset.yaml") if cases else None

@@ -342,7 +342,7 @@ class SurfaceEntry(FileModel):
     type: Annotated[str, _SURFACE_TYPE]
     """belt, strips (a set of parallel strip belts) or rollers (a roller matrix)."""
     material: Annotated[str, _MATERIAL]
-    """Which contact parameters apply: belt (_BePa), roller or metal (_MePa)."""
+    """Which contact parameters apply: belt or roller (_BePa), metal (_MePa)."""
     centre: _Point
     """Centre of the conveying area in the rig frame [m], [x, y]."""
     length: _Size
