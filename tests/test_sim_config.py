@@ -1041,6 +1041,23 @@ def test_a_rig_or_consignment_file_whose_name_is_not_its_stem_is_refused_by_a_st
     assert load_study(path).cases[0].case.consignment == "mailer"
 
 
+def test_rig_files_are_loaded_by_name_and_a_name_given_twice_is_refused(tmp_path):
+    """`load_rig_files` (the simulator's rigs, `track-all --rig`): each file's rig by its name,
+    after the rigs already known; the same name twice names the second file and the key."""
+    import shutil
+    from pathlib import Path
+
+    from parcelfit.sim.mujoco import load_rig, load_rig_files
+
+    bench = Path(__file__).resolve().parent.parent / "examples" / "bench"
+    rigs = load_rig_files([bench / "B1.yaml", bench / "B2.yaml"], {"E3": load_rig("E3")})
+    assert list(rigs) == ["E3", "B1", "B2"] and rigs["B2"].speeds[2] == {"belt": 2.0}
+    shutil.copy(bench / "B1.yaml", tmp_path / "B1.yaml")
+    with pytest.raises(ParcelfitError, match="two rigs are named B1") as err:
+        load_rig_files([bench / "B1.yaml", tmp_path / "B1.yaml"], where="--rig")
+    assert err.value.file == str(tmp_path / "B1.yaml") and err.value.where == "--rig"
+
+
 def parcelfit_rigs_folder():
     """The folder of the bundled rig files."""
     from pathlib import Path

@@ -131,23 +131,14 @@ def track_all_command(
 ) -> None:
     """Track a folder of videos into one dataset (resumable: finished videos are skipped; a bad
     video is reported and the others go on)."""
-    from parcelfit.sim.mujoco import bundled_rig_names, load_rig
+    from parcelfit.sim.mujoco import bundled_rig_names, load_rig, load_rig_files
     from parcelfit.tracking import load_tag_map, track_all
     from parcelfit.tracking.track import TrackOptions
 
     tag_map = load_tag_map(tags)
+    # the user's rig file before a bundled rig of the same name
     rigs = {name: load_rig(name) for name in bundled_rig_names()}
-    given: set[str] = set()
-    for file in rig or ():
-        loaded = load_rig(file)
-        if loaded.name in given:
-            raise ParcelfitError(
-                f"two rig files name the rig {loaded.name}",
-                file=file,
-                fix="give each rig's file once",
-            )
-        given.add(loaded.name)
-        rigs[loaded.name] = loaded  # the user's file before a bundled rig of that name
+    rigs.update(load_rig_files(rig or (), where="--rig"))
     with frame_bar() as bar:
         task = bar.add_task("frames", total=None)
 

@@ -397,24 +397,14 @@ def make_simulator(config: SimulatorConfig) -> Simulator:
 def _rigs(config: SimulatorConfig) -> dict[str, Rig]:
     """The rigs of ``config`` by name: its ``rig`` and its ``rigs`` files (bundled rigs the
     simulators load by themselves); a name given twice is refused, naming the file."""
-    from parcelfit.sim.mujoco import load_rig
+    from parcelfit.sim.mujoco import load_rig, load_rig_files
 
     assert config.rig is not None  # checked on creation
     rig = load_rig(config.rig)
-    out = {rig.name: rig}
-    for path in config.rigs or ():
-        if Path(path).resolve() == Path(config.rig).resolve():
-            continue  # the same file as ``rig`` (a design on one of the study's rigs)
-        extra = load_rig(path)
-        if extra.name in out:
-            raise ParcelfitError(
-                f"two rigs are named {extra.name}",
-                file=path,
-                where="simulator.rigs",
-                fix="give each rig file once, with a name of its own",
-            )
-        out[extra.name] = extra
-    return out
+    # a file that is ``rig`` again (a design on one of the study's rigs) is left out
+    same = Path(config.rig).resolve()
+    others = [p for p in config.rigs or () if Path(p).resolve() != same]
+    return load_rig_files(others, {rig.name: rig}, where="simulator.rigs")
 
 
 def mujoco_simulator(

@@ -8,7 +8,7 @@ from parcelfit.sim.mujoco.consignment import (
 )
 from parcelfit.sim.mujoco.mjlog import install_default_handler
 from parcelfit.sim.mujoco.options import SceneOptions
-from parcelfit.sim.mujoco.rig import Rig, bundled_rig_names, load_rig
+from parcelfit.sim.mujoco.rig import Rig, bundled_rig_names, load_rig, load_rig_files
 from parcelfit.sim.mujoco.scene import build_scene
 from parcelfit.sim.mujoco.simulator import Frames, MujocoSimulator, SimOptions
 
@@ -26,4 +26,5 @@ __all__ = [
     "bundled_rig_names",
     "load_consignment",
     "load_rig",
+    "load_rig_files",
 ]

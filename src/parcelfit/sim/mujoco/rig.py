@@ -58,7 +58,7 @@ after it interrupts the second light barrier, or after ``duration`` seconds of s
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Annotated, Any
@@ -639,3 +639,25 @@ def load_rig(name_or_path: str | Path) -> Rig:
     """Load a bundled rig by name (``E3``) or a rig file by path."""
     path = resolve_file("rigs", name_or_path, "rig")
     return parse_rig(load_yaml(path), str(path))
+
+
+def load_rig_files(
+    paths: Sequence[str | Path],
+    taken: Mapping[str, Rig] | None = None,
+    *,
+    where: str | None = None,
+) -> dict[str, Rig]:
+    """The rigs of the rig files ``paths`` by name, after those already ``taken``; a name given
+    twice (among the files or in ``taken``) is refused naming the file and ``where``."""
+    out = dict(taken or {})
+    for path in paths:
+        rig = load_rig(path)
+        if rig.name in out:
+            raise ParcelfitError(
+                f"two rigs are named {rig.name}",
+                file=str(path),
+                where=where,
+                fix="give each rig file once, with a name of its own",
+            )
+        out[rig.name] = rig
+    return out
