@@ -149,3 +149,52 @@ def test_an_effect_counts_at_the_family_wise_t_quantile():
     assert resolved_t(20, 4) == pytest.approx(3.515, abs=1e-3)
     assert resolved_t(10, 4) == pytest.approx(5.33, abs=0.01)
     assert resolved_t(10, 4) > resolved_t(20, 4) > resolved_t(50, 4) > 3.0
+
+
+def _ident(names):
+    from parcelfit.study.identify import Identifiability, ParameterInterval
+
+    return Identifiability(
+        parameters=tuple(
+            ParameterInterval(
+                name=n,
+                low=0.0,
+                high=1.0,
+                interval=(0.0, 1.0),
+                median=0.5,
+                verdict="undetermined",
+                rhat=1.0,
+            )
+            for n in names
+        ),
+        correlation=np.eye(len(names)),
+        sample=np.zeros((1, len(names))),
+        threshold=1.0,
+        threshold_source="by hand",
+        evaluations=10,
+        noise_sd=0.1,
+    )
+
+
+def test_a_run_s_angle_informs_once_and_its_scatter_is_unbiased():
+    """The rotation and the exit heading are one angle measured twice: only the exit heading
+    enters J; the run-to-run scatter divides by the runs less the sets (here 2 placements per
+    set: twice what the divisor N gives)."""
+    from parcelfit.study.design import FLOOR, sensitivity
+
+    rng = np.random.default_rng(3)
+    p = rng.uniform(0.0, 1.0, 20)
+    sets = [{"a": float(v)} for v in p]
+    placement = np.array([-0.01, 0.01])  # each set's two runs 0.02 rad apart
+    angle = 0.5 * p[:, None] + placement[None, :]
+    grids = {
+        "transit_time": np.full((20, 2), 1.0),
+        "rotation": angle,
+        "exit_y": np.full((20, 2), 0.1),
+        "exit_heading": angle,
+    }
+    J, scatter = sensitivity(_ident(["a"]), sets, grids)
+    assert J[1, 0] == 0.0  # rotation: measured again by the exit heading
+    assert J[3, 0] == pytest.approx(0.5, rel=1e-9)
+    # within-set deviations +-0.01: sum 40 x 1e-4 over 40 runs - 20 sets
+    assert scatter[3] ** 2 == pytest.approx(40 * 1e-4 / 20 + FLOOR["exit_heading"] ** 2)

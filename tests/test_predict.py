@@ -46,6 +46,29 @@ def test_decomposition_with_missing_runs_is_the_law_of_total_variance():
     assert math.isnan(decompose(np.full((2, 2), np.nan)).total)
 
 
+def test_one_set_has_no_parameter_share_and_a_run_s_variance_is_unbiased():
+    one = decompose(np.array([[1.0, 2.0, 3.0]]))
+    assert math.isnan(one.parameter_share) and one.placement_share == pytest.approx(1.0)
+    q = np.array([[1.0, 3.0], [5.0, 9.0], [2.0, np.nan]])
+    d = decompose(q)
+    # deviations from the set means: 1, 1, 2, 2 (the single run's 0) over 5 runs - 3 sets
+    assert d.run_variance == pytest.approx(10.0 / 2.0)
+    assert d.within == pytest.approx(10.0 / 5.0)
+    assert math.isnan(decompose(np.array([[1.0], [2.0]])).run_variance)  # one run per set
+
+
+def test_an_effect_counts_at_the_family_wise_threshold_and_a_flat_one_never():
+    from parcelfit.study.spread import Effect, t_threshold
+
+    t = t_threshold(20, 4, 4)
+    assert t == pytest.approx(3.515, abs=1e-3)
+    assert not Effect("a", "undetermined", "exit_y", 0.0, 1.0, 2.5, 1.0, t).resolved
+    assert Effect("a", "undetermined", "exit_y", 0.0, 1.0, 3.6, 1.0, t).resolved
+    assert not Effect("a", "undetermined", "exit_y", 0.0, 1.0, 0.0, 0.0, t).resolved
+    nan = Effect("a", "undetermined", "exit_y", 0.0, 1.0, math.nan, math.nan, t)
+    assert not nan.resolved and not nan.estimated
+
+
 def test_effects_are_the_change_over_the_plausible_interval():
     rng = np.random.default_rng(1)
     X = np.column_stack([rng.uniform(0.4, 0.5, 30), rng.uniform(2e8, 1.6e9, 30)])
@@ -185,3 +208,53 @@ def test_a_folder_without_a_finished_study_exits_2(study, tmp_path):
     unfinished = runner.invoke(app, ["predict", str(study), *argv])
     assert unfinished.exit_code == 2
     assert "no stored analysis of what its data determine" in " ".join(unfinished.output.split())
+
+
+def test_a_parameter_whose_effect_could_not_be_estimated_is_not_called_harmless():
+    """Fewer parameter sets than parameters + 2: no effect is estimated, and the sentence says
+    so instead of "for this design it does not matter"."""
+    from parcelfit.study.identify import Identifiability, ParameterInterval
+    from parcelfit.study.predict import summarise_prediction
+
+    names = ["a", "b", "c", "d"]
+    ident = Identifiability(
+        parameters=tuple(
+            ParameterInterval(
+                name=n,
+                low=0.0,
+                high=1.0,
+                interval=(0.0, 1.0),
+                median=0.5,
+                verdict="undetermined",
+                rhat=1.0,
+            )
+            for n in names
+        ),
+        correlation=np.eye(4),
+        sample=np.zeros((1, 4)),
+        threshold=1.0,
+        threshold_source="by hand",
+        evaluations=10,
+        noise_sd=0.1,
+    )
+    rng = np.random.default_rng(4)
+    sets = [
+        {n: float(v) for n, v in zip(names, rng.uniform(0, 1, 4), strict=True)} for _ in range(5)
+    ]
+    rows = [
+        {
+            "set": i,
+            "placement": j,
+            "transit_time": 1.0 + 0.05 * s["a"] + 0.001 * j,  # a moves it by 50 ms
+            "rotation": 0.1,
+            "exit_y": 0.0,
+            "exit_heading": 0.1,
+        }
+        for i, s in enumerate(sets)
+        for j in range(3)
+    ]
+    _, effects, sentences = summarise_prediction(ident, sets, [0, 1, 2], pd.DataFrame(rows))
+    assert not any(e.estimated for e in effects)
+    assert len(sentences) == 4
+    assert all("was not estimated" in s and "at least 6 parameter sets" in s for s in sentences)
+    assert not any("does not matter" in s for s in sentences)

@@ -23,14 +23,20 @@ time, rotation, exit position and heading). For quantity q:
   with 20 sets and 4 parameters, 5.3 with 10), else it counts as zero. Where a quantity bends
   over the interval, the linear fit lends one parameter's effect to another at random; twice
   the standard error let such false effects through;
-* its run-to-run scatter is s_q^2 = W_q + f_q^2: W_q the mean within-set variance over the
-  placements (`parcelfit.study.spread.decompose`) and f_q a measurement floor (`FLOOR`: the
+* its run-to-run scatter is s_q^2 = W_q + f_q^2: W_q one run's variance about its set's mean
+  over the placements, unbiased (`parcelfit.study.spread.Decomposition.run_variance`; 0 with
+  one placement, when only the floor remains) and f_q a measurement floor (`FLOOR`: the
   band test's tolerances, 3 mm and 1 degree, for the exit position and the angles, 2 ms for
   the transit time, assumed), so that a quantity the placements do not scatter is not taken
   as exact. Each placement runs the rig's drives off their mean speeds as `parcelfit predict`
   does (``speed_deviation``, default 3 %). The specimens' own scatter (two real parcels of one
   type differ) is not simulated: real runs scatter more, and the widths below are optimistic;
   the ranking is what they are for.
+
+The rotation |theta(end) - theta(start)| and the exit heading theta(end) are one angle
+measured twice when the start heading scatters little (a placement's sd is 1 degree), and
+the formula below takes its quantities as independent: so the rotation (`REPEATED`) gives no
+information of its own, and each run's angle counts once, through the exit heading.
 
 The signal-to-noise of p on the candidate is max_q |J_qp| / s_q: how many run-to-run standard
 deviations the outcome moves as p crosses its plausible interval.
@@ -139,6 +145,8 @@ FLOOR = {
     "exit_y": 0.003,
     "exit_heading": math.radians(1.0),
 }
+# quantities that measure what another does again (module docstring): no information of their own
+REPEATED = frozenset({"rotation"})
 
 
 def candidate_designs(
@@ -327,18 +335,20 @@ def sensitivity(
     X = np.array([[s[n] for n in names] for s in sets], float)
     J = np.zeros((len(QUANTITIES), len(names)))
     scatter = np.ones(len(QUANTITIES))
-    resolved = resolved_t(len(sets), len(names))
     for k, q in enumerate(QUANTITIES):
         grid = grids[q]
         dec = decompose(grid)
         floor = FLOOR[q]
-        within = dec.within if math.isfinite(dec.within) else 0.0
+        within = dec.run_variance if math.isfinite(dec.run_variance) else 0.0
         scatter[k] = math.sqrt(within + floor**2)
         with np.errstate(invalid="ignore"):
             means = (
                 np.nanmean(grid, axis=1) if np.isfinite(grid).any() else np.full(len(grid), np.nan)
             )
+        if q in REPEATED:
+            continue  # measured again by another quantity: its row of J stays 0
         eff, se = effects_of(means, X, intervals)
+        resolved = resolved_t(int(np.isfinite(means).sum()), len(names))  # the fitted sets
         ok = np.isfinite(eff) & (np.abs(eff) >= resolved * np.where(np.isfinite(se), se, np.inf))
         J[k] = np.where(ok, eff, 0.0)
     return J, scatter

@@ -11,10 +11,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from parcelfit.study.predict import QUANTITIES
+from parcelfit.study.spread import FALSE_EFFECTS, t_threshold
 
 MAX_RUNS = 100  # the most real runs a candidate is asked for
 PRIOR_PRECISION = 12.0  # of a uniform distribution on [0, 1]
-FALSE_EFFECTS = 0.05  # the chance that a case shows any effect it does not have (t-test)
 
 
 def information(J: np.ndarray, scatter: np.ndarray) -> np.ndarray:
@@ -91,14 +91,9 @@ def greedy_sequence(
 
 
 def resolved_t(n_sets: int, n_parameters: int) -> float:
-    """The t value an effect must reach to count (module docstring): the two-sided quantile of
-    Student's t (n_sets - n_parameters - 1 degrees of freedom) at `FALSE_EFFECTS` shared
-    over every quantity and parameter of a case (Bonferroni)."""
-    from scipy.stats import t
-
-    tests = len(QUANTITIES) * n_parameters
-    dof = max(n_sets - n_parameters - 1, 1)
-    return float(t.ppf(1.0 - FALSE_EFFECTS / (2 * tests), dof))
+    """The t value an effect must reach to count (module docstring): `t_threshold` over the
+    quantities of `parcelfit.study.predict`."""
+    return t_threshold(n_sets, n_parameters, len(QUANTITIES))
 
 
 __all__ = [

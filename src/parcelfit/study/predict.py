@@ -102,7 +102,7 @@ from parcelfit.study.run_scatter import (
     scatter_note,
     stored_recommendation,
 )
-from parcelfit.study.spread import RESOLVED, Decomposition, Effect, decompose, effects_of
+from parcelfit.study.spread import Decomposition, Effect, decompose, effects_of, t_threshold
 from parcelfit.study.store import Store
 from parcelfit.study.studyfile import CaseSpec, Study
 
@@ -329,10 +329,19 @@ def summarise_prediction(
         with np.errstate(invalid="ignore"):
             means = np.nanmean(np.where(np.isfinite(grid), grid, np.nan), axis=1)
         eff, se = effects_of(means, X, intervals)
+        # the sets with a mean of q are the regression's
+        threshold = t_threshold(int(np.isfinite(means).sum()), len(names), len(QUANTITIES))
         for j, p in enumerate(ident.parameters):
             effects.append(
                 Effect(
-                    p.name, p.verdict, q, p.interval[0], p.interval[1], float(eff[j]), float(se[j])
+                    p.name,
+                    p.verdict,
+                    q,
+                    p.interval[0],
+                    p.interval[1],
+                    float(eff[j]),
+                    float(se[j]),
+                    threshold,
                 )
             )
     band = {s.quantity: s.q95 - s.q05 for s in summaries}
@@ -340,12 +349,20 @@ def summarise_prediction(
     for p in ident.parameters:
         if p.determined:
             continue
+        words = _VERDICT_WORDS.get(p.verdict, p.verdict)
+        if not any(e.estimated for e in effects if e.parameter == p.name):
+            sentences.append(
+                f"{p.name} {words}, and what it does here was not estimated: the "
+                f"{len(names)} parameters need at least {len(names) + 2} parameter sets with "
+                f"a result (--sets), {n} were drawn"
+            )
+            continue
         mine = [e for e in effects if e.parameter == p.name and e.resolved]
         if not mine:
             sentences.append(
-                f"{p.name} {_VERDICT_WORDS.get(p.verdict, p.verdict)} but moves none of these "
-                f"predictions here by more than {RESOLVED:g} standard errors of the "
-                "placements' noise: for this design it does not matter"
+                f"{p.name} {words} but moves none of these predictions here by a resolved "
+                "effect (its t value below the threshold over the parameter sets): for this "
+                "design it does not matter"
             )
             continue
 

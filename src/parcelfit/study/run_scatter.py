@@ -19,8 +19,12 @@ time T [s], rotation [rad], exit x and y [m], exit heading [rad];
                  validation case, each with its drives off their mean speeds as the
                  prediction's own runs; without them (`estimate_run_scatter` not given the
                  model's runs) the simulations of c in the recommended evaluation, 0 with one
-    E(c)       = max(0, V_real(c) - V_model(c))
-    s_q^2      = mean of E(c) over the cases with at least two real runs
+    D(c)       = V_real(c) - V_model(c)
+    s_q^2      = max(0, mean of D(c) over the cases with at least two real runs)
+
+The differences are averaged before the cut at 0: cut case by case (max(0, D(c)), then the
+mean), cases whose real runs scatter exactly like the model's would still add a positive
+excess, about a third of their variance from ten noisy robust variances.
 
 The transit time is taken relative to each case's mean real transit time (V divided by its
 square), as a specimen's friction and the timing noise move it in proportion. With one
@@ -99,23 +103,23 @@ def robust_variance(values: np.ndarray) -> float:
     return float(median_abs_deviation(values, scale="normal")) ** 2
 
 
-def excess_variance(
+def variance_difference(
     real: Sequence[float], model: Sequence[float], relative: bool = False
 ) -> float | None:
-    """E = max(0, V_real - V_model) (module docstring: robust variances) of one quantity of one
-    case; relative: both divided by the square of the real runs' mean. None with fewer than two
-    real values."""
+    """D = V_real - V_model (module docstring: robust variances) of one quantity of one case,
+    negative where the model scatters more; relative: both divided by the square of the real
+    runs' mean. None with fewer than two real values."""
     r = np.asarray([v for v in real if v is not None and math.isfinite(v)], float)
     m = np.asarray([v for v in model if v is not None and math.isfinite(v)], float)
     if r.size < 2:
         return None
     v_real = robust_variance(r)
     v_model = robust_variance(m) if m.size >= 2 else 0.0
-    excess = max(0.0, v_real - v_model)
+    difference = v_real - v_model
     if relative:
         mean = float(r.mean())
-        return excess / mean**2 if mean != 0 else None
-    return excess
+        return difference / mean**2 if mean != 0 else None
+    return difference
 
 
 def recommended_evaluation(store: Store) -> Evaluation | None:
@@ -198,7 +202,7 @@ def estimate_run_scatter(
         sims = max(sims, len(values))
         any_used = False
         for q in QUANTITIES:
-            e = excess_variance(
+            e = variance_difference(
                 [v[q] for v in real], [v.get(q) for v in values], relative=q in RELATIVE
             )
             if e is not None:
@@ -206,7 +210,7 @@ def estimate_run_scatter(
                 any_used = True
         if any_used:
             used.append(spec.label)
-    sd = {q: math.sqrt(float(np.mean(v))) for q, v in pooled.items() if v}
+    sd = {q: math.sqrt(max(0.0, float(np.mean(v)))) for q, v in pooled.items() if v}
     return RunScatter(sd, tuple(used), sims)
 
 

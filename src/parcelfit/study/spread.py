@@ -12,6 +12,14 @@ set means m_i = (1/n_i) sum_j q_ij and the grand mean m = (1/N) sum_ij q_ij:
     W = (1/N) sum_i sum_j (q_ij - m_i)^2               mean within-set variance
     V = B + W,   parameter share = B / V,   placement share = W / V.
 
+The parameter share needs two sets at least (NaN with one). W (divisor N) is what the shares
+add up with; as an estimate of one run's scatter about its set's mean it is biased low by the
+set means fitted to the same runs, and `Decomposition.run_variance` is the unbiased one,
+
+    s^2 = (1/(N - n_sets)) sum_i sum_j (q_ij - m_i)^2     (NaN when N <= n_sets),
+
+which `parcelfit design` uses (with K = 5 placements W alone is 0.8 of it).
+
 With every run ok (n_i = K) B is the variance of the per-set means and W the mean of the
 within-set variances (both with divisor n, resp. K). Because every set sees the same K
 placements, a quantity that is a sum of a parameter part and a placement part,
@@ -28,11 +36,15 @@ mean over its plausible interval with the other parameters varying over the plau
 they do in use (so a parameter correlated with another in S is credited only with its own
 part), and its standard error is the regression's. A one-at-a-time sweep was not chosen: it
 costs 2 x K more simulations per parameter and moves the parameter from one calibrated set that
-may lie outside S at the interval's ends. An effect counts as resolved when it is at least
-twice its standard error (with N sets and d parameters the regression needs N > d + 1; for
-parameters spread evenly over their intervals and uncorrelated, the standard error is about
-s sqrt(12 / N), s the scatter of the set means about the fit: 0.77 s with the default 20
-sets).
+may lie outside S at the interval's ends. An effect counts as resolved when its t value
+(effect / standard error, nonzero) reaches Student's two-sided quantile with N - d - 1 degrees
+of freedom for a 5 % chance that any of a case's quantities x parameters shows an effect it
+does not have (Bonferroni, `t_threshold`; 3.5 with 20 sets, 4 parameters and 4 quantities; N the
+sets with a mean of that quantity). With N sets and d parameters the regression needs N > d + 1;
+for parameters spread evenly over their intervals and uncorrelated, the standard error is about
+s sqrt(12 / N), s the scatter of the set means about the fit: 0.77 s with the default 20 sets.
+The standard error is the regression's: it holds the placements' scatter of the set means and
+whatever the linear fit in all parameters leaves unexplained.
 """
 
 from __future__ import annotations
@@ -43,7 +55,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-RESOLVED = 2.0  # an effect is resolved when it is at least this many standard errors
+FALSE_EFFECTS = 0.05  # the chance that a case shows any effect it does not have (t-test)
+
+
+def t_threshold(n_sets: int, n_parameters: int, n_quantities: int) -> float:
+    """The t value an effect must reach to count (module docstring): the two-sided quantile of
+    Student's t (n_sets - n_parameters - 1 degrees of freedom, at least 1) at `FALSE_EFFECTS`
+    shared over every quantity and parameter of a case (Bonferroni)."""
+    from scipy.stats import t
+
+    tests = max(n_quantities * n_parameters, 1)
+    dof = max(n_sets - n_parameters - 1, 1)
+    return float(t.ppf(1.0 - FALSE_EFFECTS / (2 * tests), dof))
 
 
 @dataclass(frozen=True)
@@ -59,8 +82,16 @@ class Decomposition:
 
     @property
     def parameter_share(self) -> float:
-        """B / V (NaN when V is 0 or nothing was measured)."""
-        return self.between / self.total if self.total > 0 else math.nan
+        """B / V (NaN when V is 0, nothing was measured or fewer than two sets have a value)."""
+        return self.between / self.total if self.total > 0 and self.sets >= 2 else math.nan
+
+    @property
+    def run_variance(self) -> float:
+        """One run's variance about its set's mean, unbiased (module docstring): W N / (N -
+        n_sets); NaN when no set has two runs."""
+        if not self.runs > self.sets:
+            return math.nan
+        return self.within * self.runs / (self.runs - self.sets)
 
     @property
     def placement_share(self) -> float:
@@ -91,8 +122,8 @@ def decompose(values: np.ndarray) -> Decomposition:
 @dataclass(frozen=True)
 class Effect:
     """How far one parameter moves one quantity's predicted mean over the parameter's
-    plausible interval [low, high] (SI), with its standard error (module docstring); NaN when
-    the regression has too few sets."""
+    plausible interval [low, high] (SI), with its standard error (module docstring) and the t
+    value it must reach to count (`t_threshold`); NaN when the regression has too few sets."""
 
     parameter: str
     verdict: str
@@ -101,11 +132,21 @@ class Effect:
     high: float
     effect: float
     se: float
+    threshold: float
+
+    @property
+    def estimated(self) -> bool:
+        """False when the regression had too few sets to estimate the effect."""
+        return math.isfinite(self.effect)
 
     @property
     def resolved(self) -> bool:
-        """True when the effect is at least `RESOLVED` standard errors."""
-        return math.isfinite(self.effect) and abs(self.effect) >= RESOLVED * self.se
+        """True when the effect is nonzero and at least `threshold` standard errors."""
+        return (
+            math.isfinite(self.effect)
+            and self.effect != 0.0
+            and abs(self.effect) >= self.threshold * self.se
+        )
 
 
 def effects_of(
@@ -138,9 +179,10 @@ def effects_of(
 
 
 __all__ = [
-    "RESOLVED",
+    "FALSE_EFFECTS",
     "Decomposition",
     "Effect",
     "decompose",
     "effects_of",
+    "t_threshold",
 ]
