@@ -437,6 +437,12 @@ def rank_experiments(
         )
     inputs = load_inputs(folder)
     ident = inputs.identifiability
+    if sets < len(ident.names) + 2:
+        raise ParcelfitError(
+            f"--sets {sets}: the effects of {len(ident.names)} parameters need at least "
+            f"{len(ident.names) + 2} parameter sets (with fewer nothing could narrow anything)",
+            fix=f"give --sets {len(ident.names) + 5} or more (the default is 20)",
+        )
     config = inputs.study.simulator
     mine = config.backend in ("mujoco", "rigidbox")
     # the study's own further rig files (simulator.rigs) are candidates too
