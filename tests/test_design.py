@@ -199,3 +199,24 @@ def test_a_run_s_angle_informs_once_and_its_scatter_is_unbiased():
     assert J[3, 0] == pytest.approx(0.5, rel=1e-9)
     # within-set deviations +-0.01: sum 40 x 1e-4 over 40 runs - 20 sets
     assert scatter[3] ** 2 == pytest.approx(40 * 1e-4 / 20 + FLOOR["exit_heading"] ** 2)
+
+
+def test_the_real_runs_own_scatter_widens_a_candidate_s_noise_beyond_the_floor():
+    """e_q of `sensitivity`: the real runs' scatter beyond the model's, the transit time's as a
+    share of the candidate's mean; below the floor it changes nothing."""
+    from parcelfit.study.design import FLOOR, sensitivity
+
+    p = np.linspace(0.0, 1.0, 8)
+    sets = [{"a": float(v)} for v in p]
+    grids = {
+        "transit_time": np.full((8, 2), 2.0) + 0.1 * p[:, None],  # no placement scatter
+        "rotation": np.zeros((8, 2)),
+        "exit_y": np.zeros((8, 2)),
+        "exit_heading": np.zeros((8, 2)),
+    }
+    _, plain = sensitivity(_ident(["a"]), sets, grids)
+    assert plain[0] == pytest.approx(FLOOR["transit_time"])
+    real = {"transit_time": 0.01, "exit_y": 0.001}  # 1 % of the transit time; 1 mm < floor
+    _, wider = sensitivity(_ident(["a"]), sets, grids, real)
+    assert wider[0] == pytest.approx(0.01 * 2.05, rel=1e-9)  # 1 % of the mean 2.05 s
+    assert wider[2] == pytest.approx(FLOOR["exit_y"])

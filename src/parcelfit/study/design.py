@@ -23,15 +23,17 @@ time, rotation, exit position and heading). For quantity q:
   with 20 sets and 4 parameters, 5.3 with 10), else it counts as zero. Where a quantity bends
   over the interval, the linear fit lends one parameter's effect to another at random; twice
   the standard error let such false effects through;
-* its run-to-run scatter is s_q^2 = W_q + f_q^2: W_q one run's variance about its set's mean
-  over the placements, unbiased (`parcelfit.study.spread.Decomposition.run_variance`; 0 with
-  one placement, when only the floor remains) and f_q a measurement floor (`FLOOR`: the
-  band test's tolerances, 3 mm and 1 degree, for the exit position and the angles, 2 ms for
-  the transit time, assumed), so that a quantity the placements do not scatter is not taken
-  as exact. Each placement runs the rig's drives off their mean speeds as `parcelfit predict`
-  does (``speed_deviation``, default 3 %). The specimens' own scatter (two real parcels of one
-  type differ) is not simulated: real runs scatter more, and the widths below are optimistic;
-  the ranking is what they are for.
+* its run-to-run scatter is s_q^2 = W_q + max(f_q, e_q)^2: W_q one run's variance about its
+  set's mean over the placements, unbiased (`parcelfit.study.spread.Decomposition.run_variance`;
+  0 with one placement); f_q a measurement floor (`FLOOR`: the band test's tolerances, 3 mm
+  and 1 degree, for the exit position and the angles, 2 ms for the transit time, assumed), so
+  that a quantity the placements do not scatter is not taken as exact; and e_q the real runs'
+  own scatter beyond the model's, from the study's fitted cases as `parcelfit predict`
+  estimates it (`parcelfit.study.run_scatter`: each real parcel is its own specimen, and
+  tracking measures with noise; the transit time's as a share of the candidate's mean;
+  `real_run_scatter`, 0 where the calibration simulated one placement per case). Each
+  placement runs the rig's drives off their mean speeds as `parcelfit predict` does
+  (``speed_deviation``, default 3 %).
 
 The rotation |theta(end) - theta(start)| and the exit heading theta(end) are one angle
 measured twice when the start heading scatters little (a placement's sd is 1 degree), and
@@ -82,7 +84,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -131,6 +133,7 @@ from parcelfit.study.predict import (
     finish_run,
     open_executor,
 )
+from parcelfit.study.run_scatter import RELATIVE, estimate_run_scatter
 from parcelfit.study.spread import decompose, effects_of
 from parcelfit.study.store import Store
 from parcelfit.study.studyfile import Study
@@ -249,6 +252,7 @@ class DesignResult:
     out: Path | None = None
     sequence: list[tuple[str, float]] = field(default_factory=list)
     fitted: list[str] = field(default_factory=list)
+    real_scatter: dict[str, float] = field(default_factory=dict)
 
     def candidates_table(self) -> pd.DataFrame:
         """One row per candidate and open parameter, ranked per parameter (docs/data.md)."""
@@ -324,7 +328,10 @@ class DesignResult:
 
 
 def sensitivity(
-    ident: Identifiability, sets: Sequence[dict[str, float]], grids: dict[str, np.ndarray]
+    ident: Identifiability,
+    sets: Sequence[dict[str, float]],
+    grids: dict[str, np.ndarray],
+    real_scatter: Mapping[str, float] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """One case's sensitivities J (quantities x parameters: the change of each quantity's
     per-set mean over each parameter's current interval, zero where unresolved) and
@@ -340,7 +347,10 @@ def sensitivity(
         dec = decompose(grid)
         floor = FLOOR[q]
         within = dec.run_variance if math.isfinite(dec.run_variance) else 0.0
-        scatter[k] = math.sqrt(within + floor**2)
+        extra = (real_scatter or {}).get(q, 0.0)
+        if q in RELATIVE and extra:
+            extra *= float(np.nanmean(grid)) if np.isfinite(grid).any() else 0.0
+        scatter[k] = math.sqrt(within + max(floor, extra) ** 2)
         with np.errstate(invalid="ignore"):
             means = (
                 np.nanmean(grid, axis=1) if np.isfinite(grid).any() else np.full(len(grid), np.nan)
@@ -361,11 +371,13 @@ def score_candidate(
     grids: dict[str, np.ndarray],
     runs: int,
     known: np.ndarray | None = None,
+    real_scatter: Mapping[str, float] | None = None,
 ) -> list[CandidateScore]:
     """The scores of one candidate from its simulated quantities ``grids`` (quantity -> n sets
     x K placements, NaN where a run has none), for every parameter the data do not determine,
-    given the information ``known`` the fitted cases hold (None: nothing)."""
-    J, scatter = sensitivity(ident, sets, grids)
+    given the information ``known`` the fitted cases hold (None: nothing) and the real runs'
+    own scatter ``real_scatter`` (`sensitivity`)."""
+    J, scatter = sensitivity(ident, sets, grids, real_scatter)
     shares = expected_width(J, scatter, runs, known)
     target = np.array(
         [
@@ -396,6 +408,18 @@ def score_candidate(
             )
         )
     return out
+
+
+def real_run_scatter(folder: Path, study: Study) -> dict[str, float]:
+    """The real runs' own scatter beyond the model's (`parcelfit.study.run_scatter`; SI, the
+    transit time's a share of its value) from the calibration's recommended evaluation, where
+    it simulated each fitted case at two placements or more; empty otherwise (with one
+    simulation per case the excess would hold the placements' scatter, which the candidates'
+    own placements give already)."""
+    scatter = estimate_run_scatter(folder, study)
+    if scatter is None or scatter.simulations < 2:
+        return {}
+    return {q: float(v) for q, v in scatter.sd.items()}
 
 
 def rank_experiments(
@@ -547,21 +571,30 @@ def rank_experiments(
         finally:
             store.close()
         grids = [_grids(rows, c, len(full), len(seeds)) for c in range(len(cases))]
-        sens = [sensitivity(ident, drawn, g) for g in grids]
+        real = real_run_scatter(inputs.folder, inputs.study)
+        sens = [sensitivity(ident, drawn, g, real) for g in grids]
         known = sum(
             (n * information(*sens[len(designs) + f]) for f, (_, n) in enumerate(fitted)),
             np.zeros((len(ident.names),) * 2),
         )
         scores: list[CandidateScore] = []
         for c, d in enumerate(designs):
-            scores += score_candidate(d, ident, drawn, grids[c], runs, known)
+            scores += score_candidate(d, ident, drawn, grids[c], runs, known, real)
         open_idx = [j for j, p in enumerate(ident.parameters) if not p.determined]
         infos = [information(*sens[c]) for c in range(len(designs))]
         sequence = [
             (designs[c].label, share) for c, share in greedy_sequence(infos, known, runs, open_idx)
         ]
         result = DesignResult(
-            open_, scores, runs, sets, placements, out_dir, sequence, [d.label for d, _ in fitted]
+            open_,
+            scores,
+            runs,
+            sets,
+            placements,
+            out_dir,
+            sequence,
+            [d.label for d, _ in fitted],
+            dict(real),
         )
         write_design(result, out_dir, table_format)
     finally:
@@ -626,6 +659,7 @@ def write_design(result: DesignResult, out: Path, table_format: str = "csv") -> 
         "sets": result.sets,
         "placements": result.placements,
         "fitted": result.fitted,
+        "real_scatter": result.real_scatter,
         "candidates": records(tables[0][1]),
         "ranking": records(tables[1][1]),
     }
