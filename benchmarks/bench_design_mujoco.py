@@ -152,10 +152,11 @@ def run_truth(k: int, args: argparse.Namespace) -> dict[str, Any]:
     ranking = design.ranking_table()
     order = list(ranking["candidate"])
     top = order[:2]
+    pair = sorted(top)  # the twin data and the study named by the pair, whatever its order
     if top:
         extra = twin(
-            folder / ("data-" + "+".join(c.replace("/", "-") for c in top)),
-            top,
+            folder / ("data-" + "+".join(c.replace("/", "-") for c in pair)),
+            pair,
             truth,
             200 + k,
             args.workers,
@@ -169,10 +170,10 @@ def run_truth(k: int, args: argparse.Namespace) -> dict[str, Any]:
                     "rig": c.split("/")[0],
                     "speed_setting": int(c.split("/")[2]),
                 }
-                for c in top
+                for c in pair
             ),
         ]
-        name = joint.name + "+" + "+".join(c.replace("/", "-") for c in top)
+        name = joint.name + "+" + "+".join(c.replace("/", "-") for c in pair)
         sim_rigs = {**simulator, "rigs": [str(p) for p in BENCH_RIGS]}
         study, minutes = calibrate(folder, name, keys, sim_rigs, data, k, args.workers)
         rows["with the designed"] = {**bench_twin.assess(study, truth_si), "minutes": minutes}
