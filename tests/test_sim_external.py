@@ -31,6 +31,12 @@ def test_runs_the_solver_and_reads_the_trajectory(sim):
     assert res.run.case == CASE
 
 
+def test_a_run_without_a_transit_file_has_no_transit_time(sim):
+    res = sim.run({**defaults_si("rigid"), "mu_d_BePa": 0.13}, CASE)
+    assert res.status is SimStatus.OK, res.diagnostics
+    assert res.run.transit_time is None and len(res.run.trajectory.t) == 61
+
+
 def test_failures_and_timeouts_become_statuses(sim):
     res = sim.run({**defaults_si("rigid"), "mu_d_BePa": 0.11}, CASE)
     assert res.status is SimStatus.FAILED

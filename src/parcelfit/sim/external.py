@@ -7,7 +7,8 @@ A solver description (YAML)::
     template: params.tmpl        # parameter file template, relative to this file
     params_file: params.txt      # name of the rendered file in the run's work folder
     output_file: trajectory.csv  # trajectory the solver writes (columns t,x,y,theta; SI units)
-    transit_file: transit.txt    # optional: a file holding the transit time [s]
+    transit_file: transit.txt    # optional: a file holding the transit time [s] (none written
+                                 # or empty: the run crossed no second light barrier)
     timeout: 3600                # wall-clock limit [s]
 
 The template and every command argument may use ``${name}`` placeholders: each catalogue
@@ -225,8 +226,11 @@ class ExternalSimulator:
         try:
             traj = read_trajectory(workdir / self.solver.output_file)
             transit = None
-            if self.solver.transit_file:
-                transit = float((workdir / self.solver.transit_file).read_text().strip())
+            transit_path = workdir / self.solver.transit_file if self.solver.transit_file else None
+            # no file, or an empty one: the parcel crossed no second light barrier
+            if transit_path is not None and transit_path.is_file():
+                text = transit_path.read_text().strip()
+                transit = float(text) if text else None
             run = Run(
                 run_id or f"ext-{case.rig}-{case.consignment}-{case.speed_setting}",
                 case,

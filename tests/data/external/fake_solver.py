@@ -2,7 +2,8 @@
 
 Reads ``key = value`` lines, writes a trajectory of a parcel sliding onto a belt (speed 1 m/s)
 with friction mu_d_BePa: it accelerates at mu * g until it reaches the belt speed.
-Special values: mu_d_BePa = 0.11 exits with an error, 0.12 sleeps for 30 s.
+Special values: mu_d_BePa = 0.11 exits with an error, 0.12 sleeps for 30 s, 0.13 writes no
+transit time.
 """
 
 import sys
@@ -30,5 +31,6 @@ for i in range(61):
     x += v / 60
 with open(sys.argv[2], "w") as fh:
     fh.write("\n".join(rows) + "\n")
-with open("transit.txt", "w") as fh:
-    fh.write(f"{1.0 / max(v, 1e-9):.6f}\n")
+if mu != 0.13:  # 0.13: no transit time written, as for a parcel that never crosses
+    with open("transit.txt", "w") as fh:
+        fh.write(f"{1.0 / max(v, 1e-9):.6f}\n")
