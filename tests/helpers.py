@@ -239,3 +239,30 @@ def write_study_results(folder: Path, dataset: Path, optimizer=None) -> None:
             ),
         ),
     )
+
+
+def intervals_of(names, low=0.0, high=1.0, verdict="undetermined"):
+    """An analysis of what the data determine in which every parameter of ``names`` has the
+    plausible interval [low, high] (SI) and ``verdict``: the input `design` and `predict` read."""
+    from parcelfit.study.identify import Identifiability, ParameterInterval
+
+    return Identifiability(
+        parameters=tuple(
+            ParameterInterval(
+                name=n,
+                low=low,
+                high=high,
+                interval=(low, high),
+                median=(low + high) / 2,
+                verdict=verdict,
+                rhat=1.0,
+            )
+            for n in names
+        ),
+        correlation=np.eye(len(names)),
+        sample=np.zeros((1, len(names))),
+        threshold=1.0,
+        threshold_source="by hand",
+        evaluations=10,
+        noise_sd=0.1,
+    )

@@ -14,6 +14,7 @@ from typer.testing import CliRunner
 from parcelfit.cli import app
 from parcelfit.study.design import expected_width, runs_needed
 
+from .helpers import intervals_of
 from .predict_helpers import write_finished_study, write_rig_q
 
 runner = CliRunner()
@@ -152,31 +153,6 @@ def test_an_effect_counts_at_the_family_wise_t_quantile():
     assert resolved_t(10, 4) > resolved_t(20, 4) > resolved_t(50, 4) > 3.0
 
 
-def _ident(names):
-    from parcelfit.study.identify import Identifiability, ParameterInterval
-
-    return Identifiability(
-        parameters=tuple(
-            ParameterInterval(
-                name=n,
-                low=0.0,
-                high=1.0,
-                interval=(0.0, 1.0),
-                median=0.5,
-                verdict="undetermined",
-                rhat=1.0,
-            )
-            for n in names
-        ),
-        correlation=np.eye(len(names)),
-        sample=np.zeros((1, len(names))),
-        threshold=1.0,
-        threshold_source="by hand",
-        evaluations=10,
-        noise_sd=0.1,
-    )
-
-
 def test_a_run_s_angle_informs_once_and_its_scatter_is_unbiased():
     """The rotation and the exit heading are one angle measured twice: only the exit heading
     enters J; the run-to-run scatter divides by the runs less the sets (here 2 placements per
@@ -194,7 +170,7 @@ def test_a_run_s_angle_informs_once_and_its_scatter_is_unbiased():
         "exit_y": np.full((20, 2), 0.1),
         "exit_heading": angle,
     }
-    J, scatter = sensitivity(_ident(["a"]), sets, grids)
+    J, scatter = sensitivity(intervals_of(["a"]), sets, grids)
     assert J[1, 0] == 0.0  # rotation: measured again by the exit heading
     assert J[3, 0] == pytest.approx(0.5, rel=1e-9)
     # within-set deviations +-0.01: sum 40 x 1e-4 over 40 runs - 20 sets
@@ -214,9 +190,9 @@ def test_the_real_runs_own_scatter_widens_a_candidate_s_noise_beyond_the_floor()
         "exit_y": np.zeros((8, 2)),
         "exit_heading": np.zeros((8, 2)),
     }
-    _, plain = sensitivity(_ident(["a"]), sets, grids)
+    _, plain = sensitivity(intervals_of(["a"]), sets, grids)
     assert plain[0] == pytest.approx(FLOOR["transit_time"])
     real = {"transit_time": 0.01, "exit_y": 0.001}  # 1 % of the transit time; 1 mm < floor
-    _, wider = sensitivity(_ident(["a"]), sets, grids, real)
+    _, wider = sensitivity(intervals_of(["a"]), sets, grids, real)
     assert wider[0] == pytest.approx(0.01 * 2.05, rel=1e-9)  # 1 % of the mean 2.05 s
     assert wider[2] == pytest.approx(FLOOR["exit_y"])

@@ -17,6 +17,7 @@ from parcelfit.study.predict import PREDICT_STORE
 from parcelfit.study.spread import decompose, effects_of
 from parcelfit.study.store import Store
 
+from .helpers import intervals_of
 from .predict_helpers import write_finished_study, write_rig_q
 
 runner = CliRunner()
@@ -213,30 +214,10 @@ def test_a_folder_without_a_finished_study_exits_2(study, tmp_path):
 def test_a_parameter_whose_effect_could_not_be_estimated_is_not_called_harmless():
     """Fewer parameter sets than parameters + 2: no effect is estimated, and the sentence says
     so instead of "for this design it does not matter"."""
-    from parcelfit.study.identify import Identifiability, ParameterInterval
     from parcelfit.study.predict import summarise_prediction
 
     names = ["a", "b", "c", "d"]
-    ident = Identifiability(
-        parameters=tuple(
-            ParameterInterval(
-                name=n,
-                low=0.0,
-                high=1.0,
-                interval=(0.0, 1.0),
-                median=0.5,
-                verdict="undetermined",
-                rhat=1.0,
-            )
-            for n in names
-        ),
-        correlation=np.eye(4),
-        sample=np.zeros((1, 4)),
-        threshold=1.0,
-        threshold_source="by hand",
-        evaluations=10,
-        noise_sd=0.1,
-    )
+    ident = intervals_of(names)
     rng = np.random.default_rng(4)
     sets = [
         {n: float(v) for n, v in zip(names, rng.uniform(0, 1, 4), strict=True)} for _ in range(5)

@@ -21,7 +21,7 @@ from parcelfit.study.run_scatter import (
 )
 from parcelfit.study.studyfile import load_study
 
-from .helpers import write_study
+from .helpers import intervals_of, write_study
 from .predict_helpers import write_rig_q
 
 K = 1.482602218505602  # 1 / Phi^-1(3/4): the MAD of normal scatter times K is its sd
@@ -106,7 +106,6 @@ def test_the_estimate_from_a_calibration_with_one_run_per_evaluation(tmp_path):
 
 
 def test_a_prediction_s_band_of_a_real_run_holds_the_model_s_band():
-    from parcelfit.study.identify import Identifiability, ParameterInterval
     from parcelfit.study.predict import summarise_prediction
 
     rng = np.random.default_rng(2)
@@ -123,25 +122,7 @@ def test_a_prediction_s_band_of_a_real_run_holds_the_model_s_band():
         for i, s in enumerate(sets)
         for j in range(4)
     ]
-    ident = Identifiability(
-        parameters=(
-            ParameterInterval(
-                name="mu_d_BePa",
-                low=0.3,
-                high=0.5,
-                interval=(0.3, 0.5),
-                median=0.4,
-                verdict="determined",
-                rhat=1.0,
-            ),
-        ),
-        correlation=np.eye(1),
-        sample=np.zeros((1, 1)),
-        threshold=1.0,
-        threshold_source="by hand",
-        evaluations=10,
-        noise_sd=0.1,
-    )
+    ident = intervals_of(["mu_d_BePa"], 0.3, 0.5, "determined")
     scatter = RunScatter({"transit_time": 0.02}, ("R/P/1",), 2)
     summaries, _, _ = summarise_prediction(ident, sets, [0, 1, 2, 3], pd.DataFrame(rows), scatter)
     by = {s.quantity: s for s in summaries}
