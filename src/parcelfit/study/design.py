@@ -351,12 +351,12 @@ def sensitivity(
         if q in RELATIVE and extra:
             extra *= float(np.nanmean(grid)) if np.isfinite(grid).any() else 0.0
         scatter[k] = math.sqrt(within + max(floor, extra) ** 2)
+        if q in REPEATED:
+            continue  # measured again by another quantity: its row of J stays 0
         with np.errstate(invalid="ignore"):
             means = (
                 np.nanmean(grid, axis=1) if np.isfinite(grid).any() else np.full(len(grid), np.nan)
             )
-        if q in REPEATED:
-            continue  # measured again by another quantity: its row of J stays 0
         eff, se = effects_of(means, X, intervals)
         resolved = resolved_t(int(np.isfinite(means).sum()), len(names))  # the fitted sets
         ok = np.isfinite(eff) & (np.abs(eff) >= resolved * np.where(np.isfinite(se), se, np.inf))

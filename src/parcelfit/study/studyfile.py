@@ -184,15 +184,14 @@ def _to_si(name: str, value: float, backend: str) -> float:
 
 
 def check_simulator_files(sim: SimulatorConfig, path: Path) -> set[str] | None:
-    """For the mujoco backend, load the rig and consignment now (a bundled name or a file), so
+    """For the mujoco and rigidbox backends, load the rig and consignment now (a bundled name or a file), so
     that an unknown name is refused on load naming ``simulator.rig`` (or ``.consignment``) of
     the file at ``path``; a mistake inside a rig or consignment file names that file. Returns
     the rig names the file's cases may use (mujoco and rigidbox, `_rig_names`; None: any)."""
     if sim.backend not in ("mujoco", "rigidbox"):
         return None
     names = _rig_names(sim, path)
-    if sim.backend != "mujoco":
-        return names
+    # both backends build their simulator from these files (keyed by their name:)
     from parcelfit.sim.mujoco import load_consignment, load_rig
 
     for key, load in (("rig", load_rig), ("consignment", load_consignment)):
