@@ -7,7 +7,12 @@ import pytest
 from parcelfit import ParcelfitError
 from parcelfit.metrics import calibration_cost, real_run_costs, select_reference
 from parcelfit.metrics.dtw import dtw_distance
-from parcelfit.metrics.ensemble import ensemble_cost, ensemble_real_costs
+from parcelfit.metrics.ensemble import (
+    ensemble_cost,
+    ensemble_null_costs,
+    ensemble_real_costs,
+    transit_statistic,
+)
 from parcelfit.optimize.space import Dimension, Space
 from parcelfit.runs import TestCase, load_dataset
 from parcelfit.study.identify import Identifiability, identify, verdict
@@ -135,9 +140,46 @@ def test_ensemble_transit_term_is_the_squared_z_of_the_mean_difference(reference
     traj, _ = trajectory({**TRUTH, "E_Pa": 1e9}, 1, rig="Q")
     shifted = [real.mean() + 0.01, real.mean() + 0.02, real.mean() + 0.03]
     e = ensemble_cost([traj] * 3, shifted, sel, w_transit=2.0)
-    se2 = np.var(shifted, ddof=1) / 3 + real.var(ddof=1) / len(real)
+    n = len(real)
+    pooled = (2 * np.var(shifted, ddof=1) + (n - 1) * real.var(ddof=1)) / (3 + n - 2)
+    se2 = pooled * (1 / 3 + 1 / n)
     assert e.transit_term == pytest.approx(2.0 * 0.02**2 / se2, rel=1e-9)
     assert e.value == pytest.approx(e.trajectory_term + e.transit_term)
+
+
+def test_two_simulations_crossing_in_the_same_time_do_not_blow_up_the_transit_term():
+    # Welch's SE would rest on the two simulations' own variance (here 0) and give
+    # 0.5^2 / (1 / 10) = 2.5; pooled with the real runs' it is the t statistic of equal scatter
+    real = [1.0 + 0.1 * z for z in (-1.5, -1, -0.5, -0.2, 0, 0.1, 0.3, 0.6, 1.0, 1.2)]
+    s2 = float(np.var(real, ddof=1))
+    sims = [np.mean(real) + 0.05, np.mean(real) + 0.05]
+    pooled = 9 * s2 / 10
+    assert transit_statistic(sims, real) == pytest.approx(0.05**2 / (pooled * 0.6), rel=1e-12)
+    assert transit_statistic(sims, real) < 0.05**2 / (s2 / 10)
+    # one simulation: the real runs' variance alone, as before
+    assert transit_statistic(sims[:1], real) == pytest.approx(0.05**2 / (s2 * 1.1), rel=1e-12)
+    with pytest.raises(ParcelfitError):
+        transit_statistic(sims, real[:1])
+
+
+def test_null_costs_of_sets_of_real_runs(reference):
+    _, sel = reference
+    n = len(sel.run_ids)
+    one = ensemble_null_costs(sel, 1)
+    assert one == pytest.approx(ensemble_real_costs(sel), rel=1e-12) and len(one) == n
+    two = ensemble_null_costs(sel, 2)
+    assert len(two) == n * (n - 1) // 2
+    d = sel.d_xy / sel.max_xy + sel.d_theta / sel.max_theta
+    t = np.array(sel.transit_times, float)
+    chosen, others = [0, 1], list(range(2, n))  # the first set in lexicographic order
+    expect = d[np.ix_(chosen, others)].mean() + transit_statistic(t[chosen], t[others])
+    assert two[0] == pytest.approx(expect, rel=1e-12)
+    # more sets than asked: a seeded sample, the same for the same seed
+    few = ensemble_null_costs(sel, 3, max_subsets=7, seed=4)
+    assert len(few) == 7
+    assert few == pytest.approx(ensemble_null_costs(sel, 3, max_subsets=7, seed=4), rel=0)
+    # a set as large as the real runs allow: n - 2 (the others keep a variance)
+    assert len(ensemble_null_costs(sel, n + 5)) == n * (n - 1) // 2
 
 
 def test_ensemble_real_costs_score_each_run_against_the_others(reference):

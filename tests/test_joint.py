@@ -2,12 +2,16 @@
 on the analytic fake simulator (rig R and a second rig Q on which E_Pa turns the parcel)."""
 
 import json
+import math
 
+import numpy as np
 import pytest
 import yaml
 
 from parcelfit import ParcelfitError
 from parcelfit.study.calibration import Calibration
+from parcelfit.study.joint import case_null_costs, threshold
+from parcelfit.study.objective import select_references
 from parcelfit.study.results import read_results
 from parcelfit.study.status import study_status
 from parcelfit.study.studyfile import load_study
@@ -215,8 +219,21 @@ def test_a_joint_ensemble_study_stores_the_parts_and_checks_transfer(
     assert [v.case for v in results.transfer] == ["Q/P/2"]
     assert results.transfer[0].verdict is not None
     assert results.identifiability is not None and results.identifiability.evaluations == 8
-    eps = sum(c.weight * c.threshold for c in status.cases if c.role == "fit")
-    assert results.identifiability.threshold == pytest.approx(eps, rel=1e-12)
+    # the threshold: the 95 % quantile of the weighted sum of what sets of 3 real runs score
+    refs = select_references(study)
+    nulls = [(c.weight, case_null_costs(refs[c.label], study, c)) for c in study.cases]
+    assert [len(n) for _, n in nulls] == [
+        math.comb(len(refs[c.label].run_ids), 3) for c in study.cases
+    ]
+    eps = results.identifiability.threshold
+    assert eps == pytest.approx(threshold(refs, study)[0], rel=1e-12)
+    assert "95 % quantile of the weighted sum" in results.identifiability.threshold_source
+    assert "3 of" in results.identifiability.threshold_source
+    # every pair of a set per case: the share of sums at or below eps is about 95 %
+    sums = np.add.outer(nulls[0][0] * nulls[0][1], nulls[1][0] * nulls[1][1])
+    assert np.mean(sums <= eps) == pytest.approx(0.95, abs=0.01)
+    for c, (_, n) in zip(status.cases, nulls, strict=False):  # one case alone: its own 95 %
+        assert c.threshold == pytest.approx(np.quantile(n, 0.95, method="higher"), rel=1e-12)
     assert status.validations and all(v.after_iteration >= 1 for v in status.validations)
     # the advice, when a parameter stays open, weighs the validation and transfer cases
     assert results.advice is None or set(results.advice.changes) == {"R/P/2", "Q/P/2"}

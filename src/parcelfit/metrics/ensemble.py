@@ -11,16 +11,21 @@ DTW distances normalised as in equation (3),
 (max over the real runs' matrices of section 4), the cost of a case is
 
     c = (1 / (K n)) sum_s sum_r D(s, r)  +  w_T (mean T_sim - mean T_real)^2 / SE^2,
-    SE^2 = s_sim^2 / K + s_real^2 / n
+    SE^2 = s_p^2 (1 / K + 1 / n),  s_p^2 = ((K - 1) s_sim^2 + (n - 1) s_real^2) / (K + n - 2)
 
-with the sample variances s^2 of the transit times [s^2] (s_sim^2 is replaced by s_real^2 when
-fewer than two simulations have a transit time: one run tells nothing of the model's scatter).
+with the sample variances s^2 of the transit times [s^2], pooled (s_p^2 = s_real^2 when fewer
+than two simulations have a transit time: one run tells nothing of the model's scatter).
 The first term estimates E[D(S, R)] for a simulated run S and a real run R drawn independently
-(unbiased: every pair counts once); the second is the squared z statistic of the difference of
-the mean transit times, about chi-square with one degree of freedom (mean 1) when the model's
-mean transit time is the real one, and growing with the square of the difference in units of
-its standard error otherwise. The transit term is left out (``transit_term`` None) when the real
-runs have no transit times or no simulation has one.
+(unbiased: every pair counts once); the second is the squared two-sample t statistic of the mean
+transit times: when the model's runs scatter like the real runs around the same mean it follows
+F(1, K + n - 2) (mean (K + n - 2) / (K + n - 4), 1.25 for K = 2 and n = 10), and it grows with
+the square of the difference in units of its standard error otherwise. The variances are pooled
+because that is the hypothesis the term tests (simulated and real runs alike); Welch's form,
+s_sim^2 / K + s_real^2 / n, rests on s_sim^2 from K runs, which for K = 2 is nearly zero
+whenever two placements happen to cross in about the same time, and then turns a mean difference
+of a fraction of the real runs' scatter into a term of 10-60 (at K = 2 its statistic has about
+one degree of freedom and no finite mean). The transit term is left out (``transit_term`` None)
+when the real runs have no transit times or no simulation has one.
 
 **Variance of the estimator.** The first term is a two-sample mean over all pairs (a
 generalised U-statistic); to first order
@@ -37,16 +42,21 @@ reference are adjusted for the belt speeds each run rode at
 alike before they reach this module: T above is then T^a, and s_real^2 the adjusted times'
 variance (smaller by what the belt speeds explain).
 
-**Real runs on the same scale.** `ensemble_real_costs` scores every real run j as a one-member
-ensemble against the other n - 1 real runs (its transit time against their mean, SE^2 = s^2 (1 +
-1 / (n - 1)) with their sample variance): what a simulation as good as one more real run would
-score. Its largest value is the acceptance threshold of the identifiability analysis
-(`parcelfit.study.identify`), conservative for K > 1 (an average of K runs scatters less than
-one run).
+**Real runs on the same scale.** `ensemble_null_costs` scores every set of K real runs (every
+one of the C(n, K) sets, or a seeded sample of them when there are more than
+``max_subsets``) as an ensemble against the other n - K real runs, in the same formula: what an
+ensemble of K simulations would score if the simulations were as good as K more real runs
+(the cost's distribution at the true parameters, as far as the real runs can show it).
+`ensemble_real_costs` is its K = 1 case (each real run against the other n - 1; the transit
+term's SE^2 = s^2 (1 + 1 / (n - 1)) with their sample variance). A high quantile of it is the
+acceptance threshold of the identifiability analysis (`parcelfit.study.joint.threshold`,
+`parcelfit.study.identify`). K is cut to n - 2 when the real runs are fewer than K + 2, so that
+the other runs still have a variance.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -116,13 +126,66 @@ def ensemble_cost(
     transit = None
     mean_t = float(np.mean(sim_t)) if sim_t else None
     if sim_t and len(real_t) >= 2 and w_transit > 0:
-        var_real = float(np.var(real_t, ddof=1))
-        var_sim = float(np.var(sim_t, ddof=1)) if len(sim_t) >= 2 else var_real
-        se2 = var_sim / len(sim_t) + var_real / len(real_t)
-        diff2 = (float(np.mean(sim_t)) - float(np.mean(real_t))) ** 2
-        transit = w_transit * (diff2 / se2 if se2 > 0 else (0.0 if diff2 == 0 else math.inf))
+        transit = w_transit * transit_statistic(sim_t, real_t)
     value = traj + (transit or 0.0)
     return EnsembleCost(value, traj, transit, se, k, mean_t)
+
+
+def transit_statistic(sim_times: Sequence[float], real_times: Sequence[float]) -> float:
+    """The squared two-sample t statistic of the mean transit times [s] with pooled variances
+    (module docstring; dimensionless): s_p^2 = s_real^2 with fewer than two simulated times.
+    Needs at least two real times; 0 when both sets are constant and equal, inf when they are
+    constant and differ."""
+    m, n = len(sim_times), len(real_times)
+    if m < 1 or n < 2:
+        raise ParcelfitError("a transit statistic needs a simulated and two real transit times")
+    var_real = float(np.var(real_times, ddof=1))
+    pooled = var_real
+    if m >= 2:
+        pooled = ((m - 1) * float(np.var(sim_times, ddof=1)) + (n - 1) * var_real) / (m + n - 2)
+    se2 = pooled * (1.0 / m + 1.0 / n)
+    diff2 = (float(np.mean(sim_times)) - float(np.mean(real_times))) ** 2
+    return diff2 / se2 if se2 > 0 else (0.0 if diff2 == 0 else math.inf)
+
+
+def ensemble_null_costs(
+    reference: ReferenceSelection,
+    k: int = 1,
+    w_xy: float = 1.0,
+    w_theta: float = 1.0,
+    w_transit: float = 1.0,
+    *,
+    max_subsets: int = 2000,
+    seed: int = 0,
+) -> np.ndarray:
+    """The ensemble cost of sets of ``k`` real runs against the other real runs (module
+    docstring), from the selection's matrices (dimensionless, one per set: all C(n, k) sets in
+    lexicographic order, or ``max_subsets`` drawn with ``seed`` when there are more)."""
+    n = len(reference.run_ids)
+    if n < 2:
+        raise ParcelfitError(
+            f"test case {reference.case.label} has {n} real run: too few to compare sets"
+        )
+    if k < 1:
+        raise ParcelfitError(f"an ensemble has at least one run, got {k}")
+    k = max(1, min(k, n - 2))
+    sx, st = _scales(reference)
+    d = w_xy * reference.d_xy / sx + w_theta * reference.d_theta / st
+    times = [t for t in reference.transit_times if t is not None]
+    use_t = len(times) == n and n - k >= 2 and w_transit > 0
+    t_all = np.asarray(times, float)
+    if math.comb(n, k) <= max_subsets:
+        subsets = [list(c) for c in itertools.combinations(range(n), k)]
+    else:
+        rng = np.random.default_rng([seed, n, k])
+        subsets = [sorted(rng.choice(n, k, replace=False)) for _ in range(max_subsets)]
+    out = np.empty(len(subsets))
+    for i, chosen in enumerate(subsets):
+        others = [r for r in range(n) if r not in chosen]
+        out[i] = d[np.ix_(chosen, others)].mean()
+        if use_t:
+            out[i] += w_transit * transit_statistic(t_all[chosen], t_all[others])
+    return out
 
 
 def ensemble_real_costs(
@@ -133,25 +196,13 @@ def ensemble_real_costs(
 ) -> np.ndarray:
     """The ensemble cost of every real run as a one-member ensemble against the other real runs
     (module docstring), from the selection's matrices (dimensionless, one per real run)."""
-    n = len(reference.run_ids)
-    if n < 2:
-        raise ParcelfitError(
-            f"test case {reference.case.label} has {n} real run: too few to compare sets"
-        )
-    sx, st = _scales(reference)
-    d = w_xy * reference.d_xy / sx + w_theta * reference.d_theta / st
-    out = np.empty(n)
-    times = [t for t in reference.transit_times if t is not None]
-    use_t = len(times) == n and n >= 3 and w_transit > 0
-    for j in range(n):
-        others = [r for r in range(n) if r != j]
-        out[j] = d[j, others].mean()
-        if use_t:
-            t_others = np.array([times[r] for r in others])
-            se2 = float(t_others.var(ddof=1)) * (1 + 1 / len(others))
-            diff2 = (times[j] - float(t_others.mean())) ** 2
-            out[j] += w_transit * (diff2 / se2 if se2 > 0 else 0.0)
-    return out
+    return ensemble_null_costs(reference, 1, w_xy, w_theta, w_transit)
 
 
-__all__ = ["EnsembleCost", "ensemble_cost", "ensemble_real_costs"]
+__all__ = [
+    "EnsembleCost",
+    "ensemble_cost",
+    "ensemble_null_costs",
+    "ensemble_real_costs",
+    "transit_statistic",
+]

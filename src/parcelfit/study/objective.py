@@ -141,7 +141,7 @@ def case_summary(study: Study, references: Mapping[str, ReferenceSelection]) -> 
                     weight=spec.weight,
                     dataset=str(spec.dataset),
                     reference_run=ref.reference_id,
-                    threshold=case_threshold(ref, study) if role == "fit" else None,
+                    threshold=case_threshold(ref, study, spec) if role == "fit" else None,
                     transit=None
                     if ref.transit_adjustment is None
                     else ref.transit_adjustment.describe(),
