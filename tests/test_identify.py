@@ -1,6 +1,9 @@
 """What the data determine (parcelfit.study.identify) and the ensemble cost
 (parcelfit.metrics.ensemble), on objectives and data whose truth is known."""
 
+import dataclasses
+import math
+
 import numpy as np
 import pytest
 
@@ -8,6 +11,7 @@ from parcelfit import ParcelfitError
 from parcelfit.metrics import calibration_cost, real_run_costs, select_reference
 from parcelfit.metrics.dtw import dtw_distance
 from parcelfit.metrics.ensemble import (
+    effective_set_size,
     ensemble_cost,
     ensemble_null_costs,
     ensemble_real_costs,
@@ -132,7 +136,7 @@ def test_ensemble_cost_of_the_real_runs_themselves(reference):
     assert e.se == pytest.approx(se, rel=1e-9) and e.n_sims == n
 
 
-def test_ensemble_transit_term_is_the_squared_z_of_the_mean_difference(reference):
+def test_ensemble_transit_term_is_the_squared_welch_statistic_of_the_mean_difference(reference):
     _, sel = reference
     real = np.array(sel.transit_times, float)
     from .fake_sim import TRUTH, trajectory
@@ -140,24 +144,23 @@ def test_ensemble_transit_term_is_the_squared_z_of_the_mean_difference(reference
     traj, _ = trajectory({**TRUTH, "E_Pa": 1e9}, 1, rig="Q")
     shifted = [real.mean() + 0.01, real.mean() + 0.02, real.mean() + 0.03]
     e = ensemble_cost([traj] * 3, shifted, sel, w_transit=2.0)
-    n = len(real)
-    pooled = (2 * np.var(shifted, ddof=1) + (n - 1) * real.var(ddof=1)) / (3 + n - 2)
-    se2 = pooled * (1 / 3 + 1 / n)
+    se2 = np.var(shifted, ddof=1) / 3 + real.var(ddof=1) / len(real)
     assert e.transit_term == pytest.approx(2.0 * 0.02**2 / se2, rel=1e-9)
     assert e.value == pytest.approx(e.trajectory_term + e.transit_term)
 
 
-def test_two_simulations_crossing_in_the_same_time_do_not_blow_up_the_transit_term():
-    # Welch's SE would rest on the two simulations' own variance (here 0) and give
-    # 0.5^2 / (1 / 10) = 2.5; pooled with the real runs' it is the t statistic of equal scatter
+def test_the_transit_statistic_keeps_each_sides_variance():
     real = [1.0 + 0.1 * z for z in (-1.5, -1, -0.5, -0.2, 0, 0.1, 0.3, 0.6, 1.0, 1.2)]
     s2 = float(np.var(real, ddof=1))
-    sims = [np.mean(real) + 0.05, np.mean(real) + 0.05]
-    pooled = 9 * s2 / 10
-    assert transit_statistic(sims, real) == pytest.approx(0.05**2 / (pooled * 0.6), rel=1e-12)
-    assert transit_statistic(sims, real) < 0.05**2 / (s2 / 10)
-    # one simulation: the real runs' variance alone, as before
-    assert transit_statistic(sims[:1], real) == pytest.approx(0.05**2 / (s2 * 1.1), rel=1e-12)
+    sims = [np.mean(real) + 0.04, np.mean(real) + 0.06]  # variance 0.0002
+    se2 = 0.0002 / 2 + s2 / 10
+    assert transit_statistic(sims, real) == pytest.approx(0.05**2 / se2, rel=1e-12)
+    # one simulation: the real runs' variance stands for the model's
+    assert transit_statistic(sims[:1], real) == pytest.approx(0.04**2 / (s2 * 1.1), rel=1e-12)
+    # no scatter on either side: 0 for equal means, else what the caller says (inf by default)
+    assert transit_statistic([1.0, 1.0], [1.0, 1.0]) == 0.0
+    assert transit_statistic([1.0, 1.0], [2.0, 2.0]) == math.inf
+    assert transit_statistic([1.0, 1.0], [2.0, 2.0], constant=0.0) == 0.0
     with pytest.raises(ParcelfitError):
         transit_statistic(sims, real[:1])
 
@@ -166,20 +169,45 @@ def test_null_costs_of_sets_of_real_runs(reference):
     _, sel = reference
     n = len(sel.run_ids)
     one = ensemble_null_costs(sel, 1)
-    assert one == pytest.approx(ensemble_real_costs(sel), rel=1e-12) and len(one) == n
+    assert len(one) == n
     two = ensemble_null_costs(sel, 2)
     assert len(two) == n * (n - 1) // 2
     d = sel.d_xy / sel.max_xy + sel.d_theta / sel.max_theta
     t = np.array(sel.transit_times, float)
-    chosen, others = [0, 1], list(range(2, n))  # the first set in lexicographic order
-    expect = d[np.ix_(chosen, others)].mean() + transit_statistic(t[chosen], t[others])
-    assert two[0] == pytest.approx(expect, rel=1e-12)
-    # more sets than asked: a seeded sample, the same for the same seed
+    for chosen in ([0, 1], [n - 2, n - 1]):  # the first and last sets in lexicographic order
+        others = [r for r in range(n) if r not in chosen]
+        welch = t[chosen].var(ddof=1) / 2 + t[others].var(ddof=1) / (n - 2)
+        diff2 = (t[chosen].mean() - t[others].mean()) ** 2
+        expect = d[np.ix_(chosen, others)].mean() + diff2 / welch
+        assert two[0 if chosen[0] == 0 else -1] == pytest.approx(expect, rel=1e-12)
+    # more sets than asked: a seeded sample of the sets, the same for the same seed
+    every = ensemble_null_costs(sel, 3)
     few = ensemble_null_costs(sel, 3, max_subsets=7, seed=4)
-    assert len(few) == 7
+    assert len(few) == 7 and all(np.isclose(every, v, rtol=1e-12).any() for v in few)
     assert few == pytest.approx(ensemble_null_costs(sel, 3, max_subsets=7, seed=4), rel=0)
-    # a set as large as the real runs allow: n - 2 (the others keep a variance)
-    assert len(ensemble_null_costs(sel, n + 5)) == n * (n - 1) // 2
+    assert not np.allclose(few, ensemble_null_costs(sel, 3, max_subsets=7, seed=5))
+    # a set as large as the real runs allow: n - 2, so the others keep a variance
+    assert effective_set_size(n, n + 5) == n - 2 and effective_set_size(2, 1) == 1
+    assert ensemble_null_costs(sel, n + 5) == pytest.approx(ensemble_null_costs(sel, n - 2))
+
+
+def test_null_costs_count_the_transit_times_the_runs_have(reference):
+    _, sel = reference
+    n = len(sel.run_ids)
+    times = list(sel.transit_times)
+    times[0] = None  # one real run without a transit time
+    part = dataclasses.replace(sel, transit_times=times)
+    costs = ensemble_null_costs(part, 1)
+    d = sel.d_xy / sel.max_xy + sel.d_theta / sel.max_theta
+    t = np.array(sel.transit_times, float)
+    assert costs[0] == pytest.approx(d[0, 1:].mean(), rel=1e-12)  # no time: trajectories only
+    others = [r for r in range(2, n)]  # run 1 against runs 2.. (run 0 has no time)
+    se2 = t[others].var(ddof=1) * (1 + 1 / len(others))
+    traj = d[1, [0, *others]].mean()
+    assert costs[1] == pytest.approx(traj + (t[1] - t[others].mean()) ** 2 / se2, rel=1e-12)
+    # real runs that all take one time: no scatter to judge by, no transit term (not inf)
+    same = dataclasses.replace(sel, transit_times=[1.5] * n)
+    assert np.all(np.isfinite(ensemble_null_costs(same, 2)))
 
 
 def test_ensemble_real_costs_score_each_run_against_the_others(reference):

@@ -11,21 +11,21 @@ DTW distances normalised as in equation (3),
 (max over the real runs' matrices of section 4), the cost of a case is
 
     c = (1 / (K n)) sum_s sum_r D(s, r)  +  w_T (mean T_sim - mean T_real)^2 / SE^2,
-    SE^2 = s_p^2 (1 / K + 1 / n),  s_p^2 = ((K - 1) s_sim^2 + (n - 1) s_real^2) / (K + n - 2)
+    SE^2 = s_sim^2 / K + s_real^2 / n
 
-with the sample variances s^2 of the transit times [s^2], pooled (s_p^2 = s_real^2 when fewer
-than two simulations have a transit time: one run tells nothing of the model's scatter).
+with the sample variances s^2 of the transit times [s^2] (s_sim^2 is replaced by s_real^2 when
+fewer than two simulations have a transit time: one run tells nothing of the model's scatter).
 The first term estimates E[D(S, R)] for a simulated run S and a real run R drawn independently
-(unbiased: every pair counts once); the second is the squared two-sample t statistic of the mean
-transit times: when the model's runs scatter like the real runs around the same mean it follows
-F(1, K + n - 2) (mean (K + n - 2) / (K + n - 4), 1.25 for K = 2 and n = 10), and it grows with
-the square of the difference in units of its standard error otherwise. The variances are pooled
-because that is the hypothesis the term tests (simulated and real runs alike); Welch's form,
-s_sim^2 / K + s_real^2 / n, rests on s_sim^2 from K runs, which for K = 2 is nearly zero
-whenever two placements happen to cross in about the same time, and then turns a mean difference
-of a fraction of the real runs' scatter into a term of 10-60 (at K = 2 its statistic has about
-one degree of freedom and no finite mean). The transit term is left out (``transit_term`` None)
-when the real runs have no transit times or no simulation has one.
+(unbiased: every pair counts once); the second is the squared Welch statistic of the difference
+of the mean transit times, growing with the square of the difference in units of its standard
+error. Each side keeps its own variance because the model's runs need not scatter like the
+real runs (on E1 the placements scatter the transit time by a tenth of what the real runs'
+specimens and belts do; on E3 spins scatter both). With few placements the statistic is far
+from chi-square with one degree of freedom: at K = 2, s_sim^2 rests on two runs and is near zero
+whenever they cross in about the same time, so its tail is long. That is the cost's own
+scatter at the true parameters, and the acceptance threshold of the identifiability analysis
+is taken from it (below). The transit term is left out (``transit_term`` None) when the real
+runs have fewer than two transit times or no simulation has one.
 
 **Variance of the estimator.** The first term is a two-sample mean over all pairs (a
 generalised U-statistic); to first order
@@ -43,15 +43,18 @@ alike before they reach this module: T above is then T^a, and s_real^2 the adjus
 variance (smaller by what the belt speeds explain).
 
 **Real runs on the same scale.** `ensemble_null_costs` scores every set of K real runs (every
-one of the C(n, K) sets, or a seeded sample of them when there are more than
-``max_subsets``) as an ensemble against the other n - K real runs, in the same formula: what an
-ensemble of K simulations would score if the simulations were as good as K more real runs
-(the cost's distribution at the true parameters, as far as the real runs can show it).
-`ensemble_real_costs` is its K = 1 case (each real run against the other n - 1; the transit
+one of the C(n, K) sets, or ``max_subsets`` sets drawn with a seed when there are more) as an
+ensemble against the other n - K real runs, in the same formula: what an ensemble of K
+simulations would score if the simulations were as good as K more real runs (the cost's
+distribution at the true parameters, as far as the real runs can show it). Against n - K runs
+instead of n it scatters a little more than the cost would, which errs on the side of accepting.
+`ensemble_real_costs` is its K = 1 case (each real run against the other n - 1, the transit
 term's SE^2 = s^2 (1 + 1 / (n - 1)) with their sample variance). A high quantile of it is the
-acceptance threshold of the identifiability analysis (`parcelfit.study.joint.threshold`,
-`parcelfit.study.identify`). K is cut to n - 2 when the real runs are fewer than K + 2, so that
-the other runs still have a variance.
+acceptance threshold of the identifiability analysis (`parcelfit.study.joint.threshold`). K is
+cut to n - 2 when the real runs are fewer than K + 2, so that the other runs keep a variance.
+With ``transit: adjusted`` the real runs' times were adjusted by a fit to all of them, the sets'
+included, so the sets score a little better than simulations would, and the threshold is less
+generous than stated.
 """
 
 from __future__ import annotations
@@ -131,21 +134,21 @@ def ensemble_cost(
     return EnsembleCost(value, traj, transit, se, k, mean_t)
 
 
-def transit_statistic(sim_times: Sequence[float], real_times: Sequence[float]) -> float:
-    """The squared two-sample t statistic of the mean transit times [s] with pooled variances
-    (module docstring; dimensionless): s_p^2 = s_real^2 with fewer than two simulated times.
-    Needs at least two real times; 0 when both sets are constant and equal, inf when they are
-    constant and differ."""
+def transit_statistic(
+    sim_times: Sequence[float], real_times: Sequence[float], *, constant: float = math.inf
+) -> float:
+    """The squared Welch statistic of the mean transit times [s] (module docstring;
+    dimensionless): SE^2 = s_sim^2 / K + s_real^2 / n, s_sim^2 = s_real^2 with one simulated
+    time. Needs a simulated and two real times; when SE^2 is 0 it is 0 for equal means and
+    ``constant`` otherwise."""
     m, n = len(sim_times), len(real_times)
     if m < 1 or n < 2:
         raise ParcelfitError("a transit statistic needs a simulated and two real transit times")
     var_real = float(np.var(real_times, ddof=1))
-    pooled = var_real
-    if m >= 2:
-        pooled = ((m - 1) * float(np.var(sim_times, ddof=1)) + (n - 1) * var_real) / (m + n - 2)
-    se2 = pooled * (1.0 / m + 1.0 / n)
+    var_sim = float(np.var(sim_times, ddof=1)) if m >= 2 else var_real
+    se2 = var_sim / m + var_real / n
     diff2 = (float(np.mean(sim_times)) - float(np.mean(real_times))) ** 2
-    return diff2 / se2 if se2 > 0 else (0.0 if diff2 == 0 else math.inf)
+    return diff2 / se2 if se2 > 0 else (0.0 if diff2 == 0 else constant)
 
 
 def ensemble_null_costs(
@@ -160,7 +163,9 @@ def ensemble_null_costs(
 ) -> np.ndarray:
     """The ensemble cost of sets of ``k`` real runs against the other real runs (module
     docstring), from the selection's matrices (dimensionless, one per set: all C(n, k) sets in
-    lexicographic order, or ``max_subsets`` drawn with ``seed`` when there are more)."""
+    lexicographic order, or ``max_subsets`` drawn with ``seed`` when there are more; ``k`` cut
+    as `effective_set_size` says). The transit term counts the runs that have a transit time,
+    as the cost does."""
     n = len(reference.run_ids)
     if n < 2:
         raise ParcelfitError(
@@ -168,12 +173,10 @@ def ensemble_null_costs(
         )
     if k < 1:
         raise ParcelfitError(f"an ensemble has at least one run, got {k}")
-    k = max(1, min(k, n - 2))
+    k = effective_set_size(n, k)
     sx, st = _scales(reference)
     d = w_xy * reference.d_xy / sx + w_theta * reference.d_theta / st
-    times = [t for t in reference.transit_times if t is not None]
-    use_t = len(times) == n and n - k >= 2 and w_transit > 0
-    t_all = np.asarray(times, float)
+    t = np.array([math.nan if x is None else float(x) for x in reference.transit_times])
     if math.comb(n, k) <= max_subsets:
         subsets = [list(c) for c in itertools.combinations(range(n), k)]
     else:
@@ -183,9 +186,18 @@ def ensemble_null_costs(
     for i, chosen in enumerate(subsets):
         others = [r for r in range(n) if r not in chosen]
         out[i] = d[np.ix_(chosen, others)].mean()
-        if use_t:
-            out[i] += w_transit * transit_statistic(t_all[chosen], t_all[others])
+        sim_t = t[chosen][np.isfinite(t[chosen])]
+        real_t = t[others][np.isfinite(t[others])]
+        if w_transit > 0 and len(sim_t) and len(real_t) >= 2:  # as `ensemble_cost` has it
+            # real runs with one transit time between them: no scatter to judge by, no term
+            out[i] += w_transit * transit_statistic(sim_t, real_t, constant=0.0)
     return out
+
+
+def effective_set_size(n: int, k: int) -> int:
+    """The size of the sets of real runs `ensemble_null_costs` scores for ``k`` placements and
+    ``n`` real runs: k, cut to n - 2 (at least 1) so that the other runs keep a variance."""
+    return max(1, min(k, n - 2))
 
 
 def ensemble_real_costs(
@@ -201,6 +213,7 @@ def ensemble_real_costs(
 
 __all__ = [
     "EnsembleCost",
+    "effective_set_size",
     "ensemble_cost",
     "ensemble_null_costs",
     "ensemble_real_costs",

@@ -37,7 +37,7 @@ trace plots of the stored evaluations, and the pairwise plot of the stored sampl
 What the data determine (stated in the report) is the calibration's stored identifiability
 analysis (`parcelfit.study.identify`, formulas there): per parameter the interval of values the
 evaluations cannot tell apart (those a GP surrogate of the log cost cannot exclude at 95 %
-confidence from costing less than the real runs' largest cost) and its verdict:
+confidence from costing less than what real runs score) and its verdict:
 determined (interval at most 20 % of the range; reported as its midpoint +- half-width, so
 within 10 % of the range of anything in it), bounded on one side or narrowed (reported as the
 bound or interval), or undetermined (no value is reported).

@@ -24,7 +24,7 @@ from parcelfit.runs import read_trajectory, write_trajectory
 from parcelfit.sim.executors import Executor, Task
 from parcelfit.sim.protocol import SimResult, Simulator
 from parcelfit.study.identify import Advice, Identifiability, identify
-from parcelfit.study.joint import advise, case_threshold, threshold
+from parcelfit.study.joint import THRESHOLD_LEVEL, advise, case_threshold, threshold
 from parcelfit.study.objective import case_summary, study_cases
 from parcelfit.study.results import (
     KeyFramesRecord,
@@ -257,7 +257,7 @@ class Finish:
                 eps, source = threshold(references, study)
             else:  # a Study made in code without its cases
                 eps = case_threshold(references[self.fit_case.label], study)
-                source = f"largest equation (3) of a real run: {eps:.3g}"
+                source = f"{100 * THRESHOLD_LEVEL:g} % quantile of the real runs' costs: {eps:.3g}"
             initial = [r.cost for r in fits if r.iteration == 0 and r.status == "ok" and r.cost]
             typical = math.exp(sum(map(math.log, initial)) / len(initial)) if initial else None
             return identify(

@@ -17,18 +17,22 @@ difference). An evaluation whose simulations do not all succeed is a failure (th
 simulation's status).
 
 **Threshold.** The identifiability analysis (`parcelfit.study.identify`) accepts a parameter
-set when its cost is below epsilon, the 95 % quantile (`THRESHOLD_LEVEL`) of what the cost
-would be if the simulations were as good as more real runs: per case k the costs c_k that sets
-of real runs score in the study's own cost against the case's other real runs (equation (3) of
-each real run against the reference run, `parcelfit.metrics.cost.real_run_costs`; for the
-ensemble cost every set of K_k real runs, K_k the case's placements, against the other n - K_k,
-`parcelfit.metrics.ensemble.ensemble_null_costs`), and for several cases the weighted sum
-sum_k w_k c_k, its distribution drawn (200,000 seeded draws, one value per case, independent:
-the cases' real runs are different runs). Its quantile is taken as the next value up (numpy's
-"higher"), so that for one case of ten real runs and the published cost epsilon is the largest
-of the nine real runs' costs. The same K as the evaluations matters: at K = 2 a pair of real
-runs scores differently from one run, and more so in the tails (two runs of a case whose runs
-catch or slide can both catch), so one run's costs are not a conservative stand-in for it.
+set when its cost is below epsilon = sum_k w_k q_k, q_k the 95 % quantile (`THRESHOLD_LEVEL`)
+of what case k's cost would be if the simulations were as good as more real runs: the costs
+that sets of real runs score in the study's own cost against the case's other real runs
+(equation (3) of each real run against the reference run for the published cost,
+`parcelfit.metrics.cost.real_run_costs`; for the ensemble cost every set of K_k real runs, K_k
+the case's placements, against the other n - K_k, in the same formula,
+`parcelfit.metrics.ensemble.ensemble_null_costs`). The quantile is the next value up (numpy's
+"higher"): of fewer than 20 values it is the largest, which a new value exceeds about once in
+N + 1 (for the published cost and ten real runs, once in ten). The cases' quantiles are summed,
+not the quantile of their sum taken: the placement seeds are the same on every rig, so the
+cases' costs at the truth need not be independent, and the sum of the quantiles is the
+quantile of the sum when they rise and fall together. The same K as the evaluations matters:
+at K = 2 a pair of real runs scores differently from one run, far more in the tail (two runs of
+a case whose runs catch or slide can both catch, and two runs that cross in about the same time
+give the transit term a standard error near the real runs' alone), so one run's costs are no
+stand-in for it.
 
 **Transfer check.** The calibrated parameters simulated on other test cases (usually other rigs
 with the same consignment), each judged like a validation: the published criteria and the band
@@ -61,7 +65,11 @@ import numpy as np
 from parcelfit.errors import ParcelfitError
 from parcelfit.metrics import ReferenceSelection, calibration_cost, real_run_costs
 from parcelfit.metrics.dtw import dtw_distance
-from parcelfit.metrics.ensemble import ensemble_cost, ensemble_null_costs
+from parcelfit.metrics.ensemble import (
+    effective_set_size,
+    ensemble_cost,
+    ensemble_null_costs,
+)
 from parcelfit.runs import Trajectory
 from parcelfit.sim.executors import Executor, Task, simulate_task
 from parcelfit.sim.protocol import SimResult, SimStatus, Simulator
@@ -255,8 +263,7 @@ def evaluation_outcome(
     return out
 
 
-THRESHOLD_LEVEL = 0.95  # epsilon: this quantile of the cost at the truth, as the real runs show it
-THRESHOLD_DRAWS = 200_000  # draws of a joint study's weighted sum of the cases' costs
+THRESHOLD_LEVEL = 0.95  # epsilon: this quantile of each case's cost at the truth, summed
 
 
 def case_null_costs(
@@ -277,39 +284,34 @@ def case_null_costs(
 def case_threshold(
     reference: ReferenceSelection, study: Study, spec: CaseSpec | None = None
 ) -> float:
-    """The acceptance threshold of one case alone: the `THRESHOLD_LEVEL` quantile of
-    `case_null_costs` (dimensionless)."""
+    """The acceptance threshold of one case alone: the `THRESHOLD_LEVEL` quantile (the next
+    value up) of `case_null_costs` (dimensionless; NaN without any)."""
     costs = case_null_costs(reference, study, spec)
     return float(np.quantile(costs, THRESHOLD_LEVEL, method="higher")) if len(costs) else math.nan
 
 
 def threshold(references: Mapping[str, ReferenceSelection], study: Study) -> tuple[float, str]:
-    """The acceptance threshold epsilon of the identifiability analysis (module docstring) and
-    how it was made."""
-    nulls = [(s, case_null_costs(references[s.label], study, s)) for s in study.cases]
-    if any(not len(c) for _, c in nulls):
-        return math.nan, "no real-run costs"
-    if len(nulls) == 1:
-        spec, costs = nulls[0]
-        total = spec.weight * float(np.quantile(costs, THRESHOLD_LEVEL, method="higher"))
-    else:  # the weighted sum's distribution, one independent draw per case
-        rng = np.random.default_rng([study.seed, 0xE5])
-        draws = sum(s.weight * c[rng.integers(0, len(c), THRESHOLD_DRAWS)] for s, c in nulls)
-        total = float(np.quantile(draws, THRESHOLD_LEVEL, method="higher"))
-    if study.cost_kind == "ensemble":
-        sets = ", ".join(
-            f"{len(placement_seeds(study, s))} of {len(references[s.label].run_ids)} ({s.label})"
-            for s, _ in nulls
-        )
-        what = f"the ensemble cost of sets of real runs against the other real runs: {sets}"
-    else:
-        what = "equation (3) of each real run against the reference run: " + ", ".join(
-            s.label for s, _ in nulls
-        )
+    """The acceptance threshold epsilon of the identifiability analysis, sum_k w_k q_k over the
+    fitted cases of nonzero weight (module docstring), and how it was made."""
+    cases = [s for s in study.cases if s.weight > 0]
+    parts = [(s, case_threshold(references[s.label], study, s)) for s in cases]
+    total = sum(s.weight * q for s, q in parts)
     level = f"{100 * THRESHOLD_LEVEL:g} % quantile"
-    if len(nulls) > 1:
-        level += " of the weighted sum over the cases"
-    return total, f"{level} of {what}"
+    if study.cost_kind == "ensemble":
+
+        def sets(s: CaseSpec) -> str:
+            n = len(references[s.label].run_ids)
+            k = effective_set_size(n, len(placement_seeds(study, s)))
+            return f"{k} of {n}"
+
+        what = "of the ensemble cost of sets of real runs against the other real runs"
+        words = " + ".join(
+            f"{s.weight:g} x {q:.3g} ({s.label}: sets of {sets(s)})" for s, q in parts
+        )
+    else:
+        what = "of equation (3) of each real run against the reference run"
+        words = " + ".join(f"{s.weight:g} x {q:.3g} ({s.label})" for s, q in parts)
+    return total, f"{level} {what}, per case: {words}"
 
 
 # -- advice: which test case would help most ---------------------------------------------------
