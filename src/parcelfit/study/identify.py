@@ -10,8 +10,8 @@ quantile (`parcelfit.study.joint.threshold`): per case, the 95 % quantile (the n
 equation 3 of every real run against the reference run for the published cost
 (`parcelfit.metrics.cost.real_run_costs`; with ten real runs, the largest of the nine), or of
 the ensemble cost of every set of K real runs (K the case's placements) against the other real
-runs (`parcelfit.metrics.ensemble.ensemble_null_costs`); for a joint study the weighted sum of
-the cases' quantiles.
+runs (`parcelfit.metrics.ensemble.ensemble_null_costs`), but at least the largest cost of one
+real run against the others; for a joint study the weighted sum of the cases' thresholds.
 
 **Surrogate.** A Gaussian process on the unit cube (`parcelfit.optimize.space`) models the log
 cost of the finished evaluations (failed ones carry no cost and are left out):
