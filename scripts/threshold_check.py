@@ -1,6 +1,6 @@
 """The acceptance threshold of the identifiability analysis, checked against the cost it guards.
 
-    python scripts/threshold_check.py STUDY.yaml [STUDY.yaml ...]
+    python scripts/threshold_check.py STUDY.yaml [STUDY.yaml ...] [--folder STUDY_DIR]
 
 Run from the repository's root. For every fitted case of each study (its real runs, no
 simulation): the largest cost of a single real run against the others (the threshold's basis
@@ -8,7 +8,10 @@ until 2026-12-04) beside what sets of real runs as large as the case's placement
 study's cost against the case's other real runs (`parcelfit.study.joint.case_null_costs`: their
 median, 95 % quantile and largest); then the study's threshold now
 (`parcelfit.study.joint.threshold`) and the former one (the weighted sum of the cases' largest
-single-run costs). Seconds per study.
+single-run costs). With ``--folder`` (one study file), the finished study in that folder is
+analysed again with today's threshold (`parcelfit.study.finish.Finish.identifiability`, from
+its stored evaluations: nothing is simulated), beside what its ``results.json`` holds. Seconds
+per study.
 """
 
 from __future__ import annotations
@@ -20,15 +23,46 @@ from pathlib import Path
 import numpy as np
 
 from parcelfit.metrics.ensemble import effective_set_size, ensemble_real_costs
+from parcelfit.study.finish import Finish
 from parcelfit.study.joint import case_null_costs, placement_seeds, threshold
 from parcelfit.study.objective import select_references
+from parcelfit.study.results import read_results
+from parcelfit.study.store import STORE_FILE, Store
 from parcelfit.study.studyfile import load_study
+
+
+def reanalyse(study_path: Path, folder: Path) -> None:
+    """Print the stored and today's verdicts of the finished study in ``folder``."""
+    study = load_study(study_path)
+    store = Store(folder / STORE_FILE)
+    finish = Finish(
+        study, folder, store, None, select_references(study), lambda *_: None, lambda: None
+    )  # type: ignore[arg-type]  # identifiability simulates nothing
+    now = finish.identifiability()
+    stored = read_results(folder).identifiability
+    print(f"## {folder}: what the data determine, stored and with today's threshold\n")
+    for label, ident in (("stored", stored), ("today", now)):
+        if ident is None:
+            print(f"{label}: none")
+            continue
+        cells = "; ".join(
+            f"{p.name} {p.verdict} [{p.interval[0]:.4g}, {p.interval[1]:.4g}]"
+            for p in ident.parameters
+        )
+        print(f"{label} (threshold {ident.threshold:.4g}): {cells}")
+    print()
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("studies", nargs="+", type=Path)
+    ap.add_argument("--folder", type=Path, help="a finished study of the (one) study file")
     args = ap.parse_args(argv)
+    if args.folder is not None:
+        if len(args.studies) != 1:
+            ap.error("--folder takes one study file")
+        reanalyse(args.studies[0], args.folder)
+        return 0
     for path in args.studies:
         study = load_study(path)
         refs = select_references(study)
