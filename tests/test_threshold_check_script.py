@@ -1,0 +1,36 @@
+"""scripts/threshold_check.py: the identifiability threshold beside its former form
+(docs/research/identify-threshold.md)."""
+
+import re
+
+import pytest
+
+from parcelfit.study.joint import threshold
+from parcelfit.study.objective import select_references
+from parcelfit.study.studyfile import load_study
+
+from .helpers import ROOT, load_file_module
+
+
+@pytest.fixture(scope="module")
+def script():
+    return load_file_module("scripts/threshold_check.py")
+
+
+def test_it_prints_each_case_and_the_threshold_the_study_uses(script, capsys):
+    path = ROOT / "examples" / "e3-e1-kpbw-joint" / "study.yaml"
+    assert script.main([str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "| E3/KPBW/1 | 10 | 3 |" in out and "| E1/KPBW/3 | 10 | 3 |" in out
+    study = load_study(path)
+    eps, _ = threshold(select_references(study), study)
+    printed = float(re.search(r"threshold now: ([0-9.]+)", out).group(1))
+    assert printed == pytest.approx(eps, rel=1e-3)
+    former = float(re.search(r"former threshold .*: ([0-9.]+)", out).group(1))
+    assert eps >= former  # the single runs' largest costs are the floor
+
+
+def test_folder_takes_one_study_file(script, capsys):
+    with pytest.raises(SystemExit):
+        script.main(["a.yaml", "b.yaml", "--folder", "x"])
+    assert "--folder takes one study file" in capsys.readouterr().err
