@@ -324,7 +324,7 @@ def _print_parts(console: Console, parts: list[CaseCost]) -> None:
 
 def _print_determined(console: Console, determined: list[Determination]) -> None:
     """Which parameters the data determine: an undetermined parameter's value above is one
-    of many equally good ones."""
+    of many the data do not rule out."""
     words = []
     for p in determined:
         unit = f" {p.unit}" if p.unit else ""
@@ -332,7 +332,7 @@ def _print_determined(console: Console, determined: list[Determination]) -> None
         if p.determined:
             words.append(f"{p.name} determined: {(lo + hi) / 2:.4g} +- {(hi - lo) / 2:.2g}{unit}")
         elif p.verdict == "undetermined":
-            words.append(f"{p.name} NOT determined (its value above is as good as any in range)")
+            words.append(f"{p.name} NOT determined (no part of its range is ruled out)")
         else:
             words.append(f"{p.name} {p.verdict}: {lo:.4g} - {hi:.4g}{unit}")
     console.print(Text("what the data determine: " + "; ".join(words)), markup=False)

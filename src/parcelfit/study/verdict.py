@@ -40,8 +40,8 @@ LEVELS: tuple[Level, ...] = ("not trustworthy", "incomplete", "trustworthy")  # 
 CRITERIA, BAND, TRANSFER = "published criteria", "band test", "transfer check"
 PARAMETERS = "parameters determined"
 UNDETERMINED_MEANING = (
-    "A parameter that is not determined is one the data leave open: every value in its "
-    "interval fits them as well, so a prediction that depends on it carries that range."
+    "A parameter that is not determined is one the data leave open: no value in its "
+    "interval can be ruled out by them, so a prediction that depends on it carries that range."
 )
 
 
