@@ -6,7 +6,8 @@ Run from the repository's root. For every fitted case of each study (its real ru
 simulation): the largest cost of a single real run against the others (the threshold's basis
 until 2026-12-04) beside what sets of real runs as large as the case's placements score in the
 study's cost against the case's other real runs (`parcelfit.study.joint.case_null_costs`: their
-median, 95 % quantile and largest); then the study's threshold now
+median, 95 % quantile (the next value up) and largest, and how many of the sets score above the
+largest single-run cost); then the study's threshold now
 (`parcelfit.study.joint.threshold`) and the former one (the weighted sum of the cases' largest
 single-run costs). With ``--folder`` (one study file), the finished study in that folder is
 analysed again with today's threshold (`parcelfit.study.finish.Finish.identifiability`, from
@@ -69,9 +70,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"## {path} ({study.cost_kind} cost)\n")
         print(
             "| case | real runs | set size | largest single-run cost | "
-            "sets' costs: median / 95 % / largest |"
+            "sets' costs: median / 95 % / largest | sets above the largest single-run cost |"
         )
-        print("|---|---|---|---|---|")
+        print("|---|---|---|---|---|---|")
         former = 0.0
         for spec in study.cases:
             ref = refs[spec.label]
@@ -83,9 +84,10 @@ def main(argv: list[str] | None = None) -> int:
                 single, k = sets, 1
             former += spec.weight * float(np.max(single))
             q = np.quantile(sets, 0.95, method="higher")
+            above = int(np.sum(sets > np.max(single)))
             print(
                 f"| {spec.label} | {len(ref.run_ids)} | {k} | {float(np.max(single)):.3g} "
-                f"| {np.median(sets):.3g} / {q:.3g} / {sets.max():.3g} |"
+                f"| {np.median(sets):.3g} / {q:.3g} / {sets.max():.3g} | {above} of {len(sets)} |"
             )
         eps, source = threshold(refs, study)
         print(f"\nthreshold now: {eps:.4g} ({source})")

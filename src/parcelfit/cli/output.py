@@ -332,7 +332,9 @@ def _print_determined(console: Console, determined: list[Determination]) -> None
         if p.determined:
             words.append(f"{p.name} determined: {(lo + hi) / 2:.4g} +- {(hi - lo) / 2:.2g}{unit}")
         elif p.verdict == "undetermined":
-            words.append(f"{p.name} NOT determined (no part of its range is ruled out)")
+            words.append(
+                f"{p.name} NOT determined (less than 10 % of its range ruled out at either end)"
+            )
         else:
             words.append(f"{p.name} {p.verdict}: {lo:.4g} - {hi:.4g}{unit}")
     console.print(Text("what the data determine: " + "; ".join(words)), markup=False)

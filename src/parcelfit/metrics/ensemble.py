@@ -44,12 +44,13 @@ variance (smaller by what the belt speeds explain).
 
 **Real runs on the same scale.** `ensemble_null_costs` scores every set of K real runs (every
 one of the C(n, K) sets, or ``max_subsets`` sets drawn with a seed when there are more) as an
-ensemble against the other n - K real runs, in the same formula: what an ensemble of K
+ensemble against the other n - K real runs, in the same formula (except that a transit term
+with no scatter on either side is 0, not infinite): what an ensemble of K
 simulations would score if the simulations were as good as K more real runs (the cost's
 distribution at the true parameters, as far as the real runs can show it). Against n - K runs
 instead of n it scatters a little more than the cost would, which errs on the side of accepting.
 `ensemble_real_costs` is its K = 1 case (each real run against the other n - 1, the transit
-term's SE^2 = s^2 (1 + 1 / (n - 1)) with their sample variance). A high quantile of it is the
+term's SE^2 = s^2 (1 + 1 / (n - 1)) with their sample variance). A high quantile of the sets' costs is the
 acceptance threshold of the identifiability analysis (`parcelfit.study.joint.threshold`). K is
 cut to n - 2 when the real runs are fewer than K + 2, so that the other runs keep a variance.
 With ``transit: adjusted`` the real runs' times were adjusted by a fit to all of them, the sets'
