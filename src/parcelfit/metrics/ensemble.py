@@ -190,7 +190,7 @@ def ensemble_null_costs(
         sim_t = t[chosen][np.isfinite(t[chosen])]
         real_t = t[others][np.isfinite(t[others])]
         if w_transit > 0 and len(sim_t) and len(real_t) >= 2:  # as `ensemble_cost` has it
-            # real runs with one transit time between them: no scatter to judge by, no term
+            # runs that all took one transit time: no scatter to judge by, so no term (not inf)
             out[i] += w_transit * transit_statistic(sim_t, real_t, constant=0.0)
     return out
 
