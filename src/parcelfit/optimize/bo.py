@@ -50,6 +50,7 @@ from parcelfit.errors import ParcelfitError
 from parcelfit.optimize.kernel import cross_kernel, posterior
 from parcelfit.optimize.nei import NoisyEI
 from parcelfit.optimize.nei import log_h as _log_h
+from parcelfit.optimize.prior import MapOptimizer
 from parcelfit.optimize.space import Space
 
 
@@ -85,6 +86,10 @@ class BOSettings:
     batch: str = "believer"
     nei_samples: int = 128  # draws of the latent function (lognei), a power of 2 (Sobol)
     ard: bool = True  # one length scale per input (False: one shared length scale)
+    # "none" (maximum marginal likelihood) or "dim_scaled" (maximum a posteriori with BoTorch's
+    # priors since 0.12: log l_j ~ N(sqrt 2 + log(d) / 2, 3) on the length scales and
+    # log sigma_n^2 ~ N(-4, 1) on the noise variance; Hvarfner et al. 2024; prior.py)
+    prior: str = "none"
     # a fitted signal variance sigma_f^2 times the Matern kernel (False: the Matern kernel alone
     # on the standardised cost, as scikit-learn's GP in the published work, Mango's surrogate)
     amplitude: bool = True
@@ -112,6 +117,7 @@ class BOSettings:
             or (self.batch == "joint" and self.acquisition != "lognei")
             or self.recommend not in ("posterior_mean", "best_observed")
             or self.incumbent not in ("observed", "mean")
+            or self.prior not in ("none", "dim_scaled")
         ):
             raise ParcelfitError(f"invalid BO settings: {self}")
 
@@ -350,6 +356,7 @@ class BatchBO:
         gp = GaussianProcessRegressor(
             kernel=kernel,
             alpha=s.alpha if s.noise == "fixed" else 1e-10,
+            optimizer="fmin_l_bfgs_b" if s.prior == "none" else MapOptimizer(kernel, X.shape[1]),
             normalize_y=False,
             n_restarts_optimizer=s.n_restarts,
             random_state=state,
