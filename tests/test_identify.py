@@ -232,6 +232,48 @@ def test_when_no_parameter_set_reaches_the_real_runs_scatter_nothing_is_determin
     assert all(p.interval == (0, 1) for p in ident.parameters)
 
 
+# ten evaluations of a twin calibration on the analytic test simulator (tests/test_bench_twin.py,
+# truth 2, the published cost: mu_d_BePa 0.375, mu_d_MePa 0.27, E_Pa 1180 N/mm^2), SI
+_TEN = [
+    ((0.3345, 0.2721, 1.0451e9), 1.5955),
+    ((0.5186, 0.1812, 1.3595e9), 42.805),
+    ((0.4528, 0.2127, 1.4825e9), 12.812),
+    ((0.3075, 0.2440, 4.5068e8), 5.1218),
+    ((0.4691, 0.2929, 1.0913e9), 10.079),
+    ((0.3942, 0.1623, 3.6217e8), 37.246),
+    ((0.5400, 0.3289, 7.2865e8), 33.216),
+    ((0.3647, 0.3093, 6.2330e8), 1.6933),
+    ((0.3273, 0.3211, 1.3504e9), 5.4267),
+    ((0.3524, 0.2958, 1.6000e9), 0.98901),
+]
+_TEN_SPACE = Space(
+    [
+        Dimension("mu_d_BePa", 0.3, 0.55),
+        Dimension("mu_d_MePa", 0.15, 0.35),
+        Dimension("E_Pa", 2e8, 1.6e9),
+    ]
+)
+
+
+def test_a_plausible_set_no_evaluation_lies_in_determines_nothing():
+    names = [d.name for d in _TEN_SPACE.dims]
+    points = [dict(zip(names, x, strict=True)) for x, _ in _TEN]
+    costs = [c for _, c in _TEN]
+    typical = math.exp(np.mean(np.log(costs[:8])))
+    # every evaluation costs at least 1.7 times the threshold: the surrogate's valley between
+    # two of them is all that is "plausible"; it once gave intervals 8-10 % of the ranges wide,
+    # one of them without the truth
+    ident = identify(_TEN_SPACE, points, costs, 0.5853, typical_cost=typical, seed=0)
+    assert ident.reached and not ident.supported
+    assert all(p.verdict == "undetermined" for p in ident.parameters)
+    assert all(p.interval == (p.low, p.high) for p in ident.parameters)
+    # once an evaluation reaches the threshold, the set around it counts again
+    ident = identify(_TEN_SPACE, points, costs, 1.2, typical_cost=typical, seed=0)
+    assert ident.reached and ident.supported
+    assert any(p.interval != (p.low, p.high) for p in ident.parameters)
+    assert Identifiability.from_json(ident.to_json()).supported
+
+
 @pytest.mark.parametrize("seed", [1, 3])
 def test_a_design_crowded_near_the_optimum_as_an_optimiser_leaves_it(seed):
     # 16 uniform points (the initial design) and 40 crowded around the truth, as BO does

@@ -169,6 +169,7 @@ def _identifiability_view(
         "noise_sd": ident.noise_sd,
         "level": f"{ident.level * 100:.0f}",
         "reached": ident.reached,
+        "supported": ident.supported,
         "best_acceptance": ident.best_acceptance,
         "converged": ident.converged,
         "correlations": [(a, b, f"{r:+.2f}") for a, b, r in ident.strongest_correlations()],

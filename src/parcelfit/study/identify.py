@@ -61,7 +61,12 @@ they stay in S; each parameter's step adapted during the first half of 2000 step
 spread and about 30 % acceptance, then fixed; the second half kept). R-hat (Gelman-Rubin, split
 chains) is stored per parameter; above 1.1 the report says the sample has not converged. If S is
 empty (no parameter set reaches the real runs' scatter: the model cannot reproduce the data
-within it), every parameter is undetermined.
+within it), every parameter is undetermined. So is every parameter when S holds none of the
+evaluated points (L(u_i) < alpha for every i): S is then a region between evaluations that
+all cost more than the real runs score, which the surrogate's fitted length scales and noise
+alone put there. Seen with 10 evaluations of the analytic test simulator
+(`tests/test_bench_twin.py`): all ten cost 1.7-73 times the threshold, and the GP's valley
+between two of them gave intervals 8-10 % of their ranges wide, one of them missing the truth.
 
 **Intervals and verdicts.** Per parameter, the interval is the projection of S: the smallest
 and largest value among the sample, in the parameter's own unit. With its width W and its
@@ -164,7 +169,9 @@ class Identifiability(ArrayRecord):
     it in SI (``sample``: (m, d)), the threshold epsilon and where it came from, how many
     evaluations the surrogate learnt, its fitted noise standard deviation (of the log cost), the
     confidence ``level`` of an exclusion (1 - alpha), whether any parameter set reaches the
-    real runs' scatter (``reached``) and the largest acceptance L seen."""
+    real runs' scatter (``reached``), whether an evaluated one does (``supported``: without,
+    the plausible set is the surrogate's extrapolation and nothing is determined) and the
+    largest acceptance L seen."""
 
     parameters: tuple[ParameterInterval, ...]
     correlation: FloatArray
@@ -175,6 +182,7 @@ class Identifiability(ArrayRecord):
     noise_sd: float
     level: float = 1.0 - ALPHA
     reached: bool = True
+    supported: bool = True
     best_acceptance: float = 1.0
 
     @property
@@ -206,7 +214,7 @@ class Identifiability(ArrayRecord):
     @classmethod
     def _read_shapes(cls, doc: Any) -> Any:
         """The stored (nested list) correlation as (d, d) and sample as (m, d), also when empty;
-        missing level, reached, best_acceptance: the defaults."""
+        missing level, reached, supported, best_acceptance: the defaults."""
         if isinstance(doc, Mapping) and not isinstance(doc.get("sample"), np.ndarray):
             d = len(doc["parameters"])
             doc = {
@@ -433,14 +441,17 @@ def identify(
         model, math.log(threshold), d, alpha=alpha, seed=seed, starts=U, n_steps=n_steps
     )
     reached = len(sample_u) > 0
-    if not reached:  # nothing is plausible: no value can be told from another
+    # an evaluation in S: a plausible set no evaluation lies in is the surrogate's extrapolation
+    # alone (a valley between evaluations that all cost more than the real runs score)
+    supported = bool(np.any(_log_likelihood(model, U, math.log(threshold)) >= math.log(alpha)))
+    if not (reached and supported):  # no value can be told from another
         sample_u = np.random.default_rng([seed, 0x5A]).random((N_KEEP_FOR_PLOT, d))
     values = np.array([list(space.from_unit(u).values()) for u in sample_u])
     params = []
     for j, dim in enumerate(space.dims):
         interval = (
             (float(values[:, j].min()), float(values[:, j].max()))
-            if reached
+            if reached and supported
             else (dim.low, dim.high)
         )
         params.append(
@@ -469,6 +480,7 @@ def identify(
         noise_sd=math.sqrt(model.noise_var),
         level=1.0 - alpha,
         reached=reached,
+        supported=supported,
         best_acceptance=best,
     )
 

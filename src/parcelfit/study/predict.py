@@ -563,6 +563,11 @@ def predict(
                 "no parameter set of the calibration reached the real runs' scatter: the sets "
                 "are drawn from the whole parameter box, not from a plausible set"
             )
+        elif not inputs.identifiability.supported:
+            notes.append(
+                "no evaluation of the calibration reached the real runs' scatter: the sets "
+                "are drawn from the whole parameter box, not from a plausible set"
+            )
         note = scatter_note(scatter)
         if note is not None:
             notes.append(note)
