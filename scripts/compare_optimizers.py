@@ -3,7 +3,8 @@
     python scripts/compare_optimizers.py [--study examples/e3-kpbw/study.yaml]
         [--samplers gp,published] [--seeds 1] [--out compare-optimizers] [--workers 2]
 
-Runs the study once per optimiser (``optimizer: {sampler: ...}``) and seed into its own folder
+Runs the study once per optimiser (``optimizer: {sampler: ...}``; ``gp:prior=none:amplitude=true``
+gives the sampler ``gp`` with those study-file optimizer keys) and seed into its own folder
 under ``--out`` (an existing folder is resumed, not redone) and prints, per optimiser, the
 fitting simulations until validation passed (or the budget), the iteration, the best cost, the
 band test (`parcelfit.study.verdict`) and, where the study's dataset holds the hidden truth of a
@@ -51,18 +52,25 @@ def errors(folder: Path, study_file: Path) -> dict[str, float]:
     }
 
 
+def _folder(sampler: str) -> str:
+    """A folder name for ``sampler`` (its keys joined by underscores)."""
+    return sampler.replace(":", "_").replace("=", "-")
+
+
 def run_one(study_file: Path, sampler: str, seed: int, out: Path, workers: int) -> tuple:
     """Calibrate with ``sampler`` and ``seed``; (evaluations, validated, last iteration, best cost)."""
     doc = load_yaml(study_file)
-    doc["optimizer"] = {**(doc.get("optimizer") or {}), "sampler": sampler}
+    name, *pairs = sampler.split(":")
+    keys = {k: yaml.safe_load(v) for k, v in (pair.split("=", 1) for pair in pairs)}
+    doc["optimizer"] = {**(doc.get("optimizer") or {}), "sampler": name, **keys}
     doc["seed"] = seed
     doc["reference"]["dataset"] = str((study_file.parent / doc["reference"]["dataset"]).resolve())
-    variant = study_file.parent / f".{study_file.stem}-{sampler}-{seed}.yaml"
+    variant = study_file.parent / f".{study_file.stem}-{_folder(sampler)}-{seed}.yaml"
     variant.write_text(yaml.safe_dump(doc, sort_keys=False))  # the study as written: the order
     # of its parameters sets the initial design
     try:
         result = Calibration(
-            load_study(variant), out / f"{sampler}-seed{seed}", workers=workers
+            load_study(variant), out / f"{_folder(sampler)}-seed{seed}", workers=workers
         ).run()
     finally:
         variant.unlink()
@@ -86,7 +94,7 @@ def main() -> None:
         counts, errs = [], []
         for seed in range(1, args.seeds + 1):
             n, ok, _, cost = run_one(args.study, sampler, seed, args.out, args.workers)
-            folder = args.out / f"{sampler}-seed{seed}"
+            folder = args.out / f"{_folder(sampler)}-seed{seed}"
             band = next(c.outcome for c in folder_verdict(folder).checks if c.name == "band test")
             err = errors(folder, args.study)
             counts.append(n)

@@ -2,9 +2,10 @@
 
 Two configurations of one `BatchBO` (`BOSettings`):
 
-* the default, measured in ``benchmarks/bench_bo.py``: Latin hypercube of 16; GP (scikit-learn)
-  with Matern 5/2, one length scale per input and the noise variance fitted by marginal
-  likelihood within [1e-6, 0.35^2] of the standardised cost; the cost left as it is or Box-Cox
+* the default, chosen on the held-out half of ``benchmarks/bench_bo_wide.py``: Latin hypercube
+  of 16; GP (scikit-learn) with Matern 5/2 (no signal variance: the cost is standardised), one
+  length scale per input and the noise variance within [1e-6, 0.35^2] of the standardised cost,
+  fitted by maximum a posteriori with BoTorch's dimension-scaled priors (prior.py); the cost left as it is or Box-Cox
   transformed (lambda fitted, scikit-learn ``PowerTransformer``), whichever gives the costs the
   higher warped-GP likelihood; the acquisition log noisy expected improvement (expected
   improvement averaged over draws of the latent cost at the evaluated points, whose best is the
@@ -86,13 +87,15 @@ class BOSettings:
     batch: str = "believer"
     nei_samples: int = 128  # draws of the latent function (lognei), a power of 2 (Sobol)
     ard: bool = True  # one length scale per input (False: one shared length scale)
-    # "none" (maximum marginal likelihood) or "dim_scaled" (maximum a posteriori with BoTorch's
-    # priors since 0.12: log l_j ~ N(sqrt 2 + log(d) / 2, 3) on the length scales and
-    # log sigma_n^2 ~ N(-4, 1) on the noise variance; Hvarfner et al. 2024; prior.py)
-    prior: str = "none"
-    # a fitted signal variance sigma_f^2 times the Matern kernel (False: the Matern kernel alone
-    # on the standardised cost, as scikit-learn's GP in the published work, Mango's surrogate)
-    amplitude: bool = True
+    # "dim_scaled" (maximum a posteriori with BoTorch's priors since 0.12: log-normal on the
+    # length scales, LogNormal(sqrt 2 + log(d) / 2, 3), and on the noise variance,
+    # LogNormal(-4, 1); Hvarfner et al. 2024; prior.py; the default since 2026-12-04,
+    # docs/optimizer.md) or "none" (maximum marginal likelihood)
+    prior: str = "dim_scaled"
+    # False (the default since 2026-12-04, with prior: dim_scaled): the Matern kernel alone on the
+    # standardised cost, as BoTorch's GP since 0.12, scikit-learn's GP in the published work and
+    # Mango's surrogate; True: a fitted signal variance sigma_f^2 (<= amplitude_max) times it
+    amplitude: bool = False
     recommend: str = "posterior_mean"  # or "best_observed" (published); see BatchBO.recommend
     # the incumbent y* of expected improvement (acquisition: logei): "observed" (best observed y)
     # or "mean" (highest posterior mean at an evaluated point, the usual choice for noisy costs)
@@ -135,6 +138,7 @@ class BOSettings:
             "local_fraction": 0.0,
             "ard": False,
             "amplitude": False,
+            "prior": "none",
             "recommend": "best_observed",
             "incumbent": "observed",
             "n_restarts": 3,
