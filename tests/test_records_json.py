@@ -96,10 +96,16 @@ def test_a_parameter_interval_reads_integers_as_floats():
 
 def test_identifiability_reads_an_empty_sample_and_earlier_defaults():
     doc = json.loads(RESULTS)["identifiability"]
-    old = {k: v for k, v in doc.items() if k not in ("level", "reached", "best_acceptance")}
+    earlier = ("level", "reached", "supported", "best_acceptance")
+    old = {k: v for k, v in doc.items() if k not in earlier}
     ident = Identifiability.from_json({**old, "sample": []})
     assert ident.sample.shape == (0, 2) and ident.correlation.shape == (2, 2)
-    assert (ident.level, ident.reached, ident.best_acceptance) == (0.95, True, 1.0)
+    assert (ident.level, ident.reached, ident.supported, ident.best_acceptance) == (
+        0.95,
+        True,
+        True,
+        1.0,
+    )
     assert json.dumps(ident.to_json()["sample"]) == "[]"
 
 
