@@ -5,9 +5,9 @@ Two configurations of one `BatchBO` (`BOSettings`):
 * the default, chosen on the held-out half of ``benchmarks/bench_bo_wide.py``: Latin hypercube
   of 16; GP (scikit-learn) with Matern 5/2 (no signal variance: the cost is standardised), one
   length scale per input and the noise variance within [1e-6, 0.35^2] of the standardised cost,
-  fitted by maximum a posteriori with BoTorch's dimension-scaled priors (prior.py); the cost left as it is or Box-Cox
-  transformed (lambda fitted, scikit-learn ``PowerTransformer``), whichever gives the costs the
-  higher warped-GP likelihood; the acquisition log noisy expected improvement (expected
+  fitted by maximum a posteriori with BoTorch's dimension-scaled priors (prior.py); the cost
+  left as it is or Box-Cox transformed (lambda fitted, scikit-learn ``PowerTransformer``),
+  whichever gives the costs the higher warped-GP likelihood; the acquisition log noisy expected improvement (expected
   improvement averaged over draws of the latent cost at the evaluated points, whose best is the
   incumbent; nei.py), maximised over Monte Carlo candidates and polished by
   L-BFGS-B from the best of them; the batch chosen by kriging believer (pick one point, believe

@@ -16,8 +16,9 @@ dimensions"; ``botorch.models.utils.gpytorch_modules``), as densities of the val
     d(-log p) / d(log v) = (log v - mu) / s^2 + 1.
 
 The length-scale prior's mode exp(mu_l - s_l^2) = 0.21 sqrt(d) grows with the dimension, so the
-GP does not explain a few points by wiggles in every input. The signal variance has no prior
-(BoTorch fixes it at 1; the default fits it within its bounds).
+GP does not explain a few points by wiggles in every input. The signal variance has no prior:
+the default has none (`amplitude: false`, as BoTorch, whose is fixed at 1), and with
+`amplitude: true` it is fitted within its bounds by the likelihood alone.
 
 Written by hand because scikit-learn's GP has no hyperparameter priors; its ``optimizer``
 argument takes a callable, through which this adds the log prior and its gradient to the
@@ -47,14 +48,15 @@ def prior_terms(kernel: Kernel, d: int) -> tuple[np.ndarray, np.ndarray, np.ndar
     for h in kernel.hyperparameters:
         if h.fixed:
             continue
-        if h.name.endswith("length_scale"):
-            m, sd = length_scale_prior(d)
-        elif h.name.endswith("noise_level"):
-            m, sd = NOISE_PRIOR
-        else:
-            m, sd = 0.0, 1.0
-        on = h.name.endswith(("length_scale", "noise_level"))
-        has += [on] * h.n_elements
+        prior = (
+            length_scale_prior(d)
+            if h.name.endswith("length_scale")
+            else NOISE_PRIOR
+            if h.name.endswith("noise_level")
+            else None
+        )
+        m, sd = prior or (0.0, 1.0)  # placeholders where there is no prior (has: False)
+        has += [prior is not None] * h.n_elements
         mu += [m] * h.n_elements
         s += [sd] * h.n_elements
     return np.array(has), np.array(mu), np.array(s)

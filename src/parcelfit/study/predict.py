@@ -558,14 +558,11 @@ def predict(
             inputs.identifiability, drawn, seeds, runs, scatter, seed
         )
         notes = []
-        if not inputs.identifiability.reached:
+        ident = inputs.identifiability
+        if not (ident.reached and ident.supported):
+            what = "parameter set" if not ident.reached else "evaluation"
             notes.append(
-                "no parameter set of the calibration reached the real runs' scatter: the sets "
-                "are drawn from the whole parameter box, not from a plausible set"
-            )
-        elif not inputs.identifiability.supported:
-            notes.append(
-                "no evaluation of the calibration reached the real runs' scatter: the sets "
+                f"no {what} of the calibration reached the real runs' scatter: the sets "
                 "are drawn from the whole parameter box, not from a plausible set"
             )
         note = scatter_note(scatter)
