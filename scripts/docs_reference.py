@@ -184,7 +184,63 @@ def files_page() -> str:
         lines += ["| key | type | default | unit | description |", "|---|---|---|---|---|"]
         lines += ["| " + " | ".join(r) + " |" for r in rows]
         lines += ["", f"JSON Schema: [schemas/{slug}.json](schemas/{slug}.json)", ""]
+    lines += _optimizer_section() + _solver_section()
     return "\n".join(lines).rstrip() + "\n"
+
+
+def _value(v: Any) -> str:
+    return f"`{json.dumps(v)}`" if not isinstance(v, float) else f"`{v:g}`"
+
+
+def _optimizer_section() -> list[str]:
+    """The settings a study's ``optimizer`` takes beside ``sampler: gp`` or ``published``, from
+    `BOSettings`' fields (their help in the field's metadata)."""
+    from dataclasses import fields
+
+    from parcelfit.optimize.bo import BOSettings
+
+    default, published = BOSettings(), BOSettings.published()
+    lines = [
+        "## Optimiser settings",
+        "",
+        "The keys a study file's `optimizer` takes beside `sampler: gp` or `sampler: published`",
+        "(the size of the initial design is the study's `initial`). The published column is what",
+        "`published` sets; a key given beside it wins.",
+        "",
+        "| key | default (`gp`) | `published` | description |",
+        "|---|---|---|---|",
+    ]
+    for f in fields(BOSettings):
+        if f.name == "n_initial":
+            continue
+        d, p = getattr(default, f.name), getattr(published, f.name)
+        lines.append(
+            f"| `optimizer.{f.name}` | {_value(d)} | {_value(p)} | {f.metadata['help']}. |"
+        )
+    return [*lines, ""]
+
+
+def _solver_section() -> list[str]:
+    """The keys of an external solver's description (`parcelfit.sim.external`)."""
+    from dataclasses import fields
+
+    from parcelfit.sim.external import HELP, ExternalSolver
+
+    defaults = {f.name: f.default for f in fields(ExternalSolver)}
+    lines = [
+        "## Solver description",
+        "",
+        "The YAML file a study's `simulator: {backend: external, external: FILE}` names",
+        "([Your own solver](../guide/solver.md)).",
+        "",
+        "| key | default | description |",
+        "|---|---|---|",
+    ]
+    for key in HELP:
+        d = defaults.get(key)
+        shown = "required" if key in ("name", "command", "template") else _value(d)
+        lines.append(f"| `{key}` | {shown} | {HELP[key]}. |")
+    return [*lines, ""]
 
 
 def schemas() -> dict[str, str]:

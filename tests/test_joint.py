@@ -137,6 +137,10 @@ def test_a_joint_study_file_lists_its_cases(tmp_path):
             r"transfer\[0\]\.placements: only fitted cases take placements",
         ),
         (
+            {"transfer": [{"rig": "Q", "consignment": "P", "speed_setting": 2, "weight": 2.0}]},
+            r"transfer\[0\]\.weight: only fitted cases take weight",
+        ),
+        (
             {
                 "validation": {
                     "every": 1,

@@ -60,46 +60,105 @@ class BOSettings:
     """Settings of the batch BO. The defaults are the measured default (see the module docstring);
     `BOSettings.published()` gives the configuration of method.md section 7."""
 
-    n_initial: int = 16  # Latin hypercube size
-    ucb_lambda: float = 2.0  # exploration weight of UCB
-    n_samples: int = 4000  # Monte Carlo candidates per ask
-    top_fraction: float = 0.25  # share of candidates kept for clustering (batch: kmeans)
-    local_fraction: float = 0.25  # share of candidates drawn near the best observations
-    nu: float = 2.5  # Matern smoothness
-    alpha: float = 0.35**2  # noise variance on the standardised cost (noise: fixed)
-    noise: str = (
-        "fit"  # "fit": noise variance by marginal likelihood in [1e-6, noise_max]; "fixed": alpha
+    n_initial: int = field(default=16, metadata={"help": "Latin hypercube size [evaluations]"})
+    ucb_lambda: float = field(default=2.0, metadata={"help": "exploration weight of UCB [-]"})
+    n_samples: int = field(
+        default=4000, metadata={"help": "Monte Carlo candidates of the acquisition per ask"}
     )
-    n_restarts: int = 1  # optimiser restarts of the GP's hyperparameters
-    noise_max: float = 0.35**2  # upper bound of the fitted noise variance (noise: fit)
-    amplitude_max: float = 1e2  # upper bound of the fitted signal variance (amplitude: true)
-    # "none", "log", "power" (Box-Cox, lambda fitted to the costs' marginal distribution) or
-    # "auto" (of none and power, the one whose warped GP explains the costs best; see _fit)
-    transform: str = "auto"
-    # "lognei" (log noisy expected improvement: EI averaged over draws of the latent function at
-    # the evaluated points, nei.py; the default since 2026-12-03, docs/optimizer.md), "logei"
-    # (log expected improvement over ``incumbent``) or "ucb"
-    acquisition: str = "lognei"
-    polish: int = 2  # L-BFGS-B polishing starts from the best candidates (0: sampled only)
-    # "believer" (kriging believer, sequential), "kmeans" (published) or "joint" (acquisition
-    # lognei only: each point by noisy EI given the batch so far and the pending points, whose
-    # latent values are drawn jointly with the evaluated points', nei.py; nothing is believed)
-    batch: str = "believer"
-    nei_samples: int = 128  # draws of the latent function (lognei), a power of 2 (Sobol)
-    ard: bool = True  # one length scale per input (False: one shared length scale)
-    # "dim_scaled" (maximum a posteriori with BoTorch's priors since 0.12: log-normal on the
-    # length scales, LogNormal(sqrt 2 + log(d) / 2, 3), and on the noise variance,
-    # LogNormal(-4, 1); Hvarfner et al. 2024; prior.py; the default since 2026-12-04,
-    # docs/optimizer.md) or "none" (maximum marginal likelihood)
-    prior: str = "dim_scaled"
-    # False (the default since 2026-12-04, with prior: dim_scaled): the Matern kernel alone on the
-    # standardised cost, as BoTorch's GP since 0.12, scikit-learn's GP in the published work and
-    # Mango's surrogate; True: a fitted signal variance sigma_f^2 (<= amplitude_max) times it
-    amplitude: bool = False
-    recommend: str = "posterior_mean"  # or "best_observed" (published); see BatchBO.recommend
-    # the incumbent y* of expected improvement (acquisition: logei): "observed" (best observed y)
-    # or "mean" (highest posterior mean at an evaluated point, the usual choice for noisy costs)
-    incumbent: str = "mean"
+    top_fraction: float = field(
+        default=0.25, metadata={"help": "share of candidates kept for clustering (batch: kmeans)"}
+    )
+    local_fraction: float = field(
+        default=0.25, metadata={"help": "share of candidates drawn near the best observations"}
+    )
+    nu: float = field(default=2.5, metadata={"help": "Matern smoothness [-]"})
+    alpha: float = field(
+        default=0.35**2,
+        metadata={"help": "noise variance on the standardised cost (noise: fixed)"},
+    )
+    noise: str = field(
+        default="fit",
+        metadata={
+            "help": "fit: the noise variance by marginal likelihood in [1e-6, noise_max]; "
+            "fixed: alpha"
+        },
+    )
+    n_restarts: int = field(
+        default=1, metadata={"help": "optimiser restarts of the GP's hyperparameters"}
+    )
+    noise_max: float = field(
+        default=0.35**2,
+        metadata={"help": "upper bound of the fitted noise variance (noise: fit)"},
+    )
+    amplitude_max: float = field(
+        default=1e2,
+        metadata={"help": "upper bound of the fitted signal variance (amplitude: true)"},
+    )
+    transform: str = field(
+        default="auto",
+        metadata={
+            "help": "the costs' warping: none, log, power (Box-Cox, lambda fitted to the costs' "
+            "marginal distribution) or auto (of none and power, the one whose warped GP explains "
+            "the costs best)"
+        },
+    )
+    acquisition: str = field(
+        default="lognei",
+        metadata={
+            "help": "lognei (log noisy expected improvement: EI averaged over draws of the latent "
+            "function at the evaluated points, nei.py), logei (log expected improvement over "
+            "incumbent) or ucb"
+        },
+    )
+    polish: int = field(
+        default=2,
+        metadata={"help": "L-BFGS-B polishing starts from the best candidates (0: sampled only)"},
+    )
+    batch: str = field(
+        default="believer",
+        metadata={
+            "help": "believer (kriging believer, sequential), kmeans (published) or joint "
+            "(acquisition lognei only: each point by noisy EI given the batch so far and the "
+            "pending points, drawn jointly with the evaluated points; nothing is believed)"
+        },
+    )
+    nei_samples: int = field(
+        default=128,
+        metadata={"help": "draws of the latent function (lognei), a power of 2 (Sobol)"},
+    )
+    ard: bool = field(
+        default=True,
+        metadata={"help": "one length scale per input (false: one shared length scale)"},
+    )
+    prior: str = field(
+        default="dim_scaled",
+        metadata={
+            "help": "dim_scaled (maximum a posteriori with BoTorch's priors: log-normal on the "
+            "length scales, LogNormal(sqrt 2 + log(d) / 2, 3), and on the noise variance, "
+            "LogNormal(-4, 1); prior.py) or none (maximum marginal likelihood)"
+        },
+    )
+    amplitude: bool = field(
+        default=False,
+        metadata={
+            "help": "false: the Matern kernel alone on the standardised cost (as BoTorch's GP); "
+            "true: a fitted signal variance (<= amplitude_max) times it"
+        },
+    )
+    recommend: str = field(
+        default="posterior_mean",
+        metadata={
+            "help": "the parameters reported: posterior_mean (the evaluated point with the "
+            "lowest GP mean cost) or best_observed (published)"
+        },
+    )
+    incumbent: str = field(
+        default="mean",
+        metadata={
+            "help": "the incumbent of expected improvement (acquisition: logei): observed (the "
+            "best observed cost) or mean (the lowest posterior mean at an evaluated point)"
+        },
+    )
 
     def __post_init__(self) -> None:
         if (

@@ -49,7 +49,18 @@ from parcelfit.runs import Run, TestCase, read_trajectory
 from parcelfit.sim.lifetime import STDERR_FILE, STDOUT_FILE, run_command
 from parcelfit.sim.protocol import SimResult, SimStatus
 
-_KEYS = ("name", "command", "template", "params_file", "output_file", "transit_file", "timeout")
+HELP = {  # every key of a solver description, shown in docs/reference/files.md
+    "name": "the solver's name, shown in outputs and in its work folders' names",
+    "command": "the command and its arguments as a list, run in the work folder without a "
+    "shell; placeholders ${...} filled in",
+    "template": "the parameter file's template, relative to this file",
+    "params_file": "the filled-in template's name in the run's work folder",
+    "output_file": "the trajectory your command writes: CSV with t [s], x [m], y [m], "
+    "theta [rad] in the rig's frame",
+    "transit_file": "optional: a file holding the transit time [s] between the light barriers",
+    "timeout": "wall-clock limit of one run [s]",
+}
+_KEYS = tuple(HELP)
 
 
 @dataclass(frozen=True)

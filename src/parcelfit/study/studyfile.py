@@ -72,7 +72,7 @@ from __future__ import annotations
 import hashlib
 import json
 from collections.abc import Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -88,6 +88,7 @@ from parcelfit.schema import (
 from parcelfit.sim.factory import SimulatorConfig, SimulatorSection
 from parcelfit.study.studyschema import (
     CaseSection,
+    JudgedCaseSection,
     ReferenceSection,
     StudyFile,
 )
@@ -390,10 +391,7 @@ def study_cases(
     default = cases[0].dataset
     if f.validation.cases:
         validation = tuple(
-            replace(
-                _case(c, f.simulator, path, folder, default, f"validation.cases[{i}]", rigs),
-                weight=1.0,
-            )
+            _case(c, f.simulator, path, folder, default, f"validation.cases[{i}]", rigs)
             for i, c in enumerate(f.validation.cases)
         )
     elif f.validation.speed_setting is not None:
@@ -408,7 +406,7 @@ def study_cases(
     else:
         validation = ()
     transfer = tuple(
-        replace(_case(c, f.simulator, path, folder, default, f"transfer[{i}]", rigs), weight=1.0)
+        _case(c, f.simulator, path, folder, default, f"transfer[{i}]", rigs)
         for i, c in enumerate(f.transfer)
     )
     for i, c in enumerate(cases):
@@ -423,14 +421,6 @@ def study_cases(
     fitted = {c.case for c in cases}
     for where, group in (("validation.cases", validation), ("transfer", transfer)):
         for i, c in enumerate(group):
-            if c.placements is not None:
-                raise ParcelfitError(
-                    "only fitted cases take placements: validation and transfer cases are "
-                    "simulated once, at the nominal placement",
-                    file=path,
-                    where=f"{where}[{i}].placements",
-                    fix="leave placements out here",
-                )
             if c.case in fitted:
                 raise ParcelfitError(
                     f"{c.label} is also fitted: a case used for fitting cannot judge the fit",
@@ -448,7 +438,7 @@ def study_cases(
 
 
 def _case(
-    c: CaseSection,
+    c: JudgedCaseSection,
     sim: SimulatorSection,
     path: Path,
     folder: Path,
@@ -479,9 +469,8 @@ def _case(
                 where=f"{where}.rig",
                 fix=f"name one of {sorted(rigs)}, or add the rig's file to simulator.rigs",
             )
-    return CaseSpec(
-        TestCase(rig, consignment, c.speed_setting), dataset, c.weight, c.placements, where
-    )
+    weight, placements = (c.weight, c.placements) if isinstance(c, CaseSection) else (1.0, None)
+    return CaseSpec(TestCase(rig, consignment, c.speed_setting), dataset, weight, placements, where)
 
 
 def reference_case(

@@ -50,14 +50,10 @@ class ReferenceSection(FileModel):
     """The speed setting fitted (whole number >= 1, as in the dataset)."""
 
 
-class CaseSection(FileModel):
-    """One test case of ``cases``, ``validation.cases`` or ``transfer``: dataset folder
-    (relative to the file; default the first case's), rig and consignment (default the
-    simulator's), speed setting, and (``cases`` only) its weight in the cost and, with the
-    ensemble cost, its own number of placements (default ``cost.placements``): a case whose
-    placements scatter less than its real runs (E1: 1.5 ms of transit time against the real
-    runs' 16.8 ms, 3.4 ms adjusted for belt speeds) loses less by fewer than one whose
-    placements spin at some seeds (E3)."""
+class JudgedCaseSection(FileModel):
+    """One test case of ``validation.cases`` or ``transfer``: dataset folder (relative to the
+    file; default the first case's), rig and consignment (default the simulator's) and speed
+    setting. Each is judged on its own, at the nominal placement: no weight, no placements."""
 
     dataset: Annotated[str | None, Text(nullable=True)] = None
     """The dataset folder, relative to this file (default: the first case's)."""
@@ -67,11 +63,32 @@ class CaseSection(FileModel):
     """The case's consignment type as the dataset names it (default: the simulator's)."""
     speed_setting: Annotated[int, Whole(ge=1, le=MAX_SPEED_SETTING)]
     """The case's speed setting (whole number >= 1)."""
+
+    @classmethod
+    def allowed_keys(cls, data: Mapping[Any, Any]) -> list[str]:
+        for key in ("weight", "placements"):
+            if key in data and key not in cls.model_fields:  # a fitted case (below) takes them
+                raise ParcelfitError(
+                    f"only fitted cases take {key}: validation and transfer cases are judged "
+                    "each on its own, simulated once at the nominal placement",
+                    where=key,
+                    fix=f"leave {key} out here",
+                )
+        return super().allowed_keys(data)
+
+
+class CaseSection(JudgedCaseSection):
+    """One fitted test case of ``cases``: as a validation case, and its weight in the cost and,
+    with the ensemble cost, its own number of placements (default ``cost.placements``): a case
+    whose placements scatter less than its real runs (E1: 1.5 ms of transit time against the
+    real runs' 16.8 ms, 3.4 ms adjusted for belt speeds) loses less by fewer than one whose
+    placements spin at some seeds (E3)."""
+
     weight: Annotated[float, Number(ge=0)] = 1.0
-    """Weight of this case's cost in the sum (`cases` only; >= 0) [-]."""
+    """Weight of this case's cost in the sum (>= 0) [-]."""
     placements: Annotated[int | None, Whole(ge=1, le=MAX_PLACEMENTS, nullable=True)] = None
-    """Seeded placements of this case per evaluation with the ensemble cost (`cases` only;
-    default: cost.placements)."""
+    """Seeded placements of this case per evaluation with the ensemble cost (default:
+    cost.placements)."""
 
 
 class CostSection(FileModel):
@@ -169,8 +186,9 @@ class ValidationSection(FileModel):
     validation)."""
     every: Annotated[int, Whole(ge=1, le=MAX_EVALUATIONS)] = 5
     """Validate the recommended parameters every this many iterations."""
-    cases: Annotated[list[CaseSection], or_default(list)] = Field(default_factory=list)
-    """The validation test cases of a joint study (all must pass), each as in `cases`."""
+    cases: Annotated[list[JudgedCaseSection], or_default(list)] = Field(default_factory=list)
+    """The validation test cases of a joint study (all must pass), each as in `cases` without
+    weight and placements."""
 
     @model_validator(mode="after")
     def _one_way(self) -> ValidationSection:
@@ -234,8 +252,8 @@ class OptimizerSection(FileModel):
     model_config = ConfigDict(extra="allow")  # merged with FileModel's
     sampler: Annotated[str, Choice(tuple(SAMPLERS), what="optimizer")] = "gp"
     """The optimiser: gp (the default batch Bayesian optimisation), published (the published
-    settings), tpe or optuna-gp (Optuna) or botorch (BoTorch); gp and published take BOSettings
-    keys beside it."""
+    settings), tpe or optuna-gp (Optuna) or botorch (BoTorch); gp and published take the
+    optimiser settings (their own table below) beside it."""
 
     @classmethod
     def allowed_keys(cls, data: Mapping[Any, Any]) -> list[str]:
@@ -275,7 +293,7 @@ class StudyFile(FileModel):
     """The fitted test cases of a joint study (instead of `reference`)."""
     cost: Annotated[CostSection, or_default(dict)] = Field(default_factory=CostSection)
     """The cost of a case: published (default) or ensemble."""
-    transfer: Annotated[list[CaseSection], or_default(list)] = Field(default_factory=list)
+    transfer: Annotated[list[JudgedCaseSection], or_default(list)] = Field(default_factory=list)
     """Test cases the calibrated parameters are judged on once the study stops (not fitted)."""
     validation: Annotated[ValidationSection, or_default(dict)] = Field(
         default_factory=ValidationSection
