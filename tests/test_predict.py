@@ -140,6 +140,8 @@ def test_predict_names_what_the_undetermined_parameter_moves(study, tmp_path):
     assert len(doc["sentences"]) == 1  # only E_Pa is not determined
     page = (tmp_path / "p" / "prediction.html").read_text()
     assert "Q/KPBW/1" in page and "<script" not in page
+    # the study was calibrated on the test simulator's type P: another type is noted
+    assert any("calibrated on P, not on KPBW" in n for n in doc["notes"]), doc["notes"]
 
 
 def test_resume_gives_the_same_tables(study, tmp_path):

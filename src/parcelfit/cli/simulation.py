@@ -93,8 +93,8 @@ def simulate(
         str,
         typer.Option(
             help="The packaging shell's degrees of freedom: auto (the consignment file's "
-            "shell if it names one, e.g. trilinear over 4 x 4 x 1 cells for the bundled "
-            "rigid-content types; else quadratic around a rigid content, full around a soft "
+            "shell if it names one, e.g. trilinear over the cells of its shell_cells for the "
+            "bundled rigid-content types; else quadratic around a rigid content, full around a soft "
             "one), full (one per vertex; give a fine --timestep, "
             "e.g. 0.000208333 for 1/4800 s), quadratic or trilinear (see the simulator's "
             "README, Spin).",

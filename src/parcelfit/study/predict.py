@@ -568,6 +568,13 @@ def predict(
         note = scatter_note(scatter)
         if note is not None:
             notes.append(note)
+        calibrated = sorted({c.case.consignment for c in inputs.study.cases})
+        if design.consignment_name not in calibrated:
+            notes.append(
+                f"the parameters were calibrated on {', '.join(calibrated)}, not on "
+                f"{design.consignment_name}: the packaging's parameters of one type carry over to "
+                "another only as far as the two packagings are alike"
+            )
         if speed_deviation > 0 and deviation == 0:
             notes.append(
                 "this simulator cannot run its drives off their mean speeds, so the runs hold "
