@@ -14,7 +14,7 @@ that never get there as "more than the budget", the share of seeds that get ther
 final regret and the median CPU seconds per run; after each problem, the ratio of our median
 final regret to each peer's, measured in the same run. Methods:
 
-* ``parcelfit``: `BatchBO` with its defaults (see docs/optimizer.md: noise fitted by marginal
+* ``parcelfit``: `BatchBO` with its defaults (see docs/research/optimizer-benchmarks.md: noise fitted by marginal
   likelihood, output transform chosen by the warped-GP likelihood, log EI with the posterior-mean
   incumbent polished by L-BFGS-B, kriging-believer batches, one length scale per input);
 * ``published``: `BOSettings.published()`, method.md section 7 (fixed noise 0.35^2, MC UCB,

@@ -297,7 +297,7 @@ def _fitted(cost, settings, n=24, seed=0):
 def test_auto_transform_warps_a_heavy_tailed_cost_and_leaves_a_smooth_one():
     # on the fit by marginal likelihood with a signal variance (the former default): the
     # default's fixed unit signal variance and priors make the warped Box-Cox fit of the smooth
-    # bowl the likelier one too (docs/optimizer.md)
+    # bowl the likelier one too (docs/research/optimizer-benchmarks.md)
     settings = BOSettings(
         transform="auto", n_initial=24, n_restarts=0, prior="none", amplitude=True
     )
@@ -375,7 +375,7 @@ def test_polish_moves_kmeans_picks_uphill_on_the_acquisition():
 
 # the GP fit these tests of noisy EI's arithmetic were built on (the former default): maximum
 # marginal likelihood with a fitted signal variance; the default's noise prior keeps the fitted
-# noise of a noise-free cost near 0.0066 instead of 1e-6 (docs/optimizer.md)
+# noise of a noise-free cost near 0.0066 instead of 1e-6 (docs/research/optimizer-benchmarks.md)
 _MARGINAL_LIKELIHOOD = {"prior": "none", "amplitude": True}
 
 
