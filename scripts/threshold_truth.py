@@ -85,7 +85,8 @@ def main(argv: list[str] | None = None) -> int:
     eps, source = threshold(refs, study)
     print(f"## {args.study}: the truth's cost against epsilon ({args.draws} sets of placements)\n")
     print(
-        "| case | epsilon | the truth's cost at the study's seeds | median / 95 % / largest over the draws | draws above epsilon |"
+        "| case | epsilon | the truth's cost at the study's seeds | median / 95 % / largest "
+        "over the draws | draws above epsilon |"
     )
     print("|---|---|---|---|---|")
 
