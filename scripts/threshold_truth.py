@@ -14,7 +14,8 @@ study's cost against the real runs like any evaluation (`parcelfit.study.joint.e
 Printed: per case and in total, epsilon beside the truth's costs (at the study's seeds, the
 median, 95 % quantile and largest over the draws), and how many draws score above epsilon.
 A threshold far above every draw of the truth's cost rules out less than the data could; a
-draw above it would exclude the truth.
+draw above it would exclude the truth. With several cases, the rank correlation of their costs
+over the draws (the placement seeds are shared across cases) is printed too.
 """
 
 from __future__ import annotations
@@ -102,6 +103,16 @@ def main(argv: list[str] | None = None) -> int:
         row(spec.label, case_threshold(refs[spec.label], study, spec), per_case[:, c])
     row("all (weighted)", eps, total)
     print(f"\nepsilon: {source}")
+    if len(study.cases) > 1 and args.draws >= 5:  # do the cases' costs at the truth move together?
+        from scipy.stats import spearmanr
+
+        pairs = [
+            f"{a.label} ~ {b.label} {spearmanr(per_case[:, i], per_case[:, j], nan_policy='omit')[0]:+.2f}"
+            for i, a in enumerate(study.cases)
+            for j, b in enumerate(study.cases)
+            if i < j
+        ]
+        print("rank correlation of the cases' costs over the draws: " + "; ".join(pairs))
     return 0
 
 
