@@ -72,7 +72,8 @@ class JudgedCaseSection(FileModel):
                     f"only fitted cases take {key}: validation and transfer cases are judged "
                     "each on its own, simulated once at the nominal placement",
                     where=key,
-                    fix=f"leave {key} out here",
+                    fix=f"leave {key} out here (a study folder begun with it continues only "
+                    "with --restart, as the study file changed)",
                 )
         return super().allowed_keys(data)
 
