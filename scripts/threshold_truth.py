@@ -1,6 +1,7 @@
 """The acceptance threshold of "what the data determine" against what the truth itself scores.
 
     python scripts/threshold_truth.py STUDY.yaml --set NAME=VALUE [--set ...] [--draws 20]
+                                      [--executor local|serial]
                                       [--workers N]
 
 Run from the repository's root, on a study whose dataset is a twin with a known truth (the
@@ -29,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from parcelfit.sim.executors import Task, local_executor
+from parcelfit.sim.executors import Task, make_executor
 from parcelfit.sim.factory import make_simulator
 from parcelfit.sim.params import parse_assignments
 from parcelfit.study.joint import (
@@ -51,6 +52,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", required=True)
     ap.add_argument("--draws", type=int, default=20, help="sets of K placement seeds (>= 1)")
     ap.add_argument("--workers", type=int, default=None, help="worker processes (default: cores)")
+    ap.add_argument("--executor", choices=("local", "serial"), default="local")
     args = ap.parse_args(argv)
     if args.draws < 1:
         ap.error("--draws must be at least 1")
@@ -75,7 +77,7 @@ def main(argv: list[str] | None = None) -> int:
                 items.append((Task(params, spec.case, f"truth-d{d}-c{c}-p{shifted}"), shifted))
                 owner.append((d, c))
     runs: dict[int, list[tuple[int, CaseRun]]] = {}
-    executor = local_executor(args.workers)
+    executor = make_executor(args.executor, workers=args.workers)
     try:
         for j, result in simulate_items(executor, simulator, items):
             d, c = owner[j]
