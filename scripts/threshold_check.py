@@ -11,8 +11,9 @@ largest single-run cost); then the study's threshold now
 (`parcelfit.study.joint.threshold`) and the former one (the weighted sum of the cases' largest
 single-run costs). With ``--folder`` (one study file), the finished study in that folder is
 analysed again with today's threshold (`parcelfit.study.finish.Finish.identifiability`, from
-its stored evaluations: nothing is simulated), beside what its ``results.json`` holds. Seconds
-per study.
+its stored evaluations: nothing is simulated), beside what its ``results.json`` holds; with
+``--epsilon`` too, with that threshold instead (what the data would determine if the threshold
+were that, e.g. the truth's own cost from scripts/threshold_truth.py). Seconds per study.
 """
 
 from __future__ import annotations
@@ -32,14 +33,15 @@ from parcelfit.study.store import STORE_FILE, Store
 from parcelfit.study.studyfile import load_study
 
 
-def reanalyse(study_path: Path, folder: Path) -> None:
-    """Print the stored and today's verdicts of the finished study in ``folder``."""
+def reanalyse(study_path: Path, folder: Path, epsilon: float | None = None) -> None:
+    """Print the stored and today's verdicts of the finished study in ``folder`` (today's with
+    the threshold ``epsilon`` where given)."""
     study = load_study(study_path)
     store = Store(folder / STORE_FILE)
     finish = Finish(
         study, folder, store, None, select_references(study), lambda *_: None, lambda: None
     )  # type: ignore[arg-type]  # identifiability simulates nothing
-    now = finish.identifiability()
+    now = finish.identifiability(epsilon)
     stored = read_results(folder).identifiability
     print(f"## {folder}: what the data determine, stored and with today's threshold\n")
     for label, ident in (("stored", stored), ("today", now)):
@@ -58,11 +60,19 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("studies", nargs="+", type=Path)
     ap.add_argument("--folder", type=Path, help="a finished study of the (one) study file")
+    ap.add_argument(
+        "--epsilon",
+        type=float,
+        default=None,
+        help="with --folder: analyse with this threshold instead of the study's (a what-if)",
+    )
     args = ap.parse_args(argv)
+    if args.epsilon is not None and (args.folder is None or not args.epsilon > 0):
+        ap.error("--epsilon takes a positive threshold and --folder")
     if args.folder is not None:
         if len(args.studies) != 1:
             ap.error("--folder takes one study file")
-        reanalyse(args.studies[0], args.folder)
+        reanalyse(args.studies[0], args.folder, args.epsilon)
         return 0
     for path in args.studies:
         study = load_study(path)

@@ -34,3 +34,26 @@ def test_folder_takes_one_study_file(script, capsys):
     with pytest.raises(SystemExit):
         script.main(["a.yaml", "b.yaml", "--folder", "x"])
     assert "--folder takes one study file" in capsys.readouterr().err
+
+
+def test_epsilon_takes_a_folder_and_a_positive_value(script, capsys):
+    with pytest.raises(SystemExit):
+        script.main(["a.yaml", "--epsilon", "3"])
+    with pytest.raises(SystemExit):
+        script.main(["a.yaml", "--folder", "x", "--epsilon", "-1"])
+    assert "--epsilon takes a positive threshold and --folder" in capsys.readouterr().err
+
+
+def test_a_finished_study_is_analysed_again_with_a_given_threshold(script, tmp_path, capsys):
+    from parcelfit.study.calibration import Calibration
+
+    from .test_joint import _joint_study
+
+    path = _joint_study(tmp_path)
+    out = tmp_path / "study"
+    Calibration(load_study(path), out, figures=False).run()
+    assert script.main([str(path), "--folder", str(out), "--epsilon", "1e9"]) == 0
+    text = capsys.readouterr().out
+    today = next(line for line in text.splitlines() if line.startswith("today"))
+    # a threshold no cost reaches rules nothing out
+    assert "(threshold 1e+09)" in today and today.count("undetermined") == 3

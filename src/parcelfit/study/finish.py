@@ -245,15 +245,18 @@ class Finish:
             curves=None if curves is None else tuple(curves),
         )
 
-    def identifiability(self) -> Identifiability | None:
+    def identifiability(self, epsilon: float | None = None) -> Identifiability | None:
         """What the finished fitting evaluations determine (`parcelfit.study.identify`), with
-        the acceptance threshold from the fitted cases' real runs (`joint.threshold`); None
+        the acceptance threshold from the fitted cases' real runs (`joint.threshold`), or
+        ``epsilon`` [-] where given (a research check: scripts/threshold_check.py); None
         with fewer than three successful evaluations or real runs that do not differ."""
         study = self.study
         fits = [r for r in self.store.evaluations("fit") if r.status != "pending"]
         references = self.references
         try:
-            if study.cases:
+            if epsilon is not None:
+                eps, source = epsilon, f"given: {epsilon:.4g}"
+            elif study.cases:
                 eps, source = threshold(references, study)
             else:  # a Study made in code without its cases
                 eps = case_threshold(references[self.fit_case.label], study)
