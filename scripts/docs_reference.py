@@ -224,7 +224,7 @@ def _solver_section() -> list[str]:
     """The keys of an external solver's description (`parcelfit.sim.external`)."""
     from dataclasses import fields
 
-    from parcelfit.sim.external import HELP, ExternalSolver
+    from parcelfit.sim.external import HELP, REQUIRED, ExternalSolver
 
     defaults = {f.name: f.default for f in fields(ExternalSolver)}
     lines = [
@@ -238,7 +238,7 @@ def _solver_section() -> list[str]:
     ]
     for key in HELP:
         d = defaults.get(key)
-        shown = "required" if key in ("name", "command", "template") else _value(d)
+        shown = "required" if key in REQUIRED else _value(d)
         lines.append(f"| `{key}` | {shown} | {HELP[key]}. |")
     return [*lines, ""]
 

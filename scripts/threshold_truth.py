@@ -107,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
         if not len(ok):
             print(f"| {label} | {e:.3g} | - | no draw ended ok | - |")
             return
-        # the 95 % quantile only where 20 draws or more leave it below the largest
+        # the 95 % quantile only from 40 draws on: with fewer, `higher` gives the largest
         q = np.quantile(ok, 0.95, method="higher") if len(ok) >= 40 else math.nan
         above = "-" if math.isnan(e) else f"{int(np.sum(ok > e))} of {len(ok)}"
         print(

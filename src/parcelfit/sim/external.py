@@ -61,6 +61,7 @@ HELP = {  # every key of a solver description, shown in docs/reference/files.md
     "timeout": "wall-clock limit of one run [s]",
 }
 _KEYS = tuple(HELP)
+REQUIRED = ("name", "command", "template")  # the keys a description must give
 
 
 @dataclass(frozen=True)
@@ -80,7 +81,7 @@ class ExternalSolver:
 def load_external_solver(path: str | Path) -> ExternalSolver:
     """Read and check a solver description file (YAML)."""
     path = Path(path)
-    doc = load_config(path, allowed=_KEYS, required=("name", "command", "template"))
+    doc = load_config(path, allowed=_KEYS, required=REQUIRED)
     command = doc["command"]
     if (
         not isinstance(command, list)
