@@ -268,8 +268,18 @@ def main(argv: list[str] | None = None) -> int:
     user = parse_assignments(args.set)
     sim: MujocoSimulator | RigidBoxSimulator
     if args.backend == "rigidbox":
+        # the reference shares only the start's offset with MuJoCo's scene options
+        other = sorted(k.split("=", 1)[0] for k in args.scene if not k.startswith("start_offset="))
+        if other:
+            ap.error(
+                f"--scene: the rigidbox backend takes only start_offset, not {', '.join(other)}"
+            )
         sim = RigidBoxSimulator(
-            RigidBoxOptions(bottom_patch=args.bottom_patch, wall_limit=args.wall_limit),
+            RigidBoxOptions(
+                bottom_patch=args.bottom_patch,
+                wall_limit=args.wall_limit,
+                start_offset=scene.start_offset,
+            ),
             rigs={r.name: r for r in rigs},
             consignments=consignments,
         )

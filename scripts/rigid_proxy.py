@@ -107,8 +107,8 @@ def proxy_xml(
                 f'pos="{a[0]} {a[1]} {w.base + w.height / 2}" {common}/>'
             )
     start = rig.surface(rig.start.surface)
-    x0 = rig.start.position[0] + offset[0]
-    y0 = rig.start.position[1] + offset[1]
+    cx, cy = rig.start_centre(L, W)
+    x0, y0 = cx + offset[0], cy + offset[1]
     heading = rig.start.heading + offset[2]
     u0 = start.unit()
     v0 = speeds[start.drive]

@@ -270,7 +270,9 @@ def test_e3_smoke(e3_runs, name):
     traj = result.run.trajectory
     assert np.allclose(np.diff(traj.t), 1 / 60)
     rig = load_rig("E3")
-    assert (traj.x[0], traj.y[0]) == pytest.approx(rig.start.position)
+    assert (traj.x[0], traj.y[0]) == pytest.approx(
+        rig.start_centre(*load_consignment(name).outer[:2])
+    )
     assert traj.theta[0] == pytest.approx(math.radians(30))
 
 
@@ -303,8 +305,9 @@ def test_the_simulator_is_picklable_and_seeds_its_placement():
     for m in members:
         dx, dy, dh = rig.placement(m.seed)
         traj = m.run.trajectory
-        assert traj.x[0] == pytest.approx(rig.start.position[0] + dx)
-        assert traj.y[0] == pytest.approx(rig.start.position[1] + dy)
+        cx, cy = rig.start_centre(*load_consignment("KP").outer[:2])
+        assert traj.x[0] == pytest.approx(cx + dx)
+        assert traj.y[0] == pytest.approx(cy + dy)
         assert math.degrees(traj.theta[0]) == pytest.approx(rig.start.heading + dh)
 
 

@@ -30,6 +30,7 @@ A rig file (YAML, SI units, angles in degrees counter-clockwise from the rig's x
          base: 0.0, thickness: 0.003, lead_in: 0.01}   # lead_in: radius of a rounded
                                   # (rolled) upstream end [m], optional
     start: {position: [x, y], heading: 30, surface: strips,   # parcel centre, x axis, surface below
+            align: centre,                                    # optional: centre | right | left
             scatter: {along: 0.01, across: 0.01, heading: 2}} # optional: hand placement, see below
     light_barriers:               # exactly two beams, crossed in this order
       - {name: LS1, from: [x, y], to: [x, y]}
@@ -45,6 +46,14 @@ of a normal distribution along and across the start surface's heading [m] and of
 [deg], each draw cut off at 2.5 standard deviations. A simulation with a placement seed draws its
 start pose from it (`Rig.placement`), so an ensemble of seeds gives a distribution of outcomes
 like the repeated real runs of a test case; without a seed the parcel starts at the nominal pose.
+
+``start.align`` says how a hand lays parcels of different sizes: ``centre`` (the default) puts
+every consignment type's centre at ``position``; ``right`` (``left``) puts the middle of its
+right (left) side, looking along the start surface's direction, at ``position``, as a hand laying
+each specimen against a line would. The centre then lies half the parcel's extent across the
+surface to the left (right) of ``position``: with Delta the parcel's heading minus the surface's,
+that half extent is (L |sin Delta| + W |cos Delta|) / 2 for its outer length L and width W
+(`Rig.start_centre`).
 
 ``step_refinement`` is the rig's own demand on the time step: where its outcome converges only
 at finer steps (E1's transfer onto a fast belt, 2; E2a's roller module, where the polybag stalled
@@ -180,6 +189,7 @@ class StartPose:
     heading: float
     surface: str
     scatter: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    align: str = "centre"  # centre | right | left: which part of a parcel lies at ``position``
 
 
 @dataclass(frozen=True)
@@ -246,6 +256,18 @@ class Rig:
         order (a twin's "real" runs draw from the same distribution with their own stream)."""
         return {d: 1 + float(rng.uniform(-deviation, deviation)) for d in self.drives()}
 
+    def start_centre(self, length: float, width: float) -> tuple[float, float]:
+        """The nominal start of the centre [m] of a parcel of outer ``length`` and ``width`` [m]
+        under ``start.align`` (module docstring): ``start.position`` itself for ``centre``, else
+        moved across the start surface by half the parcel's extent across it."""
+        x, y = self.start.position
+        if self.start.align == "centre":
+            return x, y
+        delta = math.radians(self.start.heading - self.surface(self.start.surface).heading)
+        half = 0.5 * (length * abs(math.sin(delta)) + width * abs(math.cos(delta)))
+        dx, dy = self.start_shift(0.0, half if self.start.align == "right" else -half)
+        return float(x + dx), float(y + dy)
+
     def start_shift(self, along: float, across: float) -> tuple[float, float]:
         """The rig-frame offset (dx, dy) [m] of a start moved ``along`` and ``across`` [m] its
         surface (across: to the left of the surface's direction)."""
@@ -296,6 +318,11 @@ _Height = Annotated[float, Number(unit="m", ge=-10, le=10)]
 _Extra = Annotated[float | None, Number()]
 _SURFACE_TYPE = Choice(SURFACE_TYPES, what="surface type")
 _MATERIAL = Choice(MATERIALS, what="material")
+START_ALIGNMENTS = (
+    "centre",
+    "right",
+    "left",
+)  # start.align: which part of a parcel lies at position
 
 
 def _description(value: Any) -> str:
@@ -467,11 +494,16 @@ class StartSection(FileModel):
     """``start``: the parcel's centre [m], heading [deg], the surface below, the scatter."""
 
     position: _Point
-    """The parcel centre's nominal start in the rig frame [m], [x, y]."""
+    """The parcel's nominal start in the rig frame [m], [x, y]: its centre, or with `align`
+    `right` or `left` the middle of that side."""
     heading: _Heading
     """The parcel's nominal heading (its x axis), counter-clockwise from the rig's x axis [deg]."""
     surface: Annotated[str, Text()]
     """The surface the parcel starts on."""
+    align: Annotated[str, Choice(START_ALIGNMENTS, what="alignment")] = "centre"
+    """Which part of every consignment type lies at `position`: its centre, or the middle of
+    its right or left side looking along the start surface's direction (a hand laying each
+    specimen against a line; wider types then start further across)."""
     scatter: ScatterSection | None = None
     """The scatter of a hand placement (draws cut off at 2.5 standard deviations); seeded
     placements draw from it."""
@@ -617,6 +649,7 @@ def parse_rig(doc: Any, file: str) -> Rig:
             position=f.start.position,
             heading=f.start.heading,
             surface=f.start.surface,
+            align=f.start.align,
             scatter=(0.0, 0.0, 0.0)
             if scatter is None
             else (scatter.along, scatter.across, scatter.heading),

@@ -335,7 +335,8 @@ def build_scene(
     # --- parcel ---------------------------------------------------------------------------------
     start_surface = rig.surface(rig.start.surface)
     dx, dy, dh = opt.start_offset
-    x0, y0 = rig.start.position[0] + dx, rig.start.position[1] + dy
+    cx, cy = rig.start_centre(consignment.outer[0], consignment.outer[1])
+    x0, y0 = cx + dx, cy + dy
     heading = rig.start.heading + dh
     zc = start_surface.top + half_height + shell.bulge_depth + r + CONTACT_GAP
     q = _quat(heading)

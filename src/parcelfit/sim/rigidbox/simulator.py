@@ -1,10 +1,11 @@
 """The rigid-box reference as a `Simulator` backend: a rig and a consignment in, a run sampled
 like the camera out (`parcelfit.sim.protocol`).
 
-A run: the parcel starts on its start surface (``rig.start``: centre, heading, plus the
-placement draw of ``placement_seed`` (`Rig.placement`) and ``start_offset``), its bottom face on
-the surface's top, moving with that surface's speed (times ``speed_factors`` of its drive and
-``start_speed_factor``), as the MuJoCo scene starts it. Every 1/sample_rate s (60 Hz) the box
+A run: the parcel starts on its start surface (``rig.start``: the centre `Rig.start_centre`
+gives for the consignment's outline, the heading, plus the placement draw of ``placement_seed``
+(`Rig.placement`) and ``start_offset``), its bottom face on the surface's top, moving with
+that surface's speed (times ``speed_factors`` of its drive and ``start_speed_factor``), as the
+MuJoCo scene starts it. Every 1/sample_rate s (60 Hz) the box
 centre (x, y) and the heading of its x axis projected onto the plane, theta = atan2(R_yx, R_xx),
 are sampled (a `Trajectory`, unwrapped). The light barriers are timed every step (the box's
 footprint, `integrator`), and the run ends as the MuJoCo simulator's does: when the centre leaves
@@ -157,10 +158,10 @@ class RigidBoxSimulator(RigBackend[RigidBoxOptions]):
             * opt.start_speed_factor
         )
         u = surface.unit()
+        outer = self.consignment(case.consignment).outer
+        cx, cy = rig.start_centre(outer[0], outer[1])
         return {
-            "position": np.array(
-                [rig.start.position[0] + dx, rig.start.position[1] + dy, surface.top + half_height]
-            ),
+            "position": np.array([cx + dx, cy + dy, surface.top + half_height]),
             "quaternion": yaw_quaternion(rig.start.heading + dh),
             "velocity": np.array([speed * u[0], speed * u[1], 0.0]),
         }

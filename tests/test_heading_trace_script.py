@@ -1,0 +1,36 @@
+"""scripts/heading_trace.py: one placement in the model and in the reference, side by side."""
+
+import importlib.util
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from parcelfit.runs import Trajectory
+
+_SPEC = importlib.util.spec_from_file_location(
+    "heading_trace", Path(__file__).parents[1] / "scripts" / "heading_trace.py"
+)
+heading_trace = importlib.util.module_from_spec(_SPEC)
+_SPEC.loader.exec_module(heading_trace)
+
+
+def test_samples_are_the_nearest_samples_to_each_multiple_of_the_interval():
+    t = np.arange(0.0, 0.51, 1 / 60)
+    traj = Trajectory(t, t * 2.0, -t, t * 0.1)
+    rows = heading_trace.samples(traj, 0.1)
+    assert [r[0] for r in rows] == pytest.approx([0.0, 0.1, 0.2, 0.3, 0.4, 0.5], abs=1 / 120)
+    for r in rows:
+        assert r[1] == pytest.approx(2 * r[0]) and r[2] == pytest.approx(-r[0])
+        assert r[3] == pytest.approx(math.degrees(0.1 * r[0]))
+
+
+def test_both_engines_are_traced_from_the_same_start(capsys):
+    assert heading_trace.main(["--consignment", "BW", "--seed", "1", "--duration", "0.2"]) == 0
+    out = capsys.readouterr().out
+    blocks = out.split("reference (rigid box, outline patch)")
+    assert len(blocks) == 2 and blocks[0].startswith("model (MuJoCo), E3/BW/1, placement 1: ok")
+    firsts = [b.splitlines()[1] for b in blocks]
+    assert firsts[0] == firsts[1]  # the same start pose, printed alike
+    assert out.count("net rotation") == 2
