@@ -6,6 +6,8 @@ Simulates one seeded placement of a test case with the MuJoCo model (`MujocoSimu
 the rigid-box reference (`RigidBoxSimulator`, ``--bottom-patch``), both at their defaults, and
 prints every ``--every`` seconds of each trajectory the centre x, y [m] and the heading [deg]
 (unwrapped, as sampled), and at the end each run's net rotation [deg] and transit time [s].
+``--step-check`` then runs the reference again at a half and a quarter of its step and prints
+the three net rotations (is the reference's answer converged in its step?).
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from __future__ import annotations
 import argparse
 import math
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 
@@ -33,6 +36,11 @@ def samples(traj: Trajectory, every: float) -> list[tuple[float, float, float, f
     return out
 
 
+def net_rotation(traj: Trajectory) -> float:
+    """|last heading - first heading| of ``traj`` [deg] (its heading is unwrapped)."""
+    return math.degrees(abs(float(traj.theta[-1]) - float(traj.theta[0])))
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -46,17 +54,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument(
         "--bottom-patch", choices=("consignment", "outline", "content"), default="outline"
     )
+    ap.add_argument(
+        "--step-check", action="store_true", help="the reference also at 1/2 and 1/4 of its step"
+    )
     args = ap.parse_args(argv)
     case = TestCase(args.rig, args.consignment, args.setting)
+    reference = RigidBoxOptions(
+        bottom_patch=args.bottom_patch, placement_seed=args.seed, duration=args.duration
+    )
     runs = {
         "model (MuJoCo)": MujocoSimulator(
             SimOptions(placement_seed=args.seed, duration=args.duration)
         ).run({}, case),
-        f"reference (rigid box, {args.bottom_patch} patch)": RigidBoxSimulator(
-            RigidBoxOptions(
-                bottom_patch=args.bottom_patch, placement_seed=args.seed, duration=args.duration
-            )
-        ).run({}, case),
+        f"reference (rigid box, {args.bottom_patch} patch)": RigidBoxSimulator(reference).run(
+            {}, case
+        ),
     }
     for name, result in runs.items():
         print(f"{name}, {case.label}, placement {args.seed}: {result.status.value}")
@@ -65,11 +77,23 @@ def main(argv: Sequence[str] | None = None) -> int:
         traj = result.run.trajectory
         for t, x, y, h in samples(traj, args.every):
             print(f"  t {t:5.2f} s   x {x:+.3f} m   y {y:+.3f} m   heading {h:7.1f} deg")
-        rotation = math.degrees(abs(traj.theta[-1] - traj.theta[0]))
+        rotation = net_rotation(traj)
         transit = result.run.transit_time
         print(
             f"  net rotation {rotation:.1f} deg, transit "
             + ("none" if transit is None else f"{transit:.4f} s")
+        )
+    if args.step_check:
+        first = list(runs.values())[1]
+        step = float(first.diagnostics["timestep"])
+        turns = []
+        for factor in (1.0, 0.5, 0.25):
+            result = RigidBoxSimulator(replace(reference, timestep=step * factor)).run({}, case)
+            turns.append(net_rotation(result.run.trajectory) if result.run else float("nan"))
+        print(
+            f"reference's net rotation at its step {step:.3g} s, 1/2 and 1/4 of it: "
+            + ", ".join(f"{t:.1f}" for t in turns)
+            + " deg"
         )
     return 0
 

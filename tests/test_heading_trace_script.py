@@ -34,3 +34,12 @@ def test_both_engines_are_traced_from_the_same_start(capsys):
     firsts = [b.splitlines()[1] for b in blocks]
     assert firsts[0] == firsts[1]  # the same start pose, printed alike
     assert out.count("net rotation") == 2
+
+
+def test_the_step_check_runs_the_reference_at_three_steps(capsys):
+    args = ["--consignment", "BW", "--seed", "1", "--duration", "0.1", "--step-check"]
+    assert heading_trace.main(args) == 0
+    last = capsys.readouterr().out.splitlines()[-1]
+    assert last.startswith("reference's net rotation at its step")
+    turns = [float(t) for t in last.split(":")[1].removesuffix(" deg").split(",")]
+    assert len(turns) == 3 and all(0 <= t < 360 for t in turns)
