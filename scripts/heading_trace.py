@@ -20,6 +20,7 @@ from dataclasses import replace
 import numpy as np
 
 from parcelfit.runs import TestCase, Trajectory
+from parcelfit.sim.ensemble import rotation
 from parcelfit.sim.mujoco import MujocoSimulator, SimOptions
 from parcelfit.sim.rigidbox import RigidBoxOptions, RigidBoxSimulator
 
@@ -34,11 +35,6 @@ def samples(traj: Trajectory, every: float) -> list[tuple[float, float, float, f
             (float(traj.t[i]), float(traj.x[i]), float(traj.y[i]), math.degrees(traj.theta[i]))
         )
     return out
-
-
-def net_rotation(traj: Trajectory) -> float:
-    """|last heading - first heading| of ``traj`` [deg] (its heading is unwrapped)."""
-    return math.degrees(abs(float(traj.theta[-1]) - float(traj.theta[0])))
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -77,10 +73,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         traj = result.run.trajectory
         for t, x, y, h in samples(traj, args.every):
             print(f"  t {t:5.2f} s   x {x:+.3f} m   y {y:+.3f} m   heading {h:7.1f} deg")
-        rotation = net_rotation(traj)
+        turned = math.degrees(rotation(traj))
         transit = result.run.transit_time
         print(
-            f"  net rotation {rotation:.1f} deg, transit "
+            f"  net rotation {turned:.1f} deg, transit "
             + ("none" if transit is None else f"{transit:.4f} s")
         )
     if args.step_check:
@@ -89,7 +85,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         turns = []
         for factor in (1.0, 0.5, 0.25):
             result = RigidBoxSimulator(replace(reference, timestep=step * factor)).run({}, case)
-            turns.append(net_rotation(result.run.trajectory) if result.run else float("nan"))
+            turns.append(
+                math.degrees(rotation(result.run.trajectory)) if result.run else float("nan")
+            )
         print(
             f"reference's net rotation at its step {step:.3g} s, 1/2 and 1/4 of it: "
             + ", ".join(f"{t:.1f}" for t in turns)
