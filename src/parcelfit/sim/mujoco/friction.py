@@ -103,6 +103,9 @@ class ContactFriction:
         self._inverse_mass = np.zeros(0)
         self._surface_normal = np.zeros(model.ngeom)  # mean normal force [N] by surface geom
         self._surface_inverse_mass = np.full(model.ngeom, np.inf)
+        # this step's selection, made in `apply` and read again in `record`: mj_step2 neither
+        # finds contacts nor moves the flex's vertex positions, so both see the same contacts
+        self._selected: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self.explicit_steps = 0  # steps in which some contact slid by hand (diagnostics)
         self.clamped = 0  # contact-steps whose force by hand was limited by the half-slip bound
 
@@ -140,7 +143,7 @@ class ContactFriction:
         """Set each surface contact's friction, and the Coulomb forces of the sliding ones as
         ``data.qfrc_applied`` [N]; call between ``mj_step1`` and ``mj_step2``."""
         data.qfrc_applied[:] = 0.0
-        idx, surface, keys = self._select(data)
+        idx, surface, keys = self._selected = self._select(data)
         if idx.size == 0:
             return
         con = data.contact
@@ -182,8 +185,10 @@ class ContactFriction:
 
     def record(self, data: mujoco.MjData) -> None:
         """Keep this step's surface contacts' normal forces [N] and tangential inverse effective
-        masses [1/kg] (MuJoCo's ``efc_diagA``) for the next step; call after ``mj_step2``."""
-        idx, surface, keys = self._select(data)
+        masses [1/kg] (MuJoCo's ``efc_diagA``) for the next step; call after ``mj_step2`` (the
+        contacts `apply` selected in this step, else selected here)."""
+        selected, self._selected = self._selected, None
+        idx, surface, keys = selected if selected is not None else self._select(data)
         adr = data.contact.efc_address[idx]
         normal = np.maximum(data.efc_force[adr], 0.0)
         inverse_mass = np.maximum(data.efc_diagA[adr + 1], 0.0)
