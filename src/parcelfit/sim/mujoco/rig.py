@@ -318,11 +318,8 @@ _Height = Annotated[float, Number(unit="m", ge=-10, le=10)]
 _Extra = Annotated[float | None, Number()]
 _SURFACE_TYPE = Choice(SURFACE_TYPES, what="surface type")
 _MATERIAL = Choice(MATERIALS, what="material")
-START_ALIGNMENTS = (
-    "centre",
-    "right",
-    "left",
-)  # start.align: which part of a parcel lies at position
+# start.align: which part of a parcel lies at start.position
+START_ALIGNMENTS = ("centre", "right", "left")
 
 
 def _description(value: Any) -> str:

@@ -335,7 +335,7 @@ def build_scene(
     # --- parcel ---------------------------------------------------------------------------------
     start_surface = rig.surface(rig.start.surface)
     dx, dy, dh = opt.start_offset
-    cx, cy = rig.start_centre(consignment.outer[0], consignment.outer[1])
+    cx, cy = rig.start_centre(L, W)
     x0, y0 = cx + dx, cy + dy
     heading = rig.start.heading + dh
     zc = start_surface.top + half_height + shell.bulge_depth + r + CONTACT_GAP
