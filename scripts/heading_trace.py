@@ -1,13 +1,17 @@
 """Where does a run turn? One placement in the model and in the independent reference, side by side.
 
     python scripts/heading_trace.py --rig examples/e3-variants/E3-right-sides.yaml --consignment KP --seed 2
+    python scripts/heading_trace.py --consignment KP --seed 1 --set k_MePa=6110   # catalogue units
 
 Simulates one seeded placement of a test case with the MuJoCo model (`MujocoSimulator`) and with
 the rigid-box reference (`RigidBoxSimulator`, ``--bottom-patch``), both at their defaults, and
 prints every ``--every`` seconds of each trajectory the centre x, y [m] and the heading [deg]
-(unwrapped, as sampled), and at the end each run's net rotation [deg] and transit time [s].
-``--step-check`` then runs the reference again at a half and a quarter of its step and prints
-the three net rotations (is the reference's answer converged in its step?).
+(unwrapped, as sampled), and at the end each run's net rotation [deg] and transit time [s] and
+how deep each guide plate's lead-in reached into the consignment's outline at the run's poses
+(`lead_in_reach`; sample with ``--rate`` well above 60 Hz for it, e.g. 1200).
+``--set NAME=VALUE`` changes parameters in both (catalogue units). ``--step-check`` then runs
+the reference again at a half and a quarter of its step and prints the three net rotations (is
+the reference's answer converged in its step?).
 """
 
 from __future__ import annotations
@@ -21,7 +25,8 @@ import numpy as np
 
 from parcelfit.runs import TestCase, Trajectory
 from parcelfit.sim.ensemble import rotation
-from parcelfit.sim.mujoco import MujocoSimulator, SimOptions
+from parcelfit.sim.mujoco import MujocoSimulator, SimOptions, load_consignment, load_rig
+from parcelfit.sim.params import parameter, parse_assignments
 from parcelfit.sim.rigidbox import RigidBoxOptions, RigidBoxSimulator
 
 
@@ -35,6 +40,25 @@ def samples(traj: Trajectory, every: float) -> list[tuple[float, float, float, f
             (float(traj.t[i]), float(traj.x[i]), float(traj.y[i]), math.degrees(traj.theta[i]))
         )
     return out
+
+
+def lead_in_reach(
+    traj: Trajectory, size: tuple[float, float], axis: tuple[float, float], radius: float
+) -> tuple[float, float]:
+    """The deepest reach [m] of a vertical lead-in (its ``axis`` [m], ``radius`` [m]) into a
+    rigid ``size`` = (L, W) [m] rectangle at the run's sampled poses (the reference's box; for
+    the model a lower bound, as its rim may bend), and when [s]; negative: it never touched."""
+    best, when = -math.inf, math.nan
+    for t, x, y, th in zip(traj.t, traj.x, traj.y, traj.theta, strict=True):
+        dx, dy = axis[0] - x, axis[1] - y
+        c, s = math.cos(th), math.sin(th)
+        qx = abs(c * dx + s * dy) - size[0] / 2  # the axis in the body frame, past the sides
+        qy = abs(-s * dx + c * dy) - size[1] / 2
+        outside = math.hypot(max(qx, 0.0), max(qy, 0.0))
+        depth = radius - outside if outside > 0 else radius - max(qx, qy)
+        if depth > best:
+            best, when = depth, float(t)
+    return best, when
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -53,15 +77,26 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument(
         "--step-check", action="store_true", help="the reference also at 1/2 and 1/4 of its step"
     )
+    ap.add_argument("--rate", type=float, default=60.0, help="sample rate [Hz] of both runs")
+    ap.add_argument(
+        "--set", nargs="*", default=[], metavar="NAME=VALUE", help="both engines; catalogue units"
+    )
     args = ap.parse_args(argv)
+    params = {k: parameter(k).to_si(v) for k, v in parse_assignments(args.set).items()}
     case = TestCase(args.rig, args.consignment, args.setting)
+    rig = load_rig(args.rig)
+    size = load_consignment(args.consignment).outer
+    outer = (float(size[0]), float(size[1]))
     reference = RigidBoxOptions(
-        bottom_patch=args.bottom_patch, placement_seed=args.seed, duration=args.duration
+        bottom_patch=args.bottom_patch,
+        placement_seed=args.seed,
+        duration=args.duration,
+        sample_rate=args.rate,
     )
     runs = {
         "model (MuJoCo)": MujocoSimulator(
-            SimOptions(placement_seed=args.seed, duration=args.duration)
-        ).run({}, case),
+            SimOptions(placement_seed=args.seed, duration=args.duration, sample_rate=args.rate)
+        ).run(params, case),
         f"reference (rigid box, {args.bottom_patch} patch)": RigidBoxSimulator(reference).run(
             {}, case
         ),
@@ -73,6 +108,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         traj = result.run.trajectory
         for t, x, y, h in samples(traj, args.every):
             print(f"  t {t:5.2f} s   x {x:+.3f} m   y {y:+.3f} m   heading {h:7.1f} deg")
+        for wall in rig.walls:
+            if wall.lead_in > 0:
+                depth, when = lead_in_reach(traj, outer, wall.start, wall.lead_in)
+                print(
+                    f"  {wall.name}'s lead-in reaches {depth * 1e3:.1f} mm into the outline at most"
+                    f" (t {when:.3f} s)"
+                )
         turned = math.degrees(rotation(traj))
         transit = result.run.transit_time
         print(
@@ -84,7 +126,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         step = float(first.diagnostics["timestep"])
         turns = []
         for factor in (1.0, 0.5, 0.25):
-            result = RigidBoxSimulator(replace(reference, timestep=step * factor)).run({}, case)
+            result = RigidBoxSimulator(replace(reference, timestep=step * factor)).run(params, case)
             turns.append(
                 math.degrees(rotation(result.run.trajectory)) if result.run else float("nan")
             )

@@ -34,6 +34,7 @@ def test_both_engines_are_traced_from_the_same_start(capsys):
     firsts = [b.splitlines()[1] for b in blocks]
     assert firsts[0] == firsts[1]  # the same start pose, printed alike
     assert out.count("net rotation") == 2
+    assert out.count("guide's lead-in reaches") == 2  # E3's one lead-in, in each engine
 
 
 def test_the_step_check_runs_the_reference_at_three_steps(capsys):
@@ -43,3 +44,20 @@ def test_the_step_check_runs_the_reference_at_three_steps(capsys):
     assert last.startswith("reference's net rotation at its step")
     turns = [float(t) for t in last.split(":")[1].removesuffix(" deg").split(",")]
     assert len(turns) == 3 and all(0 <= t < 360 for t in turns)
+
+
+def test_lead_in_reach_is_the_deepest_overlap_of_a_cylinder_and_the_outline():
+    size = (0.32, 0.25)
+    t = np.array([0.0, 0.1, 0.2])
+    traj = Trajectory(t, np.zeros(3), np.zeros(3), np.zeros(3))
+    # beside the long side, 4 mm out: 6 mm of a 10 mm radius inside; 5 mm inside: 15 mm
+    assert heading_trace.lead_in_reach(traj, size, (0.0, -0.129), 0.01) == pytest.approx((0.006, 0))
+    assert heading_trace.lead_in_reach(traj, size, (0.0, -0.12), 0.01)[0] == pytest.approx(0.015)
+    # off a corner by (3, 4) mm: 5 mm away, so 5 mm of the radius reaches in
+    assert heading_trace.lead_in_reach(traj, size, (0.163, -0.129), 0.01)[0] == pytest.approx(0.005)
+    # the body turned by 90 degrees at t = 0.2: the same point now lies off its short end
+    turned = Trajectory(t, np.zeros(3), np.zeros(3), np.array([0.0, 0.0, math.pi / 2]))
+    depth, when = heading_trace.lead_in_reach(turned, size, (0.0, -0.165), 0.01)
+    assert depth == pytest.approx(0.005) and when == pytest.approx(0.2)
+    # never near: negative
+    assert heading_trace.lead_in_reach(traj, size, (1.0, 1.0), 0.01)[0] < 0
