@@ -98,7 +98,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             SimOptions(placement_seed=args.seed, duration=args.duration, sample_rate=args.rate)
         ).run(params, case),
         f"reference (rigid box, {args.bottom_patch} patch)": RigidBoxSimulator(reference).run(
-            {}, case
+            params, case
         ),
     }
     for name, result in runs.items():

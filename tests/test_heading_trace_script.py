@@ -61,3 +61,21 @@ def test_lead_in_reach_is_the_deepest_overlap_of_a_cylinder_and_the_outline():
     assert depth == pytest.approx(0.005) and when == pytest.approx(0.2)
     # never near: negative
     assert heading_trace.lead_in_reach(traj, size, (1.0, 1.0), 0.01)[0] < 0
+
+
+def test_set_reaches_both_engines_in_si_units(monkeypatch, capsys):
+    seen = []
+    for cls in (heading_trace.MujocoSimulator, heading_trace.RigidBoxSimulator):
+        original = cls.run
+
+        def run(self, params, case, *rest, _original=original, _cls=cls):
+            seen.append((_cls.__name__, dict(params)))
+            return _original(self, params, case, *rest)
+
+        monkeypatch.setattr(cls, "run", run)
+    args = ["--consignment", "BW", "--seed", "1", "--duration", "0.05", "--set", "k_MePa=300"]
+    assert heading_trace.main(args) == 0
+    assert seen == [
+        ("MujocoSimulator", {"k_MePa": pytest.approx(3e5)}),
+        ("RigidBoxSimulator", {"k_MePa": pytest.approx(3e5)}),
+    ]
