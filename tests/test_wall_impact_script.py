@@ -54,6 +54,7 @@ def test_measures_of_a_bounce_turn_and_settle():
     assert m["rebound"] == pytest.approx(0.25, abs=1e-6)
     assert m["overshoot"] == pytest.approx(3.0, abs=1e-6)
     assert m["final"] == pytest.approx(0.0, abs=1e-9)
+    assert m["end rate"] == pytest.approx(0.0, abs=1e-6)  # settled over the last 20 ms
     assert m["spin"] == pytest.approx(23.0 / 0.04, rel=1e-3)  # the fastest turn [deg/s]
     # started turned the other way (its rear corner towards the wall): past flush is positive
     mirrored = Trajectory(t, x, np.zeros_like(t), np.radians(90.0 - turn))
@@ -70,6 +71,6 @@ def test_both_engines_strike_the_wall_and_the_reference_is_converged_in_its_step
     assert wall_impact.main([*args, "--model", "--reference", "--duration", "0.1"]) == 0
     rows = [r.split() for r in capsys.readouterr().out.splitlines()[2:]]
     assert [r[1] for r in rows] == ["model", "reference", "reference,"]
-    rebound = {r[1]: float(r[-5]) for r in rows}
+    rebound = {r[1]: float(r[-6]) for r in rows}
     assert all(0.0 <= v <= 1.0 for v in rebound.values())
     assert rebound["reference"] == pytest.approx(rebound["reference,"], abs=0.01)
