@@ -243,7 +243,7 @@ def test_e1_parcel_reaches_belt_2_speed_and_heavier_and_lighter_parcels_behave_a
 
 @pytest.mark.longest
 def test_same_inputs_same_result_and_small_continuous_friction_effect():
-    sim = MujocoSimulator(SimOptions(duration=1.0))
+    sim = MujocoSimulator(SimOptions(duration=0.5))
     case = TestCase("E1", "BW", 3)  # the cheapest type (4 x 4 x 1 cells, 30 mm)
     a = sim.run({"mu_d_BePa": 0.45}, case).run.trajectory
     b = sim.run({"mu_d_BePa": 0.45}, case).run.trajectory
