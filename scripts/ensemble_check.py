@@ -227,6 +227,13 @@ def main(argv: list[str] | None = None) -> int:
         help="rigidbox: where the bottom carries contact (the consignment's bulge patch if it "
         "has one, else the outline; the whole outline; the content's footprint)",
     )
+    ap.add_argument(
+        "--reference-spacing",
+        type=float,
+        default=None,
+        help="rigidbox: the spacing of the box's contact points [m] (default: the reference's, "
+        "10 mm); halve it to check the reference's verdict is converged in it",
+    )
     ap.add_argument("--bulge", nargs="*", default=[], metavar="TYPE=FOOTPRINT")
     ap.add_argument("--bulge-depth", type=float, default=0.004, help="[m]")
     ap.add_argument(
@@ -239,6 +246,15 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if not args.wall_limit > 0:
         ap.error(f"--wall-limit must be positive [s], got {args.wall_limit:g}")
+    if args.reference_spacing is not None:
+        if args.backend != "rigidbox":
+            ap.error(
+                "--reference-spacing sets the rigid-box reference's contact points: add --backend rigidbox"
+            )
+        if not 1e-3 <= args.reference_spacing <= 0.05:
+            ap.error(
+                f"--reference-spacing must lie in [0.001, 0.05] m, got {args.reference_spacing:g}"
+            )
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "figures").mkdir(exist_ok=True)
     rigs = [load_rig(r) for r in args.rigs]  # bundled names or rig files
@@ -277,6 +293,7 @@ def main(argv: list[str] | None = None) -> int:
         sim = RigidBoxSimulator(
             RigidBoxOptions(
                 bottom_patch=args.bottom_patch,
+                **({} if args.reference_spacing is None else {"spacing": args.reference_spacing}),
                 wall_limit=args.wall_limit,
                 start_offset=scene.start_offset,
             ),
@@ -307,6 +324,11 @@ def main(argv: list[str] | None = None) -> int:
         + (
             f" --backend rigidbox --bottom-patch {args.bottom_patch}"
             if args.backend == "rigidbox"
+            else ""
+        )
+        + (
+            f" --reference-spacing {args.reference_spacing:g}"
+            if args.reference_spacing is not None
             else ""
         )
         + (f" --wall-limit {args.wall_limit:g}" if args.wall_limit != SimOptions.wall_limit else "")

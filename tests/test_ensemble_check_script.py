@@ -1,0 +1,45 @@
+"""scripts/ensemble_check.py: the reference's contact-point spacing as an option."""
+
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+_SPEC = importlib.util.spec_from_file_location(
+    "ensemble_check", Path(__file__).parents[1] / "scripts" / "ensemble_check.py"
+)
+ensemble_check = importlib.util.module_from_spec(_SPEC)
+_SPEC.loader.exec_module(ensemble_check)
+
+
+class _BuiltError(Exception):
+    pass
+
+
+def test_reference_spacing_reaches_the_reference(monkeypatch, tmp_path):
+    built = []
+
+    def fake(options, **kwargs):
+        built.append(options)
+        raise _BuiltError
+
+    monkeypatch.setattr(ensemble_check, "RigidBoxSimulator", fake)
+    args = ["--types", "KP", "--placements", "1", "--backend", "rigidbox", "--out", str(tmp_path)]
+    with pytest.raises(_BuiltError):
+        ensemble_check.main([*args, "--reference-spacing", "0.005"])
+    with pytest.raises(_BuiltError):
+        ensemble_check.main(args)
+    assert built[0].spacing == pytest.approx(0.005)
+    assert built[1].spacing == ensemble_check.RigidBoxOptions().spacing  # the reference's own
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [["--reference-spacing", "0.005"], ["--backend", "rigidbox", "--reference-spacing", "0.5"]],
+)
+def test_reference_spacing_is_refused_without_the_reference_or_out_of_range(
+    tmp_path, extra, capsys
+):
+    with pytest.raises(SystemExit):
+        ensemble_check.main(["--types", "KP", "--placements", "1", "--out", str(tmp_path), *extra])
+    assert "--reference-spacing" in capsys.readouterr().err
