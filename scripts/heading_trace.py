@@ -46,8 +46,10 @@ def lead_in_reach(
     traj: Trajectory, size: tuple[float, float], axis: tuple[float, float], radius: float
 ) -> tuple[float, float]:
     """The deepest reach [m] of a vertical lead-in (its ``axis`` [m], ``radius`` [m]) into a
-    rigid ``size`` = (L, W) [m] rectangle at the run's sampled poses (the reference's box; for
-    the model a lower bound, as its rim may bend), and when [s]; negative: it never touched."""
+    rigid ``size`` = (L, W) [m] rectangle at the run's sampled poses, and when [s]; negative:
+    it never reached the rectangle. For the reference the rectangle is its box; for the model
+    only an estimate within about 1-2 mm (its contact vertices carry a 1 mm radius, so contact
+    begins about 1 mm outside the rectangle, and its rim may bend)."""
     best, when = -math.inf, math.nan
     for t, x, y, th in zip(traj.t, traj.x, traj.y, traj.theta, strict=True):
         dx, dy = axis[0] - x, axis[1] - y
