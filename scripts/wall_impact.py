@@ -42,7 +42,7 @@ from __future__ import annotations
 import argparse
 import math
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -197,10 +197,13 @@ def _engines(
     reference: RigidBoxOptions,
     model_variants: Sequence[str],
     reference_variants: Sequence[str],
+    params: Mapping[str, float],
+    case: TestCase,
 ) -> list[tuple[str, MujocoSimulator | RigidBoxSimulator]]:
     """(label, simulator): the model with ``model`` and with each of ``model_variants``
-    (``KEY=VALUE,...`` scene options), the reference with ``reference`` (its half step is added
-    after its first run) and with each of ``reference_variants`` (`RigidBoxOptions` fields)."""
+    (``KEY=VALUE,...`` scene options), the reference with ``reference``, with each of
+    ``reference_variants`` (`RigidBoxOptions` fields) and at half its step for ``case`` with
+    ``params`` (SI)."""
     engines: list[tuple[str, MujocoSimulator | RigidBoxSimulator]] = [
         ("model", MujocoSimulator(model))
     ]
@@ -213,6 +216,9 @@ def _engines(
         engines.append(
             (f"reference {text}", RigidBoxSimulator(_reference_options(text, reference)))
         )
+    _, step = RigidBoxSimulator(reference).world(params, case)  # the reference's own step [s]
+    half = replace(reference, timestep=step / 2)
+    engines.append(("reference, half step", RigidBoxSimulator(half)))
     return engines
 
 
@@ -270,22 +276,16 @@ def main(argv: Sequence[str] | None = None) -> int:
                 ),
                 args.model,
                 args.reference,
+                params,
+                case,
             )
-            k = 0
-            while k < len(engines):
-                name, sim = engines[k]
-                k += 1
+            for name, sim in engines:
                 result = sim.run(params, case)
                 step = result.diagnostics.get("timestep")
-                if step is None:
+                if step is None:  # the model reports its steps, not its step
                     step = 1 / round(
                         result.diagnostics["steps"] / result.diagnostics["simulated_time"]
                     )
-                if name == "reference" and isinstance(
-                    sim, RigidBoxSimulator
-                ):  # and at half its step
-                    half = replace(sim.options, timestep=float(step) / 2)
-                    engines.append(("reference, half step", RigidBoxSimulator(half)))
                 if result.run is None:
                     print(f"{angle:>6g}  {name:<34}{float(step):>12.3g}  {result.status}")
                     continue
