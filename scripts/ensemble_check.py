@@ -66,7 +66,7 @@ from parcelfit.sim.mujoco import (
 )
 from parcelfit.sim.mujoco.options import scene_options
 from parcelfit.sim.mujoco.rig import Rig
-from parcelfit.sim.params import parameter, parse_assignments
+from parcelfit.sim.params import WALL_CONTACTS, parameter, parse_assignments
 from parcelfit.sim.rigidbox import RigidBoxOptions, RigidBoxSimulator
 
 TYPES = ("BW", "KPBW", "KP", "PB")
@@ -234,6 +234,13 @@ def main(argv: list[str] | None = None) -> int:
         help="rigidbox: the spacing of the box's contact points [m] (default: the reference's, "
         "10 mm); halve it to check the reference's verdict is converged in it",
     )
+    ap.add_argument(
+        "--wall-contact",
+        choices=WALL_CONTACTS,
+        default=None,
+        help="rigidbox: how walls meet the box (default: the reference's, its outline; points: "
+        "its contact points, as before the outline contact)",
+    )
     ap.add_argument("--bulge", nargs="*", default=[], metavar="TYPE=FOOTPRINT")
     ap.add_argument("--bulge-depth", type=float, default=0.004, help="[m]")
     ap.add_argument(
@@ -255,6 +262,8 @@ def main(argv: list[str] | None = None) -> int:
             ap.error(
                 f"--reference-spacing must lie in [0.001, 0.05] m, got {args.reference_spacing:g}"
             )
+    if args.wall_contact is not None and args.backend != "rigidbox":
+        ap.error("--wall-contact sets the rigid-box reference's walls: add --backend rigidbox")
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "figures").mkdir(exist_ok=True)
     rigs = [load_rig(r) for r in args.rigs]  # bundled names or rig files
@@ -294,6 +303,7 @@ def main(argv: list[str] | None = None) -> int:
             RigidBoxOptions(
                 bottom_patch=args.bottom_patch,
                 **({} if args.reference_spacing is None else {"spacing": args.reference_spacing}),
+                **({} if args.wall_contact is None else {"wall_contact": args.wall_contact}),
                 wall_limit=args.wall_limit,
                 start_offset=scene.start_offset,
             ),
@@ -331,6 +341,7 @@ def main(argv: list[str] | None = None) -> int:
             if args.reference_spacing is not None
             else ""
         )
+        + (f" --wall-contact {args.wall_contact}" if args.wall_contact is not None else "")
         + (f" --wall-limit {args.wall_limit:g}" if args.wall_limit != SimOptions.wall_limit else "")
         + "`: "
         "every consignment type at its default parameters, placement seeds "

@@ -26,7 +26,7 @@ import numpy as np
 from parcelfit.runs import TestCase, Trajectory
 from parcelfit.sim.ensemble import rotation
 from parcelfit.sim.mujoco import MujocoSimulator, SimOptions, load_consignment, load_rig
-from parcelfit.sim.params import parameter, parse_assignments
+from parcelfit.sim.params import WALL_CONTACTS, parameter, parse_assignments
 from parcelfit.sim.rigidbox import RigidBoxOptions, RigidBoxSimulator
 
 
@@ -77,6 +77,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--bottom-patch", choices=("consignment", "outline", "content"), default="outline"
     )
     ap.add_argument(
+        "--wall-contact",
+        choices=WALL_CONTACTS,
+        default="outline",
+        help="how the reference's walls meet the box: its outline or its contact points",
+    )
+    ap.add_argument(
         "--step-check", action="store_true", help="the reference also at 1/2 and 1/4 of its step"
     )
     ap.add_argument("--rate", type=float, default=60.0, help="sample rate [Hz] of both runs")
@@ -91,6 +97,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     outer = (float(size[0]), float(size[1]))
     reference = RigidBoxOptions(
         bottom_patch=args.bottom_patch,
+        wall_contact=args.wall_contact,
         placement_seed=args.seed,
         duration=args.duration,
         sample_rate=args.rate,

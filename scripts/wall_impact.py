@@ -52,7 +52,7 @@ import yaml
 from parcelfit.runs import TestCase, Trajectory
 from parcelfit.sim.mujoco import MujocoSimulator, SimOptions, load_consignment
 from parcelfit.sim.mujoco.options import scene_options
-from parcelfit.sim.params import BOTTOM_PATCHES, parameter, parse_assignments
+from parcelfit.sim.params import BOTTOM_PATCHES, WALL_CONTACTS, parameter, parse_assignments
 from parcelfit.sim.rigidbox import RigidBoxOptions, RigidBoxSimulator
 
 WALL_POINT = (0.2, 0.0)  # a point of the wall's line [m]
@@ -249,6 +249,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         choices=BOTTOM_PATCHES,
         help="the reference's bottom contact patch (outline, as the E3 reference runs)",
     )
+    ap.add_argument(
+        "--wall-contact",
+        choices=WALL_CONTACTS,
+        default="outline",
+        help="how the reference's wall meets the box: its outline or its contact points",
+    )
     ap.add_argument("--duration", type=float, default=DURATION, help="simulated time [s]")
     ap.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE", help="catalogue units")
     args = ap.parse_args(argv)
@@ -272,7 +278,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             engines = _engines(
                 SimOptions(sample_rate=args.rate, duration=args.duration),
                 RigidBoxOptions(
-                    sample_rate=args.rate, duration=args.duration, bottom_patch=args.bottom_patch
+                    sample_rate=args.rate,
+                    duration=args.duration,
+                    bottom_patch=args.bottom_patch,
+                    wall_contact=args.wall_contact,
                 ),
                 args.model,
                 args.reference,

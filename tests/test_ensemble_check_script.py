@@ -1,4 +1,4 @@
-"""scripts/ensemble_check.py: the reference's contact-point spacing as an option."""
+"""scripts/ensemble_check.py: the reference's contact-point spacing and wall contact as options."""
 
 import importlib.util
 from pathlib import Path
@@ -29,8 +29,12 @@ def test_reference_spacing_reaches_the_reference(monkeypatch, tmp_path):
         ensemble_check.main([*args, "--reference-spacing", "0.005"])
     with pytest.raises(_BuiltError):
         ensemble_check.main(args)
+    with pytest.raises(_BuiltError):
+        ensemble_check.main([*args, "--wall-contact", "points"])
     assert built[0].spacing == pytest.approx(0.005)
     assert built[1].spacing == ensemble_check.RigidBoxOptions().spacing  # the reference's own
+    assert built[1].wall_contact == "outline"
+    assert built[2].wall_contact == "points"
 
 
 @pytest.mark.parametrize(
@@ -43,3 +47,20 @@ def test_reference_spacing_is_refused_without_the_reference_or_out_of_range(
     with pytest.raises(SystemExit):
         ensemble_check.main(["--types", "KP", "--placements", "1", "--out", str(tmp_path), *extra])
     assert "--reference-spacing" in capsys.readouterr().err
+
+
+def test_wall_contact_is_refused_without_the_reference(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        ensemble_check.main(
+            [
+                "--types",
+                "KP",
+                "--placements",
+                "1",
+                "--out",
+                str(tmp_path),
+                "--wall-contact",
+                "points",
+            ]
+        )
+    assert "--wall-contact" in capsys.readouterr().err

@@ -25,6 +25,7 @@ from parcelfit.sim.rigidbox import (
     rig_primitives,
 )
 from parcelfit.sim.rigidbox.contact import disc_rectangle_overlap, friction_coefficient, law_array
+from parcelfit.sim.rigidbox.engine import yaw_quaternion
 from parcelfit.sim.rigidbox.geometry import (
     BELT,
     BOX,
@@ -33,6 +34,7 @@ from parcelfit.sim.rigidbox.geometry import (
     LEAD_IN,
     METAL,
     SIDE,
+    WALL,
     box_inertia,
     primitive,
     rot_z,
@@ -99,6 +101,8 @@ def test_a_soft_content_and_unknown_options_are_refused():
         parcel_body(load_consignment("PB"), 0.01)
     with pytest.raises(ParcelfitError, match="bottom_patch"):
         RigidBoxOptions(bottom_patch="rim")
+    with pytest.raises(ParcelfitError, match="wall_contact"):
+        RigidBoxOptions(wall_contact="edges")
     with pytest.raises(ParcelfitError, match="stick_speed < slip_speed"):
         RigidBoxOptions(stick_speed=0.002, slip_speed=0.001)
 
@@ -153,11 +157,74 @@ def test_the_lead_in_contact_is_the_segment_law_whatever_the_point_spacing(bw):
     assert np.allclose(forces[0], forces[1], rtol=1e-12, atol=1e-15)
 
 
+def _pressed_into_a_wall(bw, kind, spacing, yaw_deg, delta):
+    """The contact force [N] of BW (yawed by ``yaw_deg``) whose outline reaches ``delta`` past
+    the face of a 3 mm metal wall along world y, mounted 4 mm above the belt."""
+    body = parcel_body(bw, 0.02, spacing)
+    a = math.radians(yaw_deg)
+    hx, hy, hz = body.half
+    reach = hx * math.cos(a) + hy * math.sin(a)  # the corner (hx, -hy) reaches farthest in x
+    wall = primitive(
+        "wall", kind, (reach - delta + 0.0015, 0.0, 0.054), rot_z(90), (0.5, 0.0015, 0.05), METAL
+    )
+    law = law_array((K, 6e5), (1, 1), (0.3, 0.3), (0, 0), bw.mass, body.bottom_area)
+    world = World(body, Primitives.of([wall]), law, 0.001, 0.0015, 0.0)
+    return Motion(world, (0, 0, hz), yaw_quaternion(yaw_deg)).F.copy(), body
+
+
+@pytest.mark.parametrize("yaw_deg", [0.0, 8.0, 24.0])
+def test_a_wall_meets_the_outline_whatever_the_point_spacing(bw, yaw_deg):
+    """The outline law's force: flat, kappa h delta (W + delta); a corner at alpha,
+    kappa h delta^2 (1 / sin alpha + 1 / cos alpha) / 2, at 10, 5 and 2.5 mm spacing alike."""
+    delta = 0.002
+    forces = []
+    for spacing in (0.01, 0.005, 0.0025):
+        F, body = _pressed_into_a_wall(bw, WALL, spacing, yaw_deg, delta)
+        kappa, h = 6e5 / body.bottom_area, 2 * body.half[2] - 0.004
+        if yaw_deg == 0.0:
+            expected = kappa * h * delta * (2 * body.half[1] + delta)
+        else:
+            a = math.radians(yaw_deg)
+            expected = kappa * h * delta**2 * (1 / math.sin(a) + 1 / math.cos(a)) / 2
+        assert -F[0] == pytest.approx(expected, rel=1e-9)
+        assert F[1] == pytest.approx(0.0, abs=1e-9 * expected)  # at rest: no friction
+        forces.append(F)
+    assert np.allclose(forces[0], forces[2], rtol=1e-12, atol=1e-12)
+
+
+def test_a_wall_s_face_takes_only_the_outline_nearer_to_it_than_to_the_wall_s_end(bw):
+    """A box straddling a wall's line, its front edge 5 mm past the wall's end: of the edge
+    behind the face on the centre's side only the part less deep than its 5 mm to the end is
+    the face's (kappa h d^2 / 2 with d = 5 mm, pushing the box to its side); the rest, up to
+    W / 2 deep, is left to the end's contact (a lead-in)."""
+    body = parcel_body(bw, 0.02, 0.01)
+    hx, _, hz = body.half
+    d, s1 = 0.005, 0.0015
+    # a wall along world x whose start lies d inside the box's front edge, 1 mm to its left
+    wall = primitive("wall", WALL, (hx - d + 0.5, 0.001, 0.054), rot_z(0), (0.5, s1, 0.05), METAL)
+    law = law_array((K, 6e5), (1, 1), (0.3, 0.3), (0, 0), bw.mass, body.bottom_area)
+    world = World(body, Primitives.of([wall]), law, 0.001, 0.0015, 0.0)
+    F = Motion(world, (0, 0, hz), (1, 0, 0, 0)).F
+    kappa, h = 6e5 / body.bottom_area, 2 * hz - 0.004
+    assert F == pytest.approx((0.0, -kappa * h * d**2 / 2, 0.0), rel=1e-9, abs=1e-9)
+
+
+def test_a_wall_met_by_points_depends_on_their_spacing(bw):
+    """The point contact the outline law replaces: a corner strike's force changes with the
+    spacing (why walls default to the outline)."""
+    F10, _ = _pressed_into_a_wall(bw, BOX, 0.01, 24.0, 0.004)
+    F5, _ = _pressed_into_a_wall(bw, BOX, 0.005, 24.0, 0.004)
+    assert abs(F10[0] - F5[0]) > 0.1 * abs(F5[0])
+
+
 def test_rig_primitives_follow_the_mujoco_scene():
     e3 = rig_primitives(load_rig("E3"), 1)
     names = list(e3.names)
     assert names.count("guide") == 1 and "guide_lead_in" in names
     assert e3.kind[names.index("guide_lead_in")] == LEAD_IN
+    assert e3.kind[names.index("guide")] == WALL
+    points = rig_primitives(load_rig("E3"), 1, wall_contact="points")
+    assert points.kind[names.index("guide")] == BOX
     assert e3.material[names.index("guide")] == METAL
     main = names.index("main")
     assert np.allclose(e3.vel[main], (1.56, 0, 0))
@@ -330,13 +397,14 @@ def test_a_study_s_simulator_section_makes_a_rigidbox_simulator(tmp_path):
 
     section = SimulatorSection(
         backend="rigidbox", rig="E3", consignment="KPBW", spacing=0.005, bottom_patch="content",
-        stick_speed=0.002, wall_limit=60,
+        stick_speed=0.002, wall_limit=60, wall_contact="points",
     )  # fmt: skip
     config = section.to_config(tmp_path)
     sim = make_simulator(config)
     assert isinstance(sim, RigidBoxSimulator)
     opt = sim.options
     assert (opt.spacing, opt.bottom_patch, opt.wall_limit) == (0.005, "content", 60)
+    assert opt.wall_contact == "points"
     assert (opt.stick_speed, opt.slip_speed) == (0.002, pytest.approx(0.003))
     assert content_kind(config) == "rigid"
     assert (
@@ -349,6 +417,10 @@ def test_a_study_s_simulator_section_makes_a_rigidbox_simulator(tmp_path):
         SimulatorConfig("rigidbox", rig="E3", consignment="BW", shell_dof="full")
     with pytest.raises(ParcelfitError, match="bottom_patch is a setting of the rigidbox"):
         SimulatorConfig("mujoco", rig="E3", consignment="BW", bottom_patch="content")
+    with pytest.raises(ParcelfitError, match="wall_contact is a setting of the rigidbox"):
+        SimulatorConfig("mujoco", rig="E3", consignment="BW", wall_contact="points")
+    with pytest.raises(Exception, match="wall_contact"):
+        SimulatorSection(backend="rigidbox", rig="E3", consignment="BW", wall_contact="edges")
     with pytest.raises(Exception, match="must exceed stick_speed"):  # the rigid box's 1 mm/s
         SimulatorSection(backend="rigidbox", rig="E3", consignment="BW", slip_speed=0.0008)
     pb = SimulatorSection(backend="rigidbox", rig="E3", consignment="PB").to_config(tmp_path)

@@ -18,7 +18,8 @@ the slip speed, see `SceneOptions`), ``rig_timesteps`` (a time step [s] by rig n
 ``wall_limit`` [s]),
 ``rigidbox`` (the rigid-box reference, `parcelfit.sim.rigidbox`: a bundled or user rig and a
 consignment with a rigid content, optional ``timestep`` [s], ``spacing`` [m] (its contact points),
-``bottom_patch`` (``outline`` or ``content``), ``stick_speed`` and ``slip_speed`` [m/s] (its
+``bottom_patch`` (``outline`` or ``content``), ``wall_contact`` (``outline``, the default: walls
+meet the box's outline, or ``points``: its contact points), ``stick_speed`` and ``slip_speed`` [m/s] (its
 friction's static and dynamic threshold speeds, default 0.001 and 0.0015), ``roller_surface``
 and ``wall_limit`` [s]; the MuJoCo scene's other settings are refused),
 ``external`` (a solver description file run as a command) or ``python`` (``factory:
@@ -53,6 +54,7 @@ from parcelfit.sim.params import (
     SHELL_DIAGONALS,
     SHELL_DOFS,
     STICK_SPEED,
+    WALL_CONTACTS,
     ShellCellsField,
 )
 from parcelfit.sim.protocol import Simulator
@@ -98,6 +100,7 @@ _SETTINGS = (
     "slip_speed",
     "rig_timesteps",
     "bottom_patch",
+    "wall_contact",
     "wall_limit",
     "external",
     "factory",
@@ -116,7 +119,7 @@ _SCENE_NAMES = {"film_spacing": "soft_shell_spacing"}
 
 def _check_needs(backend: str, settings: Any) -> None:
     """Refuse a configuration that leaves out what its backend needs, or gives the rigid-box
-    reference a MuJoCo setting (or MuJoCo the rigid box's ``bottom_patch``)."""
+    reference a MuJoCo setting (or MuJoCo the rigid box's ``bottom_patch`` or ``wall_contact``)."""
     for key in _NEEDS[backend]:
         if getattr(settings, key) is None:
             raise ParcelfitError(f"the {backend} backend needs {key!r}", fix=f"add `{key}:`")
@@ -133,8 +136,12 @@ def _check_needs(backend: str, settings: Any) -> None:
                 f"the rigidbox backend does not take {', '.join(given)}",
                 fix="remove it (a setting of the MuJoCo scene)",
             )
-    elif settings.bottom_patch is not None:
-        raise ParcelfitError("bottom_patch is a setting of the rigidbox backend", fix="remove it")
+    else:
+        for key in ("bottom_patch", "wall_contact"):
+            if getattr(settings, key) is not None:
+                raise ParcelfitError(
+                    f"{key} is a setting of the rigidbox backend", where=key, fix="remove it"
+                )
 
 
 @dataclass(frozen=True)
@@ -146,7 +153,7 @@ class SimulatorConfig(Mapping[str, Any]):
     ``shell_diagonals``, ``mass_lumping``, ``belt_friction``, ``roller_surface``, ``stick_speed`` and
     ``slip_speed`` [m/s], ``rig_timesteps`` (rig name -> time step [s]); rigidbox: ``rig`` and
     ``consignment``, optional ``rigs``, ``timestep``, ``spacing``, ``bottom_patch``, ``stick_speed``,
-    ``slip_speed``, ``roller_surface``; external: the solver description file ``external``;
+    ``slip_speed``, ``roller_surface``, ``wall_contact``; external: the solver description file ``external``;
     python: ``factory``),
     optional ``wall_limit`` [s] per simulation, and ``folder``: the folder of the file it came
     from (an external solver's runs go into ``folder/.external-runs``).
@@ -175,6 +182,7 @@ class SimulatorConfig(Mapping[str, Any]):
     slip_speed: float | None = None
     rig_timesteps: Mapping[str, float] | None = None
     bottom_patch: str | None = None
+    wall_contact: str | None = None
     wall_limit: float | None = None
     external: str | None = None
     factory: str | None = None
@@ -273,6 +281,8 @@ class SimulatorSection(FileModel):
     """A time step [s] by rig name, e.g. {E1: 0.000208333}."""
     bottom_patch: Annotated[str | None, Choice(BOTTOM_PATCHES, what="bottom contact patch")] = None
     """rigidbox: where the box touches the belt: outline or content."""
+    wall_contact: Annotated[str | None, Choice(WALL_CONTACTS, what="wall contact")] = None
+    """rigidbox: how walls meet the box: its outline (default) or its contact points."""
     wall_limit: Annotated[float | None, Number(unit="s", ge=1e-9)] = None
     """Wall-clock limit of one simulation [s] (default 600)."""
     external: Annotated[str | None, Text()] = None
@@ -367,7 +377,7 @@ def make_simulator(config: SimulatorConfig) -> Simulator:
             for k in ("timestep", "spacing", "stick_speed", "slip_speed")
             if k in config
         }
-        for key in ("bottom_patch", "roller_surface"):
+        for key in ("bottom_patch", "roller_surface", "wall_contact"):
             if key in config:
                 given[key] = config[key]
         if "stick_speed" in given and "slip_speed" not in given:

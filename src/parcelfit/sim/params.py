@@ -73,6 +73,9 @@ FRICTION_LAWS = ("contact", "geom")
 # consignment's own bulge patch if it has one, else the whole outline; the outline; the content's
 # footprint
 BOTTOM_PATCHES = ("consignment", "outline", "content")
+# how the rigid-box reference's walls meet the parcel (sim/rigidbox/contact.py): its outline, or
+# its contact points
+WALL_CONTACTS = ("outline", "points")
 # how a flow splitter's rollers move the packaging (`SceneOptions.roller_surface`) and how the
 # shell's grid cells are split into triangles (`SceneOptions.shell_diagonals`); a study's
 # simulator section checks against the same lists

@@ -59,6 +59,29 @@ delta^(3/2) to leading order, what the point contacts give as their spacing goes
 the length of the rectangle's outline inside the circle. The force acts at the outline point
 nearest to a, pushing the parcel from a towards it (a inside the rectangle: away from the nearest
 side, so that the lead-in leaves through it), with the friction law above on that point's slip.
+
+**Wall** (``WALL``, the default ``wall_contact: outline``; a thin vertical box of half extents
+s_x along the wall, s_y across it, s_z up): met by the parcel's outline, not by its contact
+points, so that a corner pressed into a guide plate does not depend on the points' spacing. The
+face met is the one on the parcel centre's side (sign sigma of the centre's local y), with the
+outward normal n = sigma e_y; a point q (wall frame) lies at the depth delta = s_y - sigma q_y
+(growing on through the wall: no tunnelling). At each side row's level zeta_j (band height h_j)
+the outline is the rectangle |x| <= L/2, |y| <= W/2 of the body frame; on each of its four edges
+the part where 0 < delta < s_x - |q_x| (behind the face, and nearer to it than to the wall's
+ends: nearer an end, the end's contact acts, the lead-in's or none, as a contact point is pushed
+out through the face it entered by) is an interval of the edge (the bounds are linear along it),
+integrated with the point law per unit length,
+
+    f_n = max(0, kappa h_j delta(s) + c h_j d(delta)/dt (s)),   kappa = K / A_b, c = 2 zeta sqrt(K M) / A_b
+
+by 4-point Gauss-Legendre quadrature on that interval (the band clipped to the wall's height as
+a side point's): the limit of the side points' law as their spacing goes to zero. For a flat side
+pressed delta into a wall over the height h the force is kappa h delta (W + delta) (the two
+neighbouring sides' penetrated ends included); for a corner at angle alpha to the wall,
+kappa h delta^2 (1 / sin alpha + 1 / cos alpha) / 2. Quadrature is exact for the normal force and
+its torque (delta is linear along an edge); friction takes each node's own slip. The top and
+bottom faces' points do not meet a wall. ``wall_contact: points`` restores the point contact (a
+``BOX``), whose answer at a corner strike depends on the spacing.
 """
 
 from __future__ import annotations
@@ -68,12 +91,17 @@ import math
 import numpy as np
 from numba import njit
 
-from parcelfit.sim.rigidbox.geometry import BOX, CAPSULE, CYLINDER, LEAD_IN
+from parcelfit.sim.rigidbox.geometry import BOX, CAPSULE, CYLINDER, LEAD_IN, WALL
 
 # law columns per material: stiffness per unit area K / A_b [N/m^3], damping per unit area
 # 2 zeta sqrt(K M) / A_b [N s/m^3], mu_d, mu_s
 KAPPA, CDENS, MU_D, MU_S = 0, 1, 2, 3
 MIN_LEAD_IN_COS = 0.5  # the lead-in's analytic contact needs the parcel less than 60 deg tilted
+# Gauss-Legendre nodes and weights on [0, 1] for a wall's outline contact: exact for the normal
+# force and its torque (penetration linear along an edge), the friction's smooth slip to high order
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(4)
+WALL_NODES = 0.5 * (_GL_X + 1.0)
+WALL_WEIGHTS = 0.5 * _GL_W
 
 
 @njit(cache=True, inline="always")
@@ -273,6 +301,109 @@ def _lead_in(F, T, x, R, v, w, half, row_z, row_h, j, centre, size, law_m, v_s, 
 
 
 @njit(cache=True)
+def _edge_inside(a0, a1, lo, hi):
+    """The part [t0, t1] of t in [0, 1] where a0 + t (a1 - a0) lies in (lo, hi) (t0 >= t1:
+    none)."""
+    t0, t1 = 0.0, 1.0
+    d = a1 - a0
+    if abs(d) < 1e-300:
+        if a0 <= lo or a0 >= hi:
+            return 1.0, 0.0
+        return t0, t1
+    ta, tb = (lo - a0) / d, (hi - a0) / d
+    if ta > tb:
+        ta, tb = tb, ta
+    return max(t0, ta), min(t1, tb)
+
+
+@njit(cache=True)
+def _wall(F, T, x, R, v, w, half, row_z, row_h, j, centre, rot, size, vel, spin, law_m, v_s,
+          v_d, radius, nodes, weights):  # fmt: skip
+    """The outline contact of the parcel with wall j (module docstring)."""
+    cx, cy, cz = _primitive_of(x[0], x[1], x[2], j, centre, rot)
+    s0, s1, s2 = size[j, 0], size[j, 1], size[j, 2]
+    if abs(cx) > s0 + radius or abs(cy) > s1 + radius or abs(cz) > s2 + radius:
+        return
+    kappa, cdens, mu_d, mu_s = law_m[0], law_m[1], law_m[2], law_m[3]
+    sigma = 1.0 if cy >= 0.0 else -1.0  # the face on the parcel centre's side
+    nx, ny, nz = sigma * rot[j, 0, 1], sigma * rot[j, 1, 1], sigma * rot[j, 2, 1]
+    # the body's z axis in the wall's frame (the bands' direction)
+    ex, ey, ez = _primitive_of(x[0] + R[0, 2], x[1] + R[1, 2], x[2] + R[2, 2], j, centre, rot)
+    ex, ey, ez = ex - cx, ey - cy, ez - cz
+    hx, hy = half[0], half[1]
+    for i in range(row_z.shape[0]):
+        zeta, hb = row_z[i], row_h[i]
+        reach_z = 0.5 * hb * abs(ez)
+        for e in range(4):  # the outline's edges at body height zeta, corner to corner
+            if e == 0:
+                bx0, by0, bx1, by1 = hx, -hy, hx, hy
+            elif e == 1:
+                bx0, by0, bx1, by1 = -hx, hy, -hx, -hy
+            elif e == 2:
+                bx0, by0, bx1, by1 = hx, hy, -hx, hy
+            else:
+                bx0, by0, bx1, by1 = -hx, -hy, hx, -hy
+            length = 2.0 * (hy if e < 2 else hx)
+            p0x = x[0] + R[0, 0] * bx0 + R[0, 1] * by0 + R[0, 2] * zeta
+            p0y = x[1] + R[1, 0] * bx0 + R[1, 1] * by0 + R[1, 2] * zeta
+            p0z = x[2] + R[2, 0] * bx0 + R[2, 1] * by0 + R[2, 2] * zeta
+            p1x = x[0] + R[0, 0] * bx1 + R[0, 1] * by1 + R[0, 2] * zeta
+            p1y = x[1] + R[1, 0] * bx1 + R[1, 1] * by1 + R[1, 2] * zeta
+            p1z = x[2] + R[2, 0] * bx1 + R[2, 1] * by1 + R[2, 2] * zeta
+            q0x, q0y, q0z = _primitive_of(p0x, p0y, p0z, j, centre, rot)
+            q1x, q1y, q1z = _primitive_of(p1x, p1y, p1z, j, centre, rot)
+            # where the edge lies behind the near face (depth s1 - sigma q_y > 0) and nearer
+            # to it than to either end of the wall (s1 - sigma q_y < s0 -+ q_x; nearer an end,
+            # the end's contact acts: the lead-in's, or none), as a point entering the wall is
+            # pushed out through the face it is nearest to
+            ta, tb = _edge_inside(sigma * q0y, sigma * q1y, -1e300, s1)
+            if tb <= ta:
+                continue
+            ua, ub = _edge_inside(q0x - sigma * q0y, q1x - sigma * q1y, -1e300, s0 - s1)
+            va, vb = _edge_inside(-q0x - sigma * q0y, -q1x - sigma * q1y, -1e300, s0 - s1)
+            ta, tb = max(ta, ua, va), min(tb, ub, vb)
+            if tb <= ta:
+                continue
+            for g in range(nodes.shape[0]):
+                t = ta + (tb - ta) * nodes[g]
+                qx = q0x + t * (q1x - q0x)
+                qy = q0y + t * (q1y - q0y)
+                qz = q0z + t * (q1z - q0z)
+                a = (tb - ta) * length * weights[g] * hb
+                tau = 0.0
+                if reach_z > 1e-12:  # the band against the wall's height, as a point's
+                    lo, hi = max(qz - reach_z, -s2), min(qz + reach_z, s2)
+                    if hi <= lo:
+                        continue
+                    a *= (hi - lo) / (2.0 * reach_z)
+                    tau = (0.5 * (lo + hi) - qz) / ez
+                    qx, qy, qz = qx + tau * ex, qy + tau * ey, 0.5 * (lo + hi)
+                elif abs(qz) >= s2:
+                    continue
+                delta = s1 - sigma * qy
+                if delta <= 0.0:
+                    continue
+                bx = bx0 + t * (bx1 - bx0)
+                by = by0 + t * (by1 - by0)
+                bz = zeta + tau
+                rx = R[0, 0] * bx + R[0, 1] * by + R[0, 2] * bz
+                ry = R[1, 0] * bx + R[1, 1] * by + R[1, 2] * bz
+                rz = R[2, 0] * bx + R[2, 1] * by + R[2, 2] * bz
+                px, py, pz = x[0] + rx, x[1] + ry, x[2] + rz
+                ax_, ay_, az_ = px - centre[j, 0], py - centre[j, 1], pz - centre[j, 2]
+                sx = vel[j, 0] + spin[j, 1] * az_ - spin[j, 2] * ay_
+                sy = vel[j, 1] + spin[j, 2] * ax_ - spin[j, 0] * az_
+                sz = vel[j, 2] + spin[j, 0] * ay_ - spin[j, 1] * ax_
+                vx = v[0] + w[1] * rz - w[2] * ry - sx
+                vy = v[1] + w[2] * rx - w[0] * rz - sy
+                vz = v[2] + w[0] * ry - w[1] * rx - sz
+                _spring_friction(
+                    F, T, x, px, py, pz, vx, vy, vz, nx, ny, nz, delta,
+                    kappa * a, cdens * a, mu_d, mu_s, v_s, v_d,
+                )  # fmt: skip
+
+
+@njit(cache=True)
 def contact_forces(
     x, R, v, w,
     points, area, band, tile_start, tile_end, tile_centre, tile_radius, half, row_z, row_h,
@@ -291,6 +422,10 @@ def contact_forces(
         if kj == LEAD_IN:
             _lead_in(F, T, x, R, v, w, half, row_z, row_h, j, centre, size, law[m], v_s, v_d,
                      radius)  # fmt: skip
+            continue
+        if kj == WALL:
+            _wall(F, T, x, R, v, w, half, row_z, row_h, j, centre, rot, size, vel, spin, law[m],
+                  v_s, v_d, radius, WALL_NODES, WALL_WEIGHTS)  # fmt: skip
             continue
         cx, cy, cz = _primitive_of(x[0], x[1], x[2], j, centre, rot)
         if _outside_by(cx, cy, cz, j, reach) > radius:

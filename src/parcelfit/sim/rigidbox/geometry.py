@@ -8,7 +8,9 @@ velocity field v_s(p) = vel + spin x (p - c)):
 * ``BOX`` (half extents hx, hy, hz): a belt's or strip's slab under its top face, as in the MuJoCo
   scene (top at ``surface.top``, half-thickness 0.02 m, the flat top shortened by the drum radius
   at each end; vel = speed * heading unit vector), and a wall as a thin vertical box from ``base``
-  to ``base + height`` (still).
+  to ``base + height`` (still): met by the contact points (option ``wall_contact: points``).
+* ``WALL`` (half extents as a box's): a wall met by the parcel's outline (the default,
+  ``wall_contact: outline``; `parcelfit.sim.rigidbox.contact`), not by its contact points.
 * ``CYLINDER`` (radius r, half-length; axis = local z): the drum a belt or strip runs round at each
   end (radius ``nose_radius``, axis across the heading at height top - r, its top level with the
   belt's), turning with the belt: spin = (speed / r) n with n the unit vector across the heading
@@ -63,10 +65,16 @@ import numpy as np
 from parcelfit.errors import ParcelfitError
 from parcelfit.sim.mujoco.consignment import Consignment
 from parcelfit.sim.mujoco.rig import Rig
-from parcelfit.sim.params import BOTTOM_PATCHES
+from parcelfit.sim.params import BOTTOM_PATCHES, WALL_CONTACTS
 
-BOX, CYLINDER, CAPSULE, LEAD_IN = 0, 1, 2, 3
-KIND_NAMES = {BOX: "box", CYLINDER: "cylinder", CAPSULE: "capsule", LEAD_IN: "lead-in"}
+BOX, CYLINDER, CAPSULE, LEAD_IN, WALL = 0, 1, 2, 3, 4
+KIND_NAMES = {
+    BOX: "box",
+    CYLINDER: "cylinder",
+    CAPSULE: "capsule",
+    LEAD_IN: "lead-in",
+    WALL: "wall",
+}
 BELT, METAL = 0, 1  # material indices: the BePa and MePa parameter sets
 SLAB = 0.02  # half-thickness of belt and strip slabs [m], as the MuJoCo scene's
 BOTTOM, TOP, SIDE = 0, 1, 2  # point groups
@@ -147,7 +155,7 @@ def primitive(
 ) -> dict:
     """One primitive's fields (for `Primitives.of`); its search bounds follow from the kind."""
     a, b, c = size
-    if kind == BOX:
+    if kind in (BOX, WALL):
         reach = (a, b, c)
     elif kind in (CYLINDER, LEAD_IN):
         reach = (a, a, b)
@@ -179,12 +187,19 @@ def rig_primitives(
     setting: int,
     speed_factors: Mapping[str, float] | None = None,
     roller_surface: str = "linear",
+    wall_contact: str = "outline",
 ) -> Primitives:
     """The static primitives of ``rig`` at speed ``setting`` (drive speeds times
-    ``speed_factors``, as the MuJoCo scene's option): see the module docstring."""
+    ``speed_factors``, as the MuJoCo scene's option): see the module docstring. ``wall_contact``:
+    a wall met by the parcel's outline (``outline``, `WALL`) or by its contact points
+    (``points``, a `BOX`)."""
     if roller_surface not in ROLLER_SURFACES:
         raise ParcelfitError(
             f"unknown roller_surface {roller_surface!r}", fix=f"use one of {list(ROLLER_SURFACES)}"
+        )
+    if wall_contact not in WALL_CONTACTS:
+        raise ParcelfitError(
+            f"unknown wall_contact {wall_contact!r}", fix=f"use one of {list(WALL_CONTACTS)}"
         )
     speeds = rig.drive_speeds(setting)
     factors = speed_factors or {}
@@ -262,7 +277,7 @@ def rig_primitives(
         items.append(
             primitive(
                 w.name,
-                BOX,
+                WALL if wall_contact == "outline" else BOX,
                 (c[0], c[1], w.base + w.height / 2),
                 rot_z(yaw),
                 (length / 2, w.thickness / 2, w.height / 2),

@@ -39,6 +39,7 @@ from parcelfit.sim.rigidbox.engine import GRAVITY, Motion, World, yaw_quaternion
 from parcelfit.sim.rigidbox.geometry import (
     METAL,
     ROLLER_SURFACES,
+    WALL_CONTACTS,
     parcel_body,
     rig_primitives,
 )
@@ -58,10 +59,11 @@ class RigidBoxOptions:
     ``timestep`` [s] (None: the default of `step_for`), ``spacing`` [m] of the contact points,
     ``bottom_patch`` (``outline`` or ``content``, `geometry`), the friction's static and dynamic
     threshold speeds ``stick_speed`` < ``slip_speed`` [m/s], ``speed_factors`` (drive ->
-    factor), ``roller_surface`` (``linear`` or ``turning``), the start's ``start_offset`` (dx [m],
-    dy [m], dheading [deg]) and ``start_speed_factor``, ``sample_rate`` [Hz], ``wall_limit`` [s],
-    ``duration`` [s] (None: the rig's), ``placement_seed`` (None: the nominal start pose),
-    ``gravity`` [m/s^2]."""
+    factor), ``roller_surface`` (``linear`` or ``turning``), ``wall_contact`` (``outline``: walls
+    met by the parcel's outline, or ``points``: by its contact points; `geometry`), the start's
+    ``start_offset`` (dx [m], dy [m], dheading [deg]) and ``start_speed_factor``,
+    ``sample_rate`` [Hz], ``wall_limit`` [s], ``duration`` [s] (None: the rig's),
+    ``placement_seed`` (None: the nominal start pose), ``gravity`` [m/s^2]."""
 
     timestep: float | None = None
     spacing: float = 0.01
@@ -70,6 +72,7 @@ class RigidBoxOptions:
     slip_speed: float = SLIP_SPEED
     speed_factors: Mapping[str, float] = field(default_factory=dict)
     roller_surface: str = "linear"
+    wall_contact: str = "outline"
     start_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
     start_speed_factor: float = 1.0
     sample_rate: float = 60.0
@@ -90,6 +93,11 @@ class RigidBoxOptions:
             raise ParcelfitError(
                 f"unknown roller_surface {self.roller_surface!r}",
                 fix=f"use one of {list(ROLLER_SURFACES)}",
+            )
+        if self.wall_contact not in WALL_CONTACTS:
+            raise ParcelfitError(
+                f"unknown wall_contact {self.wall_contact!r}",
+                fix=f"use one of {list(WALL_CONTACTS)}",
             )
         if not 0 < self.stick_speed < self.slip_speed:
             raise ParcelfitError(
@@ -129,7 +137,9 @@ class RigidBoxSimulator(RigBackend[RigidBoxOptions]):
         rig, cons = self.rig(case.rig), self.consignment(case.consignment)
         p = cons.parameter_values(si_values=params)
         body = parcel_body(cons, p["m_Pa"], opt.spacing, opt.bottom_patch)
-        prims = rig_primitives(rig, case.speed_setting, opt.speed_factors, opt.roller_surface)
+        prims = rig_primitives(
+            rig, case.speed_setting, opt.speed_factors, opt.roller_surface, opt.wall_contact
+        )
         law = law_array(
             (p["k_BePa"], p["k_MePa"]),
             (p["zeta_BePa"], p["zeta_MePa"]),
