@@ -66,7 +66,7 @@ from parcelfit.sim.mujoco import (
 )
 from parcelfit.sim.mujoco.options import scene_options
 from parcelfit.sim.mujoco.rig import Rig
-from parcelfit.sim.params import WALL_CONTACTS, parameter, parse_assignments
+from parcelfit.sim.params import WALL_CONTACTS, WALL_DAMPINGS, parameter, parse_assignments
 from parcelfit.sim.rigidbox import RigidBoxOptions, RigidBoxSimulator
 
 TYPES = ("BW", "KPBW", "KP", "PB")
@@ -241,6 +241,13 @@ def main(argv: list[str] | None = None) -> int:
         help="rigidbox: how walls meet the box (default: the reference's, its outline; points: "
         "its contact points, as before the outline contact)",
     )
+    ap.add_argument(
+        "--wall-damping",
+        choices=WALL_DAMPINGS,
+        default=None,
+        help="rigidbox: walls and lead-ins damped at the ratio of their contact's stiffness "
+        "(default, ratio) or per unit area (area, as before)",
+    )
     ap.add_argument("--bulge", nargs="*", default=[], metavar="TYPE=FOOTPRINT")
     ap.add_argument("--bulge-depth", type=float, default=0.004, help="[m]")
     ap.add_argument(
@@ -262,8 +269,12 @@ def main(argv: list[str] | None = None) -> int:
             ap.error(
                 f"--reference-spacing must lie in [0.001, 0.05] m, got {args.reference_spacing:g}"
             )
-    if args.wall_contact is not None and args.backend != "rigidbox":
-        ap.error("--wall-contact sets the rigid-box reference's walls: add --backend rigidbox")
+    for given, flag in (
+        (args.wall_contact, "--wall-contact"),
+        (args.wall_damping, "--wall-damping"),
+    ):
+        if given is not None and args.backend != "rigidbox":
+            ap.error(f"{flag} sets the rigid-box reference's walls: add --backend rigidbox")
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "figures").mkdir(exist_ok=True)
     rigs = [load_rig(r) for r in args.rigs]  # bundled names or rig files
@@ -304,6 +315,7 @@ def main(argv: list[str] | None = None) -> int:
                 bottom_patch=args.bottom_patch,
                 **({} if args.reference_spacing is None else {"spacing": args.reference_spacing}),
                 **({} if args.wall_contact is None else {"wall_contact": args.wall_contact}),
+                **({} if args.wall_damping is None else {"wall_damping": args.wall_damping}),
                 wall_limit=args.wall_limit,
                 start_offset=scene.start_offset,
             ),
@@ -342,6 +354,7 @@ def main(argv: list[str] | None = None) -> int:
             else ""
         )
         + (f" --wall-contact {args.wall_contact}" if args.wall_contact is not None else "")
+        + (f" --wall-damping {args.wall_damping}" if args.wall_damping is not None else "")
         + (f" --wall-limit {args.wall_limit:g}" if args.wall_limit != SimOptions.wall_limit else "")
         + "`: "
         "every consignment type at its default parameters, placement seeds "

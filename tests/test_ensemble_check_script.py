@@ -30,11 +30,12 @@ def test_reference_spacing_reaches_the_reference(monkeypatch, tmp_path):
     with pytest.raises(_BuiltError):
         ensemble_check.main(args)
     with pytest.raises(_BuiltError):
-        ensemble_check.main([*args, "--wall-contact", "points"])
+        ensemble_check.main([*args, "--wall-contact", "points", "--wall-damping", "area"])
     assert built[0].spacing == pytest.approx(0.005)
     assert built[1].spacing == ensemble_check.RigidBoxOptions().spacing  # the reference's own
     assert built[1].wall_contact == "outline"
-    assert built[2].wall_contact == "points"
+    assert (built[2].wall_contact, built[2].wall_damping) == ("points", "area")
+    assert built[1].wall_damping == "ratio"
 
 
 @pytest.mark.parametrize(
@@ -49,18 +50,10 @@ def test_reference_spacing_is_refused_without_the_reference_or_out_of_range(
     assert "--reference-spacing" in capsys.readouterr().err
 
 
-def test_wall_contact_is_refused_without_the_reference(tmp_path, capsys):
+@pytest.mark.parametrize("flag, value", [("--wall-contact", "points"), ("--wall-damping", "area")])
+def test_wall_options_are_refused_without_the_reference(tmp_path, capsys, flag, value):
     with pytest.raises(SystemExit):
         ensemble_check.main(
-            [
-                "--types",
-                "KP",
-                "--placements",
-                "1",
-                "--out",
-                str(tmp_path),
-                "--wall-contact",
-                "points",
-            ]
+            ["--types", "KP", "--placements", "1", "--out", str(tmp_path), flag, value]
         )
-    assert "--wall-contact" in capsys.readouterr().err
+    assert flag in capsys.readouterr().err

@@ -103,6 +103,8 @@ def test_a_soft_content_and_unknown_options_are_refused():
         RigidBoxOptions(bottom_patch="rim")
     with pytest.raises(ParcelfitError, match="wall_contact"):
         RigidBoxOptions(wall_contact="edges")
+    with pytest.raises(ParcelfitError, match="wall_damping"):
+        RigidBoxOptions(wall_damping="none")
     with pytest.raises(ParcelfitError, match="stick_speed < slip_speed"):
         RigidBoxOptions(stick_speed=0.002, slip_speed=0.001)
 
@@ -204,9 +206,50 @@ def test_a_wall_s_face_takes_only_the_outline_nearer_to_it_than_to_the_wall_s_en
     wall = primitive("wall", WALL, (hx - d + 0.5, 0.001, 0.054), rot_z(0), (0.5, s1, 0.05), METAL)
     law = law_array((K, 6e5), (1, 1), (0.3, 0.3), (0, 0), bw.mass, body.bottom_area)
     world = World(body, Primitives.of([wall]), law, 0.001, 0.0015, 0.0)
-    F = Motion(world, (0, 0, hz), (1, 0, 0, 0)).F
+    force = Motion(world, (0, 0, hz), (1, 0, 0, 0)).F
     kappa, h = 6e5 / body.bottom_area, 2 * hz - 0.004
-    assert F == pytest.approx((0.0, -kappa * h * d**2 / 2, 0.0), rel=1e-9, abs=1e-9)
+    assert force == pytest.approx((0.0, -kappa * h * d**2 / 2, 0.0), rel=1e-9, abs=1e-9)
+
+
+def _strike_a_wall(bw, damping, speed=0.5):
+    """BW (no gravity) moving at ``speed`` flat into a wall along world y: its rebound speed over
+    ``speed``."""
+    body = parcel_body(bw, 0.02, 0.01)
+    hx, _, hz = body.half
+    wall = primitive("wall", WALL, (hx + 0.002 + 0.0015, 0, 0.054), rot_z(90), (0.5, 0.0015, 0.05),
+                     METAL)  # fmt: skip
+    law = law_array((K, 6e5), (1, 1), (0.3, 0.3), (0, 0), bw.mass, body.bottom_area, damping)
+    world = World(body, Primitives.of([wall]), law, 0.001, 0.0015, 0.0)
+    m = Motion(world, (0, 0, hz), (1, 0, 0, 0), velocity=(speed, 0, 0))
+    m.advance(DT, 5000)  # 50 ms: in, and out again
+    return -m.v[0] / speed
+
+
+def test_a_wall_s_damping_ratio_is_the_catalogue_s_for_its_own_contact(bw):
+    """With ``ratio`` the whole contact's damper is 2 zeta sqrt(k_S M), k_S = kappa S its
+    stiffness over the pressed strip S = h (W + 2 delta): at zeta = 1 a linear spring-damper that
+    only pushes rebounds with exp(-2) of its speed; per unit area the same side is damped at
+    zeta sqrt(S / A_b) and rebounds more."""
+    delta, u = 0.002, 0.1
+    body = parcel_body(bw, 0.02, 0.01)
+    hx, hy, hz = body.half
+    wall = primitive("wall", WALL, (hx - delta + 0.0015, 0, 0.054), rot_z(90), (0.5, 0.0015, 0.05),
+                     METAL)  # fmt: skip
+    forces = {}
+    for damping in ("ratio", "area"):
+        law = law_array((K, 6e5), (1, 1), (0.3, 0.3), (0, 0), bw.mass, body.bottom_area, damping)
+        world = World(body, Primitives.of([wall]), law, 0.001, 0.0015, 0.0)
+        at_rest = Motion(world, (0, 0, hz), (1, 0, 0, 0)).F[0]
+        moving = Motion(world, (0, 0, hz), (1, 0, 0, 0), velocity=(u, 0, 0)).F[0]
+        forces[damping] = (at_rest - moving) / u  # the damper [N s/m]
+    kappa, h = 6e5 / body.bottom_area, 2 * hz - 0.004
+    shared = h * (2 * hy + 2 * delta)
+    assert forces["ratio"] == pytest.approx(2 * math.sqrt(kappa * shared * bw.mass), rel=1e-9)
+    assert forces["area"] == pytest.approx(
+        2 * math.sqrt(6e5 * bw.mass) / body.bottom_area * shared, rel=1e-9
+    )
+    assert _strike_a_wall(bw, "ratio") == pytest.approx(math.exp(-2), rel=0.02)
+    assert _strike_a_wall(bw, "area") > 0.3
 
 
 def test_a_wall_met_by_points_depends_on_their_spacing(bw):

@@ -19,7 +19,9 @@ the slip speed, see `SceneOptions`), ``rig_timesteps`` (a time step [s] by rig n
 ``rigidbox`` (the rigid-box reference, `parcelfit.sim.rigidbox`: a bundled or user rig and a
 consignment with a rigid content, optional ``timestep`` [s], ``spacing`` [m] (its contact points),
 ``bottom_patch`` (``outline`` or ``content``), ``wall_contact`` (``outline``, the default: walls
-meet the box's outline, or ``points``: its contact points), ``stick_speed`` and ``slip_speed`` [m/s] (its
+meet the box's outline, or ``points``: its contact points), ``wall_damping`` (``ratio``, the
+default: walls and lead-ins damped at the ratio of their contact's stiffness, or ``area``),
+``stick_speed`` and ``slip_speed`` [m/s] (its
 friction's static and dynamic threshold speeds, default 0.001 and 0.0015), ``roller_surface``
 and ``wall_limit`` [s]; the MuJoCo scene's other settings are refused),
 ``external`` (a solver description file run as a command) or ``python`` (``factory:
@@ -55,6 +57,7 @@ from parcelfit.sim.params import (
     SHELL_DOFS,
     STICK_SPEED,
     WALL_CONTACTS,
+    WALL_DAMPINGS,
     ShellCellsField,
 )
 from parcelfit.sim.protocol import Simulator
@@ -101,6 +104,7 @@ _SETTINGS = (
     "rig_timesteps",
     "bottom_patch",
     "wall_contact",
+    "wall_damping",
     "wall_limit",
     "external",
     "factory",
@@ -137,7 +141,7 @@ def _check_needs(backend: str, settings: Any) -> None:
                 fix="remove it (a setting of the MuJoCo scene)",
             )
     else:
-        for key in ("bottom_patch", "wall_contact"):
+        for key in ("bottom_patch", "wall_contact", "wall_damping"):
             if getattr(settings, key) is not None:
                 raise ParcelfitError(
                     f"{key} is a setting of the rigidbox backend", where=key, fix="remove it"
@@ -152,8 +156,9 @@ class SimulatorConfig(Mapping[str, Any]):
     and ``film_spacing`` [m], ``membrane_cap`` [N/m], ``shell_dof``, ``shell_cells``,
     ``shell_diagonals``, ``mass_lumping``, ``belt_friction``, ``roller_surface``, ``stick_speed`` and
     ``slip_speed`` [m/s], ``rig_timesteps`` (rig name -> time step [s]); rigidbox: ``rig`` and
-    ``consignment``, optional ``rigs``, ``timestep``, ``spacing``, ``bottom_patch``, ``stick_speed``,
-    ``slip_speed``, ``roller_surface``, ``wall_contact``; external: the solver description file ``external``;
+    ``consignment``, optional ``rigs``, ``timestep``, ``spacing``, ``bottom_patch``,
+    ``stick_speed``, ``slip_speed``, ``roller_surface``, ``wall_contact``, ``wall_damping``;
+    external: the solver description file ``external``;
     python: ``factory``),
     optional ``wall_limit`` [s] per simulation, and ``folder``: the folder of the file it came
     from (an external solver's runs go into ``folder/.external-runs``).
@@ -183,6 +188,7 @@ class SimulatorConfig(Mapping[str, Any]):
     rig_timesteps: Mapping[str, float] | None = None
     bottom_patch: str | None = None
     wall_contact: str | None = None
+    wall_damping: str | None = None
     wall_limit: float | None = None
     external: str | None = None
     factory: str | None = None
@@ -283,6 +289,9 @@ class SimulatorSection(FileModel):
     """rigidbox: where the box touches the belt: outline or content."""
     wall_contact: Annotated[str | None, Choice(WALL_CONTACTS, what="wall contact")] = None
     """rigidbox: how walls meet the box: its outline (default) or its contact points."""
+    wall_damping: Annotated[str | None, Choice(WALL_DAMPINGS, what="wall damping")] = None
+    """rigidbox: walls and lead-ins damped at the ratio of their contact's stiffness (ratio,
+    default) or per unit area (area)."""
     wall_limit: Annotated[float | None, Number(unit="s", ge=1e-9)] = None
     """Wall-clock limit of one simulation [s] (default 600)."""
     external: Annotated[str | None, Text()] = None
@@ -377,7 +386,7 @@ def make_simulator(config: SimulatorConfig) -> Simulator:
             for k in ("timestep", "spacing", "stick_speed", "slip_speed")
             if k in config
         }
-        for key in ("bottom_patch", "roller_surface", "wall_contact"):
+        for key in ("bottom_patch", "roller_surface", "wall_contact", "wall_damping"):
             if key in config:
                 given[key] = config[key]
         if "stick_speed" in given and "slip_speed" not in given:

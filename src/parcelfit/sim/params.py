@@ -76,6 +76,9 @@ BOTTOM_PATCHES = ("consignment", "outline", "content")
 # how the rigid-box reference's walls meet the parcel (sim/rigidbox/contact.py): its outline, or
 # its contact points
 WALL_CONTACTS = ("outline", "points")
+# how the rigid-box reference damps a wall's and a lead-in's contact: at the damping ratio of the
+# contact's own stiffness, or per unit area as its contact points
+WALL_DAMPINGS = ("ratio", "area")
 # how a flow splitter's rollers move the packaging (`SceneOptions.roller_surface`) and how the
 # shell's grid cells are split into triangles (`SceneOptions.shell_diagonals`); a study's
 # simulator section checks against the same lists

@@ -59,6 +59,8 @@ delta^(3/2) to leading order, what the point contacts give as their spacing goes
 the length of the rectangle's outline inside the circle. The force acts at the outline point
 nearest to a, pushing the parcel from a towards it (a inside the rectangle: away from the nearest
 side, so that the lead-in leaves through it), with the friction law above on that point's slip.
+(c_a per unit area is ``wall_damping: area``'s; by default the damper follows the contact's own
+stiffness, below.)
 
 **Wall** (``WALL``, the default ``wall_contact: outline``; a thin vertical box of half extents
 s_x along the wall, s_y across it, s_z up): met by the parcel's outline, not by its contact
@@ -82,6 +84,18 @@ kappa h delta^2 (1 / sin alpha + 1 / cos alpha) / 2. Quadrature is exact for the
 its torque (delta is linear along an edge); friction takes each node's own slip. The top and
 bottom faces' points do not meet a wall. ``wall_contact: points`` restores the point contact (a
 ``BOX``), whose answer at a corner strike depends on the spacing.
+
+**Damping of walls and lead-ins** (``wall_damping: ratio``, the default): the catalogue's zeta is
+a damping ratio, and a wall's or a lead-in's contact is damped at that ratio of its own
+stiffness. Its stiffness is kappa S, with S the pressed strip's measure: for a wall
+S = sum of h_j times the edges' intervals' lengths (the quadrature's weights), for a lead-in
+S = sum of h_j l_o (d A_o / d delta = l_o, so kappa S is the tangent stiffness). Its damper is
+2 zeta sqrt(kappa S M), spread over S: per unit area 2 zeta sqrt(kappa M / S) in place of c,
+which gives a contact the ratio zeta only when S = A_b. Per unit area (``wall_damping: area``,
+as the contact points keep) a side pressed into a plate, S = h W much smaller than A_b, is
+damped at zeta sqrt(S / A_b) (about 0.3 of zeta for BW's side, 0.08 at a lead-in) and rebounds:
+KP struck off E3's lead-in with about 0.8 of its speed. At zeta = 1 a flat side's strike
+rebounds with exp(-2) = 0.135 of its speed (a linear spring-damper that only pushes).
 """
 
 from __future__ import annotations
@@ -94,8 +108,9 @@ from numba import njit
 from parcelfit.sim.rigidbox.geometry import BOX, CAPSULE, CYLINDER, LEAD_IN, WALL
 
 # law columns per material: stiffness per unit area K / A_b [N/m^3], damping per unit area
-# 2 zeta sqrt(K M) / A_b [N s/m^3], mu_d, mu_s
-KAPPA, CDENS, MU_D, MU_S = 0, 1, 2, 3
+# 2 zeta sqrt(K M) / A_b [N s/m^3], mu_d, mu_s, and 2 zeta sqrt(M) [sqrt(kg)] where a wall's and a
+# lead-in's contact is damped at the ratio zeta of its own stiffness (0: per unit area)
+KAPPA, CDENS, MU_D, MU_S, ZDAMP = 0, 1, 2, 3, 4
 MIN_LEAD_IN_COS = 0.5  # the lead-in's analytic contact needs the parcel less than 60 deg tilted
 # Gauss-Legendre nodes and weights on [0, 1] for a wall's outline contact: exact for the normal
 # force and its torque (penetration linear along an edge), the friction's smooth slip to high order
@@ -231,32 +246,53 @@ def _outline_inside(ax, ay, r, hx, hy):
 
 
 @njit(cache=True)
+def _lead_in_band(x, R, half, row_z, row_h, i, j, centre, size, base):
+    """Band i's section with lead-in j: (h, zeta, ax, ay) of the module docstring, h = 0: none."""
+    cz = centre[j, 2]
+    hh = size[j, 1]
+    za = x[2] + (row_z[i] - 0.5 * row_h[i] - base) / R[2, 2]
+    zb = x[2] + (row_z[i] + 0.5 * row_h[i] - base) / R[2, 2]
+    lo, hi = max(min(za, zb), cz - hh), min(max(za, zb), cz + hh)
+    if hi <= lo:
+        return 0.0, 0.0, 0.0, 0.0
+    zeta_lo, zeta_hi = R[2, 2] * (lo - x[2]) + base, R[2, 2] * (hi - x[2]) + base
+    zeta = 0.5 * (zeta_lo + zeta_hi)
+    h = abs(zeta_hi - zeta_lo)
+    dz = (zeta - base) / R[2, 2]
+    dx0, dy0 = centre[j, 0] - x[0], centre[j, 1] - x[1]
+    ax = R[0, 0] * dx0 + R[1, 0] * dy0 + R[2, 0] * dz
+    ay = R[0, 1] * dx0 + R[1, 1] * dy0 + R[2, 1] * dz
+    return h, zeta, ax, ay
+
+
+@njit(cache=True)
 def _lead_in(F, T, x, R, v, w, half, row_z, row_h, j, centre, size, law_m, v_s, v_d, radius):
     """The analytic contact of the parcel's outline with lead-in j (module docstring)."""
-    cx, cy, cz = centre[j, 0], centre[j, 1], centre[j, 2]
-    r, hh = size[j, 0], size[j, 1]
+    cx, cy = centre[j, 0], centre[j, 1]
+    r = size[j, 0]
     dx0, dy0 = cx - x[0], cy - x[1]
     if dx0 * dx0 + dy0 * dy0 > (radius + r) ** 2:
         return
     if abs(R[2, 2]) < MIN_LEAD_IN_COS:
         return
-    kappa, cdens, mu_d, mu_s = law_m[0], law_m[1], law_m[2], law_m[3]
+    kappa, cdens, mu_d, mu_s, zdamp = law_m[0], law_m[1], law_m[2], law_m[3], law_m[4]
     hx, hy = half[0], half[1]
     base = R[0, 2] * dx0 + R[1, 2] * dy0  # the axis point at body height zeta lies at world
-    for i in range(row_z.shape[0]):  # z = x_z + (zeta - base) / R_zz
-        # the part of the row's band [zeta_i - h_i/2, zeta_i + h_i/2] whose axis point lies
-        # within the lead-in's height: its middle and its length along the body's z
-        za = x[2] + (row_z[i] - 0.5 * row_h[i] - base) / R[2, 2]
-        zb = x[2] + (row_z[i] + 0.5 * row_h[i] - base) / R[2, 2]
-        lo, hi = max(min(za, zb), cz - hh), min(max(za, zb), cz + hh)
-        if hi <= lo:
+    # z = x_z + (zeta - base) / R_zz
+    if zdamp > 0.0:  # damped at the ratio zeta of the whole contact's stiffness kappa S
+        shared = 0.0  # S = sum of h l_o over the bands [m^2]
+        for i in range(row_z.shape[0]):
+            h, _, ax, ay = _lead_in_band(x, R, half, row_z, row_h, i, j, centre, size, base)
+            if h > 0.0 and abs(ax) < hx + r and abs(ay) < hy + r:
+                shared += h * _outline_inside(ax, ay, r, hx, hy)
+        if shared > 0.0:  # (0: the lead-in wholly inside the outline; per unit area then)
+            cdens = zdamp * math.sqrt(kappa / shared)  # c = 2 zeta sqrt(kappa S M) over S
+    for i in range(row_z.shape[0]):
+        # the part of the row's band whose axis point lies within the lead-in's height: its
+        # length h along the body's z, its middle zeta, the axis point (ax, ay) of the body
+        h, zeta, ax, ay = _lead_in_band(x, R, half, row_z, row_h, i, j, centre, size, base)
+        if h <= 0.0:
             continue
-        zeta_lo, zeta_hi = R[2, 2] * (lo - x[2]) + base, R[2, 2] * (hi - x[2]) + base
-        zeta = 0.5 * (zeta_lo + zeta_hi)
-        h = abs(zeta_hi - zeta_lo)
-        dz = (zeta - base) / R[2, 2]
-        ax = R[0, 0] * dx0 + R[1, 0] * dy0 + R[2, 0] * dz
-        ay = R[0, 1] * dx0 + R[1, 1] * dy0 + R[2, 1] * dz
         if abs(ax) >= hx + r or abs(ay) >= hy + r:
             continue
         inside = abs(ax) <= hx and abs(ay) <= hy  # closed: outside, the nearest point differs
@@ -317,14 +353,13 @@ def _edge_inside(a0, a1, lo, hi):
 
 
 @njit(cache=True)
-def _wall(F, T, x, R, v, w, half, row_z, row_h, j, centre, rot, size, vel, spin, law_m, v_s,
-          v_d, radius, nodes, weights):  # fmt: skip
-    """The outline contact of the parcel with wall j (module docstring)."""
+def _wall_pass(apply, F, T, x, R, v, w, half, row_z, row_h, j, centre, rot, size, vel, spin,
+               kappa, cdens, mu_d, mu_s, v_s, v_d, nodes, weights):  # fmt: skip
+    """One pass over the outline's nodes behind wall j's face: with ``apply`` add their forces
+    (damping ``cdens`` per unit area); returns the nodes' summed area weights S [m^2]."""
     cx, cy, cz = _primitive_of(x[0], x[1], x[2], j, centre, rot)
     s0, s1, s2 = size[j, 0], size[j, 1], size[j, 2]
-    if abs(cx) > s0 + radius or abs(cy) > s1 + radius or abs(cz) > s2 + radius:
-        return
-    kappa, cdens, mu_d, mu_s = law_m[0], law_m[1], law_m[2], law_m[3]
+    shared = 0.0
     sigma = 1.0 if cy >= 0.0 else -1.0  # the face on the parcel centre's side
     nx, ny, nz = sigma * rot[j, 0, 1], sigma * rot[j, 1, 1], sigma * rot[j, 2, 1]
     # the body's z axis in the wall's frame (the bands' direction)
@@ -383,6 +418,9 @@ def _wall(F, T, x, R, v, w, half, row_z, row_h, j, centre, rot, size, vel, spin,
                 delta = s1 - sigma * qy
                 if delta <= 0.0:
                     continue
+                shared += a
+                if not apply:
+                    continue
                 bx = bx0 + t * (bx1 - bx0)
                 by = by0 + t * (by1 - by0)
                 bz = zeta + tau
@@ -401,6 +439,30 @@ def _wall(F, T, x, R, v, w, half, row_z, row_h, j, centre, rot, size, vel, spin,
                     F, T, x, px, py, pz, vx, vy, vz, nx, ny, nz, delta,
                     kappa * a, cdens * a, mu_d, mu_s, v_s, v_d,
                 )  # fmt: skip
+    return shared
+
+
+@njit(cache=True)
+def _wall(F, T, x, R, v, w, half, row_z, row_h, j, centre, rot, size, vel, spin, law_m, v_s,
+          v_d, radius, nodes, weights):  # fmt: skip
+    """The outline contact of the parcel with wall j (module docstring)."""
+    cx, cy, cz = _primitive_of(x[0], x[1], x[2], j, centre, rot)
+    if (
+        abs(cx) > size[j, 0] + radius
+        or abs(cy) > size[j, 1] + radius
+        or abs(cz) > size[j, 2] + radius
+    ):
+        return
+    kappa, cdens, mu_d, mu_s, zdamp = law_m[0], law_m[1], law_m[2], law_m[3], law_m[4]
+    if zdamp > 0.0:  # damped at the ratio zeta of the whole contact's stiffness kappa S
+        shared = _wall_pass(False, F, T, x, R, v, w, half, row_z, row_h, j, centre, rot, size,
+                            vel, spin, kappa, cdens, mu_d, mu_s, v_s, v_d, nodes,
+                            weights)  # fmt: skip
+        if shared <= 0.0:
+            return
+        cdens = zdamp * math.sqrt(kappa / shared)  # c = 2 zeta sqrt(kappa S M) over S
+    _wall_pass(True, F, T, x, R, v, w, half, row_z, row_h, j, centre, rot, size, vel, spin,
+               kappa, cdens, mu_d, mu_s, v_s, v_d, nodes, weights)  # fmt: skip
 
 
 @njit(cache=True)
@@ -537,13 +599,17 @@ def law_array(
     mu_s_offset: tuple[float, float],
     mass: float,
     bottom_area: float,
+    wall_damping: str = "ratio",
 ) -> np.ndarray:
     """The law's per-material columns (belt, metal): K / A_b, 2 zeta sqrt(K M) / A_b, mu_d,
-    mu_d + offset (module docstring)."""
-    law = np.empty((2, 4))
+    mu_d + offset, and 2 zeta sqrt(M) with ``wall_damping`` ``ratio`` (walls and lead-ins
+    damped at the ratio zeta of their contact's own stiffness), 0 with ``area`` (per unit area,
+    as the points; module docstring)."""
+    law = np.empty((2, 5))
     for m in range(2):
         law[m, KAPPA] = stiffness[m] / bottom_area
         law[m, CDENS] = 2.0 * damping[m] * math.sqrt(stiffness[m] * mass) / bottom_area
         law[m, MU_D] = mu_d[m]
         law[m, MU_S] = mu_d[m] + mu_s_offset[m]
+        law[m, ZDAMP] = 2.0 * damping[m] * math.sqrt(mass) if wall_damping == "ratio" else 0.0
     return law

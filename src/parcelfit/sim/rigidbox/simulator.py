@@ -31,7 +31,7 @@ from parcelfit.runs import Run, TestCase, Trajectory
 from parcelfit.sim.mujoco.backend import RigBackend
 from parcelfit.sim.mujoco.consignment import Consignment
 from parcelfit.sim.mujoco.rig import Rig
-from parcelfit.sim.params import BOTTOM_PATCHES
+from parcelfit.sim.params import BOTTOM_PATCHES, WALL_CONTACTS, WALL_DAMPINGS
 from parcelfit.sim.protocol import SimResult, SimStatus
 from parcelfit.sim.rigidbox import integrator as ig
 from parcelfit.sim.rigidbox.contact import law_array
@@ -39,7 +39,6 @@ from parcelfit.sim.rigidbox.engine import GRAVITY, Motion, World, yaw_quaternion
 from parcelfit.sim.rigidbox.geometry import (
     METAL,
     ROLLER_SURFACES,
-    WALL_CONTACTS,
     parcel_body,
     rig_primitives,
 )
@@ -60,7 +59,9 @@ class RigidBoxOptions:
     ``bottom_patch`` (``outline`` or ``content``, `geometry`), the friction's static and dynamic
     threshold speeds ``stick_speed`` < ``slip_speed`` [m/s], ``speed_factors`` (drive ->
     factor), ``roller_surface`` (``linear`` or ``turning``), ``wall_contact`` (``outline``: walls
-    met by the parcel's outline, or ``points``: by its contact points; `geometry`), the start's
+    met by the parcel's outline, or ``points``: by its contact points; `geometry`),
+    ``wall_damping`` (``ratio``: a wall's and a lead-in's contact damped at the ratio zeta of its
+    own stiffness, or ``area``: per unit area as the points; `contact`), the start's
     ``start_offset`` (dx [m], dy [m], dheading [deg]) and ``start_speed_factor``,
     ``sample_rate`` [Hz], ``wall_limit`` [s], ``duration`` [s] (None: the rig's),
     ``placement_seed`` (None: the nominal start pose), ``gravity`` [m/s^2]."""
@@ -73,6 +74,7 @@ class RigidBoxOptions:
     speed_factors: Mapping[str, float] = field(default_factory=dict)
     roller_surface: str = "linear"
     wall_contact: str = "outline"
+    wall_damping: str = "ratio"
     start_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
     start_speed_factor: float = 1.0
     sample_rate: float = 60.0
@@ -98,6 +100,11 @@ class RigidBoxOptions:
             raise ParcelfitError(
                 f"unknown wall_contact {self.wall_contact!r}",
                 fix=f"use one of {list(WALL_CONTACTS)}",
+            )
+        if self.wall_damping not in WALL_DAMPINGS:
+            raise ParcelfitError(
+                f"unknown wall_damping {self.wall_damping!r}",
+                fix=f"use one of {list(WALL_DAMPINGS)}",
             )
         if not 0 < self.stick_speed < self.slip_speed:
             raise ParcelfitError(
@@ -147,6 +154,7 @@ class RigidBoxSimulator(RigBackend[RigidBoxOptions]):
             (p["mu_s_BePa"], p["mu_s_MePa"]),
             body.mass,
             body.bottom_area,
+            opt.wall_damping,
         )
         stiffness = p["k_BePa"]
         if np.any(prims.material == METAL):
