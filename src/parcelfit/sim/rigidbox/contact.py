@@ -184,6 +184,24 @@ def _spring_friction(
 
 
 @njit(cache=True)
+def _surface_contact(F, T, x, v, w, rx, ry, rz, j, centre, vel, spin, nx, ny, nz, delta, k, c,
+                     mu_d, mu_s, v_s, v_d):  # fmt: skip
+    """One contact of the body point at x + r with primitive j's surface (normal n, depth
+    delta): its relative velocity, the point's minus the surface's (vel + spin x (p - c)),
+    into the spring, damper and friction of `_spring_friction`."""
+    px, py, pz = x[0] + rx, x[1] + ry, x[2] + rz
+    ax_, ay_, az_ = px - centre[j, 0], py - centre[j, 1], pz - centre[j, 2]
+    sx = vel[j, 0] + spin[j, 1] * az_ - spin[j, 2] * ay_
+    sy = vel[j, 1] + spin[j, 2] * ax_ - spin[j, 0] * az_
+    sz = vel[j, 2] + spin[j, 0] * ay_ - spin[j, 1] * ax_
+    vx = v[0] + w[1] * rz - w[2] * ry - sx
+    vy = v[1] + w[2] * rx - w[0] * rz - sy
+    vz = v[2] + w[0] * ry - w[1] * rx - sz
+    _spring_friction(F, T, x, px, py, pz, vx, vy, vz, nx, ny, nz, delta, k, c, mu_d, mu_s, v_s,
+                     v_d)  # fmt: skip
+
+
+@njit(cache=True)
 def _half_chord_integral(t, r):
     """The integral of sqrt(r^2 - X^2) dX from 0 to t (t clipped to [-r, r])."""
     t = min(max(t, -r), r)
@@ -427,18 +445,8 @@ def _wall_pass(apply, F, T, x, R, v, w, half, row_z, row_h, j, centre, rot, size
                 rx = R[0, 0] * bx + R[0, 1] * by + R[0, 2] * bz
                 ry = R[1, 0] * bx + R[1, 1] * by + R[1, 2] * bz
                 rz = R[2, 0] * bx + R[2, 1] * by + R[2, 2] * bz
-                px, py, pz = x[0] + rx, x[1] + ry, x[2] + rz
-                ax_, ay_, az_ = px - centre[j, 0], py - centre[j, 1], pz - centre[j, 2]
-                sx = vel[j, 0] + spin[j, 1] * az_ - spin[j, 2] * ay_
-                sy = vel[j, 1] + spin[j, 2] * ax_ - spin[j, 0] * az_
-                sz = vel[j, 2] + spin[j, 0] * ay_ - spin[j, 1] * ax_
-                vx = v[0] + w[1] * rz - w[2] * ry - sx
-                vy = v[1] + w[2] * rx - w[0] * rz - sy
-                vz = v[2] + w[0] * ry - w[1] * rx - sz
-                _spring_friction(
-                    F, T, x, px, py, pz, vx, vy, vz, nx, ny, nz, delta,
-                    kappa * a, cdens * a, mu_d, mu_s, v_s, v_d,
-                )  # fmt: skip
+                _surface_contact(F, T, x, v, w, rx, ry, rz, j, centre, vel, spin, nx, ny, nz,
+                                 delta, kappa * a, cdens * a, mu_d, mu_s, v_s, v_d)  # fmt: skip
     return shared
 
 
@@ -578,18 +586,8 @@ def contact_forces(
                     nz = rot[j, 2, 0] * ex + rot[j, 2, 1] * ey + rot[j, 2, 2] * ez
                 else:
                     continue
-                # relative velocity: the point's minus the surface's (vel + spin x (p - c))
-                ax_, ay_, az_ = px - centre[j, 0], py - centre[j, 1], pz - centre[j, 2]
-                sx = vel[j, 0] + spin[j, 1] * az_ - spin[j, 2] * ay_
-                sy = vel[j, 1] + spin[j, 2] * ax_ - spin[j, 0] * az_
-                sz = vel[j, 2] + spin[j, 0] * ay_ - spin[j, 1] * ax_
-                vx = v[0] + w[1] * rz - w[2] * ry - sx
-                vy = v[1] + w[2] * rx - w[0] * rz - sy
-                vz = v[2] + w[0] * ry - w[1] * rx - sz
-                _spring_friction(
-                    F, T, x, px, py, pz, vx, vy, vz, nx, ny, nz, delta,
-                    kappa * a, cdens * a, mu_d, mu_s, v_s, v_d,
-                )  # fmt: skip
+                _surface_contact(F, T, x, v, w, rx, ry, rz, j, centre, vel, spin, nx, ny, nz,
+                                 delta, kappa * a, cdens * a, mu_d, mu_s, v_s, v_d)  # fmt: skip
 
 
 def law_array(

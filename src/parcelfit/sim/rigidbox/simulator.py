@@ -86,26 +86,15 @@ class RigidBoxOptions:
     def __post_init__(self) -> None:
         if self.timestep is not None and not 1e-7 <= self.timestep <= 1e-3:
             raise ParcelfitError(f"timestep must lie in [1e-7, 1e-3] s, got {self.timestep}")
-        if self.bottom_patch not in BOTTOM_PATCHES:
-            raise ParcelfitError(
-                f"unknown bottom_patch {self.bottom_patch!r}",
-                fix=f"use one of {list(BOTTOM_PATCHES)}",
-            )
-        if self.roller_surface not in ROLLER_SURFACES:
-            raise ParcelfitError(
-                f"unknown roller_surface {self.roller_surface!r}",
-                fix=f"use one of {list(ROLLER_SURFACES)}",
-            )
-        if self.wall_contact not in WALL_CONTACTS:
-            raise ParcelfitError(
-                f"unknown wall_contact {self.wall_contact!r}",
-                fix=f"use one of {list(WALL_CONTACTS)}",
-            )
-        if self.wall_damping not in WALL_DAMPINGS:
-            raise ParcelfitError(
-                f"unknown wall_damping {self.wall_damping!r}",
-                fix=f"use one of {list(WALL_DAMPINGS)}",
-            )
+        for key, allowed in (
+            ("bottom_patch", BOTTOM_PATCHES),
+            ("roller_surface", ROLLER_SURFACES),
+            ("wall_contact", WALL_CONTACTS),
+            ("wall_damping", WALL_DAMPINGS),
+        ):
+            value = getattr(self, key)
+            if value not in allowed:
+                raise ParcelfitError(f"unknown {key} {value!r}", fix=f"use one of {list(allowed)}")
         if not 0 < self.stick_speed < self.slip_speed:
             raise ParcelfitError(
                 f"need 0 < stick_speed < slip_speed, got {self.stick_speed}, {self.slip_speed} m/s"
