@@ -235,6 +235,13 @@ def main(argv: list[str] | None = None) -> int:
         "10 mm); halve it to check the reference's verdict is converged in it",
     )
     ap.add_argument(
+        "--reference-step-divisor",
+        type=int,
+        default=None,
+        help="rigidbox: the reference's own step divided by this whole number (2: half the "
+        "step), to check its verdict is converged in it",
+    )
+    ap.add_argument(
         "--wall-contact",
         choices=WALL_CONTACTS,
         default=None,
@@ -272,9 +279,12 @@ def main(argv: list[str] | None = None) -> int:
     for given, flag in (
         (args.wall_contact, "--wall-contact"),
         (args.wall_damping, "--wall-damping"),
+        (args.reference_step_divisor, "--reference-step-divisor"),
     ):
         if given is not None and args.backend != "rigidbox":
-            ap.error(f"{flag} sets the rigid-box reference's walls: add --backend rigidbox")
+            ap.error(f"{flag} is a setting of the rigid-box reference: add --backend rigidbox")
+    if args.reference_step_divisor is not None and not 1 <= args.reference_step_divisor <= 64:
+        ap.error(f"--reference-step-divisor must lie in [1, 64], got {args.reference_step_divisor}")
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "figures").mkdir(exist_ok=True)
     rigs = [load_rig(r) for r in args.rigs]  # bundled names or rig files
@@ -316,6 +326,11 @@ def main(argv: list[str] | None = None) -> int:
                 **({} if args.reference_spacing is None else {"spacing": args.reference_spacing}),
                 **({} if args.wall_contact is None else {"wall_contact": args.wall_contact}),
                 **({} if args.wall_damping is None else {"wall_damping": args.wall_damping}),
+                **(
+                    {}
+                    if args.reference_step_divisor is None
+                    else {"step_divisor": args.reference_step_divisor}
+                ),
                 wall_limit=args.wall_limit,
                 start_offset=scene.start_offset,
             ),
@@ -355,6 +370,11 @@ def main(argv: list[str] | None = None) -> int:
         )
         + (f" --wall-contact {args.wall_contact}" if args.wall_contact is not None else "")
         + (f" --wall-damping {args.wall_damping}" if args.wall_damping is not None else "")
+        + (
+            f" --reference-step-divisor {args.reference_step_divisor}"
+            if args.reference_step_divisor is not None
+            else ""
+        )
         + (f" --wall-limit {args.wall_limit:g}" if args.wall_limit != SimOptions.wall_limit else "")
         + "`: "
         "every consignment type at its default parameters, placement seeds "

@@ -30,12 +30,23 @@ def test_reference_spacing_reaches_the_reference(monkeypatch, tmp_path):
     with pytest.raises(_BuiltError):
         ensemble_check.main(args)
     with pytest.raises(_BuiltError):
-        ensemble_check.main([*args, "--wall-contact", "points", "--wall-damping", "area"])
+        ensemble_check.main(
+            [
+                *args,
+                "--wall-contact",
+                "points",
+                "--wall-damping",
+                "area",
+                "--reference-step-divisor",
+                "2",
+            ]
+        )
     assert built[0].spacing == pytest.approx(0.005)
     assert built[1].spacing == ensemble_check.RigidBoxOptions().spacing  # the reference's own
     assert built[1].wall_contact == "outline"
     assert (built[2].wall_contact, built[2].wall_damping) == ("points", "area")
     assert built[1].wall_damping == "ratio"
+    assert (built[1].step_divisor, built[2].step_divisor) == (1, 2)
 
 
 @pytest.mark.parametrize(
@@ -50,7 +61,10 @@ def test_reference_spacing_is_refused_without_the_reference_or_out_of_range(
     assert "--reference-spacing" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("flag, value", [("--wall-contact", "points"), ("--wall-damping", "area")])
+@pytest.mark.parametrize(
+    "flag, value",
+    [("--wall-contact", "points"), ("--wall-damping", "area"), ("--reference-step-divisor", "2")],
+)
 def test_wall_options_are_refused_without_the_reference(tmp_path, capsys, flag, value):
     with pytest.raises(SystemExit):
         ensemble_check.main(

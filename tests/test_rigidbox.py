@@ -428,6 +428,9 @@ def test_the_default_step_resolves_the_stiffest_contact():
     assert (1 / 60) / dt == pytest.approx(round((1 / 60) / dt))
     assert opt.step_for(1e9, 0.08) < 1e-5  # a stiffer contact takes a finer step
     assert RigidBoxOptions(timestep=2e-5).step_for(1e9, 0.08) == 2e-5
+    assert RigidBoxOptions(step_divisor=2).step_for(1e6, 0.08) == pytest.approx(dt / 2, rel=1e-12)
+    with pytest.raises(ParcelfitError, match="step_divisor"):
+        RigidBoxOptions(step_divisor=0)
 
 
 def test_a_study_s_simulator_section_makes_a_rigidbox_simulator(tmp_path):

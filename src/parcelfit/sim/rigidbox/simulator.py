@@ -55,7 +55,9 @@ SLIP_SPEED = 0.0015
 class RigidBoxOptions:
     """Numerical settings of the rigid-box reference (not calibrated).
 
-    ``timestep`` [s] (None: the default of `step_for`), ``spacing`` [m] of the contact points,
+    ``timestep`` [s] (None: the default of `step_for`), ``step_divisor`` (the default step divided
+    by this whole number, to check a result's convergence in it), ``spacing`` [m] of the contact
+    points,
     ``bottom_patch`` (``outline`` or ``content``, `geometry`), the friction's static and dynamic
     threshold speeds ``stick_speed`` < ``slip_speed`` [m/s], ``speed_factors`` (drive ->
     factor), ``roller_surface`` (``linear`` or ``turning``), ``wall_contact`` (``outline``: walls
@@ -67,6 +69,7 @@ class RigidBoxOptions:
     ``placement_seed`` (None: the nominal start pose), ``gravity`` [m/s^2]."""
 
     timestep: float | None = None
+    step_divisor: int = 1
     spacing: float = 0.01
     bottom_patch: str = "consignment"
     stick_speed: float = STICK_SPEED
@@ -86,6 +89,10 @@ class RigidBoxOptions:
     def __post_init__(self) -> None:
         if self.timestep is not None and not 1e-7 <= self.timestep <= 1e-3:
             raise ParcelfitError(f"timestep must lie in [1e-7, 1e-3] s, got {self.timestep}")
+        if not (isinstance(self.step_divisor, int) and 1 <= self.step_divisor <= 64):
+            raise ParcelfitError(
+                f"step_divisor must be a whole number in [1, 64], got {self.step_divisor!r}"
+            )
         for key, allowed in (
             ("bottom_patch", BOTTOM_PATCHES),
             ("roller_surface", ROLLER_SURFACES),
@@ -105,11 +112,13 @@ class RigidBoxOptions:
     def step_for(self, stiffness: float, mass: float) -> float:
         """The time step [s]: ``timestep`` if given, else the largest 1 / (sample_rate n) (n
         whole) with omega_max dt <= 0.1, omega_max = sqrt(stiffness / mass) (the stiffest
-        whole-face contact [N/m] and the parcel's mass [kg]), and dt <= 1e-5 s."""
+        whole-face contact [N/m] and the parcel's mass [kg]), and dt <= 1e-5 s; that divided by
+        ``step_divisor`` (the samples still fall on steps)."""
         if self.timestep is not None:
             return self.timestep
         limit = min(MAX_STEP, OMEGA_DT / math.sqrt(stiffness / mass))
-        return 1.0 / (self.sample_rate * math.ceil(1.0 / (self.sample_rate * limit) - 1e-9))
+        n = math.ceil(1.0 / (self.sample_rate * limit) - 1e-9)
+        return 1.0 / (self.sample_rate * n * self.step_divisor)
 
 
 class RigidBoxSimulator(RigBackend[RigidBoxOptions]):
