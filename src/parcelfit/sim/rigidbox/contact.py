@@ -264,7 +264,7 @@ def _outline_inside(ax, ay, r, hx, hy):
 
 
 @njit(cache=True)
-def _lead_in_band(x, R, half, row_z, row_h, i, j, centre, size, base):
+def _lead_in_band(x, R, row_z, row_h, i, j, centre, size, base):
     """Band i's section with lead-in j: (h, zeta, ax, ay) of the module docstring, h = 0: none."""
     cz = centre[j, 2]
     hh = size[j, 1]
@@ -300,7 +300,7 @@ def _lead_in(F, T, x, R, v, w, half, row_z, row_h, j, centre, size, law_m, v_s, 
     if zdamp > 0.0:  # damped at the ratio zeta of the whole contact's stiffness kappa S
         shared = 0.0  # S = sum of h l_o over the bands [m^2]
         for i in range(row_z.shape[0]):
-            h, _, ax, ay = _lead_in_band(x, R, half, row_z, row_h, i, j, centre, size, base)
+            h, _, ax, ay = _lead_in_band(x, R, row_z, row_h, i, j, centre, size, base)
             if h > 0.0 and abs(ax) < hx + r and abs(ay) < hy + r:
                 shared += h * _outline_inside(ax, ay, r, hx, hy)
         if shared > 0.0:  # (0: the lead-in wholly inside the outline; per unit area then)
@@ -308,7 +308,7 @@ def _lead_in(F, T, x, R, v, w, half, row_z, row_h, j, centre, size, law_m, v_s, 
     for i in range(row_z.shape[0]):
         # the part of the row's band whose axis point lies within the lead-in's height: its
         # length h along the body's z, its middle zeta, the axis point (ax, ay) of the body
-        h, zeta, ax, ay = _lead_in_band(x, R, half, row_z, row_h, i, j, centre, size, base)
+        h, zeta, ax, ay = _lead_in_band(x, R, row_z, row_h, i, j, centre, size, base)
         if h <= 0.0:
             continue
         if abs(ax) >= hx + r or abs(ay) >= hy + r:
