@@ -93,8 +93,8 @@ S = sum of h_j l_o (d A_o / d delta = l_o, so kappa S is the tangent stiffness).
 2 zeta sqrt(kappa S M), spread over S: per unit area 2 zeta sqrt(kappa M / S) in place of c,
 which gives a contact the ratio zeta only when S = A_b. Per unit area (``wall_damping: area``,
 as the contact points keep) a side pressed into a plate, S = h W much smaller than A_b, is
-damped at zeta sqrt(S / A_b) (about 0.3 of zeta for BW's side, 0.08 at a lead-in) and rebounds:
-KP struck off E3's lead-in with about 0.8 of its speed. At zeta = 1 a flat side's strike
+damped at zeta sqrt(S / A_b) (about 0.3 of zeta for BW's side, 0.07 at a lead-in) and rebounds:
+KP bounced off E3's lead-in. At zeta = 1 a flat side's strike
 rebounds with exp(-2) = 0.135 of its speed (a linear spring-damper that only pushes).
 """
 
