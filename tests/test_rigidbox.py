@@ -105,6 +105,8 @@ def test_a_soft_content_and_unknown_options_are_refused():
         RigidBoxOptions(wall_contact="edges")
     with pytest.raises(ParcelfitError, match="wall_damping"):
         RigidBoxOptions(wall_damping="none")
+    with pytest.raises(ParcelfitError, match="wall_damping"):
+        law_array((K, K), (1, 1), (0.3, 0.3), (0, 0), 0.08, 0.03, "none")
     with pytest.raises(ParcelfitError, match="stick_speed < slip_speed"):
         RigidBoxOptions(stick_speed=0.002, slip_speed=0.001)
 

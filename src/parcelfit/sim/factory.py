@@ -123,7 +123,8 @@ _SCENE_NAMES = {"film_spacing": "soft_shell_spacing"}
 
 def _check_needs(backend: str, settings: Any) -> None:
     """Refuse a configuration that leaves out what its backend needs, or gives the rigid-box
-    reference a MuJoCo setting (or MuJoCo the rigid box's ``bottom_patch`` or ``wall_contact``)."""
+    reference a MuJoCo setting (or MuJoCo the rigid box's ``bottom_patch``, ``wall_contact`` or
+    ``wall_damping``)."""
     for key in _NEEDS[backend]:
         if getattr(settings, key) is None:
             raise ParcelfitError(f"the {backend} backend needs {key!r}", fix=f"add `{key}:`")

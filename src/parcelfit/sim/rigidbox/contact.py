@@ -105,6 +105,8 @@ import math
 import numpy as np
 from numba import njit
 
+from parcelfit.errors import ParcelfitError
+from parcelfit.sim.params import WALL_DAMPINGS
 from parcelfit.sim.rigidbox.geometry import BOX, CAPSULE, CYLINDER, LEAD_IN, WALL
 
 # law columns per material: stiffness per unit area K / A_b [N/m^3], damping per unit area
@@ -603,6 +605,10 @@ def law_array(
     mu_d + offset, and 2 zeta sqrt(M) with ``wall_damping`` ``ratio`` (walls and lead-ins
     damped at the ratio zeta of their contact's own stiffness), 0 with ``area`` (per unit area,
     as the points; module docstring)."""
+    if wall_damping not in WALL_DAMPINGS:  # any other word would silently mean "area"
+        raise ParcelfitError(
+            f"unknown wall_damping {wall_damping!r}", fix=f"use one of {list(WALL_DAMPINGS)}"
+        )
     law = np.empty((2, 5))
     for m in range(2):
         law[m, KAPPA] = stiffness[m] / bottom_area
