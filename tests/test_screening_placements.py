@@ -211,15 +211,26 @@ def test_three_placements_simulate_every_row_at_seeds_1_to_3_and_average(tmp_pat
         assert row["median_rotation"] == pytest.approx(np.median(turns), rel=1e-12)
     # selection on the DTW responses; spin share and median rotation analysed beside them
     assert [a.response for a in stage.analyses] == ["dtw_xy", "dtw_theta"]
-    assert [a.response for a in stage.ensemble_analyses] == ["spin_share", "median_rotation"]
+    assert [a.response for a in stage.ensemble_analyses] == [
+        "spin_share",
+        "median_rotation",
+        "transit_time",
+    ]
     spin = stage.ensemble_analyses[0].table.iloc[0]
     assert spin["term"] == "mu_d_MePa" and spin["effect"] == pytest.approx(1 / 3)
+    # the mean transit time's main effects: the difference of the rows' means, high minus low
+    transit = stage.ensemble_analyses[2].table.set_index("term")
+    for name in DESIGN:
+        high = design[name] == design[name].max()
+        want = design.loc[high, "transit_time"].mean() - design.loc[~high, "transit_time"].mean()
+        assert transit.loc[name, "effect"] == pytest.approx(want, rel=1e-9, abs=1e-12)
     effects = pd.read_csv(out / "stage1-effects.csv")
     assert list(dict.fromkeys(effects["response"])) == [
         "dtw_xy",
         "dtw_theta",
         "spin_share",
         "median_rotation",
+        "transit_time",
     ]
     assert (out / "stage1-pareto-spin_share.png").is_file()
     assert not any(

@@ -73,8 +73,8 @@ def print_screen(stages: Any, selection: dict[str, Any]) -> None:
         console.print(table)
         if stage.ensemble_analyses:
             console.print(
-                "spin_share and median_rotation (over each run's placements) are shown; "
-                "the selection is made on dtw_xy and dtw_theta"
+                f"{', '.join(a.response for a in stage.ensemble_analyses)} (over each run's "
+                "placements) are shown; the selection is made on dtw_xy and dtw_theta"
             )
     console.print(
         f"[bold]selected for calibration:[/] {', '.join(selection['selected']) or 'none'}"

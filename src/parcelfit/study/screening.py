@@ -47,7 +47,8 @@ differences between rows), and the row's responses are ensemble statistics of it
   would be over other placements than the other rows'.
 
 Survivors and the selection are judged on DTW_xy and DTW_theta as with one placement; the
-spin share and the median rotation are analysed too (their effects in ``stageN-effects.csv``,
+spin share, the median rotation and the mean transit time (over the rows that have one) are
+analysed too (their effects in ``stageN-effects.csv``,
 their Pareto charts, `StageResult.ensemble_analyses`), to be read beside them, but select
 nothing. A simulator without seeded placements (``with_placement``) is refused for K > 1.
 Each of a row's K simulations is a row of the store (slot = design row x K + seed - 1, the
@@ -119,7 +120,7 @@ from parcelfit.study.studyschema import ReferenceSection, ScreenExecutorSection
 
 RESPONSES = ("dtw_xy", "dtw_theta")  # the responses the survivors and the selection are judged on
 # analysed too with several placements, shown but not selecting (see the module docstring)
-ENSEMBLE_RESPONSES = ("spin_share", "median_rotation")
+ENSEMBLE_RESPONSES = ("spin_share", "median_rotation", "transit_time")
 MAX_PLACEMENTS = 50
 _STAGES = ("fractional", "full")
 
@@ -491,10 +492,15 @@ def run_screen(
             run_ok, centre_ok = ok[:n_runs], ok[n_runs:]
             for resp in RESPONSES + (ENSEMBLE_RESPONSES if n_place > 1 else ()):
                 y = frame[resp].to_numpy(dtype=float)
-                sub = design if run_ok.all() else _subset(design, run_ok)
-                centre = y[n_runs:][centre_ok] if screen.centre_points else None
+                # a row whose every placement ended without a transit has no mean transit time
+                use = run_ok & np.isfinite(y[:n_runs])
+                if use.sum() <= len(factors):
+                    continue  # an ensemble response too few rows have (the DTWs have every ok row)
+                sub = design if use.all() else _subset(design, use)
+                use_centre = centre_ok & np.isfinite(y[n_runs:])
+                centre = y[n_runs:][use_centre] if screen.centre_points else None
                 a = analyse_effects(
-                    sub, factors, y[:n_runs][run_ok], name=resp, alpha=screen.alpha, centre=centre
+                    sub, factors, y[:n_runs][use], name=resp, alpha=screen.alpha, centre=centre
                 )
                 (analyses if resp in RESPONSES else extra).append(a)
                 save_figure(pareto_chart(a), out / f"stage{stage + 1}-pareto-{resp}")
