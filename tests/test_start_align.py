@@ -2,6 +2,8 @@
 
 import copy
 import math
+from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -57,11 +59,32 @@ def test_an_unknown_alignment_is_refused_with_the_key():
     assert "centre" in str(info.value) and "right" in str(info.value)
 
 
-def test_the_bundled_e3_lays_every_type_with_its_centre_on_one_spot():
+def test_the_bundled_e3_lays_every_type_with_its_right_side_on_one_line():
+    """Right sides in line, BW's centre where every centre lay with centres on one spot; the
+    variant files keep both conventions and the bundled start is the right-sides variant's."""
     rig = load_rig("E3")
-    assert rig.start.align == "centre"
+    assert rig.start.align == "right"
+    assert rig.start_centre(*load_consignment("BW").outer[:2]) == pytest.approx(
+        (-0.3031, -0.575), abs=1e-6
+    )
+    n = _left(rig)
+    bw = np.array(rig.start_centre(*load_consignment("BW").outer[:2]))
+    for name, further_left in (("KPBW", 0.025), ("PB", 0.0375), ("KP", 0.05)):
+        centre = np.array(rig.start_centre(*load_consignment(name).outer[:2]))
+        assert centre - bw == pytest.approx(further_left * n, abs=1e-6)
+    examples = Path(__file__).resolve().parents[1] / "examples" / "e3-variants"
+    right = load_rig(examples / "E3-right-sides.yaml")
+    assert right.start == rig.start
+    centres = load_rig(examples / "E3-centres.yaml")
+    assert centres.start.align == "centre"
     for name in ("BW", "KPBW", "KP", "PB"):
-        assert rig.start_centre(*load_consignment(name).outer[:2]) == rig.start.position
+        assert centres.start_centre(*load_consignment(name).outer[:2]) == pytest.approx(
+            (-0.3031, -0.575)
+        )
+    # but for the start, the former bundled rig is today's
+    assert replace(centres, name="E3", description="", source="", start=rig.start) == replace(
+        rig, description="", source=""
+    )
 
 
 @pytest.mark.parametrize("name", ["KP", "BW"])

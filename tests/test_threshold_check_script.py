@@ -27,7 +27,8 @@ def test_it_prints_each_case_and_the_threshold_the_study_uses(script, capsys):
     printed = float(re.search(r"threshold now: ([0-9.]+)", out).group(1))
     assert printed == pytest.approx(eps, rel=1e-3)
     former = float(re.search(r"former threshold .*: ([0-9.]+)", out).group(1))
-    assert eps >= former  # the single runs' largest costs are the floor
+    # the single runs' largest costs are the floor (printed to 4 significant digits)
+    assert eps >= former * (1 - 5e-4)
 
 
 def test_folder_takes_one_study_file(script, capsys):
