@@ -1,6 +1,7 @@
 """A screen's stored responses and written tables stay what they were when its evaluation loop
 moved onto `parcelfit.study.loop` (tests/data/screen-loop holds them from the earlier code):
-one nominal placement with centre points, and two placements with a transit-less seed."""
+one nominal placement with centre points, and two placements with a transit-less seed (its
+effects table since gained the mean transit time's rows, appended to the earlier code's)."""
 
 from __future__ import annotations
 
