@@ -492,12 +492,14 @@ def run_screen(
             run_ok, centre_ok = ok[:n_runs], ok[n_runs:]
             for resp in RESPONSES + (ENSEMBLE_RESPONSES if n_place > 1 else ()):
                 y = frame[resp].to_numpy(dtype=float)
-                # a row whose every placement ended without a transit has no mean transit time
-                use = run_ok & np.isfinite(y[:n_runs])
-                if use.sum() <= len(factors):
-                    continue  # an ensemble response too few rows have (the DTWs have every ok row)
+                use, use_centre = run_ok, centre_ok
+                if resp in ENSEMBLE_RESPONSES:
+                    # a row whose every placement ended without a transit has no mean transit
+                    use = run_ok & np.isfinite(y[:n_runs])
+                    use_centre = centre_ok & np.isfinite(y[n_runs:])
+                    if use.sum() <= len(factors):
+                        continue  # too few rows have this response to estimate the effects
                 sub = design if use.all() else _subset(design, use)
-                use_centre = centre_ok & np.isfinite(y[n_runs:])
                 centre = y[n_runs:][use_centre] if screen.centre_points else None
                 a = analyse_effects(
                     sub, factors, y[:n_runs][use], name=resp, alpha=screen.alpha, centre=centre
