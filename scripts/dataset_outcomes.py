@@ -18,26 +18,28 @@ import math
 from collections.abc import Sequence
 from pathlib import Path
 
-import numpy as np
-
 from parcelfit.runs import TestCase
 from parcelfit.runs.dataset import CaseData, load_dataset
-from parcelfit.sim.ensemble import rotation
+from parcelfit.sim.ensemble import Member, rotation, summarise
+from parcelfit.sim.protocol import SimStatus
 
 
 def case_summary(case: CaseData) -> dict[str, object]:
     """One case's outcome: runs, median transit [s], median rotation [deg], shares of runs
-    above 90 and 180 degrees [-] and each run's rotation [deg] by run id."""
-    rot = {r.id: math.degrees(rotation(r.trajectory)) for r in case.runs}
-    transit = [r.transit_time for r in case.runs if r.transit_time is not None]
-    values = np.array(list(rot.values()))
+    above 90 and 180 degrees [-] and each run's rotation [deg] by run id; the statistics are
+    `parcelfit.sim.ensemble.summarise`'s, the real runs taken as an ensemble's members."""
+    members = [
+        Member(k, SimStatus.OK, r.transit_time, rotation(r.trajectory), r, 0.0)
+        for k, r in enumerate(case.runs)
+    ]
+    summary = summarise(members)
     return {
         "runs": len(case.runs),
-        "median_transit": float(np.median(transit)) if transit else math.nan,
-        "median_rotation": float(np.median(values)),
-        "above_90": float(np.mean(values > 90.0)),
-        "above_180": float(np.mean(values > 180.0)),
-        "rotations": rot,
+        "median_transit": summary.transit_median,
+        "median_rotation": math.degrees(summary.rotation_median),
+        "above_90": summary.share_over_90,
+        "above_180": summary.share_over_180,
+        "rotations": {m.run.id: math.degrees(m.rotation) for m in members},
     }
 
 
