@@ -48,6 +48,7 @@ from collections.abc import Iterable, Mapping
 from typing import TYPE_CHECKING
 
 import mujoco
+import numba
 import numpy as np
 
 from parcelfit.errors import ParcelfitError
@@ -96,6 +97,10 @@ class ContactFriction:
             elems = model.flex_elem[model.flex_elemdataadr[flex] :]
             self.triangles = np.asarray(elems[: 3 * int(model.flex_elemnum[flex])]).reshape(-1, 3)
             self.vertex_offset = int(model.flex_vertadr[flex])
+        # the kernels take an empty table for a packaging without a 2-D shell
+        self._triangles = (
+            np.zeros((0, 3), dtype=np.int32) if self.triangles is None else self.triangles
+        )
         self._qfrc = np.zeros(model.nv)
         # the step before's contacts on surfaces: sorted keys, normal forces, inverse masses
         self._keys = np.zeros(0, dtype=np.int64)
@@ -114,25 +119,17 @@ class ContactFriction:
         names the surface, the packaging's element and the element's corner nearest to the
         contact point: MuJoCo makes one contact per touching corner of a triangle, so the element
         alone does not tell a triangle's contacts apart."""
-        n = data.ncon
         con = data.contact
-        g0, g1 = con.geom[:n, 0], con.geom[:n, 1]
-        on0 = np.zeros(n, dtype=bool)
-        on1 = np.zeros(n, dtype=bool)
-        on0[g0 >= 0] = self.is_surface[g0[g0 >= 0]]
-        on1[g1 >= 0] = self.is_surface[g1[g1 >= 0]]
-        idx = np.flatnonzero((on0 | on1) & (con.efc_address[:n] >= 0))
-        surface = np.where(on0[idx], g0[idx], g1[idx]).astype(np.int64)
-        elem = con.elem[idx].max(axis=1).astype(np.int64)
-        corner = np.zeros(idx.size, dtype=np.int64)
-        if self.triangles is not None and idx.size:
-            ok = (elem >= 0) & (elem < len(self.triangles))
-            tri = self.triangles[elem[ok]]  # (k, 3) vertex ids within the flex
-            points = data.flexvert_xpos[self.vertex_offset + tri]  # (k, 3, 3)
-            gap = np.linalg.norm(points - con.pos[idx[ok], None, :], axis=2)
-            corner[ok] = np.argmin(gap, axis=1)
-        keys = (surface << (_ELEM_BITS + 2)) | ((elem + 1) << 2) | corner
-        return idx, surface, keys
+        return _select_contacts(
+            con.geom,
+            con.efc_address,
+            con.elem,
+            con.pos,
+            self.is_surface,
+            self._triangles,
+            data.flexvert_xpos,
+            self.vertex_offset,
+        )
 
     def stick_share(self, slip: np.ndarray) -> np.ndarray:
         """S(v): the share of the static offset at slip speed ``slip`` [m/s]."""
@@ -146,40 +143,39 @@ class ContactFriction:
         idx, surface, keys = self._selected = self._select(data)
         if idx.size == 0:
             return
-        con = data.contact
-        adr = con.efc_address[idx]
-        v1, v2 = data.efc_vel[adr + 1], data.efc_vel[adr + 2]
-        slip = np.hypot(v1, v2)
-        mu_d = model.geom_friction[surface, 0]
-        mu = mu_d + self.offset[surface] * self.stick_share(slip)
         # the normal force [N] and tangential inverse effective mass [1/kg] each contact had in
         # the step before's solve (matched by surface geom, shell element and vertex; a contact
-        # new in this step has no force by hand yet)
-        # a contact the step before did not have takes that step's mean over the contacts on
-        # the same surface: MuJoCo keeps at most 50 contacts of a shell with one geom, and on a
-        # large face the 50 change from step to step
-        normal = self._surface_normal[surface]
-        inverse_mass = self._surface_inverse_mass[surface]
-        if self._keys.size:
-            pos = np.minimum(np.searchsorted(self._keys, keys), self._keys.size - 1)
-            known = self._keys[pos] == keys
-            normal[known] = self._normal[pos[known]]
-            inverse_mass[known] = self._inverse_mass[pos[known]]
-        # every sliding contact leaves MuJoCo's cone; its force by hand is mu_d N, but never more
+        # new in this step has no force by hand yet); a contact the step before did not have
+        # takes that step's mean over the contacts on the same surface: MuJoCo keeps at most 50
+        # contacts of a shell with one geom, and on a large face the 50 change from step to step.
+        # Every sliding contact leaves MuJoCo's cone; its force by hand is mu_d N, but never more
         # than changes its slip by half in one step (explicit in time: a larger force would
-        # reverse the slip and chatter)
-        by_hand = slip > self.v_d
-        con.friction[idx, 0] = np.where(by_hand, NEGLIGIBLE_FRICTION, mu)
-        con.friction[idx, 1] = con.friction[idx, 0]
-        k = np.flatnonzero(by_hand & (normal > 0))
-        if k.size:
+        # reverse the slip and chatter). `_contact_friction` sets the coefficients and fills
+        # ``vec`` with the forces in constraint space.
+        vec = np.zeros(data.nefc)
+        by_hand, clamped = _contact_friction(
+            idx,
+            surface,
+            keys,
+            data.contact.efc_address,
+            data.efc_vel,
+            model.geom_friction,
+            self.offset,
+            self.v_s,
+            self.v_d,
+            self._surface_normal,
+            self._surface_inverse_mass,
+            self._keys,
+            self._normal,
+            self._inverse_mass,
+            data.contact.friction,
+            self.h,
+            NEGLIGIBLE_FRICTION,
+            vec,
+        )
+        if by_hand:
             self.explicit_steps += 1
-            vec = np.zeros(data.nefc)
-            force = np.minimum(mu_d[k] * normal[k], 0.5 * slip[k] / (self.h * inverse_mass[k]))
-            self.clamped += int(np.count_nonzero(force < mu_d[k] * normal[k]))
-            scale = force / slip[k]
-            vec[adr[k] + 1] = -scale * v1[k]
-            vec[adr[k] + 2] = -scale * v2[k]
+            self.clamped += clamped
             mujoco.mj_mulJacTVec(model, data, self._qfrc, vec)
             data.qfrc_applied[:] = self._qfrc
 
@@ -189,24 +185,169 @@ class ContactFriction:
         contacts `apply` selected in this step, else selected here)."""
         selected, self._selected = self._selected, None
         idx, surface, keys = selected if selected is not None else self._select(data)
-        adr = data.contact.efc_address[idx]
-        normal = np.maximum(data.efc_force[adr], 0.0)
-        inverse_mass = np.maximum(data.efc_diagA[adr + 1], 0.0)
-        order = np.argsort(keys, kind="stable")
-        self._keys = keys[order]
-        self._normal = normal[order]
-        self._inverse_mass = inverse_mass[order]
-        count = np.bincount(surface, minlength=self.is_surface.size)
-        seen = count > 0
-        self._surface_normal = np.zeros(self.is_surface.size)
-        self._surface_normal[seen] = (
-            np.bincount(surface, weights=normal, minlength=self.is_surface.size)[seen] / count[seen]
+        (
+            self._keys,
+            self._normal,
+            self._inverse_mass,
+            self._surface_normal,
+            self._surface_inverse_mass,
+        ) = _record_contacts(
+            idx,
+            surface,
+            keys,
+            data.contact.efc_address,
+            data.efc_force,
+            data.efc_diagA,
+            self.is_surface.size,
         )
-        self._surface_inverse_mass = np.full(self.is_surface.size, np.inf)
-        self._surface_inverse_mass[seen] = (
-            np.bincount(surface, weights=inverse_mass, minlength=self.is_surface.size)[seen]
-            / count[seen]
-        )
+
+
+# The three kernels below are the law's per-step work on the ~10-100 surface contacts, compiled
+# with numba: as NumPy calls on such small arrays it cost more in call overhead than in
+# arithmetic (about a fifth of a BW run's time on E1). They do exactly the arithmetic of those
+# NumPy calls, in the same order, so a run is the same to the last bit.
+
+
+@numba.njit(cache=True)
+def _select_contacts(
+    geom: np.ndarray,
+    efc_address: np.ndarray,
+    elem: np.ndarray,
+    pos: np.ndarray,
+    is_surface: np.ndarray,
+    triangles: np.ndarray,
+    vertices: np.ndarray,
+    vertex_offset: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Indices, surface geom ids and keys of the contacts on surfaces (see `_select`)."""
+    n = geom.shape[0]
+    idx = np.empty(n, dtype=np.int64)
+    m = 0
+    for i in range(n):
+        g0, g1 = geom[i, 0], geom[i, 1]
+        on0 = g0 >= 0 and is_surface[g0]
+        on1 = g1 >= 0 and is_surface[g1]
+        if (on0 or on1) and efc_address[i] >= 0:
+            idx[m] = i
+            m += 1
+    idx = idx[:m]
+    surface = np.empty(m, dtype=np.int64)
+    keys = np.empty(m, dtype=np.int64)
+    n_tri = triangles.shape[0]
+    for j in range(m):
+        i = idx[j]
+        g0 = geom[i, 0]
+        surface[j] = g0 if (g0 >= 0 and is_surface[g0]) else geom[i, 1]
+        e = np.int64(max(elem[i, 0], elem[i, 1]))
+        corner = 0
+        if 0 <= e < n_tri:
+            best = 0.0
+            for c in range(3):
+                v = vertex_offset + triangles[e, c]
+                dx = vertices[v, 0] - pos[i, 0]
+                dy = vertices[v, 1] - pos[i, 1]
+                dz = vertices[v, 2] - pos[i, 2]
+                gap = np.sqrt((dx * dx + dy * dy) + dz * dz)  # NumPy's norm, summed alike
+                if c == 0 or gap < best:  # the first of equal gaps, as argmin
+                    best = gap
+                    corner = c
+        keys[j] = (surface[j] << (_ELEM_BITS + 2)) | ((e + 1) << 2) | corner
+    return idx, surface, keys
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _contact_friction(
+    idx: np.ndarray,
+    surface: np.ndarray,
+    keys: np.ndarray,
+    efc_address: np.ndarray,
+    efc_vel: np.ndarray,
+    geom_friction: np.ndarray,
+    offset: np.ndarray,
+    v_s: float,
+    v_d: float,
+    surface_normal: np.ndarray,
+    surface_inverse_mass: np.ndarray,
+    prev_keys: np.ndarray,
+    prev_normal: np.ndarray,
+    prev_inverse_mass: np.ndarray,
+    friction: np.ndarray,
+    h: float,
+    negligible: float,
+    vec: np.ndarray,
+) -> tuple[bool, int]:
+    """Each surface contact's coefficient mu(v) into ``friction``, and the Coulomb force of
+    each sliding one with a normal force into ``vec`` (constraint space); returns whether any
+    contact slid by hand and how many forces the half-slip bound limited."""
+    n_prev = prev_keys.size
+    any_by_hand = False
+    clamped = 0
+    for j in range(idx.size):
+        i = idx[j]
+        s = surface[j]
+        adr = efc_address[i]
+        v1, v2 = efc_vel[adr + 1], efc_vel[adr + 2]
+        slip = np.hypot(v1, v2)
+        mu_d = geom_friction[s, 0]
+        u = min(max((slip - v_s) / (v_d - v_s), 0.0), 1.0)
+        mu = mu_d + offset[s] * (1.0 - u * u * (3.0 - 2.0 * u))
+        normal = surface_normal[s]
+        inverse_mass = surface_inverse_mass[s]
+        if n_prev:
+            k = min(np.searchsorted(prev_keys, keys[j]), n_prev - 1)
+            if prev_keys[k] == keys[j]:
+                normal = prev_normal[k]
+                inverse_mass = prev_inverse_mass[k]
+        by_hand = slip > v_d
+        friction[i, 0] = negligible if by_hand else mu
+        friction[i, 1] = friction[i, 0]
+        if by_hand and normal > 0:
+            any_by_hand = True
+            coulomb = mu_d * normal
+            force = min(coulomb, 0.5 * slip / (h * inverse_mass))
+            if force < coulomb:
+                clamped += 1
+            scale = force / slip
+            vec[adr + 1] = -scale * v1
+            vec[adr + 2] = -scale * v2
+    return any_by_hand, clamped
+
+
+@numba.njit(cache=True)
+def _record_contacts(
+    idx: np.ndarray,
+    surface: np.ndarray,
+    keys: np.ndarray,
+    efc_address: np.ndarray,
+    efc_force: np.ndarray,
+    efc_diag: np.ndarray,
+    n_geom: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The contacts' keys in order with their normal forces [N] and tangential inverse
+    effective masses [1/kg], and both's means by surface geom (0 and inf where none)."""
+    m = idx.size
+    normal = np.empty(m)
+    inverse_mass = np.empty(m)
+    for j in range(m):
+        adr = efc_address[idx[j]]
+        f, a = efc_force[adr], efc_diag[adr + 1]
+        normal[j] = f if (f >= 0.0 or f != f) else 0.0  # np.maximum(f, 0), NaN kept
+        inverse_mass[j] = a if (a >= 0.0 or a != a) else 0.0
+    order = np.argsort(keys, kind="mergesort")  # stable
+    count = np.zeros(n_geom, dtype=np.int64)
+    normal_sum = np.zeros(n_geom)
+    inverse_mass_sum = np.zeros(n_geom)
+    for j in range(m):  # in the contacts' order, as np.bincount sums
+        count[surface[j]] += 1
+        normal_sum[surface[j]] += normal[j]
+        inverse_mass_sum[surface[j]] += inverse_mass[j]
+    surface_normal = np.zeros(n_geom)
+    surface_inverse_mass = np.full(n_geom, np.inf)
+    for g in range(n_geom):
+        if count[g] > 0:
+            surface_normal[g] = normal_sum[g] / count[g]
+            surface_inverse_mass[g] = inverse_mass_sum[g] / count[g]
+    return keys[order], normal[order], inverse_mass[order], surface_normal, surface_inverse_mass
 
 
 def surface_offsets(
