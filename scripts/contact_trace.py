@@ -2,7 +2,7 @@
 
     python scripts/contact_trace.py --rig E2a --consignment KPBW --setting 1 --seed 3
                                     --from 1.76 --to 1.9 [--every 0.01] [--scene KEY=VALUE ...]
-                                    [--bulge FOOTPRINT [--bulge-depth D]] [--bottom]
+                                    [--bulge FOOTPRINT [--bulge-depth D]] [--bottom] [--stop]
 
 Runs one simulation as `parcelfit simulate` does and prints, at every ``--every`` seconds of the
 window [``--from``, ``--to``] (simulated time, s): the packaging's centre [m] (the mean of its
@@ -22,6 +22,10 @@ of the vertices of its face (the flat patch under the content, or the bulge's pa
 rest of the bottom sheet (the rim, seam excluded), both above the bottom sheet's lowest vertex,
 and the content's height above that vertex [mm], its heading [deg] and its yaw rate [rad/s] (a
 rigid content). A bulge that the weight presses flat shows as a rim as low as the face.
+
+The run goes on to its end and the last line gives its rotation and transit time; ``--stop``
+ends it at ``--to`` instead (a look at an early moment then costs only the simulated time up
+to it; the last line's rotation is up to there and its transit "none").
 """
 
 from __future__ import annotations
@@ -136,14 +140,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--bulge", type=float, default=None, metavar="FOOTPRINT")
     ap.add_argument("--bulge-depth", type=float, default=0.004, help="[m]")
     ap.add_argument("--bottom", action="store_true", help="print how the bottom sheet lies")
+    ap.add_argument("--stop", action="store_true", help="end the run at --to")
     args = ap.parse_args(argv)
     if not (args.every > 0 and args.t1 > args.t0 and args.top > 0):
         ap.error("--every and --top must be positive and --to after --from")
+    if args.stop and not math.isfinite(args.t1):
+        ap.error("--stop needs --to")
     try:
         rig, cons = load_rig(args.rig), load_consignment(args.consignment)
         if args.bulge is not None:  # 0: a flat bottom, whatever the consignment file says
             cons = replace(cons, bulge=(args.bulge_depth, args.bulge) if args.bulge > 0 else None)
-        options = SimOptions(scene=scene_options(args.scene))
+        options = SimOptions(
+            scene=scene_options(args.scene), duration=args.t1 if args.stop else None
+        )
         sim = MujocoSimulator(options, {rig.name: rig}, {cons.name: cons}).with_placement(args.seed)
         case = TestCase(rig.name, cons.name, args.setting)
         shell = sim.scene({}, case).shell

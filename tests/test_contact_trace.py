@@ -22,6 +22,9 @@ def test_bad_arguments_are_refused(trace, capsys):
     with pytest.raises(SystemExit):
         trace.main(["--rig", "E2a", "--consignment", "KPBW", "--from", "1", "--to", "0.5"])
     assert "--to after --from" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        trace.main(["--rig", "E3", "--consignment", "KPBW", "--stop"])
+    assert "--stop needs --to" in capsys.readouterr().err
     assert trace.main(["--rig", "E9", "--consignment", "KPBW"]) == 2
     assert "unknown rig 'E9'" in capsys.readouterr().err
     # a bulge needs a rigid content, and a patch smaller than it
@@ -42,9 +45,12 @@ def test_the_bottom_sheet_of_a_bulged_mailer_lies_on_its_patch(trace, capsys):
 
     def bottom(*extra: str) -> list[float]:
         args = ["--rig", "E3", "--consignment", "BW", "--bottom", *extra]
-        assert trace.main([*args, "--from", "0.2", "--to", "0.21", "--every", "0.01"]) == 0
-        found = pattern.search(capsys.readouterr().out)
-        assert found is not None
+        assert (
+            trace.main([*args, "--from", "0.2", "--to", "0.21", "--every", "0.01", "--stop"]) == 0
+        )
+        out = capsys.readouterr().out
+        found = pattern.search(out)
+        assert found is not None and "transit none" in out  # --stop: ended at 0.21 s
         return [float(found.group(i)) for i in range(1, 6)]
 
     face_min, face_mean, rim_min, rim_mean, content = bottom("--bulge", "0.5")
