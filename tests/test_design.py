@@ -77,7 +77,11 @@ def test_the_candidate_built_to_depend_on_a_parameter_ranks_first_for_it(tmp_pat
         (["--candidate", "E3-KPBW-1"], "--candidate 'E3-KPBW-1' is not RIG/TYPE/SETTING"),
         (["--candidate", "E3/KPBW/7"], "rig E3 has no speed setting 7"),
         (["--rig", "E3"], "--rig 'E3' is not a rig .yaml file"),
-        (["--sets", "2"], "parameter sets (with fewer nothing could narrow anything)"),
+        (
+            ["--sets", "2"],
+            "3 parameters need at least 5 parameter sets (with fewer nothing could narrow "
+            "anything) Fix: give --sets 5 or more",
+        ),
     ],
 )
 def test_bad_candidates_exit_2(tmp_path, args, message):

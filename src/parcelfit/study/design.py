@@ -462,10 +462,12 @@ def rank_experiments(
     inputs = load_inputs(folder)
     ident = inputs.identifiability
     if sets < len(ident.names) + 2:
+        n = len(ident.names)
         raise ParcelfitError(
-            f"--sets {sets}: the effects of {len(ident.names)} parameters need at least "
-            f"{len(ident.names) + 2} parameter sets (with fewer nothing could narrow anything)",
-            fix=f"give --sets {len(ident.names) + 5} or more (the default is 20)",
+            f"--sets {sets}: the effects of {n} parameter{'s' if n != 1 else ''} need at least "
+            f"{n + 2} parameter sets (with fewer nothing could narrow anything)",
+            fix=f"give --sets {n + 2} or more ({n + 5} or more for a steadier ranking; "
+            "the default is 20)",
         )
     config = inputs.study.simulator
     mine = config.backend in ("mujoco", "rigidbox")
