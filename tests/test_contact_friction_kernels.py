@@ -5,12 +5,12 @@ plate (KP/BW, where contacts slide by hand and new contacts take their surface's
 
 import mujoco
 import numpy as np
+import pytest
 
 from parcelfit.runs import TestCase
-from parcelfit.sim.mujoco import MujocoSimulator
-from parcelfit.sim.mujoco.friction import _ELEM_BITS, NEGLIGIBLE_FRICTION, Stepper
-from parcelfit.sim.mujoco.mjlog import CountedWarnings
-from parcelfit.sim.mujoco.simulator import _set_velocity
+from parcelfit.sim.mujoco.friction import _ELEM_BITS, NEGLIGIBLE_FRICTION
+
+from .simhelpers import contact_law_scene
 
 
 def _select(law, data):
@@ -89,19 +89,10 @@ def _record(law, data, selected):
     return keys[order], normal[order], inverse_mass[order], mean_normal, mean_inverse_mass
 
 
+@pytest.mark.slow
+@pytest.mark.mujoco
 def test_the_compiled_law_is_the_numpy_law_to_the_last_bit():
-    sim = MujocoSimulator().with_placement(2)
-    case = TestCase("E3", "KPBW", 2)
-    scene = sim.scene({}, case)
-    with CountedWarnings():
-        model = scene.model()
-        data = mujoco.MjData(model)
-        _set_velocity(model, data, np.asarray(scene.start_velocity))
-        stepper = Stepper(
-            model, data, scene, sim.consignment("KPBW").parameter_values(), sim.options.scene
-        )
-        law = stepper.contact
-        assert law is not None
+    with contact_law_scene(TestCase("E3", "KPBW", 2), placement=2) as (model, data, law):
         by_hand_steps = new_contacts = 0
         for step in range(round(0.9 / model.opt.timestep)):
             mujoco.mj_step1(model, data)

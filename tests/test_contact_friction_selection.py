@@ -6,25 +6,12 @@ import mujoco
 import numpy as np
 
 from parcelfit.runs import TestCase
-from parcelfit.sim.mujoco import MujocoSimulator
-from parcelfit.sim.mujoco.friction import Stepper
-from parcelfit.sim.mujoco.mjlog import CountedWarnings
-from parcelfit.sim.mujoco.simulator import _set_velocity
+
+from .simhelpers import contact_law_scene
 
 
 def test_the_contacts_apply_selected_are_the_ones_a_fresh_selection_finds_after_the_step():
-    sim = MujocoSimulator()
-    case = TestCase("E3", "KPBW", 1)
-    scene = sim.scene({}, case)
-    with CountedWarnings():
-        model = scene.model()
-        data = mujoco.MjData(model)
-        _set_velocity(model, data, np.asarray(scene.start_velocity))
-        stepper = Stepper(
-            model, data, scene, sim.consignment("KPBW").parameter_values(), sim.options.scene
-        )
-        friction = stepper.contact
-        assert friction is not None
+    with contact_law_scene(TestCase("E3", "KPBW", 1)) as (model, data, friction):
         checked = 0
         for step in range(300):
             mujoco.mj_step1(model, data)
