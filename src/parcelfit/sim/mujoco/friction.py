@@ -133,8 +133,8 @@ class ContactFriction:
 
     def stick_share(self, slip: np.ndarray) -> np.ndarray:
         """S(v): the share of the static offset at slip speed ``slip`` [m/s]."""
-        u = np.clip((slip - self.v_s) / (self.v_d - self.v_s), 0.0, 1.0)
-        return 1.0 - u * u * (3.0 - 2.0 * u)
+        values = [_stick_share(float(v), self.v_s, self.v_d) for v in np.ravel(slip)]
+        return np.reshape(values, np.shape(slip))
 
     def apply(self, model: mujoco.MjModel, data: mujoco.MjData) -> None:
         """Set each surface contact's friction, and the Coulomb forces of the sliding ones as
@@ -202,10 +202,17 @@ class ContactFriction:
         )
 
 
-# The three kernels below are the law's per-step work on the ~10-100 surface contacts, compiled
+# The kernels below are the law's per-step work on the ~10-100 surface contacts, compiled
 # with numba: as NumPy calls on such small arrays it cost more in call overhead than in
-# arithmetic (about a fifth of a BW run's time on E1). They do exactly the arithmetic of those
+# arithmetic (a fifth of a BW run's time on E1, under a profiler). They do the arithmetic of those
 # NumPy calls, in the same order, so a run is the same to the last bit.
+
+
+@numba.njit(cache=True, inline="always")
+def _stick_share(slip: float, v_s: float, v_d: float) -> float:
+    """S(v) = 1 - u^2 (3 - 2 u), u = clip((v - v_s) / (v_d - v_s), 0, 1) at slip speed v [m/s]."""
+    u = min(max((slip - v_s) / (v_d - v_s), 0.0), 1.0)
+    return 1.0 - u * u * (3.0 - 2.0 * u)
 
 
 @numba.njit(cache=True)
@@ -248,7 +255,10 @@ def _select_contacts(
                 dy = vertices[v, 1] - pos[i, 1]
                 dz = vertices[v, 2] - pos[i, 2]
                 gap = np.sqrt((dx * dx + dy * dy) + dz * dz)  # NumPy's norm, summed alike
-                if c == 0 or gap < best:  # the first of equal gaps, as argmin
+                # np.argmin: the first of equal gaps, and the first NaN wins over any number
+                if best != best:
+                    break
+                if c == 0 or gap < best or gap != gap:
                     best = gap
                     corner = c
         keys[j] = (surface[j] << (_ELEM_BITS + 2)) | ((e + 1) << 2) | corner
@@ -289,8 +299,7 @@ def _contact_friction(
         v1, v2 = efc_vel[adr + 1], efc_vel[adr + 2]
         slip = np.hypot(v1, v2)
         mu_d = geom_friction[s, 0]
-        u = min(max((slip - v_s) / (v_d - v_s), 0.0), 1.0)
-        mu = mu_d + offset[s] * (1.0 - u * u * (3.0 - 2.0 * u))
+        mu = mu_d + offset[s] * _stick_share(slip, v_s, v_d)
         normal = surface_normal[s]
         inverse_mass = surface_inverse_mass[s]
         if n_prev:
@@ -304,7 +313,9 @@ def _contact_friction(
         if by_hand and normal > 0:
             any_by_hand = True
             coulomb = mu_d * normal
-            force = min(coulomb, 0.5 * slip / (h * inverse_mass))
+            bound = 0.5 * slip / (h * inverse_mass)
+            # np.minimum: a NaN on either side gives NaN
+            force = coulomb if (coulomb < bound or coulomb != coulomb) else bound
             if force < coulomb:
                 clamped += 1
             scale = force / slip
@@ -331,8 +342,9 @@ def _record_contacts(
     for j in range(m):
         adr = efc_address[idx[j]]
         f, a = efc_force[adr], efc_diag[adr + 1]
-        normal[j] = f if (f >= 0.0 or f != f) else 0.0  # np.maximum(f, 0), NaN kept
-        inverse_mass[j] = a if (a >= 0.0 or a != a) else 0.0
+        # np.maximum(x, 0.0): NaN kept, -0.0 and below give +0.0
+        normal[j] = f if (f > 0.0 or f != f) else 0.0
+        inverse_mass[j] = a if (a > 0.0 or a != a) else 0.0
     order = np.argsort(keys, kind="mergesort")  # stable
     count = np.zeros(n_geom, dtype=np.int64)
     normal_sum = np.zeros(n_geom)
