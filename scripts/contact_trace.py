@@ -24,8 +24,10 @@ and the content's height above that vertex [mm], its heading [deg] and its yaw r
 rigid content). A bulge that the weight presses flat shows as a rim as low as the face.
 
 The run goes on to its end and the last line gives its rotation and transit time; ``--stop``
-ends it at ``--to`` instead (a look at an early moment then costs only the simulated time up
-to it; the last line's rotation is up to there and its transit "none").
+ends it at ``--to`` instead if the rig's run lasts that long (a look at an early moment then
+costs only the simulated time up to it; the last line's rotation is up to there, and its
+transit "none" unless the parcel crossed both light barriers before). ``--to`` is then at
+least 0.05 s (a run needs three samples).
 """
 
 from __future__ import annotations
@@ -126,6 +128,9 @@ def _bottom(model: mujoco.MjModel, data: mujoco.MjData, face: np.ndarray, rim: n
     return text
 
 
+STOP_MIN = 0.05  # [s] the shortest run --stop makes: a run needs three samples
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rig", required=True)
@@ -144,15 +149,14 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if not (args.every > 0 and args.t1 > args.t0 and args.top > 0):
         ap.error("--every and --top must be positive and --to after --from")
-    if args.stop and not math.isfinite(args.t1):
-        ap.error("--stop needs --to")
+    if args.stop and not (math.isfinite(args.t1) and args.t1 >= STOP_MIN):
+        ap.error(f"--stop needs --to of at least {STOP_MIN} s")
     try:
         rig, cons = load_rig(args.rig), load_consignment(args.consignment)
         if args.bulge is not None:  # 0: a flat bottom, whatever the consignment file says
             cons = replace(cons, bulge=(args.bulge_depth, args.bulge) if args.bulge > 0 else None)
-        options = SimOptions(
-            scene=scene_options(args.scene), duration=args.t1 if args.stop else None
-        )
+        stop = min(args.t1, rig.end.duration) if args.stop else None  # never longer
+        options = SimOptions(scene=scene_options(args.scene), duration=stop)
         sim = MujocoSimulator(options, {rig.name: rig}, {cons.name: cons}).with_placement(args.seed)
         case = TestCase(rig.name, cons.name, args.setting)
         shell = sim.scene({}, case).shell

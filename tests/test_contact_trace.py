@@ -22,9 +22,10 @@ def test_bad_arguments_are_refused(trace, capsys):
     with pytest.raises(SystemExit):
         trace.main(["--rig", "E2a", "--consignment", "KPBW", "--from", "1", "--to", "0.5"])
     assert "--to after --from" in capsys.readouterr().err
-    with pytest.raises(SystemExit):
-        trace.main(["--rig", "E3", "--consignment", "KPBW", "--stop"])
-    assert "--stop needs --to" in capsys.readouterr().err
+    for to in ([], ["--to", "0.03"]):
+        with pytest.raises(SystemExit):
+            trace.main(["--rig", "E3", "--consignment", "KPBW", "--stop", *to])
+        assert "--stop needs --to of at least 0.05 s" in capsys.readouterr().err
     assert trace.main(["--rig", "E9", "--consignment", "KPBW"]) == 2
     assert "unknown rig 'E9'" in capsys.readouterr().err
     # a bulge needs a rigid content, and a patch smaller than it

@@ -353,7 +353,8 @@ def summarise_prediction(
         if not any(e.estimated for e in effects if e.parameter == p.name):
             sentences.append(
                 f"{p.name} {words}, and what it does here was not estimated: the "
-                f"{len(names)} parameters need at least {len(names) + 2} parameter sets with "
+                f"{len(names)} parameter{'s' if len(names) != 1 else ''} need at least "
+                f"{len(names) + 2} parameter sets with "
                 f"a result (--sets), {n} were drawn"
             )
             continue
