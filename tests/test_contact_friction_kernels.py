@@ -210,6 +210,18 @@ def test_no_contacts_select_nothing_and_record_empty_tables():
 # -- a run -------------------------------------------------------------------------------------
 
 
+def _kept(law):
+    """What the law keeps for the next step: sorted keys, normal forces, inverse masses, and
+    their means by surface."""
+    return (
+        law._keys,
+        law._normal,
+        law._inverse_mass,
+        law._surface_normal,
+        law._surface_inverse_mass,
+    )
+
+
 @pytest.mark.slow
 @pytest.mark.mujoco
 def test_the_compiled_law_is_the_numpy_law_step_after_step_of_a_run():
@@ -230,13 +242,7 @@ def test_the_compiled_law_is_the_numpy_law_step_after_step_of_a_run():
                     law.vertex_offset,
                 )
                 previous = law._keys.copy()
-                kept = (
-                    law._keys,
-                    law._normal,
-                    law._inverse_mass,
-                    law._surface_normal,
-                    law._surface_inverse_mass,
-                )
+                kept = _kept(law)
                 friction, vec, clamped = np_friction(
                     *selected,
                     con.efc_address,
@@ -275,13 +281,7 @@ def test_the_compiled_law_is_the_numpy_law_step_after_step_of_a_run():
                     law.is_surface.size,
                 )
                 law.record(data)
-                kept = (
-                    law._keys,
-                    law._normal,
-                    law._inverse_mass,
-                    law._surface_normal,
-                    law._surface_inverse_mass,
-                )
+                kept = _kept(law)
                 for a, b in zip(expected, kept, strict=True):
                     assert same_bits(a, b)
             else:
