@@ -237,7 +237,7 @@ def test_the_compiled_law_is_the_numpy_law_step_after_step_of_a_run():
                     con.elem,
                     con.pos,
                     law.is_surface,
-                    law._triangles,
+                    law.triangles,
                     data.flexvert_xpos,
                     law.vertex_offset,
                 )

@@ -91,16 +91,13 @@ class ContactFriction:
             self.offset[gid] = off
         self.h = float(model.opt.timestep)
         flex = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, "packaging")
-        self.triangles: np.ndarray | None = None
+        # the packaging shell's triangles (vertex ids within the flex); none without a 2-D shell
+        self.triangles = np.zeros((0, 3), dtype=np.int32)
         self.vertex_offset = 0
         if flex >= 0 and model.flex_dim[flex] == 2:
             elems = model.flex_elem[model.flex_elemdataadr[flex] :]
             self.triangles = np.asarray(elems[: 3 * int(model.flex_elemnum[flex])]).reshape(-1, 3)
             self.vertex_offset = int(model.flex_vertadr[flex])
-        # the kernels take an empty table for a packaging without a 2-D shell
-        self._triangles = (
-            np.zeros((0, 3), dtype=np.int32) if self.triangles is None else self.triangles
-        )
         self._qfrc = np.zeros(model.nv)
         # the step before's contacts on surfaces: sorted keys, normal forces, inverse masses
         self._keys = np.zeros(0, dtype=np.int64)
@@ -126,7 +123,7 @@ class ContactFriction:
             con.elem,
             con.pos,
             self.is_surface,
-            self._triangles,
+            self.triangles,
             data.flexvert_xpos,
             self.vertex_offset,
         )
