@@ -1,7 +1,7 @@
 """Simulation speed: 2 s of E3 (induction) with the flexible parcels, one core.
 
     python benchmarks/bench_sim.py [--repeats 3] [--types KPBW PB] [--scene KEY=VALUE ...]
-                                   [--peer KEY=VALUE ...] [--explain] [--profile]
+                                   [--peer KEY=VALUE ...] [--explain [--windows S]] [--profile]
 
 Simulates exactly 2 s (the end box is widened so the run does not stop at the rig's end) for
 KPBW (flexible packaging, rigid content) and PB (polybag, soft content), or the ``--types``
@@ -114,6 +114,14 @@ def main() -> None:
         "configurations they replaced and say why they were made",
     )
     ap.add_argument(
+        "--windows",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="with --explain: each profile also per window of this length (Newton iterations, "
+        "contacts, steps with a contact slid by hand)",
+    )
+    ap.add_argument(
         "--profile",
         action="store_true",
         help="also print where a step's time goes (MuJoCo's timers, Newton iterations, contacts)",
@@ -149,7 +157,7 @@ def main() -> None:
         if cons in BUDGET and wall > BUDGET[cons]:
             over.append(cons)
     if args.explain:
-        _explain(over, sim, rig, given, args.repeats)
+        _explain(over, sim, rig, given, args.repeats, args.windows)
     if args.profile:
         print(
             f"\n{'case':<10}{'ms/step':>9}{'solver':>8}{'pos+col':>9}{'rest':>7}"
@@ -177,7 +185,12 @@ def _alternate(
 
 
 def _explain(
-    over: list[str], sim: MujocoSimulator, rig: object, given: dict[str, object], repeats: int
+    over: list[str],
+    sim: MujocoSimulator,
+    rig: object,
+    given: dict[str, object],
+    repeats: int,
+    window: float | None = None,
 ) -> None:
     """For each type above its target: its fidelity choices' cost against the cheaper
     configurations they replaced (median wall times [s], measured alternately) and why."""
@@ -187,6 +200,11 @@ def _explain(
     for cons in over:
         print(f"\nE3/{cons} is above its target of {BUDGET[cons]:.0f} s. What its fidelity costs:")
         profiles: list[tuple[str, MujocoSimulator]] = [("as timed", sim)]
+        bundled = MujocoSimulator(sim.options).run({}, TestCase("E3", cons, 1))
+        print(
+            f"  (on the bundled E3, whose end box stops a run {bundled_end_note()}, this run "
+            f"ends after {bundled.diagnostics['simulated_time']:.2f} s of the 2 s timed)"
+        )
         for options, why in FIDELITY.get(cons, []):
             cheaper = SceneOptions(**{**given, **parse_scene_options(options)})  # type: ignore[arg-type]
             cheap_sim = MujocoSimulator(SimOptions(scene=cheaper), rigs={"E3": rig})  # type: ignore[dict-item]
@@ -202,15 +220,29 @@ def _explain(
             f"{'rest':>7}{'Newton it':>11}{'contacts':>10}{'rows':>7}{'nv':>6}"
         )
         for label, which in profiles:
-            print(f"  {label[:40]:<40}" + _profile(which, cons))
+            print(f"  {label[:40]:<40}" + _profile(which, cons, window))
 
 
-def _profile(sim: MujocoSimulator, cons: str) -> str:
+def bundled_end_note() -> str:
+    """How the bundled E3 ends a run, in words."""
+    end = load_rig("E3").end
+    return (
+        f"when the centre leaves x = {end.x[0]:g} to {end.x[1]:g} m, {end.after_last_barrier:g} s after "
+        f"the last light barrier or at {end.duration:g} s"
+    )
+
+
+def _profile(sim: MujocoSimulator, cons: str, window: float | None = None) -> str:
     """One 2 s run of ``cons`` on E3 stepped here with MuJoCo's timers: per step [ms] in total,
     in the constraint solver, in positions and collisions, and the rest; mean Newton
-    iterations, contacts and constraint rows per step; the degrees of freedom."""
+    iterations, contacts and constraint rows per step; the degrees of freedom. With ``window``
+    [s], also a line per window of that length: mean Newton iterations and contacts per step,
+    and the steps in which the friction law slid some contact by hand."""
     scene = sim.scene({}, TestCase("E3", cons, 1))
     iters = contacts = rows = 0
+    per_step_iters: list[int] = []
+    per_step_contacts: list[int] = []
+    by_hand: list[int] = []
     with CountedWarnings():  # counted, not printed, as in the simulator's own runs
         model = scene.model()
         data = mujoco.MjData(model)
@@ -220,10 +252,16 @@ def _profile(sim: MujocoSimulator, cons: str) -> str:
         )
         n = round(2.0 / model.opt.timestep)
         for _ in range(n):
+            before = stepper.contact.explicit_steps if stepper.contact is not None else 0
             stepper.step()
             iters += int(data.solver_niter[0])
             contacts += data.ncon
             rows += data.nefc
+            if window is not None:
+                per_step_iters.append(int(data.solver_niter[0]))
+                per_step_contacts.append(int(data.ncon))
+                after = stepper.contact.explicit_steps if stepper.contact is not None else 0
+                by_hand.append(after - before)
 
     def per_step(timer: mujoco.mjtTimer) -> float:
         t = data.timer[timer]
@@ -232,10 +270,23 @@ def _profile(sim: MujocoSimulator, cons: str) -> str:
     total = per_step(mujoco.mjtTimer.mjTIMER_STEP)
     solver = per_step(mujoco.mjtTimer.mjTIMER_CONSTRAINT)
     position = per_step(mujoco.mjtTimer.mjTIMER_POSITION)
-    return (
+    line = (
         f"{total:>9.2f}{solver:>8.2f}{position:>9.2f}{total - solver - position:>7.2f}"
         f"{iters / n:>11.2f}{contacts / n:>10.0f}{rows / n:>7.0f}{model.nv:>6d}"
     )
+    if window is None:
+        return line
+    w = max(1, round(window / model.opt.timestep))
+    for k in range(0, n, w):
+        it, con, hand = (
+            np.asarray(a[k : k + w]) for a in (per_step_iters, per_step_contacts, by_hand)
+        )
+        t0, t1 = k * model.opt.timestep, min(k + w, n) * model.opt.timestep
+        line += (
+            f"\n      {t0:4.2f}-{t1:4.2f} s: Newton it {it.mean():6.2f}, contacts {con.mean():5.0f}, "
+            f"steps with a contact slid by hand {int(hand.sum())} of {it.size}"
+        )
+    return line
 
 
 if __name__ == "__main__":
