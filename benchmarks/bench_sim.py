@@ -15,10 +15,13 @@ run, alternating the two (``--peer``, default the contact and friction laws befo
 ``contact_law=impedance friction=geom``), and prints the ratio of their wall times, so that a
 change of the machine's state between runs moves both.
 
-``--explain`` says, for each type above its target, how much its fidelity costs and why: it
-times the type against the cheaper configuration each fidelity choice replaced (alternating the
-two, as the peer), prints the ratio with the reason the choice was made and the note that
-measured it, and the profile line of where the type's step goes.
+``--explain`` says, for each type above its target, how much its fidelity costs and why: when
+the bundled E3 would have ended the run timed; for each fidelity choice (`FIDELITY`) the type
+timed against the cheaper configuration the choice replaced (alternating the two, as the peer),
+the ratio, and why the choice was made with the note that measured it; then the profile line
+(below) of the run as timed and of each cheaper configuration. ``--windows S`` adds to each
+profile a line per window of S seconds (rounded to whole steps): mean Newton iterations and
+contacts per step, and the steps in which the friction law slid some contact by hand.
 
 ``--profile`` then steps each type's scene once more for the same 2 s with MuJoCo's own timers
 and prints where a step's time goes: the constraint solver, positions and collisions, and the
@@ -31,12 +34,13 @@ from __future__ import annotations
 import argparse
 import statistics
 from dataclasses import replace
+from typing import Any, NamedTuple
 
 import mujoco
 import numpy as np
 
 from parcelfit.runs import TestCase
-from parcelfit.sim.mujoco import MujocoSimulator, SceneOptions, SimOptions, load_rig
+from parcelfit.sim.mujoco import MujocoSimulator, Rig, SceneOptions, SimOptions, load_rig
 from parcelfit.sim.mujoco.friction import Stepper
 from parcelfit.sim.mujoco.mjlog import CountedWarnings
 from parcelfit.sim.mujoco.options import parse_scene_options
@@ -45,32 +49,40 @@ from parcelfit.sim.mujoco.simulator import _set_velocity
 PUBLISHED_SECONDS = 5 * 3600.0
 BUDGET = {"KPBW": 8.0, "PB": 30.0}  # s, the targets of the physics issue
 FORMER_LAWS = ["contact_law=impedance", "friction=geom"]
-# Per type, the fidelity choices that cost time: the cheaper configuration each replaced (scene
-# options) and why it was replaced, with the research note that measured it.
-FIDELITY: dict[str, list[tuple[list[str], str]]] = {
+
+
+class Fidelity(NamedTuple):
+    """A fidelity choice of a consignment type: the cheaper configuration it replaced (scene
+    options, KEY=VALUE) and why it was made, naming the research note that measured it."""
+
+    cheaper: list[str]
+    why: str
+
+
+FIDELITY: dict[str, list[Fidelity]] = {
     "KPBW": [
-        (
+        Fidelity(
             ["shell_cells=4,4,1"],
-            "its shell over 5 x 5 x 1 cells (72 nodes against 50): the 55 mm rim is a row of "
-            "cells of its own that moves apart from the content, which gives E_Pa and k_CoPa the "
-            "reference's signs on E3's slides and keeps the outcomes converged "
+            "its shell over 5 x 5 x 1 cells (72 nodes against 50): on E3's slides a stiffer "
+            "packaging turns 16 of 17 further and a stiffer content contact slows all 17, the "
+            "signs of the full shell at a fine step (4 x 4 x 1 cells: 7 of 16 and 15 of 17), and "
+            "its outcomes hold on a finer mesh at 18 of 20 placements (4 x 4 x 1: 16) "
             "(docs/research/rim-brace/README.md)",
         ),
     ],
     "PB": [
-        (
+        Fidelity(
             FORMER_LAWS,
-            "the penalty contact and the friction decided per contact (docs/research/contact-law.md): "
-            "compare the Newton iterations per step in the profile lines below; in the 2 s timed "
-            "here the bag is carried on past the rig's end for its last 0.4 s, a state in which "
-            "the solver iterates far more under today's laws than under the former ones",
+            "the penalty contact, whose stiffness follows the packaging's, and the friction "
+            "decided per contact, under which a sliding parcel keeps touching the belt "
+            "(docs/research/contact-law.md); the profile lines below show where the steps' "
+            "time goes in each",
         ),
-        (
+        Fidelity(
             ["timestep=1/600"],
-            "the polybag's step, 1/1200 s: at 1/600 s every outcome holds but the transit times "
-            "are biased by up to 50 ms at E3 setting 2 (docs/research/pb-speed.md); most of a "
-            "step is MuJoCo's Newton solve over the film's contacts with its soft content "
-            "(the profile line below)",
+            "its step, 1/1200 s: at 1/600 s every E3 outcome holds, but at setting 2 the polybag "
+            "arrives 50 ms late (median, paired, measured on the former 40 mm meshes; "
+            "docs/research/pb-speed.md)",
         ),
     ],
 }
@@ -127,13 +139,15 @@ def main() -> None:
         help="also print where a step's time goes (MuJoCo's timers, Newton iterations, contacts)",
     )
     args = ap.parse_args()
+    if args.windows is not None and (not args.explain or not args.windows > 0):
+        ap.error("--windows takes a positive number of seconds, and only with --explain")
     rig = load_rig("E3")
     rig = replace(rig, end=replace(rig.end, x=(-1.0, 3.9), duration=2.0, after_last_barrier=10.0))
-    given = parse_scene_options(args.scene)
+    given: dict[str, Any] = parse_scene_options(args.scene)
     if args.iterations is not None:
         given["iterations"] = args.iterations
-    scene = SceneOptions(**given)  # type: ignore[arg-type]
-    peer = SceneOptions(**{**given, **parse_scene_options(args.peer)})  # type: ignore[arg-type]
+    scene = SceneOptions(**given)
+    peer = SceneOptions(**{**given, **parse_scene_options(args.peer)})
     sim = MujocoSimulator(SimOptions(scene=scene), rigs={"E3": rig})
     peer_sim = MujocoSimulator(SimOptions(scene=peer), rigs={"E3": rig})
     print(
@@ -187,34 +201,39 @@ def _alternate(
 def _explain(
     over: list[str],
     sim: MujocoSimulator,
-    rig: object,
-    given: dict[str, object],
+    rig: Rig,
+    given: dict[str, Any],
     repeats: int,
     window: float | None = None,
 ) -> None:
-    """For each type above its target: its fidelity choices' cost against the cheaper
-    configurations they replaced (median wall times [s], measured alternately) and why."""
+    """For each type above its target: when the bundled E3 would have ended the run; its
+    fidelity choices' cost against the cheaper configurations they replaced (median wall times
+    [s], measured alternately) and why; the profiles of the run as timed and of each cheaper one."""
     if not over:
-        print("\nevery type timed is within its target")
+        print("\nevery type timed that has a target is within it")
         return
     for cons in over:
         print(f"\nE3/{cons} is above its target of {BUDGET[cons]:.0f} s. What its fidelity costs:")
-        profiles: list[tuple[str, MujocoSimulator]] = [("as timed", sim)]
         bundled = MujocoSimulator(sim.options).run({}, TestCase("E3", cons, 1))
-        print(
-            f"  (on the bundled E3, whose end box stops a run {bundled_end_note()}, this run "
-            f"ends after {bundled.diagnostics['simulated_time']:.2f} s of the 2 s timed)"
-        )
-        for options, why in FIDELITY.get(cons, []):
-            cheaper = SceneOptions(**{**given, **parse_scene_options(options)})  # type: ignore[arg-type]
-            cheap_sim = MujocoSimulator(SimOptions(scene=cheaper), rigs={"E3": rig})  # type: ignore[dict-item]
+        if bundled.ok:
+            print(
+                f"  (on the bundled E3, whose end box stops a run {_bundled_end_note()}, this run "
+                f"ends after {bundled.diagnostics['simulated_time']:.2f} s of the 2 s timed)"
+            )
+        profiles: list[tuple[str, MujocoSimulator]] = [("as timed", sim)]
+        for choice in FIDELITY.get(cons, []):
+            cheaper = SceneOptions(**{**given, **parse_scene_options(choice.cheaper)})
+            label = " ".join(choice.cheaper)
+            if cheaper == sim.options.scene:
+                print(f"  {label}: already the configuration timed (--scene), not compared")
+                continue
+            cheap_sim = MujocoSimulator(SimOptions(scene=cheaper), rigs={"E3": rig})
             (walls, cheap_walls), _ = _alternate(cons, (sim, cheap_sim), repeats)
             wall, cheap = statistics.median(walls), statistics.median(cheap_walls)
             print(
-                f"  {wall:.2f} s against {cheap:.2f} s with {' '.join(options)}: "
-                f"{wall / cheap:.2f} times, for {why}"
+                f"  {wall:.2f} s against {cheap:.2f} s with {label}: {wall / cheap:.2f} times, for {choice.why}"
             )
-            profiles.append((" ".join(options), cheap_sim))
+            profiles.append((label, cheap_sim))
         print(
             f"  where a step goes:\n  {'scene':<40}{'ms/step':>9}{'solver':>8}{'pos+col':>9}"
             f"{'rest':>7}{'Newton it':>11}{'contacts':>10}{'rows':>7}{'nv':>6}"
@@ -223,7 +242,7 @@ def _explain(
             print(f"  {label[:40]:<40}" + _profile(which, cons, window))
 
 
-def bundled_end_note() -> str:
+def _bundled_end_note() -> str:
     """How the bundled E3 ends a run, in words."""
     end = load_rig("E3").end
     return (
@@ -276,17 +295,39 @@ def _profile(sim: MujocoSimulator, cons: str, window: float | None = None) -> st
     )
     if window is None:
         return line
-    w = max(1, round(window / model.opt.timestep))
-    for k in range(0, n, w):
-        it, con, hand = (
-            np.asarray(a[k : k + w]) for a in (per_step_iters, per_step_contacts, by_hand)
-        )
-        t0, t1 = k * model.opt.timestep, min(k + w, n) * model.opt.timestep
+    for t0, t1, steps, it, con, hand in window_means(
+        per_step_iters, per_step_contacts, by_hand, model.opt.timestep, window
+    ):
+        slid = str(hand) if stepper.contact is not None else "- (no per-contact law)"
         line += (
-            f"\n      {t0:4.2f}-{t1:4.2f} s: Newton it {it.mean():6.2f}, contacts {con.mean():5.0f}, "
-            f"steps with a contact slid by hand {int(hand.sum())} of {it.size}"
+            f"\n      {t0:4.2f}-{t1:4.2f} s: Newton it {it:6.2f}, contacts {con:5.0f}, "
+            f"steps with a contact slid by hand {slid} of {steps}"
         )
     return line
+
+
+def window_means(
+    iterations: list[int], contacts: list[int], by_hand: list[int], step: float, window: float
+) -> list[tuple[float, float, int, float, float, int]]:
+    """Per window of ``window`` seconds (rounded to whole steps of ``step`` s, at least one; the
+    last may be shorter): its start and end [s], its steps, the mean Newton iterations and
+    contacts per step, and the steps with a contact slid by hand."""
+    n = len(iterations)
+    w = max(1, round(window / step))
+    out = []
+    for k in range(0, n, w):
+        m = min(k + w, n)
+        out.append(
+            (
+                k * step,
+                m * step,
+                m - k,
+                float(np.mean(iterations[k:m])),
+                float(np.mean(contacts[k:m])),
+                int(np.sum(by_hand[k:m])),
+            )
+        )
+    return out
 
 
 if __name__ == "__main__":
