@@ -169,7 +169,7 @@ def test_help_names_list_options_and_the_demo_default():
     )
     assert "--executor [serial|local|dask]" in calibrate
     demo = " ".join(runner.invoke(app, ["demo", "--help"], terminal_width=120).output.split())
-    assert "Without a flag: the published 32-run screen" in demo and "about 20 minutes" in demo
+    assert "Without a flag: the published 32-run screen" in demo and "about 25 minutes" in demo
     assert "the file's executor" not in demo
 
 
