@@ -25,10 +25,10 @@ def bench():
 
 def test_every_type_with_a_target_says_what_its_fidelity_costs(bench) -> None:
     assert set(bench.FIDELITY) == set(bench.BUDGET)
-    case_default = MujocoSimulator(SimOptions(scene=SceneOptions()))
+    default_sim = MujocoSimulator(SimOptions(scene=SceneOptions()))
     for cons, choices in bench.FIDELITY.items():
         assert choices, cons
-        default_xml = case_default.scene({}, TestCase("E3", cons, 1)).xml
+        default_xml = default_sim.scene({}, TestCase("E3", cons, 1)).xml
         for choice in choices:
             cheaper = SceneOptions(**parse_scene_options(choice.cheaper))
             xml = MujocoSimulator(SimOptions(scene=cheaper)).scene({}, TestCase("E3", cons, 1)).xml
