@@ -173,10 +173,7 @@ def main() -> None:
     if args.explain:
         _explain(over, sim, rig, given, args.repeats, args.windows)
     if args.profile:
-        print(
-            f"\n{'case':<10}{'ms/step':>9}{'solver':>8}{'pos+col':>9}{'rest':>7}"
-            f"{'Newton it':>11}{'contacts':>10}{'rows':>7}{'nv':>6}"
-        )
+        print(f"\n{'case':<10}{PROFILE_COLUMNS}")
         for cons in args.types:
             print(f"{'E3/' + cons:<10}" + _profile(sim, cons))
 
@@ -234,10 +231,7 @@ def _explain(
                 f"  {wall:.2f} s against {cheap:.2f} s with {label}: {wall / cheap:.2f} times, for {choice.why}"
             )
             profiles.append((label, cheap_sim))
-        print(
-            f"  where a step goes:\n  {'scene':<40}{'ms/step':>9}{'solver':>8}{'pos+col':>9}"
-            f"{'rest':>7}{'Newton it':>11}{'contacts':>10}{'rows':>7}{'nv':>6}"
-        )
+        print(f"  where a step goes:\n  {'scene':<40}{PROFILE_COLUMNS}")
         for label, which in profiles:
             print(f"  {label[:40]:<40}" + _profile(which, cons, window))
 
@@ -251,6 +245,13 @@ def _bundled_end_note() -> str:
     )
 
 
+# the columns of a `_profile` line, after its first (a case or a scene)
+PROFILE_COLUMNS = (
+    f"{'ms/step':>9}{'solver':>8}{'pos+col':>9}{'rest':>7}"
+    f"{'Newton it':>11}{'contacts':>10}{'rows':>7}{'nv':>6}"
+)
+
+
 def _profile(sim: MujocoSimulator, cons: str, window: float | None = None) -> str:
     """One 2 s run of ``cons`` on E3 stepped here with MuJoCo's timers: per step [ms] in total,
     in the constraint solver, in positions and collisions, and the rest; mean Newton
@@ -258,7 +259,7 @@ def _profile(sim: MujocoSimulator, cons: str, window: float | None = None) -> st
     [s], also a line per window of that length: mean Newton iterations and contacts per step,
     and the steps in which the friction law slid some contact by hand."""
     scene = sim.scene({}, TestCase("E3", cons, 1))
-    iters = contacts = rows = 0
+    rows = 0
     per_step_iters: list[int] = []
     per_step_contacts: list[int] = []
     by_hand: list[int] = []
@@ -273,14 +274,11 @@ def _profile(sim: MujocoSimulator, cons: str, window: float | None = None) -> st
         for _ in range(n):
             before = stepper.contact.explicit_steps if stepper.contact is not None else 0
             stepper.step()
-            iters += int(data.solver_niter[0])
-            contacts += data.ncon
             rows += data.nefc
-            if window is not None:
-                per_step_iters.append(int(data.solver_niter[0]))
-                per_step_contacts.append(int(data.ncon))
-                after = stepper.contact.explicit_steps if stepper.contact is not None else 0
-                by_hand.append(after - before)
+            per_step_iters.append(int(data.solver_niter[0]))
+            per_step_contacts.append(int(data.ncon))
+            after = stepper.contact.explicit_steps if stepper.contact is not None else 0
+            by_hand.append(after - before)
 
     def per_step(timer: mujoco.mjtTimer) -> float:
         t = data.timer[timer]
@@ -291,7 +289,7 @@ def _profile(sim: MujocoSimulator, cons: str, window: float | None = None) -> st
     position = per_step(mujoco.mjtTimer.mjTIMER_POSITION)
     line = (
         f"{total:>9.2f}{solver:>8.2f}{position:>9.2f}{total - solver - position:>7.2f}"
-        f"{iters / n:>11.2f}{contacts / n:>10.0f}{rows / n:>7.0f}{model.nv:>6d}"
+        f"{sum(per_step_iters) / n:>11.2f}{sum(per_step_contacts) / n:>10.0f}{rows / n:>7.0f}{model.nv:>6d}"
     )
     if window is None:
         return line
