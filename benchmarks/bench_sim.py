@@ -1,7 +1,7 @@
 """Simulation speed: 2 s of E3 (induction) with the flexible parcels, one core.
 
     python benchmarks/bench_sim.py [--repeats 3] [--types KPBW PB] [--scene KEY=VALUE ...]
-                                   [--peer KEY=VALUE ...] [--explain [--windows S]] [--profile]
+                                   [--peer KEY=VALUE ...] [--explain] [--profile] [--windows S]
 
 Simulates exactly 2 s (the end box is widened so the run does not stop at the rig's end) for
 KPBW (flexible packaging, rigid content) and PB (polybag, soft content), or the ``--types``
@@ -23,17 +23,29 @@ the ratio, and why the choice was made with the note that measured it; then the 
 profile a line per window of S seconds (rounded to whole steps): mean Newton iterations and
 contacts per step, and the steps in which the friction law slid some contact by hand.
 
-``--profile`` then steps each type's scene once more for the same 2 s with MuJoCo's own timers
-and prints where a step's time goes: the constraint solver, positions and collisions, and the
-rest (mostly the smooth dynamics' factorisation), with the mean Newton iterations, contacts,
-constraint rows and degrees of freedom (nv).
+``--profile`` then steps each type's scene, and the peer's, once more for the same 2 s with
+MuJoCo's own timers and prints where a step's time goes: the constraint solver, positions and
+collisions, and the rest (mostly the smooth dynamics' factorisation), with the mean Newton
+iterations, contacts, constraint rows and degrees of freedom (nv). ``--windows S`` adds the
+same per-window lines to ``--profile`` as to ``--explain``.
+
+Other work on the machine slows a run when it wants more cores than are free: on a 2-core
+machine KP/BW took as long beside one busy process (``--neighbours 1``) as alone, and 1.4-1.5
+times as long beside two. The benchmark therefore prints the processor and, under the table,
+how many cores other processes kept busy on average while it timed the table (from the
+kernel's /proc/stat, beside this process's own CPU time), and warns when they took more than
+the cores it leaves free: the times are then not a measure against the targets. The ratios to
+the peer, measured alternately, are less affected.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
+import sys
 from dataclasses import replace
+from pathlib import Path
 from typing import Any, NamedTuple
 
 import mujoco
@@ -45,6 +57,10 @@ from parcelfit.sim.mujoco.friction import Stepper
 from parcelfit.sim.mujoco.mjlog import CountedWarnings
 from parcelfit.sim.mujoco.options import parse_scene_options
 from parcelfit.sim.mujoco.simulator import _set_velocity
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from machine_load import OtherWork, busy_neighbour, processor, report_other_work
 
 PUBLISHED_SECONDS = 5 * 3600.0
 BUDGET = {"KPBW": 8.0, "PB": 30.0}  # s, the targets of the physics issue
@@ -77,6 +93,14 @@ FIDELITY: dict[str, list[Fidelity]] = {
             "decided per contact, under which a sliding parcel keeps touching the belt "
             "(docs/research/contact-law.md); the profile lines below show where the steps' "
             "time goes in each",
+        ),
+        Fidelity(
+            ["impratio=1000"],
+            "MuJoCo's impratio of 1e4 under the penalty law, which stiffens the friction rows "
+            "against the normal's so that a sticking contact holds (at 100 a parcel pushed with "
+            "half its weight creeps 0.03 mm/s, from 1e3 it holds; docs/research/contact-law.md), "
+            "with a factor of ten to spare: MuJoCo's Newton solver iterates more the stiffer the "
+            "friction rows are (docs/research/pb-speed.md)",
         ),
         Fidelity(
             ["timestep=1/600"],
@@ -130,8 +154,22 @@ def main() -> None:
         type=float,
         default=None,
         metavar="SECONDS",
-        help="with --explain: each profile also per window of this length (Newton iterations, "
-        "contacts, steps with a contact slid by hand)",
+        help="with --explain or --profile: each profile also per window of this length (Newton "
+        "iterations, contacts, steps with a contact slid by hand)",
+    )
+    ap.add_argument(
+        "--rig",
+        default="E3",
+        help="the E3 rig to time: the bundled one (default) or a variant's rig file, e.g. "
+        "examples/e3-variants/E3-centres.yaml (E3's start before 2026-12-05)",
+    )
+    ap.add_argument(
+        "--neighbours",
+        type=int,
+        default=0,
+        metavar="N",
+        help="keep N other processes busy (each a pure-Python loop on one core) while timing "
+        "the table, to show what other work on the machine does to the times",
     )
     ap.add_argument(
         "--profile",
@@ -139,9 +177,13 @@ def main() -> None:
         help="also print where a step's time goes (MuJoCo's timers, Newton iterations, contacts)",
     )
     args = ap.parse_args()
-    if args.windows is not None and (not args.explain or not args.windows > 0):
-        ap.error("--windows takes a positive number of seconds, and only with --explain")
-    rig = load_rig("E3")
+    if args.neighbours < 0:
+        ap.error("--neighbours takes a whole number of processes, 0 or more")
+    if args.windows is not None and not args.windows > 0:
+        ap.error("--windows takes a positive number of seconds")
+    if args.windows is not None and not args.profile and not args.explain:
+        ap.error("--windows takes effect with --explain or --profile")
+    rig = load_rig(args.rig)
     rig = replace(rig, end=replace(rig.end, x=(-1.0, 3.9), duration=2.0, after_last_barrier=10.0))
     given: dict[str, Any] = parse_scene_options(args.scene)
     if args.iterations is not None:
@@ -150,6 +192,7 @@ def main() -> None:
     peer = SceneOptions(**{**given, **parse_scene_options(args.peer)})
     sim = MujocoSimulator(SimOptions(scene=scene), rigs={"E3": rig})
     peer_sim = MujocoSimulator(SimOptions(scene=peer), rigs={"E3": rig})
+    print(f"processor: {processor()}, {os.cpu_count()} cores; rig: {args.rig}")
     print(
         f"E3, speed setting 1, 2.0 s simulated, default resolution, one core, "
         f"iteration cap {scene.iterations}, contact law {scene.contact_law}, friction "
@@ -160,6 +203,8 @@ def main() -> None:
         f"{'peer [s]':>10}{'ratio':>7}"
     )
     over: list[str] = []
+    neighbours = [busy_neighbour() for _ in range(args.neighbours)]
+    watch = OtherWork()
     for cons in args.types:
         (walls, peer_walls), rates = _alternate(cons, (sim, peer_sim), args.repeats)
         wall, peer_wall = statistics.median(walls), statistics.median(peer_walls)
@@ -170,12 +215,19 @@ def main() -> None:
         )
         if cons in BUDGET and wall > BUDGET[cons]:
             over.append(cons)
+    print(report_other_work(watch.cores(), os.cpu_count()))
+    for proc in neighbours:
+        proc.terminate()
+        proc.join()
+    if neighbours:
+        print(f"(neighbour processes busy beside the table: {len(neighbours)})")
     if args.explain:
         _explain(over, sim, rig, given, args.repeats, args.windows)
     if args.profile:
         print(f"\n{'case':<10}{PROFILE_COLUMNS}")
         for cons in args.types:
-            print(f"{'E3/' + cons:<10}" + _profile(sim, cons))
+            print(f"{'E3/' + cons:<10}" + _profile(sim, cons, args.windows))
+            print(f"{'  peer':<10}" + _profile(peer_sim, cons, args.windows))
 
 
 def _alternate(

@@ -63,3 +63,54 @@ def test_window_means_are_the_steps_own_means(bench) -> None:
     assert [t for r in rows for t in r[:2]] == pytest.approx([0.0, 0.02, 0.02, 0.04, 0.04, 0.05])
     # a window shorter than a step is one step
     assert len(bench.window_means(iterations, contacts, by_hand, 0.01, 0.001)) == 5
+
+
+@pytest.fixture(scope="module")
+def machine():
+    return load_file_module("benchmarks/machine_load.py")
+
+
+def test_busy_seconds_count_the_busy_ticks_of_proc_stat(machine) -> None:
+    # user nice system idle iowait irq softirq steal guest guest_nice
+    line = "cpu  100 20 30 5000 40 5 6 7 50 0"
+    assert machine.busy_seconds(line, 100.0) == pytest.approx((100 + 20 + 30 + 5 + 6 + 7) / 100.0)
+    # an older kernel's shorter line: the missing fields count 0
+    assert machine.busy_seconds("cpu 10 0 10 500", 10.0) == pytest.approx(2.0)
+    with pytest.raises(ValueError, match="cpu line"):
+        machine.busy_seconds("cpu0 1 2 3 4", 100.0)
+
+
+def test_other_cores_subtract_this_process(machine) -> None:
+    # 10 s of wall, all cores busy 13 CPU s, 10 of them this process's: 0.3 cores of other work
+    assert machine.other_cores(13.0, 10.0, 10.0) == pytest.approx(0.3)
+    # the kernel's ticks and the process's clock disagree by rounding: never below 0
+    assert machine.other_cores(9.99, 10.0, 10.0) == 0.0
+    assert machine.other_cores(5.0, 1.0, 0.0) == 0.0
+
+
+def test_other_work_is_warned_of_when_it_takes_more_than_the_free_cores(machine) -> None:
+    assert (
+        machine.report_other_work(0.05, 2)
+        == "other work beside the timing: 0.05 cores busy on average"
+    )
+    # one busy process on the other of 2 cores: the benchmark's core stays free
+    assert "WARNING" not in machine.report_other_work(1.0, 2)
+    # two of them, or one on a single core: they take time on the benchmark's core
+    assert "WARNING" in machine.report_other_work(1.3, 2)
+    assert "WARNING" in machine.report_other_work(0.5, 1)
+    assert "not measured" in machine.report_other_work(None, 2)
+
+
+def test_other_work_counts_the_busy_time_beside_this_process(machine, monkeypatch) -> None:
+    busy = iter([100.0, 106.0])  # all cores' busy CPU s at the start and the end
+    own = iter([1.0, 5.0])  # this process's CPU s
+    clock = iter([50.0, 60.0])  # wall clock [s]
+    monkeypatch.setattr(machine, "_read_busy", lambda: next(busy))
+    monkeypatch.setattr(machine, "_own_cpu", lambda: next(own))
+    monkeypatch.setattr(machine, "_clock", lambda: next(clock))
+    # 6 busy CPU s in 10 s, 4 of them this process's: 0.2 cores of other work
+    assert machine.OtherWork().cores() == pytest.approx(0.2)
+    monkeypatch.setattr(machine, "_read_busy", lambda: None)
+    monkeypatch.setattr(machine, "_own_cpu", lambda: 0.0)
+    monkeypatch.setattr(machine, "_clock", lambda: 0.0)
+    assert machine.OtherWork().cores() is None
