@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -34,6 +35,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_predict_coverage import coverage_row, row_text
+from machine_load import other_work_now, processor
 
 QUANTITIES = ("transit_time", "rotation", "exit_y", "exit_heading")
 DEFAULT_CANDIDATES = "E3/KPBW/2,E1/KPBW/1,E1/KPBW/3,E3/BW/1"
@@ -147,6 +149,12 @@ def main() -> None:
     from parcelfit.study.studyfile import load_study
 
     args.out.mkdir(parents=True, exist_ok=True)
+    other = other_work_now()
+    print(
+        f"processor: {processor()}, {os.cpu_count()} cores; other work just before the start: "
+        + ("not measured" if other is None else f"{other:.2f} cores busy"),
+        flush=True,
+    )
     study = load_study(args.study)
     folder = args.out / "calibration"
     seconds: dict[str, float] = {}

@@ -21,6 +21,7 @@ from pathlib import Path
 
 OTHER_WORK_LIMIT = 0.2  # cores other processes may keep busy on average before times are suspect
 _clock = time.perf_counter  # the wall clock [s] (a name of its own, for the tests)
+_sleep = time.sleep
 
 
 def processor() -> str:
@@ -66,6 +67,14 @@ class OtherWork:
         if busy is None or self._busy is None:
             return None
         return other_cores(busy - self._busy, _own_cpu() - self._own, _clock() - self._t)
+
+
+def other_work_now(seconds: float = 2.0) -> float | None:
+    """Cores other processes keep busy over the next ``seconds`` [s], this process idle: for a
+    benchmark whose own worker processes keep it from measuring other work while it runs."""
+    watch = OtherWork()
+    _sleep(seconds)
+    return watch.cores()
 
 
 def report_other_work(other: float | None, cores: int | None) -> str:

@@ -114,3 +114,16 @@ def test_other_work_counts_the_busy_time_beside_this_process(machine, monkeypatc
     monkeypatch.setattr(machine, "_own_cpu", lambda: 0.0)
     monkeypatch.setattr(machine, "_clock", lambda: 0.0)
     assert machine.OtherWork().cores() is None
+
+
+def test_other_work_now_watches_while_this_process_waits(machine, monkeypatch) -> None:
+    busy = iter([10.0, 11.5])
+    clock = iter([0.0, 2.0])
+    slept: list[float] = []
+    monkeypatch.setattr(machine, "_read_busy", lambda: next(busy))
+    monkeypatch.setattr(machine, "_own_cpu", lambda: 3.0)
+    monkeypatch.setattr(machine, "_clock", lambda: next(clock))
+    monkeypatch.setattr(machine, "_sleep", slept.append)
+    # 1.5 busy CPU s in 2 s, none of them this process's
+    assert machine.other_work_now(2.0) == pytest.approx(0.75)
+    assert slept == [2.0]
