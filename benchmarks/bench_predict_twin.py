@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import time
 from pathlib import Path
@@ -35,7 +34,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_predict_coverage import coverage_row, row_text
-from machine_load import other_work_now, processor
+from machine_load import Watch, other_work_now, processor, report_machine, usable_cores
 
 QUANTITIES = ("transit_time", "rotation", "exit_y", "exit_heading")
 DEFAULT_CANDIDATES = "E3/KPBW/2,E1/KPBW/1,E1/KPBW/3,E3/BW/1"
@@ -151,10 +150,11 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     other = other_work_now()
     print(
-        f"processor: {processor()}, {os.cpu_count()} cores; other work just before the start: "
-        + ("not measured" if other is None else f"{other:.2f} cores busy"),
+        f"processor: {processor()}, {usable_cores()} usable cores; other work just before the "
+        + ("start: not measured" if other is None else f"start: {other:.2f} cores busy"),
         flush=True,
     )
+    watch = Watch()
     study = load_study(args.study)
     folder = args.out / "calibration"
     seconds: dict[str, float] = {}
@@ -205,6 +205,12 @@ def main() -> None:
         "wall time: "
         + ", ".join(f"{k} {v / 60:.1f} min" for k, v in seconds.items())
         + f"; in all {total / 60:.1f} min on {args.workers} processes"
+    )
+    # the workers have ended by now, so their CPU time is this process's children's
+    print(
+        report_machine(
+            "while it ran", None, watch.cores(), max(usable_cores() - args.workers + 1, 1)
+        )
     )
 
 

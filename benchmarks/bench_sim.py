@@ -1,7 +1,8 @@
 """Simulation speed: 2 s of E3 (induction) with the flexible parcels, one core.
 
     python benchmarks/bench_sim.py [--repeats 3] [--types KPBW PB] [--scene KEY=VALUE ...]
-                                   [--peer KEY=VALUE ...] [--explain] [--profile] [--windows S]
+                                   [--peer KEY=VALUE ...] [--iterations N] [--rig E3|FILE]
+                                   [--explain] [--profile] [--windows S] [--neighbours N]
 
 Simulates exactly 2 s (the end box is widened so the run does not stop at the rig's end) for
 KPBW (flexible packaging, rigid content) and PB (polybag, soft content), or the ``--types``
@@ -29,19 +30,18 @@ collisions, and the rest (mostly the smooth dynamics' factorisation), with the m
 iterations, contacts, constraint rows and degrees of freedom (nv). ``--windows S`` adds the
 same per-window lines to ``--profile`` as to ``--explain``.
 
-Other work on the machine slows a run when it wants more cores than are free: on a 2-core
-machine KP/BW took as long beside one busy process (``--neighbours 1``) as alone, and 1.4-1.5
-times as long beside two. The benchmark therefore prints the processor and, under the table,
-how many cores other processes kept busy on average while it timed the table (from the
-kernel's /proc/stat, beside this process's own CPU time), and warns when they took more than
-the cores it leaves free: the times are then not a measure against the targets. The ratios to
-the peer, measured alternately, are less affected.
+Other work on the machine slows a run when it takes time on the benchmark's core. Under the
+table, and under each comparison of ``--explain``, the benchmark prints its own share of a
+core while it timed and the cores other processes kept busy (`machine_load.py`), and warns when
+its share fell below 0.95 or the others took more than the free cores: the times are then not a
+measure against the targets; the ratios, measured alternately, are less affected.
+``--neighbours N`` starts N busy processes beside the table, to show what other work does.
+``--rig FILE`` times a variant of E3 (``--explain`` only with the bundled one).
 """
 
 from __future__ import annotations
 
 import argparse
-import os
 import statistics
 import sys
 from dataclasses import replace
@@ -60,7 +60,7 @@ from parcelfit.sim.mujoco.simulator import _set_velocity
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from machine_load import OtherWork, busy_neighbour, processor, report_other_work
+from machine_load import Watch, busy_neighbour, processor, report_machine, usable_cores
 
 PUBLISHED_SECONDS = 5 * 3600.0
 BUDGET = {"KPBW": 8.0, "PB": 30.0}  # s, the targets of the physics issue
@@ -177,6 +177,8 @@ def main() -> None:
         help="also print where a step's time goes (MuJoCo's timers, Newton iterations, contacts)",
     )
     args = ap.parse_args()
+    if args.explain and args.rig != "E3":
+        ap.error("--explain describes the bundled E3: leave out --rig")
     if args.neighbours < 0:
         ap.error("--neighbours takes a whole number of processes, 0 or more")
     if args.windows is not None and not args.windows > 0:
@@ -192,7 +194,8 @@ def main() -> None:
     peer = SceneOptions(**{**given, **parse_scene_options(args.peer)})
     sim = MujocoSimulator(SimOptions(scene=scene), rigs={"E3": rig})
     peer_sim = MujocoSimulator(SimOptions(scene=peer), rigs={"E3": rig})
-    print(f"processor: {processor()}, {os.cpu_count()} cores; rig: {args.rig}")
+    cores = usable_cores()
+    print(f"processor: {processor()}, {cores} usable cores; rig: {args.rig}")
     print(
         f"E3, speed setting 1, 2.0 s simulated, default resolution, one core, "
         f"iteration cap {scene.iterations}, contact law {scene.contact_law}, friction "
@@ -200,22 +203,29 @@ def main() -> None:
     )
     print(
         f"{'case':<10}{'wall [s]':>10}{'steps/s':>10}{'x faster than 5 h':>20}{'target [s]':>12}"
-        f"{'peer [s]':>10}{'ratio':>7}"
+        f"{'peer [s]':>10}{'ratio':>7}  (range of wall)"
     )
     over: list[str] = []
     neighbours = [busy_neighbour() for _ in range(args.neighbours)]
-    watch = OtherWork()
+    machine: list[str] = []
     for cons in args.types:
+        watch = Watch()
         (walls, peer_walls), rates = _alternate(cons, (sim, peer_sim), args.repeats)
+        machine.append(
+            report_machine(
+                f"while timing E3/{cons} and its peer", watch.own_share(), watch.cores(), cores
+            )
+        )
         wall, peer_wall = statistics.median(walls), statistics.median(peer_walls)
         print(
             f"{'E3/' + cons:<10}{wall:>10.2f}{statistics.median(rates):>10.0f}{PUBLISHED_SECONDS / wall:>20.0f}"
             + (f"{BUDGET[cons]:>12.0f}" if cons in BUDGET else f"{'-':>12}")
             + f"{peer_wall:>10.2f}{wall / peer_wall:>7.2f}"
+            + f"  ({min(walls):.2f}-{max(walls):.2f})"
         )
         if cons in BUDGET and wall > BUDGET[cons]:
             over.append(cons)
-    print(report_other_work(watch.cores(), os.cpu_count()))
+    print("\n".join(machine))
     for proc in neighbours:
         proc.terminate()
         proc.join()
@@ -277,11 +287,16 @@ def _explain(
                 print(f"  {label}: already the configuration timed (--scene), not compared")
                 continue
             cheap_sim = MujocoSimulator(SimOptions(scene=cheaper), rigs={"E3": rig})
+            watch = Watch()
             (walls, cheap_walls), _ = _alternate(cons, (sim, cheap_sim), repeats)
+            machine = report_machine(
+                "    while timing these", watch.own_share(), watch.cores(), usable_cores()
+            )
             wall, cheap = statistics.median(walls), statistics.median(cheap_walls)
             print(
                 f"  {wall:.2f} s against {cheap:.2f} s with {label}: {wall / cheap:.2f} times, for {choice.why}"
             )
+            print(machine)
             profiles.append((label, cheap_sim))
         print(f"  where a step goes:\n  {'scene':<40}{PROFILE_COLUMNS}")
         for label, which in profiles:

@@ -1,14 +1,22 @@
-"""The machine a benchmark runs on, and how much other work ran beside it.
+"""The machine a benchmark runs on, and whether other work took time from it.
 
-Wall times depend on the processor and on what else the machine does. On a 2-core machine a
-2 s KP/BW run on E3 took as long beside one process busy on the other core as alone, and 1.4-1.5
-times as long beside two (`python benchmarks/bench_sim.py --types KPBW --neighbours N`): other
-work slows a single-process benchmark when it wants more cores than are free. The benchmark
-therefore measures the cores other processes kept busy while it timed: the busy CPU time of
-all cores from the kernel's /proc/stat (Linux) less this process's own CPU time, over the
-wall time. Not measurable where
-there is no /proc/stat, and not for a benchmark that runs worker processes of its own (their
-CPU time is not this process's until they end).
+Wall times depend on the processor and on what else the machine does. A single-process
+benchmark (one simulation on one core) measures, while it times:
+
+* **its own share of a core**: its CPU time over the wall time. A single-threaded run alone on
+  a core has about 1; less means other work took time on its core (or it waited for the disk).
+* **the cores other processes kept busy**: the busy CPU time of all cores from the kernel's
+  /proc/stat (Linux; user, nice, system, irq, softirq and steal, so a hypervisor's stolen time
+  counts as other work; in a container /proc/stat is the host's) less its own CPU time, over
+  the wall time. Worker processes of its own count as other work until they have ended and
+  been waited for (then they are in its children's CPU time).
+
+It warns when its own share is below `OWN_SHARE_MIN`, or when other processes took more than
+the cores it leaves free (the cores this process may run on, less one) by `OTHER_WORK_LIMIT`.
+What other work did on one 2-core machine (`python benchmarks/bench_sim.py --types KPBW
+--neighbours N`, each neighbour a pure-Python loop): with one, KP/BW took as long as alone;
+with two, 1.53 times as long. A neighbour that uses memory and caches as a simulation does was
+not tried.
 """
 
 from __future__ import annotations
@@ -19,20 +27,48 @@ import platform
 import time
 from pathlib import Path
 
-OTHER_WORK_LIMIT = 0.2  # cores other processes may keep busy on average before times are suspect
+OTHER_WORK_LIMIT = 0.2  # cores other processes may keep busy beyond the free ones
+OWN_SHARE_MIN = 0.95  # the least share of a core a single-threaded timing may have
 _clock = time.perf_counter  # the wall clock [s] (a name of its own, for the tests)
 _sleep = time.sleep
 
 
 def processor() -> str:
-    """The processor's model name (Linux's /proc/cpuinfo), else what the platform says."""
+    """The processor: its model name with family, model and clock (Linux's /proc/cpuinfo, first
+    core), else what the platform says."""
+    fields: dict[str, str] = {}
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
+            if not line.strip():
+                break
+            key, _, value = line.partition(":")
+            fields.setdefault(key.strip(), value.strip())
     except OSError:
         pass
-    return platform.processor() or "unknown"
+    return describe_processor(fields) or platform.processor() or platform.machine() or "unknown"
+
+
+def describe_processor(fields: dict[str, str]) -> str:
+    """A processor's description from its /proc/cpuinfo fields ("" when it names no model)."""
+    name = fields.get("model name", "")
+    if not name:
+        return ""
+    detail = [
+        f"{label} {fields[key]}"
+        for key, label in (("cpu family", "family"), ("model", "model"))
+        if key in fields
+    ]
+    if "cpu MHz" in fields:
+        detail.append(f"{float(fields['cpu MHz']):.0f} MHz")
+    return f"{name} ({', '.join(detail)})" if detail else name
+
+
+def usable_cores() -> int:
+    """The cores this process may run on (its affinity), else the machine's."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:
+        return os.cpu_count() or 1
 
 
 def busy_seconds(stat_cpu_line: str, ticks_per_second: float) -> float:
@@ -53,8 +89,8 @@ def other_cores(busy: float, own: float, wall: float) -> float:
     return max(0.0, (busy - own) / wall) if wall > 0 else 0.0
 
 
-class OtherWork:
-    """How many cores other processes keep busy, from its creation to :meth:`cores`."""
+class Watch:
+    """What this process and the others did on the machine, from its creation on."""
 
     def __init__(self) -> None:
         self._busy = _read_busy()
@@ -68,29 +104,40 @@ class OtherWork:
             return None
         return other_cores(busy - self._busy, _own_cpu() - self._own, _clock() - self._t)
 
+    def own_share(self) -> float:
+        """This process's CPU time since creation over the wall time: its share of a core."""
+        wall = _clock() - self._t
+        return (_own_cpu() - self._own) / wall if wall > 0 else 1.0
+
 
 def other_work_now(seconds: float = 2.0) -> float | None:
     """Cores other processes keep busy over the next ``seconds`` [s], this process idle: for a
     benchmark whose own worker processes keep it from measuring other work while it runs."""
-    watch = OtherWork()
+    watch = Watch()
     _sleep(seconds)
     return watch.cores()
 
 
-def report_other_work(other: float | None, cores: int | None) -> str:
-    """The line (two with a warning) saying how many cores other processes kept busy while a
-    single-process benchmark timed, warning when they took more than the ``cores`` - 1 it
-    leaves free, by `OTHER_WORK_LIMIT`: then they competed for its core."""
-    if other is None:
-        return "other work beside the timing: not measured (no /proc/stat)"
-    line = f"other work beside the timing: {other:.2f} cores busy on average"
-    free = max((cores or 1) - 1, 0)
-    if other > free + OTHER_WORK_LIMIT:
+def report_machine(what: str, own_share: float | None, other: float | None, cores: int) -> str:
+    """The line on ``what`` was timed: this process's share of a core (None: not a
+    single-process timing) and the cores other processes kept busy (None: not measured), with
+    a warning (a second line) when its share is below `OWN_SHARE_MIN` or the others took more
+    than the ``cores`` - 1 it leaves free by more than `OTHER_WORK_LIMIT`."""
+    parts = []
+    if own_share is not None:
+        parts.append(f"this process {own_share:.2f} of a core")
+    parts.append("other work not measured" if other is None else f"other work {other:.2f} cores")
+    line = f"{what}: {', '.join(parts)}"
+    free = max(cores - 1, 0)
+    why = []
+    if own_share is not None and own_share < OWN_SHARE_MIN:
+        why.append(f"this process had {own_share:.2f} of a core (less than {OWN_SHARE_MIN})")
+    if other is not None and other > free + OTHER_WORK_LIMIT:
+        why.append(f"other processes kept {other:.2f} cores busy, more than the {free} left free")
+    if why:
         line += (
-            f"\nWARNING: other processes kept {other:.2f} cores busy, more than the {free} this "
-            "benchmark leaves free: they took time on its core, so the wall times are slower "
-            "than this machine's and not a measure against the targets; the ratios, measured "
-            "alternately, count more"
+            f"\nWARNING: {'; '.join(why)}: the wall times are slower than this machine's and "
+            "not a measure against the targets; ratios measured alternately count more"
         )
     return line
 

@@ -88,17 +88,32 @@ def test_other_cores_subtract_this_process(machine) -> None:
     assert machine.other_cores(5.0, 1.0, 0.0) == 0.0
 
 
-def test_other_work_is_warned_of_when_it_takes_more_than_the_free_cores(machine) -> None:
+def test_the_machine_line_warns_when_the_timing_lost_time_on_its_core(machine) -> None:
+    limit, share = machine.OTHER_WORK_LIMIT, machine.OWN_SHARE_MIN
     assert (
-        machine.report_other_work(0.05, 2)
-        == "other work beside the timing: 0.05 cores busy on average"
+        machine.report_machine("while timing X", 0.99, 0.05, 2)
+        == "while timing X: this process 0.99 of a core, other work 0.05 cores"
     )
-    # one busy process on the other of 2 cores: the benchmark's core stays free
-    assert "WARNING" not in machine.report_other_work(1.0, 2)
-    # two of them, or one on a single core: they take time on the benchmark's core
-    assert "WARNING" in machine.report_other_work(1.3, 2)
-    assert "WARNING" in machine.report_other_work(0.5, 1)
-    assert "not measured" in machine.report_other_work(None, 2)
+    # one busy process on the other of 2 cores leaves the benchmark's core free
+    assert "WARNING" not in machine.report_machine("t", 0.99, 1.0, 2)
+    # other work beyond the free cores, just above and at the limit
+    assert "WARNING" in machine.report_machine("t", 0.99, 1 + limit + 1e-6, 2)
+    assert "WARNING" not in machine.report_machine("t", 0.99, 1 + limit, 2)
+    assert "WARNING" in machine.report_machine("t", 0.99, limit + 1e-6, 1)
+    # this process's own share of its core, just below and at the least allowed
+    assert "WARNING" in machine.report_machine("t", share - 1e-6, 0.0, 2)
+    assert "WARNING" not in machine.report_machine("t", share, 0.0, 2)
+    # a multi-process run: no share of its own; other work not measurable
+    line = machine.report_machine("t", None, None, 2)
+    assert line == "t: other work not measured"
+
+
+def test_the_processor_is_described_by_model_family_and_clock(machine) -> None:
+    fields = {"model name": "AMD EPYC", "cpu family": "26", "model": "2", "cpu MHz": "2596.122"}
+    assert machine.describe_processor(fields) == "AMD EPYC (family 26, model 2, 2596 MHz)"
+    assert machine.describe_processor({"model name": "X"}) == "X"
+    # an ARM core's /proc/cpuinfo names no model: the platform's word is taken instead
+    assert machine.describe_processor({"CPU implementer": "0x41"}) == ""
 
 
 def test_other_work_counts_the_busy_time_beside_this_process(machine, monkeypatch) -> None:
@@ -109,11 +124,11 @@ def test_other_work_counts_the_busy_time_beside_this_process(machine, monkeypatc
     monkeypatch.setattr(machine, "_own_cpu", lambda: next(own))
     monkeypatch.setattr(machine, "_clock", lambda: next(clock))
     # 6 busy CPU s in 10 s, 4 of them this process's: 0.2 cores of other work
-    assert machine.OtherWork().cores() == pytest.approx(0.2)
+    assert machine.Watch().cores() == pytest.approx(0.2)
     monkeypatch.setattr(machine, "_read_busy", lambda: None)
     monkeypatch.setattr(machine, "_own_cpu", lambda: 0.0)
     monkeypatch.setattr(machine, "_clock", lambda: 0.0)
-    assert machine.OtherWork().cores() is None
+    assert machine.Watch().cores() is None
 
 
 def test_other_work_now_watches_while_this_process_waits(machine, monkeypatch) -> None:
@@ -127,3 +142,12 @@ def test_other_work_now_watches_while_this_process_waits(machine, monkeypatch) -
     # 1.5 busy CPU s in 2 s, none of them this process's
     assert machine.other_work_now(2.0) == pytest.approx(0.75)
     assert slept == [2.0]
+
+
+def test_the_own_share_is_cpu_time_over_wall_time(machine, monkeypatch) -> None:
+    own = iter([2.0, 2.9])
+    clock = iter([0.0, 1.0])
+    monkeypatch.setattr(machine, "_read_busy", lambda: 0.0)
+    monkeypatch.setattr(machine, "_own_cpu", lambda: next(own))
+    monkeypatch.setattr(machine, "_clock", lambda: next(clock))
+    assert machine.Watch().own_share() == pytest.approx(0.9)
