@@ -14,9 +14,9 @@ benchmark (one simulation on one core) measures, while it times:
 It warns when its own share is below `OWN_SHARE_MIN`, or when other processes took more than
 the cores it leaves free (the cores this process may run on, less one) by `OTHER_WORK_LIMIT`.
 What other work did on one 2-core machine (`python benchmarks/bench_sim.py --types KPBW
---neighbours N`, each neighbour a pure-Python loop): with one, KP/BW took as long as alone;
-with two, 1.53 times as long. A neighbour that uses memory and caches as a simulation does was
-not tried.
+--neighbours N`, each neighbour a pure-Python loop): with one, KP/BW took 1.03 times as long
+as alone; with two, 1.49 times (docs/research/pb-speed.md). A neighbour that uses memory and
+caches as a simulation does was not tried.
 """
 
 from __future__ import annotations
