@@ -40,16 +40,22 @@ import math
 import multiprocessing
 import os
 import statistics
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from machine_load import installed, processor
+
 SPLIT_SEED = 57
 BATCH = 4
 N_INITIAL = 16
 SAMPLERS = ("gp", "published", "tpe", "optuna-gp", "botorch")
+VERSIONED = ("numpy", "scipy", "scikit-learn", "optuna", "torch", "botorch", "gpytorch")
 
 Objective = Callable[[np.ndarray], float]
 
@@ -458,6 +464,9 @@ def main() -> None:
     ap.add_argument("--summary-only", action="store_true")
     args = ap.parse_args()
     samplers = args.samplers.split(",")
+    # results can differ between machines and installs (docs/research/bo-wide/replication.md)
+    print(f"processor: {processor()}", flush=True)
+    print(f"installed: {installed(VERSIONED)}", flush=True)
     args.out.mkdir(parents=True, exist_ok=True)
     with (args.out / "split.csv").open("w", newline="") as fh:
         w = csv.writer(fh)

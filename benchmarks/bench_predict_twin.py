@@ -34,7 +34,14 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_predict_coverage import coverage_row, row_text
-from machine_load import Watch, other_work_now, processor, report_machine, usable_cores
+from machine_load import (
+    Watch,
+    installed,
+    other_work_now,
+    processor,
+    report_machine,
+    usable_cores,
+)
 
 QUANTITIES = ("transit_time", "rotation", "exit_y", "exit_heading")
 DEFAULT_CANDIDATES = "E3/KPBW/2,E1/KPBW/1,E1/KPBW/3,E3/BW/1"
@@ -154,6 +161,7 @@ def main() -> None:
         + ("start: not measured" if other is None else f"start: {other:.2f} cores busy"),
         flush=True,
     )
+    print(f"installed: {installed(('mujoco', 'numba', 'numpy', 'scipy', 'scikit-learn'))}")
     watch = Watch()
     study = load_study(args.study)
     folder = args.out / "calibration"

@@ -60,7 +60,14 @@ from parcelfit.sim.mujoco.simulator import _set_velocity
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from machine_load import Watch, busy_neighbour, processor, report_machine, usable_cores
+from machine_load import (
+    Watch,
+    busy_neighbour,
+    installed,
+    processor,
+    report_machine,
+    usable_cores,
+)
 
 PUBLISHED_SECONDS = 5 * 3600.0
 BUDGET = {"KPBW": 8.0, "PB": 30.0}  # s, the targets of the physics issue
@@ -196,6 +203,7 @@ def main() -> None:
     peer_sim = MujocoSimulator(SimOptions(scene=peer), rigs={"E3": rig})
     cores = usable_cores()
     print(f"processor: {processor()}, {cores} usable cores; rig: {args.rig}")
+    print(f"installed: {installed(('mujoco', 'numba', 'numpy'))}")
     print(
         f"E3, speed setting 1, 2.0 s simulated, default resolution, one core, "
         f"iteration cap {scene.iterations}, contact law {scene.contact_law}, friction "

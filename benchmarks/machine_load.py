@@ -25,6 +25,7 @@ import multiprocessing
 import os
 import platform
 import time
+from importlib import metadata
 from pathlib import Path
 
 OTHER_WORK_LIMIT = 0.2  # cores other processes may keep busy beyond the free ones
@@ -46,6 +47,18 @@ def processor() -> str:
     except OSError:
         pass
     return describe_processor(fields) or platform.processor() or platform.machine() or "unknown"
+
+
+def installed(names: tuple[str, ...]) -> str:
+    """The installed versions of the packages ``names`` ("numpy 2.4.6, ..."), "not installed"
+    for those that are not, with Python's: a benchmark's results can differ between installs."""
+    parts = [f"Python {platform.python_version()}"]
+    for name in names:
+        try:
+            parts.append(f"{name} {metadata.version(name)}")
+        except metadata.PackageNotFoundError:
+            parts.append(f"{name} not installed")
+    return ", ".join(parts)
 
 
 def describe_processor(fields: dict[str, str]) -> str:

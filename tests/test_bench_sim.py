@@ -151,3 +151,12 @@ def test_the_own_share_is_cpu_time_over_wall_time(machine, monkeypatch) -> None:
     monkeypatch.setattr(machine, "_own_cpu", lambda: next(own))
     monkeypatch.setattr(machine, "_clock", lambda: next(clock))
     assert machine.Watch().own_share() == pytest.approx(0.9)
+
+
+def test_installed_names_each_version_and_what_is_missing(machine) -> None:
+    line = machine.installed(("numpy", "no-such-package-parcelfit"))
+    import numpy
+
+    assert line.startswith("Python ")
+    assert f"numpy {numpy.__version__}" in line
+    assert "no-such-package-parcelfit not installed" in line
