@@ -33,8 +33,8 @@ same per-window lines to ``--profile`` as to ``--explain``.
 Other work on the machine slows a run when it takes time on the benchmark's core. Under the
 table, and under each comparison of ``--explain``, the benchmark prints its own share of a
 core while it timed and the cores other processes kept busy (`machine_load.py`), and warns when
-its share fell below 0.95 or the others took more than the free cores: the times are then not a
-measure against the targets; the ratios, measured alternately, are less affected.
+its share fell below 0.95 or the others took more than the free cores by over 0.2: the times
+are then not a measure against the targets; the ratios, measured alternately, are less affected.
 ``--neighbours N`` starts N busy processes beside the table, to show what other work does.
 ``--rig FILE`` times a variant of E3 (``--explain`` only with the bundled one).
 """
@@ -104,7 +104,7 @@ FIDELITY: dict[str, list[Fidelity]] = {
         Fidelity(
             ["impratio=1000"],
             "MuJoCo's impratio of 1e4 under the penalty law, which stiffens the friction rows "
-            "against the normal's so that a sticking contact holds (at 100 a parcel pushed with "
+            "against the normal's so that a sticking contact holds (at 100 a KP/BW pushed with "
             "half its weight creeps 0.03 mm/s, from 1e3 it holds; docs/research/contact-law.md), "
             "with a factor of ten to spare: MuJoCo's Newton solver iterates more the stiffer the "
             "friction rows are (docs/research/pb-speed.md)",

@@ -132,7 +132,7 @@ def other_work_now(seconds: float = 2.0) -> float | None:
 
 
 def report_machine(what: str, own_share: float | None, other: float | None, cores: int) -> str:
-    """The line on ``what`` was timed: this process's share of a core (None: not a
+    """The line saying how ``what`` was timed: this process's share of a core (None: not a
     single-process timing) and the cores other processes kept busy (None: not measured), with
     a warning (a second line) when its share is below `OWN_SHARE_MIN` or the others took more
     than the ``cores`` - 1 it leaves free by more than `OTHER_WORK_LIMIT`."""
