@@ -214,12 +214,10 @@ def main() -> None:
         + ", ".join(f"{k} {v / 60:.1f} min" for k, v in seconds.items())
         + f"; in all {total / 60:.1f} min on {args.workers} processes"
     )
-    # the workers have ended by now, so their CPU time is this process's children's
-    print(
-        report_machine(
-            "while it ran", None, watch.cores(), max(usable_cores() - args.workers + 1, 1)
-        )
-    )
+    # the workers have ended by now, so their CPU time is this process's children's; they
+    # leave the cores beyond their number free
+    free = max(usable_cores() - args.workers, 0)
+    print(report_machine("while it ran", None, watch.cores(), free))
 
 
 if __name__ == "__main__":

@@ -221,7 +221,7 @@ def main() -> None:
         (walls, peer_walls), rates = _alternate(cons, (sim, peer_sim), args.repeats)
         machine.append(
             report_machine(
-                f"while timing E3/{cons} and its peer", watch.own_share(), watch.cores(), cores
+                f"while timing E3/{cons} and its peer", watch.own_share(), watch.cores(), cores - 1
             )
         )
         wall, peer_wall = statistics.median(walls), statistics.median(peer_walls)
@@ -298,7 +298,7 @@ def _explain(
             watch = Watch()
             (walls, cheap_walls), _ = _alternate(cons, (sim, cheap_sim), repeats)
             machine = report_machine(
-                "    while timing these", watch.own_share(), watch.cores(), usable_cores()
+                "    while timing these", watch.own_share(), watch.cores(), usable_cores() - 1
             )
             wall, cheap = statistics.median(walls), statistics.median(cheap_walls)
             print(

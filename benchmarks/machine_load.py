@@ -12,7 +12,8 @@ benchmark (one simulation on one core) measures, while it times:
   been waited for (then they are in its children's CPU time).
 
 It warns when its own share is below `OWN_SHARE_MIN`, or when other processes took more than
-the cores it leaves free (the cores this process may run on, less one) by `OTHER_WORK_LIMIT`.
+the cores it leaves free (for a single-process benchmark the cores it may run on, less one) by
+`OTHER_WORK_LIMIT`.
 What other work did on one 2-core machine (`python benchmarks/bench_sim.py --types KPBW
 --neighbours N`, each neighbour a pure-Python loop): with one, KP/BW took 1.03 times as long
 as alone; with two, 1.49 times (docs/research/pb-speed.md). A neighbour that uses memory and
@@ -131,17 +132,16 @@ def other_work_now(seconds: float = 2.0) -> float | None:
     return watch.cores()
 
 
-def report_machine(what: str, own_share: float | None, other: float | None, cores: int) -> str:
+def report_machine(what: str, own_share: float | None, other: float | None, free: int) -> str:
     """The line saying how ``what`` was timed: this process's share of a core (None: not a
     single-process timing) and the cores other processes kept busy (None: not measured), with
     a warning (a second line) when its share is below `OWN_SHARE_MIN` or the others took more
-    than the ``cores`` - 1 it leaves free by more than `OTHER_WORK_LIMIT`."""
+    than the ``free`` cores the timing leaves them by more than `OTHER_WORK_LIMIT`."""
     parts = []
     if own_share is not None:
         parts.append(f"this process {own_share:.2f} of a core")
     parts.append("other work not measured" if other is None else f"other work {other:.2f} cores")
     line = f"{what}: {', '.join(parts)}"
-    free = max(cores - 1, 0)
     why = []
     if own_share is not None and own_share < OWN_SHARE_MIN:
         why.append(f"this process had {own_share:.2f} of a core (less than {OWN_SHARE_MIN})")

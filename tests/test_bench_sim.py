@@ -91,20 +91,20 @@ def test_other_cores_subtract_this_process(machine) -> None:
 def test_the_machine_line_warns_when_the_timing_lost_time_on_its_core(machine) -> None:
     limit, share = machine.OTHER_WORK_LIMIT, machine.OWN_SHARE_MIN
     assert (
-        machine.report_machine("while timing X", 0.99, 0.05, 2)
+        machine.report_machine("while timing X", 0.99, 0.05, 1)
         == "while timing X: this process 0.99 of a core, other work 0.05 cores"
     )
-    # one busy process on the other of 2 cores leaves the benchmark's core free
-    assert "WARNING" not in machine.report_machine("t", 0.99, 1.0, 2)
+    # one busy process on the one core left free (2 cores, one benchmark process)
+    assert "WARNING" not in machine.report_machine("t", 0.99, 1.0, 1)
     # other work beyond the free cores, just above and at the limit
-    assert "WARNING" in machine.report_machine("t", 0.99, 1 + limit + 1e-6, 2)
-    assert "WARNING" not in machine.report_machine("t", 0.99, 1 + limit, 2)
-    assert "WARNING" in machine.report_machine("t", 0.99, limit + 1e-6, 1)
+    assert "WARNING" in machine.report_machine("t", 0.99, 1 + limit + 1e-6, 1)
+    assert "WARNING" not in machine.report_machine("t", 0.99, 1 + limit, 1)
+    assert "WARNING" in machine.report_machine("t", 0.99, limit + 1e-6, 0)
     # this process's own share of its core, just below and at the least allowed
-    assert "WARNING" in machine.report_machine("t", share - 1e-6, 0.0, 2)
-    assert "WARNING" not in machine.report_machine("t", share, 0.0, 2)
+    assert "WARNING" in machine.report_machine("t", share - 1e-6, 0.0, 1)
+    assert "WARNING" not in machine.report_machine("t", share, 0.0, 1)
     # a multi-process run: no share of its own; other work not measurable
-    line = machine.report_machine("t", None, None, 2)
+    line = machine.report_machine("t", None, None, 1)
     assert line == "t: other work not measured"
 
 
