@@ -27,8 +27,10 @@ and the K runs at the high end, against the same change between the runs at the 
 standard error of the change (how much another draw of K placements would move it). On a rig
 where single placements near the spin/slide threshold change branch with any small change, this
 is the response a parameter has to move. ``--scene KEY=VALUE`` sets scene options other
-than the defaults (e.g. ``belt_friction=coulomb``). Writes ``docs/research/parameter-effects.md``
-(``--out``).
+than the defaults (e.g. ``belt_friction=coulomb``). ``--backend rigidbox`` measures the same in
+the independent rigid-box reference (`parcelfit.sim.rigidbox`, its ``--bottom-patch``), for the
+parameters its world is built from (the shell's, E_Pa and k_CoPa, do not exist in it). Writes
+``docs/research/parameter-effects.md`` (``--out``).
 """
 
 from __future__ import annotations
@@ -45,7 +47,14 @@ import numpy as np
 from parcelfit.metrics.comparison import Comparison
 from parcelfit.metrics.dtw import dtw_distance
 from parcelfit.runs import Run, TestCase
-from parcelfit.sim.ensemble import EnsembleShift, Member, ensemble_shift, member_of
+from parcelfit.sim.ensemble import (
+    TIE_ANGLE,
+    EnsembleShift,
+    Member,
+    ensemble_shift,
+    member_of,
+    paired_order,
+)
 from parcelfit.sim.mujoco import (
     MujocoSimulator,
     SceneOptions,
@@ -54,17 +63,28 @@ from parcelfit.sim.mujoco import (
     load_rig,
 )
 from parcelfit.sim.mujoco.options import scene_options
-from parcelfit.sim.params import CATALOGUE
+from parcelfit.sim.params import BOTTOM_PATCHES, CATALOGUE
+from parcelfit.sim.rigidbox import RigidBoxOptions, RigidBoxSimulator
+from parcelfit.sim.rigidbox.simulator import PARAMETERS as REFERENCE_PARAMETERS
 
 PUBLISHED_E3 = ("k_CoPa", "k_MePa", "mu_d_BePa", "mu_d_MePa", "mu_s_MePa", "E_Pa")
 MEASURES = ("DTW_xy [m]", "DTW_theta [rad]", "transit [s]")
 ENSEMBLE_MEASURES = ("median rotation [deg]", "median transit [s]", "spin share [-]")
 
 
-def _simulate(job: tuple[dict[str, float], TestCase, int, SceneOptions]) -> Member:
-    params, case, seed, scene = job
-    sim = MujocoSimulator(SimOptions(scene=scene)).with_placement(seed)
-    return member_of(seed, sim.run(params, case))
+Job = tuple[dict[str, float], TestCase, int, SceneOptions, str, str]
+
+
+def _simulate(job: Job) -> Member:
+    params, case, seed, scene, backend, bottom_patch = job
+    sim: MujocoSimulator | RigidBoxSimulator
+    if backend == "rigidbox":
+        sim = RigidBoxSimulator(
+            RigidBoxOptions(bottom_patch=bottom_patch, start_offset=scene.start_offset)
+        )
+    else:
+        sim = MujocoSimulator(SimOptions(scene=scene))
+    return member_of(seed, sim.with_placement(seed).run(params, case))
 
 
 def _table_head(
@@ -95,9 +115,9 @@ def _members(runs: dict[tuple[str, str, int], Member], name: str, label: str) ->
 
 
 def _shift_values(sh: EnsembleShift) -> tuple[np.ndarray, np.ndarray]:
-    """(|differences|, standard errors) in the units of ENSEMBLE_MEASURES."""
+    """(differences b - a, standard errors) in the units of ENSEMBLE_MEASURES."""
     deg = 180 / np.pi
-    values = np.abs([sh.rotation_median * deg, sh.transit_median, sh.spin_share])
+    values = np.array([sh.rotation_median * deg, sh.transit_median, sh.spin_share])
     ses = np.array([sh.rotation_median_se * deg, sh.transit_median_se, sh.spin_share_se])
     return values, ses
 
@@ -113,16 +133,17 @@ def _ensemble_lines(
         floor[name], _ = _shift_values(
             ensemble_shift(_members(runs, name, "minus"), _members(runs, name, "plus"))
         )
+    floor = {name: np.abs(v) for name, v in floor.items()}
     noise = np.nanmedian(np.array(list(floor.values())), axis=0)
     lines = [
         "",
         f"## The ensemble of {n} placements",
         "",
-        "What each parameter does to the ensemble's statistics: effect = |change| between the "
-        f"{n} runs at the low and the {n} runs at the high end (matched placements), with its "
-        "paired bootstrap standard error (SE); floor = the same change between the runs at the "
-        "default -+step; noise floor = median of the floors. A ratio is effect / noise floor "
-        "(inf where the floor is 0: no placement changed), z = effect / SE.",
+        "What each parameter does to the ensemble's statistics: effect = change from the "
+        f"{n} runs at the low to the {n} runs at the high end (matched placements; high - low), "
+        "with its paired bootstrap standard error (SE); floor = |the same change| between the "
+        "runs at the default -+step; noise floor = median of the floors. A ratio is |effect| / "
+        "noise floor (inf where the floor is 0: no placement changed), z = |effect| / SE.",
         "",
         *_table_head(
             "Ensemble noise floor",
@@ -135,12 +156,12 @@ def _ensemble_lines(
     ]
     with np.errstate(divide="ignore", invalid="ignore"):
         for name in params:
-            ratio = effect[name] / noise
-            z = effect[name] / se[name]
+            ratio = np.abs(effect[name]) / noise
+            z = np.abs(effect[name]) / se[name]
             lines.append(
                 f"| {name} | "
                 + " | ".join(
-                    f"{v:.4g} ({e:.2g})" for v, e in zip(effect[name], se[name], strict=True)
+                    f"{v:+.4g} ({e:.2g})" for v, e in zip(effect[name], se[name], strict=True)
                 )
                 + " | "
                 + " | ".join(f"{v:.4g}" for v in floor[name])
@@ -151,9 +172,22 @@ def _ensemble_lines(
                 + " |"
             )
         moved = {
-            n_: bool(np.any((effect[n_] / noise >= 3) & (effect[n_] / se[n_] >= 2)))
+            n_: bool(np.any((np.abs(effect[n_]) / noise >= 3) & (np.abs(effect[n_]) / se[n_] >= 2)))
             for n_ in params
         }
+    lines += [
+        "",
+        "Placement by placement (rotations closer than "
+        f"{np.degrees(TIE_ANGLE):g} degree count as alike; sign test over the others):",
+        "",
+    ]
+    for name in params:
+        po = paired_order(_members(runs, name, "low"), _members(runs, name, "high"))
+        lines.append(
+            f"* {name}: at the high end further at {po.b_further} of {po.n_pairs} placements, "
+            f"less at {po.a_further}, alike at {po.ties} (p = {po.p_value:.2g}); median paired "
+            f"difference {np.degrees(po.median_difference):+.2f} degrees"
+        )
     lines += [
         "",
         "Parameters that move at least one ensemble statistic by >= 3 times its floor and >= 2 "
@@ -189,7 +223,34 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--out", type=Path, default=Path("docs/research"))
     ap.add_argument("--scene", nargs="*", default=[], metavar="KEY=VALUE")
+    ap.add_argument(
+        "--backend",
+        choices=("mujoco", "rigidbox"),
+        default="mujoco",
+        help="the model measured: MuJoCo's, or the independent rigid-box reference",
+    )
+    ap.add_argument(
+        "--bottom-patch",
+        choices=BOTTOM_PATCHES,
+        default=None,
+        help="rigidbox: where the bottom carries contact (default: the consignment's)",
+    )
     args = ap.parse_args(argv)
+    if args.backend == "rigidbox":
+        absent = [n for n in args.params if n not in REFERENCE_PARAMETERS]
+        if absent:
+            ap.error(
+                f"--params: {', '.join(absent)} do not exist in the rigid-box reference (it has "
+                f"no packaging shell); it takes {', '.join(REFERENCE_PARAMETERS)}"
+            )
+        other = sorted(k.split("=", 1)[0] for k in args.scene if not k.startswith("start_offset="))
+        if other:
+            ap.error(
+                f"--scene: the rigidbox backend takes only start_offset, not {', '.join(other)}"
+            )
+    elif args.bottom_patch is not None:
+        ap.error("--bottom-patch is a setting of the rigid-box reference: add --backend rigidbox")
+    bottom_patch = args.bottom_patch or "consignment"
     rig = load_rig(args.rig)
     cons = load_consignment(args.consignment)
     kind = cons.content_kind
@@ -198,7 +259,7 @@ def main(argv: list[str] | None = None) -> int:
     spec = {p.name: p for p in CATALOGUE}
     seeds = list(range(args.placements))
     scene = scene_options(args.scene)
-    jobs: dict[tuple[str, str, int], tuple[dict[str, float], TestCase, int, SceneOptions]] = {}
+    jobs: dict[tuple[str, str, int], Job] = {}
     for name in args.params:
         r = spec[name].range_for(kind)
         d = defaults[name]
@@ -209,7 +270,14 @@ def main(argv: list[str] | None = None) -> int:
             ("plus", d * (1 + args.step)),
         ):
             for s in seeds:
-                jobs[name, label, s] = ({**defaults, name: value}, case, s, scene)
+                jobs[name, label, s] = (
+                    {**defaults, name: value},
+                    case,
+                    s,
+                    scene,
+                    args.backend,
+                    bottom_patch,
+                )
     t0 = time.perf_counter()
     print(f"{len(jobs)} simulations on {args.workers} processes", flush=True)
     with ProcessPoolExecutor(args.workers) as ex:
@@ -242,6 +310,11 @@ def main(argv: list[str] | None = None) -> int:
         f"{args.step:g}"
         + (f" --params {' '.join(args.params)}" if list(args.params) != list(PUBLISHED_E3) else "")
         + (f" --scene {' '.join(args.scene)}" if args.scene else "")
+        + (
+            f" --backend rigidbox --bottom-patch {bottom_patch}"
+            if args.backend == "rigidbox"
+            else ""
+        )
         + f" --out {args.out}`: {len(runs)} simulations ({failed} not ok) in {wall:.0f} s on "
         f"{args.workers} processes. Effect: the response between the runs at the two ends of "
         f"the parameter's screening range; floor: between the runs at the default "

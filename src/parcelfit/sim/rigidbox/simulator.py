@@ -43,6 +43,19 @@ from parcelfit.sim.rigidbox.geometry import (
     rig_primitives,
 )
 
+# the parameters the reference's world is built from (`RigidBoxSimulator.world`); the others
+# (the packaging's and the content's stiffness, E_Pa, ...) belong to a shell it does not have
+PARAMETERS = (
+    "m_Pa",
+    "k_BePa",
+    "k_MePa",
+    "zeta_BePa",
+    "zeta_MePa",
+    "mu_d_BePa",
+    "mu_d_MePa",
+    "mu_s_BePa",
+    "mu_s_MePa",
+)
 FALL_DEPTH = 0.2  # m
 MAX_STEP = 1e-5  # s, the largest default step
 OMEGA_DT = 0.1  # the default step keeps omega_max * dt at most this

@@ -1,0 +1,78 @@
+"""scripts/parameter_effects.py: the rigid-box reference as a backend, signed ensemble effects."""
+
+import importlib.util
+import math
+from pathlib import Path
+
+import pytest
+
+from parcelfit.runs import TestCase
+from parcelfit.sim.ensemble import Member
+from parcelfit.sim.mujoco import SceneOptions
+from parcelfit.sim.protocol import SimStatus
+
+_SPEC = importlib.util.spec_from_file_location(
+    "parameter_effects", Path(__file__).parents[1] / "scripts" / "parameter_effects.py"
+)
+parameter_effects = importlib.util.module_from_spec(_SPEC)
+_SPEC.loader.exec_module(parameter_effects)
+
+
+class _BuiltError(Exception):
+    pass
+
+
+def test_shell_parameters_are_refused_by_the_reference(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        parameter_effects.main(
+            ["--backend", "rigidbox", "--params", "k_MePa", "E_Pa", "--out", str(tmp_path)]
+        )
+    err = capsys.readouterr().err
+    assert "E_Pa" in err and "k_MePa do not" not in err
+    assert not (tmp_path / "parameter-effects.md").exists()
+
+
+@pytest.mark.parametrize(
+    "extra, named",
+    [
+        (["--bottom-patch", "content"], "--bottom-patch"),
+        (["--backend", "rigidbox", "--scene", "impratio=10"], "impratio"),
+    ],
+)
+def test_reference_options_are_refused_where_they_do_not_apply(tmp_path, capsys, extra, named):
+    with pytest.raises(SystemExit):
+        parameter_effects.main(["--params", "k_MePa", "--out", str(tmp_path), *extra])
+    assert named in capsys.readouterr().err
+
+
+def test_a_job_reaches_the_backend_it_names(monkeypatch):
+    built = []
+
+    def fake(options, *args, **kwargs):
+        built.append(options)
+        raise _BuiltError
+
+    monkeypatch.setattr(parameter_effects, "RigidBoxSimulator", fake)
+    case = TestCase("E3", "KPBW", 1)
+    with pytest.raises(_BuiltError):
+        parameter_effects._simulate(({}, case, 3, SceneOptions(), "rigidbox", "content"))
+    assert built[0].bottom_patch == "content"
+
+
+def _member(seed: int, rotation_deg: float, transit: float) -> Member:
+    return Member(seed, SimStatus.OK, transit, math.radians(rotation_deg), None, 1.0)
+
+
+def test_ensemble_effects_keep_their_sign_and_count_the_placements():
+    runs = {}
+    for s in range(6):
+        runs["k", "low", s] = _member(s, 20.0 + s, 1.0)
+        runs["k", "high", s] = _member(s, 18.0 + s, 1.0 + 0.01 * (s + 1))
+        runs["k", "minus", s] = _member(s, 20.0 + s, 1.0)
+        runs["k", "plus", s] = _member(s, 20.1 + s, 1.0)
+    text = "\n".join(parameter_effects._ensemble_lines(runs, ["k"], 6))
+    row = next(line for line in text.splitlines() if line.startswith("| k |"))
+    assert row.split(" | ")[1].startswith("-2 (")  # the median rotation fell by 2 degrees
+    assert row.split(" | ")[2].startswith("+0.035 (")  # the median transit rose by 35 ms
+    assert "further at 0 of 6 placements, less at 6, alike at 0" in text
+    assert "median paired difference -2.00 degrees" in text
