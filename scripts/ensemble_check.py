@@ -27,6 +27,8 @@ every type, ``--bulge TYPE=FOOTPRINT`` gives a type's packaging a bulging bottom
 (``--bulge-depth``, `parcelfit.sim.mujoco.shell`), ``--scene`` sets scene options,
 ``--nose-radius`` the radius [m] of the drums every belt and strip set of the rigs runs round at
 its ends (0: square ends) in place of the rig files' own (`Rig.with_drum_ends`).
+``--backend rigidbox`` judges the independent rigid-box reference instead; its
+``--bottom-patch`` takes one patch for every type or one per type (``KPBW=content KP=outline``).
 """
 
 from __future__ import annotations
@@ -66,7 +68,13 @@ from parcelfit.sim.mujoco import (
 )
 from parcelfit.sim.mujoco.options import scene_options
 from parcelfit.sim.mujoco.rig import Rig
-from parcelfit.sim.params import WALL_CONTACTS, WALL_DAMPINGS, parameter, parse_assignments
+from parcelfit.sim.params import (
+    BOTTOM_PATCHES,
+    WALL_CONTACTS,
+    WALL_DAMPINGS,
+    parameter,
+    parse_assignments,
+)
 from parcelfit.sim.rigidbox import RigidBoxOptions, RigidBoxSimulator
 
 TYPES = ("BW", "KPBW", "KP", "PB")
@@ -186,6 +194,27 @@ def _paired_lines(rig: str, members: dict[str, list[Member]]) -> list[str]:
     return out
 
 
+def _bottom_patches(given: list[str], types: list[str]) -> dict[str, str]:
+    """Each type's bottom patch from ``--bottom-patch``: one patch for every type, or
+    TYPE=PATCH items (a type not named: ``consignment``); ValueError names what is wrong."""
+    allowed = ", ".join(BOTTOM_PATCHES)
+    if len(given) == 1 and "=" not in given[0]:
+        if given[0] not in BOTTOM_PATCHES:
+            raise ValueError(f"unknown patch {given[0]!r}: use one of {allowed}")
+        return dict.fromkeys(types, given[0])
+    out = dict.fromkeys(types, "consignment")
+    for item in given:
+        name, sep, patch = item.partition("=")
+        if not sep:
+            raise ValueError(f"{item!r}: give one patch, or TYPE=PATCH for each type named")
+        if name not in types:
+            raise ValueError(f"{name!r} is not among --types ({' '.join(types)})")
+        if patch not in BOTTOM_PATCHES:
+            raise ValueError(f"unknown patch {patch!r} for {name}: use one of {allowed}")
+        out[name] = patch
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rigs", nargs="+", default=["E3"])
@@ -222,10 +251,13 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument(
         "--bottom-patch",
-        choices=("consignment", "outline", "content"),
-        default="consignment",
-        help="rigidbox: where the bottom carries contact (the consignment's bulge patch if it "
-        "has one, else the outline; the whole outline; the content's footprint)",
+        nargs="+",
+        default=["consignment"],
+        metavar="PATCH|TYPE=PATCH",
+        help="rigidbox: where the bottom carries contact, for every type or per type "
+        "(KPBW=content KP=outline; a type not named: consignment): consignment (its bulge "
+        "patch if it has one, else the outline), outline (the whole outline) or content "
+        "(the content's footprint)",
     )
     ap.add_argument(
         "--reference-spacing",
@@ -312,7 +344,14 @@ def main(argv: list[str] | None = None) -> int:
         for t, c in ((t, load_consignment(t)) for t in args.types)
     }
     user = parse_assignments(args.set)
+    try:
+        patches = _bottom_patches(args.bottom_patch, args.types)
+    except ValueError as exc:
+        ap.error(f"--bottom-patch: {exc}")
+    if args.backend != "rigidbox" and args.bottom_patch != ["consignment"]:
+        ap.error("--bottom-patch is a setting of the rigid-box reference: add --backend rigidbox")
     sim: MujocoSimulator | RigidBoxSimulator
+    sim_for: dict[str, MujocoSimulator | RigidBoxSimulator] = {}
     if args.backend == "rigidbox":
         # the reference shares only the start's offset with MuJoCo's scene options
         other = sorted(k.split("=", 1)[0] for k in args.scene if not k.startswith("start_offset="))
@@ -322,7 +361,7 @@ def main(argv: list[str] | None = None) -> int:
             )
         sim = RigidBoxSimulator(
             RigidBoxOptions(
-                bottom_patch=args.bottom_patch,
+                bottom_patch="consignment",
                 **({} if args.reference_spacing is None else {"spacing": args.reference_spacing}),
                 **({} if args.wall_contact is None else {"wall_contact": args.wall_contact}),
                 **({} if args.wall_damping is None else {"wall_damping": args.wall_damping}),
@@ -337,6 +376,7 @@ def main(argv: list[str] | None = None) -> int:
             rigs={r.name: r for r in rigs},
             consignments=consignments,
         )
+        sim_for = {t: sim.with_options(bottom_patch=patches[t]) for t in args.types}
     else:
         sim = MujocoSimulator(
             SimOptions(scene=scene, wall_limit=args.wall_limit),
@@ -359,7 +399,7 @@ def main(argv: list[str] | None = None) -> int:
         + (f" --bulge-depth {args.bulge_depth}" if args.bulge else "")
         + (f" --nose-radius {args.nose_radius:g}" if args.nose_radius is not None else "")
         + (
-            f" --backend rigidbox --bottom-patch {args.bottom_patch}"
+            f" --backend rigidbox --bottom-patch {' '.join(args.bottom_patch)}"
             if args.backend == "rigidbox"
             else ""
         )
@@ -402,7 +442,7 @@ def main(argv: list[str] | None = None) -> int:
                     params = {k: parameter(k).to_si(v) for k, v in user.items()}
                     consignments[cons].parameter_values(si_values=params)  # checks names, ranges
                     members[cons] = simulate_ensemble(
-                        sim.with_placement, params, case, seeds, executor=ex
+                        sim_for.get(cons, sim).with_placement, params, case, seeds, executor=ex
                     )
                     print(f"{case.label}: done ({time.perf_counter() - t0:.0f} s)", flush=True)
                 stats = {c: summarise(m) for c, m in members.items()}

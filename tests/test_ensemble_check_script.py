@@ -71,3 +71,56 @@ def test_wall_options_are_refused_without_the_reference(tmp_path, capsys, flag, 
             ["--types", "KP", "--placements", "1", "--out", str(tmp_path), flag, value]
         )
     assert flag in capsys.readouterr().err
+
+
+def test_bottom_patch_one_for_all_or_per_type():
+    types = ["BW", "KPBW", "KP"]
+    assert ensemble_check._bottom_patches(["outline"], types) == dict.fromkeys(types, "outline")
+    assert ensemble_check._bottom_patches(["KPBW=content", "KP=outline"], types) == {
+        "BW": "consignment",
+        "KPBW": "content",
+        "KP": "outline",
+    }
+    for bad, named in (
+        (["bulge"], "bulge"),
+        (["PB=content"], "PB"),
+        (["KP=rim"], "rim"),
+        (["KP=outline", "content"], "content"),
+    ):
+        with pytest.raises(ValueError, match=named):
+            ensemble_check._bottom_patches(bad, types)
+
+
+def test_each_type_runs_on_its_own_bottom_patch(monkeypatch, tmp_path):
+    patches = {}
+
+    def fake(with_placement, params, case, seeds, executor):
+        patches[case.consignment] = with_placement(0).options.bottom_patch
+        raise _BuiltError
+
+    monkeypatch.setattr(ensemble_check, "simulate_ensemble", fake)
+    with pytest.raises(_BuiltError):
+        ensemble_check.main(
+            [
+                *("--types", "KPBW", "--placements", "1", "--backend", "rigidbox"),
+                *("--bottom-patch", "KPBW=content", "--out", str(tmp_path), "--workers", "1"),
+            ]
+        )
+    assert patches == {"KPBW": "content"}
+
+
+def test_bottom_patch_is_refused_without_the_reference(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        ensemble_check.main(
+            [
+                "--types",
+                "KP",
+                "--placements",
+                "1",
+                "--out",
+                str(tmp_path),
+                "--bottom-patch",
+                "content",
+            ]
+        )
+    assert "--bottom-patch" in capsys.readouterr().err
