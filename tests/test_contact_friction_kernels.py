@@ -264,7 +264,9 @@ def test_the_compiled_law_is_the_numpy_law_step_after_step_of_a_run():
                 assert same_bits(data.contact.friction[idx, 1], friction)
                 if vec is None:
                     assert not data.qfrc_applied.any() and law.explicit_steps == steps_before
+                    assert not law.hand_force.any()  # the forces by hand kept: none
                 else:
+                    assert same_bits(law.hand_force, vec)  # kept for diagnostics, as applied
                     qfrc = np.zeros(model.nv)
                     mujoco.mj_mulJacTVec(model, data, qfrc, vec)
                     assert same_bits(data.qfrc_applied, qfrc)

@@ -110,6 +110,8 @@ class ContactFriction:
         self._selected: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self.explicit_steps = 0  # steps in which some contact slid by hand (diagnostics)
         self.clamped = 0  # contact-steps whose force by hand was limited by the half-slip bound
+        # this step's forces by hand in constraint space (``data.efc_*`` rows; diagnostics)
+        self.hand_force = np.zeros(0)
 
     def _select(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The current contacts on surfaces: their indices, surface geom ids and keys. A key
@@ -138,6 +140,7 @@ class ContactFriction:
         ``data.qfrc_applied`` [N]; call between ``mj_step1`` and ``mj_step2``."""
         data.qfrc_applied[:] = 0.0
         idx, surface, keys = self._selected = self._select(data)
+        self.hand_force = np.zeros(data.nefc)
         if idx.size == 0:
             return
         # the normal force [N] and tangential inverse effective mass [1/kg] each contact had in
@@ -149,7 +152,7 @@ class ContactFriction:
         # than changes its slip by half in one step (explicit in time: a larger force would
         # reverse the slip and chatter). `_contact_friction` sets the coefficients and fills
         # ``vec`` with the forces in constraint space.
-        vec = np.zeros(data.nefc)
+        vec = self.hand_force
         by_hand, clamped = _contact_friction(
             idx,
             surface,

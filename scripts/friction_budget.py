@@ -1,0 +1,227 @@
+"""How much friction do the rig's surfaces exert per unit of normal force over one run?
+
+    python scripts/friction_budget.py --rig E3 --consignment KPBW --setting 1 --seed 0
+                                      [--set k_MePa=1000 ...] [--scene KEY=VALUE ...]
+
+Runs one simulation as `parcelfit simulate` does (the default friction law, ``contact``,
+`parcelfit.sim.mujoco.friction`) and sums over every step, for the packaging's contacts with
+the guide plates and lead-ins (``metal``) and with the belts, strips and rollers (``belt``):
+
+    normal impulse      I_n = sum_steps sum_contacts N h           [N s]
+    friction impulse    I_t = sum_steps sum_contacts |F_t| h       [N s]
+
+with N the contact's normal force and F_t its friction force in that step: MuJoCo's own (a
+contact that sticks or slips slowly, inside its cone) and the Coulomb force applied by hand (a
+contact that slides faster than the dynamic threshold, `ContactFriction`). Their ratio
+I_t / I_n is the friction the surfaces exerted per unit of normal force, to compare with the
+coefficients set (mu_d and mu_s = mu_d + offset): a sliding contact should give mu_d. Also
+printed per material: the contact-steps, the share of them sliding by hand, the share of
+those whose force by hand was less than mu_d N of its own step (the half-slip bound, or a
+normal force that rose since the step before, whose force the hand law uses), the ratio of
+the force by hand to mu_d N, the yaw impulse sum tau_z h [N m s] of the contacts' forces
+about the packaging's centre (the mean of its vertices) and the normal-force-weighted mean
+horizontal distance of the contacts from that centre [mm] (where on the parcel the surface
+pushes).
+
+Why by hand: MuJoCo reports its constraint forces (``mj_contactForce``) but not the forces the
+contact law applies as ``qfrc_applied``; the law keeps this step's (`ContactFriction.hand_force`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+
+import mujoco
+import numpy as np
+
+from parcelfit.errors import ParcelfitError
+from parcelfit.runs import TestCase
+from parcelfit.sim.mujoco import MujocoSimulator, SimOptions, load_consignment, load_rig
+from parcelfit.sim.mujoco.friction import Stepper
+from parcelfit.sim.mujoco.options import scene_options
+from parcelfit.sim.params import parameter, parse_assignments
+
+MATERIALS = ("metal", "belt")
+
+
+class Budget:
+    """Impulses [N s] and counts per material, summed step by step (module docstring)."""
+
+    def __init__(self) -> None:
+        self.normal = dict.fromkeys(MATERIALS, 0.0)
+        self.friction = dict.fromkeys(MATERIALS, 0.0)
+        self.coulomb = dict.fromkeys(MATERIALS, 0.0)  # sum mu_d N h of the contacts by hand
+        self.hand = dict.fromkeys(MATERIALS, 0.0)  # sum |F_hand| h
+        self.steps = dict.fromkeys(MATERIALS, 0)
+        self.by_hand = dict.fromkeys(MATERIALS, 0)
+        self.short = dict.fromkeys(MATERIALS, 0)
+        self.torque = dict.fromkeys(MATERIALS, 0.0)  # sum tau_z h about the packaging's centre
+        self.arm = dict.fromkeys(MATERIALS, 0.0)  # sum N r h: r the horizontal distance from it
+
+    def add(
+        self,
+        material: str,
+        normal: float,
+        mujoco_t: float,
+        hand: float,
+        mu_d: float,
+        h: float,
+        yaw_torque: float,
+        arm: float,
+    ) -> None:
+        """One contact in one step: its normal force, MuJoCo's and the hand law's friction
+        force [N], its dynamic coefficient [-], the step [s], the yaw torque [N m] of its
+        whole force about the packaging's centre and its horizontal distance from it [m]."""
+        self.torque[material] += yaw_torque * h
+        self.arm[material] += normal * arm * h
+        self.normal[material] += normal * h
+        self.friction[material] += (mujoco_t + hand) * h
+        self.steps[material] += 1
+        if hand > 0:
+            self.by_hand[material] += 1
+            self.hand[material] += hand * h
+            self.coulomb[material] += mu_d * normal * h
+            if hand < 0.999 * mu_d * normal:
+                self.short[material] += 1
+
+    def lines(self) -> list[str]:
+        """The table, one row per material that had contacts."""
+        out = [
+            "| surfaces | contact-steps | normal impulse [N s] | friction impulse [N s] | "
+            "friction / normal | by hand | by hand below mu_d N | by hand: impulse / (mu_d N) | "
+            "yaw impulse [N m s] | mean distance from the centre [mm] |",
+            "|---|---|---|---|---|---|---|---|---|---|",
+        ]
+        for m in MATERIALS:
+            n = self.steps[m]
+            if not n:
+                continue
+            ratio = self.friction[m] / self.normal[m] if self.normal[m] > 0 else math.nan
+            hand_ratio = self.hand[m] / self.coulomb[m] if self.coulomb[m] > 0 else math.nan
+            out.append(
+                f"| {m} | {n} | {self.normal[m]:.5g} | {self.friction[m]:.5g} | {ratio:.4f} | "
+                f"{self.by_hand[m] / n:.1%} | {self.short[m] / max(1, self.by_hand[m]):.1%} | "
+                f"{hand_ratio:.4f} | {self.torque[m]:+.5g} | "
+                f"{self.arm[m] / self.normal[m] * 1e3 if self.normal[m] > 0 else math.nan:.1f} |"
+            )
+        return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rig", required=True)
+    ap.add_argument("--consignment", required=True)
+    ap.add_argument("--setting", type=int, default=1)
+    ap.add_argument("--seed", type=int, default=None, help="placement seed (default: nominal)")
+    ap.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE", help="catalogue units")
+    ap.add_argument("--scene", nargs="*", default=[], metavar="KEY=VALUE")
+    args = ap.parse_args(argv)
+    try:
+        rig, cons = load_rig(args.rig), load_consignment(args.consignment)
+        scene_opts = scene_options(args.scene)
+        if scene_opts.friction != "contact":
+            raise ParcelfitError(
+                "the budget reads the per-contact friction law's forces",
+                fix="leave friction at its default (contact)",
+            )
+        params = {k: parameter(k).to_si(v) for k, v in parse_assignments(args.set).items()}
+        cons.parameter_values(si_values=params)  # checks names and ranges
+        sim = MujocoSimulator(
+            SimOptions(scene=scene_opts), {rig.name: rig}, {cons.name: cons}
+        ).with_placement(args.seed)
+        case = TestCase(rig.name, cons.name, args.setting)
+        scene = sim.scene(params, case)
+    except ParcelfitError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    budget = Budget()
+    metal_names = [*scene.metal_geoms, *(g.name for g in scene.driven if g.material == "metal")]
+    step = Stepper.step
+
+    def counted_step(stepper: Stepper) -> None:
+        step(stepper)
+        model, data, law = stepper.model, stepper.data, stepper.contact
+        if law is None:
+            return
+        metal = {mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, g) for g in metal_names}
+        h = float(model.opt.timestep)
+        hand = law.hand_force
+        flex = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, "packaging")
+        adr0, num = model.flex_vertadr[flex], model.flex_vertnum[flex]
+        centre = data.flexvert_xpos[adr0 : adr0 + num].mean(axis=0)
+        for i in range(data.ncon):
+            con = data.contact[i]
+            adr = con.efc_address
+            surface = (
+                con.geom[0] if con.geom[0] >= 0 and law.is_surface[con.geom[0]] else con.geom[1]
+            )
+            if adr < 0 or surface < 0 or not law.is_surface[surface]:
+                continue
+            material = "metal" if surface in metal else "belt"
+            normal = float(data.efc_force[adr])
+            mujoco_t = float(np.hypot(data.efc_force[adr + 1], data.efc_force[adr + 2]))
+            by_hand = float(np.hypot(hand[adr + 1], hand[adr + 2])) if hand.size > adr + 2 else 0.0
+            # the contact's whole force on the packaging in world axes: the frame's rows are the
+            # normal (from geom 0 to geom 1) and the two tangents; efc rows of an elliptic cone
+            # are the forces along them, the hand law's along the same tangents
+            f = con.frame.reshape(3, 3).T @ np.array(
+                [
+                    normal,
+                    data.efc_force[adr + 1] + hand[adr + 1],
+                    data.efc_force[adr + 2] + hand[adr + 2],
+                ]
+                if hand.size > adr + 2
+                else [normal, data.efc_force[adr + 1], data.efc_force[adr + 2]]
+            )
+            if con.geom[0] != surface:  # f acts on object 2; where that is the surface, -f on us
+                f = -f
+            arm = con.pos - centre
+            budget.add(
+                material,
+                normal,
+                mujoco_t,
+                by_hand,
+                float(model.geom_friction[surface, 0]),
+                h,
+                float(arm[0] * f[1] - arm[1] * f[0]),
+                float(np.hypot(arm[0], arm[1])),
+            )
+
+    Stepper.step = counted_step  # type: ignore[method-assign]
+    try:
+        result = sim.run(params, case)
+    finally:
+        Stepper.step = step  # type: ignore[method-assign]
+    run = result.run
+    print(
+        f"# Friction budget: {case.label}, placement seed {args.seed}"
+        + (f", {' '.join(args.set)}" if args.set else "")
+        + (f", scene {' '.join(args.scene)}" if args.scene else "")
+    )
+    print()
+    print(
+        "Coefficients set: "
+        + ", ".join(
+            f"{k} {v:g}"
+            for k, v in cons.parameter_values(si_values=params).items()
+            if k.startswith("mu_")
+        )
+    )
+    print()
+    print("\n".join(budget.lines()))
+    print()
+    if run is None:
+        print(f"run failed: {result.status.value}")
+        return 1
+    theta = np.unwrap(run.trajectory.theta)
+    print(
+        f"rotation {math.degrees(theta[-1] - theta[0]):+.2f} deg, transit "
+        + (f"{run.transit_time:.4f} s" if run.transit_time is not None else "none")
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
