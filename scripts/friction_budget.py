@@ -21,7 +21,8 @@ normal force that rose since the step before, whose force the hand law uses), th
 the force by hand to mu_d N, the yaw impulse sum tau_z h [N m s] of the contacts' forces
 about the packaging's centre (the mean of its vertices) and the normal-force-weighted mean
 horizontal distance of the contacts from that centre [mm] (where on the parcel the surface
-pushes).
+pushes), and the share of the normal impulse from contacts beyond the footprint of a rigid
+content (in its frame: how much of the load a mailer's rim carries).
 
 Why by hand: MuJoCo reports its constraint forces (``mj_contactForce``) but not the forces the
 contact law applies as ``qfrc_applied``; the law keeps this step's (`ContactFriction.hand_force`).
@@ -59,6 +60,7 @@ class Budget:
         self.short = dict.fromkeys(MATERIALS, 0)
         self.torque = dict.fromkeys(MATERIALS, 0.0)  # sum tau_z h about the packaging's centre
         self.arm = dict.fromkeys(MATERIALS, 0.0)  # sum N r h: r the horizontal distance from it
+        self.outside = dict.fromkeys(MATERIALS, 0.0)  # sum N h beyond the content's footprint
 
     def add(
         self,
@@ -70,12 +72,16 @@ class Budget:
         h: float,
         yaw_torque: float,
         arm: float,
+        outside: bool = False,
     ) -> None:
         """One contact in one step: its normal force, MuJoCo's and the hand law's friction
         force [N], its dynamic coefficient [-], the step [s], the yaw torque [N m] of its
-        whole force about the packaging's centre and its horizontal distance from it [m]."""
+        whole force about the packaging's centre, its horizontal distance from it [m] and
+        whether it lies beyond the content's footprint."""
         self.torque[material] += yaw_torque * h
         self.arm[material] += normal * arm * h
+        if outside:
+            self.outside[material] += normal * h
         self.normal[material] += normal * h
         self.friction[material] += (mujoco_t + hand) * h
         self.steps[material] += 1
@@ -91,8 +97,9 @@ class Budget:
         out = [
             "| surfaces | contact-steps | normal impulse [N s] | friction impulse [N s] | "
             "friction / normal | by hand | by hand below mu_d N | by hand: impulse / (mu_d N) | "
-            "yaw impulse [N m s] | mean distance from the centre [mm] |",
-            "|---|---|---|---|---|---|---|---|---|---|",
+            "yaw impulse [N m s] | mean distance from the centre [mm] | "
+            "normal impulse beyond the content's footprint |",
+            "|---|---|---|---|---|---|---|---|---|---|---|",
         ]
         for m in MATERIALS:
             n = self.steps[m]
@@ -104,7 +111,8 @@ class Budget:
                 f"| {m} | {n} | {self.normal[m]:.5g} | {self.friction[m]:.5g} | {ratio:.4f} | "
                 f"{self.by_hand[m] / n:.1%} | {self.short[m] / max(1, self.by_hand[m]):.1%} | "
                 f"{hand_ratio:.4f} | {self.torque[m]:+.5g} | "
-                f"{self.arm[m] / self.normal[m] * 1e3 if self.normal[m] > 0 else math.nan:.1f} |"
+                f"{self.arm[m] / self.normal[m] * 1e3 if self.normal[m] > 0 else math.nan:.1f} | "
+                f"{self.outside[m] / self.normal[m] if self.normal[m] > 0 else math.nan:.1%} |"
             )
         return out
 
@@ -138,6 +146,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     budget = Budget()
     metal_names = [*scene.metal_geoms, *(g.name for g in scene.driven if g.material == "metal")]
+    half = np.asarray(cons.content[:2]) / 2
     step = Stepper.step
 
     def counted_step(stepper: Stepper) -> None:
@@ -151,6 +160,16 @@ def main(argv: list[str] | None = None) -> int:
         flex = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, "packaging")
         adr0, num = model.flex_vertadr[flex], model.flex_vertnum[flex]
         centre = data.flexvert_xpos[adr0 : adr0 + num].mean(axis=0)
+
+        content = -1 if cons.soft else mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "content")
+
+        def beyond(pos: np.ndarray) -> bool:
+            # in the rigid content's frame: outside its footprint's rectangle
+            if content < 0:
+                return False
+            local = data.xmat[content].reshape(3, 3).T @ (pos - data.xpos[content])
+            return bool(abs(local[0]) > half[0] or abs(local[1]) > half[1])
+
         for i in range(data.ncon):
             con = data.contact[i]
             adr = con.efc_address
@@ -187,6 +206,7 @@ def main(argv: list[str] | None = None) -> int:
                 h,
                 float(arm[0] * f[1] - arm[1] * f[0]),
                 float(np.hypot(arm[0], arm[1])),
+                beyond(con.pos),
             )
 
     Stepper.step = counted_step  # type: ignore[method-assign]

@@ -19,7 +19,7 @@ def test_budget_sums_impulses_and_counts_short_forces_by_hand():
     # sticking in MuJoCo's cone: 2 N normal, 0.5 N friction, 0.1 m from the centre
     b.add("metal", 2.0, 0.5, 0.0, 0.3, h, 0.05, 0.1)
     # sliding by hand at mu_d N, 0.3 m from the centre
-    b.add("metal", 1.0, 0.0, 0.3, 0.3, h, -0.09, 0.3)
+    b.add("metal", 1.0, 0.0, 0.3, 0.3, h, -0.09, 0.3, outside=True)
     # sliding by hand, limited to half of mu_d N
     b.add("metal", 1.0, 0.0, 0.15, 0.3, h, 0.0, 0.1)
     assert b.normal["metal"] == pytest.approx(4.0 * h)
@@ -34,6 +34,7 @@ def test_budget_sums_impulses_and_counts_short_forces_by_hand():
     assert float(row[7]) == pytest.approx(0.45 / 0.6, abs=1e-4)  # by hand / (mu_d N)
     assert float(row[9].rstrip(" |")) == pytest.approx((0.2 + 0.3 + 0.1) / 4.0 * 1e3, abs=0.05)
     assert not math.isnan(float(row[8]))
+    assert row[10] == "25.0% |"  # a quarter of the normal impulse beyond the content
 
 
 def test_the_geom_friction_law_is_refused(capsys):
