@@ -2,6 +2,7 @@
 
     python scripts/friction_budget.py --rig E3 --consignment KPBW --setting 1 --seed 0
                                       [--set k_MePa=1000 ...] [--scene KEY=VALUE ...]
+                                      [--bulge FOOTPRINT [--bulge-depth D]]
 
 Runs one simulation as `parcelfit simulate` does (the default friction law, ``contact``,
 `parcelfit.sim.mujoco.friction`) and sums over every step, for the packaging's contacts with
@@ -33,6 +34,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from dataclasses import replace
 
 import mujoco
 import numpy as np
@@ -125,9 +127,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=None, help="placement seed (default: nominal)")
     ap.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE", help="catalogue units")
     ap.add_argument("--scene", nargs="*", default=[], metavar="KEY=VALUE")
+    ap.add_argument(
+        "--bulge",
+        type=float,
+        default=None,
+        metavar="FOOTPRINT",
+        help="a bottom bulging below the rigid content over this share of the outline (0: flat)",
+    )
+    ap.add_argument("--bulge-depth", type=float, default=0.004, help="[m]")
     args = ap.parse_args(argv)
     try:
         rig, cons = load_rig(args.rig), load_consignment(args.consignment)
+        if args.bulge is not None:  # 0: a flat bottom, whatever the consignment file says
+            cons = replace(cons, bulge=(args.bulge_depth, args.bulge) if args.bulge > 0 else None)
         scene_opts = scene_options(args.scene)
         if scene_opts.friction != "contact":
             raise ParcelfitError(
@@ -219,6 +231,7 @@ def main(argv: list[str] | None = None) -> int:
         f"# Friction budget: {case.label}, placement seed {args.seed}"
         + (f", {' '.join(args.set)}" if args.set else "")
         + (f", scene {' '.join(args.scene)}" if args.scene else "")
+        + (f", bulge {args.bulge:g} ({args.bulge_depth:g} m)" if args.bulge is not None else "")
     )
     print()
     print(
