@@ -20,10 +20,14 @@ printed per material: the contact-steps, the share of them sliding by hand, the 
 those whose force by hand was less than mu_d N of its own step (the half-slip bound, or a
 normal force that rose since the step before, whose force the hand law uses), the ratio of
 the force by hand to mu_d N, the yaw impulse sum tau_z h [N m s] of the contacts' forces
-about the packaging's centre (the mean of its vertices) and the normal-force-weighted mean
-horizontal distance of the contacts from that centre [mm] (where on the parcel the surface
-pushes), and the share of the normal impulse from contacts beyond the footprint of a rigid
-content (in its frame: how much of the load a mailer's rim carries).
+about the packaging's centre (the mean of its vertices), the turn impulse
+sum tau_z (T - t) h [N m s^2] (T the run's end: the double time integral of the torque, the
+material's share of I_z times the net turn; a slide starts and ends without spin, so the yaw
+impulses of all materials sum to about zero whatever the turn, the turn impulses do not), the
+normal-force-weighted mean horizontal distance of the contacts from that centre [mm] (where on
+the parcel the surface pushes), and the share of the normal impulse from contacts beyond the
+footprint of a rigid content by more than 5 mm (in its frame: how much of the load a mailer's
+rim carries; the shell has rows of vertices right below the content's edges).
 
 Why by hand: MuJoCo reports its constraint forces (``mj_contactForce``) but not the forces the
 contact law applies as ``qfrc_applied``; the law keeps this step's (`ContactFriction.hand_force`).
@@ -47,12 +51,42 @@ from parcelfit.sim.mujoco.options import scene_options
 from parcelfit.sim.params import parameter, parse_assignments
 
 MATERIALS = ("metal", "belt")
+# a contact within this distance [m] of a rigid content's footprint counts as under it: the
+# shell's mesh has rows of vertices right below the content's edges, which deformation moves by
+# fractions of a millimetre to either side
+EDGE_MARGIN = 0.005
+
+
+def force_on_packaging(frame: np.ndarray, forces: np.ndarray, surface_first: bool) -> np.ndarray:
+    """A contact's force [N] on the packaging in world axes: ``frame`` MuJoCo's contact frame
+    (9 values, its rows the normal from geom 0 to geom 1 and the two tangents), ``forces`` the
+    force along them (normal, tangent 1, tangent 2) as MuJoCo's constraint rows give it, the
+    force on object 2; ``surface_first`` when the surface is geom 0 (the packaging object 2)."""
+    f = np.asarray(frame, dtype=float).reshape(3, 3).T @ np.asarray(forces, dtype=float)
+    return f if surface_first else -f
+
+
+def beyond_footprint(
+    pos: np.ndarray,
+    content_pos: np.ndarray,
+    content_xmat: np.ndarray,
+    half: np.ndarray,
+    margin: float = EDGE_MARGIN,
+) -> bool:
+    """Whether the world point ``pos`` [m] lies beyond a rigid content's footprint (half
+    lengths ``half`` [m] in its frame, at ``content_pos`` with rotation ``content_xmat``) by
+    more than ``margin`` [m]."""
+    local = np.asarray(content_xmat, dtype=float).reshape(3, 3).T @ (
+        np.asarray(pos, dtype=float) - np.asarray(content_pos, dtype=float)
+    )
+    return bool(abs(local[0]) > half[0] + margin or abs(local[1]) > half[1] + margin)
 
 
 class Budget:
     """Impulses [N s] and counts per material, summed step by step (module docstring)."""
 
-    def __init__(self) -> None:
+    def __init__(self, rigid_content: bool = True) -> None:
+        self.rigid_content = rigid_content
         self.normal = dict.fromkeys(MATERIALS, 0.0)
         self.friction = dict.fromkeys(MATERIALS, 0.0)
         self.coulomb = dict.fromkeys(MATERIALS, 0.0)  # sum mu_d N h of the contacts by hand
@@ -61,8 +95,10 @@ class Budget:
         self.by_hand = dict.fromkeys(MATERIALS, 0)
         self.short = dict.fromkeys(MATERIALS, 0)
         self.torque = dict.fromkeys(MATERIALS, 0.0)  # sum tau_z h about the packaging's centre
+        self.torque_time = dict.fromkeys(MATERIALS, 0.0)  # sum tau_z t h
         self.arm = dict.fromkeys(MATERIALS, 0.0)  # sum N r h: r the horizontal distance from it
         self.outside = dict.fromkeys(MATERIALS, 0.0)  # sum N h beyond the content's footprint
+        self.end = 0.0  # the last step's time [s]
 
     def add(
         self,
@@ -75,12 +111,15 @@ class Budget:
         yaw_torque: float,
         arm: float,
         outside: bool = False,
+        t: float = 0.0,
     ) -> None:
         """One contact in one step: its normal force, MuJoCo's and the hand law's friction
         force [N], its dynamic coefficient [-], the step [s], the yaw torque [N m] of its
-        whole force about the packaging's centre, its horizontal distance from it [m] and
-        whether it lies beyond the content's footprint."""
+        whole force about the packaging's centre, its horizontal distance from it [m], whether
+        it lies beyond the content's footprint, and the step's time [s]."""
         self.torque[material] += yaw_torque * h
+        self.torque_time[material] += yaw_torque * t * h
+        self.end = max(self.end, t)
         self.arm[material] += normal * arm * h
         if outside:
             self.outside[material] += normal * h
@@ -94,14 +133,21 @@ class Budget:
             if hand < 0.999 * mu_d * normal:
                 self.short[material] += 1
 
+    def turn_impulse(self, material: str, end: float | None = None) -> float:
+        """sum tau_z (T - t) h [N m s^2] up to T (``end``, default the last step's time): the
+        double time integral of the material's yaw torque, the share of I_z times the net
+        turn its torques drove (a torque early in the run turns the parcel for longer)."""
+        end = self.end if end is None else end
+        return end * self.torque[material] - self.torque_time[material]
+
     def lines(self) -> list[str]:
         """The table, one row per material that had contacts."""
         out = [
             "| surfaces | contact-steps | normal impulse [N s] | friction impulse [N s] | "
             "friction / normal | by hand | by hand below mu_d N | by hand: impulse / (mu_d N) | "
-            "yaw impulse [N m s] | mean distance from the centre [mm] | "
-            "normal impulse beyond the content's footprint |",
-            "|---|---|---|---|---|---|---|---|---|---|---|",
+            "yaw impulse [N m s] | turn impulse [N m s^2] | mean distance from the centre [mm] | "
+            f"normal impulse beyond the content's footprint (by > {EDGE_MARGIN * 1e3:g} mm) |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|",
         ]
         for m in MATERIALS:
             n = self.steps[m]
@@ -109,12 +155,17 @@ class Budget:
                 continue
             ratio = self.friction[m] / self.normal[m] if self.normal[m] > 0 else math.nan
             hand_ratio = self.hand[m] / self.coulomb[m] if self.coulomb[m] > 0 else math.nan
+            share = (
+                f"{self.outside[m] / self.normal[m]:.1%}"
+                if self.rigid_content and self.normal[m] > 0
+                else "n/a"
+            )
             out.append(
                 f"| {m} | {n} | {self.normal[m]:.5g} | {self.friction[m]:.5g} | {ratio:.4f} | "
                 f"{self.by_hand[m] / n:.1%} | {self.short[m] / max(1, self.by_hand[m]):.1%} | "
-                f"{hand_ratio:.4f} | {self.torque[m]:+.5g} | "
+                f"{hand_ratio:.4f} | {self.torque[m]:+.5g} | {self.turn_impulse(m):+.5g} | "
                 f"{self.arm[m] / self.normal[m] * 1e3 if self.normal[m] > 0 else math.nan:.1f} | "
-                f"{self.outside[m] / self.normal[m] if self.normal[m] > 0 else math.nan:.1%} |"
+                f"{share} |"
             )
         return out
 
@@ -156,32 +207,33 @@ def main(argv: list[str] | None = None) -> int:
     except ParcelfitError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    budget = Budget()
+    budget = Budget(rigid_content=not cons.soft)
     metal_names = [*scene.metal_geoms, *(g.name for g in scene.driven if g.material == "metal")]
     half = np.asarray(cons.content[:2]) / 2
     step = Stepper.step
+    looked_up: list[tuple[set[int], slice, int]] = []  # the model's ids, looked up once
 
     def counted_step(stepper: Stepper) -> None:
         step(stepper)
         model, data, law = stepper.model, stepper.data, stepper.contact
         if law is None:
             return
-        metal = {mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, g) for g in metal_names}
+        if not looked_up:
+            flex = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, "packaging")
+            adr = int(model.flex_vertadr[flex])
+            looked_up.append(
+                (
+                    {mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, g) for g in metal_names},
+                    slice(adr, adr + int(model.flex_vertnum[flex])),
+                    -1
+                    if cons.soft
+                    else mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "content"),
+                )
+            )
+        metal, verts, content = looked_up[0]
         h = float(model.opt.timestep)
         hand = law.hand_force
-        flex = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, "packaging")
-        adr0, num = model.flex_vertadr[flex], model.flex_vertnum[flex]
-        centre = data.flexvert_xpos[adr0 : adr0 + num].mean(axis=0)
-
-        content = -1 if cons.soft else mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "content")
-
-        def beyond(pos: np.ndarray) -> bool:
-            # in the rigid content's frame: outside its footprint's rectangle
-            if content < 0:
-                return False
-            local = data.xmat[content].reshape(3, 3).T @ (pos - data.xpos[content])
-            return bool(abs(local[0]) > half[0] or abs(local[1]) > half[1])
-
+        centre = data.flexvert_xpos[verts].mean(axis=0)
         for i in range(data.ncon):
             con = data.contact[i]
             adr = con.efc_address
@@ -194,20 +246,10 @@ def main(argv: list[str] | None = None) -> int:
             normal = float(data.efc_force[adr])
             mujoco_t = float(np.hypot(data.efc_force[adr + 1], data.efc_force[adr + 2]))
             by_hand = float(np.hypot(hand[adr + 1], hand[adr + 2])) if hand.size > adr + 2 else 0.0
-            # the contact's whole force on the packaging in world axes: the frame's rows are the
-            # normal (from geom 0 to geom 1) and the two tangents; efc rows of an elliptic cone
-            # are the forces along them, the hand law's along the same tangents
-            f = con.frame.reshape(3, 3).T @ np.array(
-                [
-                    normal,
-                    data.efc_force[adr + 1] + hand[adr + 1],
-                    data.efc_force[adr + 2] + hand[adr + 2],
-                ]
-                if hand.size > adr + 2
-                else [normal, data.efc_force[adr + 1], data.efc_force[adr + 2]]
-            )
-            if con.geom[0] != surface:  # f acts on object 2; where that is the surface, -f on us
-                f = -f
+            rows = data.efc_force[adr : adr + 3].copy()
+            if hand.size > adr + 2:  # the hand law's forces lie along the same tangents
+                rows[1:] += hand[adr + 1 : adr + 3]
+            f = force_on_packaging(con.frame, rows, con.geom[0] == surface)
             arm = con.pos - centre
             budget.add(
                 material,
@@ -218,7 +260,9 @@ def main(argv: list[str] | None = None) -> int:
                 h,
                 float(arm[0] * f[1] - arm[1] * f[0]),
                 float(np.hypot(arm[0], arm[1])),
-                beyond(con.pos),
+                content >= 0
+                and beyond_footprint(con.pos, data.xpos[content], data.xmat[content], half),
+                float(data.time),
             )
 
     Stepper.step = counted_step  # type: ignore[method-assign]
@@ -227,12 +271,15 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         Stepper.step = step  # type: ignore[method-assign]
     run = result.run
+    shown = " ".join(sys.argv[1:] if argv is None else argv)
     print(
         f"# Friction budget: {case.label}, placement seed {args.seed}"
         + (f", {' '.join(args.set)}" if args.set else "")
         + (f", scene {' '.join(args.scene)}" if args.scene else "")
         + (f", bulge {args.bulge:g} ({args.bulge_depth:g} m)" if args.bulge is not None else "")
     )
+    print()
+    print(f"Written by `python scripts/friction_budget.py {shown}`")
     print()
     print(
         "Coefficients set: "

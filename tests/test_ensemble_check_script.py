@@ -96,17 +96,19 @@ def test_each_type_runs_on_its_own_bottom_patch(monkeypatch, tmp_path):
 
     def fake(with_placement, params, case, seeds, executor):
         patches[case.consignment] = with_placement(0).options.bottom_patch
-        raise _BuiltError
+        if len(patches) == 2:
+            raise _BuiltError
+        return []
 
     monkeypatch.setattr(ensemble_check, "simulate_ensemble", fake)
     with pytest.raises(_BuiltError):
         ensemble_check.main(
             [
-                *("--types", "KPBW", "--placements", "1", "--backend", "rigidbox"),
+                *("--types", "KPBW", "KP", "--placements", "1", "--backend", "rigidbox"),
                 *("--bottom-patch", "KPBW=content", "--out", str(tmp_path), "--workers", "1"),
             ]
         )
-    assert patches == {"KPBW": "content"}
+    assert patches == {"KPBW": "content", "KP": "consignment"}  # KP not named: its own
 
 
 def test_bottom_patch_is_refused_without_the_reference(tmp_path, capsys):

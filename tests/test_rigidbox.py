@@ -474,3 +474,26 @@ def test_a_study_s_simulator_section_makes_a_rigidbox_simulator(tmp_path):
     pb = SimulatorSection(backend="rigidbox", rig="E3", consignment="PB").to_config(tmp_path)
     with pytest.raises(ParcelfitError, match="rigid contents only"):
         make_simulator(pb)
+
+
+def test_the_reference_is_built_from_exactly_its_listed_parameters(monkeypatch):
+    """`rigidbox.simulator.PARAMETERS` names what `parameter_effects.py --backend rigidbox`
+    accepts: the world must read those and no others (E_Pa, k_CoPa... act on no rigid box)."""
+    from parcelfit.sim.mujoco.consignment import Consignment
+    from parcelfit.sim.rigidbox.simulator import PARAMETERS
+
+    read: set[str] = set()
+
+    class Recording(dict):
+        def __getitem__(self, key):
+            read.add(key)
+            return super().__getitem__(key)
+
+    original = Consignment.parameter_values
+    monkeypatch.setattr(
+        Consignment,
+        "parameter_values",
+        lambda self, *a, **k: Recording(original(self, *a, **k)),
+    )
+    RigidBoxSimulator().world({}, TestCase("E3", "KPBW", 1))
+    assert read == set(PARAMETERS)
