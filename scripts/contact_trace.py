@@ -43,8 +43,9 @@ import numpy as np
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import TestCase
+from parcelfit.sim.ensemble import outcome_line
 from parcelfit.sim.mujoco import MujocoSimulator, SimOptions, load_consignment, load_rig
-from parcelfit.sim.mujoco.friction import Stepper
+from parcelfit.sim.mujoco.friction import Stepper, observed_steps
 from parcelfit.sim.mujoco.options import scene_options
 
 CAP = 50  # MuJoCo's mjMAXCONPAIR: contacts kept per colliding pair (geom-flex, body-flex)
@@ -166,12 +167,9 @@ def main(argv: list[str] | None = None) -> int:
     face = np.asarray(shell.bottom_face)
     sheet = set(shell.triangles[shell.bottom_triangles].ravel()) - set(shell.seam) - set(face)
     rim = np.array(sorted(sheet), dtype=int)
-    # the simulator owns its stepping loop; wrapping its stepper in this process is the one way
-    # to look at every step of exactly that loop without changing it
-    step, state = Stepper.step, {"next": args.t0}
+    state = {"next": args.t0}
 
     def traced_step(stepper: Stepper) -> None:
-        step(stepper)
         model, data = stepper.model, stepper.data
         if "start" not in state:
             state["start"] = _line_angle(model, data)
@@ -181,21 +179,10 @@ def main(argv: list[str] | None = None) -> int:
             if args.bottom:
                 print(_bottom(model, data, face, rim), flush=True)
 
-    Stepper.step = traced_step  # type: ignore[method-assign]
-    try:
+    with observed_steps(traced_step):
         result = sim.run({}, case)
-    finally:
-        Stepper.step = step  # type: ignore[method-assign]
-    run = result.run
-    if run is None:
-        print(f"run failed: {result.status.value} ({result.diagnostics.get('message')})")
-        return 1
-    theta = np.unwrap(run.trajectory.theta)
-    print(
-        f"rotation {math.degrees(theta[-1] - theta[0]):+.1f} deg, transit "
-        + (f"{run.transit_time:.3f} s" if run.transit_time is not None else "none")
-    )
-    return 0
+    print(outcome_line(result))
+    return 0 if result.run is not None else 1
 
 
 if __name__ == "__main__":

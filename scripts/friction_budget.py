@@ -30,7 +30,8 @@ footprint of a rigid content by more than 5 mm (in its frame: how much of the lo
 rim carries; the shell has rows of vertices right below the content's edges).
 
 Why by hand: MuJoCo reports its constraint forces (``mj_contactForce``) but not the forces the
-contact law applies as ``qfrc_applied``; the law keeps this step's (`ContactFriction.hand_force`).
+contact law applies as ``qfrc_applied``; the law keeps this step's (`ContactFriction.hand_force`),
+read after every step of the simulator's own loop (`friction.observed_steps`).
 """
 
 from __future__ import annotations
@@ -45,8 +46,9 @@ import numpy as np
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import TestCase
+from parcelfit.sim.ensemble import outcome_line
 from parcelfit.sim.mujoco import MujocoSimulator, SimOptions, load_consignment, load_rig
-from parcelfit.sim.mujoco.friction import Stepper
+from parcelfit.sim.mujoco.friction import Stepper, observed_steps
 from parcelfit.sim.mujoco.options import scene_options
 from parcelfit.sim.params import parameter, parse_assignments
 
@@ -210,11 +212,9 @@ def main(argv: list[str] | None = None) -> int:
     budget = Budget(rigid_content=not cons.soft)
     metal_names = [*scene.metal_geoms, *(g.name for g in scene.driven if g.material == "metal")]
     half = np.asarray(cons.content[:2]) / 2
-    step = Stepper.step
     looked_up: list[tuple[set[int], slice, int]] = []  # the model's ids, looked up once
 
     def counted_step(stepper: Stepper) -> None:
-        step(stepper)
         model, data, law = stepper.model, stepper.data, stepper.contact
         if law is None:
             return
@@ -265,12 +265,8 @@ def main(argv: list[str] | None = None) -> int:
                 float(data.time),
             )
 
-    Stepper.step = counted_step  # type: ignore[method-assign]
-    try:
+    with observed_steps(counted_step):
         result = sim.run(params, case)
-    finally:
-        Stepper.step = step  # type: ignore[method-assign]
-    run = result.run
     shown = " ".join(sys.argv[1:] if argv is None else argv)
     print(
         f"# Friction budget: {case.label}, placement seed {args.seed}"
@@ -292,15 +288,8 @@ def main(argv: list[str] | None = None) -> int:
     print()
     print("\n".join(budget.lines()))
     print()
-    if run is None:
-        print(f"run failed: {result.status.value}")
-        return 1
-    theta = np.unwrap(run.trajectory.theta)
-    print(
-        f"rotation {math.degrees(theta[-1] - theta[0]):+.2f} deg, transit "
-        + (f"{run.transit_time:.4f} s" if run.transit_time is not None else "none")
-    )
-    return 0
+    print(outcome_line(result))
+    return 0 if result.run is not None else 1
 
 
 if __name__ == "__main__":

@@ -292,3 +292,20 @@ def test_the_compiled_law_is_the_numpy_law_step_after_step_of_a_run():
                 law.record(data)
     # the checks covered contacts sliding by hand and contacts new to their step
     assert by_hand_steps > 10 and new_contacts > 10
+
+
+def test_observed_steps_sees_every_step_and_restores_the_stepper(monkeypatch):
+    from parcelfit.sim.mujoco.friction import Stepper, observed_steps
+
+    calls: list[str] = []
+    monkeypatch.setattr(Stepper, "step", lambda self: calls.append("step"))
+    plain = Stepper.step
+    stepper = object.__new__(Stepper)
+    with observed_steps(lambda s: calls.append("seen" if s is stepper else "other")):
+        stepper.step()
+        stepper.step()
+    stepper.step()
+    assert calls == ["step", "seen", "step", "seen", "step"]
+    with pytest.raises(RuntimeError), observed_steps(lambda s: None):
+        raise RuntimeError
+    assert Stepper.step is plain  # restored after an error too

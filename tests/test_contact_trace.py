@@ -87,4 +87,4 @@ def test_the_square_end_catch_on_e2a_is_the_outfeed_pushing_the_parcel_back(
     assert hardest is not None, out
     torque, fx, fz = float(hardest.group(1)), float(hardest.group(2)), float(hardest.group(4))
     assert fx < -10.0 and abs(fz) < 1.0 and abs(torque) > 0.3  # a horizontal push, off centre
-    assert re.search(r"rotation -1[23]\.\d deg, transit 2\.1[34]\d s", out)
+    assert re.search(r"rotation -1[23]\.\d\d deg, transit 2\.1[34]\d\d s", out)

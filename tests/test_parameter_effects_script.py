@@ -4,6 +4,7 @@ import importlib.util
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from parcelfit.runs import TestCase
@@ -76,3 +77,20 @@ def test_ensemble_effects_keep_their_sign_and_count_the_placements():
     assert row.split(" | ")[2].startswith("+0.035 (")  # the median transit rose by 35 ms
     assert "further at 0 of 6 placements, less at 6, alike at 0" in text
     assert "median paired difference -2.00 degrees" in text
+
+
+def test_outcome_line_gives_the_signed_turn_or_why_a_run_failed():
+    from parcelfit.runs import Run, Trajectory
+    from parcelfit.sim.ensemble import outcome_line
+    from parcelfit.sim.protocol import SimResult
+
+    # an unwrapped heading (a trajectory's) across 180 degrees and back: a net turn of -20
+    theta = np.radians([170.0, 185.0, 150.0])
+    track = Trajectory(np.array([0.0, 0.1, 0.2]), np.zeros(3), np.zeros(3), theta)
+    run = Run("r", TestCase("E3", "KP", 1), track, transit_time=1.23456)
+    assert outcome_line(SimResult(run, SimStatus.OK, 1.0)) == (
+        "rotation -20.00 deg, transit 1.2346 s"
+    )
+    failed = SimResult(None, SimStatus.UNSTABLE, 1.0, {"message": "nan in qacc"})
+    assert outcome_line(failed) == "run failed: unstable (nan in qacc)"
+    assert outcome_line(SimResult(None, SimStatus.TIMEOUT, 1.0)) == "run failed: timeout"

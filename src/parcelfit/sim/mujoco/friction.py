@@ -44,7 +44,8 @@ offset).
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from contextlib import contextmanager
 from typing import TYPE_CHECKING
 
 import mujoco
@@ -433,10 +434,30 @@ class Stepper:
         }
 
 
+@contextmanager
+def observed_steps(observe: Callable[[Stepper], None]) -> Iterator[None]:
+    """While open, every `Stepper.step` in this process calls ``observe(stepper)`` after the
+    step: for diagnostic scripts, which look at each step of exactly the simulator's own
+    stepping loop without changing it (the loop is the simulator's; wrapping its stepper is the
+    one way in)."""
+    step = Stepper.step
+
+    def observed(stepper: Stepper) -> None:
+        step(stepper)
+        observe(stepper)
+
+    Stepper.step = observed  # type: ignore[method-assign]
+    try:
+        yield
+    finally:
+        Stepper.step = step  # type: ignore[method-assign]
+
+
 __all__ = [
     "DYNAMIC_THRESHOLD",
     "STATIC_THRESHOLD",
     "ContactFriction",
     "Stepper",
+    "observed_steps",
     "surface_offsets",
 ]
