@@ -1,17 +1,13 @@
 """scripts/friction_budget.py: impulses and ratios summed per material."""
 
-import importlib.util
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-_SPEC = importlib.util.spec_from_file_location(
-    "friction_budget", Path(__file__).parents[1] / "scripts" / "friction_budget.py"
-)
-friction_budget = importlib.util.module_from_spec(_SPEC)
-_SPEC.loader.exec_module(friction_budget)
+from .helpers import load_file_module
+
+friction_budget = load_file_module("scripts/friction_budget.py")
 
 
 def test_budget_sums_impulses_and_counts_short_forces_by_hand():

@@ -1,8 +1,6 @@
 """scripts/parameter_effects.py: the rigid-box reference as a backend, signed ensemble effects."""
 
-import importlib.util
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,11 +10,9 @@ from parcelfit.sim.ensemble import Member
 from parcelfit.sim.mujoco import SceneOptions
 from parcelfit.sim.protocol import SimStatus
 
-_SPEC = importlib.util.spec_from_file_location(
-    "parameter_effects", Path(__file__).parents[1] / "scripts" / "parameter_effects.py"
-)
-parameter_effects = importlib.util.module_from_spec(_SPEC)
-_SPEC.loader.exec_module(parameter_effects)
+from .helpers import load_file_module
+
+parameter_effects = load_file_module("scripts/parameter_effects.py")
 
 
 class _BuiltError(Exception):
