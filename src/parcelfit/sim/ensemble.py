@@ -69,13 +69,13 @@ def rotation(trajectory: Trajectory) -> float:
 
 def outcome_line(result: SimResult) -> str:
     """One line on a run's outcome, for diagnostic scripts: its signed net rotation [deg]
-    (theta at the end minus at the start, unwrapped) and its transit time [s], or the status
-    of a run that failed (with MuJoCo's message where there is one)."""
+    (a trajectory's heading is unwrapped: theta at the end minus at the start) and its transit
+    time [s], or the status of a run that failed (with MuJoCo's message where there is one)."""
     run = result.run
     if run is None:
         message = result.diagnostics.get("message")
         return f"run failed: {result.status.value}" + (f" ({message})" if message else "")
-    theta = np.unwrap(np.asarray(run.trajectory.theta, dtype=float))
+    theta = run.trajectory.theta
     return f"rotation {math.degrees(theta[-1] - theta[0]):+.2f} deg, transit " + (
         f"{run.transit_time:.4f} s" if run.transit_time is not None else "none"
     )

@@ -64,6 +64,7 @@ if TYPE_CHECKING:
 # is degenerate (MuJoCo's solve then drops the contact's normal force as well)
 NEGLIGIBLE_FRICTION = 1e-6
 _ELEM_BITS = 30
+_NO_FORCE = np.zeros(0)  # a step without surface contacts: no force by hand
 
 
 class ContactFriction:
@@ -111,8 +112,9 @@ class ContactFriction:
         self._selected: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self.explicit_steps = 0  # steps in which some contact slid by hand (diagnostics)
         self.clamped = 0  # contact-steps whose force by hand was limited by the half-slip bound
-        # this step's forces by hand in constraint space (``data.efc_*`` rows; diagnostics)
-        self.hand_force = np.zeros(0)
+        # this step's forces by hand in constraint space (``data.efc_*`` rows; empty in a step
+        # without surface contacts; diagnostics)
+        self.hand_force = _NO_FORCE
 
     def _select(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The current contacts on surfaces: their indices, surface geom ids and keys. A key
@@ -141,8 +143,8 @@ class ContactFriction:
         ``data.qfrc_applied`` [N]; call between ``mj_step1`` and ``mj_step2``."""
         data.qfrc_applied[:] = 0.0
         idx, surface, keys = self._selected = self._select(data)
-        self.hand_force = np.zeros(data.nefc)
         if idx.size == 0:
+            self.hand_force = _NO_FORCE
             return
         # the normal force [N] and tangential inverse effective mass [1/kg] each contact had in
         # the step before's solve (matched by surface geom, shell element and vertex; a contact
@@ -153,7 +155,7 @@ class ContactFriction:
         # than changes its slip by half in one step (explicit in time: a larger force would
         # reverse the slip and chatter). `_contact_friction` sets the coefficients and fills
         # ``vec`` with the forces in constraint space.
-        vec = self.hand_force
+        vec = self.hand_force = np.zeros(data.nefc)
         by_hand, clamped = _contact_friction(
             idx,
             surface,
