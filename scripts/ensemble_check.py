@@ -256,8 +256,9 @@ def main(argv: list[str] | None = None) -> int:
         metavar="PATCH|TYPE=PATCH",
         help="rigidbox: where the bottom carries contact, for every type or per type "
         "(KPBW=content KP=outline; a type not named: consignment): consignment (its bulge "
-        "patch if it has one, else the outline), outline (the whole outline) or content "
-        "(the content's footprint)",
+        "patch if it has one, else the outline), outline (the whole outline), content "
+        "(the content's footprint) or rim-weight (the outline, its rim carrying only its own "
+        "weight)",
     )
     ap.add_argument(
         "--reference-spacing",

@@ -29,7 +29,10 @@ where single placements near the spin/slide threshold change branch with any sma
 is the response a parameter has to move. ``--scene KEY=VALUE`` sets scene options other
 than the defaults (e.g. ``belt_friction=coulomb``). ``--backend rigidbox`` measures the same in
 the independent rigid-box reference (`parcelfit.sim.rigidbox`, its ``--bottom-patch``), for the
-parameters its world is built from (the shell's, E_Pa and k_CoPa, do not exist in it). Writes
+parameters its world is built from (the shell's, E_Pa and k_CoPa, do not exist in it).
+``--bulge FOOTPRINT`` gives the consignment a bottom bulging under its rigid content over that
+share of its outline (``--bulge-depth``; 0: a flat bottom), as ``ensemble_check.py --bulge``
+does, in either backend (the reference's ``consignment`` patch is then the bulge's). Writes
 ``docs/research/parameter-effects.md`` (``--out``).
 """
 
@@ -40,10 +43,12 @@ import os
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
+from parcelfit.errors import ParcelfitError
 from parcelfit.metrics.comparison import Comparison
 from parcelfit.metrics.dtw import dtw_distance
 from parcelfit.runs import Run, TestCase
@@ -56,6 +61,7 @@ from parcelfit.sim.ensemble import (
     paired_order,
 )
 from parcelfit.sim.mujoco import (
+    Consignment,
     MujocoSimulator,
     SceneOptions,
     SimOptions,
@@ -72,18 +78,20 @@ MEASURES = ("DTW_xy [m]", "DTW_theta [rad]", "transit [s]")
 ENSEMBLE_MEASURES = ("median rotation [deg]", "median transit [s]", "spin share [-]")
 
 
-Job = tuple[dict[str, float], TestCase, int, SceneOptions, str, str]
+Job = tuple[dict[str, float], TestCase, int, SceneOptions, str, str, Consignment]
 
 
 def _simulate(job: Job) -> Member:
-    params, case, seed, scene, backend, bottom_patch = job
+    params, case, seed, scene, backend, bottom_patch, cons = job
     sim: MujocoSimulator | RigidBoxSimulator
+    own = {cons.name: cons}
     if backend == "rigidbox":
         sim = RigidBoxSimulator(
-            RigidBoxOptions(bottom_patch=bottom_patch, start_offset=scene.start_offset)
+            RigidBoxOptions(bottom_patch=bottom_patch, start_offset=scene.start_offset),
+            consignments=own,
         )
     else:
-        sim = MujocoSimulator(SimOptions(scene=scene))
+        sim = MujocoSimulator(SimOptions(scene=scene), consignments=own)
     return member_of(seed, sim.with_placement(seed).run(params, case))
 
 
@@ -224,6 +232,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=Path("docs/research"))
     ap.add_argument("--scene", nargs="*", default=[], metavar="KEY=VALUE")
     ap.add_argument(
+        "--bulge",
+        type=float,
+        default=None,
+        metavar="FOOTPRINT",
+        help="a bottom bulging below the rigid content over this share of the outline (0: flat)",
+    )
+    ap.add_argument("--bulge-depth", type=float, default=0.004, help="[m]")
+    ap.add_argument(
         "--backend",
         choices=("mujoco", "rigidbox"),
         default="mujoco",
@@ -253,6 +269,14 @@ def main(argv: list[str] | None = None) -> int:
     bottom_patch = args.bottom_patch or "consignment"
     rig = load_rig(args.rig)
     cons = load_consignment(args.consignment)
+    if args.bulge is not None:  # 0: a flat bottom, whatever the consignment file says
+        cons = replace(cons, bulge=(args.bulge_depth, args.bulge) if args.bulge > 0 else None)
+        try:  # the packaging's scene checks the bulge (a rigid content, a patch inside it)
+            MujocoSimulator(consignments={cons.name: cons}).scene(
+                {}, TestCase(args.rig, cons.name, args.setting)
+            )
+        except ParcelfitError as exc:
+            ap.error(f"--bulge: {exc}")
     kind = cons.content_kind
     case = TestCase(args.rig, args.consignment, args.setting)
     defaults = cons.parameter_values()
@@ -277,6 +301,7 @@ def main(argv: list[str] | None = None) -> int:
                     scene,
                     args.backend,
                     bottom_patch,
+                    cons,
                 )
     t0 = time.perf_counter()
     print(f"{len(jobs)} simulations on {args.workers} processes", flush=True)
@@ -310,6 +335,11 @@ def main(argv: list[str] | None = None) -> int:
         f"{args.step:g}"
         + (f" --params {' '.join(args.params)}" if list(args.params) != list(PUBLISHED_E3) else "")
         + (f" --scene {' '.join(args.scene)}" if args.scene else "")
+        + (
+            f" --bulge {args.bulge:g} --bulge-depth {args.bulge_depth:g}"
+            if args.bulge is not None
+            else ""
+        )
         + (
             f" --backend rigidbox --bottom-patch {bottom_patch}"
             if args.backend == "rigidbox"

@@ -1,13 +1,14 @@
 """scripts/parameter_effects.py: the rigid-box reference as a backend, signed ensemble effects."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from parcelfit.runs import TestCase
 from parcelfit.sim.ensemble import Member
-from parcelfit.sim.mujoco import SceneOptions
+from parcelfit.sim.mujoco import SceneOptions, load_consignment
 from parcelfit.sim.protocol import SimStatus
 
 from .helpers import load_file_module
@@ -42,18 +43,38 @@ def test_reference_options_are_refused_where_they_do_not_apply(tmp_path, capsys,
     assert named in capsys.readouterr().err
 
 
-def test_a_job_reaches_the_backend_it_names(monkeypatch):
+@pytest.mark.parametrize("backend", ["rigidbox", "mujoco"])
+def test_a_job_reaches_the_backend_it_names_with_its_consignment(monkeypatch, backend):
     built = []
 
     def fake(options, *args, **kwargs):
-        built.append(options)
+        built.append((options, kwargs["consignments"]))
         raise _BuiltError
 
-    monkeypatch.setattr(parameter_effects, "RigidBoxSimulator", fake)
+    name = "RigidBoxSimulator" if backend == "rigidbox" else "MujocoSimulator"
+    monkeypatch.setattr(parameter_effects, name, fake)
     case = TestCase("E3", "KPBW", 1)
+    bulged = replace(load_consignment("KPBW"), bulge=(0.004, 0.55))
     with pytest.raises(_BuiltError):
-        parameter_effects._simulate(({}, case, 3, SceneOptions(), "rigidbox", "content"))
-    assert built[0].bottom_patch == "content"
+        parameter_effects._simulate(({}, case, 3, SceneOptions(), backend, "content", bulged))
+    options, consignments = built[0]
+    assert consignments == {"KPBW": bulged}  # the bulge given on the command line reaches it
+    if backend == "rigidbox":
+        assert options.bottom_patch == "content"
+
+
+@pytest.mark.parametrize(
+    "consignment, bulge, says",
+    [("PB", "0.5", "needs a rigid content"), ("KP", "0.95", "smaller than the content")],
+)
+def test_a_bulge_the_packaging_cannot_have_is_refused_before_any_run(
+    tmp_path, capsys, consignment, bulge, says
+):
+    with pytest.raises(SystemExit):
+        args = ["--consignment", consignment, "--bulge", bulge, "--params", "E_Pa"]
+        parameter_effects.main([*args, "--out", str(tmp_path)])
+    assert says in capsys.readouterr().err
+    assert not (tmp_path / "parameter-effects.md").exists()
 
 
 def _member(seed: int, rotation_deg: float, transit: float) -> Member:

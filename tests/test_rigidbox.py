@@ -24,7 +24,12 @@ from parcelfit.sim.rigidbox import (
     parcel_body,
     rig_primitives,
 )
-from parcelfit.sim.rigidbox.contact import disc_rectangle_overlap, friction_coefficient, law_array
+from parcelfit.sim.rigidbox.contact import (
+    KAPPA,
+    disc_rectangle_overlap,
+    friction_coefficient,
+    law_array,
+)
 from parcelfit.sim.rigidbox.engine import yaw_quaternion
 from parcelfit.sim.rigidbox.geometry import (
     BELT,
@@ -94,6 +99,37 @@ def test_the_box_has_the_consignment_s_mass_inertia_and_contact_areas(bw):
     )
     bottom = content.points[content.group == 0]
     assert np.all(np.abs(bottom[:, 0]) <= cL / 2 + 1e-12)
+
+
+@pytest.mark.parametrize("name", ["KPBW", "KP"])
+def test_the_rim_weight_patch_lays_only_the_rims_own_weight_on_the_rim(name):
+    # lying flat every bottom point is as deep, so each carries its weight's share of the load:
+    # the rim (outside the content's footprint) its own mass, m_Pa over its share of the area
+    cons = load_consignment(name)
+    L, W, _ = cons.outer
+    cL, cW, _ = cons.content
+    m_pa = 0.02
+    body = parcel_body(cons, m_pa, bottom_patch="rim-weight")
+    outline = parcel_body(cons, m_pa, bottom_patch="outline")
+    bottom = body.group == 0
+    pts, w = body.points[bottom], body.area[bottom]
+    rim = (np.abs(pts[:, 0]) > cL / 2 + 1e-9) | (np.abs(pts[:, 1]) > cW / 2 + 1e-9)
+    assert rim.any() and (~rim).any()
+    share = m_pa * (1 - cL * cW / (L * W)) / cons.mass
+    assert w[rim].sum() / w.sum() == pytest.approx(share, rel=1e-12)
+    # the same grid as the outline's; the footprint's nodes keep their weights, the rim's shrink
+    assert np.array_equal(pts, outline.points[outline.group == 0])
+    w_out = outline.area[outline.group == 0]
+    assert np.array_equal(w[~rim], w_out[~rim])
+    assert np.all(w[rim] < w_out[rim])
+    # the patch's area is its weights' sum, so the whole bottom is as stiff as the outline's
+    assert body.bottom_area == pytest.approx(w.sum(), rel=1e-12)
+    law = law_array((K, K), (1, 1), (0.3, 0.3), (0, 0), cons.mass, body.bottom_area)
+    assert law[BELT, KAPPA] * w.sum() == pytest.approx(K, rel=1e-12)
+    # a heavier packaging lays more on its rim
+    heavier = parcel_body(cons, 2 * m_pa, bottom_patch="rim-weight")
+    hw = heavier.area[heavier.group == 0]
+    assert hw[rim].sum() / hw.sum() == pytest.approx(2 * share, rel=1e-12)
 
 
 def test_a_soft_content_and_unknown_options_are_refused():

@@ -47,8 +47,19 @@ with the centre of mass at the box centre (body frame: x along L, y along W, z u
   (its ``footprint`` times L x W, centred) where it has one, else the whole face; ``outline``: the
   bottom grid covers the whole L x W face;
   ``content``: the bottom grid covers only the content's footprint cL x cW (centred): the rim
-  beyond it carries no bottom contact (a bubble mailer's flexible rim that lifts off). The top
-  face always covers L x W.
+  beyond it carries no bottom contact (a bubble mailer's flexible rim that lifts off);
+  ``rim-weight``: the bottom grid covers L x W, and the weights of the nodes outside the
+  content's footprint (the rim) are scaled by s so that, lying flat (every bottom point as deep),
+  the rim carries only its own weight and the content's footprint the rest. A thin packaging
+  cannot pass the content's weight out to its rim; the rim bears the packaging's mass over its
+  area, w = m_Pa (1 - cL cW / (L W)) / M of the total, so
+
+      s = w A_c / ((1 - w) A_r)
+
+  with A_c and A_r the node weights' sums inside and outside the footprint (a node on the
+  footprint's edge counts as inside). The patch's area (which divides the contact stiffness,
+  `parcelfit.sim.rigidbox.contact`) is then A_c + s A_r, so the whole bottom is as stiff as the
+  outline's. The top face always covers L x W.
 
 The points are grouped into tiles (3 x 3 bottom or top nodes, 3 columns of a side) with a
 bounding sphere each, so that the contact search skips tiles far from a primitive.
@@ -304,7 +315,7 @@ class Body:
     [kg m^2], half extents (3,) [m], contact points (n, 3) [m, body frame], their area weights
     (n,) [m^2], groups (n,) (bottom, top, side) and height bands (n,) [m] (a side point's row
     height, 0 for the others), tiles (start, end index into the points,
-    centre (3,), radius), the bottom patch's area [m^2], the side rows' body z (m,) and height
+    centre (3,), radius), the bottom patch's area [m^2] (its weights' sum), the side rows' body z (m,) and height
     weights (m,) [m] (the lead-in's analytic contact is taken at these levels)."""
 
     mass: float
@@ -412,6 +423,16 @@ def parcel_body(
         footprint = consignment.bulge[1]
         bottom = (footprint * L, footprint * W)
     face(bottom, -H / 2, BOTTOM)
+    bottom_area = bottom[0] * bottom[1]
+    if bottom_patch == "rim-weight":
+        pts, w, g, tiles = blocks[0]
+        tol = 1e-9  # a node on the footprint's edge belongs to it
+        rim = (np.abs(pts[:, 0]) > cL / 2 + tol) | (np.abs(pts[:, 1]) > cW / 2 + tol)
+        share = packaging_mass * (1.0 - cL * cW / (L * W)) / mass
+        inside, outside = float(w[~rim].sum()), float(w[rim].sum())
+        scale = share * inside / ((1.0 - share) * outside)
+        blocks[0] = (pts, np.where(rim, scale * w, w), g, tiles)
+        bottom_area = inside + scale * outside
     face((L, W), H / 2, TOP)
     nz = max(MIN_SIDE_ROWS, math.ceil(H / spacing - 1e-9))
     row_z = -H / 2 + (np.arange(nz) + 0.5) * H / nz
@@ -454,7 +475,7 @@ def parcel_body(
         tile_end=np.array(ends, dtype=np.int64),
         tile_centre=np.array(centres),
         tile_radius=np.array(radii),
-        bottom_area=float(bottom[0] * bottom[1]),
+        bottom_area=float(bottom_area),
         row_z=row_z,
         row_h=row_h,
     )

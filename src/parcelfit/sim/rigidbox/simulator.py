@@ -71,7 +71,8 @@ class RigidBoxOptions:
     ``timestep`` [s] (None: the default of `step_for`), ``step_divisor`` (the default step divided
     by this whole number, to check a result's convergence in it), ``spacing`` [m] of the contact
     points,
-    ``bottom_patch`` (``outline`` or ``content``, `geometry`), the friction's static and dynamic
+    ``bottom_patch`` (``consignment``, ``outline``, ``content`` or ``rim-weight``, `geometry`),
+    the friction's static and dynamic
     threshold speeds ``stick_speed`` < ``slip_speed`` [m/s], ``speed_factors`` (drive ->
     factor), ``roller_surface`` (``linear`` or ``turning``), ``wall_contact`` (``outline``: walls
     met by the parcel's outline, or ``points``: by its contact points; `geometry`),
