@@ -270,6 +270,8 @@ def main(argv: list[str] | None = None) -> int:
     rig = load_rig(args.rig)
     cons = load_consignment(args.consignment)
     if args.bulge is not None:  # 0: a flat bottom, whatever the consignment file says
+        if args.bulge < 0:
+            ap.error("--bulge: a share of the outline, 0 (a flat bottom) or more")
         cons = replace(cons, bulge=(args.bulge_depth, args.bulge) if args.bulge > 0 else None)
         try:  # the packaging's scene checks the bulge (a rigid content, a patch inside it)
             MujocoSimulator(consignments={cons.name: cons}).scene(
@@ -278,7 +280,7 @@ def main(argv: list[str] | None = None) -> int:
         except ParcelfitError as exc:
             ap.error(f"--bulge: {exc}")
     kind = cons.content_kind
-    case = TestCase(args.rig, args.consignment, args.setting)
+    case = TestCase(args.rig, cons.name, args.setting)  # the name the simulators know it by
     defaults = cons.parameter_values()
     spec = {p.name: p for p in CATALOGUE}
     seeds = list(range(args.placements))

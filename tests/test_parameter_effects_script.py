@@ -65,7 +65,11 @@ def test_a_job_reaches_the_backend_it_names_with_its_consignment(monkeypatch, ba
 
 @pytest.mark.parametrize(
     "consignment, bulge, says",
-    [("PB", "0.5", "needs a rigid content"), ("KP", "0.95", "smaller than the content")],
+    [
+        ("PB", "0.5", "needs a rigid content"),
+        ("KP", "0.95", "smaller than the content"),
+        ("KPBW", "-0.5", "0 (a flat bottom) or more"),
+    ],
 )
 def test_a_bulge_the_packaging_cannot_have_is_refused_before_any_run(
     tmp_path, capsys, consignment, bulge, says
@@ -111,3 +115,34 @@ def test_outcome_line_gives_the_signed_turn_or_why_a_run_failed():
     failed = SimResult(None, SimStatus.UNSTABLE, 1.0, {"message": "nan in qacc"})
     assert outcome_line(failed) == "run failed: unstable (nan in qacc)"
     assert outcome_line(SimResult(None, SimStatus.TIMEOUT, 1.0)) == "run failed: timeout"
+
+
+def test_the_bulge_reaches_the_runs_whatever_the_consignment_is_called(monkeypatch, tmp_path):
+    # KP/BW, a lowercase name or a file path name the same type: the runs must get the bulge
+    seen = []
+
+    def fake(job):
+        seen.append(job)
+        raise _BuiltError
+
+    class _Serial:
+        def __init__(self, *_):
+            pass
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *_):
+            return False
+
+        def submit(self, fn, job):
+            fn(job)
+
+    monkeypatch.setattr(parameter_effects, "_simulate", fake)
+    monkeypatch.setattr(parameter_effects, "ProcessPoolExecutor", _Serial)
+    args = ["--consignment", "KP/BW", "--bulge", "0.55", "--params", "E_Pa", "--placements", "1"]
+    with pytest.raises(_BuiltError):
+        parameter_effects.main([*args, "--out", str(tmp_path)])
+    _, case, *_, cons = seen[0]
+    assert case.consignment == cons.name == "KPBW"
+    assert cons.bulge == (0.004, 0.55)

@@ -57,9 +57,11 @@ def bw():
     return replace(load_consignment("BW"), bulge=None)
 
 
-def _plane_world(bw, speed=0.0, spacing=0.01, gravity=G, stick=0.001, slip=0.0015):
+def _plane_world(
+    bw, speed=0.0, spacing=0.01, gravity=G, stick=0.001, slip=0.0015, patch="consignment"
+):
     """BW on a large flat belt (top at z = 0) moving at ``speed`` along x."""
-    body = parcel_body(bw, 0.02, spacing)
+    body = parcel_body(bw, 0.02, spacing, patch)
     belt = primitive("belt", BOX, (0, 0, -0.02), rot_z(0), (5, 1, 0.02), BELT, vel=(speed, 0, 0))
     law = law_array((K, K), (1, 1), (MU_D, MU_D), (OFFSET, OFFSET), bw.mass, body.bottom_area)
     return World(body, Primitives.of([belt]), law, stick, slip, gravity)
@@ -89,16 +91,23 @@ def test_the_box_has_the_consignment_s_mass_inertia_and_contact_areas(bw):
         body.tile_start, body.tile_end, body.tile_centre, body.tile_radius, strict=True
     ):
         assert np.all(np.linalg.norm(body.points[s:e] - c, axis=1) <= r + 1e-12)
+    # a patch decides where the bottom's stiffness sits: its weights sum to the outline's area,
+    # the area that divides the law's stiffness, so sides, top and walls are as stiff on any patch
     content = parcel_body(bw, 0.02, bottom_patch="content")
-    assert content.bottom_area == pytest.approx(cL * cW)
-    # the default patch follows the consignment: the bundled BW's bulge, half its outline
-    bulged = parcel_body(load_consignment("BW"), 0.02)
-    assert bulged.bottom_area == pytest.approx(0.5 * L * 0.5 * W)
+    bulged = parcel_body(load_consignment("BW"), 0.02)  # the default: the bundled BW's bulge
+    for patched in (content, bulged):
+        assert patched.bottom_area == pytest.approx(L * W)
+        assert patched.area[patched.group == 0].sum() == pytest.approx(L * W)
+        assert np.array_equal(patched.area[patched.group != 0], body.area[body.group != 0])
     assert parcel_body(load_consignment("BW"), 0.02, bottom_patch="outline").bottom_area == (
         pytest.approx(L * W)
     )
     bottom = content.points[content.group == 0]
     assert np.all(np.abs(bottom[:, 0]) <= cL / 2 + 1e-12)
+    assert np.all(np.abs(bottom[:, 1]) <= cW / 2 + 1e-12)
+    # the bulge's patch: half the outline's length and width
+    bottom = bulged.points[bulged.group == 0]
+    assert np.max(np.abs(bottom[:, 0])) == pytest.approx(0.25 * L)
 
 
 @pytest.mark.parametrize("name", ["KPBW", "KP"])
@@ -117,19 +126,45 @@ def test_the_rim_weight_patch_lays_only_the_rims_own_weight_on_the_rim(name):
     assert rim.any() and (~rim).any()
     share = m_pa * (1 - cL * cW / (L * W)) / cons.mass
     assert w[rim].sum() / w.sum() == pytest.approx(share, rel=1e-12)
-    # the same grid as the outline's; the footprint's nodes keep their weights, the rim's shrink
+    # the same grid as the outline's; the rim's nodes lighter against the footprint's
     assert np.array_equal(pts, outline.points[outline.group == 0])
     w_out = outline.area[outline.group == 0]
-    assert np.array_equal(w[~rim], w_out[~rim])
-    assert np.all(w[rim] < w_out[rim])
-    # the patch's area is its weights' sum, so the whole bottom is as stiff as the outline's
-    assert body.bottom_area == pytest.approx(w.sum(), rel=1e-12)
-    law = law_array((K, K), (1, 1), (0.3, 0.3), (0, 0), cons.mass, body.bottom_area)
-    assert law[BELT, KAPPA] * w.sum() == pytest.approx(K, rel=1e-12)
+    ratio = w / w_out
+    assert np.allclose(ratio[~rim], ratio[~rim][0], rtol=1e-12)
+    assert np.all(ratio[rim] < ratio[~rim][0])
+    # the whole bottom as stiff as the outline's, and the sides, top and walls too
+    assert w.sum() == pytest.approx(L * W, rel=1e-12)
+    assert body.bottom_area == outline.bottom_area == pytest.approx(L * W)
+    assert np.array_equal(body.area[~bottom], outline.area[outline.group != 0])
     # a heavier packaging lays more on its rim
     heavier = parcel_body(cons, 2 * m_pa, bottom_patch="rim-weight")
     hw = heavier.area[heavier.group == 0]
     assert hw[rim].sum() / hw.sum() == pytest.approx(2 * share, rel=1e-12)
+
+
+def test_a_box_on_its_rim_weight_patch_rests_at_the_outlines_depth_with_its_rim_light():
+    # dropped flat on a belt it settles as deep as on its outline (the bottom's stiffness is K);
+    # the rim's contact points then carry its own weight, those under the content the rest
+    cons = load_consignment("KPBW")
+    world = _plane_world(cons, patch="rim-weight")
+    m = Motion(world, (0, 0, float(world.body.half[2]) + 0.002), (1, 0, 0, 0))
+    m.advance(DT, 30000)
+    depth = float(world.body.half[2]) - m.x[2]
+    assert depth == pytest.approx(cons.mass * G / K, rel=1e-3)
+    body = world.body
+    bottom = body.group == 0
+    L, W, _ = cons.outer
+    cL, cW, _ = cons.content
+    pts = body.points[bottom]
+    rim = (np.abs(pts[:, 0]) > cL / 2 + 1e-9) | (np.abs(pts[:, 1]) > cW / 2 + 1e-9)
+    force = world.law[BELT, KAPPA] * body.area[bottom] * depth  # each point's spring at rest
+    assert force.sum() == pytest.approx(cons.mass * G, rel=1e-3)
+    share = 0.02 * (1 - cL * cW / (L * W)) / cons.mass
+    assert force[rim].sum() / force.sum() == pytest.approx(share, rel=1e-9)
+    # a content smaller than the grid's cells has no contact point to carry it: refused
+    tiny = replace(cons, content=(0.02, 0.02, cons.content[2]))
+    with pytest.raises(ParcelfitError, match="inside the content's footprint"):
+        parcel_body(tiny, 0.02, spacing=0.1, bottom_patch="rim-weight")
 
 
 def test_a_soft_content_and_unknown_options_are_refused():

@@ -25,9 +25,10 @@ Normal force (RecurDyn's standard contact with linear exponents, one spring-damp
     k_i = (K / A_b) A_i,   c_i = 2 zeta sqrt(k_i m_i),   m_i = M A_i / A_b
 
 K the catalogue's whole-face stiffness of the primitive's material (k_BePa belt and rollers,
-k_MePa metal) [N/m], zeta its damping ratio (zeta_BePa, zeta_MePa), A_b the area of the bottom
-contact patch, M the parcel's mass: lying flat on its bottom patch the parcel has the stiffness
-K and the damping ratio zeta; the same stiffness per unit area applies at its sides and top.
+k_MePa metal) [N/m], zeta its damping ratio (zeta_BePa, zeta_MePa), A_b the outline's area
+L W, which the bottom contact patch's weights sum to whatever the patch (`geometry`), M the
+parcel's mass: lying flat on its bottom patch the parcel has the stiffness K and the damping
+ratio zeta; the same stiffness per unit area applies at its sides and top on every patch.
 v_i = v + w x (p_i - x) is the point's velocity, v_s the primitive's surface velocity there.
 
 Friction per point from its own slip: u = v_i - v_s(p_i) minus its normal part, v = |u|,

@@ -57,9 +57,15 @@ with the centre of mass at the box centre (body frame: x along L, y along W, z u
       s = w A_c / ((1 - w) A_r)
 
   with A_c and A_r the node weights' sums inside and outside the footprint (a node on the
-  footprint's edge counts as inside). The patch's area (which divides the contact stiffness,
-  `parcelfit.sim.rigidbox.contact`) is then A_c + s A_r, so the whole bottom is as stiff as the
-  outline's. The top face always covers L x W.
+  footprint's edge counts as inside; at least one node must lie inside).
+
+  Whatever the patch, its weights are then scaled to sum to the outline's area L W, the area
+  A_b by which the contact law divides the catalogue's stiffness and damping
+  (`parcelfit.sim.rigidbox.contact`): lying flat on its patch the parcel has the stiffness K,
+  and its sides, top and the walls it meets the same stiffness per unit area K / (L W) on every
+  patch. (Until 2026-12-06 A_b was the patch's own area, so a patch smaller than the outline
+  also stiffened the sides, walls and lead-ins, by L W / A_b: 4 times for BW's bulge patch.)
+  The top face always covers L x W.
 
 The points are grouped into tiles (3 x 3 bottom or top nodes, 3 columns of a side) with a
 bounding sphere each, so that the contact search skips tiles far from a primitive.
@@ -315,7 +321,8 @@ class Body:
     [kg m^2], half extents (3,) [m], contact points (n, 3) [m, body frame], their area weights
     (n,) [m^2], groups (n,) (bottom, top, side) and height bands (n,) [m] (a side point's row
     height, 0 for the others), tiles (start, end index into the points,
-    centre (3,), radius), the bottom patch's area [m^2] (its weights' sum), the side rows' body z (m,) and height
+    centre (3,), radius), the area A_b [m^2] that divides the contact law's stiffness (the outline's
+    L W, which the bottom patch's weights sum to), the side rows' body z (m,) and height
     weights (m,) [m] (the lead-in's analytic contact is taken at these levels)."""
 
     mass: float
@@ -423,16 +430,21 @@ def parcel_body(
         footprint = consignment.bulge[1]
         bottom = (footprint * L, footprint * W)
     face(bottom, -H / 2, BOTTOM)
-    bottom_area = bottom[0] * bottom[1]
+    pts, w, g, tiles = blocks[0]
     if bottom_patch == "rim-weight":
-        pts, w, g, tiles = blocks[0]
         tol = 1e-9  # a node on the footprint's edge belongs to it
         rim = (np.abs(pts[:, 0]) > cL / 2 + tol) | (np.abs(pts[:, 1]) > cW / 2 + tol)
+        if rim.all():
+            raise ParcelfitError(
+                f"no contact point of the {spacing * 1e3:g} mm grid lies inside the content's "
+                f"footprint ({cL * 1e3:g} x {cW * 1e3:g} mm)",
+                fix="use a finer spacing",
+            )
         share = packaging_mass * (1.0 - cL * cW / (L * W)) / mass
         inside, outside = float(w[~rim].sum()), float(w[rim].sum())
-        scale = share * inside / ((1.0 - share) * outside)
-        blocks[0] = (pts, np.where(rim, scale * w, w), g, tiles)
-        bottom_area = inside + scale * outside
+        w = np.where(rim, share * inside / ((1.0 - share) * outside) * w, w)
+    # the patch carries the whole bottom's stiffness K, spread over the outline's area
+    blocks[0] = (pts, w * (L * W) / w.sum(), g, tiles)
     face((L, W), H / 2, TOP)
     nz = max(MIN_SIDE_ROWS, math.ceil(H / spacing - 1e-9))
     row_z = -H / 2 + (np.arange(nz) + 0.5) * H / nz
@@ -475,7 +487,7 @@ def parcel_body(
         tile_end=np.array(ends, dtype=np.int64),
         tile_centre=np.array(centres),
         tile_radius=np.array(radii),
-        bottom_area=float(bottom_area),
+        bottom_area=float(L * W),
         row_z=row_z,
         row_h=row_h,
     )
