@@ -36,7 +36,6 @@ import argparse
 import collections
 import math
 import sys
-from dataclasses import replace
 
 import mujoco
 import numpy as np
@@ -45,6 +44,7 @@ from parcelfit.errors import ParcelfitError
 from parcelfit.runs import TestCase
 from parcelfit.sim.ensemble import outcome_line
 from parcelfit.sim.mujoco import MujocoSimulator, SimOptions, load_consignment, load_rig
+from parcelfit.sim.mujoco.consignment import BULGE_DEPTH, with_bulge
 from parcelfit.sim.mujoco.friction import Stepper, observed_steps
 from parcelfit.sim.mujoco.options import scene_options
 
@@ -144,7 +144,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--top", type=int, default=4, help="geoms listed per sample")
     ap.add_argument("--scene", nargs="*", default=[], metavar="KEY=VALUE")
     ap.add_argument("--bulge", type=float, default=None, metavar="FOOTPRINT")
-    ap.add_argument("--bulge-depth", type=float, default=0.004, help="[m]")
+    ap.add_argument("--bulge-depth", type=float, default=BULGE_DEPTH, help="[m]")
     ap.add_argument("--bottom", action="store_true", help="print how the bottom sheet lies")
     ap.add_argument("--stop", action="store_true", help="end the run at --to")
     args = ap.parse_args(argv)
@@ -153,9 +153,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.stop and not (math.isfinite(args.t1) and args.t1 >= STOP_MIN):
         ap.error(f"--stop needs --to of at least {STOP_MIN} s")
     try:
-        rig, cons = load_rig(args.rig), load_consignment(args.consignment)
-        if args.bulge is not None:  # 0: a flat bottom, whatever the consignment file says
-            cons = replace(cons, bulge=(args.bulge_depth, args.bulge) if args.bulge > 0 else None)
+        rig = load_rig(args.rig)  # --bulge 0: a flat bottom, whatever the consignment file says
+        cons = with_bulge(load_consignment(args.consignment), args.bulge, args.bulge_depth)
         stop = min(args.t1, rig.end.duration) if args.stop else None  # never longer
         options = SimOptions(scene=scene_options(args.scene), duration=stop)
         sim = MujocoSimulator(options, {rig.name: rig}, {cons.name: cons}).with_placement(args.seed)

@@ -39,7 +39,6 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-from dataclasses import replace
 
 import mujoco
 import numpy as np
@@ -48,6 +47,7 @@ from parcelfit.errors import ParcelfitError
 from parcelfit.runs import TestCase
 from parcelfit.sim.ensemble import outcome_line
 from parcelfit.sim.mujoco import MujocoSimulator, SimOptions, load_consignment, load_rig
+from parcelfit.sim.mujoco.consignment import BULGE_DEPTH, with_bulge
 from parcelfit.sim.mujoco.friction import Stepper, observed_steps
 from parcelfit.sim.mujoco.options import scene_options
 from parcelfit.sim.params import parameter, parse_assignments
@@ -187,12 +187,11 @@ def main(argv: list[str] | None = None) -> int:
         metavar="FOOTPRINT",
         help="a bottom bulging below the rigid content over this share of the outline (0: flat)",
     )
-    ap.add_argument("--bulge-depth", type=float, default=0.004, help="[m]")
+    ap.add_argument("--bulge-depth", type=float, default=BULGE_DEPTH, help="[m]")
     args = ap.parse_args(argv)
     try:
-        rig, cons = load_rig(args.rig), load_consignment(args.consignment)
-        if args.bulge is not None:  # 0: a flat bottom, whatever the consignment file says
-            cons = replace(cons, bulge=(args.bulge_depth, args.bulge) if args.bulge > 0 else None)
+        rig = load_rig(args.rig)  # --bulge 0: a flat bottom, whatever the consignment file says
+        cons = with_bulge(load_consignment(args.consignment), args.bulge, args.bulge_depth)
         scene_opts = scene_options(args.scene)
         if scene_opts.friction != "contact":
             raise ParcelfitError(

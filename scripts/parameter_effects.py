@@ -43,7 +43,6 @@ import os
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -68,6 +67,7 @@ from parcelfit.sim.mujoco import (
     load_consignment,
     load_rig,
 )
+from parcelfit.sim.mujoco.consignment import BULGE_DEPTH, with_bulge
 from parcelfit.sim.mujoco.options import scene_options
 from parcelfit.sim.params import BOTTOM_PATCHES, CATALOGUE
 from parcelfit.sim.rigidbox import RigidBoxOptions, RigidBoxSimulator
@@ -238,7 +238,7 @@ def main(argv: list[str] | None = None) -> int:
         metavar="FOOTPRINT",
         help="a bottom bulging below the rigid content over this share of the outline (0: flat)",
     )
-    ap.add_argument("--bulge-depth", type=float, default=0.004, help="[m]")
+    ap.add_argument("--bulge-depth", type=float, default=BULGE_DEPTH, help="[m]")
     ap.add_argument(
         "--backend",
         choices=("mujoco", "rigidbox"),
@@ -270,10 +270,8 @@ def main(argv: list[str] | None = None) -> int:
     rig = load_rig(args.rig)
     cons = load_consignment(args.consignment)
     if args.bulge is not None:  # 0: a flat bottom, whatever the consignment file says
-        if args.bulge < 0:
-            ap.error("--bulge: a share of the outline, 0 (a flat bottom) or more")
-        cons = replace(cons, bulge=(args.bulge_depth, args.bulge) if args.bulge > 0 else None)
         try:  # the packaging's scene checks the bulge (a rigid content, a patch inside it)
+            cons = with_bulge(cons, args.bulge, args.bulge_depth)
             MujocoSimulator(consignments={cons.name: cons}).scene(
                 {}, TestCase(args.rig, cons.name, args.setting)
             )

@@ -68,7 +68,7 @@ def test_a_job_reaches_the_backend_it_names_with_its_consignment(monkeypatch, ba
     [
         ("PB", "0.5", "needs a rigid content"),
         ("KP", "0.95", "smaller than the content"),
-        ("KPBW", "-0.5", "0 (a flat bottom) or more"),
+        ("KPBW", "-0.5", "0 (a flat bottom) or positive"),
     ],
 )
 def test_a_bulge_the_packaging_cannot_have_is_refused_before_any_run(

@@ -1065,3 +1065,17 @@ def parcelfit_rigs_folder():
     import parcelfit.sim.mujoco
 
     return Path(parcelfit.sim.mujoco.__file__).parent / "rigs"
+
+
+def test_with_bulge_gives_a_flat_or_bulged_bottom_and_refuses_a_negative_one():
+    from parcelfit.errors import ParcelfitError
+    from parcelfit.sim.mujoco.consignment import BULGE_DEPTH, with_bulge
+
+    bw = load_consignment("BW")
+    assert with_bulge(bw, None) is bw  # as its file says
+    assert bw.bulge is not None and with_bulge(bw, 0).bulge is None  # 0: flat
+    assert with_bulge(load_consignment("KPBW"), 0.55).bulge == (BULGE_DEPTH, 0.55)
+    assert with_bulge(bw, 0.4, 0.002).bulge == (0.002, 0.4)
+    for footprint, depth in ((-0.5, BULGE_DEPTH), (0.5, 0.0), (0.5, -0.001)):
+        with pytest.raises(ParcelfitError, match="0 \\(a flat bottom\\) or positive"):
+            with_bulge(bw, footprint, depth)

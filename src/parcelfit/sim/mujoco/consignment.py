@@ -52,7 +52,7 @@ larger). The packaging's mass is a simulation parameter (m_Pa); the content gets
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -255,6 +255,27 @@ def parse_consignment(doc: Any, file: str) -> Consignment:
         rim_brace=f.rim_brace or 0.0,
         mesh_spacing=f.mesh_spacing,
     )
+
+
+BULGE_DEPTH = 0.004  # the bundled mailers' bulge depth [m] (BW.yaml), a script's default
+
+
+def with_bulge(
+    consignment: Consignment, footprint: float | None, depth: float = BULGE_DEPTH
+) -> Consignment:
+    """``consignment`` with its bottom bulging ``depth`` [m] below its content over ``footprint``
+    (a share of the outer length and width); footprint 0: a flat bottom, None: as its file
+    says. A negative footprint or a depth that is not positive is refused; whether the patch
+    fits inside the content is checked where the packaging's shell is built."""
+    if footprint is None:
+        return consignment
+    if footprint < 0 or (footprint > 0 and depth <= 0):
+        raise ParcelfitError(
+            f"bulge {footprint:g} ({depth:g} m deep): the footprint must be 0 (a flat bottom) "
+            "or positive, and the depth positive",
+            fix="give a share of the outline such as 0.5 and a depth such as 0.004",
+        )
+    return replace(consignment, bulge=(depth, footprint) if footprint > 0 else None)
 
 
 def bundled_consignment_names() -> list[str]:
