@@ -269,16 +269,14 @@ def main(argv: list[str] | None = None) -> int:
     bottom_patch = args.bottom_patch or "consignment"
     rig = load_rig(args.rig)
     cons = load_consignment(args.consignment)
+    case = TestCase(args.rig, cons.name, args.setting)  # the name the simulators know it by
     if args.bulge is not None:  # 0: a flat bottom, whatever the consignment file says
         try:  # the packaging's scene checks the bulge (a rigid content, a patch inside it)
             cons = with_bulge(cons, args.bulge, args.bulge_depth)
-            MujocoSimulator(consignments={cons.name: cons}).scene(
-                {}, TestCase(args.rig, cons.name, args.setting)
-            )
+            MujocoSimulator(consignments={cons.name: cons}).scene({}, case)
         except ParcelfitError as exc:
             ap.error(f"--bulge: {exc}")
     kind = cons.content_kind
-    case = TestCase(args.rig, cons.name, args.setting)  # the name the simulators know it by
     defaults = cons.parameter_values()
     spec = {p.name: p for p in CATALOGUE}
     seeds = list(range(args.placements))
