@@ -256,9 +256,10 @@ def main(argv: list[str] | None = None) -> int:
         metavar="PATCH|TYPE=PATCH",
         help="rigidbox: where the bottom carries contact, for every type or per type "
         "(KPBW=content KP=outline; a type not named: consignment): consignment (its bulge "
-        "patch if it has one, else the outline), outline (the whole outline), content "
-        "(the content's footprint) or rim-weight (the outline, its rim carrying only its own "
-        "weight)",
+        "patch if it has one, else rim-bending), outline (the whole outline at one pressure), "
+        "content (the content's footprint), rim-weight (the outline, its rim carrying only its "
+        "own weight) or rim-bending (its own weight and what its bending passes on, from E_Pa, "
+        "t_Pa, nu_Pa and k_BePa)",
     )
     ap.add_argument(
         "--reference-spacing",

@@ -29,7 +29,8 @@ where single placements near the spin/slide threshold change branch with any sma
 is the response a parameter has to move. ``--scene KEY=VALUE`` sets scene options other
 than the defaults (e.g. ``belt_friction=coulomb``). ``--backend rigidbox`` measures the same in
 the independent rigid-box reference (`parcelfit.sim.rigidbox`, its ``--bottom-patch``), for the
-parameters its world is built from (the shell's, E_Pa and k_CoPa, do not exist in it).
+parameters its world is built from (k_CoPa and the content's do not exist in it; E_Pa, t_Pa and
+nu_Pa act only on its ``rim-bending`` patch, the default where the consignment has no bulge).
 ``--bulge FOOTPRINT`` gives the consignment a bottom bulging under its rigid content over that
 share of its outline (``--bulge-depth``; 0: a flat bottom), as ``ensemble_check.py --bulge``
 does, in either backend (the reference's ``consignment`` patch is then the bulge's). Writes
@@ -71,7 +72,9 @@ from parcelfit.sim.mujoco.consignment import BULGE_DEPTH, with_bulge
 from parcelfit.sim.mujoco.options import scene_options
 from parcelfit.sim.params import BOTTOM_PATCHES, CATALOGUE
 from parcelfit.sim.rigidbox import RigidBoxOptions, RigidBoxSimulator
+from parcelfit.sim.rigidbox.geometry import resolved_bottom_patch
 from parcelfit.sim.rigidbox.simulator import PARAMETERS as REFERENCE_PARAMETERS
+from parcelfit.sim.rigidbox.simulator import RIM_BENDING_PARAMETERS
 
 PUBLISHED_E3 = ("k_CoPa", "k_MePa", "mu_d_BePa", "mu_d_MePa", "mu_s_MePa", "E_Pa")
 MEASURES = ("DTW_xy [m]", "DTW_theta [rad]", "transit [s]")
@@ -276,6 +279,15 @@ def main(argv: list[str] | None = None) -> int:
             MujocoSimulator(consignments={cons.name: cons}).scene({}, case)
         except ParcelfitError as exc:
             ap.error(f"--bulge: {exc}")
+    bending = [n for n in args.params if n in RIM_BENDING_PARAMETERS]
+    if args.backend == "rigidbox" and bending:
+        patch = resolved_bottom_patch(cons, bottom_patch)
+        if patch != "rim-bending":
+            ap.error(
+                f"--params: {', '.join(bending)} act on the rigid-box reference only through its "
+                f"rim's bending (--bottom-patch rim-bending, the default where the consignment "
+                f"has no bulge); on {cons.name}'s {patch} patch they change nothing"
+            )
     kind = cons.content_kind
     defaults = cons.parameter_values()
     spec = {p.name: p for p in CATALOGUE}

@@ -23,10 +23,29 @@ class _BuiltError(Exception):
 def test_shell_parameters_are_refused_by_the_reference(tmp_path, capsys):
     with pytest.raises(SystemExit):
         parameter_effects.main(
-            ["--backend", "rigidbox", "--params", "k_MePa", "E_Pa", "--out", str(tmp_path)]
+            ["--backend", "rigidbox", "--params", "k_MePa", "k_CoPa", "--out", str(tmp_path)]
         )
     err = capsys.readouterr().err
-    assert "E_Pa" in err and "k_MePa do not" not in err
+    assert "k_CoPa" in err and "k_MePa do not" not in err
+    assert not (tmp_path / "parameter-effects.md").exists()
+
+
+@pytest.mark.parametrize(
+    "extra, patch",
+    [
+        (["--bottom-patch", "outline"], "outline"),
+        (["--consignment", "BW"], "bulge"),  # the bundled BW rests on its bulge
+    ],
+)
+def test_the_sheets_stiffness_is_refused_where_the_reference_does_not_bend_its_rim(
+    tmp_path, capsys, extra, patch
+):
+    # E_Pa, t_Pa and nu_Pa reach the reference only through its rim's bending
+    with pytest.raises(SystemExit):
+        args = ["--backend", "rigidbox", "--params", "E_Pa", *extra, "--out", str(tmp_path)]
+        parameter_effects.main(args)
+    err = capsys.readouterr().err
+    assert "rim-bending" in err and f"{patch} patch" in err
     assert not (tmp_path / "parameter-effects.md").exists()
 
 

@@ -42,6 +42,9 @@ from parcelfit.sim.rigidbox.geometry import (
     WALL,
     box_inertia,
     primitive,
+    resolved_bottom_patch,
+    rim_bending_length,
+    rim_load_share,
     rot_z,
 )
 
@@ -53,13 +56,12 @@ MU_D, OFFSET = 0.45, 0.1
 
 @pytest.fixture(scope="module")
 def bw():
-    """BW with a flat bottom (the bundled file's bulge removed): the analytic checks' box."""
+    """BW with a flat bottom (the bundled file's bulge removed): the analytic checks' box, on its
+    whole outline (``bottom_patch="outline"``: every bottom point as stiff per unit area)."""
     return replace(load_consignment("BW"), bulge=None)
 
 
-def _plane_world(
-    bw, speed=0.0, spacing=0.01, gravity=G, stick=0.001, slip=0.0015, patch="consignment"
-):
+def _plane_world(bw, speed=0.0, spacing=0.01, gravity=G, stick=0.001, slip=0.0015, patch="outline"):
     """BW on a large flat belt (top at z = 0) moving at ``speed`` along x."""
     body = parcel_body(bw, 0.02, spacing, patch)
     belt = primitive("belt", BOX, (0, 0, -0.02), rot_z(0), (5, 1, 0.02), BELT, vel=(speed, 0, 0))
@@ -75,7 +77,7 @@ def _on_plane(world, **kw):
 
 
 def test_the_box_has_the_consignment_s_mass_inertia_and_contact_areas(bw):
-    body = parcel_body(bw, 0.02)
+    body = parcel_body(bw, 0.02, bottom_patch="outline")
     L, W, H = bw.outer
     assert body.mass == bw.mass
     assert np.allclose(body.inertia, box_inertia(bw.mass, bw.outer, bw.content, 0.02))
@@ -167,6 +169,81 @@ def test_a_box_on_its_rim_weight_patch_rests_at_the_outlines_depth_with_its_rim_
         parcel_body(tiny, 0.02, spacing=0.1, bottom_patch="rim-weight")
 
 
+def test_the_rims_bending_length_is_the_plate_on_its_contacts_foundation():
+    # lambda = (4 D / k_f)^(1/4), D = E t^3 / (12 (1 - nu^2)), k_f = K / (L W)
+    E, t, nu, K, area = 1e9, 5e-4, 0.3, 5e5, 0.055
+    D = E * t**3 / (12 * (1 - nu**2))
+    assert rim_bending_length(E, t, nu, K, area) == pytest.approx((4 * D * area / K) ** 0.25)
+    assert rim_bending_length(E, t, nu, K, area) == pytest.approx(8.424e-3, rel=1e-3)
+    # a sixteenth of the foundation's stiffness doubles it
+    assert rim_bending_length(E, t, nu, K / 16, area) == pytest.approx(
+        2 * rim_bending_length(E, t, nu, K, area)
+    )
+    for bad in ((0, t, nu, K, area), (E, -t, nu, K, area), (E, t, 0.5, K, area)):
+        with pytest.raises(ParcelfitError, match="bending"):
+            rim_bending_length(*bad)
+    with pytest.raises(ParcelfitError, match="bending length"):
+        parcel_body(load_consignment("KPBW"), 0.02, bottom_patch="rim-bending", bending_length=-1)
+
+
+def test_the_rim_bending_patch_passes_a_strip_of_the_bending_length_to_the_rim():
+    # the content's pressure decays beyond its edge as e^-b (cos b + sin b), b = d / lambda; on
+    # a long edge that adds lambda (1 + e^(-3 pi / 4) / sqrt 2) of the content's pressure per
+    # metre of edge, and 2 pi lambda^2 c2 at the four corners together; the rim's own weight
+    # rests on it besides
+    from scipy.integrate import quad
+
+    cons = load_consignment("KPBW")
+    L, W, _ = cons.outer
+    cL, cW, _ = cons.content
+    m_pa, lam = 0.02, 0.008
+    c1 = 1 + math.exp(-0.75 * math.pi) / math.sqrt(2)
+    c2 = quad(lambda b: math.exp(-b) * (math.cos(b) + math.sin(b)) * b, 0, 0.75 * math.pi)[0]
+    passed = lam * 2 * (cL + cW) * c1 + 2 * math.pi * lam**2 * c2  # [m^2] of content pressure
+    a_in, a_out = cL * cW, L * W - cL * cW
+    share = m_pa * a_out / (L * W) / cons.mass  # the rim's own weight
+    # the own weight at pressure q_w over a_out; the content's pressure p_c over a_in + passed,
+    # less q_w's part already counted on the passed strip: q_w a_out = share M g
+    p_c = (1 - share * (a_out - passed) / a_out) / (a_in + passed)  # per unit M g
+    expected = 1 - p_c * a_in
+    body = parcel_body(cons, m_pa, 0.0025, "rim-bending", lam)
+    assert rim_load_share(cons, body) == pytest.approx(expected, rel=0.02)
+    assert 0.2 < expected < 0.3  # more than its own weight (8.9 %), less than the outline's
+    # no bending: the rim-weight patch, node for node
+    flexible = parcel_body(cons, m_pa, 0.01, "rim-bending", 0.0)
+    weight = parcel_body(cons, m_pa, 0.01, "rim-weight")
+    assert np.array_equal(flexible.area, weight.area)
+    # a stiffer sheet passes more to the rim; the bottom always sums to the outline's area
+    shares = [
+        rim_load_share(cons, parcel_body(cons, m_pa, 0.005, "rim-bending", x))
+        for x in (0.002, 0.005, 0.01, 0.02)
+    ]
+    assert shares == sorted(shares) and shares[0] > share
+    body = parcel_body(cons, m_pa, 0.005, "rim-bending", 0.02)
+    assert body.area[body.group == 0].sum() == pytest.approx(L * W)
+
+
+def test_the_reference_rests_a_consignment_without_a_bulge_on_its_bending_rim():
+    # the default patch: the bulge where the file has one (BW), else the rim's bending from
+    # E_Pa, t_Pa, nu_Pa and k_BePa (KP/BW, KP)
+    cons = load_consignment("KPBW")
+    assert resolved_bottom_patch(cons, "consignment") == "rim-bending"
+    assert resolved_bottom_patch(load_consignment("BW"), "consignment") == "bulge"
+    assert resolved_bottom_patch(cons, "outline") == "outline"
+    sim = RigidBoxSimulator()
+    case = TestCase("E3", "KPBW", 1)
+    L, W, _ = cons.outer
+    for E_pa in (200e6, 1600e6):
+        world, _ = sim.world({"E_Pa": E_pa}, case)
+        p = cons.parameter_values(si_values={"E_Pa": E_pa})
+        lam = rim_bending_length(E_pa, p["t_Pa"], p["nu_Pa"], p["k_BePa"], L * W)
+        expected = parcel_body(cons, p["m_Pa"], 0.01, "rim-bending", lam)
+        assert np.array_equal(world.body.area, expected.area)
+    soft, _ = sim.world({"E_Pa": 200e6}, case)
+    stiff, _ = sim.world({"E_Pa": 1600e6}, case)
+    assert rim_load_share(cons, stiff.body) > rim_load_share(cons, soft.body) + 0.03
+
+
 def test_a_soft_content_and_unknown_options_are_refused():
     with pytest.raises(ParcelfitError, match="rigid contents only"):
         parcel_body(load_consignment("PB"), 0.01)
@@ -214,7 +291,7 @@ def test_the_lead_in_contact_is_the_segment_law_whatever_the_point_spacing(bw):
     r, delta = 0.01, 0.002
     forces = []
     for spacing in (0.01, 0.005):
-        body = parcel_body(bw, 0.02, spacing)
+        body = parcel_body(bw, 0.02, spacing, "outline")
         L, _, H = bw.outer
         lead = primitive(
             "lead", LEAD_IN, (L / 2 + r - delta, 0.0, 0.054), np.eye(3), (r, 0.05, 0), 1
@@ -235,7 +312,7 @@ def test_the_lead_in_contact_is_the_segment_law_whatever_the_point_spacing(bw):
 def _pressed_into_a_wall(bw, kind, spacing, yaw_deg, delta):
     """The contact force [N] of BW (yawed by ``yaw_deg``) whose outline reaches ``delta`` past
     the face of a 3 mm metal wall along world y, mounted 4 mm above the belt."""
-    body = parcel_body(bw, 0.02, spacing)
+    body = parcel_body(bw, 0.02, spacing, "outline")
     a = math.radians(yaw_deg)
     hx, hy, hz = body.half
     reach = hx * math.cos(a) + hy * math.sin(a)  # the corner (hx, -hy) reaches farthest in x
@@ -272,7 +349,7 @@ def test_a_wall_s_face_takes_only_the_outline_nearer_to_it_than_to_the_wall_s_en
     behind the face on the centre's side only the part less deep than its 5 mm to the end is
     the face's (kappa h d^2 / 2 with d = 5 mm, pushing the box to its side); the rest, up to
     W / 2 deep, is left to the end's contact (a lead-in)."""
-    body = parcel_body(bw, 0.02, 0.01)
+    body = parcel_body(bw, 0.02, 0.01, "outline")
     hx, _, hz = body.half
     d, s1 = 0.005, 0.0015
     # a wall along world x whose start lies d inside the box's front edge, 1 mm to its left
@@ -287,7 +364,7 @@ def test_a_wall_s_face_takes_only_the_outline_nearer_to_it_than_to_the_wall_s_en
 def _strike_a_wall(bw, damping, speed=0.5):
     """BW (no gravity) moving at ``speed`` flat into a wall along world y: its rebound speed over
     ``speed``."""
-    body = parcel_body(bw, 0.02, 0.01)
+    body = parcel_body(bw, 0.02, 0.01, "outline")
     hx, _, hz = body.half
     wall = primitive("wall", WALL, (hx + 0.002 + 0.0015, 0, 0.054), rot_z(90), (0.5, 0.0015, 0.05),
                      METAL)  # fmt: skip
@@ -304,7 +381,7 @@ def test_a_wall_s_damping_ratio_is_the_catalogue_s_for_its_own_contact(bw):
     only pushes rebounds with exp(-2) of its speed; per unit area the same side is damped at
     zeta sqrt(S / A_b) and rebounds more."""
     delta, u = 0.002, 0.1
-    body = parcel_body(bw, 0.02, 0.01)
+    body = parcel_body(bw, 0.02, 0.01, "outline")
     hx, hy, hz = body.half
     wall = primitive("wall", WALL, (hx - delta + 0.0015, 0, 0.054), rot_z(90), (0.5, 0.0015, 0.05),
                      METAL)  # fmt: skip

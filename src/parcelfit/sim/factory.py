@@ -18,7 +18,7 @@ the slip speed, see `SceneOptions`), ``rig_timesteps`` (a time step [s] by rig n
 ``wall_limit`` [s]),
 ``rigidbox`` (the rigid-box reference, `parcelfit.sim.rigidbox`: a bundled or user rig and a
 consignment with a rigid content, optional ``timestep`` [s], ``spacing`` [m] (its contact points),
-``bottom_patch`` (``consignment``, ``outline``, ``content`` or ``rim-weight``),
+``bottom_patch`` (``consignment``, ``outline``, ``content``, ``rim-weight`` or ``rim-bending``),
 ``wall_contact`` (``outline``, the default: walls meet the box's outline, or ``points``: its
 contact points), ``wall_damping`` (``ratio``, the default: walls and lead-ins damped at the
 ratio of their contact's stiffness, or ``area``),
@@ -288,8 +288,10 @@ class SimulatorSection(FileModel):
     ) = None
     """A time step [s] by rig name, e.g. {E1: 0.000208333}."""
     bottom_patch: Annotated[str | None, Choice(BOTTOM_PATCHES, what="bottom contact patch")] = None
-    """rigidbox: where the box touches the belt: consignment (its bulge patch, else the
-    outline), outline, content, or rim-weight (the outline, its rim carrying its own weight)."""
+    """rigidbox: where the box touches the belt: consignment (its bulge patch, else
+    rim-bending), outline, content, rim-weight (the outline, its rim carrying its own weight) or
+    rim-bending (its own weight and what its bending passes on, from E_Pa, t_Pa, nu_Pa and
+    k_BePa)."""
     wall_contact: Annotated[str | None, Choice(WALL_CONTACTS, what="wall contact")] = None
     """rigidbox: how walls meet the box: its outline (default) or its contact points."""
     wall_damping: Annotated[str | None, Choice(WALL_DAMPINGS, what="wall damping")] = None

@@ -72,7 +72,7 @@ FRICTION_LAWS = ("contact", "geom")
 # where the rigid-box reference's bottom carries contact (sim/rigidbox/geometry.py): the
 # consignment's own bulge patch if it has one, else the whole outline; the outline; the content's
 # footprint; the outline with its rim beyond the content carrying only the rim's own weight
-BOTTOM_PATCHES = ("consignment", "outline", "content", "rim-weight")
+BOTTOM_PATCHES = ("consignment", "outline", "content", "rim-weight", "rim-bending")
 # how the rigid-box reference's walls meet the parcel (sim/rigidbox/contact.py): its outline, or
 # its contact points
 WALL_CONTACTS = ("outline", "points")

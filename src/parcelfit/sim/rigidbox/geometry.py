@@ -44,8 +44,9 @@ with the centre of mass at the box centre (body frame: x along L, y along W, z u
   (z = -H/2 + (j + 1/2) H / n_z, weight H / n_z along the height): the faces' edges are carried by
   the bottom and top grids, so no point is counted twice when the parcel lies flat.
 * the **bottom contact patch** (option): ``consignment`` (default): the consignment's bulge patch
-  (its ``footprint`` times L x W, centred) where it has one, else the whole face; ``outline``: the
-  bottom grid covers the whole L x W face;
+  (its ``footprint`` times L x W, centred) where it has one, else ``rim-bending`` (below);
+  ``outline``: the bottom grid covers the whole L x W face at one pressure, as if the rim were
+  as rigid as the content;
   ``content``: the bottom grid covers only the content's footprint cL x cW (centred): the rim
   beyond it carries no bottom contact (a bubble mailer's flexible rim that lifts off);
   ``rim-weight``: the bottom grid covers L x W, and the weights of the nodes outside the
@@ -58,6 +59,28 @@ with the centre of mass at the box centre (body frame: x along L, y along W, z u
 
   with A_c and A_r the node weights' sums inside and outside the footprint (a node on the
   footprint's edge counts as inside; at least one node must lie inside).
+  ``rim-bending``: the rim carries its own weight and what its bending passes on from the
+  content. The packaging's sheet beyond the content's edge is a plate (bending stiffness
+  D = E_Pa t_Pa^3 / (12 (1 - nu_Pa^2)) per unit width) on the contact's foundation, the belt's
+  stiffness per unit area k_f = k_BePa / (L W) [N/m^3], clamped to the content, which presses
+  it down. A plate on an elastic foundation with its edge pressed down bends back up within
+  the bending length
+
+      lambda = (4 D / k_f)^(1/4)
+
+  (Hetenyi's beam on an elastic foundation, an edge displaced without rotation), its pressure
+  beyond the edge, as a share of the content's, g(b) = e^-b (cos b + sin b) at b = d / lambda
+  (d the distance from the content's footprint; set to 0 from b = 3 pi / 4, where it would
+  pull). Over a long edge g adds a strip about lambda wide at the content's pressure (its
+  integral is 1.07 lambda). So the pressure is p_c on the footprint and q_w + (p_c - q_w) g
+  beyond it, with q_w the rim's own weight per unit area (q_w A_r = w M g, w as above) and
+  p_c from the balance of the weight. The node weights are these pressures averaged over each
+  node's cell (8 x 8 points; lambda is about the grid's spacing, so a node's value alone would
+  make the rim's load depend on where the content's edge falls between nodes). At E3's
+  defaults (E_Pa 1000 N/mm^2, t_Pa 0.5 mm, k_BePa 500 N/mm) lambda is 8.4 mm for KP/BW and
+  its rim carries about 27 % of its weight (its own 8.9 %); over the catalogue's ranges 2.4 to
+  24 mm. lambda = 0 is ``rim-weight``, node for node. The other contacts (walls, a plate under
+  the parcel) keep these weights: the bending length is the belt's.
 
   Whatever the patch, its weights are then scaled to sum to the outline's area L W, the area
   A_b by which the contact law divides the catalogue's stiffness and damping
@@ -97,6 +120,7 @@ SLAB = 0.02  # half-thickness of belt and strip slabs [m], as the MuJoCo scene's
 BOTTOM, TOP, SIDE = 0, 1, 2  # point groups
 ROLLER_SURFACES = ("linear", "turning")
 TILE = 3  # nodes per tile edge
+SUB = 8  # sub-points per axis of a node's cell where the rim's bending profile is averaged
 MIN_SIDE_ROWS = 3
 
 
@@ -384,13 +408,126 @@ def _tiles_of_grid(nx: int, ny: int) -> list[np.ndarray]:
     ]
 
 
+def resolved_bottom_patch(consignment: Consignment, bottom_patch: str) -> str:
+    """The patch ``bottom_patch`` stands for on ``consignment``: ``consignment`` is ``bulge``
+    (the consignment's bulge patch) where it has one, else ``rim-bending``; any other name is
+    itself."""
+    if bottom_patch != "consignment":
+        return bottom_patch
+    return "bulge" if consignment.bulge is not None else "rim-bending"
+
+
+def rim_bending_length(
+    young: float, thickness: float, poisson: float, stiffness: float, area: float
+) -> float:
+    """The bending length lambda = (4 D / k_f)^(1/4) [m] of a packaging sheet (Young's modulus
+    ``young`` [Pa], ``thickness`` [m], ``poisson`` [-]; D = E t^3 / (12 (1 - nu^2)) [N m]) on
+    the contact's foundation k_f = ``stiffness`` / ``area`` [N/m^3] (the whole bottom's
+    stiffness K [N/m] over the outline's area L W [m^2]); see the module docstring."""
+    for name, value in (("young", young), ("thickness", thickness), ("stiffness", stiffness)):
+        if not (math.isfinite(value) and value > 0):
+            raise ParcelfitError(f"the rim's bending needs a positive {name}, got {value!r}")
+    if not 0 <= poisson < 0.5 or not area > 0:
+        raise ParcelfitError(
+            f"the rim's bending needs 0 <= poisson < 0.5 and a positive area, got {poisson!r}, "
+            f"{area!r}"
+        )
+    rigidity = young * thickness**3 / (12.0 * (1.0 - poisson**2))
+    return (4.0 * rigidity * area / stiffness) ** 0.25
+
+
+def _bending_profile(
+    x: np.ndarray, y: np.ndarray, cL: float, cW: float, length: float
+) -> np.ndarray:
+    """The rim's pressure from bending as a share of the content's, at (x, y) [m] beyond the
+    content's footprint cL x cW: e^-b (cos b + sin b) (b = d / length, d the distance from the
+    footprint), 0 from b = 3 pi / 4 where the profile would pull."""
+    d = np.hypot(np.maximum(np.abs(x) - cL / 2, 0.0), np.maximum(np.abs(y) - cW / 2, 0.0))
+    b = d / length
+    return np.where(b < 0.75 * math.pi, np.exp(-b) * (np.cos(b) + np.sin(b)), 0.0)
+
+
+def _rim_weights(
+    pts: np.ndarray,
+    w: np.ndarray,
+    consignment: Consignment,
+    packaging_mass: float,
+    length: float,
+    spacing: float,
+) -> np.ndarray:
+    """Factors r_i on the bottom nodes' weights ``w`` so that, lying flat, the rim carries its
+    own weight and, over the bending length ``length`` [m] (0: none), the share its bending
+    passes on from the content (module docstring)."""
+    L, W, _ = consignment.outer
+    cL, cW, _ = consignment.content
+    tol = 1e-9  # a node on the footprint's edge belongs to it
+    rim = (np.abs(pts[:, 0]) > cL / 2 + tol) | (np.abs(pts[:, 1]) > cW / 2 + tol)
+    if rim.all():
+        raise ParcelfitError(
+            f"no contact point of the {spacing * 1e3:g} mm grid lies inside the content's "
+            f"footprint ({cL * 1e3:g} x {cW * 1e3:g} mm)",
+            fix="use a finer spacing",
+        )
+    share = packaging_mass * (1.0 - cL * cW / (L * W)) / consignment.mass
+    if length == 0:
+        # node by node: a node inside the footprint (or on its edge) carries the content's
+        # pressure, one outside the own weight's
+        inside, outside = float(w[~rim].sum()), float(w[rim].sum())
+        if outside == 0:
+            return np.ones_like(w)
+        return np.where(rim, share * inside / ((1.0 - share) * outside), 1.0)
+    # cell by cell: the share of each node's cell inside the footprint, outside it, and the
+    # bending profile's mean over the part outside (SUB x SUB points per cell): the bending
+    # length is about the grid's spacing, and a node's point value would make the share depend
+    # on where the content's edge falls between nodes
+    half = []
+    for extent in (L, W):
+        n = max(1, math.ceil(extent / spacing - 1e-9))
+        half.append(extent / n / 2)
+    u = (np.arange(SUB) + 0.5) / SUB * 2.0 - 1.0  # cell-relative offsets in (-1, 1)
+    xs = np.clip(pts[:, 0, None] + half[0] * u, -L / 2, L / 2)  # (n, SUB)
+    ys = np.clip(pts[:, 1, None] + half[1] * u, -W / 2, W / 2)
+    X = np.repeat(xs, SUB, axis=1)
+    Y = np.tile(ys, (1, SUB))
+    out = (np.abs(X) > cL / 2) | (np.abs(Y) > cW / 2)
+    frac_out = out.mean(axis=1)
+    passed = np.where(out, _bending_profile(X, Y, cL, cW, length), 0.0).mean(axis=1)
+    a_in = float((w * (1.0 - frac_out)).sum())
+    a_out = float((w * frac_out).sum())
+    g = float((w * passed).sum())
+    if a_out == 0:
+        return np.ones_like(w)
+    rho = share * (a_in + g) / (a_out - share * (a_out - g))
+    return (1.0 - frac_out) + rho * frac_out + (1.0 - rho) * passed
+
+
+def rim_load_share(consignment: Consignment, body: Body) -> float:
+    """The share [-] of ``body``'s bottom load, lying flat, that rests outside the content's
+    footprint: each bottom node's weight spread evenly over its grid cell (16 x 16 points)."""
+    L, W, _ = consignment.outer
+    cL, cW, _ = consignment.content
+    bottom = body.group == BOTTOM
+    pts, area = body.points[bottom], body.area[bottom]
+    u = (np.arange(16) + 0.5) / 16 - 0.5
+    cells = [np.diff(np.unique(pts[:, k]))[:1].sum() for k in (0, 1)]  # 0 for a single node
+    X = np.clip(pts[:, 0, None, None] + cells[0] * u[:, None], -L / 2, L / 2)
+    Y = np.clip(pts[:, 1, None, None] + cells[1] * u[None, :], -W / 2, W / 2)
+    out = ((np.abs(X) > cL / 2) | (np.abs(Y) > cW / 2)).mean(axis=(1, 2))
+    return float((area * out).sum() / area.sum())
+
+
 def parcel_body(
     consignment: Consignment,
     packaging_mass: float,
     spacing: float = 0.01,
     bottom_patch: str = "consignment",
+    bending_length: float = 0.0,
 ) -> Body:
-    """The rigid box of ``consignment`` (see the module docstring)."""
+    """The rigid box of ``consignment`` with the packaging's mass ``packaging_mass`` [kg],
+    contact points ``spacing`` [m] apart and the bottom contact patch ``bottom_patch``; on the
+    ``rim-bending`` patch (the default where the consignment has no bulge) the rim's bending
+    length ``bending_length`` [m] (`rim_bending_length`; 0: a rim that does not bend, the
+    ``rim-weight`` patch). See the module docstring."""
     if consignment.soft:
         raise ParcelfitError(
             f"consignment {consignment.name} has a soft content: the rigid-box reference "
@@ -400,6 +537,10 @@ def parcel_body(
     if bottom_patch not in BOTTOM_PATCHES:
         raise ParcelfitError(
             f"unknown bottom_patch {bottom_patch!r}", fix=f"use one of {list(BOTTOM_PATCHES)}"
+        )
+    if not (math.isfinite(bending_length) and bending_length >= 0):
+        raise ParcelfitError(
+            f"the rim's bending length must be a finite length >= 0 m, got {bending_length!r}"
         )
     if not 0.001 <= spacing <= 0.1:
         raise ParcelfitError(
@@ -423,26 +564,18 @@ def parcel_body(
         pts = np.column_stack([X.ravel(), Y.ravel(), np.full(X.size, z)])
         blocks.append((pts, np.outer(wx, wy).ravel(), group, _tiles_of_grid(len(x), len(y))))
 
+    patch = resolved_bottom_patch(consignment, bottom_patch)
     bottom = (L, W)
-    if bottom_patch == "content":
+    if patch == "content":
         bottom = (cL, cW)
-    elif bottom_patch == "consignment" and consignment.bulge is not None:
+    elif patch == "bulge":
         footprint = consignment.bulge[1]
         bottom = (footprint * L, footprint * W)
     face(bottom, -H / 2, BOTTOM)
     pts, w, g, tiles = blocks[0]
-    if bottom_patch == "rim-weight":
-        tol = 1e-9  # a node on the footprint's edge belongs to it
-        rim = (np.abs(pts[:, 0]) > cL / 2 + tol) | (np.abs(pts[:, 1]) > cW / 2 + tol)
-        if rim.all():
-            raise ParcelfitError(
-                f"no contact point of the {spacing * 1e3:g} mm grid lies inside the content's "
-                f"footprint ({cL * 1e3:g} x {cW * 1e3:g} mm)",
-                fix="use a finer spacing",
-            )
-        share = packaging_mass * (1.0 - cL * cW / (L * W)) / mass
-        inside, outside = float(w[~rim].sum()), float(w[rim].sum())
-        w = np.where(rim, share * inside / ((1.0 - share) * outside) * w, w)
+    if patch in ("rim-weight", "rim-bending"):
+        length = bending_length if patch == "rim-bending" else 0.0
+        w = w * _rim_weights(pts, w, consignment, packaging_mass, length, spacing)
     # the patch carries the whole bottom's stiffness K, spread over the outline's area
     blocks[0] = (pts, w * (L * W) / w.sum(), g, tiles)
     face((L, W), H / 2, TOP)

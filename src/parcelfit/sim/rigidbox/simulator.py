@@ -40,13 +40,20 @@ from parcelfit.sim.rigidbox.geometry import (
     METAL,
     ROLLER_SURFACES,
     parcel_body,
+    resolved_bottom_patch,
     rig_primitives,
+    rim_bending_length,
 )
 
-# the parameters the reference's world is built from (`RigidBoxSimulator.world`); the others
-# (the packaging's and the content's stiffness, E_Pa, ...) belong to a shell it does not have
+# the parameters the reference's world is built from (`RigidBoxSimulator.world`; E_Pa, t_Pa and
+# nu_Pa only on the rim-bending patch, where they set how far the rim's bending passes the
+# content's load on); the others (k_CoPa, the content's stiffness, ...) belong to a shell it does
+# not have
 PARAMETERS = (
     "m_Pa",
+    "E_Pa",
+    "t_Pa",
+    "nu_Pa",
     "k_BePa",
     "k_MePa",
     "zeta_BePa",
@@ -56,6 +63,7 @@ PARAMETERS = (
     "mu_s_BePa",
     "mu_s_MePa",
 )
+RIM_BENDING_PARAMETERS = ("E_Pa", "t_Pa", "nu_Pa")  # read on the rim-bending patch only
 FALL_DEPTH = 0.2  # m
 MAX_STEP = 1e-5  # s, the largest default step
 OMEGA_DT = 0.1  # the default step keeps omega_max * dt at most this
@@ -71,7 +79,8 @@ class RigidBoxOptions:
     ``timestep`` [s] (None: the default of `step_for`), ``step_divisor`` (the default step divided
     by this whole number, to check a result's convergence in it), ``spacing`` [m] of the contact
     points,
-    ``bottom_patch`` (``consignment``, ``outline``, ``content`` or ``rim-weight``, `geometry`),
+    ``bottom_patch`` (``consignment``, ``outline``, ``content``, ``rim-weight`` or
+    ``rim-bending``, `geometry`; the rim's bending from E_Pa, t_Pa, nu_Pa and k_BePa),
     the friction's static and dynamic
     threshold speeds ``stick_speed`` < ``slip_speed`` [m/s], ``speed_factors`` (drive ->
     factor), ``roller_surface`` (``linear`` or ``turning``), ``wall_contact`` (``outline``: walls
@@ -155,7 +164,11 @@ class RigidBoxSimulator(RigBackend[RigidBoxOptions]):
         opt = self.options
         rig, cons = self.rig(case.rig), self.consignment(case.consignment)
         p = cons.parameter_values(si_values=params)
-        body = parcel_body(cons, p["m_Pa"], opt.spacing, opt.bottom_patch)
+        length = 0.0
+        if resolved_bottom_patch(cons, opt.bottom_patch) == "rim-bending":
+            L, W, _ = cons.outer
+            length = rim_bending_length(p["E_Pa"], p["t_Pa"], p["nu_Pa"], p["k_BePa"], L * W)
+        body = parcel_body(cons, p["m_Pa"], opt.spacing, opt.bottom_patch, length)
         prims = rig_primitives(
             rig, case.speed_setting, opt.speed_factors, opt.roller_surface, opt.wall_contact
         )
