@@ -165,3 +165,20 @@ def test_the_bulge_reaches_the_runs_whatever_the_consignment_is_called(monkeypat
     _, case, *_, cons = seen[0]
     assert case.consignment == cons.name == "KPBW"
     assert cons.bulge == (0.004, 0.55)
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [[], ["--consignment", "BW", "--bulge", "0"], ["--bottom-patch", "rim-bending"]],
+)
+def test_the_sheets_stiffness_reaches_the_reference_where_its_rim_bends(
+    tmp_path, monkeypatch, extra
+):
+    # KP/BW by default, a flat BW and the patch named: the runs are submitted
+    def submitted(*args, **kwargs):
+        raise _BuiltError
+
+    monkeypatch.setattr(parameter_effects, "ProcessPoolExecutor", submitted)
+    with pytest.raises(_BuiltError):
+        args = ["--backend", "rigidbox", "--params", "E_Pa", "t_Pa", *extra]
+        parameter_effects.main([*args, "--out", str(tmp_path)])

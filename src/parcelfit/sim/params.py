@@ -70,8 +70,9 @@ BELT_FRICTION = ("mujoco", "coulomb")
 CONTACT_LAWS = ("penalty", "impedance")
 FRICTION_LAWS = ("contact", "geom")
 # where the rigid-box reference's bottom carries contact (sim/rigidbox/geometry.py): the
-# consignment's own bulge patch if it has one, else the whole outline; the outline; the content's
-# footprint; the outline with its rim beyond the content carrying only the rim's own weight
+# consignment's own bulge patch if it has one, else rim-bending; the outline at one pressure; the
+# content's footprint; the outline with its rim beyond the content carrying only the rim's own
+# weight; or that and what the packaging sheet's bending passes on from the content
 BOTTOM_PATCHES = ("consignment", "outline", "content", "rim-weight", "rim-bending")
 # how the rigid-box reference's walls meet the parcel (sim/rigidbox/contact.py): its outline, or
 # its contact points

@@ -61,27 +61,34 @@ with the centre of mass at the box centre (body frame: x along L, y along W, z u
   footprint's edge counts as inside; at least one node must lie inside).
   ``rim-bending``: the rim carries its own weight and what its bending passes on from the
   content. The packaging's sheet beyond the content's edge is a plate (bending stiffness
-  D = E_Pa t_Pa^3 / (12 (1 - nu_Pa^2)) per unit width) on the contact's foundation, the belt's
-  stiffness per unit area k_f = k_BePa / (L W) [N/m^3], clamped to the content, which presses
-  it down. A plate on an elastic foundation with its edge pressed down bends back up within
-  the bending length
+  D = E_Pa t_Pa^3 / (12 (1 - nu_Pa^2)) per unit width, one sheet) on the belt contact's
+  foundation k_f = k_BePa / (L W) [N/m^3] (the contact law's stiffness per unit area: a
+  modelling choice, the penalty contact's, not a measured softness of belt and paper), held
+  flat by the content, which presses it down, and free at the outline. A plate on an elastic
+  foundation whose edge is pressed down bends back up within the bending length
 
       lambda = (4 D / k_f)^(1/4)
 
-  (Hetenyi's beam on an elastic foundation, an edge displaced without rotation), its pressure
-  beyond the edge, as a share of the content's, g(b) = e^-b (cos b + sin b) at b = d / lambda
-  (d the distance from the content's footprint; set to 0 from b = 3 pi / 4, where it would
-  pull). Over a long edge g adds a strip about lambda wide at the content's pressure (its
-  integral is 1.07 lambda). So the pressure is p_c on the footprint and q_w + (p_c - q_w) g
-  beyond it, with q_w the rim's own weight per unit area (q_w A_r = w M g, w as above) and
-  p_c from the balance of the weight. The node weights are these pressures averaged over each
-  node's cell (8 x 8 points; lambda is about the grid's spacing, so a node's value alone would
-  make the rim's load depend on where the content's edge falls between nodes). At E3's
-  defaults (E_Pa 1000 N/mm^2, t_Pa 0.5 mm, k_BePa 500 N/mm) lambda is 8.4 mm for KP/BW and
-  its rim carries about 27 % of its weight (its own 8.9 %); over the catalogue's ranges 2.4 to
-  24 mm. lambda = 0 is ``rim-weight``, node for node. The other contacts (walls, a plate under
-  the parcel) keep these weights: the bending length is the belt's.
-
+  (Hetenyi's beam on an elastic foundation): its deflection beyond the content, as a share of
+  the content's sink, is `strip_profile` g(b), b = d / lambda (d the distance from the
+  content's footprint), which solves d^4 g / db^4 + 4 g = 0 with g(0) = 1, g'(0) = 0 and no
+  moment or shear at the outline (b = the span to the outline along the same line); over a
+  long span g = e^-b (cos b + sin b), whose integral is 1: a strip lambda wide at the
+  content's pressure per metre of edge. The pressure is p_c on the footprint and
+  q_w + (p_c - q_w) g beyond it (0 where that would pull), with q_w the rim's own weight per
+  unit area (q_w A_r = w M g, w as above) and p_c from the balance of the weight. The node
+  weights are these pressures averaged over each node's cell (8 x 8 points: lambda is about
+  the grid's spacing, so a node's value alone would make the rim's load depend on where the
+  content's edge falls between nodes). At E3's defaults (E_Pa 1000 N/mm^2, t_Pa 0.5 mm,
+  k_BePa 500 N/mm) lambda is 8.4 mm for KP/BW and its rim carries 26 % of its weight (its own
+  8.9 %); over the catalogue's ranges lambda runs from 2.4 to 24 mm and the share from 15 to
+  45 % (`scripts/rim_bending.py`). lambda = 0 is ``rim-weight``, node for node. Its limits:
+  held flat by the content gives the rim the most (a content resting on the sheet unbonded
+  lets the sheet lift off just inside its edge and passes less; not modelled); two bonded
+  plies or a bubble lining would bend stiffer; and the weights are the box's contact
+  stiffness and friction per point in every state, so a rim pressed at a wall or the parcel
+  tilting meets the same per-area springs, not a bending sheet. Other contacts under the
+  parcel (a metal plate) keep these weights: the bending length is the belt's.
   Whatever the patch, its weights are then scaled to sum to the outline's area L W, the area
   A_b by which the contact law divides the catalogue's stiffness and damping
   (`parcelfit.sim.rigidbox.contact`): lying flat on its patch the parcel has the stiffness K,
@@ -436,15 +443,50 @@ def rim_bending_length(
     return (4.0 * rigidity * area / stiffness) ** 0.25
 
 
+def strip_profile(b: np.ndarray, span: np.ndarray) -> np.ndarray:
+    """The deflection g(b) [-] of a strip on an elastic foundation, d^4 g / db^4 + 4 g = 0 in
+    b = x / lambda, its edge b = 0 pressed down by 1 without turning (held by the content) and
+    free at b = ``span`` (the outline: no moment, no shear): g(0) = 1, g'(0) = 0, the second and
+    third derivatives 0 at b = span. Over a long span g = e^-b (cos b + sin b)."""
+    b, span = np.broadcast_arrays(np.asarray(b, dtype=float), np.asarray(span, dtype=float))
+    up, down = 1.0 + 1.0j, -1.0 + 1.0j  # g = Re/Im of e^(up b) (scaled by e^-span), e^(down b)
+
+    def rows(order: int, at: np.ndarray) -> np.ndarray:
+        grow = up**order * np.exp(up * at - span)
+        decay = down**order * np.exp(down * at)
+        return np.stack([grow.real, grow.imag, decay.real, decay.imag], axis=-1)
+
+    zero = np.zeros_like(span)
+    system = np.stack([rows(0, zero), rows(1, zero), rows(2, span), rows(3, span)], axis=-2)
+    rhs = np.broadcast_to(np.array([1.0, 0.0, 0.0, 0.0]), (*span.shape, 4))
+    coef = np.linalg.solve(system, rhs[..., None])[..., 0]
+    return (rows(0, b) * coef).sum(axis=-1)
+
+
 def _bending_profile(
-    x: np.ndarray, y: np.ndarray, cL: float, cW: float, length: float
+    x: np.ndarray,
+    y: np.ndarray,
+    outer: tuple[float, float],
+    content: tuple[float, float],
+    length: float,
 ) -> np.ndarray:
-    """The rim's pressure from bending as a share of the content's, at (x, y) [m] beyond the
-    content's footprint cL x cW: e^-b (cos b + sin b) (b = d / length, d the distance from the
-    footprint), 0 from b = 3 pi / 4 where the profile would pull."""
-    d = np.hypot(np.maximum(np.abs(x) - cL / 2, 0.0), np.maximum(np.abs(y) - cW / 2, 0.0))
-    b = d / length
-    return np.where(b < 0.75 * math.pi, np.exp(-b) * (np.cos(b) + np.sin(b)), 0.0)
+    """The rim's deflection from bending as a share of the content's sink, at points (x, y) [m]
+    outside the content's footprint (``content`` cL x cW inside ``outer`` L x W):
+    `strip_profile` at b = d / ``length`` (d the distance from the footprint) over the span
+    from the footprint to the outline along the same line."""
+    (L, W), (cL, cW) = outer, content
+    dx = np.maximum(np.abs(x) - cL / 2, 0.0)
+    dy = np.maximum(np.abs(y) - cW / 2, 0.0)
+    d = np.hypot(dx, dy)
+    # along the line from the footprint's nearest point through (x, y) the outline lies at
+    # (L - cL) / 2 / cos and (W - cW) / 2 / sin of its angle, whichever is nearer
+    with np.errstate(divide="ignore", invalid="ignore"):
+        reach = np.minimum(
+            np.where(dx > 0, (L - cL) / 2 * d / dx, np.inf),
+            np.where(dy > 0, (W - cW) / 2 * d / dy, np.inf),
+        )
+    reach = np.maximum(np.where(np.isfinite(reach), reach, d), d)
+    return strip_profile(d / length, reach / length)
 
 
 def _rim_weights(
@@ -491,14 +533,19 @@ def _rim_weights(
     Y = np.tile(ys, (1, SUB))
     out = (np.abs(X) > cL / 2) | (np.abs(Y) > cW / 2)
     frac_out = out.mean(axis=1)
-    passed = np.where(out, _bending_profile(X, Y, cL, cW, length), 0.0).mean(axis=1)
-    a_in = float((w * (1.0 - frac_out)).sum())
     a_out = float((w * frac_out).sum())
-    g = float((w * passed).sum())
     if a_out == 0:
         return np.ones_like(w)
-    rho = share * (a_in + g) / (a_out - share * (a_out - g))
-    return (1.0 - frac_out) + rho * frac_out + (1.0 - rho) * passed
+    g = np.zeros_like(X)
+    g[out] = _bending_profile(X[out], Y[out], (L, W), (cL, cW), length)
+    a_in = float((w * (1.0 - frac_out)).sum())
+    passed = float((w * g.mean(axis=1)).sum())
+    rho = share * (a_in + passed) / (a_out - share * (a_out - passed))
+    # the pressure q_w + (p_c - q_w) g as a share of p_c; where the profile would pull the sheet
+    # (g < -rho / (1 - rho)) it lifts off: no pressure, and the own weight is carried a little
+    # short of exactly
+    pressure = np.where(out, np.maximum(rho + (1.0 - rho) * g, 0.0), 1.0)
+    return pressure.mean(axis=1)
 
 
 def rim_load_share(consignment: Consignment, body: Body) -> float:
