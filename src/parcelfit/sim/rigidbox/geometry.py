@@ -548,9 +548,10 @@ def _rim_weights(
     return pressure.mean(axis=1)
 
 
-def rim_load_share(consignment: Consignment, body: Body) -> float:
-    """The share [-] of ``body``'s bottom load, lying flat, that rests outside the content's
-    footprint: each bottom node's weight spread evenly over its grid cell (16 x 16 points)."""
+def rim_load_share(consignment: Consignment, body: Body, beyond: float = 0.0) -> float:
+    """The share [-] of ``body``'s bottom load, lying flat, that rests more than ``beyond`` [m]
+    outside the content's footprint (in x or y): each bottom node's weight spread evenly over
+    its grid cell (16 x 16 points)."""
     L, W, _ = consignment.outer
     cL, cW, _ = consignment.content
     bottom = body.group == BOTTOM
@@ -559,7 +560,7 @@ def rim_load_share(consignment: Consignment, body: Body) -> float:
     cells = [np.diff(np.unique(pts[:, k]))[:1].sum() for k in (0, 1)]  # 0 for a single node
     X = np.clip(pts[:, 0, None, None] + cells[0] * u[:, None], -L / 2, L / 2)
     Y = np.clip(pts[:, 1, None, None] + cells[1] * u[None, :], -W / 2, W / 2)
-    out = ((np.abs(X) > cL / 2) | (np.abs(Y) > cW / 2)).mean(axis=(1, 2))
+    out = ((np.abs(X) > cL / 2 + beyond) | (np.abs(Y) > cW / 2 + beyond)).mean(axis=(1, 2))
     return float((area * out).sum() / area.sum())
 
 
