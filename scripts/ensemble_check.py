@@ -136,17 +136,30 @@ def _row(cons: str, st: EnsembleSummary) -> str:
     )
 
 
-def _checks(rig: str, stats: dict[str, EnsembleSummary]) -> list[tuple[str, bool | None]]:
+def _checks(
+    rig: str, stats: dict[str, EnsembleSummary], members: dict[str, list[Member]] | None = None
+) -> list[tuple[str, bool | None]]:
+    """The published observations checked on ``rig``'s ensembles. The order of median rotations
+    is met only where, placement by placement (``members``), each type also turns further than
+    the next at more placements than less (`parcelfit.sim.ensemble.paired_order`): medians that
+    differ by less than the 0.5-degree band at every placement are a tie, not an order."""
     out: list[tuple[str, bool | None]] = []
     have = set(stats)
     if rig.startswith("E3") and {"BW", "KPBW", "KP"} <= have:
         bw, kpbw, kp = stats["BW"], stats["KPBW"], stats["KP"]
-        out.append(
-            (
-                "median rotation BW > KP/BW > KP",
-                bw.rotation_median > kpbw.rotation_median > kp.rotation_median,
-            )
-        )
+        order = bw.rotation_median > kpbw.rotation_median > kp.rotation_median
+        text = "median rotation BW > KP/BW > KP"
+        if members is not None:
+            text += ", and each type further than the next at more placements than less"
+            for further, less in (("BW", "KPBW"), ("KPBW", "KP")):
+                po = paired_order(members[less], members[further])
+                if po.b_further <= po.a_further:
+                    order = False
+                    text += (
+                        f" ({further} further than {less} at {po.b_further}, less at "
+                        f"{po.a_further}, alike at {po.ties})"
+                    )
+        out.append((text, order))
         out.append(("BW > 90 degrees in at least 25 % of placements", bw.share_over_90 >= 0.25))
         out.append(("BW > 180 degrees in some placements", bw.share_over_180 > 0))
         out.append(("KP median rotation < 30 degrees", _deg(kp.rotation_median) < 30))
@@ -486,7 +499,7 @@ def main(argv: list[str] | None = None) -> int:
                     + ".",
                     "",
                 ]
-                for text, ok in _checks(rig_name, stats):
+                for text, ok in _checks(rig_name, stats, members):
                     mark = "met" if ok else "NOT met"
                     failures += not ok
                     lines.append(f"- {text}: **{mark}**")

@@ -126,3 +126,32 @@ def test_bottom_patch_is_refused_without_the_reference(tmp_path, capsys):
             ]
         )
     assert "--bottom-patch" in capsys.readouterr().err
+
+
+def _ensemble(rotations_deg):
+    import math
+
+    from parcelfit.sim.ensemble import Member, summarise
+    from parcelfit.sim.protocol import SimStatus
+
+    members = [
+        Member(s, SimStatus.OK, 1.0 + 0.001 * r, math.radians(r), None, 1.0)
+        for s, r in enumerate(rotations_deg)
+    ]
+    return members, summarise(members)
+
+
+def test_an_order_of_medians_within_the_band_at_every_placement_is_a_tie():
+    # KP/BW 0.2 degree further than KP at every placement: the medians order them, the
+    # placements do not (within 0.5 degree): a tie, not met; 1 degree further: met
+    bw = _ensemble([200.0, 100.0, 150.0, 30.0, 190.0])
+    kp = _ensemble([20.0, 21.0, 22.0, 23.0, 24.0])
+    for shift, met in ((0.2, False), (1.0, True)):
+        kpbw = _ensemble([r + shift for r in (20.0, 21.0, 22.0, 23.0, 24.0)])
+        stats = {"BW": bw[1], "KPBW": kpbw[1], "KP": kp[1]}
+        members = {"BW": bw[0], "KPBW": kpbw[0], "KP": kp[0]}
+        text, ok = ensemble_check._checks("E3", stats, members)[0]
+        assert ok is met
+        assert ("KPBW further than KP at 0, less at 0, alike at 5" in text) is not met
+        # by the medians alone (no placements given) both are an order
+        assert ensemble_check._checks("E3", stats)[0][1] is True
