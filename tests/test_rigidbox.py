@@ -208,6 +208,9 @@ def test_the_strip_profile_solves_the_plate_on_its_foundation():
     # over a long span, the semi-infinite strip's e^-b (cos b + sin b)
     b = np.linspace(0, 6, 13)
     assert np.allclose(strip_profile(b, 200.0), np.exp(-b) * (np.cos(b) + np.sin(b)), atol=1e-12)
+    for b, span in ((5.0, 1.0), (-0.1, 1.0), (0.0, -1.0)):
+        with pytest.raises(ParcelfitError, match="0 <= b <= span"):
+            strip_profile(b, span)
 
 
 def test_the_rim_bending_patch_passes_a_strip_of_the_bending_length_to_the_rim():
