@@ -498,6 +498,18 @@ def _bending_profile(
     return strip_profile(d / length, reach / length)
 
 
+def _cell_samples(
+    pts: np.ndarray, half: tuple[float, float], outer: tuple[float, float], n: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """n x n points [m] evenly over each bottom node's cell (``pts``, half widths ``half`` [m]),
+    clipped to the outline ``outer`` L x W: their x and y, each (nodes, n * n), row-major over
+    (x offset, y offset)."""
+    (L, W), u = outer, (np.arange(n) + 0.5) / n * 2.0 - 1.0  # cell-relative offsets in (-1, 1)
+    xs = np.clip(pts[:, 0, None] + half[0] * u, -L / 2, L / 2)  # (nodes, n)
+    ys = np.clip(pts[:, 1, None] + half[1] * u, -W / 2, W / 2)
+    return np.repeat(xs, n, axis=1), np.tile(ys, (1, n))
+
+
 def _rim_weights(
     pts: np.ndarray,
     w: np.ndarray,
@@ -531,15 +543,8 @@ def _rim_weights(
     # bending profile's mean over the part outside (SUB x SUB points per cell): the bending
     # length is about the grid's spacing, and a node's point value would make the share depend
     # on where the content's edge falls between nodes
-    half = []
-    for extent in (L, W):
-        n = max(1, math.ceil(extent / spacing - 1e-9))
-        half.append(extent / n / 2)
-    u = (np.arange(SUB) + 0.5) / SUB * 2.0 - 1.0  # cell-relative offsets in (-1, 1)
-    xs = np.clip(pts[:, 0, None] + half[0] * u, -L / 2, L / 2)  # (n, SUB)
-    ys = np.clip(pts[:, 1, None] + half[1] * u, -W / 2, W / 2)
-    X = np.repeat(xs, SUB, axis=1)
-    Y = np.tile(ys, (1, SUB))
+    hx, hy = (float(_axis(extent, spacing)[1][1]) / 2 for extent in (L, W))  # a cell's half
+    X, Y = _cell_samples(pts, (hx, hy), (L, W), SUB)
     out = (np.abs(X) > cL / 2) | (np.abs(Y) > cW / 2)
     frac_out = out.mean(axis=1)
     a_out = float((w * frac_out).sum())
@@ -565,11 +570,9 @@ def rim_load_share(consignment: Consignment, body: Body, beyond: float = 0.0) ->
     cL, cW, _ = consignment.content
     bottom = body.group == BOTTOM
     pts, area = body.points[bottom], body.area[bottom]
-    u = (np.arange(16) + 0.5) / 16 - 0.5
-    cells = [np.diff(np.unique(pts[:, k]))[:1].sum() for k in (0, 1)]  # 0 for a single node
-    X = np.clip(pts[:, 0, None, None] + cells[0] * u[:, None], -L / 2, L / 2)
-    Y = np.clip(pts[:, 1, None, None] + cells[1] * u[None, :], -W / 2, W / 2)
-    out = ((np.abs(X) > cL / 2 + beyond) | (np.abs(Y) > cW / 2 + beyond)).mean(axis=(1, 2))
+    hx, hy = (np.diff(np.unique(pts[:, k]))[:1].sum() / 2 for k in (0, 1))  # 0: a single node
+    X, Y = _cell_samples(pts, (hx, hy), (L, W), 16)
+    out = ((np.abs(X) > cL / 2 + beyond) | (np.abs(Y) > cW / 2 + beyond)).mean(axis=1)
     return float((area * out).sum() / area.sum())
 
 
