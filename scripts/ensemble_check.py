@@ -28,7 +28,10 @@ every type, ``--bulge TYPE=FOOTPRINT`` gives a type's packaging a bulging bottom
 ``--nose-radius`` the radius [m] of the drums every belt and strip set of the rigs runs round at
 its ends (0: square ends) in place of the rig files' own (`Rig.with_drum_ends`).
 ``--backend rigidbox`` judges the independent rigid-box reference instead; its
-``--bottom-patch`` takes one patch for every type or one per type (``KPBW=content KP=outline``).
+``--bottom-patch`` takes one patch for every type or one per type (``KPBW=content KP=outline``),
+``--wall-outline`` likewise the outline walls and lead-ins meet (``KPBW=content``: KP/BW's rim
+gives way at the plate, the others' do not; ``rim-buckling``: each rim yields at its buckling
+load).
 """
 
 from __future__ import annotations
@@ -72,6 +75,7 @@ from parcelfit.sim.params import (
     BOTTOM_PATCHES,
     WALL_CONTACTS,
     WALL_DAMPINGS,
+    WALL_OUTLINES,
     parameter,
     parse_assignments,
 )
@@ -207,25 +211,38 @@ def _paired_lines(rig: str, members: dict[str, list[Member]]) -> list[str]:
     return out
 
 
-def _bottom_patches(given: list[str], types: list[str]) -> dict[str, str]:
-    """Each type's bottom patch from ``--bottom-patch``: one patch for every type, or
-    TYPE=PATCH items (a type not named: ``consignment``); ValueError names what is wrong."""
-    allowed = ", ".join(BOTTOM_PATCHES)
+def _per_type(
+    given: list[str], types: list[str], choices: tuple[str, ...], default: str
+) -> dict[str, str]:
+    """Each type's choice from a per-type option (``--bottom-patch``, ``--wall-outline``): one
+    choice for every type, or TYPE=CHOICE items (a type not named: ``default``); ValueError names
+    what is wrong."""
+    allowed = ", ".join(choices)
     if len(given) == 1 and "=" not in given[0]:
-        if given[0] not in BOTTOM_PATCHES:
-            raise ValueError(f"unknown patch {given[0]!r}: use one of {allowed}")
+        if given[0] not in choices:
+            raise ValueError(f"unknown value {given[0]!r}: use one of {allowed}")
         return dict.fromkeys(types, given[0])
-    out = dict.fromkeys(types, "consignment")
+    out = dict.fromkeys(types, default)
     for item in given:
-        name, sep, patch = item.partition("=")
+        name, sep, value = item.partition("=")
         if not sep:
-            raise ValueError(f"{item!r}: give one patch, or TYPE=PATCH for each type named")
+            raise ValueError(f"{item!r}: give one value, or TYPE=VALUE for each type named")
         if name not in types:
             raise ValueError(f"{name!r} is not among --types ({' '.join(types)})")
-        if patch not in BOTTOM_PATCHES:
-            raise ValueError(f"unknown patch {patch!r} for {name}: use one of {allowed}")
-        out[name] = patch
+        if value not in choices:
+            raise ValueError(f"unknown value {value!r} for {name}: use one of {allowed}")
+        out[name] = value
     return out
+
+
+def _bottom_patches(given: list[str], types: list[str]) -> dict[str, str]:
+    """Each type's bottom patch from ``--bottom-patch`` (a type not named: ``consignment``)."""
+    return _per_type(given, types, BOTTOM_PATCHES, "consignment")
+
+
+def _wall_outlines(given: list[str], types: list[str]) -> dict[str, str]:
+    """Each type's wall outline from ``--wall-outline`` (a type not named: ``outline``)."""
+    return _per_type(given, types, WALL_OUTLINES, "outline")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -294,6 +311,16 @@ def main(argv: list[str] | None = None) -> int:
         default=None,
         help="rigidbox: how walls meet the box (default: the reference's, its outline; points: "
         "its contact points, as before the outline contact)",
+    )
+    ap.add_argument(
+        "--wall-outline",
+        nargs="+",
+        default=["outline"],
+        metavar="OUTLINE|TYPE=OUTLINE",
+        help="rigidbox: the outline walls and lead-ins meet, for every type or per type "
+        "(KPBW=content; a type not named: outline): outline (the packaging's, a rim as stiff "
+        "as the content), content (the content's: a rim that gives way at a wall) or "
+        "rim-buckling (the packaging's up to its rim's buckling load, then the content's)",
     )
     ap.add_argument(
         "--wall-damping",
@@ -365,6 +392,16 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--bottom-patch: {exc}")
     if args.backend != "rigidbox" and args.bottom_patch != ["consignment"]:
         ap.error("--bottom-patch is a setting of the rigid-box reference: add --backend rigidbox")
+    try:
+        walls = _wall_outlines(args.wall_outline, args.types)
+    except ValueError as exc:
+        ap.error(f"--wall-outline: {exc}")
+    if args.backend != "rigidbox" and args.wall_outline != ["outline"]:
+        ap.error("--wall-outline is a setting of the rigid-box reference: add --backend rigidbox")
+    if args.wall_contact == "points" and set(walls.values()) != {"outline"}:
+        ap.error(
+            "--wall-outline content needs walls met by the outline: drop --wall-contact points"
+        )
     sim: MujocoSimulator | RigidBoxSimulator
     sim_for: dict[str, MujocoSimulator | RigidBoxSimulator] = {}
     if args.backend == "rigidbox":
@@ -391,7 +428,9 @@ def main(argv: list[str] | None = None) -> int:
             rigs={r.name: r for r in rigs},
             consignments=consignments,
         )
-        sim_for = {t: sim.with_options(bottom_patch=patches[t]) for t in args.types}
+        sim_for = {
+            t: sim.with_options(bottom_patch=patches[t], wall_outline=walls[t]) for t in args.types
+        }
     else:
         sim = MujocoSimulator(
             SimOptions(scene=scene, wall_limit=args.wall_limit),
@@ -424,6 +463,11 @@ def main(argv: list[str] | None = None) -> int:
             else ""
         )
         + (f" --wall-contact {args.wall_contact}" if args.wall_contact is not None else "")
+        + (
+            f" --wall-outline {' '.join(args.wall_outline)}"
+            if args.wall_outline != ["outline"]
+            else ""
+        )
         + (f" --wall-damping {args.wall_damping}" if args.wall_damping is not None else "")
         + (
             f" --reference-step-divisor {args.reference_step_divisor}"

@@ -128,6 +128,40 @@ def test_bottom_patch_is_refused_without_the_reference(tmp_path, capsys):
     assert "--bottom-patch" in capsys.readouterr().err
 
 
+def test_wall_outline_one_for_all_or_per_type(monkeypatch, tmp_path, capsys):
+    types = ["BW", "KPBW", "KP"]
+    assert ensemble_check._wall_outlines(["content"], types) == dict.fromkeys(types, "content")
+    assert ensemble_check._wall_outlines(["KPBW=content"], types) == {
+        "BW": "outline",
+        "KPBW": "content",
+        "KP": "outline",
+    }
+    with pytest.raises(ValueError, match="rim"):
+        ensemble_check._wall_outlines(["KP=rim"], types)
+    outlines = {}
+
+    def fake(with_placement, params, case, seeds, executor):
+        outlines[case.consignment] = with_placement(0).options.wall_outline
+        if len(outlines) == 2:
+            raise _BuiltError
+        return []
+
+    monkeypatch.setattr(ensemble_check, "simulate_ensemble", fake)
+    base = ["--types", "KPBW", "KP", "--placements", "1", "--out", str(tmp_path)]
+    with pytest.raises(_BuiltError):
+        ensemble_check.main(
+            [*base, "--backend", "rigidbox", "--wall-outline", "KPBW=content", "--workers", "1"]
+        )
+    assert outlines == {"KPBW": "content", "KP": "outline"}
+    for extra in (
+        ["--wall-outline", "content"],  # MuJoCo has no such setting
+        ["--backend", "rigidbox", "--wall-outline", "content", "--wall-contact", "points"],
+    ):
+        with pytest.raises(SystemExit):
+            ensemble_check.main([*base, *extra])
+        assert "--wall-outline" in capsys.readouterr().err
+
+
 def _ensemble(rotations_deg):
     import math
 

@@ -44,6 +44,8 @@ from parcelfit.sim.rigidbox.geometry import (
     primitive,
     resolved_bottom_patch,
     rim_bending_length,
+    rim_buckling_caps,
+    rim_buckling_load,
     rim_load_share,
     rot_z,
     strip_profile,
@@ -426,6 +428,164 @@ def test_a_wall_s_damping_ratio_is_the_catalogue_s_for_its_own_contact(bw):
     assert _strike_a_wall(bw, "area") > 0.3
 
 
+def test_walls_may_meet_the_content_s_outline_instead_of_the_packaging_s(bw):
+    """``wall_outline: content``: a wall meets the content's cL x cW outline (a rim that gives
+    way), so the packaging's outline pressed 2 mm past the face meets nothing, and the content's
+    pressed delta takes kappa h delta (cW + delta); the sides' contact points stay on the
+    outline; an unknown outline is refused."""
+    body = parcel_body(bw, 0.02, 0.01, "outline", wall_outline="content")
+    outline = parcel_body(bw, 0.02, 0.01, "outline")
+    (L, W, H), (cL, cW, _) = bw.outer, bw.content
+    assert body.wall_half == pytest.approx((cL / 2, cW / 2, H / 2))
+    assert outline.wall_half == pytest.approx((L / 2, W / 2, H / 2))
+    assert np.array_equal(body.points, outline.points) and np.array_equal(body.area, outline.area)
+    law = law_array((K, 6e5), (1, 1), (0.3, 0.3), (0, 0), bw.mass, body.bottom_area)
+    kappa, h = 6e5 / body.bottom_area, H - 0.004
+
+    def force(reach, delta):
+        wall = primitive("wall", WALL, (reach - delta + 0.0015, 0.0, 0.054), rot_z(90),
+                         (0.5, 0.0015, 0.05), METAL)  # fmt: skip
+        world = World(body, Primitives.of([wall]), law, 0.001, 0.0015, 0.0)
+        return Motion(world, (0, 0, H / 2), (1, 0, 0, 0)).F.copy()
+
+    assert force(L / 2, 0.002) == pytest.approx((0.0, 0.0, 0.0), abs=1e-12)
+    delta = 0.002
+    assert -force(cL / 2, delta)[0] == pytest.approx(kappa * h * delta * (cW + delta), rel=1e-9)
+    with pytest.raises(ParcelfitError, match="wall_outline"):
+        parcel_body(bw, 0.02, 0.01, "outline", wall_outline="rim")
+
+
+def _kpbw_against_a_wall(depth, caps, zeta=1.0, speed=0.0):
+    """KP/BW (no gravity) on ``rim-buckling`` walls with ``caps`` [Pa], its short edge
+    (x = +L/2) ``depth`` past the face of a metal wall 4 mm above the belt, moving at ``speed``
+    into it: its Motion, body and the law's kappa."""
+    cons = load_consignment("KPBW")
+    body = parcel_body(cons, 0.02, 0.01, "outline", wall_outline="rim-buckling", rim_cap=caps)
+    hx, _, hz = body.half
+    wall = primitive("wall", WALL, (hx - depth + 0.0015, 0.0, 0.054), rot_z(90),
+                     (0.5, 0.0015, 0.05), METAL)  # fmt: skip
+    law = law_array((K, 6e5), (1, zeta), (0.3, 0.3), (0, 0), cons.mass, body.bottom_area)
+    world = World(body, Primitives.of([wall]), law, 0.001, 0.0015, 0.0)
+    motion = Motion(world, (0, 0, hz), (1, 0, 0, 0), velocity=(speed, 0, 0))
+    return motion, body, 6e5 / body.bottom_area
+
+
+def test_a_buckling_rim_yields_at_its_load_and_the_content_meets_the_wall_behind_it():
+    """``rim-buckling``: the outline's edge x = +L/2 pressed delta takes at most its cap over its
+    length W (the long edges' ends behind the face, less deep, under theirs: kappa h delta^2);
+    pressed past the rim's width, the content's outline takes the full law
+    kappa h d (cW + d); the caps are each rim's buckling load over H, inf without a rim."""
+    cons = load_consignment("KPBW")
+    (L, W, H), (cL, cW, _) = cons.outer, cons.content
+    caps = rim_buckling_caps(cons, 1e9, 5e-4, 0.3)
+    assert caps == pytest.approx(
+        (rim_buckling_load(1e9, 5e-4, 0.3, (L - cL) / 2) / H,
+         rim_buckling_load(1e9, 5e-4, 0.3, (W - cW) / 2) / H)
+    )  # fmt: skip
+    assert caps[0] < caps[1]  # the wider rim (55 mm at the short edges) buckles first
+    full = replace(cons, content=cons.outer)
+    assert rim_buckling_caps(full, 1e9, 5e-4, 0.3) == (math.inf, math.inf)
+    h = H - 0.004
+    kappa = 6e5 / (L * W)
+    delta = 0.5 * (caps[0] + caps[1]) / kappa  # the short edge capped, the long edges' ends not
+    motion, _, _ = _kpbw_against_a_wall(delta, caps)
+    assert -motion.F[0] == pytest.approx(h * W * caps[0] + kappa * h * delta**2, rel=1e-9)
+    d = 0.002  # the content pressed 2 mm, the rim's caps negligible
+    motion, _, _ = _kpbw_against_a_wall((L - cL) / 2 + d, (1e-9, 1e-9))
+    assert -motion.F[0] == pytest.approx(kappa * h * d * (cW + d), rel=1e-6)
+    with pytest.raises(ParcelfitError, match="rim-buckling"):
+        parcel_body(cons, 0.02, 0.01, "outline", wall_outline="outline", rim_cap=caps)
+    with pytest.raises(ParcelfitError, match="rim-buckling"):
+        parcel_body(cons, 0.02, 0.01, "outline", wall_outline="rim-buckling")
+    with pytest.raises(ParcelfitError, match="positive"):
+        parcel_body(cons, 0.02, 0.01, "outline", wall_outline="rim-buckling", rim_cap=(1.0, -1.0))
+
+
+def test_a_buckling_rim_without_damping_returns_the_strike_s_energy():
+    """The capped spring depends on the depth alone: undamped, a strike that buckles the rim
+    (its force capped over most of the stroke) but stops short of the content rebounds at its
+    own speed."""
+    cons = load_consignment("KPBW")
+    caps = rim_buckling_caps(cons, 1e9, 5e-4, 0.3)
+    motion, _, kappa = _kpbw_against_a_wall(-0.001, caps, zeta=0.0, speed=0.5)
+    deepest = 0.0
+    for _ in range(1000):  # 100 ms: 1 mm to the wall, in and out again
+        motion.advance(DT, 10)
+        deepest = max(deepest, motion.x[0] - 0.001)
+        if motion.x[0] < 0.0:
+            break
+    assert deepest > 5 * caps[1] / kappa  # well past where the caps bind
+    assert deepest < (cons.outer[0] - cons.content[0]) / 2  # the content never met the wall
+    assert motion.v[0] == pytest.approx(-0.5, rel=1e-3)
+
+
+def test_the_simulator_s_buckling_rim_follows_the_sheet():
+    sim = RigidBoxSimulator(RigidBoxOptions(wall_outline="rim-buckling"))
+    cons = load_consignment("KPBW")
+    case = TestCase("E3", "KPBW", 1)
+    for E in (2e8, 1.6e9):
+        world, _ = sim.world({"E_Pa": E}, case)
+        p = cons.parameter_values(si_values={"E_Pa": E})
+        expected = rim_buckling_caps(cons, E, p["t_Pa"], p["nu_Pa"])
+        assert world.body.rim_cap == pytest.approx(expected)
+    outline, _ = RigidBoxSimulator().world({}, case)
+    assert np.all(np.isinf(outline.body.rim_cap))
+
+
+def test_a_content_wall_outline_needs_walls_met_by_the_outline():
+    assert RigidBoxOptions(wall_outline="content").wall_outline == "content"
+    with pytest.raises(ParcelfitError, match="wall_contact"):
+        RigidBoxOptions(wall_outline="content", wall_contact="points")
+    with pytest.raises(ParcelfitError, match="wall_outline"):
+        RigidBoxOptions(wall_outline="rim")
+
+
+def test_a_probe_world_of_the_walls_alone_gives_their_force(bw):
+    """`Primitives.subset` and `Motion.take_state`: a world of a belt and a wall, and a probe
+    world of its wall alone without gravity; at the first's state the probe's force is the
+    wall's, the total less the belt's and gravity's."""
+    body = parcel_body(bw, 0.02, 0.01, "outline")
+    hx, _, hz = body.half
+    belt = primitive("belt", BOX, (0, 0, -0.02), rot_z(0), (5, 1, 0.02), BELT)
+    wall = primitive("wall", WALL, (hx - 0.002 + 0.0015, 0.0, 0.054), rot_z(90),
+                     (0.5, 0.0015, 0.05), METAL)  # fmt: skip
+    law = law_array((K, 6e5), (1, 1), (0.3, 0.3), (0, 0), bw.mass, body.bottom_area)
+    prims = Primitives.of([belt, wall])
+    both = Motion(World(body, prims, law, 0.001, 0.0015, G), (0, 0, hz - 1e-4), (1, 0, 0, 0))
+    belt_only = Motion(
+        World(body, Primitives.of([belt]), law, 0.001, 0.0015, G), (0, 0, hz - 1e-4), (1, 0, 0, 0)
+    )
+    walls = prims.subset((WALL, LEAD_IN))
+    assert walls.names == ("wall",)
+    probe = Motion(World(body, walls, law, 0.001, 0.0015, 0.0), (0, 0, 0), (1, 0, 0, 0))
+    probe.take_state(both)
+    assert np.allclose(probe.F, both.F - belt_only.F, rtol=1e-12, atol=1e-12)
+    assert probe.F[0] < 0
+    with pytest.raises(ParcelfitError, match="no primitive"):
+        Primitives.of([belt]).subset((WALL,))
+    other = Motion(
+        World(parcel_body(bw, 0.02, 0.005, "outline"), walls, law, 0.001, 0.0015, 0.0),
+        (0, 0, 0),
+        (1, 0, 0, 0),
+    )
+    with pytest.raises(ParcelfitError, match="same body"):
+        other.take_state(both)
+
+
+def test_the_rim_s_buckling_load_is_the_cantilever_strips_euler_load():
+    """Two plies, each pi^2 D / (4 b^2) per unit length: 40.2 N/m for KP/BW's 37.5 mm rim at the
+    defaults (E 1000 N/mm^2, t 0.5 mm, nu 0.3); 1 / b^2 and t^3; bad input refused."""
+    E, t, nu, b = 1e9, 5e-4, 0.3, 0.0375
+    D = E * t**3 / (12 * (1 - nu**2))
+    assert rim_buckling_load(E, t, nu, b) == pytest.approx(2 * math.pi**2 * D / (4 * b**2))
+    assert rim_buckling_load(E, t, nu, b) == pytest.approx(40.2, abs=0.05)
+    assert rim_buckling_load(E, t, nu, b / 2) == pytest.approx(4 * rim_buckling_load(E, t, nu, b))
+    assert rim_buckling_load(E, 2 * t, nu, b) == pytest.approx(8 * rim_buckling_load(E, t, nu, b))
+    for bad in ((E, t, nu, 0.0), (E, t, 0.5, b), (-E, t, nu, b), (E, math.nan, nu, b)):
+        with pytest.raises(ParcelfitError):
+            rim_buckling_load(*bad)
+
+
 def test_a_wall_met_by_points_depends_on_their_spacing(bw):
     """The point contact the outline law replaces: a corner strike's force changes with the
     spacing (why walls default to the outline)."""
@@ -641,6 +801,14 @@ def test_a_study_s_simulator_section_makes_a_rigidbox_simulator(tmp_path):
         SimulatorConfig("mujoco", rig="E3", consignment="BW", wall_contact="points")
     with pytest.raises(Exception, match="wall_contact"):
         SimulatorSection(backend="rigidbox", rig="E3", consignment="BW", wall_contact="edges")
+    content = SimulatorSection(
+        backend="rigidbox", rig="E3", consignment="KPBW", wall_outline="content"
+    ).to_config(tmp_path)
+    assert make_simulator(content).options.wall_outline == "content"
+    with pytest.raises(ParcelfitError, match="wall_outline is a setting of the rigidbox"):
+        SimulatorConfig("mujoco", rig="E3", consignment="BW", wall_outline="content")
+    with pytest.raises(Exception, match="wall outline"):
+        SimulatorSection(backend="rigidbox", rig="E3", consignment="BW", wall_outline="rim")
     with pytest.raises(Exception, match="must exceed stick_speed"):  # the rigid box's 1 mm/s
         SimulatorSection(backend="rigidbox", rig="E3", consignment="BW", slip_speed=0.0008)
     pb = SimulatorSection(backend="rigidbox", rig="E3", consignment="PB").to_config(tmp_path)

@@ -20,8 +20,11 @@ the slip speed, see `SceneOptions`), ``rig_timesteps`` (a time step [s] by rig n
 consignment with a rigid content, optional ``timestep`` [s], ``spacing`` [m] (its contact points),
 ``bottom_patch`` (``consignment``, ``outline``, ``content``, ``rim-weight`` or ``rim-bending``),
 ``wall_contact`` (``outline``, the default: walls meet the box's outline, or ``points``: its
-contact points), ``wall_damping`` (``ratio``, the default: walls and lead-ins damped at the
-ratio of their contact's stiffness, or ``area``),
+contact points), ``wall_outline`` (``outline``, the default: the packaging's outline, or
+``content``: the content's, a rim that gives way at a wall, or ``rim-buckling``: the
+packaging's up to its rim's buckling load, then the content's), ``wall_damping`` (``ratio``,
+the default: walls and lead-ins damped at the ratio of their contact's stiffness, or
+``area``),
 ``stick_speed`` and ``slip_speed`` [m/s] (its
 friction's static and dynamic threshold speeds, default 0.001 and 0.0015), ``roller_surface``
 and ``wall_limit`` [s]; the MuJoCo scene's other settings are refused),
@@ -59,6 +62,7 @@ from parcelfit.sim.params import (
     STICK_SPEED,
     WALL_CONTACTS,
     WALL_DAMPINGS,
+    WALL_OUTLINES,
     ShellCellsField,
 )
 from parcelfit.sim.protocol import Simulator
@@ -105,6 +109,7 @@ _SETTINGS = (
     "rig_timesteps",
     "bottom_patch",
     "wall_contact",
+    "wall_outline",
     "wall_damping",
     "wall_limit",
     "external",
@@ -124,8 +129,8 @@ _SCENE_NAMES = {"film_spacing": "soft_shell_spacing"}
 
 def _check_needs(backend: str, settings: Any) -> None:
     """Refuse a configuration that leaves out what its backend needs, or gives the rigid-box
-    reference a MuJoCo setting (or MuJoCo the rigid box's ``bottom_patch``, ``wall_contact`` or
-    ``wall_damping``)."""
+    reference a MuJoCo setting (or MuJoCo the rigid box's ``bottom_patch``, ``wall_contact``,
+    ``wall_outline`` or ``wall_damping``)."""
     for key in _NEEDS[backend]:
         if getattr(settings, key) is None:
             raise ParcelfitError(f"the {backend} backend needs {key!r}", fix=f"add `{key}:`")
@@ -143,7 +148,7 @@ def _check_needs(backend: str, settings: Any) -> None:
                 fix="remove it (a setting of the MuJoCo scene)",
             )
     else:
-        for key in ("bottom_patch", "wall_contact", "wall_damping"):
+        for key in ("bottom_patch", "wall_contact", "wall_outline", "wall_damping"):
             if getattr(settings, key) is not None:
                 raise ParcelfitError(
                     f"{key} is a setting of the rigidbox backend", where=key, fix="remove it"
@@ -159,7 +164,8 @@ class SimulatorConfig(Mapping[str, Any]):
     ``shell_diagonals``, ``mass_lumping``, ``belt_friction``, ``roller_surface``, ``stick_speed`` and
     ``slip_speed`` [m/s], ``rig_timesteps`` (rig name -> time step [s]); rigidbox: ``rig`` and
     ``consignment``, optional ``rigs``, ``timestep``, ``spacing``, ``bottom_patch``,
-    ``stick_speed``, ``slip_speed``, ``roller_surface``, ``wall_contact``, ``wall_damping``;
+    ``stick_speed``, ``slip_speed``, ``roller_surface``, ``wall_contact``, ``wall_outline``,
+    ``wall_damping``;
     external: the solver description file ``external``;
     python: ``factory``),
     optional ``wall_limit`` [s] per simulation, and ``folder``: the folder of the file it came
@@ -190,6 +196,7 @@ class SimulatorConfig(Mapping[str, Any]):
     rig_timesteps: Mapping[str, float] | None = None
     bottom_patch: str | None = None
     wall_contact: str | None = None
+    wall_outline: str | None = None
     wall_damping: str | None = None
     wall_limit: float | None = None
     external: str | None = None
@@ -294,6 +301,10 @@ class SimulatorSection(FileModel):
     k_BePa)."""
     wall_contact: Annotated[str | None, Choice(WALL_CONTACTS, what="wall contact")] = None
     """rigidbox: how walls meet the box: its outline (default) or its contact points."""
+    wall_outline: Annotated[str | None, Choice(WALL_OUTLINES, what="wall outline")] = None
+    """rigidbox: the outline walls and lead-ins meet: the packaging's (outline, default), the
+    content's (content: a rim that gives way at a wall) or the packaging's up to its rim's
+    buckling load from E_Pa, t_Pa and nu_Pa, then the content's (rim-buckling)."""
     wall_damping: Annotated[str | None, Choice(WALL_DAMPINGS, what="wall damping")] = None
     """rigidbox: walls and lead-ins damped at the ratio of their contact's stiffness (ratio,
     default) or per unit area (area)."""
@@ -391,7 +402,13 @@ def make_simulator(config: SimulatorConfig) -> Simulator:
             for k in ("timestep", "spacing", "stick_speed", "slip_speed")
             if k in config
         }
-        for key in ("bottom_patch", "roller_surface", "wall_contact", "wall_damping"):
+        for key in (
+            "bottom_patch",
+            "roller_surface",
+            "wall_contact",
+            "wall_outline",
+            "wall_damping",
+        ):
             if key in config:
                 given[key] = config[key]
         if "stick_speed" in given and "slip_speed" not in given:

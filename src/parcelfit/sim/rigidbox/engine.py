@@ -82,6 +82,7 @@ class Motion:
         self.mem_step = np.full((len(b.points), n_prim), -10, dtype=np.int64)
         self.counters = np.array([0, 0, np.iinfo(np.int64).max], dtype=np.int64)
         self.corners = _corners(b.half)
+        self.outlines = b.wall_outlines
         self.beam_a = np.zeros((2, 2))
         self.beam_d = np.ones((2, 2))
         self.beam_d2 = np.ones(2)
@@ -103,7 +104,7 @@ class Motion:
         b, p, world = self.world.body, self.world.primitives, self.world
         return (
             b.points, b.area, b.band, b.tile_start, b.tile_end, b.tile_centre, b.tile_radius,
-            b.half,
+            self.outlines,
             b.row_z, b.row_h, b.radius,
             p.kind, p.centre, p.rot, p.size, p.material, p.vel, p.spin, p.reach,
             world.law, world.stick_speed, world.slip_speed, self.mem_face, self.mem_step,
@@ -129,6 +130,17 @@ class Motion:
                 self.clear_t, self.clear_g, after,
             )
         )  # fmt: skip
+
+    def take_state(self, other: Motion) -> None:
+        """Take ``other``'s position, orientation, velocity and angular momentum and evaluate
+        this world's forces [N] and torques [N m] there (`F`, `T`): with a world of some of the
+        other's primitives and no gravity, the force those primitives exert."""
+        if self.world.body is not other.world.body:
+            raise ParcelfitError("take_state needs the same body in both worlds")
+        for mine, theirs in ((self.x, other.x), (self.q, other.q), (self.v, other.v)):
+            mine[:] = theirs
+        self.pi[:] = other.pi
+        self._evaluate()
 
     @property
     def steps(self) -> int:

@@ -31,7 +31,7 @@ from parcelfit.runs import Run, TestCase, Trajectory
 from parcelfit.sim.mujoco.backend import RigBackend
 from parcelfit.sim.mujoco.consignment import Consignment
 from parcelfit.sim.mujoco.rig import Rig
-from parcelfit.sim.params import BOTTOM_PATCHES, WALL_CONTACTS, WALL_DAMPINGS
+from parcelfit.sim.params import BOTTOM_PATCHES, WALL_CONTACTS, WALL_DAMPINGS, WALL_OUTLINES
 from parcelfit.sim.protocol import SimResult, SimStatus
 from parcelfit.sim.rigidbox import integrator as ig
 from parcelfit.sim.rigidbox.contact import law_array
@@ -43,12 +43,13 @@ from parcelfit.sim.rigidbox.geometry import (
     resolved_bottom_patch,
     rig_primitives,
     rim_bending_length,
+    rim_buckling_caps,
 )
 
 # the parameters the reference's world is built from (`RigidBoxSimulator.world`; E_Pa, t_Pa and
 # nu_Pa only on the rim-bending patch, where they set how far the rim's bending passes the
-# content's load on); the others (k_CoPa, the content's stiffness, ...) belong to a shell it does
-# not have
+# content's load on, and on rim-buckling walls, where they set the rim's buckling load); the
+# others (k_CoPa, the content's stiffness, ...) belong to a shell it does not have
 PARAMETERS = (
     "m_Pa",
     "E_Pa",
@@ -85,6 +86,10 @@ class RigidBoxOptions:
     threshold speeds ``stick_speed`` < ``slip_speed`` [m/s], ``speed_factors`` (drive ->
     factor), ``roller_surface`` (``linear`` or ``turning``), ``wall_contact`` (``outline``: walls
     met by the parcel's outline, or ``points``: by its contact points; `geometry`),
+    ``wall_outline`` (with walls met by the outline: ``outline``, the packaging's,
+    ``content``, the content's: a rim that gives way at a wall, or ``rim-buckling``: the
+    packaging's up to its rim's buckling load from E_Pa, t_Pa and nu_Pa, then the content's;
+    `geometry`),
     ``wall_damping`` (``ratio``: a wall's and a lead-in's contact damped at the ratio zeta of its
     own stiffness, or ``area``: per unit area as the points; `contact`), the start's
     ``start_offset`` (dx [m], dy [m], dheading [deg]) and ``start_speed_factor``,
@@ -100,6 +105,7 @@ class RigidBoxOptions:
     speed_factors: Mapping[str, float] = field(default_factory=dict)
     roller_surface: str = "linear"
     wall_contact: str = "outline"
+    wall_outline: str = "outline"
     wall_damping: str = "ratio"
     start_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
     start_speed_factor: float = 1.0
@@ -120,11 +126,18 @@ class RigidBoxOptions:
             ("bottom_patch", BOTTOM_PATCHES),
             ("roller_surface", ROLLER_SURFACES),
             ("wall_contact", WALL_CONTACTS),
+            ("wall_outline", WALL_OUTLINES),
             ("wall_damping", WALL_DAMPINGS),
         ):
             value = getattr(self, key)
             if value not in allowed:
                 raise ParcelfitError(f"unknown {key} {value!r}", fix=f"use one of {list(allowed)}")
+        if self.wall_outline != "outline" and self.wall_contact != "outline":
+            raise ParcelfitError(
+                f"wall_outline {self.wall_outline!r} needs walls met by the outline, got "
+                f"wall_contact {self.wall_contact!r}",
+                fix="set wall_contact: outline, or leave wall_outline at 'outline'",
+            )
         if not 0 < self.stick_speed < self.slip_speed:
             raise ParcelfitError(
                 f"need 0 < stick_speed < slip_speed, got {self.stick_speed}, {self.slip_speed} m/s"
@@ -168,7 +181,12 @@ class RigidBoxSimulator(RigBackend[RigidBoxOptions]):
         if resolved_bottom_patch(cons, opt.bottom_patch) == "rim-bending":
             L, W, _ = cons.outer
             length = rim_bending_length(p["E_Pa"], p["t_Pa"], p["nu_Pa"], p["k_BePa"], L * W)
-        body = parcel_body(cons, p["m_Pa"], opt.spacing, opt.bottom_patch, length)
+        caps = None
+        if opt.wall_outline == "rim-buckling":
+            caps = rim_buckling_caps(cons, p["E_Pa"], p["t_Pa"], p["nu_Pa"])
+        body = parcel_body(
+            cons, p["m_Pa"], opt.spacing, opt.bottom_patch, length, opt.wall_outline, caps
+        )
         prims = rig_primitives(
             rig, case.speed_setting, opt.speed_factors, opt.roller_surface, opt.wall_contact
         )

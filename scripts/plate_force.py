@@ -1,0 +1,219 @@
+"""The guide plate's peak force on a parcel in the rigid-box reference, against the load under
+which the parcel's rim buckles.
+
+    python scripts/plate_force.py
+    python scripts/plate_force.py --types KPBW KP --settings 1 2 --placements 20 --workers 2
+
+For each type and speed setting of the rig (E3) it runs the reference at its defaults (``--wall-outline
+content``: walls meeting the content's outline; ``--set``: parameters in catalogue units) at
+``--placements`` seeded placements and records, every step while a wall or a lead-in touches
+the parcel (every ``--chunk`` steps otherwise), the horizontal force they exert on it. It prints
+each placement's peak [N] and, from the catalogue's E_Pa, t_Pa and nu_Pa (the defaults and the
+ends of E_Pa's and t_Pa's ranges), the load under which the rim buckles along a whole long and a
+whole short edge (`parcelfit.sim.rigidbox.geometry.rim_buckling_load`, per unit length and
+times the edge's length). A corner strike presses a short length of edge hard, so the force is
+also compared per unit length: each placement's peak line load of a wall (its spring force per
+unit length of outline at the deepest corner, `wall_line_load`) against the rim's buckling load
+per unit length (of the weaker and of the stiffer of the long and the short edges' rims). Where
+the line load exceeds it, a rim as stiff as the content (``wall_outline: outline``, the
+reference's default) is not consistent: the rim buckles (``rim-buckling`` follows it until the
+content arrives; ``content`` lets it give way entirely); where it stays below, the rim holds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import statistics
+from concurrent.futures import ProcessPoolExecutor
+
+import numpy as np
+
+from parcelfit.runs import TestCase
+from parcelfit.sim.mujoco import load_consignment
+from parcelfit.sim.params import CATALOGUE, WALL_OUTLINES, parameter, parse_assignments
+from parcelfit.sim.rigidbox import RigidBoxOptions, RigidBoxSimulator
+from parcelfit.sim.rigidbox import integrator as ig
+from parcelfit.sim.rigidbox.engine import Motion, World
+from parcelfit.sim.rigidbox.geometry import LEAD_IN, WALL, rim_buckling_load
+
+
+def range_ends(name: str, kind: str) -> tuple[float, float]:
+    """The catalogue's range of parameter ``name`` for a content ``kind``, in SI units."""
+    spec = next(p for p in CATALOGUE if p.name == name)
+    r = spec.range_for(kind)
+    return spec.to_si(r.low), spec.to_si(r.high)
+
+
+def wall_line_load(world: World, motion: Motion) -> float:
+    """The largest spring force per unit length of outline [N/m] that a wall of ``world`` exerts
+    on the parcel of ``motion``: kappa h delta at the outline's deepest corner behind a wall's
+    face (kappa = K / A_b, h the height the parcel and the wall share, the parcel lying flat;
+    damping left out). The outline is the one walls meet (``wall_outline``)."""
+    prims, body = world.primitives, world.body
+    hx, hy, hz = body.wall_half
+    corners = np.array([[sx * hx, sy * hy, 0.0] for sx in (-1, 1) for sy in (-1, 1)])
+    world_corners = motion.x + corners @ motion.R.T
+    most = 0.0
+    for j in np.flatnonzero(prims.kind == WALL):
+        rot, centre, (s0, s1, s2) = prims.rot[j], prims.centre[j], prims.size[j]
+        local = (world_corners - centre) @ rot  # the corners in the wall's frame
+        side = 1.0 if float((motion.x - centre) @ rot[:, 1]) >= 0 else -1.0
+        depth = s1 - side * local[:, 1]
+        inside = (np.abs(local[:, 0]) < s0) & (depth > 0)
+        if not inside.any():
+            continue
+        z = float((motion.x - centre) @ rot[:, 2])
+        shared = min(z + hz, s2) - max(z - hz, -s2)
+        if shared <= 0:
+            continue
+        kappa = float(world.law[prims.material[j], 0])
+        most = max(most, kappa * shared * float(depth[inside].max()))
+    return most
+
+
+def peak_plate_force(
+    rig: str,
+    consignment: str,
+    setting: int,
+    seed: int,
+    params: dict[str, float],
+    wall_outline: str = "outline",
+    chunk: int = 20,
+) -> tuple[float, float, float]:
+    """The peak horizontal force [N] of the walls and lead-ins of ``rig`` on ``consignment`` at
+    placement ``seed`` of ``setting`` (SI ``params``) in the rigid-box reference, when [s]
+    ((0, nan) if none touches it) and the peak line load of a wall (`wall_line_load`) [N/m]."""
+    sim = RigidBoxSimulator(RigidBoxOptions(wall_outline=wall_outline)).with_placement(seed)
+    case = TestCase(rig, consignment, setting)
+    world, dt = sim.world(params, case)
+    the_rig = sim.rig(rig)
+    motion = Motion(world, **sim.start(the_rig, case, float(world.body.half[2])))
+    plates = World(
+        world.body,
+        world.primitives.subset((WALL, LEAD_IN)),
+        world.law,
+        world.stick_speed,
+        world.slip_speed,
+        gravity=0.0,
+    )
+    probe = Motion(plates, motion.x, motion.q)
+    n_steps = round(the_rig.end.duration / dt)
+    (x_lo, x_hi), (y_lo, y_hi) = the_rig.end.x, the_rig.end.y
+    peak, when, touching, line = 0.0, math.nan, False, 0.0
+    while motion.steps < n_steps:
+        code = motion.advance(dt, 1 if touching else chunk)
+        if code in (ig.NOT_FINITE, ig.TOO_FAST):
+            raise RuntimeError(f"{consignment} seed {seed}: the reference's run blew up")
+        probe.take_state(motion)
+        force = math.hypot(float(probe.F[0]), float(probe.F[1]))
+        touching = force > 0.0
+        if force > peak:
+            peak, when = force, motion.steps * dt
+        if touching:
+            line = max(line, wall_line_load(plates, motion))
+        c = motion.x
+        if code == ig.STOPPED or not (x_lo <= c[0] <= x_hi and y_lo <= c[1] <= y_hi):
+            break
+    return peak, when, line
+
+
+def _peak(job: tuple) -> tuple[float, float, float]:
+    return peak_plate_force(*job)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rig", default="E3")
+    ap.add_argument("--types", nargs="+", default=["KPBW", "KP"])
+    ap.add_argument("--settings", nargs="+", type=int, default=[1, 2])
+    ap.add_argument("--placements", type=int, default=20)
+    ap.add_argument(
+        "--wall-outline",
+        choices=[w for w in WALL_OUTLINES if w != "rim-buckling"],  # its rim's load is capped
+        default="outline",
+    )
+    ap.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE")
+    ap.add_argument("--chunk", type=int, default=20, help="steps between looks, out of contact")
+    ap.add_argument("--workers", type=int, default=1)
+    args = ap.parse_args(argv)
+    if args.placements < 1 or args.chunk < 1 or args.workers < 1:
+        ap.error("--placements, --chunk and --workers must be at least 1")
+    user = {k: parameter(k).to_si(v) for k, v in parse_assignments(args.set).items()}
+    line = f"python scripts/plate_force.py --rig {args.rig} --types {' '.join(args.types)}"
+    line += f" --settings {' '.join(map(str, args.settings))} --placements {args.placements}"
+    if args.wall_outline != "outline":
+        line += f" --wall-outline {args.wall_outline}"
+    if args.set:
+        line += f" --set {' '.join(args.set)}"
+    print(f"Written by `{line}`.")
+    with ProcessPoolExecutor(args.workers) as pool:
+        for name in args.types:
+            cons = load_consignment(name)
+            if cons.soft:
+                print(f"\n{name}: skipped (a soft content: not in the rigid-box reference)")
+                continue
+            (L, W, _), (cL, cW, _) = cons.outer, cons.content
+            p = cons.parameter_values(si_values=user)
+            kind = cons.content_kind
+            print(
+                f"\n{name}: outer {L * 1e3:g} x {W * 1e3:g} mm, content {cL * 1e3:g} x "
+                f"{cW * 1e3:g} mm; rim {(W - cW) / 2 * 1e3:g} mm wide along the long edges, "
+                f"{(L - cL) / 2 * 1e3:g} mm along the short ones"
+            )
+            rows = [("defaults", p["E_Pa"], p["t_Pa"])]
+            rows += [("E_Pa end", E, p["t_Pa"]) for E in range_ends("E_Pa", kind)]
+            rows += [("t_Pa end", p["E_Pa"], t) for t in range_ends("t_Pa", kind)]
+            print(
+                "| E_Pa [N/mm^2] | t_Pa [mm] | buckling load, long edges' rim [N/m] | "
+                "short edges' [N/m] | along a whole long edge [N] | short edge [N] | row |"
+            )
+            print("|---|---|---|---|---|---|---|")
+            per_length = {}
+            for label, E, t in rows:
+                q_long = rim_buckling_load(E, t, p["nu_Pa"], (W - cW) / 2)
+                q_short = rim_buckling_load(E, t, p["nu_Pa"], (L - cL) / 2)
+                per_length.setdefault(label, []).append(
+                    (min(q_long, q_short), max(q_long, q_short))
+                )
+                print(
+                    f"| {E * 1e-6:g} | {t * 1e3:g} | {q_long:.1f} | {q_short:.1f} | "
+                    f"{q_long * L:.2f} | {q_short * W:.2f} | {label} |"
+                )
+            for setting in args.settings:
+                jobs = [
+                    (args.rig, name, setting, s, user, args.wall_outline, args.chunk)
+                    for s in range(args.placements)
+                ]
+                peaks = list(pool.map(_peak, jobs))
+                print(f"\n{name}, setting {setting}, per placement (seed 0, 1, ...):")
+                print(
+                    "peak force of the walls and lead-ins [N]: "
+                    + ", ".join(f"{f:.1f}" for f, _, _ in peaks)
+                )
+                print(
+                    "peak line load of a wall [N/m]: " + ", ".join(f"{q:.0f}" for _, _, q in peaks)
+                )
+                touched = [q for _, _, q in peaks if q > 0]
+                if not touched:
+                    print("no placement touched a wall")
+                    continue
+                forces = [f for f, _, _ in peaks if f > 0]
+                median = statistics.median(touched)
+                print(
+                    f"median peak force {statistics.median(forces):.1f} N; median peak line "
+                    f"load {median:.0f} N/m over the {len(touched)} placements that met a wall"
+                )
+                for label in ("defaults", "E_Pa end", "t_Pa end"):
+                    for pair in per_length[label]:
+                        parts = [
+                            f"{which} rim's {q:.1f} N/m: median {median / q:.1f} times it, "
+                            f"{sum(x > q for x in touched)} of {len(touched)} above it"
+                            for which, q in zip(("the weaker", "the stiffer"), pair, strict=True)
+                        ]
+                        print(f"  buckling load ({label}) of " + "; of ".join(parts))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
