@@ -18,6 +18,10 @@ per unit length (of the weaker and of the stiffer of the long and the short edge
 the line load exceeds it, a rim as stiff as the content (``wall_outline: outline``, the
 reference's default) is not consistent: the rim buckles (``rim-buckling`` follows it until the
 content arrives; ``content`` lets it give way entirely); where it stays below, the rim holds.
+Each placement's deepest reach of the outline behind a wall's face is printed too: with
+``--wall-outline rim-buckling`` it is how far the rim yielded, and whether the content could
+have met the wall (beyond the narrower rim's width); the line loads are then capped and not
+compared.
 """
 
 from __future__ import annotations
@@ -45,16 +49,15 @@ def range_ends(name: str, kind: str) -> tuple[float, float]:
     return spec.to_si(r.low), spec.to_si(r.high)
 
 
-def wall_line_load(world: World, motion: Motion) -> float:
-    """The largest spring force per unit length of outline [N/m] that a wall of ``world`` exerts
-    on the parcel of ``motion``: kappa h delta at the outline's deepest corner behind a wall's
-    face (kappa = K / A_b, h the height the parcel and the wall share, the parcel lying flat;
-    damping left out). The outline is the one walls meet (``wall_outline``)."""
+def _pressed(world: World, motion: Motion) -> list[tuple[float, float, float]]:
+    """For each wall of ``world`` that the parcel of ``motion`` presses: kappa [N/m^3], the
+    height h [m] the parcel (lying flat) and the wall share, and the depth [m] of the deepest
+    corner of the outline walls meet (``wall_outline``) behind the wall's face."""
     prims, body = world.primitives, world.body
     hx, hy, hz = body.wall_half
     corners = np.array([[sx * hx, sy * hy, 0.0] for sx in (-1, 1) for sy in (-1, 1)])
     world_corners = motion.x + corners @ motion.R.T
-    most = 0.0
+    out = []
     for j in np.flatnonzero(prims.kind == WALL):
         rot, centre, (s0, s1, s2) = prims.rot[j], prims.centre[j], prims.size[j]
         local = (world_corners - centre) @ rot  # the corners in the wall's frame
@@ -68,8 +71,22 @@ def wall_line_load(world: World, motion: Motion) -> float:
         if shared <= 0:
             continue
         kappa = float(world.law[prims.material[j], 0])
-        most = max(most, kappa * shared * float(depth[inside].max()))
-    return most
+        out.append((kappa, shared, float(depth[inside].max())))
+    return out
+
+
+def wall_line_load(world: World, motion: Motion) -> float:
+    """The largest spring force per unit length of outline [N/m] that a wall of ``world`` exerts
+    on the parcel of ``motion``: kappa h delta at the outline's deepest corner behind a wall's
+    face (kappa = K / A_b, h the height the parcel and the wall share, the parcel lying flat;
+    damping left out; uncapped). The outline is the one walls meet (``wall_outline``)."""
+    return max((k * h * d for k, h, d in _pressed(world, motion)), default=0.0)
+
+
+def wall_depth(world: World, motion: Motion) -> float:
+    """How far [m] the outline walls meet reaches behind a wall's face at its deepest corner
+    (0: no wall pressed): on ``rim-buckling``, how far the rim has yielded."""
+    return max((d for _, _, d in _pressed(world, motion)), default=0.0)
 
 
 def peak_plate_force(
@@ -80,10 +97,11 @@ def peak_plate_force(
     params: dict[str, float],
     wall_outline: str = "outline",
     chunk: int = 20,
-) -> tuple[float, float, float]:
+) -> tuple[float, float, float, float]:
     """The peak horizontal force [N] of the walls and lead-ins of ``rig`` on ``consignment`` at
     placement ``seed`` of ``setting`` (SI ``params``) in the rigid-box reference, when [s]
-    ((0, nan) if none touches it) and the peak line load of a wall (`wall_line_load`) [N/m]."""
+    ((0, nan) if none touches it), the peak line load of a wall (`wall_line_load`) [N/m] and the
+    deepest the outline reached behind a wall's face (`wall_depth`) [m]."""
     sim = RigidBoxSimulator(RigidBoxOptions(wall_outline=wall_outline)).with_placement(seed)
     case = TestCase(rig, consignment, setting)
     world, dt = sim.world(params, case)
@@ -100,7 +118,7 @@ def peak_plate_force(
     probe = Motion(plates, motion.x, motion.q)
     n_steps = round(the_rig.end.duration / dt)
     (x_lo, x_hi), (y_lo, y_hi) = the_rig.end.x, the_rig.end.y
-    peak, when, touching, line = 0.0, math.nan, False, 0.0
+    peak, when, touching, line, deepest = 0.0, math.nan, False, 0.0, 0.0
     while motion.steps < n_steps:
         code = motion.advance(dt, 1 if touching else chunk)
         if code in (ig.NOT_FINITE, ig.TOO_FAST):
@@ -112,13 +130,14 @@ def peak_plate_force(
             peak, when = force, motion.steps * dt
         if touching:
             line = max(line, wall_line_load(plates, motion))
+            deepest = max(deepest, wall_depth(plates, motion))
         c = motion.x
         if code == ig.STOPPED or not (x_lo <= c[0] <= x_hi and y_lo <= c[1] <= y_hi):
             break
-    return peak, when, line
+    return peak, when, line, deepest
 
 
-def _peak(job: tuple) -> tuple[float, float, float]:
+def _peak(job: tuple) -> tuple[float, float, float, float]:
     return peak_plate_force(*job)
 
 
@@ -128,11 +147,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--types", nargs="+", default=["KPBW", "KP"])
     ap.add_argument("--settings", nargs="+", type=int, default=[1, 2])
     ap.add_argument("--placements", type=int, default=20)
-    ap.add_argument(
-        "--wall-outline",
-        choices=[w for w in WALL_OUTLINES if w != "rim-buckling"],  # its rim's load is capped
-        default="outline",
-    )
+    ap.add_argument("--wall-outline", choices=WALL_OUTLINES, default="outline")
     ap.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE")
     ap.add_argument("--chunk", type=int, default=20, help="steps between looks, out of contact")
     ap.add_argument("--workers", type=int, default=1)
@@ -189,16 +204,31 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"\n{name}, setting {setting}, per placement (seed 0, 1, ...):")
                 print(
                     "peak force of the walls and lead-ins [N]: "
-                    + ", ".join(f"{f:.1f}" for f, _, _ in peaks)
+                    + ", ".join(f"{f:.1f}" for f, *_ in peaks)
                 )
                 print(
-                    "peak line load of a wall [N/m]: " + ", ".join(f"{q:.0f}" for _, _, q in peaks)
+                    "deepest behind a wall's face [mm]: "
+                    + ", ".join(f"{d * 1e3:.1f}" for *_, d in peaks)
                 )
-                touched = [q for _, _, q in peaks if q > 0]
-                if not touched:
+                narrow = min(L - cL, W - cW) / 2
+                depths = [d for *_, d in peaks if d > 0]
+                if not depths:
                     print("no placement touched a wall")
                     continue
-                forces = [f for f, _, _ in peaks if f > 0]
+                print(
+                    f"median deepest {statistics.median(depths) * 1e3:.1f} mm, most "
+                    f"{max(depths) * 1e3:.1f} mm; beyond the narrower rim's {narrow * 1e3:g} mm "
+                    f"(where the content could meet the wall) at {sum(d > narrow for d in depths)} "
+                    f"of {len(depths)} placements"
+                )
+                if args.wall_outline == "rim-buckling":
+                    continue  # its rim's line load is capped: nothing to compare
+                print(
+                    "peak line load of a wall [N/m]: "
+                    + ", ".join(f"{q:.0f}" for _, _, q, _ in peaks)
+                )
+                touched = [q for _, _, q, _ in peaks if q > 0]
+                forces = [f for f, *_ in peaks if f > 0]
                 median = statistics.median(touched)
                 print(
                     f"median peak force {statistics.median(forces):.1f} N; median peak line "

@@ -19,8 +19,8 @@ plate_force = load_file_module("scripts/plate_force.py")
 @pytest.mark.parametrize("outline", ["outline", "content"])
 def test_the_line_load_is_kappa_h_delta_at_the_deepest_corner(outline):
     """KP/BW turned 10 degrees, its wall outline's farthest corner 2 mm past a wall's face (a
-    wall 4 mm above the belt): the spring's line load there is kappa h delta; a belt is not a
-    wall; 5 mm short of the face, none."""
+    wall 4 mm above the belt): the spring's line load there is kappa h delta, the depth delta; a
+    belt is not a wall; 5 mm short of the face, none."""
     cons = load_consignment("KPBW")
     body = parcel_body(cons, 0.02, 0.01, "outline", wall_outline=outline)
     hx, hy, hz = body.wall_half
@@ -37,6 +37,8 @@ def test_the_line_load_is_kappa_h_delta_at_the_deepest_corner(outline):
         motion = Motion(world, (0, 0, hz), q)
         expected = kappa * h * delta if delta > 0 else 0.0
         assert plate_force.wall_line_load(world, motion) == pytest.approx(expected, rel=1e-9)
+        depth = plate_force.wall_depth(world, motion)
+        assert depth == (pytest.approx(delta, rel=1e-9) if delta > 0 else 0.0)
 
 
 def test_one_placement_meets_the_plate_and_bad_counts_are_refused(capsys):
