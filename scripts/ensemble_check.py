@@ -30,8 +30,7 @@ its ends (0: square ends) in place of the rig files' own (`Rig.with_drum_ends`).
 ``--backend rigidbox`` judges the independent rigid-box reference instead; its
 ``--bottom-patch`` takes one patch for every type or one per type (``KPBW=content KP=outline``),
 ``--wall-outline`` likewise the outline walls and lead-ins meet (``KPBW=content``: KP/BW's rim
-gives way at the plate, the others' do not; ``rim-buckling``: each rim yields at its buckling
-load).
+gives way at the plate, the others' do not).
 """
 
 from __future__ import annotations
@@ -319,8 +318,7 @@ def main(argv: list[str] | None = None) -> int:
         metavar="OUTLINE|TYPE=OUTLINE",
         help="rigidbox: the outline walls and lead-ins meet, for every type or per type "
         "(KPBW=content; a type not named: outline): outline (the packaging's, a rim as stiff "
-        "as the content), content (the content's: a rim that gives way at a wall) or "
-        "rim-buckling (the packaging's up to its rim's buckling load, then the content's)",
+        "as the content) or content (the content's: a rim that gives way at a wall)",
     )
     ap.add_argument(
         "--wall-damping",

@@ -30,8 +30,7 @@ is the response a parameter has to move. ``--scene KEY=VALUE`` sets scene option
 than the defaults (e.g. ``belt_friction=coulomb``). ``--backend rigidbox`` measures the same in
 the independent rigid-box reference (`parcelfit.sim.rigidbox`, its ``--bottom-patch``), for the
 parameters its world is built from (k_CoPa and the content's do not exist in it; E_Pa, t_Pa and
-nu_Pa act only on its ``rim-bending`` patch, the default where the consignment has no bulge, and
-at its walls with ``--wall-outline rim-buckling``).
+nu_Pa act only on its ``rim-bending`` patch, the default where the consignment has no bulge).
 ``--bulge FOOTPRINT`` gives the consignment a bottom bulging under its rigid content over that
 share of its outline (``--bulge-depth``; 0: a flat bottom), as ``ensemble_check.py --bulge``
 does, in either backend (the reference's ``consignment`` patch is then the bulge's). Writes
@@ -71,7 +70,7 @@ from parcelfit.sim.mujoco import (
 )
 from parcelfit.sim.mujoco.consignment import BULGE_DEPTH, with_bulge
 from parcelfit.sim.mujoco.options import scene_options
-from parcelfit.sim.params import BOTTOM_PATCHES, CATALOGUE, WALL_OUTLINES
+from parcelfit.sim.params import BOTTOM_PATCHES, CATALOGUE
 from parcelfit.sim.rigidbox import RigidBoxOptions, RigidBoxSimulator
 from parcelfit.sim.rigidbox.geometry import resolved_bottom_patch
 from parcelfit.sim.rigidbox.simulator import PARAMETERS as REFERENCE_PARAMETERS
@@ -82,20 +81,16 @@ MEASURES = ("DTW_xy [m]", "DTW_theta [rad]", "transit [s]")
 ENSEMBLE_MEASURES = ("median rotation [deg]", "median transit [s]", "spin share [-]")
 
 
-Job = tuple[dict[str, float], TestCase, int, SceneOptions, str, str, str, Consignment]
+Job = tuple[dict[str, float], TestCase, int, SceneOptions, str, str, Consignment]
 
 
 def _simulate(job: Job) -> Member:
-    params, case, seed, scene, backend, bottom_patch, wall_outline, cons = job
+    params, case, seed, scene, backend, bottom_patch, cons = job
     sim: MujocoSimulator | RigidBoxSimulator
     own = {cons.name: cons}
     if backend == "rigidbox":
         sim = RigidBoxSimulator(
-            RigidBoxOptions(
-                bottom_patch=bottom_patch,
-                wall_outline=wall_outline,
-                start_offset=scene.start_offset,
-            ),
+            RigidBoxOptions(bottom_patch=bottom_patch, start_offset=scene.start_offset),
             consignments=own,
         )
     else:
@@ -259,13 +254,6 @@ def main(argv: list[str] | None = None) -> int:
         default=None,
         help="rigidbox: where the bottom carries contact (default: the consignment's)",
     )
-    ap.add_argument(
-        "--wall-outline",
-        choices=WALL_OUTLINES,
-        default=None,
-        help="rigidbox: the outline walls and lead-ins meet (default: outline; rim-buckling: "
-        "the packaging's up to its rim's buckling load from E_Pa, t_Pa and nu_Pa)",
-    )
     args = ap.parse_args(argv)
     if args.backend == "rigidbox":
         absent = [n for n in args.params if n not in REFERENCE_PARAMETERS]
@@ -279,15 +267,9 @@ def main(argv: list[str] | None = None) -> int:
             ap.error(
                 f"--scene: the rigidbox backend takes only start_offset, not {', '.join(other)}"
             )
-    else:
-        for given, flag in (
-            (args.bottom_patch, "--bottom-patch"),
-            (args.wall_outline, "--wall-outline"),
-        ):
-            if given is not None:
-                ap.error(f"{flag} is a setting of the rigid-box reference: add --backend rigidbox")
+    elif args.bottom_patch is not None:
+        ap.error("--bottom-patch is a setting of the rigid-box reference: add --backend rigidbox")
     bottom_patch = args.bottom_patch or "consignment"
-    wall_outline = args.wall_outline or "outline"
     rig = load_rig(args.rig)
     cons = load_consignment(args.consignment)
     case = TestCase(args.rig, cons.name, args.setting)  # the name the simulators know it by
@@ -300,12 +282,11 @@ def main(argv: list[str] | None = None) -> int:
     bending = [n for n in args.params if n in RIM_BENDING_PARAMETERS]
     if args.backend == "rigidbox" and bending:
         patch = resolved_bottom_patch(cons, bottom_patch)
-        if patch != "rim-bending" and wall_outline != "rim-buckling":
+        if patch != "rim-bending":
             ap.error(
                 f"--params: {', '.join(bending)} act on the rigid-box reference only through its "
                 f"rim's bending (--bottom-patch rim-bending, the default where the consignment "
-                f"has no bulge) or buckling (--wall-outline rim-buckling); on {cons.name}'s "
-                f"{patch} patch with walls meeting the {wall_outline} they change nothing"
+                f"has no bulge); on {cons.name}'s {patch} patch they change nothing"
             )
     kind = cons.content_kind
     defaults = cons.parameter_values()
@@ -330,7 +311,6 @@ def main(argv: list[str] | None = None) -> int:
                     scene,
                     args.backend,
                     bottom_patch,
-                    wall_outline,
                     cons,
                 )
     t0 = time.perf_counter()
@@ -372,7 +352,6 @@ def main(argv: list[str] | None = None) -> int:
         )
         + (
             f" --backend rigidbox --bottom-patch {bottom_patch}"
-            + (f" --wall-outline {wall_outline}" if wall_outline != "outline" else "")
             if args.backend == "rigidbox"
             else ""
         )

@@ -4,24 +4,21 @@ which the parcel's rim buckles.
     python scripts/plate_force.py
     python scripts/plate_force.py --types KPBW KP --settings 1 2 --placements 20 --workers 2
 
-For each type and speed setting of the rig (E3) it runs the reference at its defaults (``--wall-outline
-content``: walls meeting the content's outline; ``--set``: parameters in catalogue units) at
-``--placements`` seeded placements and records, every step while a wall or a lead-in touches
-the parcel (every ``--chunk`` steps otherwise), the horizontal force they exert on it. It prints
-each placement's peak [N] and, from the catalogue's E_Pa, t_Pa and nu_Pa (the defaults and the
-ends of E_Pa's and t_Pa's ranges), the load under which the rim buckles along a whole long and a
-whole short edge (`parcelfit.sim.rigidbox.geometry.rim_buckling_load`, per unit length and
-times the edge's length). A corner strike presses a short length of edge hard, so the force is
-also compared per unit length: each placement's peak line load of a wall (its spring force per
-unit length of outline at the deepest corner, `wall_line_load`) against the rim's buckling load
-per unit length (of the weaker and of the stiffer of the long and the short edges' rims). Where
-the line load exceeds it, a rim as stiff as the content (``wall_outline: outline``, the
-reference's default) is not consistent: the rim buckles (``rim-buckling`` follows it until the
-content arrives; ``content`` lets it give way entirely); where it stays below, the rim holds.
-Each placement's deepest reach of the outline behind a wall's face is printed too: with
-``--wall-outline rim-buckling`` it is how far the rim yielded, and whether the content could
-have met the wall (beyond the narrower rim's width); the line loads are then capped and not
-compared.
+For each type and speed setting of the rig (E3) it runs the reference at its defaults, its walls
+meeting the packaging's outline as if the rim were as stiff as the content (``--set``:
+parameters in catalogue units), at ``--placements`` seeded placements, and records, every step
+while a wall or a lead-in touches the parcel (every ``--chunk`` steps otherwise, so a contact's
+first steps may be missed), the horizontal force they exert on it, the largest spring force per
+unit length of outline a wall exerts (at the outline's deepest corner behind its face,
+`wall_line_load`; damping left out) and how deep that corner reaches (`wall_depth`). It prints
+each placement's peak force, line load and depth, and from the catalogue's E_Pa, t_Pa and
+nu_Pa (the defaults and the ends of E_Pa's and t_Pa's ranges) an estimate of the load per unit
+length under which each rim buckles (`parcelfit.sim.rigidbox.geometry.rim_buckling_load`,
+neither bound: its docstring), against which it sets the median peak line load. Where the line
+load is well above it, a rim as stiff as the content is not what the packaging can be; where it
+is well below, the rim holds. The estimate is for a load spread evenly along an edge: a corner
+or a lead-in presses a short length, which the rim beside it helps to carry, and the lead-ins'
+loads are in the force but not in the line load.
 """
 
 from __future__ import annotations
@@ -35,7 +32,7 @@ import numpy as np
 
 from parcelfit.runs import TestCase
 from parcelfit.sim.mujoco import load_consignment
-from parcelfit.sim.params import CATALOGUE, WALL_OUTLINES, parameter, parse_assignments
+from parcelfit.sim.params import CATALOGUE, parameter, parse_assignments
 from parcelfit.sim.rigidbox import RigidBoxOptions, RigidBoxSimulator
 from parcelfit.sim.rigidbox import integrator as ig
 from parcelfit.sim.rigidbox.engine import Motion, World
@@ -79,13 +76,13 @@ def wall_line_load(world: World, motion: Motion) -> float:
     """The largest spring force per unit length of outline [N/m] that a wall of ``world`` exerts
     on the parcel of ``motion``: kappa h delta at the outline's deepest corner behind a wall's
     face (kappa = K / A_b, h the height the parcel and the wall share, the parcel lying flat;
-    damping left out; uncapped). The outline is the one walls meet (``wall_outline``)."""
+    damping left out). The outline is the one walls meet (``wall_outline``)."""
     return max((k * h * d for k, h, d in _pressed(world, motion)), default=0.0)
 
 
 def wall_depth(world: World, motion: Motion) -> float:
     """How far [m] the outline walls meet reaches behind a wall's face at its deepest corner
-    (0: no wall pressed): on ``rim-buckling``, how far the rim has yielded."""
+    (0: no wall pressed)."""
     return max((d for _, _, d in _pressed(world, motion)), default=0.0)
 
 
@@ -95,14 +92,13 @@ def peak_plate_force(
     setting: int,
     seed: int,
     params: dict[str, float],
-    wall_outline: str = "outline",
     chunk: int = 20,
 ) -> tuple[float, float, float, float]:
     """The peak horizontal force [N] of the walls and lead-ins of ``rig`` on ``consignment`` at
     placement ``seed`` of ``setting`` (SI ``params``) in the rigid-box reference, when [s]
     ((0, nan) if none touches it), the peak line load of a wall (`wall_line_load`) [N/m] and the
     deepest the outline reached behind a wall's face (`wall_depth`) [m]."""
-    sim = RigidBoxSimulator(RigidBoxOptions(wall_outline=wall_outline)).with_placement(seed)
+    sim = RigidBoxSimulator(RigidBoxOptions()).with_placement(seed)
     case = TestCase(rig, consignment, setting)
     world, dt = sim.world(params, case)
     the_rig = sim.rig(rig)
@@ -147,7 +143,6 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--types", nargs="+", default=["KPBW", "KP"])
     ap.add_argument("--settings", nargs="+", type=int, default=[1, 2])
     ap.add_argument("--placements", type=int, default=20)
-    ap.add_argument("--wall-outline", choices=WALL_OUTLINES, default="outline")
     ap.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE")
     ap.add_argument("--chunk", type=int, default=20, help="steps between looks, out of contact")
     ap.add_argument("--workers", type=int, default=1)
@@ -157,8 +152,6 @@ def main(argv: list[str] | None = None) -> int:
     user = {k: parameter(k).to_si(v) for k, v in parse_assignments(args.set).items()}
     line = f"python scripts/plate_force.py --rig {args.rig} --types {' '.join(args.types)}"
     line += f" --settings {' '.join(map(str, args.settings))} --placements {args.placements}"
-    if args.wall_outline != "outline":
-        line += f" --wall-outline {args.wall_outline}"
     if args.set:
         line += f" --set {' '.join(args.set)}"
     print(f"Written by `{line}`.")
@@ -197,8 +190,7 @@ def main(argv: list[str] | None = None) -> int:
                 )
             for setting in args.settings:
                 jobs = [
-                    (args.rig, name, setting, s, user, args.wall_outline, args.chunk)
-                    for s in range(args.placements)
+                    (args.rig, name, setting, s, user, args.chunk) for s in range(args.placements)
                 ]
                 peaks = list(pool.map(_peak, jobs))
                 print(f"\n{name}, setting {setting}, per placement (seed 0, 1, ...):")
@@ -210,19 +202,14 @@ def main(argv: list[str] | None = None) -> int:
                     "deepest behind a wall's face [mm]: "
                     + ", ".join(f"{d * 1e3:.1f}" for *_, d in peaks)
                 )
-                narrow = min(L - cL, W - cW) / 2
                 depths = [d for *_, d in peaks if d > 0]
                 if not depths:
                     print("no placement touched a wall")
                     continue
                 print(
-                    f"median deepest {statistics.median(depths) * 1e3:.1f} mm, most "
-                    f"{max(depths) * 1e3:.1f} mm; beyond the narrower rim's {narrow * 1e3:g} mm "
-                    f"(where the content could meet the wall) at {sum(d > narrow for d in depths)} "
-                    f"of {len(depths)} placements"
+                    f"median deepest {statistics.median(depths) * 1e3:.2f} mm, most "
+                    f"{max(depths) * 1e3:.2f} mm"
                 )
-                if args.wall_outline == "rim-buckling":
-                    continue  # its rim's line load is capped: nothing to compare
                 print(
                     "peak line load of a wall [N/m]: "
                     + ", ".join(f"{q:.0f}" for _, _, q, _ in peaks)

@@ -53,7 +53,6 @@ def test_the_sheets_stiffness_is_refused_where_the_reference_does_not_bend_its_r
     "extra, named",
     [
         (["--bottom-patch", "content"], "--bottom-patch"),
-        (["--wall-outline", "rim-buckling"], "--wall-outline"),
         (["--backend", "rigidbox", "--scene", "impratio=10"], "impratio"),
     ],
 )
@@ -76,12 +75,11 @@ def test_a_job_reaches_the_backend_it_names_with_its_consignment(monkeypatch, ba
     case = TestCase("E3", "KPBW", 1)
     bulged = replace(load_consignment("KPBW"), bulge=(0.004, 0.55))
     with pytest.raises(_BuiltError):
-        job = ({}, case, 3, SceneOptions(), backend, "content", "rim-buckling", bulged)
-        parameter_effects._simulate(job)
+        parameter_effects._simulate(({}, case, 3, SceneOptions(), backend, "content", bulged))
     options, consignments = built[0]
     assert consignments == {"KPBW": bulged}  # the bulge given on the command line reaches it
     if backend == "rigidbox":
-        assert (options.bottom_patch, options.wall_outline) == ("content", "rim-buckling")
+        assert options.bottom_patch == "content"
 
 
 @pytest.mark.parametrize(
@@ -171,13 +169,7 @@ def test_the_bulge_reaches_the_runs_whatever_the_consignment_is_called(monkeypat
 
 @pytest.mark.parametrize(
     "extra",
-    [
-        [],
-        ["--consignment", "BW", "--bulge", "0"],
-        ["--bottom-patch", "rim-bending"],
-        ["--bottom-patch", "outline", "--wall-outline", "rim-buckling"],  # it buckles at walls
-        ["--consignment", "BW", "--wall-outline", "rim-buckling"],
-    ],
+    [[], ["--consignment", "BW", "--bulge", "0"], ["--bottom-patch", "rim-bending"]],
 )
 def test_the_sheets_stiffness_reaches_the_reference_where_its_rim_bends(
     tmp_path, monkeypatch, extra

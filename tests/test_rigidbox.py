@@ -44,7 +44,6 @@ from parcelfit.sim.rigidbox.geometry import (
     primitive,
     resolved_bottom_patch,
     rim_bending_length,
-    rim_buckling_caps,
     rim_buckling_load,
     rim_load_share,
     rot_z,
@@ -453,83 +452,6 @@ def test_walls_may_meet_the_content_s_outline_instead_of_the_packaging_s(bw):
     assert -force(cL / 2, delta)[0] == pytest.approx(kappa * h * delta * (cW + delta), rel=1e-9)
     with pytest.raises(ParcelfitError, match="wall_outline"):
         parcel_body(bw, 0.02, 0.01, "outline", wall_outline="rim")
-
-
-def _kpbw_against_a_wall(depth, caps, zeta=1.0, speed=0.0):
-    """KP/BW (no gravity) on ``rim-buckling`` walls with ``caps`` [Pa], its short edge
-    (x = +L/2) ``depth`` past the face of a metal wall 4 mm above the belt, moving at ``speed``
-    into it: its Motion, body and the law's kappa."""
-    cons = load_consignment("KPBW")
-    body = parcel_body(cons, 0.02, 0.01, "outline", wall_outline="rim-buckling", rim_cap=caps)
-    hx, _, hz = body.half
-    wall = primitive("wall", WALL, (hx - depth + 0.0015, 0.0, 0.054), rot_z(90),
-                     (0.5, 0.0015, 0.05), METAL)  # fmt: skip
-    law = law_array((K, 6e5), (1, zeta), (0.3, 0.3), (0, 0), cons.mass, body.bottom_area)
-    world = World(body, Primitives.of([wall]), law, 0.001, 0.0015, 0.0)
-    motion = Motion(world, (0, 0, hz), (1, 0, 0, 0), velocity=(speed, 0, 0))
-    return motion, body, 6e5 / body.bottom_area
-
-
-def test_a_buckling_rim_yields_at_its_load_and_the_content_meets_the_wall_behind_it():
-    """``rim-buckling``: the outline's edge x = +L/2 pressed delta takes at most its cap over its
-    length W (the long edges' ends behind the face, less deep, under theirs: kappa h delta^2);
-    pressed past the rim's width, the content's outline takes the full law
-    kappa h d (cW + d); the caps are each rim's buckling load over H, inf without a rim."""
-    cons = load_consignment("KPBW")
-    (L, W, H), (cL, cW, _) = cons.outer, cons.content
-    caps = rim_buckling_caps(cons, 1e9, 5e-4, 0.3)
-    assert caps == pytest.approx(
-        (rim_buckling_load(1e9, 5e-4, 0.3, (L - cL) / 2) / H,
-         rim_buckling_load(1e9, 5e-4, 0.3, (W - cW) / 2) / H)
-    )  # fmt: skip
-    assert caps[0] < caps[1]  # the wider rim (55 mm at the short edges) buckles first
-    full = replace(cons, content=cons.outer)
-    assert rim_buckling_caps(full, 1e9, 5e-4, 0.3) == (math.inf, math.inf)
-    h = H - 0.004
-    kappa = 6e5 / (L * W)
-    delta = 0.5 * (caps[0] + caps[1]) / kappa  # the short edge capped, the long edges' ends not
-    motion, _, _ = _kpbw_against_a_wall(delta, caps)
-    assert -motion.F[0] == pytest.approx(h * W * caps[0] + kappa * h * delta**2, rel=1e-9)
-    d = 0.002  # the content pressed 2 mm, the rim's caps negligible
-    motion, _, _ = _kpbw_against_a_wall((L - cL) / 2 + d, (1e-9, 1e-9))
-    assert -motion.F[0] == pytest.approx(kappa * h * d * (cW + d), rel=1e-6)
-    with pytest.raises(ParcelfitError, match="rim-buckling"):
-        parcel_body(cons, 0.02, 0.01, "outline", wall_outline="outline", rim_cap=caps)
-    with pytest.raises(ParcelfitError, match="rim-buckling"):
-        parcel_body(cons, 0.02, 0.01, "outline", wall_outline="rim-buckling")
-    with pytest.raises(ParcelfitError, match="positive"):
-        parcel_body(cons, 0.02, 0.01, "outline", wall_outline="rim-buckling", rim_cap=(1.0, -1.0))
-
-
-def test_a_buckling_rim_without_damping_returns_the_strike_s_energy():
-    """The capped spring depends on the depth alone: undamped, a strike that buckles the rim
-    (its force capped over most of the stroke) but stops short of the content rebounds at its
-    own speed."""
-    cons = load_consignment("KPBW")
-    caps = rim_buckling_caps(cons, 1e9, 5e-4, 0.3)
-    motion, _, kappa = _kpbw_against_a_wall(-0.001, caps, zeta=0.0, speed=0.5)
-    deepest = 0.0
-    for _ in range(1000):  # 100 ms: 1 mm to the wall, in and out again
-        motion.advance(DT, 10)
-        deepest = max(deepest, motion.x[0] - 0.001)
-        if motion.x[0] < 0.0:
-            break
-    assert deepest > 5 * caps[1] / kappa  # well past where the caps bind
-    assert deepest < (cons.outer[0] - cons.content[0]) / 2  # the content never met the wall
-    assert motion.v[0] == pytest.approx(-0.5, rel=1e-3)
-
-
-def test_the_simulator_s_buckling_rim_follows_the_sheet():
-    sim = RigidBoxSimulator(RigidBoxOptions(wall_outline="rim-buckling"))
-    cons = load_consignment("KPBW")
-    case = TestCase("E3", "KPBW", 1)
-    for E in (2e8, 1.6e9):
-        world, _ = sim.world({"E_Pa": E}, case)
-        p = cons.parameter_values(si_values={"E_Pa": E})
-        expected = rim_buckling_caps(cons, E, p["t_Pa"], p["nu_Pa"])
-        assert world.body.rim_cap == pytest.approx(expected)
-    outline, _ = RigidBoxSimulator().world({}, case)
-    assert np.all(np.isinf(outline.body.rim_cap))
 
 
 def test_a_content_wall_outline_needs_walls_met_by_the_outline():

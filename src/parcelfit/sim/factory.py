@@ -21,8 +21,7 @@ consignment with a rigid content, optional ``timestep`` [s], ``spacing`` [m] (it
 ``bottom_patch`` (``consignment``, ``outline``, ``content``, ``rim-weight`` or ``rim-bending``),
 ``wall_contact`` (``outline``, the default: walls meet the box's outline, or ``points``: its
 contact points), ``wall_outline`` (``outline``, the default: the packaging's outline, or
-``content``: the content's, a rim that gives way at a wall, or ``rim-buckling``: the
-packaging's up to its rim's buckling load, then the content's), ``wall_damping`` (``ratio``,
+``content``: the content's, a rim that gives way at a wall), ``wall_damping`` (``ratio``,
 the default: walls and lead-ins damped at the ratio of their contact's stiffness, or
 ``area``),
 ``stick_speed`` and ``slip_speed`` [m/s] (its
@@ -302,9 +301,8 @@ class SimulatorSection(FileModel):
     wall_contact: Annotated[str | None, Choice(WALL_CONTACTS, what="wall contact")] = None
     """rigidbox: how walls meet the box: its outline (default) or its contact points."""
     wall_outline: Annotated[str | None, Choice(WALL_OUTLINES, what="wall outline")] = None
-    """rigidbox: the outline walls and lead-ins meet: the packaging's (outline, default), the
-    content's (content: a rim that gives way at a wall) or the packaging's up to its rim's
-    buckling load from E_Pa, t_Pa and nu_Pa, then the content's (rim-buckling)."""
+    """rigidbox: the outline walls and lead-ins meet: the packaging's (outline, default) or the
+    content's (content: a rim that gives way at a wall)."""
     wall_damping: Annotated[str | None, Choice(WALL_DAMPINGS, what="wall damping")] = None
     """rigidbox: walls and lead-ins damped at the ratio of their contact's stiffness (ratio,
     default) or per unit area (area)."""

@@ -78,9 +78,8 @@ BOTTOM_PATCHES = ("consignment", "outline", "content", "rim-weight", "rim-bendin
 # its contact points
 WALL_CONTACTS = ("outline", "points")
 # which outline the rigid-box reference's walls and lead-ins meet: the packaging's (a rim as stiff
-# as the content), the content's (a rim that gives way at a wall), or the packaging's up to its
-# rim's buckling load and the content's behind it
-WALL_OUTLINES = ("outline", "content", "rim-buckling")
+# as the content), or the content's (a rim that gives way at a wall)
+WALL_OUTLINES = ("outline", "content")
 # how the rigid-box reference damps a wall's and a lead-in's contact: at the damping ratio of the
 # contact's own stiffness, or per unit area as its contact points
 WALL_DAMPINGS = ("ratio", "area")

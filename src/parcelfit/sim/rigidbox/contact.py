@@ -84,15 +84,9 @@ neighbouring sides' penetrated ends included); for a corner at angle alpha to th
 kappa h delta^2 (1 / sin alpha + 1 / cos alpha) / 2. Quadrature is exact for the normal force and
 its torque (delta is linear along an edge); friction takes each node's own slip. The top and
 bottom faces' points do not meet a wall. ``wall_contact: points`` restores the point contact (a
-``BOX``), whose answer at a corner strike depends on the spacing.
-
-**The outline met** (``wall_outline``): walls and lead-ins meet the rectangle of the body's
-``wall_half`` (the packaging's L x W, or the content's cL x cW). With finite edge caps p_x, p_y
-[Pa] (``rim-buckling``: each rim's buckling load over the height), a node on an edge x = +-L/2
-takes at most p_x times its area weight (h_j times its share of the edge's length; the edges
-y = +-W/2: p_y), a lead-in band at most the nearer edge's cap times h_j l_o, and a second pass
-meets the content's outline behind it with no cap: the rim holds until it buckles, then yields
-at its buckling load until the content arrives. The capped spring depends on the depth alone.
+``BOX``), whose answer at a corner strike depends on the spacing. The rectangle walls and
+lead-ins meet is the body's ``wall_half`` (``wall_outline``: the packaging's L x W, or the
+content's cL x cW).
 
 **Damping of walls and lead-ins** (``wall_damping: ratio``, the default): the catalogue's zeta is
 a damping ratio, and a wall's or a lead-in's contact is damped at that ratio of its own
@@ -174,12 +168,12 @@ def _apply(F, T, px, py, pz, x, fx, fy, fz):
 
 @njit(cache=True)
 def _spring_friction(
-    F, T, x, px, py, pz, vx, vy, vz, nx, ny, nz, delta, k, c, mu_d, mu_s, v_s, v_d, cap
+    F, T, x, px, py, pz, vx, vy, vz, nx, ny, nz, delta, k, c, mu_d, mu_s, v_s, v_d
 ) -> float:
-    """Add one contact's normal and friction force (relative velocity v, normal n) at point p,
-    the normal force at most ``cap`` [N] (inf: none); returns the normal force [N]."""
+    """Add one contact's normal and friction force (relative velocity v, normal n) at point p;
+    returns the normal force [N]."""
     vn = vx * nx + vy * ny + vz * nz
-    fn = min(k * delta - c * vn, cap)
+    fn = k * delta - c * vn
     if fn <= 0.0:
         return 0.0
     tx, ty, tz = vx - vn * nx, vy - vn * ny, vz - vn * nz
@@ -196,10 +190,10 @@ def _spring_friction(
 
 @njit(cache=True)
 def _surface_contact(F, T, x, v, w, rx, ry, rz, j, centre, vel, spin, nx, ny, nz, delta, k, c,
-                     mu_d, mu_s, v_s, v_d, cap):  # fmt: skip
+                     mu_d, mu_s, v_s, v_d):  # fmt: skip
     """One contact of the body point at x + r with primitive j's surface (normal n, depth
     delta): its relative velocity, the point's minus the surface's (vel + spin x (p - c)),
-    into the spring, damper and friction of `_spring_friction` (normal force at most ``cap``)."""
+    into the spring, damper and friction of `_spring_friction`."""
     px, py, pz = x[0] + rx, x[1] + ry, x[2] + rz
     ax_, ay_, az_ = px - centre[j, 0], py - centre[j, 1], pz - centre[j, 2]
     sx = vel[j, 0] + spin[j, 1] * az_ - spin[j, 2] * ay_
@@ -209,7 +203,7 @@ def _surface_contact(F, T, x, v, w, rx, ry, rz, j, centre, vel, spin, nx, ny, nz
     vy = v[1] + w[2] * rx - w[0] * rz - sy
     vz = v[2] + w[0] * ry - w[1] * rx - sz
     _spring_friction(F, T, x, px, py, pz, vx, vy, vz, nx, ny, nz, delta, k, c, mu_d, mu_s, v_s,
-                     v_d, cap)  # fmt: skip
+                     v_d)  # fmt: skip
 
 
 @njit(cache=True)
@@ -295,11 +289,8 @@ def _lead_in_band(x, R, row_z, row_h, i, j, centre, size, base):
 
 
 @njit(cache=True)
-def _lead_in(F, T, x, R, v, w, half, caps, row_z, row_h, j, centre, size, law_m, v_s, v_d,
-             radius):  # fmt: skip
-    """The analytic contact of the parcel's outline (half extents ``half``) with lead-in j
-    (module docstring); ``caps``: the most pressure [Pa] the outline takes at its edges
-    x = +-hx and y = +-hy (inf: no limit)."""
+def _lead_in(F, T, x, R, v, w, half, row_z, row_h, j, centre, size, law_m, v_s, v_d, radius):
+    """The analytic contact of the parcel's outline with lead-in j (module docstring)."""
     cx, cy = centre[j, 0], centre[j, 1]
     r = size[j, 0]
     dx0, dy0 = cx - x[0], cy - x[1]
@@ -361,12 +352,10 @@ def _lead_in(F, T, x, R, v, w, half, caps, row_z, row_h, j, centre, size, law_m,
         vx = v[0] + w[1] * rz - w[2] * ry
         vy = v[1] + w[2] * rx - w[0] * rz
         vz = v[2] + w[0] * ry - w[1] * rx
-        # the spring's "k delta" is kappa h A_o, its damper c_a h l_o (as k = 1, c = c_a h l_o);
-        # at most the cap of the edge it pushes (the nearer edge's) over h l_o
-        cap = (caps[0] if abs(nbx) >= abs(nby) else caps[1]) * h * length
+        # the spring's "k delta" is kappa h A_o, its damper c_a h l_o (as k = 1, c = c_a h l_o)
         _spring_friction(
             F, T, x, px, py, pz, vx, vy, vz, nx, ny, 0.0,
-            kappa * h * area, 1.0, cdens * h * length, mu_d, mu_s, v_s, v_d, cap,
+            kappa * h * area, 1.0, cdens * h * length, mu_d, mu_s, v_s, v_d,
         )  # fmt: skip
 
 
@@ -387,11 +376,10 @@ def _edge_inside(a0, a1, lo, hi):
 
 
 @njit(cache=True)
-def _wall_pass(apply, F, T, x, R, v, w, half, caps, row_z, row_h, j, centre, rot, size, vel,
-               spin, kappa, cdens, mu_d, mu_s, v_s, v_d, nodes, weights):  # fmt: skip
+def _wall_pass(apply, F, T, x, R, v, w, half, row_z, row_h, j, centre, rot, size, vel, spin,
+               kappa, cdens, mu_d, mu_s, v_s, v_d, nodes, weights):  # fmt: skip
     """One pass over the outline's nodes behind wall j's face: with ``apply`` add their forces
-    (damping ``cdens`` per unit area; a node's normal force at most its edge's cap [Pa] times
-    its area weight); returns the nodes' summed area weights S [m^2]."""
+    (damping ``cdens`` per unit area); returns the nodes' summed area weights S [m^2]."""
     cx, cy, cz = _primitive_of(x[0], x[1], x[2], j, centre, rot)
     s0, s1, s2 = size[j, 0], size[j, 1], size[j, 2]
     shared = 0.0
@@ -414,7 +402,6 @@ def _wall_pass(apply, F, T, x, R, v, w, half, caps, row_z, row_h, j, centre, rot
             else:
                 bx0, by0, bx1, by1 = -hx, -hy, hx, -hy
             length = 2.0 * (hy if e < 2 else hx)
-            cap = caps[0] if e < 2 else caps[1]  # edges 0, 1 lie at x = +-hx
             p0x = x[0] + R[0, 0] * bx0 + R[0, 1] * by0 + R[0, 2] * zeta
             p0y = x[1] + R[1, 0] * bx0 + R[1, 1] * by0 + R[1, 2] * zeta
             p0z = x[2] + R[2, 0] * bx0 + R[2, 1] * by0 + R[2, 2] * zeta
@@ -464,16 +451,14 @@ def _wall_pass(apply, F, T, x, R, v, w, half, caps, row_z, row_h, j, centre, rot
                 ry = R[1, 0] * bx + R[1, 1] * by + R[1, 2] * bz
                 rz = R[2, 0] * bx + R[2, 1] * by + R[2, 2] * bz
                 _surface_contact(F, T, x, v, w, rx, ry, rz, j, centre, vel, spin, nx, ny, nz,
-                                 delta, kappa * a, cdens * a, mu_d, mu_s, v_s, v_d,
-                                 cap * a)  # fmt: skip
+                                 delta, kappa * a, cdens * a, mu_d, mu_s, v_s, v_d)  # fmt: skip
     return shared
 
 
 @njit(cache=True)
-def _wall(F, T, x, R, v, w, half, caps, row_z, row_h, j, centre, rot, size, vel, spin, law_m,
-          v_s, v_d, radius, nodes, weights):  # fmt: skip
-    """The contact of the parcel's outline (half extents ``half``, edge caps ``caps`` [Pa]) with
-    wall j (module docstring)."""
+def _wall(F, T, x, R, v, w, half, row_z, row_h, j, centre, rot, size, vel, spin, law_m, v_s,
+          v_d, radius, nodes, weights):  # fmt: skip
+    """The outline contact of the parcel with wall j (module docstring)."""
     cx, cy, cz = _primitive_of(x[0], x[1], x[2], j, centre, rot)
     if (
         abs(cx) > size[j, 0] + radius
@@ -483,20 +468,20 @@ def _wall(F, T, x, R, v, w, half, caps, row_z, row_h, j, centre, rot, size, vel,
         return
     kappa, cdens, mu_d, mu_s, zdamp = law_m[0], law_m[1], law_m[2], law_m[3], law_m[4]
     if zdamp > 0.0:  # damped at the ratio zeta of the whole contact's stiffness kappa S
-        shared = _wall_pass(False, F, T, x, R, v, w, half, caps, row_z, row_h, j, centre, rot,
-                            size, vel, spin, kappa, cdens, mu_d, mu_s, v_s, v_d, nodes,
+        shared = _wall_pass(False, F, T, x, R, v, w, half, row_z, row_h, j, centre, rot, size,
+                            vel, spin, kappa, cdens, mu_d, mu_s, v_s, v_d, nodes,
                             weights)  # fmt: skip
         if shared <= 0.0:
             return
         cdens = zdamp * math.sqrt(kappa / shared)  # c = 2 zeta sqrt(kappa S M) over S
-    _wall_pass(True, F, T, x, R, v, w, half, caps, row_z, row_h, j, centre, rot, size, vel,
-               spin, kappa, cdens, mu_d, mu_s, v_s, v_d, nodes, weights)  # fmt: skip
+    _wall_pass(True, F, T, x, R, v, w, half, row_z, row_h, j, centre, rot, size, vel, spin,
+               kappa, cdens, mu_d, mu_s, v_s, v_d, nodes, weights)  # fmt: skip
 
 
 @njit(cache=True)
 def contact_forces(
     x, R, v, w,
-    points, area, band, tile_start, tile_end, tile_centre, tile_radius, outlines, row_z, row_h,
+    points, area, band, tile_start, tile_end, tile_centre, tile_radius, half, row_z, row_h,
     radius,
     kind, centre, rot, size, material, vel, spin, reach,
     law, v_s, v_d, mem_face, mem_step, count, F, T,
@@ -506,26 +491,16 @@ def contact_forces(
     this evaluation's number (the entry-face memory of box contacts holds the face a point
     entered through and the evaluation it was last inside)."""
     n_prim = kind.shape[0]
-    # the outline walls meet and its edges' caps; a capped rim: the content's outline behind it
-    half, caps, inner = outlines[0], outlines[2, :2], outlines[1]
-    rim = math.isfinite(caps[0]) or math.isfinite(caps[1])
-    uncapped = np.full(2, np.inf)
     for j in range(n_prim):
         kj = kind[j]
         m = material[j]
         if kj == LEAD_IN:
-            _lead_in(F, T, x, R, v, w, half, caps, row_z, row_h, j, centre, size, law[m], v_s,
-                     v_d, radius)  # fmt: skip
-            if rim:
-                _lead_in(F, T, x, R, v, w, inner, uncapped, row_z, row_h, j, centre, size,
-                         law[m], v_s, v_d, radius)  # fmt: skip
+            _lead_in(F, T, x, R, v, w, half, row_z, row_h, j, centre, size, law[m], v_s, v_d,
+                     radius)  # fmt: skip
             continue
         if kj == WALL:
-            _wall(F, T, x, R, v, w, half, caps, row_z, row_h, j, centre, rot, size, vel, spin,
-                  law[m], v_s, v_d, radius, WALL_NODES, WALL_WEIGHTS)  # fmt: skip
-            if rim:
-                _wall(F, T, x, R, v, w, inner, uncapped, row_z, row_h, j, centre, rot, size, vel,
-                      spin, law[m], v_s, v_d, radius, WALL_NODES, WALL_WEIGHTS)  # fmt: skip
+            _wall(F, T, x, R, v, w, half, row_z, row_h, j, centre, rot, size, vel, spin, law[m],
+                  v_s, v_d, radius, WALL_NODES, WALL_WEIGHTS)  # fmt: skip
             continue
         cx, cy, cz = _primitive_of(x[0], x[1], x[2], j, centre, rot)
         if _outside_by(cx, cy, cz, j, reach) > radius:
@@ -617,8 +592,7 @@ def contact_forces(
                 else:
                     continue
                 _surface_contact(F, T, x, v, w, rx, ry, rz, j, centre, vel, spin, nx, ny, nz,
-                                 delta, kappa * a, cdens * a, mu_d, mu_s, v_s, v_d,
-                                 math.inf)  # fmt: skip
+                                 delta, kappa * a, cdens * a, mu_d, mu_s, v_s, v_d)  # fmt: skip
 
 
 def law_array(

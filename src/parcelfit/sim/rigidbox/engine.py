@@ -82,7 +82,6 @@ class Motion:
         self.mem_step = np.full((len(b.points), n_prim), -10, dtype=np.int64)
         self.counters = np.array([0, 0, np.iinfo(np.int64).max], dtype=np.int64)
         self.corners = _corners(b.half)
-        self.outlines = b.wall_outlines
         self.beam_a = np.zeros((2, 2))
         self.beam_d = np.ones((2, 2))
         self.beam_d2 = np.ones(2)
@@ -104,7 +103,7 @@ class Motion:
         b, p, world = self.world.body, self.world.primitives, self.world
         return (
             b.points, b.area, b.band, b.tile_start, b.tile_end, b.tile_centre, b.tile_radius,
-            self.outlines,
+            b.wall_half,
             b.row_z, b.row_h, b.radius,
             p.kind, p.centre, p.rot, p.size, p.material, p.vel, p.spin, p.reach,
             world.law, world.stick_speed, world.slip_speed, self.mem_face, self.mem_step,

@@ -105,12 +105,10 @@ with the centre of mass at the box centre (body frame: x along L, y along W, z u
 * the **outline the walls meet** (option ``wall_outline``; walls met by the outline and
   lead-ins only): ``outline`` (default), the packaging's L x W, as if the rim beyond the content
   were as stiff at a wall as the content; ``content``: the content's cL x cW, a rim that gives
-  way entirely at a wall, so the wall meets the content through it; ``rim-buckling``: the
-  packaging's outline, each edge's contact pressure at most its rim's buckling load
-  (`rim_buckling_load`, for the rim's width beyond that edge) over the height H, and behind it
-  the content's outline at the full law: the rim holds until it buckles, then yields at its
-  buckling load until the content arrives. The side points, which meet belts, drums and slabs,
-  stay on the outline.
+  way entirely at a wall, so the wall meets the content through it. The side points, which meet
+  belts, drums and slabs, stay on the outline. (How hard E3's plate presses a rim as stiff as
+  the content, against the load its rim buckles under, `rim_buckling_load`:
+  `scripts/plate_force.py`.)
 
 The points are grouped into tiles (3 x 3 bottom or top nodes, 3 columns of a side) with a
 bounding sphere each, so that the contact search skips tiles far from a primitive.
@@ -388,11 +386,8 @@ class Body:
     height, 0 for the others), tiles (start, end index into the points,
     centre (3,), radius), the area A_b [m^2] that divides the contact law's stiffness (the outline's
     L W, which the bottom patch's weights sum to), the side rows' body z (m,) and height
-    weights (m,) [m] (the lead-in's analytic contact is taken at these levels), the half
-    extents (3,) [m] of the outline that walls and lead-ins meet (``wall_outline``), the
-    content's half extents (3,) [m] and the most pressure [Pa] that outline takes at its edges
-    x = +-L/2 and y = +-W/2 (2,) (inf: no limit; finite: a rim that buckles, the content's
-    outline behind it)."""
+    weights (m,) [m] (the lead-in's analytic contact is taken at these levels) and the half
+    extents (3,) [m] of the outline that walls and lead-ins meet (``wall_outline``)."""
 
     mass: float
     inertia: np.ndarray
@@ -409,14 +404,6 @@ class Body:
     row_z: np.ndarray
     row_h: np.ndarray
     wall_half: np.ndarray
-    content_half: np.ndarray
-    rim_cap: np.ndarray
-
-    @property
-    def wall_outlines(self) -> np.ndarray:
-        """(3, 3): ``wall_half``, ``content_half`` and (rim_cap, 0), as the contact law takes
-        them."""
-        return np.stack([self.wall_half, self.content_half, np.append(self.rim_cap, 0.0)])
 
     @property
     def radius(self) -> float:
@@ -503,32 +490,17 @@ def plate_rigidity(young: float, thickness: float, poisson: float) -> float:
 
 
 def rim_buckling_load(young: float, thickness: float, poisson: float, width: float) -> float:
-    """The in-plane load per unit length of edge [N/m] under which a rim ``width`` [m] wide
-    (from the content's edge to the outline) buckles, pressed at the outline: its two plies (the
-    packaging's top and bottom sheet), each a plate strip held by the content and free at the
-    outline, the cantilever's Euler load in cylindrical bending, 2 pi^2 D / (4 b^2) (D:
-    `plate_rigidity`). The plies taken apart and flat: a rim tapering to a seam, bonded plies or
-    a bubble lining buckle later."""
+    """An estimate of the in-plane load per unit length of edge [N/m] under which a rim
+    ``width`` [m] wide (from the content's edge to the outline) buckles, pressed evenly along
+    its outline: its two plies (the packaging's top and bottom sheet), each a plate strip
+    clamped at the content and free at the outline, the cantilever's Euler load in cylindrical
+    bending, 2 pi^2 D / (4 b^2) (D: `plate_rigidity`). Neither bound: a content's edge that
+    lets the sheet turn (a hinge) or plies meeting at an angle at a seam lower it; bonded plies
+    or a bubble lining raise it; a load on a short length of edge (a corner, a lead-in) is
+    resisted by the rim beside it too."""
     if not (math.isfinite(width) and width > 0):
         raise ParcelfitError(f"a rim's width must be a positive length, got {width!r} m")
     return 2.0 * math.pi**2 * plate_rigidity(young, thickness, poisson) / (4.0 * width**2)
-
-
-def rim_buckling_caps(
-    consignment: Consignment, young: float, thickness: float, poisson: float
-) -> tuple[float, float]:
-    """The most pressure [Pa] the packaging's outline takes at a wall on ``rim-buckling``: at its
-    edges x = +-L/2 (the rim (L - cL) / 2 wide) and y = +-W/2 ((W - cW) / 2), each rim's
-    buckling load (`rim_buckling_load`, the sheet's ``young`` [Pa], ``thickness`` [m],
-    ``poisson`` [-]) over the height H; inf where the content fills the outline."""
-    (L, W, H), (cL, cW, _) = consignment.outer, consignment.content
-    caps = []
-    for outer, inner in ((L, cL), (W, cW)):
-        width = (outer - inner) / 2
-        caps.append(
-            rim_buckling_load(young, thickness, poisson, width) / H if width > 0 else math.inf
-        )
-    return caps[0], caps[1]
 
 
 def strip_profile(b: np.ndarray, span: np.ndarray) -> np.ndarray:
@@ -665,15 +637,13 @@ def parcel_body(
     bottom_patch: str = "consignment",
     bending_length: float = 0.0,
     wall_outline: str = "outline",
-    rim_cap: tuple[float, float] | None = None,
 ) -> Body:
     """The rigid box of ``consignment`` with the packaging's mass ``packaging_mass`` [kg],
     contact points ``spacing`` [m] apart and the bottom contact patch ``bottom_patch``; on the
     ``rim-bending`` patch (the default where the consignment has no bulge) the rim's bending
     length ``bending_length`` [m] (`rim_bending_length`; 0: a rim that does not bend, the
     ``rim-weight`` patch); walls and lead-ins meet the packaging's or the content's outline
-    (``wall_outline``), on ``rim-buckling`` the packaging's edges at most at ``rim_cap`` [Pa]
-    (`rim_buckling_caps`). See the module docstring."""
+    (``wall_outline``). See the module docstring."""
     if consignment.soft:
         raise ParcelfitError(
             f"consignment {consignment.name} has a soft content: the rigid-box reference "
@@ -688,16 +658,6 @@ def parcel_body(
         raise ParcelfitError(
             f"unknown wall_outline {wall_outline!r}", fix=f"use one of {list(WALL_OUTLINES)}"
         )
-    if (wall_outline == "rim-buckling") != (rim_cap is not None):
-        raise ParcelfitError(
-            "the rim's caps go with wall_outline 'rim-buckling' and only with it, got "
-            f"{wall_outline!r} and {rim_cap!r}"
-        )
-    caps = np.full(2, np.inf)
-    if rim_cap is not None:
-        caps = np.asarray(rim_cap, dtype=float)
-        if caps.shape != (2,) or np.any(np.isnan(caps)) or np.any(caps <= 0):
-            raise ParcelfitError(f"the rim's caps must be two positive pressures, got {rim_cap!r}")
     if not (math.isfinite(bending_length) and bending_length >= 0):
         raise ParcelfitError(
             f"the rim's bending length must be a finite length >= 0 m, got {bending_length!r}"
@@ -716,9 +676,8 @@ def parcel_body(
     L, W, H = consignment.outer
     cL, cW, _ = consignment.content
     wall_half = np.array([L / 2, W / 2, H / 2])
-    content_half = np.array([cL / 2, cW / 2, H / 2])
     if wall_outline == "content":
-        wall_half = content_half
+        wall_half = np.array([cL / 2, cW / 2, H / 2])
     blocks: list[tuple[np.ndarray, np.ndarray, int, list[np.ndarray]]] = []
 
     def face(size: tuple[float, float], z: float, group: int) -> None:
@@ -788,6 +747,4 @@ def parcel_body(
         row_z=row_z,
         row_h=row_h,
         wall_half=wall_half,
-        content_half=content_half,
-        rim_cap=caps,
     )

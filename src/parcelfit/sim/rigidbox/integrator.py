@@ -97,7 +97,7 @@ def free_rotation(q, pi, inertia, h):
 @njit(cache=True)
 def evaluate(
     x, q, v, pi, R, w, F, T, mass, inertia, gravity,
-    points, area, band, tile_start, tile_end, tile_centre, tile_radius, outlines, row_z, row_h,
+    points, area, band, tile_start, tile_end, tile_centre, tile_radius, half, row_z, row_h,
     radius,
     kind, centre, rot, size, material, vel, spin, reach,
     law, v_s, v_d, mem_face, mem_step, count,
@@ -113,7 +113,7 @@ def evaluate(
     F[2] = -mass * gravity
     contact_forces(
         x, R, v, w,
-        points, area, band, tile_start, tile_end, tile_centre, tile_radius, outlines, row_z, row_h,
+        points, area, band, tile_start, tile_end, tile_centre, tile_radius, half, row_z, row_h,
     radius,
         kind, centre, rot, size, material, vel, spin, reach,
         law, v_s, v_d, mem_face, mem_step, count, F, T,
@@ -153,7 +153,7 @@ def _beam_margin(x, R, corners, a, d, d2, nrm):
 @njit(cache=True)
 def advance(
     x, q, v, pi, R, w, F, T, mass, inertia, gravity, dt, n_steps, counters,
-    points, area, band, tile_start, tile_end, tile_centre, tile_radius, outlines, row_z, row_h,
+    points, area, band, tile_start, tile_end, tile_centre, tile_radius, half, row_z, row_h,
     radius,
     kind, centre, rot, size, material, vel, spin, reach,
     law, v_s, v_d, mem_face, mem_step,
@@ -173,7 +173,7 @@ def advance(
         counters[1] += 1
         evaluate(
             x, q, v, pi, R, w, F, T, mass, inertia, gravity,
-            points, area, band, tile_start, tile_end, tile_centre, tile_radius, outlines, row_z,
+            points, area, band, tile_start, tile_end, tile_centre, tile_radius, half, row_z,
             row_h, radius, kind, centre, rot, size, material, vel, spin, reach,
             law, v_s, v_d, mem_face, mem_step, counters[1],
         )  # fmt: skip

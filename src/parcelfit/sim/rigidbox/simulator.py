@@ -43,13 +43,12 @@ from parcelfit.sim.rigidbox.geometry import (
     resolved_bottom_patch,
     rig_primitives,
     rim_bending_length,
-    rim_buckling_caps,
 )
 
 # the parameters the reference's world is built from (`RigidBoxSimulator.world`; E_Pa, t_Pa and
 # nu_Pa only on the rim-bending patch, where they set how far the rim's bending passes the
-# content's load on, and on rim-buckling walls, where they set the rim's buckling load); the
-# others (k_CoPa, the content's stiffness, ...) belong to a shell it does not have
+# content's load on); the others (k_CoPa, the content's stiffness, ...) belong to a shell it
+# does not have
 PARAMETERS = (
     "m_Pa",
     "E_Pa",
@@ -86,10 +85,8 @@ class RigidBoxOptions:
     threshold speeds ``stick_speed`` < ``slip_speed`` [m/s], ``speed_factors`` (drive ->
     factor), ``roller_surface`` (``linear`` or ``turning``), ``wall_contact`` (``outline``: walls
     met by the parcel's outline, or ``points``: by its contact points; `geometry`),
-    ``wall_outline`` (with walls met by the outline: ``outline``, the packaging's,
-    ``content``, the content's: a rim that gives way at a wall, or ``rim-buckling``: the
-    packaging's up to its rim's buckling load from E_Pa, t_Pa and nu_Pa, then the content's;
-    `geometry`),
+    ``wall_outline`` (with walls met by the outline: ``outline``, the packaging's, or
+    ``content``, the content's: a rim that gives way at a wall; `geometry`),
     ``wall_damping`` (``ratio``: a wall's and a lead-in's contact damped at the ratio zeta of its
     own stiffness, or ``area``: per unit area as the points; `contact`), the start's
     ``start_offset`` (dx [m], dy [m], dheading [deg]) and ``start_speed_factor``,
@@ -181,12 +178,7 @@ class RigidBoxSimulator(RigBackend[RigidBoxOptions]):
         if resolved_bottom_patch(cons, opt.bottom_patch) == "rim-bending":
             L, W, _ = cons.outer
             length = rim_bending_length(p["E_Pa"], p["t_Pa"], p["nu_Pa"], p["k_BePa"], L * W)
-        caps = None
-        if opt.wall_outline == "rim-buckling":
-            caps = rim_buckling_caps(cons, p["E_Pa"], p["t_Pa"], p["nu_Pa"])
-        body = parcel_body(
-            cons, p["m_Pa"], opt.spacing, opt.bottom_patch, length, opt.wall_outline, caps
-        )
+        body = parcel_body(cons, p["m_Pa"], opt.spacing, opt.bottom_patch, length, opt.wall_outline)
         prims = rig_primitives(
             rig, case.speed_setting, opt.speed_factors, opt.roller_surface, opt.wall_contact
         )
