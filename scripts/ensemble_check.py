@@ -384,18 +384,18 @@ def main(argv: list[str] | None = None) -> int:
         for t, c in ((t, load_consignment(t)) for t in args.types)
     }
     user = parse_assignments(args.set)
-    try:
-        patches = _bottom_patches(args.bottom_patch, args.types)
-    except ValueError as exc:
-        ap.error(f"--bottom-patch: {exc}")
-    if args.backend != "rigidbox" and args.bottom_patch != ["consignment"]:
-        ap.error("--bottom-patch is a setting of the rigid-box reference: add --backend rigidbox")
-    try:
-        walls = _wall_outlines(args.wall_outline, args.types)
-    except ValueError as exc:
-        ap.error(f"--wall-outline: {exc}")
-    if args.backend != "rigidbox" and args.wall_outline != ["outline"]:
-        ap.error("--wall-outline is a setting of the rigid-box reference: add --backend rigidbox")
+    per_type = {}
+    for flag, given, parse, default in (
+        ("--bottom-patch", args.bottom_patch, _bottom_patches, ["consignment"]),
+        ("--wall-outline", args.wall_outline, _wall_outlines, ["outline"]),
+    ):
+        try:
+            per_type[flag] = parse(given, args.types)
+        except ValueError as exc:
+            ap.error(f"{flag}: {exc}")
+        if args.backend != "rigidbox" and given != default:
+            ap.error(f"{flag} is a setting of the rigid-box reference: add --backend rigidbox")
+    patches, walls = per_type["--bottom-patch"], per_type["--wall-outline"]
     if args.wall_contact == "points" and set(walls.values()) != {"outline"}:
         ap.error(
             "--wall-outline content needs walls met by the outline: drop --wall-contact points"

@@ -19,6 +19,15 @@ load is well above it, a rim as stiff as the content is not what the packaging c
 is well below, the rim holds. The estimate is for a load spread evenly along an edge: a corner
 or a lead-in presses a short length, which the rim beside it helps to carry, and the lead-ins'
 loads are in the force but not in the line load.
+
+``--engines model`` measures the MuJoCo model instead (``--engines reference model``: both): how
+close its rigid content comes to the guide plate, after every step the least distance of the
+corners of the content's footprint (its box cL x cW at its mid-height, `plate_gap`) from a
+plate's face, among the corners within the plate's length, and the width of the rim that faced
+the plate then (`facing_rim`: beyond the edge whose normal lies nearer the plate's). A rim as
+stiff as the content keeps that gap at about the rim's width (the reference's stiff rim reaches
+0.5-1.7 mm behind the face); a rim that gives way lets it fall to about zero. The plates are the
+scene's metal box geoms (lead-ins are cylinders and not counted).
 """
 
 from __future__ import annotations
@@ -28,15 +37,19 @@ import math
 import statistics
 from concurrent.futures import ProcessPoolExecutor
 
+import mujoco
 import numpy as np
 
 from parcelfit.runs import TestCase
-from parcelfit.sim.mujoco import load_consignment
+from parcelfit.sim.mujoco import MujocoSimulator, SimOptions, load_consignment
+from parcelfit.sim.mujoco.friction import Stepper, observed_steps
 from parcelfit.sim.params import CATALOGUE, parameter, parse_assignments
 from parcelfit.sim.rigidbox import RigidBoxOptions, RigidBoxSimulator
 from parcelfit.sim.rigidbox import integrator as ig
 from parcelfit.sim.rigidbox.engine import Motion, World
 from parcelfit.sim.rigidbox.geometry import LEAD_IN, WALL, rim_buckling_load
+
+ENGINES = ("reference", "model")
 
 
 def range_ends(name: str, kind: str) -> tuple[float, float]:
@@ -137,12 +150,171 @@ def _peak(job: tuple) -> tuple[float, float, float, float]:
     return peak_plate_force(*job)
 
 
+def plate_gap(
+    centre: np.ndarray,
+    rotation: np.ndarray,
+    half: tuple[float, float],
+    plate_centre: np.ndarray,
+    plate_rotation: np.ndarray,
+    plate_half: np.ndarray,
+) -> float:
+    """The least distance [m] from a plate's face (a box: centre, rotation with its local axes as
+    columns, half extents [m]; its face normal along its thinnest axis) of the corners of a
+    footprint (``half`` [m] along the body's x and y, at the body's ``centre`` [m] and
+    ``rotation``) lying within the plate's extent along its other two axes, measured from the
+    face on the footprint centre's side; negative: behind that face; inf: no corner within the
+    plate's extent."""
+    thin = int(np.argmin(plate_half))
+    others = [k for k in range(3) if k != thin]
+    hx, hy = half
+    corners = np.array([[sx * hx, sy * hy, 0.0] for sx in (-1, 1) for sy in (-1, 1)])
+    world = centre + corners @ rotation.T
+    local = (world - plate_centre) @ plate_rotation
+    within = np.all(np.abs(local[:, others]) <= plate_half[others], axis=1)
+    if not within.any():
+        return math.inf
+    side = 1.0 if float((centre - plate_centre) @ plate_rotation[:, thin]) >= 0 else -1.0
+    return float(np.min(side * local[within, thin] - plate_half[thin]))
+
+
+def facing_rim(rotation: np.ndarray, plate_rotation: np.ndarray, plate_half: np.ndarray,
+               outer: tuple[float, float], content: tuple[float, float]) -> float:  # fmt: skip
+    """The width [m] of the rim beyond the content's edge that faces the plate: (L - cL) / 2 where
+    the body's x axis lies nearer the plate's normal than its y axis, else (W - cW) / 2."""
+    normal = plate_rotation[:, int(np.argmin(plate_half))]
+    along_x = abs(float(rotation[:, 0] @ normal)) >= abs(float(rotation[:, 1] @ normal))
+    return (outer[0] - content[0]) / 2 if along_x else (outer[1] - content[1]) / 2
+
+
+def least_gap(
+    rig: str, consignment: str, setting: int, seed: int, params: dict[str, float]
+) -> tuple[float, float]:
+    """The content's least gap [m] to a guide plate of ``rig`` over one run of the MuJoCo model
+    (`plate_gap`), and the width [m] of the rim that faced the plate then (`facing_rim`; nan:
+    no gap)."""
+    cons = load_consignment(consignment)
+    sim = MujocoSimulator(SimOptions()).with_placement(seed)
+    case = TestCase(rig, cons.name, setting)
+    scene = sim.scene(params, case)
+    half = (cons.content[0] / 2, cons.content[1] / 2)
+    found: list[tuple[int, list[int]]] = []
+    least = [math.inf, math.nan]
+
+    def look(stepper: Stepper) -> None:
+        model, data = stepper.model, stepper.data
+        if not found:
+            content = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "content")
+            plates = [
+                g
+                for g in (
+                    mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, n) for n in scene.metal_geoms
+                )
+                if g >= 0 and model.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX
+            ]
+            found.append((content, plates))
+        content, plates = found[0]
+        centre = data.xpos[content]
+        rotation = data.xmat[content].reshape(3, 3)
+        for g in plates:
+            gap = plate_gap(
+                centre,
+                rotation,
+                half,
+                data.geom_xpos[g],
+                data.geom_xmat[g].reshape(3, 3),
+                model.geom_size[g],
+            )
+            if gap < least[0]:
+                least[0] = gap
+                least[1] = facing_rim(
+                    rotation,
+                    data.geom_xmat[g].reshape(3, 3),
+                    model.geom_size[g],
+                    cons.outer[:2],
+                    cons.content[:2],
+                )
+
+    with observed_steps(look):
+        sim.run(params, case)
+    return least[0], least[1]
+
+
+def _gap(job: tuple) -> tuple[float, float]:
+    return least_gap(*job)
+
+
+def _reference_lines(
+    name: str, setting: int, peaks: list[tuple[float, float, float, float]], per_length: dict
+) -> None:
+    """Print the reference's peaks at one setting against the rims' buckling loads."""
+    print(f"\n{name}, setting {setting}, the reference, per placement (seed 0, 1, ...):")
+    print("peak force of the walls and lead-ins [N]: " + ", ".join(f"{f:.1f}" for f, *_ in peaks))
+    print("deepest behind a wall's face [mm]: " + ", ".join(f"{d * 1e3:.1f}" for *_, d in peaks))
+    depths = [d for *_, d in peaks if d > 0]
+    if not depths:
+        print("no placement touched a wall")
+        return
+    print(
+        f"median deepest {statistics.median(depths) * 1e3:.2f} mm, most {max(depths) * 1e3:.2f} mm"
+    )
+    print("peak line load of a wall [N/m]: " + ", ".join(f"{q:.0f}" for _, _, q, _ in peaks))
+    touched = [q for _, _, q, _ in peaks if q > 0]
+    forces = [f for f, *_ in peaks if f > 0]
+    median = statistics.median(touched)
+    print(
+        f"median peak force {statistics.median(forces):.1f} N; median peak line "
+        f"load {median:.0f} N/m over the {len(touched)} placements that met a wall"
+    )
+    for label in ("defaults", "E_Pa end", "t_Pa end"):
+        for pair in per_length[label]:
+            parts = [
+                f"{which} rim's {q:.1f} N/m: median {median / q:.1f} times it, "
+                f"{sum(x > q for x in touched)} of {len(touched)} above it"
+                for which, q in zip(("the weaker", "the stiffer"), pair, strict=True)
+            ]
+            print(f"  buckling load ({label}) of " + "; of ".join(parts))
+
+
+def _model_lines(name: str, setting: int, found: list[tuple[float, float]]) -> None:
+    """Print the model's least gaps of the content to the plate at one setting."""
+    print(f"\n{name}, setting {setting}, the model, per placement (seed 0, 1, ...):")
+    print(
+        "the content's least gap to the plate [mm]: "
+        + ", ".join(f"{g * 1e3:.1f}" for g, _ in found)
+    )
+    print("the facing rim's width then [mm]: " + ", ".join(f"{r * 1e3:g}" for _, r in found))
+    met = [(g, r) for g, r in found if math.isfinite(g)]
+    if not met:
+        print("no placement came within the plate's extent")
+        return
+    gaps = [g for g, _ in met]
+    shares = [g / r for g, r in met]
+    print(
+        f"median gap {statistics.median(gaps) * 1e3:.1f} mm (range "
+        f"{min(gaps) * 1e3:.1f}-{max(gaps) * 1e3:.1f}); the gap over the facing "
+        f"rim's width: median {statistics.median(shares):.2f}, range "
+        f"{min(shares):.2f}-{max(shares):.2f} over {len(met)} placements (1: the rim "
+        "held its width, 0: it gave way entirely)"
+    )
+
+
+def _gap(job: tuple) -> tuple[float, float]:
+    return least_gap(*job)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rig", default="E3")
     ap.add_argument("--types", nargs="+", default=["KPBW", "KP"])
     ap.add_argument("--settings", nargs="+", type=int, default=[1, 2])
     ap.add_argument("--placements", type=int, default=20)
+    ap.add_argument(
+        "--engines",
+        nargs="+",
+        choices=ENGINES,
+        default=["reference"],
+        help="reference: the rigid-box reference's plate load; model: the MuJoCo model's gap",
+    )
     ap.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE")
     ap.add_argument("--chunk", type=int, default=20, help="steps between looks, out of contact")
     ap.add_argument("--workers", type=int, default=1)
@@ -152,6 +324,8 @@ def main(argv: list[str] | None = None) -> int:
     user = {k: parameter(k).to_si(v) for k, v in parse_assignments(args.set).items()}
     line = f"python scripts/plate_force.py --rig {args.rig} --types {' '.join(args.types)}"
     line += f" --settings {' '.join(map(str, args.settings))} --placements {args.placements}"
+    if args.engines != ["reference"]:
+        line += f" --engines {' '.join(args.engines)}"
     if args.set:
         line += f" --set {' '.join(args.set)}"
     print(f"Written by `{line}`.")
@@ -159,7 +333,7 @@ def main(argv: list[str] | None = None) -> int:
         for name in args.types:
             cons = load_consignment(name)
             if cons.soft:
-                print(f"\n{name}: skipped (a soft content: not in the rigid-box reference)")
+                print(f"\n{name}: skipped (a soft content: no rigid content, no rim to measure)")
                 continue
             (L, W, _), (cL, cW, _) = cons.outer, cons.content
             p = cons.parameter_values(si_values=user)
@@ -169,66 +343,34 @@ def main(argv: list[str] | None = None) -> int:
                 f"{cW * 1e3:g} mm; rim {(W - cW) / 2 * 1e3:g} mm wide along the long edges, "
                 f"{(L - cL) / 2 * 1e3:g} mm along the short ones"
             )
-            rows = [("defaults", p["E_Pa"], p["t_Pa"])]
-            rows += [("E_Pa end", E, p["t_Pa"]) for E in range_ends("E_Pa", kind)]
-            rows += [("t_Pa end", p["E_Pa"], t) for t in range_ends("t_Pa", kind)]
-            print(
-                "| E_Pa [N/mm^2] | t_Pa [mm] | buckling load, long edges' rim [N/m] | "
-                "short edges' [N/m] | along a whole long edge [N] | short edge [N] | row |"
-            )
-            print("|---|---|---|---|---|---|---|")
-            per_length = {}
-            for label, E, t in rows:
-                q_long = rim_buckling_load(E, t, p["nu_Pa"], (W - cW) / 2)
-                q_short = rim_buckling_load(E, t, p["nu_Pa"], (L - cL) / 2)
-                per_length.setdefault(label, []).append(
-                    (min(q_long, q_short), max(q_long, q_short))
-                )
+            per_length: dict[str, list[tuple[float, float]]] = {}
+            if "reference" in args.engines:
+                rows = [("defaults", p["E_Pa"], p["t_Pa"])]
+                rows += [("E_Pa end", E, p["t_Pa"]) for E in range_ends("E_Pa", kind)]
+                rows += [("t_Pa end", p["E_Pa"], t) for t in range_ends("t_Pa", kind)]
                 print(
-                    f"| {E * 1e-6:g} | {t * 1e3:g} | {q_long:.1f} | {q_short:.1f} | "
-                    f"{q_long * L:.2f} | {q_short * W:.2f} | {label} |"
+                    "| E_Pa [N/mm^2] | t_Pa [mm] | buckling load, long edges' rim [N/m] | "
+                    "short edges' [N/m] | along a whole long edge [N] | short edge [N] | row |"
                 )
+                print("|---|---|---|---|---|---|---|")
+                for label, E, t in rows:
+                    q_long = rim_buckling_load(E, t, p["nu_Pa"], (W - cW) / 2)
+                    q_short = rim_buckling_load(E, t, p["nu_Pa"], (L - cL) / 2)
+                    per_length.setdefault(label, []).append(
+                        (min(q_long, q_short), max(q_long, q_short))
+                    )
+                    print(
+                        f"| {E * 1e-6:g} | {t * 1e3:g} | {q_long:.1f} | {q_short:.1f} | "
+                        f"{q_long * L:.2f} | {q_short * W:.2f} | {label} |"
+                    )
             for setting in args.settings:
-                jobs = [
-                    (args.rig, name, setting, s, user, args.chunk) for s in range(args.placements)
-                ]
-                peaks = list(pool.map(_peak, jobs))
-                print(f"\n{name}, setting {setting}, per placement (seed 0, 1, ...):")
-                print(
-                    "peak force of the walls and lead-ins [N]: "
-                    + ", ".join(f"{f:.1f}" for f, *_ in peaks)
-                )
-                print(
-                    "deepest behind a wall's face [mm]: "
-                    + ", ".join(f"{d * 1e3:.1f}" for *_, d in peaks)
-                )
-                depths = [d for *_, d in peaks if d > 0]
-                if not depths:
-                    print("no placement touched a wall")
-                    continue
-                print(
-                    f"median deepest {statistics.median(depths) * 1e3:.2f} mm, most "
-                    f"{max(depths) * 1e3:.2f} mm"
-                )
-                print(
-                    "peak line load of a wall [N/m]: "
-                    + ", ".join(f"{q:.0f}" for _, _, q, _ in peaks)
-                )
-                touched = [q for _, _, q, _ in peaks if q > 0]
-                forces = [f for f, *_ in peaks if f > 0]
-                median = statistics.median(touched)
-                print(
-                    f"median peak force {statistics.median(forces):.1f} N; median peak line "
-                    f"load {median:.0f} N/m over the {len(touched)} placements that met a wall"
-                )
-                for label in ("defaults", "E_Pa end", "t_Pa end"):
-                    for pair in per_length[label]:
-                        parts = [
-                            f"{which} rim's {q:.1f} N/m: median {median / q:.1f} times it, "
-                            f"{sum(x > q for x in touched)} of {len(touched)} above it"
-                            for which, q in zip(("the weaker", "the stiffer"), pair, strict=True)
-                        ]
-                        print(f"  buckling load ({label}) of " + "; of ".join(parts))
+                seeds = range(args.placements)
+                if "reference" in args.engines:
+                    jobs = [(args.rig, name, setting, s, user, args.chunk) for s in seeds]
+                    _reference_lines(name, setting, list(pool.map(_peak, jobs)), per_length)
+                if "model" in args.engines:
+                    jobs = [(args.rig, name, setting, s, user) for s in seeds]
+                    _model_lines(name, setting, list(pool.map(_gap, jobs)))
     return 0
 
 
