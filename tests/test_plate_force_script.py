@@ -78,6 +78,12 @@ def test_the_gap_is_the_nearest_footprint_corner_s_distance_from_the_plate_s_fac
         np.zeros(3), np.eye(3), (0.1, 0.05), np.array([0.0, 0.1, 0.0]), np.eye(3), short
     )
     assert far == math.inf
+    # the same plate turned 14 degrees about z (E3's): its face's normal is its local y axis
+    turn = _rot_z(14.0)
+    normal = turn[:, 1]
+    centre = normal * 0.1  # the plate 0.1 m from the origin along its normal
+    gap = plate_force.plate_gap(np.zeros(3), turn, (0.1, 0.05), centre, turn, plate_half)
+    assert gap == pytest.approx(0.1 - 0.0015 - 0.05, rel=1e-12)  # the footprint turned with it
 
 
 def test_the_facing_rim_is_the_one_beyond_the_edge_turned_to_the_plate():
@@ -100,4 +106,7 @@ def test_the_model_s_content_stays_within_its_rim_of_the_plate(capsys):
     gaps = next(line for line in out.splitlines() if line.startswith("the content's least gap"))
     gap = float(gaps.rsplit(":", 1)[1])
     assert 0.0 < gap < 55.0
+    outline = next(line for line in out.splitlines() if line.startswith("the outline's least"))
+    # the outline set at the content's pose lies the facing rim's width nearer the plate
+    assert float(outline.rsplit(":", 1)[1]) < gap - 30.0
     assert "peak force" not in out  # the reference not run
