@@ -162,6 +162,27 @@ def test_wall_outline_one_for_all_or_per_type(monkeypatch, tmp_path, capsys):
         assert "--wall-outline" in capsys.readouterr().err
 
 
+def test_wall_inset_one_for_all_or_per_type(tmp_path, capsys):
+    types = ["BW", "KPBW", "KP"]
+    assert ensemble_check._wall_insets(["0.004"], types) == dict.fromkeys(types, 0.004)
+    assert ensemble_check._wall_insets(["KPBW=0.0084", "KP=0.011"], types) == {
+        "BW": 0.0,
+        "KPBW": 0.0084,
+        "KP": 0.011,
+    }
+    for bad, named in ((["KP=soft"], "soft"), (["KP=-0.001"], "-0.001"), (["PB=0.01"], "PB")):
+        with pytest.raises(ValueError, match=named):
+            ensemble_check._wall_insets(bad, types)
+    base = ["--types", "KPBW", "KP", "--placements", "1", "--out", str(tmp_path)]
+    for extra in (
+        ["--wall-inset", "0.004"],  # MuJoCo has no such setting
+        ["--backend", "rigidbox", "--wall-inset", "0.004", "--wall-outline", "content"],
+    ):
+        with pytest.raises(SystemExit):
+            ensemble_check.main([*base, *extra])
+        assert "--wall-inset" in capsys.readouterr().err
+
+
 def _ensemble(rotations_deg):
     import math
 

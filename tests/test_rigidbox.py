@@ -454,6 +454,35 @@ def test_walls_may_meet_the_content_s_outline_instead_of_the_packaging_s(bw):
         parcel_body(bw, 0.02, 0.01, "outline", wall_outline="rim")
 
 
+def test_a_wall_inset_moves_the_outline_walls_meet_in_no_further_than_the_content(bw):
+    """``wall_inset`` d: the packaging's outline inset by d on every side (a rim that gave way by
+    d), clipped at the content's; a wall then meets the outline pressed delta past the inset
+    face as the outline law does, kappa h delta (W - 2 d + delta); negative insets and insets
+    with a content outline are refused."""
+    (L, W, H), (cL, cW, _) = bw.outer, bw.content
+    d = 0.004
+    body = parcel_body(bw, 0.02, 0.01, "outline", wall_inset=d)
+    assert body.wall_half == pytest.approx((L / 2 - d, W / 2 - d, H / 2))
+    deep = parcel_body(bw, 0.02, 0.01, "outline", wall_inset=1.0)
+    assert deep.wall_half == pytest.approx((cL / 2, cW / 2, H / 2))
+    law = law_array((K, 6e5), (1, 1), (0.3, 0.3), (0, 0), bw.mass, body.bottom_area)
+    delta = 0.002
+    wall = primitive("wall", WALL, (L / 2 - d - delta + 0.0015, 0.0, 0.054), rot_z(90),
+                     (0.5, 0.0015, 0.05), METAL)  # fmt: skip
+    world = World(body, Primitives.of([wall]), law, 0.001, 0.0015, 0.0)
+    force = Motion(world, (0, 0, H / 2), (1, 0, 0, 0)).F
+    kappa, h = 6e5 / body.bottom_area, H - 0.004
+    assert -force[0] == pytest.approx(kappa * h * delta * (W - 2 * d + delta), rel=1e-9)
+    for bad in ({"wall_inset": -0.001}, {"wall_inset": math.nan}):
+        with pytest.raises(ParcelfitError, match="wall_inset"):
+            parcel_body(bw, 0.02, 0.01, "outline", **bad)
+    with pytest.raises(ParcelfitError, match="wall_inset"):
+        parcel_body(bw, 0.02, 0.01, "outline", wall_outline="content", wall_inset=d)
+    with pytest.raises(ParcelfitError, match="wall_inset"):
+        RigidBoxOptions(wall_inset=d, wall_contact="points")
+    assert RigidBoxOptions(wall_inset=d).wall_inset == d
+
+
 def test_a_content_wall_outline_needs_walls_met_by_the_outline():
     assert RigidBoxOptions(wall_outline="content").wall_outline == "content"
     with pytest.raises(ParcelfitError, match="wall_contact"):
@@ -731,6 +760,12 @@ def test_a_study_s_simulator_section_makes_a_rigidbox_simulator(tmp_path):
         SimulatorConfig("mujoco", rig="E3", consignment="BW", wall_outline="content")
     with pytest.raises(Exception, match="wall outline"):
         SimulatorSection(backend="rigidbox", rig="E3", consignment="BW", wall_outline="rim")
+    inset = SimulatorSection(
+        backend="rigidbox", rig="E3", consignment="KPBW", wall_inset=0.008
+    ).to_config(tmp_path)
+    assert make_simulator(inset).options.wall_inset == 0.008
+    with pytest.raises(ParcelfitError, match="wall_inset is a setting of the rigidbox"):
+        SimulatorConfig("mujoco", rig="E3", consignment="BW", wall_inset=0.008)
     with pytest.raises(Exception, match="must exceed stick_speed"):  # the rigid box's 1 mm/s
         SimulatorSection(backend="rigidbox", rig="E3", consignment="BW", slip_speed=0.0008)
     pb = SimulatorSection(backend="rigidbox", rig="E3", consignment="PB").to_config(tmp_path)

@@ -21,7 +21,8 @@ consignment with a rigid content, optional ``timestep`` [s], ``spacing`` [m] (it
 ``bottom_patch`` (``consignment``, ``outline``, ``content``, ``rim-weight`` or ``rim-bending``),
 ``wall_contact`` (``outline``, the default: walls meet the box's outline, or ``points``: its
 contact points), ``wall_outline`` (``outline``, the default: the packaging's outline, or
-``content``: the content's, a rim that gives way at a wall), ``wall_damping`` (``ratio``,
+``content``: the content's, a rim that gives way at a wall), ``wall_inset`` [m] (the
+packaging's outline inset by this on every side), ``wall_damping`` (``ratio``,
 the default: walls and lead-ins damped at the ratio of their contact's stiffness, or
 ``area``),
 ``stick_speed`` and ``slip_speed`` [m/s] (its
@@ -109,6 +110,7 @@ _SETTINGS = (
     "bottom_patch",
     "wall_contact",
     "wall_outline",
+    "wall_inset",
     "wall_damping",
     "wall_limit",
     "external",
@@ -129,7 +131,7 @@ _SCENE_NAMES = {"film_spacing": "soft_shell_spacing"}
 def _check_needs(backend: str, settings: Any) -> None:
     """Refuse a configuration that leaves out what its backend needs, or gives the rigid-box
     reference a MuJoCo setting (or MuJoCo the rigid box's ``bottom_patch``, ``wall_contact``,
-    ``wall_outline`` or ``wall_damping``)."""
+    ``wall_outline``, ``wall_inset`` or ``wall_damping``)."""
     for key in _NEEDS[backend]:
         if getattr(settings, key) is None:
             raise ParcelfitError(f"the {backend} backend needs {key!r}", fix=f"add `{key}:`")
@@ -147,7 +149,7 @@ def _check_needs(backend: str, settings: Any) -> None:
                 fix="remove it (a setting of the MuJoCo scene)",
             )
     else:
-        for key in ("bottom_patch", "wall_contact", "wall_outline", "wall_damping"):
+        for key in ("bottom_patch", "wall_contact", "wall_outline", "wall_inset", "wall_damping"):
             if getattr(settings, key) is not None:
                 raise ParcelfitError(
                     f"{key} is a setting of the rigidbox backend", where=key, fix="remove it"
@@ -164,6 +166,7 @@ class SimulatorConfig(Mapping[str, Any]):
     ``slip_speed`` [m/s], ``rig_timesteps`` (rig name -> time step [s]); rigidbox: ``rig`` and
     ``consignment``, optional ``rigs``, ``timestep``, ``spacing``, ``bottom_patch``,
     ``stick_speed``, ``slip_speed``, ``roller_surface``, ``wall_contact``, ``wall_outline``,
+    ``wall_inset``,
     ``wall_damping``;
     external: the solver description file ``external``;
     python: ``factory``),
@@ -196,6 +199,7 @@ class SimulatorConfig(Mapping[str, Any]):
     bottom_patch: str | None = None
     wall_contact: str | None = None
     wall_outline: str | None = None
+    wall_inset: float | None = None
     wall_damping: str | None = None
     wall_limit: float | None = None
     external: str | None = None
@@ -303,6 +307,9 @@ class SimulatorSection(FileModel):
     wall_outline: Annotated[str | None, Choice(WALL_OUTLINES, what="wall outline")] = None
     """rigidbox: the outline walls and lead-ins meet: the packaging's (outline, default) or the
     content's (content: a rim that gives way at a wall)."""
+    wall_inset: Annotated[float | None, Number(unit="m", ge=0.0)] = None
+    """rigidbox: the packaging's outline that walls meet, inset by this on every side [m] (no
+    nearer than the content's): a rim that has given way so far (default 0)."""
     wall_damping: Annotated[str | None, Choice(WALL_DAMPINGS, what="wall damping")] = None
     """rigidbox: walls and lead-ins damped at the ratio of their contact's stiffness (ratio,
     default) or per unit area (area)."""
@@ -397,7 +404,7 @@ def make_simulator(config: SimulatorConfig) -> Simulator:
             )
         given: dict[str, Any] = {
             k: float(config[k])
-            for k in ("timestep", "spacing", "stick_speed", "slip_speed")
+            for k in ("timestep", "spacing", "stick_speed", "slip_speed", "wall_inset")
             if k in config
         }
         for key in (

@@ -105,8 +105,10 @@ with the centre of mass at the box centre (body frame: x along L, y along W, z u
 * the **outline the walls meet** (option ``wall_outline``; walls met by the outline and
   lead-ins only): ``outline`` (default), the packaging's L x W, as if the rim beyond the content
   were as stiff at a wall as the content; ``content``: the content's cL x cW, a rim that gives
-  way entirely at a wall, so the wall meets the content through it. The side points, which meet
-  belts, drums and slabs, stay on the outline. (How hard E3's plate presses a rim as stiff as
+  way entirely at a wall, so the wall meets the content through it; with ``wall_inset`` d
+  [m], the packaging's outline inset by d on every side (no nearer the centre than the
+  content's): a rim that has given way by d. The side points, which meet belts, drums and slabs,
+  stay on the outline. (How hard E3's plate presses a rim as stiff as
   the content, against the load its rim buckles under, `rim_buckling_load`:
   `scripts/plate_force.py`.)
 
@@ -637,13 +639,15 @@ def parcel_body(
     bottom_patch: str = "consignment",
     bending_length: float = 0.0,
     wall_outline: str = "outline",
+    wall_inset: float = 0.0,
 ) -> Body:
     """The rigid box of ``consignment`` with the packaging's mass ``packaging_mass`` [kg],
     contact points ``spacing`` [m] apart and the bottom contact patch ``bottom_patch``; on the
     ``rim-bending`` patch (the default where the consignment has no bulge) the rim's bending
     length ``bending_length`` [m] (`rim_bending_length`; 0: a rim that does not bend, the
     ``rim-weight`` patch); walls and lead-ins meet the packaging's or the content's outline
-    (``wall_outline``). See the module docstring."""
+    (``wall_outline``), the packaging's inset by ``wall_inset`` [m] on every side (at most to
+    the content's). See the module docstring."""
     if consignment.soft:
         raise ParcelfitError(
             f"consignment {consignment.name} has a soft content: the rigid-box reference "
@@ -657,6 +661,13 @@ def parcel_body(
     if wall_outline not in WALL_OUTLINES:
         raise ParcelfitError(
             f"unknown wall_outline {wall_outline!r}", fix=f"use one of {list(WALL_OUTLINES)}"
+        )
+    if not (math.isfinite(wall_inset) and wall_inset >= 0):
+        raise ParcelfitError(f"wall_inset must be a finite length >= 0 m, got {wall_inset!r}")
+    if wall_inset > 0 and wall_outline != "outline":
+        raise ParcelfitError(
+            f"wall_inset insets the packaging's outline; wall_outline {wall_outline!r} has none",
+            fix="set wall_outline: outline, or wall_inset: 0",
         )
     if not (math.isfinite(bending_length) and bending_length >= 0):
         raise ParcelfitError(
@@ -675,7 +686,7 @@ def parcel_body(
         )
     L, W, H = consignment.outer
     cL, cW, _ = consignment.content
-    wall_half = np.array([L / 2, W / 2, H / 2])
+    wall_half = np.array([max(L / 2 - wall_inset, cL / 2), max(W / 2 - wall_inset, cW / 2), H / 2])
     if wall_outline == "content":
         wall_half = np.array([cL / 2, cW / 2, H / 2])
     blocks: list[tuple[np.ndarray, np.ndarray, int, list[np.ndarray]]] = []

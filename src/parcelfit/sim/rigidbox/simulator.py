@@ -86,7 +86,8 @@ class RigidBoxOptions:
     factor), ``roller_surface`` (``linear`` or ``turning``), ``wall_contact`` (``outline``: walls
     met by the parcel's outline, or ``points``: by its contact points; `geometry`),
     ``wall_outline`` (with walls met by the outline: ``outline``, the packaging's, or
-    ``content``, the content's: a rim that gives way at a wall; `geometry`),
+    ``content``, the content's: a rim that gives way at a wall; `geometry`), ``wall_inset`` [m]
+    (with ``outline``: the outline inset by this on every side, a rim that gave way so far),
     ``wall_damping`` (``ratio``: a wall's and a lead-in's contact damped at the ratio zeta of its
     own stiffness, or ``area``: per unit area as the points; `contact`), the start's
     ``start_offset`` (dx [m], dy [m], dheading [deg]) and ``start_speed_factor``,
@@ -103,6 +104,7 @@ class RigidBoxOptions:
     roller_surface: str = "linear"
     wall_contact: str = "outline"
     wall_outline: str = "outline"
+    wall_inset: float = 0.0
     wall_damping: str = "ratio"
     start_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
     start_speed_factor: float = 1.0
@@ -129,6 +131,14 @@ class RigidBoxOptions:
             value = getattr(self, key)
             if value not in allowed:
                 raise ParcelfitError(f"unknown {key} {value!r}", fix=f"use one of {list(allowed)}")
+        if not (math.isfinite(self.wall_inset) and self.wall_inset >= 0):
+            raise ParcelfitError(f"wall_inset must be a length >= 0 [m], got {self.wall_inset!r}")
+        if self.wall_inset > 0 and (self.wall_outline, self.wall_contact) != ("outline", "outline"):
+            raise ParcelfitError(
+                "wall_inset insets the outline walls meet: it needs wall_outline and wall_contact "
+                f"outline, got {self.wall_outline!r} and {self.wall_contact!r}",
+                fix="leave wall_inset at 0",
+            )
         if self.wall_outline != "outline" and self.wall_contact != "outline":
             raise ParcelfitError(
                 f"wall_outline {self.wall_outline!r} needs walls met by the outline, got "
@@ -178,7 +188,9 @@ class RigidBoxSimulator(RigBackend[RigidBoxOptions]):
         if resolved_bottom_patch(cons, opt.bottom_patch) == "rim-bending":
             L, W, _ = cons.outer
             length = rim_bending_length(p["E_Pa"], p["t_Pa"], p["nu_Pa"], p["k_BePa"], L * W)
-        body = parcel_body(cons, p["m_Pa"], opt.spacing, opt.bottom_patch, length, opt.wall_outline)
+        body = parcel_body(
+            cons, p["m_Pa"], opt.spacing, opt.bottom_patch, length, opt.wall_outline, opt.wall_inset
+        )
         prims = rig_primitives(
             rig, case.speed_setting, opt.speed_factors, opt.roller_surface, opt.wall_contact
         )
