@@ -85,8 +85,8 @@ kappa h delta^2 (1 / sin alpha + 1 / cos alpha) / 2. Quadrature is exact for the
 its torque (delta is linear along an edge); friction takes each node's own slip. The top and
 bottom faces' points do not meet a wall. ``wall_contact: points`` restores the point contact (a
 ``BOX``), whose answer at a corner strike depends on the spacing. The rectangle walls and
-lead-ins meet is the body's ``wall_half`` (``wall_outline``: the packaging's L x W, or the
-content's cL x cW).
+lead-ins meet is the body's ``wall_half`` (``wall_outline``: the packaging's L x W, inset by
+``wall_inset`` on every side, or the content's cL x cW).
 
 **Damping of walls and lead-ins** (``wall_damping: ratio``, the default): the catalogue's zeta is
 a damping ratio, and a wall's or a lead-in's contact is damped at that ratio of its own
