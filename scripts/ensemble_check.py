@@ -42,9 +42,11 @@ import multiprocessing
 import os
 import sys
 import time
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -211,16 +213,13 @@ def _paired_lines(rig: str, members: dict[str, list[Member]]) -> list[str]:
 
 
 def _per_type(
-    given: list[str], types: list[str], choices: tuple[str, ...], default: str
-) -> dict[str, str]:
-    """Each type's choice from a per-type option (``--bottom-patch``, ``--wall-outline``): one
-    choice for every type, or TYPE=CHOICE items (a type not named: ``default``); ValueError names
-    what is wrong."""
-    allowed = ", ".join(choices)
+    given: list[str], types: list[str], convert: Callable[[str], Any], default: Any
+) -> dict[str, Any]:
+    """Each type's value of a per-type option (``--bottom-patch``, ``--wall-outline``,
+    ``--wall-inset``): one value for every type, or TYPE=VALUE items (a type not named:
+    ``default``), each through ``convert``; ValueError names what is wrong."""
     if len(given) == 1 and "=" not in given[0]:
-        if given[0] not in choices:
-            raise ValueError(f"unknown value {given[0]!r}: use one of {allowed}")
-        return dict.fromkeys(types, given[0])
+        return dict.fromkeys(types, convert(given[0]))
     out = dict.fromkeys(types, default)
     for item in given:
         name, sep, value = item.partition("=")
@@ -228,41 +227,48 @@ def _per_type(
             raise ValueError(f"{item!r}: give one value, or TYPE=VALUE for each type named")
         if name not in types:
             raise ValueError(f"{name!r} is not among --types ({' '.join(types)})")
-        if value not in choices:
-            raise ValueError(f"unknown value {value!r} for {name}: use one of {allowed}")
-        out[name] = value
+        try:
+            out[name] = convert(value)
+        except ValueError as exc:
+            raise ValueError(f"{exc} (for {name})") from None
     return out
+
+
+def _choice(choices: tuple[str, ...]) -> Callable[[str], str]:
+    """A converter that accepts one of ``choices``."""
+
+    def convert(value: str) -> str:
+        if value not in choices:
+            raise ValueError(f"unknown value {value!r}: use one of {', '.join(choices)}")
+        return value
+
+    return convert
+
+
+def _length(value: str) -> float:
+    """A wall inset [m] in [0, 0.1]."""
+    try:
+        length = float(value)
+    except ValueError:
+        raise ValueError(f"{value!r} is not a length [m]") from None
+    if not (math.isfinite(length) and 0 <= length <= 0.1):
+        raise ValueError(f"{value!r}: give a length in [0, 0.1] m")
+    return length
 
 
 def _bottom_patches(given: list[str], types: list[str]) -> dict[str, str]:
     """Each type's bottom patch from ``--bottom-patch`` (a type not named: ``consignment``)."""
-    return _per_type(given, types, BOTTOM_PATCHES, "consignment")
+    return _per_type(given, types, _choice(BOTTOM_PATCHES), "consignment")
 
 
 def _wall_outlines(given: list[str], types: list[str]) -> dict[str, str]:
     """Each type's wall outline from ``--wall-outline`` (a type not named: ``outline``)."""
-    return _per_type(given, types, WALL_OUTLINES, "outline")
+    return _per_type(given, types, _choice(WALL_OUTLINES), "outline")
 
 
 def _wall_insets(given: list[str], types: list[str]) -> dict[str, float]:
-    """Each type's wall inset [m] from ``--wall-inset``: one length for every type, or
-    TYPE=LENGTH items (a type not named: 0); ValueError names what is wrong."""
-    items = given if len(given) > 1 or "=" in given[0] else [f"{t}={given[0]}" for t in types]
-    out = dict.fromkeys(types, 0.0)
-    for item in items:
-        name, sep, value = item.partition("=")
-        if not sep:
-            raise ValueError(f"{item!r}: give one length, or TYPE=LENGTH for each type named")
-        if name not in types:
-            raise ValueError(f"{name!r} is not among --types ({' '.join(types)})")
-        try:
-            length = float(value)
-        except ValueError:
-            raise ValueError(f"{value!r} for {name} is not a length [m]") from None
-        if not (math.isfinite(length) and 0 <= length <= 0.1):
-            raise ValueError(f"{value!r} for {name}: give a length in [0, 0.1] m")
-        out[name] = length
-    return out
+    """Each type's wall inset [m] from ``--wall-inset`` (a type not named: 0)."""
+    return _per_type(given, types, _length, 0.0)
 
 
 def main(argv: list[str] | None = None) -> int:
