@@ -295,11 +295,11 @@ def main(argv: list[str] | None = None) -> int:
     scene = scene_options(args.scene)
     jobs: dict[tuple[str, str, int], Job] = {}
     for name in args.params:
-        r = spec[name].range_for(kind)
+        low, high = spec[name].si_range(kind)
         d = defaults[name]
         for label, value in (
-            ("low", spec[name].to_si(r.low)),
-            ("high", spec[name].to_si(r.high)),
+            ("low", low),
+            ("high", high),
             ("minus", d * (1 - args.step)),
             ("plus", d * (1 + args.step)),
         ):

@@ -46,20 +46,13 @@ import numpy as np
 from parcelfit.runs import TestCase
 from parcelfit.sim.mujoco import MujocoSimulator, SimOptions, load_consignment
 from parcelfit.sim.mujoco.friction import Stepper, observed_steps
-from parcelfit.sim.params import CATALOGUE, parameter, parse_assignments
+from parcelfit.sim.params import parameter, parse_assignments
 from parcelfit.sim.rigidbox import RigidBoxOptions, RigidBoxSimulator
 from parcelfit.sim.rigidbox import integrator as ig
 from parcelfit.sim.rigidbox.engine import Motion, World
 from parcelfit.sim.rigidbox.geometry import LEAD_IN, WALL, rim_buckling_load
 
 ENGINES = ("reference", "model")
-
-
-def range_ends(name: str, kind: str) -> tuple[float, float]:
-    """The catalogue's range of parameter ``name`` for a content ``kind``, in SI units."""
-    spec = next(p for p in CATALOGUE if p.name == name)
-    r = spec.range_for(kind)
-    return spec.to_si(r.low), spec.to_si(r.high)
 
 
 def _pressed(world: World, motion: Motion) -> list[tuple[float, float, float]]:
@@ -346,8 +339,8 @@ def main(argv: list[str] | None = None) -> int:
             per_length: dict[str, list[tuple[float, float]]] = {}
             if "reference" in args.engines:
                 rows = [("defaults", p["E_Pa"], p["t_Pa"])]
-                rows += [("E_Pa end", E, p["t_Pa"]) for E in range_ends("E_Pa", kind)]
-                rows += [("t_Pa end", p["E_Pa"], t) for t in range_ends("t_Pa", kind)]
+                rows += [("E_Pa end", E, p["t_Pa"]) for E in parameter("E_Pa").si_range(kind)]
+                rows += [("t_Pa end", p["E_Pa"], t) for t in parameter("t_Pa").si_range(kind)]
                 print(
                     "| E_Pa [N/mm^2] | t_Pa [mm] | buckling load, long edges' rim [N/m] | "
                     "short edges' [N/m] | along a whole long edge [N] | short edge [N] | row |"

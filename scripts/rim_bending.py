@@ -21,15 +21,8 @@ import argparse
 import itertools
 
 from parcelfit.sim.mujoco import load_consignment
-from parcelfit.sim.params import CATALOGUE
+from parcelfit.sim.params import parameter
 from parcelfit.sim.rigidbox.geometry import parcel_body, rim_bending_length, rim_load_share
-
-
-def range_ends(name: str, kind: str) -> tuple[float, float]:
-    """The catalogue's range of parameter ``name`` for a content ``kind``, in SI units."""
-    spec = next(p for p in CATALOGUE if p.name == name)
-    r = spec.range_for(kind)
-    return spec.to_si(r.low), spec.to_si(r.high)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -61,10 +54,12 @@ def main(argv: list[str] | None = None) -> int:
         )
         rows = [("defaults", p["E_Pa"], p["t_Pa"], p["k_BePa"])]
         for E, t, K in itertools.product(
-            range_ends("E_Pa", kind), range_ends("t_Pa", kind), range_ends("k_BePa", kind)
+            parameter("E_Pa").si_range(kind),
+            parameter("t_Pa").si_range(kind),
+            parameter("k_BePa").si_range(kind),
         ):
             rows.append(("corner", E, t, K))
-        for E in range_ends("E_Pa", kind):
+        for E in parameter("E_Pa").si_range(kind):
             rows.append(("E_Pa end", E, p["t_Pa"], p["k_BePa"]))
         head = "| E_Pa [N/mm^2] | t_Pa [mm] | k_BePa [N/mm] | lambda [mm] | "
         head += " | ".join(f"rim share at {s * 1e3:g} mm" for s in args.spacings)

@@ -136,6 +136,11 @@ class ParameterSpec:
             )
         return value
 
+    def si_range(self, content_kind: str) -> tuple[float, float]:
+        """The screening range's ends for a content kind ("rigid" or "soft"), in SI."""
+        r = self.range_for(content_kind)
+        return self.to_si(r.low), self.to_si(r.high)
+
     def to_si(self, value: float) -> float:
         """Convert a value from the user unit to SI."""
         return value * self.si_factor

@@ -686,9 +686,9 @@ def parcel_body(
         )
     L, W, H = consignment.outer
     cL, cW, _ = consignment.content
-    wall_half = np.array([max(L / 2 - wall_inset, cL / 2), max(W / 2 - wall_inset, cW / 2), H / 2])
-    if wall_outline == "content":
-        wall_half = np.array([cL / 2, cW / 2, H / 2])
+    # the content's outline is the packaging's inset as far as it goes
+    inset = math.inf if wall_outline == "content" else wall_inset
+    wall_half = np.array([max(L / 2 - inset, cL / 2), max(W / 2 - inset, cW / 2), H / 2])
     blocks: list[tuple[np.ndarray, np.ndarray, int, list[np.ndarray]]] = []
 
     def face(size: tuple[float, float], z: float, group: int) -> None:

@@ -133,17 +133,18 @@ class RigidBoxOptions:
                 raise ParcelfitError(f"unknown {key} {value!r}", fix=f"use one of {list(allowed)}")
         if not (math.isfinite(self.wall_inset) and self.wall_inset >= 0):
             raise ParcelfitError(f"wall_inset must be a length >= 0 [m], got {self.wall_inset!r}")
-        if self.wall_inset > 0 and (self.wall_outline, self.wall_contact) != ("outline", "outline"):
+        moved = self.wall_outline != "outline" or self.wall_inset > 0
+        if moved and self.wall_contact != "outline":
             raise ParcelfitError(
-                "wall_inset insets the outline walls meet: it needs wall_outline and wall_contact "
-                f"outline, got {self.wall_outline!r} and {self.wall_contact!r}",
-                fix="leave wall_inset at 0",
+                f"wall_outline {self.wall_outline!r} and wall_inset {self.wall_inset:g} m move the "
+                f"outline walls meet: they need wall_contact outline, got {self.wall_contact!r}",
+                fix="set wall_contact: outline, or leave wall_outline at 'outline' and wall_inset 0",
             )
-        if self.wall_outline != "outline" and self.wall_contact != "outline":
+        if self.wall_inset > 0 and self.wall_outline != "outline":
             raise ParcelfitError(
-                f"wall_outline {self.wall_outline!r} needs walls met by the outline, got "
-                f"wall_contact {self.wall_contact!r}",
-                fix="set wall_contact: outline, or leave wall_outline at 'outline'",
+                f"wall_inset insets the packaging's outline; wall_outline {self.wall_outline!r} "
+                "has none",
+                fix="set wall_outline: outline, or wall_inset: 0",
             )
         if not 0 < self.stick_speed < self.slip_speed:
             raise ParcelfitError(
