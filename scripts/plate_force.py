@@ -10,7 +10,7 @@ parameters in catalogue units), at ``--placements`` seeded placements, and recor
 while a wall or a lead-in touches the parcel (every ``--chunk`` steps otherwise, so a contact's
 first steps may be missed), the horizontal force they exert on it, the largest spring force per
 unit length of outline a wall exerts (at the outline's deepest corner behind its face,
-`wall_line_load`; damping left out) and how deep that corner reaches (`wall_depth`). It prints
+`wall_press`; damping left out) and how deep that corner reaches. It prints
 each placement's peak force, line load and depth, and from the catalogue's E_Pa, t_Pa and
 nu_Pa (the defaults and the ends of E_Pa's and t_Pa's ranges) an estimate of the load per unit
 length under which each rim buckles (`parcelfit.sim.rigidbox.geometry.rim_buckling_load`,
@@ -81,18 +81,17 @@ def _pressed(world: World, motion: Motion) -> list[tuple[float, float, float]]:
     return out
 
 
-def wall_line_load(world: World, motion: Motion) -> float:
-    """The largest spring force per unit length of outline [N/m] that a wall of ``world`` exerts
-    on the parcel of ``motion``: kappa h delta at the outline's deepest corner behind a wall's
-    face (kappa = K / A_b, h the height the parcel and the wall share, the parcel lying flat;
-    damping left out). The outline is the one walls meet (``wall_outline``)."""
-    return max((k * h * d for k, h, d in _pressed(world, motion)), default=0.0)
-
-
-def wall_depth(world: World, motion: Motion) -> float:
-    """How far [m] the outline walls meet reaches behind a wall's face at its deepest corner
-    (0: no wall pressed)."""
-    return max((d for _, _, d in _pressed(world, motion)), default=0.0)
+def wall_press(world: World, motion: Motion) -> tuple[float, float]:
+    """How a wall of ``world`` presses the parcel of ``motion``: the largest spring force per unit
+    length of outline [N/m], kappa h delta at the outline's deepest corner behind a wall's face
+    (kappa = K / A_b, h the height the parcel and the wall share, the parcel lying flat; damping
+    left out), and how far [m] that outline reaches behind a wall's face at its deepest corner
+    (0, 0: no wall pressed). The outline is the one walls meet (``wall_outline``)."""
+    pressed = _pressed(world, motion)
+    return (
+        max((k * h * d for k, h, d in pressed), default=0.0),
+        max((d for _, _, d in pressed), default=0.0),
+    )
 
 
 def peak_plate_force(
@@ -105,8 +104,8 @@ def peak_plate_force(
 ) -> tuple[float, float, float, float]:
     """The peak horizontal force [N] of the walls and lead-ins of ``rig`` on ``consignment`` at
     placement ``seed`` of ``setting`` (SI ``params``) in the rigid-box reference, when [s]
-    ((0, nan) if none touches it), the peak line load of a wall (`wall_line_load`) [N/m] and the
-    deepest the outline reached behind a wall's face (`wall_depth`) [m]."""
+    ((0, nan) if none touches it), the peak line load of a wall [N/m] and the deepest the outline
+    reached behind a wall's face [m] (`wall_press`)."""
     sim = RigidBoxSimulator(RigidBoxOptions()).with_placement(seed)
     case = TestCase(rig, consignment, setting)
     world, dt = sim.world(params, case)
@@ -134,8 +133,8 @@ def peak_plate_force(
         if force > peak:
             peak, when = force, motion.steps * dt
         if touching:
-            line = max(line, wall_line_load(plates, motion))
-            deepest = max(deepest, wall_depth(plates, motion))
+            load, depth = wall_press(plates, motion)
+            line, deepest = max(line, load), max(deepest, depth)
         c = motion.x
         if code == ig.STOPPED or not (x_lo <= c[0] <= x_hi and y_lo <= c[1] <= y_hi):
             break

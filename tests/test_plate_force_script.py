@@ -36,8 +36,8 @@ def test_the_line_load_is_kappa_h_delta_at_the_deepest_corner(outline):
         q = np.array([math.cos(a / 2), 0.0, 0.0, math.sin(a / 2)])
         motion = Motion(world, (0, 0, hz), q)
         expected = kappa * h * delta if delta > 0 else 0.0
-        assert plate_force.wall_line_load(world, motion) == pytest.approx(expected, rel=1e-9)
-        depth = plate_force.wall_depth(world, motion)
+        load, depth = plate_force.wall_press(world, motion)
+        assert load == pytest.approx(expected, rel=1e-9)
         assert depth == (pytest.approx(delta, rel=1e-9) if delta > 0 else 0.0)
 
 
