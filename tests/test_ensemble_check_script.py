@@ -91,12 +91,14 @@ def test_bottom_patch_one_for_all_or_per_type():
             ensemble_check._bottom_patches(bad, types)
 
 
-def test_each_type_runs_on_its_own_bottom_patch(monkeypatch, tmp_path):
-    patches = {}
+def _options_per_type(monkeypatch, tmp_path, extra, attribute):
+    """Run the reference's ensembles of KP/BW and KP with ``extra`` arguments up to the first
+    run of each: the option ``attribute`` each type's simulator was given."""
+    seen = {}
 
     def fake(with_placement, params, case, seeds, executor):
-        patches[case.consignment] = with_placement(0).options.bottom_patch
-        if len(patches) == 2:
+        seen[case.consignment] = getattr(with_placement(0).options, attribute)
+        if len(seen) == 2:
             raise _BuiltError
         return []
 
@@ -105,9 +107,26 @@ def test_each_type_runs_on_its_own_bottom_patch(monkeypatch, tmp_path):
         ensemble_check.main(
             [
                 *("--types", "KPBW", "KP", "--placements", "1", "--backend", "rigidbox"),
-                *("--bottom-patch", "KPBW=content", "--out", str(tmp_path), "--workers", "1"),
+                *("--out", str(tmp_path), "--workers", "1", *extra),
             ]
         )
+    return seen
+
+
+def _assert_refused(tmp_path, capsys, flag, *extras):
+    """Each of ``extras`` (arguments beyond KP/BW and KP's one placement) stops the script with
+    an error that names ``flag``."""
+    base = ["--types", "KPBW", "KP", "--placements", "1", "--out", str(tmp_path)]
+    for extra in extras:
+        with pytest.raises(SystemExit):
+            ensemble_check.main([*base, *extra])
+        assert flag in capsys.readouterr().err
+
+
+def test_each_type_runs_on_its_own_bottom_patch(monkeypatch, tmp_path):
+    patches = _options_per_type(
+        monkeypatch, tmp_path, ["--bottom-patch", "KPBW=content"], "bottom_patch"
+    )
     assert patches == {"KPBW": "content", "KP": "consignment"}  # KP not named: its own
 
 
@@ -138,31 +157,20 @@ def test_wall_outline_one_for_all_or_per_type(monkeypatch, tmp_path, capsys):
     }
     with pytest.raises(ValueError, match="rim"):
         ensemble_check._wall_outlines(["KP=rim"], types)
-    outlines = {}
-
-    def fake(with_placement, params, case, seeds, executor):
-        outlines[case.consignment] = with_placement(0).options.wall_outline
-        if len(outlines) == 2:
-            raise _BuiltError
-        return []
-
-    monkeypatch.setattr(ensemble_check, "simulate_ensemble", fake)
-    base = ["--types", "KPBW", "KP", "--placements", "1", "--out", str(tmp_path)]
-    with pytest.raises(_BuiltError):
-        ensemble_check.main(
-            [*base, "--backend", "rigidbox", "--wall-outline", "KPBW=content", "--workers", "1"]
-        )
+    outlines = _options_per_type(
+        monkeypatch, tmp_path, ["--wall-outline", "KPBW=content"], "wall_outline"
+    )
     assert outlines == {"KPBW": "content", "KP": "outline"}
-    for extra in (
+    _assert_refused(
+        tmp_path,
+        capsys,
+        "--wall-outline",
         ["--wall-outline", "content"],  # MuJoCo has no such setting
         ["--backend", "rigidbox", "--wall-outline", "content", "--wall-contact", "points"],
-    ):
-        with pytest.raises(SystemExit):
-            ensemble_check.main([*base, *extra])
-        assert "--wall-outline" in capsys.readouterr().err
+    )
 
 
-def test_wall_inset_one_for_all_or_per_type(tmp_path, capsys):
+def test_wall_inset_one_for_all_or_per_type(monkeypatch, tmp_path, capsys):
     types = ["BW", "KPBW", "KP"]
     assert ensemble_check._wall_insets(["0.004"], types) == dict.fromkeys(types, 0.004)
     assert ensemble_check._wall_insets(["KPBW=0.0084", "KP=0.011"], types) == {
@@ -173,14 +181,15 @@ def test_wall_inset_one_for_all_or_per_type(tmp_path, capsys):
     for bad, named in ((["KP=soft"], "soft"), (["KP=-0.001"], "-0.001"), (["PB=0.01"], "PB")):
         with pytest.raises(ValueError, match=named):
             ensemble_check._wall_insets(bad, types)
-    base = ["--types", "KPBW", "KP", "--placements", "1", "--out", str(tmp_path)]
-    for extra in (
+    insets = _options_per_type(monkeypatch, tmp_path, ["--wall-inset", "KP=0.011"], "wall_inset")
+    assert insets == {"KPBW": 0.0, "KP": 0.011}
+    _assert_refused(
+        tmp_path,
+        capsys,
+        "--wall-inset",
         ["--wall-inset", "0.004"],  # MuJoCo has no such setting
         ["--backend", "rigidbox", "--wall-inset", "0.004", "--wall-outline", "content"],
-    ):
-        with pytest.raises(SystemExit):
-            ensemble_check.main([*base, *extra])
-        assert "--wall-inset" in capsys.readouterr().err
+    )
 
 
 def _ensemble(rotations_deg):
