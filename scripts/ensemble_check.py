@@ -70,7 +70,7 @@ from parcelfit.sim.mujoco import (
     load_consignment,
     load_rig,
 )
-from parcelfit.sim.mujoco.options import scene_options
+from parcelfit.sim.mujoco.options import parse_scene_options, scene_options
 from parcelfit.sim.mujoco.rig import Rig
 from parcelfit.sim.params import (
     BOTTOM_PATCHES,
@@ -210,6 +210,56 @@ def _paired_lines(rig: str, members: dict[str, list[Member]]) -> list[str]:
             f"{_deg(po.median_difference):+.1f} degrees"
         )
     return out
+
+
+# the scene options (`SceneOptions` fields) `parcelfit simulate` has a flag for
+_SIMULATE_FLAGS = {
+    "timestep": "--timestep",
+    "spacing": "--spacing",
+    "soft_shell_spacing": "--film-spacing",
+    "membrane_cap": "--membrane-cap",
+    "belt_friction": "--belt-friction",
+    "shell_dof": "--shell-dof",
+    "shell_cells": "--shell-cells",
+    "rim_brace": "--rim-brace",
+    "mass_lumping": "--mass-lumping",
+}
+
+
+def _reproduce_note(
+    rig: str,
+    setting: int,
+    scene: list[str],
+    set_: list[str],
+    wall_limit: float,
+    without_flag: list[str],
+) -> str:
+    """How one placement of this check is run again alone: the `parcelfit simulate` command with
+    the check's parameters and scene options, or, where the check used an option that command
+    has no flag for (``without_flag``, or a scene option outside `_SIMULATE_FLAGS`), which."""
+    given = parse_scene_options(scene)
+    missing = [*without_flag, *(f"--scene {k}" for k in given if k not in _SIMULATE_FLAGS)]
+    if missing:
+        return (
+            "not reproducible with `parcelfit simulate` alone, which has no option for "
+            + ", ".join(missing)
+        )
+    flags = "".join(f" --set {item}" for item in set_)
+    for key, value in given.items():
+        text = (
+            ",".join(f"{v:g}" for v in value)
+            if isinstance(value, tuple)
+            else f"{value:.10g}"
+            if isinstance(value, float)
+            else str(value)
+        )
+        flags += f" {_SIMULATE_FLAGS[key]} {text}"
+    if wall_limit != SimOptions.wall_limit:
+        flags += f" --wall-limit {wall_limit:g}"
+    return (
+        f"each reproducible with `parcelfit simulate --rig {rig} --consignment TYPE "
+        f"--setting {setting}{flags} --seed N`"
+    )
 
 
 def _per_type(
@@ -527,11 +577,21 @@ def main(argv: list[str] | None = None) -> int:
         "correlation of rotation and transit time.",
         "",
     ]
+    # options of this check that `parcelfit simulate` cannot repeat
+    without_flag = [
+        flag
+        for flag, used in (
+            ("--backend rigidbox", args.backend == "rigidbox"),
+            ("--bulge", bool(args.bulge)),
+            ("--nose-radius", args.nose_radius is not None),
+        )
+        if used
+    ]
     t0 = time.perf_counter()
     failures = 0
     # spawned workers: MuJoCo and numba are not fork-safe
     with ProcessPoolExecutor(args.workers, mp_context=multiprocessing.get_context("spawn")) as ex:
-        for rig in rigs:
+        for rig_arg, rig in zip(args.rigs, rigs, strict=True):
             rig_name = rig.name
             settings = (
                 sorted(rig.speeds)
@@ -561,8 +621,11 @@ def main(argv: list[str] | None = None) -> int:
                     "|---|---|---|---|---|---|---|---|---|---|---|---|",
                     *(_row(c, st) for c, st in stats.items()),
                     "",
-                    "Net rotation of each placement seed 0, 1, ... [deg] (each reproducible with "
-                    f"`parcelfit simulate --rig {rig_name} --consignment TYPE --setting {setting} --seed N`):",
+                    "Net rotation of each placement seed 0, 1, ... [deg] ("
+                    + _reproduce_note(
+                        rig_arg, setting, args.scene, args.set, args.wall_limit, without_flag
+                    )
+                    + "):",
                     "",
                     *(
                         f"- {c}: "

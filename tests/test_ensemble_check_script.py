@@ -219,3 +219,40 @@ def test_an_order_of_medians_within_the_band_at_every_placement_is_a_tie():
         assert ("KPBW further than KP at 0, less at 0, alike at 5" in text) is not met
         # by the medians alone (no placements given) both are an order
         assert ensemble_check._checks("E3", stats)[0][1] is True
+
+
+def test_the_reproduce_note_carries_the_checks_options_or_says_what_simulate_lacks():
+    note = ensemble_check._reproduce_note
+    assert note("E3", 2, [], [], 600.0, []) == (
+        "each reproducible with `parcelfit simulate --rig E3 --consignment TYPE --setting 2 "
+        "--seed N`"
+    )
+    assert note(
+        "rig.yaml",
+        1,
+        ["spacing=0.0075", "timestep=1/4800", "shell_cells=4,4,1", "soft_shell_spacing=0.03"],
+        ["mu_d_BePa=0.5"],
+        1200.0,
+        [],
+    ) == (
+        "each reproducible with `parcelfit simulate --rig rig.yaml --consignment TYPE --setting 1 "
+        "--set mu_d_BePa=0.5 --spacing 0.0075 --timestep 0.0002083333333 --shell-cells 4,4,1 "
+        "--film-spacing 0.03 --wall-limit 1200 --seed N`"
+    )
+    assert note("E3", 1, ["impratio=10", "spacing=0.01"], [], 600.0, ["--bulge"]) == (
+        "not reproducible with `parcelfit simulate` alone, which has no option for --bulge, "
+        "--scene impratio"
+    )
+
+
+def test_a_check_on_a_finer_mesh_prints_how_to_repeat_a_placement_on_it(monkeypatch, tmp_path):
+    monkeypatch.setattr(ensemble_check, "simulate_ensemble", lambda *a, **k: _ensemble([20.0])[0])
+    monkeypatch.setattr(ensemble_check, "_figure", lambda *a: None)
+    ensemble_check.main(
+        [
+            *("--types", "KP", "--placements", "1", "--scene", "spacing=0.005"),
+            *("--workers", "1", "--out", str(tmp_path)),
+        ]
+    )
+    text = (tmp_path / "ensemble-check.md").read_text()
+    assert "--setting 1 --spacing 0.005 --seed N`" in text
