@@ -632,6 +632,22 @@ def rim_load_share(consignment: Consignment, body: Body, beyond: float = 0.0) ->
     return float((area * out).sum() / area.sum())
 
 
+def check_walls(wall_outline: str, wall_inset: float) -> None:
+    """Refuse an unknown ``wall_outline``, a ``wall_inset`` [m] that is not a finite length >= 0,
+    and an inset of an outline other than the packaging's (`parcel_body`, `RigidBoxOptions`)."""
+    if wall_outline not in WALL_OUTLINES:
+        raise ParcelfitError(
+            f"unknown wall_outline {wall_outline!r}", fix=f"use one of {list(WALL_OUTLINES)}"
+        )
+    if not (math.isfinite(wall_inset) and wall_inset >= 0):
+        raise ParcelfitError(f"wall_inset must be a finite length >= 0 m, got {wall_inset!r}")
+    if wall_inset > 0 and wall_outline != "outline":
+        raise ParcelfitError(
+            f"wall_inset insets the packaging's outline; wall_outline {wall_outline!r} has none",
+            fix="set wall_outline: outline, or wall_inset: 0",
+        )
+
+
 def parcel_body(
     consignment: Consignment,
     packaging_mass: float,
@@ -658,17 +674,7 @@ def parcel_body(
         raise ParcelfitError(
             f"unknown bottom_patch {bottom_patch!r}", fix=f"use one of {list(BOTTOM_PATCHES)}"
         )
-    if wall_outline not in WALL_OUTLINES:
-        raise ParcelfitError(
-            f"unknown wall_outline {wall_outline!r}", fix=f"use one of {list(WALL_OUTLINES)}"
-        )
-    if not (math.isfinite(wall_inset) and wall_inset >= 0):
-        raise ParcelfitError(f"wall_inset must be a finite length >= 0 m, got {wall_inset!r}")
-    if wall_inset > 0 and wall_outline != "outline":
-        raise ParcelfitError(
-            f"wall_inset insets the packaging's outline; wall_outline {wall_outline!r} has none",
-            fix="set wall_outline: outline, or wall_inset: 0",
-        )
+    check_walls(wall_outline, wall_inset)
     if not (math.isfinite(bending_length) and bending_length >= 0):
         raise ParcelfitError(
             f"the rim's bending length must be a finite length >= 0 m, got {bending_length!r}"

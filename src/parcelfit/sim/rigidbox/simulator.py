@@ -31,7 +31,7 @@ from parcelfit.runs import Run, TestCase, Trajectory
 from parcelfit.sim.mujoco.backend import RigBackend
 from parcelfit.sim.mujoco.consignment import Consignment
 from parcelfit.sim.mujoco.rig import Rig
-from parcelfit.sim.params import BOTTOM_PATCHES, WALL_CONTACTS, WALL_DAMPINGS, WALL_OUTLINES
+from parcelfit.sim.params import BOTTOM_PATCHES, WALL_CONTACTS, WALL_DAMPINGS
 from parcelfit.sim.protocol import SimResult, SimStatus
 from parcelfit.sim.rigidbox import integrator as ig
 from parcelfit.sim.rigidbox.contact import law_array
@@ -39,6 +39,7 @@ from parcelfit.sim.rigidbox.engine import GRAVITY, Motion, World, yaw_quaternion
 from parcelfit.sim.rigidbox.geometry import (
     METAL,
     ROLLER_SURFACES,
+    check_walls,
     parcel_body,
     resolved_bottom_patch,
     rig_primitives,
@@ -125,26 +126,18 @@ class RigidBoxOptions:
             ("bottom_patch", BOTTOM_PATCHES),
             ("roller_surface", ROLLER_SURFACES),
             ("wall_contact", WALL_CONTACTS),
-            ("wall_outline", WALL_OUTLINES),
             ("wall_damping", WALL_DAMPINGS),
         ):
             value = getattr(self, key)
             if value not in allowed:
                 raise ParcelfitError(f"unknown {key} {value!r}", fix=f"use one of {list(allowed)}")
-        if not (math.isfinite(self.wall_inset) and self.wall_inset >= 0):
-            raise ParcelfitError(f"wall_inset must be a length >= 0 [m], got {self.wall_inset!r}")
+        check_walls(self.wall_outline, self.wall_inset)
         moved = self.wall_outline != "outline" or self.wall_inset > 0
         if moved and self.wall_contact != "outline":
             raise ParcelfitError(
                 f"wall_outline {self.wall_outline!r} and wall_inset {self.wall_inset:g} m move the "
                 f"outline walls meet: they need wall_contact outline, got {self.wall_contact!r}",
                 fix="set wall_contact: outline, or leave wall_outline at 'outline' and wall_inset 0",
-            )
-        if self.wall_inset > 0 and self.wall_outline != "outline":
-            raise ParcelfitError(
-                f"wall_inset insets the packaging's outline; wall_outline {self.wall_outline!r} "
-                "has none",
-                fix="set wall_outline: outline, or wall_inset: 0",
             )
         if not 0 < self.stick_speed < self.slip_speed:
             raise ParcelfitError(
