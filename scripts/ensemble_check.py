@@ -223,6 +223,7 @@ _SIMULATE_FLAGS = {
     "shell_cells": "--shell-cells",
     "rim_brace": "--rim-brace",
     "mass_lumping": "--mass-lumping",
+    "refinement": "--refinement",
 }
 
 

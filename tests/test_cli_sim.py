@@ -1,3 +1,6 @@
+import math
+
+import numpy as np
 import pytest
 from typer.testing import CliRunner
 
@@ -37,6 +40,8 @@ def test_simulate_writes_run_and_animation(tmp_path):
     assert result.exit_code == 0, result.output
     assert "ok:" in result.output and "transit time:" in result.output
     traj = read_trajectory(out)
+    turned = math.degrees(np.unwrap(traj.theta)[-1] - np.unwrap(traj.theta)[0])
+    assert f"rotation: {turned:+.2f} degrees" in result.output
     assert traj.sample_rate() == pytest.approx(60.0, rel=0.01)
     assert traj.x[-1] > traj.x[0] + 1.0
     assert gif.read_bytes()[:6] in (b"GIF89a", b"GIF87a")
@@ -80,3 +85,24 @@ def test_rigs_and_params_listings():
     )
     result = runner.invoke(app, ["params"])
     assert "16 parameters for KPBW" in result.output
+
+
+@pytest.mark.slow
+@pytest.mark.mujoco
+def test_simulate_refined_is_the_run_at_the_divided_step_and_spacing(tmp_path):
+    """--refinement 2 runs the scene with its step and mesh spacing halved: the same run, to
+    the bit, as giving the halved values (the convergence check's refined model)."""
+    common = ["simulate", "--rig", "E3", "--consignment", "KPBW", "--setting", "2"]
+    refined, given = tmp_path / "refined.csv", tmp_path / "given.csv"
+    for out, flags in (
+        (refined, ["--timestep", repr(1 / 1200), "--spacing", "0.05", "--refinement", "2"]),
+        (given, ["--timestep", repr(1 / 2400), "--spacing", "0.025"]),
+    ):
+        result = runner.invoke(app, [*common, *flags, "--out", str(out)])
+        assert result.exit_code == 0, result.output
+    a, b = read_trajectory(refined), read_trajectory(given)
+    assert len(a.t) == len(b.t) > 30
+    for name in ("t", "x", "y", "theta"):
+        assert (getattr(a, name) == getattr(b, name)).all(), name
+    result = runner.invoke(app, [*common, "--refinement", "5", "--out", str(tmp_path / "r.csv")])
+    assert result.exit_code == 2 and "--refinement" in result.output

@@ -3,9 +3,12 @@ consignment types and parameters, and twin datasets."""
 
 from __future__ import annotations
 
+import math
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
+import numpy as np
 import typer
 from rich.markup import escape
 from rich.progress import Progress, TimeElapsedColumn
@@ -24,6 +27,7 @@ from parcelfit.cli.options import (
 from parcelfit.cli.output import console, resumes, say_cost
 from parcelfit.errors import ParcelfitError
 from parcelfit.progress import ProgressEvent
+from parcelfit.sim.params import MAX_REFINEMENT
 
 if TYPE_CHECKING:
     from parcelfit.simulate import CaseSimulation
@@ -125,6 +129,16 @@ def simulate(
             "the former model).",
         ),
     ] = "area",
+    refinement: Annotated[
+        int,
+        typer.Option(
+            help="Divide every mesh spacing and the time step (the type's, the rig's or the "
+            "ones given) by this: the same run on a refined model, as a calibration's "
+            "convergence check simulates it.",
+            min=1,
+            max=MAX_REFINEMENT,
+        ),
+    ] = 1,
     wall_limit: Annotated[float, typer.Option(help="Wall-clock limit [s].")] = 600.0,
     seed: Annotated[
         int | None,
@@ -173,6 +187,8 @@ def simulate(
         mass_lumping=mass_lumping,
         wall_limit=wall_limit,
     )
+    if refinement > 1:
+        run = replace(run, simulator=run.simulator.with_refinement(refinement))
     case = run.case
     if repeat > 1:
         if video is not None:
@@ -191,6 +207,11 @@ def simulate(
         tt = result.run.transit_time
         console.print(
             f"transit time: {'not measured (a light barrier was not crossed)' if tt is None else f'{tt:.4f} s'}"
+        )
+        heading = np.unwrap(np.asarray(result.run.trajectory.theta, dtype=float))
+        console.print(
+            f"rotation: {math.degrees(heading[-1] - heading[0]):+.2f} degrees (the heading at "
+            "the end minus at the start)"
         )
         console.print(Text(f"wrote {write_trajectory(result.run.trajectory, out)}"))
     if video is not None and frames is not None:

@@ -18,6 +18,7 @@ from parcelfit.sim.params import (
     DYNAMIC_THRESHOLD,
     FRICTION_LAWS,
     MASS_LUMPINGS,
+    MAX_REFINEMENT,
     MAX_TIMESTEP,
     MIN_TIMESTEP,
     ROLLER_SURFACES,
@@ -180,10 +181,23 @@ class SceneOptions:
     rig_timesteps: Mapping[str, float] = field(default_factory=dict)
     start_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)  # dx [m], dy [m], dheading [deg]
     start_speed_factor: float = 1.0  # the parcel's initial speed as a fraction of its surface's
+    # every mesh spacing (the packaging's, the film's, a soft content's vertices) and the time
+    # step divided by this whole number, whatever set them (a scene option, the type's own, the
+    # rig's): the model refined as a whole, to check that a result does not depend on its
+    # discretisation (the calibration's convergence check). The shell's grid of cells, which
+    # carries the packaging's bending, is the model's and stays
+    refinement: int = 1
 
     def __post_init__(self) -> None:
         if self.timestep is not None:
             _check_step(self.timestep, "timestep")
+        if not (float(self.refinement).is_integer() and 1 <= self.refinement <= MAX_REFINEMENT):
+            raise ParcelfitError(
+                f"refinement must be a whole number from 1 to {MAX_REFINEMENT}, got "
+                f"{self.refinement}",
+                fix="use 1 (the model as it is) or 2 (every mesh spacing and the step halved)",
+            )
+        object.__setattr__(self, "refinement", int(self.refinement))
         if not self.contact_frequency > 0:
             raise ParcelfitError(
                 f"contact_frequency must be positive [rad/s], got {self.contact_frequency}"
@@ -325,12 +339,19 @@ class SceneOptions:
     def spacing_of(self, consignment: Consignment) -> float:
         """The shell's mesh spacing [m] for ``consignment``: around a soft content
         ``soft_shell_spacing``; around a rigid one ``spacing`` if set, else the type's own
-        (``mesh_spacing``), else `DEFAULT_SPACING`."""
+        (``mesh_spacing``), else `DEFAULT_SPACING`; divided by ``refinement``."""
         if consignment.soft:
-            return self.soft_shell_spacing
-        if self.spacing is not None:
-            return self.spacing
-        return consignment.mesh_spacing or DEFAULT_SPACING
+            base = self.soft_shell_spacing
+        elif self.spacing is not None:
+            base = self.spacing
+        else:
+            base = consignment.mesh_spacing or DEFAULT_SPACING
+        return base / self.refinement
+
+    def content_spacing(self) -> float:
+        """The vertex spacing [m] of a soft content: ``soft_spacing`` divided by
+        ``refinement``."""
+        return self.soft_spacing / self.refinement
 
     def rim_brace_of(self, consignment: Consignment) -> float:
         """The share of an ideal wedge's stiffness the braces across the rim cells of
@@ -358,12 +379,12 @@ class SceneOptions:
         Coulomb belt friction, whose explicit forces on the film's light vertices went unstable
         at 1/1200 s: E1 PB setting 1 turned 42 degrees and stalled, the simulator README's
         "Sliding"), divided by the rig's ``step_refinement``; ``own``: the consignment's shell
-        (`shell_for`)."""
+        (`shell_for`); every one divided by the scene's ``refinement``."""
         if rig is not None and rig.name in self.rig_timesteps:
-            return self.rig_timesteps[rig.name]
+            return self.rig_timesteps[rig.name] / self.refinement
         if self.timestep is not None:
-            return self.timestep
-        refinement = rig.step_refinement if rig is not None else 1
+            return self.timestep / self.refinement
+        refinement = (rig.step_refinement if rig is not None else 1) * self.refinement
         if self.shell_for(soft, own) == "full" and self.belt_friction != "coulomb":
             return FULL_SHELL_STEP / refinement
         return INTERPOLATED_SHELL_STEP / refinement

@@ -289,7 +289,7 @@ def build_scene(
     belt_cp = contact("BePa", consignment.mass)
     metal_cp = contact("MePa", consignment.mass)
     if soft:
-        counts = [max(2, round(s / opt.soft_spacing) + 1) for s in (cL, cW)] + [2]
+        counts = [max(2, round(s / opt.content_spacing()) + 1) for s in (cL, cW)] + [2]
         m_cv = m_co / (counts[0] * counts[1] * counts[2])
         content_cp = contact("CoPa", m_co, 1 / m_cv)
     else:

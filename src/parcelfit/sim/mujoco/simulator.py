@@ -145,6 +145,12 @@ class MujocoSimulator(RigBackend[SimOptions]):
         ``speed_factors``)."""
         return self.with_options(scene=replace(self.options.scene, speed_factors=dict(factors)))
 
+    def with_refinement(self, factor: int) -> MujocoSimulator:
+        """The same model refined ``factor`` times over: every mesh spacing and the time step
+        divided by it (`SceneOptions.refinement`), on top of any refinement it has."""
+        scene = self.options.scene
+        return self.with_options(scene=replace(scene, refinement=scene.refinement * factor))
+
     def scene_options(self, rig: Rig) -> SceneOptions:
         """The scene settings of a run on ``rig``: the placement draw added to the start offset
         (the step on the rig follows from them, `SceneOptions.step_for`)."""

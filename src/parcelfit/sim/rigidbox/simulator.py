@@ -23,6 +23,7 @@ import math
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -172,6 +173,16 @@ class RigidBoxSimulator(RigBackend[RigidBoxOptions]):
     def with_speed_factors(self, factors: Mapping[str, float]) -> RigidBoxSimulator:
         """The same reference with each drive's speed times its factor [-]."""
         return self.with_options(speed_factors=dict(factors))
+
+    def with_refinement(self, factor: int) -> RigidBoxSimulator:
+        """The same reference refined ``factor`` times over: its contact points' spacing and its
+        time step divided by it."""
+        opt = self.options
+        if opt.timestep is not None:
+            step: dict[str, Any] = {"timestep": opt.timestep / factor}
+        else:
+            step = {"step_divisor": opt.step_divisor * factor}
+        return self.with_options(spacing=opt.spacing / factor, **step)
 
     def world(self, params: Mapping[str, float], case: TestCase) -> tuple[World, float]:
         """The world of ``case`` with SI ``params`` (defaults filled in) and its time step [s]."""
