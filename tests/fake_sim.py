@@ -7,7 +7,9 @@ when its simulation starts; FAKE_SIM_CRASH_ONCE names a file: the first simulati
 missing creates it and kills its own process with SIGKILL (a worker dying mid-simulation);
 FAKE_SIM_HANG names a file: a simulation finding it there runs for 120 s more;
 FAKE_SIM_INTERRUPT_AFTER=k: the simulation after the k-th one started in a process raises
-KeyboardInterrupt (Ctrl-C; count in `started`).
+KeyboardInterrupt (Ctrl-C; count in `started`); FAKE_SIM_MESH_ERROR [rad] adds a discretisation
+error to the heading, (1 - exp(-2 t)) times it divided by the simulator's refinement
+(`with_refinement`), the shape of mu_d_MePa's turn, so a calibration can absorb it.
 """
 
 from __future__ import annotations
@@ -83,15 +85,32 @@ class AnalyticSimulator:
         log: str | None = None,
         crash_once: str | None = None,
         placement_seed: int | None = None,
+        mesh_error: float = 0.0,
+        refinement: int = 1,
     ) -> None:
         self.delay = delay
         self.log = log
         self.crash_once = crash_once
         self.placement_seed = placement_seed
+        self.mesh_error = mesh_error
+        self.refinement = refinement
 
     def with_placement(self, seed: int | None) -> AnalyticSimulator:
         """The same simulator with placement ``seed`` (None: the nominal start)."""
-        return AnalyticSimulator(self.delay, self.log, self.crash_once, seed)
+        return AnalyticSimulator(
+            self.delay, self.log, self.crash_once, seed, self.mesh_error, self.refinement
+        )
+
+    def with_refinement(self, factor: int) -> AnalyticSimulator:
+        """The same simulator refined ``factor`` times over (its mesh error divided by it)."""
+        return AnalyticSimulator(
+            self.delay,
+            self.log,
+            self.crash_once,
+            self.placement_seed,
+            self.mesh_error,
+            self.refinement * factor,
+        )
 
     def run(
         self, params: Mapping[str, float], case: TestCase, run_id: str | None = None
@@ -123,6 +142,9 @@ class AnalyticSimulator:
             )
         start = (0.0, 0.0, 0.0) if self.placement_seed is None else placement(self.placement_seed)
         traj, transit = trajectory(params, case.speed_setting, rig=case.rig, placement=start)
+        if self.mesh_error:
+            turn = self.mesh_error / self.refinement * (1 - np.exp(-2 * traj.t))
+            traj = Trajectory(t=traj.t, x=traj.x, y=traj.y, theta=traj.theta + turn)
         return SimResult(
             Run(run_id or "sim", case, traj, transit), SimStatus.OK, time.perf_counter() - t0, {}
         )
@@ -179,6 +201,7 @@ def make() -> AnalyticSimulator:
         float(os.environ.get("FAKE_SIM_DELAY", "0")),
         os.environ.get("FAKE_SIM_LOG"),
         os.environ.get("FAKE_SIM_CRASH_ONCE"),
+        mesh_error=float(os.environ.get("FAKE_SIM_MESH_ERROR", "0")),
     )
 
 

@@ -137,7 +137,8 @@ def old_meta(store, **records) -> None:
 def write_study_results(folder: Path, dataset: Path, optimizer=None) -> None:
     """``results.json`` for the store of `write_study_store`, made here without a calibration:
     the reference runs of the fake dataset's R/P/1 and R/P/2, a validation after iteration 1 of
-    the analytic run at the truth, a surrogate (sharp along mu_d_BePa, flat along E_Pa) said to
+    the analytic run at the truth (the transfer check's and the convergence check's run too), a
+    surrogate (sharp along mu_d_BePa, flat along E_Pa) said to
     be fitted with ``optimizer`` (default: the published configuration), no key frames."""
     from dataclasses import asdict
 
@@ -146,6 +147,7 @@ def write_study_results(folder: Path, dataset: Path, optimizer=None) -> None:
     from parcelfit.runs import TestCase, load_dataset
     from parcelfit.study.identify import Advice, Identifiability, ParameterInterval
     from parcelfit.study.results import (
+        ConvergenceRecord,
         DependenceCurve,
         KeyFramesRecord,
         ReferenceRecord,
@@ -231,6 +233,9 @@ def write_study_results(folder: Path, dataset: Path, optimizer=None) -> None:
                 noise_sd=0.1,
             ),
             transfer=[record.model_copy(update={"after_iteration": None})],
+            convergence=ConvergenceRecord(
+                refinement=2, runs=(record.model_copy(update={"after_iteration": None}),)
+            ),
             advice=Advice(
                 changes={"R/P/2": {"E_Pa": 0.02}},
                 best="R/P/2",

@@ -177,6 +177,7 @@ def test_report_renders_in_headless_chromium(demo_folder, tmp_path):
         "screening",
         "calibration",
         "validation",
+        "convergence",
         "frames",
     ]
     assert found["images"] == len(_images(page.read_text())) and found["broken"] == 0

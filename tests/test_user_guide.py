@@ -152,7 +152,8 @@ def _the_own_rig_tutorial_made_its_dataset_study_and_report(
 
     rig = said["guide/rig.md"]
     assert "expected cost: 6 simulations on 2 processes" in rig  # synth
-    assert "expected cost: 8 simulations on 2 processes" in rig and "mu_d_BePa" in rig
+    # 6 evaluations, 1 validation, the convergence check's run and the key frames
+    assert "expected cost: 9 simulations on 2 processes" in rig and "mu_d_BePa" in rig
     assert "published criteria: " in rig and "verdict: " in rig  # calibrate and report
     doc = yaml.safe_load((own / "data" / "dataset.yaml").read_text())
     assert doc["synthetic"] is True

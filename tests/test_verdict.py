@@ -39,20 +39,21 @@ PARAMETERS = {  # not analysed, and 0, 2 and 4 of 4 determined
 
 
 @pytest.mark.parametrize(
-    ("criteria", "band", "transfer", "parameters"),
-    list(itertools.product(OUTCOMES, OUTCOMES, OUTCOMES, PARAMETERS)),
+    ("criteria", "band", "transfer", "convergence", "parameters"),
+    list(itertools.product(OUTCOMES, OUTCOMES, OUTCOMES, OUTCOMES, PARAMETERS)),
 )
 def test_the_overall_verdict_is_no_better_than_its_worst_check(
-    criteria, band, transfer, parameters
+    criteria, band, transfer, convergence, parameters
 ):
     checks = (
         Check("published criteria", criteria, "E3/KPBW/2"),
         Check("band test", band),
         Check("transfer check", transfer, "E1/KPBW/1"),
+        Check("convergence check", convergence, "E3/KPBW/2, E1/KPBW/1"),
     )
     p = PARAMETERS[parameters]
     verdict = combine(*checks, p)
-    outcomes = (criteria, band, transfer)
+    outcomes = (criteria, band, transfer, convergence)
     if "failed" in outcomes:
         expected = "not trustworthy"
     elif "not run" in outcomes or not p.analysed:
@@ -77,15 +78,15 @@ def test_the_overall_verdict_is_no_better_than_its_worst_check(
     assert (count in verdict.text) == p.analysed
     # every check on a line of its own, the parameters named, the verdict last
     lines = verdict.lines()
-    assert lines[:3] == [c.line() for c in checks]
+    assert lines[:4] == [c.line() for c in checks]
     assert (
-        lines[3].startswith("parameters determined: ") and lines[-1] == f"verdict: {verdict.text}"
+        lines[4].startswith("parameters determined: ") and lines[-1] == f"verdict: {verdict.text}"
     )
     if p.analysed:
-        assert lines[3].startswith(f"parameters determined: {len(p.determined)} of 4 (")
-        assert all(n in lines[3] for n in NAMES)
+        assert lines[4].startswith(f"parameters determined: {len(p.determined)} of 4 (")
+        assert all(n in lines[4] for n in NAMES)
     else:
-        assert lines[3] == "parameters determined: not run (the analysis runs when the study stops)"
+        assert lines[4] == "parameters determined: not run (the analysis runs when the study stops)"
     assert (UNDETERMINED_MEANING in lines) == bool(p.open)
     doc = verdict.to_json()
     assert [c["outcome"] for c in doc["checks"]] == list(outcomes)
@@ -100,6 +101,7 @@ def test_the_demo_s_case_reads_not_trustworthy():
         Check("published criteria", "passed"),
         Check("band test", "failed"),
         Check("transfer check", "failed", "E1/KPBW/1: DTW_theta"),
+        Check("convergence check", "passed"),
         PARAMETERS["0 of 4"],
     )
     assert verdict.text == (
@@ -183,19 +185,22 @@ def test_status_json_carries_every_check_and_the_overall_verdict(tmp_path):
         ("published criteria", "passed"),
         ("band test", "passed"),
         ("transfer check", "passed"),
+        ("convergence check", "passed"),
     ]
     assert verdict["parameters"]["determined"] == ["mu_d_BePa"]
     assert verdict["parameters"]["not_determined"] == [{"name": "E_Pa", "kind": "undetermined"}]
     assert verdict["level"] == "trustworthy" and verdict["undetermined_means"]
     assert verdict["text"] == (
-        "trustworthy: published criteria, band test and transfer check passed; "
-        "1 of 2 parameters determined"
+        "trustworthy: published criteria, band test, transfer check and convergence check "
+        "passed; 1 of 2 parameters determined"
     )
     # the terminal says the same, a line per check
     text = " ".join(runner.invoke(app, ["status", str(study)]).stdout.split())
     for line in (
         "published criteria: passed (R/P/2 after iteration 1)",
         "transfer check: passed (R/P/2)",
+        "convergence check: passed (R/P/2: the same outcome with every mesh spacing and the "
+        "time step halved)",
         "parameters determined: 1 of 2 (mu_d_BePa; not determined: E_Pa (undetermined))",
         UNDETERMINED_MEANING,
         f"verdict: {verdict['text']}",
@@ -206,13 +211,20 @@ def test_status_json_carries_every_check_and_the_overall_verdict(tmp_path):
     info = json.loads(runner.invoke(app, ["status", str(study), "--json"]).stdout)
     assert info["verdict"]["level"] == "not trustworthy"
     assert info["verdict"]["checks"][2]["detail"] == "R/P/2: DTW_theta"
+    # the refined model's run still passes where the model's own now fails: not converged
+    assert info["verdict"]["checks"][3] == {
+        "name": "convergence check",
+        "outcome": "failed",
+        "detail": "R/P/2: fails (DTW_theta), refined passes (every mesh spacing and the time "
+        "step halved)",
+    }
     # a study without stored results: nothing was judged, nothing is trustworthy
     (study / "results.json").unlink()
     verdict = json.loads(runner.invoke(app, ["status", str(study), "--json"]).stdout)["verdict"]
-    assert [c["outcome"] for c in verdict["checks"]] == ["not run"] * 3
+    assert [c["outcome"] for c in verdict["checks"]] == ["not run"] * 4
     assert verdict["text"] == (
         "incomplete: published criteria not run, band test not run, transfer check not run, "
-        "parameter analysis not run"
+        "convergence check not run, parameter analysis not run"
     )
 
 
@@ -226,7 +238,10 @@ def test_the_report_s_verdict_box_is_green_only_when_every_check_passes(tmp_path
     _fail_the_transfer_check(study)
     text = build_report(study, out=tmp_path / "r.html", key_frames=False).read_text()
     assert '<div class="verdict pass">' not in text
-    assert '<div class="verdict fail"><b>Verdict: not trustworthy: transfer check failed; ' in text
+    assert (
+        '<div class="verdict fail"><b>Verdict: not trustworthy: transfer check failed, '
+        "convergence check failed; " in text
+    )
     assert '<li><b>transfer check</b>: <span class="bad">failed</span> (R/P/2: DTW_theta)' in text
     assert '<li><b>published criteria</b>: <span class="ok">passed</span>' in text
     # a check not run: amber, not green

@@ -326,6 +326,25 @@ def _transfer_section(page: Page, results: StudyResults | None) -> None:
     page.add("transfer", title, "transfer", data)
 
 
+def _convergence_section(page: Page, results: StudyResults | None) -> None:
+    """The convergence check: each validation and transfer case's published criteria on the
+    model and on the refined model, side by side (only for a study that ran it)."""
+    if results is None or results.convergence is None or not results.convergence.runs:
+        return
+    title = page.start("Does the verdict depend on the mesh and step? (convergence check)")
+    stored = [*results.validations, *results.transfer]  # the model's own run of the same
+    rows = [  # case and parameters (the last, as the verdict judges)
+        (next((v for v in reversed(stored) if (v.case, v.params) == (r.case, r.params)), None), r)
+        for r in results.convergence.runs
+    ]
+    page.add(
+        "convergence",
+        title,
+        "convergence",
+        {"rows": rows, "refinement": results.convergence.refinement},
+    )
+
+
 def _stricter_example_section(page: Page, root: Path) -> None:
     path = inside(root, "stricter-criterion.json", "its folder")
     if path is None:
@@ -453,6 +472,7 @@ def build_report(
     )
     _validation_section(page, results, record)
     _transfer_section(page, results)
+    _convergence_section(page, results)
     _stricter_example_section(page, places.root)
     if key_frames and best is not None:
         _frames_section(page, places.study, results, animation)

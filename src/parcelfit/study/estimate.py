@@ -45,7 +45,9 @@ def _processes(
 
 def calibration_estimate(study: Study, workers: int) -> Estimate:
     """At most ``budget`` evaluations (each simulating every fitted case at its placements),
-    the validations, the transfer check and the key frames."""
+    the validations, the transfer check, the convergence check (each validation and transfer
+    case once on the refined model, as long as ``refinement`` runs: measured 2.0 and 2.1 times
+    at 2 on E3 and E1 KP/BW) and the key frames."""
     runs: list[tuple[int, float | None]] = []
     for spec in study.cases:
         runs.append((study.budget * len(placement_seeds(study, spec)), _seconds(study, spec.case)))
@@ -62,6 +64,10 @@ def calibration_estimate(study: Study, workers: int) -> Estimate:
         runs.append((checks, _seconds(study, case)))
     for spec in study.transfer:
         runs.append((1, _seconds(study, spec.case)))
+    if study.refinement > 1:  # the convergence check: every validation and transfer case once
+        for case in [s.case for s in (*study.validation_cases, *study.transfer)]:
+            seconds = _seconds(study, case)  # a refined run takes about refinement times as
+            runs.append((1, None if seconds is None else seconds * study.refinement))  # long
     runs.append((1, _seconds(study, study.cases[0].case)))  # the key frames
     return estimate(runs, workers)
 

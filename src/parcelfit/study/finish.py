@@ -1,5 +1,6 @@
 """What a calibration concludes (method.md section 8): the validations, and when the study stops
-the transfer check, what the evaluations determine, the advice on which test case to add, the
+the transfer check, the convergence check (the recommended parameters on a refined model), what
+the evaluations determine, the advice on which test case to add, the
 study figures and the key frames, written into ``results.json`` for the report
 (`parcelfit.study.results`), which computes nothing of its own.
 
@@ -27,6 +28,7 @@ from parcelfit.study.identify import Advice, Identifiability, identify
 from parcelfit.study.joint import THRESHOLD_LEVEL, advise, case_threshold, threshold
 from parcelfit.study.objective import case_summary, study_cases
 from parcelfit.study.results import (
+    ConvergenceRecord,
     KeyFramesRecord,
     ReferenceRecord,
     StudyResults,
@@ -286,10 +288,12 @@ class Finish:
         identifiability: Identifiability | None = None,
         transfer: tuple[ValidationRecord, ...] = (),
         advice: Advice | None = None,
+        convergence: ConvergenceRecord | None = None,
     ) -> Path:
         """Write ``results.json``: the references, every validation, the surrogate (refitted
         here unless given), the key frames and figures, and what the study concluded when it
-        stopped (identifiability, transfer check, advice); returns its path."""
+        stopped (identifiability, transfer check, advice, convergence check); returns its
+        path."""
         references = {"fit": ReferenceRecord.from_selection(self.references[self.fit_case.label])}
         if self.val_case is not None:
             references["validation"] = ReferenceRecord.from_selection(
@@ -311,6 +315,7 @@ class Finish:
                 identifiability=identifiability,
                 transfer=transfer,
                 advice=advice,
+                convergence=convergence,
                 cases=case_summary(self.study, self.references) if self.study.cases else (),
             ),
         )
@@ -331,8 +336,10 @@ class Finish:
         ident = self.identifiability()
         transfer: tuple[ValidationRecord, ...] = ()
         advice = None
+        convergence = None
         if best_params is not None:
             transfer = self._transfer(best_params, last)
+            convergence = self._convergence(best_params, last)
             advice = self._advice(best_params, ident, last)
         figures: list[Path] = []
         key_frames = None
@@ -357,15 +364,19 @@ class Finish:
             identifiability=ident,
             transfer=transfer,
             advice=advice,
+            convergence=convergence,
         )
         return tuple(figures)
 
-    def _simulate_tasks(self, tasks: list[Task]) -> list[SimResult]:
-        """Simulate tasks with the study's executor; results in task order."""
+    def _simulate_tasks(
+        self, tasks: list[Task], simulator: Simulator | None = None
+    ) -> list[SimResult]:
+        """Simulate tasks with the study's executor (on ``simulator``, default the study's);
+        results in task order."""
         out: dict[int, SimResult] = {}
         executor = self._executor()
         try:
-            for i, r in executor.simulate(self.simulator, tasks):
+            for i, r in executor.simulate(simulator or self.simulator, tasks):
                 out[i] = r
         finally:
             executor.close()
@@ -414,6 +425,76 @@ class Finish:
         if fresh:
             self.store.set_meta("transfer", [v.to_json() for v in out])
         return out
+
+    def _convergence(self, params: Mapping[str, float], iteration: int) -> ConvergenceRecord:
+        """The convergence check: the recommended parameters simulated on every validation and
+        transfer case by the study's simulator refined ``study.refinement`` times over (every
+        mesh spacing and the time step divided by it, ``with_refinement``), each judged like a
+        validation; the verdict compares their outcomes with the model's own
+        (`parcelfit.study.verdict.convergence_check`). Not run with refinement 1 or a simulator
+        that cannot be refined (the record says why). An earlier result for the same parameters
+        and refinement is kept (the run files stay in ``runs/``)."""
+        factor = self.study.refinement
+        if factor <= 1:
+            return ConvergenceRecord(
+                refinement=factor, reason="switched off (validation.refinement: 1)"
+            )
+        refine = getattr(self.simulator, "with_refinement", None)
+        if not callable(refine):
+            return ConvergenceRecord(
+                refinement=factor,
+                reason=f"the {type(self.simulator).__name__} simulator cannot be refined "
+                "(it has no with_refinement): check its convergence by hand",
+            )
+        specs = [*self.validation_cases(), *self.study.transfer]
+        if not specs:
+            return ConvergenceRecord(refinement=factor, reason="no validation or transfer cases")
+        stored = self.store.get_meta("convergence")  # kept: a rerun simulates none again
+        if stored is not None:
+            kept = ConvergenceRecord.from_json(stored)
+            labels = [v.case for v in kept.runs]
+            if (
+                kept.refinement == factor
+                and labels == [s.label for s in specs]
+                and all(v.params == dict(params) for v in kept.runs)
+            ):
+                return kept
+        self._report(
+            iteration,
+            len(specs),
+            f"convergence check: {len(specs)} test cases, every mesh spacing and the time step "
+            f"divided by {factor}",
+        )
+        tasks = [
+            Task(
+                self._full_params(params),
+                s.case,
+                f"refined-{s.case.rig}-{s.case.consignment}-{s.case.speed_setting}",
+            )
+            for s in specs
+        ]
+        runs = []
+        for spec, task, result in zip(
+            specs, tasks, self._simulate_tasks(tasks, refine(factor)), strict=True
+        ):
+            run_file = None
+            if result.ok and result.run is not None:
+                run_file = f"runs/{task.run_id}.csv"
+                write_trajectory(result.run.trajectory, self.folder / run_file)
+            runs.append(
+                validation_record(
+                    self.references[spec.label],
+                    None if run_file is None or result.run is None else result.run.trajectory,
+                    None if result.run is None else result.run.transit_time,
+                    status=result.status.value,
+                    message=result.diagnostics.get("message"),
+                    params=params,
+                    run_file=run_file,
+                )
+            )
+        record = ConvergenceRecord(refinement=factor, runs=tuple(runs))
+        self.store.set_meta("convergence", record.to_json())
+        return record
 
     def _advice(
         self, params: Mapping[str, float], ident: Identifiability | None, iteration: int

@@ -15,7 +15,9 @@ when it stops; the report renders it and computes nothing of its own. It holds
   correlations and sample (`parcelfit.study.identify.Identifiability`), and which candidate
   test case would help most (`parcelfit.study.joint.Advice`);
 * the transfer check: the calibrated parameters judged on other test cases
-  (`ValidationRecord` each), and the study's test cases with their roles and weights.
+  (`ValidationRecord` each), and the study's test cases with their roles and weights;
+* the convergence check: the calibrated parameters simulated again on every validation and
+  transfer case with a refined model (`ConvergenceRecord`).
 
 The file's schema is documented in docs/data.md (Study results); units are SI throughout (m,
 rad, s; squared DTW distances in m^2 and rad^2). `read_results` reads it, `write_results`
@@ -418,6 +420,17 @@ def _write_cases(cases: tuple[CaseRecord, ...]) -> list[dict[str, Any]]:
 _none_empty = BeforeValidator(lambda v: v or ())  # a missing or null list: none
 
 
+class ConvergenceRecord(ArrayRecord):
+    """The convergence check (`parcelfit.study.finish`): the recommended parameters simulated
+    on every validation and transfer case with every mesh spacing and the time step divided by
+    ``refinement``, each run judged like a validation (``runs``); or why it did not run
+    (``reason``: a simulator that cannot be refined, a check switched off)."""
+
+    refinement: int
+    runs: Annotated[tuple[ValidationRecord, ...], _none_empty] = ()
+    reason: str | None = None
+
+
 class StudyResults(ArrayRecord):
     """Everything ``results.json`` holds (see the module docstring): when and by which parcelfit
     version it was written (Unix time [s]), why the study stopped (None: written while it ran),
@@ -436,13 +449,18 @@ class StudyResults(ArrayRecord):
     identifiability: Identifiability | None = None
     transfer: Annotated[tuple[ValidationRecord, ...], _none_empty] = ()
     advice: Advice | None = None
+    convergence: ConvergenceRecord | None = None
     # the study's test cases
     cases: Annotated[tuple[CaseRecord, ...], _none_empty, PlainSerializer(_write_cases)] = ()
 
     @model_serializer(mode="wrap")
     def _write_stored_form(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
-        """The file's format and version, then the fields."""
-        return {"format": FORMAT, "version": VERSION, **handler(self)}
+        """The file's format and version, then the fields (``convergence`` only once the
+        study stopped: files written before the check existed read back to the same bytes)."""
+        fields = handler(self)
+        if fields.get("convergence") is None:
+            fields.pop("convergence", None)
+        return {"format": FORMAT, "version": VERSION, **fields}
 
     def shown_validation(self) -> ValidationRecord | None:
         """The validation a report shows: the last that passed, else the last one (of a study
@@ -476,6 +494,7 @@ def new_results(
     identifiability: Identifiability | None = None,
     transfer: Sequence[ValidationRecord] = (),
     advice: Advice | None = None,
+    convergence: ConvergenceRecord | None = None,
     cases: Sequence[CaseRecord | Mapping[str, Any]] = (),
 ) -> StudyResults:
     """Results stamped with this moment and this parcelfit version."""
@@ -491,6 +510,7 @@ def new_results(
         identifiability=identifiability,
         transfer=tuple(transfer),
         advice=advice,
+        convergence=convergence,
         cases=tuple(c if isinstance(c, CaseRecord) else CaseRecord.from_json(c) for c in cases),
     )
 
@@ -541,6 +561,7 @@ __all__ = [
     "RESULTS_FILE",
     "VERSION",
     "BandRecord",
+    "ConvergenceRecord",
     "DependenceCurve",
     "KeyFramesRecord",
     "ReferenceRecord",

@@ -129,6 +129,7 @@ class Study:
     placements: int = 1  # seeded placements per case and evaluation (ensemble)
     transit_weight: float = 1.0  # w_T of the ensemble cost
     transit_adjusted: bool = False  # ensemble transit term on belt-speed-adjusted times
+    refinement: int = 2  # the convergence check's refinement (1: no check)
 
     @property
     def joint(self) -> bool:
@@ -358,6 +359,7 @@ def load_study(path: str | Path) -> Study:
         placements=f.cost.placements,
         transit_weight=f.cost.transit_weight,
         transit_adjusted=f.cost.transit == "adjusted",
+        refinement=f.validation.refinement,
     )
 
 

@@ -28,6 +28,7 @@ from parcelfit.schema import (
 from parcelfit.sim.ensemble import MAX_PLACEMENTS
 from parcelfit.sim.executors import MAX_WORKERS
 from parcelfit.sim.factory import SimulatorSection
+from parcelfit.sim.params import MAX_REFINEMENT
 
 # the most a study may ask for (each is checked on load, before anything runs): evaluations
 # (``budget``, ``initial``, ``validation.every``), simulations in one batch (``batch_size``)
@@ -190,6 +191,12 @@ class ValidationSection(FileModel):
     cases: Annotated[list[JudgedCaseSection], or_default(list)] = Field(default_factory=list)
     """The validation test cases of a joint study (all must pass), each as in `cases` without
     weight and placements."""
+    refinement: Annotated[int, Whole(ge=1, le=MAX_REFINEMENT)] = 2
+    """The convergence check once the study stops: the recommended parameters simulated again on
+    every validation and transfer case with every mesh spacing and the time step divided by this
+    (MuJoCo and the rigid-box reference; 2: halved), passed when each case's published criteria
+    give the same outcome as on the model itself. 1: no check (the verdict then reads
+    incomplete)."""
 
     @model_validator(mode="after")
     def _one_way(self) -> ValidationSection:

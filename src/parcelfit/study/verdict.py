@@ -1,6 +1,6 @@
 """One honest verdict on a calibration: every check on a line of its own, and one overall verdict.
 
-A calibration is judged by three checks and one analysis:
+A calibration is judged by four checks and one analysis:
 
 * **published criteria** (method section 8): the recommended parameters, simulated on the
   validation cases, pass the three published criteria on every case;
@@ -8,10 +8,14 @@ A calibration is judged by three checks and one analysis:
   band over at least 95 % of the path on every validation case;
 * **transfer check**: the recommended parameters pass the published criteria on every transfer
   case (cases that took no part in the calibration, usually another rig);
+* **convergence check**: the recommended parameters, simulated again on every validation and
+  transfer case by the model refined (every mesh spacing and the time step halved, by default),
+  give the same published-criteria outcome on each case as on the model itself: the verdict
+  is the model's, not its discretisation's;
 * **parameters determined** (`parcelfit.study.identify`): which parameters the data fix.
 
 Each check passed, failed or was not run. The overall verdict is ``trustworthy`` only when all
-three checks passed and the parameters were analysed; a failed check makes it ``not
+four checks passed and the parameters were analysed; a failed check makes it ``not
 trustworthy``, else a check not run makes it ``incomplete``: it never reads better than the
 worst of its checks. How many parameters are determined does not change the level (a model
 can pass every check with parameters the data leave open), but the verdict always says it, and
@@ -30,7 +34,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 if TYPE_CHECKING:
     from parcelfit.study.identify import Identifiability
-    from parcelfit.study.results import StudyResults, ValidationRecord
+    from parcelfit.study.results import ConvergenceRecord, StudyResults, ValidationRecord
     from parcelfit.study.store import CaseRecord
 
 Outcome = Literal["passed", "failed", "not run"]
@@ -38,6 +42,7 @@ Level = Literal["not trustworthy", "incomplete", "trustworthy"]
 LEVELS: tuple[Level, ...] = ("not trustworthy", "incomplete", "trustworthy")  # worst first
 
 CRITERIA, BAND, TRANSFER = "published criteria", "band test", "transfer check"
+CONVERGENCE = "convergence check"
 PARAMETERS = "parameters determined"
 UNDETERMINED_MEANING = (
     "A parameter that is not determined is one the data leave open: no value in its "
@@ -114,12 +119,13 @@ class Verdict:
     criteria: Check
     band: Check
     transfer: Check
+    convergence: Check
     parameters: Determined
 
     @property
-    def checks(self) -> tuple[Check, Check, Check]:
-        """The three checks that decide the level."""
-        return (self.criteria, self.band, self.transfer)
+    def checks(self) -> tuple[Check, Check, Check, Check]:
+        """The four checks that decide the level."""
+        return (self.criteria, self.band, self.transfer, self.convergence)
 
     @property
     def trustworthy(self) -> bool:
@@ -136,7 +142,7 @@ class Verdict:
 
     def to_json(self) -> dict[str, Any]:
         """The JSON form (``status --json``): ``level``, ``text``, ``checks`` (published
-        criteria, band test, transfer check) and ``parameters``."""
+        criteria, band test, transfer check, convergence check) and ``parameters``."""
         return {
             "level": self.level,
             "text": self.text,
@@ -146,11 +152,13 @@ class Verdict:
         }
 
 
-def combine(criteria: Check, band: Check, transfer: Check, parameters: Determined) -> Verdict:
+def combine(
+    criteria: Check, band: Check, transfer: Check, convergence: Check, parameters: Determined
+) -> Verdict:
     """The overall verdict of the checks: ``not trustworthy`` when one failed, else
     ``incomplete`` when one was not run (the parameter analysis too), else ``trustworthy``.
     The sentence names every check that failed or was not run, and the determined count."""
-    checks = (criteria, band, transfer)
+    checks = (criteria, band, transfer, convergence)
     failed = [f"{c.name} failed" for c in checks if c.outcome == "failed"]
     not_run = [f"{c.name} not run" for c in checks if c.outcome == "not run"]
     if not parameters.analysed:
@@ -161,10 +169,13 @@ def combine(criteria: Check, band: Check, transfer: Check, parameters: Determine
     elif not_run:
         level, text = "incomplete", "incomplete: " + ", ".join(not_run)
     else:
-        level, text = "trustworthy", f"trustworthy: {CRITERIA}, {BAND} and {TRANSFER} passed"
+        level, text = (
+            "trustworthy",
+            f"trustworthy: {CRITERIA}, {BAND}, {TRANSFER} and {CONVERGENCE} passed",
+        )
     if parameters.analysed:
         text += f"; {len(parameters.determined)} of {parameters.total} parameters determined"
-    return Verdict(level, text, criteria, band, transfer, parameters)
+    return Verdict(level, text, criteria, band, transfer, convergence, parameters)
 
 
 # -- the checks of a study's stored results ----------------------------------------------------
@@ -239,6 +250,54 @@ def transfer_check(records: Sequence[ValidationRecord], planned: bool, stopped: 
     return Check(TRANSFER, "not run", "the study stopped without recommended parameters")
 
 
+def _outcome_word(v: ValidationRecord) -> str:
+    return "passes" if v.passed else f"fails ({_failed_criteria(v)})"
+
+
+def convergence_check(
+    convergence: ConvergenceRecord | None,
+    judged: Sequence[ValidationRecord],
+    stopped: bool,
+) -> Check:
+    """Whether the refined model's runs (``convergence``) give every case the published
+    criteria's outcome the model's own runs (``judged``: the validation judged and the transfer
+    check) gave it; not run before the study stops, when switched off or when the simulator
+    cannot be refined."""
+    if convergence is None:
+        why = (
+            "it runs when the study stops"
+            if not stopped
+            else "no result stored (a study stopped without recommended parameters, or "
+            "concluded before this check: rerun parcelfit calibrate to run it)"
+        )
+        return Check(CONVERGENCE, "not run", why)
+    if convergence.reason is not None or not convergence.runs:
+        return Check(CONVERGENCE, "not run", convergence.reason or "no runs")
+    own = {v.case: v for v in judged}
+    differ, missing = [], []
+    for r in convergence.runs:
+        v = own.get(r.case)
+        if v is None or v.params != r.params:  # not the same parameters: nothing to compare
+            missing.append(r.case)
+        elif v.passed != r.passed:
+            differ.append(f"{r.case}: {_outcome_word(v)}, refined {_outcome_word(r)}")
+    how = (
+        "every mesh spacing and the time step halved"
+        if convergence.refinement == 2
+        else f"every mesh spacing and the time step divided by {convergence.refinement}"
+    )
+    if differ:
+        return Check(CONVERGENCE, "failed", "; ".join(differ) + f" ({how})")
+    if missing:
+        return Check(
+            CONVERGENCE,
+            "not run",
+            "no run of the model itself to compare on " + ", ".join(missing),
+        )
+    cases = ", ".join(r.case for r in convergence.runs)
+    return Check(CONVERGENCE, "passed", f"{cases}: the same outcome with {how}")
+
+
 def determined(ident: Identifiability | None, stopped: bool) -> Determined:
     """Which parameters the data determine, from the study's analysis (None: not run)."""
     if ident is None:
@@ -275,12 +334,16 @@ def study_verdict(
         criteria_check(group),
         band_check(group),
         transfer_check(transfer, planned, stopped),
+        convergence_check(
+            None if results is None else results.convergence, [*group, *transfer], stopped
+        ),
         determined(None if results is None else results.identifiability, stopped),
     )
 
 
 __all__ = [
     "BAND",
+    "CONVERGENCE",
     "CRITERIA",
     "LEVELS",
     "PARAMETERS",
@@ -293,6 +356,7 @@ __all__ = [
     "Verdict",
     "band_check",
     "combine",
+    "convergence_check",
     "criteria_check",
     "determined",
     "study_verdict",
