@@ -81,8 +81,8 @@ def test_the_check_compares_each_case_s_outcome_with_the_model_s_own():
     own = [_record("E3/KPBW/2", after=4), _record("E1/KPBW/1")]
     same = ConvergenceRecord(refinement=2, runs=(_record("E3/KPBW/2"), _record("E1/KPBW/1")))
     assert convergence_check(same, own, True).line() == (
-        "convergence check: passed (E3/KPBW/2, E1/KPBW/1: the same outcome with every mesh "
-        "spacing and the time step halved)"
+        "convergence check: passed (E3/KPBW/2, E1/KPBW/1: the same published-criteria outcome "
+        "with every mesh spacing and the time step halved)"
     )
     # a case that fails on the model and on the refined one alike: the same outcome (the
     # published criteria check fails the verdict, not this one)
@@ -151,3 +151,111 @@ def test_a_study_can_switch_the_check_off_and_its_verdict_says_so(tmp_path):
     bad = write_study(tmp_path / "bad", validation={"speed_setting": 2, "refinement": 5})
     with pytest.raises(ParcelfitError, match="refinement"):
         load_study(bad)
+
+
+@pytest.mark.parametrize(("rig", "kind"), [("E1", "PB"), ("E1", "KPBW"), ("E3", "KP")])
+def test_the_refined_scene_is_the_scene_of_the_divided_values(rig, kind):
+    """The scene built at refinement 2 is, character for character, the one built with every
+    spacing and the step halved by hand (the film's and the soft content's too)."""
+    from parcelfit.sim.mujoco.scene import build_scene
+
+    sim = MujocoSimulator()
+    r, c = sim.rig(rig), sim.consignment(kind)
+    params = c.parameter_values(si_values={})
+    base = SceneOptions()
+    by_hand = SceneOptions(
+        timestep=base.step_for(c.soft, r, c.shell) / 2,
+        spacing=None if c.soft else base.spacing_of(c) / 2,
+        soft_shell_spacing=base.soft_shell_spacing / 2,
+        soft_spacing=base.soft_spacing / 2,
+    )
+    refined = build_scene(r, c, params, 1, SceneOptions(refinement=2))
+    assert refined.xml == build_scene(r, c, params, 1, by_hand).xml
+    assert refined.n_shell_vertices > build_scene(r, c, params, 1, base).n_shell_vertices
+
+
+def test_a_refined_run_that_did_not_finish_is_not_compared():
+    own = [_record("E1/PB/1")]
+    broken = _record("E1/PB/1").model_copy(
+        update={"status": "timeout", "verdict": None, "message": "wall-clock limit reached"}
+    )
+    check = convergence_check(ConvergenceRecord(refinement=2, runs=(broken,)), own, True)
+    assert check.line() == (
+        "convergence check: not run (E1/PB/1: the refined run ended timeout (wall-clock limit "
+        "reached))"
+    )
+    # a case validated and transferred is paired with its validation
+    judged = [_record("E3/KPBW/2", after=4), _record("E3/KPBW/2", passed=False)]
+    same = ConvergenceRecord(refinement=2, runs=(_record("E3/KPBW/2"),))
+    assert convergence_check(same, judged, True).outcome == "passed"
+
+
+def test_a_simulator_that_cannot_be_refined_leaves_the_check_not_run(tmp_path, monkeypatch):
+    monkeypatch.setenv("FAKE_SIM_FIXED", "1")  # runs as the analytic simulator, no refinement
+    path = write_study(
+        tmp_path, simulator={"backend": "python", "factory": "tests.fake_sim:make_broken"}
+    )
+    out = tmp_path / "out"
+    Calibration(load_study(path), out, figures=False).run()
+    results = read_results(out)
+    verdict = study_verdict(results, results.cases, stopped=True)
+    assert verdict.convergence.outcome == "not run"
+    assert "BrokenSimulator simulator cannot be refined" in verdict.convergence.detail
+    assert verdict.level == "incomplete"
+
+
+def test_the_check_runs_again_for_other_parameters_or_another_refinement(tmp_path, monkeypatch):
+    """A stored check is reused only for the same parameters and refinement; the refinement
+    may change on a finished study (it is not part of the study's fingerprint)."""
+    from parcelfit.study.store import STORE_FILE, Store
+
+    path = write_study(tmp_path)
+    out = tmp_path / "out"
+    Calibration(load_study(path), out, figures=False).run()
+    log = tmp_path / "log.txt"
+    monkeypatch.setenv("FAKE_SIM_LOG", str(log))
+    store = Store(out / STORE_FILE)
+    try:
+        doc = store.get_meta("convergence")
+        doc["runs"][0]["params"]["mu_d_BePa"] += 0.01  # as if other parameters were checked
+        store.set_meta("convergence", doc)
+    finally:
+        store.close()
+    Calibration(load_study(path), out, figures=False).run()
+    assert log.read_text().count("refined-R-P-2") == 1
+    assert read_results(out).convergence.refinement == 2
+    finer = write_study(tmp_path, validation={"speed_setting": 2, "every": 2, "refinement": 3})
+    assert load_study(finer).fingerprint == load_study(path).fingerprint
+    Calibration(load_study(finer), out, figures=False).run()
+    assert log.read_text().count("refined-R-P-2") == 2
+    assert read_results(out).convergence.refinement == 3
+
+
+def test_the_cost_estimate_counts_the_refined_runs():
+    from parcelfit.sim.cost import refined_seconds, run_seconds
+    from parcelfit.sim.factory import SimulatorConfig
+
+    rigid = SimulatorConfig("mujoco", rig="E3", consignment="KPBW")
+    assert refined_seconds(rigid, 2) == pytest.approx(2 * run_seconds(rigid))  # measured
+    soft = SimulatorConfig("mujoco", rig="E3", consignment="PB")
+    assert refined_seconds(soft, 2) == pytest.approx(8 * run_seconds(soft))  # not measured
+    box = SimulatorConfig("rigidbox", rig="E3", consignment="KPBW")
+    assert refined_seconds(box, 2) == pytest.approx(8 * run_seconds(box))
+    assert refined_seconds(SimulatorConfig("python", factory="tests.fake_sim:make"), 2) is None
+
+
+def test_the_calibration_estimate_adds_one_run_per_judged_case_where_it_can_refine(tmp_path):
+    from dataclasses import replace
+
+    from parcelfit.study.estimate import calibration_estimate
+
+    study = load_study(write_study(tmp_path))  # python backend: cannot be refined
+    on = calibration_estimate(study, 2).simulations
+    assert calibration_estimate(replace(study, refinement=1), 2).simulations == on
+    mujoco = replace(
+        study, simulator=replace(study.simulator, backend="mujoco", rig="E3", consignment="KPBW")
+    )
+    assert (
+        calibration_estimate(mujoco, 2).simulations
+        == calibration_estimate(replace(mujoco, refinement=1), 2).simulations + 1
+    )

@@ -177,6 +177,14 @@ def _fail_the_transfer_check(study):
     path.write_text(json.dumps(doc))
 
 
+def _fail_the_refined_run(study):
+    path = study / "results.json"
+    doc = json.loads(path.read_text())
+    verdict = doc["convergence"]["runs"][0]["verdict"]
+    verdict["theta"]["passed"] = verdict["passed"] = False
+    path.write_text(json.dumps(doc))
+
+
 def test_status_json_carries_every_check_and_the_overall_verdict(tmp_path):
     study = _finished_study(tmp_path)
     info = json.loads(runner.invoke(app, ["status", str(study), "--json"]).stdout)
@@ -199,8 +207,8 @@ def test_status_json_carries_every_check_and_the_overall_verdict(tmp_path):
     for line in (
         "published criteria: passed (R/P/2 after iteration 1)",
         "transfer check: passed (R/P/2)",
-        "convergence check: passed (R/P/2: the same outcome with every mesh spacing and the "
-        "time step halved)",
+        "convergence check: passed (R/P/2: the same published-criteria outcome with every "
+        "mesh spacing and the time step halved)",
         "parameters determined: 1 of 2 (mu_d_BePa; not determined: E_Pa (undetermined))",
         UNDETERMINED_MEANING,
         f"verdict: {verdict['text']}",
@@ -211,11 +219,15 @@ def test_status_json_carries_every_check_and_the_overall_verdict(tmp_path):
     info = json.loads(runner.invoke(app, ["status", str(study), "--json"]).stdout)
     assert info["verdict"]["level"] == "not trustworthy"
     assert info["verdict"]["checks"][2]["detail"] == "R/P/2: DTW_theta"
-    # the refined model's run still passes where the model's own now fails: not converged
+    # R/P/2 is validated and transferred: its refined run is paired with its validation (which
+    # passes, as the refined run does), not with the transfer record
+    assert info["verdict"]["checks"][3]["outcome"] == "passed"
+    _fail_the_refined_run(study)
+    info = json.loads(runner.invoke(app, ["status", str(study), "--json"]).stdout)
     assert info["verdict"]["checks"][3] == {
         "name": "convergence check",
         "outcome": "failed",
-        "detail": "R/P/2: fails (DTW_theta), refined passes (every mesh spacing and the time "
+        "detail": "R/P/2: passes, refined fails (DTW_theta) (every mesh spacing and the time "
         "step halved)",
     }
     # a study without stored results: nothing was judged, nothing is trustworthy
@@ -238,10 +250,7 @@ def test_the_report_s_verdict_box_is_green_only_when_every_check_passes(tmp_path
     _fail_the_transfer_check(study)
     text = build_report(study, out=tmp_path / "r.html", key_frames=False).read_text()
     assert '<div class="verdict pass">' not in text
-    assert (
-        '<div class="verdict fail"><b>Verdict: not trustworthy: transfer check failed, '
-        "convergence check failed; " in text
-    )
+    assert '<div class="verdict fail"><b>Verdict: not trustworthy: transfer check failed; ' in text
     assert '<li><b>transfer check</b>: <span class="bad">failed</span> (R/P/2: DTW_theta)' in text
     assert '<li><b>published criteria</b>: <span class="ok">passed</span>' in text
     # a check not run: amber, not green

@@ -345,7 +345,7 @@ _LEVEL_STYLE = {"trustworthy": "green", "incomplete": "yellow", "not trustworthy
 
 def print_verdict(console: Console, verdict: Verdict, tail: str = "") -> None:
     """Every check of a study's overall verdict on a line of its own (published criteria,
-    band test, transfer check, parameters determined) and the verdict
+    band test, transfer check, convergence check, parameters determined) and the verdict
     (`parcelfit.study.verdict.Verdict`), followed by ``tail``."""
     *checks, _ = verdict.lines()
     for line in checks:

@@ -12,7 +12,8 @@ screening; calibration (history, parameters with their ranges and, for synthetic
 what the evaluations determine: each parameter's interval and verdict, the pairwise plot, which
 test case would help most); validation (published criteria and the stricter band test, figures
 like the published Figures 16-19; every validation case of a joint study); the transfer check
-(do the parameters carry over to other test cases?); the simulated run's key frames.
+(do the parameters carry over to other test cases?); the convergence check (does the verdict
+depend on the mesh and step?); the simulated run's key frames.
 
 Architecture: the report renders, it does not analyse. The calibration writes what it concluded
 into the study folder: the store (`parcelfit.study.store`: the evaluations and the typed
@@ -88,7 +89,13 @@ from parcelfit.study.results import (
 )
 from parcelfit.study.status import folder_verdict
 from parcelfit.study.store import STORE_FILE, SourceRecord, Store, StudyRecord
-from parcelfit.study.verdict import UNDETERMINED_MEANING, Verdict, study_verdict
+from parcelfit.study.verdict import (
+    UNDETERMINED_MEANING,
+    Verdict,
+    convergence_pairs,
+    last_validation,
+    study_verdict,
+)
 
 
 @dataclass(frozen=True)
@@ -332,11 +339,8 @@ def _convergence_section(page: Page, results: StudyResults | None) -> None:
     if results is None or results.convergence is None or not results.convergence.runs:
         return
     title = page.start("Does the verdict depend on the mesh and step? (convergence check)")
-    stored = [*results.validations, *results.transfer]  # the model's own run of the same
-    rows = [  # case and parameters (the last, as the verdict judges)
-        (next((v for v in reversed(stored) if (v.case, v.params) == (r.case, r.params)), None), r)
-        for r in results.convergence.runs
-    ]
+    judged = [*last_validation(results), *results.transfer]  # paired as the verdict pairs them
+    rows = convergence_pairs(results.convergence.runs, judged)
     page.add(
         "convergence",
         title,

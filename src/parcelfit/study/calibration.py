@@ -9,8 +9,8 @@ are run) and continues exactly where it stopped.
 ensemble study simulates every case and placement of it in one batch), the sampler
 (`parcelfit.optimize.sampler`), the storage (`parcelfit.study.store`) and what the study
 concludes (`parcelfit.study.finish`: the validations, whose cases are simulated one after the
-other and pass when every case passes, and after the loop the transfer check, the advice, the
-study figures and the key frames).
+other and pass when every case passes, and after the loop the transfer check, the convergence
+check, the advice, the study figures and the key frames).
 
 Failed, unstable and timed-out simulations, and runs whose trajectory misses the regions of
 interest, are stored with their status and told to the optimiser as failures (it penalises them
@@ -139,10 +139,11 @@ class Calibration:
     figures (`parcelfit.study.plots.study_figures`) and, with ``key_frames`` too, the
     recommended run's key frames (MuJoCo studies: one more simulation; ``animation`` adds
     ``figures/run.gif``). When the study stops it also analyses what its evaluations determine
-    (`parcelfit.study.identify`), runs the transfer check of a study with ``transfer`` cases
+    (`parcelfit.study.identify`), runs the transfer check of a study with ``transfer`` cases,
+    the convergence check (every validation and transfer case once more on the refined model)
     and, with ``advice`` and at least two validation or transfer cases, simulates the
     calibrated set at the ends of the open intervals on each to say which case would help most
-    (`parcelfit.study.joint`); all three go into ``results.json``.
+    (`parcelfit.study.joint`); all four go into ``results.json``.
 
     A folder holding an earlier study's outputs (``runs/``, ``results.json``, ``figures/``)
     without its store is refused (`refuse_orphaned_outputs`); with ``restart`` the folder's

@@ -10,7 +10,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from parcelfit.runs import TestCase
-from parcelfit.sim.cost import Estimate, estimate, run_seconds
+from parcelfit.sim.cost import Estimate, estimate, refined_seconds, run_seconds
 from parcelfit.study.joint import placement_seeds
 from parcelfit.study.screening import Screen
 from parcelfit.study.studyfile import Study
@@ -27,6 +27,16 @@ def validation_checks(study: Study) -> int:
     batches = max(0, math.ceil((study.budget - study.initial) / study.batch_size))
     checks = batches // study.validate_every
     return checks + (1 if batches == 0 or batches % study.validate_every else 0)
+
+
+def validation_cases(study: Study) -> list[TestCase]:
+    """The test cases a study validates on: its validation cases, else the fitted rig and type
+    at its validation speed setting (a study made in code), else none."""
+    if study.validation_cases:
+        return [s.case for s in study.validation_cases]
+    if study.validation_setting is not None:
+        return [TestCase(study.rig, study.consignment, study.validation_setting)]
+    return []
 
 
 def _processes(
@@ -46,28 +56,23 @@ def _processes(
 def calibration_estimate(study: Study, workers: int) -> Estimate:
     """At most ``budget`` evaluations (each simulating every fitted case at its placements),
     the validations, the transfer check, the convergence check (each validation and transfer
-    case once on the refined model, as long as ``refinement`` runs: measured 2.0 and 2.1 times
-    at 2 on E3 and E1 KP/BW) and the key frames."""
+    case once on the refined model, `parcelfit.sim.cost.refined_seconds`; not with a simulator
+    that cannot be refined) and the key frames."""
     runs: list[tuple[int, float | None]] = []
     for spec in study.cases:
         runs.append((study.budget * len(placement_seeds(study, spec)), _seconds(study, spec.case)))
     checks = validation_checks(study)
-    validation = list(study.validation_cases)
-    if not validation and study.validation_setting is not None:
-        validation = [None]
-    for spec in validation:
-        case = (
-            TestCase(study.rig, study.consignment, study.validation_setting or 1)
-            if spec is None
-            else spec.case
-        )
+    for case in validation_cases(study):
         runs.append((checks, _seconds(study, case)))
     for spec in study.transfer:
         runs.append((1, _seconds(study, spec.case)))
-    if study.refinement > 1:  # the convergence check: every validation and transfer case once
-        for case in [s.case for s in (*study.validation_cases, *study.transfer)]:
-            seconds = _seconds(study, case)  # a refined run takes about refinement times as
-            runs.append((1, None if seconds is None else seconds * study.refinement))  # long
+    refinable = study.simulator.backend in ("mujoco", "rigidbox")
+    if study.refinement > 1 and refinable:  # the convergence check: each case judged, once
+        judged = {c.label: c for c in [*validation_cases(study), *(s.case for s in study.transfer)]}
+        for case in judged.values():
+            runs.append(
+                (1, refined_seconds(study.simulator, study.refinement, case.rig, case.consignment))
+            )
     runs.append((1, _seconds(study, study.cases[0].case)))  # the key frames
     return estimate(runs, workers)
 

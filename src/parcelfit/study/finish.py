@@ -8,8 +8,8 @@ study figures and the key frames, written into ``results.json`` for the report
 `parcelfit.study.calibration.Calibration.prepare`): `Finish.validate` simulates the recommended
 parameters on every validation case after an iteration, and the validation passes when every
 case passes; `Finish.conclude` does the rest once the loop stopped. What it simulated is kept
-(validations in the store, the transfer check and the advice in the store's meta, the key frames
-in ``results.json``) and reused while the parameters are the same, so a rerun of a finished
+(validations in the store, the transfer check, the convergence check and the advice in the
+store's meta, the key frames in ``results.json``) and reused while the parameters are the same, so a rerun of a finished
 study simulates nothing again.
 """
 
@@ -58,8 +58,8 @@ class Finish:
     """The validations and conclusions of one open study (see the module doc).
 
     ``references``: every case's reference selection by label; ``report`` receives a progress
-    line; ``executor`` makes an executor for the simulations after the loop (the transfer check
-    and the advice). With ``figures`` the study figures (`parcelfit.study.plots`) are drawn,
+    line; ``executor`` makes an executor for the simulations after the loop (the transfer and
+    convergence checks and the advice). With ``figures`` the study figures (`parcelfit.study.plots`) are drawn,
     with ``key_frames`` too the recommended run's key frames (MuJoCo: one more simulation;
     ``animation`` adds ``figures/run.gif``); ``advice`` enables the advice on which test case
     to add. ``last_validation`` is the verdict of the latest finished validation (None before
@@ -328,7 +328,7 @@ class Finish:
     ) -> tuple[Path, ...]:
         """The results, study figures and key frames of a study stopped after
         ``last_iteration`` for ``stop_reason`` with the recommended ``best_params`` (SI), what
-        its evaluations determine, the transfer check and the advice; returns the figures
+        its evaluations determine, the transfer and convergence checks and the advice; returns the figures
         written."""
         last = -1 if last_iteration is None else last_iteration
         surrogate = self.surrogate()
@@ -446,7 +446,10 @@ class Finish:
                 reason=f"the {type(self.simulator).__name__} simulator cannot be refined "
                 "(it has no with_refinement): check its convergence by hand",
             )
-        specs = [*self.validation_cases(), *self.study.transfer]
+        specs: list[CaseSpec] = []  # a case both validated and transferred, once
+        for spec in [*self.validation_cases(), *self.study.transfer]:
+            if spec.label not in {s.label for s in specs}:
+                specs.append(spec)
         if not specs:
             return ConvergenceRecord(refinement=factor, reason="no validation or transfer cases")
         stored = self.store.get_meta("convergence")  # kept: a rerun simulates none again
@@ -473,9 +476,15 @@ class Finish:
             )
             for s in specs
         ]
+        try:
+            refined = refine(factor)
+        except ParcelfitError as exc:  # a refined setting out of its range
+            return ConvergenceRecord(
+                refinement=factor, reason=f"the model cannot be refined {factor} times: {exc}"
+            )
         runs = []
         for spec, task, result in zip(
-            specs, tasks, self._simulate_tasks(tasks, refine(factor)), strict=True
+            specs, tasks, self._simulate_tasks(tasks, refined), strict=True
         ):
             run_file = None
             if result.ok and result.run is not None:

@@ -326,9 +326,12 @@ def load_study(path: str | Path) -> Study:
         raise ParcelfitError(
             str(exc), file=path, where="optimizer", fix="see BOSettings for the allowed values"
         ) from None
-    fingerprint = hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[
-        :16
-    ]
+    hashed = dict(doc)  # the convergence check's refinement acts once the study stopped: a
+    if isinstance(hashed.get("validation"), dict):  # finished study may be checked at another
+        hashed["validation"] = {k: v for k, v in hashed["validation"].items() if k != "refinement"}
+    fingerprint = hashlib.sha256(
+        json.dumps(hashed, sort_keys=True, default=str).encode()
+    ).hexdigest()[:16]
     return Study(
         name=f.name,
         folder=folder,

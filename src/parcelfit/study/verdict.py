@@ -10,8 +10,8 @@ A calibration is judged by four checks and one analysis:
   case (cases that took no part in the calibration, usually another rig);
 * **convergence check**: the recommended parameters, simulated again on every validation and
   transfer case by the model refined (every mesh spacing and the time step halved, by default),
-  give the same published-criteria outcome on each case as on the model itself: the verdict
-  is the model's, not its discretisation's;
+  pass or fail the published criteria on each case as on the model itself (the outcome is
+  compared, not the numbers or the band test);
 * **parameters determined** (`parcelfit.study.identify`): which parameters the data fix.
 
 Each check passed, failed or was not run. The overall verdict is ``trustworthy`` only when all
@@ -254,15 +254,44 @@ def _outcome_word(v: ValidationRecord) -> str:
     return "passes" if v.passed else f"fails ({_failed_criteria(v)})"
 
 
+def last_validation(results: StudyResults | None) -> list[ValidationRecord]:
+    """Every case's record of a study's last validation: that of the recommended parameters,
+    which the transfer and convergence checks simulate too (not an earlier one that passed)."""
+    group: list[ValidationRecord] = []
+    for v in () if results is None else results.validations:
+        if group and v.after_iteration != group[-1].after_iteration:
+            group = []
+        group.append(v)
+    return group
+
+
+def convergence_pairs(
+    refined: Sequence[ValidationRecord], judged: Sequence[ValidationRecord]
+) -> list[tuple[ValidationRecord | None, ValidationRecord]]:
+    """Each refined run with the model's own run it is compared with: the judged run (the last
+    validation's, then the transfer check's; a case in both, its validation) of the same case
+    and parameters; None where there is none. The verdict and the report pair them so."""
+    own: dict[str, ValidationRecord] = {}
+    for v in judged:
+        own.setdefault(v.case, v)
+    out: list[tuple[ValidationRecord | None, ValidationRecord]] = []
+    for r in refined:
+        v = own.get(r.case)
+        out.append((v if v is not None and v.params == r.params else None, r))
+    return out
+
+
 def convergence_check(
     convergence: ConvergenceRecord | None,
     judged: Sequence[ValidationRecord],
     stopped: bool,
 ) -> Check:
     """Whether the refined model's runs (``convergence``) give every case the published
-    criteria's outcome the model's own runs (``judged``: the validation judged and the transfer
-    check) gave it; not run before the study stops, when switched off or when the simulator
-    cannot be refined."""
+    criteria's pass or fail that the model's own runs (``judged``: the last validation's and
+    the transfer check's) gave it. Not run before the study stops, when switched off, when the
+    simulator cannot be refined, or where a case cannot be compared: no run of the model with
+    the same parameters, or a refined run that did not finish (a time-out, an instability: the
+    check cannot tell, it says so)."""
     if convergence is None:
         why = (
             "it runs when the study stops"
@@ -273,12 +302,13 @@ def convergence_check(
         return Check(CONVERGENCE, "not run", why)
     if convergence.reason is not None or not convergence.runs:
         return Check(CONVERGENCE, "not run", convergence.reason or "no runs")
-    own = {v.case: v for v in judged}
-    differ, missing = [], []
-    for r in convergence.runs:
-        v = own.get(r.case)
-        if v is None or v.params != r.params:  # not the same parameters: nothing to compare
-            missing.append(r.case)
+    differ, open_ = [], []
+    for v, r in convergence_pairs(convergence.runs, judged):
+        if v is None:
+            open_.append(f"{r.case}: no run of the model with the same parameters")
+        elif r.status != "ok" and v.status == "ok":
+            why = f"{r.case}: the refined run ended {r.status}"
+            open_.append(why + (f" ({r.message})" if r.message else ""))
         elif v.passed != r.passed:
             differ.append(f"{r.case}: {_outcome_word(v)}, refined {_outcome_word(r)}")
     how = (
@@ -288,14 +318,10 @@ def convergence_check(
     )
     if differ:
         return Check(CONVERGENCE, "failed", "; ".join(differ) + f" ({how})")
-    if missing:
-        return Check(
-            CONVERGENCE,
-            "not run",
-            "no run of the model itself to compare on " + ", ".join(missing),
-        )
+    if open_:
+        return Check(CONVERGENCE, "not run", "; ".join(open_))
     cases = ", ".join(r.case for r in convergence.runs)
-    return Check(CONVERGENCE, "passed", f"{cases}: the same outcome with {how}")
+    return Check(CONVERGENCE, "passed", f"{cases}: the same published-criteria outcome with {how}")
 
 
 def determined(ident: Identifiability | None, stopped: bool) -> Determined:
@@ -323,11 +349,7 @@ def study_verdict(
     (the store's ``cases``: a transfer case has role ``transfer``) and whether it stopped. The
     validation judged is the last one (every case of it): that of the recommended parameters,
     which the transfer check simulates too, not an earlier one that passed."""
-    group: list[ValidationRecord] = []
-    for v in () if results is None else results.validations:
-        if group and v.after_iteration != group[-1].after_iteration:
-            group = []
-        group.append(v)
+    group = last_validation(results)
     transfer = () if results is None else results.transfer
     planned = bool(transfer) or any(c.role == "transfer" for c in cases or ())
     return combine(
@@ -357,8 +379,10 @@ __all__ = [
     "band_check",
     "combine",
     "convergence_check",
+    "convergence_pairs",
     "criteria_check",
     "determined",
+    "last_validation",
     "study_verdict",
     "transfer_check",
 ]

@@ -147,9 +147,14 @@ class MujocoSimulator(RigBackend[SimOptions]):
 
     def with_refinement(self, factor: int) -> MujocoSimulator:
         """The same model refined ``factor`` times over: every mesh spacing and the time step
-        divided by it (`SceneOptions.refinement`), on top of any refinement it has."""
+        divided by it (`SceneOptions.refinement`), on top of any refinement it has; its
+        wall-clock limit times factor^3 (a film's vertices grow as its square, the steps as
+        itself), so that a refined run is not cut short where the model's own finishes."""
         scene = self.options.scene
-        return self.with_options(scene=replace(scene, refinement=scene.refinement * factor))
+        return self.with_options(
+            scene=replace(scene, refinement=scene.refinement * factor),
+            wall_limit=self.options.wall_limit * factor**3,
+        )
 
     def scene_options(self, rig: Rig) -> SceneOptions:
         """The scene settings of a run on ``rig``: the placement draw added to the start offset

@@ -176,13 +176,16 @@ class RigidBoxSimulator(RigBackend[RigidBoxOptions]):
 
     def with_refinement(self, factor: int) -> RigidBoxSimulator:
         """The same reference refined ``factor`` times over: its contact points' spacing and its
-        time step divided by it."""
+        time step divided by it, its wall-clock limit times factor^3 (points as its square,
+        steps as itself)."""
         opt = self.options
         if opt.timestep is not None:
             step: dict[str, Any] = {"timestep": opt.timestep / factor}
         else:
             step = {"step_divisor": opt.step_divisor * factor}
-        return self.with_options(spacing=opt.spacing / factor, **step)
+        return self.with_options(
+            spacing=opt.spacing / factor, wall_limit=opt.wall_limit * factor**3, **step
+        )
 
     def world(self, params: Mapping[str, float], case: TestCase) -> tuple[World, float]:
         """The world of ``case`` with SI ``params`` (defaults filled in) and its time step [s]."""
