@@ -382,6 +382,40 @@ class Finish:
             executor.close()
         return [out[i] for i in range(len(tasks))]
 
+    def _judged_runs(
+        self,
+        specs: list[CaseSpec],
+        run_ids: list[str],
+        params: Mapping[str, float],
+        simulator: Simulator | None = None,
+    ) -> list[ValidationRecord]:
+        """``params`` (SI) simulated on each case of ``specs`` (by ``simulator``, default the
+        study's; run files ``runs/RUN_ID.csv``) and judged like a validation, in case order."""
+        tasks = [
+            Task(self._full_params(params), s.case, rid)
+            for s, rid in zip(specs, run_ids, strict=True)
+        ]
+        out = []
+        for spec, task, result in zip(
+            specs, tasks, self._simulate_tasks(tasks, simulator), strict=True
+        ):
+            run_file = None
+            if result.ok and result.run is not None:
+                run_file = f"runs/{task.run_id}.csv"
+                write_trajectory(result.run.trajectory, self.folder / run_file)
+            out.append(
+                validation_record(
+                    self.references[spec.label],
+                    None if run_file is None or result.run is None else result.run.trajectory,
+                    None if result.run is None else result.run.transit_time,
+                    status=result.status.value,
+                    message=result.diagnostics.get("message"),
+                    params=params,
+                    run_file=run_file,
+                )
+            )
+        return out
+
     def _transfer(
         self, params: Mapping[str, float], iteration: int
     ) -> tuple[ValidationRecord, ...]:
@@ -399,28 +433,9 @@ class Finish:
         fresh: dict[str, ValidationRecord] = {}
         if todo:
             self._report(iteration, len(todo), f"transfer check on {len(todo)} test cases")
-            tasks = [
-                Task(
-                    self._full_params(params),
-                    s.case,
-                    f"transfer-{s.case.rig}-{s.case.speed_setting}",
-                )
-                for s in todo
-            ]
-            for spec, task, result in zip(todo, tasks, self._simulate_tasks(tasks), strict=True):
-                run_file = None
-                if result.ok and result.run is not None:
-                    run_file = f"runs/{task.run_id}.csv"
-                    write_trajectory(result.run.trajectory, self.folder / run_file)
-                fresh[spec.label] = validation_record(
-                    self.references[spec.label],
-                    None if run_file is None or result.run is None else result.run.trajectory,
-                    None if result.run is None else result.run.transit_time,
-                    status=result.status.value,
-                    message=result.diagnostics.get("message"),
-                    params=params,
-                    run_file=run_file,
-                )
+            ids = [f"transfer-{s.case.rig}-{s.case.speed_setting}" for s in todo]
+            for spec, record in zip(todo, self._judged_runs(todo, ids, params), strict=True):
+                fresh[spec.label] = record
         out = tuple(fresh.get(s.label) or kept[s.label] for s in specs)
         if fresh:
             self.store.set_meta("transfer", [v.to_json() for v in out])
@@ -468,39 +483,14 @@ class Finish:
             f"convergence check: {len(specs)} test cases, every mesh spacing and the time step "
             f"divided by {factor}",
         )
-        tasks = [
-            Task(
-                self._full_params(params),
-                s.case,
-                f"refined-{s.case.rig}-{s.case.consignment}-{s.case.speed_setting}",
-            )
-            for s in specs
-        ]
         try:
             refined = refine(factor)
         except ParcelfitError as exc:  # a refined setting out of its range
             return ConvergenceRecord(
                 refinement=factor, reason=f"the model cannot be refined {factor} times: {exc}"
             )
-        runs = []
-        for spec, task, result in zip(
-            specs, tasks, self._simulate_tasks(tasks, refined), strict=True
-        ):
-            run_file = None
-            if result.ok and result.run is not None:
-                run_file = f"runs/{task.run_id}.csv"
-                write_trajectory(result.run.trajectory, self.folder / run_file)
-            runs.append(
-                validation_record(
-                    self.references[spec.label],
-                    None if run_file is None or result.run is None else result.run.trajectory,
-                    None if result.run is None else result.run.transit_time,
-                    status=result.status.value,
-                    message=result.diagnostics.get("message"),
-                    params=params,
-                    run_file=run_file,
-                )
-            )
+        ids = [f"refined-{s.case.rig}-{s.case.consignment}-{s.case.speed_setting}" for s in specs]
+        runs = self._judged_runs(specs, ids, params, refined)
         record = ConvergenceRecord(refinement=factor, runs=tuple(runs))
         self.store.set_meta("convergence", record.to_json())
         return record
