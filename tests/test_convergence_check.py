@@ -123,7 +123,7 @@ def test_a_calibration_that_absorbed_a_discretisation_error_fails_the_check(
     assert results is not None and results.convergence is not None
     record = results.convergence
     assert record.refinement == 2 and [r.case for r in record.runs] == ["R/P/2"]
-    assert all((out / r.run_file).is_file() for r in record.runs if r.run_file)
+    assert all(r.status == "ok" and (out / r.run_file).is_file() for r in record.runs)
     verdict = study_verdict(results, results.cases, stopped=True)
     assert verdict.criteria.outcome == "passed"  # the model itself passes its validation
     assert verdict.convergence.outcome == outcome
@@ -172,6 +172,41 @@ def test_the_refined_scene_is_the_scene_of_the_divided_values(rig, kind):
     refined = build_scene(r, c, params, 1, SceneOptions(refinement=2))
     assert refined.xml == build_scene(r, c, params, 1, by_hand).xml
     assert refined.n_shell_vertices > build_scene(r, c, params, 1, base).n_shell_vertices
+
+
+def test_a_case_without_a_verdict_on_either_model_is_not_compared():
+    def ended(case, status):
+        return _record(case).model_copy(update={"status": status, "verdict": None})
+
+    both = ConvergenceRecord(refinement=2, runs=(ended("E1/PB/1", "unstable"),))
+    check = convergence_check(both, [ended("E1/PB/1", "timeout")], True)
+    assert check.line() == (
+        "convergence check: not run (E1/PB/1: the model's run ended timeout, the refined run "
+        "ended unstable)"
+    )
+    # a case that differs fails the check, and the detail names the cases not compared too
+    runs = (_record("E3/KPBW/2", passed=False), ended("E1/PB/1", "unstable"))
+    own = [_record("E3/KPBW/2", after=4), _record("E1/PB/1")]
+    check = convergence_check(ConvergenceRecord(refinement=2, runs=runs), own, True)
+    assert check.outcome == "failed"
+    assert check.detail.endswith("; not compared: E1/PB/1: the refined run ended unstable")
+
+
+def test_the_refinement_alone_does_not_change_a_study_s_fingerprint(tmp_path):
+    import yaml
+
+    plain = write_study(tmp_path / "a")
+    doc = yaml.safe_load(plain.read_text())
+    del doc["validation"]
+    plain.write_text(yaml.safe_dump(doc))
+    refined = tmp_path / "a" / "refined.yaml"
+    refined.write_text(yaml.safe_dump({**doc, "validation": {"refinement": 3}}))
+    assert load_study(refined).refinement == 3
+    assert load_study(refined).fingerprint == load_study(plain).fingerprint
+    doc["validation"] = {"speed_setting": 2}
+    other = tmp_path / "a" / "other.yaml"
+    other.write_text(yaml.safe_dump(doc))
+    assert load_study(other).fingerprint != load_study(plain).fingerprint
 
 
 def test_a_refined_run_that_did_not_finish_is_not_compared():
@@ -224,7 +259,9 @@ def test_the_check_runs_again_for_other_parameters_or_another_refinement(tmp_pat
     Calibration(load_study(path), out, figures=False).run()
     assert log.read_text().count("refined-R-P-2") == 1
     assert read_results(out).convergence.refinement == 2
-    finer = write_study(tmp_path, validation={"speed_setting": 2, "every": 2, "refinement": 3})
+    finer = write_study(
+        tmp_path / "finer", validation={"speed_setting": 2, "every": 2, "refinement": 3}
+    )
     assert load_study(finer).fingerprint == load_study(path).fingerprint
     Calibration(load_study(finer), out, figures=False).run()
     assert log.read_text().count("refined-R-P-2") == 2
@@ -241,7 +278,10 @@ def test_the_cost_estimate_counts_the_refined_runs():
     assert refined_seconds(soft, 2) == pytest.approx(8 * run_seconds(soft))  # not measured
     box = SimulatorConfig("rigidbox", rig="E3", consignment="KPBW")
     assert refined_seconds(box, 2) == pytest.approx(8 * run_seconds(box))
-    assert refined_seconds(SimulatorConfig("python", factory="tests.fake_sim:make"), 2) is None
+    full = SimulatorConfig("mujoco", rig="E3", consignment="KPBW", shell_dof="full")
+    assert refined_seconds(full, 2) == pytest.approx(8 * run_seconds(full))
+    python = SimulatorConfig("python", factory="tests.fake_sim:make")
+    assert refined_seconds(python, 2) == pytest.approx(2 * run_seconds(python))
 
 
 def test_the_calibration_estimate_adds_one_run_per_judged_case_where_it_can_refine(tmp_path):
@@ -249,9 +289,17 @@ def test_the_calibration_estimate_adds_one_run_per_judged_case_where_it_can_refi
 
     from parcelfit.study.estimate import calibration_estimate
 
-    study = load_study(write_study(tmp_path))  # python backend: cannot be refined
-    on = calibration_estimate(study, 2).simulations
-    assert calibration_estimate(replace(study, refinement=1), 2).simulations == on
+    study = load_study(write_study(tmp_path))  # python backend: its factory's may refine
+    assert (
+        calibration_estimate(study, 2).simulations
+        == calibration_estimate(replace(study, refinement=1), 2).simulations + 1
+    )
+    solver = replace(study.simulator, backend="external", external="solver.yaml", factory=None)
+    external = replace(study, simulator=solver)
+    assert (
+        calibration_estimate(external, 2).simulations
+        == calibration_estimate(replace(external, refinement=1), 2).simulations
+    )
     mujoco = replace(
         study, simulator=replace(study.simulator, backend="mujoco", rig="E3", consignment="KPBW")
     )

@@ -95,8 +95,8 @@ def test_the_overall_verdict_is_no_better_than_its_worst_check(
 
 
 def test_the_demo_s_case_reads_not_trustworthy():
-    """The quick demo's: published criteria passed, band test and transfer check failed, no
-    parameter determined; it used to end with `verdict: validation passed`."""
+    """A quick demo of 2026-11: published criteria passed, band test and transfer check
+    failed, no parameter determined; it used to end with `verdict: validation passed`."""
     verdict = combine(
         Check("published criteria", "passed"),
         Check("band test", "failed"),
@@ -253,6 +253,10 @@ def test_the_report_s_verdict_box_is_green_only_when_every_check_passes(tmp_path
     assert '<div class="verdict fail"><b>Verdict: not trustworthy: transfer check failed; ' in text
     assert '<li><b>transfer check</b>: <span class="bad">failed</span> (R/P/2: DTW_theta)' in text
     assert '<li><b>published criteria</b>: <span class="ok">passed</span>' in text
+    # the convergence section: the model's run and the refined one, each with its criteria
+    section = text[text.index('id="convergence"') :]
+    assert "divided by 2" in section and "as calibrated" in section and "refined" in section
+    assert section.count('<span class="ok">pass</span>') >= 2
     # a check not run: amber, not green
     path = study / "results.json"
     doc = json.loads(path.read_text())

@@ -134,7 +134,7 @@ def simulate(
         typer.Option(
             help="Divide every mesh spacing and the time step (the type's, the rig's or the "
             "ones given) by this: the same run on a refined model, as a calibration's "
-            "convergence check simulates it.",
+            "convergence check simulates it; the wall-clock limit is multiplied by its cube.",
             min=1,
             max=MAX_REFINEMENT,
         ),

@@ -77,16 +77,19 @@ def refined_seconds(
     config: SimulatorConfig, refinement: int, rig: str | None = None, consignment: str | None = None
 ) -> float | None:
     """Expected wall time [s] of one run of ``config`` refined ``refinement`` times over (the
-    convergence check; `run_seconds` otherwise), None where the backend cannot be refined or no
-    time is known: on MuJoCo around a rigid content ``refinement`` times the model's (2.0 and
-    2.1 times measured at 2 for KP/BW on E3 and E1: the steps double, the interpolated shell's
-    nodes stay), else its cube (a film's or the reference's points grow as its square, the steps
-    as itself; not measured)."""
+    convergence check; `run_seconds` otherwise), None where no time is known (an external
+    solver): on MuJoCo around a rigid content with an interpolated shell ``refinement`` times
+    the model's (2.1-2.2 times measured at 2 for KP/BW on E3 and E1, docs/research/
+    convergence-check.md: the steps double, the shell's nodes stay), a Python factory's as
+    many times, else its cube (a film's, a full shell's or the reference's points grow as its
+    square, the steps as itself; not measured)."""
     seconds = run_seconds(config, rig, consignment)
-    if seconds is None or config.backend not in ("mujoco", "rigidbox"):
+    if seconds is None:
         return None
     power = 3
-    if config.backend == "mujoco":
+    if config.backend == "python":  # its cost is its own: counted as its steps'
+        power = 1
+    elif config.backend == "mujoco" and (config.shell_dof or "auto") != "full":
         from parcelfit.sim.mujoco import load_consignment
 
         try:

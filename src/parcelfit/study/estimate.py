@@ -56,8 +56,8 @@ def _processes(
 def calibration_estimate(study: Study, workers: int) -> Estimate:
     """At most ``budget`` evaluations (each simulating every fitted case at its placements),
     the validations, the transfer check, the convergence check (each validation and transfer
-    case once on the refined model, `parcelfit.sim.cost.refined_seconds`; not with a simulator
-    that cannot be refined) and the key frames."""
+    case once on the refined model, `parcelfit.sim.cost.refined_seconds`; not with an external
+    solver, which cannot be refined) and the key frames."""
     runs: list[tuple[int, float | None]] = []
     for spec in study.cases:
         runs.append((study.budget * len(placement_seeds(study, spec)), _seconds(study, spec.case)))
@@ -66,7 +66,7 @@ def calibration_estimate(study: Study, workers: int) -> Estimate:
         runs.append((checks, _seconds(study, case)))
     for spec in study.transfer:
         runs.append((1, _seconds(study, spec.case)))
-    refinable = study.simulator.backend in ("mujoco", "rigidbox")
+    refinable = study.simulator.backend != "external"  # a Python factory's may refine
     if study.refinement > 1 and refinable:  # the convergence check: each case judged, once
         judged = {c.label: c for c in [*validation_cases(study), *(s.case for s in study.transfer)]}
         for case in judged.values():

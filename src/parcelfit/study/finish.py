@@ -448,7 +448,8 @@ class Finish:
         validation; the verdict compares their outcomes with the model's own
         (`parcelfit.study.verdict.convergence_check`). Not run with refinement 1 or a simulator
         that cannot be refined (the record says why). An earlier result for the same parameters
-        and refinement is kept (the run files stay in ``runs/``)."""
+        and refinement is kept (the run files stay in ``runs/``) when every run of it finished;
+        a rerun simulates a check with a failed or timed-out run again."""
         factor = self.study.refinement
         if factor <= 1:
             return ConvergenceRecord(
@@ -475,6 +476,7 @@ class Finish:
                 kept.refinement == factor
                 and labels == [s.label for s in specs]
                 and all(v.params == dict(params) for v in kept.runs)
+                and all(v.status == "ok" for v in kept.runs)  # a rerun retries the others
             ):
                 return kept
         self._report(

@@ -328,7 +328,11 @@ def load_study(path: str | Path) -> Study:
         ) from None
     hashed = dict(doc)  # the convergence check's refinement acts once the study stopped: a
     if isinstance(hashed.get("validation"), dict):  # finished study may be checked at another
-        hashed["validation"] = {k: v for k, v in hashed["validation"].items() if k != "refinement"}
+        rest = {k: v for k, v in hashed["validation"].items() if k != "refinement"}
+        if rest:
+            hashed["validation"] = rest
+        else:  # a section that held only the refinement hashes as none
+            del hashed["validation"]
     fingerprint = hashlib.sha256(
         json.dumps(hashed, sort_keys=True, default=str).encode()
     ).hexdigest()[:16]

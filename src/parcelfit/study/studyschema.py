@@ -194,9 +194,9 @@ class ValidationSection(FileModel):
     refinement: Annotated[int, Whole(ge=1, le=MAX_REFINEMENT)] = 2
     """The convergence check once the study stops: the recommended parameters simulated again on
     every validation and transfer case with every mesh spacing and the time step divided by this
-    (MuJoCo and the rigid-box reference; 2: halved), passed when each case's published criteria
-    give the same outcome as on the model itself. 1: no check (the verdict then reads
-    incomplete)."""
+    (MuJoCo, the rigid-box reference, a factory's simulator with with_refinement; 2: halved),
+    passed when each case's published criteria give the same outcome as on the model itself.
+    1: no check (the verdict then at best incomplete)."""
 
     @model_validator(mode="after")
     def _one_way(self) -> ValidationSection:

@@ -290,8 +290,8 @@ def convergence_check(
     criteria's pass or fail that the model's own runs (``judged``: the last validation's and
     the transfer check's) gave it. Not run before the study stops, when switched off, when the
     simulator cannot be refined, or where a case cannot be compared: no run of the model with
-    the same parameters, or a refined run that did not finish (a time-out, an instability: the
-    check cannot tell, it says so)."""
+    the same parameters, or a run (the model's or the refined one) without a verdict (a
+    time-out, an instability: the check cannot tell, it says so)."""
     if convergence is None:
         why = (
             "it runs when the study stops"
@@ -306,9 +306,13 @@ def convergence_check(
     for v, r in convergence_pairs(convergence.runs, judged):
         if v is None:
             open_.append(f"{r.case}: no run of the model with the same parameters")
-        elif r.status != "ok" and v.status == "ok":
-            why = f"{r.case}: the refined run ended {r.status}"
-            open_.append(why + (f" ({r.message})" if r.message else ""))
+        elif v.verdict is None or r.verdict is None:  # a run that did not finish, or not
+            ended = [  # comparable: nothing to compare on this case
+                f"{who} run ended {x.status}" + (f" ({x.message})" if x.message else "")
+                for who, x in (("the model's", v), ("the refined", r))
+                if x.verdict is None
+            ]
+            open_.append(f"{r.case}: " + ", ".join(ended))
         elif v.passed != r.passed:
             differ.append(f"{r.case}: {_outcome_word(v)}, refined {_outcome_word(r)}")
     how = (
@@ -317,7 +321,8 @@ def convergence_check(
         else f"every mesh spacing and the time step divided by {convergence.refinement}"
     )
     if differ:
-        return Check(CONVERGENCE, "failed", "; ".join(differ) + f" ({how})")
+        also = f"; not compared: {'; '.join(open_)}" if open_ else ""
+        return Check(CONVERGENCE, "failed", "; ".join(differ) + f" ({how}){also}")
     if open_:
         return Check(CONVERGENCE, "not run", "; ".join(open_))
     cases = ", ".join(r.case for r in convergence.runs)
