@@ -93,8 +93,8 @@ def test_the_check_compares_each_case_s_outcome_with_the_model_s_own():
         refinement=2, runs=(_record("E3/KPBW/2"), _record("E1/KPBW/1", passed=False))
     )
     assert convergence_check(flipped, own, True).line() == (
-        "convergence check: failed (E1/KPBW/1: passes, refined fails (DTW_theta) (every mesh "
-        "spacing and the time step halved))"
+        "convergence check: failed (E1/KPBW/1 passes on the model, fails (DTW_theta) refined, "
+        "every mesh spacing and the time step halved)"
     )
     # a refined run without the model's own run of the same parameters: nothing to compare
     other = ConvergenceRecord(refinement=2, runs=(_record("E3/KPBW/2", params={"x": 1.0}),))
@@ -129,7 +129,9 @@ def test_a_calibration_that_absorbed_a_discretisation_error_fails_the_check(
     assert verdict.convergence.outcome == outcome
     if outcome == "failed":
         assert verdict.level == "not trustworthy"
-        assert "refined fails (DTW_theta)" in verdict.convergence.detail
+        assert "R/P/2 passes on the model, fails (DTW_theta) refined" in (
+            verdict.convergence.detail
+        )
     # the rerun keeps the stored record (no refined simulation again)
     monkeypatch.setenv("FAKE_SIM_LOG", str(tmp_path / "log.txt"))
     Calibration(load_study(path), out, figures=False).run()

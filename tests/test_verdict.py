@@ -227,8 +227,8 @@ def test_status_json_carries_every_check_and_the_overall_verdict(tmp_path):
     assert info["verdict"]["checks"][3] == {
         "name": "convergence check",
         "outcome": "failed",
-        "detail": "R/P/2: passes, refined fails (DTW_theta) (every mesh spacing and the time "
-        "step halved)",
+        "detail": "R/P/2 passes on the model, fails (DTW_theta) refined, every mesh spacing and "
+        "the time step halved",
     }
     # a study without stored results: nothing was judged, nothing is trustworthy
     (study / "results.json").unlink()

@@ -314,7 +314,7 @@ def convergence_check(
             ]
             open_.append(f"{r.case}: " + ", ".join(ended))
         elif v.passed != r.passed:
-            differ.append(f"{r.case}: {_outcome_word(v)}, refined {_outcome_word(r)}")
+            differ.append(f"{r.case} {_outcome_word(v)} on the model, {_outcome_word(r)} refined")
     how = (
         "every mesh spacing and the time step halved"
         if convergence.refinement == 2
@@ -322,7 +322,7 @@ def convergence_check(
     )
     if differ:
         also = f"; not compared: {'; '.join(open_)}" if open_ else ""
-        return Check(CONVERGENCE, "failed", "; ".join(differ) + f" ({how}){also}")
+        return Check(CONVERGENCE, "failed", "; ".join(differ) + f", {how}{also}")
     if open_:
         return Check(CONVERGENCE, "not run", "; ".join(open_))
     cases = ", ".join(r.case for r in convergence.runs)
