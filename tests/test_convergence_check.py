@@ -1,10 +1,11 @@
 """The convergence check: the recommended parameters simulated again by a refined model (every
 mesh spacing and the time step divided), and the verdict failing where the refined model's
-published-criteria outcome differs from the model's own."""
+outcome (published criteria; the band test on a validation case) differs from the model's own."""
 
 import pytest
 
 from parcelfit.errors import ParcelfitError
+from parcelfit.metrics.envelope import EnvelopeCheck
 from parcelfit.metrics.validation import MeanDistanceCheck, TransitTimeCheck, Validation
 from parcelfit.sim.mujoco import MujocoSimulator, SceneOptions
 from parcelfit.sim.mujoco.options import DEFAULT_SPACING, INTERPOLATED_SHELL_STEP
@@ -19,11 +20,15 @@ from .helpers import write_study
 PARAMS = {"mu_d_BePa": 0.45}
 
 
-def _record(case, passed=True, params=PARAMS, after=None):
+def _record(case, passed=True, params=PARAMS, after=None, band=None):
+    """A record whose published criteria pass or not; ``band``: its band test's outcome (None:
+    no band)."""
+    inside = None if band is None else (1.0 if band else 0.9)
     verdict = Validation(
         TransitTimeCheck(2.0, 1.9, 2.1, True),
         MeanDistanceCheck("xy", 1e-4, (2e-4,), 2e-4, True),
         MeanDistanceCheck("theta", 1e-2 if passed else 3e-2, (2e-2,), 2e-2, passed),
+        None if band is None else EnvelopeCheck(inside, 1.0, 0.01, 0.02, 0.95, band),
     )
     return ValidationRecord(
         case=case,
@@ -81,8 +86,8 @@ def test_the_check_compares_each_case_s_outcome_with_the_model_s_own():
     own = [_record("E3/KPBW/2", after=4), _record("E1/KPBW/1")]
     same = ConvergenceRecord(refinement=2, runs=(_record("E3/KPBW/2"), _record("E1/KPBW/1")))
     assert convergence_check(same, own, True).line() == (
-        "convergence check: passed (E3/KPBW/2, E1/KPBW/1: the same published-criteria outcome "
-        "with every mesh spacing and the time step halved)"
+        "convergence check: passed (E3/KPBW/2, E1/KPBW/1: the same outcomes with every mesh "
+        "spacing and the time step halved)"
     )
     # a case that fails on the model and on the refined one alike: the same outcome (the
     # published criteria check fails the verdict, not this one)
@@ -174,6 +179,21 @@ def test_the_refined_scene_is_the_scene_of_the_divided_values(rig, kind):
     refined = build_scene(r, c, params, 1, SceneOptions(refinement=2))
     assert refined.xml == build_scene(r, c, params, 1, by_hand).xml
     assert refined.n_shell_vertices > build_scene(r, c, params, 1, base).n_shell_vertices
+
+
+def test_a_validation_case_s_band_test_is_compared_a_transfer_case_s_not():
+    """The band test decides the verdict on the validation cases only: there a band that
+    passes on the model and fails refined fails the check; on a transfer case it does not."""
+    own = [_record("E3/KPBW/2", after=4, band=True), _record("E1/KPBW/1", band=True)]
+    runs = (_record("E3/KPBW/2", band=False), _record("E1/KPBW/1", band=True))
+    check = convergence_check(ConvergenceRecord(refinement=2, runs=runs), own, True)
+    assert check.line() == (
+        "convergence check: failed (E3/KPBW/2's band test passes on the model, fails refined, "
+        "every mesh spacing and the time step halved)"
+    )
+    runs = (_record("E3/KPBW/2", band=True), _record("E1/KPBW/1", band=False))
+    check = convergence_check(ConvergenceRecord(refinement=2, runs=runs), own, True)
+    assert check.outcome == "passed"
 
 
 def test_a_case_without_a_verdict_on_either_model_is_not_compared():

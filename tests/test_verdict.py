@@ -207,8 +207,8 @@ def test_status_json_carries_every_check_and_the_overall_verdict(tmp_path):
     for line in (
         "published criteria: passed (R/P/2 after iteration 1)",
         "transfer check: passed (R/P/2)",
-        "convergence check: passed (R/P/2: the same published-criteria outcome with every "
-        "mesh spacing and the time step halved)",
+        "convergence check: passed (R/P/2: the same outcomes with every mesh spacing and the "
+        "time step halved)",
         "parameters determined: 1 of 2 (mu_d_BePa; not determined: E_Pa (undetermined))",
         UNDETERMINED_MEANING,
         f"verdict: {verdict['text']}",

@@ -195,7 +195,8 @@ class ValidationSection(FileModel):
     """The convergence check once the study stops: the recommended parameters simulated again on
     every validation and transfer case with every mesh spacing and the time step divided by this
     (MuJoCo, the rigid-box reference, a factory's simulator with with_refinement; 2: halved),
-    passed when each case's published criteria give the same outcome as on the model itself.
+    passed when each case's published criteria (and each validation case's band test) give the
+    same outcome as on the model itself.
     1: no check (the verdict then at best incomplete)."""
 
     @model_validator(mode="after")

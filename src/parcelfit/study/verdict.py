@@ -10,8 +10,8 @@ A calibration is judged by four checks and one analysis:
   case (cases that took no part in the calibration, usually another rig);
 * **convergence check**: the recommended parameters, simulated again on every validation and
   transfer case by the model refined (every mesh spacing and the time step halved, by default),
-  pass or fail the published criteria on each case as on the model itself (the outcome is
-  compared, not the numbers or the band test);
+  pass or fail the published criteria on each case as on the model itself, and the band test
+  on each validation case (the outcomes are compared, not the numbers);
 * **parameters determined** (`parcelfit.study.identify`): which parameters the data fix.
 
 Each check passed, failed or was not run. The overall verdict is ``trustworthy`` only when all
@@ -254,6 +254,12 @@ def _outcome_word(v: ValidationRecord) -> str:
     return "passes" if v.passed else f"fails ({_failed_criteria(v)})"
 
 
+def _band_passed(v: ValidationRecord) -> bool | None:
+    """The band test's outcome of a record (None: no band, fewer than two real runs)."""
+    env = None if v.verdict is None else v.verdict.envelope
+    return None if env is None else env.passed
+
+
 def last_validation(results: StudyResults | None) -> list[ValidationRecord]:
     """Every case's record of a study's last validation: that of the recommended parameters,
     which the transfer and convergence checks simulate too (not an earlier one that passed)."""
@@ -288,7 +294,8 @@ def convergence_check(
 ) -> Check:
     """Whether the refined model's runs (``convergence``) give every case the published
     criteria's pass or fail that the model's own runs (``judged``: the last validation's and
-    the transfer check's) gave it. Not run before the study stops, when switched off, when the
+    the transfer check's) gave it, and every validation case the band test's too (both decide
+    the verdict there). Not run before the study stops, when switched off, when the
     simulator cannot be refined, or where a case cannot be compared: no run of the model with
     the same parameters, or a run (the model's or the refined one) without a verdict (a
     time-out, an instability: the check cannot tell, it says so)."""
@@ -315,6 +322,13 @@ def convergence_check(
             open_.append(f"{r.case}: " + ", ".join(ended))
         elif v.passed != r.passed:
             differ.append(f"{r.case} {_outcome_word(v)} on the model, {_outcome_word(r)} refined")
+        elif v.after_iteration is not None and _band_passed(v) != _band_passed(r):
+            # a validation case: its band test decides the verdict too
+            word = {True: "passes", False: "fails", None: "has no band"}
+            differ.append(
+                f"{r.case}'s band test {word[_band_passed(v)]} on the model, "
+                f"{word[_band_passed(r)]} refined"
+            )
     how = (
         "every mesh spacing and the time step halved"
         if convergence.refinement == 2
@@ -326,7 +340,7 @@ def convergence_check(
     if open_:
         return Check(CONVERGENCE, "not run", "; ".join(open_))
     cases = ", ".join(r.case for r in convergence.runs)
-    return Check(CONVERGENCE, "passed", f"{cases}: the same published-criteria outcome with {how}")
+    return Check(CONVERGENCE, "passed", f"{cases}: the same outcomes with {how}")
 
 
 def determined(ident: Identifiability | None, stopped: bool) -> Determined:
