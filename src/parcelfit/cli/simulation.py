@@ -8,7 +8,6 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
-import numpy as np
 import typer
 from rich.markup import escape
 from rich.progress import Progress, TimeElapsedColumn
@@ -208,10 +207,11 @@ def simulate(
         console.print(
             f"transit time: {'not measured (a light barrier was not crossed)' if tt is None else f'{tt:.4f} s'}"
         )
-        heading = np.unwrap(np.asarray(result.run.trajectory.theta, dtype=float))
+        from parcelfit.sim.ensemble import signed_rotation
+
+        turned = math.degrees(signed_rotation(result.run.trajectory))
         console.print(
-            f"rotation: {math.degrees(heading[-1] - heading[0]):+.2f} degrees (the heading at "
-            "the end minus at the start)"
+            f"rotation: {turned:+.2f} degrees (the heading at the end minus at the start)"
         )
         console.print(Text(f"wrote {write_trajectory(result.run.trajectory, out)}"))
     if video is not None and frames is not None:

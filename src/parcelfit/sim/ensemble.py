@@ -61,10 +61,15 @@ SPIN_ANGLE = math.pi / 2  # rotation [rad] above which a run counts as a spin
 TYPE_COLOURS = {"BW": "tab:orange", "KPBW": "tab:blue", "KP": "tab:green", "PB": "tab:red"}
 
 
+def signed_rotation(trajectory: Trajectory) -> float:
+    """Net rotation [rad] of a run, signed: theta(t_end) - theta(t_0) of the unwrapped heading."""
+    theta = np.unwrap(np.asarray(trajectory.theta, dtype=float))
+    return float(theta[-1] - theta[0])
+
+
 def rotation(trajectory: Trajectory) -> float:
     """Net rotation [rad] of a run: |theta(t_end) - theta(t_0)| of the unwrapped heading."""
-    theta = np.unwrap(np.asarray(trajectory.theta, dtype=float))
-    return float(abs(theta[-1] - theta[0]))
+    return abs(signed_rotation(trajectory))
 
 
 def outcome_line(result: SimResult) -> str:
@@ -313,6 +318,7 @@ __all__ = [
     "member_of",
     "paired_order",
     "rotation",
+    "signed_rotation",
     "simulate_ensemble",
     "summarise",
 ]

@@ -29,16 +29,6 @@ def validation_checks(study: Study) -> int:
     return checks + (1 if batches == 0 or batches % study.validate_every else 0)
 
 
-def validation_cases(study: Study) -> list[TestCase]:
-    """The test cases a study validates on: its validation cases, else the fitted rig and type
-    at its validation speed setting (a study made in code), else none."""
-    if study.validation_cases:
-        return [s.case for s in study.validation_cases]
-    if study.validation_setting is not None:
-        return [TestCase(study.rig, study.consignment, study.validation_setting)]
-    return []
-
-
 def _processes(
     executor: str | None,
     workers: int | None,
@@ -62,17 +52,17 @@ def calibration_estimate(study: Study, workers: int) -> Estimate:
     for spec in study.cases:
         runs.append((study.budget * len(placement_seeds(study, spec)), _seconds(study, spec.case)))
     checks = validation_checks(study)
-    for case in validation_cases(study):
-        runs.append((checks, _seconds(study, case)))
+    for spec in study.validation_specs():
+        runs.append((checks, _seconds(study, spec.case)))
     for spec in study.transfer:
         runs.append((1, _seconds(study, spec.case)))
     refinable = study.simulator.backend != "external"  # a Python factory's may refine
     if study.refinement > 1 and refinable:  # the convergence check: each case judged, once
-        judged = {c.label: c for c in [*validation_cases(study), *(s.case for s in study.transfer)]}
-        for case in judged.values():
-            runs.append(
-                (1, refined_seconds(study.simulator, study.refinement, case.rig, case.consignment))
+        for spec in study.judged_specs():
+            seconds = refined_seconds(
+                study.simulator, study.refinement, spec.case.rig, spec.case.consignment
             )
+            runs.append((1, seconds))
     runs.append((1, _seconds(study, study.cases[0].case)))  # the key frames
     return estimate(runs, workers)
 

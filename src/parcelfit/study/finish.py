@@ -122,9 +122,7 @@ class Finish:
 
     def validation_cases(self) -> tuple[CaseSpec, ...]:
         """The validation cases (slot order of the validation rows of one iteration)."""
-        return self.study.validation_cases or (
-            () if self.val_case is None else (CaseSpec(self.val_case, self.study.dataset),)
-        )
+        return self.study.validation_specs()
 
     def run_validation(
         self,
@@ -462,10 +460,7 @@ class Finish:
                 reason=f"the {type(self.simulator).__name__} simulator cannot be refined "
                 "(it has no with_refinement): check its convergence by hand",
             )
-        specs: list[CaseSpec] = []  # a case both validated and transferred, once
-        for spec in [*self.validation_cases(), *self.study.transfer]:
-            if spec.label not in {s.label for s in specs}:
-                specs.append(spec)
+        specs = list(self.study.judged_specs())
         if not specs:
             return ConvergenceRecord(refinement=factor, reason="no validation or transfer cases")
         stored = self.store.get_meta("convergence")  # kept: a rerun simulates none again

@@ -137,6 +137,26 @@ class Study:
         (several cases, or the ensemble cost)."""
         return len(self.cases) > 1 or self.cost_kind != "published"
 
+    def validation_specs(self) -> tuple[CaseSpec, ...]:
+        """The cases a validation simulates, in order: ``validation_cases``, else the fitted
+        rig and type at ``validation_setting`` from the study's dataset (a study made in code),
+        else none."""
+        if self.validation_cases:
+            return self.validation_cases
+        if self.validation_setting is None:
+            return ()
+        case = TestCase(self.rig, self.consignment, self.validation_setting)
+        return (CaseSpec(case, self.dataset),)
+
+    def judged_specs(self) -> tuple[CaseSpec, ...]:
+        """The cases the recommended parameters are judged on once the study stops: the
+        validation cases, then the transfer cases, each label once (a case both validated and
+        transferred is its validation's)."""
+        out: dict[str, CaseSpec] = {}
+        for spec in (*self.validation_specs(), *self.transfer):
+            out.setdefault(spec.label, spec)
+        return tuple(out.values())
+
     def new_sampler(self) -> Sampler:
         """A fresh optimiser of this study: the factory its ``sampler`` names in
         `parcelfit.optimize.sampler.SAMPLERS`, over its space, with its batch size, seed,
