@@ -13,6 +13,7 @@ from parcelfit.metrics.envelope import EnvelopeCheck
 from parcelfit.metrics.validation import MeanDistanceCheck, TransitTimeCheck, Validation
 from parcelfit.study.results import ValidationRecord
 from parcelfit.study.verdict import (
+    CONVERGENCE_ADVICE,
     LEVELS,
     UNDETERMINED_MEANING,
     Check,
@@ -88,7 +89,14 @@ def test_the_overall_verdict_is_no_better_than_its_worst_check(
     else:
         assert lines[4] == "parameters determined: not run (the analysis runs when the study stops)"
     assert (UNDETERMINED_MEANING in lines) == bool(p.open)
+    # what to do about a failed convergence check, only when it failed, before the verdict
+    failed_convergence = outcomes[3] == "failed"
+    assert (CONVERGENCE_ADVICE in lines) == failed_convergence
+    if failed_convergence:
+        assert lines[-2] == CONVERGENCE_ADVICE
     doc = verdict.to_json()
+    assert (doc["convergence_advice"] == CONVERGENCE_ADVICE) == failed_convergence
+    assert (doc["convergence_advice"] is None) == (not failed_convergence)
     assert [c["outcome"] for c in doc["checks"]] == list(outcomes)
     assert doc["level"] == expected and doc["parameters"]["outcome"] == p.outcome
     assert json.loads(json.dumps(doc)) == doc
@@ -230,6 +238,9 @@ def test_status_json_carries_every_check_and_the_overall_verdict(tmp_path):
         "detail": "R/P/2 passes on the model, fails (DTW_theta) refined, every mesh spacing and "
         "the time step halved",
     }
+    assert info["verdict"]["convergence_advice"] == CONVERGENCE_ADVICE
+    text = " ".join(runner.invoke(app, ["status", str(study)]).stdout.split())
+    assert CONVERGENCE_ADVICE in text
     # a study without stored results: nothing was judged, nothing is trustworthy
     (study / "results.json").unlink()
     verdict = json.loads(runner.invoke(app, ["status", str(study), "--json"]).stdout)["verdict"]
@@ -257,6 +268,7 @@ def test_the_report_s_verdict_box_is_green_only_when_every_check_passes(tmp_path
     section = text[text.index('id="convergence"') :]
     assert "divided by 2" in section and "as calibrated" in section and "refined" in section
     assert section.count('<span class="ok">pass</span>') >= 2
+    assert CONVERGENCE_ADVICE.split("'")[0] not in text  # (autoescaped: its words before one)
     # a check not run: amber, not green
     path = study / "results.json"
     doc = json.loads(path.read_text())
@@ -265,6 +277,15 @@ def test_the_report_s_verdict_box_is_green_only_when_every_check_passes(tmp_path
     text = build_report(study, out=tmp_path / "r.html", key_frames=False).read_text()
     assert '<div class="verdict incomplete"><b>Verdict: incomplete: transfer check not run' in text
     assert "the study names no transfer cases" in text
+    # a failed convergence check: the box says what to do about it
+    _fail_the_refined_run(study)
+    text = build_report(study, out=tmp_path / "r.html", key_frames=False).read_text()
+    box = text[
+        text.index('<div class="verdict') : text.index("</div>", text.index('<div class="verdict'))
+    ]
+    assert '<li><b>convergence check</b>: <span class="bad">failed</span>' in box
+    # (autoescaped: compare the words around the apostrophes)
+    assert all(part in box for part in CONVERGENCE_ADVICE.split("'"))
 
 
 def test_the_last_validation_is_judged_the_recommended_parameters_one():

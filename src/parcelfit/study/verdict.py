@@ -48,6 +48,12 @@ UNDETERMINED_MEANING = (
     "A parameter that is not determined is one the data leave open: no value in its "
     "interval can be ruled out by them, so a prediction that depends on it carries that range."
 )
+CONVERGENCE_ADVICE = (
+    "A failed convergence check means a case's outcome depends on the model's mesh or time "
+    "step: give the study's simulator a finer spacing (film_spacing around a soft content) and "
+    "timestep (or a rig_timesteps entry) and calibrate again in a new study folder (or with "
+    "--restart); the runs get slower."
+)
 
 
 @dataclass(frozen=True)
@@ -134,10 +140,13 @@ class Verdict:
 
     def lines(self) -> list[str]:
         """The summary for a terminal: one line per check, what an undetermined parameter
-        means (when one is), and the verdict last."""
+        means (when one is), what to do about a failed convergence check (when it failed), and
+        the verdict last."""
         out = [c.line() for c in self.checks] + [self.parameters.line()]
         if self.parameters.open:
             out.append(UNDETERMINED_MEANING)
+        if self.convergence.outcome == "failed":
+            out.append(CONVERGENCE_ADVICE)
         return [*out, f"verdict: {self.text}"]
 
     def to_json(self) -> dict[str, Any]:
@@ -149,6 +158,9 @@ class Verdict:
             "checks": [c.to_json() for c in self.checks],
             "parameters": self.parameters.to_json(),
             "undetermined_means": UNDETERMINED_MEANING if self.parameters.open else None,
+            "convergence_advice": CONVERGENCE_ADVICE
+            if self.convergence.outcome == "failed"
+            else None,
         }
 
 
