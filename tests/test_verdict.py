@@ -223,6 +223,7 @@ def test_status_json_carries_every_check_and_the_overall_verdict(tmp_path):
     ):
         assert line in text
     assert text.rstrip().endswith(f"verdict: {verdict['text']}")
+    assert verdict["convergence_advice"] is None and CONVERGENCE_ADVICE not in text
     _fail_the_transfer_check(study)
     info = json.loads(runner.invoke(app, ["status", str(study), "--json"]).stdout)
     assert info["verdict"]["level"] == "not trustworthy"

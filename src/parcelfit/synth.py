@@ -28,7 +28,8 @@ experiments do (method.md sections 2 and 3):
   soft one), and ``real_soft_timestep`` around a soft content (default None: ``real_timestep``):
   with the defaults the twin is consistent with the model, not finer than it; a finer step
   (the bundled twin and ``benchmarks/bench_twin.py`` use half the model's) lets the twin expose
-  the model's remaining step error to a calibration. ``real_belt_friction`` (``mujoco``,
+  the model's remaining step error to a calibration, and a finer ``real_spacing`` (the bundled
+  twin's is 15 mm) its mesh error. ``real_belt_friction`` (``mujoco``,
   default, or ``coulomb``) is the twin's law of friction on belts, strips and rollers
   (`parcelfit.sim.mujoco.options.SceneOptions.belt_friction`). The remaining model-form
   differences are the specimen, placement, speed and tracking variations above.

@@ -90,7 +90,6 @@ from parcelfit.study.results import (
 from parcelfit.study.status import folder_verdict
 from parcelfit.study.store import STORE_FILE, SourceRecord, Store, StudyRecord
 from parcelfit.study.verdict import (
-    CONVERGENCE_ADVICE,
     UNDETERMINED_MEANING,
     Verdict,
     convergence_pairs,
@@ -553,7 +552,6 @@ def _summary(
         "verdict": overall,
         "box": _BOX[overall.level],
         "undetermined_means": UNDETERMINED_MEANING,
-        "convergence_advice": CONVERGENCE_ADVICE,
         "validation": verdict,
         "strict": strict,
         "truth": truth and bool(rows),

@@ -50,9 +50,9 @@ UNDETERMINED_MEANING = (
 )
 CONVERGENCE_ADVICE = (
     "A failed convergence check means a case's outcome depends on the model's mesh or time "
-    "step: give the study's simulator a finer spacing (film_spacing around a soft content) and "
-    "timestep (or a rig_timesteps entry) and calibrate again in a new study folder (or with "
-    "--restart); the runs get slower."
+    "step: give the study's simulator a finer spacing than the type's own mesh (film_spacing "
+    "around a soft content) and timestep (or a rig_timesteps entry) and calibrate again in a new "
+    "study folder (or with --restart); the runs get slower."
 )
 
 
@@ -134,6 +134,11 @@ class Verdict:
         return (self.criteria, self.band, self.transfer, self.convergence)
 
     @property
+    def convergence_advice(self) -> str | None:
+        """What to do about a failed convergence check (`CONVERGENCE_ADVICE`), else None."""
+        return CONVERGENCE_ADVICE if self.convergence.outcome == "failed" else None
+
+    @property
     def trustworthy(self) -> bool:
         """True only when every check passed and the parameters were analysed."""
         return self.level == "trustworthy"
@@ -145,22 +150,21 @@ class Verdict:
         out = [c.line() for c in self.checks] + [self.parameters.line()]
         if self.parameters.open:
             out.append(UNDETERMINED_MEANING)
-        if self.convergence.outcome == "failed":
-            out.append(CONVERGENCE_ADVICE)
+        if self.convergence_advice:
+            out.append(self.convergence_advice)
         return [*out, f"verdict: {self.text}"]
 
     def to_json(self) -> dict[str, Any]:
         """The JSON form (``status --json``): ``level``, ``text``, ``checks`` (published
-        criteria, band test, transfer check, convergence check) and ``parameters``."""
+        criteria, band test, transfer check, convergence check), ``parameters``,
+        ``undetermined_means`` and ``convergence_advice`` (None where they do not apply)."""
         return {
             "level": self.level,
             "text": self.text,
             "checks": [c.to_json() for c in self.checks],
             "parameters": self.parameters.to_json(),
             "undetermined_means": UNDETERMINED_MEANING if self.parameters.open else None,
-            "convergence_advice": CONVERGENCE_ADVICE
-            if self.convergence.outcome == "failed"
-            else None,
+            "convergence_advice": self.convergence_advice,
         }
 
 
