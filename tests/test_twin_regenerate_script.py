@@ -47,19 +47,17 @@ def _spec(tmp_path: Path, runs: int) -> Path:
     return path
 
 
+def _regenerate(tmp_path: Path, old: Path, runs: int) -> None:
+    """The script on a spec of E3/PB/1 with ``runs`` runs, PB's taken from ``old``."""
+    spec = str(_spec(tmp_path, runs))
+    twin_regenerate.main(
+        [spec, "--out", str(tmp_path / "new"), "--reuse", str(old), "--types", "PB"]
+    )
+
+
 def test_the_taken_runs_are_the_old_dataset_s(tmp_path):
     old = _old(tmp_path / "old", runs=3)
-    twin_regenerate.main(
-        [
-            str(_spec(tmp_path, 3)),
-            "--out",
-            str(tmp_path / "new"),
-            "--reuse",
-            str(old),
-            "--types",
-            "PB",
-        ]
-    )
+    _regenerate(tmp_path, old, runs=3)
     (new,) = load_dataset(tmp_path / "new").cases.values()
     (was,) = load_dataset(old).cases.values()
     assert [r.id for r in new.runs] == [r.id for r in was.runs]
@@ -72,14 +70,4 @@ def test_the_taken_runs_are_the_old_dataset_s(tmp_path):
 def test_a_run_the_old_dataset_lacks_stops_it(tmp_path):
     old = _old(tmp_path / "old", runs=2)
     with pytest.raises(SystemExit, match="has no run E3-PB-1-03"):
-        twin_regenerate.main(
-            [
-                str(_spec(tmp_path, 3)),
-                "--out",
-                str(tmp_path / "new"),
-                "--reuse",
-                str(old),
-                "--types",
-                "PB",
-            ]
-        )
+        _regenerate(tmp_path, old, runs=3)
