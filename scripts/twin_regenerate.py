@@ -2,17 +2,22 @@
 
 Usage:
     python scripts/twin_regenerate.py SPEC --out DIR --reuse OLD --types PB [--workers 2]
+    python scripts/twin_regenerate.py SPEC --out DIR --reuse OLD --only E1/KPBW/1 [--workers 2]
 
 `parcelfit synth SPEC --out DIR` with one difference: the runs of the consignment types named
-by ``--types`` are not simulated but read from the dataset OLD (the same run ids), each with its
-stored trajectory and transit time. Use it when a change of the twin specification cannot
-change those types' runs, e.g. ``real_spacing`` (the mesh around a rigid content) for the
-polybag, whose film and content meshes are settings of their own: their runs' inputs are the
-same, so simulating them again would give the same runs. `synth`'s own cache of finished runs
-cannot serve here, because its key is a hash of every setting, the changed one included. The
-script checks only that OLD holds every run it takes; that a type's inputs did not change is
-the user's claim (compare a few of its runs simulated anew, e.g. with ``--types`` left out on a
-spec of one case).
+by ``--types`` (or of every test case but those named by ``--only``) are not simulated but read
+from the dataset OLD (the same run ids), each with its stored trajectory and transit time.
+Every run keeps its own random stream (specimen, placement, belt speeds, tracking noise), so a
+case simulated again with another setting differs from OLD's by that setting alone.
+
+``--types``: when a change of the twin specification cannot change those types' runs, e.g.
+``real_spacing`` (the mesh around a rigid content) for the polybag, whose film and content
+meshes are settings of their own: their runs' inputs are the same, so simulating them again
+would give the same runs. `synth`'s own cache of finished runs cannot serve here, because its
+key is a hash of every setting, the changed one included. The script checks only that OLD holds
+every run it takes; that a type's inputs did not change is the user's claim.
+``--only``: to see how a setting moves some cases' runs (e.g. a finer ``real_spacing``) without
+simulating the rest.
 """
 
 from __future__ import annotations
@@ -31,14 +36,17 @@ from parcelfit.runs.run import Run
 _simulate = synth._twin_run
 # where to take runs from and which types, for every process: synth's worker processes start
 # afresh ("spawn") and inherit the environment, and they call `_run` (this module's, by name)
-_REUSE = "PARCELFIT_TWIN_REUSE"  # "FOLDER|TYPE,TYPE"
+_REUSE = "PARCELFIT_TWIN_REUSE"  # "FOLDER|TYPE,TYPE|CASE,CASE" (types taken, cases simulated)
 _kept: dict[str, dict[str, Run]] = {}
 
 
 def _run(job: synth.TwinJob) -> tuple[Run, float]:
     """synth's run function, replaced: the stored run for a job of a reused type, else simulated."""
-    folder, types = os.environ[_REUSE].split("|")
-    if job.consignment.name not in types.split(","):
+    folder, types, only = os.environ[_REUSE].split("|")
+    taken = (
+        job.consignment.name in types.split(",") if types else job.case.label not in only.split(",")
+    )
+    if not taken:
         return _simulate(job)
     if folder not in _kept:
         _kept[folder] = {r.id: r for c in load_dataset(folder).cases.values() for r in c.runs}
@@ -53,11 +61,15 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("spec", type=Path, help="the twin specification (YAML)")
     parser.add_argument("--out", type=Path, required=True, help="the new dataset's folder")
     parser.add_argument("--reuse", type=Path, required=True, help="the dataset to take runs from")
-    parser.add_argument("--types", nargs="+", required=True, help="consignment types to take")
+    which = parser.add_mutually_exclusive_group(required=True)
+    which.add_argument("--types", nargs="+", default=[], help="consignment types to take")
+    which.add_argument(
+        "--only", nargs="+", default=[], help="test cases to simulate, e.g. E1/KPBW/1"
+    )
     parser.add_argument("--workers", type=int, default=1)
     args = parser.parse_args(argv)
     load_dataset(args.reuse)  # a clear error now, not in a worker
-    os.environ[_REUSE] = f"{args.reuse.resolve()}|{','.join(args.types)}"
+    os.environ[_REUSE] = f"{args.reuse.resolve()}|{','.join(args.types)}|{','.join(args.only)}"
     synth._twin_run = _run  # make_twin_dataset hands this function to its workers
     spec = synth.load_twin_spec(args.spec)
     start = time.perf_counter()

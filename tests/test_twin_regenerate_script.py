@@ -71,3 +71,31 @@ def test_a_run_the_old_dataset_lacks_stops_it(tmp_path):
     old = _old(tmp_path / "old", runs=2)
     with pytest.raises(SystemExit, match="has no run E3-PB-1-03"):
         _regenerate(tmp_path, old, runs=3)
+
+
+def test_only_the_named_cases_are_simulated(tmp_path, monkeypatch):
+    """With --only, every other case's runs are taken; the named case's are simulated (here by a
+    stand-in that marks them)."""
+    e3, e1 = TestCase("E3", "PB", 1), TestCase("E1", "PB", 1)
+    t = np.linspace(0.0, 1.0, 11)
+    old_runs = [
+        CaseData(c, (Run(f"{c.rig}-PB-1-01", c, Trajectory(t=t, x=t, y=0 * t, theta=0 * t), 1.5),))
+        for c in (e3, e1)
+    ]
+    save_dataset(tmp_path / "old", "old", old_runs, synthetic=True)
+    simulated = []
+
+    def marked(job):
+        simulated.append(job.run_id)
+        return Run(job.run_id, job.case, Trajectory(t=t, x=2 * t, y=0 * t, theta=0 * t), 9.0), 0.0
+
+    monkeypatch.setattr(twin_regenerate, "_simulate", marked)
+    spec = tmp_path / "spec.yaml"
+    spec.write_text("name: again\nseed: 3\ncases: [E3/PB/1, E1/PB/1]\nsettings: {runs: 1}\n")
+    args = [str(spec), "--out", str(tmp_path / "new"), "--reuse", str(tmp_path / "old")]
+    twin_regenerate.main([*args, "--only", "E1/PB/1"])
+    assert simulated == ["E1-PB-1-01"]
+    new = load_dataset(tmp_path / "new")
+    assert new[e3].runs[0].transit_time == 1.5 and new[e1].runs[0].transit_time == 9.0
+    with pytest.raises(SystemExit):  # one of the two, not both
+        twin_regenerate.main([*args, "--only", "E1/PB/1", "--types", "PB"])
