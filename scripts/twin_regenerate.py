@@ -17,7 +17,9 @@ would give the same runs. `synth`'s own cache of finished runs cannot serve here
 key is a hash of every setting, the changed one included. The script checks only that OLD holds
 every run it takes; that a type's inputs did not change is the user's claim.
 ``--only``: to see how a setting moves some cases' runs (e.g. a finer ``real_spacing``) without
-simulating the rest.
+simulating the rest. The dataset it writes describes every run by the spec's settings (its
+description and truth.yaml), though only the named cases' runs were made with them: compare it
+with OLD case by case, do not use it as a dataset of its own.
 """
 
 from __future__ import annotations
@@ -29,7 +31,9 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import parcelfit.synth as synth
+from parcelfit.errors import ParcelfitError
 from parcelfit.progress import ProgressEvent
+from parcelfit.runs import TestCase
 from parcelfit.runs.dataset import load_dataset
 from parcelfit.runs.run import Run
 
@@ -56,10 +60,29 @@ def _run(job: synth.TwinJob) -> tuple[Run, float]:
     return Run(job.run_id, job.case, kept.trajectory, kept.transit_time), 0.0
 
 
+def _names(spec: synth.TwinSpec, types: list[str], only: list[str]) -> tuple[list[str], list[str]]:
+    """``types`` and ``only`` checked against the spec (each type one of its cases'
+    consignments, each case one of its cases, written as the spec writes it); stops otherwise."""
+    in_spec = {c.consignment for c in spec.cases}
+    for name in types:
+        if name not in in_spec:
+            raise SystemExit(f"--types {name!r}: no case of the spec has it ({sorted(in_spec)})")
+    labels = []
+    for text in only:
+        try:
+            case = TestCase.parse(text)
+        except ParcelfitError as exc:  # its message says what is wrong
+            raise SystemExit(f"--only {text!r}: {exc}") from exc
+        if case not in spec.cases:
+            raise SystemExit(f"--only {text!r}: not a case of the spec")
+        labels.append(case.label)
+    return types, labels
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("spec", type=Path, help="the twin specification (YAML)")
-    parser.add_argument("--out", type=Path, required=True, help="the new dataset's folder")
+    parser.add_argument("--out", type=Path, required=True, help="the new dataset's folder (new)")
     parser.add_argument("--reuse", type=Path, required=True, help="the dataset to take runs from")
     which = parser.add_mutually_exclusive_group(required=True)
     which.add_argument("--types", nargs="+", default=[], help="consignment types to take")
@@ -68,10 +91,15 @@ def main(argv: Sequence[str] | None = None) -> None:
     )
     parser.add_argument("--workers", type=int, default=1)
     args = parser.parse_args(argv)
+    if args.out.exists():
+        # synth's cache of finished runs does not record which runs were taken: a folder of
+        # another --types or --only would hand its taken runs on as simulated ones
+        raise SystemExit(f"{args.out} exists: give a new folder")
     load_dataset(args.reuse)  # a clear error now, not in a worker
-    os.environ[_REUSE] = f"{args.reuse.resolve()}|{','.join(args.types)}|{','.join(args.only)}"
-    synth._twin_run = _run  # make_twin_dataset hands this function to its workers
     spec = synth.load_twin_spec(args.spec)
+    types, only = _names(spec, args.types, args.only)
+    os.environ[_REUSE] = f"{args.reuse.resolve()}|{','.join(types)}|{','.join(only)}"
+    synth._twin_run = _run  # make_twin_dataset hands this function to its workers
     start = time.perf_counter()
 
     def say(event: ProgressEvent) -> None:
@@ -79,6 +107,11 @@ def main(argv: Sequence[str] | None = None) -> None:
 
     path = spec.make(args.out, workers=args.workers, progress=say)
     print(f"wrote {path} in {(time.perf_counter() - start) / 60:.1f} min")
+    if only:
+        print(
+            f"note: only {', '.join(only)} follow the spec's settings; every other run is "
+            f"{args.reuse}'s, whatever the dataset's description and truth.yaml say"
+        )
 
 
 if __name__ == "__main__":

@@ -1,5 +1,6 @@
-"""scripts/twin_regenerate.py: a twin dataset made again with some types' runs taken from
-an existing one (no physics here: only the taken runs, and the refusal of a missing one)."""
+"""scripts/twin_regenerate.py: a twin dataset made again with some runs taken from an existing
+one. No physics: the runs it would simulate are made by a stand-in that marks them, in one
+process (the worker processes of `--workers 2` are exercised by the script's measured use only)."""
 
 import importlib.util
 from pathlib import Path
@@ -20,9 +21,10 @@ _SPEC.loader.exec_module(twin_regenerate)
 
 @pytest.fixture(autouse=True)
 def _restore_synth(monkeypatch):
-    # the script replaces synth's run function and sets its environment entry: undo both
+    # the script replaces synth's run function and sets its environment entry: undo both (set
+    # here first, so that monkeypatch removes the entry afterwards)
     monkeypatch.setattr(synth, "_twin_run", synth._twin_run)
-    monkeypatch.delenv(twin_regenerate._REUSE, raising=False)
+    monkeypatch.setenv(twin_regenerate._REUSE, "")
 
 
 def _old(folder: Path, runs: int) -> Path:
@@ -73,29 +75,76 @@ def test_a_run_the_old_dataset_lacks_stops_it(tmp_path):
         _regenerate(tmp_path, old, runs=3)
 
 
-def test_only_the_named_cases_are_simulated(tmp_path, monkeypatch):
-    """With --only, every other case's runs are taken; the named case's are simulated (here by a
-    stand-in that marks them)."""
-    e3, e1 = TestCase("E3", "PB", 1), TestCase("E1", "PB", 1)
-    t = np.linspace(0.0, 1.0, 11)
+T = np.linspace(0.0, 1.0, 11)
+
+
+@pytest.fixture
+def two_cases(tmp_path, monkeypatch):
+    """An old dataset with one run of E3/PB/1 and of E1/PB/1, a spec of both plus E1/BW/1, and
+    a stand-in simulation that records and marks (transit 9 s) what it simulates: (argv head
+    without --out, the simulated run ids)."""
     old_runs = [
-        CaseData(c, (Run(f"{c.rig}-PB-1-01", c, Trajectory(t=t, x=t, y=0 * t, theta=0 * t), 1.5),))
-        for c in (e3, e1)
+        CaseData(c, (Run(f"{c.rig}-PB-1-01", c, Trajectory(t=T, x=T, y=0 * T, theta=0 * T), 1.5),))
+        for c in (TestCase("E3", "PB", 1), TestCase("E1", "PB", 1))
     ]
     save_dataset(tmp_path / "old", "old", old_runs, synthetic=True)
-    simulated = []
+    simulated: list[str] = []
 
     def marked(job):
         simulated.append(job.run_id)
-        return Run(job.run_id, job.case, Trajectory(t=t, x=2 * t, y=0 * t, theta=0 * t), 9.0), 0.0
+        return Run(job.run_id, job.case, Trajectory(t=T, x=2 * T, y=0 * T, theta=0 * T), 9.0), 0.0
 
     monkeypatch.setattr(twin_regenerate, "_simulate", marked)
     spec = tmp_path / "spec.yaml"
-    spec.write_text("name: again\nseed: 3\ncases: [E3/PB/1, E1/PB/1]\nsettings: {runs: 1}\n")
-    args = [str(spec), "--out", str(tmp_path / "new"), "--reuse", str(tmp_path / "old")]
-    twin_regenerate.main([*args, "--only", "E1/PB/1"])
-    assert simulated == ["E1-PB-1-01"]
-    new = load_dataset(tmp_path / "new")
-    assert new[e3].runs[0].transit_time == 1.5 and new[e1].runs[0].transit_time == 9.0
-    with pytest.raises(SystemExit):  # one of the two, not both
-        twin_regenerate.main([*args, "--only", "E1/PB/1", "--types", "PB"])
+    spec.write_text(
+        "name: again\nseed: 3\ncases: [E3/PB/1, E1/PB/1, E1/BW/1]\nsettings: {runs: 1}\n"
+    )
+    return [str(spec), "--reuse", str(tmp_path / "old")], simulated
+
+
+def _transits(folder: Path) -> dict[str, float]:
+    return {c.label: cd.runs[0].transit_time for c, cd in load_dataset(folder).cases.items()}
+
+
+def test_types_takes_those_types_and_simulates_the_others(tmp_path, two_cases):
+    args, simulated = two_cases
+    twin_regenerate.main([*args, "--out", str(tmp_path / "new"), "--types", "PB"])
+    assert simulated == ["E1-BW-1-01"]
+    assert _transits(tmp_path / "new") == {"E3/PB/1": 1.5, "E1/PB/1": 1.5, "E1/BW/1": 9.0}
+
+
+def test_only_simulates_the_named_cases_and_takes_the_others(tmp_path, two_cases):
+    args, simulated = two_cases
+    with pytest.raises(SystemExit, match="has no run E1-BW-1-01"):  # taken, but not in OLD
+        twin_regenerate.main([*args, "--out", str(tmp_path / "a"), "--only", "E1/PB/1"])
+    simulated.clear()
+    # a case written another way (a zero-padded setting) is the same case
+    twin_regenerate.main([*args, "--out", str(tmp_path / "b"), "--only", "E1/PB/01", "E1/BW/1"])
+    assert sorted(simulated) == ["E1-BW-1-01", "E1-PB-1-01"]
+    assert _transits(tmp_path / "b") == {"E3/PB/1": 1.5, "E1/PB/1": 9.0, "E1/BW/1": 9.0}
+
+
+@pytest.mark.parametrize(
+    ("which", "message"),
+    [
+        (["--types", "KP"], "--types 'KP': no case of the spec has it"),
+        (["--only", "e1/pb/1"], "--only 'e1/pb/1': not a case of the spec"),
+        (["--only", "E1/PB/x"], "--only 'E1/PB/x': "),
+        (["--only", "E1/PB/1", "--types", "PB"], None),  # one of the two, not both
+    ],
+)
+def test_names_not_in_the_spec_stop_it_before_anything_runs(tmp_path, two_cases, which, message):
+    args, simulated = two_cases
+    with pytest.raises(SystemExit) as stop:
+        twin_regenerate.main([*args, "--out", str(tmp_path / "new"), *which])
+    if message is not None:
+        assert str(stop.value).startswith(message)
+    assert simulated == [] and not (tmp_path / "new").exists()
+
+
+def test_an_existing_out_folder_is_refused(tmp_path, two_cases):
+    args, simulated = two_cases
+    (tmp_path / "new").mkdir()
+    with pytest.raises(SystemExit, match="exists: give a new folder"):
+        twin_regenerate.main([*args, "--out", str(tmp_path / "new"), "--types", "PB"])
+    assert simulated == []
