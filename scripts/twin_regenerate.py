@@ -25,7 +25,6 @@ with OLD case by case, do not use it as a dataset of its own.
 from __future__ import annotations
 
 import argparse
-import os
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -37,32 +36,11 @@ from parcelfit.runs import TestCase
 from parcelfit.runs.dataset import load_dataset
 from parcelfit.runs.run import Run
 
-_simulate = synth._twin_run
-# where to take runs from and which types, for every process: synth's worker processes start
-# afresh ("spawn") and inherit the environment, and they call `_run` (this module's, by name)
-_REUSE = "PARCELFIT_TWIN_REUSE"  # "FOLDER|TYPE,TYPE|CASE,CASE" (types taken, cases simulated)
-_kept: dict[str, dict[str, Run]] = {}
 
-
-def _run(job: synth.TwinJob) -> tuple[Run, float]:
-    """synth's run function, replaced: the stored run for a job of a reused type, else simulated."""
-    folder, types, only = os.environ[_REUSE].split("|")
-    taken = (
-        job.consignment.name in types.split(",") if types else job.case.label not in only.split(",")
-    )
-    if not taken:
-        return _simulate(job)
-    if folder not in _kept:
-        _kept[folder] = {r.id: r for c in load_dataset(folder).cases.values() for r in c.runs}
-    kept = _kept[folder].get(job.run_id)
-    if kept is None:
-        raise SystemExit(f"{folder} has no run {job.run_id} to reuse")
-    return Run(job.run_id, job.case, kept.trajectory, kept.transit_time), 0.0
-
-
-def _names(spec: synth.TwinSpec, types: list[str], only: list[str]) -> tuple[list[str], list[str]]:
+def _only_labels(spec: synth.TwinSpec, types: list[str], only: list[str]) -> list[str]:
     """``types`` and ``only`` checked against the spec (each type one of its cases'
-    consignments, each case one of its cases, written as the spec writes it); stops otherwise."""
+    consignments, each case one of its cases); ``only`` as the spec writes its cases. Stops
+    otherwise."""
     in_spec = {c.consignment for c in spec.cases}
     for name in types:
         if name not in in_spec:
@@ -76,7 +54,23 @@ def _names(spec: synth.TwinSpec, types: list[str], only: list[str]) -> tuple[lis
         if case not in spec.cases:
             raise SystemExit(f"--only {text!r}: not a case of the spec")
         labels.append(case.label)
-    return types, labels
+    return labels
+
+
+def taking(old: Path, types: list[str], only: list[str]):
+    """`make_twin_dataset`'s ``taken``: OLD's run for a job of one of ``types`` (or of a case
+    not in ``only``), None (simulate) for the others; stops where OLD lacks a run to take."""
+    runs = {r.id: r for c in load_dataset(old).cases.values() for r in c.runs}
+
+    def taken(job: synth.TwinJob) -> Run | None:
+        if (job.consignment.name not in types) if types else (job.case.label in only):
+            return None
+        kept = runs.get(job.run_id)
+        if kept is None:
+            raise SystemExit(f"{old} has no run {job.run_id} to reuse")
+        return Run(job.run_id, job.case, kept.trajectory, kept.transit_time)
+
+    return taken
 
 
 def main(argv: Sequence[str] | None = None) -> None:
@@ -95,17 +89,15 @@ def main(argv: Sequence[str] | None = None) -> None:
         # synth's cache of finished runs does not record which runs were taken: a folder of
         # another --types or --only would hand its taken runs on as simulated ones
         raise SystemExit(f"{args.out} exists: give a new folder")
-    load_dataset(args.reuse)  # a clear error now, not in a worker
     spec = synth.load_twin_spec(args.spec)
-    types, only = _names(spec, args.types, args.only)
-    os.environ[_REUSE] = f"{args.reuse.resolve()}|{','.join(types)}|{','.join(only)}"
-    synth._twin_run = _run  # make_twin_dataset hands this function to its workers
+    only = _only_labels(spec, args.types, args.only)
+    taken = taking(args.reuse, args.types, only)
     start = time.perf_counter()
 
     def say(event: ProgressEvent) -> None:
         print(event.message, flush=True)
 
-    path = spec.make(args.out, workers=args.workers, progress=say)
+    path = spec.make(args.out, workers=args.workers, progress=say, taken=taken)
     print(f"wrote {path} in {(time.perf_counter() - start) / 60:.1f} min")
     if only:
         print(

@@ -1,6 +1,5 @@
 """scripts/twin_regenerate.py: a twin dataset made again with some runs taken from an existing
-one. No physics: the runs it would simulate are made by a stand-in that marks them, in one
-process (the worker processes of `--workers 2` are exercised by the script's measured use only)."""
+one. No physics: the runs it would simulate are made by a stand-in that marks them."""
 
 import importlib.util
 from pathlib import Path
@@ -17,14 +16,6 @@ _SPEC = importlib.util.spec_from_file_location(
 )
 twin_regenerate = importlib.util.module_from_spec(_SPEC)
 _SPEC.loader.exec_module(twin_regenerate)
-
-
-@pytest.fixture(autouse=True)
-def _restore_synth(monkeypatch):
-    # the script replaces synth's run function and sets its environment entry: undo both (set
-    # here first, so that monkeypatch removes the entry afterwards)
-    monkeypatch.setattr(synth, "_twin_run", synth._twin_run)
-    monkeypatch.setenv(twin_regenerate._REUSE, "")
 
 
 def _old(folder: Path, runs: int) -> Path:
@@ -94,7 +85,7 @@ def two_cases(tmp_path, monkeypatch):
         simulated.append(job.run_id)
         return Run(job.run_id, job.case, Trajectory(t=T, x=2 * T, y=0 * T, theta=0 * T), 9.0), 0.0
 
-    monkeypatch.setattr(twin_regenerate, "_simulate", marked)
+    monkeypatch.setattr(synth, "_twin_run", marked)
     spec = tmp_path / "spec.yaml"
     spec.write_text(
         "name: again\nseed: 3\ncases: [E3/PB/1, E1/PB/1, E1/BW/1]\nsettings: {runs: 1}\n"

@@ -315,11 +315,14 @@ def make_twin_dataset(
     progress: ProgressCallback | None = None,
     rigs: Sequence[Rig] = (),
     consignments: Sequence[Consignment] = (),
+    taken: Callable[[TwinJob], Run | None] | None = None,
 ) -> Path:
     """Simulate ``settings.runs`` real-like runs per test case; returns the dataset.yaml path.
 
     ``rigs`` and ``consignments`` are a user's own (loaded from their files), which the cases
-    may name beside the bundled ones.
+    may name beside the bundled ones. ``taken`` gives a job a run to keep instead of simulating
+    it (None: simulate it), e.g. a run of an earlier dataset whose inputs the settings changed
+    do not touch (`scripts/twin_regenerate.py`); it is called in this process.
 
     ``truth_user`` maps a consignment type to its true parameters in the catalogue's units; the
     others take their defaults. ``executor`` is serial (in this process) or local (``workers``
@@ -366,10 +369,14 @@ def make_twin_dataset(
     todo = []
     for i in range(len(jobs)):
         stored = kept.get(i)
-        if stored is None:
-            todo.append(i)
-        else:
+        given = None if stored is not None or taken is None else taken(jobs[i])
+        if stored is not None:
             done(stored, "from the cache")
+        elif given is not None:
+            kept.put(i, given, 0.0)
+            done(given, "taken")
+        else:
+            todo.append(i)
     kind = executor or ("local" if workers > 1 else "serial")
     with make_executor(kind, workers=workers) as pool:
         for k, out in pool.map(_twin_run, [jobs[i] for i in todo]):
@@ -465,9 +472,10 @@ class TwinSpec:
         workers: int = 1,
         executor: str | None = None,
         progress: ProgressCallback | None = None,
+        taken: Callable[[TwinJob], Run | None] | None = None,
     ) -> Path:
-        """`make_twin_dataset` of this specification into ``folder`` (resumes); the
-        dataset.yaml path."""
+        """`make_twin_dataset` of this specification into ``folder`` (resumes; ``taken`` as
+        there); the dataset.yaml path."""
         return make_twin_dataset(
             folder,
             self.cases,
@@ -480,6 +488,7 @@ class TwinSpec:
             progress=progress,
             rigs=self.rigs(),
             consignments=self.consignments(),
+            taken=taken,
         )
 
 
