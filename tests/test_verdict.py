@@ -252,6 +252,12 @@ def test_status_json_carries_every_check_and_the_overall_verdict(tmp_path):
     )
 
 
+def _verdict_box(html: str) -> str:
+    """The report's verdict box (its opening tag to its closing one)."""
+    start = html.index('<div class="verdict')
+    return html[start : html.index("</div>", start)]
+
+
 @pytest.mark.slow
 def test_the_report_s_verdict_box_is_green_only_when_every_check_passes(tmp_path):
     from parcelfit.report import build_report
@@ -268,8 +274,11 @@ def test_the_report_s_verdict_box_is_green_only_when_every_check_passes(tmp_path
     # the convergence section: the model's run and the refined one, each with its criteria
     section = text[text.index('id="convergence"') :]
     assert "divided by 2" in section and "as calibrated" in section and "refined" in section
+    # what to do when it fails, the verdict's own words (autoescaped: compare around apostrophes)
+    assert all(part in section for part in CONVERGENCE_ADVICE.split("'"))
     assert section.count('<span class="ok">pass</span>') >= 2
-    assert CONVERGENCE_ADVICE.split("'")[0] not in text  # (autoescaped: its words before one)
+    box = _verdict_box(text)
+    assert CONVERGENCE_ADVICE.split("'")[0] not in box  # (autoescaped: its words before one)
     # a check not run: amber, not green
     path = study / "results.json"
     doc = json.loads(path.read_text())
@@ -281,9 +290,7 @@ def test_the_report_s_verdict_box_is_green_only_when_every_check_passes(tmp_path
     # a failed convergence check: the box says what to do about it
     _fail_the_refined_run(study)
     text = build_report(study, out=tmp_path / "r.html", key_frames=False).read_text()
-    box = text[
-        text.index('<div class="verdict') : text.index("</div>", text.index('<div class="verdict'))
-    ]
+    box = _verdict_box(text)
     assert '<li><b>convergence check</b>: <span class="bad">failed</span>' in box
     # (autoescaped: compare the words around the apostrophes)
     assert all(part in box for part in CONVERGENCE_ADVICE.split("'"))

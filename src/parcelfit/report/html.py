@@ -90,6 +90,7 @@ from parcelfit.study.results import (
 from parcelfit.study.status import folder_verdict
 from parcelfit.study.store import STORE_FILE, SourceRecord, Store, StudyRecord
 from parcelfit.study.verdict import (
+    CONVERGENCE_ADVICE,
     UNDETERMINED_MEANING,
     Verdict,
     convergence_pairs,
@@ -345,7 +346,7 @@ def _convergence_section(page: Page, results: StudyResults | None) -> None:
         "convergence",
         title,
         "convergence",
-        {"rows": rows, "refinement": results.convergence.refinement},
+        {"rows": rows, "refinement": results.convergence.refinement, "advice": CONVERGENCE_ADVICE},
     )
 
 
