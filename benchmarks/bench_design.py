@@ -13,7 +13,9 @@ every other rig name (here E3) runs as R.
 
 Per hidden truth (``--truths``, seeded fractions 0.2-0.8 of the four ranges, not the bundled
 twin's) a twin dataset of every rig at speed settings 1 and 2 (10 runs per case with specimen,
-placement and tracking scatter) and:
+placement and tracking scatter; every rig's runs, R's too, scatter as the calibration's
+ensemble placements do; before 2026-12-06 R's runs started at the nominal placement, which
+``--r-nominal`` repeats) and:
 
 a. a calibration on the published-like cases only (rig R, settings 1 and 2 jointly, ensemble
    cost over 2 placements; ``--budget`` evaluations, 8 initial, batches of 4);
@@ -126,13 +128,26 @@ def helped_most(rows: Mapping[str, Mapping[str, Any]], by: str = "open_width") -
     return min(rows, key=lambda c: (round(rows[c][by], 3), -rows[c]["within"], c))
 
 
-def twin_dataset(folder: Path, truth_si: Mapping[str, float], seed: int) -> Path:
+def twin_dataset(
+    folder: Path,
+    truth_si: Mapping[str, float],
+    seed: int,
+    nominal_rigs: Sequence[str] = (),
+) -> Path:
     """The twin dataset of every rig in ``RIGS`` at ``truth_si`` (SI), ``RUNS`` runs per case,
-    drawn with ``seed``, in ``folder`` (written once, then reused); ``folder``."""
+    drawn with ``seed`` (the runs of ``nominal_rigs`` at the nominal placement), in ``folder``
+    (written once, then reused); ``folder``."""
     from tests.fake_sim import write_reference_dataset
 
     if not (folder / "dataset.yaml").is_file():
-        write_reference_dataset(folder, n_runs=RUNS, rigs=RIGS, truth=truth_si, seed=seed)
+        write_reference_dataset(
+            folder,
+            n_runs=RUNS,
+            rigs=RIGS,
+            truth=truth_si,
+            seed=seed,
+            nominal_rigs=tuple(nominal_rigs),
+        )
     return folder
 
 
@@ -154,11 +169,18 @@ def tied_best(
 
 
 def calibrate(
-    folder: Path, name: str, dataset: Path, extra_cases: Sequence[str], budget: int, seed: int
+    folder: Path,
+    name: str,
+    dataset: Path,
+    extra_cases: Sequence[str],
+    budget: int,
+    seed: int,
+    mirrored: bool = False,
 ) -> tuple[Path, float]:
     """Calibrate rig R (settings 1 and 2) plus ``extra_cases`` (candidate labels, their rig and
-    setting) on ``dataset``; returns the study folder and the wall time [min] of the run that
-    did the work (stored, so a resumed benchmark reports it)."""
+    setting) on ``dataset`` (``mirrored``: with antithetic placements); returns the study folder
+    and the wall time [min] of the run that did the work (stored, so a resumed benchmark
+    reports it)."""
 
     cases: list[dict[str, Any]] = [
         {"dataset": "{dataset}", "rig": "R", "speed_setting": 1},
@@ -167,7 +189,10 @@ def calibrate(
     for label in extra_cases:
         rig, _, setting = label.split("/")
         cases.append({"rig": rig, "speed_setting": int(setting)})
-    setup = bench_twin.Setup(name, {"cases": cases, "cost": {"kind": "ensemble", "placements": 2}})
+    cost: dict[str, Any] = {"kind": "ensemble", "placements": 2}
+    if mirrored:
+        cost["mirrored"] = True
+    setup = bench_twin.Setup(name, {"cases": cases, "cost": cost})
     path = bench_twin.write_study_file(
         folder,
         setup,
@@ -207,8 +232,8 @@ def run_truth(k: int, args: argparse.Namespace, rig_files: Sequence[Path]) -> di
     folder = args.out / f"truth{k + 1}"
     truth = truth_for(k)
     truth_si = to_si(truth)
-    data = twin_dataset(folder / "data", truth_si, seed=700 + k)
-    base, minutes = calibrate(folder, "R", data, (), args.budget, k)
+    data = twin_dataset(folder / "data", truth_si, seed=700 + k, nominal_rigs=args.nominal_rigs)
+    base, minutes = calibrate(folder, "R", data, (), args.budget, k, args.mirrored)
     verdicts = bench_twin.assess(base, truth_si)["verdicts"]
     open_ = [n for n in PARAMETERS if verdicts.get(n) != "determined"]
     rows: dict[str, dict[str, Any]] = {"R": measure(base, minutes, truth_si, open_)}
@@ -231,22 +256,30 @@ def run_truth(k: int, args: argparse.Namespace, rig_files: Sequence[Path]) -> di
     replicate_errors: dict[str, list[float]] = {}
     for label in CANDIDATES:
         name = "R+" + label.replace("/", "-")
-        study, minutes = calibrate(folder, name, data, (label,), args.budget, k)
+        study, minutes = calibrate(folder, name, data, (label,), args.budget, k, args.mirrored)
         rows[label] = measure(study, minutes, truth_si, open_)
         replicate_errors[label] = [rows[label]["open_error"]]
         for r in range(1, args.replicates):  # other optimiser seeds, their own folders
             replicate_data, tag = data, f"r{r}"
             if args.replicate_data:  # and another draw of the twin's runs
-                replicate_data = twin_dataset(folder / f"data-r{r}", truth_si, 700 + k + 1000 * r)
+                replicate_data = twin_dataset(
+                    folder / f"data-r{r}", truth_si, 700 + k + 1000 * r, args.nominal_rigs
+                )
                 tag = f"d{r}"
             study, minutes = calibrate(
-                folder, f"{name}-{tag}", replicate_data, (label,), args.budget, k + 1000 * r
+                folder,
+                f"{name}-{tag}",
+                replicate_data,
+                (label,),
+                args.budget,
+                k + 1000 * r,
+                args.mirrored,
             )
             replicate_errors[label].append(measure(study, minutes, truth_si, open_)["open_error"])
     top = tuple(order[:2]) if order else ()
     if top:
         name = "R+top2-" + "+".join(c.replace("/", "-") for c in top)
-        study, minutes = calibrate(folder, name, data, top, args.budget, k)
+        study, minutes = calibrate(folder, name, data, top, args.budget, k, args.mirrored)
         rows["top two"] = measure(study, minutes, truth_si, open_)
     cands = {c: rows[c] for c in CANDIDATES}
     best, best_error = helped_most(cands), helped_most(cands, "open_error")
@@ -337,9 +370,22 @@ def main() -> None:
         help="each replicate also draws its own twin dataset (the real runs' scatter)",
     )
     ap.add_argument("--out", type=Path, default=Path("bench-design"))
+    ap.add_argument(
+        "--r-nominal",
+        action="store_true",
+        help="rig R's twin runs at the nominal placement, as before 2026-12-06 (the model's "
+        "ensemble placements on R scatter: the twin and the model then disagree)",
+    )
+    ap.add_argument(
+        "--mirrored",
+        action="store_true",
+        help="calibrate with antithetic placements (cost.mirrored: each placement beside its "
+        "mirror image)",
+    )
     args = ap.parse_args()
     if args.replicates < 1:
         ap.error("--replicates must be at least 1")
+    args.nominal_rigs = bench_twin.analytic_nominal_rigs(args.out, args.r_nominal, args.mirrored)
 
     from tests.predict_helpers import write_rig_q
 

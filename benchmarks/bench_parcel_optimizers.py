@@ -10,7 +10,9 @@ Run from the repository's root: the simulator is the analytic test simulator of 
 (``tests/fake_sim.py``: the drift follows mu_d_BePa, the turn mu_d_MePa, and on a second rig
 the turn follows E_Pa too), so the benchmark measures the optimisers and not the physics. For
 each seed k it hides a truth at seeded fractions of the three parameters' ranges, writes a twin
-dataset of it (8 runs per case with specimen, placement and tracking scatter), and calibrates it
+dataset of it (8 runs per case with specimen, placement and tracking scatter; every rig's runs, R's
+too, scatter as the calibration's ensemble placements do; before 2026-12-06 R's runs started at
+the nominal placement, which ``--r-nominal`` repeats), and calibrates it
 with every sampler (study seed k; rigs R and Q at speed setting 1 fitted jointly with the
 ensemble cost over 2 placements, so that all three parameters are determined; validated on R at
 setting 2 after every iteration; 8 initial points, batches of 4; stopping at the first passed
@@ -51,9 +53,18 @@ def truth_for(seed: int) -> dict[str, float]:
     return bench_twin.truth_values([float(f) for f in fractions], PARAMETERS)
 
 
-def one(sampler: str, seed: int, budget: int, out: Path, validate: bool = True) -> dict:
+def one(
+    sampler: str,
+    seed: int,
+    budget: int,
+    out: Path,
+    validate: bool = True,
+    nominal_rigs: tuple[str, ...] = (),
+    mirrored: bool = False,
+) -> dict:
     """Calibrate seed ``seed``'s twin with ``sampler``; simulations to validation, errors.
-    ``validate`` False: no validation, the whole budget (the error at the budget)."""
+    ``validate`` False: no validation, the whole budget (the error at the budget); the twin's
+    runs on ``nominal_rigs`` start at the nominal placement."""
     from tests.fake_sim import write_reference_dataset
 
     from parcelfit.sim.params import CATALOGUE
@@ -63,13 +74,15 @@ def one(sampler: str, seed: int, budget: int, out: Path, validate: bool = True) 
     truth_si = {n: specs[n].to_si(v) for n, v in truth.items()}
     data = out / f"seed{seed}" / "data"
     if not (data / "dataset.yaml").is_file():
-        write_reference_dataset(data, rigs=("R", "Q"), truth=truth_si, seed=1000 + seed)
+        write_reference_dataset(
+            data, rigs=("R", "Q"), truth=truth_si, seed=1000 + seed, nominal_rigs=nominal_rigs
+        )
     keys: dict = {
         "cases": [
             {"dataset": "{dataset}", "rig": "R", "speed_setting": 1},
             {"rig": "Q", "speed_setting": 1},
         ],
-        "cost": {"kind": "ensemble", "placements": 2},
+        "cost": {"kind": "ensemble", "placements": 2, **({"mirrored": True} if mirrored else {})},
     }
     if validate:
         keys["validation"] = {"every": 1, "cases": [{"rig": "R", "speed_setting": 2}]}
@@ -118,7 +131,20 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=5)
     ap.add_argument("--budget", type=int, default=40, help="evaluations per calibration")
     ap.add_argument("--out", type=Path, default=Path("bench-parcel-optimizers"))
+    ap.add_argument(
+        "--r-nominal",
+        action="store_true",
+        help="rig R's twin runs at the nominal placement, as before 2026-12-06 (the model's "
+        "ensemble placements on R scatter: the twin and the model then disagree)",
+    )
+    ap.add_argument(
+        "--mirrored",
+        action="store_true",
+        help="calibrate with antithetic placements (cost.mirrored: each placement beside its "
+        "mirror image)",
+    )
     args = ap.parse_args()
+    nominal = bench_twin.analytic_nominal_rigs(args.out, args.r_nominal, args.mirrored)
     samplers = args.samplers.split(",")
     rows = []
     print(
@@ -127,8 +153,8 @@ def main() -> None:
     )
     for seed in range(args.seeds):
         for sampler in samplers:
-            r = one(sampler, seed, args.budget, args.out)
-            b = one(sampler, seed, args.budget, args.out, validate=False)
+            r = one(sampler, seed, args.budget, args.out, True, nominal, args.mirrored)
+            b = one(sampler, seed, args.budget, args.out, False, nominal, args.mirrored)
             rows += [r, b]
             sims = str(r["simulations"]) if r["validated"] else f">{r['simulations']}"
             print(

@@ -8,7 +8,9 @@ Run from the repository's root. The simulator is the analytic test simulator of 
 hardly acts; on rig Q (a rig file under that name) the turn follows E_Pa too. For each of
 ``--truths`` hidden truths (seeded fractions of the ranges) it writes a twin dataset of rigs R
 and Q at speed settings 1 and 2 (8 runs per case with specimen, placement and tracking
-scatter), calibrates on rig R only (both settings jointly, ensemble cost over 2 placements), so
+scatter; every rig's runs, R's too, scatter as the calibration's ensemble placements do; before
+2026-12-06 R's runs started at the nominal placement, which ``--r-nominal`` repeats),
+calibrates on rig R only (both settings jointly, ensemble cost over 2 placements), so
 that E_Pa stays undetermined, and predicts the unseen cases Q/1 and Q/2 (``--sets`` parameter
 sets from the plausible set times ``--placements`` seeded placements). It prints, per truth,
 case and quantity (transit time, rotation, exit heading), the 5-95 % predictive band, the twin
@@ -76,8 +78,11 @@ def truth_for(k: int) -> dict[str, float]:
     return bench_twin.truth_values([float(f) for f in fractions], PARAMETERS)
 
 
-def calibrate(k: int, budget: int, out: Path) -> tuple[Path, Path]:
-    """Truth ``k``'s twin dataset and its calibration on rig R (folders)."""
+def calibrate(
+    k: int, budget: int, out: Path, nominal_rigs: tuple[str, ...] = ()
+) -> tuple[Path, Path]:
+    """Truth ``k``'s twin dataset (the runs on ``nominal_rigs`` at the nominal placement) and
+    its calibration on rig R (folders)."""
     from tests.fake_sim import write_reference_dataset
 
     from parcelfit.sim.params import CATALOGUE
@@ -88,7 +93,9 @@ def calibrate(k: int, budget: int, out: Path) -> tuple[Path, Path]:
     truth_si = {n: specs[n].to_si(v) for n, v in truth_for(k).items()}
     data = out / f"truth{k + 1}" / "data"
     if not (data / "dataset.yaml").is_file():
-        write_reference_dataset(data, rigs=("R", "Q"), truth=truth_si, seed=500 + k)
+        write_reference_dataset(
+            data, rigs=("R", "Q"), truth=truth_si, seed=500 + k, nominal_rigs=nominal_rigs
+        )
     setup = bench_twin.Setup(
         "fit-R",
         {
@@ -122,6 +129,12 @@ def main() -> None:
     ap.add_argument("--placements", type=int, default=10)
     ap.add_argument("--budget", type=int, default=24, help="evaluations per calibration")
     ap.add_argument("--out", type=Path, default=Path("bench-predict-coverage"))
+    ap.add_argument(
+        "--r-nominal",
+        action="store_true",
+        help="rig R's twin runs at the nominal placement, as before 2026-12-06 (the model's "
+        "ensemble placements on R scatter: the twin and the model then disagree)",
+    )
     args = ap.parse_args()
 
     from tests.predict_helpers import write_rig_q
@@ -130,7 +143,7 @@ def main() -> None:
     from parcelfit.study.predict import load_inputs, predict, run_values
     from parcelfit.study.run_scatter import estimate_run_scatter, real_run_band
 
-    args.out.mkdir(parents=True, exist_ok=True)
+    nominal = bench_twin.analytic_nominal_rigs(args.out, args.r_nominal)
     rig_q = write_rig_q(args.out)
     inside = {q: 0 for q in QUANTITIES}
     inside_real = {q: 0 for q in QUANTITIES}
@@ -142,7 +155,7 @@ def main() -> None:
         f"{'run q05':>10}{'run q95':>10}{'inside':>8}{'parameters share':>18}"
     )
     for k in range(args.truths):
-        data, folder = calibrate(k, args.budget, args.out)
+        data, folder = calibrate(k, args.budget, args.out, nominal)
         dataset = load_dataset(data)
         inputs = load_inputs(folder)
         scatter = estimate_run_scatter(inputs.folder, inputs.study)

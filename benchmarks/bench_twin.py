@@ -185,6 +185,34 @@ def write_study_file(
     return path
 
 
+ANALYTIC_CHOICES_FILE = "analytic-choices.txt"
+
+
+def analytic_nominal_rigs(out: Path, r_nominal: bool, mirrored: bool = False) -> tuple[str, ...]:
+    """The rigs whose twin runs start at the nominal placement in a benchmark on the analytic
+    test simulator (`tests.fake_sim.write_reference_dataset`'s ``nominal_rigs``): none, so
+    that every rig's runs scatter as the calibration's ensemble placements do; ``("R",)`` with
+    ``r_nominal`` (``--r-nominal``), the twins these benchmarks made before 2026-12-06, whose
+    rig-R runs did not scatter while the model's placements on R did. The choices (and
+    ``mirrored``, the calibrations' antithetic placements) are written to ``out``; a rerun into
+    the same folder with other choices is refused (its stored datasets and calibrations were
+    made the other way)."""
+    out.mkdir(parents=True, exist_ok=True)
+    mark = out / ANALYTIC_CHOICES_FILE
+    said = (
+        ("rig R: nominal placement" if r_nominal else "every rig: placement scatter")
+        + "; calibrations: "
+        + ("mirrored placements" if mirrored else "independent placements")
+    )
+    if mark.is_file() and mark.read_text().strip() != said:
+        raise SystemExit(
+            f"{out} holds a benchmark made with {mark.read_text().strip()!r}, not {said!r}: "
+            "give another --out"
+        )
+    mark.write_text(said + "\n")
+    return ("R",) if r_nominal else ()
+
+
 def truth_values(fractions: Sequence[float], parameters: Mapping[str, Sequence[float]]) -> dict:
     """Catalogue values at ``fractions`` of the parameters' ranges."""
     return {

@@ -101,3 +101,39 @@ def test_the_mujoco_design_benchmark_judges_only_the_designed_calibrations():
         "| truth1 | + B2/KPBW/1 + B1/KPBW/2 | 3/4 | 0.010 / 0.020 / 0.050 / 0.300 | mu_d_BePa "
         "| 4/4 | 40 | 170 | 21.5 | passed | 1/1 |"
     )
+
+
+def _start_turns(folder):
+    from parcelfit.runs import load_dataset
+
+    data = load_dataset(folder)
+    return {
+        (c.case.rig, c.case.speed_setting): np.array([r.trajectory.theta[0] for r in c.runs])
+        for c in data.cases.values()
+    }
+
+
+def test_the_benchmarks_twin_places_rig_r_as_the_model_does_unless_told(tmp_path):
+    from .fake_sim import write_reference_dataset
+
+    # at t = 0 a run's heading is its placement's turn (sd 0.01 rad) plus tracking noise
+    # (sd 0.003 rad): rig R's runs scatter like the model's ensemble placements only when R is
+    # not among the nominal rigs (the tests' data of rig R keep the nominal start)
+    placed = _start_turns(
+        write_reference_dataset(tmp_path / "placed", n_runs=30, rigs=("R",), nominal_rigs=())
+    )
+    nominal = _start_turns(write_reference_dataset(tmp_path / "nominal", n_runs=30, rigs=("R",)))
+    for setting in (1, 2):
+        assert placed[("R", setting)].std() > 0.006
+        assert nominal[("R", setting)].std() < 0.005
+
+
+def test_a_benchmark_folder_keeps_the_twin_it_was_made_with(tmp_path):
+    twin = load_file_module("benchmarks/bench_twin.py")
+    assert twin.analytic_nominal_rigs(tmp_path, r_nominal=False) == ()
+    assert twin.analytic_nominal_rigs(tmp_path, r_nominal=False) == ()  # a rerun resumes
+    with pytest.raises(SystemExit, match="give another --out"):
+        twin.analytic_nominal_rigs(tmp_path, r_nominal=True)
+    with pytest.raises(SystemExit, match="mirrored placements"):
+        twin.analytic_nominal_rigs(tmp_path, r_nominal=False, mirrored=True)
+    assert twin.analytic_nominal_rigs(tmp_path / "former", r_nominal=True) == ("R",)

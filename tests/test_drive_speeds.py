@@ -27,6 +27,18 @@ def test_speed_factors_are_seeded_uniform_draws_per_drive():
     assert many.std() == pytest.approx(0.03 / np.sqrt(3), rel=0.1)
 
 
+def test_a_negative_seed_mirrors_the_placement_and_the_drives_of_the_positive_one():
+    rig = load_rig("E3")  # a rig with a hand-placement scatter along, across and in heading
+    for seed in (1, 2, 17):
+        dx, dy, dh = rig.placement(seed)
+        assert (dx, dy, dh) != (0.0, 0.0, 0.0)
+        assert rig.placement(-seed) == (-dx, -dy, -dh)
+        f, g = rig.speed_factors(seed, 0.03), rig.speed_factors(-seed, 0.03)
+        assert list(g) == list(f)
+        for d in f:  # the deviations cancel: a pair of runs averages to the mean speed
+            assert f[d] + g[d] == pytest.approx(2.0, abs=1e-15)
+
+
 class _Recorder:
     """A simulator that records its placement and drive factors in the run's diagnostics."""
 

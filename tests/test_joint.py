@@ -84,6 +84,11 @@ def test_a_joint_study_file_lists_its_cases(tmp_path):
         ),
         ({"cost": {"kind": "ensemble", "transit": "raw"}}, r"cost\.transit: unknown transit"),
         (
+            {"cost": {"kind": "published", "mirrored": True}},
+            r"cost\.mirrored: the published cost simulates the nominal placement only",
+        ),
+        ({"cost": {"kind": "ensemble", "mirrored": "yes"}}, r"cost\.mirrored"),
+        (
             {"validation": {"speed_setting": 2}},
             r"validation\.speed_setting: a joint study names its validation cases",
         ),
@@ -362,3 +367,40 @@ def test_an_ensemble_on_adjusted_transit_times_adjusts_real_and_simulated_runs_a
     page = build_report(out).read_text()
     assert "adjusted for the belt speeds each run rode at" in page
     assert "<li>Q/P/1: transit times adjusted to the real runs" in page
+
+
+def test_mirrored_placements_pair_each_draw_with_its_mirror_image(tmp_path):
+    from parcelfit.study.joint import placement_seeds
+
+    from .fake_sim import placement
+
+    cases = [
+        {"dataset": "data", "rig": "R", "consignment": "P", "speed_setting": 1},
+        {"rig": "Q", "consignment": "P", "speed_setting": 1, "placements": 3},
+    ]
+    cost = {"kind": "ensemble", "placements": 2, "mirrored": True}
+    path = _joint_study(tmp_path, cases=cases, cost=cost, budget=2, initial=2, transfer=[])
+    study = load_study(path)
+    assert study.mirrored
+    # an even number: draws beside their mirror images; an odd one: the nominal start first
+    assert [placement_seeds(study, c) for c in study.cases] == [[1, -1], [None, 1, -1]]
+    four = load_study(_joint_study(tmp_path, cost={**cost, "placements": 4}))
+    assert placement_seeds(four, four.cases[0]) == [1, -1, 2, -2]
+    plain = load_study(_joint_study(tmp_path, cost={"kind": "ensemble", "placements": 2}))
+    assert not plain.mirrored and placement_seeds(plain, plain.cases[0]) == [1, 2]
+    # the analytic simulator's placement -s is placement s negated
+    assert placement(-3) == tuple(-v for v in placement(3))
+    out = tmp_path / "out"
+    Calibration(study, out, figures=False).run()
+    parts = study_status(out).recommended.parts
+    assert [p.seeds for p in parts] == [[1, -1], [None, 1, -1]]
+    # the two runs of an evaluation on R start mirrored: they differ by twice placement 1's
+    # offset, dy (1 + t) and dtheta, so they average to the nominal start's run
+    from parcelfit.runs.io import read_trajectory
+
+    plus = read_trajectory(out / "runs" / "fit-000-00-c0-p1.csv")
+    minus = read_trajectory(out / "runs" / "fit-000-00-c0-p-1.csv")
+    dy, dth, _ = placement(1)
+    np.testing.assert_allclose(plus.y - minus.y, 2 * dy * (1 + plus.t), atol=1e-12)
+    np.testing.assert_allclose(plus.theta - minus.theta, 2 * dth, atol=1e-12)
+    assert (out / "runs" / "fit-000-00-c1.csv").is_file()  # Q's nominal start

@@ -13,8 +13,15 @@ cost against all of case k's real runs (``ensemble``, `parcelfit.metrics.ensembl
 cost is normalised by its own real runs (section 4), so cases of different rigs add on one
 scale. The placement seeds are 1..K for every evaluation (common random numbers: two parameter
 sets are compared under the same placements, which removes the placements' scatter from their
-difference). An evaluation whose simulations do not all succeed is a failure (the first failed
-simulation's status).
+difference). With ``cost.mirrored`` they are 1, -1, 2, -2, ... (the nominal placement first
+when K is odd), seed -s the mirror image of placement s (`parcelfit.sim.mujoco.rig.Rig.placement`):
+antithetic placements, whose offsets average to exactly the nominal start, so that the fixed
+sample of K placements shifts no mean of the model's runs to first order (none at all where a
+run is linear in its placement). Independent draws do: at K = 2
+their mean offset is the scatter over sqrt(2), the same in every evaluation, and a parameter
+that moves the same quantity weakly takes up that shift (docs/research/design-benchmark.md).
+An evaluation whose simulations do not all succeed is a failure (the first failed simulation's
+status).
 
 **Threshold.** The identifiability analysis (`parcelfit.study.identify`) accepts a parameter
 set when its cost is below epsilon = sum_k w_k q_k, q_k what case k's cost would be, at most,
@@ -85,9 +92,16 @@ from parcelfit.study.studyfile import CaseSpec, Study
 def placement_seeds(study: Study, spec: CaseSpec | None = None) -> list[int | None]:
     """The placement seeds of a case (``spec``, default the study's setting) in an evaluation:
     1..K for the ensemble cost, K the case's own ``placements`` or else the study's, the
-    nominal placement (None) for the published cost."""
+    nominal placement (None) for the published cost. With ``study.mirrored`` the antithetic
+    seeds instead: the nominal placement first when K is odd, then 1, -1, 2, -2, ... (module
+    docstring)."""
     if study.cost_kind == "ensemble":
         k = study.placements if spec is None or spec.placements is None else spec.placements
+        if study.mirrored:
+            seeds: list[int | None] = [None] if k % 2 else []
+            for s in range(1, k // 2 + 1):
+                seeds += [s, -s]
+            return seeds
         return list(range(1, k + 1))
     return [None]
 

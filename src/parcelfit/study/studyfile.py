@@ -127,6 +127,7 @@ class Study:
     transfer: tuple[CaseSpec, ...] = ()
     cost_kind: str = "published"  # published | ensemble
     placements: int = 1  # seeded placements per case and evaluation (ensemble)
+    mirrored: bool = False  # antithetic placements: 1, -1, 2, -2, ... (ensemble)
     transit_weight: float = 1.0  # w_T of the ensemble cost
     transit_adjusted: bool = False  # ensemble transit term on belt-speed-adjusted times
     refinement: int = 2  # the convergence check's refinement (1: no check)
@@ -384,6 +385,7 @@ def load_study(path: str | Path) -> Study:
         transfer=transfer,
         cost_kind=f.cost.kind,
         placements=f.cost.placements,
+        mirrored=f.cost.mirrored,
         transit_weight=f.cost.transit_weight,
         transit_adjusted=f.cost.transit == "adjusted",
         refinement=f.validation.refinement,

@@ -105,6 +105,10 @@ class CostSection(FileModel):
     placements: Annotated[int, Whole(ge=1, le=MAX_PLACEMENTS)] = 1
     """Seeded placements per case and evaluation (ensemble cost only; the published cost
     simulates one)."""
+    mirrored: Annotated[bool, Flag()] = False
+    """Antithetic placements (ensemble cost only): each seeded placement beside its mirror
+    image (every offset negated, the nominal start first when ``placements`` is odd), so that
+    the fixed sample of placements averages to the nominal start; false: independent draws."""
     transit_weight: Annotated[float, Number(ge=0)] = 1.0
     """Weight w_T of the ensemble cost's transit-time term [-]."""
     transit: Annotated[str, Choice(("measured", "adjusted"), what="transit time")] = "measured"
@@ -122,6 +126,12 @@ class CostSection(FileModel):
                 "the published cost compares one simulation with the reference run",
                 where="placements",
                 fix="use kind: ensemble for several placements, or leave placements out",
+            )
+        if self.kind == "published" and self.mirrored:
+            raise ParcelfitError(
+                "the published cost simulates the nominal placement only: nothing to mirror",
+                where="mirrored",
+                fix="use kind: ensemble with placements: 2 or more, or leave mirrored out",
             )
         if self.kind == "published" and self.transit != "measured":
             raise ParcelfitError(

@@ -228,7 +228,13 @@ class Rig:
 
     def placement(self, seed: int) -> tuple[float, float, float]:
         """The start-pose offset (dx [m], dy [m], dheading [deg]) of placement ``seed``: a draw
-        from ``start.scatter`` (normal, cut at 2.5 sd), along/across rotated into the rig frame."""
+        from ``start.scatter`` (normal, cut at 2.5 sd), along/across rotated into the rig frame.
+        A negative seed is the mirror image of the positive one's draw (every offset negated;
+        the scatter is symmetric, so it is a draw of the same distribution: the antithetic
+        placements of ``cost.mirrored``)."""
+        if seed < 0:
+            dx, dy, dh = self.placement(-seed)
+            return -dx, -dy, -dh
         return self.draw_placement(np.random.default_rng([PLACEMENT_STREAM, seed]))
 
     def draw_placement(self, rng: np.random.Generator) -> tuple[float, float, float]:
@@ -248,7 +254,10 @@ class Rig:
     def speed_factors(self, seed: int, deviation: float) -> dict[str, float]:
         """Drive -> speed factor [-] of run ``seed``: each drive's short-term deviation from its
         mean speed, 1 + U(-deviation, deviation) (method.md: real belt speeds deviate up to 3 %
-        short-term), drawn as `draw_speed_factors` draws it with the seed's own stream."""
+        short-term), drawn as `draw_speed_factors` draws it with the seed's own stream; a
+        negative seed mirrors the positive one's deviations (1 - (f - 1))."""
+        if seed < 0:
+            return {d: 2.0 - f for d, f in self.speed_factors(-seed, deviation).items()}
         return self.draw_speed_factors(np.random.default_rng([SPEED_STREAM, seed]), deviation)
 
     def draw_speed_factors(self, rng: np.random.Generator, deviation: float) -> dict[str, float]:
