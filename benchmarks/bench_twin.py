@@ -196,7 +196,8 @@ def analytic_nominal_rigs(out: Path, r_nominal: bool, mirrored: bool = False) ->
     rig-R runs did not scatter while the model's placements on R did. The choices (and
     ``mirrored``, the calibrations' antithetic placements) are written to ``out``; a rerun into
     the same folder with other choices is refused (its stored datasets and calibrations were
-    made the other way)."""
+    made the other way), and a folder that holds a benchmark but no record of its choices was
+    made before they existed: rig R nominal, independent placements."""
     out.mkdir(parents=True, exist_ok=True)
     mark = out / ANALYTIC_CHOICES_FILE
     said = (
@@ -204,10 +205,17 @@ def analytic_nominal_rigs(out: Path, r_nominal: bool, mirrored: bool = False) ->
         + "; calibrations: "
         + ("mirrored placements" if mirrored else "independent placements")
     )
-    if mark.is_file() and mark.read_text().strip() != said:
+    before = "rig R: nominal placement; calibrations: independent placements"
+    if mark.is_file():
+        made = mark.read_text().strip()
+    elif any(p.name != ANALYTIC_CHOICES_FILE for p in out.iterdir()):
+        made = before  # a folder of a benchmark from before the choices were recorded
+    else:
+        made = said
+    if made != said:
         raise SystemExit(
-            f"{out} holds a benchmark made with {mark.read_text().strip()!r}, not {said!r}: "
-            "give another --out"
+            f"{out} holds a benchmark made with {made!r}, not {said!r}: give another --out"
+            + (" (or --r-nominal to resume it)" if made == before else "")
         )
     mark.write_text(said + "\n")
     return ("R",) if r_nominal else ()

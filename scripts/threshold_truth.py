@@ -73,7 +73,11 @@ def main(argv: list[str] | None = None) -> int:
     for d in range(args.draws):
         for c, spec in enumerate(study.cases):
             for seed in placement_seeds(study, spec):
-                shifted = int(seed) + d * k_max  # draw 0: the study's own seeds
+                # draw 0: the study's own seeds; a mirrored seed -s stays the mirror image of
+                # its positive one, the nominal placement (None) stays nominal
+                shifted = (
+                    None if seed is None else (abs(seed) + d * k_max) * (1 if seed > 0 else -1)
+                )
                 items.append((Task(params, spec.case, f"truth-d{d}-c{c}-p{shifted}"), shifted))
                 owner.append((d, c))
     runs: dict[int, list[tuple[int, CaseRun]]] = {}

@@ -137,3 +137,9 @@ def test_a_benchmark_folder_keeps_the_twin_it_was_made_with(tmp_path):
     with pytest.raises(SystemExit, match="mirrored placements"):
         twin.analytic_nominal_rigs(tmp_path, r_nominal=False, mirrored=True)
     assert twin.analytic_nominal_rigs(tmp_path / "former", r_nominal=True) == ("R",)
+    # a folder of a benchmark from before the choices were recorded: rig R nominal
+    old = tmp_path / "old"
+    (old / "truth1" / "data").mkdir(parents=True)
+    with pytest.raises(SystemExit, match="--r-nominal to resume it"):
+        twin.analytic_nominal_rigs(old, r_nominal=False)
+    assert twin.analytic_nominal_rigs(old, r_nominal=True) == ("R",)

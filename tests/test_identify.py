@@ -165,6 +165,41 @@ def test_the_transit_statistic_keeps_each_sides_variance():
         transit_statistic(sims, real[:1])
 
 
+def test_antithetic_units_carry_the_simulations_part_of_the_variances(reference):
+    real = [1.0 + 0.1 * z for z in (-1.5, -1, -0.5, -0.2, 0, 0.1, 0.3, 0.6, 1.0, 1.2)]
+    s2 = float(np.var(real, ddof=1))
+    m = float(np.mean(real))
+    pair = [m + 0.05 - 0.02, m + 0.05 + 0.02]  # a placement and its mirror image
+    # one unit: its mean has no placement scatter (first order), the real runs' part alone
+    assert transit_statistic(pair, real, units=[1, 1]) == pytest.approx(0.05**2 / (s2 / 10))
+    assert transit_statistic(pair, real) == pytest.approx(0.05**2 / (0.0008 / 2 + s2 / 10))
+    # two pairs and the nominal start: the variance of the three units' means over three
+    times = [m + 0.03, m + 0.02, m + 0.06, m + 0.05, m + 0.07]
+    units = [0, 1, 1, 2, 2]
+    means = [0.03, 0.04, 0.06]
+    se2 = float(np.var(means, ddof=1)) / 3 + s2 / 10
+    assert transit_statistic(times, real, units=units) == pytest.approx(
+        float(np.mean(times) - m) ** 2 / se2, rel=1e-12
+    )
+    # the trajectory term's standard error: the units' means of the rows
+    _, sel = reference
+    from .fake_sim import TRUTH, placement, trajectory
+
+    trajs = [
+        trajectory({**TRUTH, "E_Pa": 1e9}, 1, rig="Q", placement=placement(s))[0]
+        for s in (1, -1, 2, -2)
+    ]
+    plain = ensemble_cost(trajs, [None] * 4, sel)
+    paired = ensemble_cost(trajs, [None] * 4, sel, units=[1, 1, 2, 2])
+    assert paired.value == pytest.approx(plain.value, rel=1e-12)  # the cost is the same
+    assert paired.se < plain.se
+    one = ensemble_cost(trajs[:2], [None] * 2, sel, units=[1, 1])  # the real runs' part only
+    two = ensemble_cost(trajs[:2], [None] * 2, sel)
+    assert one.se is not None and two.se is not None and 0 < one.se < two.se
+    with pytest.raises(ParcelfitError, match="one unit per simulated run"):
+        ensemble_cost(trajs, [None] * 4, sel, units=[1, 1])
+
+
 def test_null_costs_of_sets_of_real_runs(reference):
     _, sel = reference
     n = len(sel.run_ids)

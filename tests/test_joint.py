@@ -89,6 +89,10 @@ def test_a_joint_study_file_lists_its_cases(tmp_path):
         ),
         ({"cost": {"kind": "ensemble", "mirrored": "yes"}}, r"cost\.mirrored"),
         (
+            {"cost": {"kind": "ensemble", "mirrored": True}},
+            r"cost\.mirrored: mirrored placements pair .* placements: 2 or more",
+        ),
+        (
             {"validation": {"speed_setting": 2}},
             r"validation\.speed_setting: a joint study names its validation cases",
         ),
@@ -394,6 +398,15 @@ def test_mirrored_placements_pair_each_draw_with_its_mirror_image(tmp_path):
     Calibration(study, out, figures=False).run()
     parts = study_status(out).recommended.parts
     assert [p.seeds for p in parts] == [[1, -1], [None, 1, -1]]
+    # the transit term takes the simulations' variance from the pairs' means (antithetic units)
+    from parcelfit.metrics.ensemble import transit_statistic
+
+    refs = select_references(study)
+    for part, units in zip(parts, ([1, 1], [0, 1, 1]), strict=True):
+        real = [t for t in refs[part.case].transit_times if t is not None]
+        expect = transit_statistic(part.transit_times, real, units=units)
+        assert part.transit_term == pytest.approx(expect, rel=1e-12)
+        assert part.transit_term != pytest.approx(transit_statistic(part.transit_times, real))
     # the two runs of an evaluation on R start mirrored: they differ by twice placement 1's
     # offset, dy (1 + t) and dtheta, so they average to the nominal start's run
     from parcelfit.runs.io import read_trajectory

@@ -143,8 +143,8 @@ def simulate(
         int | None,
         typer.Option(
             help="Placement seed: draw the start pose from the rig's hand-placement scatter "
-            "(default: the nominal pose; with --repeat, 0).",
-            min=0,
+            "(default: the nominal pose; with --repeat, 0); a negative seed is the mirror image "
+            "of its positive one's draw (a calibration's run ...-p-1 with cost.mirrored).",
         ),
     ] = None,
     repeat: Annotated[

@@ -36,6 +36,19 @@ generalised U-statistic); to first order
 fewer than two real runs; with one simulation the second part alone). More placements shrink
 the first part only; the real runs' part is fixed by the experiment.
 
+**Antithetic placements** (``cost.mirrored``, `parcelfit.study.joint.placement_seeds`). The
+simulations then come in units: a placement beside its mirror image, and the nominal placement
+alone when K is odd. A unit's mean has no placement scatter to first order (none where a run is
+linear in its placement), so the K runs' own variance overstates the variance of their mean
+(by a factor of about K for a pair). With ``units`` given (the unit of each simulation), the
+simulations' part of both variances is taken from the units' means instead, over the U units:
+
+    SE^2 = s_units^2 / U + s_real^2 / n,      Var(c_traj) ~ var_u(unit mean of the rows) / U + ...
+
+and is 0 with a single unit (K = 2: one pair; what remains is of second order and not
+estimated). The threshold's sets of K real runs (below) are independent runs, which no real
+experiment can mirror; they are not changed.
+
 **Adjusted transit times.** With ``cost.transit: adjusted`` the real runs' transit times in the
 reference are adjusted for the belt speeds each run rode at
 (`parcelfit.metrics.reference.adjusted_reference`) and the simulated runs' times
@@ -103,9 +116,12 @@ def ensemble_cost(
     w_xy: float = 1.0,
     w_theta: float = 1.0,
     w_transit: float = 1.0,
+    units: Sequence[int] | None = None,
 ) -> EnsembleCost:
     """The ensemble cost (module docstring) of simulated runs ``sims`` (raw trajectories, SI)
-    with their transit times [s] against the real runs behind ``reference``."""
+    with their transit times [s] against the real runs behind ``reference``; ``units`` (one per
+    simulation) groups antithetic placements, whose units' means carry the simulations' part of
+    the variances (module docstring)."""
     if not sims:
         raise ParcelfitError("an ensemble cost needs at least one simulated run")
     if min(w_xy, w_theta, w_transit) < 0:
@@ -119,35 +135,65 @@ def ensemble_cost(
         + w_theta * cross_dtw([p.theta for p in prepared], reference.theta_series, window) ** 2 / st
     )
     k, n = d.shape
+    if units is not None and len(units) != k:
+        raise ParcelfitError("an ensemble cost needs one unit per simulated run")
     traj = float(d.mean())
     se = None
-    if k >= 2 and n >= 2:
-        se = math.sqrt(d.mean(axis=1).var(ddof=1) / k + d.mean(axis=0).var(ddof=1) / n)
-    elif n >= 2:  # one simulation: the real runs' part of the variance only
-        se = math.sqrt(d.mean(axis=0).var(ddof=1) / n)
-    sim_t = [t for t in transit_times if t is not None and math.isfinite(t)]
+    rows = d.mean(axis=1)
+    sim_part = None  # the simulations' part of the variance of the trajectory term
+    if units is not None:
+        means = _unit_means(rows, units)
+        sim_part = float(np.var(means, ddof=1)) / len(means) if len(means) >= 2 else 0.0
+    elif k >= 2:
+        sim_part = float(rows.var(ddof=1)) / k
+    if n >= 2:  # with one independent simulation: the real runs' part of the variance only
+        se = math.sqrt((sim_part or 0.0) + d.mean(axis=0).var(ddof=1) / n)
+    timed = [
+        (t, u)
+        for t, u in zip(transit_times, units if units is not None else range(k), strict=True)
+        if t is not None and math.isfinite(t)
+    ]
+    sim_t = [t for t, _ in timed]
     real_t = [t for t in reference.transit_times if t is not None]
     transit = None
     mean_t = float(np.mean(sim_t)) if sim_t else None
     if sim_t and len(real_t) >= 2 and w_transit > 0:
-        transit = w_transit * transit_statistic(sim_t, real_t)
+        transit = w_transit * transit_statistic(
+            sim_t, real_t, units=None if units is None else [u for _, u in timed]
+        )
     value = traj + (transit or 0.0)
     return EnsembleCost(value, traj, transit, se, k, mean_t)
 
 
+def _unit_means(values: np.ndarray, units: Sequence[int]) -> np.ndarray:
+    """The mean of ``values`` per unit (antithetic placements), in the units' first order."""
+    order = list(dict.fromkeys(units))
+    return np.array([values[[i for i, u in enumerate(units) if u == g]].mean() for g in order])
+
+
 def transit_statistic(
-    sim_times: Sequence[float], real_times: Sequence[float], *, constant: float = math.inf
+    sim_times: Sequence[float],
+    real_times: Sequence[float],
+    *,
+    constant: float = math.inf,
+    units: Sequence[int] | None = None,
 ) -> float:
     """The squared Welch statistic of the mean transit times [s] (module docstring;
     dimensionless): SE^2 = s_sim^2 / K + s_real^2 / n, s_sim^2 = s_real^2 with one simulated
-    time. Needs a simulated and two real times; when SE^2 is 0 it is 0 for equal means and
-    ``constant`` otherwise."""
+    time; with ``units`` (antithetic placements) the simulations' part from the units' means,
+    0 with one unit. Needs a simulated and two real times; when SE^2 is 0 it is 0 for equal
+    means and ``constant`` otherwise."""
     m, n = len(sim_times), len(real_times)
     if m < 1 or n < 2:
         raise ParcelfitError("a transit statistic needs a simulated and two real transit times")
     var_real = float(np.var(real_times, ddof=1))
-    var_sim = float(np.var(sim_times, ddof=1)) if m >= 2 else var_real
-    se2 = var_sim / m + var_real / n
+    if units is not None:
+        means = _unit_means(np.asarray(sim_times, float), units)
+        sim_part = float(np.var(means, ddof=1)) / len(means) if len(means) >= 2 else 0.0
+    else:
+        var_sim = float(np.var(sim_times, ddof=1)) if m >= 2 else var_real
+        sim_part = var_sim / m
+    se2 = sim_part + var_real / n
     diff2 = (float(np.mean(sim_times)) - float(np.mean(real_times))) ** 2
     return diff2 / se2 if se2 > 0 else (0.0 if diff2 == 0 else constant)
 

@@ -53,7 +53,8 @@ class CaseCost(_Stored):
         default_factory=list, description="its simulated runs, relative to the study folder"
     )
     seeds: list[int | None] = Field(
-        default_factory=list, description="their placement seeds (None: nominal placement)"
+        default_factory=list,
+        description="their placement seeds (None: nominal placement; -s: placement s mirrored)",
     )
     transit_times: list[float | None] = Field(
         default_factory=list, description="their simulated transit times [s]"

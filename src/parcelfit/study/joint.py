@@ -221,8 +221,9 @@ def case_cost(
         transits = [adjustment.adjust_track(t, tr) for t, tr in zip(transits, trajs, strict=True)]
         out["adjusted_transit_times"] = transits
     if study.cost_kind == "ensemble":
+        units = [0 if r.seed is None else abs(r.seed) for r in runs] if study.mirrored else None
         e = ensemble_cost(
-            trajs, transits, reference, study.w_xy, study.w_theta, study.transit_weight
+            trajs, transits, reference, study.w_xy, study.w_theta, study.transit_weight, units
         )
         out.update(
             cost=e.value,

@@ -106,9 +106,11 @@ class CostSection(FileModel):
     """Seeded placements per case and evaluation (ensemble cost only; the published cost
     simulates one)."""
     mirrored: Annotated[bool, Flag()] = False
-    """Antithetic placements (ensemble cost only): each seeded placement beside its mirror
-    image (every offset negated, the nominal start first when ``placements`` is odd), so that
-    the fixed sample of placements averages to the nominal start; false: independent draws."""
+    """Antithetic placements (ensemble cost, 2 or more placements): each seeded placement
+    beside its mirror image (every offset negated, the nominal start first when ``placements``
+    is odd), so that the fixed sample of placements averages to the nominal start, and the
+    cost's variances taken from the pairs' means; false: independent draws. A simulator of
+    your own (``backend: python``) gets seed -s for the mirror image of placement s."""
     transit_weight: Annotated[float, Number(ge=0)] = 1.0
     """Weight w_T of the ensemble cost's transit-time term [-]."""
     transit: Annotated[str, Choice(("measured", "adjusted"), what="transit time")] = "measured"
@@ -132,6 +134,13 @@ class CostSection(FileModel):
                 "the published cost simulates the nominal placement only: nothing to mirror",
                 where="mirrored",
                 fix="use kind: ensemble with placements: 2 or more, or leave mirrored out",
+            )
+        if self.mirrored and self.placements < 2:
+            raise ParcelfitError(
+                "mirrored placements pair a placement with its mirror image: one placement "
+                "has nothing to pair",
+                where="mirrored",
+                fix="use placements: 2 or more, or leave mirrored out",
             )
         if self.kind == "published" and self.transit != "measured":
             raise ParcelfitError(
