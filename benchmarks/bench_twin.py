@@ -203,7 +203,11 @@ def analytic_nominal_rigs(out: Path, r_nominal: bool, mirrored: bool = False) ->
     said = (
         ("rig R: nominal placement" if r_nominal else "every rig: placement scatter")
         + "; calibrations: "
-        + ("mirrored placements" if mirrored else "independent placements")
+        + (
+            "mirrored placements (transit variance from the pairs' means)"
+            if mirrored
+            else "independent placements"
+        )
     )
     before = "rig R: nominal placement; calibrations: independent placements"
     if mark.is_file():

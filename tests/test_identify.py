@@ -181,7 +181,13 @@ def test_antithetic_units_carry_the_simulations_part_of_the_variances(reference)
     assert transit_statistic(times, real, units=units) == pytest.approx(
         float(np.mean(times) - m) ** 2 / se2, rel=1e-12
     )
-    # the trajectory term's standard error: the units' means of the rows
+    # no scatter left: the runs' own variance stands, as without units (no infinite term)
+    same = [1.0, 1.0, 1.0]
+    assert transit_statistic([1.04, 1.06], same, units=[1, 1]) == pytest.approx(
+        transit_statistic([1.04, 1.06], same)
+    )
+    # the trajectory term's standard error keeps the runs' own variance (a squared distance's
+    # scatter is not cancelled by mirroring); the cost is the same
     _, sel = reference
     from .fake_sim import TRUTH, placement, trajectory
 
@@ -191,11 +197,15 @@ def test_antithetic_units_carry_the_simulations_part_of_the_variances(reference)
     ]
     plain = ensemble_cost(trajs, [None] * 4, sel)
     paired = ensemble_cost(trajs, [None] * 4, sel, units=[1, 1, 2, 2])
-    assert paired.value == pytest.approx(plain.value, rel=1e-12)  # the cost is the same
-    assert paired.se < plain.se
-    one = ensemble_cost(trajs[:2], [None] * 2, sel, units=[1, 1])  # the real runs' part only
-    two = ensemble_cost(trajs[:2], [None] * 2, sel)
-    assert one.se is not None and two.se is not None and 0 < one.se < two.se
+    assert paired.value == pytest.approx(plain.value, rel=1e-12)
+    assert paired.se == pytest.approx(plain.se, rel=1e-12)
+    # a pair that lost one run's transit time: its lone run keeps its scatter, no units
+    real_t = [t for t in sel.transit_times if t is not None]
+    lost = ensemble_cost(trajs, [1.0, None, 1.01, 0.99], sel, units=[1, 1, 2, 2])
+    assert lost.transit_term == pytest.approx(transit_statistic([1.0, 1.01, 0.99], real_t))
+    whole = ensemble_cost(trajs, [1.0, 1.02, 1.01, 0.99], sel, units=[1, 1, 2, 2])
+    expect = transit_statistic([1.0, 1.02, 1.01, 0.99], real_t, units=[1, 1, 2, 2])
+    assert whole.transit_term == pytest.approx(expect, rel=1e-12)
     with pytest.raises(ParcelfitError, match="one unit per simulated run"):
         ensemble_cost(trajs, [None] * 4, sel, units=[1, 1])
 

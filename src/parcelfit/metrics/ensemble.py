@@ -38,16 +38,24 @@ the first part only; the real runs' part is fixed by the experiment.
 
 **Antithetic placements** (``cost.mirrored``, `parcelfit.study.joint.placement_seeds`). The
 simulations then come in units: a placement beside its mirror image, and the nominal placement
-alone when K is odd. A unit's mean has no placement scatter to first order (none where a run is
-linear in its placement), so the K runs' own variance overstates the variance of their mean
-(by a factor of about K for a pair). With ``units`` given (the unit of each simulation), the
-simulations' part of both variances is taken from the units' means instead, over the U units:
+alone when K is odd. A unit's mean transit time has no placement scatter to first order (none
+where the transit time is linear in the placement), so the K runs' own variance overstates the
+variance of their mean. With ``units`` given (the unit of each simulation), the transit term's
+simulation part is taken from the units' means instead, over the U units:
 
-    SE^2 = s_units^2 / U + s_real^2 / n,      Var(c_traj) ~ var_u(unit mean of the rows) / U + ...
+    SE^2 = s_units^2 / U + s_real^2 / n
 
-and is 0 with a single unit (K = 2: one pair; what remains is of second order and not
-estimated). The threshold's sets of K real runs (below) are independent runs, which no real
-experiment can mirror; they are not changed.
+0 with a single unit (K = 2: one pair; what remains is of second order and not estimated).
+Where that leaves SE^2 = 0 (real runs that all cross in the same time), or a unit lost a run's
+transit time (a lone run of a pair keeps its whole placement scatter), the runs' own variance
+over K stands as without units. The mean is still over the runs (the nominal run of an odd K
+weighs 1/K, where the units' variance treats the U means alike: a small mismatch, kept). The
+trajectory term's standard error keeps the runs' own variance: D is a squared distance, whose
+part linear in the placement vanishes near the best fit, and mirroring does not cancel the
+quadratic part that remains. The threshold's sets of K real runs (below) are independent runs,
+which no real experiment can mirror: with their long-tailed transit statistic (above) against a
+mirrored cost whose transit term at the truth is about chi-square with one degree of freedom,
+the threshold is the more generous and the plausible sets the wider.
 
 **Adjusted transit times.** With ``cost.transit: adjusted`` the real runs' transit times in the
 reference are adjusted for the belt speeds each run rode at
@@ -121,7 +129,7 @@ def ensemble_cost(
     """The ensemble cost (module docstring) of simulated runs ``sims`` (raw trajectories, SI)
     with their transit times [s] against the real runs behind ``reference``; ``units`` (one per
     simulation) groups antithetic placements, whose units' means carry the simulations' part of
-    the variances (module docstring)."""
+    the transit term's variance (module docstring)."""
     if not sims:
         raise ParcelfitError("an ensemble cost needs at least one simulated run")
     if min(w_xy, w_theta, w_transit) < 0:
@@ -139,28 +147,26 @@ def ensemble_cost(
         raise ParcelfitError("an ensemble cost needs one unit per simulated run")
     traj = float(d.mean())
     se = None
-    rows = d.mean(axis=1)
-    sim_part = None  # the simulations' part of the variance of the trajectory term
-    if units is not None:
-        means = _unit_means(rows, units)
-        sim_part = float(np.var(means, ddof=1)) / len(means) if len(means) >= 2 else 0.0
-    elif k >= 2:
-        sim_part = float(rows.var(ddof=1)) / k
-    if n >= 2:  # with one independent simulation: the real runs' part of the variance only
-        se = math.sqrt((sim_part or 0.0) + d.mean(axis=0).var(ddof=1) / n)
+    if k >= 2 and n >= 2:  # the trajectory term's SE: the runs' own variance (docstring)
+        se = math.sqrt(d.mean(axis=1).var(ddof=1) / k + d.mean(axis=0).var(ddof=1) / n)
+    elif n >= 2:  # one simulation: the real runs' part of the variance only
+        se = math.sqrt(d.mean(axis=0).var(ddof=1) / n)
     timed = [
         (t, u)
         for t, u in zip(transit_times, units if units is not None else range(k), strict=True)
         if t is not None and math.isfinite(t)
     ]
     sim_t = [t for t, _ in timed]
+    timed_units = None
+    if units is not None:
+        timed_units = [u for _, u in timed]
+        if any(timed_units.count(u) != list(units).count(u) for u in set(timed_units)):
+            timed_units = None  # a unit lost a run's time: its lone run is not a pair's mean
     real_t = [t for t in reference.transit_times if t is not None]
     transit = None
     mean_t = float(np.mean(sim_t)) if sim_t else None
     if sim_t and len(real_t) >= 2 and w_transit > 0:
-        transit = w_transit * transit_statistic(
-            sim_t, real_t, units=None if units is None else [u for _, u in timed]
-        )
+        transit = w_transit * transit_statistic(sim_t, real_t, units=timed_units)
     value = traj + (transit or 0.0)
     return EnsembleCost(value, traj, transit, se, k, mean_t)
 
@@ -181,18 +187,19 @@ def transit_statistic(
     """The squared Welch statistic of the mean transit times [s] (module docstring;
     dimensionless): SE^2 = s_sim^2 / K + s_real^2 / n, s_sim^2 = s_real^2 with one simulated
     time; with ``units`` (antithetic placements) the simulations' part from the units' means,
-    0 with one unit. Needs a simulated and two real times; when SE^2 is 0 it is 0 for equal
+    0 with one unit, unless that leaves SE^2 = 0. Needs a simulated and two real times; when SE^2 is 0 it is 0 for equal
     means and ``constant`` otherwise."""
     m, n = len(sim_times), len(real_times)
     if m < 1 or n < 2:
         raise ParcelfitError("a transit statistic needs a simulated and two real transit times")
     var_real = float(np.var(real_times, ddof=1))
+    var_sim = float(np.var(sim_times, ddof=1)) if m >= 2 else var_real
+    sim_part = var_sim / m
     if units is not None:
         means = _unit_means(np.asarray(sim_times, float), units)
-        sim_part = float(np.var(means, ddof=1)) / len(means) if len(means) >= 2 else 0.0
-    else:
-        var_sim = float(np.var(sim_times, ddof=1)) if m >= 2 else var_real
-        sim_part = var_sim / m
+        paired = float(np.var(means, ddof=1)) / len(means) if len(means) >= 2 else 0.0
+        if paired + var_real / n > 0:  # else the runs' own variance, as without units
+            sim_part = paired
     se2 = sim_part + var_real / n
     diff2 = (float(np.mean(sim_times)) - float(np.mean(real_times))) ** 2
     return diff2 / se2 if se2 > 0 else (0.0 if diff2 == 0 else constant)
