@@ -370,18 +370,7 @@ def main() -> None:
         help="each replicate also draws its own twin dataset (the real runs' scatter)",
     )
     ap.add_argument("--out", type=Path, default=Path("bench-design"))
-    ap.add_argument(
-        "--r-nominal",
-        action="store_true",
-        help="rig R's twin runs at the nominal placement, as before 2026-12-06 (the model's "
-        "ensemble placements on R scatter: the twin and the model then disagree)",
-    )
-    ap.add_argument(
-        "--mirrored",
-        action="store_true",
-        help="calibrate with antithetic placements (cost.mirrored: each placement beside its "
-        "mirror image)",
-    )
+    bench_twin.add_analytic_arguments(ap, mirrored=True)
     args = ap.parse_args()
     if args.replicates < 1:
         ap.error("--replicates must be at least 1")

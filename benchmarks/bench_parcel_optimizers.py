@@ -131,18 +131,7 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=5)
     ap.add_argument("--budget", type=int, default=40, help="evaluations per calibration")
     ap.add_argument("--out", type=Path, default=Path("bench-parcel-optimizers"))
-    ap.add_argument(
-        "--r-nominal",
-        action="store_true",
-        help="rig R's twin runs at the nominal placement, as before 2026-12-06 (the model's "
-        "ensemble placements on R scatter: the twin and the model then disagree)",
-    )
-    ap.add_argument(
-        "--mirrored",
-        action="store_true",
-        help="calibrate with antithetic placements (cost.mirrored: each placement beside its "
-        "mirror image)",
-    )
+    bench_twin.add_analytic_arguments(ap, mirrored=True)
     args = ap.parse_args()
     nominal = bench_twin.analytic_nominal_rigs(args.out, args.r_nominal, args.mirrored)
     samplers = args.samplers.split(",")

@@ -129,12 +129,7 @@ def main() -> None:
     ap.add_argument("--placements", type=int, default=10)
     ap.add_argument("--budget", type=int, default=24, help="evaluations per calibration")
     ap.add_argument("--out", type=Path, default=Path("bench-predict-coverage"))
-    ap.add_argument(
-        "--r-nominal",
-        action="store_true",
-        help="rig R's twin runs at the nominal placement, as before 2026-12-06 (the model's "
-        "ensemble placements on R scatter: the twin and the model then disagree)",
-    )
+    bench_twin.add_analytic_arguments(ap, mirrored=False)
     args = ap.parse_args()
 
     from tests.predict_helpers import write_rig_q

@@ -188,6 +188,24 @@ def write_study_file(
 ANALYTIC_CHOICES_FILE = "analytic-choices.txt"
 
 
+def add_analytic_arguments(ap: argparse.ArgumentParser, mirrored: bool = True) -> None:
+    """The options of a benchmark on the analytic test simulator: ``--r-nominal`` (the twins
+    before 2026-12-06, `analytic_nominal_rigs`) and, with ``mirrored``, ``--mirrored``."""
+    ap.add_argument(
+        "--r-nominal",
+        action="store_true",
+        help="rig R's twin runs at the nominal placement, as before 2026-12-06 (the model's "
+        "ensemble placements on R scatter: the twin and the model then disagree)",
+    )
+    if mirrored:
+        ap.add_argument(
+            "--mirrored",
+            action="store_true",
+            help="calibrate with antithetic placements (cost.mirrored: each placement beside "
+            "its mirror image)",
+        )
+
+
 def analytic_nominal_rigs(out: Path, r_nominal: bool, mirrored: bool = False) -> tuple[str, ...]:
     """The rigs whose twin runs start at the nominal placement in a benchmark on the analytic
     test simulator (`tests.fake_sim.write_reference_dataset`'s ``nominal_rigs``): none, so

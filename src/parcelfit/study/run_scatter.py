@@ -5,7 +5,7 @@ of one test case differ further: each is its own specimen (its friction and stif
 about its type's values) and tracking and light barriers measure with noise. Neither is a
 parameter the calibration sets nor a placement the rig file describes, so where the data
 determine the parameters the model's band is narrower than the spread of real runs
-(docs/research/predict-coverage.md: 56-83 % of unseen twin transit times inside a 90 % band).
+(docs/research/predict-coverage.md: 77-83 % of unseen twin transit times inside a 90 % band).
 
 **Estimate** from the calibration's cases with real runs, per quantity q of a run (transit
 time T [s], rotation [rad], exit x and y [m], exit heading [rad];

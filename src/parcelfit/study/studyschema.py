@@ -109,7 +109,7 @@ class CostSection(FileModel):
     """Antithetic placements (ensemble cost, 2 or more placements): each seeded placement
     beside its mirror image (every offset negated, the nominal start first when ``placements``
     is odd), so that the fixed sample of placements averages to the nominal start, and the
-    cost's variances taken from the pairs' means; false: independent draws. A simulator of
+    transit term's variance taken from the pairs' means; false: independent draws. A simulator of
     your own (``backend: python``) gets seed -s for the mirror image of placement s."""
     transit_weight: Annotated[float, Number(ge=0)] = 1.0
     """Weight w_T of the ensemble cost's transit-time term [-]."""
