@@ -189,10 +189,7 @@ def calibrate(
     for label in extra_cases:
         rig, _, setting = label.split("/")
         cases.append({"rig": rig, "speed_setting": int(setting)})
-    cost: dict[str, Any] = {"kind": "ensemble", "placements": 2}
-    if mirrored:
-        cost["mirrored"] = True
-    setup = bench_twin.Setup(name, {"cases": cases, "cost": cost})
+    setup = bench_twin.Setup(name, {"cases": cases, "cost": bench_twin.analytic_cost(mirrored)})
     path = bench_twin.write_study_file(
         folder,
         setup,

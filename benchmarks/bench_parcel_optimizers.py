@@ -82,7 +82,7 @@ def one(
             {"dataset": "{dataset}", "rig": "R", "speed_setting": 1},
             {"rig": "Q", "speed_setting": 1},
         ],
-        "cost": {"kind": "ensemble", "placements": 2, **({"mirrored": True} if mirrored else {})},
+        "cost": bench_twin.analytic_cost(mirrored),
     }
     if validate:
         keys["validation"] = {"every": 1, "cases": [{"rig": "R", "speed_setting": 2}]}

@@ -206,6 +206,12 @@ def add_analytic_arguments(ap: argparse.ArgumentParser, mirrored: bool = True) -
         )
 
 
+def analytic_cost(mirrored: bool) -> dict[str, Any]:
+    """The ensemble cost of the benchmarks on the analytic test simulator: 2 placements per
+    case, mirrored (``cost.mirrored``) with ``--mirrored``."""
+    return {"kind": "ensemble", "placements": 2, **({"mirrored": True} if mirrored else {})}
+
+
 def analytic_nominal_rigs(out: Path, r_nominal: bool, mirrored: bool = False) -> tuple[str, ...]:
     """The rigs whose twin runs start at the nominal placement in a benchmark on the analytic
     test simulator (`tests.fake_sim.write_reference_dataset`'s ``nominal_rigs``): none, so

@@ -369,14 +369,15 @@ def make_twin_dataset(
     todo = []
     for i in range(len(jobs)):
         stored = kept.get(i)
-        given = None if stored is not None or taken is None else taken(jobs[i])
         if stored is not None:
             done(stored, "from the cache")
-        elif given is not None:
-            kept.put(i, given, 0.0)
-            done(given, "taken")
-        else:
+            continue
+        given = taken(jobs[i]) if taken is not None else None
+        if given is None:
             todo.append(i)
+            continue
+        kept.put(i, given, 0.0)
+        done(given, "taken")
     kind = executor or ("local" if workers > 1 else "serial")
     with make_executor(kind, workers=workers) as pool:
         for k, out in pool.map(_twin_run, [jobs[i] for i in todo]):

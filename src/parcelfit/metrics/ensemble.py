@@ -83,6 +83,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -160,7 +161,8 @@ def ensemble_cost(
     timed_units = None
     if units is not None:
         timed_units = [u for _, u in timed]
-        if any(timed_units.count(u) != list(units).count(u) for u in set(timed_units)):
+        whole, kept = Counter(units), Counter(timed_units)
+        if any(kept[u] != whole[u] for u in kept):
             timed_units = None  # a unit lost a run's time: its lone run is not a pair's mean
     real_t = [t for t in reference.transit_times if t is not None]
     transit = None
@@ -187,8 +189,8 @@ def transit_statistic(
     """The squared Welch statistic of the mean transit times [s] (module docstring;
     dimensionless): SE^2 = s_sim^2 / K + s_real^2 / n, s_sim^2 = s_real^2 with one simulated
     time; with ``units`` (antithetic placements) the simulations' part from the units' means,
-    0 with one unit, unless that leaves SE^2 = 0. Needs a simulated and two real times; when SE^2 is 0 it is 0 for equal
-    means and ``constant`` otherwise."""
+    0 with one unit, unless that leaves SE^2 = 0. Needs a simulated and two real times; when
+    SE^2 is 0 it is 0 for equal means and ``constant`` otherwise."""
     m, n = len(sim_times), len(real_times)
     if m < 1 or n < 2:
         raise ParcelfitError("a transit statistic needs a simulated and two real transit times")
