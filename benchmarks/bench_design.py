@@ -1,7 +1,7 @@
 """Does `parcelfit design` rank first the experiment that helps the calibration most?
 
-    python benchmarks/bench_design.py [--truths 3] [--budget 64] [--sets 20] [--placements 5]
-        [--replicates 1] [--out bench-design]
+    python benchmarks/bench_design.py [--truths 3] [--first-truth 1] [--budget 64] [--sets 20]
+        [--placements 5] [--replicates 1] [--out bench-design]
 
 Run from the repository's root. The simulator is the analytic test simulator of the test suite
 (``tests/fake_sim.py``), not MuJoCo: on rig R the drift and the transit time follow mu_d_BePa
@@ -11,11 +11,11 @@ mu_d_BePa three times as strongly as on R, nothing else; on the bench test B2 (p
 ``examples/bench/B2.yaml``) the turn follows k_MePa and the lateral position E_Pa (weakly);
 every other rig name (here E3) runs as R.
 
-Per hidden truth (``--truths``, seeded fractions 0.2-0.8 of the four ranges, not the bundled
-twin's) a twin dataset of every rig at speed settings 1 and 2 (10 runs per case with specimen,
-placement and tracking scatter; every rig's runs, R's too, scatter as the calibration's
-ensemble placements do; before 2026-12-06 R's runs started at the nominal placement, which
-``--r-nominal`` repeats) and:
+Per hidden truth (``--truths`` of them from truth ``--first-truth`` on, seeded fractions
+0.2-0.8 of the four ranges, not the bundled twin's) a twin dataset of every rig at speed
+settings 1 and 2 (10 runs per case with specimen, placement and tracking scatter; every rig's
+runs, R's too, scatter as the calibration's ensemble placements do; before 2026-12-06 R's runs
+started at the nominal placement, which ``--r-nominal`` repeats) and:
 
 a. a calibration on the published-like cases only (rig R, settings 1 and 2 jointly, ensemble
    cost over 2 placements; ``--budget`` evaluations, 8 initial, batches of 4);
@@ -355,6 +355,9 @@ def main() -> None:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     ap.add_argument("--truths", type=int, default=3)
+    ap.add_argument(
+        "--first-truth", type=int, default=1, help="the first truth's number (truths 1, 2, ...)"
+    )
     ap.add_argument("--budget", type=int, default=64, help="evaluations per calibration")
     ap.add_argument("--sets", type=int, default=20, help="design's plausible parameter sets")
     ap.add_argument("--placements", type=int, default=5, help="design's placements per set")
@@ -371,6 +374,8 @@ def main() -> None:
     args = ap.parse_args()
     if args.replicates < 1:
         ap.error("--replicates must be at least 1")
+    if args.first_truth < 1 or args.truths < 1:
+        ap.error("--first-truth and --truths must be at least 1")
     args.nominal_rigs = bench_twin.analytic_nominal_rigs(args.out, args.r_nominal, args.mirrored)
 
     from tests.predict_helpers import write_rig_q
@@ -380,16 +385,18 @@ def main() -> None:
     rig_files = [write_rig_q(args.out), bench / "B1.yaml", bench / "B2.yaml"]
     t0 = time.perf_counter()
     results = []
-    for k in range(args.truths):
+    for k in range(args.first_truth - 1, args.first_truth - 1 + args.truths):
         res = run_truth(k, args, rig_files)
         print_truth(k, res)
         results.append(res)
+    for k, r in enumerate(results, args.first_truth):
+        r["truth_number"] = k
     (args.out / "results.json").write_text(json.dumps(results, indent=1))
 
     def said(key: str) -> str:
         return ", ".join(
-            f"truth {i + 1} {'yes' if r['design_first'] == r[key] else 'no'}"
-            for i, r in enumerate(results)
+            f"truth {i} {'yes' if r['design_first'] == r[key] else 'no'}"
+            for i, r in enumerate(results, args.first_truth)
         )
 
     designed = [r["rows"].get("top two") for r in results]
@@ -397,12 +404,12 @@ def main() -> None:
     covered = all(d is not None and d["covered"] == len(PARAMETERS) for d in designed)
     if args.replicates > 1:
         best = ", ".join(
-            f"truth {i + 1} {'yes' if r['design_first'] == r['helped_most_mean'] else 'no'}"
-            for i, r in enumerate(results)
+            f"truth {i} {'yes' if r['design_first'] == r['helped_most_mean'] else 'no'}"
+            for i, r in enumerate(results, args.first_truth)
         )
         tied = ", ".join(
-            f"truth {i + 1} {'yes' if r['design_first'] in r['tied_best'] else 'no'}"
-            for i, r in enumerate(results)
+            f"truth {i} {'yes' if r['design_first'] in r['tied_best'] else 'no'}"
+            for i, r in enumerate(results, args.first_truth)
         )
         over = (
             f"over {args.replicates} optimiser seeds"

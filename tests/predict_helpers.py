@@ -13,9 +13,10 @@ from .helpers import write_study
 BOUNDS = {"mu_d_BePa": (0.44, 0.46), "mu_d_MePa": (0.19, 0.21), "E_Pa": (2e8, 1.6e9)}
 
 
-def write_finished_study(tmp_path: Path, rows: int = 400) -> Path:
+def write_finished_study(tmp_path: Path, rows: int = 400, **study: object) -> Path:
     """A study folder (``tmp_path/study``) whose stored sample of the plausible set is uniform
-    on `BOUNDS` (seeded); returns the folder."""
+    on `BOUNDS` (seeded), its study file's keys ``study`` replaced (`write_study`); returns the
+    folder."""
     from parcelfit.study.identify import Identifiability, ParameterInterval, verdict
     from parcelfit.study.results import new_results, write_results
     from parcelfit.study.store import SourceRecord, Store
@@ -23,6 +24,7 @@ def write_finished_study(tmp_path: Path, rows: int = 400) -> Path:
     path = write_study(
         tmp_path,
         parameters={"mu_d_BePa": [0.3, 0.6], "mu_d_MePa": [0.15, 0.35], "E_Pa": [200, 1600]},
+        **study,
     )
     folder = tmp_path / "study"
     folder.mkdir()

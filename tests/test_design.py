@@ -122,7 +122,7 @@ def test_a_candidate_that_informs_only_jointly_with_a_fitted_case_ranks_above_on
     assert given[1] == pytest.approx(math.sqrt(12 * 2e-5), rel=1e-3)
     assert given[0] > 0.999  # p0 is known already: nothing gained
     assert shares_of(10 * same, known) == pytest.approx([1.0, 1.0])
-    order = greedy_sequence([same, joint], known, 10, [0, 1])
+    order = greedy_sequence([10 * same, 10 * joint], known, [0, 1])
     assert [c for c, _ in order] == [1, 0]
     assert order[0][1] == pytest.approx(float(np.mean(given)))
     assert order[1][1] == pytest.approx(order[0][1])  # nothing added by the second
@@ -137,7 +137,7 @@ def test_the_greedy_second_choice_is_not_the_first_rig_at_another_setting():
     b = information(np.array([[0.0, 0.4, 0.0]]), s)  # rig B: p1, weaker
     one = [float(np.mean(shares_of(10 * i))) for i in (a1, a2, b)]
     assert one[1] < one[0] < one[2]  # one by one: A2, A1, then B
-    order = greedy_sequence([a1, a2, b], None, 10, [0, 1, 2])
+    order = greedy_sequence([10 * a1, 10 * a2, 10 * b], None, [0, 1, 2])
     assert [c for c, _ in order] == [1, 2, 0]  # A2, then B (a new parameter), then A1
     assert order[0][1] == pytest.approx(one[1])
     pair = shares_of(10 * (a2 + b))
@@ -200,3 +200,124 @@ def test_the_real_runs_own_scatter_widens_a_candidate_s_noise_beyond_the_floor()
     _, wider = sensitivity(intervals_of(["a"]), sets, grids, real)
     assert wider[0] == pytest.approx(0.01 * 2.05, rel=1e-9)  # 1 % of the mean 2.05 s
     assert wider[2] == pytest.approx(FLOOR["exit_y"])
+
+
+def test_the_simulations_own_scatter_caps_what_more_real_runs_tell():
+    """information with m_q: n real runs measure the mean against the simulated mean with
+    variance s^2 / n + m; the expected share follows that posterior and stops narrowing at
+    J^2 / m however many runs are added."""
+    from parcelfit.study.design import information
+
+    J = np.array([[0.3]])
+    scatter = np.array([0.1])
+    model = np.array([0.01])  # the simulated mean's variance: as much as 1 run's
+    for n in (1, 10, 100):
+        info = information(J, scatter, n, model)
+        assert info[0, 0] == pytest.approx(0.09 / (0.01 / n + 0.01), rel=1e-12)
+        w = expected_width(J, scatter, n, model=model)[0]
+        assert w == pytest.approx(math.sqrt(12 / (info[0, 0] + 12)), rel=1e-12)
+    # without it, 10 runs are 10 times one run's information
+    assert information(J, scatter, 10)[0, 0] == pytest.approx(10 * 9.0, rel=1e-12)
+    # 9 n / (1 + n): 2 runs a share of sqrt(12 / 18) = 0.816, 3 runs sqrt(12 / 18.75) = 0.8
+    assert runs_needed(J, scatter, np.array([0.81]), model=model) == [3]
+    # the cap: J^2 / m = 9, a share of sqrt(12 / 21) = 0.756 at best (0.2 without m: 32 runs)
+    assert runs_needed(J, scatter, np.array([0.75]), model=model) == [None]
+
+
+def test_the_simulated_mean_s_variance_from_independent_and_from_mirrored_placements():
+    """model_variance: R W / K^2 with independent placements (W / K without a nominal run);
+    with mirrored pairs 4 P V / K^2, V the variance of a pair's mean, so a response linear in
+    the placement gives 0; V = W / 2 where the grid holds fewer than two complete pairs; the
+    published cost's nominal run counts as exact."""
+    from parcelfit.study.design import (
+        design_placement_seeds,
+        model_variance,
+        run_variance,
+    )
+    from parcelfit.study.plausible import placement_seeds
+    from parcelfit.study.spread import decompose
+
+    rng = np.random.default_rng(5)
+    offsets = rng.normal(0.0, 0.01, (20, 2))  # two pairs per set
+    linear = np.stack([offsets[:, 0], -offsets[:, 0], offsets[:, 1], -offsets[:, 1]], axis=1)
+    bent = linear**2  # even in the placement: the pairs do not cancel it
+    grids = {q: linear + 1.0 for q in ("transit_time", "rotation", "exit_y", "exit_heading")}
+    grids["exit_y"] = bent
+    w_all = decompose(linear).run_variance
+    assert w_all == pytest.approx(float(np.sum(linear**2)) / (80 - 20), rel=1e-9)
+    assert model_variance(grids, [1, 2], mirrored=False)[0] == pytest.approx(w_all / 2, rel=1e-12)
+    assert model_variance(grids, [None], mirrored=False).tolist() == [0.0] * 4  # published
+    # mirrored pairs: one run's variance is exact from them (the pooled W runs high by 4 / 3)
+    assert run_variance(linear, mirrored=True) == pytest.approx(np.mean(linear**2), rel=1e-9)
+    assert model_variance(grids, [1, -1], mirrored=True)[0] == pytest.approx(0.0, abs=1e-20)
+    pairs = np.stack([bent[:, 0], bent[:, 2]], axis=1)  # a pair's mean of squares: its square
+    V = float(np.sum((pairs - pairs.mean(axis=1, keepdims=True)) ** 2) / (40 - 20))
+    assert model_variance(grids, [1, -1], mirrored=True)[2] == pytest.approx(V, rel=1e-9)
+    # an odd K: the nominal run first, counted exact; one pair of three runs
+    assert model_variance(grids, [None, 1, -1], True)[2] == pytest.approx(4 * V / 9, rel=1e-9)
+    # one pair per set: V from W / 2, the independent draws' value
+    one_pair = {q: g[:, :2] for q, g in grids.items()}
+    Wb = decompose(one_pair["exit_y"]).run_variance
+    assert model_variance(one_pair, [1, -1], True)[2] == pytest.approx(Wb / 2, rel=1e-12)
+    # a pair's member lost everywhere: no complete pair of two, the same fallback, not 0
+    lost = {q: g.copy() for q, g in grids.items()}
+    for g in lost.values():
+        g[:, 3] = np.nan
+    Wl = decompose(lost["exit_y"]).run_variance
+    assert model_variance(lost, [1, -1], True)[2] == pytest.approx(Wl / 2, rel=1e-12)
+    assert (
+        model_variance({q: g[:, :1] for q, g in grids.items()}, [1, 2], False).tolist() == [0.0] * 4
+    )
+    # design's own placements: in mirrored pairs, else those a prediction draws
+    seeds = design_placement_seeds(5, 7, mirrored=True)
+    assert seeds[1] == -seeds[0] and seeds[3] == -seeds[2] and len(seeds) == 5 and seeds[4] > 0
+    assert design_placement_seeds(4, 7, mirrored=False) == placement_seeds(4, 7)
+
+
+def test_design_of_an_ensemble_study_counts_the_fit_s_own_placements(tmp_path):
+    """rank_experiments: with the ensemble cost the candidates' shares take the simulated
+    means' variance m_q (2 placements per case) and are wider than with m_q = 0; with
+    antithetic placements design runs its own placements in mirrored pairs."""
+    from parcelfit.study.design import rank_experiments
+    from parcelfit.study.store import Store
+
+    def shares(folder, out):
+        result = rank_experiments(
+            folder,
+            candidates=["Q/KPBW/1"],
+            rig_files=[str(q)],
+            sets=8,
+            placements=4,
+            executor="serial",
+            out=out,
+        )
+        return result, {s.parameter: s.share for s in result.scores}
+
+    study = write_finished_study(tmp_path, cost={"kind": "ensemble", "placements": 2})
+    q = write_rig_q(tmp_path)
+    result, with_m = shares(study, tmp_path / "d")
+    assert result.fit_scatter
+    doc = json.loads((tmp_path / "d" / "design.json").read_text())
+    assert doc["fit_scatter"] is True
+    import parcelfit.study.design as design
+
+    real = design.model_variance
+    try:  # the same simulations scored with the simulated means taken as exact
+        design.model_variance = lambda grids, seeds, mirrored: np.zeros(4)
+        _, without = shares(study, tmp_path / "d")
+    finally:
+        design.model_variance = real
+    assert with_m["E_Pa"] > without["E_Pa"] + 1e-3
+
+    mirrored = tmp_path / "m"
+    mirrored.mkdir()
+    folder = write_finished_study(
+        mirrored, cost={"kind": "ensemble", "placements": 2, "mirrored": True}
+    )
+    shares(folder, mirrored / "d")
+    store = Store(mirrored / "d" / "design.sqlite")
+    try:
+        seeds = store.get_meta("design")["placements"]
+    finally:
+        store.close()
+    assert seeds[1] == -seeds[0] and seeds[3] == -seeds[2] and seeds[0] > 0

@@ -43,18 +43,43 @@ information of its own, and each run's angle counts once, through the exit headi
 The signal-to-noise of p on the candidate is max_q |J_qp| / s_q: how many run-to-run standard
 deviations the outcome moves as p crosses its plausible interval.
 
+**The simulations' own scatter.** A calibration compares the real runs' mean with the mean of
+the few placements it simulates per case, the same seeds in every evaluation (the ensemble
+cost's K per case, `parcelfit.study.joint.placement_seeds`). That simulated mean misses the
+model's own mean by a fixed amount, which the fit can only take up in the parameters, as it
+would the real runs' scatter: its variance is m_q = W_q / K (`model_variance`; W_q one run's
+variance over the placements). With antithetic placements (``cost.mirrored``) a run's
+first-order offset cancels in its pair's mean: m_q = 4 P V_q / K^2, V_q the variance of a
+pair's mean, P the pairs (the nominal run of an odd K counted exact); design then simulates its
+own placements in mirrored pairs and estimates V_q from them (with fewer than two complete pairs
+per set, V_q = W_q / 2, its value for independent draws; with two pairs, as from
+``--placements`` 4 or 5, from one degree of freedom of placement: take more for a steady
+ranking), and W_q as V_q plus a pair's mean squared half-difference (the pooled estimate would
+run high by K / (K - 1)). The published cost's one nominal run is counted exact (its offset
+from the mean is of second order in the placement and is not estimated). m_q enters only where
+design's own runs scatter as the fit's do: not where they run the drives off their mean speeds
+(``speed_deviation``, MuJoCo and rigid-box rigs by default), which the calibration's runs do
+not; there m_q = 0 and the widths are optimistic (``fit_scatter`` in design.json). Assumed:
+M diagonal, and each case's offset independent of the others', though one set of seeds moves a
+case's quantities together and the cases share seed numbers; both make the widths optimistic
+once M dominates. So a candidate whose quantities the placements scatter, measured by an effect
+the size of that scatter, tells less than its real runs alone would say, however many runs are
+taken.
+
 **What the fitted cases tell.** The study's fitted test cases are simulated at the same sets
-and placements and give their own J_f and s_f: they hold the information
-F = sum_f n_f J_f^T S_f^-1 J_f (n_f: the real runs each was fitted on: its dataset's runs with
-the ensemble cost, the reference run with the published cost). A candidate on which an open
-parameter and a parameter the fitted cases fix act alike thus tells the open one.
+and placements and give their own J_f, s_f and M_f: they hold the information
+F = sum_f J_f^T (S_f / n_f + M_f)^-1 J_f (n_f: the real runs each was fitted on: its
+dataset's runs with the ensemble cost, the reference run with the published cost; M_f from its
+own placements). A candidate on which an open parameter and a parameter the fitted cases fix
+act alike thus tells the open one.
 
 **Expected interval after n real runs** (a linear-Gaussian experimental design). In interval
-units (each parameter's plausible interval mapped to [0, 1]), n real runs of the candidate
-measure each quantity's mean with variance s_q^2 / n; with the uniform prior over the interval
-(variance 1/12, precision 12) and the fitted cases' F, the posterior covariance is
+units (each parameter's plausible interval mapped to [0, 1]), n real runs of the candidate,
+fitted with the study's K placements, measure each quantity's mean against the simulations'
+with variance s_q^2 / n + m_q; with the uniform prior over the interval (variance 1/12,
+precision 12) and the fitted cases' F, the posterior covariance is
 
-    C(n) = ( n J^T S^-1 J + F + 12 I )^-1,   S = diag(s_q^2),
+    C(n) = ( J^T (S / n + M)^-1 J + F + 12 I )^-1,   S = diag(s_q^2),  M = diag(m_q),
 
 and the expected interval of p after the runs, as a share of its current interval, is
 w_p(n) = sqrt(C_pp(n) / C_pp(0)) (1: no narrowing). Today's interval is wider than F alone
@@ -63,7 +88,7 @@ candidate adds to what the fitted cases tell, applied to today's interval. A can
 moves two parameters alike cannot tell them apart unless F fixes one, and C says so. The runs
 a candidate needs for p are the smallest n (up to `MAX_RUNS`) at which w_p(n) times the
 current interval is at most 20 % of p's range, the width `parcelfit.study.identify` calls
-determined (none: not within `MAX_RUNS`).
+determined (none: not within `MAX_RUNS`, which M can make any number of runs).
 
 **Ranking.** Per parameter, the candidates by the expected width after ``--runs`` real runs
 (ties by the signal-to-noise). Overall, greedily: first the candidate with the smallest mean
@@ -117,6 +142,7 @@ from parcelfit.study.joint import (
     simulate_items,
     varies_drives,
 )
+from parcelfit.study.joint import placement_seeds as fit_placement_seeds
 from parcelfit.study.plausible import (
     Design,
     check_design,
@@ -242,7 +268,9 @@ class CandidateScore:
 class DesignResult:
     """A finished ranking: the open parameters, the candidates' scores, the runs assumed,
     where it was written, the greedy order (candidate label, mean share with the ones before;
-    empty: by the mean share alone) and the fitted cases taken into account (labels)."""
+    empty: by the mean share alone), the fitted cases taken into account (labels), the real
+    runs' own scatter used and whether the simulated means' variance m_q entered (module
+    docstring; not where design's runs vary the drives, which the calibration's do not)."""
 
     parameters: list[str]
     scores: list[CandidateScore]
@@ -253,6 +281,7 @@ class DesignResult:
     sequence: list[tuple[str, float]] = field(default_factory=list)
     fitted: list[str] = field(default_factory=list)
     real_scatter: dict[str, float] = field(default_factory=dict)
+    fit_scatter: bool = False
 
     def candidates_table(self) -> pd.DataFrame:
         """One row per candidate and open parameter, ranked per parameter (docs/data.md)."""
@@ -332,11 +361,13 @@ def sensitivity(
     sets: Sequence[dict[str, float]],
     grids: dict[str, np.ndarray],
     real_scatter: Mapping[str, float] | None = None,
+    mirrored: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """One case's sensitivities J (quantities x parameters: the change of each quantity's
     per-set mean over each parameter's current interval, zero where unresolved) and
     run-to-run scatter s_q (module docstring), from its simulated quantities ``grids``
-    (quantity -> n sets x K placements, NaN where a run has none) at ``sets``."""
+    (quantity -> n sets x K placements, NaN where a run has none; with ``mirrored`` the
+    placements in pairs s, -s, `run_variance`) at ``sets``."""
     names = ident.names
     intervals = [p.interval for p in ident.parameters]
     X = np.array([[s[n] for n in names] for s in sets], float)
@@ -344,9 +375,9 @@ def sensitivity(
     scatter = np.ones(len(QUANTITIES))
     for k, q in enumerate(QUANTITIES):
         grid = grids[q]
-        dec = decompose(grid)
         floor = FLOOR[q]
-        within = dec.run_variance if math.isfinite(dec.run_variance) else 0.0
+        within = run_variance(grid, mirrored)
+        within = within if math.isfinite(within) else 0.0
         extra = (real_scatter or {}).get(q, 0.0)
         if q in RELATIVE and extra:
             extra *= float(np.nanmean(grid)) if np.isfinite(grid).any() else 0.0
@@ -364,6 +395,72 @@ def sensitivity(
     return J, scatter
 
 
+def run_variance(grid: np.ndarray, mirrored: bool = False) -> float:
+    """One run's variance about its set's mean over the placements of ``grid`` (n sets x
+    placements, NaN where a run has none; units of the quantity squared), unbiased
+    (`parcelfit.study.spread.Decomposition.run_variance`); NaN when no set has two runs. With
+    ``mirrored`` (columns in pairs s, -s, design's placements of a mirrored study) the pairs'
+    means are not independent draws and that estimate would run high by K / (K - 1): then the
+    variance of a pair's mean plus the mean squared half-difference of a pair, where the sets
+    hold two complete pairs or more."""
+    q = np.asarray(grid, float)
+    pairs = q.shape[1] // 2
+    if mirrored and pairs >= 2:
+        a, b = q[:, 0 : 2 * pairs : 2], q[:, 1 : 2 * pairs : 2]
+        between = decompose(0.5 * (a + b)).run_variance
+        half = 0.5 * (a - b)
+        if math.isfinite(between) and np.isfinite(half).any():
+            return between + float(np.nanmean(half**2))
+    return decompose(q).run_variance
+
+
+def model_variance(
+    grids: dict[str, np.ndarray], fit_seeds: Sequence[int | None], mirrored: bool
+) -> np.ndarray:
+    """Per quantity (`QUANTITIES` order) m_q, the variance of the simulated mean a calibration
+    fits a case with (module docstring; units of the quantity squared), from design's runs of
+    the case ``grids`` (quantity -> n sets x placements, NaN: no value) and the placement seeds
+    the fit simulates it at, ``fit_seeds`` (`parcelfit.study.joint.placement_seeds`; None the
+    nominal start, counted as exact). Independent placements: R W_q / K^2 (R seeded runs of K,
+    W_q / K without a nominal one). ``mirrored``: 4 P V_q / K^2 with P pairs s, -s and V_q the
+    variance of a pair's mean, from ``grids``' columns in pairs where the sets hold two complete
+    pairs or more, else W_q / 2 (its value for independent draws). 0 where nothing estimates
+    it."""
+    K = len(fit_seeds)
+    seeded = [s for s in fit_seeds if s is not None]
+    out = np.zeros(len(QUANTITIES))
+    if K == 0 or not seeded:
+        return out
+    for k, q in enumerate(QUANTITIES):
+        grid = np.asarray(grids[q], float)
+        W = run_variance(grid, mirrored)
+        if not mirrored:
+            v = len(seeded) * W / K**2
+        else:
+            pairs = grid.shape[1] // 2
+            V = math.nan
+            if pairs >= 2:
+                V = decompose(0.5 * (grid[:, 0 : 2 * pairs : 2] + grid[:, 1 : 2 * pairs : 2]))
+                V = V.run_variance
+            if not math.isfinite(V):
+                V = W / 2
+            v = 4 * sum(s > 0 for s in seeded) * V / K**2
+        out[k] = v if math.isfinite(v) else 0.0
+    return out
+
+
+def design_placement_seeds(placements: int, seed: int, mirrored: bool) -> list[int]:
+    """The placement seeds design simulates every case at: ``placements`` seeds drawn from
+    ``seed`` (`parcelfit.study.plausible.placement_seeds`), or with ``mirrored`` half as many
+    each beside its mirror image (s, -s, ...; the last unpaired when ``placements`` is odd)."""
+    if not mirrored:
+        return placement_seeds(placements, seed)
+    out: list[int] = []
+    for s in placement_seeds((placements + 1) // 2, seed):
+        out += [s, -s]
+    return out[:placements]
+
+
 def score_candidate(
     design: Design,
     ident: Identifiability,
@@ -372,20 +469,24 @@ def score_candidate(
     runs: int,
     known: np.ndarray | None = None,
     real_scatter: Mapping[str, float] | None = None,
+    model: np.ndarray | None = None,
+    mirrored: bool = False,
 ) -> list[CandidateScore]:
     """The scores of one candidate from its simulated quantities ``grids`` (quantity -> n sets
     x K placements, NaN where a run has none), for every parameter the data do not determine,
-    given the information ``known`` the fitted cases hold (None: nothing) and the real runs'
-    own scatter ``real_scatter`` (`sensitivity`)."""
-    J, scatter = sensitivity(ident, sets, grids, real_scatter)
-    shares = expected_width(J, scatter, runs, known)
+    given the information ``known`` the fitted cases hold (None: nothing), the real runs'
+    own scatter ``real_scatter`` (`sensitivity`) and the variance ``model`` of the simulated
+    means the calibration would fit them with (`model_variance`; None: exact); ``mirrored``:
+    the placements in pairs s, -s."""
+    J, scatter = sensitivity(ident, sets, grids, real_scatter, mirrored)
+    shares = expected_width(J, scatter, runs, known, model)
     target = np.array(
         [
             DETERMINED_WIDTH * (p.high - p.low) / max(p.interval[1] - p.interval[0], 1e-300)
             for p in ident.parameters
         ]
     )
-    needed = runs_needed(J, scatter, target, known)
+    needed = runs_needed(J, scatter, target, known, model)
     snr = np.abs(J) / scatter[:, None]
     n_ok = int(np.isfinite(grids["rotation"]).sum())
     out = []
@@ -485,7 +586,7 @@ def rank_experiments(
     if not open_:
         return DesignResult([], [], runs, sets, placements, out_dir)
     fitted = fitted_cases(inputs.study)
-    cases = designs + [d for d, _ in fitted]  # the fitted cases simulated after the candidates
+    cases = designs + [d for d, _, _ in fitted]  # the fitted cases simulated after the candidates
     own = make_simulator(config) if fitted else None
     simulators = [design_simulator(inputs.study, d) for d in designs] + [own for _ in fitted]
     for sim in simulators:
@@ -494,7 +595,8 @@ def rank_experiments(
     varied = placed and all(varies_drives(s) for s in simulators)
     deviation = speed_deviation if varied else 0.0
     drawn = draw_sets(ident, sets, seed)
-    seeds = placement_seeds(placements, seed) if placed else [0]
+    study = inputs.study
+    seeds = design_placement_seeds(placements, seed, study.mirrored) if placed else [0]
     full = [{**inputs.study.fixed, **s} for s in drawn]
     check_writable(out_dir, (DESIGN_STORE,))
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -505,7 +607,7 @@ def rank_experiments(
             record = {
                 "study": str(inputs.folder.resolve()),
                 "candidates": [[d.rig, d.consignment, d.setting] for d in designs],
-                "fitted": [[d.rig, d.consignment, d.setting, n] for d, n in fitted],
+                "fitted": [[d.rig, d.consignment, d.setting, n] for d, n, _ in fitted],
                 "seed": seed,
                 "sets": drawn,
                 "placements": seeds,
@@ -517,8 +619,9 @@ def rank_experiments(
             elif json.loads(json.dumps(known)) != json.loads(json.dumps(record)):
                 raise ParcelfitError(
                     "this folder holds an experiment design with other inputs (study, "
-                    "candidates, --sets, --placements, --seed or --speed-deviation; or one made by an earlier "
-                    "version, which did not simulate the fitted cases)",
+                    "candidates, --sets, --placements, --seed, --speed-deviation or the "
+                    "study's cost.mirrored, which places design's runs in mirrored pairs; or "
+                    "one made by an earlier version)",
                     file=out_dir,
                     fix="give another --out, or the same inputs to resume it",
                 )
@@ -574,18 +677,32 @@ def rank_experiments(
             store.close()
         grids = [_grids(rows, c, len(full), len(seeds)) for c in range(len(cases))]
         real = real_run_scatter(inputs.folder, inputs.study)
-        sens = [sensitivity(ident, drawn, g, real) for g in grids]
+        mirrored = placed and study.mirrored
+        sens = [sensitivity(ident, drawn, g, real, mirrored) for g in grids]
+        # a candidate joins the fit with the study's placements, a fitted case keeps its own;
+        # m only where design's runs scatter as the fit's do: placed, at the drives' mean speeds
+        fit_scatter = placed and deviation == 0.0
+        per_case = [fit_placement_seeds(study)] * len(designs) + [k for *_, k in fitted]
+        models = [
+            model_variance(g, k, mirrored) if fit_scatter else None
+            for g, k in zip(grids, per_case, strict=True)
+        ]
         known = sum(
-            (n * information(*sens[len(designs) + f]) for f, (_, n) in enumerate(fitted)),
+            (
+                information(*sens[len(designs) + f], n, models[len(designs) + f])
+                for f, (_, n, _) in enumerate(fitted)
+            ),
             np.zeros((len(ident.names),) * 2),
         )
         scores: list[CandidateScore] = []
         for c, d in enumerate(designs):
-            scores += score_candidate(d, ident, drawn, grids[c], runs, known, real)
+            scores += score_candidate(
+                d, ident, drawn, grids[c], runs, known, real, models[c], mirrored
+            )
         open_idx = [j for j, p in enumerate(ident.parameters) if not p.determined]
-        infos = [information(*sens[c]) for c in range(len(designs))]
+        infos = [information(*sens[c], runs, models[c]) for c in range(len(designs))]
         sequence = [
-            (designs[c].label, share) for c, share in greedy_sequence(infos, known, runs, open_idx)
+            (designs[c].label, share) for c, share in greedy_sequence(infos, known, open_idx)
         ]
         result = DesignResult(
             open_,
@@ -595,8 +712,9 @@ def rank_experiments(
             placements,
             out_dir,
             sequence,
-            [d.label for d, _ in fitted],
+            [d.label for d, _, _ in fitted],
             dict(real),
+            fit_scatter,
         )
         write_design(result, out_dir, table_format)
     finally:
@@ -620,10 +738,11 @@ def _grids(rows: Sequence[Any], c: int, n_sets: int, n_seeds: int) -> dict[str, 
     return grids
 
 
-def fitted_cases(study: Study) -> list[tuple[Design, int]]:
+def fitted_cases(study: Study) -> list[tuple[Design, int, list[int | None]]]:
     """The study's fitted test cases as designs (run by the study's own simulator) with the
-    real runs each was fitted on: all of its dataset's runs with the ensemble cost, the one
-    reference run with the published cost."""
+    real runs each was fitted on (all of its dataset's runs with the ensemble cost, the one
+    reference run with the published cost) and the placement seeds it was fitted with in every
+    evaluation (`parcelfit.study.joint.placement_seeds`; [None] with the published cost)."""
     from parcelfit.runs.dataset import load_dataset
 
     out = []
@@ -635,7 +754,8 @@ def fitted_cases(study: Study) -> list[tuple[Design, int]]:
                 n = max(1, len(load_dataset(spec.dataset)[c].runs))
             except ParcelfitError:
                 n = 1
-        out.append((Design(c.rig, c.consignment, c.rig, c.consignment, c.speed_setting), n))
+        design = Design(c.rig, c.consignment, c.rig, c.consignment, c.speed_setting)
+        out.append((design, n, fit_placement_seeds(study, spec)))
     return out
 
 
@@ -662,6 +782,7 @@ def write_design(result: DesignResult, out: Path, table_format: str = "csv") -> 
         "placements": result.placements,
         "fitted": result.fitted,
         "real_scatter": result.real_scatter,
+        "fit_scatter": result.fit_scatter,
         "candidates": records(tables[0][1]),
         "ranking": records(tables[1][1]),
     }
@@ -680,10 +801,12 @@ __all__ = [
     "CandidateScore",
     "DesignResult",
     "candidate_designs",
+    "design_placement_seeds",
     "expected_width",
     "fitted_cases",
     "greedy_sequence",
     "information",
+    "model_variance",
     "rank_experiments",
     "resolved_t",
     "runs_needed",

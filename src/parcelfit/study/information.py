@@ -17,11 +17,21 @@ MAX_RUNS = 100  # the most real runs a candidate is asked for
 PRIOR_PRECISION = 12.0  # of a uniform distribution on [0, 1]
 
 
-def information(J: np.ndarray, scatter: np.ndarray) -> np.ndarray:
-    """The information of one real run (module docstring): J^T S^-1 J, ``J`` (quantities x
-    parameters, the changes over the intervals), ``scatter`` s_q (per quantity, same units);
-    parameters x parameters, in interval units."""
-    Js = np.asarray(J, float) / np.asarray(scatter, float)[:, None]
+def information(
+    J: np.ndarray, scatter: np.ndarray, runs: int = 1, model: np.ndarray | None = None
+) -> np.ndarray:
+    """The information of ``runs`` real runs of a case fitted against simulations (module
+    docstring of `parcelfit.study.design`): J^T (S / n + M)^-1 J, ``J`` (quantities x
+    parameters, the changes over the intervals), ``scatter`` s_q (per quantity, same units),
+    ``model`` m_q the variance of the simulated mean over the fit's placements (same units
+    squared; None: 0, the simulations' mean taken as exact); parameters x parameters, in
+    interval units. Without ``model`` it is ``runs`` times one run's J^T S^-1 J; with it,
+    it stops growing at J^T M^-1 J however many runs are added."""
+    scatter = np.asarray(scatter, float)
+    if model is None:
+        Js = np.asarray(J, float) / scatter[:, None]
+        return runs * (Js.T @ Js)
+    Js = np.asarray(J, float) / np.sqrt(scatter**2 / runs + np.asarray(model, float))[:, None]
     return Js.T @ Js
 
 
@@ -40,25 +50,33 @@ def shares_of(gained: np.ndarray, known: np.ndarray | None = None) -> np.ndarray
 
 
 def expected_width(
-    J: np.ndarray, scatter: np.ndarray, runs: int, known: np.ndarray | None = None
+    J: np.ndarray,
+    scatter: np.ndarray,
+    runs: int,
+    known: np.ndarray | None = None,
+    model: np.ndarray | None = None,
 ) -> np.ndarray:
     """w_p(n) of the module docstring for every parameter: ``J`` (quantities x parameters, the
     changes over the intervals), ``scatter`` s_q (per quantity, same units), ``runs`` n,
-    ``known`` the information the fitted cases hold (None: nothing); a share of the current
-    interval (at most 1)."""
-    return shares_of(runs * information(J, scatter), known)
+    ``known`` the information the fitted cases hold (None: nothing), ``model`` the simulated
+    mean's variance m_q (`information`); a share of the current interval (at most 1)."""
+    return shares_of(information(J, scatter, runs, model), known)
 
 
 def runs_needed(
-    J: np.ndarray, scatter: np.ndarray, target: np.ndarray, known: np.ndarray | None = None
+    J: np.ndarray,
+    scatter: np.ndarray,
+    target: np.ndarray,
+    known: np.ndarray | None = None,
+    model: np.ndarray | None = None,
 ) -> list[int | None]:
     """Per parameter, the fewest real runs (1 to `MAX_RUNS`) after which the expected width
-    share (with the information ``known`` of the fitted cases) is at most ``target`` (a share
-    of the current interval); None when never."""
+    share (with the information ``known`` of the fitted cases and the simulated mean's
+    variance ``model``, `information`) is at most ``target`` (a share of the current
+    interval); None when never."""
     out: list[int | None] = [None] * J.shape[1]
-    one = information(J, scatter)
     for n in range(1, MAX_RUNS + 1):
-        w = shares_of(n * one, known)
+        w = shares_of(information(J, scatter, n, model), known)
         for p in range(J.shape[1]):
             if out[p] is None and w[p] <= target[p]:
                 out[p] = n
@@ -68,10 +86,10 @@ def runs_needed(
 
 
 def greedy_sequence(
-    infos: Sequence[np.ndarray], known: np.ndarray | None, runs: int, open_: Sequence[int]
+    infos: Sequence[np.ndarray], known: np.ndarray | None, open_: Sequence[int]
 ) -> list[tuple[int, float]]:
-    """The candidates in the greedy order of the module docstring: ``infos`` their one-run
-    informations, ``known`` the fitted cases', ``runs`` real runs each, ``open_`` the indices
+    """The candidates in the greedy order of `parcelfit.study.design`'s docstring: ``infos``
+    the information of each one's real runs (`information`), ``known`` the fitted cases', ``open_`` the indices
     of the open parameters; each step takes the candidate whose runs, added to those of the
     ones taken before, leave the smallest mean share over the open parameters (ties: the
     earlier candidate). Returns (candidate index, that mean share) in order."""
@@ -82,10 +100,10 @@ def greedy_sequence(
     left = list(range(len(infos)))
     out: list[tuple[int, float]] = []
     while left:
-        means = [float(np.mean(shares_of(taken + runs * infos[c], known)[idx])) for c in left]
+        means = [float(np.mean(shares_of(taken + infos[c], known)[idx])) for c in left]
         k = int(np.argmin(np.round(means, 12)))
         out.append((left[k], means[k]))
-        taken = taken + runs * infos[left[k]]
+        taken = taken + infos[left[k]]
         left.pop(k)
     return out
 
