@@ -143,3 +143,12 @@ def test_a_benchmark_folder_keeps_the_twin_it_was_made_with(tmp_path):
     with pytest.raises(SystemExit, match="--r-nominal to resume it"):
         twin.analytic_nominal_rigs(old, r_nominal=False)
     assert twin.analytic_nominal_rigs(old, r_nominal=True) == ("R",)
+
+
+def test_candidates_design_scores_alike_and_ranks_by_the_mean():
+    bench = _bench()
+    shares = {"Q/KPBW/1": 0.7091, "Q/KPBW/2": 0.7091 + 1e-9, "B2/KPBW/1": 0.7152}
+    assert bench.scored_equal(shares, "Q/KPBW/1") == ["Q/KPBW/1", "Q/KPBW/2"]
+    assert bench.scored_equal(shares, "B2/KPBW/1") == ["B2/KPBW/1"]
+    stats = {"Q/KPBW/1": (0.47, 0.06), "Q/KPBW/2": (0.44, 0.08), "B2/KPBW/1": (0.37, 0.07)}
+    assert [bench.mean_rank(stats, c) for c in stats] == [3, 2, 1]
