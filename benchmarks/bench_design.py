@@ -362,15 +362,16 @@ def print_truth(k: int, res: dict[str, Any]) -> None:
         )
         from scipy.stats import spearmanr
 
-        labels = sorted(stats)
-        rho = spearmanr([res["mean_share"][c] for c in labels], [stats[c][0] for c in labels])
-        print(
-            "design's share against the mean open error, Spearman's rank correlation over the "
-            f"{len(labels)} candidates: {float(rho.statistic):+.2f} (p = {float(rho.pvalue):.2g}; "
-            "+1: design orders them as they helped)"
-        )
+        labels = sorted(c for c in stats if c in res["mean_share"])
+        if len(labels) > 2:  # design scored the candidates (it had open parameters)
+            rho = spearmanr([res["mean_share"][c] for c in labels], [stats[c][0] for c in labels])
+            print(
+                "design's share against the mean open error, Spearman's rank correlation over "
+                f"the {len(labels)} candidates: {float(rho.statistic):+.2f} "
+                f"(p = {float(rho.pvalue):.2g}; +1: design orders them as they helped)"
+            )
         first = res["design_first"]
-        if first is not None:
+        if first is not None and first in res["mean_share"]:
             same = scored_equal(res["mean_share"], first)
             print(
                 f"design's first choice {first} ranks {mean_rank(stats, first)} of {len(stats)} "
@@ -444,7 +445,7 @@ def main() -> None:
             f"truth {i} "
             + (
                 "yes"
-                if r["design_first"] is not None
+                if r["design_first"] in r["mean_share"]
                 and r["helped_most_mean"] in scored_equal(r["mean_share"], r["design_first"])
                 else "no"
             )

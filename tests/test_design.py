@@ -63,6 +63,8 @@ def test_the_candidate_built_to_depend_on_a_parameter_ranks_first_for_it(tmp_pat
     assert ranking.iloc[0]["candidate"].startswith("Q/")
     # the fitted case is simulated too; after one Q candidate the other Q adds little
     assert json.loads((out / "design.json").read_text())["fitted"] == ["R/P/1"]
+    # the published cost's nominal run counts as exact: no simulated-mean scatter entered
+    assert json.loads((out / "design.json").read_text())["fit_scatter"] is False
     assert ranking.iloc[0]["with_above"] == ranking.iloc[0]["mean_share"]
     assert ranking.iloc[1]["with_above"] <= ranking.iloc[0]["with_above"]
     assert "E_Pa (undetermined): the experiments that narrow it most" in result.output

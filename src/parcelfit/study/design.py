@@ -88,7 +88,7 @@ candidate adds to what the fitted cases tell, applied to today's interval. A can
 moves two parameters alike cannot tell them apart unless F fixes one, and C says so. The runs
 a candidate needs for p are the smallest n (up to `MAX_RUNS`) at which w_p(n) times the
 current interval is at most 20 % of p's range, the width `parcelfit.study.identify` calls
-determined (none: not within `MAX_RUNS`, which M can make any number of runs).
+determined (none: not within `MAX_RUNS`, or never where M caps what runs can tell).
 
 **Ranking.** Per parameter, the candidates by the expected width after ``--runs`` real runs
 (ties by the signal-to-noise). Overall, greedily: first the candidate with the smallest mean
@@ -687,6 +687,8 @@ def rank_experiments(
             model_variance(g, k, mirrored) if fit_scatter else None
             for g, k in zip(grids, per_case, strict=True)
         ]
+        # reported as entered only where it did (the published cost's nominal run: exact)
+        fit_scatter = any(m is not None and bool(m.any()) for m in models)
         known = sum(
             (
                 information(*sens[len(designs) + f], n, models[len(designs) + f])
