@@ -404,14 +404,24 @@ def run_variance(grid: np.ndarray, mirrored: bool = False) -> float:
     variance of a pair's mean plus the mean squared half-difference of a pair, where the sets
     hold two complete pairs or more."""
     q = np.asarray(grid, float)
-    pairs = q.shape[1] // 2
-    if mirrored and pairs >= 2:
-        a, b = q[:, 0 : 2 * pairs : 2], q[:, 1 : 2 * pairs : 2]
+    pairs = _mirrored_pairs(q) if mirrored else None
+    if pairs is not None:
+        a, b = pairs
         between = decompose(0.5 * (a + b)).run_variance
         half = 0.5 * (a - b)
         if math.isfinite(between) and np.isfinite(half).any():
             return between + float(np.nanmean(half**2))
     return decompose(q).run_variance
+
+
+def _mirrored_pairs(grid: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """The columns of ``grid`` (sets x placements s, -s, t, -t, ...) split into each pair's
+    first and second runs (sets x pairs each; an odd last column left out); None with fewer
+    than two pairs, from which no pair-to-pair variance can be estimated."""
+    pairs = grid.shape[1] // 2
+    if pairs < 2:
+        return None
+    return grid[:, 0 : 2 * pairs : 2], grid[:, 1 : 2 * pairs : 2]
 
 
 def model_variance(
@@ -437,11 +447,8 @@ def model_variance(
         if not mirrored:
             v = len(seeded) * W / K**2
         else:
-            pairs = grid.shape[1] // 2
-            V = math.nan
-            if pairs >= 2:
-                V = decompose(0.5 * (grid[:, 0 : 2 * pairs : 2] + grid[:, 1 : 2 * pairs : 2]))
-                V = V.run_variance
+            pairs = _mirrored_pairs(grid)
+            V = math.nan if pairs is None else decompose(0.5 * (pairs[0] + pairs[1])).run_variance
             if not math.isfinite(V):
                 V = W / 2
             v = 4 * sum(s > 0 for s in seeded) * V / K**2
@@ -561,6 +568,7 @@ def rank_experiments(
             f"unknown table format {shown(table_format)}", fix=f"use one of {list(TABLE_FORMATS)}"
         )
     inputs = load_inputs(folder)
+    study = inputs.study
     ident = inputs.identifiability
     if sets < len(ident.names) + 2:
         n = len(ident.names)
@@ -570,7 +578,7 @@ def rank_experiments(
             fix=f"give --sets {n + 2} or more ({n + 5} or more for a steadier ranking; "
             "the default is 20)",
         )
-    config = inputs.study.simulator
+    config = study.simulator
     mine = config.backend in ("mujoco", "rigidbox")
     # the study's own further rig files (simulator.rigs) are candidates too
     given = {Path(r).resolve() for r in rig_files}
@@ -585,19 +593,18 @@ def rank_experiments(
     out_dir = Path(out) if out is not None else inputs.folder / "design"
     if not open_:
         return DesignResult([], [], runs, sets, placements, out_dir)
-    fitted = fitted_cases(inputs.study)
+    fitted = fitted_cases(study)
     cases = designs + [d for d, _, _ in fitted]  # the fitted cases simulated after the candidates
     own = make_simulator(config) if fitted else None
-    simulators = [design_simulator(inputs.study, d) for d in designs] + [own for _ in fitted]
+    simulators = [design_simulator(study, d) for d in designs] + [own for _ in fitted]
     for sim in simulators:
         require_placements(sim, placements, file=None, where="--placements")
     placed = callable(getattr(simulators[0], "with_placement", None))
     varied = placed and all(varies_drives(s) for s in simulators)
     deviation = speed_deviation if varied else 0.0
     drawn = draw_sets(ident, sets, seed)
-    study = inputs.study
     seeds = design_placement_seeds(placements, seed, study.mirrored) if placed else [0]
-    full = [{**inputs.study.fixed, **s} for s in drawn]
+    full = [{**study.fixed, **s} for s in drawn]
     check_writable(out_dir, (DESIGN_STORE,))
     out_dir.mkdir(parents=True, exist_ok=True)
     lock = lock_folder(out_dir, "an experiment design")
@@ -636,7 +643,7 @@ def rank_experiments(
                         [s for _ in full for s in seeds],
                     )
             if on_cost is not None:
-                on_cost(cost_line(inputs.study, cases, store, executor, workers, make is not None))
+                on_cost(cost_line(study, cases, store, executor, workers, make is not None))
             rows = store.evaluations("screen")
             total = len(rows)
             done = sum(e.status != "pending" for e in rows)
@@ -676,15 +683,15 @@ def rank_experiments(
         finally:
             store.close()
         grids = [_grids(rows, c, len(full), len(seeds)) for c in range(len(cases))]
-        real = real_run_scatter(inputs.folder, inputs.study)
+        real = real_run_scatter(inputs.folder, study)
         mirrored = placed and study.mirrored
         sens = [sensitivity(ident, drawn, g, real, mirrored) for g in grids]
         # a candidate joins the fit with the study's placements, a fitted case keeps its own;
         # m only where design's runs scatter as the fit's do: placed, at the drives' mean speeds
-        fit_scatter = placed and deviation == 0.0
+        as_fitted = placed and deviation == 0.0
         per_case = [fit_placement_seeds(study)] * len(designs) + [k for *_, k in fitted]
         models = [
-            model_variance(g, k, mirrored) if fit_scatter else None
+            model_variance(g, k, mirrored) if as_fitted else None
             for g, k in zip(grids, per_case, strict=True)
         ]
         # reported as entered only where it did (the published cost's nominal run: exact)
