@@ -63,13 +63,16 @@ def predict_cases(
     seed: int,
     out: Path,
     workers: int,
+    numerical_runs: int | None = None,
 ) -> tuple[list[dict], dict[str, list[int]], float]:
     """``predict`` every ``unseen`` case (RIG/TYPE/SETTING, RIG a bundled name or a rig file)
     from the calibration in ``folder`` and count the runs of ``dataset_dir`` inside each band;
     prints a row per case and quantity. Returns the rows, per quantity [inside the model's
-    band, inside the band of a real run, runs], and the wall time [s]."""
+    band, inside the band of a real run, runs], and the wall time [s]. ``numerical_runs``: the
+    placements of predict's numerical error (None: predict's default; 0: none)."""
     from parcelfit.runs import load_dataset
-    from parcelfit.study.predict import predict, run_values
+    from parcelfit.study.numerical_error import NUMERICAL_RUNS
+    from parcelfit.study.predict import predict, run_values, shown_value
 
     dataset = load_dataset(dataset_dir)
     rows = []
@@ -93,8 +96,23 @@ def predict_cases(
             seed=seed,
             out=out / f"predict-{name}-{kind}-{setting}",
             workers=workers,
+            numerical_runs=NUMERICAL_RUNS if numerical_runs is None else numerical_runs,
         )
         seconds += time.perf_counter() - t
+        err = p.numerical
+        if err is not None and err.reason is None:
+            shown = ", ".join(
+                f"{q} {v * 100:.2g} %" if q == "transit_time" else f"{q} {shown_value(q, v, 2)}"
+                for q, v in err.sd.items()
+                if q in QUANTITIES
+            )
+            print(
+                f"{label}: the model's numerical error (sd; refined {err.refinement} times, "
+                f"{err.pairs} placements, {err.changed} changing outcome): {shown}",
+                flush=True,
+            )
+        elif err is not None:
+            print(f"{label}: no numerical error ({err.reason})", flush=True)
         real = [
             run_values(r)
             for c in dataset.cases.values()
@@ -147,6 +165,12 @@ def main() -> None:
     ap.add_argument("--design-placements", type=int, default=3)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument(
+        "--numerical-runs",
+        type=int,
+        default=None,
+        help="predict's placements for the model's numerical error (default: predict's; 0: none)",
+    )
     ap.add_argument("--out", type=Path, default=Path("bench-predict-twin"))
     args = ap.parse_args()
 
@@ -203,6 +227,7 @@ def main() -> None:
         seed=args.seed,
         out=args.out,
         workers=args.workers,
+        numerical_runs=args.numerical_runs,
     )
     total = sum(seconds.values())
     (args.out / "results.json").write_text(

@@ -55,6 +55,14 @@ def predict(
             "real runs' scatter.",
         ),
     ] = 10,
+    numerical_runs: Annotated[
+        int,
+        typer.Option(
+            min=0,
+            help="Placements at which the recommended parameters run on the design by the "
+            "model and the refined model, for the model's numerical error (0: none).",
+        ),
+    ] = 6,
     out: Annotated[
         Path | None,
         typer.Option(help="Output folder (default: predict-RIG-TYPE-SETTING in the study folder)."),
@@ -91,6 +99,7 @@ def predict(
             seed=seed,
             speed_deviation=speed_deviation,
             scatter_runs=scatter_runs,
+            numerical_runs=numerical_runs,
             out=out,
             executor=executor,
             workers=workers,

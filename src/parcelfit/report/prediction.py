@@ -28,12 +28,14 @@ from parcelfit import __version__
 from parcelfit.report.page import CONTENT_SECURITY_POLICY, CSS, TEMPLATES, write_page
 from parcelfit.report.page import figure_html as _figure_html
 from parcelfit.study.design import DesignResult
+from parcelfit.study.numerical_error import NumericalError
 from parcelfit.study.predict import (
     QUANTITIES,
     Prediction,
     quantity_words,
     shown_value,
 )
+from parcelfit.study.run_scatter import RELATIVE
 
 PAGE_FILE = "prediction.html"
 
@@ -71,8 +73,12 @@ def _histograms(prediction: Prediction) -> Figure:
 def prediction_view(prediction: Prediction) -> dict[str, Any]:
     """The values the page shows (text, escaped by the template)."""
     rows = []
+    numerical = prediction.numerical
     for s in prediction.summaries:
         d = s.decomposition
+        sd = None if numerical is None else numerical.sd.get(s.quantity)
+        if sd is not None and s.quantity in RELATIVE:  # a share of the value: in its unit here
+            sd = sd * abs(s.median) if math.isfinite(s.median) else None
         rows.append(
             {
                 "quantity": quantity_words(s.quantity),
@@ -84,6 +90,7 @@ def prediction_view(prediction: Prediction) -> dict[str, Any]:
                 else f"{shown_value(s.quantity, s.run_q05)} to {shown_value(s.quantity, s.run_q95)}",
                 "parameters": _share(d.parameter_share),
                 "placements": _share(d.placement_share),
+                "numerical": "-" if sd is None else shown_value(s.quantity, sd, 2),
             }
         )
     effects = []
@@ -108,7 +115,20 @@ def prediction_view(prediction: Prediction) -> dict[str, Any]:
         if scatter is None or not scatter.sd
         else f"estimated from the real runs of {', '.join(scatter.cases)} beyond the spread of "
         f"{scatter.simulations} simulation(s) per case at the recommended parameters",
+        "numerical": _numerical_words(numerical),
     }
+
+
+def _numerical_words(numerical: NumericalError | None) -> str:
+    """How the model's numerical error was estimated, or why it was not (one clause)."""
+    if numerical is None or numerical.reason is not None:
+        why = "" if numerical is None else f" ({numerical.reason})"
+        return f"not estimated{why}: the band of a real run holds no error of the mesh or step"
+    return (
+        f"estimated from {numerical.pairs} placement(s) of the recommended parameters on this "
+        f"design, simulated by the model and by the model refined {numerical.refinement} times "
+        "over (every mesh spacing and the time step divided)"
+    )
 
 
 def terminal_table(prediction: Prediction) -> Table:
@@ -126,6 +146,7 @@ def terminal_table(prediction: Prediction) -> Table:
         "median",
         "5-95 % band",
         "band of a real run",
+        "numerical error",
         "from parameters",
         "from placements",
     ):
@@ -137,6 +158,7 @@ def terminal_table(prediction: Prediction) -> Table:
             r["median"],
             r["band"],
             r["run_band"],
+            r["numerical"],
             r["parameters"],
             r["placements"],
         )

@@ -38,11 +38,19 @@ their drive speeds across sets as they share the start pose.
 `SCATTER_RUNS` (or ``scatter_runs``) seeded placements (drives as above) on every fitted and
 validation case of the study (`parcelfit.study.run_scatter`).
 
+**The model's numerical error** at the design is estimated from the recommended parameters
+simulated on the design at `NUMERICAL_RUNS` (or ``numerical_runs``) seeded placements by the
+model and by the model refined ``validation.refinement`` times over (matched pairs,
+`parcelfit.study.numerical_error`); it widens the band of a real run with the real runs'
+scatter. Not estimated where the study switches the refinement off, the simulator cannot be
+refined or ``numerical_runs`` is 0 (the prediction's notes say so).
+
 **Resumable.** The simulations are recorded in their own store, ``predict.sqlite`` in the
 output folder (`parcelfit.study.store`, rows of kind ``screen``: iteration 0 the prediction's,
 slot = set x K + placement index; iteration i >= 1 the scatter runs of the study's i-th case;
 ``seed`` the placement seed, ``transit_time`` [s], ``details`` the rotation, exit position and
-heading), all written as pending before any runs and each finished in one transaction the
+heading; iteration -1 the numerical error's runs on the model, -2 on the refined model), all
+written as pending before any runs and each finished in one transaction the
 moment it arrives; rerunning the same command runs only what is still pending. The inputs
 (study, design, N, K, seed, the drawn sets, the placement seeds and D) are stored in the meta
 record ``predict``: a folder holding a prediction with other inputs is refused.
@@ -85,6 +93,12 @@ from parcelfit.study.joint import (
     simulate_items,
     varies_drives,
 )
+from parcelfit.study.numerical_error import (
+    NUMERICAL_RUNS,
+    NumericalError,
+    estimate_numerical_error,
+    numerical_note,
+)
 from parcelfit.study.plausible import (
     Design,
     check_design,
@@ -111,6 +125,7 @@ PREDICTION_FILE = "prediction.json"
 TABLE_FORMATS = ("csv", "parquet")
 MAX_SETS = 1000  # parameter sets of one prediction (each simulated at every placement)
 SCATTER_RUNS = 10  # runs of the recommended parameters per fitted and validation case (run_scatter)
+MODEL_ITERATION, REFINED_ITERATION = -1, -2  # the numerical error's rows in predict.sqlite
 QUANTITIES = ("transit_time", "rotation", "exit_y", "exit_heading")
 # per quantity: words, SI unit, the unit a person reads and its factor from SI
 _SHOW = {
@@ -189,6 +204,7 @@ class Prediction:
     notes: list[str] = field(default_factory=list)
     out: Path | None = None
     scatter: RunScatter | None = None
+    numerical: NumericalError | None = None
 
     def summary_table(self) -> pd.DataFrame:
         """One row per quantity (docs/data.md, Predictions)."""
@@ -271,6 +287,7 @@ class Prediction:
             "seeds": self.seeds,
             "summary": records(self.summary_table()),
             "run_scatter": None if self.scatter is None else self.scatter.to_json(),
+            "numerical_error": None if self.numerical is None else self.numerical.to_json(),
             "effects": records(self.effects_table()),
             "sentences": self.sentences,
             "notes": self.notes,
@@ -303,9 +320,11 @@ def summarise_prediction(
     runs: pd.DataFrame,
     scatter: RunScatter | None = None,
     seed: int = 0,
+    numerical: NumericalError | None = None,
 ) -> tuple[list[QuantitySummary], list[Effect], list[str]]:
     """The summaries, effects and sentences of a runs table (module docstring); ``scatter``
-    (the real runs' own, seeded by ``seed``) widens each quantity's band to a real run's."""
+    (the real runs' own, seeded by ``seed``) and ``numerical`` (the model's numerical error at
+    the design) widen each quantity's band to a real run's."""
     n, k = len(sets), len(seeds)
     summaries, effects = [], []
     names = ident.names
@@ -322,7 +341,9 @@ def summarise_prediction(
             med, q05, q95 = (float(np.percentile(vals, p)) for p in (50, 5, 95))
         else:
             med = q05 = q95 = math.nan
-        run_q05, run_q95 = real_run_band(vals.tolist(), q, scatter, seed)
+        run_q05, run_q95 = real_run_band(
+            vals.tolist(), q, scatter, seed, None if numerical is None else numerical.sd
+        )
         summaries.append(
             QuantitySummary(q, int(vals.size), med, q05, q95, decompose(grid), run_q05, run_q95)
         )
@@ -386,10 +407,13 @@ def _inputs_record(
     seed: int,
     speed_deviation: float,
     scatter_runs: int = SCATTER_RUNS,
+    numerical_runs: int = NUMERICAL_RUNS,
 ) -> dict[str, Any]:
-    # the scatter's run count only where it is not the default, so that a prediction made
-    # before the option existed resumes
-    extra = {} if scatter_runs == SCATTER_RUNS else {"scatter_runs": scatter_runs}
+    # the scatter's and the numerical error's run counts only where they are not the default,
+    # so that a prediction made before the options existed resumes
+    extra: dict[str, Any] = {} if scatter_runs == SCATTER_RUNS else {"scatter_runs": scatter_runs}
+    if numerical_runs != NUMERICAL_RUNS:
+        extra["numerical_runs"] = numerical_runs
     return {
         **extra,
         "study": str(study_dir.resolve()),
@@ -419,6 +443,7 @@ def predict(
     seed: int = 0,
     speed_deviation: float = SPEED_DEVIATION,
     scatter_runs: int = SCATTER_RUNS,
+    numerical_runs: int = NUMERICAL_RUNS,
     out: str | Path | None = None,
     executor: str = "local",
     workers: int | None = None,
@@ -431,8 +456,9 @@ def predict(
     """Predict ``rig`` x ``consignment`` x ``setting`` from the calibration in ``folder``:
     ``sets`` parameter sets of its plausible set times ``placements`` seeded placements (each
     with its drives ``speed_deviation`` [-] off their mean speeds, seeded the same way) and the
-    recommended parameters at ``scatter_runs`` placements per fitted and validation case,
-    simulated in ``executor`` (serial, local with ``workers`` processes, dask at
+    recommended parameters at ``scatter_runs`` placements per fitted and validation case and at
+    ``numerical_runs`` placements on the design by the model and the refined model (0: no
+    numerical error), simulated in ``executor`` (serial, local with ``workers`` processes, dask at
     ``scheduler``), recorded in ``out``/predict.sqlite (resumable), summarised and written
     (module docstring). ``progress`` receives one event per finished simulation; ``on_cost``
     the expected cost of the simulations still to run (one line, `parcelfit.sim.cost`), before
@@ -452,6 +478,11 @@ def predict(
         raise ParcelfitError(
             f"--scatter-runs {scatter_runs}: give from 2 to {MAX_PLACEMENTS} runs per case"
         )
+    if not 0 <= numerical_runs <= MAX_PLACEMENTS:
+        raise ParcelfitError(
+            f"--numerical-runs {numerical_runs}: give from 0 (no numerical error) to "
+            f"{MAX_PLACEMENTS} placements"
+        )
     inputs = load_inputs(folder)
     design = check_design(rig, consignment, setting)
     simulator = design_simulator(inputs.study, design)
@@ -461,6 +492,9 @@ def predict(
     seeds = placement_seeds(placements, seed) if placements > 1 or placed else [0]
     deviation = speed_deviation if placed and varies_drives(simulator) else 0.0
     scatter_jobs = _scatter_jobs(inputs.folder, inputs.study, seed, scatter_runs)
+    numerical_jobs = _numerical_jobs(
+        inputs.folder, inputs.study, inputs.identifiability, simulator, numerical_runs, seed
+    )
     full = [{**inputs.study.fixed, **s} for s in drawn]
     out_dir = Path(out) if out is not None else default_out(inputs.folder, design)
     check_writable(out_dir, (PREDICT_STORE,))
@@ -470,7 +504,7 @@ def predict(
         store = Store(out_dir / PREDICT_STORE)
         try:
             record = _inputs_record(
-                inputs.folder, design, drawn, seeds, seed, deviation, scatter_runs
+                inputs.folder, design, drawn, seeds, seed, deviation, scatter_runs, numerical_runs
             )
             known = store.get_meta("predict")
             if known is None:
@@ -500,6 +534,17 @@ def predict(
                         spec.case.speed_setting,
                         scatter_seeds,
                     )
+            if isinstance(numerical_jobs, NumericalJobs):
+                have = {e.iteration for e in _rows(store, None)}
+                for it in (MODEL_ITERATION, REFINED_ITERATION):
+                    if it not in have:  # one transaction each: all its rows or none
+                        store.add_pending(
+                            "screen",
+                            it,
+                            [numerical_jobs.params] * len(numerical_jobs.seeds),
+                            design.setting,
+                            numerical_jobs.seeds,
+                        )
             if on_cost is not None:
                 on_cost(
                     cost_line(
@@ -512,6 +557,9 @@ def predict(
                         extra=[]
                         if scatter_jobs is None
                         else [s.case for s, _, _ in scatter_jobs.cases],
+                        refinement=numerical_jobs.refinement
+                        if isinstance(numerical_jobs, NumericalJobs)
+                        else 1,
                     )
                 )
             run = partial(
@@ -551,12 +599,15 @@ def predict(
                     "the real runs' scatter (the recommended parameters on the study's cases)",
                 )
                 model_values = _scatter_values(store, jobs)
+            numerical = numerical_jobs
+            if isinstance(numerical_jobs, NumericalJobs):
+                numerical = _run_numerical(store, numerical_jobs, design, simulator, run)
             runs = _runs_table(store, drawn, len(seeds), inputs.identifiability.names)
         finally:
             store.close()
         scatter = estimate_run_scatter(inputs.folder, inputs.study, model_values)
         summaries, effects, sentences = summarise_prediction(
-            inputs.identifiability, drawn, seeds, runs, scatter, seed
+            inputs.identifiability, drawn, seeds, runs, scatter, seed, numerical
         )
         notes = []
         ident = inputs.identifiability
@@ -566,9 +617,9 @@ def predict(
                 f"no {what} of the calibration reached the real runs' scatter: the sets "
                 "are drawn from the whole parameter box, not from a plausible set"
             )
-        note = scatter_note(scatter)
-        if note is not None:
-            notes.append(note)
+        for note in (scatter_note(scatter), numerical_note(numerical)):
+            if note is not None:
+                notes.append(note)
         calibrated = sorted({c.case.consignment for c in inputs.study.cases})
         if design.consignment_name not in calibrated:
             notes.append(
@@ -596,6 +647,7 @@ def predict(
             notes,
             out_dir,
             scatter,
+            numerical,
         )
         write_prediction(prediction, out_dir, table_format)
     finally:
@@ -655,6 +707,98 @@ def _scatter_values(store: Store, jobs: ScatterJobs) -> dict[str, list[dict[str,
     }
 
 
+@dataclass(frozen=True)
+class NumericalJobs:
+    """The simulations behind the model's numerical error at the design
+    (`parcelfit.study.numerical_error`): the refined simulator, its ``refinement``, the
+    parameters (SI, fixed ones included) and the placement seeds (None: the simulator takes no
+    placements, one pair at its own start)."""
+
+    refined: Simulator
+    refinement: int
+    params: dict[str, float]
+    seeds: list[int]
+    placed: bool
+
+
+def _numerical_jobs(
+    folder: Path,
+    study: Study,
+    ident: Identifiability,
+    simulator: Simulator,
+    runs: int,
+    seed: int,
+) -> NumericalJobs | NumericalError:
+    """The numerical error's simulations on the design (module docstring): the recommended
+    parameters of the calibration in ``folder`` (the plausible set's medians where it has no ok
+    fit) at ``runs`` seeded placements, on the design's ``simulator`` refined by the study's
+    ``validation.refinement``; or why there are none."""
+    factor = study.refinement
+    if runs == 0:
+        return NumericalError({}, factor, reason="switched off: --numerical-runs 0")
+    if factor <= 1:
+        return NumericalError(
+            {}, factor, reason="switched off in the study file: validation.refinement is 1"
+        )
+    refine = getattr(simulator, "with_refinement", None)
+    if not callable(refine):
+        return NumericalError(
+            {},
+            factor,
+            reason=f"the {type(simulator).__name__} simulator cannot be refined (it has no "
+            "with_refinement)",
+        )
+    try:
+        refined = refine(factor)
+    except ParcelfitError as exc:  # a refined setting out of its range
+        return NumericalError(
+            {}, factor, reason=f"the model cannot be refined {factor} times: {exc}"
+        )
+    evaluation = stored_recommendation(folder)
+    found = (
+        dict(evaluation.params)
+        if evaluation is not None
+        else {p.name: float(p.median) for p in ident.parameters}
+    )
+    placed = _placed(simulator)
+    seeds = placement_seeds(runs, seed) if placed else [0]
+    return NumericalJobs(refined, factor, {**study.fixed, **found}, seeds, placed)
+
+
+def _run_numerical(
+    store: Store,
+    jobs: NumericalJobs,
+    design: Design,
+    simulator: Simulator,
+    run: Callable[..., None],
+) -> NumericalError:
+    """Run the numerical error's pending simulations (``run``: `_run_rows` bound to the store
+    and executor) and estimate it from the pairs."""
+    for it, sim, name, what in (
+        (MODEL_ITERATION, simulator, "model", "the model"),
+        (REFINED_ITERATION, jobs.refined, "refined", f"the model refined {jobs.refinement} times"),
+    ):
+        run(
+            _rows(store, it),
+            lambda e, name=name: (
+                Task(e.params, design.case, f"numerical-{name}-p{e.seed}"),
+                e.seed if jobs.placed else None,
+            ),
+            sim,
+            f"the numerical error ({what}, the recommended parameters on the design)",
+        )
+
+    def values(it: int) -> list[dict[str, float | None] | None]:
+        return [
+            {"transit_time": e.transit_time, **e.details.quantities} if e.status == "ok" else None
+            for e in sorted(_rows(store, it), key=lambda e: e.slot)
+        ]
+
+    return estimate_numerical_error(
+        values(MODEL_ITERATION), values(REFINED_ITERATION), jobs.refinement
+    )
+
+
 def _run_rows(
     store: Store,
     rows: Sequence[Any],
@@ -703,21 +847,31 @@ def cost_line(
     workers: int | None,
     custom: bool = False,
     extra: Sequence[TestCase] = (),
+    refinement: int = 1,
 ) -> str:
     """The expected cost of the store's pending simulations (rows of kind ``screen``; with
     several designs, ``iteration`` is the design's index; with ``extra`` test cases, one
-    design's runs are iteration 0 and those of extra case i iteration i + 1) on the executor's
-    processes, as one line (`parcelfit.sim.cost.Estimate.text`)."""
-    from parcelfit.sim.cost import estimate, run_seconds
+    design's runs are iteration 0 and those of extra case i iteration i + 1; with one design,
+    the numerical error's runs are iterations -1 and -2, the latter on the model refined
+    ``refinement`` times) on the executor's processes, as one line
+    (`parcelfit.sim.cost.Estimate.text`)."""
+    from parcelfit.sim.cost import estimate, refined_seconds, run_seconds
 
     pending = [e for e in store.evaluations("screen") if e.status == "pending"]
     runs = []
     for c, d in enumerate(designs):
-        n = sum(1 for e in pending if (len(designs) == 1 and not extra) or e.iteration == c)
+        one = len(designs) == 1 and not extra
+        n = sum(1 for e in pending if (one and e.iteration >= 0) or e.iteration == c)
         runs.append((n, run_seconds(study.simulator, d.rig, d.consignment)))
     for c, case in enumerate(extra, start=1):
         n = sum(1 for e in pending if e.iteration == c)
         runs.append((n, run_seconds(study.simulator, case.rig, case.consignment)))
+    if len(designs) == 1:
+        d = designs[0]
+        n = sum(1 for e in pending if e.iteration == MODEL_ITERATION)
+        runs.append((n, run_seconds(study.simulator, d.rig, d.consignment)))
+        n = sum(1 for e in pending if e.iteration == REFINED_ITERATION)
+        runs.append((n, refined_seconds(study.simulator, refinement, d.rig, d.consignment)))
     total = sum(n for n, _ in runs)
     local = executor == "local" and not custom
     processes = min(workers or os.cpu_count() or 1, max(total, 1)) if local else 1

@@ -42,8 +42,10 @@ scatter within the outcome most runs share, which is what a specimen and the mea
 (docs/research/predict-coverage.md).
 
 **Band for a real run.** Each predicted run value v_i is joined by D seeded draws
-v_i + s_q z_ik (transit time: v_i (1 + s_q z_ik)), z ~ N(0, 1), and the 5th and 95th
-percentiles are taken over all draws; for the rotation, an absolute angle, |v_i + s_q z_ik|.
+v_i + s z_ik (transit time: v_i (1 + s z_ik)), z ~ N(0, 1), and the 5th and 95th
+percentiles are taken over all draws; for the rotation, an absolute angle, |v_i + s z_ik|.
+s = s_q, or sqrt(s_q^2 + s_num^2) where the model's numerical error at the design s_num is
+known (`parcelfit.study.numerical_error`): the two are independent.
 Hand-written because it is a few lines of NumPy over the stored runs, not a model a library
 fits.
 """
@@ -229,14 +231,22 @@ def scatter_note(scatter: RunScatter | None) -> str | None:
 
 
 def real_run_band(
-    values: Sequence[float], quantity: str, scatter: RunScatter | None, seed: int
+    values: Sequence[float],
+    quantity: str,
+    scatter: RunScatter | None,
+    seed: int,
+    numerical: Mapping[str, float] | None = None,
 ) -> tuple[float, float]:
     """The 5-95 % band of a real run (module docstring) around the predicted run values of
-    ``quantity`` (SI); the model's own band when no scatter is known for it."""
+    ``quantity`` (SI); with ``numerical`` (the model's numerical error per quantity,
+    `parcelfit.study.numerical_error`) the two sd combine as s^2 = s_q^2 + s_num^2; the model's
+    own band when neither is known for it."""
     v = np.asarray([x for x in values if x is not None and math.isfinite(x)], float)
     if v.size == 0:
         return math.nan, math.nan
-    s = None if scatter is None else scatter.sd.get(quantity)
+    s_q = None if scatter is None else scatter.sd.get(quantity)
+    s_num = None if numerical is None else numerical.get(quantity)
+    s = math.sqrt((s_q or 0.0) ** 2 + (s_num or 0.0) ** 2)
     if not s:
         return float(np.percentile(v, 5)), float(np.percentile(v, 95))
     z = np.random.default_rng([seed, 0x5C, QUANTITIES.index(quantity)]).standard_normal(
