@@ -110,8 +110,7 @@ def prediction_view(prediction: Prediction) -> dict[str, Any]:
     return {
         "summary": rows,
         "effects": effects,
-        "scatter": "the calibration holds no fitted run to estimate it from: the band of a real "
-        "run is the model's"
+        "scatter": "not estimated, the calibration holding no fitted run to estimate it from"
         if scatter is None or not scatter.sd
         else f"estimated from the real runs of {', '.join(scatter.cases)} beyond the spread of "
         f"{scatter.simulations} simulation(s) per case at the recommended parameters",
@@ -124,10 +123,12 @@ def _numerical_words(numerical: NumericalError | None) -> str:
     if numerical is None or numerical.reason is not None:
         why = "" if numerical is None else f" ({numerical.reason})"
         return f"not estimated{why}: the band of a real run holds no error of the mesh or step"
+    at = "recommended parameters" if numerical.at == "recommended" else "plausible set's medians"
     return (
-        f"estimated from {numerical.pairs} placement(s) of the recommended parameters on this "
-        f"design, simulated by the model and by the model refined {numerical.refinement} times "
-        "over (every mesh spacing and the time step divided)"
+        f"estimated from {numerical.pairs} placement(s) of the {at} on this design, simulated "
+        f"by the model and by the model refined {numerical.refinement} times over (every mesh "
+        f"spacing and the time step divided), the differences times {numerical.refinement} / "
+        f"{numerical.refinement - 1} for the part of the error the refinement leaves"
     )
 
 
@@ -146,7 +147,7 @@ def terminal_table(prediction: Prediction) -> Table:
         "median",
         "5-95 % band",
         "band of a real run",
-        "numerical error",
+        "numerical error (sd)",
         "from parameters",
         "from placements",
     ):

@@ -10,21 +10,29 @@ judges the validation and transfer cases once refined; a prediction is for anoth
 it estimates the error on the design itself.
 
 **Estimate.** The recommended parameters p* (the calibration's; the plausible set's medians
-where the store holds no fit) are simulated on the design at K seeded placements, each with
+where the store holds no fit, and the record says which) are simulated on the design at K seeded placements, each with
 its drives off their mean speeds as the prediction's own runs, once by the model and once by
 the model refined R times over (the study's ``validation.refinement``: every mesh spacing and
 the time step divided by R, ``with_refinement``), the same placements and drives for both:
 matched pairs. Per quantity q (`parcelfit.study.run_scatter.QUANTITIES`) and placement i,
 
     d_i = q_refined,i - q_model,i            (transit time: divided by q_model,i)
-    s_num^2 = median(d)^2 + (1.4826 MAD(d))^2
+    e_i = d_i R / (R - 1)
+    s_num^2 = median(e)^2 + (1.4826 MAD(e))^2
 
-the squared systematic shift plus the robust variance of the differences about it (MAD the
-median absolute deviation, scipy.stats.median_abs_deviation with scale "normal"). Robust for
+d is only the part of the model's error that the refinement removes: for an error that falls
+as h^p with the mesh spacing or step h, the model's error is d R^p / (R^p - 1). MuJoCo's time
+stepping is of first order, so e takes p = 1 (twice d at R = 2; Richardson's extrapolation),
+the larger of the usual orders: a second-order error would be 4/3 of d. s_num is the squared
+systematic shift plus the robust variance of the errors about it (MAD the median absolute
+deviation, scipy.stats.median_abs_deviation with scale "normal"). Robust for
 the reason the real runs' scatter is (`parcelfit.study.run_scatter`): a placement that spins
 on one mesh and slides on the other differs by a turn, and one such pair would make the band
 span every outcome; such placements are counted (`changed`: the rotation on opposite sides of
-`parcelfit.sim.ensemble.SPIN_ANGLE`) and the prediction names them in its notes.
+`parcelfit.sim.ensemble.SPIN_ANGLE`) and the prediction names them in its notes. The median and
+the MAD are robust only while fewer than half the pairs change outcome; from half on, the sd
+is the outcomes' spread, and the note says so. The rotation is compared as the absolute angle
+it is predicted as (a turn whose sign flips with the mesh moves the exit heading, not it).
 
 **In the band of a real run** s_num joins the real runs' own scatter s_q as an independent
 normal term, s^2 = s_q^2 + s_num^2 (`parcelfit.study.run_scatter.real_run_band`): centred on
@@ -48,21 +56,25 @@ from parcelfit.sim.ensemble import SPIN_ANGLE
 from parcelfit.study.run_scatter import QUANTITIES, RELATIVE
 
 NUMERICAL_RUNS = 6  # placements at which the model and the refined model are compared
+FEW_PAIRS = 3  # fewer matched pairs than this give no spread worth the name: the notes say so
 
 
 @dataclass(frozen=True)
 class NumericalError:
     """The model's numerical error at a design, per quantity (module docstring): ``sd`` (SI,
     or a share of the value for the transit time; absent where no pair has the quantity), the
-    ``refinement`` it was measured with, the matched ``pairs`` that ended ok on both models
-    and how many of them ``changed`` outcome (spin or slide). ``reason`` says why it was not
-    estimated (then ``sd`` is empty)."""
+    ``refinement`` it was measured with, the matched ``pairs`` that ended ok on both models of
+    the ``runs`` asked for, and how many of them ``changed`` outcome (spin or slide); ``at``
+    names the parameters simulated (``recommended`` or the plausible set's ``medians``).
+    ``reason`` says why it was not estimated (then ``sd`` is empty)."""
 
     sd: Mapping[str, float]
     refinement: int
     pairs: int = 0
     changed: int = 0
     reason: str | None = None
+    runs: int = 0
+    at: str = "recommended"
 
     def to_json(self) -> dict[str, object]:
         """The stored form (prediction.json)."""
@@ -70,7 +82,9 @@ class NumericalError:
             "sd": dict(self.sd),
             "refinement": self.refinement,
             "pairs": self.pairs,
+            "runs": self.runs,
             "changed": self.changed,
+            "at": self.at,
             "reason": self.reason,
         }
 
@@ -100,20 +114,27 @@ def estimate_numerical_error(
     model: Sequence[Mapping[str, float | None] | None],
     refined: Sequence[Mapping[str, float | None] | None],
     refinement: int,
+    at: str = "recommended",
 ) -> NumericalError:
-    """s_num per quantity (module docstring) from the quantities of the model's and the refined
-    model's runs at the same placements, in the same order (None: a run that did not end ok;
-    its pair is left out)."""
+    """s_num per quantity (module docstring) from the quantities of the model's and the model's
+    refined ``refinement`` (> 1) times runs at the same placements, in the same order (None: a
+    run that did not end ok; its pair is left out); ``at`` names the parameters they ran at."""
     if len(model) != len(refined):
         raise ValueError(f"{len(model)} model runs against {len(refined)} refined ones")
+    if refinement < 2:
+        raise ValueError(f"refinement {refinement}: a numerical error needs 2 or more")
+    runs = len(model)
     pairs = [(a, b) for a, b in zip(model, refined, strict=True) if a is not None and b is not None]
     if not pairs:
-        return NumericalError({}, refinement, reason="no placement ended ok on both models")
+        return NumericalError(
+            {}, refinement, reason="no placement ended ok on both models", runs=runs, at=at
+        )
     a_runs = [a for a, _ in pairs]
     b_runs = [b for _, b in pairs]
     sd = {}
+    scale = refinement / (refinement - 1)  # the model's error from the part refining removes
     for q in QUANTITIES:
-        d = differences(a_runs, b_runs, q)
+        d = differences(a_runs, b_runs, q) * scale
         if d.size:
             spread = float(median_abs_deviation(d, scale="normal")) if d.size > 1 else 0.0
             sd[q] = math.sqrt(float(np.median(d)) ** 2 + spread**2)
@@ -122,27 +143,47 @@ def estimate_numerical_error(
         ra, rb = a.get("rotation"), b.get("rotation")
         if ra is not None and rb is not None and (ra > SPIN_ANGLE) != (rb > SPIN_ANGLE):
             changed += 1
-    return NumericalError(sd, refinement, len(pairs), changed)
+    return NumericalError(sd, refinement, len(pairs), changed, runs=runs, at=at)
 
 
-def numerical_note(error: NumericalError | None) -> str | None:
-    """A sentence for the prediction's notes: why the numerical error was not estimated, or how
-    many placements changed outcome when the model was refined; None otherwise."""
+def numerical_notes(error: NumericalError | None) -> list[str]:
+    """Sentences for the prediction's notes: why the numerical error was not estimated; how
+    many placements changed outcome when the model was refined (and, from half of them on,
+    that the sd is then the outcomes' spread); and that it rests on few placements."""
     if error is None:
-        return None
+        return []
     if error.reason is not None:
-        return (
+        return [
             f"the model's numerical error was not estimated ({error.reason}): the band of a "
             "real run holds no error of the mesh or the time step"
+        ]
+    notes = []
+    refined = (
+        f"the model refined {error.refinement} times over (every mesh spacing and the time step)"
+    )
+    if error.changed and 2 * error.changed >= error.pairs:
+        notes.append(
+            f"at {error.changed} of {error.pairs} placements {refined} changed the outcome "
+            "(spin or slide): the design's outcomes are not converged, and the numerical "
+            "error's sd is the spread between outcomes, not a mesh or step error"
         )
-    if error.changed:
-        return (
-            f"at {error.changed} of {error.pairs} placements the model refined "
-            f"{error.refinement} times over (every mesh spacing and the time step) changed the "
-            "outcome (spin or slide): the design's outcomes are not converged, and the band "
-            "counts those placements only robustly"
+    elif error.changed:
+        notes.append(
+            f"at {error.changed} of {error.pairs} placements {refined} changed the outcome "
+            "(spin or slide): the design's outcomes are not converged; the numerical error's "
+            "sd is the other placements' (a median and a robust spread)"
         )
-    return None
+    if error.pairs < error.runs:
+        notes.append(
+            f"the model's numerical error rests on {error.pairs} of {error.runs} placements "
+            "(the others did not end ok on both models)"
+        )
+    if error.pairs < FEW_PAIRS:
+        notes.append(
+            f"the model's numerical error rests on {error.pairs} placement(s): a rough "
+            "estimate (the simulator takes no placements, or --numerical-runs is small)"
+        )
+    return notes
 
 
 __all__ = [
@@ -150,5 +191,5 @@ __all__ = [
     "NumericalError",
     "differences",
     "estimate_numerical_error",
-    "numerical_note",
+    "numerical_notes",
 ]

@@ -53,7 +53,8 @@ heading; iteration -1 the numerical error's runs on the model, -2 on the refined
 written as pending before any runs and each finished in one transaction the
 moment it arrives; rerunning the same command runs only what is still pending. The inputs
 (study, design, N, K, seed, the drawn sets, the placement seeds and D) are stored in the meta
-record ``predict``: a folder holding a prediction with other inputs is refused.
+record ``predict``, the numerical error's (refinement, parameters, placement seeds) in
+``numerical``: a folder holding a prediction with other inputs is refused.
 
 Outputs in the output folder (schemas in docs/data.md, Predictions): ``runs.csv`` (one row per
 simulation), ``summary.csv`` (one row per quantity), ``effects.csv`` (one row per parameter and
@@ -97,7 +98,7 @@ from parcelfit.study.numerical_error import (
     NUMERICAL_RUNS,
     NumericalError,
     estimate_numerical_error,
-    numerical_note,
+    numerical_notes,
 )
 from parcelfit.study.plausible import (
     Design,
@@ -185,6 +186,7 @@ class QuantitySummary:
     decomposition: Decomposition
     run_q05: float = math.nan
     run_q95: float = math.nan
+    numerical_sd: float = math.nan  # the model's numerical error (SI; transit time: a share)
 
 
 @dataclass(frozen=True, eq=False)
@@ -221,6 +223,7 @@ class Prediction:
                     "q95": s.q95,
                     "run_q05": s.run_q05,
                     "run_q95": s.run_q95,
+                    "numerical_sd": s.numerical_sd,
                     "variance": d.total,
                     "between_sets": d.between,
                     "within_sets": d.within,
@@ -344,8 +347,11 @@ def summarise_prediction(
         run_q05, run_q95 = real_run_band(
             vals.tolist(), q, scatter, seed, None if numerical is None else numerical.sd
         )
+        num_sd = math.nan if numerical is None else numerical.sd.get(q, math.nan)
         summaries.append(
-            QuantitySummary(q, int(vals.size), med, q05, q95, decompose(grid), run_q05, run_q95)
+            QuantitySummary(
+                q, int(vals.size), med, q05, q95, decompose(grid), run_q05, run_q95, num_sd
+            )
         )
         with np.errstate(invalid="ignore"):
             means = np.nanmean(np.where(np.isfinite(grid), grid, np.nan), axis=1)
@@ -407,13 +413,11 @@ def _inputs_record(
     seed: int,
     speed_deviation: float,
     scatter_runs: int = SCATTER_RUNS,
-    numerical_runs: int = NUMERICAL_RUNS,
 ) -> dict[str, Any]:
-    # the scatter's and the numerical error's run counts only where they are not the default,
-    # so that a prediction made before the options existed resumes
-    extra: dict[str, Any] = {} if scatter_runs == SCATTER_RUNS else {"scatter_runs": scatter_runs}
-    if numerical_runs != NUMERICAL_RUNS:
-        extra["numerical_runs"] = numerical_runs
+    # the scatter's run count only where it is not the default, so that a prediction made
+    # before the option existed resumes (the numerical error's runs have their own record,
+    # `_numerical_record`, so that one made before them resumes with any --numerical-runs)
+    extra = {} if scatter_runs == SCATTER_RUNS else {"scatter_runs": scatter_runs}
     return {
         **extra,
         "study": str(study_dir.resolve()),
@@ -504,7 +508,7 @@ def predict(
         store = Store(out_dir / PREDICT_STORE)
         try:
             record = _inputs_record(
-                inputs.folder, design, drawn, seeds, seed, deviation, scatter_runs, numerical_runs
+                inputs.folder, design, drawn, seeds, seed, deviation, scatter_runs
             )
             known = store.get_meta("predict")
             if known is None:
@@ -512,10 +516,24 @@ def predict(
             elif json.loads(json.dumps(known)) != json.loads(json.dumps(record)):
                 raise ParcelfitError(
                     "this folder holds a prediction with other inputs (study, design, --sets, "
-                    "--placements or --seed)",
+                    "--placements, --seed, --speed-deviation or --scatter-runs)",
                     file=out_dir,
                     fix="give another --out, or the same inputs to resume it",
                 )
+            if isinstance(numerical_jobs, NumericalJobs):
+                wanted = _numerical_record(numerical_jobs)
+                held = store.get_meta("numerical")
+                if held is None:
+                    store.set_meta("numerical", wanted)
+                elif json.loads(json.dumps(held)) != json.loads(json.dumps(wanted)):
+                    raise ParcelfitError(
+                        "this folder holds the model's numerical error with other inputs "
+                        "(--numerical-runs, --seed, the study's validation.refinement or its "
+                        "recommended parameters)",
+                        file=out_dir,
+                        fix="give another --out, the same --numerical-runs as before, or "
+                        "--numerical-runs 0 to go without it",
+                    )
             if not store.evaluations("screen"):  # one transaction: all rows or none
                 items = [(s, j) for s in range(len(full)) for j in range(len(seeds))]
                 store.add_pending(
@@ -617,9 +635,10 @@ def predict(
                 f"no {what} of the calibration reached the real runs' scatter: the sets "
                 "are drawn from the whole parameter box, not from a plausible set"
             )
-        for note in (scatter_note(scatter), numerical_note(numerical)):
-            if note is not None:
-                notes.append(note)
+        note = scatter_note(scatter)
+        if note is not None:
+            notes.append(note)
+        notes.extend(numerical_notes(numerical))
         calibrated = sorted({c.case.consignment for c in inputs.study.cases})
         if design.consignment_name not in calibrated:
             notes.append(
@@ -661,7 +680,8 @@ def _placed(simulator: Simulator) -> bool:
 
 def _rows(store: Store, iteration: int | None) -> list[Any]:
     """The store's simulations of the prediction (``iteration`` 0), of the scatter runs of one
-    study case (its index from 1) or all (None)."""
+    study case (its index from 1), of the numerical error's on the model (-1) or the refined
+    model (-2), or all (None)."""
     rows = store.evaluations("screen")
     return rows if iteration is None else [e for e in rows if e.iteration == iteration]
 
@@ -711,14 +731,27 @@ def _scatter_values(store: Store, jobs: ScatterJobs) -> dict[str, list[dict[str,
 class NumericalJobs:
     """The simulations behind the model's numerical error at the design
     (`parcelfit.study.numerical_error`): the refined simulator, its ``refinement``, the
-    parameters (SI, fixed ones included) and the placement seeds (None: the simulator takes no
-    placements, one pair at its own start)."""
+    parameters (SI, fixed ones included; ``at``: the ``recommended`` ones or the plausible
+    set's ``medians``), the placement seeds and whether the simulator takes them (if not, one
+    pair at its own start, seed 0)."""
 
     refined: Simulator
     refinement: int
     params: dict[str, float]
     seeds: list[int]
     placed: bool
+    at: str = "recommended"
+
+
+def _numerical_record(jobs: NumericalJobs) -> dict[str, Any]:
+    """The numerical error's inputs as predict.sqlite's meta value ``numerical`` holds them: a
+    rerun must match them to reuse its runs."""
+    return {
+        "refinement": jobs.refinement,
+        "params": dict(jobs.params),
+        "at": jobs.at,
+        "placements": list(jobs.seeds),
+    }
 
 
 def _numerical_jobs(
@@ -762,7 +795,8 @@ def _numerical_jobs(
     )
     placed = _placed(simulator)
     seeds = placement_seeds(runs, seed) if placed else [0]
-    return NumericalJobs(refined, factor, {**study.fixed, **found}, seeds, placed)
+    at = "recommended" if evaluation is not None else "medians"
+    return NumericalJobs(refined, factor, {**study.fixed, **found}, seeds, placed, at)
 
 
 def _run_numerical(
@@ -774,6 +808,7 @@ def _run_numerical(
 ) -> NumericalError:
     """Run the numerical error's pending simulations (``run``: `_run_rows` bound to the store
     and executor) and estimate it from the pairs."""
+    words = "recommended" if jobs.at == "recommended" else "plausible set's median"
     for it, sim, name, what in (
         (MODEL_ITERATION, simulator, "model", "the model"),
         (REFINED_ITERATION, jobs.refined, "refined", f"the model refined {jobs.refinement} times"),
@@ -785,7 +820,7 @@ def _run_numerical(
                 e.seed if jobs.placed else None,
             ),
             sim,
-            f"the numerical error ({what}, the recommended parameters on the design)",
+            f"the numerical error ({what}, the {words} parameters on the design)",
         )
 
     def values(it: int) -> list[dict[str, float | None] | None]:
@@ -795,7 +830,7 @@ def _run_numerical(
         ]
 
     return estimate_numerical_error(
-        values(MODEL_ITERATION), values(REFINED_ITERATION), jobs.refinement
+        values(MODEL_ITERATION), values(REFINED_ITERATION), jobs.refinement, jobs.at
     )
 
 
@@ -866,7 +901,7 @@ def cost_line(
     for c, case in enumerate(extra, start=1):
         n = sum(1 for e in pending if e.iteration == c)
         runs.append((n, run_seconds(study.simulator, case.rig, case.consignment)))
-    if len(designs) == 1:
+    if len(designs) == 1 and refinement > 1:  # the numerical error's pairs
         d = designs[0]
         n = sum(1 for e in pending if e.iteration == MODEL_ITERATION)
         runs.append((n, run_seconds(study.simulator, d.rig, d.consignment)))
