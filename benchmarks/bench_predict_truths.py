@@ -152,7 +152,7 @@ def main() -> None:
 
     ranges = yaml.safe_load(STUDY.read_text(encoding="utf-8"))["parameters"]
     unseen = args.unseen.split(",")
-    total = {q: [0, 0, 0] for q in QUANTITIES}
+    total = {q: [0, 0, 0, 0] for q in QUANTITIES}
     report = []
     for k in range(args.truths):
         folder = args.out / f"truth-{k}"
