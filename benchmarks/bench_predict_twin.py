@@ -115,6 +115,7 @@ def predict_cases(
             )
         elif err is not None:
             print(f"{label}: no numerical error ({err.reason})", flush=True)
+        print(f"{label}: {_simulation_time(out / f'predict-{name}-{kind}-{setting}')}", flush=True)
         real = [
             run_values(r)
             for c in dataset.cases.values()
@@ -142,6 +143,36 @@ def predict_cases(
             rows.append({"case": f"{name}/{kind}/{setting}", **row})
             print(f"{name + '/' + kind + '/' + str(setting):<12}{row_text(row)}", flush=True)
     return rows, inside, seconds
+
+
+def _simulation_time(folder: Path) -> str:
+    """From a prediction's store: the simulation time [s] summed by kind (the prediction's
+    own runs, the real runs' scatter's, the numerical error's on the model and refined), the
+    numerical error's share, and a refined run's mean time over a model run's."""
+    from parcelfit.study.predict import MODEL_ITERATION, PREDICT_STORE, REFINED_ITERATION
+    from parcelfit.study.store import Store
+
+    store = Store(folder / PREDICT_STORE, readonly=True)
+    try:
+        rows = [e for e in store.evaluations("screen") if e.wall_time is not None]
+    finally:
+        store.close()
+
+    def total(keep) -> tuple[float, int]:
+        mine = [e.wall_time for e in rows if keep(e.iteration)]
+        return float(sum(mine)), len(mine)
+
+    own, scatter = total(lambda i: i == 0), total(lambda i: i > 0)
+    model, refined = total(lambda i: i == MODEL_ITERATION), total(lambda i: i == REFINED_ITERATION)
+    everything = own[0] + scatter[0] + model[0] + refined[0]
+    ratio = (refined[0] / refined[1]) / (model[0] / model[1]) if model[1] and refined[1] else 0.0
+    return (
+        f"simulation time {own[0]:.0f} s for {own[1]} runs of the prediction, {scatter[0]:.0f} s "
+        f"for {scatter[1]} of the scatter, {model[0]:.0f} s and {refined[0]:.0f} s for "
+        f"{model[1]} and {refined[1]} of the numerical error on the model and refined: the "
+        f"numerical error {(model[0] + refined[0]) / max(everything, 1e-9):.0%} of it, a refined "
+        f"run {ratio:.2f} times a model run"
+    )
 
 
 def print_coverage(inside: dict[str, list[int]]) -> None:

@@ -65,7 +65,7 @@ def test_a_pair_that_changes_outcome_is_counted_and_does_not_set_the_band():
     assert err.changed == 1 and err.pairs == 5
     assert err.sd["rotation"] == pytest.approx(0.02)  # the median pair's, not the spin's turn
     (note,) = numerical_notes(err)
-    assert "at 1 of 5 placements" in note and "the other placements'" in note
+    assert "at 1 of 5 placements" in note and "robust to them" in note
 
 
 def test_from_half_the_pairs_changing_outcome_the_note_says_the_sd_is_the_outcomes_spread():

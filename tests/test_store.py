@@ -234,3 +234,16 @@ def test_damaged_details_are_refused_with_the_file_named(tmp_path):
     con.close()
     with pytest.raises(ParcelfitError, match="details in the study database are damaged"):
         store.evaluations()
+
+
+def test_claim_meta_stores_the_first_inputs_and_compares_later_ones_as_json(tmp_path):
+    store = Store(tmp_path / "s.sqlite")
+    try:
+        first = {"seed": 3, "placements": (1, 2), "rate": 0.5}
+        assert store.claim_meta("job", first)  # nothing stored: stored now
+        assert store.get_meta("job") == {"seed": 3, "placements": [1, 2], "rate": 0.5}
+        assert store.claim_meta("job", {"rate": 0.5, "placements": [1, 2], "seed": 3})
+        assert not store.claim_meta("job", {**first, "seed": 4})
+        assert store.get_meta("job")["seed"] == 3  # a refused claim changes nothing
+    finally:
+        store.close()

@@ -128,7 +128,7 @@ def _numerical_words(numerical: NumericalError | None) -> str:
         f"estimated from {numerical.pairs} placement(s) of the {at} on this design, simulated "
         f"by the model and by the model refined {numerical.refinement} times over (every mesh "
         f"spacing and the time step divided), the differences times {numerical.refinement} / "
-        f"{numerical.refinement - 1} for the part of the error the refinement leaves"
+        f"{numerical.refinement - 1}: the model's whole error if it is of first order"
     )
 
 

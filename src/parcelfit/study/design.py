@@ -620,10 +620,7 @@ def rank_experiments(
                 "placements": seeds,
                 "speed_deviation": deviation,
             }
-            known = store.get_meta("design")
-            if known is None:
-                store.set_meta("design", record)
-            elif json.loads(json.dumps(known)) != json.loads(json.dumps(record)):
+            if not store.claim_meta("design", record):
                 raise ParcelfitError(
                     "this folder holds an experiment design with other inputs (study, "
                     "candidates, --sets, --placements, --seed, --speed-deviation or the "

@@ -21,16 +21,18 @@ matched pairs. Per quantity q (`parcelfit.study.run_scatter.QUANTITIES`) and pla
     s_num^2 = median(e)^2 + (1.4826 MAD(e))^2
 
 d is only the part of the model's error that the refinement removes: for an error that falls
-as h^p with the mesh spacing or step h, the model's error is d R^p / (R^p - 1). MuJoCo's time
-stepping is of first order, so e takes p = 1 (twice d at R = 2; Richardson's extrapolation),
-the larger of the usual orders: a second-order error would be 4/3 of d. s_num is the squared
+as h^p with the mesh spacing or step h, the model's error is d R^p / (R^p - 1) (Richardson's
+extrapolation). e takes p = 1 (twice d at R = 2), a conservative assumption: MuJoCo's time
+stepping is of first order, but an error set by the mesh can fall faster (E1 KP/BW's median
+turn 0.8 / 0.3 / 0.2 degrees on 30 / 15 / 7.5 mm meshes, docs/research/convergence-check.md,
+where the factor would be nearer 4/3, a second-order error's). s_num is the squared
 systematic shift plus the robust variance of the errors about it (MAD the median absolute
 deviation, scipy.stats.median_abs_deviation with scale "normal"). Robust for
 the reason the real runs' scatter is (`parcelfit.study.run_scatter`): a placement that spins
 on one mesh and slides on the other differs by a turn, and one such pair would make the band
 span every outcome; such placements are counted (`changed`: the rotation on opposite sides of
-`parcelfit.sim.ensemble.SPIN_ANGLE`) and the prediction names them in its notes. The median and
-the MAD are robust only while fewer than half the pairs change outcome; from half on, the sd
+`parcelfit.sim.ensemble.SPIN_ANGLE`) and the prediction counts them in its notes. The median and
+the MAD are robust to them only while fewer than half the pairs change outcome; from half on, the sd
 is the outcomes' spread, and the note says so. The rotation is compared as the absolute angle
 it is predicted as (a turn whose sign flips with the mesh moves the exit heading, not it).
 
@@ -171,7 +173,7 @@ def numerical_notes(error: NumericalError | None) -> list[str]:
         notes.append(
             f"at {error.changed} of {error.pairs} placements {refined} changed the outcome "
             "(spin or slide): the design's outcomes are not converged; the numerical error's "
-            "sd is the other placements' (a median and a robust spread)"
+            "sd is robust to them (a median and a robust spread)"
         )
     if error.pairs < error.runs:
         notes.append(

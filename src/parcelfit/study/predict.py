@@ -53,7 +53,7 @@ heading; iteration -1 the numerical error's runs on the model, -2 on the refined
 written as pending before any runs and each finished in one transaction the
 moment it arrives; rerunning the same command runs only what is still pending. The inputs
 (study, design, N, K, seed, the drawn sets, the placement seeds and D) are stored in the meta
-record ``predict``, the numerical error's (refinement, parameters, placement seeds) in
+record ``predict``, the numerical error's (refinement, parameters, ``at``, placement seeds) in
 ``numerical``: a folder holding a prediction with other inputs is refused.
 
 Outputs in the output folder (schemas in docs/data.md, Predictions): ``runs.csv`` (one row per
@@ -510,30 +510,24 @@ def predict(
             record = _inputs_record(
                 inputs.folder, design, drawn, seeds, seed, deviation, scatter_runs
             )
-            known = store.get_meta("predict")
-            if known is None:
-                store.set_meta("predict", record)
-            elif json.loads(json.dumps(known)) != json.loads(json.dumps(record)):
+            if not store.claim_meta("predict", record):
                 raise ParcelfitError(
                     "this folder holds a prediction with other inputs (study, design, --sets, "
                     "--placements, --seed, --speed-deviation or --scatter-runs)",
                     file=out_dir,
                     fix="give another --out, or the same inputs to resume it",
                 )
-            if isinstance(numerical_jobs, NumericalJobs):
-                wanted = _numerical_record(numerical_jobs)
-                held = store.get_meta("numerical")
-                if held is None:
-                    store.set_meta("numerical", wanted)
-                elif json.loads(json.dumps(held)) != json.loads(json.dumps(wanted)):
-                    raise ParcelfitError(
-                        "this folder holds the model's numerical error with other inputs "
-                        "(--numerical-runs, --seed, the study's validation.refinement or its "
-                        "recommended parameters)",
-                        file=out_dir,
-                        fix="give another --out, the same --numerical-runs as before, or "
-                        "--numerical-runs 0 to go without it",
-                    )
+            if isinstance(numerical_jobs, NumericalJobs) and not store.claim_meta(
+                "numerical", _numerical_record(numerical_jobs)
+            ):
+                raise ParcelfitError(
+                    "this folder holds the model's numerical error with other inputs "
+                    "(--numerical-runs, --seed, the study's validation.refinement or its "
+                    "recommended parameters)",
+                    file=out_dir,
+                    fix="give another --out, the same --numerical-runs as before, or "
+                    "--numerical-runs 0 to go without it",
+                )
             if not store.evaluations("screen"):  # one transaction: all rows or none
                 items = [(s, j) for s in range(len(full)) for j in range(len(seeds))]
                 store.add_pending(

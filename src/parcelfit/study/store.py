@@ -427,6 +427,15 @@ class Store:
             raise ParcelfitError(f"the {key!r} record is written with write_{key}()")
         self._write_meta(key, value)
 
+    def claim_meta(self, key: str, value: Any) -> bool:
+        """Store ``value`` under ``key`` when nothing is stored there; whether what is stored is
+        ``value`` (compared as JSON): the check by which a resumed job refuses other inputs."""
+        known = self.get_meta(key)
+        if known is None:
+            self.set_meta(key, value)
+            return True
+        return bool(json.loads(json.dumps(known)) == json.loads(json.dumps(value)))
+
     def _record(self, key: str, read: Callable[[Mapping[str, Any]], _R]) -> _R | None:
         doc = self._read_meta(key)
         if doc is None:
