@@ -118,7 +118,7 @@ from parcelfit.study.run_scatter import (
     stored_recommendation,
 )
 from parcelfit.study.spread import Decomposition, Effect, decompose, effects_of, t_threshold
-from parcelfit.study.store import Store
+from parcelfit.study.store import Evaluation, Store
 from parcelfit.study.studyfile import CaseSpec, Study
 
 PREDICT_STORE = "predict.sqlite"
@@ -495,9 +495,10 @@ def predict(
     placed = _placed(simulator)
     seeds = placement_seeds(placements, seed) if placements > 1 or placed else [0]
     deviation = speed_deviation if placed and varies_drives(simulator) else 0.0
-    scatter_jobs = _scatter_jobs(inputs.folder, inputs.study, seed, scatter_runs)
+    recommended = stored_recommendation(inputs.folder)  # read once, for both kinds of runs
+    scatter_jobs = _scatter_jobs(recommended, inputs.study, seed, scatter_runs)
     numerical_jobs = _numerical_jobs(
-        inputs.folder, inputs.study, inputs.identifiability, simulator, numerical_runs, seed
+        recommended, inputs.study, inputs.identifiability, simulator, numerical_runs, seed
     )
     full = [{**inputs.study.fixed, **s} for s in drawn]
     out_dir = Path(out) if out is not None else default_out(inputs.folder, design)
@@ -692,11 +693,10 @@ class ScatterJobs:
 
 
 def _scatter_jobs(
-    folder: Path, study: Study, seed: int, runs: int = SCATTER_RUNS
+    evaluation: Evaluation | None, study: Study, seed: int, runs: int = SCATTER_RUNS
 ) -> ScatterJobs | None:
-    """The recommended parameters at ``runs`` seeded placements on every fitted and validation
-    case of ``study``; None when the calibration in ``folder`` has no ok fit."""
-    evaluation = stored_recommendation(folder)
+    """The recommended parameters (the calibration's ``evaluation`` of them) at ``runs`` seeded
+    placements on every fitted and validation case of ``study``; None without an ok fit."""
     if evaluation is None:
         return None
     simulator = make_simulator(study.simulator)
@@ -709,14 +709,16 @@ def _scatter_jobs(
     return ScatterJobs(simulator, placed, [(c, params, seeds) for c in specs.values()])
 
 
+def _stored_values(e: Evaluation) -> dict[str, float | None]:
+    """The quantities of one stored simulation (`finish_run` keeps all but the transit time in
+    its ``details``)."""
+    return {"transit_time": e.transit_time, **e.details.quantities}
+
+
 def _scatter_values(store: Store, jobs: ScatterJobs) -> dict[str, list[dict[str, float | None]]]:
     """Per case label of ``jobs``, the quantities of its finished scatter runs (`run_values`)."""
     return {
-        spec.label: [
-            {"transit_time": e.transit_time, **e.details.quantities}
-            for e in _rows(store, c)
-            if e.status == "ok"
-        ]
+        spec.label: [_stored_values(e) for e in _rows(store, c) if e.status == "ok"]
         for c, (spec, _, _) in enumerate(jobs.cases, start=1)
     }
 
@@ -749,7 +751,7 @@ def _numerical_record(jobs: NumericalJobs) -> dict[str, Any]:
 
 
 def _numerical_jobs(
-    folder: Path,
+    evaluation: Evaluation | None,
     study: Study,
     ident: Identifiability,
     simulator: Simulator,
@@ -757,8 +759,8 @@ def _numerical_jobs(
     seed: int,
 ) -> NumericalJobs | NumericalError:
     """The numerical error's simulations on the design (module docstring): the recommended
-    parameters of the calibration in ``folder`` (the plausible set's medians where it has no ok
-    fit) at ``runs`` seeded placements, on the design's ``simulator`` refined by the study's
+    parameters (the calibration's ``evaluation`` of them; the plausible set's medians without
+    an ok fit) at ``runs`` seeded placements, on the design's ``simulator`` refined by the study's
     ``validation.refinement``; or why there are none."""
     factor = study.refinement
     if runs == 0:
@@ -781,7 +783,6 @@ def _numerical_jobs(
         return NumericalError(
             {}, factor, reason=f"the model cannot be refined {factor} times: {exc}"
         )
-    evaluation = stored_recommendation(folder)
     found = (
         dict(evaluation.params)
         if evaluation is not None
@@ -819,7 +820,7 @@ def _run_numerical(
 
     def values(it: int) -> list[dict[str, float | None] | None]:
         return [
-            {"transit_time": e.transit_time, **e.details.quantities} if e.status == "ok" else None
+            _stored_values(e) if e.status == "ok" else None
             for e in sorted(_rows(store, it), key=lambda e: e.slot)
         ]
 
