@@ -61,7 +61,9 @@ def simulate(
     timestep: Annotated[
         float | None,
         typer.Option(
-            help="Time step [s].", show_default="1/2400 s (rigid contents), 1/1200 s (soft)"
+            help="Time step [s]; replaces the rig's step_refinement.",
+            show_default="1/2400 s (interpolated shell), 1/1200 s (full shell), divided by the "
+            "rig's step_refinement",
         ),
     ] = None,
     spacing: Annotated[
