@@ -134,18 +134,27 @@ def _shift_values(sh: EnsembleShift) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _ensemble_lines(
-    runs: dict[tuple[str, str, int], Member], params: list[str], n: int
+    runs: dict[tuple[str, str, int], Member], params: list[str], n: int, floored: bool = True
 ) -> list[str]:
+    """The ensemble table; without floor runs (``floored`` False) effects are judged by z alone."""
     effect, se, floor = {}, {}, {}
     for name in params:
         effect[name], se[name] = _shift_values(
             ensemble_shift(_members(runs, name, "low"), _members(runs, name, "high"))
         )
-        floor[name], _ = _shift_values(
-            ensemble_shift(_members(runs, name, "minus"), _members(runs, name, "plus"))
+        floor[name] = (
+            _shift_values(
+                ensemble_shift(_members(runs, name, "minus"), _members(runs, name, "plus"))
+            )[0]
+            if floored
+            else np.full(len(ENSEMBLE_MEASURES), np.nan)
         )
     floor = {name: np.abs(v) for name, v in floor.items()}
-    noise = np.nanmedian(np.array(list(floor.values())), axis=0)
+    noise = (
+        np.nanmedian(np.array(list(floor.values())), axis=0)
+        if floored
+        else np.full(len(ENSEMBLE_MEASURES), np.nan)
+    )
     lines = [
         "",
         f"## The ensemble of {n} placements",
@@ -183,7 +192,11 @@ def _ensemble_lines(
                 + " |"
             )
         moved = {
-            n_: bool(np.any((np.abs(effect[n_]) / noise >= 3) & (np.abs(effect[n_]) / se[n_] >= 2)))
+            n_: bool(
+                np.any((np.abs(effect[n_]) / noise >= 3) & (np.abs(effect[n_]) / se[n_] >= 2))
+                if floored
+                else np.any(np.abs(effect[n_]) / se[n_] >= 3)
+            )
             for n_ in params
         }
     lines += [
@@ -199,10 +212,12 @@ def _ensemble_lines(
             f"less at {po.a_further}, alike at {po.ties} (p = {po.p_value:.2g}); median paired "
             f"difference {np.degrees(po.median_difference):+.2f} degrees"
         )
+    criterion = (
+        ">= 3 times its floor and >= 2 standard errors" if floored else ">= 3 standard errors"
+    )
     lines += [
         "",
-        "Parameters that move at least one ensemble statistic by >= 3 times its floor and >= 2 "
-        "standard errors: "
+        f"Parameters that move at least one ensemble statistic by {criterion}: "
         + (", ".join(n_ for n_ in params if moved[n_]) or "none")
         + "; not: "
         + (", ".join(n_ for n_ in params if not moved[n_]) or "none")
@@ -231,6 +246,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--params", nargs="+", default=list(PUBLISHED_E3))
     ap.add_argument("--placements", type=int, default=1)
     ap.add_argument("--step", type=float, default=0.001, help="relative change for the floor")
+    ap.add_argument(
+        "--no-floor",
+        action="store_true",
+        help="skip the runs at the default -+step (half the simulations): no noise floor, "
+        "the ensemble's effects judged by their standard errors alone",
+    )
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--out", type=Path, default=Path("docs/research"))
     ap.add_argument("--scene", nargs="*", default=[], metavar="KEY=VALUE")
@@ -297,12 +318,10 @@ def main(argv: list[str] | None = None) -> int:
     for name in args.params:
         low, high = spec[name].si_range(kind)
         d = defaults[name]
-        for label, value in (
-            ("low", low),
-            ("high", high),
-            ("minus", d * (1 - args.step)),
-            ("plus", d * (1 + args.step)),
-        ):
+        levels = [("low", low), ("high", high)]
+        if not args.no_floor:
+            levels += [("minus", d * (1 - args.step)), ("plus", d * (1 + args.step))]
+        for label, value in levels:
             for s in seeds:
                 jobs[name, label, s] = (
                     {**defaults, name: value},
@@ -331,11 +350,22 @@ def main(argv: list[str] | None = None) -> int:
             [_response(runs[name, "low", s].run, runs[name, "high", s].run, cmp) for s in seeds],
             axis=0,
         )
-        floor[name] = np.nanmean(
-            [_response(runs[name, "minus", s].run, runs[name, "plus", s].run, cmp) for s in seeds],
-            axis=0,
+        floor[name] = (
+            np.full(3, np.nan)
+            if args.no_floor
+            else np.nanmean(
+                [
+                    _response(runs[name, "minus", s].run, runs[name, "plus", s].run, cmp)
+                    for s in seeds
+                ],
+                axis=0,
+            )
         )
-    noise = np.nanmedian(np.array(list(floor.values())), axis=0)
+    noise = (
+        np.full(3, np.nan)
+        if args.no_floor
+        else np.nanmedian(np.array(list(floor.values())), axis=0)
+    )
     failed = sum(m.run is None for m in runs.values())
     lines = [
         "# Parameter effects against the numerical noise floor",
@@ -343,6 +373,7 @@ def main(argv: list[str] | None = None) -> int:
         f"Written by `python scripts/parameter_effects.py --rig {args.rig} --consignment "
         f"{args.consignment} --setting {args.setting} --placements {args.placements} --step "
         f"{args.step:g}"
+        + (" --no-floor" if args.no_floor else "")
         + (f" --params {' '.join(args.params)}" if list(args.params) != list(PUBLISHED_E3) else "")
         + (f" --scene {' '.join(args.scene)}" if args.scene else "")
         + (
@@ -381,10 +412,13 @@ def main(argv: list[str] | None = None) -> int:
             + " | ".join(f"{v:.1f}" for v in ratio)
             + " |"
         )
-    ok = all(np.all(effect[n] / noise >= 3) for n in args.params)
-    lines += ["", f"Every ratio >= 3: **{'yes' if ok else 'no'}**."]
+    if args.no_floor:
+        lines += ["", "Noise floor not measured (`--no-floor`)."]
+    else:
+        ok = all(np.all(effect[n] / noise >= 3) for n in args.params)
+        lines += ["", f"Every ratio >= 3: **{'yes' if ok else 'no'}**."]
     if len(seeds) >= 2:
-        lines += _ensemble_lines(runs, args.params, len(seeds))
+        lines += _ensemble_lines(runs, args.params, len(seeds), floored=not args.no_floor)
     text = "\n".join(lines) + "\n"
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "parameter-effects.md").write_text(text)

@@ -182,3 +182,48 @@ def test_the_sheets_stiffness_reaches_the_reference_where_its_rim_bends(
     with pytest.raises(_BuiltError):
         args = ["--backend", "rigidbox", "--params", "E_Pa", "t_Pa", *extra]
         parameter_effects.main([*args, "--out", str(tmp_path)])
+
+
+def test_without_the_floor_only_the_ends_run_and_effects_are_judged_by_standard_errors(
+    monkeypatch, tmp_path
+):
+    labels = []
+
+    class _Done:
+        def __init__(self, value):
+            self.value = value
+
+        def result(self):
+            return self.value
+
+    class _Serial:
+        def __init__(self, *_):
+            pass
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *_):
+            return False
+
+        def submit(self, fn, job):
+            return _Done(fn(job))
+
+    def fake(job):
+        params, _, seed, *_ = job
+        high = params["k_CoPa"] > 500e3  # [N/m]
+        labels.append("high" if high else "low")
+        # the stiffer contact delays every placement by 20 ms, with a little scatter
+        return Member(
+            seed, SimStatus.OK, 1.0 + 0.001 * seed + (0.02 if high else 0.0), 0.3, None, 1
+        )
+
+    monkeypatch.setattr(parameter_effects, "_simulate", fake)
+    monkeypatch.setattr(parameter_effects, "ProcessPoolExecutor", _Serial)
+    monkeypatch.setattr(parameter_effects, "as_completed", lambda futures: list(futures))
+    args = ["--params", "k_CoPa", "--placements", "5", "--no-floor", "--out", str(tmp_path)]
+    assert parameter_effects.main(args) == 0
+    assert sorted(labels) == ["high"] * 5 + ["low"] * 5  # no runs at the default -+step
+    text = (tmp_path / "parameter-effects.md").read_text()
+    assert "--no-floor" in text and "Noise floor not measured" in text
+    assert "by >= 3 standard errors: k_CoPa; not: none." in text
