@@ -20,6 +20,32 @@ class _BuiltError(Exception):
     pass
 
 
+class _Done:
+    """A finished future."""
+
+    def __init__(self, value):
+        self.value = value
+
+    def result(self):
+        return self.value
+
+
+class _Serial:
+    """A process pool that runs each job at once, in this process."""
+
+    def __init__(self, *_):
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *_):
+        return False
+
+    def submit(self, fn, job):
+        return _Done(fn(job))
+
+
 def test_shell_parameters_are_refused_by_the_reference(tmp_path, capsys):
     with pytest.raises(SystemExit):
         parameter_effects.main(
@@ -144,19 +170,6 @@ def test_the_bulge_reaches_the_runs_whatever_the_consignment_is_called(monkeypat
         seen.append(job)
         raise _BuiltError
 
-    class _Serial:
-        def __init__(self, *_):
-            pass
-
-        def __enter__(self):
-            return self
-
-        def __exit__(self, *_):
-            return False
-
-        def submit(self, fn, job):
-            fn(job)
-
     monkeypatch.setattr(parameter_effects, "_simulate", fake)
     monkeypatch.setattr(parameter_effects, "ProcessPoolExecutor", _Serial)
     args = ["--consignment", "KP/BW", "--bulge", "0.55", "--params", "E_Pa", "--placements", "1"]
@@ -188,26 +201,6 @@ def test_without_the_floor_only_the_ends_run_and_effects_are_judged_by_standard_
     monkeypatch, tmp_path
 ):
     labels = []
-
-    class _Done:
-        def __init__(self, value):
-            self.value = value
-
-        def result(self):
-            return self.value
-
-    class _Serial:
-        def __init__(self, *_):
-            pass
-
-        def __enter__(self):
-            return self
-
-        def __exit__(self, *_):
-            return False
-
-        def submit(self, fn, job):
-            return _Done(fn(job))
 
     def fake(job):
         params, _, seed, *_ = job
