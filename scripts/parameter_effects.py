@@ -276,6 +276,11 @@ def main(argv: list[str] | None = None) -> int:
         help="rigidbox: where the bottom carries contact (default: the consignment's)",
     )
     args = ap.parse_args(argv)
+    if args.no_floor and args.placements < 2:
+        ap.error(
+            "--no-floor judges each parameter by the ensemble's standard errors: give "
+            "--placements 2 or more"
+        )
     if args.backend == "rigidbox":
         absent = [n for n in args.params if n not in REFERENCE_PARAMETERS]
         if absent:

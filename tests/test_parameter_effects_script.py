@@ -200,23 +200,52 @@ def test_the_sheets_stiffness_reaches_the_reference_where_its_rim_bends(
 def test_without_the_floor_only_the_ends_run_and_effects_are_judged_by_standard_errors(
     monkeypatch, tmp_path
 ):
+    from parcelfit.sim.ensemble import ensemble_shift
+
+    noise = [0.1, -0.1, 0.6, 0.1, -0.5, 0.4, 1.3, 0.9]  # per placement
+    scatter = {"k_CoPa": 0.0005, "E_Pa": 0.0017}  # [s]: z about 9.9 and 2.5 below
+
+    def transit(name: str, seed: int, high: bool) -> float:
+        """A 2 ms later transit at the high end, scattered from placement to placement."""
+        return 1.0 + 0.003 * seed + ((0.002 + scatter[name] * noise[seed]) if high else 0.0)
+
+    def members(name: str, high: bool) -> list[Member]:
+        return [Member(s, SimStatus.OK, transit(name, s, high), 0.3, None, 1.0) for s in range(8)]
+
+    for name, (low, high) in {"k_CoPa": (9, 11), "E_Pa": (2, 3)}.items():
+        sh = ensemble_shift(members(name, False), members(name, True))
+        assert low < sh.transit_median / sh.transit_median_se < high  # the data are as meant
+
     labels = []
+    defaults = load_consignment("KPBW").parameter_values()
 
     def fake(job):
         params, _, seed, *_ = job
-        high = params["k_CoPa"] > 500e3  # [N/m]
-        labels.append("high" if high else "low")
-        # the stiffer contact delays every placement by 20 ms, with a little scatter
-        return Member(
-            seed, SimStatus.OK, 1.0 + 0.001 * seed + (0.02 if high else 0.0), 0.3, None, 1
-        )
+        name = next(n for n in scatter if params[n] != defaults[n])
+        high = params[name] > defaults[name]
+        labels.append((name, high))
+        return Member(seed, SimStatus.OK, transit(name, seed, high), 0.3, None, 1.0)
 
     monkeypatch.setattr(parameter_effects, "_simulate", fake)
     monkeypatch.setattr(parameter_effects, "ProcessPoolExecutor", _Serial)
     monkeypatch.setattr(parameter_effects, "as_completed", lambda futures: list(futures))
-    args = ["--params", "k_CoPa", "--placements", "5", "--no-floor", "--out", str(tmp_path)]
+    args = ["--params", "k_CoPa", "E_Pa", "--placements", "8", "--no-floor", "--out", str(tmp_path)]
     assert parameter_effects.main(args) == 0
-    assert sorted(labels) == ["high"] * 5 + ["low"] * 5  # no runs at the default -+step
+    assert len(labels) == 32  # the two ends only, no runs at the default -+step
+    assert sorted(set(labels)) == [
+        ("E_Pa", False),
+        ("E_Pa", True),
+        ("k_CoPa", False),
+        ("k_CoPa", True),
+    ]
     text = (tmp_path / "parameter-effects.md").read_text()
     assert "--no-floor" in text and "Noise floor not measured" in text
-    assert "by >= 3 standard errors: k_CoPa; not: none." in text
+    # 3 standard errors, not 2: E_Pa at 2.5 SE is not listed as moving the ensemble
+    assert "by >= 3 standard errors: k_CoPa; not: E_Pa." in text
+
+
+def test_without_the_floor_one_placement_is_refused(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        parameter_effects.main(["--params", "k_CoPa", "--no-floor", "--out", str(tmp_path)])
+    assert "--placements 2 or more" in capsys.readouterr().err
+    assert not (tmp_path / "parameter-effects.md").exists()

@@ -247,8 +247,10 @@ class SimulatorSection(FileModel):
     """mujoco, rigidbox: a bundled consignment type (KPBW, PB, KP, BW) or a consignment .yaml
     file relative to this file."""
     timestep: Annotated[float | None, Number(unit="s", ge=1e-9)] = None
-    """Time step [s] (default: 1/2400 s around a rigid content, 1/1200 s around a soft one,
-    divided by the rig's step_refinement)."""
+    """Time step [s] (default: 1/2400 s with an interpolated shell, the rigid-content types',
+    1/1200 s with a full shell, the soft ones', 1/2400 s for a full shell with Coulomb belt
+    friction, each divided by the rig's step_refinement). A step given here is used on every
+    rig as it is, not divided by step_refinement: give E1 and E2a theirs in `rig_timesteps`."""
     spacing: Annotated[float | None, Number(unit="m", ge=1e-9)] = None
     """Shell mesh spacing around a rigid content (rigidbox: its contact points' spacing) [m]
     (default 0.03)."""
