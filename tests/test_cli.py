@@ -119,8 +119,10 @@ def test_help_keeps_units_in_square_brackets_and_shows_the_timestep_readably():
     result = runner.invoke(app, ["simulate", "--help"], terminal_width=200)
     assert result.exit_code == 0, result.output
     text = " ".join(result.output.split())
-    assert "Time step [s]." in text and "Wall-clock limit [s]." in text
-    assert "1/2400 s (rigid contents), 1/1200 s (soft)" in text and "0.00041667" not in text
+    assert "Time step [s]; replaces the rig's step_refinement." in text
+    assert "Wall-clock limit [s]." in text
+    default = "1/2400 s (interpolated shell), 1/1200 s (full shell), divided by the rig's"
+    assert default in text and "0.00041667" not in text
     result = runner.invoke(app, ["camera-calibrate", "--help"], terminal_width=200)
     assert "Side of one square [m], the tag map's unit (e.g. 0.04)." in " ".join(
         result.output.split()
