@@ -228,15 +228,12 @@ class Calibration:
             else:
                 refuse_orphaned_outputs(self.folder)
             store = Store(self.folder / STORE_FILE)
-            known = store.get_meta("fingerprint")
-            if known is not None and known != study.fingerprint:
+            if not store.claim_meta("fingerprint", study.fingerprint):
                 raise ParcelfitError(
                     "this folder holds a study made from a different study file",
                     file=self.folder,
                     fix="use a new output folder, or restore the study file it was made from",
                 )
-            if known is None:
-                store.set_meta("fingerprint", study.fingerprint)
             # where the study came from, so a report can find its file and data again
             store.write_source(
                 SourceRecord(
