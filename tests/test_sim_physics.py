@@ -179,8 +179,8 @@ def _e1_runs():
     """E1 at speed setting 3 (belt 2 at 1.57 m/s), the BW parcel at half, single and double
     mass; "scaled" also scales the contact stiffnesses and Young's modulus with the mass. At
     single mass the scaled parameters are the defaults, so both are one run (five runs). The
-    scaled runs stop at 0.9 s, past x = -0.1 m (reached at 0.82 s) and before the transfer onto
-    belt 2, which amplifies rounding (below)."""
+    runs at half and double mass stop at 0.9 s, past x = -0.1 m (reached at 0.82 s) and before
+    the transfer onto belt 2, which amplifies rounding (below)."""
     base = MujocoSimulator().consignment("BW")  # the cheapest type: 4 x 4 x 1 cells, 30 mm
     defaults = base.parameter_values()
     out = {}
@@ -195,7 +195,8 @@ def _e1_runs():
                 params.update(
                     {k: defaults[k] * factor for k in ("k_BePa", "k_CoPa", "k_MePa", "E_Pa")}
                 )
-            options = SimOptions(duration=0.9 if scaled else None)
+            # only the single-mass run goes on to belt 2 (for its speed there)
+            options = SimOptions(duration=None if factor == 1.0 else 0.9)
             sim = MujocoSimulator(options, consignments={cons.name: cons})
             out[scaled, factor] = sim.run(params, TestCase("E1", cons.name, 3))
     return out
@@ -225,8 +226,8 @@ def test_e1_parcel_reaches_belt_2_speed_and_heavier_and_lighter_parcels_behave_a
     # little. The transfer onto belt 2 (x = 0) amplifies differences: with KP/BW's 5 x 5 x 1
     # shell the rounding of the half-mass run (1e-12 m before it) grew there to 1.2 mm and 3.2
     # degrees, as a 0.1 % change of a friction coefficient moves E1's exit heading by up to
-    # about 2 degrees; so the law is checked to rounding before the transfer (the scaled runs
-    # stop there; BW's agree to 2e-14 m)
+    # about 2 degrees; so the law is checked before the transfer, where the runs at half and
+    # double mass stop (BW's scaled runs agree to 2e-14 m)
     for factor in (0.5, 2.0):
         a, b = e1_runs[True, 1.0].run.trajectory, e1_runs[True, factor].run.trajectory
         before = int(np.searchsorted(a.x, -0.1))  # x increases along E1; belt 2 from x = 0
@@ -234,11 +235,12 @@ def test_e1_parcel_reaches_belt_2_speed_and_heavier_and_lighter_parcels_behave_a
         dxy, dth = _max_deviation(a, b, upto=before)
         assert dxy < 1e-8 and dth < 1e-8
         dxy, dth = _max_deviation(
-            e1_runs[False, 1.0].run.trajectory, e1_runs[False, factor].run.trajectory
+            e1_runs[False, 1.0].run.trajectory, e1_runs[False, factor].run.trajectory, before
         )
-        # BW: 2.6 mm and 0.7 degrees at half the mass, 6.5 mm and 2.4 degrees at double (KP/BW
-        # over 5 x 5 x 1 cells: 5.3 degrees, 3.2 of them the transfer's rounding)
-        assert dxy < 0.015 and dth < math.radians(5)
+        # BW with fixed stiffnesses: 0.024 mm and 8e-5 degrees at half the mass, 0.031 mm and
+        # 8e-5 degrees at double (over the whole run, the transfer's rounding included, it was
+        # 2.6 mm and 0.7 degrees, 6.5 mm and 2.4 degrees)
+        assert dxy < 1e-4 and dth < math.radians(1e-3)
 
 
 @pytest.mark.longest
@@ -299,7 +301,8 @@ def test_a_kicked_parcel_slides_the_coulomb_distance_without_hopping(name):
     default = slide_test(cons)
     assert default.slide == pytest.approx(default.coulomb_slide, rel=0.05)
     assert default.no_contact == 0.0
-    assert slide_test(cons, options=SceneOptions(friction="geom")).no_contact > 0.1
+    if name == "BW":  # the former law on the cheapest type only (it lifted all three)
+        assert slide_test(cons, options=SceneOptions(friction="geom")).no_contact > 0.1
 
 
 def test_a_spinning_parcel_slides_at_every_contact_point_whatever_its_centre_does():
