@@ -52,9 +52,8 @@ echo "== test extras, lint, dependency check, tests"
 "$py" -m pip install -q -e ".[test]"
 "$py" -m ruff check .
 "$py" -m deptry src
-# -n auto: one test process per core (xdist); pass -n 0 to run in this process only.
-# --dist loadgroup: tests sharing a module-scoped fixture stay in one process (tests/conftest.py)
-"$py" -m pytest -n auto --dist loadgroup --durations=25 "$@"
+# -n auto: one test process per core (xdist); pass -n 0 to run in this process only
+"$py" -m pytest -n auto --durations=25 "$@"
 
 echo "== documentation site (mkdocs build --strict)"
 NO_MKDOCS_2_WARNING=1 "$py" -m mkdocs build --strict --quiet --site-dir "$work/site"

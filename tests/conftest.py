@@ -154,23 +154,5 @@ def pytest_report_header() -> str | None:
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """Start the longest tests first: with several test processes (``-n auto``) the others then
-    share the rest instead of waiting for one long test at the end. Tests sharing a fixture
-    computed once per module (rendered videos, a set of simulations) run in one test process
-    (``--dist loadgroup``, scripts/test.sh): split over two, each computed it. The groups start
-    right after the longest tests, as they too are long units of work."""
-    for item in items:
-        info = getattr(item, "_fixtureinfo", None)
-        if info is None:
-            continue
-        if any(
-            (defs := info.name2fixturedefs.get(name)) and defs[-1].scope == "module"
-            for name in info.names_closure
-        ):
-            item.add_marker(pytest.mark.xdist_group(item.path.name))
-    # then the groups, each a long unit of work (stable: a module's tests keep their order)
-    items.sort(
-        key=lambda item: (
-            item.get_closest_marker("longest") is None,
-            item.get_closest_marker("xdist_group") is None,
-        )
-    )
+    share the rest instead of waiting for one long test at the end."""
+    items.sort(key=lambda item: item.get_closest_marker("longest") is None)  # stable
