@@ -288,3 +288,62 @@ def test_closing_a_pool_frees_its_manager_thread_from_a_half_sent_result():
                 writer.close()
             manager.join(10)
     assert not stuck
+
+
+# -- one executor per command ----------------------------------------------------------------
+
+
+class _Counted:
+    """Wraps an executor factory: how many executors it made, and how many were closed."""
+
+    def __init__(self, make):
+        self.make, self.made, self.closed = make, 0, 0
+
+    def __call__(self, *args, **kwargs):
+        self.made += 1
+        executor = self.make(*args, **kwargs)
+        close = executor.close
+
+        def counted_close():
+            self.closed += 1
+            close()
+
+        executor.close = counted_close
+        return executor
+
+
+def test_a_shared_executor_is_made_on_first_use_and_closed_once():
+    from parcelfit.sim.executors import SharedExecutor
+
+    counted = _Counted(serial_executor)
+    shared = SharedExecutor(counted)
+    assert counted.made == 0  # nothing made before it is asked for
+    first = shared.get()
+    assert shared.get() is first and counted.made == 1
+    shared.close()
+    shared.close()
+    assert counted.closed == 1
+    assert shared.get() is not first and counted.made == 2  # a new one after closing
+    shared.close()
+    assert counted.closed == 2
+
+
+def test_a_calibration_makes_one_executor_for_its_loop_validations_and_checks(
+    tmp_path, monkeypatch
+):
+    """The fitting loop, the validations and the convergence check (its refined run) share one
+    executor: a local pool starts its worker processes once per run, and it is closed once."""
+    import parcelfit.study.calibration as calibration
+    from parcelfit.study.results import read_results
+    from parcelfit.study.studyfile import load_study
+
+    from .helpers import write_study
+
+    counted = _Counted(calibration.study_executor)
+    monkeypatch.setattr(calibration, "study_executor", counted)
+    study = load_study(write_study(tmp_path, budget=8, executor="serial"))
+    calibration.Calibration(study, tmp_path / "out", figures=False).run()
+    results = read_results(tmp_path / "out")
+    assert results is not None and results.validations and results.convergence is not None
+    assert results.convergence.runs  # the refined model ran after the loop
+    assert (counted.made, counted.closed) == (1, 1)

@@ -258,3 +258,24 @@ def test_a_study_that_switches_the_refinement_off_predicts_without_it(tmp_path):
 def test_a_bad_count_is_refused(study, tmp_path):
     with pytest.raises(ParcelfitError, match="--numerical-runs -1"):
         _predict(study, tmp_path, "bad", numerical_runs=-1)
+
+
+def test_the_prediction_s_phases_share_one_executor(study, tmp_path, monkeypatch):
+    """The design's runs and the numerical error's model and refined runs: one executor, made
+    once and closed once."""
+    import parcelfit.study.predict as predict_module
+
+    made, closed = [], []
+    serial = predict_module.open_executor
+
+    def counted(*args, **kwargs):
+        executor = serial(*args, **kwargs)
+        made.append(executor)
+        close = executor.close
+        executor.close = lambda: (closed.append(executor), close())[1]
+        return executor
+
+    monkeypatch.setattr(predict_module, "open_executor", counted)
+    p = _predict(study, tmp_path, "p")
+    assert p.numerical is not None and p.numerical.pairs == NUMERICAL_RUNS
+    assert len(made) == 1 and closed == made

@@ -409,6 +409,28 @@ def _local_worker(parent_pid: int) -> None:
     die_with_parent(parent_pid)
 
 
+class SharedExecutor:
+    """One executor for every phase of a command, made by ``make`` when first asked for
+    (`get`) and shut down once (`close`): a local pool then starts its worker processes (each
+    importing the simulator, seconds) once per command, not once per phase."""
+
+    def __init__(self, make: Callable[[], Executor]) -> None:
+        self._make = make
+        self._live: Executor | None = None
+
+    def get(self) -> Executor:
+        """The executor, made on the first call."""
+        if self._live is None:
+            self._live = self._make()
+        return self._live
+
+    def close(self) -> None:
+        """Shut the executor down, if one was made; a later `get` makes a new one."""
+        live, self._live = self._live, None
+        if live is not None:
+            live.close()
+
+
 def serial_executor() -> Executor:
     """Tasks in this process, one after the other (for debugging and small jobs)."""
     return Executor(SerialPool(), window=1)
@@ -592,6 +614,7 @@ __all__ = [
     "Executor",
     "Outcome",
     "SerialPool",
+    "SharedExecutor",
     "Task",
     "dask_executor",
     "local_executor",

@@ -48,7 +48,7 @@ from parcelfit.errors import ParcelfitError, os_error
 from parcelfit.metrics import ReferenceSelection
 from parcelfit.optimize.sampler import Sampler
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
-from parcelfit.sim.executors import Executor
+from parcelfit.sim.executors import Executor, SharedExecutor
 from parcelfit.sim.factory import make_simulator
 from parcelfit.sim.protocol import Simulator
 from parcelfit.study.estimate import calibration_cost_line
@@ -185,6 +185,9 @@ class Calibration:
         self.progress = progress or ignore_progress
         self._opened: _Opened | None = None
         self._closed = False
+        # the study's executor, made on first use and shared by the fitting loop and the
+        # closing phases (validations, checks, advice); `close` shuts it down
+        self._shared = SharedExecutor(lambda: study_executor(study, *self._executor_args))
 
     def cost_line(self) -> str:
         """The line said before the study starts: its expected cost on its executor and workers
@@ -275,7 +278,7 @@ class Calibration:
             simulator,
             references,
             self._report,
-            lambda: study_executor(study, *self._executor_args),
+            self._shared.get,
             figures=self.figures,
             key_frames=self.key_frames,
             animation=self.animation,
@@ -324,8 +327,9 @@ class Calibration:
         return None if self._opened is None else self._opened.finish.last_validation
 
     def close(self) -> None:
-        """Close the store and release the folder's lock (`run` does this when it ends);
-        nothing to do before `prepare`."""
+        """Shut the study's executor down, close the store and release the folder's lock
+        (`run` does this when it ends); nothing to do before `prepare`."""
+        self._shared.close()
         if self._opened is None or self._closed:
             return
         self._opened.store.close()
@@ -397,7 +401,7 @@ class Calibration:
             self._report(
                 loop.iteration, 0, "connecting to the Dask scheduler, waiting for a worker"
             )
-        executor = study_executor(study, *self._executor_args)
+        executor = self._shared.get()
         try:
             if already_passed:
                 # a finished study whose record lost fitting runs (a lost worker): complete the
@@ -445,8 +449,9 @@ class Calibration:
             ):
                 return self._result("validation passed")
             return self._result("budget spent")
-        finally:
-            executor.close()
+        except BaseException:
+            self._shared.close()  # an error or Ctrl-C: the workers stop now
+            raise
 
     def _validate(self, iteration: int, executor: Executor) -> bool | None:
         """Validate the recommended parameters after ``iteration`` (`Finish.validate`)."""

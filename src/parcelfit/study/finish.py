@@ -58,12 +58,12 @@ class Finish:
     """The validations and conclusions of one open study (see the module doc).
 
     ``references``: every case's reference selection by label; ``report`` receives a progress
-    line; ``executor`` makes an executor for the simulations after the loop (the transfer and
-    convergence checks and the advice). With ``figures`` the study figures (`parcelfit.study.plots`) are drawn,
-    with ``key_frames`` too the recommended run's key frames (MuJoCo: one more simulation;
-    ``animation`` adds ``figures/run.gif``); ``advice`` enables the advice on which test case
-    to add. ``last_validation`` is the verdict of the latest finished validation (None before
-    any)."""
+    line; ``executor`` returns the executor for the simulations after the loop (the transfer
+    and convergence checks and the advice): the calibration's, which it closes. With
+    ``figures`` the study figures (`parcelfit.study.plots`) are drawn, with ``key_frames`` too
+    the recommended run's key frames (MuJoCo: one more simulation; ``animation`` adds
+    ``figures/run.gif``); ``advice`` enables the advice on which test case to add.
+    ``last_validation`` is the verdict of the latest finished validation (None before any)."""
 
     def __init__(
         self,
@@ -370,14 +370,10 @@ class Finish:
         self, tasks: list[Task], simulator: Simulator | None = None
     ) -> list[SimResult]:
         """Simulate tasks with the study's executor (on ``simulator``, default the study's);
-        results in task order."""
+        results in task order. The executor is the calibration's, which closes it."""
         out: dict[int, SimResult] = {}
-        executor = self._executor()
-        try:
-            for i, r in executor.simulate(simulator or self.simulator, tasks):
-                out[i] = r
-        finally:
-            executor.close()
+        for i, r in self._executor().simulate(simulator or self.simulator, tasks):
+            out[i] = r
         return [out[i] for i in range(len(tasks))]
 
     def _judged_runs(

@@ -81,7 +81,7 @@ from parcelfit.errors import ParcelfitError, shown
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.runs import Run, TestCase
 from parcelfit.sim.ensemble import MAX_PLACEMENTS
-from parcelfit.sim.executors import Executor, Task, make_executor
+from parcelfit.sim.executors import Executor, SharedExecutor, Task, make_executor
 from parcelfit.sim.factory import make_simulator
 from parcelfit.sim.protocol import SimResult, Simulator
 from parcelfit.study.details import EvaluationDetails
@@ -507,6 +507,7 @@ def predict(
     lock = lock_folder(out_dir, "a prediction")
     try:
         store = Store(out_dir / PREDICT_STORE)
+        shared: SharedExecutor | None = None
         try:
             record = _inputs_record(
                 inputs.folder, design, drawn, seeds, seed, deviation, scatter_runs
@@ -575,14 +576,16 @@ def predict(
                         else 1,
                     )
                 )
+            # one executor for every phase below, sized for all their simulations
+            pending = sum(e.status == "pending" for e in _rows(store, None))
+            shared = SharedExecutor(
+                lambda: open_executor(executor, workers, scheduler, pending, make)
+            )
             run = partial(
                 _run_rows,
                 store,
                 speed_deviation=deviation,
-                executor=executor,
-                workers=workers,
-                scheduler=scheduler,
-                make=make,
+                pool=shared.get,
                 progress=progress,
             )
             k, pose = len(seeds), placed or placements > 1
@@ -617,6 +620,8 @@ def predict(
                 numerical = _run_numerical(store, numerical_jobs, design, simulator, run)
             runs = _runs_table(store, drawn, len(seeds), inputs.identifiability.names)
         finally:
+            if shared is not None:
+                shared.close()
             store.close()
         scatter = estimate_run_scatter(inputs.folder, inputs.study, model_values)
         summaries, effects, sentences = summarise_prediction(
@@ -837,14 +842,12 @@ def _run_rows(
     what: str,
     *,
     speed_deviation: float,
-    executor: str,
-    workers: int | None,
-    scheduler: str | None,
-    make: Callable[[], Executor] | None,
+    pool: Callable[[], Executor],
     progress: ProgressCallback,
 ) -> None:
     """Run the pending ones of ``rows`` on ``simulator`` (``item`` gives each its task and
-    placement seed), each recorded the moment it arrives; ``what`` names them in the progress."""
+    placement seed) on the executor ``pool()`` returns, each recorded the moment it arrives;
+    ``what`` names them in the progress."""
     pending = [e for e in rows if e.status == "pending"]
     total, done = len(rows), len(rows) - len(pending)
     progress(
@@ -858,15 +861,14 @@ def _run_rows(
     if not pending:
         return
     items = [item(e) for e in pending]
-    with open_executor(executor, workers, scheduler, len(items), make) as pool:
-        for i, result in simulate_items(pool, simulator, items, speed_deviation):
-            finish_run(store, pending[i].id, result)
-            done += 1
-            progress(
-                ProgressEvent(
-                    "predict", f"{what}: {done} of {total} simulations", done=done, total=total
-                )
+    for i, result in simulate_items(pool(), simulator, items, speed_deviation):
+        finish_run(store, pending[i].id, result)
+        done += 1
+        progress(
+            ProgressEvent(
+                "predict", f"{what}: {done} of {total} simulations", done=done, total=total
             )
+        )
 
 
 def cost_line(
