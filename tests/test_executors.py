@@ -347,3 +347,26 @@ def test_a_calibration_makes_one_executor_for_its_loop_validations_and_checks(
     assert results is not None and results.validations and results.convergence is not None
     assert results.convergence.runs  # the refined model ran after the loop
     assert (counted.made, counted.closed) == (1, 1)
+
+
+def test_a_calibration_stopped_by_an_error_closes_its_executor_once(tmp_path, monkeypatch):
+    """An error in the loop (here raised by the progress display) closes the executor once and
+    releases the folder: the rerun resumes."""
+    import parcelfit.study.calibration as calibration
+    from parcelfit.study.studyfile import load_study
+
+    from .helpers import write_study
+
+    counted = _Counted(calibration.study_executor)
+    monkeypatch.setattr(calibration, "study_executor", counted)
+    study = load_study(write_study(tmp_path, budget=8, executor="serial"))
+
+    def stop(event):
+        if event.done >= 2:
+            raise RuntimeError("display gone")
+
+    with pytest.raises(RuntimeError, match="display gone"):
+        calibration.Calibration(study, tmp_path / "out", figures=False, progress=stop).run()
+    assert (counted.made, counted.closed) == (1, 1)
+    result = calibration.Calibration(study, tmp_path / "out", figures=False).run()
+    assert result.evaluations == 8 and (counted.made, counted.closed) == (2, 2)

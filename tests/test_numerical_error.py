@@ -266,10 +266,10 @@ def test_the_prediction_s_phases_share_one_executor(study, tmp_path, monkeypatch
     import parcelfit.study.predict as predict_module
 
     made, closed = [], []
-    serial = predict_module.open_executor
+    real_open = predict_module.open_executor
 
     def counted(*args, **kwargs):
-        executor = serial(*args, **kwargs)
+        executor = real_open(*args, **kwargs)
         made.append(executor)
         close = executor.close
         executor.close = lambda: (closed.append(executor), close())[1]

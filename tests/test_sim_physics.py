@@ -227,7 +227,8 @@ def test_e1_parcel_reaches_belt_2_speed_and_heavier_and_lighter_parcels_behave_a
     # shell the rounding of the half-mass run (1e-12 m before it) grew there to 1.2 mm and 3.2
     # degrees, as a 0.1 % change of a friction coefficient moves E1's exit heading by up to
     # about 2 degrees; so the law is checked before the transfer, where the runs at half and
-    # double mass stop (BW's scaled runs agree to 2e-14 m)
+    # double mass stop (BW's scaled runs agree to 2e-14 m). Until then the parcel rides belt 1
+    # at its speed: the slide at half and double mass is checked by the kicked parcel's test
     for factor in (0.5, 2.0):
         a, b = e1_runs[True, 1.0].run.trajectory, e1_runs[True, factor].run.trajectory
         before = int(np.searchsorted(a.x, -0.1))  # x increases along E1; belt 2 from x = 0
@@ -301,8 +302,16 @@ def test_a_kicked_parcel_slides_the_coulomb_distance_without_hopping(name):
     default = slide_test(cons)
     assert default.slide == pytest.approx(default.coulomb_slide, rel=0.05)
     assert default.no_contact == 0.0
-    if name == "BW":  # the former law on the cheapest type only (it lifted all three)
+    if name == "BW":  # the cheapest type
+        # the former law lifted all three types
         assert slide_test(cons, options=SceneOptions(friction="geom")).no_contact > 0.1
+        # Coulomb friction scales with the weight: at half and double the mass (stiffnesses
+        # fixed) the slide is the same (E1's mass-scaling test sees the parcel ride, not slide)
+        m_pa = cons.parameter_values()["m_Pa"]
+        for factor in (0.5, 2.0):
+            heavier = replace(cons, name=f"BWx{factor}", mass=cons.mass * factor)
+            slide = slide_test(heavier, params={"m_Pa": m_pa * factor}).slide
+            assert slide == pytest.approx(default.slide, rel=0.02)  # 0.8 % and 0.6 %
 
 
 def test_a_spinning_parcel_slides_at_every_contact_point_whatever_its_centre_does():

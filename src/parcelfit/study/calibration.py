@@ -329,12 +329,13 @@ class Calibration:
     def close(self) -> None:
         """Shut the study's executor down, close the store and release the folder's lock
         (`run` does this when it ends); nothing to do before `prepare`."""
-        self._shared.close()
-        if self._opened is None or self._closed:
-            return
-        self._opened.store.close()
-        self._opened.lock.release()
-        self._closed = True
+        try:
+            self._shared.close()
+        finally:
+            if self._opened is not None and not self._closed:
+                self._opened.store.close()
+                self._opened.lock.release()
+                self._closed = True
 
     # -- helpers -----------------------------------------------------------------------------
     def _report(self, iteration: int, running: int, message: str) -> None:

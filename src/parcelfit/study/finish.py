@@ -59,8 +59,8 @@ class Finish:
 
     ``references``: every case's reference selection by label; ``report`` receives a progress
     line; ``executor`` returns the executor for the simulations after the loop (the transfer
-    and convergence checks and the advice): the calibration's, which it closes. With
-    ``figures`` the study figures (`parcelfit.study.plots`) are drawn, with ``key_frames`` too
+    and convergence checks and the advice): the calibration's, which the calibration closes.
+    With ``figures`` the study figures (`parcelfit.study.plots`) are drawn, with ``key_frames`` too
     the recommended run's key frames (MuJoCo: one more simulation; ``animation`` adds
     ``figures/run.gif``); ``advice`` enables the advice on which test case to add.
     ``last_validation`` is the verdict of the latest finished validation (None before any)."""
