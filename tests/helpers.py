@@ -271,3 +271,23 @@ def intervals_of(names, low=0.0, high=1.0, verdict="undetermined"):
         evaluations=10,
         noise_sd=0.1,
     )
+
+
+class CountedExecutors:
+    """Wraps an executor factory (called like it): how many executors it made, and how many
+    of them were closed."""
+
+    def __init__(self, make):
+        self.make, self.made, self.closed = make, 0, 0
+
+    def __call__(self, *args, **kwargs):
+        self.made += 1
+        executor = self.make(*args, **kwargs)
+        close = executor.close
+
+        def counted_close():
+            self.closed += 1
+            close()
+
+        executor.close = counted_close
+        return executor

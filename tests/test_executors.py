@@ -10,6 +10,7 @@ from parcelfit.sim import SimStatus
 from parcelfit.sim.executors import Executor, Task, make_executor, serial_executor
 
 from .fake_sim import AnalyticSimulator, trajectory
+from .helpers import CountedExecutors
 
 
 def _tasks(n):
@@ -293,29 +294,10 @@ def test_closing_a_pool_frees_its_manager_thread_from_a_half_sent_result():
 # -- one executor per command ----------------------------------------------------------------
 
 
-class _Counted:
-    """Wraps an executor factory: how many executors it made, and how many were closed."""
-
-    def __init__(self, make):
-        self.make, self.made, self.closed = make, 0, 0
-
-    def __call__(self, *args, **kwargs):
-        self.made += 1
-        executor = self.make(*args, **kwargs)
-        close = executor.close
-
-        def counted_close():
-            self.closed += 1
-            close()
-
-        executor.close = counted_close
-        return executor
-
-
 def test_a_shared_executor_is_made_on_first_use_and_closed_once():
     from parcelfit.sim.executors import SharedExecutor
 
-    counted = _Counted(serial_executor)
+    counted = CountedExecutors(serial_executor)
     shared = SharedExecutor(counted)
     assert counted.made == 0  # nothing made before it is asked for
     first = shared.get()
@@ -339,7 +321,7 @@ def test_a_calibration_makes_one_executor_for_its_loop_validations_and_checks(
 
     from .helpers import write_study
 
-    counted = _Counted(calibration.study_executor)
+    counted = CountedExecutors(calibration.study_executor)
     monkeypatch.setattr(calibration, "study_executor", counted)
     study = load_study(write_study(tmp_path, budget=8, executor="serial"))
     calibration.Calibration(study, tmp_path / "out", figures=False).run()
@@ -357,7 +339,7 @@ def test_a_calibration_stopped_by_an_error_closes_its_executor_once(tmp_path, mo
 
     from .helpers import write_study
 
-    counted = _Counted(calibration.study_executor)
+    counted = CountedExecutors(calibration.study_executor)
     monkeypatch.setattr(calibration, "study_executor", counted)
     study = load_study(write_study(tmp_path, budget=8, executor="serial"))
 

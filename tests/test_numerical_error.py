@@ -265,17 +265,10 @@ def test_the_prediction_s_phases_share_one_executor(study, tmp_path, monkeypatch
     once and closed once."""
     import parcelfit.study.predict as predict_module
 
-    made, closed = [], []
-    real_open = predict_module.open_executor
+    from .helpers import CountedExecutors
 
-    def counted(*args, **kwargs):
-        executor = real_open(*args, **kwargs)
-        made.append(executor)
-        close = executor.close
-        executor.close = lambda: (closed.append(executor), close())[1]
-        return executor
-
+    counted = CountedExecutors(predict_module.open_executor)
     monkeypatch.setattr(predict_module, "open_executor", counted)
     p = _predict(study, tmp_path, "p")
     assert p.numerical is not None and p.numerical.pairs == NUMERICAL_RUNS
-    assert len(made) == 1 and closed == made
+    assert (counted.made, counted.closed) == (1, 1)

@@ -402,57 +402,51 @@ class Calibration:
             self._report(
                 loop.iteration, 0, "connecting to the Dask scheduler, waiting for a worker"
             )
-        executor = self._shared.get()
-        try:
-            if already_passed:
-                # a finished study whose record lost fitting runs (a lost worker): complete the
-                # record, no new iterations
+        executor = self._shared.get()  # `run` closes it as it ends, on an error or Ctrl-C too
+        if already_passed:
+            # a finished study whose record lost fitting runs (a lost worker): complete the
+            # record, no new iterations
+            self._report(loop.iteration, len(pending), f"resuming {len(pending)} lost simulations")
+            loop.evaluate(pending, executor)
+            finish.last_validation = True
+            return self._result("validation passed")
+        # a validation interrupted by a kill is run again before anything else
+        for v in stored:
+            if v.status == "pending" and finish.validation_cases():
                 self._report(
-                    loop.iteration, len(pending), f"resuming {len(pending)} lost simulations"
+                    v.iteration, 1, f"resuming the validation after iteration {v.iteration}"
+                )
+                finish.run_validation(v.id, v.iteration, v.params, executor, v.slot)
+                group = finish.validation_rows(v.iteration)
+                if all(r.status != "pending" for r in group) and all(
+                    bool(r.details.passed) for r in group
+                ):
+                    return self._result("validation passed")
+        while True:
+            if pending:
+                self._report(
+                    loop.iteration, len(pending), f"resuming {len(pending)} pending simulations"
                 )
                 loop.evaluate(pending, executor)
-                finish.last_validation = True
-                return self._result("validation passed")
-            # a validation interrupted by a kill is run again before anything else
-            for v in stored:
-                if v.status == "pending" and finish.validation_cases():
-                    self._report(
-                        v.iteration, 1, f"resuming the validation after iteration {v.iteration}"
-                    )
-                    finish.run_validation(v.id, v.iteration, v.params, executor, v.slot)
-                    group = finish.validation_rows(v.iteration)
-                    if all(r.status != "pending" for r in group) and all(
-                        bool(r.details.passed) for r in group
-                    ):
-                        return self._result("validation passed")
-            while True:
-                if pending:
-                    self._report(
-                        loop.iteration, len(pending), f"resuming {len(pending)} pending simulations"
-                    )
-                    loop.evaluate(pending, executor)
-                    pending = []
-                elif not loop.step(executor):
-                    break
-                iteration = loop.iteration
-                if (
-                    iteration >= 1
-                    and iteration % study.validate_every == 0
-                    and iteration not in validated
-                ):
-                    validated.add(iteration)
-                    if self._validate(iteration, executor):
-                        return self._result("validation passed")
+                pending = []
+            elif not loop.step(executor):
+                break
+            iteration = loop.iteration
             if (
-                finish.validation_cases()
-                and loop.iteration not in validated
-                and self._validate(loop.iteration, executor)
+                iteration >= 1
+                and iteration % study.validate_every == 0
+                and iteration not in validated
             ):
-                return self._result("validation passed")
-            return self._result("budget spent")
-        except BaseException:
-            self._shared.close()  # an error or Ctrl-C: the workers stop now
-            raise
+                validated.add(iteration)
+                if self._validate(iteration, executor):
+                    return self._result("validation passed")
+        if (
+            finish.validation_cases()
+            and loop.iteration not in validated
+            and self._validate(loop.iteration, executor)
+        ):
+            return self._result("validation passed")
+        return self._result("budget spent")
 
     def _validate(self, iteration: int, executor: Executor) -> bool | None:
         """Validate the recommended parameters after ``iteration`` (`Finish.validate`)."""
