@@ -101,24 +101,29 @@ def _simulate(job: Job) -> Member:
 def _table_head(
     label: str,
     measures: tuple[str, ...],
-    noise: np.ndarray,
+    noise: np.ndarray | None,
     first: list[str],
     effect_suffix: str,
     last: list[str],
 ) -> list[str]:
-    """The noise-floor line and the head of an effects table (effect and floor per measure)."""
+    """The noise-floor line and the head of an effects table (effect and floor per measure);
+    without a floor (``noise`` None) the effects alone."""
     columns = [
         *first,
         *(f"effect {m}{effect_suffix}" for m in measures),
-        *(f"floor {m}" for m in measures),
+        *(f"floor {m}" for m in measures if noise is not None),
         *last,
     ]
-    return [
-        f"**{label}**: " + ", ".join(f"{m} {v:.4g}" for m, v in zip(measures, noise, strict=True)),
-        "",
-        "| " + " | ".join(columns) + " |",
-        "|---" * len(columns) + "|",
-    ]
+    floor_line = (
+        []
+        if noise is None
+        else [
+            f"**{label}**: "
+            + ", ".join(f"{m} {v:.4g}" for m, v in zip(measures, noise, strict=True)),
+            "",
+        ]
+    )
+    return [*floor_line, "| " + " | ".join(columns) + " |", "|---" * len(columns) + "|"]
 
 
 def _members(runs: dict[tuple[str, str, int], Member], name: str, label: str) -> list[Member]:
@@ -155,42 +160,47 @@ def _ensemble_lines(
         if floored
         else np.full(len(ENSEMBLE_MEASURES), np.nan)
     )
+    floor_words = (
+        "; floor = |the same change| between the runs at the default -+step; noise floor = "
+        "median of the floors. A ratio is |effect| / noise floor (inf where the floor is 0: no "
+        "placement changed), z"
+        if floored
+        else " (no runs at the default -+step: no noise floor). z"
+    )
+    kinds = ("ratio", "z") if floored else ("z",)
     lines = [
         "",
         f"## The ensemble of {n} placements",
         "",
         "What each parameter does to the ensemble's statistics: effect = change from the "
         f"{n} runs at the low to the {n} runs at the high end (matched placements; high - low), "
-        "with its paired bootstrap standard error (SE); floor = |the same change| between the "
-        "runs at the default -+step; noise floor = median of the floors. A ratio is |effect| / "
-        "noise floor (inf where the floor is 0: no placement changed), z = |effect| / SE.",
+        f"with its paired bootstrap standard error (SE){floor_words} = |effect| / SE.",
         "",
         *_table_head(
             "Ensemble noise floor",
             ENSEMBLE_MEASURES,
-            noise,
+            noise if floored else None,
             ["parameter"],
             " (SE)",
-            [f"{kind} {m}" for kind in ("ratio", "z") for m in ("rotation", "transit", "spins")],
+            [f"{kind} {m}" for kind in kinds for m in ("rotation", "transit", "spins")],
         ),
     ]
     with np.errstate(divide="ignore", invalid="ignore"):
         for name in params:
             ratio = np.abs(effect[name]) / noise
             z = np.abs(effect[name]) / se[name]
-            lines.append(
-                f"| {name} | "
-                + " | ".join(
+            cells = [
+                " | ".join(
                     f"{v:+.4g} ({e:.2g})" for v, e in zip(effect[name], se[name], strict=True)
                 )
-                + " | "
-                + " | ".join(f"{v:.4g}" for v in floor[name])
-                + " | "
-                + " | ".join(f"{v:.1f}" for v in ratio)
-                + " | "
-                + " | ".join(f"{v:.1f}" for v in z)
-                + " |"
-            )
+            ]
+            if floored:
+                cells += [
+                    " | ".join(f"{v:.4g}" for v in floor[name]),
+                    " | ".join(f"{v:.1f}" for v in ratio),
+                ]
+            cells.append(" | ".join(f"{v:.1f}" for v in z))
+            lines.append(f"| {name} | " + " | ".join(cells) + " |")
         moved = {
             n_: bool(
                 np.any((np.abs(effect[n_]) / noise >= 3) & (np.abs(effect[n_]) / se[n_] >= 2))
@@ -373,7 +383,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     failed = sum(m.run is None for m in runs.values())
     lines = [
-        "# Parameter effects against the numerical noise floor",
+        "# Parameter effects" + ("" if args.no_floor else " against the numerical noise floor"),
         "",
         f"Written by `python scripts/parameter_effects.py --rig {args.rig} --consignment "
         f"{args.consignment} --setting {args.setting} --placements {args.placements} --step "
@@ -393,30 +403,30 @@ def main(argv: list[str] | None = None) -> int:
         )
         + f" --out {args.out}`: {len(runs)} simulations ({failed} not ok) in {wall:.0f} s on "
         f"{args.workers} processes. Effect: the response between the runs at the two ends of "
-        f"the parameter's screening range; floor: between the runs at the default "
-        f"-+{args.step:.1%}; ratio: effect / noise floor (median of the floors).",
+        "the parameter's screening range"
+        + (
+            " (mean over the placements)."
+            if args.no_floor
+            else f"; floor: between the runs at the default -+{args.step:.1%}; ratio: effect / "
+            "noise floor (median of the floors)."
+        ),
         "",
         *_table_head(
             "Noise floor",
             MEASURES,
-            noise,
+            None if args.no_floor else noise,
             ["parameter", "range"],
             "",
-            ["ratio xy", "ratio theta", "ratio transit"],
+            [] if args.no_floor else ["ratio xy", "ratio theta", "ratio transit"],
         ),
     ]
     for name in args.params:
         r = spec[name].range_for(kind)
-        ratio = effect[name] / noise
-        lines.append(
-            f"| {name} | {r.low:g}-{r.high:g} {spec[name].unit} | "
-            + " | ".join(f"{v:.4g}" for v in effect[name])
-            + " | "
-            + " | ".join(f"{v:.4g}" for v in floor[name])
-            + " | "
-            + " | ".join(f"{v:.1f}" for v in ratio)
-            + " |"
-        )
+        cells = [f"{r.low:g}-{r.high:g} {spec[name].unit}", *(f"{v:.4g}" for v in effect[name])]
+        if not args.no_floor:
+            cells += [f"{v:.4g}" for v in floor[name]]
+            cells += [f"{v:.1f}" for v in effect[name] / noise]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
     if args.no_floor:
         lines += ["", "Noise floor not measured (`--no-floor`)."]
     else:

@@ -240,6 +240,15 @@ def test_without_the_floor_only_the_ends_run_and_effects_are_judged_by_standard_
     ]
     text = (tmp_path / "parameter-effects.md").read_text()
     assert "--no-floor" in text and "Noise floor not measured" in text
+    # no column, figure or title of a floor that was not measured
+    assert "floor DTW" not in text and "floor median" not in text and "ratio" not in text
+    assert "noise floor**" not in text.lower()
+    assert text.startswith("# Parameter effects\n")
+    ensemble_head = next(
+        line for line in text.splitlines() if line.startswith("| parameter | effect median")
+    )
+    row = next(line for line in text.splitlines() if line.startswith("| k_CoPa |") and "(" in line)
+    assert ensemble_head.count("|") == row.count("|") == 8  # parameter, 3 effects, 3 z
     # 3 standard errors, not 2: E_Pa at 2.5 SE is not listed as moving the ensemble
     assert "by >= 3 standard errors: k_CoPa; not: E_Pa." in text
 
