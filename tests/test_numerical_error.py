@@ -267,8 +267,21 @@ def test_the_prediction_s_phases_share_one_executor(study, tmp_path, monkeypatch
 
     from .helpers import CountedExecutors
 
-    counted = CountedExecutors(predict_module.open_executor)
+    sized, make = [], predict_module.open_executor
+
+    def recorded(kind, workers, scheduler, items, custom=None):
+        sized.append(items)
+        return make(kind, workers, scheduler, items, custom)
+
+    counted = CountedExecutors(recorded)
     monkeypatch.setattr(predict_module, "open_executor", counted)
     p = _predict(study, tmp_path, "p")
     assert p.numerical is not None and p.numerical.pairs == NUMERICAL_RUNS
     assert (counted.made, counted.closed) == (1, 1)
+    # sized for every phase's simulations (all pending in a new folder), not the first phase's
+    store = Store(tmp_path / "p" / "predict.sqlite", readonly=True)
+    try:
+        rows = store.evaluations("screen")
+    finally:
+        store.close()
+    assert sized == [len(rows)] and len(rows) >= 4 * 3 + 2 * NUMERICAL_RUNS
