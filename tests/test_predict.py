@@ -241,3 +241,44 @@ def test_a_parameter_whose_effect_could_not_be_estimated_is_not_called_harmless(
     assert len(sentences) == 4
     assert all("was not estimated" in s and "at least 6 parameter sets" in s for s in sentences)
     assert not any("does not matter" in s for s in sentences)
+
+
+def test_a_simulator_that_cannot_place_its_runs_predicts_and_designs_with_one_placement(tmp_path):
+    # an external solver, or a Python factory without with_placement: the defaults of 10 and 5
+    # placements would only repeat its one run, so without --placements they run 1; a number
+    # given is refused as before, naming the option
+    unplaced = {"backend": "python", "factory": "tests.test_screening_placements:make_unplaced"}
+    study = write_finished_study(tmp_path, simulator=unplaced)
+    q = write_rig_q(tmp_path)
+    common = ["--sets", "5", "--executor", "serial"]
+    result = runner.invoke(
+        app,
+        [
+            "predict",
+            str(study),
+            "--rig",
+            str(q),
+            "--consignment",
+            "KPBW",
+            *common,
+            "--out",
+            str(tmp_path / "p"),
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    runs = pd.read_csv(tmp_path / "p" / "runs.csv")
+    assert len(runs) == 5 and (runs["status"] == "ok").all()  # one run per set
+    result = runner.invoke(
+        app, ["design", str(study), "--rig", str(q), *common, "--out", str(tmp_path / "d")]
+    )
+    assert result.exit_code == 0, result.output
+    assert json.loads((tmp_path / "d" / "design.json").read_text())["placements"] == 1
+    for command in (
+        ["predict", str(study), "--rig", str(q), "--consignment", "KPBW"],
+        ["design", str(study), "--rig", str(q)],
+    ):
+        result = runner.invoke(
+            app, [*command, *common, "--placements", "3", "--out", str(tmp_path / "x")]
+        )
+        assert result.exit_code == 2
+        assert "has no seeded placements" in result.output and "--placements" in result.output

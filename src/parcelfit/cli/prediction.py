@@ -41,8 +41,14 @@ def predict(
         int, typer.Option(min=1, help="Parameter sets drawn from the plausible set.")
     ] = 20,
     placements: Annotated[
-        int, typer.Option(min=1, help="Seeded placements simulated per parameter set.")
-    ] = 10,
+        int | None,
+        typer.Option(
+            min=1,
+            show_default=False,
+            help="Seeded placements simulated per parameter set [default: 10; 1 for a "
+            "simulator that cannot place its runs, such as an external solver].",
+        ),
+    ] = None,
     seed: Annotated[
         int, typer.Option(min=0, help="Seed of the drawn sets and the placements.")
     ] = 0,
@@ -145,8 +151,14 @@ def design(
         int, typer.Option(min=2, help="Parameter sets drawn from the plausible set.")
     ] = 20,
     placements: Annotated[
-        int, typer.Option(min=1, help="Seeded placements simulated per set and candidate.")
-    ] = 5,
+        int | None,
+        typer.Option(
+            min=1,
+            show_default=False,
+            help="Seeded placements simulated per set and candidate [default: 5; 1 for a "
+            "simulator that cannot place its runs, such as an external solver].",
+        ),
+    ] = None,
     runs: Annotated[
         int, typer.Option(min=1, help="Real runs the expected interval widths assume.")
     ] = 10,

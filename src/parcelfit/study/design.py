@@ -138,6 +138,7 @@ from parcelfit.study.information import (
 from parcelfit.study.joint import (
     SPEED_DEVIATION,
     check_speed_deviation,
+    placements_for,
     require_placements,
     simulate_items,
     varies_drives,
@@ -166,6 +167,7 @@ from parcelfit.study.studyfile import Study
 
 DESIGN_STORE = "design.sqlite"
 DESIGN_FILE = "design.json"
+PLACEMENTS = 5  # seeded placements per set and candidate by default (1 where runs cannot be placed)
 NARROWS = 0.99  # an expected interval share below this counts as narrowing the parameter
 # run-to-run measurement floor per quantity (SI): the band test's 3 mm and 1 degree, 2 ms
 FLOOR = {
@@ -536,7 +538,7 @@ def rank_experiments(
     candidates: Sequence[str] = (),
     rig_files: Sequence[str] = (),
     sets: int = 20,
-    placements: int = 5,
+    placements: int | None = None,
     runs: int = 10,
     seed: int = 0,
     speed_deviation: float = SPEED_DEVIATION,
@@ -550,15 +552,16 @@ def rank_experiments(
     on_cost: Callable[[str], None] | None = None,
 ) -> DesignResult:
     """Rank the candidate experiments for the calibration in ``folder`` (module docstring):
-    each simulated at ``sets`` plausible parameter sets x ``placements`` seeded placements (each
-    with its drives ``speed_deviation`` [-] off their mean speeds) in ``executor``, scored for
-    ``runs`` real runs, recorded in ``out``/design.sqlite (resumable, default ``design`` in the
+    each simulated at ``sets`` plausible parameter sets x ``placements`` seeded placements
+    (default `PLACEMENTS`, 1 where a simulator cannot place its runs; each with its drives
+    ``speed_deviation`` [-] off their mean speeds) in ``executor``, scored for ``runs`` real
+    runs, recorded in ``out``/design.sqlite (resumable, default ``design`` in the
     study folder) and written there; ``on_cost`` receives the expected cost of the simulations
     still to run before they start. Seeded."""
     progress = progress or ignore_progress
     if not 2 <= sets <= MAX_SETS:
         raise ParcelfitError(f"--sets {sets}: give from 2 to {MAX_SETS} parameter sets")
-    if not 1 <= placements <= MAX_PLACEMENTS:
+    if placements is not None and not 1 <= placements <= MAX_PLACEMENTS:
         raise ParcelfitError(f"--placements {placements}: give from 1 to {MAX_PLACEMENTS}")
     if not 1 <= runs <= MAX_RUNS:
         raise ParcelfitError(f"--runs {runs}: give from 1 to {MAX_RUNS} real runs")
@@ -592,11 +595,12 @@ def rank_experiments(
     open_ = [p.name for p in ident.parameters if not p.determined]
     out_dir = Path(out) if out is not None else inputs.folder / "design"
     if not open_:
-        return DesignResult([], [], runs, sets, placements, out_dir)
+        return DesignResult([], [], runs, sets, placements or PLACEMENTS, out_dir)
     fitted = fitted_cases(study)
     cases = designs + [d for d, _, _ in fitted]  # the fitted cases simulated after the candidates
     own = make_simulator(config) if fitted else None
     simulators = [design_simulator(study, d) for d in designs] + [own for _ in fitted]
+    placements = min(placements_for(sim, placements, PLACEMENTS) for sim in simulators)
     for sim in simulators:
         require_placements(sim, placements, file=None, where="--placements")
     placed = callable(getattr(simulators[0], "with_placement", None))

@@ -127,6 +127,15 @@ def require_placements(
         )
 
 
+def placements_for(simulator: Simulator, given: int | None, default: int) -> int:
+    """The seeded placements per parameter set a command runs: ``given`` when the user gave a
+    number, else ``default`` for a simulator that places its runs (``with_placement``) and 1
+    for one that cannot (its runs would only repeat)."""
+    if given is not None:
+        return given
+    return default if callable(getattr(simulator, "with_placement", None)) else 1
+
+
 def check_placements(study: Study, simulator: Simulator) -> None:
     """Refuse an ensemble of several placements with a simulator that cannot place runs."""
     if study.cost_kind == "ensemble":

@@ -90,6 +90,7 @@ from parcelfit.study.identify import Identifiability
 from parcelfit.study.joint import (
     SPEED_DEVIATION,
     check_speed_deviation,
+    placements_for,
     require_placements,
     simulate_items,
     varies_drives,
@@ -125,6 +126,7 @@ PREDICT_STORE = "predict.sqlite"
 PREDICTION_FILE = "prediction.json"
 TABLE_FORMATS = ("csv", "parquet")
 MAX_SETS = 1000  # parameter sets of one prediction (each simulated at every placement)
+PLACEMENTS = 10  # seeded placements per set by default (1 where the simulator cannot place runs)
 SCATTER_RUNS = 10  # runs of the recommended parameters per fitted and validation case (run_scatter)
 MODEL_ITERATION, REFINED_ITERATION = -1, -2  # the numerical error's rows in predict.sqlite
 QUANTITIES = ("transit_time", "rotation", "exit_y", "exit_heading")
@@ -443,7 +445,7 @@ def predict(
     setting: int,
     *,
     sets: int = 20,
-    placements: int = 10,
+    placements: int | None = None,
     seed: int = 0,
     speed_deviation: float = SPEED_DEVIATION,
     scatter_runs: int = SCATTER_RUNS,
@@ -458,7 +460,8 @@ def predict(
     on_cost: Callable[[str], None] | None = None,
 ) -> Prediction:
     """Predict ``rig`` x ``consignment`` x ``setting`` from the calibration in ``folder``:
-    ``sets`` parameter sets of its plausible set times ``placements`` seeded placements (each
+    ``sets`` parameter sets of its plausible set times ``placements`` seeded placements
+    (default `PLACEMENTS`, 1 for a simulator that cannot place its runs; each
     with its drives ``speed_deviation`` [-] off their mean speeds, seeded the same way) and the
     recommended parameters at ``scatter_runs`` placements per fitted and validation case and at
     ``numerical_runs`` placements on the design by the model and the refined model (0: no
@@ -471,7 +474,7 @@ def predict(
     progress = progress or ignore_progress
     if not 1 <= sets <= MAX_SETS:
         raise ParcelfitError(f"--sets {sets}: give from 1 to {MAX_SETS} parameter sets")
-    if not 1 <= placements <= MAX_PLACEMENTS:
+    if placements is not None and not 1 <= placements <= MAX_PLACEMENTS:
         raise ParcelfitError(f"--placements {placements}: give from 1 to {MAX_PLACEMENTS}")
     if table_format not in TABLE_FORMATS:
         raise ParcelfitError(
@@ -490,6 +493,7 @@ def predict(
     inputs = load_inputs(folder)
     design = check_design(rig, consignment, setting)
     simulator = design_simulator(inputs.study, design)
+    placements = placements_for(simulator, placements, PLACEMENTS)
     require_placements(simulator, placements, file=None, where="--placements")
     drawn = draw_sets(inputs.identifiability, sets, seed)
     placed = _placed(simulator)
