@@ -282,3 +282,20 @@ def test_a_simulator_that_cannot_place_its_runs_predicts_and_designs_with_one_pl
         )
         assert result.exit_code == 2
         assert "has no seeded placements" in result.output and "--placements" in result.output
+
+
+def test_the_default_placements_follow_what_the_simulator_can_place():
+    from parcelfit.errors import ParcelfitError
+    from parcelfit.study.joint import placements_for, require_placements
+
+    from .fake_sim import AnalyticSimulator
+    from .test_screening_placements import Unplaced
+
+    placed, unplaced = AnalyticSimulator(), Unplaced()
+    assert callable(getattr(placed, "with_placement", None))
+    assert placements_for(placed, None, 10) == 10 and placements_for(placed, None, 5) == 5
+    assert placements_for(unplaced, None, 10) == 1
+    assert placements_for(placed, 3, 10) == placements_for(unplaced, 3, 10) == 3  # given: kept
+    with pytest.raises(ParcelfitError) as err:
+        require_placements(unplaced, 3, file=None, where="--placements")
+    assert err.value.fix.startswith("leave --placements out")

@@ -595,6 +595,7 @@ def rank_experiments(
     open_ = [p.name for p in ident.parameters if not p.determined]
     out_dir = Path(out) if out is not None else inputs.folder / "design"
     if not open_:
+        # nothing simulated: the placements are nominal (the default where none were given)
         return DesignResult([], [], runs, sets, placements or PLACEMENTS, out_dir)
     fitted = fitted_cases(study)
     cases = designs + [d for d, _, _ in fitted]  # the fitted cases simulated after the candidates

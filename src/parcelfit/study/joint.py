@@ -123,7 +123,12 @@ def require_placements(
             "(with_placement), so an ensemble of placements would repeat one run",
             file=file,
             where=where,
-            fix="use placements: 1, or a simulator with seeded placements (mujoco)",
+            fix=(
+                f"leave {where} out (one placement is then the default) or give {where} 1"
+                if where.startswith("--")
+                else "use placements: 1"
+            )
+            + ", or a simulator with seeded placements (mujoco)",
         )
 
 
@@ -427,6 +432,7 @@ __all__ = [
     "check_speed_deviation",
     "evaluation_outcome",
     "placement_seeds",
+    "placements_for",
     "require_placements",
     "response_change",
     "simulate_items",
