@@ -26,12 +26,26 @@ Markdown table; one to a few minutes per shell on one core):
     python scripts/rim_probe.py --consignment KPBW --shells braced-5x5x1 braced-5x5x1-s1
 
 (``--param`` varies another parameter over ``--values``, in the catalogue's unit.)
+
+``--probe content`` presses the content instead, down into its packaging lying on a still belt
+plate (a downward force on the content's body, ``--forces`` default 10 and 20 N), and reads
+the content's sink between the two forces, c = (z(F1) - z(F2)) / (F2 - F1) [m/N]: the
+stiffness the content meets in its packaging, k_CoPa's in series with the shell's and the
+bottom's contact on the plate. ``--spacing`` [m] sets the shell's mesh spacing around the rigid
+content (the type's default otherwise). On 15 mm and finer the loaded content of KP/BW does not
+come to rest (it jitters by some 0.01-0.03 mm from step to step), so ``--average`` [s] reads
+each height as its mean over the end of the load:
+
+    python scripts/rim_probe.py --probe content --param k_CoPa --values 100 1000 \
+        --shells default full --spacing 0.015 --settle 1.0 --average 0.4
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+from dataclasses import replace
+from typing import NamedTuple
 
 import mujoco
 import numpy as np
@@ -58,86 +72,193 @@ SHELLS = {
 }
 
 
-def rim_compliance(
+class Reading(NamedTuple):
+    """One probe: the ``compliance`` [m/N] between the two forces, the ``travel`` [m] from no
+    force to the larger one, the height's ``jitter`` (its range [m] over the averaged time at
+    the larger force) and the content's ``contacts`` at the end."""
+
+    compliance: float
+    travel: float
+    jitter: float
+    contacts: int
+
+
+def compliance(
+    probe: str,
     consignment: str,
     name: str,
     value: float,
     options: SceneOptions,
     forces: tuple[float, float],
     settle: float,
-) -> tuple[float, float]:
-    """The rim's compliance [m/N] between the two lifting ``forces`` [N] and the seam end's lift
-    [m] at the larger one, with parameter ``name`` at ``value`` (the catalogue's unit)."""
+    average: float = 0.0,
+) -> Reading:
+    """With parameter ``name`` at ``value`` (the catalogue's unit): for ``probe`` "rim" the rim's
+    compliance [m/N] between the two lifting ``forces`` [N] and the seam end's lift [m] at the
+    larger one (the parcel on a still metal plate); for "content" the content's compliance in
+    its packaging between the two downward ``forces`` on the content and its sink [m] from no
+    force to the larger one (on a still belt plate). Each height is read after ``settle`` [s]
+    at its load, as the mean over the last ``average`` [s] of it (0: the last step's)."""
     cons = load_consignment(consignment)
     full = cons.parameter_values(si_values={name: parameter(name).to_si(value)})
-    scene = build_scene(plate_rig("metal"), cons, full, 1, options)
-    model = scene.model()
+    material = "belt" if probe == "content" else "metal"
+    model = build_scene(plate_rig(material), cons, full, 1, options).model()
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
-    flex = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, "packaging")
     content = model.body("content").id
-    rot = data.xmat[content].reshape(3, 3)
-    centre = data.xpos[content].copy()
-    v0, nv = int(model.flex_vertadr[flex]), int(model.flex_vertnum[flex])
-
-    def local(points: np.ndarray) -> np.ndarray:
-        return (points - centre) @ rot
-
-    verts = local(data.flexvert_xpos[v0 : v0 + nv])
-    tip = np.flatnonzero(verts[:, 0] > verts[:, 0].max() - 1e-4)  # the seam's end at +x
-    n0, nn = int(model.flex_nodeadr[flex]), int(model.flex_nodenum[flex])
-    if nn:  # interpolated: the nodes of the end plane carry the seam's end
-        bodies = model.flex_nodebodyid[n0 : n0 + nn]
-        x = local(data.xpos[bodies])[:, 0]
-        bodies = bodies[x > x.max() - 1e-4]
-    else:
-        bodies = model.flex_vertbodyid[v0 + tip]
     steps = round(settle / model.opt.timestep)
+    if probe == "content":
+        bodies, sign = np.array([content]), -1.0  # pushed down: the sink is the height lost
+
+        def height() -> float:
+            return float(data.xpos[content, 2])
+
+    else:
+        flex = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, "packaging")
+        v0, nv = int(model.flex_vertadr[flex]), int(model.flex_vertnum[flex])
+        tip = v0 + _seam_tip(data, content, v0, nv)
+        bodies, sign = _seam_end(model, data, content, flex, tip), 1.0
+
+        def height() -> float:
+            return float(data.flexvert_xpos[tip, 2].mean())
+
+    window = min(steps, max(1, round(average / model.opt.timestep)))
 
     def settle_at(force: float) -> float:
-        data.xfrc_applied[bodies, 2] = force / len(bodies)
-        for _ in range(steps):
+        data.xfrc_applied[bodies, 2] = sign * force / len(bodies)
+        heights.clear()
+        for i in range(steps):
             mujoco.mj_step(model, data)
-        return float(data.flexvert_xpos[v0 + tip, 2].mean())
+            if i >= steps - window:
+                heights.append(height())
+        return float(np.mean(heights))
 
+    heights: list[float] = []
     z0 = settle_at(0.0)
     z1 = settle_at(forces[0])
     z2 = settle_at(forces[1])
-    return (z2 - z1) / (forces[1] - forces[0]), z2 - z0
+    return Reading(
+        sign * (z2 - z1) / (forces[1] - forces[0]),
+        sign * (z2 - z0),
+        max(heights) - min(heights),
+        content_contacts(model, data),
+    )
+
+
+def content_contacts(model: mujoco.MjModel, data: mujoco.MjData) -> int:
+    """How many contacts the content's geoms (one box, or its tiles) have now (MuJoCo keeps at
+    most 50 per colliding pair)."""
+    geoms = np.flatnonzero(model.geom_bodyid == model.body("content").id)
+    return int(np.sum(np.isin(data.contact.geom[: data.ncon], geoms).any(axis=1)))
+
+
+def _local(data: mujoco.MjData, content: int, points: np.ndarray) -> np.ndarray:
+    """``points`` [m] in the content's frame (the parcel's, at the start)."""
+    return (points - data.xpos[content]) @ data.xmat[content].reshape(3, 3)
+
+
+def _seam_tip(data: mujoco.MjData, content: int, v0: int, nv: int) -> np.ndarray:
+    """The packaging's vertices (offsets from ``v0``) at the seam's end, at +x."""
+    verts = _local(data, content, data.flexvert_xpos[v0 : v0 + nv])
+    return np.flatnonzero(verts[:, 0] > verts[:, 0].max() - 1e-4)
+
+
+def _seam_end(
+    model: mujoco.MjModel, data: mujoco.MjData, content: int, flex: int, tip: np.ndarray
+) -> np.ndarray:
+    """The bodies that carry the seam's end (vertices ``tip``): the flex vertices of a full
+    shell, the end plane's nodes of an interpolated one."""
+    n0, nn = int(model.flex_nodeadr[flex]), int(model.flex_nodenum[flex])
+    if nn:  # interpolated: the nodes of the end plane carry the seam's end
+        bodies = model.flex_nodebodyid[n0 : n0 + nn]
+        x = _local(data, content, data.xpos[bodies])[:, 0]
+        return bodies[x > x.max() - 1e-4]
+    return model.flex_vertbodyid[tip]
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(
+        description=__doc__.splitlines()[0] + " (--probe content: and the content's stiffness?)"
+    )
     ap.add_argument("--consignment", default="KPBW")
     ap.add_argument("--param", default="E_Pa", help="the parameter varied")
     ap.add_argument(
         "--values", type=float, nargs=2, default=(200.0, 1600.0), help="in the catalogue's unit"
     )
-    ap.add_argument("--forces", type=float, nargs=2, default=(0.05, 0.15), help="N")
+    ap.add_argument(
+        "--probe",
+        choices=("rim", "content"),
+        default="rim",
+        help="lift the rim at its seam, or press the content down into its packaging",
+    )
+    ap.add_argument(
+        "--forces", type=float, nargs=2, help="N (default 0.05 0.15 for the rim, 10 20 the content)"
+    )
     ap.add_argument("--settle", type=float, default=0.6, help="s per load")
     ap.add_argument(
+        "--average",
+        type=float,
+        default=0.0,
+        help="s at the end of each load over which the height is averaged (0: the last step)",
+    )
+    ap.add_argument(
         "--shells", nargs="+", default=["full", "default", "quadratic-1x1x1"], choices=list(SHELLS)
+    )
+    ap.add_argument("--spacing", type=float, help="shell mesh spacing around the rigid content [m]")
+    ap.add_argument(
+        "--content-tiles",
+        type=int,
+        default=1,
+        help="the rigid content as N x N box tiles (SceneOptions.content_tiles)",
     )
     args = ap.parse_args()
     lo, hi = args.values
     name, unit = args.param, catalogue_unit(args.param)
-    print(
-        f"Rim compliance of {args.consignment}, lifted at the seam by {args.forces[0]:g} -> "
-        f"{args.forces[1]:g} N, {name} at {lo:g} and {hi:g} {unit}\n"
+    content = args.probe == "content"
+    forces = args.forces or ((10.0, 20.0) if content else (0.05, 0.15))
+    mesh = "" if args.spacing is None else f", shell mesh {args.spacing * 1e3:g} mm"
+    if args.content_tiles > 1:
+        mesh += f", the content as {args.content_tiles} x {args.content_tiles} tiles"
+    what, moved = (
+        ("Content compliance", "pressed down by")
+        if content
+        else ("Rim compliance", "lifted at the seam by")
     )
     print(
-        f"| shell | c at {name} {lo:g} [mm/N] | c at {name} {hi:g} [mm/N] | ratio (a plate "
-        f"under E_Pa: {hi / lo:g}) | lift at {args.forces[1]:g} N, {lo:g} / {hi:g} [mm] | time [s] |"
+        f"{what} of {args.consignment}, {moved} {forces[0]:g} -> {forces[1]:g} N, {name} at "
+        f"{lo:g} and {hi:g} {unit}{mesh}; {args.settle:g} s per load"
+        + (f", each height the mean of its last {args.average:g} s" if args.average > 0 else "")
+        + "\n"
     )
-    print("|---|---|---|---|---|---|")
+    ideal = "a plate under E_Pa" if name == "E_Pa" and not content else f"{name} alone"
+    averaged = args.average > 0
+    print(
+        f"| shell | c at {name} {lo:g} [mm/N] | c at {name} {hi:g} [mm/N] | ratio ({ideal}: "
+        f"{hi / lo:g}) | {'sink' if content else 'lift'} at {forces[1]:g} N, "
+        f"{lo:g} / {hi:g} [mm] | "
+        + (f"range over the last {args.average:g} s, {lo:g} / {hi:g} [mm] | " if averaged else "")
+        + (f"content's contacts at {forces[1]:g} N | " if content else "")
+        + "time [s] |"
+    )
+    print("|---" * (6 + averaged + content) + "|")
     for shell in args.shells:
         options = SHELLS[shell]
+        if args.spacing is not None:
+            options = replace(options, spacing=args.spacing)
+        options = replace(options, content_tiles=args.content_tiles)
         t0 = time.perf_counter()
-        c_lo, z_lo = rim_compliance(args.consignment, name, lo, options, args.forces, args.settle)
-        c_hi, z_hi = rim_compliance(args.consignment, name, hi, options, args.forces, args.settle)
+        a, b = (
+            compliance(
+                args.probe, args.consignment, name, v, options, forces, args.settle, args.average
+            )
+            for v in (lo, hi)
+        )
         print(
-            f"| {shell} | {c_lo * 1e3:.3g} | {c_hi * 1e3:.3g} | {c_lo / c_hi:.2f} | "
-            f"{z_lo * 1e3:.3g} / {z_hi * 1e3:.3g} | {time.perf_counter() - t0:.0f} |",
+            f"| {shell} | {a.compliance * 1e3:.3g} | {b.compliance * 1e3:.3g} | "
+            f"{a.compliance / b.compliance:.2f} | {a.travel * 1e3:.3g} / {b.travel * 1e3:.3g} | "
+            + (f"{a.jitter * 1e3:.2g} / {b.jitter * 1e3:.2g} | " if averaged else "")
+            + (f"{a.contacts} / {b.contacts} | " if content else "")
+            + f"{time.perf_counter() - t0:.0f} |",
             flush=True,
         )
 

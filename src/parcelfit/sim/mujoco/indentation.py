@@ -123,6 +123,11 @@ def indentation_test(
         raise ParcelfitError(
             "the indentation test presses a rigid content", fix="use a rigid-content consignment"
         )
+    if options is not None and options.content_tiles > 1:
+        raise ParcelfitError(
+            "the indentation test reads the contacts of one content box",
+            fix="use content_tiles=1 (the default)",
+        )
     full = consignment.parameter_values(si_values=params or {})
     scene = build_scene(plate_rig(material), consignment, full, 1, options)
     model = scene.model()

@@ -146,6 +146,12 @@ class SceneOptions:
     # boundaries fall on the content's ends (KP/BW: 5 x 5 x 1). None: the consignment's own
     # (`Consignment.rim_brace`) where its own shell and cells are used, else none
     rim_brace: float | None = None
+    # a rigid content as n x n box tiles of one body (a diagnostic): MuJoCo keeps at most 50
+    # contacts per colliding pair (mjMAXCONPAIR), so one box rests on 50 of the hundreds of
+    # contacts a fine mesh offers, a subset that changes from step to step; each tile is a pair
+    # of its own. The content's stiffness and damping per contact are shared over the contacts
+    # the tiles keep (`content_contact_share`), so the face as a whole is as stiff as with one box
+    content_tiles: int = 1
     # friction between the packaging and belts, strips and rollers: "mujoco" (MuJoCo's own
     # contact friction) or "coulomb" (those contacts frictionless in MuJoCo and Coulomb friction
     # applied as forces at the contact points before every step, `coulomb.CoulombBelts`):
@@ -280,6 +286,12 @@ class SceneOptions:
             raise ParcelfitError(
                 f"ccd_tolerance must be positive [m] or None, got {self.ccd_tolerance}"
             )
+        if not (float(self.content_tiles).is_integer() and 1 <= self.content_tiles <= 8):
+            raise ParcelfitError(
+                f"content_tiles must be a whole number from 1 to 8 (tiles per side of a rigid "
+                f"content), got {self.content_tiles}"
+            )
+        object.__setattr__(self, "content_tiles", int(self.content_tiles))
         if self.rim_brace is not None and not 0 <= self.rim_brace <= 10:
             raise ParcelfitError(
                 f"rim_brace must lie in [0, 10] (a share of the ideal wedge), got {self.rim_brace}"

@@ -200,6 +200,22 @@ def _surface_geoms(
     return xml, geoms
 
 
+MAX_CONTACTS_PER_PAIR = 50  # MuJoCo's mjMAXCONPAIR: contacts kept per colliding pair
+
+
+def content_contact_share(n_face: int, tiles: int) -> int:
+    """The contacts a rigid content's face stiffness is spread over: ``n_face`` (as for the
+    packaging's other faces) for one box, which MuJoCo meets on at most 50 of them; for
+    ``tiles`` x ``tiles`` boxes, each a pair with its own 50, that count scaled by how many
+    more contacts the tiles keep, so the face as a whole is as stiff and as damped as with one
+    box (`SceneOptions.content_tiles`)."""
+    if tiles == 1:
+        return n_face
+    kept_one = min(MAX_CONTACTS_PER_PAIR, n_face)
+    kept_tiles = min(MAX_CONTACTS_PER_PAIR * tiles**2, n_face)
+    return max(1, round(n_face * kept_tiles / kept_one))
+
+
 def bending_omega(
     young: float, poisson: float, thickness: float, density: float, length: float
 ) -> float:
@@ -275,15 +291,18 @@ def build_scene(
     dt = opt.step_for(soft, rig, consignment.shell)
 
     # --- contact parameters (effective inverse mass of a flex contact: see contact.py) ------------
-    def contact(pair: str, resting: float, other_inverse_mass: float = 0.0) -> ContactParams:
+    def contact(
+        pair: str, resting: float, other_inverse_mass: float = 0.0, shared: int = n_face
+    ) -> ContactParams:
         # a flex vertex (1/m_v) against a static surface or the content (its inverse mass);
-        # ``resting`` [kg]: the mass that rests on the face (the penalty law's damping)
+        # ``resting`` [kg]: the mass that rests on the face (the penalty law's damping);
+        # ``shared``: the contacts the face's stiffness is spread over
         k = p[f"k_{pair}"]
         inverse_mass = 1 / m_v + other_inverse_mass
         if opt.contact_law == "penalty":
-            return penalty_contact(k, n_face, inverse_mass, p[f"zeta_{pair}"], resting, dt)
+            return penalty_contact(k, shared, inverse_mass, p[f"zeta_{pair}"], resting, dt)
         return contact_params(
-            k, n_face, inverse_mass, p[f"zeta_{pair}"], dt, frequency=opt.frequency_for(k)
+            k, shared, inverse_mass, p[f"zeta_{pair}"], dt, frequency=opt.frequency_for(k)
         )
 
     belt_cp = contact("BePa", consignment.mass)
@@ -293,7 +312,8 @@ def build_scene(
         m_cv = m_co / (counts[0] * counts[1] * counts[2])
         content_cp = contact("CoPa", m_co, 1 / m_cv)
     else:
-        content_cp = contact("CoPa", m_co, 1 / m_co)
+        tiles = opt.content_tiles
+        content_cp = contact("CoPa", m_co, 1 / m_co, content_contact_share(n_face, tiles))
 
     # --- rig ------------------------------------------------------------------------------------
     body: list[str] = []
@@ -385,11 +405,24 @@ def build_scene(
             f'<elasticity young="{_f(p["E_Co"])}" poisson="0.3" damping="{_f(beta_co)}"/></flexcomp>'
         )
     else:
+        # one box, or n x n tiles of it named content, content_1, ... (each its own contact pair)
+        tile_geoms = []
+        for i in range(tiles):
+            for j in range(tiles):
+                k = i * tiles + j
+                name = "content" if k == 0 else f"content_{k}"
+                offset = (((i + 0.5) / tiles - 0.5) * cL, ((j + 0.5) / tiles - 0.5) * cW)
+                tile_geoms.append(
+                    f'<geom name="{name}" type="box" pos="{_f(offset[0])} {_f(offset[1])} 0" '
+                    f'size="{_f(cL / 2 / tiles)} {_f(cW / 2 / tiles)} {_f(cH / 2)}" '
+                    f'mass="{_f(m_co / tiles**2)}" contype="2" conaffinity="2" condim="3" priority="1" '
+                    f'{content_friction} solref="{content_cp.solref}" solimp="{content_cp.solimp}" '
+                    f'rgba="0.6 0.4 0.2 1"/>'
+                )
         body.append(
             f'<body name="content" pos="{_f(x0)} {_f(y0)} {_f(zc)}" quat="{q}"><freejoint name="content"/>'
-            f'<geom name="content" type="box" size="{_f(cL / 2)} {_f(cW / 2)} {_f(cH / 2)}" mass="{_f(m_co)}" '
-            f'contype="2" conaffinity="2" condim="3" priority="1" {content_friction} solref="{content_cp.solref}" '
-            f'solimp="{content_cp.solimp}" rgba="0.6 0.4 0.2 1"/></body>'
+            + "".join(tile_geoms)
+            + "</body>"
         )
 
     ccd_tolerance = opt.ccd_tolerance_for(soft)
