@@ -207,8 +207,11 @@ def content_contact_share(n_face: int, tiles: int) -> int:
     """The contacts a rigid content's face stiffness is spread over: ``n_face`` (as for the
     packaging's other faces) for one box, which MuJoCo meets on at most 50 of them; for
     ``tiles`` x ``tiles`` boxes, each a pair with its own 50, that count scaled by how many
-    more contacts the tiles keep, so the face as a whole is as stiff and as damped as with one
-    box (`SceneOptions.content_tiles`)."""
+    more contacts the tiles could keep if only the flat face touched (at most ``n_face``), so
+    that the face is about as stiff and as damped as with one box (`SceneOptions.content_tiles`).
+    An approximation: the content touches the top sheet and the sides too, and on KP/BW's 15 mm
+    mesh 4 x 4 tiles keep 800 contacts where the flat face has 650, about 1.2 times stiffer
+    (docs/research/e3-contact-law/content-contacts.md)."""
     if tiles == 1:
         return n_face
     kept_one = min(MAX_CONTACTS_PER_PAIR, n_face)
@@ -251,6 +254,12 @@ def build_scene(
         raise ParcelfitError(
             f"consignment {consignment.name}: a bulge needs a rigid content",
             fix="remove the bulge (a soft content's shell sags on its own)",
+        )
+    if consignment.soft and opt.content_tiles > 1:
+        raise ParcelfitError(
+            f"consignment {consignment.name}: content_tiles splits a rigid content's box; "
+            "this content is soft",
+            fix="use content_tiles=1 (the default)",
         )
     p = params
     speeds = rig.drive_speeds(setting)

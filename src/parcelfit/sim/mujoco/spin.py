@@ -100,6 +100,11 @@ def spin_test(
     side (`indentation.plate_rig`): physically the same plate, numerically more contact pairs."""
     if consignment.soft:
         raise ParcelfitError("the spin test needs a rigid content (it follows the content body)")
+    if options is not None and options.content_tiles > 1:
+        raise ParcelfitError(
+            "the spin test reads the contacts and inertia of one content box",
+            fix="use content_tiles=1 (the default)",
+        )
     with CountedWarnings():  # MuJoCo's per-step notes (e.g. on interpolated shells) counted
         return _spin_test(consignment, w0, free, duration, params, options, settle, plate_tile)
 
