@@ -43,6 +43,7 @@ import argparse
 import os
 import sys
 import time
+from collections import Counter
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
@@ -71,6 +72,7 @@ from parcelfit.sim.mujoco import (
 from parcelfit.sim.mujoco.consignment import BULGE_DEPTH, with_bulge
 from parcelfit.sim.mujoco.options import scene_options
 from parcelfit.sim.params import BOTTOM_PATCHES, CATALOGUE
+from parcelfit.sim.protocol import SimStatus
 from parcelfit.sim.rigidbox import RigidBoxOptions, RigidBoxSimulator
 from parcelfit.sim.rigidbox.geometry import resolved_bottom_patch
 from parcelfit.sim.rigidbox.simulator import PARAMETERS as REFERENCE_PARAMETERS
@@ -81,11 +83,12 @@ MEASURES = ("DTW_xy [m]", "DTW_theta [rad]", "transit [s]")
 ENSEMBLE_MEASURES = ("median rotation [deg]", "median transit [s]", "spin share [-]")
 
 
-Job = tuple[dict[str, float], TestCase, int, SceneOptions, str, str, Consignment]
+Job = tuple[dict[str, float], TestCase, int, SceneOptions, str, str, Consignment, float]
+WALL_LIMIT = SimOptions().wall_limit  # [s] per MuJoCo run unless --wall-limit says otherwise
 
 
 def _simulate(job: Job) -> Member:
-    params, case, seed, scene, backend, bottom_patch, cons = job
+    params, case, seed, scene, backend, bottom_patch, cons, wall_limit = job
     sim: MujocoSimulator | RigidBoxSimulator
     own = {cons.name: cons}
     if backend == "rigidbox":
@@ -94,7 +97,7 @@ def _simulate(job: Job) -> Member:
             consignments=own,
         )
     else:
-        sim = MujocoSimulator(SimOptions(scene=scene), consignments=own)
+        sim = MujocoSimulator(SimOptions(scene=scene, wall_limit=wall_limit), consignments=own)
     return member_of(seed, sim.with_placement(seed).run(params, case))
 
 
@@ -263,6 +266,13 @@ def main(argv: list[str] | None = None) -> int:
         "the ensemble's effects judged by their standard errors alone",
     )
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    ap.add_argument(
+        "--wall-limit",
+        type=float,
+        default=WALL_LIMIT,
+        help="wall-clock seconds after which a MuJoCo run stops as a timeout (not ok); raise it "
+        "for costly scenes or a loaded machine",
+    )
     ap.add_argument("--out", type=Path, default=Path("docs/research"))
     ap.add_argument("--scene", nargs="*", default=[], metavar="KEY=VALUE")
     ap.add_argument(
@@ -346,6 +356,7 @@ def main(argv: list[str] | None = None) -> int:
                     args.backend,
                     bottom_patch,
                     cons,
+                    args.wall_limit,
                 )
     t0 = time.perf_counter()
     print(f"{len(jobs)} simulations on {args.workers} processes", flush=True)
@@ -353,7 +364,15 @@ def main(argv: list[str] | None = None) -> int:
         futures = {ex.submit(_simulate, job): key for key, job in jobs.items()}
         done: dict[tuple[str, str, int], Member] = {}
         for i, fut in enumerate(as_completed(futures), 1):
-            done[futures[fut]] = fut.result()
+            key = futures[fut]
+            done[key] = member = fut.result()
+            if member.status is not SimStatus.OK:  # at once: a timeout can waste hours
+                name, label, seed = key
+                print(
+                    f"  {name} {label} placement {seed}: not ok ({member.status.value}, "
+                    f"{member.wall_time:.0f} s)",
+                    flush=True,
+                )
             if i % max(1, len(jobs) // 20) == 0 or i == len(jobs):
                 print(f"  {i}/{len(jobs)} ({time.perf_counter() - t0:.0f} s)", flush=True)
     runs = {key: done[key] for key in jobs}
@@ -381,7 +400,11 @@ def main(argv: list[str] | None = None) -> int:
         if args.no_floor
         else np.nanmedian(np.array(list(floor.values())), axis=0)
     )
-    failed = sum(m.run is None for m in runs.values())
+    why = Counter(m.status.value for m in runs.values() if m.status is not SimStatus.OK)
+    failed = sum(why.values())
+    not_ok = f"{failed} not ok" + (
+        ": " + ", ".join(f"{n} {status}" for status, n in sorted(why.items())) if failed else ""
+    )
     lines = [
         "# Parameter effects" + ("" if args.no_floor else " against the numerical noise floor"),
         "",
@@ -401,7 +424,8 @@ def main(argv: list[str] | None = None) -> int:
             if args.backend == "rigidbox"
             else ""
         )
-        + f" --out {args.out}`: {len(runs)} simulations ({failed} not ok) in {wall:.0f} s on "
+        + (f" --wall-limit {args.wall_limit:g}" if args.wall_limit != WALL_LIMIT else "")
+        + f" --out {args.out}`: {len(runs)} simulations ({not_ok}) in {wall:.0f} s on "
         f"{args.workers} processes. Effect: the response between the runs at the two ends of "
         "the parameter's screening range"
         + (

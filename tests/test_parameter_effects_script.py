@@ -101,11 +101,15 @@ def test_a_job_reaches_the_backend_it_names_with_its_consignment(monkeypatch, ba
     case = TestCase("E3", "KPBW", 1)
     bulged = replace(load_consignment("KPBW"), bulge=(0.004, 0.55))
     with pytest.raises(_BuiltError):
-        parameter_effects._simulate(({}, case, 3, SceneOptions(), backend, "content", bulged))
+        parameter_effects._simulate(
+            ({}, case, 3, SceneOptions(), backend, "content", bulged, 900.0)
+        )
     options, consignments = built[0]
     assert consignments == {"KPBW": bulged}  # the bulge given on the command line reaches it
     if backend == "rigidbox":
         assert options.bottom_patch == "content"
+    else:
+        assert options.wall_limit == 900.0  # --wall-limit reaches MuJoCo's run
 
 
 @pytest.mark.parametrize(
@@ -175,7 +179,7 @@ def test_the_bulge_reaches_the_runs_whatever_the_consignment_is_called(monkeypat
     args = ["--consignment", "KP/BW", "--bulge", "0.55", "--params", "E_Pa", "--placements", "1"]
     with pytest.raises(_BuiltError):
         parameter_effects.main([*args, "--out", str(tmp_path)])
-    _, case, *_, cons = seen[0]
+    _, case, *_, cons, _ = seen[0]
     assert case.consignment == cons.name == "KPBW"
     assert cons.bulge == (0.004, 0.55)
 
@@ -240,6 +244,7 @@ def test_without_the_floor_only_the_ends_run_and_effects_are_judged_by_standard_
     ]
     text = (tmp_path / "parameter-effects.md").read_text()
     assert "--no-floor" in text and "Noise floor not measured" in text
+    assert "32 simulations (0 not ok)" in text
     # no column, figure or title of a floor that was not measured
     assert "floor DTW" not in text and "floor median" not in text and "ratio" not in text
     assert "noise floor**" not in text.lower()
@@ -258,3 +263,25 @@ def test_without_the_floor_one_placement_is_refused(tmp_path, capsys):
         parameter_effects.main(["--params", "k_CoPa", "--no-floor", "--out", str(tmp_path)])
     assert "--placements 2 or more" in capsys.readouterr().err
     assert not (tmp_path / "parameter-effects.md").exists()
+
+
+def test_runs_that_time_out_are_named_as_they_end_and_counted_by_status(
+    monkeypatch, tmp_path, capsys
+):
+    def fake(job):
+        _, _, seed, *_, wall_limit = job
+        assert wall_limit == 30.0
+        if seed == 1:  # one placement times out at each level
+            return Member(seed, SimStatus.TIMEOUT, None, None, None, 31.0)
+        return Member(seed, SimStatus.OK, 1.0 + 0.001 * seed, 0.3, None, 1.0)
+
+    monkeypatch.setattr(parameter_effects, "_simulate", fake)
+    monkeypatch.setattr(parameter_effects, "ProcessPoolExecutor", _Serial)
+    monkeypatch.setattr(parameter_effects, "as_completed", lambda futures: list(futures))
+    args = ["--params", "k_CoPa", "--placements", "3", "--no-floor", "--wall-limit", "30"]
+    assert parameter_effects.main([*args, "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "k_CoPa low placement 1: not ok (timeout, 31 s)" in out
+    assert "k_CoPa high placement 1: not ok (timeout, 31 s)" in out
+    text = (tmp_path / "parameter-effects.md").read_text()
+    assert "--wall-limit 30 " in text and "6 simulations (2 not ok: 2 timeout)" in text
