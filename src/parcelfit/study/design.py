@@ -139,6 +139,7 @@ from parcelfit.study.joint import (
     SPEED_DEVIATION,
     check_speed_deviation,
     placements_for,
+    places_runs,
     require_placements,
     simulate_items,
     varies_drives,
@@ -604,7 +605,7 @@ def rank_experiments(
     placements = min(placements_for(sim, placements, PLACEMENTS) for sim in simulators)
     for sim in simulators:
         require_placements(sim, placements, file=None, where="--placements")
-    placed = callable(getattr(simulators[0], "with_placement", None))
+    placed = places_runs(simulators[0])
     varied = placed and all(varies_drives(s) for s in simulators)
     deviation = speed_deviation if varied else 0.0
     drawn = draw_sets(ident, sets, seed)

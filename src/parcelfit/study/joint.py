@@ -112,12 +112,17 @@ def simulations_per_evaluation(study: Study) -> int:
     return sum(len(placement_seeds(study, spec)) for spec in study.cases)
 
 
+def places_runs(simulator: Simulator) -> bool:
+    """Whether ``simulator`` places its runs by a seed (has ``with_placement``)."""
+    return callable(getattr(simulator, "with_placement", None))
+
+
 def require_placements(
     simulator: Simulator, placements: int, *, file: Path | None, where: str
 ) -> None:
     """Refuse ``placements`` > 1 seeded placements with a simulator that cannot place runs
     (no ``with_placement``); ``file`` and ``where`` name the key that asked for them."""
-    if placements > 1 and not callable(getattr(simulator, "with_placement", None)):
+    if placements > 1 and not places_runs(simulator):
         raise ParcelfitError(
             f"the {type(simulator).__name__} simulator has no seeded placements "
             "(with_placement), so an ensemble of placements would repeat one run",
@@ -138,7 +143,7 @@ def placements_for(simulator: Simulator, given: int | None, default: int) -> int
     for one that cannot (its runs would only repeat)."""
     if given is not None:
         return given
-    return default if callable(getattr(simulator, "with_placement", None)) else 1
+    return default if places_runs(simulator) else 1
 
 
 def check_placements(study: Study, simulator: Simulator) -> None:
@@ -433,6 +438,7 @@ __all__ = [
     "evaluation_outcome",
     "placement_seeds",
     "placements_for",
+    "places_runs",
     "require_placements",
     "response_change",
     "simulate_items",

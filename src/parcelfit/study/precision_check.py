@@ -48,7 +48,7 @@ from parcelfit.sim.ensemble import MAX_PLACEMENTS
 from parcelfit.sim.executors import Task
 from parcelfit.sim.factory import make_simulator
 from parcelfit.study.details import EvaluationDetails
-from parcelfit.study.joint import simulate_items
+from parcelfit.study.joint import places_runs, simulate_items
 from parcelfit.study.loop import DesignLoop, FixedDesign, study_executor
 from parcelfit.study.objective import Evaluated
 from parcelfit.study.precision import (
@@ -538,7 +538,7 @@ def _simulate_and_judge(
 
     loop, todo = runs.loop(simulate, report, runs.folder)
     simulator = make_simulator(study.simulator)
-    if todo and not callable(getattr(simulator, "with_placement", None)):
+    if todo and not places_runs(simulator):
         raise ParcelfitError(
             f"the {type(simulator).__name__} simulator has no seeded placements "
             "(with_placement), so every placement would repeat one run",

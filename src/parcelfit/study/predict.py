@@ -91,6 +91,7 @@ from parcelfit.study.joint import (
     SPEED_DEVIATION,
     check_speed_deviation,
     placements_for,
+    places_runs,
     require_placements,
     simulate_items,
     varies_drives,
@@ -496,7 +497,7 @@ def predict(
     placements = placements_for(simulator, placements, PLACEMENTS)
     require_placements(simulator, placements, file=None, where="--placements")
     drawn = draw_sets(inputs.identifiability, sets, seed)
-    placed = _placed(simulator)
+    placed = places_runs(simulator)
     seeds = placement_seeds(placements, seed) if placements > 1 or placed else [0]
     deviation = speed_deviation if placed and varies_drives(simulator) else 0.0
     recommended = stored_recommendation(inputs.folder)  # read once, for both kinds of runs
@@ -678,10 +679,6 @@ def predict(
     return prediction
 
 
-def _placed(simulator: Simulator) -> bool:
-    return callable(getattr(simulator, "with_placement", None))
-
-
 def _rows(store: Store, iteration: int | None) -> list[Any]:
     """The store's simulations of the prediction (``iteration`` 0), of the scatter runs of one
     study case (its index from 1), of the numerical error's on the model (-1) or the refined
@@ -709,7 +706,7 @@ def _scatter_jobs(
     if evaluation is None:
         return None
     simulator = make_simulator(study.simulator)
-    placed = _placed(simulator)
+    placed = places_runs(simulator)
     seeds = placement_seeds(runs, seed) if placed else [0]
     params = {**study.fixed, **evaluation.params}
     specs: dict[str, CaseSpec] = {}
@@ -797,7 +794,7 @@ def _numerical_jobs(
         if evaluation is not None
         else {p.name: float(p.median) for p in ident.parameters}
     )
-    placed = _placed(simulator)
+    placed = places_runs(simulator)
     seeds = placement_seeds(runs, seed) if placed else [0]
     at = "recommended" if evaluation is not None else "medians"
     return NumericalJobs(refined, factor, {**study.fixed, **found}, seeds, placed, at)
