@@ -275,13 +275,14 @@ def intervals_of(names, low=0.0, high=1.0, verdict="undetermined"):
 
 class CountedExecutors:
     """Wraps an executor factory (called like it): how many executors it made, and how many
-    of them were closed."""
+    of them were closed; ``calls`` holds the positional arguments of each call."""
 
     def __init__(self, make):
-        self.make, self.made, self.closed = make, 0, 0
+        self.make, self.made, self.closed, self.calls = make, 0, 0, []
 
     def __call__(self, *args, **kwargs):
         self.made += 1
+        self.calls.append(args)
         executor = self.make(*args, **kwargs)
         close = executor.close
 

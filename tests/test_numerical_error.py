@@ -267,13 +267,7 @@ def test_the_prediction_s_phases_share_one_executor(study, tmp_path, monkeypatch
 
     from .helpers import CountedExecutors
 
-    sized, make = [], predict_module.open_executor
-
-    def recorded(kind, workers, scheduler, items, custom=None):
-        sized.append(items)
-        return make(kind, workers, scheduler, items, custom)
-
-    counted = CountedExecutors(recorded)
+    counted = CountedExecutors(predict_module.open_executor)
     monkeypatch.setattr(predict_module, "open_executor", counted)
     p = _predict(study, tmp_path, "p")
     assert p.numerical is not None and p.numerical.pairs == NUMERICAL_RUNS
@@ -284,4 +278,5 @@ def test_the_prediction_s_phases_share_one_executor(study, tmp_path, monkeypatch
         rows = store.evaluations("screen")
     finally:
         store.close()
+    sized = [args[3] for args in counted.calls]  # open_executor(kind, workers, scheduler, items)
     assert sized == [len(rows)] and len(rows) >= 4 * 3 + 2 * NUMERICAL_RUNS
