@@ -53,7 +53,7 @@ import numpy as np
 from parcelfit.sim.mujoco import load_consignment
 from parcelfit.sim.mujoco.indentation import plate_rig
 from parcelfit.sim.mujoco.options import SceneOptions
-from parcelfit.sim.mujoco.scene import build_scene
+from parcelfit.sim.mujoco.scene import build_scene, content_contacts
 from parcelfit.sim.params import catalogue_unit, parameter
 
 SHELLS = {
@@ -143,13 +143,6 @@ def compliance(
         max(heights) - min(heights),
         content_contacts(model, data),
     )
-
-
-def content_contacts(model: mujoco.MjModel, data: mujoco.MjData) -> int:
-    """How many contacts the content's geoms (one box, or its tiles) have now (MuJoCo keeps at
-    most 50 per colliding pair)."""
-    geoms = np.flatnonzero(model.geom_bodyid == model.body("content").id)
-    return int(np.sum(np.isin(data.contact.geom[: data.ncon], geoms).any(axis=1)))
 
 
 def _local(data: mujoco.MjData, content: int, points: np.ndarray) -> np.ndarray:

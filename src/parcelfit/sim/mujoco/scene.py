@@ -203,6 +203,14 @@ def _surface_geoms(
 MAX_CONTACTS_PER_PAIR = 50  # MuJoCo's mjMAXCONPAIR: contacts kept per colliding pair
 
 
+def content_contacts(model: mujoco.MjModel, data: mujoco.MjData) -> int:
+    """How many of ``data``'s contacts touch the content's geoms now (one box, or its
+    `SceneOptions.content_tiles`; MuJoCo keeps at most `MAX_CONTACTS_PER_PAIR` per colliding
+    pair). A count, no unit."""
+    geoms = np.flatnonzero(model.geom_bodyid == model.body("content").id)
+    return int(np.sum(np.isin(data.contact.geom[: data.ncon], geoms).any(axis=1)))
+
+
 def content_contact_share(n_face: int, tiles: int) -> int:
     """The contacts a rigid content's face stiffness is spread over: ``n_face`` (as for the
     packaging's other faces) for one box, which MuJoCo meets on at most 50 of them; for
