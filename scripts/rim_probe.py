@@ -204,6 +204,12 @@ def main() -> None:
         default=1,
         help="the rigid content as N x N box tiles (SceneOptions.content_tiles)",
     )
+    ap.add_argument(
+        "--content-kept",
+        type=int,
+        help="with --content-tiles: the contacts the tiles keep, as counted by a run before; "
+        "the stiffness is shared so that they are as stiff as one box's (SceneOptions.content_kept)",
+    )
     args = ap.parse_args()
     lo, hi = args.values
     name, unit = args.param, catalogue_unit(args.param)
@@ -212,6 +218,8 @@ def main() -> None:
     mesh = "" if args.spacing is None else f", shell mesh {args.spacing * 1e3:g} mm"
     if args.content_tiles > 1:
         mesh += f", the content as {args.content_tiles} x {args.content_tiles} tiles"
+        if args.content_kept is not None:
+            mesh += f" sharing its stiffness over {args.content_kept} kept contacts"
     what, moved = (
         ("Content compliance", "pressed down by")
         if content
@@ -238,7 +246,7 @@ def main() -> None:
         options = SHELLS[shell]
         if args.spacing is not None:
             options = replace(options, spacing=args.spacing)
-        options = replace(options, content_tiles=args.content_tiles)
+        options = replace(options, content_tiles=args.content_tiles, content_kept=args.content_kept)
         t0 = time.perf_counter()
         a, b = (
             compliance(

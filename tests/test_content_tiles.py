@@ -15,6 +15,29 @@ def test_the_face_stiffness_is_shared_over_the_contacts_the_tiles_keep():
     assert content_contact_share(650, 2) == 650 * 4  # 4 pairs keep 200 contacts, not 50
     assert content_contact_share(650, 4) == 650 * 13  # 16 pairs: at most the flat face's 650
     assert content_contact_share(40, 3) == 40  # a face of fewer than 50 contacts: all kept anyway
+    # counted contacts: 680 kept share as one box's 50 of a 212-contact face
+    assert content_contact_share(212, 4, kept=680) == round(212 * 680 / 50)
+    assert content_contact_share(212, 1, kept=680) == 212  # one box: the count plays no part
+
+
+def test_counted_contacts_need_tiles_and_a_whole_count():
+    with pytest.raises(ParcelfitError, match="give content_tiles above 1"):
+        SceneOptions(content_kept=680)
+    with pytest.raises(ParcelfitError, match="content_kept must be a whole number"):
+        SceneOptions(content_tiles=4, content_kept=0)
+    assert SceneOptions(content_tiles=4, content_kept=680.0).content_kept == 680
+
+
+def test_half_the_counted_contacts_make_each_tile_contact_twice_as_stiff():
+    cons = load_consignment("KPBW")
+
+    def stiffness(kept: int) -> float:
+        options = SceneOptions(content_tiles=4, content_kept=kept)
+        model = build_scene(plate_rig("belt"), cons, cons.parameter_values(), 1, options).model()
+        geoms = np.flatnonzero(model.geom_bodyid == model.body("content").id)
+        return float(-model.geom_solref[geoms[0], 0])  # direct solref: -stiffness
+
+    assert stiffness(340) / stiffness(680) == pytest.approx(2.0, rel=2e-3)  # share rounded
 
 
 @pytest.mark.parametrize("tiles", [0, 9, 2.5])

@@ -153,6 +153,11 @@ class SceneOptions:
     # contacts as the tiles could keep on the flat face (`content_contact_share`), so the face is
     # about as stiff as with one box (an approximation: about 1.2 times stiffer on KP/BW at 15 mm)
     content_tiles: int = 1
+    # with content_tiles: the contacts the tiles keep, counted on the scene (a diagnostic
+    # control, `scene.content_contacts`); the stiffness is then shared as if they were the
+    # flat face's, so that the kept contacts together are as stiff as one box's 50 (None: the
+    # flat face's estimate, `content_contact_share`)
+    content_kept: int | None = None
     # friction between the packaging and belts, strips and rollers: "mujoco" (MuJoCo's own
     # contact friction) or "coulomb" (those contacts frictionless in MuJoCo and Coulomb friction
     # applied as forces at the contact points before every step, `coulomb.CoulombBelts`):
@@ -293,6 +298,17 @@ class SceneOptions:
                 f"content), got {self.content_tiles}"
             )
         object.__setattr__(self, "content_tiles", int(self.content_tiles))
+        if self.content_kept is not None:
+            if self.content_tiles == 1:
+                raise ParcelfitError(
+                    "content_kept shares the content's stiffness over its tiles' contacts; "
+                    "give content_tiles above 1 with it"
+                )
+            if not (float(self.content_kept).is_integer() and self.content_kept >= 1):
+                raise ParcelfitError(
+                    f"content_kept must be a whole number of contacts, got {self.content_kept}"
+                )
+            object.__setattr__(self, "content_kept", int(self.content_kept))
         if self.rim_brace is not None and not 0 <= self.rim_brace <= 10:
             raise ParcelfitError(
                 f"rim_brace must lie in [0, 10] (a share of the ideal wedge), got {self.rim_brace}"

@@ -211,19 +211,21 @@ def content_contacts(model: mujoco.MjModel, data: mujoco.MjData) -> int:
     return int(np.sum(np.isin(data.contact.geom[: data.ncon], geoms).any(axis=1)))
 
 
-def content_contact_share(n_face: int, tiles: int) -> int:
+def content_contact_share(n_face: int, tiles: int, kept: int | None = None) -> int:
     """The contacts a rigid content's face stiffness is spread over: ``n_face`` (as for the
     packaging's other faces) for one box, which MuJoCo meets on at most 50 of them; for
     ``tiles`` x ``tiles`` boxes, each a pair with its own 50, that count scaled by how many
-    more contacts the tiles could keep if only the flat face touched (at most ``n_face``), so
-    that the face is about as stiff and as damped as with one box (`SceneOptions.content_tiles`).
-    An approximation: the content touches the top sheet and the sides too, and on KP/BW's 15 mm
-    mesh 4 x 4 tiles keep 800 contacts where the flat face has 650, about 1.2 times stiffer
-    (docs/research/e3-contact-law/content-contacts.md)."""
+    more contacts the tiles keep than one box, so that the kept contacts together are as stiff
+    and as damped as one box's (`SceneOptions.content_tiles`). ``kept``: the contacts the tiles
+    keep, counted (`SceneOptions.content_kept`); without it, the estimate if only the flat face
+    touched (at most ``n_face``). That estimate is an approximation: the content touches the
+    top sheet and the sides too, and on KP/BW's 15 mm mesh 4 x 4 tiles keep 800 contacts where
+    the flat face has 650, about 1.2 times stiffer (docs/research/e3-contact-law/content-contacts.md).
+    Counts, no unit."""
     if tiles == 1:
         return n_face
     kept_one = min(MAX_CONTACTS_PER_PAIR, n_face)
-    kept_tiles = min(MAX_CONTACTS_PER_PAIR * tiles**2, n_face)
+    kept_tiles = kept if kept is not None else min(MAX_CONTACTS_PER_PAIR * tiles**2, n_face)
     return max(1, round(n_face * kept_tiles / kept_one))
 
 
@@ -330,7 +332,8 @@ def build_scene(
         content_cp = contact("CoPa", m_co, 1 / m_cv)
     else:
         tiles = opt.content_tiles
-        content_cp = contact("CoPa", m_co, 1 / m_co, content_contact_share(n_face, tiles))
+        share = content_contact_share(n_face, tiles, opt.content_kept)
+        content_cp = contact("CoPa", m_co, 1 / m_co, share)
 
     # --- rig ------------------------------------------------------------------------------------
     body: list[str] = []
