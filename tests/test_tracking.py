@@ -930,3 +930,16 @@ def test_timing_uncertainty_is_half_the_estimate_grid_or_the_camera_figure():
     assert timing_uncertainty(0.008, 0.015, 60.0, True) == pytest.approx((1 / 3840, 1 / 1920))
     exposure_sd, readout_sd = timing_uncertainty(0.008, 0.015, 60.0, False)
     assert readout_sd > exposure_sd > timing_uncertainty(0.0, 0.0, 60.0, False)[0] > 0
+
+
+def test_a_rig_name_with_a_dash_is_read_when_the_rig_is_known():
+    from parcelfit.runs import TestCase
+    from parcelfit.tracking.batch import case_of
+
+    video = Path("E3-far-plate-KPBW-2-07.mp4")
+    known = ("E1", "E3", "E3-far", "E3-far-plate")
+    assert case_of(video, known) == (TestCase("E3-far-plate", "KPBW", 2), video.stem)  # longest
+    assert case_of(Path("E3-far-KP-1-01.mp4"), known)[0] == TestCase("E3-far", "KP", 1)
+    assert case_of(Path("E3-KPBW-1-07.mp4"), known)[0] == TestCase("E3", "KPBW", 1)
+    with pytest.raises(ParcelfitError, match="its rig file is given with --rig"):
+        case_of(video)  # without the rig's name the dash splits it

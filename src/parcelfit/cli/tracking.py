@@ -124,8 +124,8 @@ def track_all_command(
             "--rig",
             metavar="RIG.yaml",
             help="A rig file of your own (repeatable): the test cases of its rig take its "
-            "regions of interest and margin, where runs are compared. Bundled rigs (E1, E2a, "
-            "E2b, E3) are found by name.",
+            "regions of interest and margin, where runs are compared, and its name may hold "
+            "a '-' in the videos' names. Bundled rigs (E1, E2a, E2b, E3) are found by name.",
         ),
     ] = None,
 ) -> None:

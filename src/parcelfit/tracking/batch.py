@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import json
 import re
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -85,17 +85,27 @@ def write_video_track(result: VideoTrack, out: str | Path) -> list[Path]:
     return [*files, qpath]
 
 
-def case_of(video: Path) -> tuple[TestCase, str]:
-    """Test case and run id from a video's name ``RIG-CONSIGNMENT-SETTING-RUN``."""
-    m = _NAME.match(video.stem)
+_REST = re.compile(r"^(?P<cons>[^-]+)-(?P<setting>\d+)-(?P<run>[^.]+)$")
+
+
+def case_of(video: Path, rigs: Iterable[str] = ()) -> tuple[TestCase, str]:
+    """Test case and run id from a video's name ``RIG-CONSIGNMENT-SETTING-RUN``. A rig name that
+    holds a ``-`` (``E3-far-plate``) is read when it is one of ``rigs`` (the longest that fits
+    first); other rig names and the consignment's cannot hold one."""
+    stem = video.stem
+    for rig in sorted((r for r in rigs if "-" in r), key=len, reverse=True):
+        if stem.startswith(f"{rig}-") and (m := _REST.match(stem[len(rig) + 1 :])):
+            return TestCase(rig, m["cons"], int(m["setting"])), stem
+    m = _NAME.match(stem)
     if not m:
         raise ParcelfitError(
             f"cannot read the test case from the name {video.name!r}",
             file=video,
-            fix="name videos RIG-CONSIGNMENT-SETTING-RUN, e.g. E3-KPBW-1-07.mp4",
+            fix="name videos RIG-CONSIGNMENT-SETTING-RUN, e.g. E3-KPBW-1-07.mp4 (a rig name "
+            "with a '-' is read when its rig file is given with --rig)",
         )
     case = TestCase(m["rig"], m["cons"], int(m["setting"]))
-    return case, video.stem
+    return case, stem
 
 
 def track_all(
@@ -120,7 +130,8 @@ def track_all(
     Each test case takes its rig's regions of interest and margin [m] (where runs are
     compared) from ``regions`` (rig name -> (regions, margin), e.g. from the rig files). The
     rigs not in it are listed under ``whole_track`` in the summary: their runs are compared over
-    the whole track."""
+    the whole track. A rig name in ``regions`` may hold a ``-`` in the videos' names
+    (`case_of`)."""
     folder, out = Path(folder), Path(out)
     if not folder.is_dir():
         raise ParcelfitError("not a folder", file=folder, fix="point at the folder of videos")
@@ -135,6 +146,7 @@ def track_all(
             "no videos here", file=folder, fix=f"videos end in {', '.join(VIDEO_SUFFIXES)}"
         )
     tracks = out / "tracks"
+    known = tuple(regions or ())  # rig names whose videos may hold a '-' in the rig's part
     summary: dict[str, Any] = {"done": [], "skipped": [], "failed": {}}
     say = on_video or (lambda video, state: None)
     for video in videos:
@@ -144,7 +156,7 @@ def track_all(
             continue
         say(video, "tracking")
         try:
-            case_of(video)
+            case_of(video, known)
             log = None if logs is None else logs / f"{video.stem}.csv"
             if log is not None and not log.is_file():
                 raise ParcelfitError(
@@ -171,7 +183,7 @@ def track_all(
     for qfile in sorted(tracks.glob("*.quality.json")) if tracks.is_dir() else []:
         doc = json.loads(qfile.read_text(encoding="utf-8"))
         stem = qfile.name[: -len(".quality.json")]
-        case, run_id = case_of(Path(stem))
+        case, run_id = case_of(Path(stem), known)
         entries = [e for e in doc["parcel_tags"].values() if e.get("file")]
         if not entries:
             continue
