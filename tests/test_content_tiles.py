@@ -25,19 +25,29 @@ def test_counted_contacts_need_tiles_and_a_whole_count():
         SceneOptions(content_kept=680)
     with pytest.raises(ParcelfitError, match="content_kept must be a whole number"):
         SceneOptions(content_tiles=4, content_kept=0)
+    with pytest.raises(ParcelfitError, match=r"from 1 to 800 \(50 per tile\)"):
+        SceneOptions(content_tiles=4, content_kept=801)  # more than 16 pairs can keep
     assert SceneOptions(content_tiles=4, content_kept=680.0).content_kept == 680
 
 
 def test_half_the_counted_contacts_make_each_tile_contact_twice_as_stiff():
     cons = load_consignment("KPBW")
 
-    def stiffness(kept: int) -> float:
+    def solref(kept: int) -> np.ndarray:
         options = SceneOptions(content_tiles=4, content_kept=kept)
         model = build_scene(plate_rig("belt"), cons, cons.parameter_values(), 1, options).model()
         geoms = np.flatnonzero(model.geom_bodyid == model.body("content").id)
-        return float(-model.geom_solref[geoms[0], 0])  # direct solref: -stiffness
+        return -model.geom_solref[geoms[0]]  # direct solref: (-stiffness, -damping)
 
-    assert stiffness(340) / stiffness(680) == pytest.approx(2.0, rel=2e-3)  # share rounded
+    # the penalty law: stiffness and damping per contact both follow 1 / share (share rounded)
+    assert solref(340) / solref(680) == pytest.approx([2.0, 2.0], rel=2e-3)
+
+
+def test_a_full_shell_refuses_tiles():
+    cons = load_consignment("KPBW")
+    options = SceneOptions(shell_dof="full", content_tiles=2)
+    with pytest.raises(ParcelfitError, match="a full shell has no such cap"):
+        build_scene(plate_rig("belt"), cons, cons.parameter_values(), 1, options)
 
 
 @pytest.mark.parametrize("tiles", [0, 9, 2.5])

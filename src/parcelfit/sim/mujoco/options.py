@@ -146,12 +146,13 @@ class SceneOptions:
     # boundaries fall on the content's ends (KP/BW: 5 x 5 x 1). None: the consignment's own
     # (`Consignment.rim_brace`) where its own shell and cells are used, else none
     rim_brace: float | None = None
-    # a rigid content as n x n box tiles of one body (a diagnostic): MuJoCo keeps at most 50
-    # contacts per colliding pair (mjMAXCONPAIR), so one box rests on 50 of the hundreds of
-    # contacts a fine mesh offers, a subset that changes from step to step; each tile is a pair
-    # of its own. The content's stiffness and damping per contact are shared over as many more
-    # contacts as the tiles could keep on the flat face (`content_contact_share`), so the face is
-    # about as stiff as with one box (an approximation: about 1.2 times stiffer on KP/BW at 15 mm)
+    # a rigid content as n x n box tiles of one body (a diagnostic; interpolated shells only):
+    # MuJoCo keeps at most 50 contacts per colliding pair (mjMAXCONPAIR), so one box rests on 50
+    # of the hundreds of contacts a fine mesh offers, a subset MuJoCo picks anew each step; each
+    # tile is a pair of its own. The content's stiffness and damping per contact are shared over
+    # as many more contacts as the tiles could keep on the flat face (`content_contact_share`),
+    # meant to keep the face as stiff as with one box (an approximation: 1.2-2.2 times stiffer
+    # on KP/BW at 15-30 mm; `content_kept` matches it)
     content_tiles: int = 1
     # with content_tiles: the contacts the tiles keep, counted on the scene (a diagnostic
     # control, `scene.content_contacts`); the stiffness is then shared as if they were the
@@ -304,9 +305,11 @@ class SceneOptions:
                     "content_kept shares the content's stiffness over its tiles' contacts; "
                     "give content_tiles above 1 with it"
                 )
-            if not (float(self.content_kept).is_integer() and self.content_kept >= 1):
+            most = 50 * self.content_tiles**2  # MuJoCo's 50 contacts per pair, per tile
+            if not (float(self.content_kept).is_integer() and 1 <= self.content_kept <= most):
                 raise ParcelfitError(
-                    f"content_kept must be a whole number of contacts, got {self.content_kept}"
+                    f"content_kept must be a whole number of contacts from 1 to {most} (50 per "
+                    f"tile), got {self.content_kept}"
                 )
             object.__setattr__(self, "content_kept", int(self.content_kept))
         if self.rim_brace is not None and not 0 <= self.rim_brace <= 10:

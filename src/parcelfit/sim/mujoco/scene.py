@@ -219,9 +219,10 @@ def content_contact_share(n_face: int, tiles: int, kept: int | None = None) -> i
     and as damped as one box's (`SceneOptions.content_tiles`). ``kept``: the contacts the tiles
     keep, counted (`SceneOptions.content_kept`); without it, the estimate if only the flat face
     touched (at most ``n_face``). That estimate is an approximation: the content touches the
-    top sheet and the sides too, and on KP/BW's 15 mm mesh 4 x 4 tiles keep 800 contacts where
-    the flat face has 650, about 1.2 times stiffer (docs/research/e3-contact-law/content-contacts.md).
-    Counts, no unit."""
+    top sheet and the sides too, and on KP/BW 4 x 4 tiles keep 680 contacts (30 mm mesh) and
+    800 (15 mm) where the flat face has 212 and 650: 2.2 and 1.2 times stiffer
+    (docs/research/e3-contact-law/content-contacts.md). For an interpolated shell only (one box
+    on a full shell keeps hundreds; `build_scene` refuses tiles there). Counts, no unit."""
     if tiles == 1:
         return n_face
     kept_one = min(MAX_CONTACTS_PER_PAIR, n_face)
@@ -270,6 +271,14 @@ def build_scene(
             f"consignment {consignment.name}: content_tiles splits a rigid content's box; "
             "this content is soft",
             fix="use content_tiles=1 (the default)",
+        )
+    if opt.content_tiles > 1 and opt.shell_of(consignment)[0] == "full":
+        # the share assumes one box keeps MuJoCo's 50 contacts per pair; a full shell, colliding
+        # per element, keeps hundreds, and its tiles would come out several times softer
+        raise ParcelfitError(
+            f"consignment {consignment.name}: content_tiles works around the cap of an "
+            "interpolated shell's contacts; a full shell has no such cap",
+            fix="use content_tiles=1 (the default) with shell_dof=full",
         )
     p = params
     speeds = rig.drive_speeds(setting)
