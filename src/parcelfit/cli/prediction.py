@@ -21,6 +21,12 @@ from parcelfit.cli.options import (
     workers_at_most,
 )
 from parcelfit.cli.output import console, progress_bar, resumes, stored_count
+from parcelfit.study.defaults import (
+    DESIGN_PLACEMENTS,
+    NUMERICAL_RUNS,
+    PREDICT_PLACEMENTS,
+    SCATTER_RUNS,
+)
 
 
 def predict(
@@ -45,8 +51,8 @@ def predict(
         typer.Option(
             min=1,
             show_default=False,
-            help="Seeded placements simulated per parameter set [default: 10; 1 for a "
-            "simulator that cannot place its runs, such as an external solver].",
+            help=f"Seeded placements simulated per parameter set [default: {PREDICT_PLACEMENTS}; "
+            "1 for a simulator that cannot place its runs, such as an external solver].",
         ),
     ] = None,
     seed: Annotated[
@@ -60,7 +66,7 @@ def predict(
             help="Runs of the recommended parameters per fitted and validation case, for the "
             "real runs' scatter.",
         ),
-    ] = 10,
+    ] = SCATTER_RUNS,
     numerical_runs: Annotated[
         int,
         typer.Option(
@@ -68,7 +74,7 @@ def predict(
             help="Placements at which the recommended parameters run on the design by the "
             "model and the refined model, for the model's numerical error (0: none).",
         ),
-    ] = 6,
+    ] = NUMERICAL_RUNS,
     out: Annotated[
         Path | None,
         typer.Option(help="Output folder (default: predict-RIG-TYPE-SETTING in the study folder)."),
@@ -155,8 +161,8 @@ def design(
         typer.Option(
             min=1,
             show_default=False,
-            help="Seeded placements simulated per set and candidate [default: 5; 1 for a "
-            "simulator that cannot place its runs, such as an external solver].",
+            help=f"Seeded placements simulated per set and candidate [default: {DESIGN_PLACEMENTS}; "
+            "1 for a simulator that cannot place its runs, such as an external solver].",
         ),
     ] = None,
     runs: Annotated[

@@ -123,6 +123,7 @@ from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.sim.ensemble import MAX_PLACEMENTS
 from parcelfit.sim.executors import Executor, Task
 from parcelfit.sim.factory import make_simulator
+from parcelfit.study.defaults import DESIGN_PLACEMENTS
 from parcelfit.study.folderlock import check_writable, lock_folder
 from parcelfit.study.identify import DETERMINED_WIDTH, Identifiability
 from parcelfit.study.information import (
@@ -168,7 +169,7 @@ from parcelfit.study.studyfile import Study
 
 DESIGN_STORE = "design.sqlite"
 DESIGN_FILE = "design.json"
-PLACEMENTS = 5  # seeded placements per set and candidate by default (1 where runs cannot be placed)
+PLACEMENTS = DESIGN_PLACEMENTS  # seeded placements per set and candidate by default
 NARROWS = 0.99  # an expected interval share below this counts as narrowing the parameter
 # run-to-run measurement floor per quantity (SI): the band test's 3 mm and 1 degree, 2 ms
 FLOOR = {

@@ -55,9 +55,9 @@ import numpy as np
 from scipy.stats import median_abs_deviation
 
 from parcelfit.sim.ensemble import SPIN_ANGLE
+from parcelfit.study.defaults import NUMERICAL_RUNS
 from parcelfit.study.run_scatter import QUANTITIES, RELATIVE
 
-NUMERICAL_RUNS = 6  # placements at which the model and the refined model are compared
 FEW_PAIRS = 3  # fewer matched pairs than this give no spread worth the name: the notes say so
 
 

@@ -84,6 +84,7 @@ from parcelfit.sim.ensemble import MAX_PLACEMENTS
 from parcelfit.sim.executors import Executor, SharedExecutor, Task, make_executor
 from parcelfit.sim.factory import make_simulator
 from parcelfit.sim.protocol import SimResult, Simulator
+from parcelfit.study.defaults import PREDICT_PLACEMENTS, SCATTER_RUNS
 from parcelfit.study.details import EvaluationDetails
 from parcelfit.study.folderlock import check_writable, lock_folder
 from parcelfit.study.identify import Identifiability
@@ -127,8 +128,7 @@ PREDICT_STORE = "predict.sqlite"
 PREDICTION_FILE = "prediction.json"
 TABLE_FORMATS = ("csv", "parquet")
 MAX_SETS = 1000  # parameter sets of one prediction (each simulated at every placement)
-PLACEMENTS = 10  # seeded placements per set by default (1 where the simulator cannot place runs)
-SCATTER_RUNS = 10  # runs of the recommended parameters per fitted and validation case (run_scatter)
+PLACEMENTS = PREDICT_PLACEMENTS  # seeded placements per set by default
 MODEL_ITERATION, REFINED_ITERATION = -1, -2  # the numerical error's rows in predict.sqlite
 QUANTITIES = ("transit_time", "rotation", "exit_y", "exit_heading")
 # per quantity: words, SI unit, the unit a person reads and its factor from SI
