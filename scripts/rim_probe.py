@@ -211,6 +211,8 @@ def main() -> None:
         "the stiffness is shared so that they are as stiff as one box's (SceneOptions.content_kept)",
     )
     args = ap.parse_args()
+    if args.content_tiles > 1 and "full" in args.shells:
+        ap.error("--content-tiles works on interpolated shells: give --shells without full")
     lo, hi = args.values
     name, unit = args.param, catalogue_unit(args.param)
     content = args.probe == "content"

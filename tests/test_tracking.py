@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 
 from parcelfit import ParcelfitError
 from parcelfit.cli import app
-from parcelfit.runs import Trajectory, load_dataset, read_trajectory
+from parcelfit.runs import Trajectory, load_dataset, read_trajectory, write_trajectory
 from parcelfit.sim.mujoco import load_rig
 from parcelfit.tracking import (
     crossing_time,
@@ -938,8 +938,37 @@ def test_a_rig_name_with_a_dash_is_read_when_the_rig_is_known():
 
     video = Path("E3-far-plate-KPBW-2-07.mp4")
     known = ("E1", "E3", "E3-far", "E3-far-plate")
-    assert case_of(video, known) == (TestCase("E3-far-plate", "KPBW", 2), video.stem)  # longest
+    assert case_of(video, known) == (TestCase("E3-far-plate", "KPBW", 2), video.stem)
     assert case_of(Path("E3-far-KP-1-01.mp4"), known)[0] == TestCase("E3-far", "KP", 1)
     assert case_of(Path("E3-KPBW-1-07.mp4"), known)[0] == TestCase("E3", "KPBW", 1)
-    with pytest.raises(ParcelfitError, match="its rig file is given with --rig"):
+    assert case_of("E3-KP.BW-1-07", known)[0] == TestCase("E3", "KP.BW", 1)  # a stem as it is
+    with pytest.raises(ParcelfitError, match="read only for a known rig"):
         case_of(video)  # without the rig's name the dash splits it
+    with pytest.raises(ParcelfitError, match="after the rig E3-far-plate give CONSIGNMENT"):
+        case_of(Path("E3-far-plate-KPBW-x-07.mp4"), known)
+    # rig E3-far, consignment 2, setting 1 or rig E3, consignment far, setting 2, run 1-07
+    with pytest.raises(ParcelfitError, match="reads as more than one test case"):
+        case_of(Path("E3-far-2-1-07.mp4"), known)
+
+
+def test_a_run_tracked_under_a_rig_no_longer_given_is_reported_and_the_rest_go_on(tmp_path):
+    folder, out = tmp_path / "videos", tmp_path / "out"
+    folder.mkdir()
+    tracks = out / "tracks"
+    tracks.mkdir(parents=True)
+    t = np.linspace(0.0, 1.0, 11)
+    trajectory = Trajectory(t, 0.5 * t, np.zeros_like(t), np.zeros_like(t))
+    for stem in ("E3-far-KPBW-1-07", "E3-KPBW-1-01"):
+        (folder / f"{stem}.mp4").write_bytes(b"")  # tracked before: skipped, not opened
+        write_trajectory(trajectory, tracks / f"{stem}-tag1.csv")
+        entry = {"file": f"{stem}-tag1.csv", "measured_frames": 11, "transit_time_s": 1.0}
+        quality = {"parcel_tags": {"1": entry}}
+        (tracks / f"{stem}.quality.json").write_text(json.dumps(quality), encoding="utf-8")
+    tags = load_tag_map(Path(__file__).parents[1] / "examples" / "tracking" / "tags.yaml")
+    rigs = {"E3": ((), 0.0), "E3-far": ((), 0.0)}
+    summary = track_all(folder, tags, out, regions=rigs)  # with the rig: both runs read
+    assert summary["failed"] == {}
+    assert {c.rig for c in load_dataset(out).cases} == {"E3", "E3-far"}
+    summary = track_all(folder, tags, out, regions={"E3": ((), 0.0)})  # without it
+    assert list(summary["failed"]) == ["E3-far-KPBW-1-07.quality.json"]
+    assert [c.rig for c in load_dataset(out).cases] == ["E3"]

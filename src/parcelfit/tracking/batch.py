@@ -88,24 +88,47 @@ def write_video_track(result: VideoTrack, out: str | Path) -> list[Path]:
 _REST = re.compile(r"^(?P<cons>[^-]+)-(?P<setting>\d+)-(?P<run>[^.]+)$")
 
 
-def case_of(video: Path, rigs: Iterable[str] = ()) -> tuple[TestCase, str]:
-    """Test case and run id from a video's name ``RIG-CONSIGNMENT-SETTING-RUN``. A rig name that
-    holds a ``-`` (``E3-far-plate``) is read when it is one of ``rigs`` (the longest that fits
-    first); other rig names and the consignment's cannot hold one."""
-    stem = video.stem
-    for rig in sorted((r for r in rigs if "-" in r), key=len, reverse=True):
-        if stem.startswith(f"{rig}-") and (m := _REST.match(stem[len(rig) + 1 :])):
-            return TestCase(rig, m["cons"], int(m["setting"])), stem
-    m = _NAME.match(stem)
-    if not m:
-        raise ParcelfitError(
-            f"cannot read the test case from the name {video.name!r}",
-            file=video,
-            fix="name videos RIG-CONSIGNMENT-SETTING-RUN, e.g. E3-KPBW-1-07.mp4 (a rig name "
-            "with a '-' is read when its rig file is given with --rig)",
+def case_of(video: Path | str, rigs: Iterable[str] = ()) -> tuple[TestCase, str]:
+    """Test case and run id from a video's name ``RIG-CONSIGNMENT-SETTING-RUN``; ``video`` is
+    its path, or its name without the extension as it is (``E3-KP.BW-1-07`` keeps its dot). A
+    rig name that holds a ``-`` (``E3-far-plate``) is read when it is one of ``rigs``; the
+    consignment's name cannot hold one. A name that reads as two test cases (``E3-far-2-1-07``
+    with the rig ``E3-far`` known: also rig ``E3``, consignment ``far``) is refused."""
+    stem, shown, file = (
+        (video, video, None)
+        if isinstance(video, str)
+        else (
+            video.stem,
+            video.name,
+            video,
         )
-    case = TestCase(m["rig"], m["cons"], int(m["setting"]))
-    return case, stem
+    )
+    readings: dict[tuple[str, str, int], None] = {}  # an ordered set
+    for rig in rigs:
+        if "-" in rig and stem.startswith(f"{rig}-") and (m := _REST.match(stem[len(rig) + 1 :])):
+            readings[(rig, m["cons"], int(m["setting"]))] = None
+    if m := _NAME.match(stem):
+        readings[(m["rig"], m["cons"], int(m["setting"]))] = None
+    if len(readings) > 1:
+        raise ParcelfitError(
+            f"the name {shown!r} reads as more than one test case: "
+            + "; ".join(f"rig {r}, consignment {c}, setting {n}" for r, c, n in readings),
+            file=file,
+            fix="rename it so that one reading fits (no '-' in the run id, a consignment "
+            "name that is not a number)",
+        )
+    if not readings:
+        near = sorted((r for r in rigs if "-" in r and stem.startswith(f"{r}-")), key=len)[::-1]
+        raise ParcelfitError(
+            f"cannot read the test case from the name {shown!r}",
+            file=file,
+            fix=f"after the rig {near[0]} give CONSIGNMENT-SETTING-RUN, e.g. {near[0]}-KPBW-1-07"
+            if near
+            else "name videos RIG-CONSIGNMENT-SETTING-RUN, e.g. E3-KPBW-1-07.mp4 (a rig name "
+            "with a '-' is read only for a known rig, e.g. one given to track-all with --rig)",
+        )
+    ((rig, cons, setting),) = readings
+    return TestCase(rig, cons, setting), stem
 
 
 def track_all(
@@ -183,7 +206,11 @@ def track_all(
     for qfile in sorted(tracks.glob("*.quality.json")) if tracks.is_dir() else []:
         doc = json.loads(qfile.read_text(encoding="utf-8"))
         stem = qfile.name[: -len(".quality.json")]
-        case, run_id = case_of(Path(stem), known)
+        try:
+            case, run_id = case_of(stem, known)
+        except ParcelfitError as exc:  # tracked before with other --rig files: report, go on
+            summary["failed"][qfile.name] = str(exc)
+            continue
         entries = [e for e in doc["parcel_tags"].values() if e.get("file")]
         if not entries:
             continue
