@@ -39,7 +39,7 @@ from parcelfit.tracking.tagmap import TagMap
 from parcelfit.tracking.track import TrackOptions, VideoTrack, track_video
 
 VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv", ".m4v")
-_NAME = re.compile(r"^(?P<rig>[^-]+)-(?P<cons>[^-]+)-(?P<setting>\d+)-(?P<run>[^.]+)$")
+_REST = re.compile(r"^(?P<cons>[^-]+)-(?P<setting>\d+)-(?P<run>[^.]+)$")  # after RIG-
 
 
 def track_one(
@@ -85,9 +85,6 @@ def write_video_track(result: VideoTrack, out: str | Path) -> list[Path]:
     return [*files, qpath]
 
 
-_REST = re.compile(r"^(?P<cons>[^-]+)-(?P<setting>\d+)-(?P<run>[^.]+)$")
-
-
 def case_of(video: Path | str, rigs: Iterable[str] = ()) -> tuple[TestCase, str]:
     """Test case and run id from a video's name ``RIG-CONSIGNMENT-SETTING-RUN``; ``video`` is
     its path, or its name without the extension as it is (``E3-KP.BW-1-07`` keeps its dot). A
@@ -103,12 +100,12 @@ def case_of(video: Path | str, rigs: Iterable[str] = ()) -> tuple[TestCase, str]
             video,
         )
     )
+    # the rig is the name's part before its first '-', or a known rig name holding one
+    candidates = [r for r in rigs if "-" in r] + [stem.partition("-")[0]]
     readings: dict[tuple[str, str, int], None] = {}  # an ordered set
-    for rig in rigs:
-        if "-" in rig and stem.startswith(f"{rig}-") and (m := _REST.match(stem[len(rig) + 1 :])):
+    for rig in candidates:
+        if rig and stem.startswith(f"{rig}-") and (m := _REST.match(stem[len(rig) + 1 :])):
             readings[(rig, m["cons"], int(m["setting"]))] = None
-    if m := _NAME.match(stem):
-        readings[(m["rig"], m["cons"], int(m["setting"]))] = None
     if len(readings) > 1:
         raise ParcelfitError(
             f"the name {shown!r} reads as more than one test case: "
@@ -118,11 +115,11 @@ def case_of(video: Path | str, rigs: Iterable[str] = ()) -> tuple[TestCase, str]
             "name that is not a number)",
         )
     if not readings:
-        near = sorted((r for r in rigs if "-" in r and stem.startswith(f"{r}-")), key=len)[::-1]
+        near = max((r for r in candidates[:-1] if stem.startswith(f"{r}-")), key=len, default="")
         raise ParcelfitError(
             f"cannot read the test case from the name {shown!r}",
             file=file,
-            fix=f"after the rig {near[0]} give CONSIGNMENT-SETTING-RUN, e.g. {near[0]}-KPBW-1-07"
+            fix=f"after the rig {near} give CONSIGNMENT-SETTING-RUN, e.g. {near}-KPBW-1-07"
             if near
             else "name videos RIG-CONSIGNMENT-SETTING-RUN, e.g. E3-KPBW-1-07.mp4 (a rig name "
             "with a '-' is read only for a known rig, e.g. one given to track-all with --rig)",

@@ -52,6 +52,9 @@ def _check_step(step: float, what: str) -> None:
 DEFAULT_SPACING = 0.03
 
 
+MAX_CONTACTS_PER_PAIR = 50  # MuJoCo's mjMAXCONPAIR: contacts kept per colliding pair
+
+
 @dataclass(frozen=True)
 class SceneOptions:
     """Numerical settings of a scene (not calibrated): step [s], mesh spacing [m], etc."""
@@ -305,7 +308,7 @@ class SceneOptions:
                     "content_kept shares the content's stiffness over its tiles' contacts; "
                     "give content_tiles above 1 with it"
                 )
-            most = 50 * self.content_tiles**2  # MuJoCo's 50 contacts per pair, per tile
+            most = MAX_CONTACTS_PER_PAIR * self.content_tiles**2
             if not (float(self.content_kept).is_integer() and 1 <= self.content_kept <= most):
                 raise ParcelfitError(
                     f"content_kept must be a whole number of contacts from 1 to {most} (50 per "

@@ -34,7 +34,7 @@ from parcelfit.sim.mujoco.contact import (
     penalty_contact,
 )
 from parcelfit.sim.mujoco.lumped_mass import compile_model, element_vertex_masses
-from parcelfit.sim.mujoco.options import SceneOptions
+from parcelfit.sim.mujoco.options import MAX_CONTACTS_PER_PAIR, SceneOptions
 from parcelfit.sim.mujoco.rig import Rig, Surface
 from parcelfit.sim.mujoco.rim_brace import RimBrace, add_rim_braces
 from parcelfit.sim.mujoco.shell import ShellMesh, pillow_shell
@@ -198,9 +198,6 @@ def _surface_geoms(
                 conveying = (speed * math.cos(a), speed * math.sin(a), 0.0)
                 geoms.append(SurfaceGeom(name, s.material, conveying, s.name, **turns))
     return xml, geoms
-
-
-MAX_CONTACTS_PER_PAIR = 50  # MuJoCo's mjMAXCONPAIR: contacts kept per colliding pair
 
 
 def content_contacts(model: mujoco.MjModel, data: mujoco.MjData) -> int:
