@@ -86,7 +86,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             cons, {key: stiffness}, material=args.material, settle=args.settle
         )
         asked = stiffness / result.n_face
-        realised = result.plate / result.n_face
+        realised = result.plate / result.plate_contacts  # the face's stiffness per kept contact
         assumed, diagonal = inverse_masses(args.consignment, args.material, stiffness)
         print(
             f"{k:>14g}{result.n_face:>8d}{asked:>11.4g}{realised:>14.4g}{realised / asked:>7.2f}"

@@ -52,7 +52,10 @@ def test_indentation_realises_the_requested_stiffness(material, k_n_per_mm, cons
     flat = replace(load_consignment(consignment), bulge=None)
     r = indentation_test(flat, {key: k, "k_CoPa": k}, material=material, options=full)
     assert r.plate == pytest.approx(k, rel=0.10)
-    assert r.content == pytest.approx(k, rel=0.10)
+    # the content's box meets a few more corners of the sheet than the flat face has (its
+    # edges reach into the band beyond it: 236 against 212 on KP/BW), each as stiff
+    assert r.content == pytest.approx(k * r.content_contacts / r.n_face, rel=0.10)
+    assert r.content_contacts >= r.n_face - 10
     assert r.plate_contacts == r.n_face
 
 

@@ -71,6 +71,10 @@ BELT_FRICTION = ("mujoco", "coulomb")
 # how a contact's normal force follows its penetration, and how friction is decided
 # (`SceneOptions.contact_law`, `SceneOptions.friction`; sim/mujoco/contact.py, friction.py)
 CONTACT_LAWS = ("penalty", "impedance")
+# how the penalty law's per-contact stiffness meets MuJoCo's solver (`SceneOptions.contact_mapping`;
+# sim/mujoco/contact_cap.py): a lone vertex's inverse mass and every contact as MuJoCo keeps it,
+# or MuJoCo's own inverse mass and the contacts it keeps of a capped pair weighted for the rest
+CONTACT_MAPPINGS = ("vertex", "solver")
 FRICTION_LAWS = ("contact", "geom")
 # where the rigid-box reference's bottom carries contact (sim/rigidbox/geometry.py): the
 # consignment's own bulge patch if it has one, else rim-bending; the outline at one pressure; the

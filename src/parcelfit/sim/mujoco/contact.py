@@ -18,7 +18,10 @@ regulariser gives A_hat * m_v = 0.4442 = w^2 with w = 2/3, for every mesh spacin
 tried). The contact force reaches the vertex scaled by w and the vertex's motion changes the
 penetration scaled by w, so the static stiffness seen by the vertex is K_c = s w^2 / ((1-d) A_hat)
 = s / ((1 - d) / m_v): the mapping uses the plain inverse masses, A_eff = 1/m_v + 1/m_other. The
-indentation test measures exactly this.
+indentation test measures exactly this for the full shell, whose vertices are bodies. An
+interpolated shell's contact moves node bodies, whose inverse mass MuJoCo's solver takes instead,
+and MuJoCo keeps at most 50 contacts of a shell with one geom: `contact_cap.py` measures both and
+maps to them (`SceneOptions.contact_mapping = "solver"`; the default "vertex" maps as here).
 
 Meaning of the parameters (k_CoPa, k_BePa, k_MePa): the normal stiffness of a whole-face
 contact, i.e. the parcel (or its content) lying flat with one face on the counter-surface. That

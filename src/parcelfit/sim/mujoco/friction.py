@@ -53,6 +53,7 @@ import numba
 import numpy as np
 
 from parcelfit.errors import ParcelfitError
+from parcelfit.sim.mujoco.contact_cap import CapWeights
 from parcelfit.sim.mujoco.coulomb import CoulombBelts
 from parcelfit.sim.params import DYNAMIC_THRESHOLD, STATIC_THRESHOLD
 
@@ -383,7 +384,9 @@ class Stepper:
     """One MuJoCo step of a scene under its friction law (`SceneOptions.friction`): with
     "contact", ``mj_step1``, `ContactFriction.apply`, ``mj_step2`` and `ContactFriction.record`;
     with "geom", ``mj_step`` after the Coulomb belt forces where ``belt_friction`` asks for them
-    (the per-surface static switch is the simulator's, `simulator._FrictionSwitch`)."""
+    (the per-surface static switch is the simulator's, `simulator._FrictionSwitch`). With the
+    "solver" contact mapping (`SceneOptions.contact_mapping`) the capped pairs' kept contacts
+    are weighted after ``mj_step1`` (`CapWeights.apply`), before the friction law reads them."""
 
     def __init__(
         self,
@@ -394,6 +397,7 @@ class Stepper:
         options: SceneOptions,
     ) -> None:
         self.model, self.data = model, data
+        self.shell = scene.shell  # the packaging's mesh (diagnostics read it, `observed_steps`)
         self.contact: ContactFriction | None = None
         self.coulomb: CoulombBelts | None = None
         if options.friction == "contact":
@@ -411,29 +415,38 @@ class Stepper:
             )
         elif options.belt_friction == "coulomb":
             self.coulomb = CoulombBelts(model, data, scene)
+        self.cap = CapWeights(model, scene.shell) if options.contact_mapping == "solver" else None
 
     def step(self) -> None:
         """Advance the simulation by one time step."""
         model, data = self.model, self.data
-        if self.contact is not None:
-            mujoco.mj_step1(model, data)
-            self.contact.apply(model, data)
-            mujoco.mj_step2(model, data)
-            self.contact.record(data)
+        if self.contact is None and self.cap is None:
+            if self.coulomb is not None:
+                self.coulomb.apply(model, data)
+            mujoco.mj_step(model, data)
             return
         if self.coulomb is not None:
             self.coulomb.apply(model, data)
-        mujoco.mj_step(model, data)
+        mujoco.mj_step1(model, data)
+        if self.cap is not None:
+            self.cap.apply(model, data)
+        if self.contact is not None:
+            self.contact.apply(model, data)
+        mujoco.mj_step2(model, data)
+        if self.contact is not None:
+            self.contact.record(data)
 
-    def diagnostics(self) -> dict[str, int]:
+    def diagnostics(self) -> dict[str, float]:
         """How often the contact law slid contacts by hand: steps, and contact-steps whose force
-        the half-slip bound limited."""
-        if self.contact is None:
-            return {}
-        return {
-            "hand_friction_steps": self.contact.explicit_steps,
-            "hand_friction_clamped": self.contact.clamped,
-        }
+        the half-slip bound limited; with the "solver" contact mapping, how often it weighted a
+        capped pair (`CapWeights.diagnostics`)."""
+        out: dict[str, float] = {}
+        if self.contact is not None:
+            out["hand_friction_steps"] = self.contact.explicit_steps
+            out["hand_friction_clamped"] = self.contact.clamped
+        if self.cap is not None:
+            out.update(self.cap.diagnostics())
+        return out
 
 
 @contextmanager

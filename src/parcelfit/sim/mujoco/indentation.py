@@ -3,14 +3,26 @@
 The parcel lies flat on a static plate of the chosen material. The (rigid) content is pressed
 down with a force F1 [N] and the parcel settles, then with F2 > F1 and it settles again (both
 loads keep the whole face in contact; under gravity alone a few corner contacts at the face's
-edge do not touch yet). Every contact between the plate and the packaging, and between the
-content and the packaging, reports its penetration; with per-contact stiffness K_c the added
-force satisfies F2 - F1 = K_c * sum_i d(delta_i), so the realised whole-face stiffness is
+edge do not touch yet), stepped as the simulator steps (`parcelfit.sim.mujoco.friction.Stepper`,
+so the contact mapping's weights act). Every contact between the plate and the packaging, and
+between the content and the packaging's bottom sheet (below the content's centre: the face that
+carries the load), reports its penetration. Where MuJoCo keeps every touching contact, the n
+contacts at F2 carry the added load in parallel, each of stiffness (F2 - F1) / sum_i d(delta_i)
+(contacts that appear or vanish between the loads sit at near zero penetration), so the
+realised whole-face stiffness is
 
-    K_face = n_face * (F2 - F1) / sum_i d(delta_i)
+    K_face = n (F2 - F1) / sum_i d(delta_i)
 
-(n_face: the contacts of the flat face, `ShellMesh.face_contacts`, over which the catalogue's
-stiffness is spread). `parcelfit.sim.mujoco.contact` promises K_face = k_BePa / k_MePa / k_CoPa.
+Where MuJoCo keeps 50 of more (its cap per pair, `parcelfit.sim.mujoco.contact_cap`), it picks
+them anew at each load, all carrying, and the face's displacement is their mean penetration:
+
+    K_face = (F2 - F1) / (mean delta(F2) - mean delta(F1))
+
+`parcelfit.sim.mujoco.contact` promises K_face = k_BePa / k_MePa / k_CoPa where n is the flat
+face's n_face (`ShellMesh.face_contacts`). (Until 2026-12-07 the test took n_face (F2 - F1) /
+sum_i d(delta_i) throughout: the same where MuJoCo keeps all the face's contacts, as with the
+full shell, and about n_face / 50 times too stiff where it keeps 50 of them, as with an
+interpolated shell: docs/research/contact-cap.md.)
 """
 
 from __future__ import annotations
@@ -23,14 +35,16 @@ import numpy as np
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.sim.mujoco.consignment import Consignment
-from parcelfit.sim.mujoco.options import SceneOptions
+from parcelfit.sim.mujoco.friction import Stepper
+from parcelfit.sim.mujoco.options import MAX_CONTACTS_PER_PAIR, SceneOptions
 from parcelfit.sim.mujoco.rig import Rig, parse_rig
 from parcelfit.sim.mujoco.scene import build_scene
 
 
 @dataclass(frozen=True)
 class Indentation:
-    """Realised whole-face stiffnesses [N/m], the contacts that carried the load, and n_face."""
+    """Realised whole-face stiffnesses [N/m], the contacts that carried the load (at F2), and
+    n_face (the flat face's contacts, `ShellMesh.face_contacts`)."""
 
     plate: float
     content: float
@@ -101,13 +115,31 @@ def plate_geoms(model: mujoco.MjModel) -> list[int]:
 
 def _penetrations(
     model: mujoco.MjModel, data: mujoco.MjData, plate: int, content: int
-) -> tuple[np.ndarray, ...]:
+) -> tuple[np.ndarray, np.ndarray, bool, bool]:
+    """The penetrations [m] of the plate's contacts and of the content's contacts below its
+    centre (the packaging's bottom sheet under it), and whether MuJoCo capped each pair."""
     n = data.ncon
     geoms = np.asarray(data.contact.geom[:n])
     dist = np.asarray(data.contact.dist[:n])
+    below = np.asarray(data.contact.pos[:n])[:, 2] < data.xpos[model.geom_bodyid[content], 2]
     on_plate = (geoms == plate).any(axis=1)
     on_content = (geoms == content).any(axis=1)
-    return -dist[on_plate], -dist[on_content]
+    return (
+        -dist[on_plate],
+        -dist[on_content & below],
+        int(on_plate.sum()) == MAX_CONTACTS_PER_PAIR,
+        int(on_content.sum()) == MAX_CONTACTS_PER_PAIR,
+    )
+
+
+def _face_stiffness(added: float, before: np.ndarray, after: np.ndarray, capped: bool) -> float:
+    """The realised face stiffness [N/m] from the penetrations [m] before and after adding
+    ``added`` [N] (module docstring)."""
+    if capped:
+        # MuJoCo re-picks the 50 it keeps at each load, all carrying: the face's displacement
+        return added / float(np.mean(after) - np.mean(before))
+    # every touching contact kept: those that appear or vanish carry (near) no force
+    return len(after) * added / float(np.sum(after) - np.sum(before))
 
 
 def indentation_test(
@@ -128,31 +160,30 @@ def indentation_test(
             "the indentation test reads the contacts of one content box",
             fix="use content_tiles=1 (the default)",
         )
+    options = options or SceneOptions()
     full = consignment.parameter_values(si_values=params or {})
     scene = build_scene(plate_rig(material), consignment, full, 1, options)
     model = scene.model()
     data = mujoco.MjData(model)
+    stepper = Stepper(model, data, scene, full, options)
     plate = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "plate")
     content = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "content")
     body = model.geom_bodyid[content]
     steps = round(settle / model.opt.timestep)
 
-    def settle_and_measure(force: float) -> tuple[np.ndarray, np.ndarray]:
+    def settle_and_measure(force: float) -> tuple[np.ndarray, np.ndarray, bool, bool]:
         data.xfrc_applied[body, 2] = -force
         for _ in range(steps):
-            mujoco.mj_step(model, data)
+            stepper.step()
         return _penetrations(model, data, plate, content)
 
-    p0, c0 = settle_and_measure(loads[0])
-    p1, c1 = settle_and_measure(loads[1])
-    # contacts that appear or vanish between the loads sit at (near) zero penetration and carry
-    # (near) no force, so sums over whatever touches at each load are compared
-    n_face = scene.shell.face_contacts
+    p0, c0, p0_capped, c0_capped = settle_and_measure(loads[0])
+    p1, c1, p1_capped, c1_capped = settle_and_measure(loads[1])
     added = loads[1] - loads[0]
     return Indentation(
-        plate=n_face * added / float(np.sum(p1) - np.sum(p0)),
-        content=n_face * added / float(np.sum(c1) - np.sum(c0)),
+        plate=_face_stiffness(added, p0, p1, p0_capped and p1_capped),
+        content=_face_stiffness(added, c0, c1, c0_capped and c1_capped),
         plate_contacts=len(p1),
         content_contacts=len(c1),
-        n_face=n_face,
+        n_face=scene.shell.face_contacts,
     )

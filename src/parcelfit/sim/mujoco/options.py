@@ -15,6 +15,7 @@ from parcelfit.sim.mujoco.rig import Rig
 from parcelfit.sim.params import (
     BELT_FRICTION,
     CONTACT_LAWS,
+    CONTACT_MAPPINGS,
     DYNAMIC_THRESHOLD,
     FRICTION_LAWS,
     MASS_LUMPINGS,
@@ -80,6 +81,13 @@ class SceneOptions:
     # impact) or "impedance" (the law before 2026-12-01: every contact at ``contact_frequency``,
     # the stiffness setting only the static penetration)
     contact_law: str = "penalty"
+    # "penalty" law only: how its per-contact stiffness meets MuJoCo's solver (contact_cap.py):
+    # "vertex" (each contact's inverse mass a lone shell vertex's, every kept contact as it is:
+    # an interpolated shell's flat face then realises 0.41-0.74 of the catalogue's stiffness,
+    # MuJoCo keeping 50 of its contacts per pair) or "solver" (each contact's inverse mass
+    # MuJoCo's own, and the contacts MuJoCo keeps of a pair at its cap weighted for those it
+    # drops: a whole face pressed flat realises the catalogue's stiffness on 30 and 15 mm)
+    contact_mapping: str = "vertex"
     # "impedance" law only: the contacts' own angular frequency [rad/s] (see contact.py): fixed, so that a finer time
     # step resolves the same impact instead of a faster one
     contact_frequency: float = 300.0
@@ -230,6 +238,17 @@ class SceneOptions:
             raise ParcelfitError(
                 f"unknown contact_law {self.contact_law!r}", fix=f"use one of {list(CONTACT_LAWS)}"
             )
+        if self.contact_mapping not in CONTACT_MAPPINGS:
+            raise ParcelfitError(
+                f"unknown contact_mapping {self.contact_mapping!r}",
+                fix=f"use one of {list(CONTACT_MAPPINGS)}",
+            )
+        if self.contact_mapping == "solver" and self.contact_law != "penalty":
+            raise ParcelfitError(
+                "contact_mapping 'solver' maps the penalty law's stiffness, not the "
+                f"{self.contact_law!r} law's",
+                fix="use contact_law=penalty with it, or contact_mapping=vertex",
+            )
         if self.shell_dof not in SHELL_DOFS:
             raise ParcelfitError(
                 f"unknown shell_dof {self.shell_dof!r}", fix=f"use one of {list(SHELL_DOFS)}"
@@ -315,6 +334,12 @@ class SceneOptions:
                     f"tile), got {self.content_kept}"
                 )
             object.__setattr__(self, "content_kept", int(self.content_kept))
+        if self.contact_mapping == "solver" and self.content_tiles > 1:
+            raise ParcelfitError(
+                "content_tiles spread a rigid content's contacts over pairs to get round MuJoCo's "
+                "cap, which contact_mapping 'solver' already weights for",
+                fix="use content_tiles=1 with it, or contact_mapping=vertex",
+            )
         if self.rim_brace is not None and not 0 <= self.rim_brace <= 10:
             raise ParcelfitError(
                 f"rim_brace must lie in [0, 10] (a share of the ideal wedge), got {self.rim_brace}"

@@ -33,6 +33,7 @@ from parcelfit.sim.mujoco.contact import (
     contact_params,
     penalty_contact,
 )
+from parcelfit.sim.mujoco.contact_cap import map_to_solver
 from parcelfit.sim.mujoco.lumped_mass import compile_model, element_vertex_masses
 from parcelfit.sim.mujoco.options import MAX_CONTACTS_PER_PAIR, SceneOptions
 from parcelfit.sim.mujoco.rig import Rig, Surface
@@ -85,16 +86,26 @@ class Scene:
     content_flex: bool
     mass_lumping: str  # how the flexes' masses are spread (`SceneOptions.mass_lumping`)
     rim_brace: RimBrace | None = None  # braces across the shell's rim cells (`rim_brace`)
+    # how the contacts meet MuJoCo's solver (`SceneOptions.contact_mapping`), and the lone
+    # shell vertex's inverse mass [1/kg] the contacts' solref in ``xml`` was written with
+    contact_mapping: str = "vertex"
+    vertex_inverse_mass: float = 0.0
 
     def model(self) -> mujoco.MjModel:
         """The compiled MuJoCo model of this scene, its flexes' masses lumped as the scene says
-        (`parcelfit.sim.mujoco.lumped_mass.compile_model`), its rims braced if it says so."""
+        (`parcelfit.sim.mujoco.lumped_mass.compile_model`), its rims braced if it says so, and
+        with the "solver" contact mapping its packaging contacts' solref mapped with MuJoCo's
+        own inverse mass (`parcelfit.sim.mujoco.contact_cap.map_to_solver`)."""
         brace = self.rim_brace
         if brace is None:
-            return compile_model(self.xml, self.mass_lumping)
-        return compile_model(
-            self.xml, self.mass_lumping, lambda spec, model: add_rim_braces(spec, model, brace)
-        )
+            model = compile_model(self.xml, self.mass_lumping)
+        else:
+            model = compile_model(
+                self.xml, self.mass_lumping, lambda spec, model: add_rim_braces(spec, model, brace)
+            )
+        if self.contact_mapping == "solver":
+            map_to_solver(model, self.shell, self.vertex_inverse_mass)
+        return model
 
 
 def _quat(yaw_deg: float, roll_deg: float = 0.0) -> str:
@@ -475,6 +486,8 @@ def build_scene(
         n_shell_vertices=nv,
         content_flex=soft,
         mass_lumping=opt.mass_lumping,
+        contact_mapping=opt.contact_mapping,
+        vertex_inverse_mass=1 / m_v,
         rim_brace=None
         if brace == 0
         else RimBrace(brace, young_pa * t_pa, (cL, cW, cH), (L, W), beta_pa),
