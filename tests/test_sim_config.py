@@ -743,6 +743,19 @@ def test_belt_friction_from_a_study_files_simulator_section_and_a_twins_settings
     )
     scene = make_simulator(laws.to_config(tmp_path)).options.scene  # type: ignore[attr-defined]
     assert (scene.contact_law, scene.friction) == ("impedance", "geom")
+    mapped = SimulatorSection(
+        backend="mujoco", rig="E3", consignment="KPBW", contact_mapping="solver"
+    )
+    scene = make_simulator(mapped.to_config(tmp_path)).options.scene  # type: ignore[attr-defined]
+    assert scene.contact_mapping == "solver"
+    with pytest.raises(Exception, match="unknown contact mapping 'area'"):
+        SimulatorSection(backend="mujoco", rig="E3", consignment="KPBW", contact_mapping="area")
+    with pytest.raises(Exception, match="contact_mapping"):
+        make_simulator(
+            SimulatorSection(
+                backend="rigidbox", rig="E3", consignment="KPBW", contact_mapping="solver"
+            ).to_config(tmp_path)
+        )
     with pytest.raises(Exception, match="friction=geom"):
         make_simulator(
             SimulatorSection(

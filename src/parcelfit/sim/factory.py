@@ -9,7 +9,9 @@ The section's ``backend`` chooses: ``mujoco`` (a bundled or user rig and consign
 ``shell_cells`` (an interpolated shell's grid of cells, e.g. ``[4, 4, 1]``),
 ``shell_diagonals`` (``radiating`` or ``alternating``: how the shell's cells are split into
 triangles), ``mass_lumping`` (``area`` or ``equal``: how the packaging's mass is spread over its
-vertices, see `SceneOptions`), ``contact_law`` (``penalty`` or ``impedance``), ``friction``
+vertices, see `SceneOptions`), ``contact_law`` (``penalty`` or ``impedance``),
+``contact_mapping`` (``vertex`` or ``solver``: how the penalty law's stiffness meets MuJoCo's
+solver, see `SceneOptions`), ``friction``
 (``contact``: per contact, or ``geom``: the former per-surface switch), ``belt_friction``
 (``mujoco`` or ``coulomb``, with ``friction: geom``; see `SceneOptions`),
 ``roller_surface`` (``linear`` or ``turning``: how a flow splitter's rollers move the
@@ -51,6 +53,7 @@ from parcelfit.sim.params import (
     BELT_FRICTION,
     BOTTOM_PATCHES,
     CONTACT_LAWS,
+    CONTACT_MAPPINGS,
     FRICTION_LAWS,
     MASS_LUMPINGS,
     MAX_TIMESTEP,
@@ -81,6 +84,7 @@ _MUJOCO_ONLY = (
     "shell_diagonals",
     "mass_lumping",
     "contact_law",
+    "contact_mapping",
     "friction",
     "belt_friction",
     "rig_timesteps",
@@ -101,6 +105,7 @@ _SETTINGS = (
     "shell_diagonals",
     "mass_lumping",
     "contact_law",
+    "contact_mapping",
     "friction",
     "belt_friction",
     "roller_surface",
@@ -190,6 +195,7 @@ class SimulatorConfig(Mapping[str, Any]):
     shell_diagonals: str | None = None
     mass_lumping: str | None = None
     contact_law: str | None = None
+    contact_mapping: str | None = None
     friction: str | None = None
     belt_friction: str | None = None
     roller_surface: str | None = None
@@ -278,6 +284,11 @@ class SimulatorSection(FileModel):
     contact_law: Annotated[str | None, Choice(CONTACT_LAWS, what="contact law")] = None
     """penalty (default: the catalogue's stiffness and damping act as a spring and damper) or
     impedance (the former law)."""
+    contact_mapping: Annotated[str | None, Choice(CONTACT_MAPPINGS, what="contact mapping")] = None
+    """With the penalty law: vertex (default: each contact mapped with a lone shell vertex's
+    inverse mass; an interpolated shell's face realises about half the catalogue's stiffness)
+    or solver (MuJoCo's own inverse mass, and the 50 contacts it keeps of a pair weighted for
+    the ones it drops: the face realises it; docs/research/contact-cap.md)."""
     friction: Annotated[str | None, Choice(FRICTION_LAWS, what="friction law")] = None
     """contact (default: each contact's coefficient from its own slip) or geom (the former
     per-surface switch)."""
@@ -375,6 +386,7 @@ def make_simulator(config: SimulatorConfig) -> Simulator:
         }
         for key in (
             "contact_law",
+            "contact_mapping",
             "friction",
             "belt_friction",
             "roller_surface",
