@@ -146,6 +146,13 @@ def test_the_solver_mapping_realises_the_face_stiffness_on_every_mesh(spacing):
     assert vertex.plate < 0.8 * k
 
 
+def test_a_full_shell_is_not_capped_so_its_pairs_are_never_weighted():
+    cons = load_consignment("KPBW")
+    options = SceneOptions(shell_dof="full", contact_mapping="solver")
+    scene = build_scene(plate_rig("belt"), cons, cons.parameter_values(), 1, options)
+    assert CapWeights(scene.model(), scene.shell).capped is False
+
+
 def test_the_solver_mapping_refuses_a_quadratic_shell():
     cons = load_consignment("KPBW")
     options = SceneOptions(shell_dof="quadratic", contact_mapping="solver")

@@ -18,6 +18,9 @@ them anew at each load, all carrying, and the face's displacement is their mean 
 
     K_face = (F2 - F1) / (mean delta(F2) - mean delta(F1))
 
+Both assume the whole face touches at both loads. Where the touching area grows with the load
+(a light, stiff face), the quotient measures that growth too, and with the "solver" contact
+mapping, whose weights follow the touching area, it can even come out negative.
 `parcelfit.sim.mujoco.contact` promises K_face = k_BePa / k_MePa / k_CoPa where n is the flat
 face's n_face (`ShellMesh.face_contacts`). (Until 2026-12-07 the test took n_face (F2 - F1) /
 sum_i d(delta_i) throughout: the same where MuJoCo keeps all the face's contacts, as with the
