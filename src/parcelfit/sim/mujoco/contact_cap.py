@@ -19,11 +19,11 @@ the contact's inverse mass. Two things part an interpolated shell's realised fac
 
    which is 0.42 of 1 / m_v on KP/BW's 30 mm mesh and 0.105 on 15 mm (a finer mesh has lighter
    vertices, its nodes are the same): each contact comes out 1 / 0.42 = 2.4 and 9.5 times as
-   stiff as asked, and a vertex of the rim, far from the nodes' weight, up to 3 times less
-   than one of the face. The "solver" mapping scales each packaging pair's solref by
-   (A_face + A_other) / (1 / m_v + A_other) after the model is compiled, A_face the flat face's
-   contacts' harmonic mean of A_v (as the vertex mapping averages their masses;
-   `solver_inverse_mass`, `map_to_solver`), and each contact in every step by
+   stiff as asked, a vertex of the rim by another factor than one of the face. The "solver"
+   mapping scales each packaging pair's solref by (A_face + A_other) / (1 / m_v + A_other)
+   after the model is compiled, A_face the flat face's contacts' harmonic mean of A_v (as the
+   vertex mapping averages their masses; `solver_inverse_mass`, `map_to_solver`), and each
+   contact in every step by
    (A_v + A_other) / (A_face + A_other) of its own vertex (the corner of its triangle nearest
    to the contact point; `CapWeights`), so that every contact realises K_c.
 2. **The cap.** MuJoCo keeps at most 50 contacts of a flex with one geom (mjMAXCONPAIR), chosen
