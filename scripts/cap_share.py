@@ -25,7 +25,7 @@ import numpy as np
 
 from parcelfit.runs import TestCase
 from parcelfit.sim.mujoco import MujocoSimulator, SimOptions
-from parcelfit.sim.mujoco.contact_cap import PACKAGING, CapWeights
+from parcelfit.sim.mujoco.contact_cap import CapWeights, packaging_contacts
 from parcelfit.sim.mujoco.friction import Stepper, observed_steps
 from parcelfit.sim.mujoco.mjlog import CountedWarnings
 from parcelfit.sim.mujoco.options import MAX_CONTACTS_PER_PAIR, scene_options
@@ -54,13 +54,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if round(data.time / model.opt.timestep) % args.every:
             return
         sampled[0] += 1
-        packaging = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, PACKAGING)
-        n = data.ncon
-        geom = np.asarray(data.contact.geom[:n])
-        flex = np.asarray(data.contact.flex[:n])
-        on = (flex == packaging).any(axis=1)
-        other = np.maximum(geom[:, 0], geom[:, 1])[on]
-        for g, count in zip(*np.unique(other[other >= 0], return_counts=True), strict=True):
+        _, other, _ = packaging_contacts(data, weights[0].flex)
+        for g, count in zip(*np.unique(other, return_counts=True), strict=True):
             capped = count == MAX_CONTACTS_PER_PAIR
             is_box = model.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX
             touching = weights[0].touching(model, data, int(g)) if capped and is_box else np.nan

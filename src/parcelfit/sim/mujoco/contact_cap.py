@@ -63,7 +63,12 @@ import mujoco
 import numpy as np
 
 from parcelfit.errors import ParcelfitError
-from parcelfit.sim.mujoco.lumped_mass import interpolation_weights
+from parcelfit.sim.mujoco.lumped_mass import (
+    flex_elements,
+    interpolation_weights,
+    is_interpolated,
+    mass_bodies,
+)
 from parcelfit.sim.mujoco.options import MAX_CONTACTS_PER_PAIR
 
 if TYPE_CHECKING:
@@ -79,32 +84,22 @@ def _packaging_flex(model: mujoco.MjModel) -> int:
     return int(flex)
 
 
-def is_interpolated(model: mujoco.MjModel, flex: int) -> bool:
-    """Whether flex ``flex`` moves its vertices from nodes (no vertex bodies of its own)."""
-    return bool(
-        model.flex_nodenum[flex] > 0 and model.flex_vertbodyid[model.flex_vertadr[flex]] < 0
-    )
-
-
 def vertex_inverse_masses(model: mujoco.MjModel) -> np.ndarray:
     """MuJoCo's inverse mass A_v [1/kg] of a contact at each packaging vertex against a static
     geom (module docstring): through the interpolation for an interpolated shell, the vertex
     bodies' own for a full shell. A quadratic shell (a node fixed to its frame) is refused."""
     flex = _packaging_flex(model)
-    if is_interpolated(model, flex):
-        nadr = model.flex_nodeadr[flex]
-        nodes = model.flex_nodebodyid[nadr : nadr + model.flex_nodenum[flex]]
-        try:
-            weights = interpolation_weights(model, flex)
-        except ValueError as exc:  # MuJoCo's quadratic shell: a node fixed to its frame
-            raise ParcelfitError(
-                f"contact_mapping 'solver' cannot read this shell's inverse masses ({exc})",
-                fix="use shell_dof=trilinear or full with it, or contact_mapping=vertex",
-            ) from exc
-        return weights @ model.body_invweight0[nodes, 0]
-    vadr = model.flex_vertadr[flex]
-    bodies = model.flex_vertbodyid[vadr : vadr + model.flex_vertnum[flex]]
-    return np.asarray(model.body_invweight0[bodies, 0], dtype=float)
+    inverse = np.asarray(model.body_invweight0[mass_bodies(model, flex), 0], dtype=float)
+    if not is_interpolated(model, flex):
+        return inverse
+    try:
+        weights = interpolation_weights(model, flex)
+    except ValueError as exc:  # MuJoCo's quadratic shell: a node fixed to its frame
+        raise ParcelfitError(
+            f"contact_mapping 'solver' cannot read this shell's inverse masses ({exc})",
+            fix="use shell_dof=trilinear or full with it, or contact_mapping=vertex",
+        ) from exc
+    return weights @ inverse
 
 
 def face_inverse_mass(per_vertex: np.ndarray, shell: ShellMesh) -> float:
@@ -143,6 +138,23 @@ def map_to_solver(model: mujoco.MjModel, shell: ShellMesh, vertex_inverse_mass: 
     return a_v / vertex_inverse_mass
 
 
+def packaging_contacts(data: mujoco.MjData, flex: int) -> tuple[np.ndarray, ...]:
+    """This step's contacts of flex ``flex``'s elements with a geom: their indices in
+    ``data.contact``, the geom each touches and the element."""
+    n = data.ncon
+    con = data.contact
+    geom = np.asarray(con.geom[:n])
+    flexes = np.asarray(con.flex[:n])
+    elem = np.asarray(con.elem[:n])
+    # the flex's side of each contact (0 or 1; -1: not the flex's); the other side must be a
+    # geom (not a soft content's flex) and the flex's an element
+    side = np.where(flexes[:, 1] == flex, 1, np.where(flexes[:, 0] == flex, 0, -1))
+    rows = np.arange(n)
+    own = np.maximum(side, 0)
+    idx = np.flatnonzero((side >= 0) & (geom[rows, 1 - own] >= 0) & (elem[rows, own] >= 0))
+    return idx, geom[idx, 1 - side[idx]], elem[idx, side[idx]]
+
+
 class CapWeights:
     """The "solver" mapping's per-step part (module docstring): each packaging contact's solref
     scaled to its own vertex's inverse mass, and the kept contacts of a pair at the cap weighted
@@ -152,9 +164,7 @@ class CapWeights:
         flex = _packaging_flex(model)
         self.flex = flex
         self.vadr, self.vnum = int(model.flex_vertadr[flex]), int(model.flex_vertnum[flex])
-        dim = int(model.flex_dim[flex])
-        elems = np.asarray(model.flex_elem[model.flex_elemdataadr[flex] :])
-        self.elements = elems[: (dim + 1) * int(model.flex_elemnum[flex])].reshape(-1, dim + 1)
+        self.elements = flex_elements(model, flex)
         # contacts per touching vertex: one per element it is a corner of
         self.corners = np.bincount(self.elements.ravel(), minlength=self.vnum).astype(float)
         self.reach = float(model.flex_radius[flex]) + float(model.flex_margin[flex])
@@ -184,25 +194,11 @@ class CapWeights:
 
     def apply(self, model: mujoco.MjModel, data: mujoco.MjData) -> None:
         """Scale this step's packaging contacts (module docstring)."""
-        n = data.ncon
-        if n == 0:
-            return
-        con = data.contact
-        geom = np.asarray(con.geom[:n])
-        flex = np.asarray(con.flex[:n])
-        # the packaging's side of each contact (0 or 1; -1: not the packaging's), and whether
-        # the other side is a geom (not the soft content's flex)
-        side = np.where(flex[:, 1] == self.flex, 1, np.where(flex[:, 0] == self.flex, 0, -1))
-        rows = np.arange(n)
-        on_geom = (side >= 0) & (geom[rows, 1 - np.maximum(side, 0)] >= 0)
-        elem = np.asarray(con.elem[:n])
-        # a contact MuJoCo made with an element (the shell's are all element contacts)
-        on_geom &= elem[rows, np.maximum(side, 0)] >= 0
-        idx = np.flatnonzero(on_geom)
+        idx, other, element = packaging_contacts(data, self.flex)
         if len(idx) == 0:
             return
-        other = geom[idx, 1 - side[idx]]
-        element = elem[idx, side[idx]]
+        con = data.contact
+        n = data.ncon
         # each contact's vertex: the corner of its element nearest to the contact point
         corners = self.elements[element]
         verts = data.flexvert_xpos[self.vadr : self.vadr + self.vnum]

@@ -55,6 +55,7 @@ import numpy as np
 from parcelfit.errors import ParcelfitError
 from parcelfit.sim.mujoco.contact_cap import CapWeights
 from parcelfit.sim.mujoco.coulomb import CoulombBelts
+from parcelfit.sim.mujoco.lumped_mass import flex_elements
 from parcelfit.sim.params import DYNAMIC_THRESHOLD, STATIC_THRESHOLD
 
 if TYPE_CHECKING:
@@ -98,8 +99,7 @@ class ContactFriction:
         self.triangles = np.zeros((0, 3), dtype=np.int32)
         self.vertex_offset = 0
         if flex >= 0 and model.flex_dim[flex] == 2:
-            elems = model.flex_elem[model.flex_elemdataadr[flex] :]
-            self.triangles = np.asarray(elems[: 3 * int(model.flex_elemnum[flex])]).reshape(-1, 3)
+            self.triangles = flex_elements(model, flex)
             self.vertex_offset = int(model.flex_vertadr[flex])
         self._qfrc = np.zeros(model.nv)
         # the step before's contacts on surfaces: sorted keys, normal forces, inverse masses
@@ -420,13 +420,11 @@ class Stepper:
     def step(self) -> None:
         """Advance the simulation by one time step."""
         model, data = self.model, self.data
-        if self.contact is None and self.cap is None:
-            if self.coulomb is not None:
-                self.coulomb.apply(model, data)
-            mujoco.mj_step(model, data)
-            return
         if self.coulomb is not None:
             self.coulomb.apply(model, data)
+        if self.contact is None and self.cap is None:
+            mujoco.mj_step(model, data)
+            return
         mujoco.mj_step1(model, data)
         if self.cap is not None:
             self.cap.apply(model, data)

@@ -144,13 +144,27 @@ def interpolation_weights(model: mujoco.MjModel, flex: int) -> np.ndarray:
     return weights
 
 
+def is_interpolated(model: mujoco.MjModel, flex: int) -> bool:
+    """Whether flex ``flex`` moves its vertices from nodes (no vertex bodies of its own)."""
+    return bool(
+        model.flex_nodenum[flex] > 0 and model.flex_vertbodyid[model.flex_vertadr[flex]] < 0
+    )
+
+
+def flex_elements(model: mujoco.MjModel, flex: int) -> np.ndarray:
+    """The elements of flex ``flex`` (k x (dim + 1) vertex indices within the flex)."""
+    dim, num = int(model.flex_dim[flex]), int(model.flex_elemnum[flex])
+    adr = int(model.flex_elemdataadr[flex])
+    return np.asarray(model.flex_elem[adr : adr + num * (dim + 1)]).reshape(num, dim + 1)
+
+
 def mass_bodies(model: mujoco.MjModel, flex: int) -> np.ndarray:
     """The bodies that carry flex ``flex``'s mass: its nodes if it is interpolated (its
     vertices then have no bodies of their own), else its vertices' bodies."""
-    vadr = model.flex_vertadr[flex]
-    if model.flex_nodenum[flex] > 0 and model.flex_vertbodyid[vadr] < 0:
+    if is_interpolated(model, flex):
         nadr = model.flex_nodeadr[flex]
         return model.flex_nodebodyid[nadr : nadr + model.flex_nodenum[flex]]
+    vadr = model.flex_vertadr[flex]
     return model.flex_vertbodyid[vadr : vadr + model.flex_vertnum[flex]]
 
 
@@ -165,10 +179,9 @@ def lumped_masses(model: mujoco.MjModel) -> list[FlexMasses]:
         if dim < 2:
             continue
         vadr, vnum = model.flex_vertadr[f], model.flex_vertnum[f]
-        eadr, enum_ = model.flex_elemdataadr[f], model.flex_elemnum[f]
-        elements = model.flex_elem[eadr : eadr + enum_ * (dim + 1)].reshape(enum_, dim + 1)
+        elements = flex_elements(model, f)
         points = data.flexvert_xpos[vadr : vadr + vnum]
-        interpolated = model.flex_nodenum[f] > 0 and model.flex_vertbodyid[vadr] < 0
+        interpolated = is_interpolated(model, f)
         bodies = mass_bodies(model, f)
         total = float(model.body_mass[bodies].sum())
         grid = grid_vertex_masses(points, total) if dim == 3 else None

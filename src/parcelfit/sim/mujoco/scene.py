@@ -97,12 +97,8 @@ class Scene:
         with the "solver" contact mapping its packaging contacts' solref mapped with MuJoCo's
         own inverse mass (`parcelfit.sim.mujoco.contact_cap.map_to_solver`)."""
         brace = self.rim_brace
-        if brace is None:
-            model = compile_model(self.xml, self.mass_lumping)
-        else:
-            model = compile_model(
-                self.xml, self.mass_lumping, lambda spec, model: add_rim_braces(spec, model, brace)
-            )
+        edit = None if brace is None else lambda spec, model: add_rim_braces(spec, model, brace)
+        model = compile_model(self.xml, self.mass_lumping, edit)
         if self.contact_mapping == "solver":
             map_to_solver(model, self.shell, self.vertex_inverse_mass)
         return model
