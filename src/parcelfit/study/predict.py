@@ -36,7 +36,9 @@ their drive speeds across sets as they share the start pose.
 
 **The real runs' scatter** is estimated against the recommended parameters simulated at
 `SCATTER_RUNS` (or ``scatter_runs``) seeded placements (drives as above) on every fitted and
-validation case of the study (`parcelfit.study.run_scatter`).
+validation case of the study (`parcelfit.study.run_scatter`). They do not depend on the design:
+those another prediction of the study finished are taken from its store, not simulated again
+(`parcelfit.study.scatter_reuse`).
 
 **The model's numerical error** at the design is estimated from the recommended parameters
 simulated on the design at `NUMERICAL_RUNS` (or ``numerical_runs``) seeded placements by the
@@ -119,6 +121,12 @@ from parcelfit.study.run_scatter import (
     real_run_band,
     scatter_note,
     stored_recommendation,
+)
+from parcelfit.study.scatter_reuse import (
+    SCATTER_RECORD,
+    candidate_stores,
+    reuse_scatter_runs,
+    scatter_record,
 )
 from parcelfit.study.spread import Decomposition, Effect, decompose, effects_of, t_threshold
 from parcelfit.study.store import Evaluation, Store
@@ -544,15 +552,36 @@ def predict(
                     design.setting,
                     [seeds[j] for _, j in items],
                 )
-            if scatter_jobs is not None and not any(e.iteration > 0 for e in _rows(store, None)):
-                for c, (spec, params, scatter_seeds) in enumerate(scatter_jobs.cases, start=1):
-                    store.add_pending(
-                        "screen",
-                        c,
-                        [params] * len(scatter_seeds),
-                        spec.case.speed_setting,
-                        scatter_seeds,
+            scatter_rec: dict[str, Any] | None = None
+            if scatter_jobs is not None:
+                if not any(e.iteration > 0 for e in _rows(store, None)):
+                    for c, (spec, params, scatter_seeds) in enumerate(scatter_jobs.cases, start=1):
+                        store.add_pending(
+                            "screen",
+                            c,
+                            [params] * len(scatter_seeds),
+                            spec.case.speed_setting,
+                            scatter_seeds,
+                        )
+                scatter_rec = scatter_record(
+                    inputs.folder,
+                    inputs.study,
+                    [spec.label for spec, _, _ in scatter_jobs.cases],
+                    deviation,
+                )
+                if store.claim_meta(SCATTER_RECORD, scatter_rec):
+                    # the same runs finished by another prediction of this study (scatter_reuse)
+                    reused = reuse_scatter_runs(
+                        store, scatter_rec, candidate_stores(inputs.folder, out_dir)
                     )
+                    if reused.rows:
+                        progress(
+                            ProgressEvent(
+                                "predict",
+                                f"the real runs' scatter: {reused.rows} simulations taken from "
+                                f"{', '.join(reused.sources)}",
+                            )
+                        )
             if isinstance(numerical_jobs, NumericalJobs):
                 have = {e.iteration for e in _rows(store, None)}
                 for it in (MODEL_ITERATION, REFINED_ITERATION):

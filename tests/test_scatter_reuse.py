@@ -1,0 +1,118 @@
+"""The real runs' scatter runs shared between the predictions of one study
+(`parcelfit.study.scatter_reuse`), on the analytic test simulator: a second prediction takes them
+from the first instead of simulating them, gets the same values a fresh run gets, and takes
+nothing from a prediction with other placements or of another study."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+from parcelfit.progress import ProgressEvent
+from parcelfit.study.calibration import Calibration
+from parcelfit.study.predict import SCATTER_RUNS, predict
+from parcelfit.study.scatter_reuse import REUSED_RECORD, candidate_stores, reused_ids
+from parcelfit.study.store import Store
+from parcelfit.study.studyfile import load_study
+
+from .helpers import write_study
+from .predict_helpers import write_rig_q
+
+
+def _scatter_rows(out: Path) -> list:
+    store = Store(out / "predict.sqlite", readonly=True)
+    try:
+        return sorted(
+            (e for e in store.evaluations("screen") if e.iteration > 0),
+            key=lambda e: (e.iteration, e.slot),
+        )
+    finally:
+        store.close()
+
+
+def _reused(out: Path) -> tuple[set[int], object]:
+    store = Store(out / "predict.sqlite", readonly=True)
+    try:
+        return reused_ids(store), store.get_meta(REUSED_RECORD)
+    finally:
+        store.close()
+
+
+@pytest.fixture(scope="module")
+def calibrated(tmp_path_factory) -> tuple[Path, str]:
+    tmp = tmp_path_factory.mktemp("reuse")
+    path = write_study(tmp, budget=8, validation={"speed_setting": None}, executor="serial")
+    Calibration(load_study(path), tmp / "study", figures=False, key_frames=False).run()
+    return tmp, str(write_rig_q(tmp))
+
+
+def _predict(tmp: Path, rig: str, out: Path, setting: int = 1, seed: int = 0, study="study"):
+    events: list[ProgressEvent] = []
+    p = predict(
+        tmp / study,
+        rig,
+        "KPBW",
+        setting,
+        sets=2,
+        placements=2,
+        seed=seed,
+        numerical_runs=0,
+        executor="serial",
+        out=out,
+        progress=events.append,
+    )
+    return p, [e.message for e in events]
+
+
+def test_a_second_prediction_takes_the_scatter_runs_of_the_first(calibrated):
+    tmp, rig = calibrated
+    first, said = _predict(tmp, rig, tmp / "preds" / "a")
+    assert any(f"0 of {SCATTER_RUNS} simulations stored" in m for m in said), said
+    assert _reused(tmp / "preds" / "a") == (set(), None)
+    # another design, the same study and seed: nothing of the scatter is simulated again
+    second, said = _predict(tmp, rig, tmp / "preds" / "b", setting=2)
+    assert any(f"{SCATTER_RUNS} simulations taken from a" in m for m in said), said
+    assert any(f"{SCATTER_RUNS} of {SCATTER_RUNS} simulations stored, 0 to run" in m for m in said)
+    a, b = _scatter_rows(tmp / "preds" / "a"), _scatter_rows(tmp / "preds" / "b")
+    ids, record = _reused(tmp / "preds" / "b")
+    assert ids == {e.id for e in b} and record["from"] == ["a"]
+    assert [(e.params, e.seed, e.transit_time, e.details.quantities) for e in b] == [
+        (e.params, e.seed, e.transit_time, e.details.quantities) for e in a
+    ]
+    assert second.scatter == first.scatter
+    # the same as simulating them afresh (a folder with no prediction beside it)
+    fresh, _ = _predict(tmp, rig, tmp / "alone" / "c", setting=2)
+    shutil.rmtree(tmp / "alone")
+    assert fresh.scatter == second.scatter
+    assert fresh.runs.drop(columns="wall_time").equals(second.runs.drop(columns="wall_time"))
+
+
+def test_other_placements_or_another_study_take_nothing(calibrated, tmp_path):
+    tmp, rig = calibrated
+    _predict(tmp, rig, tmp / "other" / "a")
+    # another seed: other placements, so every scatter run is simulated
+    _, said = _predict(tmp, rig, tmp / "other" / "b", seed=1)
+    assert not any("taken from" in m for m in said)
+    assert _reused(tmp / "other" / "b") == (set(), None)
+    # another study beside it (its own calibration): its runs are not this study's
+    path = write_study(tmp_path, budget=8, validation={"speed_setting": None}, executor="serial")
+    Calibration(load_study(path), tmp_path / "study", figures=False, key_frames=False).run()
+    _, said = _predict(tmp_path, rig, tmp / "other" / "c")
+    assert not any("taken from" in m for m in said)
+
+
+def test_the_stores_searched(tmp_path):
+    study, out = tmp_path / "study", tmp_path / "elsewhere" / "mine"
+    for folder in (study / "predict-E1-KPBW-1", study / "notes", tmp_path / "elsewhere" / "x", out):
+        folder.mkdir(parents=True)
+        (folder / "predict.sqlite").write_bytes(b"")
+    found = candidate_stores(study, out)
+    assert found == sorted(
+        p.resolve()
+        for p in (
+            study / "predict-E1-KPBW-1" / "predict.sqlite",
+            tmp_path / "elsewhere" / "x" / "predict.sqlite",
+        )
+    )
