@@ -275,7 +275,8 @@ def _simulate_ensemble(run: CaseSimulation, first: int, n: int, workers: int, ou
 
 
 def rigs() -> None:
-    """List the bundled test rigs with their speed settings."""
+    """List the bundled test rigs with their speed settings, and the bundled consignment types
+    with their sizes and shells."""
     from parcelfit.sim.mujoco import bundled_rig_names, load_rig
 
     table = Table(title="Bundled rigs (parcelfit simulate --rig NAME)", title_justify="left")
