@@ -776,6 +776,15 @@ def test_tag_map_values_are_si(tmp_path):
     assert tm.barriers[0].start == (0.2, -0.5) and tm.barriers[0].end == (0.2, 0.5)
 
 
+def test_a_tag_map_reads_a_barrier_s_name_as_its_id(tmp_path):
+    doc = {**TAGS, "light_barriers": [{"name": "LS1", "from": [0.2, -0.5], "to": [0.2, 0.5]}]}
+    tm = load_tag_map(_write(tmp_path, doc))
+    assert tm.barriers[0].name == "LS1" and tm.barriers[0].end == (0.2, 0.5)
+    doc["light_barriers"][0]["id"] = "start"
+    with pytest.raises(ParcelfitError, match="both `id` and `name`"):
+        load_tag_map(_write(tmp_path, doc))
+
+
 def test_a_rig_file_is_si_and_takes_its_defaults(tmp_path):
     path = _write(tmp_path, RIG)
     rig = load_rig(path)

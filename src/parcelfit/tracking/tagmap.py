@@ -156,7 +156,18 @@ def _distortion(value: Any) -> tuple[float, ...]:
 def _barrier_list(value: Any) -> Any:
     if not isinstance(value, list):
         raise ParcelfitError("expected a list of barriers", fix="write - {id, from, to}")
-    return value
+    # a rig file names its barriers with `name`: copied from there, it means `id`
+    out = []
+    for entry in value:
+        if isinstance(entry, dict) and "name" in entry:
+            if "id" in entry:
+                raise ParcelfitError(
+                    "a light barrier has both `id` and `name`",
+                    fix="keep one: `name` (as in the rig file) is read as `id`",
+                )
+            entry = {("id" if k == "name" else k): v for k, v in entry.items()}
+        out.append(entry)
+    return out
 
 
 _TagId = Annotated[int, PlainValidator(_tag_id)]
@@ -214,7 +225,7 @@ class BarrierEntry(FileModel):
     """One of ``light_barriers``: its id and the segment's ends [m]."""
 
     id: Annotated[str, Text()]
-    """The light barrier's id."""
+    """The light barrier's id (or key `name`, as in the rig file)."""
     start: Annotated[tuple[float, float], Pair(), Field(alias="from")]
     """One end of the virtual barrier in the rig frame [m], [x, y] (key `from`)."""
     end: Annotated[tuple[float, float], Pair(), Field(alias="to")]
