@@ -12,6 +12,7 @@ from parcelfit.runs import TestCase
 from parcelfit.sim.executors import Task
 from parcelfit.sim.factory import SimulatorConfig, make_simulator
 from parcelfit.study.joint import places_runs, simulate_placed
+from parcelfit.study.plausible import placement_seeds
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "own-model"
 
@@ -32,12 +33,18 @@ def test_the_example_model_runs_a_case_and_places_its_runs(model):
     # a higher belt friction turns it faster
     faster = model.run({"mu_d_BePa": 0.6}, case).run.trajectory
     assert faster.theta[-1] < traj.theta[-1]
-    # placements: seed s and its mirror -s start off by opposite angles
+    # placements: seeds as predict and design draw them (up to 2^31) give starts a few degrees
+    # off, each its own; seed s and its mirror -s start off by opposite angles
     assert places_runs(model)
     task = Task({"mu_d_BePa": 0.5}, case, "p")
-    a, b = (simulate_placed(model, (task, s)).run.trajectory.theta[0] for s in (2, -2))
-    assert a - math.radians(30) == pytest.approx(math.radians(1.0))
-    assert b - math.radians(30) == pytest.approx(-math.radians(1.0))
+    seeds = placement_seeds(6, 0)
+    assert max(seeds) > 1_000_000
+    offsets = []
+    for s in seeds:
+        a, b = (simulate_placed(model, (task, x)).run.trajectory.theta[0] for x in (s, -s))
+        assert a - math.radians(30) == pytest.approx(math.radians(30) - b, abs=1e-12)
+        offsets.append(a - math.radians(30))
+    assert max(abs(o) for o in offsets) < math.radians(4) and len(set(offsets)) == 6
 
 
 def test_an_unknown_speed_setting_is_a_failed_run_with_its_message(model):

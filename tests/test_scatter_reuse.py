@@ -11,9 +11,15 @@ from pathlib import Path
 import pytest
 
 from parcelfit.progress import ProgressEvent
+from parcelfit.study import scatter_reuse
 from parcelfit.study.calibration import Calibration
 from parcelfit.study.predict import SCATTER_RUNS, predict
-from parcelfit.study.scatter_reuse import REUSED_RECORD, candidate_stores, reused_ids
+from parcelfit.study.scatter_reuse import (
+    REUSED_RECORD,
+    SCATTER_RECORD,
+    candidate_stores,
+    reused_ids,
+)
 from parcelfit.study.store import Store
 from parcelfit.study.studyfile import load_study
 
@@ -77,7 +83,7 @@ def test_a_second_prediction_takes_the_scatter_runs_of_the_first(calibrated):
     assert any(f"{SCATTER_RUNS} of {SCATTER_RUNS} simulations stored, 0 to run" in m for m in said)
     a, b = _scatter_rows(tmp / "preds" / "a"), _scatter_rows(tmp / "preds" / "b")
     ids, record = _reused(tmp / "preds" / "b")
-    assert ids == {e.id for e in b} and record["from"] == ["a"]
+    assert ids == {e.id for e in b} and record["from"] == [str((tmp / "preds" / "a").resolve())]
     assert [(e.params, e.seed, e.transit_time, e.details.quantities) for e in b] == [
         (e.params, e.seed, e.transit_time, e.details.quantities) for e in a
     ]
@@ -116,3 +122,69 @@ def test_the_stores_searched(tmp_path):
             tmp_path / "elsewhere" / "x" / "predict.sqlite",
         )
     )
+
+
+def test_a_crash_while_copying_resumes_with_every_copied_run_listed(calibrated, monkeypatch):
+    tmp, rig = calibrated
+    _predict(tmp, rig, tmp / "crash" / "a")
+    real_finish = Store.finish
+    calls = {"n": 0}
+
+    def finish_then_crash(self, row_id, **kw):
+        calls["n"] += 1
+        if calls["n"] == 4 and kw.get("wall_time") is not None:
+            raise KeyboardInterrupt  # the process stops in the middle of copying
+        return real_finish(self, row_id, **kw)
+
+    monkeypatch.setattr(Store, "finish", finish_then_crash)
+    with pytest.raises(KeyboardInterrupt):
+        _predict(tmp, rig, tmp / "crash" / "b", setting=2)
+    monkeypatch.setattr(Store, "finish", real_finish)
+    copied = {e.id for e in _scatter_rows(tmp / "crash" / "b") if e.status == "ok"}
+    assert len(copied) == 3 and len(_reused(tmp / "crash" / "b")[0]) == SCATTER_RUNS
+    # the source is gone: the rest are simulated here, and only the copied three are listed
+    shutil.rmtree(tmp / "crash" / "a")
+    _, said = _predict(tmp, rig, tmp / "crash" / "b", setting=2)
+    assert any(f"3 of {SCATTER_RUNS} simulations stored" in m for m in said), said
+    rows = _scatter_rows(tmp / "crash" / "b")
+    assert all(e.status == "ok" for e in rows)
+    ids, record = _reused(tmp / "crash" / "b")
+    assert ids == copied and record["rows"] == 3
+
+
+def test_runs_of_another_version_or_of_a_store_without_its_record_are_not_taken(
+    calibrated, monkeypatch
+):
+    tmp, rig = calibrated
+    _predict(tmp, rig, tmp / "version" / "a")
+    monkeypatch.setattr(scatter_reuse, "__version__", "0.0.0-other")
+    _, said = _predict(tmp, rig, tmp / "version" / "b")
+    assert not any("taken from" in m for m in said)
+    monkeypatch.undo()
+    # a store whose runs finished before it had a record (an older parcelfit) is not a source
+    store = Store(tmp / "version" / "b" / "predict.sqlite")
+    try:
+        store._db.execute("DELETE FROM meta WHERE key = ?", (SCATTER_RECORD,))  # as before
+        assert store.get_meta(SCATTER_RECORD) is None
+    finally:
+        store.close()
+    shutil.rmtree(tmp / "version" / "a")
+    _predict(tmp, rig, tmp / "version" / "b")  # resumed with today's version: nothing to run
+    _, said = _predict(tmp, rig, tmp / "version" / "c")
+    assert not any("taken from" in m for m in said)
+    store = Store(tmp / "version" / "b" / "predict.sqlite", readonly=True)
+    try:
+        assert store.get_meta(SCATTER_RECORD) is None  # not vouched for after the fact
+    finally:
+        store.close()
+
+
+def test_an_unreadable_or_foreign_folder_beside_the_output_is_passed_over(calibrated):
+    tmp, rig = calibrated
+    beside = tmp / "foreign"
+    (beside / "junk").mkdir(parents=True)
+    (beside / "junk" / "predict.sqlite").write_text("not a database")
+    (beside / "empty").mkdir()
+    (beside / "empty" / "predict.sqlite").write_bytes(b"")
+    p, said = _predict(tmp, rig, beside / "mine")
+    assert p.scatter is not None and not any("taken from" in m for m in said)

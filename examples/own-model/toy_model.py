@@ -1,6 +1,8 @@
 """A stand-in for your own Python model of a rig (`backend: python` in a study file).
 
-parcelfit calls ``make()`` once per process and then ``run(params, case)`` per simulation.
+parcelfit calls ``make()`` to build the model and sends the object to its worker processes
+(so it must be picklable, as a plain class is), which call ``run(params, case)`` per
+simulation.
 This toy model carries the parcel along x at the belt's speed and turns it towards the belt's
 direction at a rate that grows with the belt friction; replace its body with your model.
 """
@@ -25,10 +27,13 @@ class ToyModel:
 
     def with_placement(self, seed: int | None) -> ToyModel:
         """Optional: the same model with placement ``seed`` (None: the nominal start), so that
-        parcelfit can compare ensembles of placed runs. Here: a start heading off by
-        0.5 degrees per unit of seed (seed -s is the mirror image of s)."""
+        parcelfit can compare ensembles of placed runs. A seed is any integer (up to 2^31 in
+        magnitude); -s is the mirror image of s. Here: the start heading off by a normal draw
+        of sd 1 degree seeded by |s|, its sign flipped for -s."""
         placed = ToyModel()
-        placed.offset = 0.0 if seed is None else np.radians(0.5) * seed
+        if seed is not None:
+            draw = np.random.default_rng(abs(seed)).normal(0.0, np.radians(1.0))
+            placed.offset = float(draw if seed >= 0 else -draw)
         return placed
 
     offset = 0.0

@@ -123,8 +123,8 @@ from parcelfit.study.run_scatter import (
     stored_recommendation,
 )
 from parcelfit.study.scatter_reuse import (
-    SCATTER_RECORD,
     candidate_stores,
+    claim_scatter_record,
     reuse_scatter_runs,
     scatter_record,
 )
@@ -569,19 +569,19 @@ def predict(
                     [spec.label for spec, _, _ in scatter_jobs.cases],
                     deviation,
                 )
-                if store.claim_meta(SCATTER_RECORD, scatter_rec):
-                    # the same runs finished by another prediction of this study (scatter_reuse)
-                    reused = reuse_scatter_runs(
-                        store, scatter_rec, candidate_stores(inputs.folder, out_dir)
-                    )
-                    if reused.rows:
-                        progress(
-                            ProgressEvent(
-                                "predict",
-                                f"the real runs' scatter: {reused.rows} simulations taken from "
-                                f"{', '.join(reused.sources)}",
-                            )
+                claim_scatter_record(store, scatter_rec)
+                # the same runs finished by another prediction of this study (scatter_reuse)
+                reused = reuse_scatter_runs(
+                    store, scatter_rec, candidate_stores(inputs.folder, out_dir)
+                )
+                if reused.rows:
+                    progress(
+                        ProgressEvent(
+                            "predict",
+                            f"the real runs' scatter: {reused.rows} simulations taken from "
+                            f"{', '.join(reused.sources)}",
                         )
+                    )
             if isinstance(numerical_jobs, NumericalJobs):
                 have = {e.iteration for e in _rows(store, None)}
                 for it in (MODEL_ITERATION, REFINED_ITERATION):

@@ -8,24 +8,35 @@ of the same study (the folders ``predict-*`` in the study folder, and the other 
 its own output folder) and simulates only those it finds nowhere.
 
 A finished run is taken over only where it is the same simulation: the other store's ``scatter``
-record (the study folder, the study file's fingerprint, the study's case labels in order and the
-drive deviation) equals this one's, and its row has the same case index (the store's
-``iteration``), slot, parameters, speed setting and placement seed, and ended ok. The copy keeps
-the run's own wall time; the ``scatter_reused`` record counts the rows taken, lists their ids
-and names the folders they came from. A simulation is deterministic for these inputs, so a run taken over is
-the run this prediction would have made. What no record holds: a rig or consignment file edited
-between two predictions under the same name (as with the calibration's own store).
+record equals this one's (the study folder, the study file's fingerprint, the case labels in
+order, the drive deviation, the versions of parcelfit and MuJoCo and, for a ``python`` backend,
+a hash of its factory's module file), and its row has the same case index (the store's
+``iteration``), slot, parameters, speed setting and placement seed, and ended ok. A store
+advertises the record only if it claimed it before any of its scatter runs finished (so every
+one of them was simulated under it). The copy keeps the run's own wall time; the
+``scatter_reused`` record lists the ids of the rows taken (written before they are finished,
+and pruned of any still pending on a resume, so a crash cannot hide a copied run) and the
+folders they came from.
+
+What no record holds: a rig, consignment or solver file edited between two predictions under
+the same name, and a change of parcelfit's code without a change of its version (as with the
+calibration's own store, which a resume also continues). Reading another store, SQLite leaves
+its ``-wal`` and ``-shm`` files beside it, as any reader of a parcelfit store does.
 """
 
 from __future__ import annotations
 
+import hashlib
+import importlib.util
 import json
 import sqlite3
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
+from parcelfit import __version__
 from parcelfit.errors import ParcelfitError
 from parcelfit.study.store import Evaluation, Store
 from parcelfit.study.studyfile import Study
@@ -44,18 +55,58 @@ class Reused:
     sources: tuple[str, ...]
 
 
+def _factory_hash(factory: str | None) -> str | None:
+    """A hash of the module file a python backend's ``factory`` (module:callable) comes from
+    (None where there is none or it cannot be found)."""
+    if not factory:
+        return None
+    try:
+        spec = importlib.util.find_spec(str(factory).partition(":")[0])
+        origin = None if spec is None else spec.origin
+        if origin is None or not Path(origin).is_file():
+            return None
+        return hashlib.sha256(Path(origin).read_bytes()).hexdigest()[:16]
+    except (ImportError, ValueError, OSError):
+        return None
+
+
+def _mujoco_version() -> str | None:
+    try:
+        return version("mujoco")
+    except PackageNotFoundError:
+        return None
+
+
 def scatter_record(
     study_dir: Path, study: Study, cases: Sequence[str], speed_deviation: float
 ) -> dict[str, Any]:
     """What a store's scatter runs share beyond their rows: the study folder (absolute), its
-    file's fingerprint, the case labels in the order of the rows' ``iteration`` (from 1) and the
-    drive deviation [-]."""
-    return {
+    file's fingerprint, the case labels in the order of the rows' ``iteration`` (from 1), the
+    drive deviation [-], the versions of parcelfit and MuJoCo and, for a python backend, its
+    factory module's hash."""
+    record: dict[str, Any] = {
         "study": str(Path(study_dir).resolve()),
         "fingerprint": study.fingerprint,
         "cases": list(cases),
         "speed_deviation": float(speed_deviation),
+        "parcelfit": __version__,
+        "mujoco": _mujoco_version(),
     }
+    if study.simulator.backend == "python":
+        record["factory"] = _factory_hash(study.simulator.factory)
+    return record
+
+
+def claim_scatter_record(store: Store, record: dict[str, Any]) -> bool:
+    """Give ``store`` the scatter ``record`` (so that other predictions may take its runs) if it
+    holds it already, or holds none and none of its scatter runs has finished yet; whether it
+    holds it now."""
+    held = store.get_meta(SCATTER_RECORD)
+    if held is not None:
+        return bool(held == json.loads(json.dumps(record)))
+    if any(e.iteration > 0 and e.status != "pending" for e in store.evaluations("screen")):
+        return False  # runs finished before the record existed: not vouched for
+    return store.claim_meta(SCATTER_RECORD, record)
 
 
 def _key(e: Evaluation) -> tuple[int, int, str, int, int | None]:
@@ -65,16 +116,21 @@ def _key(e: Evaluation) -> tuple[int, int, str, int, int | None]:
 def candidate_stores(study_dir: Path, out_dir: Path) -> list[Path]:
     """The prediction stores that may hold this study's scatter runs: those of the study
     folder's ``predict-*`` folders and of the folders beside ``out_dir``, without ``out_dir``'s
-    own, each once, sorted."""
+    own, each once, sorted; a folder that cannot be read is passed over."""
     own = (Path(out_dir) / STORE_NAME).resolve()
     found: set[Path] = set()
     for pattern_dir, pattern in ((Path(study_dir), "predict-*"), (Path(out_dir).parent, "*")):
-        if not pattern_dir.is_dir():
+        try:
+            folders = sorted(pattern_dir.glob(pattern)) if pattern_dir.is_dir() else []
+        except OSError:
             continue
-        for folder in pattern_dir.glob(pattern):
+        for folder in folders:
             path = folder / STORE_NAME
-            if path.is_file() and path.resolve() != own:
-                found.add(path.resolve())
+            try:
+                if path.is_file() and path.resolve() != own:
+                    found.add(path.resolve())
+            except OSError:  # a folder of another user's, say
+                continue
     return sorted(found)
 
 
@@ -92,7 +148,7 @@ def _finished_scatter(path: Path, record: dict[str, Any]) -> dict[tuple[Any, ...
         return {
             _key(e): e for e in other.evaluations("screen") if e.iteration > 0 and e.status == "ok"
         }
-    except (ParcelfitError, sqlite3.Error):
+    except (ParcelfitError, sqlite3.Error, ValueError):
         return {}
     finally:
         other.close()
@@ -100,20 +156,30 @@ def _finished_scatter(path: Path, record: dict[str, Any]) -> dict[tuple[Any, ...
 
 def reuse_scatter_runs(store: Store, record: dict[str, Any], sources: Iterable[Path]) -> Reused:
     """Finish ``store``'s pending scatter rows (``iteration`` >= 1) with the same simulations
-    finished ok in the stores at ``sources`` (module docstring), each in its own transaction;
-    add them to the store's ``scatter_reused`` record. ``store`` must hold ``record``."""
-    if store.get_meta(SCATTER_RECORD) != json.loads(json.dumps(record)):
-        return Reused(0, ())
-    pending = {
-        _key(e): e for e in store.evaluations("screen") if e.iteration > 0 and e.status == "pending"
-    }
-    taken: list[int] = []
+    finished ok in the stores at ``sources`` whose scatter record is ``record`` (module
+    docstring), each in its own transaction, listed in the store's ``scatter_reused`` record
+    before it is finished."""
+    rows = store.evaluations("screen")
+    pending = {_key(e): e for e in rows if e.iteration > 0 and e.status == "pending"}
+    before = store.get_meta(REUSED_RECORD) or {"ids": [], "from": []}
+    open_ids = {e.id for e in pending.values()}
+    ids = {int(i) for i in before["ids"]} - open_ids  # listed, then not finished: a crash
+    sources_used = set(before["from"])
+    taken = 0
     used: list[str] = []
     for path in sources:
         if not pending:
             break
         finished = _finished_scatter(path, record)
         hits = [k for k in pending if k in finished]
+        if not hits:
+            continue
+        used.append(path.parent.name)
+        ids |= {pending[k].id for k in hits}
+        sources_used.add(str(path.parent))
+        store.set_meta(
+            REUSED_RECORD, {"rows": len(ids), "ids": sorted(ids), "from": sorted(sources_used)}
+        )
         for k in hits:
             src, row = finished[k], pending.pop(k)
             store.finish(
@@ -123,17 +189,12 @@ def reuse_scatter_runs(store: Store, record: dict[str, Any], sources: Iterable[P
                 wall_time=src.wall_time,
                 details=src.details,
             )
-            taken.append(row.id)
-        if hits:
-            used.append(path.parent.name)
-    if taken:
-        before = store.get_meta(REUSED_RECORD) or {"ids": [], "from": []}
-        ids = sorted({*before["ids"], *taken})
+        taken += len(hits)
+    if not taken and before["ids"] and set(before["ids"]) != ids:
         store.set_meta(
-            REUSED_RECORD,
-            {"rows": len(ids), "ids": ids, "from": sorted({*before["from"], *used})},
+            REUSED_RECORD, {"rows": len(ids), "ids": sorted(ids), "from": sorted(sources_used)}
         )
-    return Reused(len(taken), tuple(used))
+    return Reused(taken, tuple(used))
 
 
 def reused_ids(store: Store) -> set[int]:
