@@ -314,7 +314,8 @@ def schwefel(x: np.ndarray) -> float:
 
 
 def shekel7(x: np.ndarray) -> float:
-    """Shekel's function with m = 7 (the first seven of Shekel4's ten terms)."""
+    """Shekel's function with m = 7: the first seven of the ten terms of `shekel` (Dixon and
+    Szego's centres, the seventh (5, 5, 3, 3); some libraries give (5, 3, 5, 3))."""
     a, c = _SHEKEL_A[:7], _SHEKEL_C[:7]
     return float(-np.sum(1 / (np.sum((x - a) ** 2, axis=1) + c)))
 
