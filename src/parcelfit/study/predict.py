@@ -552,7 +552,6 @@ def predict(
                     design.setting,
                     [seeds[j] for _, j in items],
                 )
-            scatter_rec: dict[str, Any] | None = None
             if scatter_jobs is not None:
                 if not any(e.iteration > 0 for e in _rows(store, None)):
                     for c, (spec, params, scatter_seeds) in enumerate(scatter_jobs.cases, start=1):

@@ -159,12 +159,21 @@ def reuse_scatter_runs(store: Store, record: dict[str, Any], sources: Iterable[P
     finished ok in the stores at ``sources`` whose scatter record is ``record`` (module
     docstring), each in its own transaction, listed in the store's ``scatter_reused`` record
     before it is finished."""
-    rows = store.evaluations("screen")
-    pending = {_key(e): e for e in rows if e.iteration > 0 and e.status == "pending"}
+    pending = {
+        _key(e): e for e in store.evaluations("screen") if e.iteration > 0 and e.status == "pending"
+    }
     before = store.get_meta(REUSED_RECORD) or {"ids": [], "from": []}
-    open_ids = {e.id for e in pending.values()}
-    ids = {int(i) for i in before["ids"]} - open_ids  # listed, then not finished: a crash
+    # listed, then not finished (a crash while copying): simulated here unless copied again
+    ids = {int(i) for i in before["ids"]} - {e.id for e in pending.values()}
     sources_used = set(before["from"])
+
+    def write_reused() -> None:
+        store.set_meta(
+            REUSED_RECORD, {"rows": len(ids), "ids": sorted(ids), "from": sorted(sources_used)}
+        )
+
+    if len(ids) != len(before["ids"]):
+        write_reused()
     taken = 0
     used: list[str] = []
     for path in sources:
@@ -177,9 +186,7 @@ def reuse_scatter_runs(store: Store, record: dict[str, Any], sources: Iterable[P
         used.append(path.parent.name)
         ids |= {pending[k].id for k in hits}
         sources_used.add(str(path.parent))
-        store.set_meta(
-            REUSED_RECORD, {"rows": len(ids), "ids": sorted(ids), "from": sorted(sources_used)}
-        )
+        write_reused()  # before the copies finish, so that a crash cannot hide one
         for k in hits:
             src, row = finished[k], pending.pop(k)
             store.finish(
@@ -190,10 +197,6 @@ def reuse_scatter_runs(store: Store, record: dict[str, Any], sources: Iterable[P
                 details=src.details,
             )
         taken += len(hits)
-    if not taken and before["ids"] and set(before["ids"]) != ids:
-        store.set_meta(
-            REUSED_RECORD, {"rows": len(ids), "ids": sorted(ids), "from": sorted(sources_used)}
-        )
     return Reused(taken, tuple(used))
 
 
