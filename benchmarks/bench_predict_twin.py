@@ -147,16 +147,16 @@ def predict_cases(
 
 def _simulation_time(folder: Path) -> str:
     """From a prediction's store: the simulation time [s] summed by kind (the prediction's
-    own runs, the real runs' scatter's simulated here, the numerical error's on the model and
-    refined), the
+    own runs, the real runs' scatter's, the numerical error's on the model and refined, each
+    simulated here), the runs taken from other predictions, the
     numerical error's share, and a refined run's mean time over a model run's."""
     from parcelfit.study.predict import MODEL_ITERATION, PREDICT_STORE, REFINED_ITERATION
-    from parcelfit.study.scatter_reuse import reused_ids
+    from parcelfit.study.shared_runs import reused_ids
     from parcelfit.study.store import Store
 
     store = Store(folder / PREDICT_STORE, readonly=True)
     try:
-        taken = reused_ids(store)  # scatter runs another prediction simulated: no time here
+        taken = reused_ids(store)  # runs another prediction simulated: no time here
         rows = [
             e for e in store.evaluations("screen") if e.wall_time is not None and e.id not in taken
         ]
@@ -173,11 +173,10 @@ def _simulation_time(folder: Path) -> str:
     ratio = (refined[0] / refined[1]) / (model[0] / model[1]) if model[1] and refined[1] else 0.0
     return (
         f"simulation time {own[0]:.0f} s for {own[1]} runs of the prediction, {scatter[0]:.0f} s "
-        f"for {scatter[1]} of the scatter ({len(taken)} more taken from another prediction), "
-        f"{model[0]:.0f} s and {refined[0]:.0f} s for "
+        f"for {scatter[1]} of the scatter, {model[0]:.0f} s and {refined[0]:.0f} s for "
         f"{model[1]} and {refined[1]} of the numerical error on the model and refined: the "
         f"numerical error {(model[0] + refined[0]) / max(everything, 1e-9):.0%} of it, a refined "
-        f"run {ratio:.2f} times a model run"
+        f"run {ratio:.2f} times a model run; {len(taken)} more runs taken from other predictions"
     )
 
 

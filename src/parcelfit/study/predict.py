@@ -38,14 +38,17 @@ their drive speeds across sets as they share the start pose.
 `SCATTER_RUNS` (or ``scatter_runs``) seeded placements (drives as above) on every fitted and
 validation case of the study (`parcelfit.study.run_scatter`). They do not depend on the design:
 those another prediction of the study finished are taken from its store, not simulated again
-(`parcelfit.study.scatter_reuse`).
+(`parcelfit.study.shared_runs`).
 
 **The model's numerical error** at the design is estimated from the recommended parameters
 simulated on the design at `NUMERICAL_RUNS` (or ``numerical_runs``) seeded placements by the
 model and by the model refined ``validation.refinement`` times over (matched pairs,
 `parcelfit.study.numerical_error`); it widens the band of a real run with the real runs'
 scatter. Not estimated where the study switches the refinement off, the simulator cannot be
-refined or ``numerical_runs`` is 0 (the prediction's notes say so).
+refined or ``numerical_runs`` is 0 (the prediction's notes say so). Its runs do not depend on
+the sets or placements: those another prediction of the same design finished (with the same
+seed, study and drive deviation) are taken from its store, as are the design's own runs where
+they are the same simulations (`parcelfit.study.shared_runs`).
 
 **Resumable.** The simulations are recorded in their own store, ``predict.sqlite`` in the
 output folder (`parcelfit.study.store`, rows of kind ``screen``: iteration 0 the prediction's,
@@ -122,10 +125,14 @@ from parcelfit.study.run_scatter import (
     scatter_note,
     stored_recommendation,
 )
-from parcelfit.study.scatter_reuse import (
+from parcelfit.study.shared_runs import (
+    DESIGN,
+    SCATTER,
+    Reused,
     candidate_stores,
-    claim_scatter_record,
-    reuse_scatter_runs,
+    claim_record,
+    design_record,
+    reuse_runs,
     scatter_record,
 )
 from parcelfit.study.spread import Decomposition, Effect, decompose, effects_of, t_threshold
@@ -568,19 +575,15 @@ def predict(
                     [spec.label for spec, _, _ in scatter_jobs.cases],
                     deviation,
                 )
-                claim_scatter_record(store, scatter_rec)
-                # the same runs finished by another prediction of this study (scatter_reuse)
-                reused = reuse_scatter_runs(
-                    store, scatter_rec, candidate_stores(inputs.folder, out_dir)
+                claim_record(store, SCATTER, scatter_rec)
+                # the same runs finished by another prediction of this study (shared_runs)
+                _say_reused(
+                    progress,
+                    "the real runs' scatter",
+                    reuse_runs(
+                        store, SCATTER, scatter_rec, candidate_stores(inputs.folder, out_dir)
+                    ),
                 )
-                if reused.rows:
-                    progress(
-                        ProgressEvent(
-                            "predict",
-                            f"the real runs' scatter: {reused.rows} simulations taken from "
-                            f"{', '.join(reused.sources)}",
-                        )
-                    )
             if isinstance(numerical_jobs, NumericalJobs):
                 have = {e.iteration for e in _rows(store, None)}
                 for it in (MODEL_ITERATION, REFINED_ITERATION):
@@ -592,6 +595,14 @@ def predict(
                             design.setting,
                             numerical_jobs.seeds,
                         )
+            # the design's runs finished by another prediction of this design (shared_runs)
+            design_rec = design_record(inputs.folder, inputs.study, design, deviation)
+            claim_record(store, DESIGN, design_rec)
+            _say_reused(
+                progress,
+                "the design's runs",
+                reuse_runs(store, DESIGN, design_rec, candidate_stores(inputs.folder, out_dir)),
+            )
             if on_cost is not None:
                 on_cost(
                     cost_line(
@@ -705,6 +716,17 @@ def predict(
     finally:
         lock.release()
     return prediction
+
+
+def _say_reused(progress: ProgressCallback, what: str, reused: Reused) -> None:
+    """Tell ``progress`` how many of ``what``'s simulations were taken from which folders."""
+    if reused.rows:
+        progress(
+            ProgressEvent(
+                "predict",
+                f"{what}: {reused.rows} simulations taken from {', '.join(reused.sources)}",
+            )
+        )
 
 
 def _rows(store: Store, iteration: int | None) -> list[Any]:

@@ -1,7 +1,9 @@
-"""The real runs' scatter runs shared between the predictions of one study
-(`parcelfit.study.scatter_reuse`), on the analytic test simulator: a second prediction takes them
-from the first instead of simulating them, gets the same values a fresh run gets, and takes
-nothing from a prediction with other placements or of another study."""
+"""Simulations shared between the predictions of one study (`parcelfit.study.shared_runs`), on
+the analytic test simulator: a second prediction takes the real runs' scatter runs from the
+first instead of simulating them, and a second prediction of the same design the numerical
+error's (and its own runs where they are the same simulations); it gets the same values a
+fresh run gets, and takes nothing from a prediction with other placements, of another study or
+of another design (a rig file edited counts as another)."""
 
 from __future__ import annotations
 
@@ -11,11 +13,13 @@ from pathlib import Path
 import pytest
 
 from parcelfit.progress import ProgressEvent
-from parcelfit.study import scatter_reuse
+from parcelfit.study import shared_runs
 from parcelfit.study.calibration import Calibration
 from parcelfit.study.predict import SCATTER_RUNS, predict
-from parcelfit.study.scatter_reuse import (
+from parcelfit.study.shared_runs import (
+    DESIGN,
     REUSED_RECORD,
+    SCATTER,
     SCATTER_RECORD,
     candidate_stores,
     reused_ids,
@@ -24,7 +28,7 @@ from parcelfit.study.store import Store
 from parcelfit.study.studyfile import load_study
 
 from .helpers import write_study
-from .predict_helpers import write_rig_q
+from .predict_helpers import write_finished_study, write_rig_q
 
 
 def _scatter_rows(out: Path) -> list:
@@ -41,7 +45,7 @@ def _scatter_rows(out: Path) -> list:
 def _reused(out: Path) -> tuple[set[int], object]:
     store = Store(out / "predict.sqlite", readonly=True)
     try:
-        return reused_ids(store), store.get_meta(REUSED_RECORD)
+        return reused_ids(store, [SCATTER]), store.get_meta(REUSED_RECORD)
     finally:
         store.close()
 
@@ -157,7 +161,7 @@ def test_runs_of_another_version_or_of_a_store_without_its_record_are_not_taken(
 ):
     tmp, rig = calibrated
     _predict(tmp, rig, tmp / "version" / "a")
-    monkeypatch.setattr(scatter_reuse, "__version__", "0.0.0-other")
+    monkeypatch.setattr(shared_runs, "__version__", "0.0.0-other")
     _, said = _predict(tmp, rig, tmp / "version" / "b")
     assert not any("taken from" in m for m in said)
     monkeypatch.undo()
@@ -188,3 +192,103 @@ def test_an_unreadable_or_foreign_folder_beside_the_output_is_passed_over(calibr
     (beside / "empty" / "predict.sqlite").write_bytes(b"")
     p, said = _predict(tmp, rig, beside / "mine")
     assert p.scatter is not None and not any("taken from" in m for m in said)
+
+
+# the design's runs: the numerical error's and the prediction's own
+
+
+@pytest.fixture
+def unfitted(tmp_path, monkeypatch) -> tuple[Path, Path]:
+    """A study whose store holds no fit (so no scatter runs), rig Q beside it, and the log of
+    every simulation started."""
+    folder = write_finished_study(tmp_path)
+    write_rig_q(tmp_path)
+    log = tmp_path / "started.log"
+    monkeypatch.setenv("FAKE_SIM_LOG", str(log))
+    monkeypatch.setenv("FAKE_SIM_MESH_ERROR", "0.4")
+    return folder, log
+
+
+def _predict_q(study: Path, out: Path, setting: int = 1, **kw):
+    events: list[ProgressEvent] = []
+    options = {"sets": 3, "placements": 2, "numerical_runs": 3, **kw}
+    p = predict(
+        study,
+        str(study.parent / "Q.yaml"),
+        "KPBW",
+        setting,
+        executor="serial",
+        out=out,
+        progress=events.append,
+        **options,
+    )
+    return p, [e.message for e in events]
+
+
+def _started(log: Path) -> list[str]:
+    return log.read_text().splitlines() if log.is_file() else []
+
+
+def _design_rows(out: Path) -> list:
+    store = Store(out / "predict.sqlite", readonly=True)
+    try:
+        return [e for e in store.evaluations("screen") if e.iteration <= 0]
+    finally:
+        store.close()
+
+
+def test_a_design_predicted_again_with_more_sets_takes_the_numerical_error_runs(unfitted, tmp_path):
+    study, log = unfitted
+    first, _ = _predict_q(study, tmp_path / "preds" / "a")
+    assert first.numerical is not None and first.numerical.pairs == 3
+    before = _started(log)
+    assert sum(r.startswith("numerical-") for r in before) == 6
+    second, said = _predict_q(study, tmp_path / "preds" / "b", sets=5)
+    started = _started(log)[len(before) :]
+    store = Store(tmp_path / "preds" / "b" / "predict.sqlite", readonly=True)
+    try:
+        record = store.get_meta(DESIGN.reused)
+        taken = reused_ids(store, [DESIGN])
+    finally:
+        store.close()
+    rows = {e.id: e for e in _design_rows(tmp_path / "preds" / "b")}
+    own_taken = sum(rows[i].iteration == 0 for i in taken)  # sets drawn in both
+    # the 6 runs of the numerical error are not simulated again; of the 5 x 2 own runs, those
+    # of the sets both draws hold are not either
+    assert not any(r.startswith("numerical-") for r in started)
+    assert len(started) + own_taken == 10 and all(r.startswith("predict-set") for r in started)
+    assert {rows[i].iteration for i in taken} >= {-1, -2} and record["rows"] == 6 + own_taken
+    assert any(f"the design's runs: {6 + own_taken} simulations taken from a" in m for m in said)
+    assert second.numerical == first.numerical
+    # the same as estimating it afresh (no prediction beside it)
+    fresh, said = _predict_q(study, tmp_path / "alone" / "c", sets=5)
+    assert not any("taken from" in m for m in said)
+    assert fresh.numerical == second.numerical
+    assert fresh.runs.drop(columns="wall_time").equals(second.runs.drop(columns="wall_time"))
+
+
+def test_the_same_sets_and_placements_take_the_design_s_own_runs_too(unfitted, tmp_path):
+    study, log = unfitted
+    _predict_q(study, tmp_path / "same" / "a")
+    before = _started(log)
+    # other inputs in another folder, the same simulations (the study has no scatter runs)
+    p, said = _predict_q(study, tmp_path / "same" / "b", scatter_runs=4)
+    assert _started(log) == before  # nothing simulated
+    assert any("the design's runs: 12 simulations taken from a" in m for m in said), said
+    assert all(e.status == "ok" for e in _design_rows(tmp_path / "same" / "b"))
+    assert len(p.runs) == 6
+
+
+def test_another_design_or_an_edited_rig_file_takes_none_of_the_design_s_runs(unfitted, tmp_path):
+    study, log = unfitted
+    _predict_q(study, tmp_path / "other" / "a")
+    # the other speed setting: another design
+    _, said = _predict_q(study, tmp_path / "other" / "b", setting=2)
+    assert not any("taken from" in m for m in said)
+    # the rig file edited under the same name: another design, though its label is the same
+    rig = study.parent / "Q.yaml"
+    rig.write_text(rig.read_text() + "\n# edited\n")
+    before = _started(log)
+    _, said = _predict_q(study, tmp_path / "other" / "c")
+    assert not any("taken from" in m for m in said)
+    assert sum(r.startswith("numerical-") for r in _started(log)[len(before) :]) == 6
