@@ -11,6 +11,7 @@ import shutil
 from pathlib import Path
 
 import pytest
+import yaml
 
 from parcelfit.progress import ProgressEvent
 from parcelfit.study import shared_runs
@@ -292,3 +293,50 @@ def test_another_design_or_an_edited_rig_file_takes_none_of_the_design_s_runs(un
     _, said = _predict_q(study, tmp_path / "other" / "c")
     assert not any("taken from" in m for m in said)
     assert sum(r.startswith("numerical-") for r in _started(log)[len(before) :]) == 6
+
+
+def test_another_refinement_takes_none_of_the_numerical_error_runs(unfitted, tmp_path):
+    study, log = unfitted
+    first, _ = _predict_q(study, tmp_path / "refine" / "a")
+    # the study's refinement is left out of its fingerprint (a finished study may be checked at
+    # another): the refined runs at 4 are not those at 2
+    path = tmp_path / "study.yaml"
+    doc = yaml.safe_load(path.read_text())
+    doc["validation"] = {**(doc.get("validation") or {}), "refinement": 4}
+    path.write_text(yaml.safe_dump(doc))
+    before = _started(log)
+    second, said = _predict_q(study, tmp_path / "refine" / "b")
+    assert not any("taken from" in m for m in said)
+    assert sum(r.startswith("numerical-") for r in _started(log)[len(before) :]) == 6
+    assert second.numerical.refinement == 4 and second.numerical != first.numerical
+    fresh, _ = _predict_q(study, tmp_path / "alone" / "c")
+    assert fresh.numerical == second.numerical
+
+
+def test_a_prediction_resumed_under_another_record_vouches_for_none_of_its_runs(
+    unfitted, tmp_path, monkeypatch
+):
+    from . import fake_sim
+
+    study, log = unfitted
+    rig = study.parent / "Q.yaml"
+    original = rig.read_text()
+    monkeypatch.setattr(fake_sim, "started", 0)
+    monkeypatch.setenv("FAKE_SIM_INTERRUPT_AFTER", "2")
+    with pytest.raises(KeyboardInterrupt):
+        _predict_q(study, tmp_path / "resumed" / "a")
+    monkeypatch.delenv("FAKE_SIM_INTERRUPT_AFTER")
+    # resumed with the rig file edited: the rest of its runs are not what its record says
+    rig.write_text(original + "\n# edited\n")
+    _predict_q(study, tmp_path / "resumed" / "a")
+    store = Store(tmp_path / "resumed" / "a" / "predict.sqlite", readonly=True)
+    try:
+        assert store.get_meta(DESIGN.record) == shared_runs.WITHDRAWN
+    finally:
+        store.close()
+    # the file as it was: the resumed store is no source, although part of it was made so
+    rig.write_text(original)
+    before = _started(log)
+    _, said = _predict_q(study, tmp_path / "resumed" / "b")
+    assert not any("taken from" in m for m in said)
+    assert len(_started(log)) - len(before) == 3 * 2 + 6

@@ -17,24 +17,31 @@ its own output folder) and simulates only those it finds nowhere:
 
 A finished run is taken over only where it is the same simulation: the other store's record of
 that kind equals this one's, and its row has the same key and ended ok. The ``scatter`` record
-holds the study folder, the study file's fingerprint (which covers its refinement and solver
-settings), the case labels in order, the drive deviation, the versions of parcelfit and MuJoCo
-and, for a ``python`` backend, a hash of its factory's module file; a scatter row's key is its
-case index (the store's ``iteration``), slot, parameters, speed setting and placement seed. The
-``design_runs`` record holds the same but the cases, and the design: its label, the rig and
-consignment as given and a hash of each one's file where it is a file (a rig file edited
-between two predictions is another design); a design row's key is its ``iteration``,
-parameters, speed setting and placement seed (not its slot: the same set and placement sit at
-another slot when ``--sets`` or ``--placements`` differ). A store advertises a record only if it
-claimed it before any run of that kind finished (so every one of them was simulated under it).
+holds the study folder, the study file's fingerprint, the case labels in order, the drive
+deviation, the versions of parcelfit and MuJoCo and, for a ``python`` backend, a hash of its
+factory's module file; a scatter row's key is its case index (the store's ``iteration``),
+slot, parameters, speed setting and placement seed. The
+``design_runs`` record holds the same but the cases, the design (its label, the rig and
+consignment as given and a hash of each one's file where it is a file: a rig file edited
+between two predictions is another design) and the study's refinement (which its fingerprint
+leaves out); a design row's key is its ``iteration``, parameters, speed setting and placement
+seed, not its slot: with other ``--sets`` a set both draws hold sits at another slot. (Other
+``--placements`` draw other placement seeds, and other ``--sets`` mostly other sets, so a
+design's own runs recur mainly when the sets and placements are the same and another input,
+such as ``--scatter-runs``, differs; its numerical error's recur whenever the seed does.) A
+store advertises a record only if it claimed it before any run of that kind finished, and a
+store resumed under another record while runs of that kind are still pending has its record
+withdrawn: every run a record vouches for was simulated under it.
 The copy keeps the run's own wall time; the records ``scatter_reused`` and ``design_reused``
 list the ids of the rows taken (written before they are finished, and pruned of any still
 pending on a resume, so a crash cannot hide a copied run) and the folders they came from.
 
 What no record holds: a bundled rig or consignment, or a file a rig or consignment file does
 not contain itself, changed between two predictions without a change of parcelfit's version; an
-external solver's program changed under the same command; a change of parcelfit's code without
-a change of its version (as with the calibration's own store, which a resume also continues).
+external solver's description file (its command and template) or its program changed under
+the same path; the modules other than the factory's own, and the environment, that a python
+backend reads; a change of parcelfit's code without a change of its version (as with the
+calibration's own store, which a resume also continues).
 Reading another store, SQLite leaves its ``-wal`` and ``-shm`` files beside it, as any reader of
 a parcelfit store does.
 """
@@ -89,6 +96,7 @@ DESIGN = Kind(
     lambda e: (e.iteration, _params(e), e.speed_setting, e.seed),
 )
 KINDS = (SCATTER, DESIGN)
+WITHDRAWN = {"withdrawn": "resumed under another record"}  # a record that matches none
 SCATTER_RECORD, REUSED_RECORD = SCATTER.record, SCATTER.reused  # the scatter runs' meta keys
 
 
@@ -158,8 +166,9 @@ def design_record(
     study_dir: Path, study: Study, design: Design, speed_deviation: float
 ) -> dict[str, Any]:
     """What a store's design runs (its own and the numerical error's) share beyond their rows:
-    the scatter record's entries but the cases, and the design's label, its rig and
-    consignment as given and a hash of each one's file (None for a bundled name)."""
+    the scatter record's entries but the cases, the design's label, its rig and consignment as
+    given and a hash of each one's file (None for a bundled name), and the study's
+    refinement (the numerical error's refined runs')."""
     files = {}
     for name, given in (("rig", design.rig), ("consignment", design.consignment)):
         is_file = given.lower().endswith((".yaml", ".yml"))
@@ -168,17 +177,26 @@ def design_record(
         **_common_record(study_dir, study, speed_deviation),
         "design": design.label,
         **files,
+        "refinement": study.refinement,  # the refined runs' (not in the study's fingerprint)
     }
 
 
 def claim_record(store: Store, kind: Kind, record: dict[str, Any]) -> bool:
     """Give ``store`` the ``record`` of ``kind`` (so that other predictions may take its runs
     of that kind) if it holds it already, or holds none and none of its runs of that kind has
-    finished yet; whether it holds it now."""
+    finished yet; whether it holds it now. A store holding another record with runs of that
+    kind still pending has it withdrawn (it then matches no record)."""
     held = store.get_meta(kind.record)
+    rows = [e for e in store.evaluations("screen") if kind.rows(e)]
     if held is not None:
-        return bool(held == json.loads(json.dumps(record)))
-    if any(kind.rows(e) and e.status != "pending" for e in store.evaluations("screen")):
+        if held == json.loads(json.dumps(record)):
+            return True
+        if held != WITHDRAWN and any(e.status == "pending" for e in rows):
+            # resumed under another record (a new version, a file edited): the runs still to
+            # come are not what the held record vouches for, so it vouches for none
+            store.set_meta(kind.record, WITHDRAWN)
+        return False
+    if any(e.status != "pending" for e in rows):
         return False  # runs finished before the record existed: not vouched for
     return store.claim_meta(kind.record, record)
 
