@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -266,12 +267,16 @@ def test_a_simulator_that_cannot_place_its_runs_predicts_and_designs_with_one_pl
         ],
     )
     assert result.exit_code == 0, result.output
+    said = " ".join(result.output.split())
+    assert re.search(r"prediction\.json\) and \S+ in \d+ s \(this run's wall time\)", said), said
     runs = pd.read_csv(tmp_path / "p" / "runs.csv")
     assert len(runs) == 5 and (runs["status"] == "ok").all()  # one run per set
     result = runner.invoke(
         app, ["design", str(study), "--rig", str(q), *common, "--out", str(tmp_path / "d")]
     )
     assert result.exit_code == 0, result.output
+    said = " ".join(result.output.split())
+    assert re.search(r"design\.json\) in \d+ s \(this run's wall time\)", said), said
     assert json.loads((tmp_path / "d" / "design.json").read_text())["placements"] == 1
     for command in (
         ["predict", str(study), "--rig", str(q), "--consignment", "KPBW"],
@@ -299,3 +304,14 @@ def test_the_default_placements_follow_what_the_simulator_can_place():
     with pytest.raises(ParcelfitError) as err:
         require_placements(unplaced, 3, file=None, where="--placements")
     assert err.value.fix.startswith("leave --placements out")
+
+
+def test_the_wall_time_reads_in_seconds_then_minutes():
+    import time
+
+    from parcelfit.cli.output import elapsed_text
+
+    now = time.perf_counter()
+    assert re.fullmatch(r"(3[0-2]) s", elapsed_text(now - 30.4))
+    assert elapsed_text(now - 119) in ("119 s", "120 s", "2.0 min")
+    assert elapsed_text(now - 300) == "5.0 min"

@@ -5,6 +5,7 @@ says it kept."""
 from __future__ import annotations
 
 import contextlib
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
@@ -62,6 +63,13 @@ class Commands(TyperGroup):
 
 
 _resumable: dict[str, Callable[[], str | None]] = {}
+
+
+def elapsed_text(started: float) -> str:
+    """The wall time since ``started`` (a `time.perf_counter` value [s]) as a user reads it:
+    seconds under two minutes, minutes with one decimal from there."""
+    seconds = time.perf_counter() - started
+    return f"{seconds:.0f} s" if seconds < 120 else f"{seconds / 60:.1f} min"
 
 
 def resumes(stored: Callable[[], str | None] = lambda: None) -> None:

@@ -3,6 +3,7 @@ would narrow its open parameters most."""
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 from typing import Annotated
 
@@ -20,7 +21,7 @@ from parcelfit.cli.options import (
     check_paths,
     workers_at_most,
 )
-from parcelfit.cli.output import console, progress_bar, resumes, stored_count
+from parcelfit.cli.output import console, elapsed_text, progress_bar, resumes, stored_count
 from parcelfit.study.defaults import (
     DESIGN_PLACEMENTS,
     NUMERICAL_RUNS,
@@ -99,6 +100,7 @@ def predict(
         stored_count(out / PREDICT_STORE, "screen", "simulations")
     )
     # the bar appears with the first simulation, not before the inputs are checked
+    started = time.perf_counter()
     bar, show = progress_bar("predict")
     try:
         prediction = run_prediction(
@@ -129,7 +131,12 @@ def predict(
         console.print(Text(f"note: {line}", style="yellow"), highlight=False)
     for line in prediction.sentences:
         console.print(Text(line), highlight=False)
-    console.print(Text(f"wrote {prediction.out} (tables, prediction.json) and {page}"))
+    console.print(
+        Text(
+            f"wrote {prediction.out} (tables, prediction.json) and {page} in "
+            f"{elapsed_text(started)} (this run's wall time)"
+        )
+    )
 
 
 def design(
@@ -190,6 +197,7 @@ def design(
     workers_at_most(workers)
     check_paths(out)
     resumes() if out is None else resumes(stored_count(out / DESIGN_STORE, "screen", "simulations"))
+    started = time.perf_counter()
     bar, show = progress_bar("design")
     try:
         result = rank_experiments(
@@ -216,4 +224,9 @@ def design(
         return
     for table in design_tables(result):
         console.print(table)
-    console.print(Text(f"wrote {result.out} (candidates, ranking, design.json)"))
+    console.print(
+        Text(
+            f"wrote {result.out} (candidates, ranking, design.json) in {elapsed_text(started)} "
+            "(this run's wall time)"
+        )
+    )
