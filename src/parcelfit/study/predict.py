@@ -559,6 +559,8 @@ def predict(
                     design.setting,
                     [seeds[j] for _, j in items],
                 )
+            # the other predictions' stores, which may hold the same simulations (shared_runs)
+            sources = candidate_stores(inputs.folder, out_dir)
             if scatter_jobs is not None:
                 if not any(e.iteration > 0 for e in _rows(store, None)):
                     for c, (spec, params, scatter_seeds) in enumerate(scatter_jobs.cases, start=1):
@@ -580,9 +582,7 @@ def predict(
                 _say_reused(
                     progress,
                     "the real runs' scatter",
-                    reuse_runs(
-                        store, SCATTER, scatter_rec, candidate_stores(inputs.folder, out_dir)
-                    ),
+                    reuse_runs(store, SCATTER, scatter_rec, sources),
                 )
             if isinstance(numerical_jobs, NumericalJobs):
                 have = {e.iteration for e in _rows(store, None)}
@@ -601,7 +601,7 @@ def predict(
             _say_reused(
                 progress,
                 "the design's runs",
-                reuse_runs(store, DESIGN, design_rec, candidate_stores(inputs.folder, out_dir)),
+                reuse_runs(store, DESIGN, design_rec, sources),
             )
             if on_cost is not None:
                 on_cost(

@@ -201,11 +201,6 @@ def claim_record(store: Store, kind: Kind, record: dict[str, Any]) -> bool:
     return store.claim_meta(kind.record, record)
 
 
-def claim_scatter_record(store: Store, record: dict[str, Any]) -> bool:
-    """`claim_record` of the scatter runs."""
-    return claim_record(store, SCATTER, record)
-
-
 def candidate_stores(study_dir: Path, out_dir: Path) -> list[Path]:
     """The prediction stores that may hold this study's runs: those of the study folder's
     ``predict-*`` folders and of the folders beside ``out_dir``, without ``out_dir``'s own,
@@ -251,14 +246,13 @@ def reuse_runs(store: Store, kind: Kind, record: dict[str, Any], sources: Iterab
     """Finish ``store``'s pending rows of ``kind`` with the same simulations finished ok in the
     stores at ``sources`` whose record of that kind is ``record`` (module docstring), each in
     its own transaction, listed in the store's record of reused rows before it is finished."""
+    waiting = [e for e in store.evaluations("screen") if kind.rows(e) and e.status == "pending"]
     pending: dict[tuple[Any, ...], Evaluation] = {}
-    for e in store.evaluations("screen"):
-        if kind.rows(e) and e.status == "pending":
-            pending.setdefault(kind.key(e), e)  # a set drawn twice: its second row runs here
-    waiting = {e.id for e in store.evaluations("screen") if kind.rows(e) and e.status == "pending"}
+    for e in waiting:
+        pending.setdefault(kind.key(e), e)  # a set drawn twice: its second row runs here
     before = store.get_meta(kind.reused) or {"ids": [], "from": []}
     # listed, then not finished (a crash while copying): simulated here unless copied again
-    ids = {int(i) for i in before["ids"]} - waiting
+    ids = {int(i) for i in before["ids"]} - {e.id for e in waiting}
     sources_used = set(before["from"])
 
     def write_reused() -> None:
@@ -292,11 +286,6 @@ def reuse_runs(store: Store, kind: Kind, record: dict[str, Any], sources: Iterab
             )
         taken += len(hits)
     return Reused(taken, tuple(used))
-
-
-def reuse_scatter_runs(store: Store, record: dict[str, Any], sources: Iterable[Path]) -> Reused:
-    """`reuse_runs` of the scatter runs."""
-    return reuse_runs(store, SCATTER, record, sources)
 
 
 def reused_ids(store: Store, kinds: Sequence[Kind] = KINDS) -> set[int]:
