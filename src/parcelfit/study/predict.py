@@ -128,6 +128,7 @@ from parcelfit.study.run_scatter import (
 from parcelfit.study.shared_runs import (
     DESIGN,
     SCATTER,
+    STORE_NAME,
     Reused,
     candidate_stores,
     claim_record,
@@ -139,7 +140,7 @@ from parcelfit.study.spread import Decomposition, Effect, decompose, effects_of,
 from parcelfit.study.store import Evaluation, Store
 from parcelfit.study.studyfile import CaseSpec, Study
 
-PREDICT_STORE = "predict.sqlite"
+PREDICT_STORE = STORE_NAME  # the file shared_runs looks for in other predictions' folders
 PREDICTION_FILE = "prediction.json"
 TABLE_FORMATS = ("csv", "parquet")
 MAX_SETS = 1000  # parameter sets of one prediction (each simulated at every placement)
