@@ -138,10 +138,10 @@ def test_published_preset_is_method_section_7():
     assert not s.amplitude  # scikit-learn's Matern kernel alone, as the published surrogate
     bo, _ = _run(4, 6, BOSettings.published(n_samples=1000, n_restarts=0))
     assert len(bo.observations) == 24 and bo.best()[1] < min(o.cost for o in bo.observations[:16])
-    with pytest.raises(ParcelfitError, match="invalid BO settings"):
+    with pytest.raises(ParcelfitError, match="invalid BO settings: batch 'penalty' is not one of"):
         BOSettings(batch="penalty")
     for bad in ({"noise_max": 1e-7}, {"amplitude_max": 1e-3}):  # bounds below their lower ones
-        with pytest.raises(ParcelfitError, match="invalid BO settings"):
+        with pytest.raises(ParcelfitError, match=f"invalid BO settings: {next(iter(bad))} "):
             BOSettings(**bad)
 
 
@@ -269,8 +269,25 @@ def test_bad_optimizer_sections_name_file_key_and_fix(tmp_path):
         load_study(write_study(tmp_path, optimizer={"sampler": "mango"}))
     with pytest.raises(ParcelfitError, match=r"optimizer: unknown key 'n_samples'"):
         load_study(write_study(tmp_path, optimizer={"sampler": "tpe", "n_samples": 10}))
-    with pytest.raises(ParcelfitError, match=r"invalid BO settings"):
-        load_study(write_study(tmp_path, optimizer={"transform": "sqrt"}))
+    # a text setting's bad value: the key and the values it takes, not the whole settings
+    for key, bad, choices in (
+        ("transform", "sqrt", "none, log, power, auto"),
+        ("acquisition", "foo", "ucb, logei, lognei"),
+        ("batch", "penalty", "believer, kmeans, joint"),
+        ("prior", "flat", "none, dim_scaled"),
+    ):
+        with pytest.raises(ParcelfitError) as err:
+            load_study(write_study(tmp_path, optimizer={key: bad}))
+        text = str(err.value)
+        assert f"optimizer.{key}: unknown {key} value '{bad}'" in text
+        assert f"use one of {choices}" in text and "BOSettings(" not in text
+    # settings that do not go together: the setting named, with what it must be
+    with pytest.raises(ParcelfitError) as err:
+        load_study(write_study(tmp_path, optimizer={"batch": "joint", "acquisition": "logei"}))
+    assert "batch 'joint' must be believer or kmeans unless acquisition is lognei" in str(err.value)
+    assert "optimiser settings" in str(err.value) and "BOSettings(" not in str(err.value)
+    with pytest.raises(ParcelfitError, match=r"nei_samples 100 must be a power of 2"):
+        load_study(write_study(tmp_path, optimizer={"nei_samples": 100}))
 
 
 def test_fast_prediction_matches_scikit_learn():

@@ -54,6 +54,18 @@ from parcelfit.optimize.nei import log_h as _log_h
 from parcelfit.optimize.prior import MapOptimizer
 from parcelfit.optimize.space import Space
 
+TRANSFORMS = ("none", "log", "power", "auto")
+SETTING_CHOICES: dict[str, tuple[str, ...]] = {
+    "noise": ("fit", "fixed"),
+    "transform": TRANSFORMS,
+    "acquisition": ("ucb", "logei", "lognei"),
+    "batch": ("believer", "kmeans", "joint"),
+    "recommend": ("posterior_mean", "best_observed"),
+    "incumbent": ("observed", "mean"),
+    "prior": ("none", "dim_scaled"),
+}
+"""The text settings of `BOSettings` and the values each takes."""
+
 
 @dataclass(frozen=True)
 class BOSettings:
@@ -161,27 +173,36 @@ class BOSettings:
     )
 
     def __post_init__(self) -> None:
-        if (
-            self.n_initial < 1
-            or self.n_samples < 10
-            or not 0 < self.top_fraction <= 1
-            or not 0 <= self.local_fraction <= 1
-            or self.alpha <= 0
-            or self.noise_max <= NOISE_LOW
-            or self.amplitude_max <= 1e-2
-            or self.polish < 0
-            or self.noise not in ("fit", "fixed")
-            or self.transform not in TRANSFORMS
-            or self.acquisition not in ("ucb", "logei", "lognei")
-            or self.batch not in ("believer", "kmeans", "joint")
-            or self.nei_samples < 2
-            or self.nei_samples & (self.nei_samples - 1)
-            or (self.batch == "joint" and self.acquisition != "lognei")
-            or self.recommend not in ("posterior_mean", "best_observed")
-            or self.incumbent not in ("observed", "mean")
-            or self.prior not in ("none", "dim_scaled")
+        for name, choices in SETTING_CHOICES.items():
+            if getattr(self, name) not in choices:
+                raise ParcelfitError(
+                    f"invalid BO settings: {name} {getattr(self, name)!r} is not one of "
+                    f"{', '.join(choices)}"
+                )
+        for name, ok, needs in (
+            ("n_initial", self.n_initial >= 1, "at least 1"),
+            ("n_samples", self.n_samples >= 10, "at least 10"),
+            ("top_fraction", 0 < self.top_fraction <= 1, "above 0 and at most 1"),
+            ("local_fraction", 0 <= self.local_fraction <= 1, "from 0 to 1"),
+            ("alpha", self.alpha > 0, "above 0"),
+            ("noise_max", self.noise_max > NOISE_LOW, f"above {NOISE_LOW:g}"),
+            ("amplitude_max", self.amplitude_max > 1e-2, "above 0.01"),
+            ("polish", self.polish >= 0, "0 or more"),
+            (
+                "nei_samples",
+                self.nei_samples >= 2 and not self.nei_samples & (self.nei_samples - 1),
+                "a power of 2 from 2",
+            ),
+            (
+                "batch",
+                self.batch != "joint" or self.acquisition == "lognei",
+                "believer or kmeans unless acquisition is lognei",
+            ),
         ):
-            raise ParcelfitError(f"invalid BO settings: {self}")
+            if not ok:
+                raise ParcelfitError(
+                    f"invalid BO settings: {name} {getattr(self, name)!r} must be {needs}"
+                )
 
     @classmethod
     def published(cls, **overrides: Any) -> BOSettings:
@@ -203,9 +224,6 @@ class BOSettings:
             "n_restarts": 3,
         }
         return cls(**{**base, **overrides})
-
-
-TRANSFORMS = ("none", "log", "power", "auto")
 
 
 class Fit(NamedTuple):

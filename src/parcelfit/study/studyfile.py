@@ -345,7 +345,11 @@ def load_study(path: str | Path) -> Study:
         bo = make(n_initial=f.initial, **f.optimizer.settings)
     except (ParcelfitError, TypeError) as exc:
         raise ParcelfitError(
-            str(exc), file=path, where="optimizer", fix="see BOSettings for the allowed values"
+            str(exc),
+            file=path,
+            where="optimizer",
+            fix="change that setting (every optimiser setting and its values: "
+            "docs/reference/files.md, optimiser settings)",
         ) from None
     hashed = dict(doc)  # the convergence check's refinement acts once the study stopped: a
     if isinstance(hashed.get("validation"), dict):  # finished study may be checked at another

@@ -12,7 +12,7 @@ from typing import Annotated, Any
 from pydantic import ConfigDict, Field, field_validator, model_validator
 
 from parcelfit.errors import ParcelfitError, shown
-from parcelfit.optimize.bo import BOSettings
+from parcelfit.optimize.bo import SETTING_CHOICES, BOSettings
 from parcelfit.optimize.sampler import SAMPLER_SETTINGS, SAMPLERS
 from parcelfit.runs.run import MAX_SPEED_SETTING
 from parcelfit.schema import (
@@ -258,11 +258,14 @@ _SETTING_COUNTS = {
 
 
 def _setting(name: str, value: Any) -> Any:
-    """An optimizer setting checked by its type (that of the `BOSettings` default) and, for a
-    count, its bounds; the choices among texts are checked when the settings are made."""
+    """An optimizer setting checked by its type (that of the `BOSettings` default), for a
+    count by its bounds, for a text by its choices (`SETTING_CHOICES`); how settings combine is
+    checked when the settings are made."""
     default = BOSettings.__dataclass_fields__[name].default
-    check: Whole | Flag | Number | Text = (
-        _SETTING_COUNTS.get(name)
+    choices = SETTING_CHOICES.get(name)
+    check: Whole | Flag | Number | Text | Choice = (
+        (Choice(choices, what=f"{name} value") if choices else None)
+        or _SETTING_COUNTS.get(name)
         or (Flag() if isinstance(default, bool) else None)
         or (Number() if isinstance(default, float) else None)
         or Text()
