@@ -2,7 +2,7 @@
 
     python scripts/catch_window.py                                  # E3 setting 1, BW KPBW KP
     python scripts/catch_window.py --types KPBW KP --range -30 30 --step 2
-    python scripts/catch_window.py --set k_MePa=100 --out /tmp/soft-plate
+    python scripts/catch_window.py --set k_MePa=100 --out soft-plate
 
 On E3 a parcel either slides along the guide plate or catches on its lead-in and swings round
 (a spin). Which one happens is a threshold in the start pose, so a 20-placement ensemble
