@@ -244,6 +244,60 @@ def test_a_parameter_whose_effect_could_not_be_estimated_is_not_called_harmless(
     assert not any("does not matter" in s for s in sentences)
 
 
+def _effect_rows(sets, placements, transit):
+    """A runs table: the transit time ``transit(set, placement)``, the other quantities fixed."""
+    return pd.DataFrame(
+        [
+            {
+                "set": i,
+                "placement": j,
+                "transit_time": transit(s, j),
+                "rotation": 0.1,
+                "exit_y": 0.0,
+                "exit_heading": 0.1,
+            }
+            for i, s in enumerate(sets)
+            for j in range(placements)
+        ]
+    )
+
+
+def test_an_unresolved_effect_is_not_called_harmless_and_a_negligible_one_is():
+    """Six sets and four parameters leave the regression one degree of freedom: an effect must
+    reach some 200 standard errors. A large effect that falls short is reported as not resolved,
+    with its size, not as "does not matter"; one whose upper bound lies below every floor is."""
+    from parcelfit.study.predict import summarise_prediction
+
+    names = ["a", "b", "c", "d"]
+    ident = intervals_of(names)
+    rng = np.random.default_rng(4)
+    sets = [
+        {n: float(v) for n, v in zip(names, rng.uniform(0, 1, 4), strict=True)} for _ in range(6)
+    ]
+    noise = rng.normal(0.0, 0.02, (6, 2))
+    # a moves the transit by 150 ms over its interval, the set means scattered by about 15 ms
+    big = _effect_rows(sets, 2, lambda s, j: 1.0 + 0.15 * s["a"] + noise[sets.index(s), j])
+    _, effects, sentences = summarise_prediction(ident, sets, [0, 1], big)
+    a = next(e for e in effects if e.parameter == "a" and e.quantity == "transit_time")
+    assert a.estimated and not a.resolved and a.threshold > 10
+    assert 3 * a.se < abs(a.effect)  # large against its error, below the threshold
+    said = next(s for s in sentences if s.startswith("a "))
+    assert "not resolved" in said and "does not matter" not in said and "--sets" in said
+    assert f"counts from {a.threshold:.1f} standard errors" in said
+    # nothing moves anything by more than a few microseconds: harmless, and said so
+    tiny = _effect_rows(sets, 2, lambda s, j: 1.0 + 1e-6 * s["a"] + 1e-7 * j)
+    _, effects, sentences = summarise_prediction(ident, sets, [0, 1], tiny)
+    assert all(e.negligible for e in effects) and len(sentences) == 4
+    assert all("for this design it does not matter" in s for s in sentences)
+
+
+def test_one_placement_per_set_gives_no_split_of_the_spread():
+    d = decompose(np.array([[1.0], [2.0], [4.0]]))  # three sets, one run each
+    assert math.isnan(d.parameter_share) and math.isnan(d.placement_share)
+    two = decompose(np.array([[1.0, 1.5], [2.0, 2.5], [4.0, 4.5]]))
+    assert two.parameter_share + two.placement_share == pytest.approx(1.0)
+
+
 def test_a_simulator_that_cannot_place_its_runs_predicts_and_designs_with_one_placement(tmp_path):
     # an external solver, or a Python factory without with_placement: the defaults of 10 and 5
     # placements would only repeat its one run, so without --placements they run 1; a number

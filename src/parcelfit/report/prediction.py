@@ -104,6 +104,7 @@ def prediction_view(prediction: Prediction) -> dict[str, Any]:
                 if not math.isfinite(e.effect)
                 else f"{shown_value(e.quantity, e.effect)} +- {shown_value(e.quantity, e.se, 2)}",
                 "resolved": e.resolved,
+                "threshold": "-" if not math.isfinite(e.threshold) else f"{e.threshold:.1f}",
             }
         )
     scatter = prediction.scatter

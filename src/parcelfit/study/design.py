@@ -163,7 +163,7 @@ from parcelfit.study.predict import (
     open_executor,
 )
 from parcelfit.study.run_scatter import RELATIVE, estimate_run_scatter
-from parcelfit.study.spread import decompose, effects_of
+from parcelfit.study.spread import FLOOR, decompose, effects_of
 from parcelfit.study.store import Store
 from parcelfit.study.studyfile import Study
 
@@ -171,13 +171,6 @@ DESIGN_STORE = "design.sqlite"
 DESIGN_FILE = "design.json"
 PLACEMENTS = DESIGN_PLACEMENTS  # seeded placements per set and candidate by default
 NARROWS = 0.99  # an expected interval share below this counts as narrowing the parameter
-# run-to-run measurement floor per quantity (SI): the band test's 3 mm and 1 degree, 2 ms
-FLOOR = {
-    "transit_time": 0.002,
-    "rotation": math.radians(1.0),
-    "exit_y": 0.003,
-    "exit_heading": math.radians(1.0),
-}
 # quantities that measure what another does again (module docstring): no information of their own
 REPEATED = frozenset({"rotation"})
 

@@ -27,7 +27,11 @@ decomposition of the spread and the effects of `parcelfit.study.spread` (its doc
 the formulas). For each calibrated parameter the data do not determine, the quantity it moves
 most (as a share of that quantity's 5-95 % band) is named in one sentence, e.g. "E_Pa is
 undetermined and moves the transit time by 40 ms here: run `parcelfit design` to find the
-experiment that fixes it".
+experiment that fixes it" (among its resolved effects that are not negligible). A parameter
+all of whose effects are negligible (`Effect.negligible`: |effect| + threshold x SE below the
+measurement floor `spread.FLOOR`) is said not to matter for this design; one with no resolved
+effect but some that are not negligible is said not to be resolved, with its clearest effect
+(the largest t) and the advice to draw more sets.
 
 **Drives.** A placement is also the moment the run happens: each drive of the rig runs at its
 mean speed times 1 + U(-D, D), drawn from the placement seed (`Rig.speed_factors`; method.md:
@@ -404,12 +408,26 @@ def summarise_prediction(
                 f"a result (--sets), {n} were drawn"
             )
             continue
-        mine = [e for e in effects if e.parameter == p.name and e.resolved]
-        if not mine:
+        own = [e for e in effects if e.parameter == p.name and e.estimated]
+        mine = [e for e in own if e.resolved and not e.negligible]
+        if not mine and all(e.negligible for e in own):
             sentences.append(
-                f"{p.name} {words} but moves none of these predictions here by a resolved "
-                "effect (its t value below the threshold over the parameter sets): for this "
-                "design it does not matter"
+                f"{p.name} {words} but moves none of these predictions here by as much as a "
+                "run can show (each effect, with its uncertainty, below 2 ms, 3 mm and 1 "
+                "degree): for this design it does not matter"
+            )
+            continue
+        if not mine:
+            open_ = [e for e in own if not e.negligible]
+            largest = max(open_, key=lambda e: abs(e.effect) / e.se if e.se > 0 else 0.0)
+            sentences.append(
+                f"{p.name} {words}, and what it does here is not resolved: with these "
+                f"{len(sets)} parameter sets an effect counts from {largest.threshold:.1f} "
+                f"standard errors, and its clearest, on the "
+                f"{quantity_words(largest.quantity)}, is "
+                f"{shown_value(largest.quantity, abs(largest.effect), 2)} +- "
+                f"{shown_value(largest.quantity, largest.se, 2)}: draw more parameter sets "
+                "(--sets) before taking it not to matter for this design"
             )
             continue
 
@@ -683,6 +701,12 @@ def predict(
         note = scatter_note(scatter)
         if note is not None:
             notes.append(note)
+        if len(seeds) == 1:
+            notes.append(
+                "one placement per parameter set: the spread is not split between the "
+                "parameters and the placements (shares shown as -), and each set's mean holds "
+                "its one run's scatter, which the parameters' effects are then judged against"
+            )
         notes.extend(numerical_notes(numerical))
         calibrated = sorted({c.case.consignment for c in inputs.study.cases})
         if design.consignment_name not in calibrated:

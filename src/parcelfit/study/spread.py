@@ -56,6 +56,13 @@ from dataclasses import dataclass
 import numpy as np
 
 FALSE_EFFECTS = 0.05  # the chance that a case shows any effect it does not have (t-test)
+# run-to-run measurement floor per quantity (SI): the band test's 3 mm and 1 degree, 2 ms
+FLOOR = {
+    "transit_time": 0.002,
+    "rotation": math.radians(1.0),
+    "exit_y": 0.003,
+    "exit_heading": math.radians(1.0),
+}
 
 
 def t_threshold(n_sets: int, n_parameters: int, n_quantities: int) -> float:
@@ -81,9 +88,16 @@ class Decomposition:
     sets: int
 
     @property
+    def split(self) -> bool:
+        """Whether the spread can be split: two sets with a value and some set with two runs
+        (with one run per set W is 0 by construction, whatever the placements do)."""
+        return self.total > 0 and self.sets >= 2 and self.runs > self.sets
+
+    @property
     def parameter_share(self) -> float:
-        """B / V (NaN when V is 0, nothing was measured or fewer than two sets have a value)."""
-        return self.between / self.total if self.total > 0 and self.sets >= 2 else math.nan
+        """B / V (NaN when V is 0, nothing was measured, fewer than two sets have a value or no
+        set has two runs: `split`)."""
+        return self.between / self.total if self.split else math.nan
 
     @property
     def run_variance(self) -> float:
@@ -95,8 +109,9 @@ class Decomposition:
 
     @property
     def placement_share(self) -> float:
-        """W / V (NaN when V is 0 or nothing was measured)."""
-        return self.within / self.total if self.total > 0 else math.nan
+        """W / V (NaN when V is 0, nothing was measured or no set has two runs; with one set
+        it is 1: all the spread is the placements')."""
+        return self.within / self.total if self.total > 0 and self.runs > self.sets else math.nan
 
 
 def decompose(values: np.ndarray) -> Decomposition:
@@ -146,6 +161,17 @@ class Effect:
             math.isfinite(self.effect)
             and self.effect != 0.0
             and abs(self.effect) >= self.threshold * self.se
+        )
+
+    @property
+    def negligible(self) -> bool:
+        """True when even |effect| + `threshold` standard errors, the largest effect the data
+        do not rule out, stays below the quantity's measurement floor (`FLOOR`): whatever its
+        size, no run could show it."""
+        return (
+            math.isfinite(self.effect)
+            and math.isfinite(self.se)
+            and abs(self.effect) + self.threshold * self.se < FLOOR[self.quantity]
         )
 
 
