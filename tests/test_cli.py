@@ -214,3 +214,6 @@ def test_demo_stages_are_library_calls(tmp_path):
     _, full_study = write_demo_files(tmp_path / "full", PROFILES["full"], demo_dataset())
     assert "rig_timesteps" not in yaml.safe_load(full_study.read_text())["simulator"]
     assert yaml.safe_load(screen_file.read_text())["stages"] == ["fractional"]
+    # the files say how to rerun each stage into the folder the demo used, so that it resumes
+    assert "#   parcelfit calibrate study.yaml --out calibration\n" in study_file.read_text()
+    assert "#   parcelfit screen screen.yaml --out screen\n" in screen_file.read_text()

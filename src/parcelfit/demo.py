@@ -125,7 +125,8 @@ def write_demo_files(out: Path, profile: DemoProfile, dataset: Path) -> tuple[Pa
         sim["rig_timesteps"] = {"E1": profile.e1_timestep}
     head = (
         "# Written by `parcelfit demo` (profile {profile}); the dataset is the bundled SYNTHETIC\n"
-        "# twin dataset. Rerun by hand with:  parcelfit {command} {file}\n"
+        "# twin dataset. Rerun (or resume) by hand from this folder with:\n"
+        "#   parcelfit {command} {file} --out {folder}\n"
     )
     screen_doc: dict[str, Any] = {
         "name": f"demo-screen-{profile.name}",
@@ -161,9 +162,12 @@ def write_demo_files(out: Path, profile: DemoProfile, dataset: Path) -> tuple[Pa
         "seed": 1,
     }
     files = []
-    for stem, doc, command in (("screen", screen_doc, "screen"), ("study", study_doc, "calibrate")):
+    for stem, doc, command, folder in (
+        ("screen", screen_doc, "screen", "screen"),
+        ("study", study_doc, "calibrate", "calibration"),
+    ):
         path = out / f"{stem}.yaml"
-        text = head.format(profile=profile.name, command=command, file=path.name)
+        text = head.format(profile=profile.name, command=command, file=path.name, folder=folder)
         path.write_text(text + yaml.safe_dump(doc, sort_keys=False), encoding="utf-8")
         files.append(path)
     return files[0], files[1]
