@@ -1,5 +1,6 @@
 import json
 import re
+from pathlib import Path
 
 import pytest
 import yaml
@@ -138,13 +139,17 @@ def test_status_json_is_si_with_its_units(tmp_path):
     assert "SYNTHETIC" not in runner.invoke(app, ["status", str(study)]).stdout
 
 
-def test_status_of_a_demo_folder_points_to_its_calibration_subfolder(tmp_path):
+def test_status_of_a_demo_folder_shows_its_calibration_subfolder(tmp_path):
+    # as report, predict and design take a demo's folder, status reads its calibration/
     study = write_study_store(tmp_path / "demo" / "calibration", None)
-    result = runner.invoke(app, ["status", str(tmp_path / "demo")])
-    assert result.exit_code == 2
-    text = " ".join(result.output.split())
-    assert "no study.sqlite here; the study is in the calibration/ subfolder" in text
-    assert f"Fix: point at {study}" in text
+    direct = runner.invoke(app, ["status", str(study), "--json"])
+    demo = runner.invoke(app, ["status", str(tmp_path / "demo"), "--json"])
+    assert direct.exit_code == 0 and demo.exit_code == 0, demo.output
+    assert json.loads(demo.stdout) == json.loads(direct.stdout)
+    # a folder with neither is refused, naming the store
+    (tmp_path / "empty").mkdir()
+    empty = runner.invoke(app, ["status", str(tmp_path / "empty")])
+    assert empty.exit_code == 2 and "no study.sqlite here" in " ".join(empty.output.split())
 
 
 @pytest.mark.parametrize("terminal", [True, False])
@@ -182,3 +187,24 @@ def test_an_executor_a_command_cannot_use_is_one_clear_error(tmp_path):
     result = runner.invoke(app, ["screen", str(study), "--executor", "dask"])
     assert result.exit_code == 2 and "unknown executor 'dask'" in result.output
     assert "Traceback" not in result.output
+
+
+def test_the_calibration_table_shows_nothing_running_once_the_job_ended():
+    # the last stage's event (the key frames: one simulation) said "1 running"; the table left
+    # on the screen after the job must not
+    import io
+
+    from rich.console import Console
+
+    from parcelfit.cli.output import CalibrationDisplay
+    from parcelfit.progress import ProgressEvent
+    from parcelfit.study.outcome import CalibrationStart
+
+    out = io.StringIO()
+    with CalibrationDisplay(Console(file=out, force_terminal=True, width=100)) as display:
+        display.started(CalibrationStart("s", Path("s"), None))
+        display.update(
+            ProgressEvent("calibration", "drawing the key frames", 16, 16, iteration=3, running=1)
+        )
+    last = out.getvalue().rsplit("evaluations", 1)[1].splitlines()[0]
+    assert "16 done, 0 running, budget 16" in last

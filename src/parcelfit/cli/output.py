@@ -7,6 +7,7 @@ from __future__ import annotations
 import contextlib
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
@@ -235,6 +236,10 @@ class CalibrationDisplay:
             return
         self._spinner.stop()
         if self._live is not None:
+            if self._event is not None and self._event.running:
+                # the job has ended: nothing runs any more (the table stays on the screen)
+                self._event = replace(self._event, running=0)
+                self._live.update(self._table())
             self._live.stop()
         # outside a terminal the display's last line is left open: end it
         self.console.print()

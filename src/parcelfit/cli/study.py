@@ -94,13 +94,19 @@ def calibrate(
 
 
 def status(
-    study_dir: Annotated[Path, typer.Argument(help="Study folder (holding study.sqlite).")],
+    study_dir: Annotated[
+        Path,
+        typer.Argument(
+            help="Study folder (holding study.sqlite), or a demo's folder (its calibration/)."
+        ),
+    ],
     as_json: Annotated[bool, typer.Option("--json", help="Print machine-readable JSON.")] = False,
 ) -> None:
     """Show the state of a running or finished calibration study."""
     from parcelfit.study.outcome import study_summary
+    from parcelfit.study.status import study_folder
 
-    summary = study_summary(study_dir)
+    summary = study_summary(study_folder(study_dir))
     info = summary.status
     if as_json:
         sys.stdout.write(json.dumps(info.to_json(), indent=1) + "\n")

@@ -18,6 +18,7 @@ from parcelfit.sim.factory import SimulatorConfig, make_simulator
 from parcelfit.sim.protocol import Simulator
 from parcelfit.study.identify import Identifiability
 from parcelfit.study.results import read_results
+from parcelfit.study.status import study_folder
 from parcelfit.study.store import STORE_FILE, Store
 from parcelfit.study.studyfile import Study, load_study
 
@@ -40,9 +41,9 @@ def find_study(folder: str | Path) -> Path:
         raise ParcelfitError(
             "no such study folder", file=folder, fix="give the folder `parcelfit calibrate` wrote"
         )
-    for candidate in (folder, folder / "calibration"):
-        if (candidate / STORE_FILE).is_file():
-            return candidate
+    found = study_folder(folder)
+    if (found / STORE_FILE).is_file():
+        return found
     raise ParcelfitError(
         f"no calibration study here (no {STORE_FILE}, nor calibration/{STORE_FILE})",
         file=folder,

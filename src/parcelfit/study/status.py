@@ -110,6 +110,16 @@ def record_summary(record: StudyRecord) -> dict[str, Any]:
     return doc
 
 
+def study_folder(folder: str | Path) -> Path:
+    """``folder`` if it holds a study store, else its ``calibration/`` subfolder when that does
+    (as ``parcelfit demo`` writes); ``folder`` unchanged otherwise (the caller refuses it)."""
+    folder = Path(folder)
+    inner = folder / "calibration"
+    return (
+        inner if not (folder / STORE_FILE).is_file() and (inner / STORE_FILE).is_file() else folder
+    )
+
+
 def study_status(folder: str | Path) -> StudyStatus:
     """The state of the study in ``folder`` (running or finished), read from its store and
     stored results (`StudyStatus`); a folder without a store is refused, naming the
