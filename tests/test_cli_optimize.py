@@ -20,6 +20,10 @@ def test_calibrate_then_status_json(tmp_path):
     result = runner.invoke(app, ["calibrate", str(study), "--out", str(out), "--workers", "2"])
     assert result.exit_code == 0, result.output
     assert "figures in" in result.output
+    # the test's dataset is synthetic (fake_sim.write_reference_dataset), and calibrate says so
+    assert "(SYNTHETIC: simulated from hidden true parameters, not measured)" in " ".join(
+        result.output.split()
+    )
     status = runner.invoke(app, ["status", str(out), "--json"])
     info = json.loads(status.stdout)
     assert info["evaluations"] <= 12 and info["pending"] == 0 and info["validations"]

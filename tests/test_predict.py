@@ -138,6 +138,10 @@ def test_predict_names_what_the_undetermined_parameter_moves(study, tmp_path):
     assert "E_Pa is undetermined and moves the exit heading by" in " ".join(result.output.split())
     doc = json.loads((tmp_path / "p" / "prediction.json").read_text())
     assert doc["sentences"][0].startswith("E_Pa is undetermined and moves the exit heading by")
+    # the calibration's dataset is synthetic: the terminal, the json and the page say so
+    assert any("real runs are SYNTHETIC" in n for n in doc["notes"])
+    assert "real runs are SYNTHETIC" in " ".join(result.output.split())
+    assert "real runs are SYNTHETIC" in (tmp_path / "p" / "prediction.html").read_text()
     assert len(doc["sentences"]) == 1  # only E_Pa is not determined
     page = (tmp_path / "p" / "prediction.html").read_text()
     assert "Q/KPBW/1" in page and "<script" not in page

@@ -30,6 +30,7 @@ if TYPE_CHECKING:
         ShownValue,
         StudySummary,
     )
+    from parcelfit.study.status import StudyStatus
     from parcelfit.study.verdict import Verdict
 
 
@@ -245,12 +246,21 @@ class CalibrationDisplay:
         self.console.print()
 
 
+def print_synthetic(console: Console, status: StudyStatus) -> None:
+    """One yellow line naming a study's dataset when it is SYNTHETIC (nothing for real data)."""
+    if status.synthetic:
+        from parcelfit.analysis import SYNTHETIC_NOTE
+
+        console.print(Text(f"dataset {status.dataset} ({SYNTHETIC_NOTE})", style="yellow"))
+
+
 def print_outcome(console: Console, outcome: CalibrationOutcome) -> None:
     """What a calibration concluded (`parcelfit.study.outcome.CalibrationOutcome`): how it
     stopped, the recommended parameters, what the data determine, where its figures are and
-    the verdict."""
+    the verdict; a SYNTHETIC dataset is named first."""
     if outcome.set_aside is not None:
         console.print(Text(f"the earlier study's outputs are in {outcome.set_aside}"))
+    print_synthetic(console, outcome.summary.status)
     console.print(
         Text.assemble(
             (outcome.stop_reason, "bold"),

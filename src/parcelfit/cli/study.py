@@ -20,6 +20,7 @@ from parcelfit.cli.output import (
     iterations_text,
     print_outcome,
     print_summary,
+    print_synthetic,
     print_verdict,
     resumes,
     status_progress,
@@ -113,10 +114,7 @@ def status(
         return
     record = info.study or {}
     name = record.get("name", "?")
-    if info.synthetic:
-        from parcelfit.analysis import SYNTHETIC_NOTE
-
-        console.print(Text(f"dataset {info.dataset} ({SYNTHETIC_NOTE})", style="yellow"))
+    print_synthetic(console, info)
     counts = ", ".join(f"{n} {s}" for s, n in info.by_status.items())
     console.print(
         Text.assemble(

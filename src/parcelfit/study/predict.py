@@ -85,10 +85,11 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from parcelfit.analysis import SYNTHETIC_NOTE
 from parcelfit.atomic import write_text_atomic
 from parcelfit.errors import ParcelfitError, shown
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
-from parcelfit.runs import Run, TestCase
+from parcelfit.runs import Run, TestCase, is_synthetic
 from parcelfit.sim.ensemble import MAX_PLACEMENTS
 from parcelfit.sim.executors import Executor, SharedExecutor, Task, make_executor
 from parcelfit.sim.factory import make_simulator
@@ -691,6 +692,18 @@ def predict(
             inputs.identifiability, drawn, seeds, runs, scatter, seed, numerical
         )
         notes = []
+        synthetic = sorted(
+            {
+                str(c.dataset)
+                for c in (*inputs.study.cases, *inputs.study.validation_cases)
+                if is_synthetic(c.dataset)
+            }
+        )
+        if synthetic:
+            notes.append(
+                f"the calibration's real runs are {SYNTHETIC_NOTE} ({', '.join(synthetic)}): "
+                "so is this prediction's calibration"
+            )
         ident = inputs.identifiability
         if not (ident.reached and ident.supported):
             what = "parameter set" if not ident.reached else "evaluation"
