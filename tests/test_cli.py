@@ -217,3 +217,26 @@ def test_demo_stages_are_library_calls(tmp_path):
     # the files say how to rerun each stage into the folder the demo used, so that it resumes
     assert "#   parcelfit calibrate study.yaml --out calibration\n" in study_file.read_text()
     assert "#   parcelfit screen screen.yaml --out screen\n" in screen_file.read_text()
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--out", "run.txt"], "unknown file type '.txt'"),
+        (["--video", "run.avi"], "unknown video type '.avi'"),
+        (["--video", "run.gif", "--repeat", "2"], "--video works with one run only"),
+    ],
+)
+def test_simulate_refuses_bad_output_names_before_it_simulates(
+    tmp_path, monkeypatch, args, message
+):
+    import parcelfit.simulate
+
+    def never(*a, **k):
+        raise AssertionError("simulated before the output names were checked")
+
+    monkeypatch.setattr(parcelfit.simulate, "case_simulation", never)
+    argv = [*args] if "--out" in args else [*args, "--out", str(tmp_path / "run.csv")]
+    result = runner.invoke(app, ["simulate", *argv])
+    assert result.exit_code == 2, result.output
+    assert message in " ".join(result.output.split())

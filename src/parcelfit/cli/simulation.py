@@ -164,6 +164,7 @@ def simulate(
     With --repeat N, simulate N seeded placements and write each run (OUT with -s<seed> before
     its suffix), a summary table (OUT with -ensemble.csv) and print the ensemble statistics."""
     from parcelfit.runs import write_trajectory
+    from parcelfit.runs.io import check_trajectory_path
     from parcelfit.sim.ensemble import MAX_PLACEMENTS
     from parcelfit.simulate import case_simulation
 
@@ -171,6 +172,13 @@ def simulate(
     at_most(seed, "--seed", 2**32 - 1)
     workers_at_most(workers)
     check_paths(out, video)  # before a simulation of minutes
+    check_trajectory_path(out)
+    if video is not None:
+        from parcelfit.sim.mujoco.render import check_video_path
+
+        check_video_path(video)
+        if repeat > 1:
+            raise ParcelfitError("--video works with one run only", fix="leave out --repeat")
     run = case_simulation(
         rig,
         consignment,
@@ -192,8 +200,6 @@ def simulate(
         run = replace(run, simulator=run.simulator.with_refinement(refinement))
     case = run.case
     if repeat > 1:
-        if video is not None:
-            raise ParcelfitError("--video works with one run only", fix="leave out --repeat")
         _simulate_ensemble(run, seed or 0, repeat, worker_count(workers), out)
         return
     with console.status(f"simulating {case.label}"):

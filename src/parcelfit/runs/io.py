@@ -209,17 +209,23 @@ def read_trajectory(path: str | Path) -> Trajectory:
     return check_trajectory_table(read_table(path), path)
 
 
+def check_trajectory_path(path: str | Path) -> None:
+    """Refuse a trajectory file name whose suffix is not .csv or .parquet (before any work)."""
+    path = Path(path)
+    if path.suffix.lower() not in SUFFIXES:
+        raise ParcelfitError(
+            f"unknown file type {path.suffix!r}", file=path, fix="use .csv or .parquet"
+        )
+
+
 def write_trajectory(trajectory: Trajectory, path: str | Path) -> Path:
     """Write a trajectory to .csv or .parquet (by suffix); returns the path written. Numbers keep
     every digit (a CSV holds each as its shortest text that reads back to the same float). The
     optional columns (source, position_sd, heading_sd) are written only when the trajectory has
     them (tracked runs, not simulated ones)."""
     path = Path(path)
+    check_trajectory_path(path)
     suffix = path.suffix.lower()
-    if suffix not in SUFFIXES:
-        raise ParcelfitError(
-            f"unknown file type {path.suffix!r}", file=path, fix="use .csv or .parquet"
-        )
     path.parent.mkdir(parents=True, exist_ok=True)
     frame = trajectory.to_frame()
     tmp = path.with_name(path.name + ".tmp")

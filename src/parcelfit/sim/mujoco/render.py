@@ -115,13 +115,21 @@ def snapshot(rig: Rig, frames: Frames, indices: Sequence[int], title: str = "") 
     return fig
 
 
+def check_video_path(path: str | Path) -> None:
+    """Refuse an animation file name whose suffix is not .gif or .mp4 (before any work)."""
+    path = Path(path)
+    if path.suffix.lower() not in (".gif", ".mp4"):
+        raise ParcelfitError(
+            f"unknown video type {path.suffix!r}", file=path, fix="use .gif or .mp4"
+        )
+
+
 def animate_run(rig: Rig, frames: Frames, path: str | Path, title: str = "", fps: int = 20) -> Path:
     """Write an animation of the parcel's top view to ``path`` (.gif, or .mp4 with ffmpeg)."""
     from matplotlib.animation import FFMpegWriter, FuncAnimation, PillowWriter
 
     path = Path(path)
-    if path.suffix.lower() not in (".gif", ".mp4"):
-        raise ParcelfitError(f"unknown video type {path.suffix!r}", fix="use .gif or .mp4")
+    check_video_path(path)
     fig = Figure(figsize=(8, 4.5), dpi=100, layout="constrained")
     ax = fig.subplots()
     draw_rig(ax, rig)
