@@ -212,3 +212,17 @@ def test_the_calibration_table_shows_nothing_running_once_the_job_ended():
         )
     last = out.getvalue().rsplit("evaluations", 1)[1].splitlines()[0]
     assert "16 done, 0 running, budget 16" in last
+
+
+def test_a_study_whose_dataset_is_not_made_yet_names_the_study_file_and_key(tmp_path):
+    # the own-rig example run in the wrong order: calibrate before synth
+    study = write_study(tmp_path)
+    import shutil
+
+    data = tmp_path / "data"
+    shutil.rmtree(data)
+    result = runner.invoke(app, ["calibrate", str(study), "--out", str(tmp_path / "out")])
+    text = " ".join(result.output.split())
+    assert result.exit_code == 2 and "Traceback" not in result.output
+    assert f"{study}: reference.dataset:" in text and "holds no dataset.yaml" in text
+    assert "parcelfit synth" in text and not (tmp_path / "out" / "study.sqlite").exists()

@@ -18,13 +18,14 @@ from pydantic import BaseModel, ConfigDict
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.progress import ProgressCallback, ignore_progress
+from parcelfit.runs.dataset import DATASET_FILE
 from parcelfit.sim.params import catalogue_unit, to_catalogue_units
 from parcelfit.study.calibration import Calibration, CalibrationResult
 from parcelfit.study.folderlock import check_writable
 from parcelfit.study.results import read_results
 from parcelfit.study.status import StudyStatus, folder_verdict, study_status
 from parcelfit.study.store import STORE_FILE
-from parcelfit.study.studyfile import load_study
+from parcelfit.study.studyfile import Study, load_study
 from parcelfit.study.verdict import Verdict
 
 
@@ -107,6 +108,7 @@ def calibrate_study(
     resume) its calibration in ``folder`` (`Calibration`), reporting to ``progress``; the
     outcome is read back from the folder (`calibration_outcome`)."""
     study = load_study(study_file)
+    check_datasets(study)
     check_writable(folder, (STORE_FILE,))
     calibration = Calibration(
         study,
@@ -121,6 +123,22 @@ def calibrate_study(
     started(CalibrationStart(study.name, folder, calibration.cost_line()))
     result = calibration.run()
     return calibration_outcome(result, calibration.set_aside)
+
+
+def check_datasets(study: Study) -> None:
+    """Refuse a study whose fitted, validation or transfer case names a dataset folder without
+    a dataset.yaml, naming the study file and the case's key (a dataset not made yet, or a
+    path written wrong), before anything starts."""
+    for spec in (*study.cases, *study.validation_cases, *study.transfer):
+        if not (spec.dataset / DATASET_FILE).is_file():
+            raise ParcelfitError(
+                f"{spec.label}: its dataset {spec.dataset} holds no {DATASET_FILE}",
+                file=study.path,
+                where=f"{spec.where}.dataset" if spec.where else "dataset",
+                fix="make the dataset first (tracked runs: parcelfit track-all; a SYNTHETIC "
+                "twin: parcelfit synth SPEC --out FOLDER) or correct the path (relative to the "
+                "study file)",
+            )
 
 
 def calibration_outcome(
