@@ -240,3 +240,16 @@ def test_simulate_refuses_bad_output_names_before_it_simulates(
     result = runner.invoke(app, ["simulate", *argv])
     assert result.exit_code == 2, result.output
     assert message in " ".join(result.output.split())
+
+
+def test_rigs_says_where_the_bundled_files_lie():
+    from importlib.resources import files
+
+    result = runner.invoke(app, ["rigs"], terminal_width=400)
+    assert result.exit_code == 0, result.output
+    for kind in ("rigs", "consignments"):
+        folder = files("parcelfit.sim.mujoco").joinpath(kind)
+        assert (
+            f"{folder}" in result.output
+            and (folder / "E3.yaml" if kind == "rigs" else folder / "KPBW.yaml").is_file()
+        )

@@ -578,12 +578,12 @@ class TwinSpecFile(FileModel):
     """The hidden true parameters by consignment type, in the catalogue's units."""
     rigs: Annotated[list[Annotated[str, Text()]], or_default(list)] = Field(default_factory=list)
     """Rig files of your own (relative to this file) that the cases may name beside the
-    bundled rigs; a case names a rig by its name, which must equal the file's stem."""
+    bundled rigs; a case names a rig by the `name` in its file (keep it the file's stem)."""
     consignments: Annotated[list[Annotated[str, Text()]], or_default(list)] = Field(
         default_factory=list
     )
     """Consignment files of your own (relative to this file), named by the cases like the
-    bundled types; a type's name must equal the file's stem."""
+    bundled types, by the `name` in each file (keep it the file's stem)."""
     settings: Annotated[TwinSettingsSection, or_default(dict)] = Field(
         default_factory=TwinSettingsSection
     )

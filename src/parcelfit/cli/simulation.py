@@ -301,6 +301,7 @@ def rigs() -> None:
             " -> ".join(b.name for b in r.barriers),
         )
     console.print(table)
+    _print_folder("rigs", "rig")
     from parcelfit.sim.mujoco import SceneOptions, bundled_consignment_names, load_consignment
 
     table = Table(title="Bundled consignment types (--consignment NAME)", title_justify="left")
@@ -325,6 +326,18 @@ def rigs() -> None:
             _shell_text(*default_scene.shell_of(c)),
         )
     console.print(table)
+    _print_folder("consignments", "consignment")
+
+
+def _print_folder(kind: str, what: str) -> None:
+    """Where the bundled files of ``kind`` lie, to be copied as the start of one's own."""
+    from importlib.resources import files
+
+    folder = files("parcelfit.sim.mujoco").joinpath(kind)
+    console.print(
+        Text(f"their files, to copy as the start of your own {what} file: {folder}"),
+        highlight=False,
+    )
 
 
 def params(

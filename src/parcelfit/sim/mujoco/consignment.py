@@ -156,7 +156,8 @@ class ConsignmentFile(FileModel):
     """A consignment file as written (see the module docstring): mass [kg], sizes [m]."""
 
     name: Annotated[str, Text()]
-    """The type's name: the name datasets and studies use; it must equal the file's stem."""
+    """The type's name: the name datasets and studies use; keep it the file's
+    stem (not enforced: a variant file may keep the name of what it varies)."""
     description: Annotated[str, PlainValidator(_description)] = ""
     """Free text."""
     mass: Annotated[float, Number(unit="kg", ge=0.001, le=100)]

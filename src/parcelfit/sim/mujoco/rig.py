@@ -544,7 +544,8 @@ class RigFile(FileModel):
     """A rig file as written (see the module docstring)."""
 
     name: Annotated[str, Text()]
-    """The rig's name: the name datasets and studies use; it must equal the file's stem."""
+    """The rig's name: the name datasets and studies use; keep it the file's
+    stem (not enforced: a variant file may keep the name of what it varies)."""
     description: Annotated[str, PlainValidator(_description)] = ""
     """Free text."""
     speeds: Annotated[
