@@ -673,6 +673,16 @@ CASES = {
         lambda d: d["start"].update(surface="floor"),
         ("start.surface", "start.surface names no surface: 'floor'", "use one of main, strips"),
     ),
+    "rig start off its surface": (
+        "rig",
+        lambda d: d["start"].update(position=[-0.5, -1.2]),
+        (
+            "start.position",
+            "start.position [-0.5, -1.2] lies off its surface 'strips' (-0.300 m along and "
+            "-0.520 m across from its centre; it spans +-0.5 m and +-0.2 m)",
+            "put the start over the start surface, or name the surface it lies on",
+        ),
+    ),
     "rig bad region": (
         "rig",
         lambda d: d["regions"].append({"x": [2, 1]}),

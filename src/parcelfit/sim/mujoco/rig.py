@@ -327,6 +327,8 @@ _Height = Annotated[float, Number(unit="m", ge=-10, le=10)]
 _Extra = Annotated[float | None, Number()]
 _SURFACE_TYPE = Choice(SURFACE_TYPES, what="surface type")
 _MATERIAL = Choice(MATERIALS, what="material")
+# how far [m] start.position may lie beyond its surface's edge (a side laid on the edge, start.align)
+START_OFF_SURFACE = 0.01
 # start.align: which part of a parcel lies at start.position
 START_ALIGNMENTS = ("centre", "right", "left")
 
@@ -608,6 +610,23 @@ class RigFile(FileModel):
                 f"start.surface names no surface: {shown(self.start.surface)}",
                 where="start.surface",
                 fix=f"use one of {', '.join(names)}",
+            )
+        below = self.surfaces[names.index(self.start.surface)]
+        # the start's offset from the surface's centre along and across its heading [m]
+        a = math.radians(below.heading)
+        dx = self.start.position[0] - below.centre[0]
+        dy = self.start.position[1] - below.centre[1]
+        along, across = dx * math.cos(a) + dy * math.sin(a), -dx * math.sin(a) + dy * math.cos(a)
+        if (
+            abs(along) > below.length / 2 + START_OFF_SURFACE
+            or abs(across) > below.width / 2 + START_OFF_SURFACE
+        ):
+            raise ParcelfitError(
+                f"start.position {list(self.start.position)} lies off its surface "
+                f"{shown(below.name)} ({along:+.3f} m along and {across:+.3f} m across from its "
+                f"centre; it spans +-{below.length / 2:g} m and +-{below.width / 2:g} m)",
+                where="start.position",
+                fix="put the start over the start surface, or name the surface it lies on",
             )
         return self
 
