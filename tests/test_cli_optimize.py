@@ -72,6 +72,13 @@ def test_screen_cli(tmp_path):
     )
     assert result.exit_code == 0, result.output
     assert "selected for calibration: mu_d_BePa" in result.output
+    # the line says how many of the selected have a significant effect, as selection.yaml does
+    selection = yaml.safe_load((tmp_path / "o" / "selection.yaml").read_text())
+    n = len(selection["significant"])
+    assert set(selection["significant"]) <= set(selection["selected"])
+    assert f"(the 1 largest effects, as `select` asks; {n} of them significant" in " ".join(
+        result.output.split()
+    )
     # not a terminal: one progress line per finished run
     runs = len((tmp_path / "o" / "stage1-design.csv").read_text().splitlines()) - 1
     lines = re.findall(

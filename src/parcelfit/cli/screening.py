@@ -76,8 +76,17 @@ def print_screen(stages: Any, selection: dict[str, Any]) -> None:
                 f"{', '.join(a.response for a in stage.ensemble_analyses)} (over each run's "
                 "placements) are shown; the selection is made on dtw_xy and dtw_theta"
             )
+    chosen, significant = selection["selected"], selection.get("significant", [])
     console.print(
-        f"[bold]selected for calibration:[/] {', '.join(selection['selected']) or 'none'}"
+        f"[bold]selected for calibration:[/] {', '.join(chosen) or 'none'}"
+        + (
+            f" (the {len(chosen)} largest effects, as `select` asks; "
+            f"{len(significant)} of them significant"
+            + (f": {', '.join(significant)})" if significant else ")")
+            if chosen
+            else ""
+        ),
+        markup=True,
     )
 
 

@@ -535,11 +535,15 @@ def run_screen(
     sel = select_parameters(
         results[-1].analyses, max_parameters=screen.select, only_significant=False
     )
+    significant = set(
+        select_parameters(results[-1].analyses, max_parameters=len(screen.ranges)).parameters
+    )
     doc = {
         "screen": screen.name,
         "test_case": screen.case.label,
         "method": results[-1].analyses[0].method,
         "selected": sel.parameters,
+        "significant": [p for p in sel.parameters if p in significant],
         "reasons": sel.reasons,
         "parameters": {p: [_user(p, v) for v in screen.ranges[p]] for p in sel.parameters},
     }
