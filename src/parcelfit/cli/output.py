@@ -338,7 +338,7 @@ def _print_parts(console: Console, parts: list[CaseCost]) -> None:
             tt = "-" if p.transit_term is None else f"{p.transit_term:.3g}"
             adjusted = " (adjusted times)" if p.adjusted_transit_times is not None else ""
             what = f"trajectories {p.trajectory_term:.3g}{se}, transit {tt}{adjusted}"
-            what += f", {len(p.seeds)} placements"
+            what += f", {len(p.seeds)} placement{'s' if len(p.seeds) != 1 else ''}"
         else:
             what = f"DTW_xy {p.dtw_xy:.3g} m, DTW_theta {p.dtw_theta:.3g} rad"
         table.add_row(p.case, f"{p.weight:g}", f"{p.cost:.4g}", what)

@@ -138,8 +138,9 @@ def terminal_table(prediction: Prediction) -> Table:
     view = prediction_view(prediction)
     d = prediction.design
     table = Table(
-        title=f"{d.label}: {len(prediction.sets)} plausible parameter sets x "
-        f"{len(prediction.seeds)} placements",
+        title=f"{d.label}: {len(prediction.sets)} plausible parameter "
+        f"set{'s' if len(prediction.sets) != 1 else ''} x {len(prediction.seeds)} "
+        f"placement{'s' if len(prediction.seeds) != 1 else ''}",
         title_justify="left",
     )
     for col in (

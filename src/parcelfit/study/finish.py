@@ -426,7 +426,11 @@ class Finish:
         todo = [s for s in specs if not (s.label in kept and kept[s.label].params == dict(params))]
         fresh: dict[str, ValidationRecord] = {}
         if todo:
-            self._report(iteration, len(todo), f"transfer check on {len(todo)} test cases")
+            self._report(
+                iteration,
+                len(todo),
+                f"transfer check on {len(todo)} test case{'s' if len(todo) != 1 else ''}",
+            )
             ids = [f"transfer-{s.case.rig}-{s.case.speed_setting}" for s in todo]
             for spec, record in zip(todo, self._judged_runs(todo, ids, params), strict=True):
                 fresh[spec.label] = record
