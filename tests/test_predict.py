@@ -375,3 +375,20 @@ def test_the_wall_time_reads_in_seconds_then_minutes():
     assert re.fullmatch(r"(3[0-2]) s", elapsed_text(now - 30.4))
     assert elapsed_text(now - 119) in ("119 s", "120 s", "2.0 min")
     assert elapsed_text(now - 300) == "5.0 min"
+
+
+def test_a_mistake_inside_a_rig_file_names_its_key_there(study, tmp_path):
+    # the file is named, so the place is the key inside it, not the option --rig
+    q = study.parent / "Q.yaml"
+    bad = tmp_path / "Qbad.yaml"
+    bad.write_text(
+        q.read_text(encoding="utf-8")
+        .replace("name: Q", "name: Qbad", 1)
+        .replace("centre: [1.75, -0.1], length: 4.5", "centre: [1.75, -0.1], lenght: 4.5", 1),
+        encoding="utf-8",
+    )
+    argv = ["predict", str(study), "--rig", str(bad), "--consignment", "KPBW"]
+    result = runner.invoke(app, [*argv, "--out", str(tmp_path / "p"), "--executor", "serial"])
+    text = " ".join(result.output.split())
+    assert result.exit_code == 2 and "Traceback" not in result.output
+    assert f"{bad}: surfaces[0]: unknown key 'lenght'" in text

@@ -212,7 +212,10 @@ def candidate_designs(
             name = load_rig(str(Path(path).resolve())).name
         except ParcelfitError as exc:
             raise ParcelfitError(
-                exc.message, file=exc.file or str(path), where="--rig", fix=exc.fix
+                exc.message,
+                file=exc.file or str(path),
+                where=exc.where if exc.file else "--rig",  # inside the file: the key there
+                fix=exc.fix,
             ) from None
         if name in files or name in bundled_rig_names():
             raise ParcelfitError(

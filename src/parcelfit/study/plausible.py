@@ -135,7 +135,7 @@ def check_design(rig: str, consignment: str, setting: int) -> Design:
         raise ParcelfitError(
             exc.message,
             file=exc.file,
-            where="--rig",
+            where=exc.where if exc.file else "--rig",  # inside the file: the key there
             fix=exc.fix
             if exc.file
             else f"use a bundled rig ({', '.join(bundled_rig_names())}; `parcelfit rigs` lists "
@@ -147,7 +147,7 @@ def check_design(rig: str, consignment: str, setting: int) -> Design:
         raise ParcelfitError(
             exc.message,
             file=exc.file,
-            where="--consignment",
+            where=exc.where if exc.file else "--consignment",
             fix=exc.fix
             if exc.file
             else f"use a bundled type ({', '.join(bundled_consignment_names())}) or a "
