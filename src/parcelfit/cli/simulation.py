@@ -219,7 +219,8 @@ def simulate(
 
         turned = math.degrees(signed_rotation(result.run.trajectory))
         console.print(
-            f"rotation: {turned:+.2f} degrees (the heading at the end minus at the start)"
+            f"rotation: {turned:+.2f} degrees (the heading at the end minus at the start; "
+            "predict and the ensemble statistics use its size)"
         )
         console.print(Text(f"wrote {write_trajectory(result.run.trajectory, out)}"))
     if video is not None and frames is not None:
