@@ -387,7 +387,7 @@ def make_twin_dataset(
                 raise ParcelfitError(f"twin run {jobs[todo[k]].run_id} could not run: {out.error}")
             run, wall = out.value
             kept.put(todo[k], run, wall)
-            done(run, f"{wall:.1f} s")
+            done(run, f"simulated in {wall:.1f} s")
     out_cases = []
     for case in cases:
         rig = rig_named(case.rig)
