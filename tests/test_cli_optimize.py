@@ -7,6 +7,7 @@ import yaml
 from typer.testing import CliRunner
 
 from parcelfit.cli import app
+from parcelfit.errors import ParcelfitError
 
 from .helpers import write_study, write_study_store
 
@@ -76,7 +77,7 @@ def test_screen_cli(tmp_path):
     selection = yaml.safe_load((tmp_path / "o" / "selection.yaml").read_text())
     n = len(selection["significant"])
     assert set(selection["significant"]) <= set(selection["selected"])
-    assert f"(the 1 largest effects, as `select` asks; {n} of them significant" in " ".join(
+    assert f"(the largest effects, at most `select` of them; {n} of the 1 significant" in " ".join(
         result.output.split()
     )
     # not a terminal: one progress line per finished run
@@ -233,3 +234,18 @@ def test_a_study_whose_dataset_is_not_made_yet_names_the_study_file_and_key(tmp_
     assert result.exit_code == 2 and "Traceback" not in result.output
     assert f"{study}: reference.dataset:" in text and "holds no dataset.yaml" in text
     assert "parcelfit synth" in text and not (tmp_path / "out" / "study.sqlite").exists()
+
+
+def test_a_dataset_given_as_its_dataset_yaml_is_taken(tmp_path):
+    # load_dataset takes a folder or its dataset.yaml; the check before the start takes both
+    from parcelfit.study.outcome import check_datasets
+    from parcelfit.study.studyfile import load_study
+
+    study = write_study(tmp_path)
+    text = study.read_text().replace("dataset: data", "dataset: data/dataset.yaml")
+    assert text != study.read_text()
+    study.write_text(text)
+    check_datasets(load_study(study))  # no error
+    (tmp_path / "data" / "dataset.yaml").unlink()
+    with pytest.raises(ParcelfitError, match=r"data/dataset\.yaml does not exist"):
+        check_datasets(load_study(study))

@@ -679,7 +679,7 @@ CASES = {
         (
             "start.position",
             "start.position [-0.5, -1.2] lies off its surface 'strips' (-0.300 m along and "
-            "-0.520 m across from its centre; it spans +-0.5 m and +-0.2 m)",
+            "-0.520 m across from its centre; it spans -0.5 to +0.5 m along and +-0.2 m across)",
             "put the start over the start surface, or name the surface it lies on",
         ),
     ),
@@ -1010,3 +1010,41 @@ def test_every_catalogue_parameter_has_a_physical_range_holding_its_screening_ra
             assert hi <= 2, p.name
         for r in p.ranges.values():
             assert lo <= r.low < r.high <= hi and r.low <= r.default <= r.high, p.name
+
+
+def test_a_start_is_on_its_surface_as_far_as_its_longest_strip_reaches_and_within_1_cm():
+    import math
+    from pathlib import Path
+
+    import numpy as np
+
+    from parcelfit.sim.mujoco.rig import parse_rig
+
+    root = Path(__file__).resolve().parents[1]
+    file = root / "examples" / "e3-variants" / "E3-staggered.yaml"
+    doc = yaml.safe_load(file.read_text())
+    rig = parse_rig(doc, str(file))
+    strips = next(s for s in rig.surfaces if s.name == rig.start.surface)
+    assert strips.end_heading is not None  # strips of different lengths
+    u = np.array([math.cos(math.radians(strips.heading)), math.sin(math.radians(strips.heading))])
+    n = np.array([-u[1], u[0]])
+    centre = np.asarray(strips.centre)
+    longest = max(strips.parts(), key=lambda p: float((p[1] - centre) @ u) + p[2] / 2)
+    end = longest[1] + u * longest[2] / 2  # the downstream end of the longest strip
+    doc["start"].pop("align", None)
+    for offset, ok in ((-0.1, True), (0.009, True), (0.011, False)):
+        doc["start"]["position"] = [float(v) for v in end + offset * u]
+        if ok:
+            parse_rig(doc, str(file))
+        else:
+            with pytest.raises(ParcelfitError, match="lies off its surface"):
+                parse_rig(doc, str(file))
+    # across: within 1 cm beyond the side, not more
+    side = centre + n * strips.width / 2
+    for offset, ok in ((0.009, True), (0.011, False)):
+        doc["start"]["position"] = [float(v) for v in side + offset * n]
+        if ok:
+            parse_rig(doc, str(file))
+        else:
+            with pytest.raises(ParcelfitError, match="lies off its surface"):
+                parse_rig(doc, str(file))

@@ -191,7 +191,7 @@ def test_the_seed_decides(study, tmp_path):
         (["--rig", "E9"], "--rig: unknown rig 'E9'"),
         (["--consignment", "XY"], "--consignment: unknown consignment type 'XY'"),
         (["--setting", "3"], "--setting: rig E3 has no speed setting 3"),
-        (["--rig", "missing.yaml"], "missing.yaml"),
+        (["--rig", "missing.yaml"], "missing.yaml: --rig: file not found"),
     ],
 )
 def test_bad_design_exits_2_with_a_clear_message(study, tmp_path, args, message):
@@ -287,7 +287,7 @@ def test_an_unresolved_effect_is_not_called_harmless_and_a_negligible_one_is():
     assert 3 * a.se < abs(a.effect)  # large against its error, below the threshold
     said = next(s for s in sentences if s.startswith("a "))
     assert "not resolved" in said and "does not matter" not in said and "--sets" in said
-    assert f"counts from {a.threshold:.1f} standard errors" in said
+    assert f"with 6 parameter sets an effect counts from {a.threshold:.1f} standard errors" in said
     # nothing moves anything by more than a few microseconds: harmless, and said so
     tiny = _effect_rows(sets, 2, lambda s, j: 1.0 + 1e-6 * s["a"] + 1e-7 * j)
     _, effects, sentences = summarise_prediction(ident, sets, [0, 1], tiny)
@@ -331,6 +331,11 @@ def test_a_simulator_that_cannot_place_its_runs_predicts_and_designs_with_one_pl
     assert re.search(r" in \d+ s \(this run's wall time\)$", said), said
     runs = pd.read_csv(tmp_path / "p" / "runs.csv")
     assert len(runs) == 5 and (runs["status"] == "ok").all()  # one run per set
+    # one placement per set: no split of the spread, and a note saying why
+    doc = json.loads((tmp_path / "p" / "prediction.json").read_text())
+    assert any(n.startswith("one placement per parameter set") for n in doc["notes"])
+    summary = pd.read_csv(tmp_path / "p" / "summary.csv")
+    assert summary["parameter_share"].isna().all() and summary["placement_share"].isna().all()
     result = runner.invoke(
         app, ["design", str(study), "--rig", str(q), *common, "--out", str(tmp_path / "d")]
     )

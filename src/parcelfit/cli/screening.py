@@ -80,8 +80,8 @@ def print_screen(stages: Any, selection: dict[str, Any]) -> None:
     console.print(
         f"[bold]selected for calibration:[/] {', '.join(chosen) or 'none'}"
         + (
-            f" (the {len(chosen)} largest effects, as `select` asks; "
-            f"{len(significant)} of them significant"
+            " (the largest effects, at most `select` of them; "
+            f"{len(significant)} of the {len(chosen)} significant"
             + (f": {', '.join(significant)})" if significant else ")")
             if chosen
             else ""

@@ -214,7 +214,7 @@ def candidate_designs(
             raise ParcelfitError(
                 exc.message,
                 file=exc.file or str(path),
-                where=exc.where if exc.file else "--rig",  # inside the file: the key there
+                where=exc.where or "--rig",  # a mistake inside the file: the key there
                 fix=exc.fix,
             ) from None
         if name in files or name in bundled_rig_names():

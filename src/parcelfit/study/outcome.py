@@ -130,9 +130,12 @@ def check_datasets(study: Study) -> None:
     a dataset.yaml, naming the study file and the case's key (a dataset not made yet, or a
     path written wrong), before anything starts."""
     for spec in (*study.cases, *study.validation_cases, *study.transfer):
-        if not (spec.dataset / DATASET_FILE).is_file():
+        given = spec.dataset  # a folder, or its dataset.yaml itself (as load_dataset takes)
+        if not (given.is_file() or (given / DATASET_FILE).is_file()):
             raise ParcelfitError(
-                f"{spec.label}: its dataset {spec.dataset} holds no {DATASET_FILE}",
+                f"{spec.label}: its dataset file {given} does not exist"
+                if given.name == DATASET_FILE
+                else f"{spec.label}: its dataset {given} holds no {DATASET_FILE}",
                 file=study.path,
                 where=f"{spec.where}.dataset" if spec.where else "dataset",
                 fix="make the dataset first (tracked runs: parcelfit track-all; a SYNTHETIC "

@@ -135,7 +135,7 @@ def check_design(rig: str, consignment: str, setting: int) -> Design:
         raise ParcelfitError(
             exc.message,
             file=exc.file,
-            where=exc.where if exc.file else "--rig",  # inside the file: the key there
+            where=exc.where or "--rig",  # a mistake inside the file: the key there
             fix=exc.fix
             if exc.file
             else f"use a bundled rig ({', '.join(bundled_rig_names())}; `parcelfit rigs` lists "
@@ -147,7 +147,7 @@ def check_design(rig: str, consignment: str, setting: int) -> Design:
         raise ParcelfitError(
             exc.message,
             file=exc.file,
-            where=exc.where if exc.file else "--consignment",
+            where=exc.where or "--consignment",
             fix=exc.fix
             if exc.file
             else f"use a bundled type ({', '.join(bundled_consignment_names())}) or a "

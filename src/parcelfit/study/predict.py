@@ -30,8 +30,9 @@ undetermined and moves the transit time by 40 ms here: run `parcelfit design` to
 experiment that fixes it" (among its resolved effects that are not negligible). A parameter
 all of whose effects are negligible (`Effect.negligible`: |effect| + threshold x SE below the
 measurement floor `spread.FLOOR`) is said not to matter for this design; one with no resolved
-effect but some that are not negligible is said not to be resolved, with its clearest effect
-(the largest t) and the advice to draw more sets.
+effect that is not negligible, but some effect that is not negligible, is said not to be
+resolved, with its clearest such effect (the largest t), the sets its regression had and the
+advice to draw more sets.
 
 **Drives.** A placement is also the moment the run happens: each drive of the rig runs at its
 mean speed times 1 + U(-D, D), drawn from the placement seed (`Rig.speed_factors`; method.md:
@@ -354,6 +355,7 @@ def summarise_prediction(
     the design) widen each quantity's band to a real run's."""
     n, k = len(sets), len(seeds)
     summaries, effects = [], []
+    with_mean: dict[str, int] = {}  # per quantity, the sets with a mean (the regression's)
     names = ident.names
     intervals = [p.interval for p in ident.parameters]
     X = np.array([[s[name] for name in names] for s in sets], float)
@@ -381,7 +383,8 @@ def summarise_prediction(
             means = np.nanmean(np.where(np.isfinite(grid), grid, np.nan), axis=1)
         eff, se = effects_of(means, X, intervals)
         # the sets with a mean of q are the regression's
-        threshold = t_threshold(int(np.isfinite(means).sum()), len(names), len(QUANTITIES))
+        with_mean[q] = int(np.isfinite(means).sum())
+        threshold = t_threshold(with_mean[q], len(names), len(QUANTITIES))
         for j, p in enumerate(ident.parameters):
             effects.append(
                 Effect(
@@ -422,8 +425,9 @@ def summarise_prediction(
             open_ = [e for e in own if not e.negligible]
             largest = max(open_, key=lambda e: abs(e.effect) / e.se if e.se > 0 else 0.0)
             sentences.append(
-                f"{p.name} {words}, and what it does here is not resolved: with these "
-                f"{len(sets)} parameter sets an effect counts from {largest.threshold:.1f} "
+                f"{p.name} {words}, and what it does here is not resolved: with "
+                f"{with_mean[largest.quantity]} parameter sets an effect counts from "
+                f"{largest.threshold:.1f} "
                 f"standard errors, and its clearest, on the "
                 f"{quantity_words(largest.quantity)}, is "
                 f"{shown_value(largest.quantity, abs(largest.effect), 2)} +- "
@@ -696,7 +700,7 @@ def predict(
             {
                 str(c.dataset)
                 for c in (*inputs.study.cases, *inputs.study.validation_cases)
-                if is_synthetic(c.dataset)
+                if is_synthetic(c.dataset.parent if c.dataset.is_file() else c.dataset)
             }
         )
         if synthetic:

@@ -617,18 +617,46 @@ class RigFile(FileModel):
         dx = self.start.position[0] - below.centre[0]
         dy = self.start.position[1] - below.centre[1]
         along, across = dx * math.cos(a) + dy * math.sin(a), -dx * math.sin(a) + dy * math.cos(a)
+        # along the heading the surface reaches as far as its longest strip does (strips whose
+        # ends lie on a line at end_heading differ in length and are shifted along)
+        ahead = behind = below.length / 2
+        if below.type == "strips" and below.end_heading is not None:
+            u = np.array([math.cos(a), math.sin(a)])
+            centre = np.asarray(below.centre, dtype=float)
+            for _, c, length, _ in _surface(below).parts():
+                mid = float((c - centre) @ u)
+                ahead, behind = max(ahead, mid + length / 2), max(behind, length / 2 - mid)
         if (
-            abs(along) > below.length / 2 + START_OFF_SURFACE
+            not -behind - START_OFF_SURFACE <= along <= ahead + START_OFF_SURFACE
             or abs(across) > below.width / 2 + START_OFF_SURFACE
         ):
             raise ParcelfitError(
                 f"start.position {list(self.start.position)} lies off its surface "
                 f"{shown(below.name)} ({along:+.3f} m along and {across:+.3f} m across from its "
-                f"centre; it spans +-{below.length / 2:g} m and +-{below.width / 2:g} m)",
+                f"centre; it spans {-behind:+.3g} to {ahead:+.3g} m along and "
+                f"+-{below.width / 2:.3g} m across)",
                 where="start.position",
                 fix="put the start over the start surface, or name the surface it lies on",
             )
         return self
+
+
+def _surface(s: SurfaceEntry) -> Surface:
+    """The `Surface` of a checked ``surfaces`` entry."""
+    return Surface(
+        name=s.name,
+        type=s.type,
+        material=s.material,
+        centre=s.centre,
+        length=s.length,
+        width=s.width,
+        heading=s.heading,
+        top=s.top,
+        drive=s.drive,
+        extra=s.extra,
+        nose_radius=s.nose_radius,
+        end_heading=s.end_heading,
+    )
 
 
 def parse_rig(doc: Any, file: str) -> Rig:
@@ -641,23 +669,7 @@ def parse_rig(doc: Any, file: str) -> Rig:
         name=f.name,
         description=f.description,
         speeds={setting: dict(drives) for setting, drives in f.speeds.items()},
-        surfaces=tuple(
-            Surface(
-                name=s.name,
-                type=s.type,
-                material=s.material,
-                centre=s.centre,
-                length=s.length,
-                width=s.width,
-                heading=s.heading,
-                top=s.top,
-                drive=s.drive,
-                extra=s.extra,
-                nose_radius=s.nose_radius,
-                end_heading=s.end_heading,
-            )
-            for s in f.surfaces
-        ),
+        surfaces=tuple(_surface(s) for s in f.surfaces),
         walls=tuple(
             Wall(
                 name=w.name,
