@@ -972,3 +972,21 @@ def test_a_run_tracked_under_a_rig_no_longer_given_is_reported_and_the_rest_go_o
     summary = track_all(folder, tags, out, regions={"E3": ((), 0.0)})  # without it
     assert list(summary["failed"]) == ["E3-far-KPBW-1-07.quality.json"]
     assert [c.rig for c in load_dataset(out).cases] == ["E3"]
+
+
+def test_a_beam_broken_already_at_the_first_sample_has_no_crossing_time():
+    # a parcel 0.2 m long moving at 1 m/s along x, a beam across x = 0
+    from parcelfit.runs import Barrier
+    from parcelfit.tracking.barriers import broken_at_start
+
+    beam = Barrier("LS1", (0.0, -0.5), (0.0, 0.5))
+    t = np.arange(0.0, 0.5, 1 / 60)
+    outline = (0.2, 0.1)
+    before = Trajectory(t, -0.3 + t, np.zeros_like(t), np.zeros_like(t))
+    # the leading edge (centre + 0.1 m) reaches the beam at t = 0.2 s
+    assert crossing_time(before, beam, outline) == pytest.approx(0.2, abs=1e-9)
+    assert not broken_at_start(before, beam, outline)
+    # the same motion seen from t = 0.25 s: the beam was broken before the first sample
+    late = Trajectory(t, -0.05 + t, np.zeros_like(t), np.zeros_like(t))
+    assert broken_at_start(late, beam, outline)
+    assert crossing_time(late, beam, outline) is None  # not t[0], which would shorten a transit

@@ -6,7 +6,9 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
+from rich.markup import escape
 from rich.table import Table
+from rich.text import Text
 
 from parcelfit.cli.options import at_most
 from parcelfit.cli.output import console, frame_bar
@@ -56,7 +58,7 @@ def track(
         "transit time [s]",
         "file",
     ):
-        table.add_column(col)
+        table.add_column(escape(col))  # units in [] are text, not Rich markup
     for tag_id, t in result.tags.items():
         table.add_row(
             str(tag_id),
@@ -67,6 +69,17 @@ def track(
             "-" if t.trajectory is None else f"{video.stem}-tag{tag_id}.csv",
         )
     console.print(table)
+    for tag_id, t in result.tags.items():
+        early = t.quality.get("barriers_broken_at_start") or []
+        if early:
+            console.print(
+                Text(
+                    f"tag {tag_id}: {', '.join(early)} already broken in the first frame with "
+                    "the tag: crossed before the video shows it, so its time is not known and "
+                    "the transit time is left out (start the video earlier)",
+                    style="yellow",
+                )
+            )
     rp = q["reference_reprojection_px"]
     console.print(
         f"reference tags: reprojection error mean {rp['mean']:.2f} px, max {rp['max']:.2f} px; "

@@ -9,7 +9,9 @@ centre point without an outline) breaks the beam when its leading extent
 
 first becomes >= 0 while the outline overlaps the segment's extent along d. The crossing time is
 interpolated linearly between the two samples around the sign change (sub-frame). Transit time =
-crossing of the last barrier - crossing of the first.
+crossing of the last barrier - crossing of the first. A beam already broken at the first sample
+was crossed before the trajectory began: its crossing time is not known (None), and neither is
+the transit time.
 """
 
 from __future__ import annotations
@@ -41,10 +43,11 @@ def outline_corners(
     return out
 
 
-def crossing_time(
+def _breaks(
     traj: Trajectory, barrier: Barrier, outline: tuple[float, float] | None
-) -> float | None:
-    """First time [s] the outline breaks the barrier (None if it never does)."""
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per sample, whether the outline breaks the barrier, and its leading extent e(t) [m]
+    (module docstring)."""
     a, b = np.asarray(barrier.start), np.asarray(barrier.end)
     d = b - a
     length = float(np.hypot(*d))
@@ -60,12 +63,30 @@ def crossing_time(
         lead = (rel @ n).max(axis=1)
     along = rel @ u
     overlap = (along.max(axis=1) >= 0) & (along.min(axis=1) <= length)
-    hit = np.flatnonzero((lead >= 0) & overlap)
+    return (lead >= 0) & overlap, lead
+
+
+def broken_at_start(
+    traj: Trajectory, barrier: Barrier, outline: tuple[float, float] | None
+) -> bool:
+    """Whether the outline already breaks the barrier at the trajectory's first sample (it
+    crossed before the trajectory began)."""
+    return bool(len(traj.t)) and bool(_breaks(traj, barrier, outline)[0][0])
+
+
+def crossing_time(
+    traj: Trajectory, barrier: Barrier, outline: tuple[float, float] | None
+) -> float | None:
+    """First time [s] the outline breaks the barrier (None if it never does, or if it breaks it
+    already at the first sample: it crossed before the trajectory began, at a time not seen, and
+    a transit time from it would be too short; `broken_at_start` tells the two apart)."""
+    broken, lead = _breaks(traj, barrier, outline)
+    hit = np.flatnonzero(broken)
     if len(hit) == 0:
         return None
     k = int(hit[0])
     if k == 0:
-        return float(traj.t[0])
+        return None
     e0, e1 = lead[k - 1], lead[k]
     frac = 0.0 if e1 == e0 else float(np.clip(-e0 / (e1 - e0), 0, 1))
     return float(traj.t[k - 1] + frac * (traj.t[k] - traj.t[k - 1]))

@@ -40,7 +40,7 @@ import numpy as np
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import Trajectory
 from parcelfit.runs.io import MAX_SAMPLE_INTERVAL_S, MIN_SAMPLE_INTERVAL_S
-from parcelfit.tracking.barriers import barrier_times
+from parcelfit.tracking.barriers import barrier_times, broken_at_start
 from parcelfit.tracking.detect import TagDetector, _side
 from parcelfit.tracking.geometry import (
     PlaneMapper,
@@ -396,8 +396,12 @@ def track_video(
         span = _frames_in_view(before, centres[tag_id], size)
         crossings: dict[str, float | None] = {}
         transit = None
+        # beams the parcel already broke at its first sample: crossed before it was seen
+        broken_first: list[str] = []
         if traj is not None and tag_map.barriers:
-            crossings = barrier_times(traj, tag_map.barriers, tag_map.parcel_tags[tag_id].outline)
+            outline = tag_map.parcel_tags[tag_id].outline
+            crossings = barrier_times(traj, tag_map.barriers, outline)
+            broken_first = [b.name for b in tag_map.barriers if broken_at_start(traj, b, outline)]
             a, b = crossings[tag_map.barriers[0].name], crossings[tag_map.barriers[-1].name]
             if len(tag_map.barriers) >= 2 and a is not None and b is not None:
                 transit = b - a
@@ -432,6 +436,8 @@ def track_video(
                 # coverage: frames measured (detected or fitted) of the frames in view
                 "detection_rate": float(measured.sum() / span) if span else 0.0,
                 "gaps": gaps,
+                # light barriers already broken at the first sample (crossing time not known)
+                "barriers_broken_at_start": broken_first,
                 "interpolated_frames": int(sum(g["frames"] for g in gaps if g["interpolated"])),
                 "missing_frames": int(sum(g["frames"] for g in gaps if not g["interpolated"])),
             },
