@@ -734,7 +734,8 @@ def test_a_solver_that_fails_at_once_is_failed_at_once_with_its_message(tmp_path
     assert result.status is SimStatus.FAILED  # not a timeout after 30 s
     assert elapsed < 1.0
     assert result.diagnostics["message"] == (
-        "the solver exited with status 1: solver: licence server not reachable"
+        "the solver exited with status 1: solver: licence server not reachable "
+        f"(its output: parcelfit-solver.stderr in {result.diagnostics['workdir']})"
     )
     assert result.diagnostics["output_tail"] == "solver: licence server not reachable"
     assert [p for p in pids if _running(p)] == []

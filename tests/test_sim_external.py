@@ -51,7 +51,13 @@ def test_missing_output_and_missing_program(sim):
     writes_elsewhere = (*sim.solver.command[:3], "elsewhere.csv")
     broken = ExternalSimulator(replace(sim.solver, command=writes_elsewhere), workroot=sim.workroot)
     res = broken.run(defaults_si("rigid"), CASE)
-    assert res.status is SimStatus.FAILED and "unusable solver output" in res.diagnostics["message"]
+    assert res.status is SimStatus.FAILED
+    # the missing file named as the solver description calls it, with the folder it is missing in
+    assert res.diagnostics["message"] == (
+        f"the solver exited 0 but wrote no {sim.solver.output_file} in its work folder "
+        f"{res.diagnostics['workdir']} (output_file in the solver description; its own output "
+        "is in parcelfit-solver.stdout and parcelfit-solver.stderr there)"
+    )
     absent = ExternalSimulator(
         replace(sim.solver, command=("no-such-solver-binary",)), workroot=sim.workroot
     )
@@ -99,10 +105,11 @@ def test_output_goes_to_files_stdin_is_empty_and_a_signal_is_named(sim):
     )
     res = killed.run(defaults_si("rigid"), CASE)
     assert res.status is SimStatus.FAILED
-    assert res.diagnostics["message"] == (
-        "the solver was killed by signal SIGTERM: solver: out of memory"
-    )
     workdir = Path(res.diagnostics["workdir"])
+    assert res.diagnostics["message"] == (
+        "the solver was killed by signal SIGTERM: solver: out of memory "
+        f"(its output: parcelfit-solver.stderr in {workdir})"
+    )
     assert (workdir / "parcelfit-solver.stdout").read_text() == "stdin: ''\n"
     assert (workdir / "parcelfit-solver.stderr").read_text() == "solver: out of memory\n"
     clash = ExternalSimulator(
@@ -110,3 +117,64 @@ def test_output_goes_to_files_stdin_is_empty_and_a_signal_is_named(sim):
     )
     with pytest.raises(ParcelfitError, match=r"may not be named parcelfit-solver\.stderr or"):
         clash.run(defaults_si("rigid"), CASE)
+
+
+def _copy_solver(tmp_path: Path, template: str | None = None, command=None) -> Path:
+    import shutil
+
+    import yaml
+
+    folder = tmp_path / "solver"
+    shutil.copytree(SOLVER.parent, folder)
+    if template is not None:
+        (folder / "params.tmpl").write_text(template)
+    if command is not None:
+        doc = yaml.safe_load((folder / "solver.yaml").read_text())
+        doc["command"] = command
+        (folder / "solver.yaml").write_text(yaml.safe_dump(doc))
+    return folder / "solver.yaml"
+
+
+def test_an_unknown_placeholder_is_refused_when_the_description_is_read(tmp_path):
+    bad = _copy_solver(tmp_path, template="x = ${k_MePaa}\n")
+    with pytest.raises(ParcelfitError) as err:
+        load_external_solver(bad)
+    text = str(err.value)
+    assert text.startswith(f"{bad}: template: the parameter template 'params.tmpl' uses the")
+    assert "unknown placeholder ${k_MePaa}" in text and "catalogue parameter" in text
+    command = _copy_solver(tmp_path / "c", command=["python3", "${solver_dirr}/fake_solver.py"])
+    with pytest.raises(ParcelfitError, match=r"command: .*unknown placeholder \$\{solver_dirr\}"):
+        load_external_solver(command)
+
+
+def test_a_catalogue_parameter_neither_fitted_nor_fixed_takes_its_default(tmp_path):
+    from parcelfit.sim.params import parameter
+
+    solver = _copy_solver(tmp_path, template="k = ${k_MePa}\nE = ${E_Co}\nmu = ${mu_d_BePa}\n")
+    sim = ExternalSimulator(load_external_solver(solver), workroot=tmp_path / "runs")
+    res = sim.run({"mu_d_BePa": 0.5}, CASE)  # the study fits mu_d_BePa alone
+    rendered = (Path(res.diagnostics["workdir"]) / "params.txt").read_text().splitlines()
+    k = parameter("k_MePa")
+    assert rendered[0] == f"k = {k.to_si(k.range_for('rigid').default)}"
+    assert rendered[1].startswith("E = ") and rendered[2] == "mu = 0.5"
+
+
+def test_a_transit_file_that_is_not_a_number_is_named(tmp_path):
+    import sys
+
+    writes = (
+        "import sys\n"
+        "rows = ['t,x,y,theta'] + [f'{k / 60},{k / 100},0,0' for k in range(30)]\n"
+        "open(sys.argv[1], 'w').write('\\n'.join(rows) + '\\n')\n"
+        "open('transit.txt', 'w').write('1.2 s\\n')\n"
+    )
+    solver = _copy_solver(tmp_path, command=[sys.executable, "-c", writes, "${output_file}"])
+    res = ExternalSimulator(load_external_solver(solver), workroot=tmp_path / "runs").run(
+        {"mu_d_BePa": 0.5}, CASE
+    )
+    assert res.status is SimStatus.FAILED
+    transit = Path(res.diagnostics["workdir"]) / "transit.txt"
+    assert res.diagnostics["message"] == (
+        f"unusable solver output: {transit}: its transit file holds '1.2 s', not a number of "
+        "seconds Fix: write the transit time in seconds alone, e.g. 1.234"
+    )

@@ -12,12 +12,14 @@ A solver description (YAML)::
     timeout: 3600                # wall-clock limit [s]
 
 The template and every command argument may use ``${name}`` placeholders: each catalogue
-parameter in SI units (``${mu_d_BePa}``), ``${rig}``, ``${consignment}``, ``${speed_setting}``,
-``${params_file}``, ``${output_file}``, ``${workdir}``, ``${solver_dir}`` (the folder of the
-description file). A placeholder that is not known, or a value holding a line break or another
-control character (which could add lines to the parameter file), is an error before anything
-runs. Each run gets its own work folder; the command runs there, is never
-passed through a shell, reads nothing (stdin is empty) and writes its output to
+parameter in SI units (``${mu_d_BePa}``; one the study neither fits nor fixes takes its
+catalogue default, a soft content's default for the parameters only a soft content has),
+``${rig}``, ``${consignment}``, ``${speed_setting}``, ``${params_file}``, ``${output_file}``,
+``${workdir}``, ``${solver_dir}`` (the folder of the description file). A placeholder that is
+not known is an error when the description is read (`load_external_solver`), before anything
+runs; a value holding a line break or another control character (which could add lines to the
+parameter file) stops the run it would be written into. Each run gets its own work folder; the
+command runs there, is never passed through a shell, reads nothing (stdin is empty) and writes its output to
 ``parcelfit-solver.stdout`` and ``parcelfit-solver.stderr`` there. The run ends when the command
 exits or at the timeout, and then every process the command started is killed, on Linux also
 those that started their own session (`parcelfit.sim.lifetime.run_command`). Exit status 0 and
@@ -47,6 +49,7 @@ from parcelfit.config import (
 from parcelfit.errors import ParcelfitError, shown
 from parcelfit.runs import Run, TestCase, read_trajectory
 from parcelfit.sim.lifetime import STDERR_FILE, STDOUT_FILE, run_command
+from parcelfit.sim.params import defaults_si
 from parcelfit.sim.protocol import SimResult, SimStatus
 
 HELP = {  # every key of a solver description, shown in docs/reference/files.md
@@ -103,7 +106,7 @@ def load_external_solver(path: str | Path) -> ExternalSolver:
             fix="give the template's path relative to this file",
         )
     transit = doc.get("transit_file")
-    return ExternalSolver(
+    solver = ExternalSolver(
         name=get_str(doc, "name", file=path, where=""),
         command=tuple(str(a) for a in command),
         template=template_path.read_text(encoding="utf-8"),
@@ -116,6 +119,49 @@ def load_external_solver(path: str | Path) -> ExternalSolver:
         or 3600.0,
         solver_dir=str(path.parent.resolve()),
     )
+    # every placeholder is checked now, before a study starts, not at the first run
+    for text, what, where in (
+        (solver.template, f"the parameter template {template_path.name!r}", "template"),
+        *((a, f"command argument {shown(a)}", "command") for a in solver.command),
+    ):
+        try:
+            string.Template(text).substitute(
+                {name: "" for name in (*PLACEHOLDERS, *catalogue_defaults())}
+            )
+        except KeyError as exc:
+            raise ParcelfitError(
+                f"{what} uses the unknown placeholder ${{{exc.args[0]}}}",
+                file=path,
+                where=where,
+                fix="use a catalogue parameter (parcelfit params) or one of "
+                + ", ".join(PLACEHOLDERS),
+            ) from None
+        except ValueError as exc:
+            raise ParcelfitError(
+                f"{what} has a malformed placeholder ({exc})",
+                file=path,
+                where=where,
+                fix="write placeholders as ${name}",
+            ) from None
+    return solver
+
+
+# the placeholders beside the catalogue's parameters (the module docstring)
+PLACEHOLDERS = (
+    "rig",
+    "consignment",
+    "speed_setting",
+    "workdir",
+    "solver_dir",
+    "params_file",
+    "output_file",
+)
+
+
+def catalogue_defaults() -> dict[str, float]:
+    """Every catalogue parameter's default [SI], those of a soft content's included: what a
+    template's placeholder of a parameter the study neither fits nor fixes is filled with."""
+    return {**defaults_si("soft"), **defaults_si("rigid")}
 
 
 # characters a name must not hold: control characters (Cc: line feed, carriage return, U+0085,
@@ -202,6 +248,7 @@ class ExternalSimulator:
             self.workroot.mkdir(parents=True, exist_ok=True)
         workdir = Path(tempfile.mkdtemp(prefix=f"{self.solver.name}-", dir=self.workroot))
         values: dict[str, Any] = {
+            **catalogue_defaults(),
             **params,
             "rig": case.rig,
             "consignment": case.consignment,
@@ -233,16 +280,35 @@ class ExternalSimulator:
                 how = f"was killed by signal {_signal_name(-proc.returncode)}"
             else:
                 how = f"exited with status {proc.returncode}"
-            diagnostics["message"] = f"the solver {how}" + (f": {said}" if said else "")
+            diagnostics["message"] = (
+                f"the solver {how}"
+                + (f": {said}" if said else "")
+                + f" (its output: {STDERR_FILE} in {workdir})"
+            )
+            return SimResult(None, SimStatus.FAILED, time.perf_counter() - t0, diagnostics)
+        output = workdir / self.solver.output_file
+        if not output.is_file():
+            diagnostics["message"] = (
+                f"the solver exited 0 but wrote no {self.solver.output_file} in its work folder "
+                f"{workdir} (output_file in the solver description; its own output is in "
+                f"{STDOUT_FILE} and {STDERR_FILE} there)"
+            )
             return SimResult(None, SimStatus.FAILED, time.perf_counter() - t0, diagnostics)
         try:
-            traj = read_trajectory(workdir / self.solver.output_file)
+            traj = read_trajectory(output)
             transit = None
             transit_path = workdir / self.solver.transit_file if self.solver.transit_file else None
             # no file, or an empty one: the parcel crossed no second light barrier
             if transit_path is not None and transit_path.is_file():
                 text = transit_path.read_text().strip()
-                transit = float(text) if text else None
+                try:
+                    transit = float(text) if text else None
+                except ValueError:
+                    raise ParcelfitError(
+                        f"its transit file holds {shown(text)}, not a number of seconds",
+                        file=transit_path,
+                        fix="write the transit time in seconds alone, e.g. 1.234",
+                    ) from None
             run = Run(
                 run_id or f"ext-{case.rig}-{case.consignment}-{case.speed_setting}",
                 case,
