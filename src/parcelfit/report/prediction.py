@@ -153,7 +153,10 @@ def terminal_table(prediction: Prediction) -> Table:
         "from parameters",
         "from placements",
     ):
-        table.add_column(escape(col), justify="left" if col == "quantity" else "right")
+        # narrow terminals and logs fold a header or cell, they never cut it off
+        table.add_column(
+            escape(col), justify="left" if col == "quantity" else "right", overflow="fold"
+        )
     for r in view["summary"]:
         table.add_row(
             r["quantity"],
@@ -184,7 +187,13 @@ def design_tables(result: DesignResult, top: int = 5) -> list[Table]:
             title_justify="left",
         )
         for col in ("rank", "candidate", "signal/noise", "via", "interval left", "runs needed"):
-            t.add_column(escape(col), justify="left" if col in ("candidate", "via") else "right")
+            # a candidate's name ends in its speed setting: never cut it off
+            t.add_column(
+                escape(col),
+                justify="left" if col in ("candidate", "via") else "right",
+                no_wrap=col == "candidate",
+                overflow="fold",
+            )
         for r in mine.itertuples(index=False):
             t.add_row(
                 str(r.rank),
@@ -206,6 +215,7 @@ def design_tables(result: DesignResult, top: int = 5) -> list[Table]:
         t.add_column(
             escape(col),
             justify="right" if col in ("rank", "interval left", "with the ones above") else "left",
+            no_wrap=col == "candidate",
         )
     for r in ranking.itertuples(index=False):
         t.add_row(
