@@ -41,6 +41,8 @@ def test_a_candidate_that_moves_two_parameters_alike_tells_neither():
 
 
 def test_the_candidate_built_to_depend_on_a_parameter_ranks_first_for_it(tmp_path):
+    from parcelfit.study.design import few_sets_notes
+
     study = write_finished_study(tmp_path)
     q = write_rig_q(tmp_path)  # the analytic simulator turns the parcel by E_Pa on rig Q only
     out = tmp_path / "d"
@@ -68,6 +70,17 @@ def test_the_candidate_built_to_depend_on_a_parameter_ranks_first_for_it(tmp_pat
     assert ranking.iloc[0]["with_above"] == ranking.iloc[0]["mean_share"]
     assert ranking.iloc[1]["with_above"] <= ranking.iloc[0]["with_above"]
     assert "E_Pa (undetermined): the experiments that narrow it most" in result.output
+    # 8 sets for 3 calibrated parameters are enough for no note; 6 are not, and design says so
+    assert json.loads((out / "design.json").read_text())["notes"] == []
+    few = [*argv[:4], "--sets", "6", *argv[6:-1], str(tmp_path / "d6")]
+    result = runner.invoke(app, few)
+    assert result.exit_code == 0, result.output
+    assert json.loads((tmp_path / "d6" / "design.json").read_text())["notes"] == few_sets_notes(
+        6, 3
+    )
+    assert "note: with 6 parameter sets and 3 calibrated parameters" in " ".join(
+        result.output.split()
+    )
     again = runner.invoke(app, argv)  # resumes: nothing left to simulate, the same tables
     assert again.exit_code == 0
     pd.testing.assert_frame_equal(pd.read_csv(out / "candidates.csv"), cands)
@@ -323,3 +336,13 @@ def test_design_of_an_ensemble_study_counts_the_fit_s_own_placements(tmp_path):
     finally:
         store.close()
     assert seeds[1] == -seeds[0] and seeds[3] == -seeds[2] and seeds[0] > 0
+
+
+def test_too_few_sets_for_small_effects_are_said_to_be_so():
+    from parcelfit.study.design import few_sets_notes
+    from parcelfit.study.information import resolved_t
+
+    assert few_sets_notes(7, 2) == [] and few_sets_notes(20, 4) == []
+    (note,) = few_sets_notes(5, 2)
+    assert f"counts only from {resolved_t(5, 2):.1f} standard errors" in note
+    assert "give --sets 7 or more" in note

@@ -224,6 +224,8 @@ def design(
         return
     for table in design_tables(result):
         console.print(table)
+    for line in result.notes:
+        console.print(Text(f"note: {line}", style="yellow"), highlight=False)
     console.print(
         Text(
             f"wrote {result.out} (candidates, ranking, design.json) in {elapsed_text(started)} "

@@ -282,6 +282,7 @@ class DesignResult:
     fitted: list[str] = field(default_factory=list)
     real_scatter: dict[str, float] = field(default_factory=dict)
     fit_scatter: bool = False
+    notes: list[str] = field(default_factory=list)
 
     def candidates_table(self) -> pd.DataFrame:
         """One row per candidate and open parameter, ranked per parameter (docs/data.md)."""
@@ -724,11 +725,26 @@ def rank_experiments(
             [d.label for d, _, _ in fitted],
             dict(real),
             fit_scatter,
+            few_sets_notes(sets, len(ident.names)),
         )
         write_design(result, out_dir, table_format)
     finally:
         lock.release()
     return result
+
+
+def few_sets_notes(sets: int, n_parameters: int) -> list[str]:
+    """A note when ``sets`` leave the effects' regression so few degrees of freedom that only
+    large effects count (fewer than the parameters + 5 sets): a candidate scored 0 may still
+    act."""
+    if sets >= n_parameters + 5:
+        return []
+    t = resolved_t(sets, n_parameters)
+    return [
+        f"with {sets} parameter sets and {n_parameters} calibrated parameters an effect counts "
+        f"only from {t:.1f} standard errors: a signal/noise of 0.0 may hide an effect, and the "
+        f"ranking is rough (give --sets {n_parameters + 5} or more; the default is 20)"
+    ]
 
 
 def _grids(rows: Sequence[Any], c: int, n_sets: int, n_seeds: int) -> dict[str, np.ndarray]:
@@ -792,6 +808,7 @@ def write_design(result: DesignResult, out: Path, table_format: str = "csv") -> 
         "fitted": result.fitted,
         "real_scatter": result.real_scatter,
         "fit_scatter": result.fit_scatter,
+        "notes": result.notes,
         "candidates": records(tables[0][1]),
         "ranking": records(tables[1][1]),
     }
