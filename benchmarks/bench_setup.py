@@ -71,7 +71,7 @@ def main() -> None:
     )
     print(f"installed: {installed(('mujoco', 'numpy', 'scipy', 'scikit-learn'))}", flush=True)
     parcelfit = [sys.executable, "-m", "parcelfit"]
-    env = dict(os.environ)
+    env = {**os.environ, "COLUMNS": "200"}  # the commands' lines unbroken in their logs
     runs = [("parcelfit demo --quick", [*parcelfit, "demo", "--quick"], "demo-quick")]
     if not args.skip_full:
         runs.append(("parcelfit demo", [*parcelfit, "demo"], "demo"))

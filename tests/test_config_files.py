@@ -1032,17 +1032,16 @@ def test_a_start_is_on_its_surface_as_far_as_its_longest_strip_reaches_and_withi
     longest = max(strips.parts(), key=lambda p: float((p[1] - centre) @ u) + p[2] / 2)
     end = longest[1] + u * longest[2] / 2  # the downstream end of the longest strip
     doc["start"].pop("align", None)
-    for offset, ok in ((-0.1, True), (0.009, True), (0.011, False)):
-        doc["start"]["position"] = [float(v) for v in end + offset * u]
-        if ok:
-            parse_rig(doc, str(file))
-        else:
-            with pytest.raises(ParcelfitError, match="lies off its surface"):
-                parse_rig(doc, str(file))
-    # across: within 1 cm beyond the side, not more
     side = centre + n * strips.width / 2
-    for offset, ok in ((0.009, True), (0.011, False)):
-        doc["start"]["position"] = [float(v) for v in side + offset * n]
+    # along: as far as the longest strip and 1 cm beyond; across: 1 cm beyond the side
+    for point, direction, offset, ok in (
+        (end, u, -0.1, True),
+        (end, u, 0.009, True),
+        (end, u, 0.011, False),
+        (side, n, 0.009, True),
+        (side, n, 0.011, False),
+    ):
+        doc["start"]["position"] = [float(v) for v in point + offset * direction]
         if ok:
             parse_rig(doc, str(file))
         else:
