@@ -56,7 +56,7 @@ def demo(
     of KP/BW on E3 and E1 (at most 60 evaluations, validated on E3 at speed setting 2, a
     transfer check on E1, the convergence check on both), up to about 25 minutes on 2 cores.
     --quick: an 8-run screen and at most 16
-    evaluations, 6-8 minutes. --full: the published protocol (fractional then full
+    evaluations, about 5 minutes. --full: the published protocol (fractional then full
     factorial screen, at most 80 evaluations), 25 minutes or more: the calibration stops when
     its validation passes. The expected cost is printed before the simulations start."""
     import time
