@@ -22,6 +22,10 @@ def _e3(**start):
     return parse_rig(doc, "my_rig.yaml")  # the name the simulators know it by: E3
 
 
+# a point on E3's strips (the start surface): the tests place starts there
+ON_STRIPS = [-0.45, -0.65]
+
+
 def _left(rig):
     """The unit normal to the left of the start surface's direction."""
     h = math.radians(rig.surface(rig.start.surface).heading)
@@ -29,28 +33,28 @@ def _left(rig):
 
 
 def test_centre_puts_every_type_s_centre_at_the_position():
-    rig = _e3(align="centre", position=[0.1, -0.2])
+    rig = _e3(align="centre", position=ON_STRIPS)
     for length, width in ((0.32, 0.25), (0.2, 0.15)):
-        assert rig.start_centre(length, width) == pytest.approx((0.1, -0.2))
+        assert rig.start_centre(length, width) == pytest.approx(tuple(ON_STRIPS))
 
 
 @pytest.mark.parametrize(("align", "sign"), [("right", 1.0), ("left", -1.0)])
 def test_a_side_in_line_puts_that_side_s_middle_at_the_position(align, sign):
-    rig = _e3(align=align, position=[0.1, -0.2], heading=30)
+    rig = _e3(align=align, position=ON_STRIPS, heading=30)
     n = _left(rig)
     for width in (0.15, 0.20, 0.25):
         centre = np.array(rig.start_centre(0.3, width))
         # the centre lies half the width to the left (right) of the line ...
-        assert centre == pytest.approx(np.array([0.1, -0.2]) + sign * 0.5 * width * n)
+        assert centre == pytest.approx(np.array(ON_STRIPS) + sign * 0.5 * width * n)
         # ... so that side's middle is the position, whatever the width
-        assert centre - sign * 0.5 * width * n == pytest.approx([0.1, -0.2])
+        assert centre - sign * 0.5 * width * n == pytest.approx(ON_STRIPS)
 
 
 def test_a_parcel_laid_across_the_surface_extends_by_its_length():
     """Heading 90 degrees from the surface's: the extent across is the parcel's length."""
-    rig = _e3(align="right", position=[0.0, 0.0], heading=120)  # strips run at 30 degrees
+    rig = _e3(align="right", position=ON_STRIPS, heading=120)  # strips run at 30 degrees
     n = _left(rig)
-    assert np.array(rig.start_centre(0.3, 0.2)) == pytest.approx(0.15 * n)
+    assert np.array(rig.start_centre(0.3, 0.2)) == pytest.approx(np.array(ON_STRIPS) + 0.15 * n)
 
 
 def test_an_unknown_alignment_is_refused_with_the_key():

@@ -48,9 +48,6 @@ def transit_statistics(
     return StatsResult(times, tests, files)
 
 
-SYNTHETIC_NOTE = "SYNTHETIC: simulated from hidden true parameters, not measured"
-
-
 def dataset_title(dataset: Dataset) -> str:
     """Title for figures: the dataset's name, marked SYNTHETIC where it was not measured."""
     return f"{dataset.name} (SYNTHETIC data)" if dataset.synthetic else dataset.name

@@ -21,8 +21,9 @@ def reference(
     as_json: Annotated[bool, typer.Option("--json", help="Print machine-readable JSON.")] = False,
 ) -> None:
     """Choose each test case's reference run (DTW distance matrices, method section 4)."""
-    from parcelfit.analysis import SYNTHETIC_NOTE, reference_runs, reference_runs_doc
+    from parcelfit.analysis import reference_runs, reference_runs_doc
     from parcelfit.runs import load_dataset
+    from parcelfit.runs.dataset import SYNTHETIC_NOTE
 
     ds = load_dataset(dataset)
     selections = reference_runs(ds)
@@ -75,7 +76,7 @@ def stats(
 
 def print_dataset(ds: Any) -> None:
     """One line naming the dataset, its size and, for synthetic data, that it is SYNTHETIC."""
-    from parcelfit.analysis import SYNTHETIC_NOTE
+    from parcelfit.runs.dataset import SYNTHETIC_NOTE
 
     line = Text.assemble(
         ("dataset", "bold"), f" {ds.name}: {len(ds.cases)} test cases, {len(ds.runs())} runs"

@@ -249,7 +249,7 @@ class CalibrationDisplay:
 def print_synthetic(console: Console, status: StudyStatus) -> None:
     """One yellow line naming a study's dataset when it is SYNTHETIC (nothing for real data)."""
     if status.synthetic:
-        from parcelfit.analysis import SYNTHETIC_NOTE
+        from parcelfit.runs.dataset import SYNTHETIC_NOTE
 
         console.print(Text(f"dataset {status.dataset} ({SYNTHETIC_NOTE})", style="yellow"))
 

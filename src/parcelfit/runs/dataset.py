@@ -86,6 +86,10 @@ class Dataset:
         return [r for c in sorted(self.cases) for r in self.cases[c].runs]
 
 
+SYNTHETIC_NOTE = "SYNTHETIC: simulated from hidden true parameters, not measured"
+"""What every output that shows synthetic data says of them."""
+
+
 def is_synthetic(folder: str | Path) -> bool | None:
     """Whether a dataset folder's ``dataset.yaml`` marks its data synthetic, without loading the
     runs (None when there is no readable ``dataset.yaml``)."""

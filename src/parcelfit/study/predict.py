@@ -86,11 +86,11 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from parcelfit.analysis import SYNTHETIC_NOTE
 from parcelfit.atomic import write_text_atomic
 from parcelfit.errors import ParcelfitError, shown
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.runs import Run, TestCase, is_synthetic
+from parcelfit.runs.dataset import SYNTHETIC_NOTE
 from parcelfit.sim.ensemble import MAX_PLACEMENTS
 from parcelfit.sim.executors import Executor, SharedExecutor, Task, make_executor
 from parcelfit.sim.factory import make_simulator
