@@ -36,7 +36,11 @@ def timed(name: str, command: list[str], log: Path, env: dict[str, str]) -> tupl
         status = subprocess.call(command, cwd=ROOT, stdout=fh, stderr=subprocess.STDOUT, env=env)
     wall = time.perf_counter() - t0
     verdict = next(
-        (line.strip() for line in reversed(log.read_text().splitlines()) if "verdict" in line),
+        (
+            line.strip()
+            for line in reversed(log.read_text().splitlines())
+            if line.startswith("verdict:")
+        ),
         "",
     )
     print(
