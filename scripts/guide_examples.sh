@@ -8,20 +8,22 @@
 # as they are), runs there, in order, the commands of docs/guide/rig.md (synth, calibrate),
 # docs/guide/predict.md (predict with --sets 10 --placements 4) and docs/guide/design.md (design
 # with --sets 6 --placements 3), and writes each command's terminal output to
-# OUT/NN-COMMAND.txt. The tables the guide shows come from these files.
+# OUT/NN-COMMAND.txt, with OUT's own path written as OUT (a machine's path stays out of them).
+# The tables the guide shows come from these files.
 set -euo pipefail
 out=${1:?usage: bash scripts/guide_examples.sh OUT}
 root=$(cd "$(dirname "$0")/.." && pwd)
 mkdir -p "$out/examples"
 cp -r "$root/examples/own-rig" "$root/examples/bench" "$out/examples/"
 cd "$out"
+here=$(pwd)
 export COLUMNS=110
 run() {
     local name=$1
     shift
     echo "\$ $*" | tee "$name.txt"
     local t0=$SECONDS
-    "$@" 2>&1 | tee -a "$name.txt"
+    "$@" 2>&1 | sed "s#$here#OUT#g" | tee -a "$name.txt"
     echo "(wall time $((SECONDS - t0)) s)" | tee -a "$name.txt"
 }
 run 01-synth parcelfit synth examples/own-rig/twin-spec.yaml --out examples/own-rig/data

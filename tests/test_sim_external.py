@@ -135,16 +135,42 @@ def _copy_solver(tmp_path: Path, template: str | None = None, command=None) -> P
     return folder / "solver.yaml"
 
 
-def test_an_unknown_placeholder_is_refused_when_the_description_is_read(tmp_path):
-    bad = _copy_solver(tmp_path, template="x = ${k_MePaa}\n")
+def test_placeholders_are_checked_before_anything_runs(tmp_path):
+    from parcelfit.sim.external import check_placeholders
+
+    # a placeholder that names nothing the study has: refused, naming the key and the fix
+    bad = _copy_solver(tmp_path, template="x = ${k_MePaa}\nd = ${damping}\n$$5\n")
+    solver = load_external_solver(bad)  # well formed: unknown names need the study's
     with pytest.raises(ParcelfitError) as err:
-        load_external_solver(bad)
+        check_placeholders(solver, bad, ["mu_d_BePa", "damping"])
     text = str(err.value)
-    assert text.startswith(f"{bad}: template: the parameter template 'params.tmpl' uses the")
-    assert "unknown placeholder ${k_MePaa}" in text and "catalogue parameter" in text
+    assert text.startswith(f"{bad}: template: the parameter template uses the unknown")
+    assert "placeholder ${k_MePaa}" in text and "a parameter the study fits or fixes" in text
+    # the solver's own parameter (one the study fits), a catalogue one, $$: all taken
+    fine = _copy_solver(tmp_path / "f", template="d = ${damping}\nk = ${k_MePa}\n$$5\n")
+    check_placeholders(load_external_solver(fine), fine, ["damping"])
     command = _copy_solver(tmp_path / "c", command=["python3", "${solver_dirr}/fake_solver.py"])
     with pytest.raises(ParcelfitError, match=r"command: .*unknown placeholder \$\{solver_dirr\}"):
-        load_external_solver(command)
+        check_placeholders(load_external_solver(command), command, [])
+    # a malformed placeholder is refused as soon as the description is read
+    broken = _copy_solver(tmp_path / "b", template="x = ${mu_d_BePa\n")
+    with pytest.raises(ParcelfitError, match=r"template: the parameter template has a malformed"):
+        load_external_solver(broken)
+
+
+def test_a_study_with_a_solver_refuses_an_unknown_placeholder_on_load(tmp_path):
+    import shutil
+
+    from parcelfit.study.studyfile import load_study
+
+    root = Path(__file__).resolve().parents[1] / "examples" / "own-solver"
+    folder = tmp_path / "own-solver"
+    shutil.copytree(root, folder)
+    study = next(folder.glob("*study*.yaml"))
+    template = next(folder.glob("*.tmpl"))
+    template.write_text(template.read_text() + "extra = ${not_a_parameter}\n")
+    with pytest.raises(ParcelfitError, match=r"unknown placeholder \$\{not_a_parameter\}"):
+        load_study(study)
 
 
 def test_a_catalogue_parameter_neither_fitted_nor_fixed_takes_its_default(tmp_path):

@@ -990,3 +990,40 @@ def test_a_beam_broken_already_at_the_first_sample_has_no_crossing_time():
     late = Trajectory(t, -0.05 + t, np.zeros_like(t), np.zeros_like(t))
     assert broken_at_start(late, beam, outline)
     assert crossing_time(late, beam, outline) is None  # not t[0], which would shorten a transit
+
+
+@pytest.mark.slow
+def test_the_sample_video_starts_across_ls1_and_track_says_so(tmp_path):
+    root = Path(__file__).parents[1] / "examples" / "tracking"
+    video, tags = root / "D1-envelope-1-01.mp4", root / "tags.yaml"
+    result = runner.invoke(
+        app, ["track", str(video), "--tags", str(tags), "--out", str(tmp_path / "t")]
+    )
+    assert result.exit_code == 0, result.output
+    said = " ".join(result.output.split())
+    assert "tag 7: LS1 already broken in the first frame with the tag" in said
+    quality = json.loads((tmp_path / "t" / "D1-envelope-1-01.quality.json").read_text())
+    tag = quality["parcel_tags"]["7"]
+    assert tag["barriers_broken_at_start"] == ["LS1"] and tag["transit_time_s"] is None
+    # with a light-barrier log the transit time is the log's, and nothing is said of LS1
+    log = tmp_path / "log.csv"
+    log.write_text("timestamp,sensor\n0.5,LS1\n1.6,LS2\n")
+    logged = runner.invoke(
+        app,
+        [
+            "track",
+            str(video),
+            "--tags",
+            str(tags),
+            "--out",
+            str(tmp_path / "l"),
+            "--sensor-log",
+            str(log),
+            "--sensors",
+            "LS1,LS2",
+        ],
+    )
+    assert logged.exit_code == 0, logged.output
+    assert "already broken" not in logged.output
+    doc = json.loads((tmp_path / "l" / "D1-envelope-1-01.quality.json").read_text())
+    assert doc["parcel_tags"]["7"]["transit_time_s"] == pytest.approx(1.1)

@@ -71,7 +71,7 @@ def track(
     console.print(table)
     for tag_id, t in result.tags.items():
         early = t.quality.get("barriers_broken_at_start") or []
-        if early:
+        if early and sensor_log is None:  # with a log the transit time is the log's
             console.print(
                 Text(
                     f"tag {tag_id}: {', '.join(early)} already broken in the first frame with "

@@ -15,11 +15,13 @@ The template and every command argument may use ``${name}`` placeholders: each c
 parameter in SI units (``${mu_d_BePa}``; one the study neither fits nor fixes takes its
 catalogue default, a soft content's default for the parameters only a soft content has),
 ``${rig}``, ``${consignment}``, ``${speed_setting}``, ``${params_file}``, ``${output_file}``,
-``${workdir}``, ``${solver_dir}`` (the folder of the description file). A placeholder that is
-not known is an error when the description is read (`load_external_solver`), before anything
-runs; a value holding a line break or another control character (which could add lines to the
-parameter file) stops the run it would be written into. Each run gets its own work folder; the
-command runs there, is never passed through a shell, reads nothing (stdin is empty) and writes its output to
+``${workdir}``, ``${solver_dir}`` (the folder of the description file), and a parameter of the
+solver's own that the study fits or fixes. A malformed placeholder is an error when the
+description is read (`load_external_solver`), one that names none of these when the study is
+(`check_placeholders`), before anything runs; a value holding a line break or another control
+character (which could add lines to the parameter file) stops the run it would be written into.
+Each run gets its own work folder; the command runs there, is never passed through a shell,
+reads nothing (stdin is empty) and writes its output to
 ``parcelfit-solver.stdout`` and ``parcelfit-solver.stderr`` there. The run ends when the command
 exits or at the timeout, and then every process the command started is killed, on Linux also
 those that started their own session (`parcelfit.sim.lifetime.run_command`). Exit status 0 and
@@ -36,7 +38,7 @@ import subprocess
 import tempfile
 import time
 import unicodedata
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -119,31 +121,39 @@ def load_external_solver(path: str | Path) -> ExternalSolver:
         or 3600.0,
         solver_dir=str(path.parent.resolve()),
     )
-    # every placeholder is checked now, before a study starts, not at the first run
+    # malformed placeholders now; unknown names once the study's own parameters are known
+    check_placeholders(solver, path, None)
+    return solver
+
+
+def check_placeholders(
+    solver: ExternalSolver, path: str | Path, parameters: Sequence[str] | None
+) -> None:
+    """Refuse a malformed placeholder in ``solver``'s template or command (file ``path``) and,
+    given the study's own ``parameters`` (fitted and fixed), a placeholder that names neither
+    one of them, a catalogue parameter nor one of `PLACEHOLDERS`: before anything runs."""
+    known = None if parameters is None else {*PLACEHOLDERS, *catalogue_defaults(), *parameters}
     for text, what, where in (
-        (solver.template, f"the parameter template {template_path.name!r}", "template"),
+        (solver.template, "the parameter template", "template"),
         *((a, f"command argument {shown(a)}", "command") for a in solver.command),
     ):
-        try:
-            string.Template(text).substitute(
-                {name: "" for name in (*PLACEHOLDERS, *catalogue_defaults())}
+        template = string.Template(text)
+        if not template.is_valid():
+            raise ParcelfitError(
+                f"{what} has a malformed placeholder",
+                file=str(path),
+                where=where,
+                fix="write placeholders as ${name} (and a $ itself as $$)",
             )
-        except KeyError as exc:
+        unknown = sorted(set(template.get_identifiers()) - known) if known is not None else []
+        if unknown:
             raise ParcelfitError(
-                f"{what} uses the unknown placeholder ${{{exc.args[0]}}}",
-                file=path,
+                f"{what} uses the unknown placeholder ${{{unknown[0]}}}",
+                file=str(path),
                 where=where,
-                fix="use a catalogue parameter (parcelfit params) or one of "
-                + ", ".join(PLACEHOLDERS),
-            ) from None
-        except ValueError as exc:
-            raise ParcelfitError(
-                f"{what} has a malformed placeholder ({exc})",
-                file=path,
-                where=where,
-                fix="write placeholders as ${name}",
-            ) from None
-    return solver
+                fix="use a catalogue parameter (parcelfit params), a parameter the study fits or "
+                "fixes, or one of " + ", ".join(PLACEHOLDERS),
+            )
 
 
 # the placeholders beside the catalogue's parameters (the module docstring)

@@ -329,6 +329,14 @@ def load_study(path: str | Path) -> Study:
                 fix=exc.fix or "give low < high",
             ) from None
     fixed = fixed_to_si(f.fixed, backend, path)
+    if backend == "external":  # every placeholder of the solver's files known before a run
+        from parcelfit.sim.external import check_placeholders, load_external_solver
+
+        check_placeholders(
+            load_external_solver(sim["external"]),
+            sim["external"],
+            [*(d.name for d in dims), *fixed],
+        )
     overlap = set(fixed) & {d.name for d in dims}
     if overlap:
         raise ParcelfitError(

@@ -195,7 +195,16 @@ def track_all(
                 )
             write_video_track(result, tracks)
             summary["done"].append(video.name)
-            say(video, "done")
+            early = sorted(
+                {b for t in result.tags.values() for b in t.quality["barriers_broken_at_start"]}
+            )
+            say(
+                video,
+                "done"
+                if not early or log is not None
+                else f"done; {', '.join(early)} already broken in the first frame with the tag: "
+                "no transit time (start the video earlier)",
+            )
         except ParcelfitError as exc:
             summary["failed"][video.name] = str(exc)
             say(video, f"failed: {exc}")
