@@ -293,6 +293,7 @@ def test_an_unresolved_effect_is_not_called_harmless_and_a_negligible_one_is():
     _, effects, sentences = summarise_prediction(ident, sets, [0, 1], tiny)
     assert all(e.negligible for e in effects) and len(sentences) == 4
     assert all("for this design it does not matter" in s for s in sentences)
+    assert all("below 2 ms, 3 mm and 1 deg)" in s for s in sentences)  # the floors, FLOOR's
 
 
 def test_one_placement_per_set_gives_no_split_of_the_spread():

@@ -33,6 +33,7 @@ def track(
     """Track the AprilTags of a video: one run file (t, x, y, theta) per parcel tag and a quality
     report (detection rate, gaps, reprojection error, transit time)."""
     from parcelfit.tracking import load_tag_map, track_one, write_video_track
+    from parcelfit.tracking.barriers import late_start_words
     from parcelfit.tracking.track import TrackOptions
 
     tag_map = load_tag_map(tags)
@@ -72,14 +73,7 @@ def track(
     for tag_id, t in result.tags.items():
         early = t.quality.get("barriers_broken_at_start") or []
         if early and sensor_log is None:  # with a log the transit time is the log's
-            console.print(
-                Text(
-                    f"tag {tag_id}: {', '.join(early)} already broken in the first frame with "
-                    "the tag: crossed before the video shows it, so its time is not known and "
-                    "the transit time is left out (start the video earlier)",
-                    style="yellow",
-                )
-            )
+            console.print(Text(f"tag {tag_id}: {late_start_words(early)}", style="yellow"))
     rp = q["reference_reprojection_px"]
     console.print(
         f"reference tags: reprojection error mean {rp['mean']:.2f} px, max {rp['max']:.2f} px; "

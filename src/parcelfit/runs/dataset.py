@@ -90,10 +90,17 @@ SYNTHETIC_NOTE = "SYNTHETIC: simulated from hidden true parameters, not measured
 """What every output that shows synthetic data says of them."""
 
 
+def dataset_file(folder: str | Path) -> Path:
+    """The ``dataset.yaml`` of a dataset given as its folder or as that file itself."""
+    path = Path(folder)
+    return path if path.is_file() else path / DATASET_FILE
+
+
 def is_synthetic(folder: str | Path) -> bool | None:
-    """Whether a dataset folder's ``dataset.yaml`` marks its data synthetic, without loading the
-    runs (None when there is no readable ``dataset.yaml``)."""
-    file = Path(folder) / DATASET_FILE
+    """Whether a dataset's ``dataset.yaml`` (the dataset given as its folder or that file)
+    marks its data synthetic, without loading the runs (None when there is no readable
+    ``dataset.yaml``)."""
+    file = dataset_file(folder)
     try:
         doc = load_yaml(file)
     except (OSError, ParcelfitError):
@@ -114,8 +121,7 @@ def read_truth(folder: str | Path, consignment: str) -> dict[str, float]:
 
 def load_dataset(folder: str | Path) -> Dataset:
     """Load and check a dataset folder (or the path of its ``dataset.yaml``)."""
-    folder = Path(folder)
-    file = folder if folder.is_file() else folder / DATASET_FILE
+    file = dataset_file(folder)
     folder = file.parent
     if not file.is_file():
         raise ParcelfitError(

@@ -18,7 +18,7 @@ from pydantic import BaseModel, ConfigDict
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.progress import ProgressCallback, ignore_progress
-from parcelfit.runs.dataset import DATASET_FILE
+from parcelfit.runs.dataset import DATASET_FILE, dataset_file
 from parcelfit.sim.params import catalogue_unit, to_catalogue_units
 from parcelfit.study.calibration import Calibration, CalibrationResult
 from parcelfit.study.folderlock import check_writable
@@ -131,7 +131,7 @@ def check_datasets(study: Study) -> None:
     path written wrong), before anything starts."""
     for spec in (*study.cases, *study.validation_cases, *study.transfer):
         given = spec.dataset  # a folder, or its dataset.yaml itself (as load_dataset takes)
-        if not (given.is_file() or (given / DATASET_FILE).is_file()):
+        if not dataset_file(given).is_file():
             raise ParcelfitError(
                 f"{spec.label}: its dataset file {given} does not exist"
                 if given.name == DATASET_FILE

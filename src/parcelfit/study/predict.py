@@ -142,7 +142,14 @@ from parcelfit.study.shared_runs import (
     reuse_runs,
     scatter_record,
 )
-from parcelfit.study.spread import Decomposition, Effect, decompose, effects_of, t_threshold
+from parcelfit.study.spread import (
+    FLOOR,
+    Decomposition,
+    Effect,
+    decompose,
+    effects_of,
+    t_threshold,
+)
 from parcelfit.study.store import Evaluation, Store
 from parcelfit.study.studyfile import CaseSpec, Study
 
@@ -399,6 +406,9 @@ def summarise_prediction(
                 )
             )
     band = {s.quantity: s.q95 - s.q05 for s in summaries}
+    # the measurement floors as a person reads them, each unit once: "2 ms, 3 mm and 1 deg"
+    shown_floors = list(dict.fromkeys(shown_value(q, f, 1) for q, f in FLOOR.items()))
+    floors = ", ".join(shown_floors[:-1]) + " and " + shown_floors[-1]
     sentences = []
     for p in ident.parameters:
         if p.determined:
@@ -417,8 +427,8 @@ def summarise_prediction(
         if not mine and all(e.negligible for e in own):
             sentences.append(
                 f"{p.name} {words} but moves none of these predictions here by as much as a "
-                "run can show (each effect, with its uncertainty, below 2 ms, 3 mm and 1 "
-                "degree): for this design it does not matter"
+                f"run can show (each effect, with its uncertainty, below {floors}): for this "
+                "design it does not matter"
             )
             continue
         if not mine:
@@ -700,7 +710,7 @@ def predict(
             {
                 str(c.dataset)
                 for c in (*inputs.study.cases, *inputs.study.validation_cases)
-                if is_synthetic(c.dataset.parent if c.dataset.is_file() else c.dataset)
+                if is_synthetic(c.dataset)
             }
         )
         if synthetic:

@@ -59,8 +59,8 @@ FALSE_EFFECTS = 0.05  # the chance that a case shows any effect it does not have
 # run-to-run measurement floor per quantity (SI): the band test's 3 mm and 1 degree, 2 ms
 FLOOR = {
     "transit_time": 0.002,
-    "rotation": math.radians(1.0),
     "exit_y": 0.003,
+    "rotation": math.radians(1.0),
     "exit_heading": math.radians(1.0),
 }
 

@@ -74,6 +74,16 @@ def broken_at_start(
     return bool(len(traj.t)) and bool(_breaks(traj, barrier, outline)[0][0])
 
 
+def late_start_words(names: Sequence[str]) -> str:
+    """What the tracking commands say of barriers already broken at the first sample
+    (`broken_at_start`)."""
+    return (
+        f"{', '.join(names)} already broken in the first frame with the tag: crossed before the "
+        "video shows it, so its time is not known and the transit time is left out (start the "
+        "video earlier)"
+    )
+
+
 def crossing_time(
     traj: Trajectory, barrier: Barrier, outline: tuple[float, float] | None
 ) -> float | None:

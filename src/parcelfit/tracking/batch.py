@@ -34,7 +34,7 @@ from parcelfit.runs import (
     save_dataset,
     write_trajectory,
 )
-from parcelfit.tracking.barriers import read_sensor_log
+from parcelfit.tracking.barriers import late_start_words, read_sensor_log
 from parcelfit.tracking.tagmap import TagMap
 from parcelfit.tracking.track import TrackOptions, VideoTrack, track_video
 
@@ -200,10 +200,7 @@ def track_all(
             )
             say(
                 video,
-                "done"
-                if not early or log is not None
-                else f"done; {', '.join(early)} already broken in the first frame with the tag: "
-                "no transit time (start the video earlier)",
+                "done" if not early or log is not None else f"done; {late_start_words(early)}",
             )
         except ParcelfitError as exc:
             summary["failed"][video.name] = str(exc)
