@@ -185,14 +185,28 @@ def test_a_catalogue_parameter_neither_fitted_nor_fixed_takes_its_default(tmp_pa
     assert rendered[1].startswith("E = ") and rendered[2] == "mu = 0.5"
 
 
-def test_a_transit_file_that_is_not_a_number_is_named(tmp_path):
+@pytest.mark.parametrize(
+    ("write", "said"),
+    [
+        (
+            "open('transit.txt', 'w').write('1.2 s\\n')\n",
+            "its transit file holds '1.2 s', not a number of seconds Fix: write the transit time "
+            "in seconds alone, e.g. 1.234",
+        ),
+        (
+            "open('transit.txt', 'wb').write(b'\\xff\\xfe1\\x00.\\x002\\x00')\n",
+            "its transit file is not text (not UTF-8) Fix: write the transit time in seconds "
+            "alone as text, e.g. 1.234",
+        ),
+    ],
+)
+def test_a_transit_file_that_is_not_a_number_is_named(tmp_path, write, said):
     import sys
 
     writes = (
         "import sys\n"
         "rows = ['t,x,y,theta'] + [f'{k / 60},{k / 100},0,0' for k in range(30)]\n"
-        "open(sys.argv[1], 'w').write('\\n'.join(rows) + '\\n')\n"
-        "open('transit.txt', 'w').write('1.2 s\\n')\n"
+        "open(sys.argv[1], 'w').write('\\n'.join(rows) + '\\n')\n" + write
     )
     solver = _copy_solver(tmp_path, command=[sys.executable, "-c", writes, "${output_file}"])
     res = ExternalSimulator(load_external_solver(solver), workroot=tmp_path / "runs").run(
@@ -200,7 +214,4 @@ def test_a_transit_file_that_is_not_a_number_is_named(tmp_path):
     )
     assert res.status is SimStatus.FAILED
     transit = Path(res.diagnostics["workdir"]) / "transit.txt"
-    assert res.diagnostics["message"] == (
-        f"unusable solver output: {transit}: its transit file holds '1.2 s', not a number of "
-        "seconds Fix: write the transit time in seconds alone, e.g. 1.234"
-    )
+    assert res.diagnostics["message"] == f"unusable solver output: {transit}: {said}"

@@ -310,7 +310,14 @@ class ExternalSimulator:
             transit_path = workdir / self.solver.transit_file if self.solver.transit_file else None
             # no file, or an empty one: the parcel crossed no second light barrier
             if transit_path is not None and transit_path.is_file():
-                text = transit_path.read_text().strip()
+                try:
+                    text = transit_path.read_text(encoding="utf-8").strip()
+                except UnicodeDecodeError:
+                    raise ParcelfitError(
+                        "its transit file is not text (not UTF-8)",
+                        file=transit_path,
+                        fix="write the transit time in seconds alone as text, e.g. 1.234",
+                    ) from None
                 try:
                     transit = float(text) if text else None
                 except ValueError:
