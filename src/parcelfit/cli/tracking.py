@@ -71,7 +71,10 @@ def track(
         )
     console.print(table)
     for tag_id, t in result.tags.items():
-        early = t.quality.get("barriers_broken_at_start") or []
+        early = [
+            *(t.quality.get("barriers_broken_at_start") or []),
+            *(t.quality.get("barriers_passed_at_start") or []),
+        ]
         if early and sensor_log is None:  # with a log the transit time is the log's
             console.print(Text(f"tag {tag_id}: {late_start_words(early)}", style="yellow"))
     rp = q["reference_reprojection_px"]
@@ -151,7 +154,8 @@ def track_all_command(
 
         def on_video(video: Path, state: str) -> None:
             bar.console.print(f"  {video.name}: {state}", highlight=False)
-            bar.update(task, description=video.name, completed=0)
+            if state == "tracking":  # a new video's frames; a finished one keeps its full bar
+                bar.update(task, description=video.name, completed=0, total=None)
 
         summary = track_all(
             folder,

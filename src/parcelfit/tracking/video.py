@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import queue
 import threading
 import time
@@ -17,6 +18,15 @@ from parcelfit.errors import ParcelfitError
 # (one pixel a bit), which needs its white border around it; smaller frames are refused before
 # any OpenCV call sees them (a 1 x 1 px frame shrunk for the detector has no pixel left)
 MIN_FRAME_PX = 16
+
+# FFmpeg's own log level inside OpenCV (AV_LOG_QUIET): a damaged file made FFmpeg print its
+# messages ("moov atom not found") on the terminal beside parcelfit's error, which names the
+# file and the fix. A level set in the environment is kept (e.g. 16, FFmpeg's errors).
+_FFMPEG_QUIET = "-8"
+# OpenCV reads it once, when its FFmpeg backend first opens or writes a video in the process:
+# set on import of parcelfit.tracking (which imports this module), before any video is opened
+os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", _FFMPEG_QUIET)
+_DECODER_WORDS = "convert it to H.264/HEVC MP4 with ffmpeg (OPENCV_FFMPEG_LOGLEVEL=16 shows the decoder's own error)"
 
 
 def open_video(path: str | Path) -> cv2.VideoCapture:
@@ -35,12 +45,10 @@ def open_video(path: str | Path) -> cv2.VideoCapture:
         raise ParcelfitError(
             f"cannot decode this video ({exc.__class__.__name__})",
             file=path,
-            fix="convert it to H.264/HEVC MP4 with ffmpeg",
+            fix=_DECODER_WORDS,
         ) from None
     if not cap.isOpened():
-        raise ParcelfitError(
-            "cannot decode this video", file=path, fix="convert it to H.264/HEVC MP4 with ffmpeg"
-        )
+        raise ParcelfitError("cannot decode this video", file=path, fix=_DECODER_WORDS)
     ok, frame = cap.read()
     if not ok or frame is None or frame.size == 0:
         cap.release()
