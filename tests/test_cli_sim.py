@@ -47,6 +47,32 @@ def test_simulate_writes_run_and_animation(tmp_path):
     assert gif.read_bytes()[:6] in (b"GIF89a", b"GIF87a")
 
 
+@pytest.mark.slow
+@pytest.mark.mujoco
+def test_simulate_says_when_its_start_lies_across_the_first_light_barrier(tmp_path):
+    from parcelfit.sim.mujoco.bundled import resolve_file
+
+    text = resolve_file("rigs", "E1", "rig").read_text()
+    assert "start: {position: [-0.6, 0.0]" in text
+    rig = tmp_path / "E1-late.yaml"  # LS1 lies at x = -0.3
+    rig.write_text(
+        text.replace("name: E1", "name: E1-late").replace(
+            "start: {position: [-0.6, 0.0]", "start: {position: [-0.3, 0.0]"
+        )
+    )
+    result = runner.invoke(
+        app,
+        ["simulate", "--rig", str(rig), "--consignment", "KP", "--out", str(tmp_path / "r.csv"),
+         "--timestep", "0.00083333", "--spacing", "0.05"],
+        env={"COLUMNS": "200"},
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert (
+        "transit time: not measured (LS1 already broken at the start, the parcel's start lying "
+        "across it: move the rig file's start.position back)"
+    ) in result.output
+
+
 def test_simulate_bad_input_is_one_message(tmp_path):
     for args, text in (
         (["--rig", "E7"], "unknown rig 'E7'"),

@@ -781,6 +781,46 @@ def test_degenerate_videos_stop_with_one_line_naming_the_file(tmp_path, name, ma
         assert calib.exit_code == 2 and message in calib.output, calib.output
 
 
+def test_a_truncated_mp4_gives_parcelfit_s_error_and_no_decoder_noise(tmp_path):
+    """A recording cut short (its index, the moov atom, lost) made FFmpeg print its own
+    messages on the terminal beside parcelfit's; now only parcelfit's, which names the file.
+    In a process of its own: OpenCV reads FFmpeg's log level once per process."""
+    import os
+    import subprocess
+    import sys
+
+    sample = Path(__file__).resolve().parents[1] / "examples" / "tracking" / "D1-envelope-1-01.mp4"
+    video = tmp_path / "cut.mp4"
+    data = sample.read_bytes()
+    video.write_bytes(data[: len(data) // 2])
+    tags = tmp_path / "tags.yaml"
+    tags.write_text(yaml.safe_dump(scene_tag_map(conveyor_scene(), camera=False)))
+    env = {k: v for k, v in os.environ.items() if k != "OPENCV_FFMPEG_LOGLEVEL"}
+    env["COLUMNS"] = "200"
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "parcelfit",
+            "track",
+            str(video),
+            "--tags",
+            str(tags),
+            "--out",
+            str(tmp_path / "tracks"),
+        ],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+        check=False,
+    )
+    assert done.returncode == 2, done.stdout + done.stderr
+    assert "cannot decode this video" in done.stdout + done.stderr
+    assert str(video) in (done.stdout + done.stderr).replace("\n", "")
+    assert "moov" not in done.stdout + done.stderr
+
+
 def test_the_detector_finds_nothing_in_frames_too_small_for_a_tag():
     from parcelfit.tracking.detect import TagDetector
 
@@ -992,6 +1032,30 @@ def test_a_beam_broken_already_at_the_first_sample_has_no_crossing_time():
     assert crossing_time(late, beam, outline) is None  # not t[0], which would shorten a transit
 
 
+@pytest.mark.parametrize("direction", [1.0, -1.0])
+def test_a_beam_passed_before_the_first_sample_is_told_from_one_not_reached(direction):
+    """A parcel moving along x (either way: the barriers' order says which side is beyond) seen
+    only after it passed LS1 wholly: LS1 named as passed; LS2 ahead of it is not; a parcel that
+    never reached LS2 does not name LS2 either."""
+    from parcelfit.runs import Barrier
+    from parcelfit.tracking.barriers import passed_at_start
+
+    ls1 = Barrier("LS1", (0.0, -0.5), (0.0, 0.5))
+    ls2 = Barrier("LS2", (direction * 1.0, 0.5), (direction * 1.0, -0.5))
+    t = np.arange(0.0, 0.9, 1 / 60)
+    outline = (0.2, 0.1)
+    zero = np.zeros_like(t)
+    past = Trajectory(t, direction * (0.3 + t), zero, zero)  # the trailing edge 0.2 m past LS1
+    assert passed_at_start(past, [ls1, ls2], outline) == ["LS1"]
+    assert crossing_time(past, ls2, outline) is not None
+    before = Trajectory(t, direction * (-0.3 + t), zero, zero)  # breaks LS1, never LS2
+    assert passed_at_start(before, [ls1, ls2], outline) == []
+    assert passed_at_start(past, [ls1], outline) == []  # one barrier: no side is beyond
+    # wholly beyond the last barrier at the start: passed as well
+    gone = Trajectory(t, direction * (1.3 + t), zero, zero)
+    assert passed_at_start(gone, [ls1, ls2], outline) == ["LS1", "LS2"]
+
+
 @pytest.mark.slow
 def test_the_sample_video_starts_across_ls1_and_track_says_so(tmp_path):
     root = Path(__file__).parents[1] / "examples" / "tracking"
@@ -1001,10 +1065,11 @@ def test_the_sample_video_starts_across_ls1_and_track_says_so(tmp_path):
     )
     assert result.exit_code == 0, result.output
     said = " ".join(result.output.split())
-    assert "tag 7: LS1 already broken in the first frame with the tag" in said
+    assert "tag 7: LS1 already broken or passed in the first frame with the tag" in said
     quality = json.loads((tmp_path / "t" / "D1-envelope-1-01.quality.json").read_text())
     tag = quality["parcel_tags"]["7"]
     assert tag["barriers_broken_at_start"] == ["LS1"] and tag["transit_time_s"] is None
+    assert tag["barriers_passed_at_start"] == []
     # with a light-barrier log the transit time is the log's, and nothing is said of LS1
     log = tmp_path / "log.csv"
     log.write_text("timestamp,sensor\n0.5,LS1\n1.6,LS2\n")

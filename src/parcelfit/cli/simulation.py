@@ -212,9 +212,14 @@ def simulate(
     )
     if result.run is not None:
         tt = result.run.transit_time
-        console.print(
-            f"transit time: {'not measured (a light barrier was not crossed)' if tt is None else f'{tt:.4f} s'}"
+        early = list(d.get("barriers_broken_at_start") or ())
+        why = (
+            f"{', '.join(early)} already broken at the start, the parcel's start lying across "
+            "it: move the rig file's start.position back"
+            if early
+            else "a light barrier was not crossed"
         )
+        console.print(f"transit time: {f'not measured ({why})' if tt is None else f'{tt:.4f} s'}")
         from parcelfit.sim.ensemble import signed_rotation
 
         turned = math.degrees(signed_rotation(result.run.trajectory))

@@ -11,7 +11,9 @@ first becomes >= 0 while the outline overlaps the segment's extent along d. The 
 interpolated linearly between the two samples around the sign change (sub-frame). Transit time =
 crossing of the last barrier - crossing of the first. A beam already broken at the first sample
 was crossed before the trajectory began: its crossing time is not known (None), and neither is
-the transit time.
+the transit time. So was a beam the outline lies wholly beyond at the first sample and never
+breaks (`passed_at_start`; beyond: the side of the last barrier, for the last the side away
+from the first).
 """
 
 from __future__ import annotations
@@ -74,13 +76,43 @@ def broken_at_start(
     return bool(len(traj.t)) and bool(_breaks(traj, barrier, outline)[0][0])
 
 
+def passed_at_start(
+    traj: Trajectory, barriers: Sequence[Barrier], outline: tuple[float, float] | None
+) -> list[str]:
+    """Names of the barriers the outline lies wholly beyond at the first sample and never breaks
+    (it passed them before the trajectory began). Beyond a barrier is the side of the last
+    barrier's midpoint, and beyond the last barrier the side away from the first's; with fewer
+    than two barriers no side is known and none is named."""
+    if len(barriers) < 2 or not len(traj.t):
+        return []
+    corners0 = outline_corners(traj.x[:1], traj.y[:1], traj.theta[:1], outline)[0]
+    out = []
+    for k, barrier in enumerate(barriers):
+        a, b = np.asarray(barrier.start, float), np.asarray(barrier.end, float)
+        d = b - a
+        n = np.array([d[1], -d[0]])
+        if k < len(barriers) - 1:
+            other, beyond = barriers[-1], 1.0  # beyond: the last barrier's side
+        else:
+            other, beyond = barriers[0], -1.0  # beyond the last: away from the first
+        mid = (np.asarray(other.start, float) + np.asarray(other.end, float)) / 2
+        side = float(n @ (mid - a))
+        if side == 0:
+            continue
+        n = n * beyond * math.copysign(1.0, side)
+        wholly_beyond = float(((corners0 - a) @ n).min()) > 0
+        if wholly_beyond and crossing_time(traj, barrier, outline) is None:
+            out.append(barrier.name)
+    return out
+
+
 def late_start_words(names: Sequence[str]) -> str:
-    """What the tracking commands say of barriers already broken at the first sample
-    (`broken_at_start`)."""
+    """What the tracking commands say of barriers already broken or passed at the first sample
+    (`broken_at_start`, `passed_at_start`)."""
     return (
-        f"{', '.join(names)} already broken in the first frame with the tag: crossed before the "
-        "video shows it, so its time is not known and the transit time is left out (start the "
-        "video earlier)"
+        f"{', '.join(names)} already broken or passed in the first frame with the tag: crossed "
+        "before the video shows it, so its time is not known and the transit time is left out "
+        "(start the video earlier)"
     )
 
 

@@ -196,7 +196,12 @@ def track_all(
             write_video_track(result, tracks)
             summary["done"].append(video.name)
             early = sorted(
-                {b for t in result.tags.values() for b in t.quality["barriers_broken_at_start"]}
+                {
+                    b
+                    for t in result.tags.values()
+                    for key in ("barriers_broken_at_start", "barriers_passed_at_start")
+                    for b in t.quality[key]
+                }
             )
             say(
                 video,

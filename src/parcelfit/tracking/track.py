@@ -40,7 +40,7 @@ import numpy as np
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import Trajectory
 from parcelfit.runs.io import MAX_SAMPLE_INTERVAL_S, MIN_SAMPLE_INTERVAL_S
-from parcelfit.tracking.barriers import barrier_times, broken_at_start
+from parcelfit.tracking.barriers import barrier_times, broken_at_start, passed_at_start
 from parcelfit.tracking.detect import TagDetector, _side
 from parcelfit.tracking.geometry import (
     PlaneMapper,
@@ -396,12 +396,15 @@ def track_video(
         span = _frames_in_view(before, centres[tag_id], size)
         crossings: dict[str, float | None] = {}
         transit = None
-        # beams the parcel already broke at its first sample: crossed before it was seen
+        # beams the parcel already broke, or lay wholly beyond, at its first sample: crossed
+        # before it was seen
         broken_first: list[str] = []
+        passed_first: list[str] = []
         if traj is not None and tag_map.barriers:
             outline = tag_map.parcel_tags[tag_id].outline
             crossings = barrier_times(traj, tag_map.barriers, outline)
             broken_first = [b.name for b in tag_map.barriers if broken_at_start(traj, b, outline)]
+            passed_first = passed_at_start(traj, tag_map.barriers, outline)
             a, b = crossings[tag_map.barriers[0].name], crossings[tag_map.barriers[-1].name]
             if len(tag_map.barriers) >= 2 and a is not None and b is not None:
                 transit = b - a
@@ -438,6 +441,8 @@ def track_video(
                 "gaps": gaps,
                 # light barriers already broken at the first sample (crossing time not known)
                 "barriers_broken_at_start": broken_first,
+                # light barriers the parcel lay wholly beyond at the first sample (passed unseen)
+                "barriers_passed_at_start": passed_first,
                 "interpolated_frames": int(sum(g["frames"] for g in gaps if g["interpolated"])),
                 "missing_frames": int(sum(g["frames"] for g in gaps if not g["interpolated"])),
             },

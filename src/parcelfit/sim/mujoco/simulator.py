@@ -299,6 +299,10 @@ class MujocoSimulator(RigBackend[SimOptions]):
                     clear[k] = None
                 elif margin < 0:
                     clear[k] = (t_pos, margin)
+                elif pos_step == 0:
+                    # broken already at the start: crossed before the run, at no time it shows
+                    # (as tracking leaves out a beam broken in the first frame)
+                    crossed[k] = math.inf
                 else:
                     crossed[k] = _crossing_time(clear[k], t_pos, margin)
                     if k == 1:
@@ -317,15 +321,18 @@ class MujocoSimulator(RigBackend[SimOptions]):
             stepper.step()
             step += 1
         wall = time.perf_counter() - t_wall
-        transit = (
-            crossed[1] - crossed[0] if crossed[0] is not None and crossed[1] is not None else None
+        at_start = tuple(
+            b.name for b, t in zip(rig.barriers, crossed, strict=False) if t == math.inf
         )
+        times = tuple(None if t is None or t == math.inf else t for t in crossed)
+        transit = times[1] - times[0] if times[0] is not None and times[1] is not None else None
         diagnostics: dict[str, object] = {
             "message": message,
             "steps": step,
             "simulated_time": float(data.time),
             "steps_per_second": step / wall if wall > 0 else float("nan"),
-            "barrier_times": tuple(crossed),
+            "barrier_times": times,
+            "barriers_broken_at_start": at_start,
             **stepper.diagnostics(),
             # MuJoCo flags a step whose effective-inertia (M + K for flexes) solve is singular or
             # under-converged with mjWARN_INERTIA; it prints the first only, but counts them all

@@ -162,8 +162,9 @@ def advance(
     """Integrate up to ``n_steps`` steps of ``dt`` [s] from the state (x, q, v, pi; its forces F,
     T already evaluated). ``counters``: [step, force evaluation, stop_at]; the run stops early at
     step stop_at (set ``after_steps`` after the second beam breaks). Beams: ``crossed`` (NaN
-    until broken: the time [s]), ``clear_t``, ``clear_g``: the last uninterrupted time and
-    margin (NaN: none). Returns RUNNING, STOPPED, NOT_FINITE or TOO_FAST."""
+    until broken: the time [s]; inf where broken at the first step, before the run),
+    ``clear_t``, ``clear_g``: the last uninterrupted time and margin (NaN: none). Returns
+    RUNNING, STOPPED, NOT_FINITE or TOO_FAST."""
     half_dt = 0.5 * dt
     for _ in range(n_steps):
         _kick(v, pi, R, F, T, mass, half_dt)
@@ -196,6 +197,10 @@ def advance(
             elif g < 0.0:
                 clear_t[b] = t
                 clear_g[b] = g
+            elif step == 1:
+                # broken at the first position checked: crossed before the run (inf: no time),
+                # as tracking leaves out a beam broken in the first frame
+                crossed[b] = np.inf
             else:
                 if math.isnan(clear_t[b]) or not (clear_g[b] < 0.0 <= g):
                     crossed[b] = t

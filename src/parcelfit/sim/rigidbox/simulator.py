@@ -299,6 +299,9 @@ class RigidBoxSimulator(RigBackend[RigidBoxOptions]):
             "timestep": dt,
             "steps_per_second": motion.steps / wall if wall > 0 else float("nan"),
             "barrier_times": crossed,
+            "barriers_broken_at_start": tuple(
+                b.name for b, t in zip(rig.barriers, motion.crossed, strict=False) if t == np.inf
+            ),
             "contact_points": len(world.body.points),
         }
         run = None
