@@ -150,6 +150,31 @@ def test_a_beam_broken_at_the_start_gives_no_transit_time(engine):
     assert res.run.transit_time == pytest.approx(0.2 / v, abs=1e-4)
 
 
+@pytest.mark.parametrize("engine", ["mujoco", "rigidbox"])
+def test_light_barriers_listed_out_of_order_fail_the_run_and_say_so(engine):
+    """LS2 before LS1 along the path: the run fails with the order named, where it gave a
+    transit time of about one step (LS2 was timed only after LS1, when it was already broken);
+    a run too short for a trajectory fails with why it ended."""
+    from parcelfit.sim.rigidbox import RigidBoxSimulator
+
+    def sim(barriers, duration):
+        rigs = {"flat": flat_belt(1.2, start_x=0.0, barriers=barriers)}
+        if engine == "mujoco":
+            return MujocoSimulator(SimOptions(duration=duration), rigs=rigs)
+        return RigidBoxSimulator(rigs=rigs).with_options(duration=duration)
+
+    res = sim((0.7, 0.5), 1.0).run({}, KPBW)
+    assert res.status is SimStatus.FAILED
+    assert res.diagnostics["message"] == (
+        "light barrier LS2 broke before LS1 (or without it): the rig file lists light_barriers "
+        "in another order than the parcel crosses them; list LS2 first, or move the barriers"
+    )
+    assert res.run is None or res.run.transit_time is None
+    res = sim((0.5, 0.7), 0.01).run({}, KPBW)  # the first sample only, at 60 Hz
+    assert res.status is SimStatus.FAILED and res.run is None
+    assert res.diagnostics["message"].startswith("reached the end of the run after 1 sample, too")
+
+
 @pytest.mark.parametrize("timestep", [1 / 300, 1 / 2400])
 def test_light_barriers_break_when_the_front_edge_reaches_them(timestep):
     """A parcel riding with a belt at v, its front edge at x_f: the beam at x breaks at
@@ -291,7 +316,8 @@ def test_same_inputs_same_result_and_small_continuous_friction_effect():
 
 
 def test_parcel_falling_off_the_rig_is_unstable_and_wall_limit_times_out():
-    short = flat_belt(1.0, length=0.6, barriers=(3.0, 3.5), start_x=-0.5, duration=1.5)
+    # barriers beyond the belt's end (never reached: the parcel falls off first)
+    short = flat_belt(1.0, length=0.6, barriers=(1.4, 1.5), start_x=-0.5, duration=1.5)
     short = replace(short, end=replace(short.end, x=(-5.0, 5.0)))
     res = MujocoSimulator(rigs={"flat": short}).run({}, KPBW)
     assert res.status is SimStatus.UNSTABLE and "fell off" in res.diagnostics["message"]

@@ -277,6 +277,13 @@ class TagMapFile(FileModel):
 
     @model_validator(mode="after")
     def _one_role(self) -> TagMapFile:
+        for i, b in enumerate(self.light_barriers):
+            if math.dist(b.start, b.end) < 1e-3:  # from = to: a typo, a beam of no length
+                raise ParcelfitError(
+                    f"light barrier {b.id!r} has no length: from {list(b.start)} to {list(b.end)}",
+                    where=f"light_barriers[{i}]",
+                    fix="give its two ends in metres, at least 1 mm apart",
+                )
         for tag_id in self.parcel_tags:
             if tag_id in self.reference_tags:
                 raise ParcelfitError(

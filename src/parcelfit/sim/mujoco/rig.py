@@ -331,6 +331,12 @@ _MATERIAL = Choice(MATERIALS, what="material")
 START_OFF_SURFACE = 0.01
 # start.align: which part of a parcel lies at start.position
 START_ALIGNMENTS = ("centre", "right", "left")
+# the shortest wall or light barrier [m]: a plate or beam of no length is a typo (from = to)
+MIN_SEGMENT = 1e-3
+# how far [m] a light barrier may lie wholly outside the end box: a parcel's front edge still
+# breaks a beam just beyond the box its centre must stay in; one further off is never crossed
+# (often a barrier written in mm)
+BARRIER_OUTSIDE_END = 1.0
 
 
 def _description(value: Any) -> str:
@@ -611,6 +617,14 @@ class RigFile(FileModel):
                 where="start.surface",
                 fix=f"use one of {', '.join(names)}",
             )
+        for key, entries in (("walls", self.walls), ("light_barriers", self.light_barriers)):
+            for i, w in enumerate(entries):
+                if math.dist(w.start, w.end) < MIN_SEGMENT:
+                    raise ParcelfitError(
+                        f"{shown(w.name)} has no length: from {list(w.start)} to {list(w.end)}",
+                        where=f"{key}[{i}]",
+                        fix="give its two ends in metres, at least 1 mm apart",
+                    )
         below = self.surfaces[names.index(self.start.surface)]
         # the start's offset from the surface's centre along and across its heading [m]
         a = math.radians(below.heading)
@@ -638,7 +652,43 @@ class RigFile(FileModel):
                 where="start.position",
                 fix="put the start over the start surface, or name the surface it lies on",
             )
+        (x_lo, x_hi), (y_lo, y_hi) = self.end.x, self.end.y
+        px, py = self.start.position
+        if not (x_lo <= px <= x_hi and y_lo <= py <= y_hi):
+            raise ParcelfitError(
+                f"start.position {list(self.start.position)} lies outside the end box (x "
+                f"{list(self.end.x)}, y {list(self.end.y)}): every run would end before it began",
+                where="start.position",
+                fix="widen end.x and end.y to hold the start and the whole path, or move the start",
+            )
+        for i, b in enumerate(self.light_barriers):
+            # the distance of the segment from the box: 0 where some point of it lies inside
+            off = _segment_box_distance(b.start, b.end, (x_lo, x_hi), (y_lo, y_hi))
+            if off > BARRIER_OUTSIDE_END:
+                raise ParcelfitError(
+                    f"light barrier {shown(b.name)} lies {off:.3g} m outside the end box (x "
+                    f"{list(self.end.x)}, y {list(self.end.y)}): no run can reach it",
+                    where=f"light_barriers[{i}]",
+                    fix="give its ends in metres in the rig frame, within the end box",
+                )
         return self
+
+
+def _segment_box_distance(
+    a: tuple[float, float],
+    b: tuple[float, float],
+    xs: tuple[float, float],
+    ys: tuple[float, float],
+) -> float:
+    """The least distance [m] between the segment a-b [m] and the box xs x ys [m] (0 where they
+    meet), from 1001 points along the segment (a check for a typo, not geometry that needs to
+    be exact)."""
+    t = np.linspace(0.0, 1.0, 1001)
+    x = a[0] + t * (b[0] - a[0])
+    y = a[1] + t * (b[1] - a[1])
+    dx = np.maximum(np.maximum(xs[0] - x, x - xs[1]), 0.0)
+    dy = np.maximum(np.maximum(ys[0] - y, y - ys[1]), 0.0)
+    return float(np.min(np.hypot(dx, dy)))
 
 
 def _surface(s: SurfaceEntry) -> Surface:

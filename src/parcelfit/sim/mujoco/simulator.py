@@ -51,6 +51,7 @@ import numpy as np
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import Run, TestCase, Trajectory
+from parcelfit.sim.crossings import barriers_out_of_order, out_of_order_words, too_short_words
 from parcelfit.sim.mujoco.backend import RigBackend
 from parcelfit.sim.mujoco.consignment import Consignment
 from parcelfit.sim.mujoco.friction import Stepper
@@ -289,7 +290,7 @@ class MujocoSimulator(RigBackend[SimOptions]):
             if step >= stop_at:
                 break
             for k, beam in enumerate(beams):
-                if crossed[k] is not None or (k == 1 and crossed[0] is None):
+                if crossed[k] is not None:  # each beam on its own: the order is checked after
                     continue
                 if beam.distance(c) > reach:  # no vertex near the beam's line
                     clear[k] = None
@@ -326,6 +327,9 @@ class MujocoSimulator(RigBackend[SimOptions]):
         )
         times = tuple(None if t is None or t == math.inf else t for t in crossed)
         transit = times[1] - times[0] if times[0] is not None and times[1] is not None else None
+        wrong_order = barriers_out_of_order(crossed)
+        if wrong_order and status is SimStatus.OK:
+            status, message, transit = SimStatus.FAILED, out_of_order_words(rig.barriers), None
         diagnostics: dict[str, object] = {
             "message": message,
             "steps": step,
@@ -351,6 +355,9 @@ class MujocoSimulator(RigBackend[SimOptions]):
                 )
             except ParcelfitError as exc:
                 status, diagnostics["message"] = SimStatus.UNSTABLE, f"unusable trajectory: {exc}"
+        if run is None and status is SimStatus.OK:
+            status = SimStatus.FAILED
+            diagnostics["message"] = too_short_words(message, len(samples))
         result = SimResult(run, status, wall, diagnostics)
         rec = None
         if opt.record_vertices and frames:

@@ -188,7 +188,7 @@ def advance(
         if v[0] * v[0] + v[1] * v[1] + v[2] * v[2] > MAX_SPEED * MAX_SPEED:
             return TOO_FAST
         for b in range(2):
-            if not math.isnan(crossed[b]) or (b == 1 and math.isnan(crossed[0])):
+            if not math.isnan(crossed[b]):  # each beam on its own: the order is checked after
                 continue
             g = _beam_margin(x, R, corners, beam_a[b], beam_d[b], beam_d2[b], beam_n[b])
             if g == -np.inf:

@@ -29,6 +29,7 @@ import numpy as np
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import Run, TestCase, Trajectory
+from parcelfit.sim.crossings import barriers_out_of_order, out_of_order_words, too_short_words
 from parcelfit.sim.mujoco.backend import RigBackend
 from parcelfit.sim.mujoco.consignment import Consignment
 from parcelfit.sim.mujoco.rig import Rig
@@ -292,6 +293,10 @@ class RigidBoxSimulator(RigBackend[RigidBoxOptions]):
         transit = (
             crossed[1] - crossed[0] if crossed[0] is not None and crossed[1] is not None else None
         )
+        # each beam's time, None if never broken, inf if broken at the start (`sim.crossings`)
+        raw = [None if math.isnan(t) else float(t) for t in motion.crossed[: len(rig.barriers)]]
+        if barriers_out_of_order(raw) and status is SimStatus.OK:
+            status, message, transit = SimStatus.FAILED, out_of_order_words(rig.barriers), None
         diagnostics: dict[str, object] = {
             "message": message,
             "steps": motion.steps,
@@ -314,6 +319,9 @@ class RigidBoxSimulator(RigBackend[RigidBoxOptions]):
                 traj,
                 transit,
             )
+        if run is None and status is SimStatus.OK:
+            status = SimStatus.FAILED
+            diagnostics["message"] = too_short_words(message, len(samples))
         return SimResult(run, status, wall, diagnostics)
 
 
