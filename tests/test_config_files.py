@@ -457,6 +457,75 @@ CASES = {
             "use one of BW, KP, KPBW, PB or the path of a .yaml file",
         ),
     ),
+    "screen parameter both screened and fixed": (
+        "screen",
+        lambda d: d.update(fixed={"E_Pa": 800}),
+        (
+            "fixed",
+            "['E_Pa'] are both screened and fixed",
+            "remove them from parameters or from fixed",
+        ),
+    ),
+    "screen full factorial first over more than it keeps": (
+        "screen",
+        lambda d: d.update(
+            parameters=["mu_d_BePa", "E_Pa", "mu_d_MePa"], stages=["full"], max_full_factors=2
+        ),
+        (
+            "stages",
+            "the first stage is a full factorial over 3 parameters, which keeps at most "
+            "max_full_factors = 2 and has nothing to rank them by yet",
+            "start with a fractional stage (stages: [fractional, full]), list at most 2 "
+            "parameters, or set max_full_factors: 3 (8 runs)",
+        ),
+    ),
+    "screen min full factors above max": (
+        "screen",
+        lambda d: d.update(min_full_factors=5, max_full_factors=4),
+        (
+            "min_full_factors",
+            "min_full_factors 5 exceeds max_full_factors 4",
+            "give min_full_factors at most max_full_factors",
+        ),
+    ),
+    "screen soft content on a rigid one": (
+        "screen",
+        lambda d: d.update(
+            simulator={"backend": "mujoco", "rig": "E3", "consignment": "KPBW"},
+            reference={**REF, "rig": "E3", "consignment": "KPBW"},
+            soft_content=["E_Co"],
+        ),
+        (
+            "soft_content",
+            "soft_content ['E_Co'] on a consignment with a rigid content",
+            "leave soft_content out, or screen a soft-content type (e.g. PB)",
+        ),
+    ),
+    "screen speed setting the rig lacks": (
+        "screen",
+        lambda d: d.update(
+            simulator={"backend": "mujoco", "rig": "E3", "consignment": "KPBW"},
+            reference={**REF, "rig": "E3", "consignment": "KPBW", "speed_setting": 3},
+        ),
+        (
+            "reference.speed_setting",
+            "rig E3 has no speed setting 3 (test case E3/KPBW/3)",
+            "use one of [1, 2], or add the setting to the rig's speeds",
+        ),
+    ),
+    "study transfer speed setting the rig lacks": (
+        "study",
+        lambda d: d.update(
+            simulator={"backend": "mujoco", "rig": "E3", "consignment": "KPBW"},
+            reference={**REF, "rig": "E3", "consignment": "KPBW"},
+            transfer=[{"rig": "E1", "speed_setting": 4}],
+        ),
+        (
+            "transfer[0].speed_setting",
+            "rig E1 has no speed setting 4 (test case E1/KPBW/4)",
+            "use one of [1, 2, 3], or add the setting to the rig's speeds",
+        ),
+    ),
     "screen executor dask": (
         "screen",
         lambda d: d.update(executor={"kind": "dask"}),
@@ -588,6 +657,15 @@ CASES = {
             "use the tag's id number as the key",
         ),
     ),
+    "tags light barrier of no length": (
+        "tags",
+        lambda d: d["light_barriers"][0].update({"to": [0.2, -0.5]}),
+        (
+            "light_barriers[0]",
+            "light barrier 'start' has no length: from [0.2, -0.5] to [0.2, -0.5]",
+            "give its two ends in metres, at least 1 mm apart",
+        ),
+    ),
     "tags two roles": (
         "tags",
         lambda d: d["parcel_tags"].update({0: {"size": 0.06}}),
@@ -681,6 +759,44 @@ CASES = {
             "start.position [-0.5, -1.2] lies off its surface 'strips' (-0.300 m along and "
             "-0.520 m across from its centre; it spans -0.5 to +0.5 m along and +-0.2 m across)",
             "put the start over the start surface, or name the surface it lies on",
+        ),
+    ),
+    "rig wall of no length": (
+        "rig",
+        lambda d: d["walls"][0].update({"to": [0.1, -0.5]}),
+        (
+            "walls[0]",
+            "'guide' has no length: from [0.1, -0.5] to [0.1, -0.5]",
+            "give its two ends in metres, at least 1 mm apart",
+        ),
+    ),
+    "rig light barrier of no length": (
+        "rig",
+        lambda d: d["light_barriers"][1].update({"to": [1.8, -0.4]}),
+        (
+            "light_barriers[1]",
+            "'LS2' has no length: from [1.8, -0.4] to [1.8, -0.4]",
+            "give its two ends in metres, at least 1 mm apart",
+        ),
+    ),
+    "rig light barrier in mm": (
+        "rig",
+        lambda d: d["light_barriers"][1].update({"from": [1800, -400], "to": [1800, 400]}),
+        (
+            "light_barriers[1]",
+            "light barrier 'LS2' lies 1.8e+03 m outside the end box (x [-1.0, 2.0], y [-1.0, "
+            "0.5]): no run can reach it",
+            "give its ends in metres in the rig frame, within the end box",
+        ),
+    ),
+    "rig start outside the end box": (
+        "rig",
+        lambda d: d["end"].update(x=[0.0, 2.0]),
+        (
+            "start.position",
+            "start.position [-0.3, -0.6] lies outside the end box (x [0.0, 2.0], y [-1.0, 0.5]): "
+            "every run would end before it began",
+            "widen end.x and end.y to hold the start and the whole path, or move the start",
         ),
     ),
     "rig bad region": (

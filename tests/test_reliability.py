@@ -1751,3 +1751,17 @@ def test_a_full_disk_during_a_precision_check_keeps_what_it_saved(tmp_path, monk
     result = runner.invoke(app, [*args, "--out", str(out)])  # space freed
     assert result.exit_code == 0, result.output
     assert "(3 kept)" in result.output
+
+
+def test_a_failure_streak_quotes_the_first_failure_s_own_fix_once():
+    """A simulation's error carries its own 'Fix:'; quoted in the streak's message it read as a
+    second 'Fix:' beside the streak's."""
+    from parcelfit.study.loop import FailureStreak
+
+    streak = FailureStreak(2, Path("out"))
+    streak.add(1, "failed", "rig S1 has no speed setting 3 Fix: use one of [1, 2]")
+    with pytest.raises(ParcelfitError) as caught:
+        streak.add(2, "failed", "again")
+    text = str(caught.value)
+    assert "the first: failed: rig S1 has no speed setting 3; its fix: use one of [1, 2]" in text
+    assert text.count("Fix:") == 1

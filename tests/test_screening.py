@@ -102,3 +102,30 @@ def test_all_parameters_come_from_the_consignments_content_kind(tmp_path, consig
     assert len(screen.parameters) == 16
     assert own == ({"E_Co", "zeta_Co"} if kind == "soft" else set())
     assert not own & set(screen.parameters)
+
+
+@pytest.mark.parametrize("missing", ["dataset", "case"])
+def test_a_screen_without_its_data_names_the_screen_file_and_leaves_no_folder(tmp_path, missing):
+    from parcelfit import ParcelfitError
+
+    if missing == "case":
+        write_reference_dataset(tmp_path / "data")
+    doc = {
+        "name": "s",
+        "simulator": {"backend": "python", "factory": "tests.fake_sim:make"},
+        "reference": {"dataset": "data", "rig": "R", "consignment": "P", "speed_setting": 7},
+        "parameters": {"mu_d_BePa": [0.3, 0.58], "E_Pa": [200, 1600]},
+    }
+    path = tmp_path / "screen.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    with pytest.raises(ParcelfitError) as caught:
+        run_screen(load_screen(path), tmp_path / "out")
+    err = caught.value
+    assert err.file == str(path)
+    if missing == "dataset":
+        assert err.where == "reference.dataset"
+        assert err.message == f"R/P/7: its dataset {tmp_path / 'data'} holds no dataset.yaml"
+    else:
+        assert err.where == "reference"
+        assert err.message.startswith("test case R/P/7 is not in dataset")
+    assert not (tmp_path / "out").exists()

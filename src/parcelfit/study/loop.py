@@ -84,6 +84,8 @@ class FailureStreak:
             return
         if not self.ids:
             text = " ".join(str(message or "").split()) or "no message"
+            # a quoted error's own fix reads as the first failure's, not as a second "Fix:"
+            text = text.replace(" Fix: ", "; its fix: ")
             self.first = f"{status}: {text if len(text) <= 300 else text[:297] + '...'}"
         self.ids.append(row_id)
         if len(self.ids) >= self.limit:

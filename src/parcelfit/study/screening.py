@@ -94,6 +94,7 @@ from parcelfit.figures import save_figure
 from parcelfit.metrics import ReferenceSelection, select_reference
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.runs import TestCase, load_dataset, read_trajectory
+from parcelfit.runs.dataset import DATASET_FILE, dataset_file
 from parcelfit.schema import FileModel, Number, Pair, Text, Whole, or_default, parse
 from parcelfit.sim.ensemble import SPIN_ANGLE, rotation
 from parcelfit.sim.executors import Executor, Task, make_executor
@@ -113,6 +114,7 @@ from parcelfit.study.store import Evaluation, Store
 from parcelfit.study.studyfile import (
     _to_si,
     check_simulator_files,
+    check_speed_settings,
     fixed_to_si,
     reference_case,
 )
@@ -263,6 +265,9 @@ def load_screen(path: str | Path) -> Screen:
     rigs = check_simulator_files(sim, path)
     backend = f.simulator.backend
     dataset, rig, cons = reference_case(f.reference, f.simulator, path, folder, rigs)
+    check_speed_settings(
+        sim, [(TestCase(rig, cons, f.reference.speed_setting), "reference.speed_setting")], path
+    )
     kind = content_kind(sim)
     spec = f.parameters
     if spec is None:  # the consignment's candidates; its content's own are the soft_content stage
@@ -282,6 +287,7 @@ def load_screen(path: str | Path) -> Screen:
             where="parameters",
             fix="list two or more (or write parameters: all)",
         )
+    _check_plan(f, user, kind, backend, path)
     for extra in f.soft_content:  # the last stage's extra factors, unless already listed
         r = parameter(extra).range_for(SOFT)
         user.setdefault(extra, (r.low, r.high))
@@ -317,6 +323,50 @@ def load_screen(path: str | Path) -> Screen:
     )
 
 
+def _check_plan(
+    f: ScreenFile, factors: Mapping[str, Any], kind: str, backend: str, path: Path
+) -> None:
+    """What the screen file's keys cannot say alone: no parameter both screened and fixed; a
+    soft content's stage only on a soft content (where the backend knows the content); a
+    first stage that is a full factorial over no more parameters than it keeps (nothing ranks
+    them before it); min_full_factors <= max_full_factors."""
+    both = sorted(set(factors) & set(map(str, f.fixed)))
+    if both:
+        raise ParcelfitError(
+            f"{both} are both screened and fixed",
+            file=path,
+            where="fixed",
+            fix="remove them from parameters or from fixed",
+        )
+    if f.soft_content and backend in ("mujoco", "rigidbox") and kind != SOFT:
+        raise ParcelfitError(
+            f"soft_content {list(f.soft_content)} on a consignment with a rigid content",
+            file=path,
+            where="soft_content",
+            fix="leave soft_content out, or screen a soft-content type (e.g. PB)",
+        )
+    if f.stages and f.stages[0] == "full" and len(factors) > f.max_full_factors:
+        n = len(factors)
+        raise ParcelfitError(
+            f"the first stage is a full factorial over {n} parameters, which keeps at most "
+            f"max_full_factors = {f.max_full_factors} and has nothing to rank them by yet",
+            file=path,
+            where="stages",
+            fix=f"start with a fractional stage (stages: [fractional, full]), list at most "
+            f"{f.max_full_factors} parameters, or set max_full_factors: {n} ({2**n} runs)"
+            if n <= 10
+            else f"start with a fractional stage (stages: [fractional, full]) or list at most "
+            f"{f.max_full_factors} parameters",
+        )
+    if f.min_full_factors > f.max_full_factors:
+        raise ParcelfitError(
+            f"min_full_factors {f.min_full_factors} exceeds max_full_factors {f.max_full_factors}",
+            file=path,
+            where="min_full_factors",
+            fix="give min_full_factors at most max_full_factors",
+        )
+
+
 def _user(name: str, si_value: float) -> float:
     """A value from SI back to its catalogue unit for the outputs (12 significant digits, so
     that 0.35 mm does not come back as 0.35000000000000003)."""
@@ -336,6 +386,27 @@ class StageResult:
     ensemble_analyses: list[EffectAnalysis] = field(default_factory=list)
 
 
+def _reference_run(screen: Screen) -> ReferenceSelection:
+    """The reference run of the screen's test case; a dataset folder without its dataset.yaml,
+    or a dataset without the case, is refused naming the screen file and its key."""
+    if not dataset_file(screen.dataset).is_file():
+        raise ParcelfitError(
+            f"{screen.case.label}: its dataset {screen.dataset} holds no {DATASET_FILE}",
+            file=screen.path,
+            where="reference.dataset",
+            fix="make the dataset first (tracked runs: parcelfit track-all; a SYNTHETIC twin: "
+            "parcelfit synth SPEC --out FOLDER) or correct the path (relative to the screen file)",
+        )
+    dataset = load_dataset(screen.dataset)
+    try:
+        runs = dataset[screen.case]
+    except ParcelfitError as exc:
+        raise ParcelfitError(
+            exc.message, file=screen.path, where="reference", fix=exc.fix
+        ) from None
+    return select_reference(runs)
+
+
 def run_screen(
     screen: Screen,
     out: str | Path,
@@ -351,6 +422,7 @@ def run_screen(
     ``total`` counting the stage's simulations: design rows times placements)."""
     out = Path(out)
     check_writable(out, ("screen.sqlite",))
+    reference = _reference_run(screen)  # before the output folder: a missing dataset leaves none
     out.mkdir(parents=True, exist_ok=True)
     report = progress or ignore_progress
 
@@ -368,7 +440,6 @@ def run_screen(
     # the nominal placement alone (None, stored as seed 0 as before placements existed)
     seeds: list[int | None] = list(range(1, n_place + 1)) if n_place > 1 else [None]
     try:
-        reference = select_reference(load_dataset(screen.dataset)[screen.case])
         simulator = make_simulator(screen.simulator)
         require_placements(simulator, n_place, file=screen.path, where="placements")
         _check_stored_placements(store, n_place, out / "screen.sqlite")

@@ -71,7 +71,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -252,6 +252,35 @@ def _check_stem(name: str, given: str, path: Path, where: str, kind: str) -> Non
         )
 
 
+def check_speed_settings(
+    sim: SimulatorConfig, cases: Sequence[tuple[TestCase, str]], path: Path
+) -> None:
+    """For the mujoco and rigidbox backends, that each case's rig has its speed setting:
+    ``cases`` holds (case, the file's key naming it); a setting the rig lacks is refused now,
+    naming the file and the key, where it failed every simulation of the case before."""
+    if sim.backend not in ("mujoco", "rigidbox"):
+        return
+    from parcelfit.sim.mujoco import bundled_rig_names, load_rig
+
+    files = {}
+    for given in (sim.rig, *(sim.rigs or ())):
+        if given is not None and given.lower().endswith((".yaml", ".yml")):
+            rig = load_rig(given)
+            files[rig.name] = rig
+    for case, where in cases:
+        rig = files.get(case.rig)
+        if rig is None and case.rig in bundled_rig_names():
+            rig = load_rig(case.rig)
+        if rig is None or case.speed_setting in rig.speeds:
+            continue
+        raise ParcelfitError(
+            f"rig {rig.name} has no speed setting {case.speed_setting} (test case {case.label})",
+            file=path,
+            where=where,
+            fix=f"use one of {sorted(rig.speeds)}, or add the setting to the rig's speeds",
+        )
+
+
 def _rig_names(sim: SimulatorConfig, path: Path) -> set[str]:
     """The rig names a case may use with the mujoco and rigidbox backends: the bundled rigs,
     the simulator's rig and the rigs of ``simulator.rigs``, loaded now: a missing or broken
@@ -346,6 +375,14 @@ def load_study(path: str | Path) -> Study:
             fix="remove them from one of the two",
         )
     cases, validation_cases, transfer = study_cases(f, path, folder, rigs)
+    check_speed_settings(
+        sim,
+        [
+            (c.case, c.where if c.where.endswith("speed_setting") else f"{c.where}.speed_setting")
+            for c in (*cases, *validation_cases, *transfer)
+        ],
+        path,
+    )
     first = cases[0]
     dataset, rig, consignment = first.dataset, first.case.rig, first.case.consignment
     try:
