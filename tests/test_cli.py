@@ -66,6 +66,60 @@ def test_stats_writes_files(make_dataset, tmp_path):
     assert (out / "transit_time_tests.csv").is_file() and (out / "transit_times.png").is_file()
 
 
+def test_stats_says_what_it_cannot_compare(make_dataset, tmp_path):
+    """4 against 4 runs can reach p = 0.029, 3 against 3 no lower than 0.1: the table gives the
+    counts and says which pairs cannot reach alpha; a dataset without transit times is an error
+    naming its file, where it printed an empty table; alpha outside (0, 1) names the option."""
+    from parcelfit.stats.transit import smallest_p_value
+
+    result = runner.invoke(app, ["stats", str(_small(make_dataset)), "--out", str(tmp_path / "a")])
+    text = " ".join(result.output.split())
+    assert result.exit_code == 0 and "n A" in text and "too few runs" not in text
+    three = make_dataset(
+        {
+            ("E1", "KP", 1): [(f"k{i}", line_trajectory(30), 1.0 + 0.01 * i) for i in range(3)],
+            ("E1", "BW", 1): [(f"b{i}", line_trajectory(30), 1.2 + 0.01 * i) for i in range(3)],
+        }
+    )
+    result = runner.invoke(app, ["stats", str(three), "--out", str(tmp_path / "b")])
+    text = " ".join(result.output.split())
+    assert result.exit_code == 0
+    assert (
+        "too few runs to reach 0.05 whatever the data" in text and "BW (3) vs KP (3): 0.1" in text
+    )
+    assert smallest_p_value(3, 3) == pytest.approx(0.1) and smallest_p_value(4, 4) < 0.05
+    none = make_dataset({("E1", "KP", 1): [(f"n{i}", line_trajectory(30), None) for i in range(3)]})
+    result = runner.invoke(app, ["stats", str(none), "--out", str(tmp_path / "c")])
+    text = " ".join(result.output.split())
+    assert result.exit_code == 2
+    assert "no run of this dataset has a transit time: nothing to compare" in text
+    assert str(none / "dataset.yaml") in text
+    result = runner.invoke(app, ["stats", str(three), "--alpha", "5"])
+    assert result.exit_code == 2 and "--alpha" in result.output
+
+
+def test_regions_that_select_nothing_name_the_case_and_run(make_dataset):
+    """Regions written in mm keep no sample of a run in metres: the error names the test case
+    and the run, where it named neither."""
+    root = _small(make_dataset)
+    doc = yaml.safe_load((root / "dataset.yaml").read_text())
+    doc["test_cases"][0]["regions"] = [{"x": [200, 1400]}]
+    (root / "dataset.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+    result = runner.invoke(app, ["reference", str(root)])
+    text = " ".join(result.output.split())
+    assert result.exit_code == 2
+    assert "test case E1/KP/1, run r0: only 0 samples remain after selection, 3 needed" in text
+    assert "(metres in the rig frame, as the runs' x and y)" in text
+
+
+def test_reference_says_when_a_case_has_one_run(make_dataset):
+    one = make_dataset({("E1", "KP", 1): [("only", line_trajectory(30), 1.0)]})
+    result = runner.invoke(app, ["reference", str(one)])
+    text = " ".join(result.output.split())
+    assert result.exit_code == 0
+    assert "E1/KP/1 has one run: it is the reference without a comparison" in text
+
+
 def test_bad_input_gives_message_not_traceback(tmp_path):
     result = runner.invoke(app, ["reference", str(tmp_path)])
     assert result.exit_code == 2

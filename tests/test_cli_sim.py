@@ -72,6 +72,30 @@ def test_simulate_says_when_its_start_lies_across_the_first_light_barrier(tmp_pa
     ) in " ".join(result.output.split())
 
 
+@pytest.mark.slow
+@pytest.mark.mujoco
+def test_simulate_repeat_on_a_rig_without_scatter_says_its_runs_are_alike(tmp_path):
+    from parcelfit.sim.mujoco.bundled import resolve_file
+
+    text = resolve_file("rigs", "E1", "rig").read_text()
+    scatter = "\n        scatter: {along: 0.005, across: 0.005, heading: 1.5}}"
+    assert scatter in text
+    rig = tmp_path / "E1-fixed.yaml"
+    rig.write_text(text.replace("name: E1", "name: E1-fixed").replace(scatter, "}"))
+    result = runner.invoke(
+        app,
+        ["simulate", "--rig", str(rig), "--consignment", "KP", "--out", str(tmp_path / "r.csv"),
+         "--repeat", "2", "--workers", "1", "--timestep", "0.00083333", "--spacing", "0.05"],
+    )  # fmt: skip
+    said = " ".join(result.output.split())
+    assert result.exit_code == 0, result.output
+    assert (
+        "rig E1-fixed has no start.scatter: every placement starts at the nominal pose, so the 2 "
+        "runs are alike"
+    ) in said
+    assert "rank correlation with rotation none (no spread in one of the two)" in said
+
+
 def test_simulate_bad_input_is_one_message(tmp_path):
     for args, text in (
         (["--rig", "E7"], "unknown rig 'E7'"),

@@ -789,6 +789,16 @@ CASES = {
             "give its ends in metres in the rig frame, within the end box",
         ),
     ),
+    "rig surface in mm": (
+        "rig",
+        lambda d: d["surfaces"][0].update(centre=[1000, 0]),
+        (
+            "surfaces[0].centre",
+            "surface 'main' lies 996 m outside the end box (x [-1.0, 2.0], y [-1.0, 0.5]): no run "
+            "can reach it",
+            "give its centre, length and width in metres in the rig frame",
+        ),
+    ),
     "rig start outside the end box": (
         "rig",
         lambda d: d["end"].update(x=[0.0, 2.0]),

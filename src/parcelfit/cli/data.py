@@ -48,6 +48,21 @@ def reference(
                 run_id + mark, f"{sel.row_sums[i]:.3f}", "-" if tt is None else f"{tt:.3f}"
             )
         console.print(table)
+        if len(sel.run_ids) == 1:
+            console.print(
+                Text(
+                    f"{sel.case.label} has one run: it is the reference without a comparison "
+                    "(record more runs for a reference that represents the case)",
+                    style="yellow",
+                )
+            )
+
+
+def _rate(value: float) -> float:
+    """--alpha: a rate strictly between 0 and 1."""
+    if not 0.0 < value < 1.0:
+        raise typer.BadParameter(f"{value:g} is not between 0 and 1 (e.g. 0.05)")
+    return value
 
 
 def stats(
@@ -56,7 +71,10 @@ def stats(
         "stats"
     ),
     alpha: Annotated[
-        float, typer.Option(help="False discovery rate for Benjamini-Hochberg.")
+        float,
+        typer.Option(
+            callback=_rate, help="False discovery rate for Benjamini-Hochberg, between 0 and 1."
+        ),
     ] = 0.05,
     family: Annotated[
         str, typer.Option(help="Adjust per 'rig_setting' or over 'all' tests.")
@@ -64,12 +82,27 @@ def stats(
 ) -> None:
     """Compare transit times between consignment types (Mann-Whitney U + Benjamini-Hochberg)."""
     from parcelfit.analysis import transit_statistics
+    from parcelfit.errors import ParcelfitError
     from parcelfit.runs import load_dataset
+    from parcelfit.runs.dataset import dataset_file
 
     ds = load_dataset(dataset)
     print_dataset(ds)
     result = transit_statistics(ds, out, alpha=alpha, family=family)
-    _print_tests(result.tests)
+    if result.times.empty:
+        raise ParcelfitError(
+            "no run of this dataset has a transit time: nothing to compare",
+            file=dataset_file(dataset),
+            fix="give each run its transit_time [s] in the dataset file, or track the videos "
+            "with light barriers in the tag map (or with --sensor-log)",
+        )
+    if result.tests.empty:
+        console.print(
+            "[yellow]no rig and speed setting holds two consignment types with transit times: "
+            "nothing to compare[/]"
+        )
+    else:
+        _print_tests(result.tests, alpha)
     for f in result.files:
         console.print(Text(f"wrote {f}"))
 
@@ -86,25 +119,42 @@ def print_dataset(ds: Any) -> None:
     console.print(line)
 
 
-def _print_tests(tests: Any) -> None:
+def _print_tests(tests: Any, alpha: float) -> None:
+    """The table of the pairwise tests, with a note on pairs too small to reach ``alpha``."""
     from parcelfit.stats import significance_stars
+    from parcelfit.stats.transit import smallest_p_value
 
     table = Table(
         title="Transit-time comparisons (two-sided Mann-Whitney U, BH-adjusted)",
         title_justify="left",
     )
-    for col in ("rig", "setting", "A", "B", "median A [s]", "median B [s]", "p", "p adj.", ""):
+    cols = ("rig", "setting", "A", "B", "n A", "n B", "median A [s]", "median B [s]", "p", "p adj.")
+    for col in (*cols, ""):
         table.add_column(escape(col), justify="right" if col not in ("rig", "A", "B") else "left")
+    small = []
     for _, r in tests.iterrows():
         table.add_row(
             r["rig"],
             str(r["speed_setting"]),
             r["type_a"],
             r["type_b"],
+            str(r["n_a"]),
+            str(r["n_b"]),
             f"{r['median_a_s']:.3f}",
             f"{r['median_b_s']:.3f}",
             f"{r['p_value']:.2g}",
             f"{r['p_adjusted']:.2g}",
             significance_stars(r["p_adjusted"]),
         )
+        floor = smallest_p_value(int(r["n_a"]), int(r["n_b"]))
+        if floor > alpha:
+            small.append(f"{r['type_a']} ({r['n_a']}) vs {r['type_b']} ({r['n_b']}): {floor:.2g}")
     console.print(table)
+    if small:
+        console.print(
+            Text(
+                f"too few runs to reach {alpha:g} whatever the data (the smallest two-sided p "
+                f"these counts allow): {'; '.join(small)}. Record more runs of those types.",
+                style="yellow",
+            )
+        )

@@ -252,6 +252,14 @@ def _simulate_ensemble(run: CaseSimulation, first: int, n: int, workers: int, ou
     from parcelfit.simulate import simulate_placements
 
     case = run.case
+    if not any(run.rig.start.scatter):
+        console.print(
+            Text(
+                f"rig {run.rig.name} has no start.scatter: every placement starts at the nominal "
+                f"pose, so the {n} runs are alike (give start.scatter in the rig file)",
+                style="yellow",
+            )
+        )
     with Progress(*Progress.get_default_columns(), TimeElapsedColumn(), console=console) as bar:
         task = bar.add_task(f"{case.label}: {n} placements", total=n)
         done = simulate_placements(run, first, n, workers, out, lambda: bar.advance(task))
@@ -278,7 +286,11 @@ def _simulate_ensemble(run: CaseSimulation, first: int, n: int, workers: int, ou
     console.print(
         f"transit time [s]: median {st.transit_median:.3f}, mean {st.transit_mean:.3f} "
         f"+- {st.transit_sem:.3f} (standard error); rank correlation with rotation "
-        f"{st.rank_correlation:.2f}",
+        + (
+            f"{st.rank_correlation:.2f}"
+            if math.isfinite(st.rank_correlation)
+            else "none (no spread in one of the two)"
+        ),
         markup=False,
     )
     console.print(f"wrote {n} runs and {table_path}", markup=False)

@@ -90,7 +90,15 @@ def select_reference(
     if not runs:
         raise ParcelfitError(f"test case {case_data.case.label} has no runs")
     comparison = comparison or Comparison.for_case(case_data)
-    xy, theta = comparison.series([r.trajectory for r in runs])
+    prepared = []
+    for r in runs:  # one by one: an error names the case and the run
+        try:
+            prepared.append(comparison.prepare(r.trajectory))
+        except ParcelfitError as exc:
+            raise ParcelfitError(
+                f"test case {case_data.case.label}, run {r.id}: {exc.message}", fix=exc.fix
+            ) from None
+    xy, theta = [p.xy for p in prepared], [p.theta for p in prepared]
     d_xy = pairwise_dtw(xy, comparison.window) ** 2
     d_theta = pairwise_dtw(theta, comparison.window) ** 2
     times = [r.transit_time for r in runs]

@@ -224,7 +224,8 @@ class Trajectory:
         if mask.sum() < MIN_SAMPLES:
             raise ParcelfitError(
                 f"only {int(mask.sum())} samples remain after selection, {MIN_SAMPLES} needed",
-                fix="widen the regions of interest or their margin",
+                fix="widen the regions of interest or their margin (metres in the rig frame, "
+                "as the runs' x and y)",
             )
         return Trajectory(
             t=self.t[mask],

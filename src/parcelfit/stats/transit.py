@@ -12,6 +12,7 @@ speed setting form one family and are adjusted by Benjamini-Hochberg (statsmodel
 
 from __future__ import annotations
 
+import math
 from itertools import combinations
 
 import numpy as np
@@ -55,6 +56,14 @@ def transit_time_table(dataset: Dataset) -> pd.DataFrame:
     return pd.DataFrame(
         rows, columns=["rig", "consignment", "speed_setting", "run_id", "transit_time_s"]
     )
+
+
+def smallest_p_value(n_a: int, n_b: int) -> float:
+    """The smallest two-sided p-value the exact Mann-Whitney U test can give with ``n_a`` and
+    ``n_b`` observations (complete separation, no ties): 2 / C(n_a + n_b, n_a), at most 1."""
+    if n_a < 1 or n_b < 1:
+        return 1.0
+    return min(1.0, 2.0 / math.comb(n_a + n_b, n_a))
 
 
 def compare_transit_times(

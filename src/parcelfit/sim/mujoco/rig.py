@@ -333,9 +333,9 @@ START_OFF_SURFACE = 0.01
 START_ALIGNMENTS = ("centre", "right", "left")
 # the shortest wall or light barrier [m]: a plate or beam of no length is a typo (from = to)
 MIN_SEGMENT = 1e-3
-# how far [m] a light barrier may lie wholly outside the end box: a parcel's front edge still
-# breaks a beam just beyond the box its centre must stay in; one further off is never crossed
-# (often a barrier written in mm)
+# how far [m] a light barrier or a surface may lie wholly outside the end box: a parcel's front
+# edge still breaks a beam just beyond the box its centre must stay in; one further off is never
+# reached (often a value written in mm)
 BARRIER_OUTSIDE_END = 1.0
 
 
@@ -625,6 +625,21 @@ class RigFile(FileModel):
                         where=f"{key}[{i}]",
                         fix="give its two ends in metres, at least 1 mm apart",
                     )
+        (x_lo, x_hi), (y_lo, y_hi) = self.end.x, self.end.y
+        for i, sf in enumerate(self.surfaces):
+            # its centre line; a surface nowhere near the box is a unit's mistake (mm for m)
+            h = math.radians(sf.heading)
+            half = (sf.length / 2 * math.cos(h), sf.length / 2 * math.sin(h))
+            a = (sf.centre[0] - half[0], sf.centre[1] - half[1])
+            b = (sf.centre[0] + half[0], sf.centre[1] + half[1])
+            off = _segment_box_distance(a, b, (x_lo, x_hi), (y_lo, y_hi)) - sf.width / 2
+            if off > BARRIER_OUTSIDE_END:
+                raise ParcelfitError(
+                    f"surface {shown(sf.name)} lies {off:.3g} m outside the end box (x "
+                    f"{list(self.end.x)}, y {list(self.end.y)}): no run can reach it",
+                    where=f"surfaces[{i}].centre",
+                    fix="give its centre, length and width in metres in the rig frame",
+                )
         below = self.surfaces[names.index(self.start.surface)]
         # the start's offset from the surface's centre along and across its heading [m]
         a = math.radians(below.heading)
@@ -652,7 +667,6 @@ class RigFile(FileModel):
                 where="start.position",
                 fix="put the start over the start surface, or name the surface it lies on",
             )
-        (x_lo, x_hi), (y_lo, y_hi) = self.end.x, self.end.y
         px, py = self.start.position
         if not (x_lo <= px <= x_hi and y_lo <= py <= y_hi):
             raise ParcelfitError(
