@@ -121,6 +121,10 @@ def _ref(node: dict[str, Any]) -> str | None:
     items = node.get("items")
     if isinstance(items, dict) and "$ref" in items:
         return items["$ref"].split("/")[-1]
+    # a list of fixed length (a tuple) whose entries are all one mapping (the rig's barriers)
+    fixed = {p.get("$ref") for p in node.get("prefixItems") or []}
+    if len(fixed) == 1 and None not in fixed:
+        return next(iter(fixed)).split("/")[-1]
     extra = node.get("additionalProperties")
     if isinstance(extra, dict) and "$ref" in extra:
         return extra["$ref"].split("/")[-1]
