@@ -463,7 +463,26 @@ CASES = {
         (
             "fixed",
             "['E_Pa'] are both screened and fixed",
-            "remove them from parameters or from fixed",
+            "remove them from fixed, or from parameters",
+        ),
+    ),
+    "screen parameter of all that is fixed": (
+        "screen",
+        lambda d: d.update(parameters="all", fixed={"E_Pa": 800}),
+        (
+            "fixed",
+            "['E_Pa'] are both screened and fixed",
+            "remove them from fixed, or from parameters (parameters: all takes every candidate: "
+            "list the others instead)",
+        ),
+    ),
+    "screen max full factors below the default min": (
+        "screen",
+        lambda d: d.update(max_full_factors=2),
+        (
+            "min_full_factors",
+            "min_full_factors 3 (its default) exceeds max_full_factors 2",
+            "give min_full_factors at most max_full_factors",
         ),
     ),
     "screen full factorial first over more than it keeps": (

@@ -80,6 +80,31 @@ def test_polybag_third_stage_and_centre_points(tmp_path):
     assert len(pd.read_csv(tmp_path / "out" / "stage1-design.csv")) == 8 + 2
 
 
+def test_the_soft_content_stage_keeps_its_own_parameters_when_it_must_cut(tmp_path):
+    """3 survivors and 2 soft-content parameters at max_full_factors 4: the stage keeps both of
+    the content's and the 2 strongest survivors (it cut the list's end: the content's own)."""
+    write_reference_dataset(tmp_path / "data")
+    doc = {
+        "name": "pb",
+        "simulator": {"backend": "python", "factory": "tests.fake_sim:make"},
+        "reference": {"dataset": "data", "rig": "R", "consignment": "P", "speed_setting": 1},
+        "parameters": {"mu_d_BePa": [0.3, 0.58], "mu_d_MePa": [0.15, 0.35], "E_Pa": [200, 1600]},
+        "stages": ["full"],
+        "soft_content": ["E_Co", "zeta_Co"],
+        "max_full_factors": 4,
+        "executor": {"kind": "local", "workers": 2},
+    }
+    path = tmp_path / "pb.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    events = []
+    stages, _ = run_screen(load_screen(path), tmp_path / "out", progress=events.append)
+    first, second = stages
+    assert len(second.factors) == 4 and {"E_Co", "zeta_Co"} <= set(second.factors)
+    assert second.factors[:2] == first.survivors[:2]
+    assert any("keeping the 2 strongest and the soft content's E_Co, zeta_Co" in e.message
+               for e in events)  # fmt: skip
+
+
 @pytest.mark.parametrize("consignment", ["PB", "KPBW"])
 def test_all_parameters_come_from_the_consignments_content_kind(tmp_path, consignment):
     """``parameters: all`` is every catalogue candidate of the consignment's content kind but

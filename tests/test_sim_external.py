@@ -173,6 +173,26 @@ def test_a_study_with_a_solver_refuses_an_unknown_placeholder_on_load(tmp_path):
         load_study(study)
 
 
+@pytest.mark.parametrize(
+    "encoded", ["'\\ufeff1.25'.encode('utf-8')", "'1.25'.encode('utf-16')", "b'1.25'"]
+)
+def test_a_transit_file_in_utf16_or_with_a_byte_order_mark_is_read(tmp_path, encoded):
+    import sys
+
+    writes = (
+        "import sys\n"
+        "rows = ['t,x,y,theta'] + [f'{k / 60},{k / 100},0,0' for k in range(30)]\n"
+        "open(sys.argv[1], 'w').write('\\n'.join(rows) + '\\n')\n"
+        f"open('transit.txt', 'wb').write({encoded})\n"
+    )
+    solver = _copy_solver(tmp_path, command=[sys.executable, "-c", writes, "${output_file}"])
+    res = ExternalSimulator(load_external_solver(solver), workroot=tmp_path / "runs").run(
+        {"mu_d_BePa": 0.5}, CASE
+    )
+    assert res.status is SimStatus.OK, res.diagnostics
+    assert res.run.transit_time == 1.25
+
+
 def test_a_catalogue_parameter_neither_fitted_nor_fixed_takes_its_default(tmp_path):
     from parcelfit.sim.params import parameter
 
@@ -194,9 +214,9 @@ def test_a_catalogue_parameter_neither_fitted_nor_fixed_takes_its_default(tmp_pa
             "in seconds alone, e.g. 1.234",
         ),
         (
-            "open('transit.txt', 'wb').write(b'\\xff\\xfe1\\x00.\\x002\\x00')\n",
-            "its transit file is not text (not UTF-8) Fix: write the transit time in seconds "
-            "alone as text, e.g. 1.234",
+            "open('transit.txt', 'wb').write(b'\\x80\\x811.2')\n",
+            "its transit file is not text (neither UTF-8 nor UTF-16 with a byte-order mark) Fix: "
+            "write the transit time in seconds alone as UTF-8 text, e.g. 1.234",
         ),
     ],
 )

@@ -166,10 +166,25 @@ def test_light_barriers_listed_out_of_order_fail_the_run_and_say_so(engine):
     res = sim((0.7, 0.5), 1.0).run({}, KPBW)
     assert res.status is SimStatus.FAILED
     assert res.diagnostics["message"] == (
-        "light barrier LS2 broke before LS1 (or without it): the rig file lists light_barriers "
-        "in another order than the parcel crosses them; list LS2 first, or move the barriers"
+        "light barrier LS2 broke before LS1: the rig file lists light_barriers in another order "
+        "than the parcel crosses them (list LS2 first), or the two lie on one line"
     )
+    assert res.diagnostics["barriers_out_of_order"] is True
     assert res.run is None or res.run.transit_time is None
+    res = sim((0.5, 0.5), 1.0).run({}, KPBW)  # one line twice: broken together
+    assert res.status is SimStatus.FAILED and "LS2 broke with LS1" in res.diagnostics["message"]
+    assert res.run is None or res.run.transit_time is None
+    # a start wholly past LS1: not out of order, no transit time, and why
+    rigs = {"flat": flat_belt(1.2, start_x=0.3, barriers=(0.0, 0.6))}
+    past = (
+        MujocoSimulator(SimOptions(duration=1.0), rigs=rigs)
+        if engine == "mujoco"
+        else RigidBoxSimulator(rigs=rigs).with_options(duration=1.0)
+    ).run({}, KPBW)
+    assert past.status is SimStatus.OK and past.run.transit_time is None
+    assert past.diagnostics["transit_note"].startswith(
+        "LS1 was never broken, LS2 was: the start may lie past LS1"
+    )
     res = sim((0.5, 0.7), 0.01).run({}, KPBW)  # the first sample only, at 60 Hz
     assert res.status is SimStatus.FAILED and res.run is None
     assert res.diagnostics["message"].startswith("reached the end of the run after 1 sample, too")

@@ -821,6 +821,30 @@ def test_a_truncated_mp4_gives_parcelfit_s_error_and_no_decoder_noise(tmp_path):
     assert "moov" not in done.stdout + done.stderr
 
 
+def test_a_video_damaged_in_its_middle_says_the_decoder_stopped_early(tmp_path):
+    """With FFmpeg's own messages quiet, a file whose middle is damaged ended 'done' with the
+    frames before the damage alone; now track says how many of the stated frames it decoded."""
+    sample = Path(__file__).resolve().parents[1] / "examples" / "tracking" / "D1-envelope-1-01.mp4"
+    data = sample.read_bytes()
+    a, b = len(data) // 3, len(data) // 3 + len(data) // 6
+    video = tmp_path / "mid.mp4"
+    video.write_bytes(data[:a] + bytes(b - a) + data[b:])
+    tags = sample.parent / "tags.yaml"
+    result = runner.invoke(
+        app, ["track", str(video), "--tags", str(tags), "--out", str(tmp_path / "t")]
+    )
+    assert result.exit_code == 0, result.output
+    said = " ".join(result.output.split())
+    quality = json.loads((tmp_path / "t" / "mid.quality.json").read_text())
+    frames = quality["frames"]
+    assert quality["frames_in_container"] == 60 and frames < 58
+    assert f"decoded {frames} of the 60 frames the video states" in said
+    whole = runner.invoke(
+        app, ["track", str(sample), "--tags", str(tags), "--out", str(tmp_path / "w")]
+    )
+    assert whole.exit_code == 0 and "frames the video states" not in whole.output
+
+
 def test_the_detector_finds_nothing_in_frames_too_small_for_a_tag():
     from parcelfit.tracking.detect import TagDetector
 
@@ -1014,6 +1038,25 @@ def test_a_run_tracked_under_a_rig_no_longer_given_is_reported_and_the_rest_go_o
     assert [c.rig for c in load_dataset(out).cases] == ["E3"]
 
 
+def test_barriers_listed_out_of_order_give_no_transit_time_and_say_so(videos, tmp_path):
+    """The tag map's barriers swapped: the last breaks before the first; the transit time is
+    left out (it was negative, which no run file takes) and track says why."""
+    doc = scene_tag_map(videos["scene"], barriers=BARRIERS[::-1])
+    tags = tmp_path / "tags.yaml"
+    tags.write_text(yaml.safe_dump(doc))
+    result = runner.invoke(
+        app,
+        ["track", str(videos["root"] / "plain.mp4"), "--tags", str(tags), "--out", str(tmp_path)],
+    )
+    assert result.exit_code == 0, result.output
+    said = " ".join(result.output.split())
+    assert "the last light barrier broke before the first: the tag map lists light_barriers" in said
+    quality = json.loads((tmp_path / "plain.quality.json").read_text())
+    tag = quality["parcel_tags"][str(videos["scene"].parcel_tag_id)]
+    assert tag["barriers_out_of_order"] is True and tag["transit_time_s"] is None
+    assert all(t is not None for t in tag["crossings_s"].values())
+
+
 def test_a_beam_broken_already_at_the_first_sample_has_no_crossing_time():
     # a parcel 0.2 m long moving at 1 m/s along x, a beam across x = 0
     from parcelfit.runs import Barrier
@@ -1051,6 +1094,8 @@ def test_a_beam_passed_before_the_first_sample_is_told_from_one_not_reached(dire
     before = Trajectory(t, direction * (-0.3 + t), zero, zero)  # breaks LS1, never LS2
     assert passed_at_start(before, [ls1, ls2], outline) == []
     assert passed_at_start(past, [ls1], outline) == []  # one barrier: no side is beyond
+    aside = Trajectory(t, direction * (0.3 + t), zero + 0.8, zero)  # beyond its line, not its beam
+    assert passed_at_start(aside, [ls1, ls2], outline) == []
     # wholly beyond the last barrier at the start: passed as well
     gone = Trajectory(t, direction * (1.3 + t), zero, zero)
     assert passed_at_start(gone, [ls1, ls2], outline) == ["LS1", "LS2"]

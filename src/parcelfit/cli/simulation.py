@@ -212,14 +212,13 @@ def simulate(
     )
     if result.run is not None:
         tt = result.run.transit_time
-        early = list(d.get("barriers_broken_at_start") or ())
-        why = (
-            f"{', '.join(early)} already broken at the start, the parcel's start lying across "
-            "it: move the rig file's start.position back"
-            if early
-            else "a light barrier was not crossed"
-        )
-        console.print(f"transit time: {f'not measured ({why})' if tt is None else f'{tt:.4f} s'}")
+        why = d.get("transit_note") or "a light barrier was not crossed"
+        if tt is not None:
+            console.print(f"transit time: {tt:.4f} s")
+        elif d.get("barriers_out_of_order"):  # the status line said why
+            console.print("transit time: not measured (the light barriers broke out of order)")
+        else:
+            console.print(f"transit time: not measured ({why})")
         from parcelfit.sim.ensemble import signed_rotation
 
         turned = math.degrees(signed_rotation(result.run.trajectory))

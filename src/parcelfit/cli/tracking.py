@@ -33,8 +33,8 @@ def track(
     """Track the AprilTags of a video: one run file (t, x, y, theta) per parcel tag and a quality
     report (detection rate, gaps, reprojection error, transit time)."""
     from parcelfit.tracking import load_tag_map, track_one, write_video_track
-    from parcelfit.tracking.barriers import late_start_words
-    from parcelfit.tracking.track import TrackOptions
+    from parcelfit.tracking.barriers import OUT_OF_ORDER_WORDS, late_start_words
+    from parcelfit.tracking.track import TrackOptions, undecoded_words
 
     tag_map = load_tag_map(tags)
     with frame_bar() as bar:
@@ -70,6 +70,9 @@ def track(
             "-" if t.trajectory is None else f"{video.stem}-tag{tag_id}.csv",
         )
     console.print(table)
+    cut = undecoded_words(q)
+    if cut:
+        console.print(Text(cut, style="yellow"))
     for tag_id, t in result.tags.items():
         early = [
             *(t.quality.get("barriers_broken_at_start") or []),
@@ -77,6 +80,8 @@ def track(
         ]
         if early and sensor_log is None:  # with a log the transit time is the log's
             console.print(Text(f"tag {tag_id}: {late_start_words(early)}", style="yellow"))
+        if t.quality.get("barriers_out_of_order") and sensor_log is None:
+            console.print(Text(f"tag {tag_id}: {OUT_OF_ORDER_WORDS}", style="yellow"))
     rp = q["reference_reprojection_px"]
     console.print(
         f"reference tags: reprojection error mean {rp['mean']:.2f} px, max {rp['max']:.2f} px; "

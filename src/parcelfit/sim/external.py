@@ -32,6 +32,7 @@ timeout ``timeout``.
 
 from __future__ import annotations
 
+import codecs
 import signal
 import string
 import subprocess
@@ -228,6 +229,23 @@ def _last_lines(*texts: str | bytes | None, n: int = 10) -> str:
     return "\n".join([line for line in joined.splitlines() if line.strip()][-n:])
 
 
+def _read_text(path: Path) -> str:
+    """A small text file a solver wrote: UTF-8 (a byte-order mark allowed) or UTF-16 with its
+    byte-order mark (as Windows PowerShell writes by default); other bytes are refused naming
+    the file."""
+    data = path.read_bytes()
+    try:
+        if data.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
+            return data.decode("utf-16")
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        raise ParcelfitError(
+            "its transit file is not text (neither UTF-8 nor UTF-16 with a byte-order mark)",
+            file=path,
+            fix="write the transit time in seconds alone as UTF-8 text, e.g. 1.234",
+        ) from None
+
+
 def _signal_name(number: int) -> str:
     try:
         return signal.Signals(number).name
@@ -310,14 +328,7 @@ class ExternalSimulator:
             transit_path = workdir / self.solver.transit_file if self.solver.transit_file else None
             # no file, or an empty one: the parcel crossed no second light barrier
             if transit_path is not None and transit_path.is_file():
-                try:
-                    text = transit_path.read_text(encoding="utf-8").strip()
-                except UnicodeDecodeError:
-                    raise ParcelfitError(
-                        "its transit file is not text (not UTF-8)",
-                        file=transit_path,
-                        fix="write the transit time in seconds alone as text, e.g. 1.234",
-                    ) from None
+                text = _read_text(transit_path).strip()
                 try:
                     transit = float(text) if text else None
                 except ValueError:

@@ -332,11 +332,13 @@ def _check_plan(
     them before it); min_full_factors <= max_full_factors."""
     both = sorted(set(factors) & set(map(str, f.fixed)))
     if both:
+        every = " (parameters: all takes every candidate: list the others instead)"
         raise ParcelfitError(
             f"{both} are both screened and fixed",
             file=path,
             where="fixed",
-            fix="remove them from parameters or from fixed",
+            fix="remove them from fixed, or from parameters"
+            + (every if f.parameters is None else ""),
         )
     if f.soft_content and backend in ("mujoco", "rigidbox") and kind != SOFT:
         raise ParcelfitError(
@@ -360,7 +362,9 @@ def _check_plan(
         )
     if f.min_full_factors > f.max_full_factors:
         raise ParcelfitError(
-            f"min_full_factors {f.min_full_factors} exceeds max_full_factors {f.max_full_factors}",
+            f"min_full_factors {f.min_full_factors}"
+            + (" (its default)" if "min_full_factors" not in f.model_fields_set else "")
+            + f" exceeds max_full_factors {f.max_full_factors}",
             file=path,
             where="min_full_factors",
             fix="give min_full_factors at most max_full_factors",
@@ -459,10 +463,17 @@ def run_screen(
             if stage == len(screen.stages) and screen.soft_content:
                 factors = list(dict.fromkeys([*factors, *screen.soft_content]))
             if kind == "full" and len(factors) > screen.max_full_factors:
+                n_max = screen.max_full_factors
+                # the soft content's stage keeps its own parameters, which it exists for, and
+                # the strongest survivors beside them (survivors come strongest first)
+                own = [f for f in factors if f in screen.soft_content]
+                own = own[:n_max] if stage == len(screen.stages) else []
+                rest = [f for f in factors if f not in own][: n_max - len(own)]
                 say(
-                    f"stage {stage + 1}: {len(factors)} survivors, keeping the {screen.max_full_factors} strongest"
+                    f"stage {stage + 1}: {len(factors)} survivors, keeping the {len(rest)} "
+                    "strongest" + (f" and the soft content's {', '.join(own)}" if own else "")
                 )
-                factors = factors[: screen.max_full_factors]
+                factors = [f for f in factors if f in rest or f in own]
             design = (
                 fractional_factorial(len(factors), screen.resolution)
                 if kind == "fractional"

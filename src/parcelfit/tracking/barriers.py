@@ -79,10 +79,10 @@ def broken_at_start(
 def passed_at_start(
     traj: Trajectory, barriers: Sequence[Barrier], outline: tuple[float, float] | None
 ) -> list[str]:
-    """Names of the barriers the outline lies wholly beyond at the first sample and never breaks
-    (it passed them before the trajectory began). Beyond a barrier is the side of the last
-    barrier's midpoint, and beyond the last barrier the side away from the first's; with fewer
-    than two barriers no side is known and none is named."""
+    """Names of the barriers the outline lies wholly beyond at the first sample, beside the
+    beam's segment, and never breaks (it passed them before the trajectory began). Beyond a
+    barrier is the side of the last barrier's midpoint, and beyond the last barrier the side
+    away from the first's; with fewer than two barriers no side is known and none is named."""
     if len(barriers) < 2 or not len(traj.t):
         return []
     corners0 = outline_corners(traj.x[:1], traj.y[:1], traj.theta[:1], outline)[0]
@@ -100,10 +100,22 @@ def passed_at_start(
         if side == 0:
             continue
         n = n * beyond * math.copysign(1.0, side)
-        wholly_beyond = float(((corners0 - a) @ n).min()) > 0
-        if wholly_beyond and crossing_time(traj, barrier, outline) is None:
+        rel = corners0 - a
+        wholly_beyond = float((rel @ n).min()) > 0
+        # and beside the beam's segment, not beyond its line only (a curved layout's line
+        # passes elsewhere)
+        along = rel @ (d / float(np.hypot(*d)))
+        beside = along.max() >= 0 and along.min() <= float(np.hypot(*d))
+        if wholly_beyond and beside and crossing_time(traj, barrier, outline) is None:
             out.append(barrier.name)
     return out
+
+
+OUT_OF_ORDER_WORDS = (
+    "the last light barrier broke before the first: the tag map lists light_barriers in another "
+    "order than the parcel crosses them, so the transit time is left out (list them in order)"
+)
+"""What the tracking commands say when the last barrier broke before the first."""
 
 
 def late_start_words(names: Sequence[str]) -> str:

@@ -34,9 +34,9 @@ from parcelfit.runs import (
     save_dataset,
     write_trajectory,
 )
-from parcelfit.tracking.barriers import late_start_words, read_sensor_log
+from parcelfit.tracking.barriers import OUT_OF_ORDER_WORDS, late_start_words, read_sensor_log
 from parcelfit.tracking.tagmap import TagMap
-from parcelfit.tracking.track import TrackOptions, VideoTrack, track_video
+from parcelfit.tracking.track import TrackOptions, VideoTrack, track_video, undecoded_words
 
 VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv", ".m4v")
 _REST = re.compile(r"^(?P<cons>[^-]+)-(?P<setting>\d+)-(?P<run>[^.]+)$")  # after RIG-
@@ -203,10 +203,13 @@ def track_all(
                     for b in t.quality[key]
                 }
             )
-            say(
-                video,
-                "done" if not early or log is not None else f"done; {late_start_words(early)}",
-            )
+            disordered = any(t.quality["barriers_out_of_order"] for t in result.tags.values())
+            notes = [
+                *([] if not early or log is not None else [late_start_words(early)]),
+                *([OUT_OF_ORDER_WORDS] if disordered and log is None else []),
+                *filter(None, [undecoded_words(result.quality)]),
+            ]
+            say(video, "; ".join(["done", *notes]))
         except ParcelfitError as exc:
             summary["failed"][video.name] = str(exc)
             say(video, f"failed: {exc}")

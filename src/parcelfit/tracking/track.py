@@ -59,6 +59,22 @@ from parcelfit.tracking.smooth import RESTART_AFTER, rts_smooth
 from parcelfit.tracking.tagmap import TagMap, tag_corners
 from parcelfit.tracking.video import frames_of, open_video
 
+# frames the container may state beyond those decoded before the tracking commands say the
+# decoder stopped early (container counts can be estimates off by a frame)
+UNDECODED_FRAMES_NOTED = 2
+
+
+def undecoded_words(quality: dict[str, Any]) -> str | None:
+    """What the tracking commands say when the decoder stopped before the frames the container
+    states (a damaged file; FFmpeg's own messages are quiet), or None."""
+    stated, frames = quality.get("frames_in_container"), quality.get("frames", 0)
+    if not stated or stated - frames <= UNDECODED_FRAMES_NOTED:
+        return None
+    return (
+        f"decoded {frames} of the {stated} frames the video states: the file may be damaged "
+        f"after frame {frames}, and the tracks end there (check it, or convert it with ffmpeg)"
+    )
+
 
 @dataclass(frozen=True)
 class TrackOptions:
@@ -400,6 +416,7 @@ def track_video(
         # before it was seen
         broken_first: list[str] = []
         passed_first: list[str] = []
+        out_of_order = False
         if traj is not None and tag_map.barriers:
             outline = tag_map.parcel_tags[tag_id].outline
             crossings = barrier_times(traj, tag_map.barriers, outline)
@@ -407,7 +424,9 @@ def track_video(
             passed_first = passed_at_start(traj, tag_map.barriers, outline)
             a, b = crossings[tag_map.barriers[0].name], crossings[tag_map.barriers[-1].name]
             if len(tag_map.barriers) >= 2 and a is not None and b is not None:
-                transit = b - a
+                # the last broken before the first: the tag map lists them out of order
+                out_of_order = b <= a
+                transit = None if out_of_order else b - a
         tags[tag_id] = TagTrack(
             tag_id,
             traj,
@@ -443,12 +462,18 @@ def track_video(
                 "barriers_broken_at_start": broken_first,
                 # light barriers the parcel lay wholly beyond at the first sample (passed unseen)
                 "barriers_passed_at_start": passed_first,
+                # the last barrier broken before the first: no transit time (the tag map's
+                # light_barriers are not in the order the parcel crosses them)
+                "barriers_out_of_order": out_of_order,
                 "interpolated_frames": int(sum(g["frames"] for g in gaps if g["interpolated"])),
                 "missing_frames": int(sum(g["frames"] for g in gaps if not g["interpolated"])),
             },
         )
     quality = {
         "frames": frames,
+        # the frames the container states (None: it does not say); more than
+        # `UNDECODED_FRAMES_NOTED` above `frames`: the decoder stopped early (a damaged file)
+        "frames_in_container": total or None,
         "fps": fps,
         "size_px": list(size),
         "seconds_per_frame": elapsed / max(frames, 1),

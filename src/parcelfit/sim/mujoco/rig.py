@@ -668,7 +668,10 @@ class RigFile(FileModel):
                 fix="put the start over the start surface, or name the surface it lies on",
             )
         px, py = self.start.position
-        if not (x_lo <= px <= x_hi and y_lo <= py <= y_hi):
+        # with align right or left the position is on a side, the centre up to half a parcel
+        # across from it (no parcel here is 1 m wide)
+        slack = 0.0 if self.start.align == "centre" else 0.5
+        if not (x_lo - slack <= px <= x_hi + slack and y_lo - slack <= py <= y_hi + slack):
             raise ParcelfitError(
                 f"start.position {list(self.start.position)} lies outside the end box (x "
                 f"{list(self.end.x)}, y {list(self.end.y)}): every run would end before it began",

@@ -51,7 +51,7 @@ import numpy as np
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import Run, TestCase, Trajectory
-from parcelfit.sim.crossings import barriers_out_of_order, out_of_order_words, too_short_words
+from parcelfit.sim.crossings import crossing_diagnostics, judge_crossings, too_short_words
 from parcelfit.sim.mujoco.backend import RigBackend
 from parcelfit.sim.mujoco.consignment import Consignment
 from parcelfit.sim.mujoco.friction import Stepper
@@ -306,7 +306,7 @@ class MujocoSimulator(RigBackend[SimOptions]):
                     crossed[k] = math.inf
                 else:
                     crossed[k] = _crossing_time(clear[k], t_pos, margin)
-                    if k == 1:
+                    if len(beams) == 2 and None not in crossed:  # both broken: end soon
                         stop_at = min(n_steps, step + round(rig.end.after_last_barrier / dt))
             if prev_c is not None:
                 speed_vec = (c - prev_c) / dt
@@ -322,21 +322,16 @@ class MujocoSimulator(RigBackend[SimOptions]):
             stepper.step()
             step += 1
         wall = time.perf_counter() - t_wall
-        at_start = tuple(
-            b.name for b, t in zip(rig.barriers, crossed, strict=False) if t == math.inf
-        )
-        times = tuple(None if t is None or t == math.inf else t for t in crossed)
-        transit = times[1] - times[0] if times[0] is not None and times[1] is not None else None
-        wrong_order = barriers_out_of_order(crossed)
-        if wrong_order and status is SimStatus.OK:
-            status, message, transit = SimStatus.FAILED, out_of_order_words(rig.barriers), None
+        judged = judge_crossings(crossed, rig.barriers)
+        transit = judged.transit
+        if judged.out_of_order and status is SimStatus.OK:
+            status, message = SimStatus.FAILED, str(judged.note)
         diagnostics: dict[str, object] = {
             "message": message,
             "steps": step,
             "simulated_time": float(data.time),
             "steps_per_second": step / wall if wall > 0 else float("nan"),
-            "barrier_times": times,
-            "barriers_broken_at_start": at_start,
+            **crossing_diagnostics(judged),
             **stepper.diagnostics(),
             # MuJoCo flags a step whose effective-inertia (M + K for flexes) solve is singular or
             # under-converged with mjWARN_INERTIA; it prints the first only, but counts them all

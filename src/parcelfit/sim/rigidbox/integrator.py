@@ -161,7 +161,7 @@ def advance(
 ):  # fmt: skip
     """Integrate up to ``n_steps`` steps of ``dt`` [s] from the state (x, q, v, pi; its forces F,
     T already evaluated). ``counters``: [step, force evaluation, stop_at]; the run stops early at
-    step stop_at (set ``after_steps`` after the second beam breaks). Beams: ``crossed`` (NaN
+    step stop_at (set ``after_steps`` after both beams broke). Beams: ``crossed`` (NaN
     until broken: the time [s]; inf where broken at the first step, before the run),
     ``clear_t``, ``clear_g``: the last uninterrupted time and margin (NaN: none). Returns
     RUNNING, STOPPED, NOT_FINITE or TOO_FAST."""
@@ -206,7 +206,7 @@ def advance(
                     crossed[b] = t
                 else:
                     crossed[b] = clear_t[b] + (t - clear_t[b]) * clear_g[b] / (clear_g[b] - g)
-                if b == 1:
+                if not (math.isnan(crossed[0]) or math.isnan(crossed[1])):  # both broken
                     counters[2] = min(counters[2], step + after_steps)
         if step >= counters[2]:
             return STOPPED

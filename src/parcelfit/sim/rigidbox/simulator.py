@@ -29,7 +29,7 @@ import numpy as np
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.runs import Run, TestCase, Trajectory
-from parcelfit.sim.crossings import barriers_out_of_order, out_of_order_words, too_short_words
+from parcelfit.sim.crossings import crossing_diagnostics, judge_crossings, too_short_words
 from parcelfit.sim.mujoco.backend import RigBackend
 from parcelfit.sim.mujoco.consignment import Consignment
 from parcelfit.sim.mujoco.rig import Rig
@@ -289,24 +289,21 @@ class RigidBoxSimulator(RigBackend[RigidBoxOptions]):
                 )
                 break
         wall = time.perf_counter() - t_wall
-        crossed = motion.barrier_times
-        transit = (
-            crossed[1] - crossed[0] if crossed[0] is not None and crossed[1] is not None else None
-        )
         # each beam's time, None if never broken, inf if broken at the start (`sim.crossings`)
-        raw = [None if math.isnan(t) else float(t) for t in motion.crossed[: len(rig.barriers)]]
-        if barriers_out_of_order(raw) and status is SimStatus.OK:
-            status, message, transit = SimStatus.FAILED, out_of_order_words(rig.barriers), None
+        judged = judge_crossings(
+            [None if math.isnan(t) else float(t) for t in motion.crossed[: len(rig.barriers)]],
+            rig.barriers,
+        )
+        transit = judged.transit
+        if judged.out_of_order and status is SimStatus.OK:
+            status, message = SimStatus.FAILED, str(judged.note)
         diagnostics: dict[str, object] = {
             "message": message,
             "steps": motion.steps,
             "simulated_time": motion.steps * dt,
             "timestep": dt,
             "steps_per_second": motion.steps / wall if wall > 0 else float("nan"),
-            "barrier_times": crossed,
-            "barriers_broken_at_start": tuple(
-                b.name for b, t in zip(rig.barriers, motion.crossed, strict=False) if t == np.inf
-            ),
+            **crossing_diagnostics(judged),
             "contact_points": len(world.body.points),
         }
         run = None
