@@ -59,8 +59,9 @@ def test_screen_finds_the_parameters_that_matter(tmp_path):
     assert not any(e.message.startswith("ok:") for e in events)
 
 
-@pytest.mark.slow
-def test_polybag_third_stage_and_centre_points(tmp_path):
+def _polybag_screen(tmp_path, **changes):
+    """A screen file on the analytic simulator: one full factorial over three parameters, then
+    the soft content's stage (E_Co, zeta_Co); ``changes`` replace its keys."""
     write_reference_dataset(tmp_path / "data")
     doc = {
         "name": "pb",
@@ -69,12 +70,17 @@ def test_polybag_third_stage_and_centre_points(tmp_path):
         "parameters": {"mu_d_BePa": [0.3, 0.58], "mu_d_MePa": [0.15, 0.35], "E_Pa": [200, 1600]},
         "stages": ["full"],
         "soft_content": ["E_Co", "zeta_Co"],
-        "centre_points": 2,
         "executor": {"kind": "local", "workers": 2},
+        **changes,
     }
     path = tmp_path / "pb.yaml"
     path.write_text(yaml.safe_dump(doc, sort_keys=False))
-    stages, _ = run_screen(load_screen(path), tmp_path / "out")
+    return load_screen(path)
+
+
+@pytest.mark.slow
+def test_polybag_third_stage_and_centre_points(tmp_path):
+    stages, _ = run_screen(_polybag_screen(tmp_path, centre_points=2), tmp_path / "out")
     assert [s.kind for s in stages] == ["full", "full"]
     assert {"E_Co", "zeta_Co"} <= set(stages[1].factors)
     assert len(pd.read_csv(tmp_path / "out" / "stage1-design.csv")) == 8 + 2
@@ -83,21 +89,9 @@ def test_polybag_third_stage_and_centre_points(tmp_path):
 def test_the_soft_content_stage_keeps_its_own_parameters_when_it_must_cut(tmp_path):
     """3 survivors and 2 soft-content parameters at max_full_factors 4: the stage keeps both of
     the content's and the 2 strongest survivors (it cut the list's end: the content's own)."""
-    write_reference_dataset(tmp_path / "data")
-    doc = {
-        "name": "pb",
-        "simulator": {"backend": "python", "factory": "tests.fake_sim:make"},
-        "reference": {"dataset": "data", "rig": "R", "consignment": "P", "speed_setting": 1},
-        "parameters": {"mu_d_BePa": [0.3, 0.58], "mu_d_MePa": [0.15, 0.35], "E_Pa": [200, 1600]},
-        "stages": ["full"],
-        "soft_content": ["E_Co", "zeta_Co"],
-        "max_full_factors": 4,
-        "executor": {"kind": "local", "workers": 2},
-    }
-    path = tmp_path / "pb.yaml"
-    path.write_text(yaml.safe_dump(doc, sort_keys=False))
     events = []
-    stages, _ = run_screen(load_screen(path), tmp_path / "out", progress=events.append)
+    screen = _polybag_screen(tmp_path, max_full_factors=4)
+    stages, _ = run_screen(screen, tmp_path / "out", progress=events.append)
     first, second = stages
     assert len(second.factors) == 4 and {"E_Co", "zeta_Co"} <= set(second.factors)
     assert second.factors[:2] == first.survivors[:2]
