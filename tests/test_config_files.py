@@ -498,6 +498,18 @@ CASES = {
             "parameters, or set max_full_factors: 3 (8 runs)",
         ),
     ),
+    "screen soft content as large as the full stage": (
+        "screen",
+        lambda d: d.update(
+            soft_content=["E_Co", "zeta_Co"], max_full_factors=2, min_full_factors=2
+        ),
+        (
+            "max_full_factors",
+            "the soft content's stage would keep only its 2 parameters (max_full_factors 2), no "
+            "survivor beside them",
+            "set max_full_factors: 4 or more, or list fewer soft_content parameters",
+        ),
+    ),
     "screen min full factors above max": (
         "screen",
         lambda d: d.update(min_full_factors=5, max_full_factors=4),
@@ -685,6 +697,17 @@ CASES = {
             "give its two ends in metres, at least 1 mm apart",
         ),
     ),
+    "tags light barriers of one id": (
+        "tags",
+        lambda d: d["light_barriers"].append(
+            {"id": "start", "from": [0.5, -0.5], "to": [0.5, 0.5]}
+        ),
+        (
+            "light_barriers[1]",
+            "two light barriers have the id 'start'",
+            "give each barrier its own id",
+        ),
+    ),
     "tags two roles": (
         "tags",
         lambda d: d["parcel_tags"].update({0: {"size": 0.06}}),
@@ -806,6 +829,25 @@ CASES = {
             "light barrier 'LS2' lies 1.8e+03 m outside the end box (x [-1.0, 2.0], y [-1.0, "
             "0.5]): no run can reach it",
             "give its ends in metres in the rig frame, within the end box",
+        ),
+    ),
+    "rig right-aligned start outside the end box": (
+        "rig",
+        lambda d: (d["start"].update(align="right"), d["end"].update(x=[0.0, 2.0])),
+        (
+            "start.position",
+            "start.position [-0.3, -0.6] lies outside the end box (x [0.0, 2.0], y [-1.0, 0.5]): "
+            "every run would end before it began",
+            "widen end.x and end.y to hold the start and the whole path, or move the start",
+        ),
+    ),
+    "rig light barriers of one name": (
+        "rig",
+        lambda d: d["light_barriers"][1].update(name="LS1"),
+        (
+            "light_barriers[1].name",
+            "both light barriers are named 'LS1'",
+            "give each its own name (e.g. LS1 and LS2)",
         ),
     ),
     "rig surface in mm": (

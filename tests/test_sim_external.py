@@ -174,7 +174,13 @@ def test_a_study_with_a_solver_refuses_an_unknown_placeholder_on_load(tmp_path):
 
 
 @pytest.mark.parametrize(
-    "encoded", ["'\\ufeff1.25'.encode('utf-8')", "'1.25'.encode('utf-16')", "b'1.25'"]
+    "encoded",
+    [
+        "'\\ufeff1.25'.encode('utf-8')",
+        "'1.25'.encode('utf-16')",
+        "'1.25'.encode('utf-32')",
+        "b'1.25'",
+    ],
 )
 def test_a_transit_file_in_utf16_or_with_a_byte_order_mark_is_read(tmp_path, encoded):
     import sys
@@ -215,6 +221,11 @@ def test_a_catalogue_parameter_neither_fitted_nor_fixed_takes_its_default(tmp_pa
         ),
         (
             "open('transit.txt', 'wb').write(b'\\x80\\x811.2')\n",
+            "its transit file is not text (neither UTF-8 nor UTF-16 with a byte-order mark) Fix: "
+            "write the transit time in seconds alone as UTF-8 text, e.g. 1.234",
+        ),
+        (  # UTF-16 without its byte-order mark
+            "open('transit.txt', 'wb').write('1.2'.encode('utf-16-le'))\n",
             "its transit file is not text (neither UTF-8 nor UTF-16 with a byte-order mark) Fix: "
             "write the transit time in seconds alone as UTF-8 text, e.g. 1.234",
         ),

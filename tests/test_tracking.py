@@ -845,6 +845,26 @@ def test_a_video_damaged_in_its_middle_says_the_decoder_stopped_early(tmp_path):
     assert whole.exit_code == 0 and "frames the video states" not in whole.output
 
 
+def test_only_an_exact_frame_count_judges_the_decoder(tmp_path):
+    """MP4 states its frames exactly; Matroska does not (OpenCV then estimates a count from the
+    duration, an audio track's included, which made an intact file look damaged)."""
+    import av
+
+    from parcelfit.tracking.video import stated_frames
+
+    sample = Path(__file__).resolve().parents[1] / "examples" / "tracking" / "D1-envelope-1-01.mp4"
+    assert stated_frames(sample) == 60
+    mkv = tmp_path / "copy.mkv"
+    with av.open(str(sample)) as src, av.open(str(mkv), "w") as dst:
+        stream = dst.add_stream_from_template(src.streams.video[0])
+        for packet in src.demux(src.streams.video[0]):
+            if packet.dts is not None:
+                packet.stream = stream
+                dst.mux(packet)
+    assert stated_frames(mkv) is None
+    assert stated_frames(mkv.with_name("missing.mp4")) is None
+
+
 def test_the_detector_finds_nothing_in_frames_too_small_for_a_tag():
     from parcelfit.tracking.detect import TagDetector
 

@@ -54,11 +54,12 @@ def judge_crossings(crossed: Sequence[float | None], barriers: Sequence[Barrier]
     out_of_order = first is not None and second is not None and second <= first
     transit = None if out_of_order or first is None or second is None else second - first
     note = None
-    if out_of_order:
+    if out_of_order and second == first:
+        note = f"light barriers {a} and {b} broke together: the rig file puts them on one line"
+    elif out_of_order:
         note = (
-            f"light barrier {b} broke {'with' if second == first else 'before'} {a}: the rig "
-            f"file lists light_barriers in another order than the parcel crosses them (list {b} "
-            "first), or the two lie on one line"
+            f"light barrier {b} broke before {a}: the rig file lists light_barriers in another "
+            f"order than the parcel crosses them (list {b} first)"
         )
     elif transit is None:
         if at_start:

@@ -235,8 +235,12 @@ def _read_text(path: Path) -> str:
     the file."""
     data = path.read_bytes()
     try:
+        if data.startswith((codecs.BOM_UTF32_LE, codecs.BOM_UTF32_BE)):  # before UTF-16's
+            return data.decode("utf-32")
         if data.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
             return data.decode("utf-16")
+        if b"\x00" in data:  # NUL bytes are valid UTF-8 but no digit: UTF-16 without its mark
+            raise UnicodeDecodeError("utf-8", data, 0, len(data), "NUL bytes")
         return data.decode("utf-8-sig")
     except UnicodeDecodeError:
         raise ParcelfitError(

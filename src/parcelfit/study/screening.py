@@ -347,6 +347,15 @@ def _check_plan(
             where="soft_content",
             fix="leave soft_content out, or screen a soft-content type (e.g. PB)",
         )
+    if len(f.soft_content) >= f.max_full_factors:
+        raise ParcelfitError(
+            f"the soft content's stage would keep only its {len(f.soft_content)} parameters "
+            f"(max_full_factors {f.max_full_factors}), no survivor beside them",
+            file=path,
+            where="max_full_factors",
+            fix=f"set max_full_factors: {len(f.soft_content) + 2} or more, or list fewer "
+            "soft_content parameters",
+        )
     if f.stages and f.stages[0] == "full" and len(factors) > f.max_full_factors:
         n = len(factors)
         raise ParcelfitError(

@@ -277,7 +277,15 @@ class TagMapFile(FileModel):
 
     @model_validator(mode="after")
     def _one_role(self) -> TagMapFile:
+        seen: set[str] = set()
         for i, b in enumerate(self.light_barriers):
+            if b.id in seen:
+                raise ParcelfitError(
+                    f"two light barriers have the id {b.id!r}",
+                    where=f"light_barriers[{i}]",
+                    fix="give each barrier its own id",
+                )
+            seen.add(b.id)
             if math.dist(b.start, b.end) < 1e-3:  # from = to: a typo, a beam of no length
                 raise ParcelfitError(
                     f"light barrier {b.id!r} has no length: from {list(b.start)} to {list(b.end)}",

@@ -57,7 +57,7 @@ from parcelfit.tracking.smear import (
 )
 from parcelfit.tracking.smooth import RESTART_AFTER, rts_smooth
 from parcelfit.tracking.tagmap import TagMap, tag_corners
-from parcelfit.tracking.video import frames_of, open_video
+from parcelfit.tracking.video import frames_of, open_video, stated_frames
 
 # frames the container may state beyond those decoded before the tracking commands say the
 # decoder stopped early (container counts can be estimates off by a frame)
@@ -471,9 +471,9 @@ def track_video(
         )
     quality = {
         "frames": frames,
-        # the frames the container states (None: it does not say); more than
+        # the frames the container states exactly (None: it states none); more than
         # `UNDECODED_FRAMES_NOTED` above `frames`: the decoder stopped early (a damaged file)
-        "frames_in_container": total or None,
+        "frames_in_container": stated_frames(video),
         "fps": fps,
         "size_px": list(size),
         "seconds_per_frame": elapsed / max(frames, 1),

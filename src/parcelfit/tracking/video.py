@@ -70,6 +70,21 @@ def open_video(path: str | Path) -> cv2.VideoCapture:
     return cap
 
 
+def stated_frames(path: str | Path) -> int | None:
+    """The frame count a video's container states exactly (PyAV's count of the video stream),
+    or None where it states none: OpenCV estimates one from the duration for such containers
+    (Matroska, WebM), which counts an audio track's length, so only an exact count can tell a
+    decoder that stopped early."""
+    import av
+
+    try:
+        with av.open(str(path)) as container:
+            count = int(container.streams.video[0].frames)
+    except (av.FFmpegError, IndexError, OSError):
+        return None
+    return count if count > 0 else None
+
+
 def frames_of(cap: cv2.VideoCapture, prefetch: int = 4) -> Iterator[np.ndarray]:
     """Grey frames of an open video, decoded in a background thread."""
     q: queue.Queue[np.ndarray | None] = queue.Queue(maxsize=prefetch)

@@ -61,7 +61,7 @@ at 1/1200 s, 2), every run on it divides the default step by this. A study's ``r
 or an explicit ``timestep`` overrides it.
 
 The run ends when the parcel centre leaves the ``end`` box, ``after_last_barrier`` seconds
-after it interrupts the second light barrier, or after ``duration`` seconds of simulated time.
+after it has interrupted both light barriers, or after ``duration`` seconds of simulated time.
 """
 
 from __future__ import annotations
@@ -545,7 +545,7 @@ class EndSection(FileModel):
     duration: Annotated[float, Number(unit="s", ge=0.01, le=600)]
     """... or after this much simulated time [s]."""
     after_last_barrier: Annotated[float, Number(unit="s", ge=0)] = 0.3
-    """... or this long after the parcel interrupts the second light barrier [s]."""
+    """... or this long after the parcel has interrupted both light barriers [s]."""
 
 
 class RigFile(FileModel):
@@ -617,6 +617,13 @@ class RigFile(FileModel):
                 where="start.surface",
                 fix=f"use one of {', '.join(names)}",
             )
+        a, b = (x.name for x in self.light_barriers)
+        if a == b:
+            raise ParcelfitError(
+                f"both light barriers are named {shown(a)}",
+                where="light_barriers[1].name",
+                fix="give each its own name (e.g. LS1 and LS2)",
+            )
         for key, entries in (("walls", self.walls), ("light_barriers", self.light_barriers)):
             for i, w in enumerate(entries):
                 if math.dist(w.start, w.end) < MIN_SEGMENT:
@@ -668,10 +675,14 @@ class RigFile(FileModel):
                 fix="put the start over the start surface, or name the surface it lies on",
             )
         px, py = self.start.position
-        # with align right or left the position is on a side, the centre up to half a parcel
-        # across from it (no parcel here is 1 m wide)
-        slack = 0.0 if self.start.align == "centre" else 0.5
-        if not (x_lo - slack <= px <= x_hi + slack and y_lo - slack <= py <= y_hi + slack):
+        # with align right or left the position is the middle of a side: the centre lies up to
+        # half a parcel (under 0.5 m) across from it, to the left of a right side (looking
+        # along the start surface) and to the right of a left side; some of that reach must
+        # lie in the box
+        reach = {"centre": 0.0, "right": 0.5, "left": -0.5}[self.start.align]
+        h = math.radians(below.heading)
+        far = (px - reach * math.sin(h), py + reach * math.cos(h))
+        if _segment_box_distance((px, py), far, (x_lo, x_hi), (y_lo, y_hi)) > 0:
             raise ParcelfitError(
                 f"start.position {list(self.start.position)} lies outside the end box (x "
                 f"{list(self.end.x)}, y {list(self.end.y)}): every run would end before it began",

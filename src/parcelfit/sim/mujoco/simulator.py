@@ -35,8 +35,8 @@ per geom with a one-step lag rather than per contact.
 
 Status: ``unstable`` on NaN, MuJoCo's bad-acceleration warning, a speed above 20 m/s, or the
 parcel falling 0.2 m below the lowest surface; ``timeout`` when the wall-clock limit passes;
-``ok`` otherwise (the run ends when the centre leaves the rig's end box, some time after LS2,
-or at the rig's duration).
+``ok`` otherwise (the run ends when the centre leaves the rig's end box, some time after both
+LS1 and LS2 broke, or at the rig's duration).
 """
 
 from __future__ import annotations

@@ -9,8 +9,8 @@ MuJoCo scene starts it. Every 1/sample_rate s (60 Hz) the box
 centre (x, y) and the heading of its x axis projected onto the plane, theta = atan2(R_yx, R_xx),
 are sampled (a `Trajectory`, unwrapped). The light barriers are timed every step (the box's
 footprint, `integrator`), and the run ends as the MuJoCo simulator's does: when the centre leaves
-the rig's end box (checked at the samples), ``after_last_barrier`` s after the second beam
-breaks, or after the rig's duration (``duration`` overrides it).
+the rig's end box (checked at the samples), ``after_last_barrier`` s after both beams
+broke, or after the rig's duration (``duration`` overrides it).
 
 Status: ``unstable`` on a non-finite state, a speed above 20 m/s or the centre falling 0.2 m
 below the lowest surface's top; ``timeout`` when ``wall_limit`` passes (checked at the samples);
