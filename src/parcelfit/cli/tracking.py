@@ -34,7 +34,7 @@ def track(
     report (detection rate, gaps, reprojection error, transit time)."""
     from parcelfit.tracking import load_tag_map, track_one, write_video_track
     from parcelfit.tracking.barriers import OUT_OF_ORDER_WORDS, late_start_words
-    from parcelfit.tracking.track import TrackOptions, undecoded_words
+    from parcelfit.tracking.track import TrackOptions, crossed_unseen, undecoded_words
 
     tag_map = load_tag_map(tags)
     with frame_bar() as bar:
@@ -74,10 +74,7 @@ def track(
     if cut:
         console.print(Text(cut, style="yellow"))
     for tag_id, t in result.tags.items():
-        early = [
-            *(t.quality.get("barriers_broken_at_start") or []),
-            *(t.quality.get("barriers_passed_at_start") or []),
-        ]
+        early = crossed_unseen(t.quality)
         if early and sensor_log is None:  # with a log the transit time is the log's
             console.print(Text(f"tag {tag_id}: {late_start_words(early)}", style="yellow"))
         if t.quality.get("barriers_out_of_order") and sensor_log is None:

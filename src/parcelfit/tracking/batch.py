@@ -36,7 +36,13 @@ from parcelfit.runs import (
 )
 from parcelfit.tracking.barriers import OUT_OF_ORDER_WORDS, late_start_words, read_sensor_log
 from parcelfit.tracking.tagmap import TagMap
-from parcelfit.tracking.track import TrackOptions, VideoTrack, track_video, undecoded_words
+from parcelfit.tracking.track import (
+    TrackOptions,
+    VideoTrack,
+    crossed_unseen,
+    track_video,
+    undecoded_words,
+)
 
 VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv", ".m4v")
 _REST = re.compile(r"^(?P<cons>[^-]+)-(?P<setting>\d+)-(?P<run>[^.]+)$")  # after RIG-
@@ -195,14 +201,7 @@ def track_all(
                 )
             write_video_track(result, tracks)
             summary["done"].append(video.name)
-            early = sorted(
-                {
-                    b
-                    for t in result.tags.values()
-                    for key in ("barriers_broken_at_start", "barriers_passed_at_start")
-                    for b in t.quality[key]
-                }
-            )
+            early = sorted({b for t in result.tags.values() for b in crossed_unseen(t.quality)})
             disordered = any(t.quality["barriers_out_of_order"] for t in result.tags.values())
             notes = [
                 *([] if not early or log is not None else [late_start_words(early)]),

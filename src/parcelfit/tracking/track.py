@@ -64,6 +64,12 @@ from parcelfit.tracking.video import frames_of, open_video, stated_frames
 UNDECODED_FRAMES_NOTED = 2
 
 
+def crossed_unseen(quality: dict[str, Any]) -> list[str]:
+    """The barriers a tag's track (its ``quality``) crossed before the video shows it: broken,
+    or passed, at its first sample (`barriers_broken_at_start`, `barriers_passed_at_start`)."""
+    return [*quality["barriers_broken_at_start"], *quality["barriers_passed_at_start"]]
+
+
 def undecoded_words(quality: dict[str, Any]) -> str | None:
     """What the tracking commands say when the decoder stopped before the frames the container
     states (a damaged file; FFmpeg's own messages are quiet), or None."""

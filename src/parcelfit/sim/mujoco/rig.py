@@ -617,10 +617,10 @@ class RigFile(FileModel):
                 where="start.surface",
                 fix=f"use one of {', '.join(names)}",
             )
-        a, b = (x.name for x in self.light_barriers)
-        if a == b:
+        first, second = (x.name for x in self.light_barriers)
+        if first == second:
             raise ParcelfitError(
-                f"both light barriers are named {shown(a)}",
+                f"both light barriers are named {shown(first)}",
                 where="light_barriers[1].name",
                 fix="give each its own name (e.g. LS1 and LS2)",
             )
