@@ -18,6 +18,17 @@ from parcelfit.tracking import load_tag_map
 
 SIM = {"backend": "python", "factory": "tests.fake_sim:make"}
 REF = {"dataset": "data", "rig": "R", "consignment": "P", "speed_setting": 1}
+
+
+def _on_e3_kpbw(**reference: object) -> dict:
+    """A study's or screen's keys that run the MuJoCo model of E3 with KP/BW, its reference
+    case there (``reference`` keys added, e.g. speed_setting)."""
+    return {
+        "simulator": {"backend": "mujoco", "rig": "E3", "consignment": "KPBW"},
+        "reference": {**REF, "rig": "E3", "consignment": "KPBW", **reference},
+    }
+
+
 STUDY = {"name": "s", "simulator": SIM, "parameters": {"mu_d_BePa": [0.3, 0.6]}, "reference": REF}
 SCREEN = {
     "name": "s",
@@ -521,11 +532,7 @@ CASES = {
     ),
     "screen soft content on a rigid one": (
         "screen",
-        lambda d: d.update(
-            simulator={"backend": "mujoco", "rig": "E3", "consignment": "KPBW"},
-            reference={**REF, "rig": "E3", "consignment": "KPBW"},
-            soft_content=["E_Co"],
-        ),
+        lambda d: d.update(_on_e3_kpbw(), soft_content=["E_Co"]),
         (
             "soft_content",
             "soft_content ['E_Co'] on a consignment with a rigid content",
@@ -534,10 +541,7 @@ CASES = {
     ),
     "screen speed setting the rig lacks": (
         "screen",
-        lambda d: d.update(
-            simulator={"backend": "mujoco", "rig": "E3", "consignment": "KPBW"},
-            reference={**REF, "rig": "E3", "consignment": "KPBW", "speed_setting": 3},
-        ),
+        lambda d: d.update(_on_e3_kpbw(speed_setting=3)),
         (
             "reference.speed_setting",
             "rig E3 has no speed setting 3 (test case E3/KPBW/3)",
@@ -546,11 +550,7 @@ CASES = {
     ),
     "study transfer speed setting the rig lacks": (
         "study",
-        lambda d: d.update(
-            simulator={"backend": "mujoco", "rig": "E3", "consignment": "KPBW"},
-            reference={**REF, "rig": "E3", "consignment": "KPBW"},
-            transfer=[{"rig": "E1", "speed_setting": 4}],
-        ),
+        lambda d: d.update(_on_e3_kpbw(), transfer=[{"rig": "E1", "speed_setting": 4}]),
         (
             "transfer[0].speed_setting",
             "rig E1 has no speed setting 4 (test case E1/KPBW/4)",
