@@ -18,14 +18,13 @@ from pydantic import BaseModel, ConfigDict
 
 from parcelfit.errors import ParcelfitError
 from parcelfit.progress import ProgressCallback, ignore_progress
-from parcelfit.runs.dataset import DATASET_FILE, dataset_file
 from parcelfit.sim.params import catalogue_unit, to_catalogue_units
 from parcelfit.study.calibration import Calibration, CalibrationResult
 from parcelfit.study.folderlock import check_writable
 from parcelfit.study.results import read_results
 from parcelfit.study.status import StudyStatus, folder_verdict, study_status
 from parcelfit.study.store import STORE_FILE
-from parcelfit.study.studyfile import Study, load_study
+from parcelfit.study.studyfile import Study, load_study, require_dataset
 from parcelfit.study.verdict import Verdict
 
 
@@ -130,18 +129,13 @@ def check_datasets(study: Study) -> None:
     a dataset.yaml, naming the study file and the case's key (a dataset not made yet, or a
     path written wrong), before anything starts."""
     for spec in (*study.cases, *study.validation_cases, *study.transfer):
-        given = spec.dataset  # a folder, or its dataset.yaml itself (as load_dataset takes)
-        if not dataset_file(given).is_file():
-            raise ParcelfitError(
-                f"{spec.label}: its dataset file {given} does not exist"
-                if given.name == DATASET_FILE
-                else f"{spec.label}: its dataset {given} holds no {DATASET_FILE}",
-                file=study.path,
-                where=f"{spec.where}.dataset" if spec.where else "dataset",
-                fix="make the dataset first (tracked runs: parcelfit track-all; a SYNTHETIC "
-                "twin: parcelfit synth SPEC --out FOLDER) or correct the path (relative to the "
-                "study file)",
-            )
+        require_dataset(
+            spec.dataset,
+            spec.label,
+            file=study.path,
+            where=f"{spec.where}.dataset" if spec.where else "dataset",
+            kind="study",
+        )
 
 
 def calibration_outcome(

@@ -94,7 +94,6 @@ from parcelfit.figures import save_figure
 from parcelfit.metrics import ReferenceSelection, select_reference
 from parcelfit.progress import ProgressCallback, ProgressEvent, ignore_progress
 from parcelfit.runs import TestCase, load_dataset, read_trajectory
-from parcelfit.runs.dataset import DATASET_FILE, dataset_file
 from parcelfit.schema import FileModel, Number, Pair, Text, Whole, or_default, parse
 from parcelfit.sim.ensemble import SPIN_ANGLE, rotation
 from parcelfit.sim.executors import Executor, Task, make_executor
@@ -117,6 +116,7 @@ from parcelfit.study.studyfile import (
     check_speed_settings,
     fixed_to_si,
     reference_case,
+    require_dataset,
 )
 from parcelfit.study.studyschema import ReferenceSection, ScreenExecutorSection
 
@@ -402,14 +402,13 @@ class StageResult:
 def _reference_run(screen: Screen) -> ReferenceSelection:
     """The reference run of the screen's test case; a dataset folder without its dataset.yaml,
     or a dataset without the case, is refused naming the screen file and its key."""
-    if not dataset_file(screen.dataset).is_file():
-        raise ParcelfitError(
-            f"{screen.case.label}: its dataset {screen.dataset} holds no {DATASET_FILE}",
-            file=screen.path,
-            where="reference.dataset",
-            fix="make the dataset first (tracked runs: parcelfit track-all; a SYNTHETIC twin: "
-            "parcelfit synth SPEC --out FOLDER) or correct the path (relative to the screen file)",
-        )
+    require_dataset(
+        screen.dataset,
+        screen.case.label,
+        file=screen.path,
+        where="reference.dataset",
+        kind="screen",
+    )
     dataset = load_dataset(screen.dataset)
     try:
         runs = dataset[screen.case]

@@ -82,6 +82,7 @@ from parcelfit.optimize.bo import BOSettings
 from parcelfit.optimize.sampler import SAMPLER_SETTINGS, SAMPLERS, Sampler
 from parcelfit.optimize.space import Dimension, Space
 from parcelfit.runs import TestCase
+from parcelfit.runs.dataset import DATASET_FILE, dataset_file
 from parcelfit.schema import (
     parse,
 )
@@ -252,6 +253,24 @@ def _check_stem(name: str, given: str, path: Path, where: str, kind: str) -> Non
         )
 
 
+def require_dataset(given: Path, label: str, *, file: Path | None, where: str, kind: str) -> None:
+    """Refuse test case ``label``'s dataset ``given`` (a folder, or its dataset.yaml itself, as
+    `load_dataset` takes) where it has no dataset.yaml, naming the ``kind`` of file ("study",
+    "screen") at ``file`` and its key ``where``: a dataset not made yet, or a path written
+    wrong, found before anything starts."""
+    if dataset_file(given).is_file():
+        return
+    raise ParcelfitError(
+        f"{label}: its dataset file {given} does not exist"
+        if given.name == DATASET_FILE
+        else f"{label}: its dataset {given} holds no {DATASET_FILE}",
+        file=file,
+        where=where,
+        fix="make the dataset first (tracked runs: parcelfit track-all; a SYNTHETIC twin: "
+        f"parcelfit synth SPEC --out FOLDER) or correct the path (relative to the {kind} file)",
+    )
+
+
 def check_speed_settings(
     sim: SimulatorConfig, cases: Sequence[tuple[TestCase, str]], path: Path
 ) -> None:
@@ -260,13 +279,10 @@ def check_speed_settings(
     naming the file and the key, where it failed every simulation of the case before."""
     if sim.backend not in ("mujoco", "rigidbox"):
         return
-    from parcelfit.sim.mujoco import bundled_rig_names, load_rig
+    from parcelfit.sim.mujoco import bundled_rig_names, load_rig, load_rig_files
 
-    files = {}
-    for given in (sim.rig, *(sim.rigs or ())):
-        if given is not None and given.lower().endswith((".yaml", ".yml")):
-            rig = load_rig(given)
-            files[rig.name] = rig
+    given = (sim.rig, *(sim.rigs or ()))
+    files = load_rig_files([g for g in given if g and g.lower().endswith((".yaml", ".yml"))])
     for case, where in cases:
         rig = files.get(case.rig)
         if rig is None and case.rig in bundled_rig_names():
